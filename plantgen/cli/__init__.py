@@ -1,0 +1,49 @@
+"""The ``plantgen`` command line: a thin click layer over the library.
+
+Each command lives in its own module of this package, converts its options and calls one
+library function. Errors a user can cause (``PlantgenError``) print one line and exit 2.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..errors import PlantgenError
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="plantgen")
+def cli() -> None:
+    """plantgen: L-system plants skinned with relief-mapped conical frusta.
+
+    \b
+    plantgen grow    grammar or scene -> skeleton (.npz, .swc)
+    plantgen render  ray cast frusta in GLSL -> PNG
+    plantgen export  tessellate -> glTF / OBJ / PLY / STL
+    plantgen bench   reproduce Table 1 of Bhagvat et al. 2009
+
+    Run `plantgen COMMAND --help` for each command's options.
+    """
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: user errors become one line on stderr and exit status 2."""
+    try:
+        cli.main(args=argv, prog_name="plantgen", standalone_mode=False)
+    except PlantgenError as exc:
+        click.echo(f"plantgen: error: {exc}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("plantgen: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+
+
+# Commands register themselves on `cli` when their module is imported.
+from . import grow as _grow  # noqa: E402,F401

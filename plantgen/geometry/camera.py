@@ -1,0 +1,151 @@
+"""Pinhole camera: the view contract shared by every renderer, the reference and tests.
+
+Camera JSON holds ``eye``, ``target``, ``up``, ``fov_y`` (vertical, degrees), ``width``
+and ``height``. Rays go through pixel centres; pixel row 0 is the top row of the image.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlantgenError
+
+__all__ = ["Camera", "CameraError"]
+
+
+class CameraError(PlantgenError, ValueError):
+    """A camera file or value that breaks the contract."""
+
+
+@dataclass(frozen=True)
+class Camera:
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov_y: float = 40.0
+    width: int = 1024
+    height: int = 768
+
+    # ------------------------------------------------------------------ frame
+    def basis(self) -> np.ndarray:
+        """(3, 3) float64 rows: right, true up, forward (unit vectors, right-handed view)."""
+        eye, target, up = (np.asarray(a, dtype=np.float64) for a in (self.eye, self.target, self.up))
+        fwd = target - eye
+        nf = np.linalg.norm(fwd)
+        if nf == 0:
+            raise CameraError("camera eye and target coincide")
+        fwd /= nf
+        right = np.cross(fwd, up)
+        nr = np.linalg.norm(right)
+        if nr < 1e-12:
+            raise CameraError("camera up is parallel to the view direction")
+        right /= nr
+        true_up = np.cross(right, fwd)
+        return np.stack([right, true_up, fwd])
+
+    @property
+    def aspect(self) -> float:
+        return self.width / self.height
+
+    def rays(self, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+        """Rays through pixel centres.
+
+        Returns
+        -------
+        origins : (height, width, 3) array, all equal to ``eye``
+        directions : (height, width, 3) array, unit length; row 0 is the top row
+        """
+        right, up, fwd = self.basis()
+        tan_y = np.tan(np.radians(self.fov_y) / 2)
+        tan_x = tan_y * self.aspect
+        xs = ((np.arange(self.width) + 0.5) / self.width * 2 - 1) * tan_x
+        ys = (1 - (np.arange(self.height) + 0.5) / self.height * 2) * tan_y
+        d = fwd + xs[None, :, None] * right + ys[:, None, None] * up
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        o = np.broadcast_to(np.asarray(self.eye, dtype=np.float64), d.shape)
+        return o.astype(dtype), d.astype(dtype)
+
+    def view_matrix(self) -> np.ndarray:
+        """(4, 4) float64 world-to-view matrix (OpenGL convention: looking down -z)."""
+        right, up, fwd = self.basis()
+        eye = np.asarray(self.eye, dtype=np.float64)
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = right, up, -fwd
+        m[:3, 3] = -m[:3, :3] @ eye
+        return m
+
+    def projection_matrix(self, near: float, far: float) -> np.ndarray:
+        """(4, 4) float64 OpenGL perspective matrix for this camera's fov and aspect."""
+        f = 1.0 / np.tan(np.radians(self.fov_y) / 2)
+        m = np.zeros((4, 4))
+        m[0, 0] = f / self.aspect
+        m[1, 1] = f
+        m[2, 2] = (far + near) / (near - far)
+        m[2, 3] = 2 * far * near / (near - far)
+        m[3, 2] = -1.0
+        return m
+
+    # ------------------------------------------------------------------ framing
+    @classmethod
+    def auto(cls, bounds: np.ndarray, width: int = 1024, height: int = 768, fov_y: float = 40.0,
+             direction=(0.35, 0.25, 1.0), fill: float = 0.9) -> "Camera":
+        """Frame an axis-aligned box so that it spans most of the viewport.
+
+        The eye looks at the box centre from ``direction`` (not normalised) at the distance
+        where the box's bounding sphere fills ``fill`` of the tighter field of view.
+        """
+        b = np.asarray(bounds, dtype=np.float64)
+        centre = b.mean(axis=0)
+        radius = max(float(np.linalg.norm(b[1] - b[0])) / 2, 1e-9)
+        half_y = np.radians(fov_y) / 2
+        half_x = np.arctan(np.tan(half_y) * width / height)
+        half = min(half_x, half_y) * fill
+        dist = radius / np.sin(half)
+        d = np.asarray(direction, dtype=np.float64)
+        d /= np.linalg.norm(d)
+        eye = centre + d * dist
+        return cls(tuple(eye.tolist()), tuple(centre.tolist()), (0.0, 1.0, 0.0), fov_y, width, height)
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        return {"eye": list(self.eye), "target": list(self.target), "up": list(self.up),
+                "fov_y": self.fov_y, "width": self.width, "height": self.height}
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "camera") -> "Camera":
+        keys = {"eye", "target", "up", "fov_y", "width", "height"}
+        unknown = set(d) - keys
+        if unknown:
+            raise CameraError(f"{source}: unknown camera keys {sorted(unknown)}")
+        missing = {"eye", "target"} - set(d)
+        if missing:
+            raise CameraError(f"{source}: camera needs {sorted(missing)}")
+        try:
+            vec = lambda v: tuple(float(x) for x in v)  # noqa: E731
+            cam = cls(vec(d["eye"]), vec(d["target"]), vec(d.get("up", (0, 1, 0))),
+                      float(d.get("fov_y", 40.0)), int(d.get("width", 1024)), int(d.get("height", 768)))
+        except (TypeError, ValueError) as exc:
+            raise CameraError(f"{source}: bad camera value ({exc})") from None
+        if len(cam.eye) != 3 or len(cam.target) != 3 or len(cam.up) != 3:
+            raise CameraError(f"{source}: eye, target and up need three numbers each")
+        if not (0 < cam.fov_y < 180) or cam.width <= 0 or cam.height <= 0:
+            raise CameraError(f"{source}: fov_y must lie in (0, 180) and the size be positive")
+        cam.basis()
+        return cam
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Camera":
+        try:
+            d = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CameraError(f"{path}: cannot read camera JSON ({exc})") from None
+        if not isinstance(d, dict):
+            raise CameraError(f"{path}: camera JSON must be an object")
+        return cls.from_dict(d, str(path))

@@ -1,0 +1,224 @@
+"""The skeleton: branching line segments with radii, the contract between stages.
+
+A skeleton of ``n`` segments is a set of parallel arrays (y-up coordinates, as in
+Bhagvat et al. 2009):
+
+===============  ============  ==========================================================
+``start``        (n, 3) f8     first end point of each segment
+``end``          (n, 3) f8     second end point
+``r_start``      (n,) f8       radius at ``start`` (>= 0)
+``r_end``        (n,) f8       radius at ``end`` (>= 0)
+``parent``       (n,) i8       index of the parent segment, -1 for a root; parent < child
+``continues``    (n,) bool     True: the segment carries on its parent's axis and shares
+                               the joint's cutting plane; False: a root or a side branch
+``material``     (n,) i4       index into ``material_names``
+===============  ============  ==========================================================
+
+The file format (``.npz``) stores these arrays under the same names, plus
+``material_names`` as a unicode array. Nothing here imports GL or click.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlantgenError
+
+__all__ = ["Skeleton", "SkeletonError"]
+
+
+class SkeletonError(PlantgenError, ValueError):
+    """A skeleton whose arrays break the contract above."""
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    start: np.ndarray
+    end: np.ndarray
+    r_start: np.ndarray
+    r_end: np.ndarray
+    parent: np.ndarray
+    continues: np.ndarray
+    material: np.ndarray
+    material_names: tuple[str, ...] = field(default=("bark",))
+
+    def __post_init__(self) -> None:
+        n = len(np.asarray(self.start))
+        conv = {
+            "start": (np.float64, (n, 3)),
+            "end": (np.float64, (n, 3)),
+            "r_start": (np.float64, (n,)),
+            "r_end": (np.float64, (n,)),
+            "parent": (np.int64, (n,)),
+            "continues": (np.bool_, (n,)),
+            "material": (np.int32, (n,)),
+        }
+        for name, (dtype, shape) in conv.items():
+            arr = np.asarray(getattr(self, name))
+            if arr.size == 0:
+                arr = arr.reshape(shape)
+            if arr.shape != shape:
+                raise SkeletonError(f"{name} has shape {arr.shape}, expected {shape}")
+            object.__setattr__(self, name, np.ascontiguousarray(arr, dtype=dtype))
+        object.__setattr__(self, "material_names", tuple(str(m) for m in self.material_names))
+
+    # ------------------------------------------------------------------ basics
+    def __len__(self) -> int:
+        return len(self.start)
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.start)
+
+    @property
+    def tips(self) -> np.ndarray:
+        """(k,) int indices of segments that no segment continues (branch ends)."""
+        has_cont_child = np.zeros(len(self), dtype=bool)
+        p = self.parent[self.continues]
+        has_cont_child[p[p >= 0]] = True
+        return np.flatnonzero(~has_cont_child)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float: axis-aligned box of the segment end points, widened by radii."""
+        if len(self) == 0:
+            return np.zeros((2, 3))
+        pts = np.concatenate([self.start, self.end])
+        r = np.concatenate([self.r_start, self.r_end])[:, None]
+        return np.stack([(pts - r).min(axis=0), (pts + r).max(axis=0)])
+
+    @property
+    def height(self) -> float:
+        """Extent along y (up), radii included."""
+        b = self.bounds
+        return float(b[1, 1] - b[0, 1])
+
+    def validate(self, tol: float = 1e-9) -> None:
+        """Raise SkeletonError if an invariant of the format does not hold.
+
+        Invariants: finite coordinates, radii >= 0, parents precede children, every
+        segment with a parent starts where its parent ends (within ``tol`` times the
+        model size), roots do not continue, materials index ``material_names``.
+        """
+        n = len(self)
+        for name in ("start", "end", "r_start", "r_end"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise SkeletonError(f"{name} holds NaN or inf")
+        if np.any(self.r_start < 0) or np.any(self.r_end < 0):
+            raise SkeletonError("negative radius")
+        idx = np.arange(n)
+        if np.any(self.parent >= idx) or np.any(self.parent < -1):
+            raise SkeletonError("every parent index must be -1 or smaller than its child's")
+        has_p = self.parent >= 0
+        if np.any(self.continues & ~has_p):
+            raise SkeletonError("a root segment cannot continue a parent")
+        scale = max(1.0, float(np.abs(self.bounds).max())) if n else 1.0
+        gap = np.linalg.norm(self.start[has_p] - self.end[self.parent[has_p]], axis=1)
+        if gap.size and gap.max() > tol * scale:
+            bad = int(idx[has_p][np.argmax(gap)])
+            raise SkeletonError(f"segment {bad} does not start where its parent ends (gap {gap.max():.3g})")
+        if n and (self.material.min() < 0 or self.material.max() >= len(self.material_names)):
+            raise SkeletonError("material index outside material_names")
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def empty(cls, material_names=("bark",)) -> "Skeleton":
+        z3 = np.zeros((0, 3))
+        z = np.zeros(0)
+        return cls(z3, z3, z, z, np.zeros(0, int), np.zeros(0, bool), np.zeros(0, int), material_names)
+
+    def transformed(self, matrix: np.ndarray) -> "Skeleton":
+        """Apply a 4x4 similarity transform (rotation, uniform scale, translation).
+
+        Radii scale by the matrix's uniform scale factor.
+        """
+        m = np.asarray(matrix, dtype=np.float64)
+        lin, t = m[:3, :3], m[:3, 3]
+        s = float(np.cbrt(abs(np.linalg.det(lin))))
+        return Skeleton(
+            self.start @ lin.T + t, self.end @ lin.T + t, self.r_start * s, self.r_end * s,
+            self.parent, self.continues, self.material, self.material_names,
+        )
+
+    @staticmethod
+    def concatenate(parts: list["Skeleton"]) -> "Skeleton":
+        """Join skeletons into one, re-indexing parents and merging material names."""
+        names: list[str] = []
+        for p in parts:
+            for m in p.material_names:
+                if m not in names:
+                    names.append(m)
+        if not parts:
+            return Skeleton.empty()
+        arrays = {k: [] for k in ("start", "end", "r_start", "r_end", "parent", "continues", "material")}
+        offset = 0
+        for p in parts:
+            remap = np.array([names.index(m) for m in p.material_names], dtype=np.int32)
+            arrays["start"].append(p.start)
+            arrays["end"].append(p.end)
+            arrays["r_start"].append(p.r_start)
+            arrays["r_end"].append(p.r_end)
+            arrays["parent"].append(np.where(p.parent >= 0, p.parent + offset, -1))
+            arrays["continues"].append(p.continues)
+            arrays["material"].append(remap[p.material] if len(p) else p.material)
+            offset += len(p)
+        return Skeleton(**{k: np.concatenate(v) for k, v in arrays.items()}, material_names=tuple(names))
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | Path) -> None:
+        """Write the ``.npz`` format; written to a temporary name, then renamed."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".part")
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh, start=self.start, end=self.end, r_start=self.r_start, r_end=self.r_end,
+                parent=self.parent, continues=self.continues, material=self.material,
+                material_names=np.array(self.material_names, dtype=str),
+            )
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Skeleton":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                names = tuple(str(x) for x in z["material_names"]) if "material_names" in z else ("bark",)
+                return cls(z["start"], z["end"], z["r_start"], z["r_end"], z["parent"],
+                           z["continues"], z["material"], names)
+        except KeyError as exc:
+            raise SkeletonError(f"{path}: not a plantgen skeleton (missing array {exc})") from None
+        except (OSError, ValueError) as exc:
+            raise SkeletonError(f"{path}: not a plantgen skeleton ({exc})") from None
+
+    def save_swc(self, path: str | Path) -> None:
+        """Write the skeleton as SWC (one node per point, radius per node).
+
+        Every segment contributes its end point as a node; roots and side branches also
+        contribute a start node so that their radius at the start is kept. Type codes:
+        1 for the first root node, 3 (dendrite) elsewhere, as SWC readers expect.
+        """
+        n = len(self)
+        lines = ["# plantgen skeleton, y-up", "# id type x y z radius parent"]
+        end_id = np.zeros(n, dtype=np.int64)
+        nid = 0
+        for i in range(n):
+            p = int(self.parent[i])
+            if p < 0 or not self.continues[i]:
+                nid += 1
+                x, y, z = self.start[i]
+                par = -1 if p < 0 else int(end_id[p])
+                typ = 1 if nid == 1 else 3
+                lines.append(f"{nid} {typ} {x:.9g} {y:.9g} {z:.9g} {self.r_start[i]:.9g} {par}")
+                start_id = nid
+            else:
+                start_id = int(end_id[p])
+            nid += 1
+            x, y, z = self.end[i]
+            lines.append(f"{nid} 3 {x:.9g} {y:.9g} {z:.9g} {self.r_end[i]:.9g} {start_id}")
+            end_id[i] = nid
+        path = Path(path)
+        tmp = path.with_name(path.name + ".part")
+        tmp.write_text("\n".join(lines) + "\n")
+        tmp.replace(path)
