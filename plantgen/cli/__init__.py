@@ -18,13 +18,7 @@ from ..errors import PlantgenError
 def cli() -> None:
     """plantgen: L-system plants skinned with relief-mapped conical frusta.
 
-    \b
-    plantgen grow    grammar or scene -> skeleton (.npz, .swc)
-    plantgen render  ray cast frusta in GLSL -> PNG
-    plantgen export  tessellate -> glTF / OBJ / PLY / STL
-    plantgen bench   reproduce Table 1 of Bhagvat et al. 2009
-
-    Run `plantgen COMMAND --help` for each command's options.
+    Grammars and scenes are YAML files (the shipped ones are in grammars/). Run `plantgen COMMAND --help` for each command's options.
     """
 
 

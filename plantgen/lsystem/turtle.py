@@ -1,0 +1,170 @@
+"""Turtle interpretation: a derived module string to a :class:`Skeleton`.
+
+Coordinates are y-up (as in Bhagvat et al. 2009). The turtle starts at the origin with
+heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meanings:
+
+=========  ===================================================================
+``F(l)``   draw a segment of length l (default ``step``) along H
+``f(l)``   move by l without drawing; the next segment starts a new root
+``+(a)``   turn left by a degrees (default ``angle``) about U;  ``-`` turns right
+``&(a)``   pitch down about L;  ``^`` pitches up
+``\\(a)``  roll left about H;  ``/`` rolls right
+``|``      turn around (180° about U)
+``[`` ``]``  push and pop the turtle state; the first segment after ``[`` starts a
+           side branch (``continues`` False), the first after ``]`` carries on the
+           axis the branch grew from (``continues`` True)
+``!(w)``   set the radius to w; ``!`` multiplies it by ``width_factor``
+``$``      roll about H so that L is horizontal
+``;(i)``   select material i (index into the grammar's ``materials``); ``;`` the next one
+=========  ===================================================================
+
+A segment's end radius is the turtle's radius when it is drawn. A segment that continues
+its parent starts with the parent's end radius, so the skin tapers without steps; a root
+or a side branch starts with the current radius. After each ``F`` the heading bends
+towards the tropism vector T by ``strength·|H × T|`` radians (ABOP, section 2.3).
+"""
+
+from __future__ import annotations
+
+from math import cos, radians, sin, sqrt
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..geometry.skeleton import Skeleton
+from .derive import ModuleString
+from .grammar import TurtleSettings
+
+__all__ = ["interpret"]
+
+# action codes
+_NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT = range(15)
+_ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
+            "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT}
+
+
+def _rot(a, b, c, s):
+    """Rotate the pair (a, b) of 3-tuples by an angle with cosine c and sine s: a towards b."""
+    return ((a[0] * c + b[0] * s, a[1] * c + b[1] * s, a[2] * c + b[2] * s),
+            (b[0] * c - a[0] * s, b[1] * c - a[1] * s, b[2] * c - a[2] * s))
+
+
+def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
+              source: str = "<grammar>") -> Skeleton:
+    """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton."""
+    table = np.array([_ACTIONS.get(s, _NONE) for s in ms.symbols] or [_NONE], dtype=np.int8)
+    action = table[ms.sym]
+    keep = np.flatnonzero(action != _NONE)
+    acts = action[keep].tolist()
+    has_arg = (ms.nparam[keep] > 0).tolist()
+    args = ms.params[keep, 0].tolist()
+
+    step, width_factor = settings.step, settings.width_factor
+    dc, ds = cos(radians(settings.angle)), sin(radians(settings.angle))
+    tx, ty, tz = settings.tropism_direction
+    e = settings.tropism_strength
+    n_mat = len(materials)
+
+    px = py = pz = 0.0
+    H, L, U = (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    width = settings.radius
+    material = 0
+    last = -1            # last segment drawn from this state (-1: none, chain broken)
+    side = False         # next segment starts a side branch
+    stack = []
+
+    starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
+
+    for act, ha, arg in zip(acts, has_arg, args):
+        if act == _F:
+            length = arg if ha else step
+            if length == 0.0:
+                continue
+            ex, ey, ez = px + H[0] * length, py + H[1] * length, pz + H[2] * length
+            cont = last >= 0 and not side
+            starts.append((px, py, pz))
+            ends.append((ex, ey, ez))
+            r0s.append(r1s[last] if cont else width)
+            r1s.append(width)
+            parents.append(last)
+            conts.append(cont)
+            mats.append(material)
+            last = len(ends) - 1
+            side = False
+            px, py, pz = ex, ey, ez
+            if e != 0.0:
+                # bend H towards T by e·|H×T| about the axis H×T
+                ax, ay, az = H[1] * tz - H[2] * ty, H[2] * tx - H[0] * tz, H[0] * ty - H[1] * tx
+                s = sqrt(ax * ax + ay * ay + az * az)
+                if s > 1e-12:
+                    ax, ay, az = ax / s, ay / s, az / s
+                    alpha = e * s
+                    ca, sa = cos(alpha), sin(alpha)
+                    H, L, U = (_rodrigues(v, ax, ay, az, ca, sa) for v in (H, L, U))
+        elif act == _PLUS or act == _MINUS:
+            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
+            if act == _MINUS:
+                s = -s
+            H, L = _rot(H, L, c, s)
+        elif act == _AND or act == _HAT:
+            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
+            if act == _HAT:
+                s = -s
+            H, U = _rot(H, (-U[0], -U[1], -U[2]), c, s)
+            U = (-U[0], -U[1], -U[2])
+        elif act == _BSL or act == _SL:
+            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
+            if act == _SL:
+                s = -s
+            L, U = _rot(L, U, c, s)
+        elif act == _BAR:
+            H = (-H[0], -H[1], -H[2])
+            L = (-L[0], -L[1], -L[2])
+        elif act == _PUSH:
+            stack.append((px, py, pz, H, L, U, width, material, last, side))
+            side = True
+        elif act == _POP:
+            if not stack:
+                raise PlantgenError(f"{source}: unbalanced brackets in the derived string")
+            px, py, pz, H, L, U, width, material, last, side = stack.pop()
+        elif act == _WIDTH:
+            width = arg if ha else width * width_factor
+            if width < 0:
+                raise PlantgenError(f"{source}: negative radius {width:g} set by '!'")
+        elif act == _f:
+            length = arg if ha else step
+            px, py, pz = px + H[0] * length, py + H[1] * length, pz + H[2] * length
+            last = -1
+            side = False
+        elif act == _ROLLH:
+            # L = (V × H)/|V × H| with V = +y; U = H × L
+            lx, ly, lz = H[2], 0.0, -H[0]
+            s = sqrt(lx * lx + lz * lz)
+            if s > 1e-12:
+                L = (lx / s, 0.0, lz / s)
+                U = (H[1] * L[2] - H[2] * L[1], H[2] * L[0] - H[0] * L[2], H[0] * L[1] - H[1] * L[0])
+        elif act == _MAT:
+            material = int(arg) if ha else material + 1
+            if not 0 <= material < n_mat:
+                raise PlantgenError(f"{source}: material index {material} outside the grammar's "
+                                    f"{n_mat} materials {list(materials)}")
+
+    n = len(ends)
+    return Skeleton(
+        start=np.array(starts, dtype=np.float64).reshape(n, 3),
+        end=np.array(ends, dtype=np.float64).reshape(n, 3),
+        r_start=np.array(r0s, dtype=np.float64),
+        r_end=np.array(r1s, dtype=np.float64),
+        parent=np.array(parents, dtype=np.int64),
+        continues=np.array(conts, dtype=bool),
+        material=np.array(mats, dtype=np.int32),
+        material_names=materials,
+    )
+
+
+def _rodrigues(v, ax, ay, az, c, s):
+    """Rotate v about the unit axis (ax, ay, az) by the angle with cosine c, sine s."""
+    vx, vy, vz = v
+    d = (ax * vx + ay * vy + az * vz) * (1 - c)
+    cx, cy, cz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx
+    return (vx * c + cx * s + ax * d, vy * c + cy * s + ay * d, vz * c + cz * s + az * d)
