@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ._resources import grammars_dir
 from .errors import PlantgenError
 from .geometry.skeleton import Skeleton
 from .lsystem.derive import derive
@@ -17,7 +18,7 @@ from .lsystem.grammar import parse_grammar, read_yaml
 from .lsystem.turtle import interpret
 from .scene import Scene, is_scene, parse_scene
 
-__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input"]
+__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input"]
 
 
 @dataclass
@@ -45,12 +46,24 @@ def _grow_grammar_data(data, path: str, seed, iterations, max_modules, progress,
     return skel, len(ms)
 
 
+def resolve_input(path: str | Path) -> Path:
+    """A path as given, or the name of a shipped grammar or scene (``pine``, ``desert``)."""
+    p = Path(path)
+    if not p.exists() and not p.suffix and p.name == str(path):
+        shipped = grammars_dir() / f"{p.name}.yaml"
+        if shipped.is_file():
+            return shipped
+    return p
+
+
 def load_input(path: str | Path):
     """Read a YAML input: returns ("grammar" | "scene", parsed mapping)."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
         return "skeleton", None
     data = read_yaml(path)
+    if data is None:
+        raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
         return "scene", data
     if isinstance(data, dict) and "axiom" in data:
@@ -61,7 +74,7 @@ def load_input(path: str | Path):
 def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
               max_modules: int | None = None, progress=None) -> GrowResult:
     """Grow a grammar or scene, or load a skeleton ``.npz``; time every stage."""
-    path = Path(path)
+    path = resolve_input(path)
     kind, data = load_input(path)
     timings: dict = {}
     if kind == "skeleton":

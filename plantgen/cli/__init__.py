@@ -33,8 +33,12 @@ def main(argv: list[str] | None = None) -> None:
         click.echo("plantgen: aborted", err=True)
         sys.exit(130)
     except click.ClickException as exc:
-        exc.show()
-        sys.exit(2 if exc.exit_code == 2 else exc.exit_code)
+        # Usage errors too are one line; the command's --help has the details.
+        hint = ""
+        if isinstance(exc, click.UsageError) and exc.ctx is not None:
+            hint = f" (see '{exc.ctx.command_path} --help')"
+        click.echo(f"plantgen: error: {exc.format_message()}{hint}", err=True)
+        sys.exit(exc.exit_code if exc.exit_code else 2)
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
 

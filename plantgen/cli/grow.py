@@ -25,7 +25,7 @@ from . import cli
               help="Also write these formats (repeatable); swc is written beside the .npz.")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 def grow(input: Path, output: Path | None, seed, iterations, max_modules, formats, quiet) -> None:
-    """Grow INPUT (a grammar or scene .yaml) into a skeleton.
+    """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton.
 
     Derives the L-system, walks the turtle, and writes the segment arrays (start, end,
     r_start, r_end, parent, continues, material, material_names) as .npz. A scene writes
