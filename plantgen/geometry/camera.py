@@ -137,7 +137,10 @@ class Camera:
             raise CameraError(f"{source}: eye, target and up need three numbers each")
         if not (0 < cam.fov_y < 180) or cam.width <= 0 or cam.height <= 0:
             raise CameraError(f"{source}: fov_y must lie in (0, 180) and the size be positive")
-        cam.basis()
+        try:
+            cam.basis()
+        except CameraError as exc:
+            raise CameraError(f"{source}: {exc}") from None
         return cam
 
     @classmethod
