@@ -294,3 +294,20 @@ def test_grammar_max_modules_key_is_used():
 def test_bad_grammars_name_the_problem(data, message):
     with pytest.raises(GrammarError, match=message):
         parse_grammar(data, "bad.yaml")
+
+
+# ---------------------------------------------------------------- fuzzing: errors, never crashes
+_ALPHABET = st.sampled_from(list("AFBf+-&^\\/|[]!$;(),:<>0123456789.*lxy ") + ["->", "l*2", "x>1"])
+
+
+@settings(max_examples=300, deadline=None)
+@given(axiom=st.lists(_ALPHABET, max_size=12).map("".join),
+       rules=st.lists(st.lists(_ALPHABET, max_size=14).map("".join), max_size=3))
+def test_random_grammars_grow_or_fail_with_a_plantgen_error(axiom, rules):
+    from plantgen.errors import PlantgenError
+    try:
+        g = parse_grammar({"axiom": axiom, "rules": rules, "iterations": 3}, "fuzz.yaml")
+        ms = derive(g, max_modules=20_000)
+        interpret(ms, g.turtle, g.materials, g.path).validate()
+    except PlantgenError as exc:
+        assert str(exc).startswith("fuzz.yaml") and "\n" not in str(exc)

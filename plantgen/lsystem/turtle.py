@@ -15,7 +15,8 @@ heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meaning
            axis the branch grew from (``continues`` True)
 ``!(w)``   set the radius to w; ``!`` multiplies it by ``width_factor``
 ``$``      roll about H so that L is horizontal
-``;(i)``   select material i (index into the grammar's ``materials``); ``;`` the next one
+``;(i)``   select material i (index into the grammar's ``materials``); ``;`` the next one,
+           cycling
 =========  ===================================================================
 
 A segment's end radius is the turtle's radius when it is drawn. A segment that continues
@@ -144,7 +145,7 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
                 L = (lx / s, 0.0, lz / s)
                 U = (H[1] * L[2] - H[2] * L[1], H[2] * L[0] - H[0] * L[2], H[0] * L[1] - H[1] * L[0])
         elif act == _MAT:
-            material = int(arg) if ha else material + 1
+            material = int(arg) if ha else (material + 1) % n_mat
             if not 0 <= material < n_mat:
                 raise PlantgenError(f"{source}: material index {material} outside the grammar's "
                                     f"{n_mat} materials {list(materials)}")
