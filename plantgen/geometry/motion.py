@@ -1,0 +1,120 @@
+"""Skeleton motion: deterministic sway in time t, vectorised over every segment.
+
+A swaying plant bends at every joint about one horizontal axis per instance. The joint
+angle is a wave running up the plant::
+
+    theta_i(t) = A / D · sin(2π f t + φ - 2π · depth_i / D)
+
+with amplitude A (degrees, the total bend at the tip when the whole plant is in phase),
+frequency f (Hz), phase φ per instance, depth_i the joint's distance in segments from the
+root and D the deepest chain of the instance. Because every joint of an instance turns
+about the same axis, a segment's world rotation is a rotation by the sum of the angles on
+its path from the root, so the pose is a cumulative sum over the tree, done level by
+level (one numpy step per tree depth, not per segment).
+
+Segment lengths and radii are kept; every child still starts where its parent ends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .skeleton import Skeleton
+
+__all__ = ["SwayRig", "sway_rig", "pose"]
+
+
+@dataclass(frozen=True, eq=False)
+class SwayRig:
+    """What the pose of a skeleton needs, computed once for a static topology.
+
+    depth : (n,) int, segments between each segment and its root
+    levels : list of (k,) int arrays, the segments at each depth
+    axis : (n, 3) float, the unit bending axis of each segment's instance
+    amplitude, frequency, phase : (n,) float, per segment (from its instance); radians, Hz
+    max_depth : (n,) float, deepest chain of each segment's instance (>= 1)
+    moving : (n,) bool, segments whose instance has motion
+    """
+
+    depth: np.ndarray
+    levels: list
+    axis: np.ndarray
+    amplitude: np.ndarray
+    frequency: np.ndarray
+    phase: np.ndarray
+    max_depth: np.ndarray
+    moving: np.ndarray
+
+
+def _depth(parent: np.ndarray) -> np.ndarray:
+    depth = np.zeros(len(parent), dtype=np.int64)
+    # parents precede children, so one pass in index order suffices; vectorise by
+    # repeating "depth = depth[parent] + 1" until it stops changing (<= tree height passes)
+    has_p = parent >= 0
+    for _ in range(len(parent) + 1):
+        new = np.where(has_p, depth[np.where(has_p, parent, 0)] + 1, 0)
+        if np.array_equal(new, depth):
+            break
+        depth = new
+    return depth
+
+
+def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray, motions: list) -> SwayRig:
+    """Prepare the sway of ``skeleton``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton in world coordinates
+    segment_instance : (n,) int, the instance of each segment
+    motions : per instance, None or ``{"sway": {"amplitude": deg, "frequency": Hz,
+        "phase": rad}}``
+    """
+    n = len(skeleton)
+    inst = np.asarray(segment_instance, dtype=np.int64)
+    depth = _depth(skeleton.parent)
+    k = len(motions)
+    amp = np.zeros(k)
+    freq = np.zeros(k)
+    phase = np.zeros(k)
+    for i, m in enumerate(motions):
+        if m and "sway" in m:
+            s = m["sway"]
+            amp[i] = np.radians(s.get("amplitude", 0.0))
+            freq[i] = s.get("frequency", 0.0)
+            phase[i] = s.get("phase", 0.0)
+    # the bending axis is horizontal, turned by the phase so instances sway in different planes
+    axes = np.stack([np.cos(phase), np.zeros(k), np.sin(phase)], axis=1)
+    max_depth = np.ones(k)
+    if n:
+        np.maximum.at(max_depth, inst, depth + 1.0)
+    levels = [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)] if n else []
+    return SwayRig(depth, levels, axes[inst], amp[inst], freq[inst], phase[inst], max_depth[inst],
+                   amp[inst] != 0)
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues rotation of rows of ``v`` about unit rows of ``axis`` by ``angle`` (rad)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * (np.sum(axis * v, axis=1, keepdims=True) * (1 - c))
+
+
+def pose(skeleton: Skeleton, rig: SwayRig, t: float) -> Skeleton:
+    """The skeleton at time ``t`` (seconds). Deterministic in t; t = any value works."""
+    theta = rig.amplitude / rig.max_depth * np.sin(
+        2 * np.pi * rig.frequency * t + rig.phase - 2 * np.pi * rig.depth / rig.max_depth)
+    total = np.zeros(len(skeleton))
+    start = skeleton.start.copy()
+    end = skeleton.end.copy()
+    d = skeleton.end - skeleton.start
+    parent = skeleton.parent
+    for level in rig.levels:
+        p = parent[level]
+        has_p = p >= 0
+        total[level] = np.where(has_p, total[np.where(has_p, p, 0)], 0.0) + theta[level]
+        s = np.where(has_p[:, None], end[np.where(has_p, p, 0)], start[level])
+        start[level] = s
+        end[level] = s + _rotate(d[level], rig.axis[level], total[level])
+    return Skeleton(start, end, skeleton.r_start, skeleton.r_end, skeleton.parent, skeleton.continues,
+                    skeleton.material, skeleton.material_names)
