@@ -87,10 +87,22 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         return GrowResult(skel, kind, str(data.get("name", path.stem)), n, timings)
 
     modules = [0]
+    grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
     def grow_one(gpath, s, its):
-        skel, n = _grow_grammar_data(read_yaml(gpath), str(gpath), s, its, max_modules, None, timings)
-        modules[0] += n
+        key = str(gpath)
+        t0 = time.perf_counter()
+        if key not in grammars:
+            grammars[key] = parse_grammar(read_yaml(gpath), key)
+        g = grammars[key]
+        t1 = time.perf_counter()
+        ms = derive(g, iterations=its, seed=s, max_modules=max_modules)
+        t2 = time.perf_counter()
+        skel = interpret(ms, g.turtle, g.materials, key)
+        t3 = time.perf_counter()
+        for k, v in (("parse", t1 - t0), ("derive", t2 - t1), ("interpret", t3 - t2)):
+            timings[k] = timings.get(k, 0.0) + v
+        modules[0] += len(ms)
         return skel
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one)

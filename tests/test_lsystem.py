@@ -219,6 +219,12 @@ def test_width_default_factor_and_material():
     assert skel.material_names == ("bark", "leaf")
 
 
+def test_two_argument_F_tapers_roots_and_side_branches():
+    skel = grow(grammar(axiom="!(0.3) F(1, 0.2) [+ !(0.1) F(1, 0)] F(1)", iterations=0))
+    np.testing.assert_allclose(skel.r_start, [0.3, 0.1, 0.2])
+    np.testing.assert_allclose(skel.r_end, [0.2, 0.0, 0.2])
+
+
 def test_dollar_rolls_left_to_horizontal():
     skel = grow(grammar(axiom="&(30)/(50)$+(90)F", iterations=0))
     # after $, L is horizontal, so a 90° turn about U gives a horizontal heading
@@ -279,7 +285,7 @@ def test_grammar_max_modules_key_is_used():
 
 @pytest.mark.parametrize("data, message", [
     (dict(axiom="A(1)", rules=["A(x,y) -> B"]), "wrong parameter count"),
-    (dict(axiom="F(1,2)"), "wrong parameter count"),
+    (dict(axiom="F(1,2,3)"), "wrong parameter count"),
     (dict(axiom="A", rules=["A -> [B"]), "unbalanced"),
     (dict(axiom="A]"), "unbalanced"),
     (dict(axiom="A(q)"), "undefined name 'q'"),

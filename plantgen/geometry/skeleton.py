@@ -75,11 +75,10 @@ class Skeleton:
 
     @property
     def tips(self) -> np.ndarray:
-        """(k,) int indices of segments that no segment continues (branch ends)."""
-        has_cont_child = np.zeros(len(self), dtype=bool)
-        p = self.parent[self.continues]
-        has_cont_child[p[p >= 0]] = True
-        return np.flatnonzero(~has_cont_child)
+        """(k,) int indices of branch tips: segments with no child at all."""
+        has_child = np.zeros(len(self), dtype=bool)
+        has_child[self.parent[self.parent >= 0]] = True
+        return np.flatnonzero(~has_child)
 
     @property
     def bounds(self) -> np.ndarray:

@@ -38,7 +38,7 @@ __all__ = [
 
 # Turtle symbols (ABOP meanings) and the parameter counts each accepts.
 TURTLE_ARITY: dict[str, tuple[int, ...]] = {
-    "F": (0, 1), "f": (0, 1),
+    "F": (0, 1, 2), "f": (0, 1),
     "+": (0, 1), "-": (0, 1), "&": (0, 1), "^": (0, 1), "\\": (0, 1), "/": (0, 1),
     "|": (0,), "[": (0,), "]": (0,), "$": (0,),
     "!": (0, 1), ";": (0, 1),

@@ -4,7 +4,8 @@ Coordinates are y-up (as in Bhagvat et al. 2009). The turtle starts at the origi
 heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meanings:
 
 =========  ===================================================================
-``F(l)``   draw a segment of length l (default ``step``) along H
+``F(l)``   draw a segment of length l (default ``step``) along H;
+           ``F(l, w)`` also tapers it to end radius w (and sets the radius to w)
 ``f(l)``   move by l without drawing; the next segment starts a new root
 ``+(a)``   turn left by a degrees (default ``angle``) about U;  ``-`` turns right
 ``&(a)``   pitch down about L;  ``^`` pitches up
@@ -57,8 +58,9 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
     action = table[ms.sym]
     keep = np.flatnonzero(action != _NONE)
     acts = action[keep].tolist()
-    has_arg = (ms.nparam[keep] > 0).tolist()
+    nargs = ms.nparam[keep].tolist()
     args = ms.params[keep, 0].tolist()
+    args2 = ms.params[keep, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(acts)
 
     step, width_factor = settings.step, settings.width_factor
     dc, ds = cos(radians(settings.angle)), sin(radians(settings.angle))
@@ -76,16 +78,21 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
-    for act, ha, arg in zip(acts, has_arg, args):
+    for act, ha, arg, arg2 in zip(acts, nargs, args, args2):
         if act == _F:
             length = arg if ha else step
             if length == 0.0:
                 continue
+            r_start = width
+            if ha == 2:
+                if arg2 < 0:
+                    raise PlantgenError(f"{source}: negative radius {arg2:g} given to F")
+                width = arg2
             ex, ey, ez = px + H[0] * length, py + H[1] * length, pz + H[2] * length
             cont = last >= 0 and not side
             starts.append((px, py, pz))
             ends.append((ex, ey, ez))
-            r0s.append(r1s[last] if cont else width)
+            r0s.append(r1s[last] if cont else r_start)
             r1s.append(width)
             parents.append(last)
             conts.append(cont)
