@@ -1,0 +1,309 @@
+"""Raster renderer for tessellated frusta (GS, GS+R), the polygonal side of Table 1.
+
+A :class:`~plantgen.geometry.mesh.TessellatedMesh` is uploaded once (float32 positions
+relative to the mesh's own origin, normals, texture coordinates, uint32 indices) and
+drawn with one indexed draw call, back faces culled (the mesh is closed). The camera,
+light, material palette, height maps and shading code are the ray caster's
+(:mod:`plantgen.render.raycast`, ``shaders/shading.glsl``), so an RC image and a GS image
+of the same model differ only by geometry. The output is the ray caster's
+:class:`~plantgen.render.raycast.RenderResult` (colour, distance along the ray, frame time).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..geometry.camera import Camera
+from ..geometry.mesh import TessellatedMesh, _chain_position, continuing_parent_rows
+from .context import gl_context
+from .raycast import RECORD_BYTES, RenderResult, _height_maps, material_palette
+from .shaders import build_program
+
+__all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "rc_buffer_bytes", "row_data"]
+
+LIGHT_COLOR = (1.0, 0.96, 0.9)
+AMBIENT_COLOR = (0.35, 0.4, 0.5)
+SKY = {"sky_zenith": (0.18, 0.36, 0.75), "sky_horizon": (0.72, 0.8, 0.9),
+       "ground_tint": (0.35, 0.33, 0.3)}
+
+
+def row_data(frusta) -> np.ndarray:
+    """(n, 2) float32 per frustum row: chain position, material (8 bytes a row).
+
+    The chain position turns the mesh's texture v (which counts rows along a chain) back
+    into the per-row v of (7) in the fragment shader.
+    """
+    out = np.zeros((len(frusta.length), 2), dtype=np.float32)
+    out[:, 0] = _chain_position(continuing_parent_rows(frusta))
+    out[:, 1] = frusta.material
+    return out
+
+
+def gs_buffer_bytes(mesh: TessellatedMesh) -> int:
+    """GPU buffer bytes of a GS draw: vertices (32 B each), uint32 indices, 8 B per row,
+    4 B per cap (height maps, shared with RC, are not counted)."""
+    return mesh.buffer_bytes()["total"] + 8 * mesh.n_rows + 4 * mesh.n_caps
+
+
+def rc_buffer_bytes(n_rows: int) -> int:
+    """GPU buffer bytes of the ray caster's draw: one 96-byte record per row (the 8-corner,
+    12-triangle pyramid template is shared by all rows and not counted)."""
+    return RECORD_BYTES * int(n_rows)
+
+
+class RasterRenderer:
+    """Draws tessellated meshes into an offscreen framebuffer like the ray caster's."""
+
+    def __init__(self, ctx=None):
+        self.ctx = ctx if ctx is not None else gl_context()
+        self._fbo = None
+        self._fbo_size = None
+        self._textures = {}
+        self._uploaded = None  # (mesh id, buffers, vao, origin)
+
+    def _framebuffer(self, width: int, height: int):
+        if self._fbo_size != (width, height):
+            if self._fbo is not None:
+                for att in (*self._fbo.color_attachments, self._fbo.depth_attachment):
+                    att.release()
+                self._fbo.release()
+            ctx = self.ctx
+            self._fbo = ctx.framebuffer(
+                color_attachments=[ctx.renderbuffer((width, height), 4),
+                                   ctx.renderbuffer((width, height), 1, dtype="f4")],
+                depth_attachment=ctx.depth_renderbuffer((width, height)))
+            self._fbo_size = (width, height)
+        return self._fbo
+
+    def _height_texture(self, material_names):
+        key = tuple(material_names)
+        if key not in self._textures:
+            maps, repeats = _height_maps(material_names)
+            layers, h, w = maps.shape
+            tex = self.ctx.texture_array((w, h, layers), 1, maps.tobytes(), dtype="f1")
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)  # bilinear is done in GLSL
+            self._textures[key] = (tex, repeats)
+        return self._textures[key]
+
+    def release(self) -> None:
+        """Free the uploaded mesh's buffers."""
+        if self._uploaded is not None:
+            for obj in self._uploaded[1]:
+                obj.release()
+            self._uploaded = None
+
+    def upload(self, mesh: TessellatedMesh, frusta, program):
+        """Upload ``mesh`` (once per mesh object); returns (vao, origin)."""
+        key = (mesh, program)  # strong references: identity stays valid while cached
+        if self._uploaded is not None and self._uploaded[0][0] is mesh and self._uploaded[0][1] is program:
+            return self._uploaded[2], self._uploaded[3]
+        self.release()
+        ctx = self.ctx
+        origin = mesh.vertices.mean(axis=0) if len(mesh.vertices) else np.zeros(3)
+        # One interleaved buffer, 32 bytes a vertex: position, normal, uv (float32).
+        interleaved = np.empty((len(mesh.vertices), 8), dtype=np.float32)
+        interleaved[:, 0:3] = mesh.vertices - origin
+        interleaved[:, 3:6] = mesh.normals
+        interleaved[:, 6:8] = mesh.uv
+        vbo = ctx.buffer(interleaved.tobytes())
+        del interleaved
+        ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, np.uint32).tobytes())
+        rows = ctx.buffer(row_data(frusta).tobytes())
+        lateral = mesh.n_rows * 16 * 4 ** mesh.level
+        cap_rows = mesh.face_row[lateral::_cap_tris(mesh)] if mesh.n_caps else np.zeros(1, np.int32)
+        caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
+        vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")],
+                               index_buffer=ibo, index_element_size=4)
+        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao), vao, origin)
+        return vao, origin
+
+    def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
+               light_dir=(0.45, 0.8, 0.35)) -> RenderResult:
+        """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
+
+        Parameters
+        ----------
+        mesh : the tessellation (GS, or GS+R when made with ``relief=True``: displaced,
+            with normals tilted as RC+R tilts them)
+        frusta : the rows it was made from (materials, chains)
+        camera : the view, as for the ray caster
+        material_names : default ``mesh.material_names``
+        light_dir : (3,) towards the light, as for the ray caster
+        """
+        ctx = self.ctx
+        names = tuple(material_names or mesh.material_names)
+        width, height = camera.width, camera.height
+        fbo = self._framebuffer(width, height)
+        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level}
+        program = build_program(ctx, "raster.glsl", defines)
+        sky = build_program(ctx, "sky.glsl")
+        t0 = time.perf_counter()
+        vao, origin = self.upload(mesh, frusta, program)
+        upload_s = time.perf_counter() - t0
+
+        eye = np.asarray(camera.eye, dtype=np.float64)
+        right, up, fwd = camera.basis()
+        near, far = _depth_range(mesh, origin, eye, fwd)
+        view = camera.view_matrix()
+        view[:3, 3] = 0.0  # render origin: the eye
+        view_projection = camera.projection_matrix(near, far) @ view
+        tan_y = np.tan(np.radians(camera.fov_y) / 2)
+        light = np.asarray(light_dir, dtype=np.float64)
+        light /= np.linalg.norm(light)
+        palette = material_palette(names)
+        tex, repeats = self._height_texture(names)
+        shading = dict(light_dir=tuple(light), light_color=LIGHT_COLOR, ambient_color=AMBIENT_COLOR, **SKY)
+        _set(sky, viewport=(float(width), float(height)), cam_forward=tuple(fwd),
+             cam_right_scaled=tuple(right * tan_y * camera.aspect), cam_up_scaled=tuple(up * tan_y),
+             **shading)
+        _set(program, **shading, view_projection=tuple(view_projection.T.astype(np.float32).ravel()),
+             origin_from_eye=tuple((origin - eye).tolist()), n_rows=mesh.n_rows, height_maps=0)
+        for name, key in (("material_dark", "dark"), ("material_light", "light"),
+                          ("material_gloss", "gloss")):
+            if name in program:
+                program[name].write(np.ascontiguousarray(palette[key], np.float32).tobytes())
+        if "texture_repeat" in program:
+            program["texture_repeat"].write(np.ascontiguousarray(repeats, np.float32).tobytes())
+        buffers = self._uploaded[1]
+        buffers[2].bind_to_storage_buffer(0)
+        buffers[3].bind_to_storage_buffer(1)
+        sky_vao = ctx.vertex_array(sky, [])
+
+        ctx.finish()
+        t_draw = time.perf_counter()
+        fbo.use()
+        fbo.viewport = (0, 0, width, height)
+        fbo.clear(depth=1.0)
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.depth_func = "<"
+        ctx.front_face = "ccw"
+        ctx.cull_face = "back"
+        tex.use(0)
+        vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
+        ctx.finish()
+        frame_ms = (time.perf_counter() - t_draw) * 1e3
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        sky_vao.release()
+
+        color = np.frombuffer(fbo.read(components=3, attachment=0, alignment=1), np.uint8)
+        color = color.reshape(height, width, 3)[::-1].copy()
+        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
+                             np.float32).reshape(height, width)[::-1].copy()
+        stats = {"triangles": len(mesh.faces), "vertices": len(mesh.vertices), "level": mesh.level,
+                 "buffer_bytes": gs_buffer_bytes(mesh), "upload_ms": upload_s * 1e3,
+                 "near": near, "far": far, "draw_calls": 1}
+        return RenderResult(color, dist, frame_ms, camera, stats)
+
+
+def _cap_tris(mesh: TessellatedMesh) -> int:
+    return 8 * 2 ** mesh.level
+
+
+def _depth_range(mesh, origin, eye, fwd) -> tuple[float, float]:
+    if len(mesh.vertices) == 0:
+        return 0.1, 10.0
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    corners = np.stack(np.meshgrid(*np.stack([lo, hi]).T, indexing="ij"), axis=-1).reshape(-1, 3)
+    depths = (corners - eye) @ fwd
+    size = float(np.linalg.norm(hi - lo))
+    far = max(float(depths.max()), 0.0) + 0.05 * size + 1e-6
+    near = max(float(depths.min()) - 0.05 * size, far * 1e-5)
+    return near, far
+
+
+def _set(program, **values) -> None:
+    for name, value in values.items():
+        if name in program:
+            program[name].value = value
+
+
+_default: RasterRenderer | None = None
+
+
+def render_mesh(mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None) -> RenderResult:
+    """Render with the shared context's cached :class:`RasterRenderer`."""
+    global _default
+    ctx = gl_context()
+    if _default is None or _default.ctx is not ctx:
+        _default = RasterRenderer(ctx)
+    return _default.render(mesh, frusta, camera, material_names=material_names)
+
+
+def side_by_side(frusta, camera: Camera, *, gs_level: int = 2, gsr_level: int = 4,
+                 material_names=("bark",), linear_steps: int = 64, binary_steps: int = 8) -> np.ndarray:
+    """RC+R | GS | GS+R images of one model and camera, labelled, as one (h, 3w, 3) uint8 image.
+
+    GS+R takes its heights from :mod:`plantgen.geometry.relief`, the maps the ray caster samples.
+    """
+    from PIL import Image, ImageDraw
+
+    from ..geometry.mesh import tessellate
+    from .raycast import RaycastSettings, Raycaster
+
+    ctx = gl_context()
+    rc = Raycaster(ctx).render(frusta, camera, RaycastSettings(relief=True, linear_steps=linear_steps,
+                                                               binary_steps=binary_steps),
+                               material_names)
+    raster = RasterRenderer(ctx)
+    gs_mesh = tessellate(frusta, gs_level, caps="tips")  # side branch bases sit unseen in parents
+    gs = raster.render(gs_mesh, frusta, camera, material_names=material_names)
+    gsr_mesh = tessellate(frusta, gsr_level, relief=True, caps="tips")
+    gsr = raster.render(gsr_mesh, frusta, camera, material_names=material_names)
+    raster.release()
+    n = len(frusta.length)
+    panels = [(rc.color, f"RC+R: {n:,} frusta, {rc_buffer_bytes(n):,} B"),
+              (gs.color, f"GS m={gs_level}: {len(gs_mesh.faces):,} triangles, "
+                         f"{gs_buffer_bytes(gs_mesh):,} B"),
+              (gsr.color, f"GS+R m={gsr_level}: {len(gsr_mesh.faces):,} triangles, "
+                          f"{gs_buffer_bytes(gsr_mesh):,} B")]
+    image = Image.fromarray(np.concatenate([p[0] for p in panels], axis=1))
+    draw = ImageDraw.Draw(image)
+    for i, (_, label) in enumerate(panels):
+        x = i * camera.width + 4
+        draw.rectangle(draw.textbbox((x, 3), label), fill=(255, 255, 255))
+        draw.text((x, 3), label, fill=(0, 0, 0))
+    return np.asarray(image)
+
+
+def main(argv=None) -> None:
+    """``python -m plantgen.render.raster MODEL OUT.png``: the RC+R | GS | GS+R gallery image.
+
+    The camera frames the model as ``Camera.auto`` does from direction (0.3, 0.1, 1), then
+    moves ``--zoom`` of the way towards a target raised by ``--raise`` of the model height.
+    """
+    import argparse
+
+    from PIL import Image
+
+    from ..geometry.frusta import skin_skeleton
+    from ..pipeline import load_skeleton
+    from .raycast import frusta_bounds
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("model", help="grammar, scene or skeleton .npz")
+    parser.add_argument("output")
+    parser.add_argument("--gs", type=int, default=2, help="GS subdivision level")
+    parser.add_argument("--gsr", type=int, default=4, help="GS+R subdivision level")
+    parser.add_argument("--zoom", type=float, default=1.0, help="eye distance factor (< 1: closer)")
+    parser.add_argument("--raise", dest="lift", type=float, default=0.0,
+                        help="raise the target by this fraction of the model's extent")
+    parser.add_argument("--size", type=int, nargs=2, default=(400, 400))
+    args = parser.parse_args(argv)
+    frusta = skin_skeleton(load_skeleton(args.model))
+    box = frusta_bounds(frusta)
+    full = Camera.auto(box, *args.size, direction=(0.3, 0.1, 1.0))
+    target = np.asarray(full.target) + np.array([0.0, args.lift, 0.0]) * (box[1] - box[0])
+    eye = target + (np.asarray(full.eye) - np.asarray(full.target)) * args.zoom
+    camera = Camera(tuple(eye), tuple(target), (0.0, 1.0, 0.0), full.fov_y, *args.size)
+    image = side_by_side(frusta, camera, gs_level=args.gs, gsr_level=args.gsr,
+                         material_names=frusta.material_names)
+    Image.fromarray(image).save(args.output)
+    print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

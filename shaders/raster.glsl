@@ -1,0 +1,90 @@
+// Raster renderer for tessellated frusta (GS, GS+R): the polygonal baseline of Table 1.
+//
+// One indexed draw of the whole mesh, back faces culled. The shading is the ray caster's:
+// the same shading.glsl (material albedo from the height map texel, one light,
+// Blinn-Phong), the same height maps and texture repeats, the same normals (8) (per vertex,
+// interpolated), the same colour and distance outputs. Only the geometry differs.
+//
+// GS+R meshes come displaced onto the relief shell, with vertex normals tilted by the
+// height map's gradient as RC+R tilts its normals (plantgen.geometry.mesh.tessellate).
+//
+// Per-row data (chain position, material) sits in a storage buffer indexed by the
+// primitive: lateral triangles come row by row, TRIANGLES_PER_ROW each, caps after them.
+//
+// Variants (defines): TRIANGLES_PER_ROW (16·4^m).
+
+#if defined VERTEX_SHADER
+
+in vec3 position;          // relative to the mesh origin (float64 subtraction on the CPU)
+in vec3 normal;            // interpolated normal (8)
+in vec2 texcoord;          // (u, v + chain position)
+
+uniform mat4 view_projection;   // eye-relative world -> clip
+uniform vec3 origin_from_eye;   // mesh origin - eye
+
+out vec3 v_position;            // eye-relative
+out vec3 v_normal;
+out vec2 v_texcoord;
+
+void main() {
+    v_position = position + origin_from_eye;
+    v_normal = normal;
+    v_texcoord = texcoord;
+    gl_Position = view_projection * vec4(v_position, 1.0);
+}
+
+#elif defined FRAGMENT_SHADER
+
+#include "shading.glsl"
+
+in vec3 v_position;
+in vec3 v_normal;
+in vec2 v_texcoord;
+
+layout(std430, binding = 0) readonly buffer RowData { vec2 row_data[]; };  // chain position, material
+layout(std430, binding = 1) readonly buffer CapRows { int cap_row[]; };
+
+uniform int n_rows;
+uniform sampler2DArray height_maps;
+uniform vec2 texture_repeat[MAX_MATERIALS];
+
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out float out_distance;
+
+float texel_height(ivec2 size, int layer, int i, int j) {
+    i = ((i % size.x) + size.x) % size.x;
+    j = clamp(j, 0, size.y - 1);
+    return texelFetch(height_maps, ivec3(i, j, layer), 0).r;
+}
+
+// Bilinear height in [0, 1], sampled as the ray caster samples it (u repeats, v clamps).
+float height_at(int material, vec2 uv) {
+    ivec2 size = textureSize(height_maps, 0).xy;
+    int layer = clamp(material, 0, textureSize(height_maps, 0).z - 1);
+    vec2 rep = texture_repeat[clamp(material, 0, MAX_MATERIALS - 1)];
+    vec2 xy = vec2(fract(uv.x * rep.x), clamp(uv.y * rep.y, 0.0, 1.0)) * vec2(size) - 0.5;
+    vec2 cell = floor(xy);
+    vec2 w = xy - cell;
+    int i = int(cell.x), j = int(cell.y);
+    float h00 = texel_height(size, layer, i, j), h10 = texel_height(size, layer, i + 1, j);
+    float h01 = texel_height(size, layer, i, j + 1), h11 = texel_height(size, layer, i + 1, j + 1);
+    return mix(mix(h00, h10, w.x), mix(h01, h11, w.x), w.y);
+}
+
+void main() {
+    int primitive = gl_PrimitiveID;
+    int row = primitive < n_rows * TRIANGLES_PER_ROW ? primitive / TRIANGLES_PER_ROW
+                                                      : cap_row[primitive - n_rows * TRIANGLES_PER_ROW];
+    vec2 info = row_data[row];
+    int material = int(info.y + 0.5);
+    vec2 uv = vec2(v_texcoord.x, v_texcoord.y - info.x);   // per-row v of (7)
+    vec3 normal = normalize(v_normal);
+    float texel = height_at(material, uv);
+    vec3 to_eye = normalize(-v_position);
+    vec3 albedo = material_albedo(material, texel);
+    vec3 color = shade_surface(albedo, material, normal, to_eye, 1.0);
+    out_color = vec4(to_display(color), 1.0);
+    out_distance = length(v_position);
+}
+
+#endif
