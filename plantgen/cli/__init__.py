@@ -45,3 +45,5 @@ def main(argv: list[str] | None = None) -> None:
 
 # Commands register themselves on `cli` when their module is imported.
 from . import grow as _grow  # noqa: E402,F401
+from . import export as _export  # noqa: E402,F401
+from . import render as _render  # noqa: E402,F401

@@ -1,0 +1,91 @@
+"""Frame times of the GLSL ray caster, RC and RC+R, in the setting of Table 1.
+
+Run as ``python -m plantgen.benchmarks.raycast [--size 1024x768] [--frames 7] [MODEL ...]``.
+MODEL is a grammar or scene (a shipped name such as ``saguaro``, or a path) or a skeleton
+``.npz``; default: every shipped grammar and scene. Each model is framed by the ``auto``
+camera (spanning most of the viewport, as the paper measured) and rendered ``--frames``
+times after one warm-up frame (shader compilation); the table quotes the median.
+
+Columns: segments, bytes per segment sent to the GPU (one record each) and in total,
+median RC and RC+R frame times in milliseconds, and the GL renderer. On llvmpipe (a
+CPU rasteriser) the absolute numbers say little about a GPU; the ratios still show where
+time goes (relief marching, fill rate).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+
+def _models(names):
+    from .._resources import grammars_dir
+
+    if names:
+        return list(names)
+    try:
+        return sorted(str(p) for p in grammars_dir().glob("*.yaml"))
+    except FileNotFoundError:
+        return []
+
+
+def measure(path, width: int, height: int, frames: int, linear_steps: int, binary_steps: int):
+    """Median frame times (ms) of RC and RC+R for one model, and its record sizes."""
+    import numpy as np  # noqa: F401  (numpy is imported by everything below anyway)
+
+    from ..geometry.frusta import skin_skeleton
+    from ..pipeline import load_skeleton
+    from ..render.raycast import RECORD_BYTES, RaycastSettings, Raycaster, auto_camera
+
+    skeleton = load_skeleton(path)
+    frusta = skin_skeleton(skeleton)
+    camera = auto_camera(frusta, width, height)
+    caster = Raycaster()
+    row = {"model": Path(path).stem, "segments": len(skeleton), "rows": len(frusta.base),
+           "bytes_per_segment": RECORD_BYTES,
+           "upload_kib": len(frusta.base) * RECORD_BYTES / 1024}
+    names = frusta.material_names
+    for label, settings in (("rc_ms", RaycastSettings()),
+                            ("rcr_ms", RaycastSettings(relief=True, linear_steps=linear_steps,
+                                                       binary_steps=binary_steps))):
+        caster.render(frusta, camera, settings, names)   # warm-up
+        times = [caster.render(frusta, camera, settings, names).frame_ms
+                 for _ in range(frames)]
+        row[label] = statistics.median(times)
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.raycast",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="*", help="grammar, scene or .npz (default: all shipped)")
+    parser.add_argument("--size", default="1024x768")
+    parser.add_argument("--frames", type=int, default=7)
+    parser.add_argument("--linear-steps", type=int, default=32)
+    parser.add_argument("--binary-steps", type=int, default=6)
+    args = parser.parse_args(argv)
+    width, height = (int(x) for x in args.size.lower().split("x"))
+
+    from ..render.context import renderer_name
+
+    models = _models(args.models)
+    if not models:
+        print("no models: pass grammar/scene/.npz paths", file=sys.stderr)
+        return 2
+    print(f"GL renderer: {renderer_name()}; {width}x{height}; median of {args.frames} frames; "
+          f"relief {args.linear_steps} linear + {args.binary_steps} binary steps")
+    header = (f"{'model':<16}{'segments':>9}{'frusta':>8}{'B/frustum':>10}{'upload KiB':>11}"
+              f"{'RC ms':>9}{'RC+R ms':>9}")
+    print(header)
+    print("-" * len(header))
+    for path in models:
+        r = measure(path, width, height, args.frames, args.linear_steps, args.binary_steps)
+        print(f"{r['model']:<16}{r['segments']:>9,}{r['rows']:>8,}{r['bytes_per_segment']:>10}"
+              f"{r['upload_kib']:>11.1f}{r['rc_ms']:>9.1f}{r['rcr_ms']:>9.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

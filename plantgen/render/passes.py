@@ -1,0 +1,211 @@
+"""Effects decide programs and passes; the shadow-map pass of one directional light.
+
+A scene lists its effects (:data:`plantgen.scene.EFFECTS`). :func:`resolve_effects` applies
+the command line's overrides; :func:`program_variants` turns the effects into the shader
+variants (preprocessor defines) a frame needs, and :func:`frame_passes` into the passes it
+runs. Nothing more is built or run than asked: without ``shadows`` there is no shadow
+pass and no program samples a shadow map; without ``relief`` no relief march is compiled.
+
+The shadow map (:class:`ShadowPass`) is an orthographic depth image along the light. The
+ray-cast frusta write their *analytic* hit depth into it (``shaders/raycast.glsl`` with
+``SHADOW_PASS``: the light's parallel rays are intersected with each cone in the fragment
+shader, so the shadow is the frustum's, not its bounding pyramid's); the ground writes
+its plane. Receivers filter it with percentage-closer filtering and a receiver-plane bias
+(``shaders/shadow.glsl``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..scene import EFFECTS
+from .context import release_framebuffer
+
+__all__ = ["resolve_effects", "ShadowSettings", "LightWindow", "light_window", "ShadowPass",
+           "program_variants", "frame_passes", "parse_effect_list"]
+
+
+def resolve_effects(scene_effects=(), *, replace=None, add=(), remove=()) -> tuple[str, ...]:
+    """The effects a render simulates: the scene's list, or ``replace``, plus ``add`` minus
+    ``remove`` (in :data:`EFFECTS` order).
+
+    Raises
+    ------
+    PlantgenError
+        An effect name that is not one of :data:`EFFECTS` (one line, naming the known ones).
+    """
+    chosen = list(scene_effects if replace is None else replace)
+    for name in (*chosen, *add, *remove):
+        if name not in EFFECTS:
+            raise PlantgenError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
+    wanted = (set(chosen) | set(add)) - set(remove)
+    return tuple(e for e in EFFECTS if e in wanted)
+
+
+def parse_effect_list(text: str) -> tuple[str, ...]:
+    """``"relief,shadows"`` -> ("relief", "shadows"); empty items are ignored; names checked."""
+    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
+    return resolve_effects(replace=names)
+
+
+@dataclass(frozen=True)
+class ShadowSettings:
+    """Knobs of the shadow map.
+
+    resolution : texels per side of the square map
+    bias : constant depth bias in texels (world size of one texel), subtracted from the
+        receiver's light depth after the receiver-plane extrapolation
+    max_slope : clamp of the receiver plane's depth gradient (|tan| of the light's angle
+        to the normal); only surfaces lit at more than atan(max_slope) from their normal
+        may self-shadow, where the diffuse term is below 1/max_slope anyway
+    caster : ``"relief"`` (the relief surface casts the shadow when relief is on) or
+        ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow pass)
+    """
+
+    resolution: int = 2048
+    bias: float = 0.5
+    max_slope: float = 50.0
+    caster: str = "relief"
+
+    def __post_init__(self):
+        if not 16 <= int(self.resolution) <= 16384:
+            raise PlantgenError("shadow map resolution must lie in 16..16384")
+        if self.caster not in ("relief", "inner"):
+            raise PlantgenError(f"shadow caster must be 'relief' or 'inner', not {self.caster!r}")
+        if self.bias < 0 or self.max_slope <= 0:
+            raise PlantgenError("shadow bias must be >= 0 and max slope > 0")
+
+
+def program_variants(settings, shadows: ShadowSettings | None, ground: bool) -> list:
+    """(program file, defines) of every program one frame uses.
+
+    ``settings`` is the :class:`~plantgen.render.raycast.RaycastSettings` (relief on iff the
+    effects hold ``relief``); ``shadows`` is None without the ``shadows`` effect (then no
+    shadow pass runs and no program samples a map); ``ground``: the scene has a ground.
+    """
+    shadowed = shadows is not None
+    out = [("sky.glsl", {})]
+    if shadowed:
+        out.append(("raycast.glsl", {"SHADOW_PASS": True,
+                                     "RELIEF": settings.relief and shadows.caster == "relief"}))
+        if ground:
+            out.append(("ground.glsl", {"SHADOW_PASS": True}))
+    if ground:
+        out.append(("ground.glsl", {"SHADOWS": shadowed}))
+    out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed}))
+    return out
+
+
+def frame_passes(shadows: bool, ground: bool, segments: bool) -> list[str]:
+    """Names of the passes of one frame, in order."""
+    return ((["shadow"] if shadows and (segments or ground) else []) + ["sky"]
+            + (["ground"] if ground else []) + (["frusta"] if segments else []))
+
+
+@dataclass(frozen=True)
+class LightWindow:
+    """The orthographic window of a directional light, render-origin relative.
+
+    origin : (3,) window centre; right, up, forward : (3,) unit vectors (forward: the
+    direction the light travels); half : (2,) half extents in world units; depth : (2,)
+    near and far along ``forward`` from ``origin`` (world units).
+    """
+
+    origin: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    half: np.ndarray
+    depth: np.ndarray
+
+    def matrix(self) -> np.ndarray:
+        """(4, 4) float64: render-origin relative world -> clip coordinates (orthographic;
+        window depth = (z - near) / (far - near))."""
+        near, far = self.depth
+        m = np.zeros((4, 4))
+        m[0, :3] = self.right / self.half[0]
+        m[1, :3] = self.up / self.half[1]
+        m[2, :3] = 2.0 * self.forward / (far - near)
+        m[0, 3] = -self.right @ self.origin / self.half[0]
+        m[1, 3] = -self.up @ self.origin / self.half[1]
+        m[2, 3] = -2.0 * (self.forward @ self.origin + near) / (far - near) - 1.0
+        m[3, 3] = 1.0
+        return m
+
+    def uniforms(self) -> dict:
+        return {"light_origin": tuple(self.origin), "light_right": tuple(self.right),
+                "light_up": tuple(self.up), "light_forward": tuple(self.forward),
+                "light_half": tuple(self.half), "light_depth": tuple(self.depth)}
+
+    def texel_size(self, resolution: int) -> float:
+        """World size of one texel (the larger side)."""
+        return float(2.0 * self.half.max() / resolution)
+
+
+def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> LightWindow:
+    """The light's window around every shadow caster.
+
+    Parameters
+    ----------
+    caster_box : (2, 3) float64 world box around the casters (the frusta, relief shells
+        included)
+    light_travel : (3,) direction the light travels (not necessarily unit)
+    origin : (3,) float64 render origin (the camera eye), subtracted first
+    margin : relative growth of the window on every side
+
+    A directional light's shadows fall along its rays, so every shadow lies inside the
+    casters' own window: receivers outside it (in x, y) are lit, and receivers beyond
+    ``far`` see only the casters in front of them.
+    """
+    forward = np.asarray(light_travel, dtype=np.float64)
+    forward = forward / np.linalg.norm(forward)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    right = np.cross(forward, helper)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    box = np.asarray(caster_box, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+    local = corners @ np.stack([right, up, forward]).T
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    size = float(np.max(hi - lo)) or 1.0
+    pad = margin * size + 1e-9
+    lo, hi = lo - pad, hi + pad
+    centre_xy = 0.5 * (lo[:2] + hi[:2])
+    origin_rel = centre_xy[0] * right + centre_xy[1] * up
+    half = 0.5 * (hi[:2] - lo[:2])
+    return LightWindow(origin_rel, right, up, forward, half, np.array([lo[2], hi[2]]))
+
+
+class ShadowPass:
+    """The light's depth map: a depth texture of ``resolution``² and its framebuffer."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._fbo = None
+        self.texture = None
+        self.resolution = None
+
+    def target(self, resolution: int):
+        """The framebuffer (depth only) for a map of ``resolution`` texels per side."""
+        if self.resolution != resolution:
+            self.release()
+            self.texture = self.ctx.depth_texture((resolution, resolution))
+            self.texture.compare_func = ""          # read depths, compare in the shader
+            self.texture.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self._fbo = self.ctx.framebuffer(depth_attachment=self.texture)
+            self.resolution = resolution
+        return self._fbo
+
+    def depths(self) -> np.ndarray:
+        """(resolution, resolution) float32 window depths in [0, 1], row 0 the window's
+        bottom (light_up = -1); 1 where nothing was drawn."""
+        raw = self.texture.read(alignment=1)
+        return np.frombuffer(raw, dtype=np.float32).reshape(self.resolution, self.resolution).copy()
+
+    def release(self) -> None:
+        if self._fbo is not None:
+            release_framebuffer(self._fbo)
+        self._fbo = self.texture = self.resolution = None

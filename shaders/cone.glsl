@@ -1,0 +1,237 @@
+// Conical frusta (Bhagvat et al. 2009, §2): the one place the cone math lives.
+// Included by every program that ray casts or bounds frusta.
+//
+// Coordinates are world coordinates relative to the render origin (the camera eye),
+// converted to float32 on the CPU after subtracting the origin in float64, so nothing
+// here carries the digits of a model that sits far from the world origin.
+//
+// The cone is in slope form, r(y) = r1 + k*y with k = (r2 - r1)/h and y measured along
+// the axis from the base (the paper's (1) without h'): cylinders, flaring cones and cones
+// closing to a point need no branch. Points with r(y) < 0 (the mirror nappe) are outside.
+// Quadratics are solved in the stable form q = -(b + sign(b)*sqrt(disc)), t = q/a, c/q.
+
+#ifndef CONE_GLSL
+#define CONE_GLSL
+
+const float TWO_PI = 6.283185307179586;
+
+// One segment, unpacked from its record (see plantgen/render/raycast.py, pack_records).
+struct Frustum {
+    vec3 base;      // C1, relative to the render origin
+    float h;        // axis length
+    vec3 axis;      // unit axis, base towards top
+    float r1;       // radius at the base
+    vec3 ref_dir;   // unit, perpendicular to axis: the u = 0 direction
+    float r2;       // radius at the top
+    vec4 plane_lo;  // (n, d): inside iff dot(n, x - base) - d >= 0 (d relative to base)
+    vec4 plane_hi;  // (n, d): inside iff dot(n, x - base) - d <= 0
+    bool open_lo;   // the lower end is capped (no continuing row shares its plane)
+    bool open_hi;   // the upper end is capped
+    float u_offset; // added to u so u is continuous across joints
+    float twist;    // turns; u gains v*twist
+    float shell;    // relief shell thickness (0: no relief)
+    int material;   // material index
+};
+
+float frustum_slope(Frustum f) { return (f.r2 - f.r1) / f.h; }
+
+// Radius of the cone grown by `dr` at axial coordinate y (negative on the mirror nappe).
+float frustum_radius(Frustum f, float dr, float y) { return f.r1 + dr + frustum_slope(f) * y; }
+
+// Signed distances to the two cutting planes: lo >= 0 and hi <= 0 inside.
+float plane_lo_side(Frustum f, vec3 p) { return dot(f.plane_lo.xyz, p - f.base) - f.plane_lo.w; }
+float plane_hi_side(Frustum f, vec3 p) { return dot(f.plane_hi.xyz, p - f.base) - f.plane_hi.w; }
+
+// Clip the parameter interval [t0, t1] of the ray o + t*d to one half-space
+// dot(n, x) - w <= 0 (pass n, w negated for a >= 0 half-space). `face` becomes `this_face`
+// when the half-space's boundary moves t0. Returns false if the interval becomes empty.
+bool clip_half_space(vec3 n, float w, int this_face, vec3 o, vec3 d,
+                     inout float t0, inout float t1, inout int face) {
+    float side0 = dot(n, o) - w;
+    float slope = dot(n, d);
+    if (slope == 0.0) return side0 <= 0.0 && t0 <= t1;
+    float t_cross = -side0 / slope;
+    if (slope > 0.0) t1 = min(t1, t_cross);
+    else if (t_cross > t0) { t0 = t_cross; face = this_face; }
+    return t0 <= t1;
+}
+
+const int FACE_CONE = 0;      // entered through the conical surface
+const int FACE_LO = 1;        // entered through the lower cutting plane (a cap)
+const int FACE_HI = 2;        // entered through the upper cutting plane (a cap)
+const int FACE_NONE = 3;      // the interval starts at t_min (the origin is inside)
+
+// The part of the ray o + t*d, t in [t_min, t_max], inside the solid frustum grown by `dr`
+// (cone of radius r(y) + dr, r(y) + dr >= 0, between the two cutting planes). The solid is
+// convex, so the part is one interval [t_enter, t_exit]; `enter_face` says which surface
+// t_enter lies on. `o` should lie near the segment (the caller re-centres it) so that
+// float32 keeps its digits. Returns false if the ray misses the solid in [t_min, t_max].
+bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_max,
+                      out float t_enter, out float t_exit, out int enter_face) {
+    float k = frustum_slope(f);
+    vec3 e = o - f.base;
+    float e_y = dot(e, f.axis), d_y = dot(d, f.axis);
+    vec3 e_perp = e - e_y * f.axis, d_perp = d - d_y * f.axis;
+    float r0 = f.r1 + dr + k * e_y;          // cone radius at the origin's height
+    float len_d_perp = length(d_perp), len_e_perp = length(e_perp);
+    // g(t) = a t^2 + 2 b t + c <= 0 inside the double cone; the products keep the small
+    // differences (a ray along a generator, an origin on the surface) accurate.
+    float a = (len_d_perp - k * d_y) * (len_d_perp + k * d_y);
+    float b = dot(e_perp, d_perp) - k * r0 * d_y;
+    float c = (len_e_perp - r0) * (len_e_perp + r0);
+    float disc = b * b - a * c;
+
+    // Up to two connected pieces of {g <= 0} along the ray; each lies in one nappe.
+    const float BIG = 1e30;
+    float lo0 = -BIG, hi0 = BIG, lo1 = BIG, hi1 = -BIG;    // piece 1 empty by default
+    if (a == 0.0) {                                         // parallel to a generator
+        if (b == 0.0) { if (c > 0.0) return false; }
+        else if (b > 0.0) hi0 = -0.5 * c / b; else lo0 = -0.5 * c / b;
+    } else if (disc < 0.0) {
+        if (a > 0.0) return false;                          // never inside
+        // a < 0: inside for every t, within one nappe: keep the whole line
+    } else {
+        float q = -(b + (b >= 0.0 ? 1.0 : -1.0) * sqrt(disc));
+        float ta = q / a;
+        float tb = (q != 0.0) ? c / q : ta;
+        float t_lo = min(ta, tb), t_hi = max(ta, tb);
+        if (a > 0.0) { lo0 = t_lo; hi0 = t_hi; }
+        else { hi0 = t_lo; lo1 = t_hi; hi1 = BIG; }
+    }
+    for (int piece = 0; piece < 2; ++piece) {
+        float t0 = piece == 0 ? lo0 : lo1;
+        float t1 = min(piece == 0 ? hi0 : hi1, t_max);
+        int face = FACE_CONE;
+        if (t0 <= t_min) { t0 = t_min; face = FACE_NONE; }
+        if (t0 > t1) continue;
+        if (!clip_half_space(-f.plane_lo.xyz, -f.plane_lo.w, FACE_LO, e, d, t0, t1, face)) continue;
+        if (!clip_half_space(f.plane_hi.xyz, f.plane_hi.w, FACE_HI, e, d, t0, t1, face)) continue;
+        float y_mid = e_y + 0.5 * (t0 + t1) * d_y;
+        if (frustum_radius(f, dr, y_mid) < 0.0) continue;  // the mirror nappe
+        t_enter = t0; t_exit = t1; enter_face = face;
+        return true;
+    }
+    return false;
+}
+
+// The ray parameter of the point of o + t*d nearest the axis segment {C1 + s*axis,
+// 0 <= s <= h} (step 2 of plantgen.geometry.reference): re-centring the ray there gives
+// the quadratic numbers of the size of the ray's distance from the axis, not of the eye's.
+float recenter_shift(Frustum f, vec3 o, vec3 d) {
+    vec3 E = o - f.base;
+    float b = dot(d, f.axis), de = dot(d, E), e = dot(f.axis, E), dd = dot(d, d);
+    float den = dd - b * b;
+    float s = den > 1e-6 * dd ? clamp(e + b * (b * e - de) / den, 0.0, f.h) : 0.5 * f.h;
+    return (s * b - de) / dd;
+}
+
+vec3 safe_normalize(vec3 x, vec3 fallback) {
+    float len = length(x);
+    return len > 0.0 ? x / len : fallback;
+}
+
+// The nearest hit of the ray o + t*d (t > t_min) with the frustum's skin: the cone between
+// its planes, and a flat cap on each open end. A line-by-line port of
+// plantgen.geometry.reference._pair_hits (there: E = O - C1, already re-centred by the
+// caller here). `kind` is FACE_CONE, FACE_LO or FACE_HI. Returns false for a miss.
+bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out int kind) {
+    float k = frustum_slope(f);
+    vec3 E = o - f.base;
+    float ey = dot(E, f.axis), dy = dot(d, f.axis);
+    vec3 Ep = E - ey * f.axis;
+    vec3 Dp = d - dy * f.axis;
+    float R0 = f.r1 + k * ey;
+    float A = dot(Dp, Dp) - k * k * dy * dy;
+    float B = dot(Ep, Dp) - k * dy * R0;
+    float C = dot(Ep, Ep) - R0 * R0;
+    float disc = B * B - A * C;
+    float sq = sqrt(max(disc, 0.0));
+    float q = -(B + (B >= 0.0 ? sq : -sq));            // copysign(sq, B)
+    const float NONE = 3.0e38;                        // the reference's inf: no hit
+    float t1 = A != 0.0 ? q / A : NONE;
+    float t2 = q != 0.0 ? C / q : NONE;
+    t_hit = NONE;
+    kind = FACE_CONE;
+    if (disc >= 0.0) {
+        for (int i = 0; i < 2; ++i) {
+            float t = i == 0 ? t1 : t2;
+            vec3 X = E + t * d;
+            float y = dot(X, f.axis);
+            bool ok = abs(t) < NONE && f.r1 + k * y >= 0.0;   // finite (NaN fails too)
+            ok = ok && dot(f.plane_lo.xyz, X) - f.plane_lo.w >= 0.0
+                    && dot(f.plane_hi.xyz, X) - f.plane_hi.w <= 0.0;
+            ok = ok && t > t_min;
+            if (ok && t < t_hit) t_hit = t;
+        }
+    }
+    for (int c = 0; c < 2; ++c) {
+        bool is_lo = c == 0;
+        if (!(is_lo ? f.open_lo : f.open_hi)) continue;
+        vec4 cap = is_lo ? f.plane_lo : f.plane_hi;
+        vec4 other = is_lo ? f.plane_hi : f.plane_lo;
+        float den = dot(cap.xyz, d);
+        if (den == 0.0) continue;
+        float t = (cap.w - dot(cap.xyz, E)) / den;
+        vec3 X = E + t * d;
+        float y = dot(X, f.axis);
+        float rr = f.r1 + k * y;
+        vec3 perp = X - y * f.axis;
+        bool ok = abs(t) < NONE && rr >= 0.0 && dot(perp, perp) <= rr * rr;
+        float other_side = dot(other.xyz, X) - other.w;
+        ok = ok && (is_lo ? other_side <= 0.0 : other_side >= 0.0);
+        ok = ok && t > t_min;
+        if (ok && t < t_hit) { t_hit = t; kind = is_lo ? FACE_LO : FACE_HI; }
+    }
+    return t_hit < NONE;
+}
+
+// Axial coordinate y, radial distance and unit radial direction of a point p.
+void frustum_local(Frustum f, vec3 p, out float y, out float radial, out vec3 e_r) {
+    vec3 e = p - f.base;
+    y = dot(e, f.axis);
+    vec3 perp = e - y * f.axis;
+    radial = length(perp);
+    e_r = radial > 0.0 ? perp / radial : f.ref_dir;
+}
+
+// Where the generator through p of the concentric cone through p meets the two planes:
+// p + s_lo*g and p + s_hi*g, with g = axis + k*e_r (the paper's apex line, defined for k = 0).
+void generator_params(Frustum f, vec3 p, vec3 e_r, out vec3 g, out float s_lo, out float s_hi) {
+    g = f.axis + frustum_slope(f) * e_r;
+    s_lo = -plane_lo_side(f, p) / dot(f.plane_lo.xyz, g);
+    s_hi = -plane_hi_side(f, p) / dot(f.plane_hi.xyz, g);
+}
+
+// v of (7): |P - P_l| / |P_u - P_l| along the generator through p.
+float frustum_v(Frustum f, vec3 p) {
+    float y, radial; vec3 e_r, g; float s_lo, s_hi;
+    frustum_local(f, p, y, radial, e_r);
+    generator_params(f, p, e_r, g, s_lo, s_hi);
+    return clamp(-s_lo / (s_hi - s_lo), 0.0, 1.0);
+}
+
+// u of (6) without the twist term, in turns: the angle around the axis from ref_dir.
+float frustum_angle_u(Frustum f, vec3 p) {
+    vec3 e = p - f.base;
+    vec3 bitangent = cross(f.axis, f.ref_dir);
+    return atan(dot(e, bitangent), dot(e, f.ref_dir)) / TWO_PI;
+}
+
+// Full (u, v): u in [0, 1) with the joint offset and twist, v in [0, 1].
+vec2 frustum_uv_at(Frustum f, vec3 p, float v) {
+    return vec2(fract(frustum_angle_u(f, p) + f.u_offset + v * f.twist), v);
+}
+
+// The interpolated normal of (8) at p (on the cone or a concentric one), with its v.
+vec3 frustum_normal(Frustum f, vec3 p, out float v) {
+    float y, radial; vec3 e_r, g; float s_lo, s_hi;
+    frustum_local(f, p, y, radial, e_r);
+    generator_params(f, p, e_r, g, s_lo, s_hi);
+    v = clamp(-s_lo / (s_hi - s_lo), 0.0, 1.0);
+    vec3 top = f.base + f.h * f.axis;
+    vec3 n_lo = safe_normalize(p + s_lo * g - f.base, e_r);
+    vec3 n_hi = safe_normalize(p + s_hi * g - top, e_r);   // zero at a closed apex
+    return safe_normalize(mix(n_lo, n_hi, v), e_r);
+}
+
+#endif

@@ -1,0 +1,332 @@
+// Analytic ray casting of (relief-mapped) conical frusta (Bhagvat et al. 2009, §2.5-§3).
+//
+// One instance per segment: the vertex shader builds the segment's bounding pyramid
+// (§2.6, 8 corners, 12 triangles) from the segment's record; back faces are rasterised so
+// an eye inside a pyramid still gets fragments. The fragment shader casts the pixel's ray
+// (through the pixel centre, as plantgen.geometry.Camera.rays does), writes colour,
+// the distance along the ray, and gl_FragDepth.
+//
+// Variants (defines): RELIEF (march the relief shell, §3), V_EXACT (v of (7) per sample
+// instead of interpolated between entry and exit), SCREEN_PROXY (each instance covers the
+// whole screen instead of its pyramid: slow, a coverage oracle for tests), SHADOWS (sample
+// the light's shadow map, shaders/shadow.glsl), SHADOW_PASS (cast orthographic rays along
+// the light instead of the eye's rays and write only the hit's depth in the light's
+// window: the shadow map pass of plantgen.render.passes; with RELIEF the relief surface
+// is what casts the shadow).
+
+#include "cone.glsl"
+
+#if defined VERTEX_SHADER
+
+in vec3 corner;            // template: (sx, sz, end) with sx, sz = -1 or +1, end = 0 or 1
+in vec4 rec0;              // base (relative to the render origin), h
+in vec4 rec1;              // axis, r1
+in vec4 rec2;              // ref_dir, r2
+in vec4 rec3;              // plane_lo (n, d - n.base)
+in vec4 rec4;              // plane_hi (n, d - n.base)
+in vec4 rec5;              // u_offset, twist, shell, tag (material + 256 open_lo + 512 open_hi)
+
+uniform mat4 view_projection;   // render-origin-relative world -> clip
+uniform float hull_padding;     // relative growth of the pyramid (covers rasterisation edges)
+
+flat out vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
+
+// Axial height where the edge line base + y*axis + (r1 + k*y)*q of the pyramid meets
+// `plane`; `rise` is the line's approach rate to the plane (small: grazing).
+float edge_cut(vec4 plane, vec3 base, vec3 axis, vec3 q, float r1, float k, out float rise) {
+    float nq = dot(plane.xyz, q);
+    rise = dot(plane.xyz, axis) + k * nq;
+    return (plane.w - dot(plane.xyz, base) - r1 * nq) / rise;
+}
+
+// Lowest (highest) axial height of the section of the cone r1 + k*y by `plane` over all
+// generators: the extremes sit where n.e_r = -+|n_perp|.
+vec2 plane_axial_range(vec4 plane, vec3 base, vec3 axis, float r1, float k) {
+    float na = dot(plane.xyz, axis);
+    float n_perp = sqrt(max(1.0 - na * na, 0.0));
+    float gap = plane.w - dot(plane.xyz, base);
+    float y_minus = (gap + r1 * n_perp) / max(abs(na - k * n_perp), 1e-12) * sign(na - k * n_perp);
+    float y_plus = (gap - r1 * n_perp) / max(abs(na + k * n_perp), 1e-12) * sign(na + k * n_perp);
+    return vec2(min(y_minus, y_plus), max(y_minus, y_plus));
+}
+
+// The bounding pyramid of §2.6, as plantgen.geometry.frusta.bounding_pyramids builds it:
+// the square pyramid around the cone r1 + k*y (here grown by the shell and a padding),
+// its four edge lines cut by the two planes, each edge keeping the lower and the higher
+// of its two cuts (so rows whose planes cross inside stay covered). If any edge meets a
+// plane at a grazing angle, the whole row uses planes perpendicular to the axis at the
+// frustum's axial extent instead.
+vec3 pyramid_corner(vec3 base, vec3 axis, vec3 ref_dir, vec3 side, float r1, float k,
+                    vec4 plane_lo, vec4 plane_hi, vec3 corner) {
+    float n_dot_a = min(dot(plane_lo.xyz, axis), dot(plane_hi.xyz, axis));
+    float limit = 0.05 * max(n_dot_a, 1e-3);
+    bool grazing = false;
+    for (int i = 0; i < 4; ++i) {
+        vec3 q = float((i & 1) * 2 - 1) * ref_dir + float((i >> 1) * 2 - 1) * side;
+        float rise_lo, rise_hi;
+        float y_a = edge_cut(plane_lo, base, axis, q, r1, k, rise_lo);
+        float y_b = edge_cut(plane_hi, base, axis, q, r1, k, rise_hi);
+        grazing = grazing || min(rise_lo, rise_hi) < limit || isinf(y_a) || isinf(y_b)
+                  || isnan(y_a) || isnan(y_b);
+    }
+    vec3 q = corner.x * ref_dir + corner.y * side;
+    float y;
+    if (grazing) {
+        vec2 range_lo = plane_axial_range(plane_lo, base, axis, r1, k);
+        vec2 range_hi = plane_axial_range(plane_hi, base, axis, r1, k);
+        float lowest = min(range_lo.x, range_hi.x), highest = max(range_hi.y, range_lo.y);
+        y = corner.z < 0.5 ? lowest : highest;
+    } else {
+        float rise;
+        float y_a = edge_cut(plane_lo, base, axis, q, r1, k, rise);
+        float y_b = edge_cut(plane_hi, base, axis, q, r1, k, rise);
+        y = corner.z < 0.5 ? min(y_a, y_b) : max(y_a, y_b);
+    }
+    float radius = max(r1 + k * y, 0.0);   // past an apex the square shrinks to the axis
+    return base + y * axis + radius * q;
+}
+
+void main() {
+    vec3 base = rec0.xyz; float h = rec0.w;
+    vec3 axis = rec1.xyz; vec3 ref_dir = rec2.xyz;
+    float shell = rec5.z;
+    float r1 = rec1.w + shell, r2 = rec2.w + shell;
+    float r_max = max(r1, r2);
+    float pad = hull_padding * r_max + 1e-6 * (h + r_max);
+    float k = (r2 - r1) / h;
+    vec3 side = cross(ref_dir, axis);
+    // planes relative to the render origin, grown by `pad` all round (moved outwards)
+    vec4 plane_lo = vec4(rec3.xyz, rec3.w + dot(rec3.xyz, base) - pad);
+    vec4 plane_hi = vec4(rec4.xyz, rec4.w + dot(rec4.xyz, base) + pad);
+    vec3 p = pyramid_corner(base, axis, ref_dir, side, r1 + pad, k, plane_lo, plane_hi, corner);
+    gl_Position = view_projection * vec4(p, 1.0);
+#if defined SCREEN_PROXY
+    vec2 screen = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);   // one full-screen triangle
+    gl_Position = vec4(2.0 * screen - 1.0, 1e-9 * corner.z, 1.0);   // (keeps `corner` live)
+#endif
+    f_rec0 = rec0; f_rec1 = rec1; f_rec2 = rec2; f_rec3 = rec3; f_rec4 = rec4; f_rec5 = rec5;
+}
+
+#elif defined FRAGMENT_SHADER
+
+#if !defined SHADOW_PASS
+#include "shading.glsl"
+#if defined SHADOWS
+#include "shadow.glsl"
+#endif
+#else
+#define MAX_MATERIALS 16
+uniform vec3 light_origin;     // centre of the light's window, render-origin relative
+uniform vec3 light_right;      // unit, the window's +x
+uniform vec3 light_up;         // unit, the window's +y
+uniform vec3 light_forward;    // unit, the direction the light travels
+uniform vec2 light_half;       // half extents of the window (world units)
+uniform vec2 light_depth;      // near, far along light_forward from light_origin
+#endif
+
+flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
+
+uniform vec2 viewport;          // width, height in pixels
+uniform vec3 cam_forward;       // unit
+uniform vec3 cam_right_scaled;  // unit right * tan(fov_x / 2)
+uniform vec3 cam_up_scaled;     // unit up * tan(fov_y / 2)
+uniform vec2 depth_coeffs;      // projection m[2][2], m[2][3]: clip z = A*z_view + B
+uniform sampler2DArray height_maps;   // R8 height maps, layer = material, row j = v texel j
+uniform vec2 texture_repeat[MAX_MATERIALS];  // (u repeats around, v repeats per segment)
+uniform int linear_steps;
+uniform int binary_steps;
+
+#if !defined SHADOW_PASS
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out float out_distance;   // distance along the ray from the eye
+#endif
+
+Frustum unpack_frustum() {
+    Frustum f;
+    f.base = f_rec0.xyz; f.h = f_rec0.w;
+    f.axis = f_rec1.xyz; f.r1 = f_rec1.w;
+    f.ref_dir = f_rec2.xyz; f.r2 = f_rec2.w;
+    f.plane_lo = f_rec3; f.plane_hi = f_rec4;
+    f.u_offset = f_rec5.x; f.twist = f_rec5.y; f.shell = f_rec5.z;
+    int tag = int(f_rec5.w + 0.5);
+    f.material = tag & 255;
+    f.open_lo = (tag & 256) != 0;
+    f.open_hi = (tag & 512) != 0;
+    return f;
+}
+
+// Whether a cutting plane closes the frustum with a visible cap (an open chain end) rather
+// than being a joint shared with a continuing neighbour (inside the plant).
+bool face_is_open_cap(Frustum f, int face) {
+    return (face == FACE_LO && f.open_lo) || (face == FACE_HI && f.open_hi);
+}
+
+// Bilinear height in [0, 1]: u repeats, v clamps, texel centres at (i + 0.5) / size.
+float texel_height(ivec2 size, int layer, int i, int j) {
+    i = ((i % size.x) + size.x) % size.x;
+    j = clamp(j, 0, size.y - 1);
+    return texelFetch(height_maps, ivec3(i, j, layer), 0).r;
+}
+
+float height_at(int material, vec2 uv) {
+    ivec2 size = textureSize(height_maps, 0).xy;
+    int layer = clamp(material, 0, textureSize(height_maps, 0).z - 1);
+    vec2 rep = texture_repeat[clamp(material, 0, MAX_MATERIALS - 1)];
+    vec2 xy = vec2(fract(uv.x * rep.x), clamp(uv.y * rep.y, 0.0, 1.0)) * vec2(size) - 0.5;
+    vec2 cell = floor(xy);
+    vec2 w = xy - cell;
+    int i = int(cell.x), j = int(cell.y);
+    float h00 = texel_height(size, layer, i, j), h10 = texel_height(size, layer, i + 1, j);
+    float h01 = texel_height(size, layer, i, j + 1), h11 = texel_height(size, layer, i + 1, j + 1);
+    return mix(mix(h00, h10, w.x), mix(h01, h11, w.x), w.y);
+}
+
+vec3 pixel_ray() {
+    vec2 ndc = 2.0 * gl_FragCoord.xy / viewport - 1.0;   // pixel centres; +y is up
+    return normalize(cam_forward + ndc.x * cam_right_scaled + ndc.y * cam_up_scaled);
+}
+
+#if defined RELIEF
+// Relief height w of (12): 0 on the inner cone, 1 on the outer one.
+float shell_height(Frustum f, vec3 p) {
+    float y, radial; vec3 e_r;
+    frustum_local(f, p, y, radial, e_r);
+    return (radial - frustum_radius(f, 0.0, y)) / f.shell;
+}
+
+vec2 sample_uv(Frustum f, vec3 p, float v_interp) {
+#if defined V_EXACT
+    return frustum_uv_at(f, p, frustum_v(f, p));
+#else
+    return frustum_uv_at(f, p, v_interp);
+#endif
+}
+
+// March the shell from t_in to t_end: linear steps, then a bisection. True on a hit.
+bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_on_inner,
+                  out float t_hit) {
+    float v_in = frustum_v(f, o + t_in * d), v_end = frustum_v(f, o + t_end * d);
+    float t_prev = t_in;
+    int steps = max(linear_steps, 1);
+    for (int i = 0; i <= steps; ++i) {
+        float s = float(i) / float(steps);
+        float t = mix(t_in, t_end, s);
+        vec3 p = o + t * d;
+        float ground = height_at(f.material, sample_uv(f, p, mix(v_in, v_end, s)));
+        if (shell_height(f, p) <= ground || (i == steps && end_on_inner)) {
+            float t_out = t_prev, t_inside = t;      // bisect between above and below
+            for (int b = 0; b < binary_steps && i > 0; ++b) {
+                float t_mid = 0.5 * (t_out + t_inside);
+                vec3 pm = o + t_mid * d;
+                float sm = (t_mid - t_in) / max(t_end - t_in, 1e-30);
+                float gm = height_at(f.material, sample_uv(f, pm, mix(v_in, v_end, sm)));
+                if (shell_height(f, pm) <= gm) t_inside = t_mid; else t_out = t_mid;
+            }
+            t_hit = t_inside;
+            return true;
+        }
+        t_prev = t;
+    }
+    return false;
+}
+#endif
+
+void main() {
+    Frustum f = unpack_frustum();
+#if defined SHADOW_PASS
+    // an orthographic ray of the light, starting on the window's near plane
+    vec2 ndc = 2.0 * gl_FragCoord.xy / viewport - 1.0;
+    vec3 ray_origin = light_origin + ndc.x * light_half.x * light_right
+                    + ndc.y * light_half.y * light_up + light_depth.x * light_forward;
+    vec3 d = light_forward;
+    // Re-centre the ray origin at the point of the ray nearest the axis segment.
+    float t_shift = recenter_shift(f, ray_origin, d);
+    vec3 o = ray_origin + t_shift * d;
+#else
+    vec3 d = pixel_ray();
+    // Re-centre the ray origin at the point of the ray nearest the axis segment.
+    float t_shift = recenter_shift(f, vec3(0.0), d);
+    vec3 o = t_shift * d;
+#endif
+    float t_min = -t_shift;        // the ray's start (the eye, or the light's near plane)
+    float t_enter, t_exit; int face;
+    float t_hit;
+    bool cap = false;
+#if defined RELIEF
+    if (f.shell > 0.0) {
+        if (!frustum_interval(f, f.shell, o, d, t_min, 1e30, t_enter, t_exit, face)) discard;
+        float t_end = t_exit;
+        float ti_enter, ti_exit; int inner_face;
+        bool inner = frustum_interval(f, 0.0, o, d, t_min, 1e30, ti_enter, ti_exit, inner_face);
+        bool end_on_inner = inner && inner_face != FACE_NONE && ti_enter <= t_end;
+        if (end_on_inner) t_end = ti_enter;
+        if (!march_relief(f, o, d, t_enter, t_end, end_on_inner, t_hit)) discard;
+        cap = t_hit == t_enter && face_is_open_cap(f, face);
+    } else
+#endif
+    {
+        if (!frustum_hit(f, o, d, t_min, t_hit, face)) discard;
+        cap = face != FACE_CONE;
+    }
+    vec3 p = o + t_hit * d;
+    float distance = t_shift + t_hit;
+#if defined SHADOW_PASS
+    float z_light = dot(p - light_origin, light_forward);
+    gl_FragDepth = clamp((z_light - light_depth.x) / (light_depth.y - light_depth.x), 0.0, 1.0);
+#else
+
+    // Shading: u, v and the interpolated normal (6)-(8), texture colour, one light.
+    float v;
+    vec3 normal = frustum_normal(f, p, v);
+    if (cap) normal = face == FACE_LO ? -f.plane_lo.xyz : f.plane_hi.xyz;
+    vec2 uv = frustum_uv_at(f, p, v);
+    float texel = height_at(f.material, uv);
+#if defined RELIEF
+    if (f.shell > 0.0 && !cap) {
+        // Tilt the normal by the height map's gradient in the (u, v) frame.
+        ivec2 size = textureSize(height_maps, 0).xy;
+        vec2 rep = texture_repeat[clamp(f.material, 0, MAX_MATERIALS - 1)];
+        vec2 du = vec2(1.0 / (float(size.x) * rep.x), 0.0);
+        vec2 dv = vec2(0.0, 1.0 / (float(size.y) * rep.y));
+        float dh_du = (height_at(f.material, uv + du) - height_at(f.material, uv - du)) / (2.0 * du.x);
+        float dh_dv = (height_at(f.material, uv + dv) - height_at(f.material, uv - dv)) / (2.0 * dv.y);
+        float y, radial; vec3 e_r, g; float s_lo, s_hi;
+        frustum_local(f, p, y, radial, e_r);
+        generator_params(f, p, e_r, g, s_lo, s_hi);
+        vec3 tangent_u = cross(f.axis, e_r);
+        float len_u = TWO_PI * max(radial, 1e-20);            // |dP/du|
+        float len_v = max((s_hi - s_lo) * length(g), 1e-20);  // |dP/dv|
+        normal = normalize(normal - f.shell * (dh_du / len_u * tangent_u
+                                               + dh_dv / len_v * normalize(g)));
+    }
+#endif
+    vec3 albedo = material_albedo(f.material, texel);
+#if defined SHADOWS
+    // the receiver plane of the shadow test is the true tangent plane: the cone's own
+    // normal e_r - k*axis, not the interpolated shading normal (8), which leans radially
+    vec3 receiver_normal = normal;
+    bool on_relief = false;
+#if defined RELIEF
+    on_relief = f.shell > 0.0 && !cap;
+#endif
+    if (!cap && !on_relief) {
+        float y_r, radial_r; vec3 e_r_r;
+        frustum_local(f, p, y_r, radial_r, e_r_r);
+        receiver_normal = normalize(e_r_r - frustum_slope(f) * f.axis);
+    }
+    float visibility = shadow_visibility(p, receiver_normal);
+#else
+    float visibility = 1.0;
+#endif
+    vec3 color = shade_surface_visible(albedo, f.material, normal, -d, 1.0, visibility);
+    out_color = vec4(to_display(color), 1.0);
+    out_distance = distance;
+
+    // Depth of the hit for the depth test against other frusta and ordinary meshes.
+    float z_view = -distance * dot(d, cam_forward);
+    float ndc_z = (depth_coeffs.x * z_view + depth_coeffs.y) / (-z_view);
+    gl_FragDepth = clamp(0.5 * ndc_z + 0.5, 0.0, 1.0);
+#endif
+}
+
+#endif

@@ -1,0 +1,57 @@
+// Shading shared by the ray caster and the raster renderer: material colours, one
+// directional light with Blinn-Phong, and a sky background. Include after declaring
+// nothing; it declares its own uniforms (set by plantgen.render.raycast.set_shading).
+
+#ifndef SHADING_GLSL
+#define SHADING_GLSL
+
+#define MAX_MATERIALS 16
+
+uniform vec3 light_dir;                         // unit, from the surface towards the light
+uniform vec3 light_color;
+uniform vec3 ambient_color;
+uniform vec3 sky_zenith;
+uniform vec3 sky_horizon;
+uniform vec3 ground_tint;                       // sky colour below the horizon
+uniform vec3 material_dark[MAX_MATERIALS];      // albedo where the texture is low
+uniform vec3 material_light[MAX_MATERIALS];     // albedo where the texture is high
+uniform vec2 material_gloss[MAX_MATERIALS];     // (specular strength, Blinn-Phong exponent)
+
+// Sky seen along unit direction `dir` (y up): horizon haze to zenith blue, darker below.
+vec3 sky_color(vec3 dir) {
+    float up = dir.y;
+    if (up >= 0.0) return mix(sky_horizon, sky_zenith, pow(up, 0.6));
+    return mix(sky_horizon, ground_tint, pow(-up, 0.5));
+}
+
+// Albedo of material `material` where its texture (a height map) reads `texel` in [0, 1].
+vec3 material_albedo(int material, float texel) {
+    int m = clamp(material, 0, MAX_MATERIALS - 1);
+    return mix(material_dark[m], material_light[m], texel);
+}
+
+// One directional light, Blinn-Phong, plus a hemispherical ambient term.
+// normal and to_eye are unit vectors; the normal is flipped to face the eye.
+// `light_visibility` in [0, 1] scales the direct light (1: lit, 0: in shadow; see shadow.glsl).
+vec3 shade_surface_visible(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion,
+                           float light_visibility) {
+    int m = clamp(material, 0, MAX_MATERIALS - 1);
+    vec3 n = dot(normal, to_eye) < 0.0 ? -normal : normal;
+    float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
+    vec3 halfway = normalize(light_dir + to_eye);
+    float specular = diffuse > 0.0
+        ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
+    float sky_light = 0.5 + 0.5 * n.y;
+    vec3 lit = albedo * (ambient_color * sky_light * occlusion + light_color * diffuse)
+             + light_color * specular * light_visibility;
+    return lit;
+}
+
+vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion) {
+    return shade_surface_visible(albedo, material, normal, to_eye, occlusion, 1.0);
+}
+
+// Linear colour to display (sRGB-like gamma).
+vec3 to_display(vec3 linear) { return pow(clamp(linear, 0.0, 1.0), vec3(1.0 / 2.2)); }
+
+#endif

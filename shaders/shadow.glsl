@@ -1,0 +1,61 @@
+// Shadow map look-up for one directional light (plantgen.render.passes): included by the
+// programs that receive shadows (the ray caster and the ground) when SHADOWS is defined.
+//
+// The map is an orthographic depth image along the light: texel (i, j) holds the depth,
+// as (z - near) / (far - near), of the first surface met by the light ray through the
+// texel's centre (the ray-cast frusta write their analytic hit, the ground its plane).
+//
+// Filtering: percentage-closer filtering over a 3x3 tent of texels (16 texel fetches),
+// each texel compared on its own. Bias: the receiver-plane depth, i.e. the receiver's
+// depth is extrapolated to each texel centre along the plane of its (known) normal before
+// the comparison, so a flat lit surface never shadows itself however grazing the light;
+// only a small constant `shadow_bias` (world units) remains, so shadows stay attached.
+// Positions are relative to the render origin (the camera eye), like every other input.
+
+#ifndef SHADOW_GLSL
+#define SHADOW_GLSL
+
+uniform sampler2D shadow_map;      // depth texture, compare mode off
+uniform vec3 light_origin;         // centre of the light's window, render-origin relative
+uniform vec3 light_right;          // unit, the map's +x
+uniform vec3 light_up;             // unit, the map's +y
+uniform vec3 light_forward;        // unit, the direction the light travels
+uniform vec2 light_half;           // half width, half height of the window (world units)
+uniform vec2 light_depth;          // near, far along light_forward from light_origin
+uniform float shadow_bias;         // world units subtracted from the receiver's depth
+uniform float shadow_max_slope;    // clamp of the receiver plane's depth gradient
+
+// Fraction of the light reaching point p (render-origin relative) with unit normal n.
+float shadow_visibility(vec3 p, vec3 n) {
+    vec3 rel = p - light_origin;
+    vec3 lp = vec3(dot(rel, light_right), dot(rel, light_up), dot(rel, light_forward));
+    vec2 uv = 0.5 + 0.5 * lp.xy / light_half;
+    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) return 1.0;
+    ivec2 size = textureSize(shadow_map, 0);
+    vec2 st = uv * vec2(size) - 0.5;
+    vec2 cell = floor(st);
+    vec2 fr = st - cell;
+    // depth gradient of the receiver's tangent plane in light space (world units per unit)
+    vec3 nl = vec3(dot(n, light_right), dot(n, light_up), dot(n, light_forward));
+    float nz = abs(nl.z) < 1e-6 ? 1e-6 : nl.z;
+    vec2 grad = clamp(-nl.xy / nz, -shadow_max_slope, shadow_max_slope);
+    vec2 texel_world = 2.0 * light_half / vec2(size);
+    float depth_span = light_depth.y - light_depth.x;
+    float lit = 0.0;
+    for (int j = -1; j <= 2; ++j) {
+        float wy = j == -1 ? 1.0 - fr.y : (j == 2 ? fr.y : 1.0);
+        for (int i = -1; i <= 2; ++i) {
+            float wx = i == -1 ? 1.0 - fr.x : (i == 2 ? fr.x : 1.0);
+            ivec2 texel = ivec2(cell) + ivec2(i, j);
+            ivec2 fetch = clamp(texel, ivec2(0), size - 1);
+            vec2 offset = (vec2(texel) - st) * texel_world;        // texel centre - receiver
+            float z_receiver = lp.z + dot(grad, offset) - shadow_bias;
+            float stored = texelFetch(shadow_map, fetch, 0).r;     // 1: nothing drawn there
+            float z_occluder = light_depth.x + stored * depth_span;
+            lit += wx * wy * (stored >= 1.0 || z_occluder >= z_receiver ? 1.0 : 0.0);
+        }
+    }
+    return lit / 9.0;
+}
+
+#endif

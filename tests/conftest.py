@@ -1,0 +1,37 @@
+"""GL fixtures shared by every test that draws: one headless EGL context, error-checked.
+
+``gl_ctx`` hands out plantgen's shared context (plantgen.render.context, EGL: llvmpipe in
+CI) and asserts that the GL error flag is clear before and after each test, as moderngl's
+own test-suite does, so a test that leaves a GL error behind fails by name.
+
+Without any EGL driver the GL tests are skipped with the context error as the reason;
+set PLANTGEN_REQUIRE_GL=1 (CI does not need to: it has llvmpipe) to make that a failure.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+
+def _context_or_skip():
+    from plantgen.render.context import GLContextError, gl_context
+
+    try:
+        return gl_context()
+    except GLContextError as exc:
+        if os.environ.get("PLANTGEN_REQUIRE_GL") == "1":
+            pytest.fail(str(exc))
+        pytest.skip(f"no headless OpenGL context on this machine: {exc}")
+
+
+@pytest.fixture
+def gl_ctx():
+    """The shared moderngl context; GL_NO_ERROR is asserted before and after the test."""
+    ctx = _context_or_skip()
+    before = ctx.error
+    assert before == "GL_NO_ERROR", f"GL error left by an earlier test: {before}"
+    yield ctx
+    after = ctx.error
+    assert after == "GL_NO_ERROR", f"GL error raised during the test: {after}"
