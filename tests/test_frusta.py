@@ -11,6 +11,7 @@ from plantgen.geometry.frusta import (PYRAMID_TRIANGLES, Frusta, bounding_pyrami
                                       pyramid_volume_ratio, seam_mismatch, skin_skeleton,
                                       surface_normals, surface_uv, true_normals)
 from plantgen.geometry.reference import inside_frusta
+from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.stability import surface_samples
 
 
@@ -94,6 +95,27 @@ def test_side_branch_starts_inside_its_parent():
     assert f.length[branch] > np.linalg.norm(sk.end[2] - sk.start[2])
     # the extended base point lies inside the parent's or the continuing child's solid
     assert inside_frusta(f, f.base[branch][None], rows=np.flatnonzero(f.segment != 2))[0]
+
+
+@pytest.mark.parametrize("angle, ratio", [(50.0, 0.6), (90.0, 0.8), (80.0, 0.95), (30.0, 0.3)])
+def test_side_branch_base_cap_stays_hidden_in_the_trunk(angle, ratio):
+    # Thick arms (a saguaro's) must not poke their base disc out of the trunk: every point
+    # of the capped base lies inside the parent or the continuing trunk.
+    a = np.radians(angle)
+    rp = 0.2
+    sk = Skeleton(start=[[0, 0, 0], [0, 1, 0], [0, 1, 0]],
+                  end=[[0, 1, 0], [0, 2, 0], [np.sin(a), 1 + np.cos(a), 0]],
+                  r_start=[rp, rp, ratio * rp], r_end=[rp, rp, 0.8 * ratio * rp],
+                  parent=[-1, 0, 0], continues=[False, True, False], material=[0, 0, 0])
+    f = skin_skeleton(sk)
+    b = np.flatnonzero(f.segment == 2)[0]
+    e1 = f.ref_dir[b]
+    e2 = np.cross(f.axis[b], e1)
+    ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    rho = np.linspace(0, 1, 6)[:, None] * 0.999 * f.r1[b]
+    disc = f.base[b] + (rho[..., None] * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)).reshape(-1, 3)
+    trunk = np.flatnonzero(f.segment != 2)
+    assert inside_frusta(f, disc, rows=trunk).all()
 
 
 def test_seam_fitting_matches_the_minor_axes():

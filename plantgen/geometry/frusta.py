@@ -724,9 +724,9 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
     fan_step_deg : largest bend (degrees) of one knuckle fan slice
     twist : twist θ (turns per segment) stored on every row
     extend_side_branches : move each side branch's start back along its own axis into the
-        parent (keeping its slope) by min(rc·tan β, sqrt(rp² - rc²)/2), β the branch
+        parent (keeping its slope) by min(rc·tan β, (rp - rc)/sin β), β the branch
         angle: far enough that the base disc is under the parent's end plane, not so far
-        that it leaves the parent's side; the base is capped
+        that its rim leaves the parent's side; the base is capped
 
     Returns
     -------
@@ -758,11 +758,13 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
     base = start.copy()
     if extend_side_branches and side.size:
         # back far enough that the base disc's rim is below the parent's end plane
-        # (rc·tan β), not so far that its centre leaves the parent (half of sqrt(rp² - rc²))
+        # (rc·tan β), not so far that the rim leaves the parent's side ((rp - rc)/sin β)
         rp_side, rc_side = r_e[parent[side]], r_s[side]
         cos_b = np.clip(_dot(axis[side], axis[parent[side]]), -1.0, 1.0)
         sin_b = np.sqrt(1.0 - cos_b * cos_b)
-        room = 0.5 * np.sqrt(np.maximum(rp_side * rp_side - rc_side * rc_side, 0.0))
+        # moving the base back by delta puts its centre delta·sin β off the parent's axis,
+        # so its rim stays inside the parent while delta·sin β + rc <= rp
+        room = np.maximum(rp_side - rc_side, 0.0) / np.maximum(sin_b, 1e-12)
         need = np.where(cos_b > 1e-12, rc_side * sin_b / np.maximum(cos_b, 1e-12), np.inf)
         delta = np.minimum(need, room)
         k_side = (r_e[side] - r_s[side]) / length[side]
