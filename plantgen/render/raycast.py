@@ -6,6 +6,11 @@ camera eye so float32 keeps its digits far from the world origin) -> one instanc
 the 12-triangle bounding pyramid (built in the vertex shader from the record) -> the
 fragment shader in ``shaders/raycast.glsl`` intersects the pixel's ray with the frustum
 (``shaders/cone.glsl``), shades it and writes ``gl_FragDepth``.
+
+Effects (plantgen.render.passes): with shadows a first pass ray casts the same records
+along the light into a depth map that every surface then samples (``SHADOWS``); with
+relief the relief shell is marched (``RELIEF``). Neither is compiled or run otherwise.
+:func:`render_file` also writes animations (plantgen.render.animate).
 """
 
 from __future__ import annotations
