@@ -102,7 +102,7 @@ def continuing_parent_rows(frusta) -> np.ndarray:
     return np.where(ok, parent, -1)
 
 
-def _chain_position(parent_row: np.ndarray) -> np.ndarray:
+def chain_position(parent_row: np.ndarray) -> np.ndarray:
     """(n,) int: how many rows precede each row in its continuing chain.
 
     Pointer jumping: each round adds the ancestor's hop count and jumps twice as far,
@@ -332,7 +332,7 @@ def tessellate(frusta, m: int = 1, *, relief: bool = False, height: HeightFuncti
     rings = bands + 1
     parent_row = continuing_parent_rows(frusta)
     shared = parent_row >= 0
-    chain_v = _chain_position(parent_row).astype(np.float64)
+    chain_v = chain_position(parent_row).astype(np.float64)
     names = tuple(getattr(frusta, "material_names", ("bark",)))
     material = np.asarray(frusta.material, dtype=np.int32)
     step_u = step_v = 1.0 / 256

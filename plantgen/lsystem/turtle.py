@@ -146,7 +146,7 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
             side = False
         elif act == _ROLLH:
             # L = (V × H)/|V × H| with V = +y; U = H × L
-            lx, ly, lz = H[2], 0.0, -H[0]
+            lx, lz = H[2], -H[0]
             s = sqrt(lx * lx + lz * lz)
             if s > 1e-12:
                 L = (lx / s, 0.0, lz / s)

@@ -16,9 +16,9 @@ import time
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.mesh import TessellatedMesh, _chain_position, continuing_parent_rows
+from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
 from .context import gl_context
-from .raycast import RECORD_BYTES, RenderResult, _height_maps, material_palette
+from .raycast import RECORD_BYTES, OffscreenRenderer, RenderResult, material_palette
 from .shaders import build_program
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "rc_buffer_bytes", "row_data"]
@@ -36,7 +36,7 @@ def row_data(frusta) -> np.ndarray:
     into the per-row v of (7) in the fragment shader.
     """
     out = np.zeros((len(frusta.length), 2), dtype=np.float32)
-    out[:, 0] = _chain_position(continuing_parent_rows(frusta))
+    out[:, 0] = chain_position(continuing_parent_rows(frusta))
     out[:, 1] = frusta.material
     return out
 
@@ -53,39 +53,12 @@ def rc_buffer_bytes(n_rows: int) -> int:
     return RECORD_BYTES * int(n_rows)
 
 
-class RasterRenderer:
+class RasterRenderer(OffscreenRenderer):
     """Draws tessellated meshes into an offscreen framebuffer like the ray caster's."""
 
     def __init__(self, ctx=None):
-        self.ctx = ctx if ctx is not None else gl_context()
-        self._fbo = None
-        self._fbo_size = None
-        self._textures = {}
+        super().__init__(ctx)
         self._uploaded = None  # (mesh id, buffers, vao, origin)
-
-    def _framebuffer(self, width: int, height: int):
-        if self._fbo_size != (width, height):
-            if self._fbo is not None:
-                for att in (*self._fbo.color_attachments, self._fbo.depth_attachment):
-                    att.release()
-                self._fbo.release()
-            ctx = self.ctx
-            self._fbo = ctx.framebuffer(
-                color_attachments=[ctx.renderbuffer((width, height), 4),
-                                   ctx.renderbuffer((width, height), 1, dtype="f4")],
-                depth_attachment=ctx.depth_renderbuffer((width, height)))
-            self._fbo_size = (width, height)
-        return self._fbo
-
-    def _height_texture(self, material_names):
-        key = tuple(material_names)
-        if key not in self._textures:
-            maps, repeats = _height_maps(material_names)
-            layers, h, w = maps.shape
-            tex = self.ctx.texture_array((w, h, layers), 1, maps.tobytes(), dtype="f1")
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)  # bilinear is done in GLSL
-            self._textures[key] = (tex, repeats)
-        return self._textures[key]
 
     def release(self) -> None:
         """Free the uploaded mesh's buffers."""

@@ -307,34 +307,19 @@ def height_maps_for(material_names) -> tuple[np.ndarray, np.ndarray]:
     return np.full((len(names), 4, 4), 128, dtype=np.uint8), repeats
 
 
-_height_maps = height_maps_for   # the raster renderer's earlier name
 
 
-class Raycaster:
-    """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
-
-    Programs are compiled per variant (defines) and cached; nothing is compiled or run that
-    the settings do not ask for (no relief march without relief).
-    """
+class OffscreenRenderer:
+    """What every plantgen renderer shares: the GL context, an offscreen framebuffer
+    (colour RGBA8 + float32 distance + depth) resized on demand, and the relief height maps
+    uploaded once per material list."""
 
     def __init__(self, ctx=None):
         self.ctx = ctx if ctx is not None else gl_context()
-        self._template_vbo = self.ctx.buffer(PYRAMID_CORNERS.tobytes())
-        self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
-        self._sky_vao = None
         self._fbo = None
         self._fbo_size = None
         self._textures = {}
-        self.programs_used: set[tuple] = set()
-        self._shadow = ShadowPass(self.ctx)
-        self.last_light_window = None
 
-    def shadow_depths(self) -> np.ndarray:
-        """(res, res) float32 light depth map of the last shadowed render, (z - near) /
-        (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
-        return self._shadow.depths()
-
-    # ------------------------------------------------------------------ resources
     def _framebuffer(self, width: int, height: int):
         if self._fbo_size != (width, height):
             if self._fbo is not None:
@@ -356,6 +341,28 @@ class Raycaster:
             tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)  # bilinear is done in GLSL
             self._textures[key] = (tex, repeats)
         return self._textures[key]
+
+
+class Raycaster(OffscreenRenderer):
+    """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
+
+    Programs are compiled per variant (defines) and cached; nothing is compiled or run that
+    the settings do not ask for (no relief march without relief).
+    """
+
+    def __init__(self, ctx=None):
+        super().__init__(ctx)
+        self._template_vbo = self.ctx.buffer(PYRAMID_CORNERS.tobytes())
+        self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
+        self._sky_vao = None
+        self.programs_used: set[tuple] = set()
+        self._shadow = ShadowPass(self.ctx)
+        self.last_light_window = None
+
+    def shadow_depths(self) -> np.ndarray:
+        """(res, res) float32 light depth map of the last shadowed render, (z - near) /
+        (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
+        return self._shadow.depths()
 
     # ------------------------------------------------------------------ render
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
