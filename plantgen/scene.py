@@ -43,7 +43,7 @@ from .geometry.skeleton import Skeleton, SkeletonError
 __all__ = ["EFFECTS", "Scene", "SceneInstance", "SceneError", "load_scene", "parse_scene",
            "is_scene", "rotation_matrix"]
 
-EFFECTS = ("relief", "shadows", "animation", "texture")
+EFFECTS = ("relief", "shadows", "animation")
 SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances"}
 INSTANCE_KEYS = {"grammar", "skeleton", "seed", "position", "rotation", "scale", "iterations",
                  "grid", "motion"}
