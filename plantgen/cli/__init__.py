@@ -47,3 +47,4 @@ def main(argv: list[str] | None = None) -> None:
 from . import grow as _grow  # noqa: E402,F401
 from . import export as _export  # noqa: E402,F401
 from . import render as _render  # noqa: E402,F401
+from . import bench as _bench  # noqa: E402,F401

@@ -1,0 +1,83 @@
+"""``plantgen bench``: Table 1 of the paper on this machine, accuracy against time, memory."""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from ..errors import PlantgenError
+from . import cli
+
+
+def _parse_size(ctx, param, value):
+    if value is None:
+        return None
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
+    if not m or not (0 < int(m.group(1)) <= 16384 and 0 < int(m.group(2)) <= 16384):
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..16384, e.g. 1024x768")
+    return int(m.group(1)), int(m.group(2))
+
+
+@cli.command()
+@click.option("--models", metavar="LIST",
+              help="Comma-separated grammar/scene names or paths (default: the nine models of "
+                   "Table 1; with --quick: saguaro,well).")
+@click.option("--size", callback=_parse_size, metavar="WxH",
+              help="Timed frame size (default 1024x768, as the paper; --quick: 256x192).")
+@click.option("--frames", type=click.IntRange(1, 10000),
+              help="Timed frames of each Table 1 method after a warm-up (default 9; --quick: 2); "
+                   "the curves' configurations use at most 5.")
+@click.option("--eval-size", callback=_parse_size, metavar="WxH",
+              help="Evaluation window against the float64 reference, at the timed frames' "
+                   "angle per pixel (default 128x96; --quick: 64x48).")
+@click.option("--max-triangles", type=click.IntRange(min=1),
+              help="Skip GS levels above this many triangles (default 6,000,000).")
+@click.option("--quick", is_flag=True, help="A small run (two tiny models, small images): CI drives it.")
+@click.option("--images", is_flag=True, help="Also write the compared images into OUT/images.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("bench-out"), show_default=True,
+              help="Directory for table.md, table1.csv, curves.csv, results.json and plots.")
+def bench(models, size, frames, eval_size, max_triangles, quick, images, out_dir):
+    """Reproduce Table 1 (RC, RC+R, GS, GS+R fps, GS levels matched to the ray caster's
+    quality by a computed criterion) and measure error against ms per frame for every
+    accuracy knob. Prints the Markdown table; progress goes to stderr."""
+    from ..bench import BenchOptions, check_models, count_steps, run_bench, write_outputs
+
+    overrides = {}
+    if models:
+        overrides["models"] = tuple(s.strip() for s in models.split(",") if s.strip())
+        if not overrides["models"]:
+            raise PlantgenError("--models: no model named")
+    for key, value in (("size", size), ("frames", frames), ("eval_size", eval_size),
+                       ("max_triangles", max_triangles)):
+        if value is not None:
+            overrides[key] = value
+    overrides["images"] = images
+    opts = BenchOptions.quick_run(**overrides) if quick else BenchOptions(**overrides)
+    if frames is not None:   # the curves' many configurations use at most their default
+        opts.curve_frames = min(frames, opts.curve_frames)
+
+    check_models(opts.models)   # before the progress bar: a typo fails at once
+    total = count_steps(opts)
+    start = time.perf_counter()
+    with click.progressbar(length=total, label="bench", file=sys.stderr, show_pos=True,
+                           item_show_func=lambda s: s) as bar:
+        log = not sys.stderr.isatty()   # a log file gets one line per step instead
+
+        def progress(label):
+            bar.update(1, label)
+            if log:
+                click.echo(f"[{time.perf_counter() - start:6.0f} s] {label}", err=True)
+
+        results = run_bench(opts, progress, out_dir)
+        bar.update(total)
+    written = write_outputs(results, out_dir)
+    click.echo(written["markdown"])
+    if written["plots"]:
+        click.echo(f"plantgen: {written['plots']}", err=True)
+    click.echo(f"wrote {', '.join(str(p) for p in written['files'])} "
+               f"in {time.perf_counter() - start:.0f} s", err=True)
