@@ -23,10 +23,10 @@ For each model the bench
    and at the full size for its time;
 5. computes the **matched level** (the quality criterion, below) of GS and GS+R;
 6. times RC, RC+R, GS at its level and GS+R at its level **in one interleaved run**
-   (frame by frame in turn, after a warm-up), under the paper's conditions: shadow maps
-   and the ground where the scene asks for them, the animated scene posed, re-skinned
-   and uploaded in every frame (counted in the frame), leaves not relief mapped (their
-   material has no shell);
+   (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
+   all four methods: the shadow map and the ground where the scene asks for them, the
+   animated scene posed, re-skinned and uploaded in every frame (GS also re-tessellated;
+   counted in the frame), leaves not relief mapped (their material has no shell);
 7. counts the GPU bytes of each method (memory table).
 
 Error metric (documented criterion)
@@ -489,7 +489,8 @@ class _Renderers:
         if mesh is None:
             return None, float("nan")
         res = self.raster(cfg.key).render(mesh, frusta, camera, material_names=m.names,
-                                          light_dir=m.light_dir)
+                                          light_dir=m.light_dir, ground=ground, shadows=shadows,
+                                          shadow_box=self.shadow_box if animated else None)
         return res, res.frame_ms + extra_ms + (res.stats.get("upload_ms", 0.0) if animated else 0.0)
 
     def release_raster(self, key):
@@ -510,15 +511,18 @@ class _Renderers:
 
 
 def _time_configs(renderers: _Renderers, configs, camera, frames: int, *, conditions: bool,
-                  tick=None) -> dict:
+                  tick=None, passes: dict | None = None) -> dict:
     """Interleaved timing: one warm-up frame each, then ``frames`` rounds rendering every
-    config once per round. Returns {key: [ms, ...]}."""
+    config once per round. Returns {key: [ms, ...]}; ``passes``, if given, receives
+    {key: the render passes of the warm-up frame}."""
     samples = {c.key: [] for c in configs}
     alive = list(configs)
     for c in list(alive):
         res, _ = renderers.render_config(c, camera, conditions=conditions, t=0.0)
         if res is None:
             alive.remove(c)
+        elif passes is not None:
+            passes[c.key] = list(res.stats.get("passes", []))
     for i in range(frames):
         t = (i + 1) / 30.0
         for c in alive:
@@ -610,14 +614,16 @@ def bench_model(name: str, opts: BenchOptions, progress=None, images_dir: Path |
         renderers.keep_meshes({(gs_level, False), (gsr_level, True)})
         # 4. Table 1 timing: the four methods interleaved, under the paper's conditions
         step(f"{model.name}: Table 1 timing")
+        table_passes: dict = {}
         table_samples = _time_configs(renderers, table_cfgs, model.camera, opts.frames,
-                                      conditions=True)
+                                      conditions=True, passes=table_passes)
 
         def entry(key):
             if key is None or key not in table_samples or not table_samples[key]:
                 return None
             ms = _median(table_samples[key])
             return {"key": key, "ms": ms, "fps": 1000.0 / ms, "ms_samples": table_samples[key],
+                    "passes": table_passes.get(key, []),
                     "error": by_key[key]["error"], "dssim": by_key[key]["dssim"],
                     "silhouette": by_key[key]["silhouette"]}
 
@@ -638,7 +644,7 @@ def bench_model(name: str, opts: BenchOptions, progress=None, images_dir: Path |
                          [c.key for c in table_cfgs])
         notes = []
         if model.shadows:
-            notes.append("GS/GS+R without shadow pass and ground: the raster renderer has none")
+            notes.append("shadow map (2048², PCF) and ground for RC, RC+R, GS and GS+R alike")
         if model.animation is not None:
             notes.append("animated: pose + re-skin (+ re-tessellate for GS) counted in every frame")
         return {
@@ -750,16 +756,6 @@ def rcr_over_gsr(m: dict):
     return None
 
 
-def rcr_over_gsr_same_passes(m: dict):
-    """RC+R over GS+R from the curves' timings (no shadow pass, no ground, static pose for
-    both), so a renderer's missing pass does not tilt the ratio; None if either is missing."""
-    if not (m.get("rcr") and m.get("gsr")):
-        return None
-    by_key = {c["key"]: c for c in m["curve"] if "ms" in c}
-    a, b = by_key.get(m["rcr"]["key"]), by_key.get(m["gsr"]["key"])
-    return b["ms"] / a["ms"] if a and b else None
-
-
 def markdown_table(results: dict) -> str:
     """Table 1 beside the paper's, with errors, the ratio column and the memory table."""
     info = results["machine"]
@@ -773,13 +769,14 @@ def markdown_table(results: dict) -> str:
              f"mismatch against the float64 reference in a {o['eval_size'][0]}x{o['eval_size'][1]} "
              "window at full angular resolution. Level m: smallest m with err <= "
              f"RC err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, GS+R vs RC+R); '>m': "
-             "none qualified, best measured shown. RC+R/GS+R: fps ratio of the Table 1 run (RC with "
-             "the scene's shadow pass and ground, which the raster renderer lacks); 'same passes': "
-             "the curves' frame times, both without shadows and ground. Paper: 8800 GTX, 2009.", "",
+             "none qualified, best measured shown. RC+R/GS+R: fps ratio of the Table 1 run, where "
+             "all four methods run the scene's passes (shadow map and ground where it lists "
+             "shadows; pose and re-skin, and re-tessellation for GS, in every frame of an "
+             "animated scene). Paper: 8800 GTX, 2009.", "",
              "| model | segments (paper) | RC fps (paper) | RC err | RC+R fps (paper) | RC+R err | "
              "GS fps / m (paper) | GS err | GS+R fps / m (paper) | GS+R err | RC+R/GS+R ours | "
-             "same passes | paper |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "paper |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for m in results["models"]:
         p = PAPER_TABLE1.get(m["model"])
         ps = (lambda i: f" ({p[i]})" if p else "")
@@ -787,7 +784,6 @@ def markdown_table(results: dict) -> str:
         pgsr = f" ({p[4][0]} / {p[4][1]})" if p else ""
         err = (lambda e: "–" if e is None else f"{e['error']:.3f}")
         ratio = rcr_over_gsr(m)
-        same = rcr_over_gsr_same_passes(m)
         paper_ratio = p[2] / p[4][0] if p else None
         lines.append(
             f"| {m['model']} | {m['segments']:,}{ps(0)} | {_fmt_fps(m['rc'])}{ps(1)} | {err(m['rc'])} | "
@@ -795,7 +791,6 @@ def markdown_table(results: dict) -> str:
             f"{_fmt_fps(m['gs'])} / {_level(m['gs_level'], m['gs_matched'])}{pgs} | {err(m['gs'])} | "
             f"{_fmt_fps(m['gsr'])} / {_level(m['gsr_level'], m['gsr_matched'])}{pgsr} | {err(m['gsr'])} | "
             f"{'–' if ratio is None else f'{ratio:.2f}'} | "
-            f"{'–' if same is None else f'{same:.2f}'} | "
             f"{'–' if paper_ratio is None else f'{paper_ratio:.2f}'} |")
     lines += ["", "## Memory on the GPU (§4: relief-mapped frusta vs polygons)", "",
               "| model | RC records B | relief maps B | GS B (m) | GS/RC | GS+R B (m) | GS+R / RC+R | paper |",
@@ -816,7 +811,7 @@ def markdown_table(results: dict) -> str:
 
 TABLE_FIELDS = ["model", "segments", "rc_fps", "rc_ms", "rc_error", "rcr_fps", "rcr_ms", "rcr_error",
                 "gs_fps", "gs_ms", "gs_level", "gs_matched", "gs_error", "gsr_fps", "gsr_ms",
-                "gsr_level", "gsr_matched", "gsr_error", "rcr_over_gsr", "rcr_over_gsr_same_passes",
+                "gsr_level", "gsr_matched", "gsr_error", "rcr_over_gsr",
                 "paper_segments",
                 "paper_rc_fps", "paper_rcr_fps", "paper_gs_fps", "paper_gs_sub", "paper_gsr_fps",
                 "paper_gsr_sub", "paper_rcr_over_gsr", "rc_bytes", "rcr_bytes", "gs_bytes",
@@ -833,8 +828,7 @@ def table_rows(results: dict) -> list[dict]:
                "animated": m["animated"], "gl_renderer": results["machine"]["gl_renderer"],
                "gs_level": m["gs_level"], "gs_matched": m["gs_matched"],
                "gsr_level": m["gsr_level"], "gsr_matched": m["gsr_matched"],
-               "rcr_over_gsr": rcr_over_gsr(m),
-               "rcr_over_gsr_same_passes": rcr_over_gsr_same_passes(m)}
+               "rcr_over_gsr": rcr_over_gsr(m)}
         for k in ("rc", "rcr", "gs", "gsr"):
             e = m[k]
             row[f"{k}_fps"] = e["fps"] if e else None

@@ -11,7 +11,10 @@
 // Per-row data (chain position, material) sits in a storage buffer indexed by the
 // primitive: lateral triangles come row by row, TRIANGLES_PER_ROW each, caps after them.
 //
-// Variants (defines): TRIANGLES_PER_ROW (16·4^m).
+// Variants (defines): TRIANGLES_PER_ROW (16·4^m); SHADOWS (sample the light's shadow map,
+// shaders/shadow.glsl, with the facet's own plane as the receiver plane, as the ray caster
+// uses the cone's tangent plane); SHADOW_PASS (depth only, into the light's map: the
+// mesh's front faces as the light sees them, as the ray caster writes its nearest hit).
 
 #if defined VERTEX_SHADER
 
@@ -35,7 +38,14 @@ void main() {
 
 #elif defined FRAGMENT_SHADER
 
+#if defined SHADOW_PASS
+// the light's depth pass: the rasteriser's depth is the depth in the light's window
+void main() {}
+#else
 #include "shading.glsl"
+#if defined SHADOWS
+#include "shadow.glsl"
+#endif
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -62,9 +72,17 @@ void main() {
     float texel = height_at(material, uv);
     vec3 to_eye = normalize(-v_position);
     vec3 albedo = material_albedo(material, texel);
-    vec3 color = shade_surface(albedo, material, normal, to_eye, 1.0);
+#if defined SHADOWS
+    // receiver plane: the facet the rasteriser draws (the light's map holds facets too)
+    vec3 facet = cross(dFdx(v_position), dFdy(v_position));
+    float visibility = shadow_visibility(v_position, dot(facet, facet) > 0.0 ? normalize(facet) : normal);
+#else
+    float visibility = 1.0;
+#endif
+    vec3 color = shade_surface_visible(albedo, material, normal, to_eye, 1.0, visibility);
     out_color = vec4(to_display(color), 1.0);
     out_distance = length(v_position);
 }
+#endif
 
 #endif

@@ -94,7 +94,12 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     assert methods == {"RC", "RC+R", "GS", "GS+R"}
     assert any(r["pareto"] == "True" for r in curve)
     assert (out / "images" / "saguaro_reference_relief.png").is_file()
+    assert (out / "curves_saguaro.png").is_file()          # matplotlib is in the test extra
     assert (out / "images" / "saguaro_rc_color.png").is_file()
+    # the well lists shadows: all four methods ran the shadow pass and drew the ground
+    well = next(m for m in results["models"] if m["model"] == "well")
+    for key in ("rc", "rcr", "gs", "gsr"):
+        assert well[key]["passes"] == ["shadow", "sky", "ground", "frusta"], (key, well[key])
     # the ray caster agrees with the float64 reference far better than GS at level 0
     sag = next(m for m in results["models"] if m["model"] == "saguaro")
     gs0 = next(c for c in sag["curve"] if c["key"] == "gs:m=0")

@@ -114,3 +114,85 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
     colour, coverage, dist = (np.array(s) for s in zip(*scores))
     assert np.all(np.diff(colour) < 0) and np.all(np.diff(coverage) <= 0), (colour, coverage)
     assert coverage[-1] < 0.01 and dist[-1] < 5e-3, (coverage, dist)
+
+
+# ---------------------------------------------------------------- shadows and ground (GS)
+# The Table 1 scenes with shadow maps (well, desert, oasis, cacti) time GS with the same
+# passes as RC: the mesh and the ground write the light's depth map, both sample it.
+from plantgen.geometry.frusta import skin_skeleton  # noqa: E402
+from plantgen.render.passes import ShadowSettings  # noqa: E402
+
+from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402
+
+
+@pytest.mark.parametrize("elevation", [60.0, 10.0, 3.0])
+def test_a_faceted_convex_column_shadows_only_its_terminator_band(gl_ctx, elevation):
+    """A tessellated frustum is convex, so a facet that faces the light is never in shadow:
+    wherever the true surface normal faces the light by more than the facets can deviate
+    from it (half a facet angle), the pixel is the same with shadows on as off, for grazing
+    light too (the facet's own plane is the receiver plane, so no acne). Only near the
+    terminator, where a facet already faces away while the smooth shading normal (8) still
+    faces the light, may the mesh darken itself: the faceted geometry really blocks the
+    light there (the 'shadow terminator' cost of GS), and that band narrows as m grows."""
+    r0, r1, height = RADIUS_COLUMN
+    frusta = skin_skeleton(column(radius=r0, r_top=r1, height=height))
+    to_light = light_towards(elevation, azimuth_deg=10.0)   # lit side and terminator in view
+    camera = Camera((3.0, 2.5, 4.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 40.0, 96, 96)
+    eye, dirs = camera.rays()
+    raster = RasterRenderer(gl_ctx)
+    for m in (0, 2):
+        mesh = tessellate(frusta, m)
+        plain = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light)
+        shadowed = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light,
+                                 shadows=ShadowSettings(resolution=256))
+        assert plain.stats["passes"] == ["sky", "frusta"]
+        assert shadowed.stats["passes"] == ["shadow", "sky", "frusta"]
+        hit = np.isfinite(plain.distance)
+        p = eye[hit] + plain.distance[hit, None].astype(np.float64) * dirs[hit]
+        radial = p * [1, 0, 1]
+        radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+        normal = radial + [0.0, (r0 - r1) / height, 0.0]          # e_r - k·axis
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        normal[p[:, 1] > height - 1e-3] = [0.0, 1.0, 0.0]          # the tip's cap
+        facing = normal @ to_light
+        half_facet = np.pi / (8 * 2 ** m)
+        surely_lit = facing > np.sin(half_facet) + 0.02
+        assert surely_lit.sum() > 200
+        diff = np.abs(plain.color[hit].astype(int) - shadowed.color[hit].astype(int)).max(axis=1)
+        assert diff[surely_lit].max() <= 3, (m, diff[surely_lit].max(), (diff[surely_lit] > 3).sum())
+    raster.release()
+
+
+RADIUS_COLUMN = (0.3, 0.15, 2.0)
+
+
+@pytest.mark.parametrize("elevation", [45.0, 12.0])
+def test_gs_ground_shadow_matches_the_ray_casters(gl_ctx, elevation):
+    """Column on the ground, shadows on: the ground the fine mesh shadows is the ground the
+    ray caster shadows (whose shadow tests check against analytic occlusion). Outside a
+    band of a few texels at the shadow's edge, ground pixels agree to a few grey levels,
+    and the shadow is really there (many ground pixels darkened)."""
+    frusta = skin_skeleton(column())
+    to_light = light_towards(elevation)
+    camera = top_down_camera()
+    shadows = ShadowSettings(resolution=512)
+    rc = Raycaster(gl_ctx).render(frusta, camera, light_dir=to_light, ground=GROUND, shadows=shadows)
+    raster = RasterRenderer(gl_ctx)
+    mesh = tessellate(frusta, 3)
+    gs = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light,
+                       ground=GROUND, shadows=shadows)
+    plain = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light,
+                          ground=GROUND)
+    raster.release()
+    assert gs.stats["passes"] == ["shadow", "sky", "ground", "frusta"]
+    assert plain.stats["passes"] == ["sky", "ground", "frusta"]
+    eye, dirs = camera.rays()
+    points = eye + rc.distance[..., None].astype(np.float64) * dirs
+    ground = (np.isfinite(rc.distance) & np.isfinite(gs.distance)
+              & (np.abs(points[..., 1]) < 1e-3))
+    lum = lambda r: r.color.astype(int).sum(axis=-1)   # noqa: E731
+    darkened = (lum(plain) - lum(gs))[ground] > 20
+    assert darkened.sum() > 20
+    differ = np.abs(lum(rc) - lum(gs))[ground] > 6
+    # the edge band: a 16-gon's silhouette moves the shadow edge by < 2 % of the radius
+    assert differ.mean() < 0.01, (differ.sum(), ground.sum())

@@ -18,16 +18,12 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
 from .context import gl_context
-from .raycast import RECORD_BYTES, OffscreenRenderer, RenderResult, material_palette
+from .passes import ShadowSettings, frame_passes
+from .raycast import (MAX_MATERIALS, RECORD_BYTES, OffscreenRenderer, RenderResult, _ground_quad,
+                      _mat4, _set, _write, depth_range, material_palette, shading_uniforms)
 from .shaders import build_program
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "rc_buffer_bytes", "row_data"]
-
-LIGHT_COLOR = (1.0, 0.96, 0.9)
-AMBIENT_COLOR = (0.35, 0.4, 0.5)
-SKY = {"sky_zenith": (0.18, 0.36, 0.75), "sky_horizon": (0.72, 0.8, 0.9),
-       "ground_tint": (0.35, 0.33, 0.3)}
-
 
 def row_data(frusta) -> np.ndarray:
     """(n, 2) float32 per frustum row: chain position, material (8 bytes a row).
@@ -93,7 +89,8 @@ class RasterRenderer(OffscreenRenderer):
         return vao, origin
 
     def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
-               light_dir=(0.45, 0.8, 0.35)) -> RenderResult:
+               light_dir=(0.45, 0.8, 0.35), ground: dict | None = None,
+               shadows: ShadowSettings | None = None, shadow_box=None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -104,12 +101,18 @@ class RasterRenderer(OffscreenRenderer):
         camera : the view, as for the ray caster
         material_names : default ``mesh.material_names``
         light_dir : (3,) towards the light, as for the ray caster
+        ground : optional ``{"size", "height", "material"}`` square, as for the ray caster
+        shadows : None (no shadow pass) or the shadow map's knobs, as for the ray caster:
+            the mesh and the ground first write their depth into the light's map
+        shadow_box : (2, 3) world box the light's window must cover (default: the mesh's
+            bounds), as for the ray caster
         """
         ctx = self.ctx
         names = tuple(material_names or mesh.material_names)
         width, height = camera.width, camera.height
         fbo = self._framebuffer(width, height)
-        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level}
+        shadowed = shadows is not None
+        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed}
         program = build_program(ctx, "raster.glsl", defines)
         sky = build_program(ctx, "sky.glsl")
         t0 = time.perf_counter()
@@ -118,41 +121,73 @@ class RasterRenderer(OffscreenRenderer):
 
         eye = np.asarray(camera.eye, dtype=np.float64)
         right, up, fwd = camera.basis()
-        near, far = _depth_range(mesh, origin, eye, fwd)
+        ground_quad = _ground_quad(ground) if ground else None
+        bounds = _mesh_bounds(mesh)
+        near, far = depth_range([_box_corners(bounds)] + ([] if ground_quad is None else [ground_quad]),
+                                eye, fwd)
         view = camera.view_matrix()
         view[:3, 3] = 0.0  # render origin: the eye
         view_projection = camera.projection_matrix(near, far) @ view
         tan_y = np.tan(np.radians(camera.fov_y) / 2)
-        light = np.asarray(light_dir, dtype=np.float64)
-        light /= np.linalg.norm(light)
-        palette = material_palette(names)
         tex, repeats = self._height_texture(names)
-        shading = dict(light_dir=tuple(light), light_color=LIGHT_COLOR, ambient_color=AMBIENT_COLOR, **SKY)
+        palette_names = names if ground_quad is None else names + (ground["material"],)
+        palette = material_palette(palette_names)
+        shading = shading_uniforms(light_dir)
         _set(sky, viewport=(float(width), float(height)), cam_forward=tuple(fwd),
              cam_right_scaled=tuple(right * tan_y * camera.aspect), cam_up_scaled=tuple(up * tan_y),
              **shading)
-        _set(program, **shading, view_projection=tuple(view_projection.T.astype(np.float32).ravel()),
+        box = None if not shadowed else (bounds if shadow_box is None else np.asarray(shadow_box, np.float64))
+        window, receiver = self._light(shadows, box, light_dir, eye)
+        _set(program, **shading, **receiver, view_projection=_mat4(view_projection),
              origin_from_eye=tuple((origin - eye).tolist()), n_rows=mesh.n_rows, height_maps=0)
-        for name, key in (("material_dark", "dark"), ("material_light", "light"),
-                          ("material_gloss", "gloss")):
-            if name in program:
-                program[name].write(np.ascontiguousarray(palette[key], np.float32).tobytes())
-        if "texture_repeat" in program:
-            program["texture_repeat"].write(np.ascontiguousarray(repeats, np.float32).tobytes())
+        for key in ("dark", "light", "gloss"):
+            _write(program, f"material_{key}", palette[key])
+        _write(program, "texture_repeat", repeats)
         buffers = self._uploaded[1]
         buffers[2].bind_to_storage_buffer(0)
         buffers[3].bind_to_storage_buffer(1)
         sky_vao = ctx.vertex_array(sky, [])
+        ground_vao = ground_light_vao = None
+        extras = [sky_vao]
+        if ground_quad is not None:
+            ground_vao, ground_light_vao, objects = self._ground_draws(
+                ground_quad, eye, view_projection, palette,
+                min(len(palette_names) - 1, MAX_MATERIALS - 1), shading, receiver, window)
+            extras += objects
+        shadow_draws = []
+        if shadowed:
+            caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True})
+            _set(caster, view_projection=_mat4(window.matrix()),
+                 origin_from_eye=tuple((origin - eye).tolist()))
+            mesh_light_vao = ctx.vertex_array(caster, [(buffers[0], "3f 20x", "position")],
+                                              index_buffer=buffers[1], index_element_size=4)
+            extras.append(mesh_light_vao)
+
+            def draw_mesh_depth():
+                ctx.enable(ctx.CULL_FACE)
+                ctx.front_face = "ccw"
+                ctx.cull_face = "back"
+                mesh_light_vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
+            shadow_draws.append(draw_mesh_depth)
+            if ground_light_vao is not None:
+                def draw_ground_depth():
+                    ctx.disable(ctx.CULL_FACE)
+                    ground_light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+                shadow_draws.append(draw_ground_depth)
 
         ctx.finish()
         t_draw = time.perf_counter()
+        shadow_ms = self._draw_shadow_map(shadows.resolution, shadow_draws) if shadowed else 0.0
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
         sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
-        ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
+        if ground_vao is not None:
+            ground_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+        ctx.enable(ctx.CULL_FACE)
         ctx.front_face = "ccw"
         ctx.cull_face = "back"
         tex.use(0)
@@ -160,7 +195,9 @@ class RasterRenderer(OffscreenRenderer):
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
-        sky_vao.release()
+        for obj in extras:
+            if obj is not None:
+                obj.release()
 
         color = np.frombuffer(fbo.read(components=3, attachment=0, alignment=1), np.uint8)
         color = color.reshape(height, width, 3)[::-1].copy()
@@ -168,7 +205,9 @@ class RasterRenderer(OffscreenRenderer):
                              np.float32).reshape(height, width)[::-1].copy()
         stats = {"triangles": len(mesh.faces), "vertices": len(mesh.vertices), "level": mesh.level,
                  "buffer_bytes": gs_buffer_bytes(mesh), "upload_ms": upload_s * 1e3,
-                 "near": near, "far": far, "draw_calls": 1}
+                 "near": near, "far": far, "draw_calls": 1 + (ground_vao is not None),
+                 "passes": frame_passes(shadowed, ground_vao is not None, len(mesh.faces) > 0),
+                 "shadow_ms": shadow_ms, "light_window": window}
         return RenderResult(color, dist, frame_ms, camera, stats)
 
 
@@ -176,22 +215,15 @@ def _cap_tris(mesh: TessellatedMesh) -> int:
     return 8 * 2 ** mesh.level
 
 
-def _depth_range(mesh, origin, eye, fwd) -> tuple[float, float]:
+def _mesh_bounds(mesh: TessellatedMesh) -> np.ndarray:
+    """(2, 3) world box of the mesh's vertices (a unit box at the origin when empty)."""
     if len(mesh.vertices) == 0:
-        return 0.1, 10.0
-    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    corners = np.stack(np.meshgrid(*np.stack([lo, hi]).T, indexing="ij"), axis=-1).reshape(-1, 3)
-    depths = (corners - eye) @ fwd
-    size = float(np.linalg.norm(hi - lo))
-    far = max(float(depths.max()), 0.0) + 0.05 * size + 1e-6
-    near = max(float(depths.min()) - 0.05 * size, far * 1e-5)
-    return near, far
+        return np.array([[-0.5] * 3, [0.5] * 3])
+    return np.stack([mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)])
 
 
-def _set(program, **values) -> None:
-    for name, value in values.items():
-        if name in program:
-            program[name].value = value
+def _box_corners(box: np.ndarray) -> np.ndarray:
+    return np.stack(np.meshgrid(*np.asarray(box).T, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
 _default: RasterRenderer | None = None

@@ -32,7 +32,7 @@ from .shaders import build_program
 __all__ = ["RaycastSettings", "RenderResult", "Raycaster", "pack_records", "RECORD_FLOATS",
            "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES", "frusta_bounds",
            "material_palette", "render_frusta", "MAX_MATERIALS", "shading_uniforms",
-           "height_maps_for", "render_file", "RenderReport", "auto_camera"]
+           "height_maps_for", "render_file", "RenderReport", "auto_camera", "depth_range"]
 
 #: float32 values in one segment's record: base, h, axis, r1, ref_dir, r2, plane_lo,
 #: plane_hi, (u_offset, twist, shell, material).
@@ -311,14 +311,75 @@ def height_maps_for(material_names) -> tuple[np.ndarray, np.ndarray]:
 
 class OffscreenRenderer:
     """What every plantgen renderer shares: the GL context, an offscreen framebuffer
-    (colour RGBA8 + float32 distance + depth) resized on demand, and the relief height maps
-    uploaded once per material list."""
+    (colour RGBA8 + float32 distance + depth) resized on demand, the relief height maps
+    uploaded once per material list, and the scene's extras: the ground square and the
+    light's shadow map (plantgen.render.passes), drawn the same way for RC and GS."""
 
     def __init__(self, ctx=None):
         self.ctx = ctx if ctx is not None else gl_context()
         self._fbo = None
         self._fbo_size = None
         self._textures = {}
+        self._shadow = ShadowPass(self.ctx)
+        self.last_light_window = None
+
+    def shadow_depths(self) -> np.ndarray:
+        """(res, res) float32 light depth map of the last shadowed render, (z - near) /
+        (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
+        return self._shadow.depths()
+
+    def _light(self, shadows: ShadowSettings | None, caster_box, light_dir, eye):
+        """(window, receiver uniforms) of this frame's shadow map: (None, {}) without
+        shadows. ``caster_box`` (2, 3) is the world box the light's window must cover."""
+        if shadows is None:
+            return None, {}
+        window = light_window(caster_box, -np.asarray(light_dir, dtype=np.float64), eye)
+        self.last_light_window = window
+        receiver = dict(window.uniforms(), shadow_bias=shadows.bias * window.texel_size(shadows.resolution),
+                        shadow_max_slope=shadows.max_slope, shadow_map=1)
+        return window, receiver
+
+    def _ground_draws(self, quad, eye, view_projection, palette, ground_material: int,
+                      shading: dict, receiver: dict, window):
+        """Vertex arrays drawing the ground square ``quad`` ((4, 3) world, strip order) into
+        the frame and, with a light ``window``, into the light's map.
+
+        Returns (frame vao, light vao or None, [objects to release after the frame]).
+        """
+        ctx = self.ctx
+        shadowed = window is not None
+        program = build_program(ctx, "ground.glsl", {"SHADOWS": shadowed})
+        _set(program, **shading, **receiver, view_projection=_mat4(view_projection),
+             ground_material=ground_material, origin_offset=tuple(np.asarray(eye, np.float64)))
+        for key in ("dark", "light", "gloss"):
+            _write(program, f"material_{key}", palette[key])
+        buf = ctx.buffer((np.asarray(quad) - eye).astype(np.float32).tobytes())
+        vao = ctx.vertex_array(program, [(buf, "3f", "position")])
+        light_vao = None
+        if shadowed:
+            caster = build_program(ctx, "ground.glsl", {"SHADOW_PASS": True})
+            _set(caster, view_projection=_mat4(window.matrix()))
+            light_vao = ctx.vertex_array(caster, [(buf, "3f", "position")])
+        return vao, light_vao, [vao, light_vao, buf]
+
+    def _draw_shadow_map(self, resolution: int, draws) -> float:
+        """Clear the light's depth map, run each callable of ``draws`` into it with the depth
+        test on, and bind the map to texture unit 1 for the receivers. Returns the pass's
+        milliseconds (to glFinish)."""
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        fbo = self._shadow.target(int(resolution))
+        fbo.use()
+        fbo.viewport = (0, 0, resolution, resolution)
+        fbo.clear(depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        for draw in draws:
+            draw()
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.finish()
+        self._shadow.texture.use(1)
+        return (time.perf_counter() - t0) * 1e3
 
     def _framebuffer(self, width: int, height: int):
         if self._fbo_size != (width, height):
@@ -356,13 +417,6 @@ class Raycaster(OffscreenRenderer):
         self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
         self._sky_vao = None
         self.programs_used: set[tuple] = set()
-        self._shadow = ShadowPass(self.ctx)
-        self.last_light_window = None
-
-    def shadow_depths(self) -> np.ndarray:
-        """(res, res) float32 light depth map of the last shadowed render, (z - near) /
-        (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
-        return self._shadow.depths()
 
     # ------------------------------------------------------------------ render
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
@@ -421,38 +475,29 @@ class Raycaster(OffscreenRenderer):
 
         shadowed = shadows is not None
         sky = variant("sky.glsl")
-        ground_prog = (variant("ground.glsl", SHADOWS=shadowed) if ground_quad is not None else None)
         material_names = tuple(material_names)
         tex, repeats = self._height_texture(material_names)
         if ground_quad is not None:
             material_names = material_names + (ground["material"],)
         program = variant("raycast.glsl", **settings.defines(), SHADOWS=shadowed)
         palette = material_palette(material_names)
-        light = light_dir
-        for prog in (p for p in (sky, program, ground_prog) if p is not None):
-            _set(prog, **common, **shading_uniforms(light))
-        for prog in (p for p in (program, ground_prog) if p is not None):
-            _write(prog, "material_dark", palette["dark"])
-            _write(prog, "material_light", palette["light"])
-            _write(prog, "material_gloss", palette["gloss"])
-        window = None
-        if shadowed:
-            box = frusta_bounds(frusta) if shadow_box is None else np.asarray(shadow_box, np.float64)
-            window = light_window(box, -np.asarray(light_dir, dtype=np.float64), eye)
-            texel = window.texel_size(shadows.resolution)
-            self.last_light_window = window
-            for prog in (p for p in (program, ground_prog) if p is not None):
-                _set(prog, **window.uniforms(), shadow_bias=shadows.bias * texel,
-                     shadow_max_slope=shadows.max_slope, shadow_map=1)
-        ground_vao = ground_buf = None
+        shading = shading_uniforms(light_dir)
+        for prog in (sky, program):
+            _set(prog, **common, **shading)
+        for key in ("dark", "light", "gloss"):
+            _write(program, f"material_{key}", palette[key])
+        box = None if not shadowed else (frusta_bounds(frusta) if shadow_box is None
+                                         else np.asarray(shadow_box, np.float64))
+        window, receiver = self._light(shadows, box, light_dir, eye)
+        _set(program, **receiver)
+        ground_vao = ground_light_vao = None
+        ground_objects = []
         if ground_quad is not None:
-            _set(ground_prog, view_projection=tuple(view_projection.T.astype(np.float32).ravel()),
-                 ground_material=min(len(material_names) - 1, MAX_MATERIALS - 1),
-                 origin_offset=tuple(eye))
-            ground_buf = ctx.buffer((ground_quad - eye).astype(np.float32).tobytes())
-            ground_vao = ctx.vertex_array(ground_prog, [(ground_buf, "3f", "position")])
+            ground_vao, ground_light_vao, ground_objects = self._ground_draws(
+                ground_quad, eye, view_projection, palette,
+                min(len(material_names) - 1, MAX_MATERIALS - 1), shading, receiver, window)
         _write(program, "texture_repeat", repeats)
-        _set(program, view_projection=tuple(view_projection.T.astype(np.float32).ravel()),
+        _set(program, view_projection=_mat4(view_projection),
              depth_coeffs=(proj[2, 2], proj[2, 3]), hull_padding=settings.hull_padding,
              linear_steps=settings.linear_steps, binary_steps=settings.binary_steps,
              height_maps=0)
@@ -467,53 +512,42 @@ class Raycaster(OffscreenRenderer):
                 [(self._template_vbo, "3f", "corner"),
                  (rec_buf, "4f 4f 4f 4f 4f 4f/i", "rec0", "rec1", "rec2", "rec3", "rec4", "rec5")],
                 index_buffer=None if screen_proxy else self._template_ibo, index_element_size=4)
-        shadow_vaos = []
+        shadow_draws, shadow_objects = [], []
         if shadowed:
             caster = variant("raycast.glsl", SHADOW_PASS=True,
                              RELIEF=settings.relief and shadows.caster == "relief")
             _set(caster, **window.uniforms(), viewport=(float(shadows.resolution),) * 2,
                  hull_padding=settings.hull_padding, linear_steps=settings.linear_steps,
                  binary_steps=settings.binary_steps, height_maps=0,
-                 view_projection=tuple(window.matrix().T.astype(np.float32).ravel()))
+                 view_projection=_mat4(window.matrix()))
             _write(caster, "texture_repeat", repeats)
+            if ground_light_vao is not None:
+                def draw_ground_depth():
+                    ctx.disable(ctx.CULL_FACE)
+                    ground_light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+                shadow_draws.append(draw_ground_depth)
             if n:
-                shadow_vaos.append(("frusta", ctx.vertex_array(
+                frusta_light_vao = ctx.vertex_array(
                     caster,
                     [(self._template_vbo, "3f", "corner"),
                      (rec_buf, "4f 4f 4f 4f 4f 4f/i", "rec0", "rec1", "rec2", "rec3", "rec4", "rec5")],
-                    index_buffer=self._template_ibo, index_element_size=4)))
-            if ground_quad is not None:
-                ground_caster = variant("ground.glsl", SHADOW_PASS=True)
-                _set(ground_caster, view_projection=tuple(window.matrix().T.astype(np.float32).ravel()))
-                shadow_vaos.append(("ground", ctx.vertex_array(
-                    ground_caster, [(ground_buf, "3f", "position")])))
+                    index_buffer=self._template_ibo, index_element_size=4)
+                shadow_objects.append(frusta_light_vao)
+
+                def draw_frusta_depth():
+                    tex.use(0)
+                    ctx.enable(ctx.CULL_FACE)
+                    ctx.front_face = "ccw"
+                    ctx.cull_face = "front"
+                    frusta_light_vao.render(mode=ctx.TRIANGLES, vertices=len(PYRAMID_TRIANGLES) * 3,
+                                            instances=n)
+                shadow_draws.append(draw_frusta_depth)
         if self._sky_vao is None or self._sky_vao.program is not sky:
             self._sky_vao = ctx.vertex_array(sky, [])
 
         ctx.finish()
         t_draw = time.perf_counter()
-        shadow_ms = 0.0
-        if shadowed:
-            shadow_fbo = self._shadow.target(int(shadows.resolution))
-            shadow_fbo.use()
-            shadow_fbo.viewport = (0, 0, shadows.resolution, shadows.resolution)
-            shadow_fbo.clear(depth=1.0)
-            ctx.enable(ctx.DEPTH_TEST)
-            ctx.depth_func = "<"
-            for kind, svao in shadow_vaos:
-                if kind == "ground":
-                    ctx.disable(ctx.CULL_FACE)
-                    svao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-                else:
-                    tex.use(0)
-                    ctx.enable(ctx.CULL_FACE)
-                    ctx.front_face = "ccw"
-                    ctx.cull_face = "front"
-                    svao.render(mode=ctx.TRIANGLES, vertices=len(PYRAMID_TRIANGLES) * 3, instances=n)
-            ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
-            ctx.finish()
-            shadow_ms = (time.perf_counter() - t_draw) * 1e3
-            self._shadow.texture.use(1)
+        shadow_ms = self._draw_shadow_map(shadows.resolution, shadow_draws) if shadowed else 0.0
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
@@ -540,8 +574,7 @@ class Raycaster(OffscreenRenderer):
         color = color.reshape(height, width, 3)[::-1].copy()
         dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
                              np.float32).reshape(height, width)[::-1].copy()
-        for obj in (vao, rec_buf if own_buffer else None, ground_vao, ground_buf,
-                    *(v for _, v in shadow_vaos)):
+        for obj in (vao, rec_buf if own_buffer else None, *ground_objects, *shadow_objects):
             if obj is not None:
                 obj.release()
         passes = frame_passes(shadowed, ground_vao is not None, n > 0)
@@ -560,15 +593,23 @@ class Raycaster(OffscreenRenderer):
         if len(frusta.base):
             box = frusta_bounds(frusta)
             pts.append(np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3))
-        if not pts:
-            return 0.1, 10.0
-        corners = np.concatenate(pts)
-        box = np.stack([corners.min(axis=0), corners.max(axis=0)])
-        depths = (corners - eye) @ fwd
-        size = float(np.linalg.norm(box[1] - box[0]))
-        far = max(float(depths.max()), 0.0) + 0.05 * size + 1e-6
-        near = max(float(depths.min()) - 0.05 * size, far * 1e-5)
-        return near, far
+        return depth_range(pts, eye, fwd)
+
+
+def depth_range(point_sets, eye: np.ndarray, fwd: np.ndarray) -> tuple[float, float]:
+    """Near and far distances along the unit view direction ``fwd`` from ``eye`` enclosing
+    every (k, 3) array of ``point_sets`` with a 5 % margin of their extent; (0.1, 10) for
+    none. near stays above far·1e-5, so the depth buffer keeps its precision."""
+    pts = [np.asarray(p, dtype=np.float64) for p in point_sets if len(p)]
+    if not pts:
+        return 0.1, 10.0
+    corners = np.concatenate(pts)
+    box = np.stack([corners.min(axis=0), corners.max(axis=0)])
+    depths = (corners - eye) @ fwd
+    size = float(np.linalg.norm(box[1] - box[0]))
+    far = max(float(depths.max()), 0.0) + 0.05 * size + 1e-6
+    near = max(float(depths.min()) - 0.05 * size, far * 1e-5)
+    return near, far
 
 
 def _ground_quad(ground: dict) -> np.ndarray:
@@ -587,6 +628,11 @@ def _set(program, **values) -> None:
 def _write(program, name: str, array: np.ndarray) -> None:
     if name in program:
         program[name].write(np.ascontiguousarray(array, dtype=np.float32).tobytes())
+
+
+def _mat4(matrix: np.ndarray) -> tuple:
+    """A (4, 4) float64 matrix as a GLSL mat4 uniform value (column-major float32)."""
+    return tuple(np.asarray(matrix).T.astype(np.float32).ravel())
 
 
 _default_raycaster: Raycaster | None = None
