@@ -215,6 +215,10 @@ def _inside_relief(frusta, rows, points, height):
     return between & (top >= 0) & (rho <= top)
 
 
+#: Relief samples marched at once by the reference (bounds its memory to about a gigabyte).
+RELIEF_CHUNK_POINTS = 1 << 20
+
+
 def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
     """Nearest crossing into the relief solid of row rows[i] along ray i (float64)."""
     m = len(rows)
@@ -245,24 +249,34 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
     t_hit = np.full(m, np.inf)
     if not live.any():
         return t_hit
+    # Dense samples, a chunk of pairs at a time: at most RELIEF_CHUNK_POINTS points in
+    # flight, so memory stays bounded however many pairs and samples are asked for.
     idx = np.flatnonzero(live)
-    a_, b_ = ta[idx], tb[idx]
     frac = np.linspace(0.0, 1.0, samples)
-    ts = a_[:, None] + (b_ - a_)[:, None] * frac[None, :]
-    rr = np.repeat(rows[idx], samples)
-    pts = (O[idx][:, None, :] + ts[..., None] * D[idx][:, None, :]).reshape(-1, 3)
-    inside = _inside_relief(frusta, rr, pts, height).reshape(len(idx), samples)
-    any_in = inside.any(axis=1)
-    first = np.argmax(inside, axis=1)
-    sel = np.flatnonzero(any_in)
-    if sel.size == 0:
+    chunk = max(1, RELIEF_CHUNK_POINTS // samples)
+    found, entry, before = [], [], []
+    for start in range(0, len(idx), chunk):
+        part = idx[start:start + chunk]
+        ts = ta[part][:, None] + (tb[part] - ta[part])[:, None] * frac[None, :]
+        rr = np.repeat(rows[part], samples)
+        pts = (O[part][:, None, :] + ts[..., None] * D[part][:, None, :]).reshape(-1, 3)
+        inside = _inside_relief(frusta, rr, pts, height).reshape(len(part), samples)
+        sel = np.flatnonzero(inside.any(axis=1))
+        if sel.size == 0:
+            continue
+        j = np.argmax(inside[sel], axis=1)
+        found.append(part[sel])
+        entry.append(ts[sel, j])
+        before.append(np.where(j > 0, ts[sel, np.maximum(j - 1, 0)], np.nan))   # nan: first sample
+    if not found:
         return t_hit
-    j = first[sel]
-    t_in = ts[sel, j]
-    t_out = np.where(j > 0, ts[sel, np.maximum(j - 1, 0)], t_in)
-    O_s, D_s, rows_s = O[idx][sel], D[idx][sel], rows[idx][sel]
+    hit_idx = np.concatenate(found)
+    t_in = np.concatenate(entry)
+    t_out = np.concatenate(before)
+    need = ~np.isnan(t_out)
+    t_out = np.where(need, t_out, t_in)
+    O_s, D_s, rows_s = O[hit_idx], D[hit_idx], rows[hit_idx]
     scale = np.maximum(frusta.length[rows_s], np.maximum(frusta.r1[rows_s], frusta.r2[rows_s]) + frusta.shell[rows_s])
-    need = j > 0
     for _ in range(80):
         if not need.any():
             break
@@ -271,7 +285,7 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
         t_in = np.where(need & ins, mid, t_in)
         t_out = np.where(need & ~ins, mid, t_out)
         need &= (t_in - t_out) > 1e-10 * scale
-    t_hit[idx[sel]] = t_in
+    t_hit[hit_idx] = t_in
     return t_hit
 
 
