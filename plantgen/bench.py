@@ -803,10 +803,22 @@ def markdown_table(results: dict) -> str:
                      f"{f(mem['gs_bytes'])} ({_level(m['gs_level'], m['gs_matched'])}) | {r(mem['gs_over_rc'])} | "
                      f"{f(mem['gsr_bytes'])} ({_level(m['gsr_level'], m['gsr_matched'])}) | "
                      f"{r(mem['gsr_over_rcr'])} | {PAPER_MEMORY_RATIO:.0f}x |")
-    notes = sorted({f"{m['model']}: {n}" for m in results["models"] for n in m["notes"]})
+    notes = sorted({f"{m['model']}: {n}" for m in results["models"] for n in m["notes"] + _budget_notes(m)})
     if notes:
         lines += ["", "Notes:", *[f"- {n}" for n in notes]]
     return "\n".join(lines) + "\n"
+
+
+def _budget_notes(model: dict) -> list[str]:
+    """Notes for methods left unmatched (``>m``) whose finer levels were not built because
+    they exceeded the triangle budget: the criterion did not fail there, the budget did."""
+    notes = []
+    for method, matched in (("GS", model.get("gs_matched")), ("GS+R", model.get("gsr_matched"))):
+        skipped = [c for c in model["curve"] if c["method"] == method and "skipped" in c]
+        if skipped and not matched:
+            levels = ", ".join(str(c["value"]) for c in skipped)
+            notes.append(f"{method} m = {levels} not built: {skipped[0]['skipped']} (--max-triangles)")
+    return notes
 
 
 TABLE_FIELDS = ["model", "segments", "rc_fps", "rc_ms", "rc_error", "rcr_fps", "rcr_ms", "rcr_error",

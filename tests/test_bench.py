@@ -187,3 +187,15 @@ def test_unknown_model_is_one_line_error_before_any_work(tmp_path):
         "plantgen: error: no such model: no_such_plant (a shipped grammar/scene name such as "
         "coconut, pine, elm, or a path)"]
     assert not (tmp_path / "b").exists()
+
+
+def test_levels_left_out_by_the_triangle_budget_are_named_when_no_level_matched():
+    """'>m' from a budget is not a quality verdict: the table says which levels were not
+    built; a matched method, or one with nothing skipped, gets no such note."""
+    curve = [{"method": "GS+R", "value": 2, "error": 0.2},
+             {"method": "GS+R", "value": 3, "skipped": "17 triangles over the budget of 6"},
+             {"method": "GS", "value": 1, "error": 0.0}]
+    model = {"gs_matched": True, "gsr_matched": False, "curve": curve}
+    notes = bench._budget_notes(model)
+    assert notes == ["GS+R m = 3 not built: 17 triangles over the budget of 6 (--max-triangles)"]
+    assert bench._budget_notes({**model, "gsr_matched": True}) == []
