@@ -6,6 +6,7 @@ library function. Errors a user can cause (``PlantgenError``) print one line and
 
 from __future__ import annotations
 
+import re
 import sys
 
 import click
@@ -20,6 +21,17 @@ def cli() -> None:
 
     Grammars and scenes are YAML files (the shipped ones are in grammars/). Run `plantgen COMMAND --help` for each command's options.
     """
+
+
+def parse_size(ctx, param, value):
+    """click callback for a ``WIDTHxHEIGHT`` option (shared by the commands that render):
+    (width, height) ints, None when the option is not given."""
+    if value is None:
+        return None
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
+    if not m or not (0 < int(m.group(1)) <= 16384 and 0 < int(m.group(2)) <= 16384):
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..16384, e.g. 1024x768")
+    return int(m.group(1)), int(m.group(2))
 
 
 def main(argv: list[str] | None = None) -> None:

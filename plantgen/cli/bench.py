@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 import sys
 import time
 from pathlib import Path
@@ -10,28 +9,19 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from . import cli
-
-
-def _parse_size(ctx, param, value):
-    if value is None:
-        return None
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
-    if not m or not (0 < int(m.group(1)) <= 16384 and 0 < int(m.group(2)) <= 16384):
-        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..16384, e.g. 1024x768")
-    return int(m.group(1)), int(m.group(2))
+from . import cli, parse_size
 
 
 @cli.command()
 @click.option("--models", metavar="LIST",
               help="Comma-separated grammar/scene names or paths (default: the nine models of "
                    "Table 1; with --quick: saguaro,well).")
-@click.option("--size", callback=_parse_size, metavar="WxH",
+@click.option("--size", callback=parse_size, metavar="WxH",
               help="Timed frame size (default 1024x768, as the paper; --quick: 256x192).")
 @click.option("--frames", type=click.IntRange(1, 10000),
               help="Timed frames of each Table 1 method after a warm-up (default 9; --quick: 2); "
                    "the curves' configurations use at most 5.")
-@click.option("--eval-size", callback=_parse_size, metavar="WxH",
+@click.option("--eval-size", callback=parse_size, metavar="WxH",
               help="Evaluation window against the float64 reference, at the timed frames' "
                    "angle per pixel (default 128x96; --quick: 64x48).")
 @click.option("--max-triangles", type=click.IntRange(min=1),

@@ -2,23 +2,14 @@
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
 import click
 
 from ..errors import PlantgenError
-from . import cli
-
-
-def _parse_size(ctx, param, value):
-    if value is None:
-        return None
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
-    if not m or not (0 < int(m.group(1)) <= 16384 and 0 < int(m.group(2)) <= 16384):
-        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..16384, e.g. 1024x768")
-    return int(m.group(1)), int(m.group(2))
+from ..scene import EFFECTS
+from . import cli, parse_size
 
 
 @cli.command()
@@ -27,7 +18,7 @@ def _parse_size(ctx, param, value):
               help="PNG to write (.gif or .webp with --frames).")
 @click.option("--effects", metavar="LIST",
               help="Comma-separated effects replacing the scene's list, e.g. relief,shadows "
-                   "(known: relief, shadows, animation, texture).")
+                   f"(known: {', '.join(EFFECTS)}).")
 @click.option("--relief/--no-relief", default=None,
               help="Relief-map the frusta (§3). Default: on when the effects list it.")
 @click.option("--shadows/--no-shadows", default=None,
@@ -44,7 +35,7 @@ def _parse_size(ctx, param, value):
 @click.option("--time", "time_s", type=float, metavar="T",
               help="Seconds: the pose of an animated scene for a still (default 0), or the "
                    "first frame's time.")
-@click.option("--size", callback=_parse_size, metavar="WxH",
+@click.option("--size", callback=parse_size, metavar="WxH",
               help="Image size in pixels (default: the camera file's, else 1024x768).")
 @click.option("--camera", default="auto", show_default=True, metavar="auto|FILE.json",
               help="'auto' frames the model to span most of the viewport (or uses the "
