@@ -506,6 +506,7 @@ class _Renderers:
     def release(self):
         for key in list(self.rasters):
             self.release_raster(key)
+        self.raycaster.release()
         if self.model.animation is not None:
             self.model.animation.release()
 

@@ -196,3 +196,25 @@ def test_gs_ground_shadow_matches_the_ray_casters(gl_ctx, elevation):
     differ = np.abs(lum(rc) - lum(gs))[ground] > 6
     # the edge band: a 16-gon's silhouette moves the shadow edge by < 2 % of the radius
     assert differ.mean() < 0.01, (differ.sum(), ground.sum())
+
+
+def test_released_renderers_free_their_targets_and_render_again_the_same(gl_ctx):
+    """release() frees the framebuffer, height textures and shadow map of both renderers
+    (the bench makes one raster renderer per configuration); a released renderer makes
+    them again and renders the same image, shadows included."""
+    frusta = skin_skeleton(column())
+    camera = top_down_camera()
+    shadows = ShadowSettings(resolution=128)
+    mesh = tessellate(frusta, 1)
+    raster, caster = RasterRenderer(gl_ctx), Raycaster(gl_ctx)
+    draw = {"gs": lambda: raster.render(mesh, frusta, camera, material_names=("bark",),
+                                        ground=GROUND, shadows=shadows),
+            "rc": lambda: caster.render(frusta, camera, ground=GROUND, shadows=shadows)}
+    for name, renderer in (("gs", raster), ("rc", caster)):
+        first = draw[name]()
+        renderer.release()
+        assert renderer._fbo is None and renderer._shadow.texture is None and not renderer._textures
+        again = draw[name]()
+        assert np.array_equal(first.color, again.color), name
+        assert np.array_equal(first.distance, again.distance), name
+        renderer.release()

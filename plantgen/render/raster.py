@@ -56,19 +56,25 @@ class RasterRenderer(OffscreenRenderer):
         super().__init__(ctx)
         self._uploaded = None  # (mesh id, buffers, vao, origin)
 
-    def release(self) -> None:
-        """Free the uploaded mesh's buffers."""
+    def release_mesh(self) -> None:
+        """Free the uploaded mesh's buffers (the renderer stays usable)."""
         if self._uploaded is not None:
             for obj in self._uploaded[1]:
                 obj.release()
             self._uploaded = None
+
+    def release(self) -> None:
+        """Free every GL object of this renderer: the mesh's buffers, the framebuffer, the
+        height textures and the shadow map."""
+        self.release_mesh()
+        super().release()
 
     def upload(self, mesh: TessellatedMesh, frusta, program):
         """Upload ``mesh`` (once per mesh object); returns (vao, origin)."""
         key = (mesh, program)  # strong references: identity stays valid while cached
         if self._uploaded is not None and self._uploaded[0][0] is mesh and self._uploaded[0][1] is program:
             return self._uploaded[2], self._uploaded[3]
-        self.release()
+        self.release_mesh()
         ctx = self.ctx
         origin = mesh.vertices.mean(axis=0) if len(mesh.vertices) else np.zeros(3)
         # One interleaved buffer, 32 bytes a vertex: position, normal, uv (float32).

@@ -323,6 +323,17 @@ class OffscreenRenderer:
         self._shadow = ShadowPass(self.ctx)
         self.last_light_window = None
 
+    def release(self) -> None:
+        """Free the framebuffer, the height textures and the shadow map (they are made
+        again on the next render)."""
+        if self._fbo is not None:
+            release_framebuffer(self._fbo)
+        self._fbo = self._fbo_size = None
+        for tex, _ in self._textures.values():
+            tex.release()
+        self._textures = {}
+        self._shadow.release()
+
     def shadow_depths(self) -> np.ndarray:
         """(res, res) float32 light depth map of the last shadowed render, (z - near) /
         (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
