@@ -24,7 +24,7 @@ from ..errors import PlantgenError
 from ..scene import EFFECTS
 from .context import release_framebuffer
 
-__all__ = ["resolve_effects", "ShadowSettings", "LightWindow", "light_window", "ShadowPass",
+__all__ = ["resolve_effects", "ShadowSettings", "LightWindow", "light_window", "ShadowPass", "box_corners",
            "program_variants", "frame_passes", "parse_effect_list"]
 
 
@@ -145,6 +145,12 @@ class LightWindow:
         return float(2.0 * self.half.max() / resolution)
 
 
+def box_corners(box) -> np.ndarray:
+    """(8, 3) float64 corners of the axis-aligned (2, 3) box ``[lo, hi]``."""
+    box = np.asarray(box, dtype=np.float64)
+    return np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> LightWindow:
     """The light's window around every shadow caster.
 
@@ -166,8 +172,7 @@ def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> Ligh
     right = np.cross(forward, helper)
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
-    box = np.asarray(caster_box, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
-    corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+    corners = box_corners(np.asarray(caster_box, dtype=np.float64) - np.asarray(origin, dtype=np.float64))
     local = corners @ np.stack([right, up, forward]).T
     lo, hi = local.min(axis=0), local.max(axis=0)
     size = float(np.max(hi - lo)) or 1.0

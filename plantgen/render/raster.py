@@ -18,7 +18,7 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
 from .context import gl_context
-from .passes import ShadowSettings, frame_passes
+from .passes import ShadowSettings, box_corners, frame_passes
 from .raycast import (MAX_MATERIALS, RECORD_BYTES, OffscreenRenderer, RenderResult, _ground_quad,
                       _mat4, _set, _write, depth_range, material_palette, shading_uniforms)
 from .shaders import build_program
@@ -129,7 +129,7 @@ class RasterRenderer(OffscreenRenderer):
         right, up, fwd = camera.basis()
         ground_quad = _ground_quad(ground) if ground else None
         bounds = _mesh_bounds(mesh)
-        near, far = depth_range([_box_corners(bounds)] + ([] if ground_quad is None else [ground_quad]),
+        near, far = depth_range([box_corners(bounds)] + ([] if ground_quad is None else [ground_quad]),
                                 eye, fwd)
         view = camera.view_matrix()
         view[:3, 3] = 0.0  # render origin: the eye
@@ -153,10 +153,10 @@ class RasterRenderer(OffscreenRenderer):
         buffers[2].bind_to_storage_buffer(0)
         buffers[3].bind_to_storage_buffer(1)
         sky_vao = ctx.vertex_array(sky, [])
-        ground_vao = ground_light_vao = None
+        ground_vao = ground_light_draw = None
         extras = [sky_vao]
         if ground_quad is not None:
-            ground_vao, ground_light_vao, objects = self._ground_draws(
+            ground_vao, ground_light_draw, objects = self._ground_draws(
                 ground_quad, eye, view_projection, palette,
                 min(len(palette_names) - 1, MAX_MATERIALS - 1), shading, receiver, window)
             extras += objects
@@ -175,11 +175,8 @@ class RasterRenderer(OffscreenRenderer):
                 ctx.cull_face = "back"
                 mesh_light_vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
             shadow_draws.append(draw_mesh_depth)
-            if ground_light_vao is not None:
-                def draw_ground_depth():
-                    ctx.disable(ctx.CULL_FACE)
-                    ground_light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-                shadow_draws.append(draw_ground_depth)
+            if ground_light_draw is not None:
+                shadow_draws.append(ground_light_draw)
 
         ctx.finish()
         t_draw = time.perf_counter()
@@ -226,10 +223,6 @@ def _mesh_bounds(mesh: TessellatedMesh) -> np.ndarray:
     if len(mesh.vertices) == 0:
         return np.array([[-0.5] * 3, [0.5] * 3])
     return np.stack([mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)])
-
-
-def _box_corners(box: np.ndarray) -> np.ndarray:
-    return np.stack(np.meshgrid(*np.asarray(box).T, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
 _default: RasterRenderer | None = None

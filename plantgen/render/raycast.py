@@ -26,7 +26,8 @@ from ..geometry.frusta import PYRAMID_CORNERS as _FRUSTA_CORNERS
 from ..geometry.frusta import PYRAMID_TRIANGLES as _FRUSTA_TRIANGLES
 from ..geometry.mesh import continuing_parent_rows
 from .context import gl_context, release_framebuffer
-from .passes import ShadowPass, ShadowSettings, frame_passes, light_window, program_variants
+from .passes import (ShadowPass, ShadowSettings, box_corners, frame_passes, light_window,
+                     program_variants)
 from .shaders import build_program
 
 __all__ = ["RaycastSettings", "RenderResult", "Raycaster", "pack_records", "RECORD_FLOATS",
@@ -352,10 +353,11 @@ class OffscreenRenderer:
 
     def _ground_draws(self, quad, eye, view_projection, palette, ground_material: int,
                       shading: dict, receiver: dict, window):
-        """Vertex arrays drawing the ground square ``quad`` ((4, 3) world, strip order) into
-        the frame and, with a light ``window``, into the light's map.
+        """Draws of the ground square ``quad`` ((4, 3) world, strip order): its vertex array
+        for the frame and, with a light ``window``, a callable drawing it into the light's
+        map (for :meth:`_draw_shadow_map`).
 
-        Returns (frame vao, light vao or None, [objects to release after the frame]).
+        Returns (frame vao, light draw or None, [objects to release after the frame]).
         """
         ctx = self.ctx
         shadowed = window is not None
@@ -366,12 +368,16 @@ class OffscreenRenderer:
             _write(program, f"material_{key}", palette[key])
         buf = ctx.buffer((np.asarray(quad) - eye).astype(np.float32).tobytes())
         vao = ctx.vertex_array(program, [(buf, "3f", "position")])
-        light_vao = None
+        light_vao = light_draw = None
         if shadowed:
             caster = build_program(ctx, "ground.glsl", {"SHADOW_PASS": True})
             _set(caster, view_projection=_mat4(window.matrix()))
             light_vao = ctx.vertex_array(caster, [(buf, "3f", "position")])
-        return vao, light_vao, [vao, light_vao, buf]
+
+            def light_draw():
+                ctx.disable(ctx.CULL_FACE)
+                light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+        return vao, light_draw, [vao, light_vao, buf]
 
     def _draw_shadow_map(self, resolution: int, draws) -> float:
         """Clear the light's depth map, run each callable of ``draws`` into it with the depth
@@ -501,10 +507,10 @@ class Raycaster(OffscreenRenderer):
                                          else np.asarray(shadow_box, np.float64))
         window, receiver = self._light(shadows, box, light_dir, eye)
         _set(program, **receiver)
-        ground_vao = ground_light_vao = None
+        ground_vao = ground_light_draw = None
         ground_objects = []
         if ground_quad is not None:
-            ground_vao, ground_light_vao, ground_objects = self._ground_draws(
+            ground_vao, ground_light_draw, ground_objects = self._ground_draws(
                 ground_quad, eye, view_projection, palette,
                 min(len(material_names) - 1, MAX_MATERIALS - 1), shading, receiver, window)
         _write(program, "texture_repeat", repeats)
@@ -532,11 +538,8 @@ class Raycaster(OffscreenRenderer):
                  binary_steps=settings.binary_steps, height_maps=0,
                  view_projection=_mat4(window.matrix()))
             _write(caster, "texture_repeat", repeats)
-            if ground_light_vao is not None:
-                def draw_ground_depth():
-                    ctx.disable(ctx.CULL_FACE)
-                    ground_light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-                shadow_draws.append(draw_ground_depth)
+            if ground_light_draw is not None:
+                shadow_draws.append(ground_light_draw)
             if n:
                 frusta_light_vao = ctx.vertex_array(
                     caster,
@@ -603,7 +606,7 @@ class Raycaster(OffscreenRenderer):
         pts = [] if extra is None else [np.asarray(extra, dtype=np.float64)]
         if len(frusta.base):
             box = frusta_bounds(frusta)
-            pts.append(np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3))
+            pts.append(box_corners(box))
         return depth_range(pts, eye, fwd)
 
 
