@@ -11,18 +11,19 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
+import trimesh
+from trimesh.exchange.gltf import export_glb
+from trimesh.visual.material import PBRMaterial
 
 from .errors import PlantgenError
+from .files import write_atomically
+from .geometry.materials import material_colour
 from .geometry.mesh import TessellatedMesh
 
-__all__ = ["EXPORT_FORMATS", "MAX_EXPORT_TRIANGLES", "ExportError", "export_mesh", "export_model",
-           "mesh_scene", "default_material_colour"]
-
-#: Largest mesh ``export_model`` writes (about 60 bytes a triangle in memory while writing).
-MAX_EXPORT_TRIANGLES = 100_000_000
+__all__ = ["EXPORT_FORMATS", "ExportError", "export_mesh", "export_file_type", "mesh_scene"]
 
 #: File suffix -> trimesh file type.
 EXPORT_FORMATS = {".glb": "glb", ".obj": "obj", ".ply": "ply", ".stl": "stl"}
@@ -31,23 +32,13 @@ class ExportError(PlantgenError, ValueError):
     """An export target plantgen cannot write (unknown suffix, unwritable place)."""
 
 
-def default_material_colour(name: str) -> tuple[float, float, float]:
-    """Linear RGB in [0, 1] for a material name: the mean of the ray caster's dark and light
-    albedo for it (:func:`plantgen.render.raycast.material_palette`), so an exported mesh
-    has the colour the renderers give it."""
-    from .render.raycast import material_palette  # pure numpy: no GL context is made
-
-    palette = material_palette([name])
-    return tuple(float(x) for x in (palette["dark"][0] + palette["light"][0]) / 2)
-
-
 def _colours(mesh: TessellatedMesh, colours) -> list[tuple[float, float, float]]:
     out = []
     for i, name in enumerate(mesh.material_names):
         if colours is None:
-            c = default_material_colour(name)
+            c = material_colour(name)
         elif isinstance(colours, Mapping):
-            c = colours.get(name, default_material_colour(name))
+            c = colours.get(name, material_colour(name))
         else:
             c = colours[i]
         c = tuple(float(x) for x in c)
@@ -73,9 +64,6 @@ def mesh_scene(mesh: TessellatedMesh, colours: Mapping[str, Sequence[float]] | S
     Each geometry carries vertex normals and a ``TextureVisuals`` with the uv and a
     ``PBRMaterial`` whose base colour is the material colour (linear RGB, opaque).
     """
-    import trimesh
-    from trimesh.visual.material import PBRMaterial
-
     rgb = _colours(mesh, colours)
     scene = trimesh.Scene()
     face_material = mesh.face_material
@@ -93,7 +81,8 @@ def mesh_scene(mesh: TessellatedMesh, colours: Mapping[str, Sequence[float]] | S
     return scene
 
 
-def _file_type(path: Path) -> str:
+def export_file_type(path: Path) -> str:
+    """The trimesh file type of ``path``'s suffix (one line naming the known ones if none)."""
     try:
         return EXPORT_FORMATS[path.suffix.lower()]
     except KeyError:
@@ -108,93 +97,36 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike,
     Parameters
     ----------
     mesh : the tessellation to write (coordinates in model units, y up, as glTF expects)
-    path : target file; written as ``NAME.part`` beside it, then renamed
+    path : target file; written under a temporary name beside it, then renamed
     colours : material name -> linear RGB in [0, 1], or one colour per material index;
-        default :func:`default_material_colour`
+        default :func:`plantgen.geometry.materials.material_colour`
 
     Returns
     -------
     Path : the written file
     """
-    import trimesh
-    from trimesh.exchange.gltf import export_glb
-
     path = Path(path)
-    file_type = _file_type(path)
+    file_type = export_file_type(path)
     if not path.parent.is_dir():
         raise ExportError(f"{path}: directory {path.parent} does not exist")
     if len(mesh.faces) == 0:
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
-    tmp = path.with_name(path.name + ".part")
-    try:
-        if file_type == "glb":
-            data = export_glb(mesh_scene(mesh, colours), include_normals=True)
+    if file_type == "glb":
+        data = export_glb(mesh_scene(mesh, colours), include_normals=True)
+    else:
+        whole = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_normals=mesh.normals,
+                                process=False, validate=False)
+        if file_type == "obj":
+            whole.visual = trimesh.visual.TextureVisuals(uv=mesh.uv)
+            data = trimesh.exchange.obj.export_obj(whole, include_normals=True,
+                                                   include_color=False, include_texture=True,
+                                                   write_texture=False, mtl_name=None)
+        elif file_type == "ply":
+            data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
         else:
-            whole = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_normals=mesh.normals,
-                                    process=False, validate=False)
-            if file_type == "obj":
-                whole.visual = trimesh.visual.TextureVisuals(uv=mesh.uv)
-                data = trimesh.exchange.obj.export_obj(whole, include_normals=True,
-                                                       include_color=False, include_texture=True,
-                                                       write_texture=False, mtl_name=None)
-            elif file_type == "ply":
-                data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
-            else:
-                data = trimesh.exchange.stl.export_stl(whole)
-        mode = "w" if isinstance(data, str) else "wb"
-        with open(tmp, mode) as fh:
+            data = trimesh.exchange.stl.export_stl(whole)
+
+    def write(tmp):
+        with open(tmp, "w" if isinstance(data, str) else "wb") as fh:
             fh.write(data)
-        tmp.replace(path)
-    except OSError as exc:
-        raise ExportError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
-
-
-def export_model(input_path: str | os.PathLike, output_path: str | os.PathLike, *, level: int = 1,
-                 relief: bool = False, seed: int | None = None) -> dict:
-    """The library side of ``plantgen export``: input file -> skin -> tessellate -> file.
-
-    ``input_path`` is a skeleton ``.npz`` (or a grammar or scene, through
-    :func:`plantgen.pipeline.load_skeleton`). Returns a summary dict: ``segments``,
-    ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``, ``relief``, ``path``,
-    ``timings`` (seconds per stage).
-    """
-    import time
-
-    from .geometry.frusta import skin_skeleton
-    from .geometry.mesh import tessellate, triangle_count
-    from .geometry.skeleton import Skeleton
-
-    output_path = Path(output_path)
-    _file_type(output_path)  # fail on a bad suffix before any work
-    timings = {}
-    t0 = time.perf_counter()
-    try:
-        from .pipeline import load_skeleton
-    except ImportError:  # pragma: no cover - the pipeline ships with plantgen
-        load_skeleton = None
-    if load_skeleton is not None:
-        skeleton = load_skeleton(input_path, seed=seed)
-    else:  # pragma: no cover
-        skeleton = Skeleton.load(input_path)
-    if len(skeleton) == 0:
-        raise ExportError(f"{input_path}: the model has no segments")
-    skeleton.validate()
-    t1 = time.perf_counter()
-    frusta = skin_skeleton(skeleton)
-    t2 = time.perf_counter()
-    estimate = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
-    if estimate > MAX_EXPORT_TRIANGLES:
-        raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
-                          f"export limit of {MAX_EXPORT_TRIANGLES:,}; choose a lower --subdiv")
-    mesh = tessellate(frusta, level, relief=relief)
-    t3 = time.perf_counter()
-    export_mesh(mesh, output_path)
-    t4 = time.perf_counter()
-    timings = {"load": t1 - t0, "skin": t2 - t1, "tessellate": t3 - t2, "write": t4 - t3}
-    return {"segments": len(skeleton), "rows": mesh.n_rows, "caps": mesh.n_caps,
-            "triangles": len(mesh.faces), "vertices": len(mesh.vertices), "level": level,
-            "relief": relief, "path": output_path, "timings": timings}
+    return write_atomically(path, write, ExportError)

@@ -1,7 +1,16 @@
-"""From an input file (grammar, scene or skeleton ``.npz``) to a skeleton: the stages glued.
+"""The application layer: input files -> skeleton -> renderer or mesh -> output files.
 
-``grow(path)`` is the library twin of ``plantgen grow``; renderers use
-``load_skeleton(path)`` (any input kind) and ``load_scene_or_none(path)``.
+Every stage below is a pure function or a renderer that knows nothing of files or of the
+command line; this module glues them, and it is what ``plantgen.cli`` and the Python API
+call:
+
+- :func:`grow_file` / :func:`grow` (``plantgen grow``): a grammar, scene or skeleton
+  ``.npz`` to a :class:`~plantgen.geometry.skeleton.Skeleton`, with the time of each stage;
+- :func:`stage_model`: what a renderer needs of a grown model besides its frusta (camera,
+  light, ground), from the scene where there is one;
+- :func:`render_file` (``plantgen render``): skin, ray cast, write PNG / GIF / WebP, the
+  camera JSON and the depth ``.npy``;
+- :func:`export_model` (``plantgen export``): skin, tessellate, write a mesh file.
 """
 
 from __future__ import annotations
@@ -10,15 +19,33 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ._resources import grammars_dir
+from .animation import AnimatedScene
 from .errors import PlantgenError
+from .export import export_mesh
+from .files import write_atomically
+from .geometry.camera import Camera
+from .geometry.framing_tmp import auto_camera
+from .geometry.frusta import Frusta, skin_skeleton
+from .geometry.mesh import tessellate, triangle_count
 from .geometry.skeleton import Skeleton
+from .geometry.stage import MODEL_LIGHT, Ground
+from .images import ANIMATION_SUFFIXES, write_animation, write_png
+from .limits import limits
 from .lsystem.derive import derive
 from .lsystem.grammar import parse_grammar, read_yaml
 from .lsystem.turtle import interpret
+from .render.context import renderer_name
+from .render.passes import ShadowSettings, resolve_effects
+from .render.raycast import Raycaster, RaycastSettings
+from .render.records import RecordStream
+from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene
 
-__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input"]
+__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
+           "Staging", "stage_model", "RenderReport", "render_file", "export_model"]
 
 
 @dataclass
@@ -121,3 +148,221 @@ def grow(path: str | Path, *, seed: int | None = None, iterations: int | None = 
 def load_skeleton(path: str | Path, *, seed: int | None = None, iterations: int | None = None) -> Skeleton:
     """Any input kind (grammar, scene, ``.npz``) to a Skeleton."""
     return grow_file(path, seed=seed, iterations=iterations).skeleton
+
+
+# ---------------------------------------------------------------------- model -> renderer
+@dataclass(frozen=True)
+class Staging:
+    """What a renderer needs of a model besides its frusta: the view, the light (``light_dir``
+    (3,) towards it) and the ground (None without a scene's ground)."""
+
+    camera: Camera
+    light_dir: tuple
+    ground: Ground | None
+
+
+def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
+                camera: Camera | None = None) -> Staging:
+    """The scene's camera (at ``width`` x ``height``), light and ground; for a grammar or a
+    skeleton, or a scene whose camera is ``auto``, the model framed to fill the view
+    (:func:`auto_camera`) and the default model light. ``camera`` replaces the view."""
+    scene = grown.scene
+    if camera is None:
+        if scene is not None and isinstance(scene.camera, dict):
+            camera = Camera.from_dict({**scene.camera, "width": width, "height": height},
+                                      f"{scene.path}: camera")
+        else:
+            camera = auto_camera(frusta, width, height)
+    if scene is None:
+        return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
+    return Staging(camera, tuple(-np.asarray(scene.light["direction"], dtype=np.float64)),
+                   Ground(**scene.ground) if scene.ground else None)
+
+
+def animate_model(grown: GrowResult, effects) -> AnimatedScene:
+    """The model as an :class:`AnimatedScene`: a scene's instances moving as their motion
+    says when ``effects`` hold ``animation``; otherwise skinned once."""
+    if grown.scene is not None and "animation" in effects:
+        return AnimatedScene.from_scene(grown.scene)
+    return AnimatedScene.still(grown.skeleton)
+
+
+# ---------------------------------------------------------------------- plantgen render
+@dataclass
+class RenderReport:
+    """What :func:`render_file` did: for the CLI to print and tests to check."""
+
+    renderer: str
+    segments: int          # skeleton segments
+    rows: int              # frusta rows drawn (sharp bends add knuckle rows)
+    frame_ms: float
+    camera: Camera
+    settings: RaycastSettings
+    written: list = field(default_factory=list)
+    result: RenderResult | None = None
+    effects: tuple = ()
+    shadows: ShadowSettings | None = None
+    frames: int = 1
+    update_ms: float = 0.0         # median per-frame CPU update (pose, skin, pack, upload)
+    skin_calls: int = 0
+
+
+def _check_render_outputs(output: Path, frames, fps, depth_out, camera_out) -> None:
+    """Fail before any work on outputs :func:`render_file` cannot write."""
+    if frames is not None:
+        if output.suffix.lower() not in ANIMATION_SUFFIXES:
+            raise PlantgenError(f"{output}: an animation must end in .gif or .webp")
+        if int(frames) < 1 or not fps > 0:
+            raise PlantgenError("an animation needs frames >= 1 and fps > 0")
+        if depth_out is not None:
+            raise PlantgenError(f"{depth_out}: a depth output holds one frame, not an animation")
+    elif output.suffix.lower() != ".png":
+        raise PlantgenError(f"{output}: the image output must end in .png")
+    if depth_out is not None and Path(depth_out).suffix.lower() != ".npy":
+        raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
+    if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
+        raise PlantgenError(f"{camera_out}: the camera output must end in .json")
+
+
+def _camera_file(path, size) -> Camera:
+    """The camera JSON at ``path``, at ``size`` (width, height) if given, else the file's."""
+    cam = Camera.load(path)
+    if size is not None:
+        cam = Camera(cam.eye, cam.target, cam.up, cam.fov_y, size[0], size[1])
+    return cam
+
+
+def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress):
+    """Render the animation at ``times`` after one warm-up frame (it pays for the driver's
+    shader compilation). Returns (colours, frame ms, update ms, last result)."""
+    stream = RecordStream(raycaster.ctx)
+    camera = view["camera"]
+    colors, frame_times, update_times = [], [], []
+    result = None
+    try:
+        for i, t in enumerate([times[0], *times]):
+            fr, buf, update = anim.upload(stream, t, camera.eye)
+            result = raycaster.render(fr, record_buffer=buf, **view)
+            if i == 0:
+                continue
+            colors.append(result.color)
+            frame_times.append(result.frame_ms)
+            update_times.append(update.total_ms)
+            if progress is not None:
+                progress(i, len(times))
+    finally:
+        stream.release()
+    return colors, frame_times, update_times, result
+
+
+def _write_render_outputs(output: Path, result: RenderResult, colors, fps, cam: Camera,
+                          camera_out, depth_out) -> list:
+    written = [write_animation(output, colors, fps) if colors else write_png(output, result.color)]
+    if camera_out is not None:
+        written.append(write_atomically(camera_out, cam.save))
+    if depth_out is not None:
+        def save_depth(p):
+            with open(p, "wb") as fh:
+                np.save(fh, result.distance.astype(np.float32))
+        written.append(write_atomically(depth_out, save_depth))
+    return written
+
+
+def render_file(input_path, output, *, size=None, camera="auto", camera_out=None,
+                depth_out=None, seed=None, iterations=None, relief=None,
+                linear_steps=32, binary_steps=6, v_exact=False, timed_frames=3,
+                effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
+                time_s=None, frames=None, fps=12.0, progress=None) -> RenderReport:
+    """Grow or load ``input_path`` (grammar, scene or skeleton ``.npz``), skin it, ray cast
+    it and write a PNG (and optionally the camera JSON and the depth ``.npy``), or, with
+    ``frames``, an animated GIF/WebP.
+
+    Parameters
+    ----------
+    size : (width, height) in pixels; default: the camera file's size, else 1024x768
+    camera : ``"auto"`` (the scene's camera if it has one, else the model framed to fill
+        most of the viewport) or a path to a camera JSON
+    relief, shadows : True/False add/remove that effect; None: as the effects say
+    effects : None (the scene's list; none for a grammar or skeleton) or a list of effect
+        names that replaces it (plantgen.scene.EFFECTS; an unknown name is an error)
+    shadow_res : shadow map texels per side; shadow_caster : "relief" or "inner"
+    time_s : seconds: the pose of an animated scene for a still (default 0), or the first
+        frame's time of an animation
+    frames, fps : write ``frames`` frames at ``fps`` to a ``.gif``/``.webp`` output
+    progress : callable(done, total) called after each animation frame
+    depth_out : path of a float32 (height, width) array of distances along each pixel's
+        ray from the eye (``inf`` for a miss), row 0 the top row of the PNG
+    timed_frames : frames rendered after a warm-up frame; the report quotes their median
+    """
+    output = Path(output)
+    _check_render_outputs(output, frames, fps, depth_out, camera_out)
+    grown = grow_file(input_path, seed=seed, iterations=iterations)
+    chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
+                             add=[n for n, f in (("relief", relief), ("shadows", shadows)) if f],
+                             remove=[n for n, f in (("relief", relief), ("shadows", shadows))
+                                     if f is False])
+    if len(grown.skeleton) == 0:
+        raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
+    anim = animate_model(grown, chosen)
+    t_start = float(time_s or 0.0)
+    frusta = anim.frusta_at(t_start)
+    staging = stage_model(grown, frusta, *(size or (1024, 768)),
+                          camera=None if camera in ("auto", None) else _camera_file(camera, size))
+    cam = staging.camera
+    settings = RaycastSettings(relief="relief" in chosen, linear_steps=linear_steps,
+                               binary_steps=binary_steps, v_exact=v_exact)
+    shadow_settings = (ShadowSettings(resolution=int(shadow_res), caster=shadow_caster)
+                       if "shadows" in chosen else None)
+    view = {"camera": cam, "settings": settings, "material_names": frusta.material_names,
+            "light_dir": staging.light_dir, "ground": staging.ground, "shadows": shadow_settings}
+    raycaster = Raycaster()
+    colors, update_times = [], []
+    if frames is not None:
+        times = t_start + np.arange(int(frames)) / float(fps)
+        if shadow_settings is not None and anim.animated and len(times) > 1:
+            view["shadow_box"] = anim.bounds(times[:: max(len(times) // 8, 1)])   # one window
+        colors, frame_times, update_times, result = _render_frames(raycaster, anim, times, view,
+                                                                   progress)
+    else:
+        runs = [raycaster.render(frusta, **view) for _ in range(max(int(timed_frames), 1) + 1)]
+        result, frame_times = runs[-1], [r.frame_ms for r in runs[1:]]
+    written = _write_render_outputs(output, result, colors, fps, cam, camera_out, depth_out)
+    return RenderReport(renderer_name(), len(grown.skeleton), len(frusta.base),
+                        float(np.median(frame_times)), cam, settings, written, result, chosen,
+                        shadow_settings, len(colors) or 1,
+                        float(np.median(update_times)) if update_times else 0.0, anim.skin_calls)
+
+
+# ---------------------------------------------------------------------- plantgen export
+def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
+                 seed: int | None = None) -> dict:
+    """The library side of ``plantgen export``: input file -> skin -> tessellate -> file.
+
+    ``input_path`` is a skeleton ``.npz``, a grammar or a scene. Returns a summary dict:
+    ``segments``, ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``, ``relief``,
+    ``path``, ``timings`` (seconds per stage).
+    """
+    from .export import ExportError, export_file_type  # noqa
+
+    output_path = Path(output_path)
+    export_file_type(output_path)  # fail on a bad suffix before any work
+    t0 = time.perf_counter()
+    skeleton = load_skeleton(input_path, seed=seed)
+    if len(skeleton) == 0:
+        raise ExportError(f"{input_path}: the model has no segments")
+    skeleton.validate()
+    t1 = time.perf_counter()
+    frusta = skin_skeleton(skeleton)
+    t2 = time.perf_counter()
+    estimate = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+    if estimate > limits.max_export_triangles:
+        raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
+                          f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv")
+    mesh = tessellate(frusta, level, relief=relief)
+    t3 = time.perf_counter()
+    export_mesh(mesh, output_path)
+    t4 = time.perf_counter()
+    timings = {"load": t1 - t0, "skin": t2 - t1, "tessellate": t3 - t2, "write": t4 - t3}
+    return {"segments": len(skeleton), "rows": mesh.n_rows, "caps": mesh.n_caps,
+            "triangles": len(mesh.faces), "vertices": len(mesh.vertices), "level": level,
+            "relief": relief, "path": output_path, "timings": timings}

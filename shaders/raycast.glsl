@@ -115,7 +115,6 @@ void main() {
 #include "shadow.glsl"
 #endif
 #else
-#define MAX_MATERIALS 16
 uniform vec3 light_origin;     // centre of the light's window, render-origin relative
 uniform vec3 light_right;      // unit, the window's +x
 uniform vec3 light_up;         // unit, the window's +y

@@ -5,7 +5,6 @@
 #ifndef SHADING_GLSL
 #define SHADING_GLSL
 
-#define MAX_MATERIALS 16
 
 uniform vec3 light_dir;                         // unit, from the surface towards the light
 uniform vec3 light_color;

@@ -10,8 +10,9 @@ from PIL import Image
 
 from plantgen.geometry.camera import Camera
 from plantgen.pipeline import grow_file
-from plantgen.render.animate import AnimatedScene
-from plantgen.render.raycast import RECORD_BYTES, RaycastSettings, Raycaster
+from plantgen.animation import AnimatedScene
+from plantgen.render.raycast import RaycastSettings, Raycaster
+from plantgen.render.records import RECORD_BYTES, RecordStream
 
 from _cli import run_cli
 from test_effects import SCENE
@@ -36,14 +37,15 @@ def test_only_moving_instances_are_reskinned_and_uploaded(gl_ctx, scene):
     anim = AnimatedScene.from_scene(scene)
     assert anim.animated and len(anim.moving_segments) == 2 and len(anim.static_segments) == 1
     assert anim.skin_calls == 1                       # the static post, once
-    updates = [anim.upload(gl_ctx, t, CAMERA.eye)[2] for t in (0.0, 0.1, 0.2, 0.3)]
+    stream = RecordStream(gl_ctx)
+    updates = [anim.upload(stream, t, CAMERA.eye)[2] for t in (0.0, 0.1, 0.2, 0.3)]
     assert anim.skin_calls == 1 + 4                   # the moving chain, once per frame
     moving_rows = updates[-1].rows_reskinned
     assert moving_rows >= 2
     # the first frame uploads every record; later ones only the moving rows' records
     assert updates[0].upload_bytes == (1 + moving_rows) * RECORD_BYTES
     assert all(u.upload_bytes == moving_rows * RECORD_BYTES for u in updates[1:])
-    anim.release()
+    stream.release()
 
 
 def test_static_scene_is_skinned_once(gl_ctx, scene):
@@ -52,11 +54,12 @@ def test_static_scene_is_skinned_once(gl_ctx, scene):
     still = replace(scene, instances=tuple(replace(i, motion=None) for i in scene.instances))
     anim = AnimatedScene.from_scene(still)
     assert not anim.animated
-    updates = [anim.upload(gl_ctx, t, CAMERA.eye)[2] for t in np.linspace(0, 1, 5)]
+    stream = RecordStream(gl_ctx)
+    updates = [anim.upload(stream, t, CAMERA.eye)[2] for t in np.linspace(0, 1, 5)]
     assert anim.skin_calls == 1
     assert [u.rows_reskinned for u in updates] == [0] * 5
     assert [u.upload_bytes for u in updates][1:] == [0] * 4
-    anim.release()
+    stream.release()
 
 
 def test_frame_at_t_is_deterministic(gl_ctx, scene):
@@ -65,14 +68,15 @@ def test_frame_at_t_is_deterministic(gl_ctx, scene):
     assert np.array_equal(fa.base, fb.base) and np.array_equal(fa.plane_hi, fb.plane_hi)
     caster = Raycaster(gl_ctx)
     images = []
+    streams = {id(a): RecordStream(gl_ctx), id(b): RecordStream(gl_ctx)}
     for anim in (a, b, a):
-        frusta, buf, _ = anim.upload(gl_ctx, 0.37, CAMERA.eye)
+        frusta, buf, _ = anim.upload(streams[id(anim)], 0.37, CAMERA.eye)
         images.append(caster.render(frusta, CAMERA, RaycastSettings(), ("bark",),
                                     record_buffer=buf).color)
     assert np.array_equal(images[0], images[1]) and np.array_equal(images[0], images[2])
     assert not np.array_equal(a.frusta_at(0.0).base, fa.base)      # it does move
-    a.release()
-    b.release()
+    for stream in streams.values():
+        stream.release()
 
 
 def test_consecutive_frames_move_smoothly_and_joints_stay_shut(scene):
@@ -147,8 +151,9 @@ def test_shadowed_frames_change_only_where_the_moving_plant_or_its_shadow_is(gl_
     to_light = -np.asarray(scene.light["direction"], dtype=np.float64)
     camera = Camera((4.0, 3.0, 5.0), (0.5, 0.8, 0.0), (0.0, 1.0, 0.0), 40.0, 96, 72)
     frames, movers = [], []
+    stream = RecordStream(gl_ctx)
     for t in times:
-        frusta, buf, update = anim.upload(gl_ctx, t, camera.eye)
+        frusta, buf, update = anim.upload(stream, t, camera.eye)
         n_static = len(frusta) - update.rows_reskinned
         frames.append(caster.render(frusta, camera, RaycastSettings(), ("bark",), to_light, scene.ground,
                                     shadows=ShadowSettings(resolution=256), shadow_box=box,
@@ -175,4 +180,4 @@ def test_shadowed_frames_change_only_where_the_moving_plant_or_its_shadow_is(gl_
         grown[:, 1:] |= grown[:, :-1].copy()
         grown[:, :-1] |= grown[:, 1:].copy()
     assert not (changed & ~grown).any(), int((changed & ~grown).sum())
-    anim.release()
+    stream.release()

@@ -10,7 +10,7 @@ import pytest
 
 from plantgen.errors import PlantgenError
 from plantgen.render.passes import resolve_effects
-from plantgen.render.raycast import render_file
+from plantgen.pipeline import render_file
 from plantgen.render.shaders import build_program
 
 from _cli import run_cli
@@ -54,8 +54,8 @@ def test_each_combination_compiles_and_runs_only_what_it_asks_for(gl_ctx, scene_
     relief, shadows, animation = ("relief" in effects, "shadows" in effects, "animation" in effects)
     assert report.effects == effects
     # passes: a shadow pass only with shadows
-    assert stats["passes"] == (["shadow"] if shadows else []) + ["sky", "ground", "frusta"]
-    programs = set(stats["programs"])
+    assert stats.passes == (["shadow"] if shadows else []) + ["sky", "ground", "frusta"]
+    programs = set(stats.programs)
     expected = {("sky.glsl", ()), ("ground.glsl", ("SHADOWS",) if shadows else ()),
                 ("raycast.glsl", tuple(sorted((["RELIEF"] if relief else []) + (["SHADOWS"] if shadows else []))))}
     if shadows:

@@ -178,7 +178,7 @@ def test_the_export_command_reports_bad_input_in_one_line(tmp_path):
 
 
 def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
-    from plantgen.render.raycast import material_palette
+    from plantgen.geometry.materials import material_palette
 
     mesh = two_material_model(0)
     scene = trimesh.load(export_mesh(mesh, tmp_path / "plant.glb"))
@@ -190,10 +190,12 @@ def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
 
 
 def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path, monkeypatch):
-    import plantgen.export as export_module
+    from dataclasses import replace
+
+    import plantgen.pipeline as pipeline_module
     from _cli import run_cli
 
-    monkeypatch.setattr(export_module, "MAX_EXPORT_TRIANGLES", 100)
+    monkeypatch.setattr(pipeline_module, "limits", replace(pipeline_module.limits, max_export_triangles=100))
     skel_path = tmp_path / "y.npz"
     y_skeleton().save(skel_path)
     code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--subdiv", "1")

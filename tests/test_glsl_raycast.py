@@ -13,9 +13,12 @@ import pytest
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.frusta import Frusta
-from plantgen.render import raycast
-from plantgen.render.raycast import (PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES,
-                                     RaycastSettings, Raycaster, pack_records)
+from plantgen.geometry import framing_tmp as raycast
+from plantgen.geometry.materials import MAX_MATERIALS
+from plantgen.geometry.stage import Ground
+from plantgen.render import materials as render_materials
+from plantgen.render.raycast import RaycastSettings, Raycaster
+from plantgen.render.records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES, pack_records
 
 W, H = 160, 120
 FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir", "u_offset",
@@ -205,7 +208,7 @@ def test_frusta_cut_each_other_by_depth(gl_ctx, caster):
 def test_the_ground_cuts_a_frustum_that_reaches_below_it(gl_ctx, caster):
     frusta = frusta_chain([[0, -1, 0], [0, 1.5, 0]], 0.4)
     camera = Camera((2.5, 1.2, 3.0), (0, 0.2, 0), (0, 1, 0), 40.0, W, H)
-    ground = {"size": 8.0, "height": 0.0, "material": "sand"}
+    ground = Ground(size=8.0, height=0.0, material="sand")
     result = caster.render(frusta, camera, ground=ground)
     points, hit = hit_points(camera, result.distance)
     below = points[:, 1] < -1e-3
@@ -287,9 +290,9 @@ def height_table(kind):
 def relief_caster(monkeypatch):
     """A Raycaster whose height maps are the given table for every material."""
     def make(table):
-        monkeypatch.setattr(raycast, "height_maps_for",
+        monkeypatch.setattr(render_materials, "material_height_maps",
                             lambda names: (np.repeat(table[None], max(len(names), 1), axis=0),
-                                           np.ones((raycast.MAX_MATERIALS, 2), np.float32)))
+                                           np.ones((MAX_MATERIALS, 2), np.float32)))
         return Raycaster()
     return make
 
@@ -399,16 +402,16 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
     frusta = HARD_CASES["cylinder"]
     camera = look_at(frusta, (0.6, 0.35, 1.0))
     plain = caster.render(frusta, camera)
-    assert plain.stats["passes"] == ["sky", "frusta"]
-    assert plain.stats["program"][1] == {"RELIEF": False, "V_EXACT": False, "SCREEN_PROXY": False}
+    assert plain.stats.passes == ["sky", "frusta"]
+    assert plain.stats.program[1] == {"RELIEF": False, "V_EXACT": False, "SCREEN_PROXY": False}
     # programs_used: (file, names of the defines switched on) of every program a frame used
     assert ("raycast.glsl", ()) in caster.programs_used
     assert all("RELIEF" not in defines for _, defines in caster.programs_used)
     # a different size reuses the programs with a new framebuffer, without a GL error
-    ground = {"size": 6.0, "height": 0.0, "material": "sand"}
+    ground = Ground(size=6.0, height=0.0, material="sand")
     small = caster.render(frusta, look_at(frusta, (0.6, 0.35, 1.0), width=64, height=48),
                           RaycastSettings(relief=True), ground=ground)
-    assert small.distance.shape == (48, 64) and small.stats["passes"] == ["sky", "ground", "frusta"]
+    assert small.distance.shape == (48, 64) and small.stats.passes == ["sky", "ground", "frusta"]
     # a segment without a shell is not marched even in the relief program: same surface
     assert np.array_equal(np.isfinite(caster.render(frusta, camera, RaycastSettings(relief=True)).distance),
                           np.isfinite(plain.distance))

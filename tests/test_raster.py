@@ -7,8 +7,10 @@ import pytest
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import tessellate
-from plantgen.render.raster import RasterRenderer, gs_buffer_bytes, rc_buffer_bytes
-from plantgen.render.raycast import Raycaster, frusta_bounds
+from plantgen.render.raster import RasterRenderer, gs_buffer_bytes
+from plantgen.render.records import rc_buffer_bytes
+from plantgen.geometry.framing_tmp import frusta_bounds
+from plantgen.render.raycast import Raycaster
 
 from test_mesh import BENT, chain_frusta, concat_frusta
 
@@ -47,7 +49,7 @@ def test_gs_images_converge_to_the_rc_image_as_m_grows(gl_ctx):
     scores = []
     for m in range(4):
         gs = raster.render(tessellate(frusta, m), frusta, camera)
-        assert gs.stats["draw_calls"] == 1
+        assert gs.stats.draw_calls == 1
         scores.append(compare(rc, gs))
     colour, coverage, dist = (np.array(s) for s in zip(*scores))
     assert np.all(np.diff(colour) < 0), colour
@@ -145,8 +147,8 @@ def test_a_faceted_convex_column_shadows_only_its_terminator_band(gl_ctx, elevat
         plain = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light)
         shadowed = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light,
                                  shadows=ShadowSettings(resolution=256))
-        assert plain.stats["passes"] == ["sky", "frusta"]
-        assert shadowed.stats["passes"] == ["shadow", "sky", "frusta"]
+        assert plain.stats.passes == ["sky", "frusta"]
+        assert shadowed.stats.passes == ["shadow", "sky", "frusta"]
         hit = np.isfinite(plain.distance)
         p = eye[hit] + plain.distance[hit, None].astype(np.float64) * dirs[hit]
         radial = p * [1, 0, 1]
@@ -184,8 +186,8 @@ def test_gs_ground_shadow_matches_the_ray_casters(gl_ctx, elevation):
     plain = raster.render(mesh, frusta, camera, material_names=("bark",), light_dir=to_light,
                           ground=GROUND)
     raster.release()
-    assert gs.stats["passes"] == ["shadow", "sky", "ground", "frusta"]
-    assert plain.stats["passes"] == ["sky", "ground", "frusta"]
+    assert gs.stats.passes == ["shadow", "sky", "ground", "frusta"]
+    assert plain.stats.passes == ["sky", "ground", "frusta"]
     eye, dirs = camera.rays()
     points = eye + rc.distance[..., None].astype(np.float64) * dirs
     ground = (np.isfinite(rc.distance) & np.isfinite(gs.distance)
@@ -213,7 +215,7 @@ def test_released_renderers_free_their_targets_and_render_again_the_same(gl_ctx)
     for name, renderer in (("gs", raster), ("rc", caster)):
         first = draw[name]()
         renderer.release()
-        assert renderer._fbo is None and renderer._shadow.texture is None and not renderer._textures
+        assert renderer._fbo is None and renderer._shadow.texture is None and not renderer._heights._textures
         again = draw[name]()
         assert np.array_equal(first.color, again.color), name
         assert np.array_equal(first.distance, again.distance), name

@@ -11,10 +11,11 @@ from plantgen.geometry.frusta import skin_skeleton
 from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.camera import Camera
+from plantgen.geometry.stage import Ground
 from plantgen.render.passes import ShadowSettings
 from plantgen.render.raycast import RaycastSettings, Raycaster
 
-GROUND = {"size": 10.0, "height": 0.0, "material": "sand"}
+GROUND = Ground(size=10.0, height=0.0, material="sand")
 RADIUS = 0.3
 
 
@@ -60,7 +61,7 @@ def test_ground_is_shadowed_exactly_where_the_light_is_blocked(gl_ctx, caster, e
     plain = caster.render(frusta, camera, RaycastSettings(), ("bark",), to_light, GROUND)
     shadowed = caster.render(frusta, camera, RaycastSettings(), ("bark",), to_light, GROUND,
                              shadows=shadows)
-    window = shadowed.stats["light_window"]
+    window = shadowed.stats.light_window
     texel = window.texel_size(shadows.resolution)
     eye, dirs = camera.rays()
     points = eye + plain.distance[..., None].astype(np.float64) * dirs
@@ -113,7 +114,7 @@ def test_shadow_starts_at_the_foot(gl_ctx, caster):
     plain = caster.render(frusta, camera, RaycastSettings(), ("bark",), to_light, GROUND)
     result = caster.render(frusta, camera, RaycastSettings(), ("bark",), to_light, GROUND,
                            shadows=shadows)
-    texel = result.stats["light_window"].texel_size(shadows.resolution)
+    texel = result.stats.light_window.texel_size(shadows.resolution)
     eye, dirs = camera.rays()
     points = eye + plain.distance[..., None].astype(np.float64) * dirs
     ground = np.isfinite(plain.distance) & (np.abs(points[..., 1]) < 1e-3)

@@ -29,7 +29,7 @@ def export(input: Path, output: Path, level: int, relief: bool, seed, quiet) -> 
     Example:
       plantgen export pine.npz -o pine.glb --subdiv 2 --relief
     """
-    from ..export import export_model
+    from ..pipeline import export_model
 
     info = export_model(input, output, level=level, relief=relief, seed=seed)
     if quiet:

@@ -71,7 +71,8 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
       plantgen render grammars/dancing_cacti.yaml --frames 48 --fps 24 -o dance.gif
     """
     from ..render.passes import parse_effect_list
-    from ..render.raycast import RECORD_BYTES, render_file
+    from ..pipeline import render_file
+    from ..render.records import RECORD_BYTES
 
     if camera != "auto" and not Path(camera).is_file():
         raise PlantgenError(f"{camera}: no such camera file (use 'auto' or a camera JSON)")

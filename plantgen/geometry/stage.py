@@ -39,9 +39,9 @@ class Light:
     intensity: float = 1.0
 
     def towards(self) -> np.ndarray:
-        """(3,) float64 unit vector towards the light."""
-        d = -np.asarray(self.travel, dtype=np.float64)
-        return d / np.linalg.norm(d)
+        """(3,) float64 direction from a surface towards the light: ``-travel``, exactly
+        (not normalised again; the renderers normalise it once)."""
+        return -np.asarray(self.travel, dtype=np.float64)
 
 
 #: The light of a render without a scene (a grammar or a skeleton file).

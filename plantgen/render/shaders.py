@@ -13,23 +13,40 @@ macro, the caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHA
 then the file with every ``#include "other.glsl"`` replaced by that file's text (looked up
 in :func:`plantgen._resources.shaders_dir`, each file included at most once per stage).
 ``#line`` directives keep compiler messages pointing at the right file and line; the
-file numbers are listed in the error text.
+file numbers are listed in the error text. Every program also gets the defines of
+:func:`shared_defines`: the material slot count and the named tolerances of
+:mod:`plantgen.tolerances`, so GLSL and numpy read each constant from one home.
+
+Uniforms are set through :func:`set_uniforms`, which fails loudly on a name no stage of
+the program declares (a misspelt uniform), and passes over a declared uniform that the
+compiler optimised out of this variant.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
+
+import numpy as np
 
 from .._resources import shaders_dir
+from ..geometry.materials import MAX_MATERIALS
+from ..tolerances import tol
 
-__all__ = ["ShaderError", "shader_source", "build_program", "program_stages", "GLSL_VERSION"]
+__all__ = ["ShaderError", "shader_source", "build_program", "program_stages", "GLSL_VERSION",
+           "shared_defines", "set_uniforms", "mat4"]
 
 GLSL_VERSION = "#version 430 core"
 STAGES = ("VERTEX_SHADER", "GEOMETRY_SHADER", "FRAGMENT_SHADER")
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 _DEFINE_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_UNIFORM = re.compile(r"^\s*uniform\s+\w+\s+(\w+)", re.MULTILINE)
+
+
+def shared_defines() -> dict[str, object]:
+    """Defines every program gets: ``MAX_MATERIALS`` and the GLSL-side tolerances."""
+    return {"MAX_MATERIALS": MAX_MATERIALS, **tol.glsl_defines()}
 
 
 class ShaderError(RuntimeError):
@@ -74,7 +91,11 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
         raise ShaderError(f"unknown shader stage {stage!r}")
     directory = Path(directory) if directory is not None else shaders_dir()
     files: list[str] = []
-    out = [GLSL_VERSION, f"#define {stage}", *_define_lines(defines)]
+    shared = shared_defines()
+    clash = sorted(set(shared) & set(defines or {}))
+    if clash:
+        raise ShaderError(f"defines {clash} are set by plantgen for every program")
+    out = [GLSL_VERSION, f"#define {stage}", *_define_lines({**shared, **(defines or {})})]
 
     def expand(fname: str, chain: tuple[str, ...]) -> None:
         if fname in chain:
@@ -134,5 +155,33 @@ def build_program(ctx, name: str, defines: Mapping[str, object] | None = None,
     except Exception as exc:  # moderngl.Error
         files = sources["VERTEX_SHADER"].splitlines()[1]
         raise ShaderError(f"{name} {dict(defines or {})}: {exc}\n{files}") from None
+    declared = {m.group(1) for text in sources.values() for m in _UNIFORM.finditer(text)}
+    program.extra = {"name": name, "defines": dict(defines or {}), "uniforms": declared}
     _cache[key] = program
     return program
+
+
+def set_uniforms(program, **values) -> None:
+    """Set uniforms of a program made by :func:`build_program`.
+
+    A numpy array is written as float32 bytes (uniform arrays such as the palette); any
+    other value is assigned as is (numbers and tuples; see :func:`mat4` for matrices). A
+    name that no stage of the program declares raises :class:`ShaderError` (a misspelt
+    uniform is a bug); a declared uniform the compiler removed from this variant is
+    passed over.
+    """
+    info = program.extra
+    for name, value in values.items():
+        if name not in info["uniforms"]:
+            raise ShaderError(f"{info['name']} {info['defines']}: no uniform named {name!r}")
+        if name not in program:
+            continue
+        if isinstance(value, np.ndarray):
+            program[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
+        else:
+            program[name].value = value
+
+
+def mat4(matrix: np.ndarray) -> tuple:
+    """A (4, 4) float64 matrix as a GLSL ``mat4`` uniform value (column-major float32)."""
+    return tuple(np.asarray(matrix).T.astype(np.float32).ravel())

@@ -1,0 +1,240 @@
+"""The offscreen frame every renderer draws into, and what every frame shares.
+
+:class:`OffscreenRenderer` owns the GL context's offscreen framebuffer (colour RGBA8 +
+float32 distance + depth, resized on demand), the relief height textures, the sky, the
+ground square and the light's shadow map. A renderer (:class:`~plantgen.render.raycast.
+Raycaster`, :class:`~plantgen.render.raster.RasterRenderer`) prepares its programs and
+its model's draw, then :meth:`OffscreenRenderer._draw_frame` runs the passes in order
+(shadow map, sky, ground, model) and :meth:`OffscreenRenderer._read_back` returns the
+image and the distances.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.camera import Camera
+from ..geometry.materials import MAX_MATERIALS
+from ..geometry.stage import Ground
+from .context import gl_context, release_framebuffer
+from .materials import HeightTextures, palette_uniforms, shading_uniforms
+from .passes import LightWindow, ShadowPass, ShadowSettings, depth_range, light_window
+from .shaders import build_program, mat4, set_uniforms
+
+__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting"]
+
+
+@dataclass(frozen=True)
+class FrameView:
+    """The camera of one frame, relative to the render origin (the eye).
+
+    eye : (3,) float64 world position (the render origin); right, up, forward : (3,) unit
+    basis; near, far : depth range; projection : (4, 4) float64; view_projection : (4, 4)
+    float64, eye-relative world -> clip.
+    """
+
+    camera: Camera
+    eye: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    near: float
+    far: float
+    projection: np.ndarray
+    view_projection: np.ndarray
+
+    def ray_uniforms(self) -> dict:
+        """Uniforms that rebuild each pixel's ray (sky.glsl, raycast.glsl)."""
+        tan_y = np.tan(np.radians(self.camera.fov_y) / 2)
+        tan_x = tan_y * self.camera.aspect
+        return {"viewport": (float(self.camera.width), float(self.camera.height)),
+                "cam_forward": tuple(self.forward), "cam_right_scaled": tuple(self.right * tan_x),
+                "cam_up_scaled": tuple(self.up * tan_y)}
+
+
+def frame_view(camera: Camera, point_sets) -> FrameView:
+    """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
+    in ``point_sets`` (see :func:`plantgen.render.passes.depth_range`)."""
+    eye = np.asarray(camera.eye, dtype=np.float64)
+    right, up, fwd = camera.basis()
+    near, far = depth_range(point_sets, eye, fwd)
+    view = camera.view_matrix()
+    view[:3, 3] = 0.0  # the render origin is the eye
+    projection = camera.projection_matrix(near, far)
+    return FrameView(camera, eye, right, up, fwd, near, far, projection, projection @ view)
+
+
+@dataclass(frozen=True)
+class FrameLighting:
+    """The light and materials of one frame.
+
+    names : material slot names of the model, plus the ground's material when there is one
+    shading : uniforms of shaders/shading.glsl (light, ambient, sky) and the palette
+    window : the light's window (None without shadows)
+    receiver : uniforms of shaders/shadow.glsl for surfaces that sample the map ({} without)
+    """
+
+    names: tuple
+    shading: dict
+    window: LightWindow | None
+    receiver: dict
+
+    @property
+    def ground_material(self) -> int:
+        """The ground's palette slot (the last name)."""
+        return min(len(self.names) - 1, MAX_MATERIALS - 1)
+
+
+class OffscreenRenderer:
+    """What every plantgen renderer shares: the GL context, an offscreen framebuffer
+    (colour RGBA8 + float32 distance + depth) resized on demand, the relief height maps
+    uploaded once per material list, and the scene's extras: the ground square and the
+    light's shadow map (plantgen.render.passes), drawn the same way for RC and GS."""
+
+    def __init__(self, ctx=None):
+        self.ctx = ctx if ctx is not None else gl_context()
+        self._fbo = None
+        self._fbo_size = None
+        self._heights = HeightTextures(self.ctx)
+        self._shadow = ShadowPass(self.ctx)
+        self._sky_vao = None
+        self.last_light_window = None
+
+    def release(self) -> None:
+        """Free the framebuffer, the height textures and the shadow map (they are made
+        again on the next render)."""
+        if self._fbo is not None:
+            release_framebuffer(self._fbo)
+        self._fbo = self._fbo_size = None
+        self._heights.release()
+        self._shadow.release()
+
+    def shadow_depths(self) -> np.ndarray:
+        """(res, res) float32 light depth map of the last shadowed render, (z - near) /
+        (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
+        return self._shadow.depths()
+
+    # ------------------------------------------------------------------ frame set-up
+    def _lighting(self, material_names, ground: Ground | None, light_dir, shadows, caster_box,
+                  eye) -> FrameLighting:
+        """The frame's palette and light: ``light_dir`` (3,) towards the light; with
+        ``shadows``, the light's window around ``caster_box`` (2, 3) world box."""
+        names = tuple(material_names) + ((ground.material,) if ground is not None else ())
+        shading = {**shading_uniforms(light_dir), **palette_uniforms(names)}
+        if shadows is None:
+            return FrameLighting(names, shading, None, {})
+        window = light_window(caster_box, -np.asarray(light_dir, dtype=np.float64), eye)
+        self.last_light_window = window
+        receiver = dict(window.uniforms(), shadow_bias=shadows.bias * window.texel_size(shadows.resolution),
+                        shadow_max_slope=shadows.max_slope, shadow_map=1)
+        return FrameLighting(names, shading, window, receiver)
+
+    def _sky(self, view: FrameView, lighting: FrameLighting):
+        """The sky's full-screen triangle (vertex array cached per program)."""
+        sky = build_program(self.ctx, "sky.glsl")
+        set_uniforms(sky, **view.ray_uniforms(), **lighting.shading)
+        if self._sky_vao is None or self._sky_vao.program is not sky:
+            self._sky_vao = self.ctx.vertex_array(sky, [])
+        return self._sky_vao
+
+    def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting):
+        """Draws of the ground square: its vertex array for the frame and, with a light
+        window, a callable drawing it into the light's map (for :meth:`_draw_frame`).
+
+        Returns (frame vao, light draw or None, [objects to release after the frame]).
+        """
+        ctx = self.ctx
+        shadowed = lighting.window is not None
+        program = build_program(ctx, "ground.glsl", {"SHADOWS": shadowed})
+        set_uniforms(program, **lighting.shading, **lighting.receiver,
+                     view_projection=mat4(view.view_projection),
+                     ground_material=lighting.ground_material, origin_offset=tuple(view.eye))
+        buf = ctx.buffer((ground.quad() - view.eye).astype(np.float32).tobytes())
+        vao = ctx.vertex_array(program, [(buf, "3f", "position")])
+        light_vao = light_draw = None
+        if shadowed:
+            caster = build_program(ctx, "ground.glsl", {"SHADOW_PASS": True})
+            set_uniforms(caster, view_projection=mat4(lighting.window.matrix()))
+            light_vao = ctx.vertex_array(caster, [(buf, "3f", "position")])
+
+            def light_draw():
+                ctx.disable(ctx.CULL_FACE)
+                light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+        return vao, light_draw, [vao, light_vao, buf]
+
+    def _framebuffer(self, width: int, height: int):
+        if self._fbo_size != (width, height):
+            if self._fbo is not None:
+                release_framebuffer(self._fbo)
+            ctx = self.ctx
+            self._fbo = ctx.framebuffer(
+                color_attachments=[ctx.renderbuffer((width, height), 4),
+                                   ctx.renderbuffer((width, height), 1, dtype="f4")],
+                depth_attachment=ctx.depth_renderbuffer((width, height)))
+            self._fbo_size = (width, height)
+        return self._fbo
+
+    # ------------------------------------------------------------------ the frame
+    def _draw_shadow_map(self, resolution: int, draws) -> float:
+        """Clear the light's depth map, run each callable of ``draws`` into it with the depth
+        test on, and bind the map to texture unit 1 for the receivers. Returns the pass's
+        milliseconds (to glFinish)."""
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        fbo = self._shadow.target(int(resolution))
+        fbo.use()
+        fbo.viewport = (0, 0, resolution, resolution)
+        fbo.clear(depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        for draw in draws:
+            draw()
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.finish()
+        self._shadow.texture.use(1)
+        return (time.perf_counter() - t0) * 1e3
+
+    def _draw_frame(self, view: FrameView, sky_vao, ground_vao, draw_model: Callable[[], None],
+                    shadows: ShadowSettings | None, shadow_draws) -> tuple[float, float]:
+        """Run one frame's passes in order: the shadow map (with ``shadows``: each callable of
+        ``shadow_draws``), the sky, the ground (``ground_vao`` or None) and the model
+        (``draw_model()``, called with the depth test on).
+
+        Returns (frame_ms, shadow_ms): wall milliseconds from the first pass to glFinish,
+        and those of the shadow pass alone.
+        """
+        ctx = self.ctx
+        width, height = view.camera.width, view.camera.height
+        fbo = self._framebuffer(width, height)
+        ctx.finish()
+        t_draw = time.perf_counter()
+        shadow_ms = self._draw_shadow_map(shadows.resolution, shadow_draws) if shadows else 0.0
+        fbo.use()
+        fbo.viewport = (0, 0, width, height)
+        fbo.clear(depth=1.0)
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        if ground_vao is not None:
+            ground_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+        draw_model()
+        ctx.finish()
+        frame_ms = (time.perf_counter() - t_draw) * 1e3
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        return frame_ms, shadow_ms
+
+    def _read_back(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's (height, width, 3) uint8 colour and (height, width) float32 distance,
+        row 0 the top row."""
+        fbo = self._fbo
+        color = np.frombuffer(fbo.read(components=3, attachment=0, alignment=1), np.uint8)
+        color = color.reshape(height, width, 3)[::-1].copy()
+        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
+                             np.float32).reshape(height, width)[::-1].copy()
+        return color, dist
+

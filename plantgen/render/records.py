@@ -1,0 +1,133 @@
+"""The ray caster's per-segment records: packing, upload, and streaming what moves.
+
+One float32 record of 24 values (96 bytes) per frustum row; the 8-corner, 12-triangle
+bounding pyramid template (§2.6) is shared by every row and instanced in the vertex
+shader (``shaders/raycast.glsl``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
+from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
+from ..geometry.mesh import continuing_parent_rows
+
+__all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
+           "pack_records", "rc_buffer_bytes", "RecordStream", "RECORD_LAYOUT", "RECORD_ATTRIBUTES"]
+
+#: float32 values in one segment's record: base, h, axis, r1, ref_dir, r2, plane_lo,
+#: plane_hi, (u_offset, twist, shell, material).
+RECORD_FLOATS = 24
+RECORD_BYTES = 4 * RECORD_FLOATS
+#: The record's vertex-array layout (per instance) and attribute names in raycast.glsl.
+RECORD_LAYOUT = "4f 4f 4f 4f 4f 4f/i"
+RECORD_ATTRIBUTES = ("rec0", "rec1", "rec2", "rec3", "rec4", "rec5")
+
+#: The bounding pyramid's template as uploaded: corner i is (sx, sz, end); 12 triangles
+#: wound counter-clockwise seen from outside (plantgen.geometry.frusta's, in GL types).
+PYRAMID_CORNERS = _CORNERS_F64.astype(np.float32)
+PYRAMID_TRIANGLES = _TRIANGLES_I64.astype(np.int32)
+
+
+def pack_records(frusta, origin) -> np.ndarray:
+    """One float32 record per segment for upload.
+
+    Parameters
+    ----------
+    frusta : Frusta (see plantgen.geometry.frusta), n rows, float64, world units
+    origin : (3,) float64, the render origin (the camera eye); positions and plane offsets
+        are made relative to it in float64 before the cast to float32
+
+    Returns
+    -------
+    (n, 24) float32: base - origin, h | axis, r1 | ref_dir, r2 | plane_lo | plane_hi |
+    u_offset, twist, shell, tag. Plane offsets are relative to the base point
+    (d - n·base, formed in float64), as plantgen.geometry.reference uploads them. 96 bytes
+    per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open); an end is
+    open unless a continuing row shares its plane (open ends are capped surfaces, shared
+    joint planes are not).
+    """
+    origin = np.asarray(origin, dtype=np.float64)
+    n = len(frusta.base)
+    rec = np.empty((n, RECORD_FLOATS), dtype=np.float64)
+    rec[:, 0:3] = frusta.base - origin
+    rec[:, 3] = frusta.length
+    rec[:, 4:7] = frusta.axis
+    rec[:, 7] = frusta.r1
+    rec[:, 8:11] = frusta.ref_dir
+    rec[:, 11] = frusta.r2
+    for col, plane in ((12, frusta.plane_lo), (16, frusta.plane_hi)):
+        rec[:, col:col + 3] = plane[:, :3]
+        rec[:, col + 3] = plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base)
+    rec[:, 20] = frusta.u_offset
+    rec[:, 21] = frusta.twist
+    rec[:, 22] = frusta.shell
+    parent_row = continuing_parent_rows(frusta) if n else np.zeros(0, np.int64)
+    open_lo = parent_row < 0
+    open_hi = np.ones(n, dtype=bool)
+    open_hi[parent_row[parent_row >= 0]] = False
+    material = np.asarray(frusta.material, dtype=np.int64)
+    if n and (material.min() < 0 or material.max() > 255):
+        raise PlantgenError("material indices must lie in 0..255 for the ray caster")
+    rec[:, 23] = material + 256 * open_lo + 512 * open_hi
+    return rec.astype(np.float32)
+
+
+def rc_buffer_bytes(n_rows: int) -> int:
+    """GPU buffer bytes of the ray caster's draw: one 96-byte record per row (the 8-corner,
+    12-triangle pyramid template is shared by all rows and not counted)."""
+    return RECORD_BYTES * int(n_rows)
+
+
+class RecordStream:
+    """One GPU buffer of records for an animation: the head holds the static rows, packed
+    and uploaded once (again only if the origin changes or the buffer must grow), the tail
+    the moving rows, written every frame. The camera stays fixed over an animation, so the
+    static records (relative to the eye) stay valid."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.buffer = None
+        self._origin = None
+        self._static_records = None
+
+    def write(self, static, moving, origin) -> tuple[float, float, int]:
+        """Make :attr:`buffer` hold the records of ``static`` then ``moving`` (Frusta, or
+        None when nothing moves) relative to ``origin`` (3,).
+
+        Returns (pack_ms, upload_ms, bytes written to the GPU by this call).
+        """
+        origin = np.asarray(origin, dtype=np.float64)
+        n_static = len(static)
+        n_total = n_static + (len(moving) if moving is not None else 0)
+        first = self.buffer is None or self._origin is None or not np.array_equal(origin, self._origin)
+        t0 = time.perf_counter()
+        moving_records = pack_records(moving, origin) if moving is not None and len(moving) else None
+        if first:
+            self._static_records = pack_records(static, origin)
+        t1 = time.perf_counter()
+        need = max(n_total, 1) * RECORD_BYTES
+        if self.buffer is None or self.buffer.size < need:
+            if self.buffer is not None:
+                self.buffer.release()
+            self.buffer = self.ctx.buffer(reserve=need, dynamic=True)
+            first = True
+        written = 0
+        if first and n_static:
+            self.buffer.write(self._static_records.tobytes(), offset=0)
+            written += self._static_records.nbytes
+        if moving_records is not None:
+            self.buffer.write(moving_records.tobytes(), offset=n_static * RECORD_BYTES)
+            written += moving_records.nbytes
+        self._origin = origin
+        t2 = time.perf_counter()
+        return (t1 - t0) * 1e3, (t2 - t1) * 1e3, written
+
+    def release(self) -> None:
+        if self.buffer is not None:
+            self.buffer.release()
+            self.buffer = None

@@ -1,0 +1,72 @@
+"""What a render returns: the image, the distance along each pixel's ray, and typed stats."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.camera import Camera
+from .passes import LightWindow
+
+__all__ = ["RenderResult", "RenderStats", "RaycastStats", "RasterStats"]
+
+
+@dataclass(frozen=True)
+class RenderStats:
+    """What one frame did, whichever renderer drew it.
+
+    passes : names of the passes run, in order (see :func:`plantgen.render.passes.frame_passes`)
+    near, far : depth range of the frame (world units along the view direction)
+    shadow_ms : milliseconds of the shadow pass (0 without shadows)
+    light_window : the light's window of the shadow map, None without shadows
+    upload_ms : CPU milliseconds spent uploading geometry inside the render call (a mesh
+        for GS; 0 for the ray caster, whose records are timed by ``pack_ms``)
+    """
+
+    passes: list
+    near: float
+    far: float
+    shadow_ms: float
+    light_window: LightWindow | None
+    upload_ms: float = 0.0
+
+
+@dataclass(frozen=True)
+class RaycastStats(RenderStats):
+    """segments : frusta rows drawn; record_bytes : bytes of one record; upload_bytes :
+    record bytes uploaded by this call (0 when the caller supplied the buffer); pack_ms :
+    CPU milliseconds packing records; program : (file, defines) of the frusta program;
+    programs : (file, names of the defines switched on) of every program the frame used."""
+
+    segments: int = 0
+    record_bytes: int = 0
+    upload_bytes: int = 0
+    pack_ms: float = 0.0
+    program: tuple = ()
+    programs: list | None = None
+
+
+@dataclass(frozen=True)
+class RasterStats(RenderStats):
+    """triangles, vertices : the mesh's counts; level : its subdivision level m;
+    buffer_bytes : GPU bytes of the draw; draw_calls : draw calls of the frame."""
+
+    triangles: int = 0
+    vertices: int = 0
+    level: int = 0
+    buffer_bytes: int = 0
+    draw_calls: int = 0
+
+
+@dataclass
+class RenderResult:
+    """color: (height, width, 3) uint8, row 0 the top row; distance: (height, width) float32,
+    distance from the eye along each pixel's ray, inf for a miss; frame_ms: GPU frame time
+    (draw to finish, excluding upload and read-back); camera: the view rendered."""
+
+    color: np.ndarray
+    distance: np.ndarray
+    frame_ms: float
+    camera: Camera
+    stats: RenderStats
