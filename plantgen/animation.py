@@ -19,8 +19,8 @@ from typing import Protocol
 
 import numpy as np
 
-from .geometry.frusta import Frusta, skin_skeleton
 from .geometry.framing_tmp import frusta_bounds
+from .geometry.frusta import Frusta, skin_skeleton
 from .geometry.motion import pose, sway_rig
 from .geometry.skeleton import Skeleton
 from .geometry.tmp_subsets import concatenate_frusta, skeleton_rows

@@ -116,3 +116,31 @@ def test_a_draw_through_the_loader_reads_back(gl_ctx, tmp_path):
     finally:
         context_module.release_framebuffer(fbo)
     assert np.all(pixels[..., 0] == 255) and np.all(pixels[..., 1] == 0)
+
+
+def test_a_misspelt_uniform_fails_loudly_and_an_inactive_one_is_passed_over(gl_ctx):
+    """set_uniforms checks names against what the program's stages declare: a typo is a
+    bug (ShaderError naming it); a declared uniform this variant does not use is fine."""
+    from plantgen.render.shaders import set_uniforms
+
+    sky = build_program(gl_ctx, "sky.glsl")
+    set_uniforms(sky, viewport=(64.0, 48.0), material_gloss=np.zeros((16, 2), np.float32))
+    assert "material_gloss" not in sky          # declared by shading.glsl, unused by the sky
+    assert sky["viewport"].value == (64.0, 48.0)
+    with pytest.raises(ShaderError, match="viewprt"):
+        set_uniforms(sky, viewprt=(64.0, 48.0))
+
+
+def test_every_program_gets_the_shared_defines():
+    """MAX_MATERIALS and the tolerances reach GLSL from their one Python home."""
+    from plantgen.geometry.materials import MAX_MATERIALS
+    from plantgen.render.shaders import shared_defines
+
+    src = shader_source("raycast.glsl", "FRAGMENT_SHADER")
+    assert f"#define MAX_MATERIALS {MAX_MATERIALS}" in src.splitlines()
+    for name in shared_defines():
+        assert f"#define {name} " in src
+    assert not any(line.strip().startswith("#define MAX_MATERIALS")
+                   for path in shaders_dir().glob("*.glsl") for line in path.read_text().splitlines())
+    with pytest.raises(ShaderError, match="MAX_MATERIALS"):
+        shader_source("sky.glsl", "VERTEX_SHADER", {"MAX_MATERIALS": 4})

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.materials import MAX_MATERIALS
-from ..geometry.stage import Ground
+from ..geometry.stage import MODEL_LIGHT, Ground
 from .context import gl_context, release_framebuffer
 from .materials import HeightTextures, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, ShadowSettings, depth_range, light_window
@@ -121,8 +121,11 @@ class OffscreenRenderer:
     # ------------------------------------------------------------------ frame set-up
     def _lighting(self, material_names, ground: Ground | None, light_dir, shadows, caster_box,
                   eye) -> FrameLighting:
-        """The frame's palette and light: ``light_dir`` (3,) towards the light; with
-        ``shadows``, the light's window around ``caster_box`` (2, 3) world box."""
+        """The frame's palette and light: ``light_dir`` (3,) towards the light (None: the
+        model light); with ``shadows``, the light's window around ``caster_box`` (2, 3)
+        world box."""
+        if light_dir is None:
+            light_dir = MODEL_LIGHT.towards()
         names = tuple(material_names) + ((ground.material,) if ground is not None else ())
         shading = {**shading_uniforms(light_dir), **palette_uniforms(names)}
         if shadows is None:

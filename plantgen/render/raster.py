@@ -17,7 +17,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
-from ..geometry.stage import MODEL_LIGHT, Ground
+from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
 from .passes import ShadowSettings, box_corners, frame_passes
@@ -91,7 +91,7 @@ class RasterRenderer(OffscreenRenderer):
         return vao, origin
 
     def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
-               light_dir=tuple(MODEL_LIGHT.towards()), ground: Ground | None = None,
+               light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
@@ -102,7 +102,7 @@ class RasterRenderer(OffscreenRenderer):
         frusta : the rows it was made from (materials, chains)
         camera : the view, as for the ray caster
         material_names : default ``mesh.material_names``
-        light_dir : (3,) towards the light, as for the ray caster
+        light_dir : (3,) towards the light, as for the ray caster (default: the model light)
         ground : optional ground square, as for the ray caster
         shadows : None (no shadow pass) or the shadow map's knobs, as for the ray caster:
             the mesh and the ground first write their depth into the light's map

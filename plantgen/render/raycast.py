@@ -23,12 +23,11 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.camera import Camera
 from ..geometry.framing_tmp import frusta_bounds
-from ..geometry.stage import MODEL_LIGHT, Ground
+from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
 from .passes import ShadowSettings, box_corners, frame_passes, program_variants
-from .records import (PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES,
-                      RECORD_LAYOUT, pack_records)
+from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
 from .result import RaycastStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
@@ -92,7 +91,7 @@ class Raycaster(OffscreenRenderer):
         self.programs_used: set[tuple] = set()
 
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
-               material_names=("bark",), light_dir=tuple(MODEL_LIGHT.towards()),
+               material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
                shadow_box=None, record_buffer=None) -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
@@ -103,7 +102,8 @@ class Raycaster(OffscreenRenderer):
         camera : the view; rays go through pixel centres
         settings : relief on/off and its step knobs
         material_names : names of the material indices (choose colours and height maps)
-        light_dir : (3,) direction towards the light (normalised here)
+        light_dir : (3,) direction towards the light (normalised here); default: the
+            model light of :mod:`plantgen.geometry.stage`
         ground : optional ground square, rasterised into the same depth buffer
         shadows : None (no shadow pass, no shadow map sampled) or the shadow map's knobs:
             the frusta and the ground first write their depth into the light's map, then
