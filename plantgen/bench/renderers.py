@@ -18,7 +18,8 @@ from ..render.raycast import Raycaster, RenderResult
 from .configs import Config
 from .models import BenchModel
 
-__all__ = ["Renderers", "time_configs", "median_ms", "animation_time", "shadow_box"]
+__all__ = ["Renderers", "time_configs", "median_ms", "animation_time", "shadow_box",
+           "time_after_warm_up"]
 
 #: Frames per second of the animation clock: timed frame i shows the scene at (i + 1) / 30 s.
 ANIMATION_FPS = 30.0
@@ -178,3 +179,10 @@ def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditio
             _, ms = renderers.render_config(c, camera, conditions=conditions, t=t)
             samples[c.key].append(ms)
     return samples
+
+
+def time_after_warm_up(render, frames: int) -> tuple[RenderResult, list[RenderResult]]:
+    """Call ``render()`` once to warm up (shader compilation, first upload), then ``frames``
+    times in a row; returns (the warm-up result, the timed results)."""
+    first = render()
+    return first, [render() for _ in range(frames)]
