@@ -71,7 +71,6 @@ class Renderers:
         self.raycaster = Raycaster()
         self.rasters: dict = {}
         self.meshes: dict = {}
-        self.tessellate_ms: dict = {}
         self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
 
     def mesh(self, level: int, relief: bool, frusta=None) -> TessellatedMesh | None:
@@ -83,12 +82,9 @@ class Renderers:
             return self.meshes[key]
         if triangle_count(len(frusta), level, 0) > self.max_triangles:
             return None
-        t0 = time.perf_counter()
         mesh = tessellate(frusta, level, relief=relief, caps="tips")
-        ms = (time.perf_counter() - t0) * 1e3
         if static:
             self.meshes[key] = mesh
-            self.tessellate_ms[key] = ms
         return mesh
 
     def raster(self, key: str) -> RasterRenderer:
