@@ -5,7 +5,8 @@ shipped grammar or scene (default: every ``*.yaml`` in the grammars directory) i
 the default seed and writes ``OUTDIR/NAME.png``: three orthographic panels side by side,
 front (x-y), side (z-y) and top (x-z), all at the same scale in metres. Each segment is
 drawn as its projected outline (a trapezoid with the two end radii; a disc in the top view
-for upright segments; a one-pixel line when thinner than that), coloured by material. A scale bar under the panels says how long one metre is.
+for upright segments; a one-pixel line when thinner than that), coloured by material. A
+scale bar under the panels says how long one metre is.
 
 Pillow only (no matplotlib); one ``ImageDraw.polygon`` call per segment is fine for a
 gallery script, which is not a hot path.
@@ -20,9 +21,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from .._resources import grammars_dir
+from .._resources import shipped_grammar
 from ..geometry.skeleton import Skeleton
 from ..pipeline import grow_file
+from .arguments import shipped_model_paths
 
 __all__ = ["MATERIAL_COLOURS", "draw_skeleton", "main"]
 
@@ -147,8 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--panel", type=int, default=420, help="panel size in pixels")
     args = parser.parse_args(argv)
     args.outdir.mkdir(parents=True, exist_ok=True)
-    paths = ([grammars_dir() / f"{n}.yaml" for n in args.names] if args.names
-             else sorted(grammars_dir().glob("*.yaml")))
+    paths = [shipped_grammar(n) for n in args.names] if args.names else shipped_model_paths()
     for path in paths:
         result = grow_file(path)
         ground = result.scene.ground if result.scene is not None else None

@@ -27,52 +27,50 @@ import argparse
 import statistics
 import sys
 
+import numpy as np
+
+from ..bench import scene_stage
+from ..bench.renderers import time_after_warm_up
+from ..pipeline import grow_file
+from ..render.animate import AnimatedScene
+from ..render.context import renderer_name
+from ..render.passes import ShadowSettings
+from ..render.raycast import RaycastSettings, Raycaster
+from .arguments import image_size
+
 
 def _scene_setup(name, width, height):
-    import numpy as np
-
-    from ..pipeline import grow_file
-    from ..render.animate import AnimatedScene
-    from ..render.raycast import auto_camera
-    from ..geometry.camera import Camera
-
-    grown = grow_file(name)
-    scene = grown.scene
+    """(animation, frusta at t = 0, camera, light towards, ground) of a shipped scene."""
+    scene = grow_file(name).scene
     anim = AnimatedScene.from_scene(scene)
     frusta = anim.frusta_at(0.0)
-    if isinstance(scene.camera, dict):
-        camera = Camera.from_dict({**scene.camera, "width": width, "height": height})
-    else:
-        camera = auto_camera(frusta, width, height)
-    light = tuple(-np.asarray(scene.light["direction"], dtype=np.float64))
-    return scene, anim, frusta, camera, light
+    camera, light, ground = scene_stage(scene, frusta, width, height)
+    return anim, frusta, camera, light, ground
 
 
 def _median_frame(caster, frusta, camera, settings, light, ground, shadows, frames):
     names = frusta.material_names
-    first = caster.render(frusta, camera, settings, names, light, ground, shadows=shadows)  # warm-up
-    runs = [caster.render(frusta, camera, settings, names, light, ground, shadows=shadows)
-            for _ in range(frames)]
+    first, runs = time_after_warm_up(
+        lambda: caster.render(frusta, camera, settings, names, light, ground, shadows=shadows), frames)
     return (statistics.median(r.frame_ms for r in runs),
             statistics.median(r.stats["shadow_ms"] for r in runs), first.stats)
 
 
 def effect_costs(scenes, width, height, frames):
-    from ..render.passes import ShadowSettings
-    from ..render.raycast import RaycastSettings, Raycaster
-
     caster = Raycaster()
     configs = [("none", False, None), ("relief", True, None),
                ("shadows", False, ShadowSettings()), ("relief+shadows", True, ShadowSettings()),
                ("relief+shadows(inner caster)", True, ShadowSettings(caster="inner"))]
-    print(f"\n1. effect costs at {width}x{height}, shadow map 2048², median of {frames} frames")
-    print(f"{'scene':<15}{'effects':<30}{'frame ms':>10}{'shadow ms':>11}{'+ms vs none':>13}  passes / programs")
+    print(f"\n1. effect costs at {width}x{height}, shadow map {ShadowSettings().resolution}², "
+          f"median of {frames} frames")
+    print(f"{'scene':<15}{'effects':<30}{'frame ms':>10}{'shadow ms':>11}{'+ms vs none':>13}  "
+          "passes / programs")
     for name in scenes:
-        scene, anim, frusta, camera, light = _scene_setup(name, width, height)
+        anim, frusta, camera, light, ground = _scene_setup(name, width, height)
         base = None
         for label, relief, shadows in configs:
             ms, shadow_ms, stats = _median_frame(caster, frusta, camera, RaycastSettings(relief=relief),
-                                                 light, scene.ground, shadows, frames)
+                                                 light, ground, shadows, frames)
             base = ms if base is None else base
             programs = ", ".join(f"{p}[{'+'.join(d) or '-'}]" for p, d in stats["programs"])
             print(f"{name:<15}{label:<30}{ms:>10.1f}{shadow_ms:>11.1f}{ms - base:>+13.1f}  "
@@ -81,30 +79,23 @@ def effect_costs(scenes, width, height, frames):
 
 
 def resolution_costs(name, width, height, frames):
-    from ..render.passes import ShadowSettings
-    from ..render.raycast import RaycastSettings, Raycaster
-
     caster = Raycaster()
-    scene, anim, frusta, camera, light = _scene_setup(name, width, height)
+    anim, frusta, camera, light, ground = _scene_setup(name, width, height)
     print(f"\n2. shadow map resolution ({name}, relief on)")
     for res in (512, 1024, 2048, 4096):
         ms, shadow_ms, _ = _median_frame(caster, frusta, camera, RaycastSettings(relief=True), light,
-                                         scene.ground, ShadowSettings(resolution=res), frames)
+                                         ground, ShadowSettings(resolution=res), frames)
         print(f"  {res:>5}²: frame {ms:8.1f} ms, of which shadow pass {shadow_ms:8.1f} ms")
 
 
 def caster_difference(name, width, height):
     """Relief vs inner-cone casters: their light depth maps and the images they give."""
-    import numpy as np
-
-    from ..render.passes import ShadowSettings
-    from ..render.raycast import RaycastSettings, Raycaster
-
     caster = Raycaster()
-    scene, anim, frusta, camera, light = _scene_setup(name, width, height)
+    anim, frusta, camera, light, ground = _scene_setup(name, width, height)
     maps, images, drawn = {}, {}, {}
+    resolution = ShadowSettings().resolution
     for kind in ("relief", "inner"):
-        shadows = ShadowSettings(resolution=2048, caster=kind)
+        shadows = ShadowSettings(resolution=resolution, caster=kind)
         # the map without the ground (only the frusta) ...
         caster.render(frusta, camera, RaycastSettings(relief=True), frusta.material_names, light,
                       None, shadows=shadows)
@@ -114,13 +105,13 @@ def caster_difference(name, width, height):
         maps[kind] = depth.astype(np.float64) * (window.depth[1] - window.depth[0])
         # ... and the image with it
         images[kind] = caster.render(frusta, camera, RaycastSettings(relief=True), frusta.material_names,
-                                     light, scene.ground, shadows=shadows).color.astype(int)
+                                     light, ground, shadows=shadows).color.astype(int)
     both = drawn["relief"] & drawn["inner"]
     only = drawn["relief"] ^ drawn["inner"]
     diff = np.abs(maps["relief"] - maps["inner"])[both]
-    texel = window.texel_size(2048)
+    texel = window.texel_size(resolution)
     pixel_diff = np.abs(images["relief"] - images["inner"]).max(axis=-1)
-    print(f"\n3. relief vs inner-cone shadow caster ({name}, 2048², texel {texel * 100:.2f} cm)")
+    print(f"\n3. relief vs inner-cone shadow caster ({name}, {resolution}², texel {texel * 100:.2f} cm)")
     print(f"  light map: {both.sum():,} texels covered by both, {only.sum():,} by one only (the relief "
           f"silhouette); where both: depth differs by median {np.median(diff) * 100:.2f} cm, "
           f"99th percentile {np.percentile(diff, 99) * 100:.2f} cm")
@@ -130,13 +121,8 @@ def caster_difference(name, width, height):
 
 
 def animation_update(width, height, frames):
-    import numpy as np
-
-    from ..render.passes import ShadowSettings
-    from ..render.raycast import RaycastSettings, Raycaster
-
     caster = Raycaster()
-    scene, anim, frusta, camera, light = _scene_setup("dancing_cacti", width, height)
+    anim, frusta, camera, light, ground = _scene_setup("dancing_cacti", width, height)
     settings = RaycastSettings(relief=True)
     shadows = ShadowSettings()
     box = anim.bounds(np.linspace(0, 2, 5))
@@ -144,13 +130,16 @@ def animation_update(width, height, frames):
     updates, renders = [], []
     for i, t in enumerate(times):
         fr, buf, update = anim.upload(caster.ctx, t, camera.eye)
-        result = caster.render(fr, camera, settings, fr.material_names, light, scene.ground,
+        result = caster.render(fr, camera, settings, fr.material_names, light, ground,
                                shadows=shadows, shadow_box=box, record_buffer=buf)
         if i:   # the first frame uploads the static records and compiles shaders
             updates.append(update)
             renders.append(result.frame_ms)
-    med = lambda key: statistics.median(getattr(u, key) for u in updates)
-    total = statistics.median(u.total_ms for u in updates)
+
+    def med(key):
+        return statistics.median(getattr(u, key) for u in updates)
+
+    total = med("total_ms")
     print(f"\n4. animation: dancing cacti, {len(anim.moving_segments):,} moving segments -> "
           f"{updates[-1].rows_reskinned:,} rows, {width}x{height}, relief + shadows, "
           f"median of {frames} frames")
@@ -164,15 +153,14 @@ def animation_update(width, height, frames):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.effects", description=__doc__.split("\n")[0])
-    parser.add_argument("--size", default="1024x768")
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.effects",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("--size", type=image_size, default="1024x768")
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--anim-frames", type=int, default=12)
     parser.add_argument("--scenes", nargs="*", default=["well", "desert"])
     args = parser.parse_args(argv)
-    width, height = (int(v) for v in args.size.lower().split("x"))
-
-    from ..render.context import renderer_name
+    width, height = args.size
 
     print(f"GL renderer: {renderer_name()}")
     effect_costs(args.scenes, width, height, args.frames)

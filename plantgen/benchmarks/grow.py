@@ -21,7 +21,7 @@ import statistics
 import sys
 import time
 
-from .._resources import grammars_dir
+from .._resources import shipped_grammar
 from ..pipeline import grow_file
 
 __all__ = ["measure", "main"]
@@ -33,7 +33,7 @@ def measure(name: str, repeats: int = 7) -> dict:
     Returns a dict with ``segments``, ``modules``, ``derive_modules_per_s``,
     ``interpret_modules_per_s``, ``derive_s``, ``interpret_s`` and ``total_s`` (seconds).
     """
-    path = grammars_dir() / f"{name}.yaml"
+    path = shipped_grammar(name)
     grow_file(path)                                   # warm-up: imports, caches
     rows = []
     for _ in range(repeats):

@@ -19,41 +19,39 @@ import statistics
 import sys
 from pathlib import Path
 
+from ..bench.renderers import time_after_warm_up
+from ..geometry.frusta import skin_skeleton
+from ..pipeline import load_skeleton
+from ..render.context import renderer_name
+from ..render.raster import rc_buffer_bytes
+from ..render.raycast import RECORD_BYTES, RaycastSettings, Raycaster, auto_camera
+from .arguments import image_size, shipped_model_paths
+
 
 def _models(names):
-    from .._resources import grammars_dir
-
     if names:
         return list(names)
     try:
-        return sorted(str(p) for p in grammars_dir().glob("*.yaml"))
+        return [str(p) for p in shipped_model_paths()]
     except FileNotFoundError:
         return []
 
 
 def measure(path, width: int, height: int, frames: int, linear_steps: int, binary_steps: int):
     """Median frame times (ms) of RC and RC+R for one model, and its record sizes."""
-    import numpy as np  # noqa: F401  (numpy is imported by everything below anyway)
-
-    from ..geometry.frusta import skin_skeleton
-    from ..pipeline import load_skeleton
-    from ..render.raycast import RECORD_BYTES, RaycastSettings, Raycaster, auto_camera
-
     skeleton = load_skeleton(path)
     frusta = skin_skeleton(skeleton)
     camera = auto_camera(frusta, width, height)
     caster = Raycaster()
     row = {"model": Path(path).stem, "segments": len(skeleton), "rows": len(frusta.base),
            "bytes_per_segment": RECORD_BYTES,
-           "upload_kib": len(frusta.base) * RECORD_BYTES / 1024}
+           "upload_kib": rc_buffer_bytes(len(frusta.base)) / 1024}
     names = frusta.material_names
     for label, settings in (("rc_ms", RaycastSettings()),
                             ("rcr_ms", RaycastSettings(relief=True, linear_steps=linear_steps,
                                                        binary_steps=binary_steps))):
-        caster.render(frusta, camera, settings, names)   # warm-up
-        times = [caster.render(frusta, camera, settings, names).frame_ms
-                 for _ in range(frames)]
-        row[label] = statistics.median(times)
+        _, runs = time_after_warm_up(lambda s=settings: caster.render(frusta, camera, s, names), frames)
+        row[label] = statistics.median(r.frame_ms for r in runs)
     return row
 
 
@@ -61,15 +59,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.raycast",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", help="grammar, scene or .npz (default: all shipped)")
-    parser.add_argument("--size", default="1024x768")
+    parser.add_argument("--size", type=image_size, default="1024x768")
     parser.add_argument("--frames", type=int, default=7)
     parser.add_argument("--linear-steps", type=int, default=32)
     parser.add_argument("--binary-steps", type=int, default=6)
     args = parser.parse_args(argv)
-    width, height = (int(x) for x in args.size.lower().split("x"))
-
-    from ..render.context import renderer_name
-
+    width, height = args.size
     models = _models(args.models)
     if not models:
         print("no models: pass grammar/scene/.npz paths", file=sys.stderr)

@@ -21,8 +21,12 @@ import tracemalloc
 
 import numpy as np
 
+from .._resources import shipped_grammar
+from ..geometry.frusta import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
+from ..pipeline import load_skeleton
+from ..render.raster import gs_buffer_bytes, rc_buffer_bytes
 
 
 def synthetic_tree(n_segments: int = 16997, chain_length: int = 17, seed: int = 1) -> Skeleton:
@@ -80,11 +84,6 @@ def main(argv=None) -> None:
                         help="use a synthetic tree of --segments segments instead of a grammar")
     args = parser.parse_args(argv)
 
-    from ..render.raster import gs_buffer_bytes, rc_buffer_bytes
-
-    from .._resources import shipped_grammar
-    from ..geometry.frusta import skin_skeleton
-
     grammar = args.grammar
     if grammar is None and not args.synthetic:
         try:
@@ -92,8 +91,6 @@ def main(argv=None) -> None:
         except FileNotFoundError:
             grammar = None
     if grammar is not None:
-        from ..pipeline import load_skeleton
-
         skeleton = load_skeleton(grammar)
         source = str(grammar)
     else:

@@ -1,0 +1,23 @@
+"""The accuracy curves' families: which points share a reference, and their Pareto fronts."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .metrics import pareto_front
+
+__all__ = ["FAMILIES", "family_points", "family_front"]
+
+#: The two families of the accuracy curves: each is measured against its own reference
+#: (analytic cones, or the relief surface), so each has its own Pareto front.
+FAMILIES = {"plain": ("RC", "GS"), "relief": ("RC+R", "GS+R")}
+
+
+def family_points(model: dict, family: str) -> list[dict]:
+    """The measured curve points of one family (:data:`FAMILIES`) of a model's results."""
+    return [c for c in model["curve"] if "error" in c and c["method"] in FAMILIES[family]]
+
+
+def family_front(points: list[dict]) -> np.ndarray:
+    """(k,) indices into ``points`` of their Pareto front in (ms, error), fastest first."""
+    return pareto_front([c["ms"] for c in points], [c["error"] for c in points])

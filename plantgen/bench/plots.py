@@ -1,0 +1,90 @@
+"""Error against ms per frame, one PNG per model (matplotlib, the ``bench`` extra)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .curves import FAMILIES, family_front, family_points
+
+__all__ = ["plot_curves", "ERROR_FLOOR"]
+
+#: Errors below this are drawn at it (log axis; the ray caster's error can be 0).
+ERROR_FLOOR = 1e-6
+#: Colour and marker of each method's series; the RC+R binary and v sweeps get their own.
+_STYLES = {"GS": ("tab:blue", "o"), "GS+R": ("tab:orange", "s"), "RC": ("tab:green", "D"),
+           "RC+R": ("tab:red", "^")}
+
+
+def _shown(error: float) -> float:
+    return max(error, ERROR_FLOOR)
+
+
+def _style(label: str) -> tuple[str, str]:
+    """(colour, marker) of a series label such as ``GS+R`` or ``RC+R binary``."""
+    if label.endswith("binary"):
+        return "tab:purple", "v"
+    if label.endswith(" v"):
+        return "tab:brown", "*"
+    return _STYLES[label.split(" ")[0]]
+
+
+def _series(points: list[dict]) -> dict:
+    """{label: points}: one series per method, and per knob of a method with several."""
+    series = {}
+    for c in points:
+        label = c["method"] if c["knob"] in ("", "m") else f"{c['method']} {c['knob']}"
+        series.setdefault(label, []).append(c)
+    return series
+
+
+def _plot_family(ax, model: str, family: str, points: list[dict], size) -> None:
+    for label, cs in _series(points).items():
+        color, marker = _style(label)
+        cs = sorted(cs, key=lambda c: c["ms"])
+        ax.plot([c["ms"] for c in cs], [_shown(c["error"]) for c in cs], marker=marker,
+                color=color, linestyle="-" if len(cs) > 1 else "none", label=label, alpha=0.8)
+        for c in cs:
+            ax.annotate(str(c["value"]), (c["ms"], _shown(c["error"])), fontsize=6,
+                        textcoords="offset points", xytext=(3, 3))
+    front = family_front(points)
+    front_ms = [points[i]["ms"] for i in front]
+    front_error = [_shown(points[i]["error"]) for i in front]
+    ax.step(front_ms, front_error, where="post", color="black", linewidth=1.2, linestyle="--",
+            label="Pareto front")
+    ax.scatter(front_ms, front_error, s=80, facecolors="none", edgecolors="black")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("ms per frame (median, %dx%d)" % tuple(size))
+    ax.set_ylabel("error: (1 - SSIM) + silhouette mismatch (floor 1e-6)")   # ERROR_FLOOR
+    ax.set_title(f"{model}, {'relief' if family == 'relief' else 'no relief'}: "
+                 "error vs time", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def plot_curves(results: dict, out_dir: Path) -> list[Path] | str:
+    """Error against ms per frame, one PNG per model, Pareto front marked. Returns the
+    paths, or a message when matplotlib (the ``bench`` extra) is missing."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return ("matplotlib is not installed: curves written as CSV only "
+                "(install the extra: pip install 'plantgen[bench]')")
+    written = []
+    for m in results["models"]:
+        families = [f for f in FAMILIES if family_points(m, f)]
+        if not families:
+            continue
+        fig, axes = plt.subplots(1, len(families), figsize=(6.5 * len(families), 4.5), dpi=110,
+                                 squeeze=False)
+        for ax, family in zip(axes[0], families, strict=True):
+            _plot_family(ax, m["model"], family, family_points(m, family), results["options"]["size"])
+        fig.suptitle(results["machine"]["gl_renderer"] + " · " + results["machine"]["date_utc"], fontsize=8)
+        path = out_dir / f"curves_{m['model']}.png"
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)
+        written.append(path)
+    return written

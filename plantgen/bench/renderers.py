@@ -1,0 +1,184 @@
+"""The GL side of the bench: one model's renderers, and the interleaved frame timing.
+
+Frame times are measured by the renderers (draw calls to ``glFinish``, excluding
+read-back), plus the per-frame CPU update of an animated scene.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
+from ..render.passes import ShadowSettings
+from ..render.raster import RasterRenderer
+from ..render.raycast import Raycaster, RenderResult
+from .configs import Config
+from .models import BenchModel
+
+__all__ = ["Renderers", "time_configs", "median_ms", "animation_time", "shadow_box",
+           "time_after_warm_up"]
+
+#: Frames per second of the animation clock: timed frame i shows the scene at (i + 1) / 30 s.
+ANIMATION_FPS = 30.0
+
+
+def animation_time(frame) -> float | np.ndarray:
+    """Seconds of the animation clock at ``frame`` (an int or an array of them)."""
+    return frame / ANIMATION_FPS
+
+
+def shadow_box(model: BenchModel, frames: int) -> np.ndarray | None:
+    """(2, 3) world box one light window covers for every timed frame of an animated
+    scene with shadows (so the map's texels stay put); None otherwise."""
+    if model.animation is None or not model.shadows:
+        return None
+    return model.animation.bounds(animation_time(np.arange(0, frames + 2, 4)))
+
+
+def median_ms(samples) -> float:
+    """Median of frame times in ms, nan for none."""
+    return float(np.median(np.asarray(samples, dtype=np.float64))) if len(samples) else float("nan")
+
+
+@dataclass
+class _Conditions:
+    """What a frame draws besides the model: the paper's conditions, or none of them."""
+
+    shadows: ShadowSettings | None
+    ground: dict | None
+    animated: bool
+
+    @classmethod
+    def of(cls, model: BenchModel, paper: bool) -> _Conditions:
+        """The paper's conditions for ``model`` (shadow map and ground where the scene lists
+        them, the animation posed every frame), or bare frames when ``paper`` is False."""
+        if not paper:
+            return cls(None, None, False)
+        return cls(ShadowSettings() if model.shadows else None, model.ground,
+                   model.animation is not None)
+
+
+class Renderers:
+    """The GL side of one model: one ray caster, one raster renderer per configuration key
+    (so the interleaved run does not re-upload), meshes cached per (level, relief)."""
+
+    def __init__(self, model: BenchModel, max_triangles: int, shadow_box=None):
+        self.model = model
+        self.max_triangles = max_triangles
+        self.raycaster = Raycaster()
+        self.rasters: dict = {}
+        self.meshes: dict = {}
+        self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
+
+    def mesh(self, level: int, relief: bool, frusta=None) -> TessellatedMesh | None:
+        """The tessellation (cached for the static frusta), or None over the triangle budget."""
+        frusta = self.model.frusta if frusta is None else frusta
+        key = (level, relief)
+        static = frusta is self.model.frusta
+        if static and key in self.meshes:
+            return self.meshes[key]
+        if triangle_count(len(frusta), level, 0) > self.max_triangles:
+            return None
+        mesh = tessellate(frusta, level, relief=relief, caps="tips")
+        if static:
+            self.meshes[key] = mesh
+        return mesh
+
+    def raster(self, key: str) -> RasterRenderer:
+        """The raster renderer of configuration ``key`` (made on first use)."""
+        if key not in self.rasters:
+            self.rasters[key] = RasterRenderer(self.raycaster.ctx)
+        return self.rasters[key]
+
+    def render_config(self, cfg: Config, camera, *, conditions: bool = False,
+                      t: float = 0.0) -> tuple[RenderResult | None, float]:
+        """Render ``cfg`` once, under the paper's conditions if ``conditions``, at
+        animation time ``t``; returns (RenderResult, frame ms including the per-frame CPU
+        work the conditions ask for), or (None, nan) for a level over the budget."""
+        frame = _Conditions.of(self.model, conditions)
+        if cfg.ray_cast:
+            return self._ray_cast(cfg, camera, frame, t)
+        return self._rasterise(cfg, camera, frame, t)
+
+    def _ray_cast(self, cfg: Config, camera, frame: _Conditions, t: float):
+        m = self.model
+        frusta, records, box, update_ms = m.frusta, None, None, 0.0
+        if frame.animated:
+            frusta, records, update = m.animation.upload(self.raycaster.ctx, t, camera.eye)
+            box, update_ms = self.shadow_box, update.total_ms
+        res = self.raycaster.render(frusta, camera, cfg.settings, m.names, m.light_dir, frame.ground,
+                                    shadows=frame.shadows, shadow_box=box, record_buffer=records)
+        return res, res.frame_ms + update_ms
+
+    def _rasterise(self, cfg: Config, camera, frame: _Conditions, t: float):
+        m = self.model
+        extra_ms = 0.0
+        if frame.animated:
+            t0 = time.perf_counter()
+            frusta = m.animation.frusta_at(t)              # pose + re-skin, as RC does
+            mesh = self.mesh(cfg.level, cfg.relief, frusta)  # re-tessellate
+            extra_ms = (time.perf_counter() - t0) * 1e3
+        else:
+            frusta = m.frusta
+            mesh = self.mesh(cfg.level, cfg.relief)
+        if mesh is None:
+            return None, float("nan")
+        res = self.raster(cfg.key).render(mesh, frusta, camera, material_names=m.names,
+                                          light_dir=m.light_dir, ground=frame.ground,
+                                          shadows=frame.shadows,
+                                          shadow_box=self.shadow_box if frame.animated else None)
+        upload_ms = res.stats.get("upload_ms", 0.0) if frame.animated else 0.0
+        return res, res.frame_ms + extra_ms + upload_ms
+
+    def release_raster(self, key: str) -> None:
+        """Free the GPU buffers of ``key``'s raster renderer (the mesh stays cached)."""
+        raster = self.rasters.pop(key, None)
+        if raster is not None:
+            raster.release()
+
+    def keep_meshes(self, keys) -> None:
+        """Drop the cached meshes other than ``keys`` ((level, relief) pairs)."""
+        self.meshes = {k: v for k, v in self.meshes.items() if k in keys}
+
+    def release(self) -> None:
+        """Free every GL object: the raster renderers, the ray caster, the animation's."""
+        for key in list(self.rasters):
+            self.release_raster(key)
+        self.raycaster.release()
+        if self.model.animation is not None:
+            self.model.animation.release()
+
+
+def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditions: bool,
+                 passes: dict | None = None) -> dict:
+    """Interleaved timing: one warm-up frame each, then ``frames`` rounds rendering every
+    config once per round, round i at animation time (i + 1) / 30 s.
+
+    Returns {key: [ms, ...]} (empty for a level over the budget); ``passes``, if given,
+    receives {key: the render passes of the warm-up frame}.
+    """
+    samples = {c.key: [] for c in configs}
+    alive = []
+    for c in configs:
+        res, _ = renderers.render_config(c, camera, conditions=conditions, t=0.0)
+        if res is None:
+            continue
+        alive.append(c)
+        if passes is not None:
+            passes[c.key] = list(res.stats.get("passes", []))
+    for i in range(frames):
+        t = animation_time(i + 1)
+        for c in alive:
+            _, ms = renderers.render_config(c, camera, conditions=conditions, t=t)
+            samples[c.key].append(ms)
+    return samples
+
+
+def time_after_warm_up(render, frames: int) -> tuple[RenderResult, list[RenderResult]]:
+    """Call ``render()`` once to warm up (shader compilation, first upload), then ``frames``
+    times in a row; returns (the warm-up result, the timed results)."""
+    first = render()
+    return first, [render() for _ in range(frames)]
