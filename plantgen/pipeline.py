@@ -12,9 +12,10 @@ from pathlib import Path
 
 from ._resources import grammars_dir
 from .errors import PlantgenError
+from .files import read_yaml
 from .geometry.skeleton import Skeleton
 from .lsystem.derive import derive
-from .lsystem.grammar import parse_grammar, read_yaml
+from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import interpret
 from .scene import Scene, is_scene, parse_scene
 
@@ -61,7 +62,7 @@ def load_input(path: str | Path):
     path = Path(path)
     if path.suffix.lower() == ".npz":
         return "skeleton", None
-    data = read_yaml(path)
+    data = read_yaml(path, GrammarError)
     if data is None:
         raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
@@ -93,7 +94,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
-            grammars[key] = parse_grammar(read_yaml(gpath), key)
+            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError), key)
         g = grammars[key]
         t1 = time.perf_counter()
         ms = derive(g, iterations=its, seed=s, max_modules=max_modules)
