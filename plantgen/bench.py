@@ -331,7 +331,6 @@ class _Model:
 
 
 def _load_model(name: str, size) -> _Model:
-    from .geometry.camera import Camera
     from .pipeline import grow_file
     from .render.animate import AnimatedScene
     from .render.raycast import auto_camera
@@ -352,13 +351,13 @@ def _load_model(name: str, size) -> _Model:
     if len(frusta) == 0:
         raise PlantgenError(f"{name}: nothing to bench (no segments)")
     width, height = size
-    if scene is not None and isinstance(scene.camera, dict):
-        camera = Camera.from_dict({**scene.camera, "width": width, "height": height}, f"{name}: camera")
+    if scene is not None and scene.camera is not None:
+        camera = scene.camera.at_size(width, height)
     else:
         camera = auto_camera(frusta, width, height)
     light = (0.45, 0.8, 0.35)
     if scene is not None:
-        light = tuple(-np.asarray(scene.light["direction"], dtype=np.float64))
+        light = tuple(-np.asarray(scene.light.travel, dtype=np.float64))
     model_name = Path(str(name)).stem
     return _Model(model_name, frusta, tuple(frusta.material_names), camera, light,
                   scene.ground if scene is not None else None, "shadows" in effects, anim,

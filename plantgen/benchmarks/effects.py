@@ -34,17 +34,16 @@ def _scene_setup(name, width, height):
     from ..pipeline import grow_file
     from ..render.animate import AnimatedScene
     from ..render.raycast import auto_camera
-    from ..geometry.camera import Camera
 
     grown = grow_file(name)
     scene = grown.scene
     anim = AnimatedScene.from_scene(scene)
     frusta = anim.frusta_at(0.0)
-    if isinstance(scene.camera, dict):
-        camera = Camera.from_dict({**scene.camera, "width": width, "height": height})
+    if scene.camera is not None:
+        camera = scene.camera.at_size(width, height)
     else:
         camera = auto_camera(frusta, width, height)
-    light = tuple(-np.asarray(scene.light["direction"], dtype=np.float64))
+    light = tuple(-np.asarray(scene.light.travel, dtype=np.float64))
     return scene, anim, frusta, camera, light
 
 

@@ -81,7 +81,7 @@ class AnimatedScene:
     ----------
     skeleton : the scene's skeleton in world coordinates (n segments)
     segment_instance : (n,) int, the instance of each segment
-    motions : per instance, None or a motion mapping (see plantgen.scene)
+    motions : per instance, None or a :class:`~plantgen.geometry.stage.Sway`
     skin : the skinning function (``skin_skeleton`` or one with bound options)
     """
 
@@ -94,8 +94,7 @@ class AnimatedScene:
 
     def __post_init__(self):
         self.segment_instance = np.asarray(self.segment_instance, dtype=np.int64)
-        moving_instance = np.array([bool(m and m.get("sway") and m["sway"].get("amplitude", 0))
-                                    for m in self.motions] or [False])
+        moving_instance = np.array([m is not None and m.moves for m in self.motions] or [False])
         moving = (moving_instance[self.segment_instance] if len(self.skeleton)
                   else np.zeros(0, dtype=bool))
         self.moving_segments = np.flatnonzero(moving)

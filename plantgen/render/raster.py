@@ -20,7 +20,7 @@ from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_r
 from .context import gl_context
 from .passes import ShadowSettings, box_corners, frame_passes
 from .raycast import (MAX_MATERIALS, RECORD_BYTES, OffscreenRenderer, RenderResult, _ground_quad,
-                      _mat4, _set, _write, depth_range, material_palette, shading_uniforms)
+                      _mat4, as_ground, _set, _write, depth_range, material_palette, shading_uniforms)
 from .shaders import build_program
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "rc_buffer_bytes", "row_data"]
@@ -136,7 +136,7 @@ class RasterRenderer(OffscreenRenderer):
         view_projection = camera.projection_matrix(near, far) @ view
         tan_y = np.tan(np.radians(camera.fov_y) / 2)
         tex, repeats = self._height_texture(names)
-        palette_names = names if ground_quad is None else names + (ground["material"],)
+        palette_names = names if ground_quad is None else names + (as_ground(ground).material,)
         palette = material_palette(palette_names)
         shading = shading_uniforms(light_dir)
         _set(sky, viewport=(float(width), float(height)), cam_forward=tuple(fwd),

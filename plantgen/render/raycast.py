@@ -25,6 +25,7 @@ from ..geometry.camera import Camera
 from ..geometry.frusta import PYRAMID_CORNERS as _FRUSTA_CORNERS
 from ..geometry.frusta import PYRAMID_TRIANGLES as _FRUSTA_TRIANGLES
 from ..geometry.mesh import continuing_parent_rows
+from ..geometry.stage import Ground
 from .context import gl_context, release_framebuffer
 from .passes import (ShadowPass, ShadowSettings, box_corners, frame_passes, light_window,
                      program_variants)
@@ -495,7 +496,7 @@ class Raycaster(OffscreenRenderer):
         material_names = tuple(material_names)
         tex, repeats = self._height_texture(material_names)
         if ground_quad is not None:
-            material_names = material_names + (ground["material"],)
+            material_names = material_names + (as_ground(ground).material,)
         program = variant("raycast.glsl", **settings.defines(), SHADOWS=shadowed)
         palette = material_palette(material_names)
         shading = shading_uniforms(light_dir)
@@ -626,11 +627,18 @@ def depth_range(point_sets, eye: np.ndarray, fwd: np.ndarray) -> tuple[float, fl
     return near, far
 
 
-def _ground_quad(ground: dict) -> np.ndarray:
+def _ground_quad(ground) -> np.ndarray:
     """(4, 3) float64 corners of the ground square, in triangle-strip order, facing up."""
-    half = float(ground["size"]) / 2
-    y = float(ground.get("height", 0.0))
-    return np.array([[-half, y, half], [half, y, half], [-half, y, -half], [half, y, -half]])
+    return as_ground(ground).quad()
+
+
+def as_ground(ground) -> Ground:
+    """``ground`` as a :class:`Ground`: a scene's ground is one; a ``{"size", "height",
+    "material"}`` mapping (tests pass these) is converted. Temporary adapter until the
+    renderers take only :class:`Ground`."""
+    if isinstance(ground, Ground):
+        return ground
+    return Ground(ground["size"], ground.get("height", 0.0), ground["material"])
 
 
 def _set(program, **values) -> None:
@@ -769,9 +777,8 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
 
     if camera == "auto" or camera is None:
         width, height = size or (1024, 768)
-        if scene is not None and isinstance(scene.camera, dict):
-            cam = Camera.from_dict({**scene.camera, "width": width, "height": height},
-                                   f"{input_path}: camera")
+        if scene is not None and scene.camera is not None:
+            cam = scene.camera.at_size(width, height)
         else:
             cam = auto_camera(frusta, width, height)
     else:
@@ -785,7 +792,7 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
     light_dir = (0.45, 0.8, 0.35)
     ground = None
     if scene is not None:
-        light_dir = tuple(-np.asarray(scene.light["direction"], dtype=np.float64))
+        light_dir = tuple(-np.asarray(scene.light.travel, dtype=np.float64))
         ground = scene.ground
     names = getattr(frusta, "material_names", skeleton.material_names)
     n_frames = int(frames) if animation_out else 1
