@@ -25,7 +25,8 @@ __all__ = ["cli", "main"]
 def cli() -> None:
     """plantgen: L-system plants skinned with relief-mapped conical frusta.
 
-    Grammars and scenes are YAML files (the shipped ones are in grammars/). Run `plantgen COMMAND --help` for each command's options.
+    Grammars and scenes are YAML files (the shipped ones are in grammars/). Run
+    `plantgen COMMAND --help` for each command's options.
     """
 
 

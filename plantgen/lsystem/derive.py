@@ -49,7 +49,7 @@ class ModuleString:
         """ABOP text of the first ``limit`` modules, for debugging and tests."""
         out = []
         for s, k, row in zip(self.sym[:limit].tolist(), self.nparam[:limit].tolist(),
-                             self.params[:limit].tolist()):
+                             self.params[:limit].tolist(), strict=True):
             name = self.symbols[s]
             if k:
                 out.append(name + "(" + ",".join(f"{x:.{digits}g}" for x in row[:k]) + ")")

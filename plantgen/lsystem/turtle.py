@@ -109,7 +109,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
-    for act, ha, arg, arg2 in zip(*program):
+    for act, ha, arg, arg2 in zip(*program, strict=True):
         if act == _F:
             length = arg if ha else step
             if length == 0.0:
@@ -133,18 +133,18 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             px, py, pz = ex, ey, ez
             if e != 0.0:
                 H, L, U = _bend_towards(H, L, U, tropism, e)
-        elif act == _PLUS or act == _MINUS:
+        elif act == _PLUS or act == _MINUS:  # noqa: SIM109 (a tuple of globals is built per module)
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _MINUS:
                 s = -s
             H, L = _rot(H, L, c, s)
-        elif act == _AND or act == _HAT:
+        elif act == _AND or act == _HAT:  # noqa: SIM109
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _HAT:
                 s = -s
             H, U = _rot(H, (-U[0], -U[1], -U[2]), c, s)
             U = (-U[0], -U[1], -U[2])
-        elif act == _BSL or act == _SL:
+        elif act == _BSL or act == _SL:  # noqa: SIM109
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _SL:
                 s = -s
