@@ -77,7 +77,7 @@ class AnimatedScene:
 
     def __post_init__(self):
         self.segment_instance = np.asarray(self.segment_instance, dtype=np.int64)
-        moving_instance = np.array([_moves(m) for m in self.motions] or [False])
+        moving_instance = np.array([m is not None and m.moves for m in self.motions] or [False])
         moving = (moving_instance[self.segment_instance] if len(self.skeleton)
                   else np.zeros(0, dtype=bool))
         self.moving_segments = np.flatnonzero(moving)
@@ -140,10 +140,3 @@ class AnimatedScene:
         self.updates.append(update)
         return frusta, sink.buffer, update
 
-
-def _moves(m) -> bool:   # TODO(merge): motions become Sway | None
-    if m is None:
-        return False
-    if hasattr(m, "moves"):
-        return m.moves
-    return bool(m and m.get("sway") and m["sway"].get("amplitude", 0))

@@ -30,19 +30,20 @@ from .geometry.camera import Camera
 from .geometry.framing_tmp import auto_camera
 from .geometry.frusta import Frusta, skin_skeleton
 from .geometry.mesh import tessellate, triangle_count
+from .files import read_yaml
 from .geometry.skeleton import Skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
 from .limits import limits
 from .lsystem.derive import derive
-from .lsystem.grammar import parse_grammar, read_yaml
+from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import interpret
 from .render.context import renderer_name
-from .render.passes import ShadowSettings, resolve_effects
+from .render.passes import ShadowSettings
 from .render.raycast import Raycaster, RaycastSettings
 from .render.records import RecordStream
 from .render.result import RenderResult
-from .scene import Scene, is_scene, parse_scene
+from .scene import Scene, is_scene, parse_scene, resolve_effects
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
            "Staging", "stage_model", "RenderReport", "render_file", "export_model"]
@@ -88,7 +89,7 @@ def load_input(path: str | Path):
     path = Path(path)
     if path.suffix.lower() == ".npz":
         return "skeleton", None
-    data = read_yaml(path)
+    data = read_yaml(path, GrammarError)
     if data is None:
         raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
@@ -120,7 +121,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
-            grammars[key] = parse_grammar(read_yaml(gpath), key)
+            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError), key)
         g = grammars[key]
         t1 = time.perf_counter()
         ms = derive(g, iterations=its, seed=s, max_modules=max_modules)
@@ -168,15 +169,13 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     (:func:`auto_camera`) and the default model light. ``camera`` replaces the view."""
     scene = grown.scene
     if camera is None:
-        if scene is not None and isinstance(scene.camera, dict):
-            camera = Camera.from_dict({**scene.camera, "width": width, "height": height},
-                                      f"{scene.path}: camera")
+        if scene is not None and scene.camera is not None:
+            camera = scene.camera.at_size(width, height)
         else:
             camera = auto_camera(frusta, width, height)
     if scene is None:
         return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
-    return Staging(camera, tuple(-np.asarray(scene.light["direction"], dtype=np.float64)),
-                   Ground(**scene.ground) if scene.ground else None)
+    return Staging(camera, tuple(scene.light.towards()), scene.ground)
 
 
 def animate_model(grown: GrowResult, effects) -> AnimatedScene:

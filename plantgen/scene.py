@@ -1,5 +1,8 @@
 """Scene files: instances of grammars or explicit skeletons, with ground, camera, light,
-effects and motion. This module loads, validates and grows them; renderers read the result.
+effects and motion. This module loads, validates and grows them into a :class:`Scene` of
+typed values (:class:`~plantgen.geometry.stage.Ground`, :class:`~plantgen.geometry.stage.Light`,
+:class:`~plantgen.geometry.stage.Sway`, :class:`CameraSpec`); renderers read the result.
+It is also the home of the effects vocabulary (:data:`EFFECTS`, :func:`resolve_effects`).
 
 A scene is a YAML mapping with an ``instances`` list::
 
@@ -31,17 +34,21 @@ jittered and yaw turned from a generator seeded by the instance seed: determinis
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ._resources import grammars_dir
 from .errors import PlantgenError
+from .files import read_yaml
+from .geometry.camera import Camera, CameraError
 from .geometry.skeleton import Skeleton, SkeletonError
+from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
+from .lsystem.grammar import GrammarError
 
-__all__ = ["EFFECTS", "Scene", "SceneInstance", "SceneError", "load_scene", "parse_scene",
-           "is_scene", "rotation_matrix"]
+__all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "is_scene",
+           "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "rotation_matrix"]
 
 EFFECTS = ("relief", "shadows", "animation")
 SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances"}
@@ -51,11 +58,53 @@ GROUND_KEYS = {"size", "height", "material"}
 LIGHT_KEYS = {"direction", "intensity"}
 MOTION_KEYS = {"sway"}
 SWAY_KEYS = {"amplitude", "frequency", "phase"}
+GRID_KEYS = {"count", "spacing", "jitter"}
+SKELETON_KEYS = {"materials", "segments"}
 SEGMENT_KEYS = {"start", "end", "r_start", "r_end", "parent", "continues", "material"}
 
 
 class SceneError(PlantgenError):
     """A scene file that cannot be used."""
+
+
+# ---------------------------------------------------------------------------- effects
+def resolve_effects(scene_effects=(), *, replace=None, add=(), remove=()) -> tuple[str, ...]:
+    """The effects a render simulates: the scene's list, or ``replace``, plus ``add`` minus
+    ``remove`` (in :data:`EFFECTS` order).
+
+    Raises
+    ------
+    PlantgenError
+        An effect name that is not one of :data:`EFFECTS` (one line, naming the known ones).
+    """
+    chosen = list(scene_effects if replace is None else replace)
+    for name in (*chosen, *add, *remove):
+        if name not in EFFECTS:
+            raise PlantgenError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
+    wanted = (set(chosen) | set(add)) - set(remove)
+    return tuple(e for e in EFFECTS if e in wanted)
+
+
+def parse_effect_list(text: str) -> tuple[str, ...]:
+    """``"relief,shadows"`` -> ("relief", "shadows"); empty items are ignored; names checked."""
+    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
+    return resolve_effects(replace=names)
+
+
+# ---------------------------------------------------------------------------- values
+@dataclass(frozen=True)
+class CameraSpec:
+    """A scene's fixed camera: where it looks from and its vertical field of view. The
+    image size is the render's, given by :meth:`at_size`."""
+
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov_y: float = 40.0           # degrees
+
+    def at_size(self, width: int, height: int) -> Camera:
+        """The :class:`Camera` for a ``width`` x ``height`` image."""
+        return Camera(self.eye, self.target, self.up, self.fov_y, int(width), int(height))
 
 
 @dataclass(frozen=True)
@@ -66,7 +115,7 @@ class SceneInstance:
     seed: int
     matrix: np.ndarray            # (4, 4) similarity transform
     skeleton: Skeleton            # local coordinates
-    motion: dict | None = None    # e.g. {"sway": {"amplitude": deg, "frequency": Hz, "phase": rad}}
+    motion: Sway | None = None    # None: the plant stands still
 
 
 @dataclass(frozen=True)
@@ -75,9 +124,9 @@ class Scene:
     description: str
     effects: tuple[str, ...]
     instances: tuple[SceneInstance, ...]
-    ground: dict | None = None
-    camera: dict | str = "auto"
-    light: dict = field(default_factory=lambda: {"direction": [-0.4, -1.0, -0.3], "intensity": 1.0})
+    ground: Ground | None = None
+    camera: CameraSpec | None = None      # None: "auto", frame the model
+    light: Light = SCENE_LIGHT
     path: str = "<scene>"
 
     def skeleton(self) -> Skeleton:
@@ -99,6 +148,7 @@ def rotation_matrix(degrees_xyz) -> np.ndarray:
     return rz @ ry @ rx
 
 
+# ---------------------------------------------------------------------------- checks
 def _vec3(value, what, where):
     if (not isinstance(value, (list, tuple)) or len(value) != 3
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)):
@@ -125,8 +175,145 @@ def _check_keys(d, allowed, where):
         raise SceneError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
 
 
+def _non_negative_int(value) -> bool:
+    return not isinstance(value, bool) and isinstance(value, int) and value >= 0
+
+
+# ---------------------------------------------------------------------------- scene header
+def _parse_effects(effects, path: str) -> tuple[str, ...]:
+    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
+        raise SceneError(f"{path}: effects must be a list of names")
+    bad = [e for e in effects if e not in EFFECTS]
+    if bad:
+        raise SceneError(f"{path}: unknown effect(s) {bad} (known: {list(EFFECTS)})")
+    return tuple(effects)
+
+
+def _parse_ground(ground, path: str) -> Ground | None:
+    if ground is None:
+        return None
+    where = f"{path}: ground"
+    _check_keys(ground, GROUND_KEYS, where)
+    return Ground(size=_num(ground.get("size", 10.0), "size", where, positive=True),
+                  height=_num(ground.get("height", 0.0), "height", where),
+                  material=str(ground.get("material", "sand")))
+
+
+def _parse_camera(camera, path: str) -> CameraSpec | None:
+    if camera == "auto":
+        return None
+    if not isinstance(camera, dict):
+        raise SceneError(f"{path}: camera must be 'auto' or a mapping")
+    try:   # the file may give a width and height: checked, though the render sets the size
+        cam = Camera.from_dict(camera, f"{path}: camera")
+    except CameraError as exc:
+        raise SceneError(str(exc)) from None
+    return CameraSpec(cam.eye, cam.target, cam.up, cam.fov_y)
+
+
+def _parse_light(light, path: str) -> Light:
+    """The scene's light: its direction of travel normalised; :data:`SCENE_LIGHT` (as given,
+    not normalised) for what the file leaves out."""
+    where = f"{path}: light"
+    _check_keys(light, LIGHT_KEYS, where)
+    travel, intensity = SCENE_LIGHT.travel, SCENE_LIGHT.intensity
+    if "direction" in light:
+        d = _vec3(light["direction"], "direction", where)
+        if not np.linalg.norm(d):
+            raise SceneError(f"{path}: light direction must not be zero")
+        travel = tuple((d / np.linalg.norm(d)).tolist())
+    if "intensity" in light:
+        intensity = _num(light["intensity"], "intensity", where)
+    return Light(travel, intensity)
+
+
+# ---------------------------------------------------------------------------- instances
+@dataclass(frozen=True)
+class _Placement:
+    """One instance entry of the file, checked: what each of its copies shares."""
+
+    where: str                    # "<path>: instance <k>", for messages
+    seed: int
+    position: np.ndarray          # (3,)
+    rotation: np.ndarray          # (3,) degrees
+    scale: float
+    iterations: int | None
+    sway: dict | None             # the file's sway values; a missing phase is drawn per copy
+    copies: list                  # [(offset (3,), yaw degrees, copy number)]
+
+
+def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override) -> _Placement:
+    where = f"{path}: instance {k + 1}"
+    _check_keys(inst, INSTANCE_KEYS, where)
+    if ("grammar" in inst) == ("skeleton" in inst):
+        raise SceneError(f"{where}: give exactly one of 'grammar' or 'skeleton'")
+    inst_seed = inst.get("seed", base_seed + k)
+    if not _non_negative_int(inst_seed):
+        raise SceneError(f"{where}: seed must be a non-negative integer")
+    if seed_override is not None and "seed" in inst:
+        inst_seed = inst_seed + int(seed_override)   # an override seed shifts every instance
+    position = _vec3(inst.get("position", [0, 0, 0]), "position", where)
+    rotation = _vec3(inst.get("rotation", [0, 0, 0]), "rotation", where)
+    scale = _num(inst.get("scale", 1.0), "scale", where, positive=True)
+    iterations = inst.get("iterations")
+    if iterations is not None and not _non_negative_int(iterations):
+        raise SceneError(f"{where}: iterations must be a non-negative integer")
+    sway = _parse_sway(inst.get("motion"), where)
+    copies = _grid_copies(inst["grid"], where, inst_seed) if "grid" in inst else [(np.zeros(3), 0.0, 0)]
+    return _Placement(where, inst_seed, position, rotation, scale, iterations, sway, copies)
+
+
+def _parse_sway(motion, where: str) -> dict | None:
+    """The sway values a ``motion`` entry gives, or None for a plant that stands still."""
+    if motion is None:
+        return None
+    _check_keys(motion, MOTION_KEYS, f"{where}: motion")
+    if "sway" not in motion:
+        return None
+    sway = motion["sway"]
+    _check_keys(sway, SWAY_KEYS, f"{where}: motion: sway")
+    return {key: _num(v, key, f"{where}: motion: sway") for key, v in sway.items()}
+
+
+def _copy_sway(sway: dict | None, copy_seed: int) -> Sway | None:
+    """A copy's sway; a phase the file does not give is drawn from the copy's seed."""
+    if sway is None:
+        return None
+    phase = sway.get("phase")
+    if phase is None:
+        phase = float(np.random.default_rng(copy_seed).uniform(0, 2 * np.pi))
+    return Sway(amplitude=sway.get("amplitude", 0.0), frequency=sway.get("frequency", 0.0),
+                phase=phase)
+
+
+def _grid_copies(grid, where: str, inst_seed: int) -> list:
+    """The copies a ``grid`` entry asks for: [(offset (3,), yaw degrees, copy number)], row
+    by row; jittered positions and yaws come from a generator seeded by ``inst_seed``."""
+    _check_keys(grid, GRID_KEYS, f"{where}: grid")
+    count = grid.get("count", [1, 1])
+    if (not isinstance(count, list) or len(count) != 2
+            or not all(isinstance(c, int) and not isinstance(c, bool) and c > 0 for c in count)):
+        raise SceneError(f"{where}: grid count must be two positive integers")
+    spacing = grid.get("spacing", [1.0, 1.0])
+    if not isinstance(spacing, list) or len(spacing) != 2:
+        raise SceneError(f"{where}: grid spacing must be two numbers")
+    sx, sz = (_num(s, "grid spacing", where, positive=True) for s in spacing)
+    jitter = _num(grid.get("jitter", 0.0), "grid jitter", where)
+    rng = np.random.default_rng(inst_seed)
+    nx, nz = count
+    copies = []
+    for iz in range(nz):
+        for ix in range(nx):
+            off = np.array([(ix - (nx - 1) / 2) * sx, 0.0, (iz - (nz - 1) / 2) * sz])
+            if jitter:
+                off[[0, 2]] += rng.uniform(-jitter, jitter, 2) * np.array([sx, sz])
+            yaw = float(rng.uniform(0, 360)) if jitter else 0.0
+            copies.append((off, yaw, len(copies)))
+    return copies
+
+
 def _explicit_skeleton(d, where) -> Skeleton:
-    _check_keys(d, {"materials", "segments"}, where)
+    _check_keys(d, SKELETON_KEYS, where)
     materials = d.get("materials", ["bark"])
     if not isinstance(materials, list) or not materials or not all(isinstance(m, str) for m in materials):
         raise SceneError(f"{where}: materials must be a non-empty list of names")
@@ -169,6 +356,41 @@ def _resolve_grammar(name: str, base: Path, where: str) -> Path:
     raise SceneError(f"{where}: grammar {name!r} not found next to the scene or among the shipped grammars")
 
 
+def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float) -> np.ndarray:
+    """(4, 4) similarity transform of one copy: scale, rotation (plus the copy's yaw about
+    y), then the instance's position plus the copy's offset."""
+    m = np.eye(4)
+    m[:3, :3] = placement.scale * rotation_matrix(placement.rotation + np.array([0.0, yaw, 0.0]))
+    m[:3, 3] = placement.position + offset
+    return m
+
+
+def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar,
+                 cache: dict) -> list[SceneInstance]:
+    """Every copy of one instance entry, grown (grammars once per seed and iteration count,
+    through ``cache``) and placed."""
+    out = []
+    for offset, yaw, c in placement.copies:
+        s = placement.seed + c
+        if "grammar" in inst:
+            gpath = _resolve_grammar(str(inst["grammar"]), base, placement.where)
+            key = (str(gpath), s, placement.iterations)
+            if key not in cache:
+                try:
+                    cache[key] = grow_grammar(gpath, s, placement.iterations)
+                except PlantgenError as exc:
+                    raise SceneError(f"{placement.where}: {exc}") from None
+            skel = cache[key]
+            source = str(inst["grammar"])
+        else:
+            skel = _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton")
+            source = "skeleton"
+        out.append(SceneInstance(source, s, _placement_matrix(placement, offset, yaw), skel,
+                                 _copy_sway(placement.sway, s)))
+    return out
+
+
+# ---------------------------------------------------------------------------- scene
 def is_scene(data) -> bool:
     return isinstance(data, dict) and "instances" in data
 
@@ -183,119 +405,22 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     if not isinstance(data.get("instances"), list) or not data["instances"]:
         raise SceneError(f"{path}: instances must be a non-empty list")
     base_seed = int(data.get("seed", 0)) if seed is None else int(seed)
-    effects = data.get("effects", [])
-    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
-        raise SceneError(f"{path}: effects must be a list of names")
-    bad = [e for e in effects if e not in EFFECTS]
-    if bad:
-        raise SceneError(f"{path}: unknown effect(s) {bad} (known: {list(EFFECTS)})")
-    ground = data.get("ground")
-    if ground is not None:
-        _check_keys(ground, GROUND_KEYS, f"{path}: ground")
-        ground = {"size": _num(ground.get("size", 10.0), "size", f"{path}: ground", positive=True),
-                  "height": _num(ground.get("height", 0.0), "height", f"{path}: ground"),
-                  "material": str(ground.get("material", "sand"))}
-    camera = data.get("camera", "auto")
-    if camera != "auto":
-        from .geometry.camera import Camera, CameraError
-        if not isinstance(camera, dict):
-            raise SceneError(f"{path}: camera must be 'auto' or a mapping")
-        try:
-            Camera.from_dict(camera, f"{path}: camera")
-        except CameraError as exc:
-            raise SceneError(str(exc)) from None
-    light = {"direction": [-0.4, -1.0, -0.3], "intensity": 1.0}
-    if "light" in data:
-        _check_keys(data["light"], LIGHT_KEYS, f"{path}: light")
-        if "direction" in data["light"]:
-            d = _vec3(data["light"]["direction"], "direction", f"{path}: light")
-            if not np.linalg.norm(d):
-                raise SceneError(f"{path}: light direction must not be zero")
-            light["direction"] = (d / np.linalg.norm(d)).tolist()
-        if "intensity" in data["light"]:
-            light["intensity"] = _num(data["light"]["intensity"], "intensity", f"{path}: light")
+    effects = _parse_effects(data.get("effects", []), path)
+    ground = _parse_ground(data.get("ground"), path)
+    camera = _parse_camera(data.get("camera", "auto"), path)
+    light = _parse_light(data["light"], path) if "light" in data else SCENE_LIGHT
 
     base = Path(path).parent
     instances: list[SceneInstance] = []
     cache: dict[tuple, Skeleton] = {}
     for k, inst in enumerate(data["instances"]):
-        where = f"{path}: instance {k + 1}"
-        _check_keys(inst, INSTANCE_KEYS, where)
-        if ("grammar" in inst) == ("skeleton" in inst):
-            raise SceneError(f"{where}: give exactly one of 'grammar' or 'skeleton'")
-        inst_seed = inst.get("seed", base_seed + k)
-        if isinstance(inst_seed, bool) or not isinstance(inst_seed, int) or inst_seed < 0:
-            raise SceneError(f"{where}: seed must be a non-negative integer")
-        if seed is not None and "seed" in inst:
-            inst_seed = inst_seed + int(seed)   # an override seed shifts every instance
-        position = _vec3(inst.get("position", [0, 0, 0]), "position", where)
-        rotation = _vec3(inst.get("rotation", [0, 0, 0]), "rotation", where)
-        scale = _num(inst.get("scale", 1.0), "scale", where, positive=True)
-        iterations = inst.get("iterations")
-        if iterations is not None and (isinstance(iterations, bool) or not isinstance(iterations, int)
-                                       or iterations < 0):
-            raise SceneError(f"{where}: iterations must be a non-negative integer")
-        motion = inst.get("motion")
-        if motion is not None:
-            _check_keys(motion, MOTION_KEYS, f"{where}: motion")
-            sway = motion.get("sway")
-            if sway is not None:
-                _check_keys(sway, SWAY_KEYS, f"{where}: motion: sway")
-                motion = {"sway": {key: _num(v, key, f"{where}: motion: sway") for key, v in sway.items()}}
-
-        copies = [(np.zeros(3), 0.0, 0)]
-        if "grid" in inst:
-            g = inst["grid"]
-            _check_keys(g, {"count", "spacing", "jitter"}, f"{where}: grid")
-            count = g.get("count", [1, 1])
-            if (not isinstance(count, list) or len(count) != 2
-                    or not all(isinstance(c, int) and not isinstance(c, bool) and c > 0 for c in count)):
-                raise SceneError(f"{where}: grid count must be two positive integers")
-            spacing = g.get("spacing", [1.0, 1.0])
-            if not isinstance(spacing, list) or len(spacing) != 2:
-                raise SceneError(f"{where}: grid spacing must be two numbers")
-            sx, sz = (_num(s, "grid spacing", where, positive=True) for s in spacing)
-            jitter = _num(g.get("jitter", 0.0), "grid jitter", where)
-            rng = np.random.default_rng(inst_seed)
-            nx, nz = count
-            copies = []
-            for iz in range(nz):
-                for ix in range(nx):
-                    off = np.array([(ix - (nx - 1) / 2) * sx, 0.0, (iz - (nz - 1) / 2) * sz])
-                    if jitter:
-                        off[[0, 2]] += rng.uniform(-jitter, jitter, 2) * np.array([sx, sz])
-                    yaw = float(rng.uniform(0, 360)) if jitter else 0.0
-                    copies.append((off, yaw, len(copies)))
-
-        for off, yaw, c in copies:
-            s = inst_seed + c
-            if "grammar" in inst:
-                gpath = _resolve_grammar(str(inst["grammar"]), base, where)
-                key = (str(gpath), s, iterations)
-                if key not in cache:
-                    try:
-                        cache[key] = grow_grammar(gpath, s, iterations)
-                    except PlantgenError as exc:
-                        raise SceneError(f"{where}: {exc}") from None
-                skel = cache[key]
-                source = str(inst["grammar"])
-            else:
-                skel = _explicit_skeleton(inst["skeleton"], f"{where}: skeleton")
-                source = "skeleton"
-            m = np.eye(4)
-            m[:3, :3] = scale * rotation_matrix(rotation + np.array([0.0, yaw, 0.0]))
-            m[:3, 3] = position + off
-            inst_motion = None
-            if motion:
-                inst_motion = {"sway": dict(motion["sway"])}
-                if "phase" not in inst_motion["sway"]:
-                    inst_motion["sway"]["phase"] = float(np.random.default_rng(s).uniform(0, 2 * np.pi))
-            instances.append(SceneInstance(source, s, m, skel, inst_motion))
+        placement = _parse_placement(inst, k, path, base_seed, seed)
+        instances += _grow_copies(inst, placement, base, grow_grammar, cache)
 
     return Scene(str(data.get("name", Path(path).stem)), str(data.get("description", "")),
-                 tuple(effects), tuple(instances), ground, camera, light, path)
+                 effects, tuple(instances), ground, camera, light, path)
 
 
 def load_scene(path: str | Path, *, seed: int | None = None, grow_grammar=None) -> Scene:
-    from .lsystem.grammar import read_yaml
-    return parse_scene(read_yaml(path), str(path), seed=seed, grow_grammar=grow_grammar)
+    """Read a scene file and :func:`parse_scene` it."""
+    return parse_scene(read_yaml(path, GrammarError), str(path), seed=seed, grow_grammar=grow_grammar)

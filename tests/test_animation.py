@@ -148,7 +148,7 @@ def test_shadowed_frames_change_only_where_the_moving_plant_or_its_shadow_is(gl_
     times = (0.30, 0.32)
     box = anim.bounds(np.linspace(0, 1, 5))
     caster = Raycaster(gl_ctx)
-    to_light = -np.asarray(scene.light["direction"], dtype=np.float64)
+    to_light = -np.asarray(scene.light.travel, dtype=np.float64)
     camera = Camera((4.0, 3.0, 5.0), (0.5, 0.8, 0.0), (0.0, 1.0, 0.0), 40.0, 96, 72)
     frames, movers = [], []
     stream = RecordStream(gl_ctx)

@@ -196,6 +196,6 @@ def test_levels_left_out_by_the_triangle_budget_are_named_when_no_level_matched(
              {"method": "GS+R", "value": 3, "skipped": "17 triangles over the budget of 6"},
              {"method": "GS", "value": 1, "error": 0.0}]
     model = {"gs_matched": True, "gsr_matched": False, "curve": curve}
-    notes = bench._budget_notes(model)
+    notes = bench.budget_notes(model)
     assert notes == ["GS+R m = 3 not built: 17 triangles over the budget of 6 (--max-triangles)"]
-    assert bench._budget_notes({**model, "gsr_matched": True}) == []
+    assert bench.budget_notes({**model, "gsr_matched": True}) == []

@@ -9,7 +9,7 @@ import itertools
 import pytest
 
 from plantgen.errors import PlantgenError
-from plantgen.render.passes import resolve_effects
+from plantgen.scene import resolve_effects
 from plantgen.pipeline import render_file
 from plantgen.render.shaders import build_program
 

@@ -153,10 +153,10 @@ def test_scenes_ask_for_the_papers_effects(name):
     assert scene is not None
     assert "shadows" in scene.effects and "relief" in scene.effects
     assert ("animation" in scene.effects) == (name == "dancing_cacti")
-    assert scene.ground is not None and scene.ground["material"] in {"sand", "grass"}
+    assert scene.ground is not None and scene.ground.material in {"sand", "grass"}
     # the ground holds every instance's footprint
     world = scene.skeleton()
-    half = scene.ground["size"] / 2
+    half = scene.ground.size / 2
     assert np.abs(world.start[:, [0, 2]]).max() < half
 
 
@@ -167,8 +167,8 @@ def test_dancing_cacti_are_a_hundred_different_swaying_cacti():
     counts = np.array([len(i.skeleton) for i in scene.instances])
     assert 20 <= counts.min() and counts.max() <= 24 and len(set(counts.tolist())) > 1
     assert abs(counts.mean() - 21.58) < 1.0
-    phases = [i.motion["sway"]["phase"] for i in scene.instances]
-    assert all(i.motion["sway"]["amplitude"] > 0 for i in scene.instances)
+    phases = [i.motion.phase for i in scene.instances]
+    assert all(i.motion.amplitude > 0 for i in scene.instances)
     assert len(set(phases)) == 100, "every cactus sways on its own phase"
     heights = {round(_axis_height(i.skeleton), 6) for i in scene.instances}
     assert len(heights) > 50, "cacti should differ in shape"

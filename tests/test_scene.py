@@ -55,7 +55,7 @@ def test_grid_copies_are_deterministic_and_jittered(tmp_path):
     np.testing.assert_array_equal(a.skeleton.start, b.skeleton.start)
     roots = a.skeleton.start[a.skeleton.parent < 0]
     assert len(np.unique(np.round(roots, 6), axis=0)) == 6
-    phases = [i.motion["sway"]["phase"] for i in a.scene.instances]
+    phases = [i.motion.phase for i in a.scene.instances]
     assert len(set(phases)) == 6      # each copy sways with its own phase
     c = grow_file(p, seed=9)
     assert not np.array_equal(c.skeleton.start, a.skeleton.start)

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 from .metrics import (ImageError, depth_shading, image_error, matched_level, pareto_front,
                       silhouette_mismatch, ssim)
-from .models import check_models, scene_stage
+from .models import check_models
 from .options import QUICK_MODELS, BenchOptions
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, TABLE1_MODELS
 from .reports import budget_notes, write_outputs
@@ -48,8 +48,4 @@ from .window import eval_camera
 __all__ = ["BenchOptions", "PAPER_TABLE1", "PAPER_MEMORY_RATIO", "TABLE1_MODELS", "QUICK_MODELS",
            "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",
            "ssim", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
-           "matched_level", "pareto_front", "eval_camera", "budget_notes", "scene_stage"]
-
-# TEMPORARY alias: tests/test_bench.py calls ``bench._budget_notes``; rename the call to
-# ``bench.budget_notes`` and drop this line.
-_budget_notes = budget_notes
+           "matched_level", "pareto_front", "eval_camera", "budget_notes"]

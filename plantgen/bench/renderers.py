@@ -14,7 +14,9 @@ import numpy as np
 from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
 from ..render.passes import ShadowSettings
 from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster, RenderResult
+from ..render.raycast import Raycaster
+from ..render.records import RecordStream
+from ..render.result import RenderResult
 from .configs import Config
 from .models import BenchModel
 
@@ -69,6 +71,7 @@ class Renderers:
         self.model = model
         self.max_triangles = max_triangles
         self.raycaster = Raycaster()
+        self.records = RecordStream(self.raycaster.ctx)   # an animation's records
         self.rasters: dict = {}
         self.meshes: dict = {}
         self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
@@ -107,7 +110,7 @@ class Renderers:
         m = self.model
         frusta, records, box, update_ms = m.frusta, None, None, 0.0
         if frame.animated:
-            frusta, records, update = m.animation.upload(self.raycaster.ctx, t, camera.eye)
+            frusta, records, update = m.animation.upload(self.records, t, camera.eye)
             box, update_ms = self.shadow_box, update.total_ms
         res = self.raycaster.render(frusta, camera, cfg.settings, m.names, m.light_dir, frame.ground,
                                     shadows=frame.shadows, shadow_box=box, record_buffer=records)
@@ -130,7 +133,7 @@ class Renderers:
                                           light_dir=m.light_dir, ground=frame.ground,
                                           shadows=frame.shadows,
                                           shadow_box=self.shadow_box if frame.animated else None)
-        upload_ms = res.stats.get("upload_ms", 0.0) if frame.animated else 0.0
+        upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 
     def release_raster(self, key: str) -> None:
@@ -148,8 +151,7 @@ class Renderers:
         for key in list(self.rasters):
             self.release_raster(key)
         self.raycaster.release()
-        if self.model.animation is not None:
-            self.model.animation.release()
+        self.records.release()
 
 
 def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditions: bool,
@@ -168,7 +170,7 @@ def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditio
             continue
         alive.append(c)
         if passes is not None:
-            passes[c.key] = list(res.stats.get("passes", []))
+            passes[c.key] = list(res.stats.passes)
     for i in range(frames):
         t = animation_time(i + 1)
         for c in alive:

@@ -20,8 +20,9 @@ from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..render.context import gl_context, renderer_name
 from ..render.passes import ShadowSettings
-from ..render.raster import gs_buffer_bytes, rc_buffer_bytes
-from ..render.raycast import height_maps_for
+from ..geometry.materials import material_height_maps
+from ..render.raster import gs_buffer_bytes
+from ..render.records import rc_buffer_bytes
 from .configs import (MATCHED_AGAINST, TABLE_METHODS, Config, bench_configs,
                       default_relief_config, find_level)
 from .images import save_images
@@ -161,7 +162,7 @@ def _memory(model: BenchModel, table: _TableChoice, curve) -> dict:
         return None if cfg is None else measured.get(cfg.key, {}).get("gpu_bytes")
 
     rc_bytes = rc_buffer_bytes(len(model.frusta))
-    map_bytes = int(height_maps_for(model.names)[0].nbytes) if model.relief else 0
+    map_bytes = int(material_height_maps(model.names)[0].nbytes) if model.relief else 0
     gs_bytes, gsr_bytes = gpu_bytes(table.configs["gs"]), gpu_bytes(table.configs["gsr"])
     return {"rc_bytes": rc_bytes, "relief_map_bytes": map_bytes, "rcr_bytes": rc_bytes + map_bytes,
             "gs_bytes": gs_bytes, "gsr_bytes": gsr_bytes,

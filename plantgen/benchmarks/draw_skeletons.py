@@ -23,6 +23,7 @@ from PIL import Image, ImageDraw
 
 from .._resources import shipped_grammar
 from ..geometry.skeleton import Skeleton
+from ..geometry.stage import Ground
 from ..pipeline import grow_file
 from .arguments import shipped_model_paths
 
@@ -41,7 +42,7 @@ _PANELS = (("front x-y", 0, 1, False), ("side z-y", 2, 1, False), ("top x-z", 0,
 
 
 def draw_skeleton(skeleton: Skeleton, title: str = "", panel_px: int = 420,
-                  ground: dict | None = None) -> Image.Image:
+                  ground: Ground | None = None) -> Image.Image:
     """Draw three orthographic projections of ``skeleton`` into one RGB image.
 
     Parameters
@@ -49,7 +50,7 @@ def draw_skeleton(skeleton: Skeleton, title: str = "", panel_px: int = 420,
     skeleton : the model, coordinates in metres, y up
     title : text written in the top-left corner
     panel_px : width and height of each panel in pixels
-    ground : optional scene ground ({"size", "height", "material"}), drawn as a line or square
+    ground : optional scene ground, drawn as a line or square
     """
     margin, header, footer = 12, 22, 26
     width = 3 * panel_px + 4 * margin
@@ -123,12 +124,12 @@ def _frustum_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarr
     return np.stack([a + ra * normal, b + rb * normal, b - rb * normal, a - ra * normal], axis=1)
 
 
-def _draw_ground(draw, ground: dict, to_px, ax_u: int, top: bool, box) -> None:
+def _draw_ground(draw, ground: Ground, to_px, ax_u: int, top: bool, box) -> None:
     """The ground as a line (front, side) or square (top), clipped to the panel ``box``."""
-    colour = _GROUND_COLOURS.get(ground["material"], (200, 185, 140))
-    half = ground["size"] / 2
+    colour = _GROUND_COLOURS.get(ground.material, (200, 185, 140))
+    half = ground.size / 2
     ends = np.full((2, 3), 0.0)
-    ends[:, 1] = ground["height"]
+    ends[:, 1] = ground.height
     if top:
         ends[:, 0] = ends[:, 2] = [-half, half]
     else:

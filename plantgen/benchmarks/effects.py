@@ -29,23 +29,23 @@ import sys
 
 import numpy as np
 
-from ..bench import scene_stage
 from ..bench.renderers import time_after_warm_up
-from ..pipeline import grow_file
-from ..render.animate import AnimatedScene
+from ..animation import AnimatedScene
+from ..pipeline import grow_file, stage_model
 from ..render.context import renderer_name
 from ..render.passes import ShadowSettings
 from ..render.raycast import RaycastSettings, Raycaster
+from ..render.records import RecordStream
 from .arguments import image_size
 
 
 def _scene_setup(name, width, height):
     """(animation, frusta at t = 0, camera, light towards, ground) of a shipped scene."""
-    scene = grow_file(name).scene
-    anim = AnimatedScene.from_scene(scene)
+    grown = grow_file(name)
+    anim = AnimatedScene.from_scene(grown.scene)
     frusta = anim.frusta_at(0.0)
-    camera, light, ground = scene_stage(scene, frusta, width, height)
-    return anim, frusta, camera, light, ground
+    stage = stage_model(grown, frusta, width, height)
+    return anim, frusta, stage.camera, stage.light_dir, stage.ground
 
 
 def _median_frame(caster, frusta, camera, settings, light, ground, shadows, frames):
@@ -53,7 +53,7 @@ def _median_frame(caster, frusta, camera, settings, light, ground, shadows, fram
     first, runs = time_after_warm_up(
         lambda: caster.render(frusta, camera, settings, names, light, ground, shadows=shadows), frames)
     return (statistics.median(r.frame_ms for r in runs),
-            statistics.median(r.stats["shadow_ms"] for r in runs), first.stats)
+            statistics.median(r.stats.shadow_ms for r in runs), first.stats)
 
 
 def effect_costs(scenes, width, height, frames):
@@ -72,10 +72,9 @@ def effect_costs(scenes, width, height, frames):
             ms, shadow_ms, stats = _median_frame(caster, frusta, camera, RaycastSettings(relief=relief),
                                                  light, ground, shadows, frames)
             base = ms if base is None else base
-            programs = ", ".join(f"{p}[{'+'.join(d) or '-'}]" for p, d in stats["programs"])
+            programs = ", ".join(f"{p}[{'+'.join(d) or '-'}]" for p, d in stats.programs)
             print(f"{name:<15}{label:<30}{ms:>10.1f}{shadow_ms:>11.1f}{ms - base:>+13.1f}  "
-                  f"{'/'.join(stats['passes'])} | {programs}")
-        anim.release()
+                  f"{'/'.join(stats.passes)} | {programs}")
 
 
 def resolution_costs(name, width, height, frames):
@@ -117,7 +116,6 @@ def caster_difference(name, width, height):
           f"99th percentile {np.percentile(diff, 99) * 100:.2f} cm")
     print(f"  image at {width}x{height}: {np.mean(pixel_diff > 8) * 100:.1f} % of pixels change by "
           f"more than 8/255, mean change {pixel_diff.mean():.2f}/255")
-    anim.release()
 
 
 def animation_update(width, height, frames):
@@ -128,8 +126,9 @@ def animation_update(width, height, frames):
     box = anim.bounds(np.linspace(0, 2, 5))
     times = np.arange(frames + 1) / 24.0
     updates, renders = [], []
+    stream = RecordStream(caster.ctx)
     for i, t in enumerate(times):
-        fr, buf, update = anim.upload(caster.ctx, t, camera.eye)
+        fr, buf, update = anim.upload(stream, t, camera.eye)
         result = caster.render(fr, camera, settings, fr.material_names, light, ground,
                                shadows=shadows, shadow_box=box, record_buffer=buf)
         if i:   # the first frame uploads the static records and compiles shaders
@@ -149,7 +148,7 @@ def animation_update(width, height, frames):
     frame = statistics.median(renders)
     print(f"  render: {frame:.1f} ms per frame; the update is {total / (total + frame) * 100:.1f} % "
           "of update + render")
-    anim.release()
+    stream.release()
 
 
 def main(argv=None) -> int:

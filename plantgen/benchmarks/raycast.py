@@ -23,8 +23,9 @@ from ..bench.renderers import time_after_warm_up
 from ..geometry.frusta import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import renderer_name
-from ..render.raster import rc_buffer_bytes
-from ..render.raycast import RECORD_BYTES, RaycastSettings, Raycaster, auto_camera
+from ..geometry.framing_tmp import auto_camera
+from ..render.raycast import RaycastSettings, Raycaster
+from ..render.records import RECORD_BYTES, rc_buffer_bytes
 from .arguments import image_size, shipped_model_paths
 
 

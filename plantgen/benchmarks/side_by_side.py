@@ -18,8 +18,10 @@ from ..geometry.frusta import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..pipeline import load_skeleton
 from ..render.context import gl_context
-from ..render.raster import RasterRenderer, gs_buffer_bytes, rc_buffer_bytes
-from ..render.raycast import RaycastSettings, Raycaster, frusta_bounds
+from ..geometry.framing_tmp import frusta_bounds
+from ..render.raster import RasterRenderer, gs_buffer_bytes
+from ..render.raycast import RaycastSettings, Raycaster
+from ..render.records import rc_buffer_bytes
 
 __all__ = ["side_by_side", "gallery_camera", "main"]
 

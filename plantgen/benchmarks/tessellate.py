@@ -26,7 +26,8 @@ from ..geometry.frusta import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
 from ..pipeline import load_skeleton
-from ..render.raster import gs_buffer_bytes, rc_buffer_bytes
+from ..render.raster import gs_buffer_bytes
+from ..render.records import rc_buffer_bytes
 
 
 def synthetic_tree(n_segments: int = 16997, chain_length: int = 17, seed: int = 1) -> Skeleton:

@@ -9,21 +9,19 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from . import cli, parse_size
+from .options import size_opt
 
 
-@cli.command()
+@click.command()
 @click.option("--models", metavar="LIST",
               help="Comma-separated grammar/scene names or paths (default: the nine models of "
                    "Table 1; with --quick: saguaro,well).")
-@click.option("--size", callback=parse_size, metavar="WxH",
-              help="Timed frame size (default 1024x768, as the paper; --quick: 256x192).")
+@size_opt(what="Timed frame size", default="1024x768, as the paper; --quick: 256x192")
 @click.option("--frames", type=click.IntRange(1, 10000),
               help="Timed frames of each Table 1 method after a warm-up (default 9; --quick: 2); "
                    "the curves' configurations use at most 5.")
-@click.option("--eval-size", callback=parse_size, metavar="WxH",
-              help="Evaluation window against the float64 reference, at the timed frames' "
-                   "angle per pixel (default 128x96; --quick: 64x48).")
+@size_opt("--eval-size", what="Evaluation window against the float64 reference, at the timed "
+                              "frames' angle per pixel", default="128x96; --quick: 64x48")
 @click.option("--max-triangles", type=click.IntRange(min=1),
               help="Skip GS levels above this many triangles (default 6,000,000).")
 @click.option("--quick", is_flag=True, help="A small run (two tiny models, small images): CI drives it.")
@@ -35,7 +33,13 @@ def bench(models, size, frames, eval_size, max_triangles, quick, images, out_dir
     """Reproduce Table 1 (RC, RC+R, GS, GS+R fps, GS levels matched to the ray caster's
     quality by a computed criterion) and measure error against ms per frame for every
     accuracy knob. Prints the Markdown table; progress goes to stderr."""
-    from ..bench import BenchOptions, check_models, count_steps, run_bench, write_outputs
+    from ..bench import (
+        BenchOptions,
+        check_models,
+        count_steps,
+        run_bench,
+        write_outputs,
+    )
 
     overrides = {}
     if models:

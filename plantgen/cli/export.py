@@ -6,19 +6,19 @@ from pathlib import Path
 
 import click
 
-from . import cli
+from ..pipeline import export_model
+from .options import input_arg, output_opt, quiet_opt, seed_opt
 
 
-@cli.command()
-@click.argument("input", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="Write the mesh here; the suffix picks the format: .glb, .obj, .ply, .stl.")
+@click.command()
+@input_arg
+@output_opt("the mesh, in the format its suffix names: .glb, .obj, .ply or .stl.")
 @click.option("--subdiv", "level", type=click.IntRange(0, 8), default=1, show_default=True,
               help="Subdivision level m: 16·4^m triangles per segment (Table 1).")
 @click.option("--relief/--no-relief", default=False, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
-@click.option("--seed", type=click.IntRange(min=0), help="Override a grammar's or scene's seed.")
-@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@seed_opt
+@quiet_opt
 def export(input: Path, output: Path, level: int, relief: bool, seed, quiet) -> None:
     """Tessellate INPUT (a skeleton .npz, grammar or scene) and write a mesh file.
 
@@ -29,8 +29,6 @@ def export(input: Path, output: Path, level: int, relief: bool, seed, quiet) -> 
     Example:
       plantgen export pine.npz -o pine.glb --subdiv 2 --relief
     """
-    from ..pipeline import export_model
-
     info = export_model(input, output, level=level, relief=relief, seed=seed)
     if quiet:
         return

@@ -2,28 +2,30 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import click
 import numpy as np
 
 from ..errors import PlantgenError
-from . import cli
+from ..lsystem.derive import DEFAULT_MAX_MODULES
+from ..pipeline import grow_file
+from .options import input_arg, iterations_opt, output_opt, quiet_opt, seed_opt
 
 
-@cli.command()
-@click.argument("input", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the skeleton here (.npz). Default: INPUT's name with .npz, in the "
-                   "current directory.")
-@click.option("--seed", type=click.IntRange(min=0), help="Override the file's seed.")
-@click.option("--iterations", type=click.IntRange(min=0), help="Override the grammar's iteration count.")
+@click.command()
+@input_arg
+@output_opt("the skeleton (.npz). Default: INPUT's name with .npz, in the current directory.",
+            required=False)
+@seed_opt
+@iterations_opt
 @click.option("--max-modules", type=click.IntRange(min=1),
               help="Stop with an error if the module string would grow past this many modules "
-                   "(default 5,000,000).")
+                   f"(default {DEFAULT_MAX_MODULES:,}).")
 @click.option("--format", "formats", type=click.Choice(["npz", "swc"]), multiple=True,
               help="Also write these formats (repeatable); swc is written beside the .npz.")
-@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@quiet_opt
 def grow(input: Path, output: Path | None, seed, iterations, max_modules, formats, quiet) -> None:
     """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton.
 
@@ -36,10 +38,6 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, format
     Example:
       plantgen grow grammars/pine.yaml -o pine.npz --seed 3 --format swc
     """
-    import time
-
-    from ..pipeline import grow_file
-
     t_start = time.perf_counter()
 
     def progress(step, n):

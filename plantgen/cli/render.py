@@ -8,14 +8,16 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from ..scene import EFFECTS
-from . import cli, parse_size
+from ..images import ANIMATION_SUFFIXES
+from ..pipeline import render_file
+from ..render.records import RECORD_BYTES
+from ..scene import EFFECTS, parse_effect_list
+from .options import input_arg, iterations_opt, output_opt, seed_opt, size_opt
 
 
-@cli.command()
-@click.argument("input", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="PNG to write (.gif or .webp with --frames).")
+@click.command()
+@input_arg
+@output_opt("the image (.png), or with --frames the animation (.gif or .webp).")
 @click.option("--effects", metavar="LIST",
               help="Comma-separated effects replacing the scene's list, e.g. relief,shadows "
                    f"(known: {', '.join(EFFECTS)}).")
@@ -35,8 +37,7 @@ from . import cli, parse_size
 @click.option("--time", "time_s", type=float, metavar="T",
               help="Seconds: the pose of an animated scene for a still (default 0), or the "
                    "first frame's time.")
-@click.option("--size", callback=parse_size, metavar="WxH",
-              help="Image size in pixels (default: the camera file's, else 1024x768).")
+@size_opt(default="the camera file's, else 1024x768")
 @click.option("--camera", default="auto", show_default=True, metavar="auto|FILE.json",
               help="'auto' frames the model to span most of the viewport (or uses the "
                    "scene's camera); a camera JSON written by --camera-out is taken back.")
@@ -45,8 +46,8 @@ from . import cli, parse_size
 @click.option("--depth-out", type=click.Path(dir_okay=False, path_type=Path),
               help="Write float32 (height, width) distances along each pixel's ray from the "
                    "eye (.npy), inf for a miss; rays go through pixel centres of --camera-out.")
-@click.option("--seed", type=click.IntRange(min=0), help="Override the file's seed.")
-@click.option("--iterations", type=click.IntRange(min=0), help="Override the grammar's iteration count.")
+@seed_opt
+@iterations_opt
 @click.option("--linear-steps", type=click.IntRange(1, 4096), default=32, show_default=True,
               help="Relief: uniform samples through the shell.")
 @click.option("--binary-steps", type=click.IntRange(0, 64), default=6, show_default=True,
@@ -70,13 +71,10 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
           --camera-out cam.json --depth-out depth.npy
       plantgen render grammars/dancing_cacti.yaml --frames 48 --fps 24 -o dance.gif
     """
-    from ..render.passes import parse_effect_list
-    from ..pipeline import render_file
-    from ..render.records import RECORD_BYTES
-
     if camera != "auto" and not Path(camera).is_file():
         raise PlantgenError(f"{camera}: no such camera file (use 'auto' or a camera JSON)")
     chosen = parse_effect_list(effects) if effects is not None else None
+    check_outputs(output, frames, depth_out, camera_out)
     bar = None
 
     def progress(done, total):
@@ -111,3 +109,25 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
         click.echo(f"frame: {report.frame_ms:.1f} ms at {cam.width}x{cam.height}, {mode} "
                    "(median of 3 frames after a warm-up)")
     click.echo("wrote " + ", ".join(str(p) for p in report.written))
+
+
+def check_outputs(output: Path, frames: int | None, depth_out: Path | None,
+                  camera_out: Path | None) -> None:
+    """Each output's suffix against the options that ask for it, before anything is grown
+    or rendered: one line naming the file and the option.
+
+    (``--frames`` >= 1 and ``--fps`` > 0 need no check here: their click ranges refuse
+    other values first.)
+    """
+    if frames is not None:
+        if output.suffix.lower() not in ANIMATION_SUFFIXES:
+            raise PlantgenError(f"{output}: an animation (--frames) must end in .gif or .webp")
+        if depth_out is not None:
+            raise PlantgenError("--depth-out writes one frame: leave out --frames")
+    elif output.suffix.lower() != ".png":
+        raise PlantgenError(f"{output}: the image output must end in .png "
+                            "(or .gif/.webp with --frames)")
+    if depth_out is not None and depth_out.suffix.lower() != ".npy":
+        raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
+    if camera_out is not None and camera_out.suffix.lower() != ".json":
+        raise PlantgenError(f"{camera_out}: the camera output must end in .json")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .skeleton import Skeleton
+from .stage import Sway
 
 __all__ = ["SwayRig", "sway_rig", "pose"]
 
@@ -68,8 +69,8 @@ def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray, motions: list) ->
     ----------
     skeleton : Skeleton in world coordinates
     segment_instance : (n,) int, the instance of each segment
-    motions : per instance, None or ``{"sway": {"amplitude": deg, "frequency": Hz,
-        "phase": rad}}``
+    motions : per instance, None or a :class:`Sway` (or, until callers move, the mapping
+        ``{"sway": {"amplitude": deg, "frequency": Hz, "phase": rad}}``)
     """
     n = len(skeleton)
     inst = np.asarray(segment_instance, dtype=np.int64)
@@ -79,11 +80,12 @@ def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray, motions: list) ->
     freq = np.zeros(k)
     phase = np.zeros(k)
     for i, m in enumerate(motions):
-        if m and "sway" in m:
-            s = m["sway"]
-            amp[i] = np.radians(s.get("amplitude", 0.0))
-            freq[i] = s.get("frequency", 0.0)
-            phase[i] = s.get("phase", 0.0)
+        if isinstance(m, dict):   # the mapping form: temporary, until every caller passes Sway
+            m = Sway(**m["sway"]) if m.get("sway") is not None else None
+        if m is not None:
+            amp[i] = np.radians(m.amplitude)
+            freq[i] = m.frequency
+            phase[i] = m.phase
     # the bending axis is horizontal, turned by the phase so instances sway in different planes
     axes = np.stack([np.cos(phase), np.zeros(k), np.sin(phase)], axis=1)
     max_depth = np.ones(k)

@@ -5,5 +5,5 @@ from .expr import ExprError, compile_expr
 from .grammar import Grammar, GrammarError, load_grammar, parse_grammar
 from .turtle import interpret
 
-__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "derive", "ExprError",
-           "compile_expr", "Grammar", "GrammarError", "load_grammar", "parse_grammar", "interpret"]
+__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ExprError", "Grammar", "GrammarError",
+           "ModuleString", "compile_expr", "derive", "interpret", "load_grammar", "parse_grammar"]

@@ -19,7 +19,7 @@ from ..errors import PlantgenError
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
 
-__all__ = ["ModuleString", "DerivationLimit", "derive", "DEFAULT_MAX_MODULES"]
+__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "derive"]
 
 DEFAULT_MAX_MODULES = 5_000_000
 
@@ -49,7 +49,7 @@ class ModuleString:
         """ABOP text of the first ``limit`` modules, for debugging and tests."""
         out = []
         for s, k, row in zip(self.sym[:limit].tolist(), self.nparam[:limit].tolist(),
-                             self.params[:limit].tolist()):
+                             self.params[:limit].tolist(), strict=True):
             name = self.symbols[s]
             if k:
                 out.append(name + "(" + ",".join(f"{x:.{digits}g}" for x in row[:k]) + ")")
@@ -145,6 +145,11 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
            max_modules: int | None = None, progress=None) -> ModuleString:
     """Rewrite the axiom ``iterations`` times (default: the grammar's).
 
+    Each step has two phases: :func:`_select_rewrites` finds, rule group by rule group in
+    file order, the modules each rule rewrites (predecessor, context, condition, then the
+    stochastic choice among alternatives); :func:`_rewrite` writes the new string, every
+    untouched module copied and every rewritten one replaced by its successor.
+
     Parameters
     ----------
     grammar : Grammar
@@ -156,109 +161,164 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     seed = grammar.seed if seed is None else int(seed)
     limit = max_modules or grammar.max_modules or DEFAULT_MAX_MODULES
     rng = np.random.default_rng(seed)
-    symbols = grammar.symbols
-    codes = {s: i for i, s in enumerate(symbols)}
+    codes = {s: i for i, s in enumerate(grammar.symbols)}
     width = _width(grammar)
-    defines = dict(grammar.defines)
 
-    try:
-        a_sym, a_np, a_par = _instantiate(grammar.axiom, defines, rng, 1, codes, width)
-    except ExprError as exc:
-        raise PlantgenError(f"{grammar.path}: axiom: {exc}") from None
-    sym, nparam, params = a_sym, a_np, a_par[:, 0, :]
-    if len(sym) > limit:
+    string = _axiom_string(grammar, rng, codes, width)
+    if len(string[0]) > limit:
         raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limit} modules")
-
-    # Rules grouped as in the file: (first rule, alternatives, probabilities)
-    groups: list[list[Rule]] = []
-    index: dict[tuple, int] = {}
-    for r in grammar.rules:
-        key = r.group_key
-        if key not in index:
-            index[key] = len(groups)
-            groups.append([])
-        groups[index[key]].append(r)
+    groups = _rule_groups(grammar.rules)
     needs_context = any(r.left or r.right for r in grammar.rules)
 
     for step in range(iterations):
-        n = len(sym)
-        matched = np.zeros(n, dtype=bool)
-        out_len = np.ones(n, dtype=np.int64)
-        applied: list[tuple[np.ndarray, Rule, dict]] = []
-        if needs_context:
-            left_nb, right_nb = _context_neighbours(sym, symbols, grammar.ignore)
-        for alts in groups:
-            r0 = alts[0]
-            code = codes[r0.pred.symbol]
-            idx = np.flatnonzero((sym == code) & (nparam == len(r0.pred.params)) & ~matched)
-            if idx.size == 0:
-                continue
-            env = dict(defines)
-            if r0.left or r0.right:
-                keep_l, left_ctx = _match_context(idx, r0.left, left_nb, reversed, sym, nparam, codes)
-                keep_r, right_ctx = _match_context(idx, r0.right, right_nb, iter, sym, nparam, codes)
-                keep = keep_l & keep_r
-                idx = idx[keep]
-                if idx.size == 0:
-                    continue
-                for ctx_pats, ctx_map in ((r0.left, left_ctx), (r0.right, right_ctx)):
-                    for k, pat in enumerate(ctx_pats):
-                        rows = ctx_map[k][keep]
-                        for c, name in enumerate(pat.params):
-                            env[name] = params[rows, c]
-            for c, name in enumerate(r0.pred.params):
-                env[name] = params[idx, c]
-            try:
-                if r0.condition is not None:
-                    ok = np.broadcast_to(r0.condition(EvalContext(env, rng, idx.size)), idx.shape) != 0
-                    idx = idx[ok]
-                    env = {k: (v[ok] if isinstance(v, np.ndarray) else v) for k, v in env.items()}
-                    if idx.size == 0:
-                        continue
-            except ExprError as exc:
-                raise PlantgenError(f"{grammar.path}: {r0.where()}: {exc}") from None
-            matched[idx] = True
-            if len(alts) == 1:
-                choice = np.zeros(idx.size, dtype=np.int64)
-            else:
-                cum = np.cumsum([r.p for r in alts])
-                choice = np.minimum(np.searchsorted(cum / cum[-1], rng.random(idx.size), side="right"),
-                                    len(alts) - 1)
-            for a, rule in enumerate(alts):
-                sel = choice == a
-                if not sel.any():
-                    continue
-                sub = idx[sel]
-                sub_env = {k: (v[sel] if isinstance(v, np.ndarray) else v) for k, v in env.items()}
-                out_len[sub] = len(rule.successor)
-                applied.append((sub, rule, sub_env))
-
+        neighbours = (_context_neighbours(string[0], grammar.symbols, grammar.ignore)
+                      if needs_context else None)
+        matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
         total = int(out_len.sum())
         if total > limit:
             raise DerivationLimit(
                 f"{grammar.path}: derivation step {step + 1} would make {total:,} modules, "
                 f"over the limit of {limit:,} (lower iterations or raise --max-modules)")
-        offsets = np.cumsum(out_len) - out_len
-        new_sym = np.empty(total, dtype=np.int32)
-        new_np = np.empty(total, dtype=np.int8)
-        new_par = np.zeros((total, width))
-        keep = ~matched
-        new_sym[offsets[keep]] = sym[keep]
-        new_np[offsets[keep]] = nparam[keep]
-        new_par[offsets[keep]] = params[keep]
-        for sub, rule, sub_env in applied:
-            if not rule.successor:
-                continue
-            try:
-                s, k, p = _instantiate(rule.successor, sub_env, rng, sub.size, codes, width)
-            except ExprError as exc:
-                raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
-            pos = offsets[sub][None, :] + np.arange(len(rule.successor))[:, None]  # (L, k)
-            new_sym[pos] = s[:, None]
-            new_np[pos] = k[:, None]
-            new_par[pos] = p
-        sym, nparam, params = new_sym, new_np, new_par
+        string = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
         if progress is not None:
             progress(step + 1, total)
 
-    return ModuleString(sym, nparam, params, symbols)
+    return ModuleString(*string, grammar.symbols)
+
+
+def _axiom_string(grammar: Grammar, rng, codes: dict, width: int):
+    """The axiom as a module string: (sym (n,) int32, nparam (n,) int8, params (n, width))."""
+    try:
+        sym, nparam, params = _instantiate(grammar.axiom, dict(grammar.defines), rng, 1, codes, width)
+    except ExprError as exc:
+        raise PlantgenError(f"{grammar.path}: axiom: {exc}") from None
+    return sym, nparam, params[:, 0, :]
+
+
+def _rule_groups(rules: tuple[Rule, ...]) -> list[list[Rule]]:
+    """Rules grouped by predecessor, context and condition, in the order of the file: each
+    group is one rule or the stochastic alternatives of one."""
+    groups: list[list[Rule]] = []
+    index: dict[tuple, int] = {}
+    for r in rules:
+        key = r.group_key
+        if key not in index:
+            index[key] = len(groups)
+            groups.append([])
+        groups[index[key]].append(r)
+    return groups
+
+
+def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng,
+                     codes: dict):
+    """Which rule rewrites which module in this step (the first matching group wins).
+
+    Returns
+    -------
+    matched : (n,) bool, modules some rule rewrites
+    out_len : (n,) int64, length of each module's replacement (1 when untouched)
+    applied : list of (modules (k,) int, rule, env): each rule with the modules it rewrites
+        and its parameter values there
+    """
+    sym = string[0]
+    n = len(sym)
+    matched = np.zeros(n, dtype=bool)
+    out_len = np.ones(n, dtype=np.int64)
+    applied: list[tuple[np.ndarray, Rule, dict]] = []
+    for alts in groups:
+        found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes)
+        if found is None:
+            continue
+        idx, env = found
+        matched[idx] = True
+        for sub, rule, sub_env in _choose_alternatives(alts, idx, env, rng):
+            out_len[sub] = len(rule.successor)
+            applied.append((sub, rule, sub_env))
+    return matched, out_len, applied
+
+
+def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neighbours, rng,
+                 codes: dict):
+    """The modules not yet matched that ``rule``'s predecessor, context and condition match,
+    with the environment its expressions see there: ((k,) int, env), or None for none."""
+    sym, nparam, params = string
+    code = codes[rule.pred.symbol]
+    idx = np.flatnonzero((sym == code) & (nparam == len(rule.pred.params)) & ~matched)
+    if idx.size == 0:
+        return None
+    env = dict(grammar.defines)
+    if rule.left or rule.right:
+        left_nb, right_nb = neighbours
+        keep_l, left_ctx = _match_context(idx, rule.left, left_nb, reversed, sym, nparam, codes)
+        keep_r, right_ctx = _match_context(idx, rule.right, right_nb, iter, sym, nparam, codes)
+        keep = keep_l & keep_r
+        idx = idx[keep]
+        if idx.size == 0:
+            return None
+        for ctx_pats, ctx_map in ((rule.left, left_ctx), (rule.right, right_ctx)):
+            for k, pat in enumerate(ctx_pats):
+                rows = ctx_map[k][keep]
+                for c, name in enumerate(pat.params):
+                    env[name] = params[rows, c]
+    for c, name in enumerate(rule.pred.params):
+        env[name] = params[idx, c]
+    if rule.condition is not None:
+        try:
+            ok = np.broadcast_to(rule.condition(EvalContext(env, rng, idx.size)), idx.shape) != 0
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
+        idx = idx[ok]
+        env = _rows(env, ok)
+        if idx.size == 0:
+            return None
+    return idx, env
+
+
+def _choose_alternatives(alts: list[Rule], idx: np.ndarray, env: dict, rng):
+    """Split the matched modules ``idx`` among a group's alternatives, drawing one random
+    number per module for a stochastic group: [(modules, rule, env)] for each chosen rule."""
+    if len(alts) == 1:
+        choice = np.zeros(idx.size, dtype=np.int64)
+    else:
+        cum = np.cumsum([r.p for r in alts])
+        choice = np.minimum(np.searchsorted(cum / cum[-1], rng.random(idx.size), side="right"),
+                            len(alts) - 1)
+    chosen = []
+    for a, rule in enumerate(alts):
+        sel = choice == a
+        if sel.any():
+            chosen.append((idx[sel], rule, _rows(env, sel)))
+    return chosen
+
+
+def _rows(env: dict, selection: np.ndarray) -> dict:
+    """``env`` with every per-module array cut to ``selection``; defines stay scalars."""
+    return {k: (v[selection] if isinstance(v, np.ndarray) else v) for k, v in env.items()}
+
+
+def _rewrite(grammar: Grammar, string, matched: np.ndarray, out_len: np.ndarray, applied, rng,
+             codes: dict, width: int):
+    """The next module string: untouched modules copied, each rewritten module replaced by
+    its rule's successor, evaluated in ``applied`` order (rules in file order)."""
+    sym, nparam, params = string
+    total = int(out_len.sum())
+    offsets = np.cumsum(out_len) - out_len
+    new_sym = np.empty(total, dtype=np.int32)
+    new_np = np.empty(total, dtype=np.int8)
+    new_par = np.zeros((total, width))
+    keep = ~matched
+    new_sym[offsets[keep]] = sym[keep]
+    new_np[offsets[keep]] = nparam[keep]
+    new_par[offsets[keep]] = params[keep]
+    for sub, rule, sub_env in applied:
+        if not rule.successor:
+            continue
+        try:
+            s, k, p = _instantiate(rule.successor, sub_env, rng, sub.size, codes, width)
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
+        pos = offsets[sub][None, :] + np.arange(len(rule.successor))[:, None]  # (L, k)
+        new_sym[pos] = s[:, None]
+        new_np[pos] = k[:, None]
+        new_par[pos] = p
+    return new_sym, new_np, new_par

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 
-__all__ = ["ExprError", "Expr", "compile_expr", "FUNCTIONS", "MAX_EXPR_LENGTH", "MAX_DEPTH"]
+__all__ = ["FUNCTIONS", "MAX_DEPTH", "MAX_EXPR_LENGTH", "Expr", "ExprError", "compile_expr"]
 
 MAX_EXPR_LENGTH = 2000
 MAX_DEPTH = 64
@@ -107,7 +107,7 @@ class Expr:
     """A compiled expression. ``expr(ctx)`` gives a float64 array of length ``ctx.n``
     (or a scalar broadcastable to it)."""
 
-    __slots__ = ("source", "names", "_fn", "is_const")
+    __slots__ = ("_fn", "is_const", "names", "source")
 
     def __init__(self, source: str, fn: Callable, names: frozenset[str], is_const: bool):
         self.source = source

@@ -1,6 +1,6 @@
 """Grammar files (YAML) to a validated :class:`Grammar`. Parsing only: no derivation here.
 
-The format is documented in ``docs`` of the README ("Grammar format"). In short::
+The format is documented in the README, section "Grammar format". In short::
 
     name: monopodial
     description: ABOP figure 2.6
@@ -26,15 +26,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import PlantgenError
+from ..files import read_yaml
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
 
-__all__ = [
-    "GrammarError", "Grammar", "Rule", "Pattern", "ModuleTemplate", "TurtleSettings",
-    "TURTLE_ARITY", "load_grammar", "parse_grammar", "parse_modules",
-]
+__all__ = ["TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
+           "TurtleSettings", "load_grammar", "parse_grammar", "parse_modules"]
 
 # Turtle symbols (ABOP meanings) and the parameter counts each accepts.
 TURTLE_ARITY: dict[str, tuple[int, ...]] = {
@@ -447,26 +445,6 @@ def parse_grammar(data, path: str = "<grammar>") -> Grammar:
                    path, tuple(symbols))
 
 
-def read_yaml(path: str | Path):
-    """Read a YAML file, turning every failure into one PlantgenError line."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise GrammarError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise GrammarError(f"{path}: is a directory, not a grammar") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise GrammarError(f"{path}: cannot read ({exc.__class__.__name__})") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" line {mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise GrammarError(f"{path}:{line}: YAML error: {problem}") from None
-
-
 def load_grammar(path: str | Path) -> Grammar:
     """Read and validate a grammar file."""
-    return parse_grammar(read_yaml(path), str(path))
+    return parse_grammar(read_yaml(path, GrammarError), str(path))

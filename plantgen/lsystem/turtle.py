@@ -53,7 +53,30 @@ def _rot(a, b, c, s):
 
 def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
               source: str = "<grammar>") -> Skeleton:
-    """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton."""
+    """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton.
+
+    Three phases: :func:`_turtle_program` keeps the modules the turtle acts on, as action
+    codes with their arguments; :func:`_walk` moves the turtle and collects the segments'
+    columns; the columns become the skeleton's arrays.
+    """
+    columns = _walk(_turtle_program(ms), settings, materials, source)
+    starts, ends, r0s, r1s, parents, conts, mats = columns
+    n = len(ends)
+    return Skeleton(
+        start=np.array(starts, dtype=np.float64).reshape(n, 3),
+        end=np.array(ends, dtype=np.float64).reshape(n, 3),
+        r_start=np.array(r0s, dtype=np.float64),
+        r_end=np.array(r1s, dtype=np.float64),
+        parent=np.array(parents, dtype=np.int64),
+        continues=np.array(conts, dtype=bool),
+        material=np.array(mats, dtype=np.int32),
+        material_names=materials,
+    )
+
+
+def _turtle_program(ms: ModuleString):
+    """The modules the turtle acts on, as four equal lists: action code, parameter count,
+    first and second parameter (0.0 where absent). Other symbols are dropped."""
     table = np.array([_ACTIONS.get(s, _NONE) for s in ms.symbols] or [_NONE], dtype=np.int8)
     action = table[ms.sym]
     keep = np.flatnonzero(action != _NONE)
@@ -61,10 +84,18 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
     nargs = ms.nparam[keep].tolist()
     args = ms.params[keep, 0].tolist()
     args2 = ms.params[keep, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(acts)
+    return acts, nargs, args, args2
 
+
+def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str):
+    """Run the turtle over ``program`` (see :func:`_turtle_program`).
+
+    Returns the segment columns as lists: start and end (x, y, z) tuples, start and end
+    radius, parent index (-1 for a root), continues flag, material index.
+    """
     step, width_factor = settings.step, settings.width_factor
     dc, ds = cos(radians(settings.angle)), sin(radians(settings.angle))
-    tx, ty, tz = settings.tropism_direction
+    tropism = settings.tropism_direction
     e = settings.tropism_strength
     n_mat = len(materials)
 
@@ -78,7 +109,7 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
-    for act, ha, arg, arg2 in zip(acts, nargs, args, args2):
+    for act, ha, arg, arg2 in zip(*program, strict=True):
         if act == _F:
             length = arg if ha else step
             if length == 0.0:
@@ -101,26 +132,19 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
             side = False
             px, py, pz = ex, ey, ez
             if e != 0.0:
-                # bend H towards T by e·|H×T| about the axis H×T
-                ax, ay, az = H[1] * tz - H[2] * ty, H[2] * tx - H[0] * tz, H[0] * ty - H[1] * tx
-                s = sqrt(ax * ax + ay * ay + az * az)
-                if s > 1e-12:
-                    ax, ay, az = ax / s, ay / s, az / s
-                    alpha = e * s
-                    ca, sa = cos(alpha), sin(alpha)
-                    H, L, U = (_rodrigues(v, ax, ay, az, ca, sa) for v in (H, L, U))
-        elif act == _PLUS or act == _MINUS:
+                H, L, U = _bend_towards(H, L, U, tropism, e)
+        elif act == _PLUS or act == _MINUS:  # noqa: SIM109 (a tuple of globals is built per module)
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _MINUS:
                 s = -s
             H, L = _rot(H, L, c, s)
-        elif act == _AND or act == _HAT:
+        elif act == _AND or act == _HAT:  # noqa: SIM109
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _HAT:
                 s = -s
             H, U = _rot(H, (-U[0], -U[1], -U[2]), c, s)
             U = (-U[0], -U[1], -U[2])
-        elif act == _BSL or act == _SL:
+        elif act == _BSL or act == _SL:  # noqa: SIM109
             c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
             if act == _SL:
                 s = -s
@@ -145,29 +169,41 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
             last = -1
             side = False
         elif act == _ROLLH:
-            # L = (V × H)/|V × H| with V = +y; U = H × L
-            lx, lz = H[2], -H[0]
-            s = sqrt(lx * lx + lz * lz)
-            if s > 1e-12:
-                L = (lx / s, 0.0, lz / s)
-                U = (H[1] * L[2] - H[2] * L[1], H[2] * L[0] - H[0] * L[2], H[0] * L[1] - H[1] * L[0])
+            L, U = _level_left(H, L, U)
         elif act == _MAT:
             material = int(arg) if ha else (material + 1) % n_mat
             if not 0 <= material < n_mat:
                 raise PlantgenError(f"{source}: material index {material} outside the grammar's "
                                     f"{n_mat} materials {list(materials)}")
 
-    n = len(ends)
-    return Skeleton(
-        start=np.array(starts, dtype=np.float64).reshape(n, 3),
-        end=np.array(ends, dtype=np.float64).reshape(n, 3),
-        r_start=np.array(r0s, dtype=np.float64),
-        r_end=np.array(r1s, dtype=np.float64),
-        parent=np.array(parents, dtype=np.int64),
-        continues=np.array(conts, dtype=bool),
-        material=np.array(mats, dtype=np.int32),
-        material_names=materials,
-    )
+    return starts, ends, r0s, r1s, parents, conts, mats
+
+
+def _bend_towards(H, L, U, tropism, e):
+    """Tropism after a segment: H, L, U turned together about the axis H × T by
+    ``e·|H × T|`` radians, bending H towards T (ABOP, section 2.3)."""
+    tx, ty, tz = tropism
+    ax, ay, az = H[1] * tz - H[2] * ty, H[2] * tx - H[0] * tz, H[0] * ty - H[1] * tx
+    s = sqrt(ax * ax + ay * ay + az * az)
+    if not s > 1e-12:
+        return H, L, U
+    ax, ay, az = ax / s, ay / s, az / s
+    alpha = e * s
+    ca, sa = cos(alpha), sin(alpha)
+    return (_rodrigues(H, ax, ay, az, ca, sa), _rodrigues(L, ax, ay, az, ca, sa),
+            _rodrigues(U, ax, ay, az, ca, sa))
+
+
+def _level_left(H, L, U):
+    """``$``: roll about H so that L is horizontal: L = (V × H)/|V × H| with V = +y and
+    U = H × L. (L, U) unchanged when H is vertical."""
+    lx, lz = H[2], -H[0]
+    s = sqrt(lx * lx + lz * lz)
+    if not s > 1e-12:
+        return L, U
+    L = (lx / s, 0.0, lz / s)
+    U = (H[1] * L[2] - H[2] * L[1], H[2] * L[0] - H[0] * L[2], H[0] * L[1] - H[1] * L[0])
+    return L, U
 
 
 def _rodrigues(v, ax, ay, az, c, s):

@@ -1,7 +1,7 @@
 """Effects decide programs and passes; the shadow-map pass of one directional light.
 
-A scene lists its effects (:data:`plantgen.scene.EFFECTS`). :func:`resolve_effects` applies
-the command line's overrides; :func:`program_variants` turns the effects into the shader
+A scene lists its effects (:data:`plantgen.scene.EFFECTS`; :func:`plantgen.scene.resolve_effects`
+applies the command line's overrides); :func:`program_variants` turns the effects into the shader
 variants (preprocessor defines) a frame needs, and :func:`frame_passes` into the passes it
 runs. Nothing more is built or run than asked: without ``shadows`` there is no shadow
 pass and no program samples a shadow map; without ``relief`` no relief march is compiled.
@@ -21,34 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
-from ..scene import EFFECTS
 from .context import release_framebuffer
 
-__all__ = ["resolve_effects", "ShadowSettings", "LightWindow", "light_window", "ShadowPass", "box_corners",
-           "program_variants", "frame_passes", "parse_effect_list", "depth_range"]
-
-
-def resolve_effects(scene_effects=(), *, replace=None, add=(), remove=()) -> tuple[str, ...]:
-    """The effects a render simulates: the scene's list, or ``replace``, plus ``add`` minus
-    ``remove`` (in :data:`EFFECTS` order).
-
-    Raises
-    ------
-    PlantgenError
-        An effect name that is not one of :data:`EFFECTS` (one line, naming the known ones).
-    """
-    chosen = list(scene_effects if replace is None else replace)
-    for name in (*chosen, *add, *remove):
-        if name not in EFFECTS:
-            raise PlantgenError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
-    wanted = (set(chosen) | set(add)) - set(remove)
-    return tuple(e for e in EFFECTS if e in wanted)
-
-
-def parse_effect_list(text: str) -> tuple[str, ...]:
-    """``"relief,shadows"`` -> ("relief", "shadows"); empty items are ignored; names checked."""
-    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
-    return resolve_effects(replace=names)
+__all__ = ["ShadowSettings", "LightWindow", "light_window", "ShadowPass", "box_corners",
+           "program_variants", "frame_passes", "depth_range"]
 
 
 @dataclass(frozen=True)
