@@ -345,7 +345,7 @@ def _load_model(name: str, size) -> _Model:
         if not anim.animated:
             anim = None
     else:
-        from .geometry.frusta import skin_skeleton
+        from .geometry.skin import skin_skeleton
 
         anim = None
         frusta = skin_skeleton(grown.skeleton)

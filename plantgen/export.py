@@ -164,9 +164,9 @@ def export_model(input_path: str | os.PathLike, output_path: str | os.PathLike, 
     """
     import time
 
-    from .geometry.frusta import skin_skeleton
     from .geometry.mesh import tessellate, triangle_count
     from .geometry.skeleton import Skeleton
+    from .geometry.skin import skin_skeleton
 
     output_path = Path(output_path)
     _file_type(output_path)  # fail on a bad suffix before any work

@@ -8,10 +8,11 @@ import pytest
 
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from plantgen.geometry.frusta import (PYRAMID_TRIANGLES, Frusta, bounding_pyramids, plane_heights,
-                                      pyramid_volume_ratio, seam_mismatch, skin_skeleton,
-                                      surface_normals, surface_uv, true_normals)
+                                      pyramid_volume_ratio, seam_mismatch, surface_normals,
+                                      surface_uv, true_normals)
 from plantgen.geometry.reference import inside_frusta
 from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import surface_samples
 
 

@@ -418,7 +418,7 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
 def skinned_cases():
     from _geometry_helpers import chain_skeleton, random_tree, y_junction
 
-    from plantgen.geometry.frusta import skin_skeleton
+    from plantgen.geometry.skin import skin_skeleton
 
     cases = {f"bend_{b:g}": chain_skeleton([b, b / 2], lengths=1.0, radii=[0.2, 0.18, 0.15, 0.1])
              for b in (0.0, 1e-8 * 180 / np.pi, 45.0, 90.0, 135.0, 179.0)}
@@ -512,7 +512,7 @@ def test_agrees_with_the_float64_reference(gl_ctx, caster, skinned, name):
 def relief_cases():
     from _geometry_helpers import chain_skeleton, y_junction
 
-    from plantgen.geometry.frusta import skin_skeleton
+    from plantgen.geometry.skin import skin_skeleton
 
     return {"bark_chain": skin_skeleton(chain_skeleton([30.0, 40.0], radii=[0.3, 0.25, 0.2, 0.15])),
             "y_junction": skin_skeleton(y_junction(40.0))}

@@ -11,9 +11,10 @@ from hypothesis import strategies as st
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from plantgen.geometry import relief
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import Frusta, skin_skeleton, surface_uv, true_normals
+from plantgen.geometry.frusta import Frusta, surface_uv, true_normals
 from plantgen.geometry.reference import (inside_frusta, intersect_frusta, march_rays,
                                          render_reference, shade_hits)
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import hit_residuals, medial_axis_rays, surface_samples
 
 

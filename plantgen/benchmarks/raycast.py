@@ -35,7 +35,7 @@ def measure(path, width: int, height: int, frames: int, linear_steps: int, binar
     """Median frame times (ms) of RC and RC+R for one model, and its record sizes."""
     import numpy as np  # noqa: F401  (numpy is imported by everything below anyway)
 
-    from ..geometry.frusta import skin_skeleton
+    from ..geometry.skin import skin_skeleton
     from ..pipeline import load_skeleton
     from ..render.raycast import RECORD_BYTES, RaycastSettings, Raycaster, auto_camera
 

@@ -83,7 +83,7 @@ def main(argv=None) -> None:
     from ..render.raster import gs_buffer_bytes, rc_buffer_bytes
 
     from .._resources import shipped_grammar
-    from ..geometry.frusta import skin_skeleton
+    from ..geometry.skin import skin_skeleton
 
     grammar = args.grammar
     if grammar is None and not args.synthetic:

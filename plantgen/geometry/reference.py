@@ -11,7 +11,8 @@ One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
    everything is cast to ``dtype`` (float32 emulates the GPU).
 2. E = O - C1. With ``recenter``, E moves to the ray point nearest the axis segment:
    with b = D·a, d = D·E, e = a·E, the axis point s = clamp(e + b·(b·e - d)/(D·D - b²),
-   0, h) (s = h/2 when D·D - b² <= 1e-6·D·D, a ray along the axis), t0 = (s·b - d)/D·D,
+   0, h) (s = h/2 when D·D - b² <= ``tol.recenter_parallel``·D·D, a ray along the axis),
+   t0 = (s·b - d)/D·D,
    E += t0·D. The quadratic then sees numbers of the size of the ray's distance from the
    axis (about r near a hit), not of the eye distance.
 3. Cone r(y) = r1 + k·y, y = X·a: with e_y = E·a, d_y = D·a, E⊥ = E - e_y·a, D⊥ = D - d_y·a,
@@ -28,8 +29,8 @@ Relief (§3, float64 only): the outer cone r + shell bounds a height field
 r(y) + shell·h(u, v), (u, v) of the concentric cone through the point (so the shell
 shares the surface's (u, v)); w of (11)–(12) is (ρ - r(y))/shell. The ray interval
 inside the row's planes and bounding sphere is sampled densely (``relief_samples``)
-and the first inside sample is refined by bisection to below 1e-9 (relative to the
-row's size).
+and the first inside sample is refined by bisection to below ``tol.relief_bisection``
+(relative to the row's size).
 """
 
 from __future__ import annotations
@@ -38,9 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
-from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals
+from ..tolerances import tol
 from . import relief as relief_module
+from .camera import Camera
+from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals, surface_uv
 
 __all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
            "inside_frusta", "march_rays"]
@@ -139,7 +141,7 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
         d_ = _dot(D, E)
         e_ = _dot(a, E)
         denom = dd - b_ * b_
-        par = denom <= dt.type(1e-6) * dd
+        par = denom <= dt.type(tol.recenter_parallel) * dd
         with np.errstate(invalid="ignore", divide="ignore"):
             s_axis = e_ + b_ * (b_ * e_ - d_) / np.where(par, dd, denom)
         s_axis = np.where(par, h * dt.type(0.5), np.clip(s_axis, dt.type(0), h))
@@ -207,8 +209,6 @@ def _inside_relief(frusta, rows, points, height):
     lo, hi = frusta.plane_lo[rows], frusta.plane_hi[rows]
     between = (_dot(lo[:, :3], points) - lo[:, 3] >= 0) & (_dot(hi[:, :3], points) - hi[:, 3] <= 0)
     shell = frusta.shell[rows]
-    from .frusta import surface_uv
-
     u, v = surface_uv(frusta, rows, points)
     w = height(rows, u, v) if height is not None else np.zeros(len(rows))
     top = r_in + shell * w
@@ -284,7 +284,7 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
         ins = _inside_relief(frusta, rows_s, O_s + mid[:, None] * D_s, height)
         t_in = np.where(need & ins, mid, t_in)
         t_out = np.where(need & ~ins, mid, t_out)
-        need &= (t_in - t_out) > 1e-10 * scale
+        need &= (t_in - t_out) > tol.relief_bisection * scale
     t_hit[hit_idx] = t_in
     return t_hit
 
@@ -312,7 +312,8 @@ def _reduce_nearest(n_rays, ray_idx, rows, t, kind, best_t, best_row, best_kind)
 def _boxes(frusta, with_shell):
     corners = bounding_pyramids(frusta, shell=with_shell)
     lo, hi = corners.min(axis=1), corners.max(axis=1)
-    pad = 1e-9 * np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1))[:, None] + 1e-12
+    pad = tol.box_pad * np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1))[:, None] \
+        + tol.box_pad_floor
     return lo - pad, hi + pad, corners
 
 
@@ -454,7 +455,7 @@ def render_reference(frusta: Frusta, camera: Camera, *, relief=None, dtype=np.fl
         tan_y = np.tan(np.radians(camera.fov_y) / 2)
         tan_x = tan_y * camera.aspect
         scale = np.abs(rel).max(axis=(1, 2))
-        behind = (z <= 1e-9 * np.maximum(scale, 1e-300)[:, None]).any(axis=1)
+        behind = (z <= tol.behind_eye * np.maximum(scale, tol.tiny)[:, None]).any(axis=1)
         zc = np.where(z > 0, z, 1.0)
         px = ((rel @ right) / zc / tan_x + 1) / 2 * W - 0.5
         py = (1 - (rel @ upv) / zc / tan_y) / 2 * H - 0.5

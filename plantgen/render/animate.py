@@ -22,9 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.frusta import ROW_FIELDS, Frusta, skin_skeleton
+from ..geometry.frusta import ROW_FIELDS, Frusta
 from ..geometry.motion import pose, sway_rig
 from ..geometry.skeleton import Skeleton
+from ..geometry.skin import skin_skeleton
+from ..geometry.stage import Sway
 from .raycast import RECORD_BYTES, frusta_bounds, pack_records
 
 __all__ = ["AnimatedScene", "FrameUpdate", "skeleton_rows", "concatenate_frusta",
@@ -102,7 +104,7 @@ class AnimatedScene:
         self.static_segments = np.flatnonzero(~moving)
         self._moving_skeleton = skeleton_rows(self.skeleton, self.moving_segments)
         self._rig = sway_rig(self._moving_skeleton, self.segment_instance[self.moving_segments],
-                             self.motions)
+                             [Sway(**m["sway"]) if m and "sway" in m else None for m in self.motions])
         self._static = self._skin(skeleton_rows(self.skeleton, self.static_segments))
         self._static_records = None
         self._buffer = None

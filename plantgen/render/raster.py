@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
+from ..geometry.mesh import TessellatedMesh
 from .context import gl_context
 from .passes import ShadowSettings, box_corners, frame_passes
 from .raycast import (MAX_MATERIALS, RECORD_BYTES, OffscreenRenderer, RenderResult, _ground_quad,
@@ -32,7 +32,7 @@ def row_data(frusta) -> np.ndarray:
     into the per-row v of (7) in the fragment shader.
     """
     out = np.zeros((len(frusta.length), 2), dtype=np.float32)
-    out[:, 0] = chain_position(continuing_parent_rows(frusta))
+    out[:, 0] = frusta.chain_position
     out[:, 1] = frusta.material
     return out
 
@@ -283,7 +283,7 @@ def main(argv=None) -> None:
 
     from PIL import Image
 
-    from ..geometry.frusta import skin_skeleton
+    from ..geometry.skin import skin_skeleton
     from ..pipeline import load_skeleton
     from .raycast import frusta_bounds
 

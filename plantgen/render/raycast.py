@@ -24,7 +24,6 @@ from ..errors import PlantgenError
 from ..geometry.camera import Camera
 from ..geometry.frusta import PYRAMID_CORNERS as _FRUSTA_CORNERS
 from ..geometry.frusta import PYRAMID_TRIANGLES as _FRUSTA_TRIANGLES
-from ..geometry.mesh import continuing_parent_rows
 from .context import gl_context, release_framebuffer
 from .passes import (ShadowPass, ShadowSettings, box_corners, frame_passes, light_window,
                      program_variants)
@@ -182,7 +181,7 @@ def pack_records(frusta, origin) -> np.ndarray:
     rec[:, 20] = frusta.u_offset
     rec[:, 21] = frusta.twist
     rec[:, 22] = frusta.shell
-    parent_row = continuing_parent_rows(frusta) if n else np.zeros(0, np.int64)
+    parent_row = frusta.parent_row
     open_lo = parent_row < 0
     open_hi = np.ones(n, dtype=bool)
     open_hi[parent_row[parent_row >= 0]] = False
