@@ -14,6 +14,7 @@
 #define CONE_GLSL
 
 const float TWO_PI = 6.283185307179586;
+const float RAY_T_MAX = 1e30;   // beyond every hit: the open end of a ray's interval
 
 // One segment, unpacked from its record (see plantgen/render/raycast.py, pack_records).
 struct Frustum {
@@ -33,7 +34,24 @@ struct Frustum {
     int material;   // material index
 };
 
-float frustum_slope(Frustum f) { return (f.r2 - f.r1) / f.h; }
+// k = (r2 - r1)/h, the slope of a cone with radii r1, r2 an axis length h apart
+// (plantgen.geometry.frusta.cone_slope).
+float cone_slope(float r1, float r2, float h) { return (r2 - r1) / h; }
+
+float frustum_slope(Frustum f) { return cone_slope(f.r1, f.r2, f.h); }
+
+// Axial height y where the generator C1 + y*axis + (r1 + k*y)*e of a cone meets the plane
+// n.x = d, with gap = d - n.C1, n_axis = n.axis, n_radial = n.e: the GLSL twin of
+// plantgen.geometry.frusta.plane_height, y = (gap - r1*n_radial) / (n_axis + k*n_radial).
+// `rise` is the denominator, the generator's approach to the plane (0: parallel to it).
+// With min_rise > 0 the divisor keeps rise's sign but at least min_rise in size (a finite
+// height for a generator parallel to the plane).
+float plane_height(float gap, float n_axis, float n_radial, float r1, float k, float min_rise,
+                   out float rise) {
+    rise = n_axis + k * n_radial;
+    float above = gap - r1 * n_radial;
+    return min_rise > 0.0 ? above / max(abs(rise), min_rise) * sign(rise) : above / rise;
+}
 
 // Radius of the cone grown by `dr` at axial coordinate y (negative on the mirror nappe).
 float frustum_radius(Frustum f, float dr, float y) { return f.r1 + dr + frustum_slope(f) * y; }
@@ -82,8 +100,7 @@ bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_
     float disc = b * b - a * c;
 
     // Up to two connected pieces of {g <= 0} along the ray; each lies in one nappe.
-    const float BIG = 1e30;
-    float lo0 = -BIG, hi0 = BIG, lo1 = BIG, hi1 = -BIG;    // piece 1 empty by default
+    float lo0 = -RAY_T_MAX, hi0 = RAY_T_MAX, lo1 = RAY_T_MAX, hi1 = -RAY_T_MAX;   // piece 1 empty
     if (a == 0.0) {                                         // parallel to a generator
         if (b == 0.0) { if (c > 0.0) return false; }
         else if (b > 0.0) hi0 = -0.5 * c / b; else lo0 = -0.5 * c / b;
@@ -96,7 +113,7 @@ bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_
         float tb = (q != 0.0) ? c / q : ta;
         float t_lo = min(ta, tb), t_hi = max(ta, tb);
         if (a > 0.0) { lo0 = t_lo; hi0 = t_hi; }
-        else { hi0 = t_lo; lo1 = t_hi; hi1 = BIG; }
+        else { hi0 = t_lo; lo1 = t_hi; hi1 = RAY_T_MAX; }
     }
     for (int piece = 0; piece < 2; ++piece) {
         float t0 = piece == 0 ? lo0 : lo1;
@@ -121,7 +138,7 @@ float recenter_shift(Frustum f, vec3 o, vec3 d) {
     vec3 E = o - f.base;
     float b = dot(d, f.axis), de = dot(d, E), e = dot(f.axis, E), dd = dot(d, d);
     float den = dd - b * b;
-    float s = den > 1e-6 * dd ? clamp(e + b * (b * e - de) / den, 0.0, f.h) : 0.5 * f.h;
+    float s = den > TOL_RECENTER_PARALLEL * dd ? clamp(e + b * (b * e - de) / den, 0.0, f.h) : 0.5 * f.h;
     return (s * b - de) / dd;
 }
 

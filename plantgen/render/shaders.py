@@ -9,7 +9,8 @@ A program file holds every stage, each behind a guard::
     #endif
 
 :func:`shader_source` assembles the text for one stage: the ``#version`` line, the stage
-macro, the caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHADOWS``),
+macro, the tolerances (``plantgen.tolerances.tol.glsl_defines()``: ``TOL_*`` macros), the
+caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHADOWS``),
 then the file with every ``#include "other.glsl"`` replaced by that file's text (looked up
 in :func:`plantgen._resources.shaders_dir`, each file included at most once per stage).
 ``#line`` directives keep compiler messages pointing at the right file and line; the
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Mapping
 
 from .._resources import shaders_dir
+from ..tolerances import tol
 
 __all__ = ["ShaderError", "shader_source", "build_program", "program_stages", "GLSL_VERSION"]
 
@@ -74,7 +76,8 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
         raise ShaderError(f"unknown shader stage {stage!r}")
     directory = Path(directory) if directory is not None else shaders_dir()
     files: list[str] = []
-    out = [GLSL_VERSION, f"#define {stage}", *_define_lines(defines)]
+    out = [GLSL_VERSION, f"#define {stage}", *_define_lines(tol.glsl_defines()),
+           *_define_lines(defines)]
 
     def expand(fname: str, chain: tuple[str, ...]) -> None:
         if fname in chain:
