@@ -43,6 +43,7 @@ from ..tolerances import tol
 from . import relief as relief_module
 from .camera import Camera
 from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals, surface_uv
+from .vec import dot
 
 __all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
            "inside_frusta", "march_rays"]
@@ -114,6 +115,7 @@ class _Upload:
         self.k = cast(frusta.slope)
         self.n_lo = cast(frusta.plane_lo[:, :3])
         self.n_hi = cast(frusta.plane_hi[:, :3])
+        # plane offsets relative to C1 formed as the GPU records form them (pack_records)
         self.d_lo = cast(frusta.plane_lo[:, 3] - np.einsum("ij,ij->i", frusta.plane_lo[:, :3], frusta.base))
         self.d_hi = cast(frusta.plane_hi[:, 3] - np.einsum("ij,ij->i", frusta.plane_hi[:, :3], frusta.base))
         self.open_lo = frusta.open_lo
@@ -121,8 +123,92 @@ class _Upload:
         self.origin = o
 
 
-def _dot(a, b):
-    return np.einsum("...i,...i->...", a, b)
+# ------------------------------------------------------------------------------ the cone quadratic
+# Twins of cone_quadratic, solve_quadratic and difference_of_products in shaders/cone.glsl,
+# line for line; numpy has no fma, so fused_multiply_add builds it from error-free steps.
+def _two_product(a, b):
+    """p = a·b rounded and e with p + e = a·b exactly (Dekker's product with Veltkamp's
+    split; float32 or float64 arrays)."""
+    dtype = np.result_type(a, b)
+    split = dtype.type(2.0 ** ((np.finfo(dtype).nmant + 2) // 2) + 1)
+
+    def halves(x):
+        c = split * x
+        high = c - (c - x)
+        return high, x - high
+
+    p = a * b
+    (a_hi, a_lo), (b_hi, b_lo) = halves(a), halves(b)
+    return p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
+
+
+def fused_multiply_add(a, b, c):
+    """(...) a·b + c rounded once (to within an ulp), as GLSL's ``fma``: the product's
+    rounding error and the sum's (Knuth's two-sum) are added back before the last rounding."""
+    p, p_err = _two_product(a, b)
+    s = p + c
+    back = s - p
+    s_err = (p - (s - back)) + (c - back)
+    return s + (s_err + p_err)
+
+
+def difference_of_products(a, b, c, d):
+    """(...) a·b - c·d with the rounding error of c·d recovered (Kahan's algorithm, pbrt-v4's
+    ``DifferenceOfProducts``): within about an ulp even where a·b and c·d nearly cancel."""
+    cd = c * d
+    err = fused_multiply_add(-c, d, cd)          # cd - c·d, exactly
+    dop = fused_multiply_add(a, b, -cd)
+    return dop + err
+
+
+def solve_quadratic(a, b, c):
+    """The roots of a·t² + 2b·t + c = 0 (half-b form), as pbrt-v4's ``Quadratic``.
+
+    The discriminant b² - a·c is a difference of products; q = -(b + copysign(√disc, b));
+    t_q = q/a and t_c = c/q (neither cancels; where a = 0, a line, c/q = -c/(2b) is its one
+    root). All arrays (...) of one float dtype.
+
+    Returns
+    -------
+    disc : (...) the discriminant (no real root where negative)
+    t_q : (...) q/a, inf where a = 0
+    t_c : (...) c/q, t_q where q = 0 (b = 0 and a·c = 0)
+    """
+    disc = difference_of_products(b, b, a, c)
+    root = np.sqrt(np.maximum(disc, disc.dtype.type(0)))
+    q = -(b + np.where(b >= 0, root, -root))     # copysign(root, b)
+    t_q = np.where(a != 0, q / np.where(a != 0, a, 1), np.inf)
+    t_c = np.where(q != 0, c / np.where(q != 0, q, 1), t_q)
+    return disc, t_q, t_c
+
+
+def cone_quadratic(e, d, axis, r1, slope, dr=0.0):
+    """The cone r(y) = r1 + dr + k·y along rays e + t·d (e relative to the base C1):
+    g(t) = a·t² + 2b·t + c <= 0 inside the double cone.
+
+    With e_y = e·axis, d_y = d·axis, the parts E, D perpendicular to the axis and the radius
+    at e's height r0 = r1 + dr + k·e_y: a = D·D - (k·d_y)², b = E·D - k·d_y·r0,
+    c = E·E - r0².
+
+    Parameters
+    ----------
+    e, d : (m, 3) ray origins (relative to C1) and directions
+    axis : (m, 3) unit cone axes
+    r1, slope : (m,) radius at C1 and slope k
+    dr : scalar or (m,) growth of the radius (a concentric cone)
+
+    Returns
+    -------
+    a, b, c, e_y, d_y : (m,) each, ``e``'s dtype
+    """
+    e_y, d_y = dot(e, axis), dot(d, axis)
+    e_perp = e - e_y[:, None] * axis
+    d_perp = d - d_y[:, None] * axis
+    r0 = r1 + dr + slope * e_y
+    a = dot(d_perp, d_perp) - slope * slope * d_y * d_y
+    b = dot(e_perp, d_perp) - slope * d_y * r0
+    c = dot(e_perp, e_perp) - r0 * r0
+    return a, b, c, e_y, d_y
 
 
 def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
@@ -134,12 +220,12 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
     c1, a, h, r1, k = up.c1[rows], up.a[rows], up.h[rows], up.r1[rows], up.k[rows]
     n_lo, n_hi, d_lo, d_hi = up.n_lo[rows], up.n_hi[rows], up.d_lo[rows], up.d_hi[rows]
     E = O - c1
-    dd = _dot(D, D)
+    dd = dot(D, D)
     if recenter:
         # the ray point nearest the axis segment {s·a, 0 <= s <= h}
-        b_ = _dot(D, a)
-        d_ = _dot(D, E)
-        e_ = _dot(a, E)
+        b_ = dot(D, a)
+        d_ = dot(D, E)
+        e_ = dot(a, E)
         denom = dd - b_ * b_
         par = denom <= dt.type(tol.recenter_parallel) * dd
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -149,28 +235,18 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
         E = E + t0[:, None] * D
     else:
         t0 = np.zeros(len(rows), dtype=dt)
-    ey, dy = _dot(E, a), _dot(D, a)
-    Ep = E - ey[:, None] * a
-    Dp = D - dy[:, None] * a
-    R0 = r1 + k * ey
-    A = _dot(Dp, Dp) - k * k * dy * dy
-    B = _dot(Ep, Dp) - k * dy * R0
-    C = _dot(Ep, Ep) - R0 * R0
+    A, B, C, _, _ = cone_quadratic(E, D, a, r1, k)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        disc = B * B - A * C
-        sq = np.sqrt(np.maximum(disc, dt.type(0)))
-        q = -(B + np.copysign(sq, B))
-        t1 = np.where(A != 0, q / np.where(A != 0, A, 1), np.inf)
-        t2 = np.where(q != 0, C / np.where(q != 0, q, 1), np.inf)
+        disc, t1, t2 = solve_quadratic(A, B, C)
         has_root = disc >= 0
         best = np.full(len(rows), np.inf)
         kind = np.zeros(len(rows), dtype=np.int8)
         tmin_local = (t_min - t0.astype(np.float64))
         for t in (t1, t2):
             X = E + t[:, None] * D
-            y = _dot(X, a)
+            y = dot(X, a)
             ok = has_root & np.isfinite(t) & (r1 + k * y >= 0)
-            ok &= (_dot(n_lo, X) - d_lo >= 0) & (_dot(n_hi, X) - d_hi <= 0)
+            ok &= (dot(n_lo, X) - d_lo >= 0) & (dot(n_hi, X) - d_hi <= 0)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
             better = ok & (tt < best)
@@ -180,14 +256,14 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
                 (2, n_hi, d_hi, n_lo, d_lo, 1, up.open_hi[rows])):
             if not open_.any():
                 continue
-            den = _dot(n_c, D)
-            t = (d_c - _dot(n_c, E)) / np.where(den != 0, den, 1)
+            den = dot(n_c, D)
+            t = (d_c - dot(n_c, E)) / np.where(den != 0, den, 1)
             X = E + t[:, None] * D
-            y = _dot(X, a)
+            y = dot(X, a)
             rr = r1 + k * y
             perp = X - y[:, None] * a
-            ok = open_ & (den != 0) & np.isfinite(t) & (rr >= 0) & (_dot(perp, perp) <= rr * rr)
-            other = _dot(n_o, X) - d_o
+            ok = open_ & (den != 0) & np.isfinite(t) & (rr >= 0) & (dot(perp, perp) <= rr * rr)
+            other = dot(n_o, X) - d_o
             ok &= (other <= 0) if sign_o < 0 else (other >= 0)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
@@ -203,11 +279,11 @@ def _inside_relief(frusta, rows, points, height):
     """(m,) bool: point inside row's relief solid (between planes, ρ <= r(y) + shell·h)."""
     rel = points - frusta.base[rows]
     a = frusta.axis[rows]
-    y = _dot(rel, a)
+    y = dot(rel, a)
     rho = np.linalg.norm(rel - y[:, None] * a, axis=1)
     r_in = frusta.r1[rows] + frusta.slope[rows] * y
     lo, hi = frusta.plane_lo[rows], frusta.plane_hi[rows]
-    between = (_dot(lo[:, :3], points) - lo[:, 3] >= 0) & (_dot(hi[:, :3], points) - hi[:, 3] <= 0)
+    between = (dot(lo[:, :3], points) - lo[:, 3] >= 0) & (dot(hi[:, :3], points) - hi[:, 3] <= 0)
     shell = frusta.shell[rows]
     u, v = surface_uv(frusta, rows, points)
     w = height(rows, u, v) if height is not None else np.zeros(len(rows))
@@ -228,22 +304,18 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
     with np.errstate(divide="ignore", invalid="ignore"):
         for plane, sign in ((lo, 1.0), (hi, -1.0)):
             # sign·(n·(O + tD) - d) >= 0
-            s0 = sign * (_dot(plane[:, :3], O) - plane[:, 3])
-            s1 = sign * _dot(plane[:, :3], D)
+            s0 = sign * (dot(plane[:, :3], O) - plane[:, 3])
+            s1 = sign * dot(plane[:, :3], D)
             tc = -s0 / s1
             ta = np.where(s1 > 0, np.maximum(ta, tc), ta)
             tb = np.where(s1 < 0, np.minimum(tb, tc), tb)
             dead = (s1 == 0) & (s0 < 0)
             ta = np.where(dead, np.inf, ta)
         centre, radius = spheres[0][rows], spheres[1][rows]
-        dd = _dot(D, D)
         oc = O - centre
-        b = _dot(oc, D) / dd
-        c = (_dot(oc, oc) - radius * radius) / dd
-        disc = b * b - c
-        sq = np.sqrt(np.maximum(disc, 0))
-        ta = np.maximum(ta, np.where(disc >= 0, -b - sq, np.inf))
-        tb = np.minimum(tb, np.where(disc >= 0, -b + sq, -np.inf))
+        disc, t_q, t_c = solve_quadratic(dot(D, D), dot(oc, D), dot(oc, oc) - radius * radius)
+        ta = np.maximum(ta, np.where(disc >= 0, np.minimum(t_q, t_c), np.inf))
+        tb = np.minimum(tb, np.where(disc >= 0, np.maximum(t_q, t_c), -np.inf))
     ta = np.maximum(ta, t_min)
     live = ta < tb
     t_hit = np.full(m, np.inf)
@@ -309,6 +381,12 @@ def _reduce_nearest(n_rays, ray_idx, rows, t, kind, best_t, best_row, best_kind)
     best_kind[r] = kind[pick][better]
 
 
+def _bounding_spheres(corners):
+    """Centres (n, 3) and radii (n,) of spheres around bounding pyramids' corners (n, 8, 3)."""
+    centre = corners.mean(axis=1)
+    return centre, np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1)
+
+
 def _boxes(frusta, with_shell):
     corners = bounding_pyramids(frusta, shell=with_shell)
     lo, hi = corners.min(axis=1), corners.max(axis=1)
@@ -364,7 +442,7 @@ def intersect_frusta(frusta: Frusta, origins, dirs, *, relief=None, dtype=np.flo
     height = _resolve_relief(frusta, relief)
     up = _Upload(frusta, dtype, origin)
     box_lo, box_hi, corners = _boxes(frusta, height is not None)
-    spheres = (corners.mean(axis=1), np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=2).max(axis=1))
+    spheres = _bounding_spheres(corners)
     best_t = np.full(n_rays, np.inf)
     best_row = np.full(n_rays, -1, dtype=np.int64)
     best_kind = np.zeros(n_rays, dtype=np.int8)
@@ -414,8 +492,8 @@ def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True):
         uu, vv, nn = shade_rows_uv_normals(frusta, rows, pts, interpolated)
         cap = hits.cap.ravel()[hit]
         if cap.any():
-            lo_side = np.abs(_dot(frusta.plane_lo[rows[cap], :3], pts[cap]) - frusta.plane_lo[rows[cap], 3]) <= \
-                np.abs(_dot(frusta.plane_hi[rows[cap], :3], pts[cap]) - frusta.plane_hi[rows[cap], 3])
+            lo_side = np.abs(dot(frusta.plane_lo[rows[cap], :3], pts[cap]) - frusta.plane_lo[rows[cap], 3]) <= \
+                np.abs(dot(frusta.plane_hi[rows[cap], :3], pts[cap]) - frusta.plane_hi[rows[cap], 3])
             nn[cap] = np.where(lo_side[:, None], -frusta.plane_lo[rows[cap], :3], frusta.plane_hi[rows[cap], :3])
         u[hit], v[hit], nrm[hit] = uu, vv, nn
     return u.reshape(shape), v.reshape(shape), nrm.reshape(shape + (3,))
@@ -447,8 +525,7 @@ def render_reference(frusta: Frusta, camera: Camera, *, relief=None, dtype=np.fl
     best_kind = np.zeros(H * W, dtype=np.int8)
     if n:
         corners = bounding_pyramids(frusta, shell=height is not None)
-        spheres = (corners.mean(axis=1),
-                   np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=2).max(axis=1))
+        spheres = _bounding_spheres(corners)
         right, upv, fwd = camera.basis()
         rel = corners - eye
         z = rel @ fwd
@@ -523,11 +600,11 @@ def inside_frusta(frusta: Frusta, points, rows=None) -> np.ndarray:
         r = rows[s:s + 256]
         rel = pts[:, None, :] - frusta.base[r][None]
         a = frusta.axis[r][None]
-        y = _dot(rel, a)
-        rad2 = _dot(rel, rel) - y * y
+        y = dot(rel, a)
+        rad2 = dot(rel, rel) - y * y
         rr = frusta.r1[r][None] + frusta.slope[r][None] * y
-        lo = _dot(pts[:, None, :], frusta.plane_lo[r][None, :, :3]) - frusta.plane_lo[r][None, :, 3]
-        hi = _dot(pts[:, None, :], frusta.plane_hi[r][None, :, :3]) - frusta.plane_hi[r][None, :, 3]
+        lo = dot(pts[:, None, :], frusta.plane_lo[r][None, :, :3]) - frusta.plane_lo[r][None, :, 3]
+        hi = dot(pts[:, None, :], frusta.plane_hi[r][None, :, :3]) - frusta.plane_hi[r][None, :, 3]
         out |= ((rr >= 0) & (rad2 <= rr * rr) & (lo >= 0) & (hi <= 0)).any(axis=1)
     return out
 
