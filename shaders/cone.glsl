@@ -77,14 +77,33 @@ bool clip_half_space(vec3 n, float w, int this_face, vec3 o, vec3 d,
     return t0 <= t1;
 }
 
-// a*b - c*d with the rounding error of c*d recovered (Kahan's algorithm, pbrt-v4's
-// DifferenceOfProducts): within about an ulp even where a*b and c*d nearly cancel.
-// `precise` keeps the compiler from fusing or reordering the steps.
+// The float32 product a*b as p + e exactly (Dekker's product, Veltkamp's split into 12-bit
+// halves): p = a*b rounded, e its rounding error. Needs no fma (which some drivers, llvmpipe
+// among them, evaluate with two roundings); `precise` keeps the compiler from fusing or
+// reordering the steps, whose rounding is the point. Twin: reference._two_product.
+void two_product(float a, float b, out float p, out float e) {
+    const float SPLIT = 4097.0;                 // 2^12 + 1
+    precise float a_big = SPLIT * a;
+    precise float a_hi = a_big - (a_big - a);
+    precise float a_lo = a - a_hi;
+    precise float b_big = SPLIT * b;
+    precise float b_hi = b_big - (b_big - b);
+    precise float b_lo = b - b_hi;
+    precise float product = a * b;
+    precise float error = ((a_hi * b_hi - product) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo;
+    p = product;
+    e = error;
+}
+
+// a*b - c*d within about an ulp even where the two products nearly cancel (as pbrt-v4's
+// DifferenceOfProducts, with exact products instead of fma): the products' difference is
+// exact there, and their rounding errors are added back.
+// Twin: plantgen.geometry.reference.difference_of_products.
 float difference_of_products(float a, float b, float c, float d) {
-    precise float cd = c * d;
-    precise float err = fma(-c, d, cd);          // cd - c*d, exactly
-    precise float dop = fma(a, b, -cd);
-    precise float result = dop + err;
+    float ab, ab_error, cd, cd_error;
+    two_product(a, b, ab, ab_error);
+    two_product(c, d, cd, cd_error);
+    precise float result = (ab - cd) + (ab_error - cd_error);
     return result;
 }
 

@@ -124,41 +124,30 @@ class _Upload:
 
 
 # ------------------------------------------------------------------------------ the cone quadratic
-# Twins of cone_quadratic, solve_quadratic and difference_of_products in shaders/cone.glsl,
-# line for line; numpy has no fma, so fused_multiply_add builds it from error-free steps.
+# Twins of two_product, difference_of_products, solve_quadratic and cone_quadratic in
+# shaders/cone.glsl, line for line.
 def _two_product(a, b):
-    """p = a·b rounded and e with p + e = a·b exactly (Dekker's product with Veltkamp's
-    split; float32 or float64 arrays)."""
+    """p = a·b rounded and e with p + e = a·b exactly (Dekker's product with Veltkamp's split
+    into half-width halves; float32 or float64 arrays, the dtype's own split)."""
     dtype = np.result_type(a, b)
-    split = dtype.type(2.0 ** ((np.finfo(dtype).nmant + 2) // 2) + 1)
-
-    def halves(x):
-        c = split * x
-        high = c - (c - x)
-        return high, x - high
-
-    p = a * b
-    (a_hi, a_lo), (b_hi, b_lo) = halves(a), halves(b)
-    return p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
-
-
-def fused_multiply_add(a, b, c):
-    """(...) a·b + c rounded once (to within an ulp), as GLSL's ``fma``: the product's
-    rounding error and the sum's (Knuth's two-sum) are added back before the last rounding."""
-    p, p_err = _two_product(a, b)
-    s = p + c
-    back = s - p
-    s_err = (p - (s - back)) + (c - back)
-    return s + (s_err + p_err)
+    split = dtype.type(2.0 ** ((np.finfo(dtype).nmant + 2) // 2) + 1)   # 2^12 + 1, 2^27 + 1
+    a_big = split * a
+    a_hi = a_big - (a_big - a)
+    a_lo = a - a_hi
+    b_big = split * b
+    b_hi = b_big - (b_big - b)
+    b_lo = b - b_hi
+    product = a * b
+    return product, ((a_hi * b_hi - product) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
 
 
 def difference_of_products(a, b, c, d):
-    """(...) a·b - c·d with the rounding error of c·d recovered (Kahan's algorithm, pbrt-v4's
-    ``DifferenceOfProducts``): within about an ulp even where a·b and c·d nearly cancel."""
-    cd = c * d
-    err = fused_multiply_add(-c, d, cd)          # cd - c·d, exactly
-    dop = fused_multiply_add(a, b, -cd)
-    return dop + err
+    """(...) a·b - c·d within about an ulp even where the two products nearly cancel (as
+    pbrt-v4's ``DifferenceOfProducts``, with exact products instead of fma): the products'
+    difference is exact there, and their rounding errors are added back."""
+    ab, ab_error = _two_product(a, b)
+    cd, cd_error = _two_product(c, d)
+    return (ab - cd) + (ab_error - cd_error)
 
 
 def solve_quadratic(a, b, c):
