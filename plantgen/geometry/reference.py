@@ -12,13 +12,14 @@ One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
 2. E = O - C1. With ``recenter``, E moves to the ray point nearest the axis segment:
    with b = D·a, d = D·E, e = a·E, the axis point s = clamp(e + b·(b·e - d)/(D·D - b²),
    0, h) (s = h/2 when D·D - b² <= ``tol.recenter_parallel``·D·D, a ray along the axis),
-   t0 = (s·b - d)/D·D,
-   E += t0·D. The quadratic then sees numbers of the size of the ray's distance from the
-   axis (about r near a hit), not of the eye distance.
-3. Cone r(y) = r1 + k·y, y = X·a: with e_y = E·a, d_y = D·a, E⊥ = E - e_y·a, D⊥ = D - d_y·a,
-   R0 = r1 + k·e_y: A = D⊥·D⊥ - k²·d_y², B = E⊥·D⊥ - k·d_y·R0, C = E⊥·E⊥ - R0²,
-   A t² + 2B t + C = 0 solved as q = -(B + copysign(√(B² - AC), B)), t = q/A, t = C/q
-   (finite as A → 0: a ray parallel to a generator).
+   t0 = (s·b - d)/D·D, E += t0·D. The quadratic then sees numbers of the size of the
+   ray's distance from the axis (about r near a hit), not of the eye distance.
+3. Cone r(y) = r1 + k·y, y = X·a (:func:`cone_quadratic`): with e_y = E·a, d_y = D·a,
+   E⊥ = E - e_y·a, D⊥ = D - d_y·a, R0 = r1 + k·e_y: A = D⊥·D⊥ - k²·d_y²,
+   B = E⊥·D⊥ - k·d_y·R0, C = E⊥·E⊥ - R0². A t² + 2B t + C = 0 is solved as pbrt-v4
+   does (:func:`solve_quadratic`): B² - AC as a difference of exact products,
+   q = -(B + copysign(√(B² - AC), B)), t = q/A, t = C/q (finite as A → 0: a ray
+   parallel to a generator). These functions and ``shaders/cone.glsl`` are twins.
 4. A root counts if r(y) >= 0 (not the mirror nappe), n_lo·X - d_lo >= 0 and
    n_hi·X - d_hi <= 0 (between the planes) and t > t_min.
 5. Open ends (rows no continuing row shares the plane with) are capped: the plane's hit
@@ -46,7 +47,8 @@ from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals, surface_uv
 from .vec import dot
 
 __all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
-           "inside_frusta", "march_rays"]
+           "inside_frusta", "march_rays", "cone_quadratic", "solve_quadratic",
+           "difference_of_products"]
 
 
 @dataclass

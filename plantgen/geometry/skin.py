@@ -6,9 +6,9 @@
 1. segment axes and lengths (:func:`_segment_axes`), continuing children and side
    branches (:func:`_continuing_children`);
 2. side-branch bases, moved back into the parent (:func:`_extend_side_branches`);
-3. joint planes (3)–(5) at continuing joints (:func:`_joint_planes`), with the seam
-   mismatch measured (:func:`_seam_mismatch_at`) and optionally fitted
-   (:func:`_fit_seams`, §2.2);
+3. joint planes (3)–(5) at continuing joints (:func:`_joint_cuts`: the planes of
+   :func:`_joint_planes`, the seam mismatch measured by :func:`_seam_mismatch_at` and
+   optionally fitted by :func:`_fit_seams`, §2.2);
 4. sharp joints (:func:`_sharp_joints`) and their knuckle fans (:func:`_row_layout`,
    :func:`_fill_knuckle_fans`);
 5. texture frames: reference directions carried along each chain
@@ -96,8 +96,8 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
         _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
     lo = plane_through(seg.axis, seg.base)
     hi = plane_through(seg.axis, skeleton.end)
-    joints = _Joints(child, skeleton.parent[child], skeleton.start[child], seg.axis[skeleton.parent[child]],
-                     seg.axis[child])
+    parent = skeleton.parent[child]
+    joints = _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child])
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
     if seam_fit:
         report.seam_mismatch_max_after = report.seam_mismatch_mean_after = 0.0
