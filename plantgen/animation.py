@@ -19,11 +19,10 @@ from typing import Protocol
 
 import numpy as np
 
-from .geometry.framing_tmp import frusta_bounds
-from .geometry.frusta import Frusta, skin_skeleton
 from .geometry.motion import pose, sway_rig
 from .geometry.skeleton import Skeleton
-from .geometry.tmp_subsets import concatenate_frusta, skeleton_rows
+from .geometry.frusta import Frusta, frusta_bounds
+from .geometry.skin import skin_skeleton
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink"]
 
@@ -82,10 +81,10 @@ class AnimatedScene:
                   else np.zeros(0, dtype=bool))
         self.moving_segments = np.flatnonzero(moving)
         self.static_segments = np.flatnonzero(~moving)
-        self._moving_skeleton = skeleton_rows(self.skeleton, self.moving_segments)
+        self._moving_skeleton = self.skeleton.subset(self.moving_segments)
         self._rig = sway_rig(self._moving_skeleton, self.segment_instance[self.moving_segments],
                              self.motions)
-        self._static = self._skin(skeleton_rows(self.skeleton, self.static_segments))
+        self._static = self._skin(self.skeleton.subset(self.static_segments))
 
     @classmethod
     def from_scene(cls, scene, skin=skin_skeleton) -> AnimatedScene:
@@ -116,7 +115,7 @@ class AnimatedScene:
         t1 = time.perf_counter()
         moving = self._skin(posed) if self.animated else None
         t2 = time.perf_counter()
-        frusta = self._static if moving is None else concatenate_frusta(self._static, moving)
+        frusta = self._static if moving is None else Frusta.concatenate([self._static, moving])
         update = FrameUpdate(float(t), len(moving) if moving is not None else 0, 0,
                              (t1 - t0) * 1e3, (t2 - t1) * 1e3)
         return frusta, moving, update

@@ -26,9 +26,6 @@ from .animation import AnimatedScene
 from .errors import PlantgenError
 from .export import export_mesh
 from .files import write_atomically
-from .geometry.camera import Camera
-from .geometry.framing_tmp import auto_camera
-from .geometry.frusta import Frusta, skin_skeleton
 from .geometry.mesh import tessellate, triangle_count
 from .files import read_yaml
 from .geometry.skeleton import Skeleton
@@ -44,6 +41,9 @@ from .render.raycast import Raycaster, RaycastSettings
 from .render.records import RecordStream
 from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene, resolve_effects
+from .geometry.camera import Camera, auto_camera
+from .geometry.frusta import Frusta
+from .geometry.skin import skin_skeleton
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
            "Staging", "stage_model", "RenderReport", "render_file", "export_model"]

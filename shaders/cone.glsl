@@ -8,12 +8,16 @@
 // The cone is in slope form, r(y) = r1 + k*y with k = (r2 - r1)/h and y measured along
 // the axis from the base (the paper's (1) without h'): cylinders, flaring cones and cones
 // closing to a point need no branch. Points with r(y) < 0 (the mirror nappe) are outside.
-// Quadratics are solved in the stable form q = -(b + sign(b)*sqrt(disc)), t = q/a, c/q.
+// Every ray/cone intersection goes through cone_quadratic and solve_quadratic (pbrt-v4's
+// Quadratic: the discriminant as a difference of products, the stable q form); their numpy
+// twins in plantgen/geometry/reference.py read line for line the same.
 
 #ifndef CONE_GLSL
 #define CONE_GLSL
 
 const float TWO_PI = 6.283185307179586;
+const float RAY_T_MAX = 1e30;   // beyond every hit: the open end of a ray's interval
+const float NO_HIT = 3.0e38;    // "no root", "no hit": the numpy reference's inf
 
 // One segment, unpacked from its record (see plantgen/render/raycast.py, pack_records).
 struct Frustum {
@@ -33,7 +37,24 @@ struct Frustum {
     int material;   // material index
 };
 
-float frustum_slope(Frustum f) { return (f.r2 - f.r1) / f.h; }
+// k = (r2 - r1)/h, the slope of a cone with radii r1, r2 an axis length h apart
+// (plantgen.geometry.frusta.cone_slope).
+float cone_slope(float r1, float r2, float h) { return (r2 - r1) / h; }
+
+float frustum_slope(Frustum f) { return cone_slope(f.r1, f.r2, f.h); }
+
+// Axial height y where the generator C1 + y*axis + (r1 + k*y)*e of a cone meets the plane
+// n.x = d, with gap = d - n.C1, n_axis = n.axis, n_radial = n.e: the GLSL twin of
+// plantgen.geometry.frusta.plane_height, y = (gap - r1*n_radial) / (n_axis + k*n_radial).
+// `rise` is the denominator, the generator's approach to the plane (0: parallel to it).
+// With min_rise > 0 the divisor keeps rise's sign but at least min_rise in size (a finite
+// height for a generator parallel to the plane).
+float plane_height(float gap, float n_axis, float n_radial, float r1, float k, float min_rise,
+                   out float rise) {
+    rise = n_axis + k * n_radial;
+    float above = gap - r1 * n_radial;
+    return min_rise > 0.0 ? above / max(abs(rise), min_rise) * sign(rise) : above / rise;
+}
 
 // Radius of the cone grown by `dr` at axial coordinate y (negative on the mirror nappe).
 float frustum_radius(Frustum f, float dr, float y) { return f.r1 + dr + frustum_slope(f) * y; }
@@ -56,6 +77,68 @@ bool clip_half_space(vec3 n, float w, int this_face, vec3 o, vec3 d,
     return t0 <= t1;
 }
 
+// The float32 product a*b as p + e exactly (Dekker's product, Veltkamp's split into 12-bit
+// halves): p = a*b rounded, e its rounding error. Needs no fma (which some drivers, llvmpipe
+// among them, evaluate with two roundings); `precise` keeps the compiler from fusing or
+// reordering the steps, whose rounding is the point. Twin: reference._two_product.
+void two_product(float a, float b, out float p, out float e) {
+    const float SPLIT = 4097.0;                 // 2^12 + 1
+    precise float a_big = SPLIT * a;
+    precise float a_hi = a_big - (a_big - a);
+    precise float a_lo = a - a_hi;
+    precise float b_big = SPLIT * b;
+    precise float b_hi = b_big - (b_big - b);
+    precise float b_lo = b - b_hi;
+    precise float product = a * b;
+    precise float error = ((a_hi * b_hi - product) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo;
+    p = product;
+    e = error;
+}
+
+// a*b - c*d within about an ulp even where the two products nearly cancel (as pbrt-v4's
+// DifferenceOfProducts, with exact products instead of fma): the products' difference is
+// exact there, and their rounding errors are added back.
+// Twin: plantgen.geometry.reference.difference_of_products.
+float difference_of_products(float a, float b, float c, float d) {
+    float ab, ab_error, cd, cd_error;
+    two_product(a, b, ab, ab_error);
+    two_product(c, d, cd, cd_error);
+    precise float result = (ab - cd) + (ab_error - cd_error);
+    return result;
+}
+
+// The roots of a*t^2 + 2*b*t + c = 0 (half-b form), as pbrt-v4's Quadratic: the
+// discriminant b^2 - a*c as a difference of products, q = -(b + copysign(sqrt(disc), b)),
+// t_q = q/a and t_c = c/q (neither cancels; where a = 0, a line, c/q = -c/(2b) is its one
+// root). t_q is NO_HIT where a = 0; t_c is t_q where q = 0 (b = 0 and a*c = 0). Returns the
+// discriminant: no real root where it is negative.
+// Twin: plantgen.geometry.reference.solve_quadratic.
+float solve_quadratic(float a, float b, float c, out float t_q, out float t_c) {
+    float disc = difference_of_products(b, b, a, c);
+    float root = sqrt(max(disc, 0.0));
+    float q = -(b + (b >= 0.0 ? root : -root));     // copysign(root, b)
+    t_q = a != 0.0 ? q / a : NO_HIT;
+    t_c = q != 0.0 ? c / q : t_q;
+    return disc;
+}
+
+// The cone r(y) = r1 + dr + k*y (the frustum's cone grown by dr) along the ray e + t*d,
+// e relative to the base: g(t) = a*t^2 + 2*b*t + c <= 0 inside the double cone. With
+// e_y = e.axis, d_y = d.axis, the parts E, D perpendicular to the axis and the radius at
+// e's height r0 = r1 + dr + k*e_y: a = D.D - (k*d_y)^2, b = E.D - k*d_y*r0, c = E.E - r0^2.
+// Returns e_y and d_y. Twin: plantgen.geometry.reference.cone_quadratic.
+void cone_quadratic(Frustum f, float dr, vec3 e, vec3 d, out float a, out float b, out float c,
+                    out float e_y, out float d_y) {
+    float k = frustum_slope(f);
+    e_y = dot(e, f.axis);
+    d_y = dot(d, f.axis);
+    vec3 e_perp = e - e_y * f.axis, d_perp = d - d_y * f.axis;
+    float r0 = f.r1 + dr + k * e_y;
+    a = dot(d_perp, d_perp) - k * k * d_y * d_y;
+    b = dot(e_perp, d_perp) - k * d_y * r0;
+    c = dot(e_perp, e_perp) - r0 * r0;
+}
+
 const int FACE_CONE = 0;      // entered through the conical surface
 const int FACE_LO = 1;        // entered through the lower cutting plane (a cap)
 const int FACE_HI = 2;        // entered through the upper cutting plane (a cap)
@@ -68,35 +151,24 @@ const int FACE_NONE = 3;      // the interval starts at t_min (the origin is ins
 // float32 keeps its digits. Returns false if the ray misses the solid in [t_min, t_max].
 bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_max,
                       out float t_enter, out float t_exit, out int enter_face) {
-    float k = frustum_slope(f);
     vec3 e = o - f.base;
-    float e_y = dot(e, f.axis), d_y = dot(d, f.axis);
-    vec3 e_perp = e - e_y * f.axis, d_perp = d - d_y * f.axis;
-    float r0 = f.r1 + dr + k * e_y;          // cone radius at the origin's height
-    float len_d_perp = length(d_perp), len_e_perp = length(e_perp);
-    // g(t) = a t^2 + 2 b t + c <= 0 inside the double cone; the products keep the small
-    // differences (a ray along a generator, an origin on the surface) accurate.
-    float a = (len_d_perp - k * d_y) * (len_d_perp + k * d_y);
-    float b = dot(e_perp, d_perp) - k * r0 * d_y;
-    float c = (len_e_perp - r0) * (len_e_perp + r0);
-    float disc = b * b - a * c;
+    float a, b, c, e_y, d_y;
+    cone_quadratic(f, dr, e, d, a, b, c, e_y, d_y);
+    float t_q, t_c;
+    float disc = solve_quadratic(a, b, c, t_q, t_c);
 
     // Up to two connected pieces of {g <= 0} along the ray; each lies in one nappe.
-    const float BIG = 1e30;
-    float lo0 = -BIG, hi0 = BIG, lo1 = BIG, hi1 = -BIG;    // piece 1 empty by default
-    if (a == 0.0) {                                         // parallel to a generator
+    float lo0 = -RAY_T_MAX, hi0 = RAY_T_MAX, lo1 = RAY_T_MAX, hi1 = -RAY_T_MAX;   // piece 1 empty
+    if (a == 0.0) {                                         // parallel to a generator: g is linear
         if (b == 0.0) { if (c > 0.0) return false; }
-        else if (b > 0.0) hi0 = -0.5 * c / b; else lo0 = -0.5 * c / b;
+        else if (b > 0.0) hi0 = t_c; else lo0 = t_c;
     } else if (disc < 0.0) {
         if (a > 0.0) return false;                          // never inside
         // a < 0: inside for every t, within one nappe: keep the whole line
     } else {
-        float q = -(b + (b >= 0.0 ? 1.0 : -1.0) * sqrt(disc));
-        float ta = q / a;
-        float tb = (q != 0.0) ? c / q : ta;
-        float t_lo = min(ta, tb), t_hi = max(ta, tb);
+        float t_lo = min(t_q, t_c), t_hi = max(t_q, t_c);
         if (a > 0.0) { lo0 = t_lo; hi0 = t_hi; }
-        else { hi0 = t_lo; lo1 = t_hi; hi1 = BIG; }
+        else { hi0 = t_lo; lo1 = t_hi; hi1 = RAY_T_MAX; }
     }
     for (int piece = 0; piece < 2; ++piece) {
         float t0 = piece == 0 ? lo0 : lo1;
@@ -121,7 +193,7 @@ float recenter_shift(Frustum f, vec3 o, vec3 d) {
     vec3 E = o - f.base;
     float b = dot(d, f.axis), de = dot(d, E), e = dot(f.axis, E), dd = dot(d, d);
     float den = dd - b * b;
-    float s = den > 1e-6 * dd ? clamp(e + b * (b * e - de) / den, 0.0, f.h) : 0.5 * f.h;
+    float s = den > TOL_RECENTER_PARALLEL * dd ? clamp(e + b * (b * e - de) / den, 0.0, f.h) : 0.5 * f.h;
     return (s * b - de) / dd;
 }
 
@@ -137,27 +209,18 @@ vec3 safe_normalize(vec3 x, vec3 fallback) {
 bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out int kind) {
     float k = frustum_slope(f);
     vec3 E = o - f.base;
-    float ey = dot(E, f.axis), dy = dot(d, f.axis);
-    vec3 Ep = E - ey * f.axis;
-    vec3 Dp = d - dy * f.axis;
-    float R0 = f.r1 + k * ey;
-    float A = dot(Dp, Dp) - k * k * dy * dy;
-    float B = dot(Ep, Dp) - k * dy * R0;
-    float C = dot(Ep, Ep) - R0 * R0;
-    float disc = B * B - A * C;
-    float sq = sqrt(max(disc, 0.0));
-    float q = -(B + (B >= 0.0 ? sq : -sq));            // copysign(sq, B)
-    const float NONE = 3.0e38;                        // the reference's inf: no hit
-    float t1 = A != 0.0 ? q / A : NONE;
-    float t2 = q != 0.0 ? C / q : NONE;
-    t_hit = NONE;
+    float A, B, C, ey, dy;
+    cone_quadratic(f, 0.0, E, d, A, B, C, ey, dy);
+    float t1, t2;
+    float disc = solve_quadratic(A, B, C, t1, t2);
+    t_hit = NO_HIT;
     kind = FACE_CONE;
     if (disc >= 0.0) {
         for (int i = 0; i < 2; ++i) {
             float t = i == 0 ? t1 : t2;
             vec3 X = E + t * d;
             float y = dot(X, f.axis);
-            bool ok = abs(t) < NONE && f.r1 + k * y >= 0.0;   // finite (NaN fails too)
+            bool ok = abs(t) < NO_HIT && f.r1 + k * y >= 0.0;   // finite (NaN fails too)
             ok = ok && dot(f.plane_lo.xyz, X) - f.plane_lo.w >= 0.0
                     && dot(f.plane_hi.xyz, X) - f.plane_hi.w <= 0.0;
             ok = ok && t > t_min;
@@ -176,13 +239,13 @@ bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out in
         float y = dot(X, f.axis);
         float rr = f.r1 + k * y;
         vec3 perp = X - y * f.axis;
-        bool ok = abs(t) < NONE && rr >= 0.0 && dot(perp, perp) <= rr * rr;
+        bool ok = abs(t) < NO_HIT && rr >= 0.0 && dot(perp, perp) <= rr * rr;
         float other_side = dot(other.xyz, X) - other.w;
         ok = ok && (is_lo ? other_side <= 0.0 : other_side >= 0.0);
         ok = ok && t > t_min;
         if (ok && t < t_hit) { t_hit = t; kind = is_lo ? FACE_LO : FACE_HI; }
     }
-    return t_hit < NONE;
+    return t_hit < NO_HIT;
 }
 
 // Axial coordinate y, radial distance and unit radial direction of a point p.

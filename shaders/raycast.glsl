@@ -34,19 +34,20 @@ flat out vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 // Axial height where the edge line base + y*axis + (r1 + k*y)*q of the pyramid meets
 // `plane`; `rise` is the line's approach rate to the plane (small: grazing).
 float edge_cut(vec4 plane, vec3 base, vec3 axis, vec3 q, float r1, float k, out float rise) {
-    float nq = dot(plane.xyz, q);
-    rise = dot(plane.xyz, axis) + k * nq;
-    return (plane.w - dot(plane.xyz, base) - r1 * nq) / rise;
+    return plane_height(plane.w - dot(plane.xyz, base), dot(plane.xyz, axis), dot(plane.xyz, q),
+                        r1, k, 0.0, rise);
 }
 
 // Lowest (highest) axial height of the section of the cone r1 + k*y by `plane` over all
-// generators: the extremes sit where n.e_r = -+|n_perp|.
+// generators: the extremes sit where n.e_r = -+|n_perp| (the GLSL twin of
+// plantgen.geometry.frusta._axial_extent).
 vec2 plane_axial_range(vec4 plane, vec3 base, vec3 axis, float r1, float k) {
     float na = dot(plane.xyz, axis);
     float n_perp = sqrt(max(1.0 - na * na, 0.0));
     float gap = plane.w - dot(plane.xyz, base);
-    float y_minus = (gap + r1 * n_perp) / max(abs(na - k * n_perp), 1e-12) * sign(na - k * n_perp);
-    float y_plus = (gap - r1 * n_perp) / max(abs(na + k * n_perp), 1e-12) * sign(na + k * n_perp);
+    float rise;
+    float y_minus = plane_height(gap, na, -n_perp, r1, k, TOL_GENERATOR_RISE, rise);
+    float y_plus = plane_height(gap, na, n_perp, r1, k, TOL_GENERATOR_RISE, rise);
     return vec2(min(y_minus, y_plus), max(y_minus, y_plus));
 }
 
@@ -59,7 +60,7 @@ vec2 plane_axial_range(vec4 plane, vec3 base, vec3 axis, float r1, float k) {
 vec3 pyramid_corner(vec3 base, vec3 axis, vec3 ref_dir, vec3 side, float r1, float k,
                     vec4 plane_lo, vec4 plane_hi, vec3 corner) {
     float n_dot_a = min(dot(plane_lo.xyz, axis), dot(plane_hi.xyz, axis));
-    float limit = 0.05 * max(n_dot_a, 1e-3);
+    float limit = TOL_PYRAMID_GRAZING * max(n_dot_a, TOL_PLANE_TILT_COS);
     bool grazing = false;
     for (int i = 0; i < 4; ++i) {
         vec3 q = float((i & 1) * 2 - 1) * ref_dir + float((i >> 1) * 2 - 1) * side;
@@ -92,8 +93,8 @@ void main() {
     float shell = rec5.z;
     float r1 = rec1.w + shell, r2 = rec2.w + shell;
     float r_max = max(r1, r2);
-    float pad = hull_padding * r_max + 1e-6 * (h + r_max);
-    float k = (r2 - r1) / h;
+    float pad = hull_padding * r_max + TOL_PYRAMID_PAD * (h + r_max);
+    float k = cone_slope(r1, r2, h);
     vec3 side = cross(ref_dir, axis);
     // planes relative to the render origin, grown by `pad` all round (moved outwards)
     vec4 plane_lo = vec4(rec3.xyz, rec3.w + dot(rec3.xyz, base) - pad);
@@ -233,10 +234,10 @@ void main() {
     bool cap = false;
 #if defined RELIEF
     if (f.shell > 0.0) {
-        if (!frustum_interval(f, f.shell, o, d, t_min, 1e30, t_enter, t_exit, face)) discard;
+        if (!frustum_interval(f, f.shell, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) discard;
         float t_end = t_exit;
         float ti_enter, ti_exit; int inner_face;
-        bool inner = frustum_interval(f, 0.0, o, d, t_min, 1e30, ti_enter, ti_exit, inner_face);
+        bool inner = frustum_interval(f, 0.0, o, d, t_min, RAY_T_MAX, ti_enter, ti_exit, inner_face);
         bool end_on_inner = inner && inner_face != FACE_NONE && ti_enter <= t_end;
         if (end_on_inner) t_end = ti_enter;
         if (!march_relief(f, o, d, t_enter, t_end, end_on_inner, t_hit)) discard;
@@ -273,8 +274,8 @@ void main() {
         frustum_local(f, p, y, radial, e_r);
         generator_params(f, p, e_r, g, s_lo, s_hi);
         vec3 tangent_u = cross(f.axis, e_r);
-        float len_u = TWO_PI * max(radial, 1e-20);            // |dP/du|
-        float len_v = max((s_hi - s_lo) * length(g), 1e-20);  // |dP/dv|
+        float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
+        float len_v = max((s_hi - s_lo) * length(g), TOL_TANGENT_FLOOR_F32);  // |dP/dv|
         normal = normalize(normal - f.shell * (dh_du / len_u * tangent_u
                                                + dh_dv / len_v * normalize(g)));
     }

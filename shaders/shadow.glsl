@@ -37,7 +37,7 @@ float shadow_visibility(vec3 p, vec3 n) {
     vec2 fr = st - cell;
     // depth gradient of the receiver's tangent plane in light space (world units per unit)
     vec3 nl = vec3(dot(n, light_right), dot(n, light_up), dot(n, light_forward));
-    float nz = abs(nl.z) < 1e-6 ? 1e-6 : nl.z;
+    float nz = abs(nl.z) < TOL_SHADOW_NORMAL ? TOL_SHADOW_NORMAL : nl.z;
     vec2 grad = clamp(-nl.xy / nz, -shadow_max_slope, shadow_max_slope);
     vec2 texel_world = 2.0 * light_half / vec2(size);
     float depth_span = light_depth.y - light_depth.x;

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -24,7 +25,7 @@ def two_material_model(m=2):
     trunk = chain_frusta(BENT, [0.3, 0.25, 0.25, 0.2, 0.15], shell=0.03)
     leaf = chain_frusta([[0, 1, 0], [0.8, 1.6, 0], [1.4, 2.4, 0.3]], [0.1, 0.08, 0.0], material=[1, 1])
     frusta = concat_frusta(trunk, leaf)
-    frusta.material_names = ("bark", "leaf")
+    frusta = dataclasses.replace(frusta, material_names=("bark", "leaf"))
     return tessellate(frusta, m)
 
 
@@ -120,7 +121,7 @@ def test_plantgen_glb_passes_the_khronos_gltf_validator(tmp_path, relief):
         # A skinned chain with a knuckle (degenerate hinge triangles) and bark relief.
         from _geometry_helpers import chain_skeleton
 
-        from plantgen.geometry.frusta import skin_skeleton
+        from plantgen.geometry.skin import skin_skeleton
 
         frusta = skin_skeleton(chain_skeleton((30, 150), radii=(0.2, 0.15, 0.12, 0.1)))
         mesh = tessellate(frusta, 2, relief=True)
@@ -156,7 +157,7 @@ def test_the_export_command_writes_the_counted_triangles(tmp_path, suffix):
     out = tmp_path / f"y{suffix}"
     code, stdout, stderr = run_cli("export", skel_path, "-o", out, "--subdiv", "2")
     assert code == 0, stderr
-    from plantgen.geometry.frusta import skin_skeleton
+    from plantgen.geometry.skin import skin_skeleton
 
     frusta = skin_skeleton(y_skeleton())
     expected = len(tessellate(frusta, 2).faces)

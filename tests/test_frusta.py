@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
-from plantgen.geometry.frusta import (PYRAMID_TRIANGLES, Frusta, bounding_pyramids, plane_heights,
-                                      pyramid_volume_ratio, seam_mismatch, skin_skeleton,
-                                      surface_normals, surface_uv, true_normals)
+from plantgen.geometry.camera import auto_camera, box_corners, depth_range
+from plantgen.geometry.frusta import (PYRAMID_TRIANGLES, Frusta, bounding_pyramids, frusta_bounds,
+                                      plane_height, plane_heights, pyramid_volume_ratio,
+                                      seam_mismatch, surface_normals, surface_uv, true_normals)
 from plantgen.geometry.reference import inside_frusta
 from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import surface_samples
 
 
@@ -233,3 +235,81 @@ def test_radius_steps_are_modelled_not_fitted():
 
     o, d = medial_axis_rays(f, 500, seed=2)
     assert intersect_frusta(f, o, d).hit.all()
+
+
+# ---------------------------------------------------------------------------- the frozen contract
+def test_frusta_are_frozen_with_open_ends_set_at_construction():
+    f = skin_skeleton(y_junction(40.0))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        f.parent_row = np.zeros(len(f), np.int64)
+    assert np.array_equal(f.open_lo, f.parent_row < 0)
+    continued = np.zeros(len(f), bool)
+    continued[f.parent_row[f.parent_row >= 0]] = True
+    assert np.array_equal(f.open_hi, ~continued)
+    # a changed copy derives its ends again
+    g = dataclasses.replace(f, parent_row=np.full(len(f), -1))
+    assert g.open_lo.all() and g.open_hi.all()
+    with pytest.raises(ValueError, match="parent_row"):
+        dataclasses.replace(f, parent_row=[0])
+
+
+def test_concatenate_and_subset_keep_chains_and_materials():
+    a = skin_skeleton(chain_skeleton([20, 30], 1.0, 0.1))
+    b = skin_skeleton(chain_skeleton([10], 1.0, 0.2, start=(3.0, 0, 0), material_names=("leaf",)))
+    both = Frusta.concatenate([a, b])
+    assert len(both) == len(a) + len(b) and both.material_names == ("bark", "leaf")
+    assert both.parent_row.tolist() == a.parent_row.tolist() + [p + len(a) if p >= 0 else -1
+                                                                 for p in b.parent_row]
+    assert np.array_equal(both.material, [0] * len(a) + [1] * len(b))
+    assert np.array_equal(both.plane_lo[len(a):], b.plane_lo)
+    tail = both.subset(np.arange(len(a), len(both)))
+    assert np.array_equal(tail.parent_row, b.parent_row) and np.array_equal(tail.base, b.base)
+    assert np.array_equal(both.chain_position, np.concatenate([a.chain_position, b.chain_position]))
+    assert len(Frusta.concatenate([])) == 0
+
+
+def test_chain_position_counts_the_rows_before_each_row():
+    f = skin_skeleton(chain_skeleton([20, 30, 10], 1.0, 0.1))
+    assert f.chain_position.tolist() == list(range(len(f)))
+
+
+def test_knuckle_fan_rows_have_no_length():
+    f = skin_skeleton(chain_skeleton([150], 1.0, 0.1))
+    assert f.report.fan_rows > 0
+    assert (~f.has_length).sum() == f.report.fan_rows
+    assert set(f.segment[~f.has_length]) == {1}
+
+
+def test_plane_height_puts_the_generator_point_on_the_plane():
+    f = skin_skeleton(random_tree(60, seed=8))
+    rows, _ = surface_samples(f, 500, np.random.default_rng(4))
+    psi = np.random.default_rng(5).uniform(0, 2 * np.pi, len(rows))
+    e = np.cos(psi)[:, None] * f.ref_dir[rows] + np.sin(psi)[:, None] * f.side_dir[rows]
+    for which, plane in enumerate((f.plane_lo[rows], f.plane_hi[rows])):
+        y = plane_heights(f, rows, e)[which]
+        k, n = f.slope[rows], plane[:, :3]
+        gap = plane[:, 3] - np.einsum("ij,ij->i", n, f.base[rows])
+        y2, rise = plane_height(gap, np.einsum("ij,ij->i", n, f.axis[rows]), np.einsum("ij,ij->i", n, e),
+                                f.r1[rows], k)
+        np.testing.assert_allclose(y, y2, rtol=1e-12, atol=1e-12)
+        p = f.base[rows] + y[:, None] * f.axis[rows] + (f.r1[rows] + k * y)[:, None] * e
+        assert np.abs(np.einsum("ij,ij->i", n, p) - plane[:, 3]).max() < 1e-12
+        assert np.all(rise > 0)     # every generator runs through the plane, upwards
+
+
+@pytest.mark.parametrize("direction", [(0.35, 0.25, 1.0), (0.0, 1.0, 1e-3), (1.0, -0.3, 0.0)])
+def test_auto_camera_frames_every_frustum_inside_the_viewport(direction):
+    f = skin_skeleton(random_tree(120, seed=6))
+    camera = auto_camera(f, 160, 90, direction=direction, fill=0.9)
+    right, up, fwd = camera.basis()
+    rows, pts = surface_samples(f, 3000, np.random.default_rng(3))
+    rel = pts - np.asarray(camera.eye)
+    z = rel @ fwd
+    tan_y = np.tan(np.radians(camera.fov_y) / 2)
+    x_ndc = (rel @ right) / z / (tan_y * camera.aspect)
+    y_ndc = (rel @ up) / z / tan_y
+    assert np.all(z > 0) and np.abs(x_ndc).max() <= 0.9 + 1e-9 and np.abs(y_ndc).max() <= 0.9 + 1e-9
+    # and it is tight: the model reaches the edge of the allowed part on some side
+    assert max(np.abs(x_ndc).max(), np.abs(y_ndc).max()) > 0.75
+    near, far = depth_range([box_corners(frusta_bounds(f))], np.asarray(camera.eye), fwd)
+    assert 0 < near < z.min() and far > z.max()

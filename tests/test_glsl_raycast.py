@@ -13,7 +13,8 @@ import pytest
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.frusta import Frusta
-from plantgen.geometry import framing_tmp as raycast
+from plantgen.geometry.camera import auto_camera
+from plantgen.geometry.frusta import frusta_bounds
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
 from plantgen.render import materials as render_materials
@@ -63,7 +64,7 @@ def join(*parts):
 
 
 def model_box(frusta):
-    return raycast.frusta_bounds(frusta)
+    return frusta_bounds(frusta)
 
 
 def look_at(frusta, direction, *, width=W, height=H, distance=None):
@@ -387,7 +388,7 @@ def test_exact_v_follows_oblique_planes_where_interpolated_v_swims(gl_ctx, relie
 @pytest.mark.parametrize("case", ["bent_chain", "crossing", "fat", "flare_oblique"])
 def test_auto_camera_makes_the_model_span_most_of_the_viewport(gl_ctx, caster, case):
     frusta = HARD_CASES[case]
-    camera = raycast.auto_camera(frusta, W, H)
+    camera = auto_camera(frusta, W, H)
     hit = np.isfinite(caster.render(frusta, camera).distance)
     rows, cols = np.nonzero(hit)
     # nothing is cut off at the border ...
@@ -421,7 +422,7 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
 def skinned_cases():
     from _geometry_helpers import chain_skeleton, random_tree, y_junction
 
-    from plantgen.geometry.frusta import skin_skeleton
+    from plantgen.geometry.skin import skin_skeleton
 
     cases = {f"bend_{b:g}": chain_skeleton([b, b / 2], lengths=1.0, radii=[0.2, 0.18, 0.15, 0.1])
              for b in (0.0, 1e-8 * 180 / np.pi, 45.0, 90.0, 135.0, 179.0)}
@@ -446,7 +447,7 @@ SKINNED = ["bend_0", "bend_5.72958e-07", "bend_45", "bend_90", "bend_135", "bend
 def test_skinned_skeletons_render_on_the_surface_without_holes(gl_ctx, caster, skinned, name):
     frusta = skinned[name]
     for direction in ((0.6, 0.35, 1.0), (0.1, -1.0, 0.2)):
-        camera = raycast.auto_camera(frusta, W, H, direction=direction)
+        camera = auto_camera(frusta, W, H, direction=direction)
         result = caster.render(frusta, camera, material_names=frusta.material_names)
         assert not np.isnan(result.distance).any()
         points, hit = hit_points(camera, result.distance)
@@ -491,7 +492,7 @@ def test_agrees_with_the_float64_reference(gl_ctx, caster, skinned, name):
     if name in CLOSE_UP:
         camera = look_at(frusta, direction, distance=CLOSE_UP[name])
     else:
-        camera = raycast.auto_camera(frusta, W, H, direction=direction)
+        camera = auto_camera(frusta, W, H, direction=direction)
     gl = caster.render(frusta, camera, material_names=frusta.material_names).distance
     ref = render_reference(frusta, camera)                        # float64
     emulated = render_reference(frusta, camera, dtype=np.float32)  # the GPU's float32, on the CPU
@@ -515,7 +516,7 @@ def test_agrees_with_the_float64_reference(gl_ctx, caster, skinned, name):
 def relief_cases():
     from _geometry_helpers import chain_skeleton, y_junction
 
-    from plantgen.geometry.frusta import skin_skeleton
+    from plantgen.geometry.skin import skin_skeleton
 
     return {"bark_chain": skin_skeleton(chain_skeleton([30.0, 40.0], radii=[0.3, 0.25, 0.2, 0.15])),
             "y_junction": skin_skeleton(y_junction(40.0))}
@@ -527,7 +528,7 @@ def test_relief_agrees_with_the_reference_and_its_error_falls_with_the_steps(gl_
 
     frusta = relief_cases()[name]
     assert (frusta.shell > 0).all()
-    camera = raycast.auto_camera(frusta, 96, 72)
+    camera = auto_camera(frusta, 96, 72)
     ref = render_reference(frusta, camera, relief=True)   # dense marching + bisection, float64
     edges = silhouette_edges(ref.hit)
     errors = []

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 
 from _geometry_helpers import chain_skeleton, y_junction
-from plantgen.geometry.frusta import skin_skeleton
 from plantgen.geometry.reference import intersect_frusta
-from plantgen.geometry.stability import HARD_CASES, _size, evaluate_case, medial_axis_rays
+from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.stability import HARD_CASES, evaluate_case, medial_axis_rays, model_size
 
 
 @pytest.mark.parametrize("case", HARD_CASES, ids=[c.name for c in HARD_CASES])
 def test_hard_case(case):
     res = evaluate_case(case, count=80)
     f = skin_skeleton(case.build())
-    size = _size(f)
+    size = model_size(f)
     far = float(np.abs(np.concatenate([f.base, f.top])).max()) + 3 * size
     r_min = float(np.maximum(f.r1, f.r2).min())
     slack = 1e-12 * far / r_min          # rounding of points |X| from the origin, / radius

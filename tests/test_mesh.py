@@ -7,11 +7,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from plantgen.geometry.frusta import ROW_FIELDS, Frusta, skin_skeleton, surface_normals, surface_uv
+from plantgen.geometry.frusta import (ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals,
+                                      surface_uv)
 from plantgen.geometry.mesh import (
-    bands_along, columns_around, continuing_parent_rows, lateral_triangles_per_row, tessellate,
-    triangle_count,
+    bands_along, columns_around, lateral_triangles_per_row, tessellate, triangle_count,
 )
+from plantgen.geometry.skin import skin_skeleton
 
 
 # ---------------------------------------------------------------------------- builders
@@ -64,7 +65,7 @@ def lateral_vertex_rows(mesh, frusta):
     """(V_lateral,) row of each lateral vertex that the row itself owns (rings it computed)."""
     m = mesh.level
     ring = columns_around(m) + 1
-    parent = continuing_parent_rows(frusta)
+    parent = frusta.parent_row
     own_rings = bands_along(m) + (parent < 0)
     rows = np.repeat(np.arange(len(frusta.length)), own_rings * ring)
     first_ring = np.repeat(parent >= 0, own_rings * ring).astype(int)  # shared rows start at ring 1
@@ -209,7 +210,7 @@ def test_a_side_branch_is_closed_on_its_own():
     trunk = chain_frusta([[0, 0, 0], [0, 1, 0], [0, 2, 0]], 0.3)
     branch = chain_frusta([[0, 1, 0], [0.8, 1.6, 0], [1.4, 2.4, 0.3]], 0.1)
     frusta = concat_frusta(trunk, branch)
-    assert continuing_parent_rows(frusta).tolist() == [-1, 0, -1, 2]
+    assert frusta.parent_row.tolist() == [-1, 0, -1, 2]
     mesh = tessellate(frusta, 2)
     assert mesh.n_caps == 4
     tm = mesh.to_trimesh(merge=True)
@@ -324,7 +325,7 @@ def test_skinned_models_are_closed_and_counted(name):
 def test_chains_are_found_from_shared_planes_when_parent_row_is_absent():
     frusta = skinned_models()["random tree"]
     bare = SimpleNamespace(**{k: getattr(frusta, k) for k in ROW_FIELDS})
-    assert np.array_equal(continuing_parent_rows(bare), frusta.parent_row)
+    assert np.array_equal(parent_rows_from_planes(bare), frusta.parent_row)
 
 
 def test_default_relief_heights_are_the_relief_modules_maps():

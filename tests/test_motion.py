@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from plantgen.geometry.motion import pose, sway_rig
+from plantgen.geometry.stage import Sway
 from plantgen.lsystem import derive, interpret, parse_grammar
 
 
@@ -19,7 +20,7 @@ def two_plants():
     return skel, inst, len(one)
 
 
-MOTIONS = [{"sway": {"amplitude": 20, "frequency": 0.5, "phase": 1.0}}, None]
+MOTIONS = [Sway(amplitude=20, frequency=0.5, phase=1.0), None]
 
 
 def test_pose_keeps_lengths_radii_and_joints():

@@ -9,7 +9,7 @@ from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import tessellate
 from plantgen.render.raster import RasterRenderer, gs_buffer_bytes
 from plantgen.render.records import rc_buffer_bytes
-from plantgen.geometry.framing_tmp import frusta_bounds
+from plantgen.geometry.frusta import frusta_bounds
 from plantgen.render.raycast import Raycaster
 
 from test_mesh import BENT, chain_frusta, concat_frusta
@@ -121,7 +121,7 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
 # ---------------------------------------------------------------- shadows and ground (GS)
 # The Table 1 scenes with shadow maps (well, desert, oasis, cacti) time GS with the same
 # passes as RC: the mesh and the ground write the light's depth map, both sample it.
-from plantgen.geometry.frusta import skin_skeleton  # noqa: E402
+from plantgen.geometry.skin import skin_skeleton  # noqa: E402
 from plantgen.render.passes import ShadowSettings  # noqa: E402
 
 from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402

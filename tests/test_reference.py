@@ -3,17 +3,20 @@ nearest (against brute-force marching), never re-hit their frustum when leaving 
 between the camera renderer and explicit rays, and float32 emulation stays close."""
 
 import dataclasses
+from fractions import Fraction
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from plantgen.geometry import relief
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import Frusta, skin_skeleton, surface_uv, true_normals
-from plantgen.geometry.reference import (inside_frusta, intersect_frusta, march_rays,
-                                         render_reference, shade_hits)
+from plantgen.geometry.frusta import Frusta, surface_uv, true_normals
+from plantgen.geometry.reference import (difference_of_products, inside_frusta, intersect_frusta,
+                                         march_rays, render_reference, shade_hits, solve_quadratic)
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import hit_residuals, medial_axis_rays, surface_samples
 
 
@@ -200,3 +203,47 @@ def test_random_frusta_and_rays_keep_the_invariants(r1, r2, h, tilt_lo, tilt_hi,
     h32 = intersect_frusta(f, O, D, dtype=np.float32, origin=O.mean(axis=0))
     ok = h32.hit & hits.hit
     assert np.all(np.abs(h32.t[ok] - hits.t[ok]) <= 1e-4 * (hits.t[ok] + size))
+
+
+# ---------------------------------------------------------------------------- the quadratic
+def _exact(x):
+    return [Fraction(float(v)) for v in np.ravel(x)]
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_difference_of_products_is_accurate_where_the_products_cancel(dtype):
+    rng = np.random.default_rng(0)
+    b = rng.uniform(1, 2, 2000).astype(dtype)
+    a = rng.uniform(1, 2, 2000).astype(dtype)
+    c = (b * b / a * (1 + rng.uniform(-1e-5, 1e-5, 2000))).astype(dtype)   # b² ≈ a·c
+    got = difference_of_products(b, b, a, c)
+    exact = np.array([float(x * x - y * z) for x, y, z in zip(_exact(b), _exact(a), _exact(c))])
+    ulp = np.spacing(np.abs(exact).astype(dtype)).astype(np.float64)
+    assert got.dtype == dtype
+    assert np.all(np.abs(got - exact) <= 1.5 * ulp)
+    naive = b * b - a * c
+    assert np.abs(naive - exact).max() > 100 * ulp.max()    # what it replaces
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_solve_quadratic_roots_are_backward_stable(dtype):
+    """Each root solves the given quadratic up to rounding: |a t² + 2b t + c| (exact) stays
+    within a few ulps of |a| t² + 2|b t| + |c|, also for the small root of a quadratic whose
+    roots are far apart (where -b + sqrt(disc) would cancel) and for close roots."""
+    rng = np.random.default_rng(1)
+    r1 = rng.uniform(-1e3, 1e3, 400)
+    r2 = r1 * rng.choice([-1, 1], 400) * 10.0 ** rng.uniform(-7, 2, 400)
+    a = rng.uniform(0.5, 2, 400)
+    a, b, c = (x.astype(dtype) for x in (a, -a * (r1 + r2) / 2, a * r1 * r2))
+    disc, t_q, t_c = solve_quadratic(a, b, c)
+    eps = np.finfo(dtype).eps
+    real = disc >= 0
+    assert real.mean() > 0.9
+    for t in (t_q[real], t_c[real]):
+        exact = [abs(A * T * T + 2 * B * T + C) for A, B, C, T in
+                 zip(_exact(a[real]), _exact(b[real]), _exact(c[real]), _exact(t))]
+        size = np.abs(a[real]) * t * t + 2 * np.abs(b[real] * t) + np.abs(c[real])
+        assert np.all(np.array([float(x) for x in exact]) <= 8 * eps * size.astype(np.float64))
+    # a line (a = 0): the one root -c/(2b); b = 0 and a·c = 0: a double root at 0
+    disc, t_q, t_c = solve_quadratic(np.array([0.0, 2.0]), np.array([2.0, 0.0]), np.array([3.0, 0.0]))
+    assert t_q[0] == np.inf and t_c[0] == -0.75 and t_q[1] == t_c[1] == 0.0

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry.frusta import skin_skeleton
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.camera import Camera

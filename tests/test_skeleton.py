@@ -79,3 +79,13 @@ def test_concatenate_reindexes_parents_and_merges_materials():
     assert c.material_names == ("bark", "leaf", "stone")
     assert list(c.parent) == [-1, 0, 0, -1, -1, 4, 4]
     assert list(c.material) == [0, 0, 1, 2, 0, 0, 1]
+
+
+def test_subset_keeps_the_segments_and_reindexes_parents():
+    s = y_tree()
+    t = s.subset([0, 2])
+    assert t.parent.tolist() == [-1, 0] and t.continues.tolist() == [False, False]
+    np.testing.assert_array_equal(t.end, s.end[[0, 2]])
+    assert t.material.tolist() == [0, 1] and t.material_names == s.material_names
+    t.validate()
+    assert s.subset([1]).parent.tolist() == [-1]      # a dropped parent: the row becomes a root

@@ -20,10 +20,10 @@ import sys
 from pathlib import Path
 
 from ..bench.renderers import time_after_warm_up
-from ..geometry.frusta import skin_skeleton
+from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import renderer_name
-from ..geometry.framing_tmp import auto_camera
+from ..geometry.camera import auto_camera
 from ..render.raycast import RaycastSettings, Raycaster
 from ..render.records import RECORD_BYTES, rc_buffer_bytes
 from .arguments import image_size, shipped_model_paths

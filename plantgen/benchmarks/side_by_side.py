@@ -14,11 +14,11 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..geometry.camera import Camera
-from ..geometry.frusta import skin_skeleton
+from ..geometry.skin import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..pipeline import load_skeleton
 from ..render.context import gl_context
-from ..geometry.framing_tmp import frusta_bounds
+from ..geometry.frusta import frusta_bounds
 from ..render.raster import RasterRenderer, gs_buffer_bytes
 from ..render.raycast import RaycastSettings, Raycaster
 from ..render.records import rc_buffer_bytes

@@ -14,8 +14,10 @@ import time
 
 import numpy as np
 
-from ..geometry.frusta import pyramid_volume_ratio, skin_skeleton
+from ..geometry.frusta import pyramid_volume_ratio
 from ..geometry.skeleton import Skeleton
+from ..geometry.skin import skin_skeleton
+from ..pipeline import load_skeleton
 
 
 def synthetic_tree(n: int, chain: int = 17, seed: int = 0) -> Skeleton:
@@ -82,8 +84,6 @@ def main(argv=None) -> None:
 
 
 def _seams(paths) -> None:
-    from ..pipeline import load_skeleton
-
     for path in paths:
         skeleton = load_skeleton(path)
         t0 = time.perf_counter()
@@ -99,8 +99,7 @@ def _seams(paths) -> None:
 
 def _mean_ratio(frusta) -> float:
     """Mean bounding-pyramid / frustum volume over rows of real length (not knuckle fans)."""
-    real = frusta.length > 1e-6 * np.maximum(frusta.r1, frusta.r2)
-    return float(pyramid_volume_ratio(frusta.subset(real), shell=False).mean())
+    return float(pyramid_volume_ratio(frusta.subset(frusta.has_length), shell=False).mean())
 
 
 if __name__ == "__main__":

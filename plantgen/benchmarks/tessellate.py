@@ -8,7 +8,7 @@ of a GS draw beside the ray caster's records for the same rows (§4's memory cla
 
 The model is the shipped pine grammar (the paper's pine has 16,997 segments), or with
 ``--synthetic`` (or where no pine ships) a tree of ``--segments`` bent chains of 17
-tapering segments; either is skinned by ``plantgen.geometry.frusta.skin_skeleton``.
+tapering segments; either is skinned by ``plantgen.geometry.skin.skin_skeleton``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import tracemalloc
 import numpy as np
 
 from .._resources import shipped_grammar
-from ..geometry.frusta import skin_skeleton
+from ..geometry.skin import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
 from ..pipeline import load_skeleton

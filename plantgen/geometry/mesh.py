@@ -31,14 +31,18 @@ ring and column strides); rows are processed in chunks only to bound memory.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from ..tolerances import tol
+from . import relief as relief_maps
+from .frusta import Frusta, plane_height
+
 __all__ = [
     "TessellatedMesh", "tessellate", "triangle_count", "lateral_triangles_per_row",
-    "columns_around", "bands_along", "continuing_parent_rows", "generator_points",
+    "columns_around", "bands_along", "generator_points",
 ]
 
 #: A relief height function: (material (k,) int, u (k,) float, v (k,) float) -> w (k,) in [0, 1].
@@ -66,61 +70,8 @@ def _check_level(m) -> int:
     return int(m)
 
 
-# ---------------------------------------------------------------------------- topology
-def continuing_parent_rows(frusta) -> np.ndarray:
-    """The row whose top ring each row shares as its bottom ring, or -1.
-
-    A row continues another when its lower cutting plane is bit for bit the other's
-    upper plane (the Frusta contract's shared joint plane) and its base is the other's
-    top point. If the Frusta object carries ``parent_row`` it is used as given.
-
-    Returns
-    -------
-    (n,) int64 : index of the continued row, -1 for roots, side branches and chain starts
-    """
-    given = getattr(frusta, "parent_row", None)
-    if given is not None:
-        return np.asarray(given, dtype=np.int64)
-    n = len(frusta.length)
-    if n == 0:
-        return np.zeros(0, np.int64)
-    hi = np.ascontiguousarray(frusta.plane_hi, dtype=np.float64).view(np.int64)
-    lo = np.ascontiguousarray(frusta.plane_lo, dtype=np.float64).view(np.int64)
-    _, inverse = np.unique(np.concatenate([hi, lo]), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    hi_key, lo_key = inverse[:n], inverse[n:]
-    owner = np.full(inverse.max() + 1, -1, dtype=np.int64)
-    owner[hi_key] = np.arange(n)
-    parent = owner[lo_key]
-    rows = np.arange(n)
-    ok = (parent >= 0) & (parent != rows)
-    top = frusta.base + frusta.length[:, None] * frusta.axis
-    gap = np.full(n, np.inf)
-    gap[ok] = np.linalg.norm(frusta.base[ok] - top[parent[ok]], axis=1)
-    scale = np.maximum(np.maximum(frusta.r1, frusta.r2), 1e-6 * frusta.length)
-    ok &= gap <= 1e-6 * np.maximum(scale, 1e-300)
-    return np.where(ok, parent, -1)
-
-
-def chain_position(parent_row: np.ndarray) -> np.ndarray:
-    """(n,) int: how many rows precede each row in its continuing chain.
-
-    Pointer jumping: each round adds the ancestor's hop count and jumps twice as far,
-    so ``log2(chain length)`` vectorised rounds replace a walk along every chain.
-    """
-    depth = (parent_row >= 0).astype(np.int64)
-    jump = np.asarray(parent_row, dtype=np.int64).copy()
-    live = np.flatnonzero(jump >= 0)
-    while live.size:
-        ancestor = jump[live]
-        depth[live] += depth[ancestor]
-        jump[live] = jump[ancestor]
-        live = live[jump[live] >= 0]
-    return depth
-
-
 # ---------------------------------------------------------------------------- geometry
-def generator_points(frusta, rows, u, v, offset=0.0, relief_slope=None):
+def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
     """Surface points at texture coordinates ``(u, v)``: the inverse of (6)–(7).
 
     The generator at angle ``φ = 2π(u - u_offset - v·twist)`` around the axis (``φ = 0``
@@ -151,7 +102,7 @@ def generator_points(frusta, rows, u, v, offset=0.0, relief_slope=None):
     u, v, offset = (np.asarray(x, dtype=np.float64) for x in (u, v, offset))
     length = frusta.length[rows]
     r1 = frusta.r1[rows]
-    slope = (frusta.r2[rows] - r1) / length
+    slope = frusta.slope[rows]
     axis = frusta.axis[rows]
     ref = frusta.ref_dir[rows]
     binormal = np.cross(axis, ref)
@@ -169,11 +120,11 @@ def generator_points(frusta, rows, u, v, offset=0.0, relief_slope=None):
         n_axis = np.einsum("...j,...j->...", normal, axis)
         n_radial = cos_phi * np.einsum("...j,...j->...", normal, ref) \
             + sin_phi * np.einsum("...j,...j->...", normal, binormal)
-        # n·(C1 + y·axis + (r1' + k·y)·e_r) = d, relative to C1 so far models keep digits.
-        rhs = (d - np.einsum("...j,...j->...", normal, frusta.base[rows])) - start_radius * n_radial
-        den = n_axis + slope * n_radial
-        den = np.where(np.abs(den) < 1e-300, np.copysign(1e-300, den), den)  # generator ∥ plane
-        return rhs / den
+        # relative to C1 so far models keep digits; a generator ∥ the plane stays finite
+        gap = d - np.einsum("...j,...j->...", normal, frusta.base[rows])
+        return plane_height(gap, n_axis, n_radial, start_radius, slope,
+                            guard=lambda rise: np.where(np.abs(rise) < tol.tiny,
+                                                        np.copysign(tol.tiny, rise), rise))[0]
 
     y_lo, y_hi = axial_cut(frusta.plane_lo), axial_cut(frusta.plane_hi)
     y = y_lo + v * (y_hi - y_lo)  # P = P_l + v (P_u - P_l) along the straight generator
@@ -189,7 +140,7 @@ def generator_points(frusta, rows, u, v, offset=0.0, relief_slope=None):
 
     def unit_or_cone(axial, radius):
         norm = np.hypot(axial, radius)
-        tiny = norm <= 1e-12 * scale
+        tiny = norm <= tol.zero_length * scale
         safe = np.where(tiny, 1.0, norm)
         return (np.where(tiny, -slope / cone_len, axial / safe),
                 np.where(tiny, 1.0 / cone_len, radius / safe))
@@ -206,8 +157,8 @@ def generator_points(frusta, rows, u, v, offset=0.0, relief_slope=None):
     normals = n_axial[..., None] * axis + n_radial[..., None] * radial
     if relief_slope is not None:
         du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
-        radius = np.maximum(start_radius + slope * y, 1e-12 * scale)
-        generator_length = np.maximum((y_hi - y_lo) * cone_len, 1e-12 * scale)
+        radius = np.maximum(start_radius + slope * y, tol.zero_length * scale)
+        generator_length = np.maximum((y_hi - y_lo) * cone_len, tol.zero_length * scale)
         around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
         along = (axis + slope[..., None] * radial) / cone_len[..., None]
         tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
@@ -265,7 +216,7 @@ class TessellatedMesh:
 
     def to_trimesh(self, *, merge: bool = False):
         """A ``trimesh.Trimesh`` with the normals and uv kept (``merge``: weld the seam copies)."""
-        import trimesh
+        import trimesh  # here, not at the top: importing trimesh takes about a second
 
         visual = trimesh.visual.TextureVisuals(uv=self.uv)
         mesh = trimesh.Trimesh(self.vertices, self.faces, vertex_normals=self.normals,
@@ -283,9 +234,7 @@ def triangle_count(n_rows: int, m: int, n_caps: int) -> int:
 def _default_height(material_names) -> HeightFunction:
     """Heights from :mod:`plantgen.geometry.relief`: the maps, repeats and bilinear sampler
     that the ray caster and the reference use."""
-    from . import relief
-
-    maps, repeats = relief.height_maps(material_names)
+    maps, repeats = relief_maps.height_maps(material_names)
 
     def height(material, u, v):
         out = np.zeros(len(u))
@@ -293,13 +242,13 @@ def _default_height(material_names) -> HeightFunction:
         for mat in np.unique(material):
             sel = material == mat
             rep_u, rep_v = repeats[mat]
-            out[sel] = relief.sample_height(maps[mat], u[sel] * rep_u, v[sel] * rep_v)
+            out[sel] = relief_maps.sample_height(maps[mat], u[sel] * rep_u, v[sel] * rep_v)
         return out
 
     return height
 
 
-def tessellate(frusta, m: int = 1, *, relief: bool = False, height: HeightFunction | None = None,
+def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: HeightFunction | None = None,
                caps: bool | str = True, gradient_step: tuple[float, float] | None = None,
                chunk_vertices: int = 1 << 19) -> TessellatedMesh:
     """Tessellate frusta at subdivision level ``m`` (GS), optionally displaced (GS+R).
@@ -330,17 +279,15 @@ def tessellate(frusta, m: int = 1, *, relief: bool = False, height: HeightFuncti
     columns, bands = columns_around(m), bands_along(m)
     ring_size = columns + 1  # seam column duplicated
     rings = bands + 1
-    parent_row = continuing_parent_rows(frusta)
+    parent_row = frusta.parent_row
     shared = parent_row >= 0
-    chain_v = chain_position(parent_row).astype(np.float64)
-    names = tuple(getattr(frusta, "material_names", ("bark",)))
-    material = np.asarray(frusta.material, dtype=np.int32)
+    chain_v = frusta.chain_position.astype(np.float64)
+    names = frusta.material_names
+    material = frusta.material
     step_u = step_v = 1.0 / 256
     if relief and height is None:
         height = _default_height(names)
-        from .relief import height_maps
-
-        texels_v, texels_u = height_maps(names)[0].shape[1:]
+        texels_v, texels_u = relief_maps.height_maps(names)[0].shape[1:]
         step_u, step_v = 1.0 / texels_u, 1.0 / texels_v
     if gradient_step is not None:
         step_u, step_v = (float(x) for x in gradient_step)
@@ -372,7 +319,7 @@ def tessellate(frusta, m: int = 1, *, relief: bool = False, height: HeightFuncti
 
     u_col = np.arange(ring_size) / columns  # (ring_size,)
     v_ring = np.arange(rings) / bands  # (rings,)
-    shell = np.asarray(getattr(frusta, "shell", np.zeros(n)), dtype=np.float64)
+    shell = frusta.shell
 
     def ring_points(rows, ring_index):
         """Points, normals, u, texture v of rings ``ring_index`` (k,) of ``rows`` (k,),

@@ -17,12 +17,14 @@ Segment lengths and radii are kept; every child still starts where its parent en
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .skeleton import Skeleton
 from .stage import Sway
+from .vec import ancestor_count, rotate
 
 __all__ = ["SwayRig", "sway_rig", "pose"]
 
@@ -49,43 +51,28 @@ class SwayRig:
     moving: np.ndarray
 
 
-def _depth(parent: np.ndarray) -> np.ndarray:
-    depth = np.zeros(len(parent), dtype=np.int64)
-    # parents precede children, so one pass in index order suffices; vectorise by
-    # repeating "depth = depth[parent] + 1" until it stops changing (<= tree height passes)
-    has_p = parent >= 0
-    for _ in range(len(parent) + 1):
-        new = np.where(has_p, depth[np.where(has_p, parent, 0)] + 1, 0)
-        if np.array_equal(new, depth):
-            break
-        depth = new
-    return depth
-
-
-def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray, motions: list) -> SwayRig:
+def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray,
+             sways: Sequence[Sway | None]) -> SwayRig:
     """Prepare the sway of ``skeleton``.
 
     Parameters
     ----------
-    skeleton : Skeleton in world coordinates
+    skeleton : Skeleton in world coordinates (n segments)
     segment_instance : (n,) int, the instance of each segment
-    motions : per instance, None or a :class:`Sway` (or, until callers move, the mapping
-        ``{"sway": {"amplitude": deg, "frequency": Hz, "phase": rad}}``)
+    sways : per instance, its :class:`~plantgen.geometry.stage.Sway`, or None (still)
     """
     n = len(skeleton)
     inst = np.asarray(segment_instance, dtype=np.int64)
-    depth = _depth(skeleton.parent)
-    k = len(motions)
+    depth = ancestor_count(skeleton.parent)
+    k = len(sways)
     amp = np.zeros(k)
     freq = np.zeros(k)
     phase = np.zeros(k)
-    for i, m in enumerate(motions):
-        if isinstance(m, dict):   # the mapping form: temporary, until every caller passes Sway
-            m = Sway(**m["sway"]) if m.get("sway") is not None else None
-        if m is not None:
-            amp[i] = np.radians(m.amplitude)
-            freq[i] = m.frequency
-            phase[i] = m.phase
+    for i, sway in enumerate(sways):
+        if sway is not None:
+            amp[i] = np.radians(sway.amplitude)
+            freq[i] = sway.frequency
+            phase[i] = sway.phase
     # the bending axis is horizontal, turned by the phase so instances sway in different planes
     axes = np.stack([np.cos(phase), np.zeros(k), np.sin(phase)], axis=1)
     max_depth = np.ones(k)
@@ -94,12 +81,6 @@ def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray, motions: list) ->
     levels = [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)] if n else []
     return SwayRig(depth, levels, axes[inst], amp[inst], freq[inst], phase[inst], max_depth[inst],
                    amp[inst] != 0)
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues rotation of rows of ``v`` about unit rows of ``axis`` by ``angle`` (rad)."""
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * (np.sum(axis * v, axis=1, keepdims=True) * (1 - c))
 
 
 def pose(skeleton: Skeleton, rig: SwayRig, t: float) -> Skeleton:
@@ -117,6 +98,6 @@ def pose(skeleton: Skeleton, rig: SwayRig, t: float) -> Skeleton:
         total[level] = np.where(has_p, total[np.where(has_p, p, 0)], 0.0) + theta[level]
         s = np.where(has_p[:, None], end[np.where(has_p, p, 0)], start[level])
         start[level] = s
-        end[level] = s + _rotate(d[level], rig.axis[level], total[level])
+        end[level] = s + rotate(d[level], rig.axis[level], total[level])
     return Skeleton(start, end, skeleton.r_start, skeleton.r_end, skeleton.parent, skeleton.continues,
                     skeleton.material, skeleton.material_names)

@@ -11,13 +11,15 @@ One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
    everything is cast to ``dtype`` (float32 emulates the GPU).
 2. E = O - C1. With ``recenter``, E moves to the ray point nearest the axis segment:
    with b = D·a, d = D·E, e = a·E, the axis point s = clamp(e + b·(b·e - d)/(D·D - b²),
-   0, h) (s = h/2 when D·D - b² <= 1e-6·D·D, a ray along the axis), t0 = (s·b - d)/D·D,
-   E += t0·D. The quadratic then sees numbers of the size of the ray's distance from the
-   axis (about r near a hit), not of the eye distance.
-3. Cone r(y) = r1 + k·y, y = X·a: with e_y = E·a, d_y = D·a, E⊥ = E - e_y·a, D⊥ = D - d_y·a,
-   R0 = r1 + k·e_y: A = D⊥·D⊥ - k²·d_y², B = E⊥·D⊥ - k·d_y·R0, C = E⊥·E⊥ - R0²,
-   A t² + 2B t + C = 0 solved as q = -(B + copysign(√(B² - AC), B)), t = q/A, t = C/q
-   (finite as A → 0: a ray parallel to a generator).
+   0, h) (s = h/2 when D·D - b² <= ``tol.recenter_parallel``·D·D, a ray along the axis),
+   t0 = (s·b - d)/D·D, E += t0·D. The quadratic then sees numbers of the size of the
+   ray's distance from the axis (about r near a hit), not of the eye distance.
+3. Cone r(y) = r1 + k·y, y = X·a (:func:`cone_quadratic`): with e_y = E·a, d_y = D·a,
+   E⊥ = E - e_y·a, D⊥ = D - d_y·a, R0 = r1 + k·e_y: A = D⊥·D⊥ - k²·d_y²,
+   B = E⊥·D⊥ - k·d_y·R0, C = E⊥·E⊥ - R0². A t² + 2B t + C = 0 is solved as pbrt-v4
+   does (:func:`solve_quadratic`): B² - AC as a difference of exact products,
+   q = -(B + copysign(√(B² - AC), B)), t = q/A, t = C/q (finite as A → 0: a ray
+   parallel to a generator). These functions and ``shaders/cone.glsl`` are twins.
 4. A root counts if r(y) >= 0 (not the mirror nappe), n_lo·X - d_lo >= 0 and
    n_hi·X - d_hi <= 0 (between the planes) and t > t_min.
 5. Open ends (rows no continuing row shares the plane with) are capped: the plane's hit
@@ -28,8 +30,8 @@ Relief (§3, float64 only): the outer cone r + shell bounds a height field
 r(y) + shell·h(u, v), (u, v) of the concentric cone through the point (so the shell
 shares the surface's (u, v)); w of (11)–(12) is (ρ - r(y))/shell. The ray interval
 inside the row's planes and bounding sphere is sampled densely (``relief_samples``)
-and the first inside sample is refined by bisection to below 1e-9 (relative to the
-row's size).
+and the first inside sample is refined by bisection to below ``tol.relief_bisection``
+(relative to the row's size).
 """
 
 from __future__ import annotations
@@ -38,12 +40,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
-from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals
+from ..tolerances import tol
 from . import relief as relief_module
+from .camera import Camera
+from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals, surface_uv
+from .vec import dot
 
 __all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
-           "inside_frusta", "march_rays"]
+           "inside_frusta", "march_rays", "cone_quadratic", "solve_quadratic",
+           "difference_of_products"]
 
 
 @dataclass
@@ -112,6 +117,7 @@ class _Upload:
         self.k = cast(frusta.slope)
         self.n_lo = cast(frusta.plane_lo[:, :3])
         self.n_hi = cast(frusta.plane_hi[:, :3])
+        # plane offsets relative to C1 formed as the GPU records form them (pack_records)
         self.d_lo = cast(frusta.plane_lo[:, 3] - np.einsum("ij,ij->i", frusta.plane_lo[:, :3], frusta.base))
         self.d_hi = cast(frusta.plane_hi[:, 3] - np.einsum("ij,ij->i", frusta.plane_hi[:, :3], frusta.base))
         self.open_lo = frusta.open_lo
@@ -119,8 +125,81 @@ class _Upload:
         self.origin = o
 
 
-def _dot(a, b):
-    return np.einsum("...i,...i->...", a, b)
+# ------------------------------------------------------------------------------ the cone quadratic
+# Twins of two_product, difference_of_products, solve_quadratic and cone_quadratic in
+# shaders/cone.glsl, line for line.
+def _two_product(a, b):
+    """p = a·b rounded and e with p + e = a·b exactly (Dekker's product with Veltkamp's split
+    into half-width halves; float32 or float64 arrays, the dtype's own split)."""
+    dtype = np.result_type(a, b)
+    split = dtype.type(2.0 ** ((np.finfo(dtype).nmant + 2) // 2) + 1)   # 2^12 + 1, 2^27 + 1
+    a_big = split * a
+    a_hi = a_big - (a_big - a)
+    a_lo = a - a_hi
+    b_big = split * b
+    b_hi = b_big - (b_big - b)
+    b_lo = b - b_hi
+    product = a * b
+    return product, ((a_hi * b_hi - product) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
+
+
+def difference_of_products(a, b, c, d):
+    """(...) a·b - c·d within about an ulp even where the two products nearly cancel (as
+    pbrt-v4's ``DifferenceOfProducts``, with exact products instead of fma): the products'
+    difference is exact there, and their rounding errors are added back."""
+    ab, ab_error = _two_product(a, b)
+    cd, cd_error = _two_product(c, d)
+    return (ab - cd) + (ab_error - cd_error)
+
+
+def solve_quadratic(a, b, c):
+    """The roots of a·t² + 2b·t + c = 0 (half-b form), as pbrt-v4's ``Quadratic``.
+
+    The discriminant b² - a·c is a difference of products; q = -(b + copysign(√disc, b));
+    t_q = q/a and t_c = c/q (neither cancels; where a = 0, a line, c/q = -c/(2b) is its one
+    root). All arrays (...) of one float dtype.
+
+    Returns
+    -------
+    disc : (...) the discriminant (no real root where negative)
+    t_q : (...) q/a, inf where a = 0
+    t_c : (...) c/q, t_q where q = 0 (b = 0 and a·c = 0)
+    """
+    disc = difference_of_products(b, b, a, c)
+    root = np.sqrt(np.maximum(disc, disc.dtype.type(0)))
+    q = -(b + np.where(b >= 0, root, -root))     # copysign(root, b)
+    t_q = np.where(a != 0, q / np.where(a != 0, a, 1), np.inf)
+    t_c = np.where(q != 0, c / np.where(q != 0, q, 1), t_q)
+    return disc, t_q, t_c
+
+
+def cone_quadratic(e, d, axis, r1, slope, dr=0.0):
+    """The cone r(y) = r1 + dr + k·y along rays e + t·d (e relative to the base C1):
+    g(t) = a·t² + 2b·t + c <= 0 inside the double cone.
+
+    With e_y = e·axis, d_y = d·axis, the parts E, D perpendicular to the axis and the radius
+    at e's height r0 = r1 + dr + k·e_y: a = D·D - (k·d_y)², b = E·D - k·d_y·r0,
+    c = E·E - r0².
+
+    Parameters
+    ----------
+    e, d : (m, 3) ray origins (relative to C1) and directions
+    axis : (m, 3) unit cone axes
+    r1, slope : (m,) radius at C1 and slope k
+    dr : scalar or (m,) growth of the radius (a concentric cone)
+
+    Returns
+    -------
+    a, b, c, e_y, d_y : (m,) each, ``e``'s dtype
+    """
+    e_y, d_y = dot(e, axis), dot(d, axis)
+    e_perp = e - e_y[:, None] * axis
+    d_perp = d - d_y[:, None] * axis
+    r0 = r1 + dr + slope * e_y
+    a = dot(d_perp, d_perp) - slope * slope * d_y * d_y
+    b = dot(e_perp, d_perp) - slope * d_y * r0
+    c = dot(e_perp, e_perp) - r0 * r0
+    return a, b, c, e_y, d_y
 
 
 def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
@@ -132,14 +211,14 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
     c1, a, h, r1, k = up.c1[rows], up.a[rows], up.h[rows], up.r1[rows], up.k[rows]
     n_lo, n_hi, d_lo, d_hi = up.n_lo[rows], up.n_hi[rows], up.d_lo[rows], up.d_hi[rows]
     E = O - c1
-    dd = _dot(D, D)
+    dd = dot(D, D)
     if recenter:
         # the ray point nearest the axis segment {s·a, 0 <= s <= h}
-        b_ = _dot(D, a)
-        d_ = _dot(D, E)
-        e_ = _dot(a, E)
+        b_ = dot(D, a)
+        d_ = dot(D, E)
+        e_ = dot(a, E)
         denom = dd - b_ * b_
-        par = denom <= dt.type(1e-6) * dd
+        par = denom <= dt.type(tol.recenter_parallel) * dd
         with np.errstate(invalid="ignore", divide="ignore"):
             s_axis = e_ + b_ * (b_ * e_ - d_) / np.where(par, dd, denom)
         s_axis = np.where(par, h * dt.type(0.5), np.clip(s_axis, dt.type(0), h))
@@ -147,28 +226,18 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
         E = E + t0[:, None] * D
     else:
         t0 = np.zeros(len(rows), dtype=dt)
-    ey, dy = _dot(E, a), _dot(D, a)
-    Ep = E - ey[:, None] * a
-    Dp = D - dy[:, None] * a
-    R0 = r1 + k * ey
-    A = _dot(Dp, Dp) - k * k * dy * dy
-    B = _dot(Ep, Dp) - k * dy * R0
-    C = _dot(Ep, Ep) - R0 * R0
+    A, B, C, _, _ = cone_quadratic(E, D, a, r1, k)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        disc = B * B - A * C
-        sq = np.sqrt(np.maximum(disc, dt.type(0)))
-        q = -(B + np.copysign(sq, B))
-        t1 = np.where(A != 0, q / np.where(A != 0, A, 1), np.inf)
-        t2 = np.where(q != 0, C / np.where(q != 0, q, 1), np.inf)
+        disc, t1, t2 = solve_quadratic(A, B, C)
         has_root = disc >= 0
         best = np.full(len(rows), np.inf)
         kind = np.zeros(len(rows), dtype=np.int8)
         tmin_local = (t_min - t0.astype(np.float64))
         for t in (t1, t2):
             X = E + t[:, None] * D
-            y = _dot(X, a)
+            y = dot(X, a)
             ok = has_root & np.isfinite(t) & (r1 + k * y >= 0)
-            ok &= (_dot(n_lo, X) - d_lo >= 0) & (_dot(n_hi, X) - d_hi <= 0)
+            ok &= (dot(n_lo, X) - d_lo >= 0) & (dot(n_hi, X) - d_hi <= 0)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
             better = ok & (tt < best)
@@ -178,14 +247,14 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
                 (2, n_hi, d_hi, n_lo, d_lo, 1, up.open_hi[rows])):
             if not open_.any():
                 continue
-            den = _dot(n_c, D)
-            t = (d_c - _dot(n_c, E)) / np.where(den != 0, den, 1)
+            den = dot(n_c, D)
+            t = (d_c - dot(n_c, E)) / np.where(den != 0, den, 1)
             X = E + t[:, None] * D
-            y = _dot(X, a)
+            y = dot(X, a)
             rr = r1 + k * y
             perp = X - y[:, None] * a
-            ok = open_ & (den != 0) & np.isfinite(t) & (rr >= 0) & (_dot(perp, perp) <= rr * rr)
-            other = _dot(n_o, X) - d_o
+            ok = open_ & (den != 0) & np.isfinite(t) & (rr >= 0) & (dot(perp, perp) <= rr * rr)
+            other = dot(n_o, X) - d_o
             ok &= (other <= 0) if sign_o < 0 else (other >= 0)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
@@ -201,14 +270,12 @@ def _inside_relief(frusta, rows, points, height):
     """(m,) bool: point inside row's relief solid (between planes, ρ <= r(y) + shell·h)."""
     rel = points - frusta.base[rows]
     a = frusta.axis[rows]
-    y = _dot(rel, a)
+    y = dot(rel, a)
     rho = np.linalg.norm(rel - y[:, None] * a, axis=1)
     r_in = frusta.r1[rows] + frusta.slope[rows] * y
     lo, hi = frusta.plane_lo[rows], frusta.plane_hi[rows]
-    between = (_dot(lo[:, :3], points) - lo[:, 3] >= 0) & (_dot(hi[:, :3], points) - hi[:, 3] <= 0)
+    between = (dot(lo[:, :3], points) - lo[:, 3] >= 0) & (dot(hi[:, :3], points) - hi[:, 3] <= 0)
     shell = frusta.shell[rows]
-    from .frusta import surface_uv
-
     u, v = surface_uv(frusta, rows, points)
     w = height(rows, u, v) if height is not None else np.zeros(len(rows))
     top = r_in + shell * w
@@ -228,22 +295,18 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
     with np.errstate(divide="ignore", invalid="ignore"):
         for plane, sign in ((lo, 1.0), (hi, -1.0)):
             # sign·(n·(O + tD) - d) >= 0
-            s0 = sign * (_dot(plane[:, :3], O) - plane[:, 3])
-            s1 = sign * _dot(plane[:, :3], D)
+            s0 = sign * (dot(plane[:, :3], O) - plane[:, 3])
+            s1 = sign * dot(plane[:, :3], D)
             tc = -s0 / s1
             ta = np.where(s1 > 0, np.maximum(ta, tc), ta)
             tb = np.where(s1 < 0, np.minimum(tb, tc), tb)
             dead = (s1 == 0) & (s0 < 0)
             ta = np.where(dead, np.inf, ta)
         centre, radius = spheres[0][rows], spheres[1][rows]
-        dd = _dot(D, D)
         oc = O - centre
-        b = _dot(oc, D) / dd
-        c = (_dot(oc, oc) - radius * radius) / dd
-        disc = b * b - c
-        sq = np.sqrt(np.maximum(disc, 0))
-        ta = np.maximum(ta, np.where(disc >= 0, -b - sq, np.inf))
-        tb = np.minimum(tb, np.where(disc >= 0, -b + sq, -np.inf))
+        disc, t_q, t_c = solve_quadratic(dot(D, D), dot(oc, D), dot(oc, oc) - radius * radius)
+        ta = np.maximum(ta, np.where(disc >= 0, np.minimum(t_q, t_c), np.inf))
+        tb = np.minimum(tb, np.where(disc >= 0, np.maximum(t_q, t_c), -np.inf))
     ta = np.maximum(ta, t_min)
     live = ta < tb
     t_hit = np.full(m, np.inf)
@@ -284,7 +347,7 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
         ins = _inside_relief(frusta, rows_s, O_s + mid[:, None] * D_s, height)
         t_in = np.where(need & ins, mid, t_in)
         t_out = np.where(need & ~ins, mid, t_out)
-        need &= (t_in - t_out) > 1e-10 * scale
+        need &= (t_in - t_out) > tol.relief_bisection * scale
     t_hit[hit_idx] = t_in
     return t_hit
 
@@ -309,10 +372,17 @@ def _reduce_nearest(n_rays, ray_idx, rows, t, kind, best_t, best_row, best_kind)
     best_kind[r] = kind[pick][better]
 
 
+def _bounding_spheres(corners):
+    """Centres (n, 3) and radii (n,) of spheres around bounding pyramids' corners (n, 8, 3)."""
+    centre = corners.mean(axis=1)
+    return centre, np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1)
+
+
 def _boxes(frusta, with_shell):
     corners = bounding_pyramids(frusta, shell=with_shell)
     lo, hi = corners.min(axis=1), corners.max(axis=1)
-    pad = 1e-9 * np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1))[:, None] + 1e-12
+    pad = tol.box_pad * np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1))[:, None] \
+        + tol.box_pad_floor
     return lo - pad, hi + pad, corners
 
 
@@ -363,7 +433,7 @@ def intersect_frusta(frusta: Frusta, origins, dirs, *, relief=None, dtype=np.flo
     height = _resolve_relief(frusta, relief)
     up = _Upload(frusta, dtype, origin)
     box_lo, box_hi, corners = _boxes(frusta, height is not None)
-    spheres = (corners.mean(axis=1), np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=2).max(axis=1))
+    spheres = _bounding_spheres(corners)
     best_t = np.full(n_rays, np.inf)
     best_row = np.full(n_rays, -1, dtype=np.int64)
     best_kind = np.zeros(n_rays, dtype=np.int8)
@@ -413,8 +483,8 @@ def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True):
         uu, vv, nn = shade_rows_uv_normals(frusta, rows, pts, interpolated)
         cap = hits.cap.ravel()[hit]
         if cap.any():
-            lo_side = np.abs(_dot(frusta.plane_lo[rows[cap], :3], pts[cap]) - frusta.plane_lo[rows[cap], 3]) <= \
-                np.abs(_dot(frusta.plane_hi[rows[cap], :3], pts[cap]) - frusta.plane_hi[rows[cap], 3])
+            lo_side = np.abs(dot(frusta.plane_lo[rows[cap], :3], pts[cap]) - frusta.plane_lo[rows[cap], 3]) <= \
+                np.abs(dot(frusta.plane_hi[rows[cap], :3], pts[cap]) - frusta.plane_hi[rows[cap], 3])
             nn[cap] = np.where(lo_side[:, None], -frusta.plane_lo[rows[cap], :3], frusta.plane_hi[rows[cap], :3])
         u[hit], v[hit], nrm[hit] = uu, vv, nn
     return u.reshape(shape), v.reshape(shape), nrm.reshape(shape + (3,))
@@ -446,15 +516,14 @@ def render_reference(frusta: Frusta, camera: Camera, *, relief=None, dtype=np.fl
     best_kind = np.zeros(H * W, dtype=np.int8)
     if n:
         corners = bounding_pyramids(frusta, shell=height is not None)
-        spheres = (corners.mean(axis=1),
-                   np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=2).max(axis=1))
+        spheres = _bounding_spheres(corners)
         right, upv, fwd = camera.basis()
         rel = corners - eye
         z = rel @ fwd
         tan_y = np.tan(np.radians(camera.fov_y) / 2)
         tan_x = tan_y * camera.aspect
         scale = np.abs(rel).max(axis=(1, 2))
-        behind = (z <= 1e-9 * np.maximum(scale, 1e-300)[:, None]).any(axis=1)
+        behind = (z <= tol.behind_eye * np.maximum(scale, tol.tiny)[:, None]).any(axis=1)
         zc = np.where(z > 0, z, 1.0)
         px = ((rel @ right) / zc / tan_x + 1) / 2 * W - 0.5
         py = (1 - (rel @ upv) / zc / tan_y) / 2 * H - 0.5
@@ -522,11 +591,11 @@ def inside_frusta(frusta: Frusta, points, rows=None) -> np.ndarray:
         r = rows[s:s + 256]
         rel = pts[:, None, :] - frusta.base[r][None]
         a = frusta.axis[r][None]
-        y = _dot(rel, a)
-        rad2 = _dot(rel, rel) - y * y
+        y = dot(rel, a)
+        rad2 = dot(rel, rel) - y * y
         rr = frusta.r1[r][None] + frusta.slope[r][None] * y
-        lo = _dot(pts[:, None, :], frusta.plane_lo[r][None, :, :3]) - frusta.plane_lo[r][None, :, 3]
-        hi = _dot(pts[:, None, :], frusta.plane_hi[r][None, :, :3]) - frusta.plane_hi[r][None, :, 3]
+        lo = dot(pts[:, None, :], frusta.plane_lo[r][None, :, :3]) - frusta.plane_lo[r][None, :, 3]
+        hi = dot(pts[:, None, :], frusta.plane_hi[r][None, :, :3]) - frusta.plane_hi[r][None, :, 3]
         out |= ((rr >= 0) & (rad2 <= rr * rr) & (lo >= 0) & (hi <= 0)).any(axis=1)
     return out
 

@@ -21,7 +21,7 @@ all zero). Any other name gets the bark map and bark's shell thickness (document
 fallback: unknown materials look like bark rather than vanish).
 
 Shell thickness (:data:`DEFAULT_SHELL`) is a fraction of each segment's mean radius, the
-convention of :func:`plantgen.geometry.frusta.skin_skeleton`'s ``shell`` argument.
+convention of :func:`plantgen.geometry.skin.skin_skeleton`'s ``shell`` argument.
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ import zlib
 from functools import lru_cache
 
 import numpy as np
+
+from ..tolerances import tol
 
 __all__ = ["MATERIALS", "DEFAULT_SHELL", "REPEATS", "height_map", "height_maps",
            "sample_height", "default_shell"]
@@ -59,7 +61,7 @@ def _periodic_noise(rng, shape, cutoff):
     filt = np.exp(-0.5 * ((fy / cutoff[0]) ** 2 + (fx / cutoff[1]) ** 2))
     out = np.real(np.fft.ifft2(np.fft.fft2(white) * filt))
     out -= out.min()
-    return out / max(out.max(), 1e-12)
+    return out / max(out.max(), tol.tiny)
 
 
 def _bark(rng, shape):

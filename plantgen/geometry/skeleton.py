@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import tolerances
 from ..errors import PlantgenError
 
 __all__ = ["Skeleton", "SkeletonError"]
@@ -95,12 +96,12 @@ class Skeleton:
         b = self.bounds
         return float(b[1, 1] - b[0, 1])
 
-    def validate(self, tol: float = 1e-9) -> None:
+    def validate(self, tol: float = tolerances.tol.joint_gap) -> None:
         """Raise SkeletonError if an invariant of the format does not hold.
 
         Invariants: finite coordinates, radii >= 0, parents precede children, every
         segment with a parent starts where its parent ends (within ``tol`` times the
-        model size), roots do not continue, materials index ``material_names``.
+        model size, at least 1), roots do not continue, materials index ``material_names``.
         """
         n = len(self)
         for name in ("start", "end", "r_start", "r_end"):
@@ -124,12 +125,12 @@ class Skeleton:
 
     # ------------------------------------------------------------------ building
     @classmethod
-    def empty(cls, material_names=("bark",)) -> "Skeleton":
+    def empty(cls, material_names=("bark",)) -> Skeleton:
         z3 = np.zeros((0, 3))
         z = np.zeros(0)
         return cls(z3, z3, z, z, np.zeros(0, int), np.zeros(0, bool), np.zeros(0, int), material_names)
 
-    def transformed(self, matrix: np.ndarray) -> "Skeleton":
+    def transformed(self, matrix: np.ndarray) -> Skeleton:
         """Apply a 4x4 similarity transform (rotation, uniform scale, translation).
 
         Radii scale by the matrix's uniform scale factor.
@@ -142,8 +143,19 @@ class Skeleton:
             self.parent, self.continues, self.material, self.material_names,
         )
 
+    def subset(self, rows) -> Skeleton:
+        """The segments ``rows`` ((k,) int, closed under parents: a kept segment's parent
+        is kept) as a skeleton, in the given order, parents re-indexed."""
+        rows = np.asarray(rows, dtype=np.int64)
+        remap = np.full(len(self), -1, dtype=np.int64)
+        remap[rows] = np.arange(len(rows))
+        parent = self.parent[rows]
+        parent = np.where(parent >= 0, remap[np.maximum(parent, 0)], -1)
+        return Skeleton(self.start[rows], self.end[rows], self.r_start[rows], self.r_end[rows],
+                        parent, self.continues[rows], self.material[rows], self.material_names)
+
     @staticmethod
-    def concatenate(parts: list["Skeleton"]) -> "Skeleton":
+    def concatenate(parts: list[Skeleton]) -> Skeleton:
         """Join skeletons into one, re-indexing parents and merging material names."""
         names: list[str] = []
         for p in parts:
@@ -180,7 +192,7 @@ class Skeleton:
         tmp.replace(path)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Skeleton":
+    def load(cls, path: str | Path) -> Skeleton:
         try:
             with np.load(path, allow_pickle=False) as z:
                 names = tuple(str(x) for x in z["material_names"]) if "material_names" in z else ("bark",)

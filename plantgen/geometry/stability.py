@@ -27,17 +27,19 @@ Nothing here imports GL or click.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from .frusta import Frusta, skin_skeleton
+from ..tolerances import tol
+from .frusta import Frusta, plane_height
 from .reference import inside_frusta, intersect_frusta, march_rays, shade_hits
 from .skeleton import Skeleton
+from .skin import skin_skeleton
 
 __all__ = ["HardCase", "HARD_CASES", "case_rays", "medial_axis_rays", "evaluate_case",
-           "format_table", "chain", "surface_samples"]
+           "format_table", "chain", "surface_samples", "model_size", "hit_residuals"]
 
 
 def chain(bends_deg=(), lengths=1.0, radii=0.1, offset=(0.0, 0.0, 0.0)) -> Skeleton:
@@ -104,16 +106,16 @@ def surface_samples(frusta: Frusta, count: int, rng) -> tuple[np.ndarray, np.nda
     ys = []
     for plane in (frusta.plane_lo[rows], frusta.plane_hi[rows]):
         n, d = plane[:, :3], plane[:, 3]
-        ne = np.einsum("ij,ij->i", n, e)
-        ys.append((d - np.einsum("ij,ij->i", n, frusta.base[rows]) - frusta.r1[rows] * ne)
-                  / (np.einsum("ij,ij->i", n, a) + k * ne))
+        ys.append(plane_height(d - np.einsum("ij,ij->i", n, frusta.base[rows]), np.einsum("ij,ij->i", n, a),
+                               np.einsum("ij,ij->i", n, e), frusta.r1[rows], k)[0])
     lo, hi = np.minimum(*ys), np.maximum(*ys)
     y = lo + rng.uniform(0.02, 0.98, count) * (hi - lo)
     pts = frusta.base[rows] + y[:, None] * a + (frusta.r1[rows] + k * y)[:, None] * e
     return rows, pts
 
 
-def _size(frusta: Frusta) -> float:
+def model_size(frusta: Frusta) -> float:
+    """The model's size: the diagonal of its axis end points' box plus its widest diameter."""
     pts = np.concatenate([frusta.base, frusta.top])
     r = np.maximum(frusta.r1, frusta.r2).max()
     return float(np.linalg.norm(pts.max(0) - pts.min(0)) + 2 * r)
@@ -122,7 +124,7 @@ def _size(frusta: Frusta) -> float:
 def case_rays(case: HardCase, frusta: Frusta, count: int = 200, seed: int = 0):
     """(m, 3) origins, (m, 3) unit directions for a case, deterministic."""
     rng = np.random.default_rng(seed)
-    size = _size(frusta)
+    size = model_size(frusta)
     centre = 0.5 * (np.concatenate([frusta.base, frusta.top]).max(0)
                     + np.concatenate([frusta.base, frusta.top]).min(0))
     _, targets = surface_samples(frusta, count, rng)
@@ -161,7 +163,7 @@ def medial_axis_rays(frusta: Frusta, count: int = 400, seed: int = 1, rows=None)
     """Rays from points on the medial axes (inside the solids) in random directions."""
     rng = np.random.default_rng(seed)
     rows = np.arange(len(frusta)) if rows is None else np.asarray(rows)
-    long_rows = rows[frusta.length[rows] > 1e-6 * np.maximum(frusta.r1[rows], frusta.r2[rows])]
+    long_rows = rows[frusta.has_length[rows]]
     pick = long_rows[rng.integers(0, len(long_rows), count)]
     y = rng.uniform(0.0, 1.0, count) * frusta.length[pick]
     o = frusta.base[pick] + y[:, None] * frusta.axis[pick]
@@ -171,7 +173,8 @@ def medial_axis_rays(frusta: Frusta, count: int = 400, seed: int = 1, rows=None)
 
 
 def _row_scale(frusta, rows):
-    return np.maximum(np.maximum(frusta.r1[rows], frusta.r2[rows]), 1e-300)
+    """(m,) the larger radius of rows (m,), the scale of their residuals."""
+    return np.maximum(np.maximum(frusta.r1[rows], frusta.r2[rows]), tol.tiny)
 
 
 def hit_residuals(frusta: Frusta, hits) -> tuple[np.ndarray, np.ndarray]:
@@ -194,7 +197,7 @@ def evaluate_case(case: HardCase, count: int = 200, march: bool = True) -> dict:
     skeleton = case.build()
     frusta = skin_skeleton(skeleton)
     O, D = case_rays(case, frusta, count)
-    size = _size(frusta)
+    size = model_size(frusta)
     eye_ref = O[0]
     h64 = intersect_frusta(frusta, O, D)
     u, v, nrm = shade_hits(frusta, h64)

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.camera import Camera
+from ..geometry.camera import Camera, depth_range
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from .context import gl_context, release_framebuffer
 from .materials import HeightTextures, palette_uniforms, shading_uniforms
-from .passes import LightWindow, ShadowPass, ShadowSettings, depth_range, light_window
+from .passes import LightWindow, ShadowPass, ShadowSettings, light_window
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting"]
@@ -58,7 +58,7 @@ class FrameView:
 
 def frame_view(camera: Camera, point_sets) -> FrameView:
     """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
-    in ``point_sets`` (see :func:`plantgen.render.passes.depth_range`)."""
+    in ``point_sets`` (see :func:`plantgen.geometry.camera.depth_range`)."""
     eye = np.asarray(camera.eye, dtype=np.float64)
     right, up, fwd = camera.basis()
     near, far = depth_range(point_sets, eye, fwd)

@@ -21,10 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
+from ..geometry.camera import box_corners
 from .context import release_framebuffer
 
-__all__ = ["ShadowSettings", "LightWindow", "light_window", "ShadowPass", "box_corners",
-           "program_variants", "frame_passes", "depth_range"]
+__all__ = ["ShadowSettings", "LightWindow", "light_window", "ShadowPass",
+           "program_variants", "frame_passes"]
 
 
 @dataclass(frozen=True)
@@ -119,28 +120,6 @@ class LightWindow:
     def texel_size(self, resolution: int) -> float:
         """World size of one texel (the larger side)."""
         return float(2.0 * self.half.max() / resolution)
-
-
-def depth_range(point_sets, eye: np.ndarray, fwd: np.ndarray) -> tuple[float, float]:
-    """Near and far distances along the unit view direction ``fwd`` from ``eye`` enclosing
-    every (k, 3) array of ``point_sets`` with a 5 % margin of their extent; (0.1, 10) for
-    none. near stays above far·1e-5, so the depth buffer keeps its precision."""
-    pts = [np.asarray(p, dtype=np.float64) for p in point_sets if len(p)]
-    if not pts:
-        return 0.1, 10.0
-    corners = np.concatenate(pts)
-    box = np.stack([corners.min(axis=0), corners.max(axis=0)])
-    depths = (corners - eye) @ fwd
-    size = float(np.linalg.norm(box[1] - box[0]))
-    far = max(float(depths.max()), 0.0) + 0.05 * size + 1e-6
-    near = max(float(depths.min()) - 0.05 * size, far * 1e-5)
-    return near, far
-
-
-def box_corners(box) -> np.ndarray:
-    """(8, 3) float64 corners of the axis-aligned (2, 3) box ``[lo, hi]``."""
-    box = np.asarray(box, dtype=np.float64)
-    return np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
 def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> LightWindow:

@@ -16,11 +16,12 @@ import time
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.mesh import TessellatedMesh, chain_position, continuing_parent_rows
+from ..geometry.camera import box_corners
+from ..geometry.mesh import TessellatedMesh
 from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
-from .passes import ShadowSettings, box_corners, frame_passes
+from .passes import ShadowSettings, frame_passes
 from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
@@ -34,7 +35,7 @@ def row_data(frusta) -> np.ndarray:
     into the per-row v of (7) in the fragment shader.
     """
     out = np.zeros((len(frusta.length), 2), dtype=np.float32)
-    out[:, 0] = chain_position(continuing_parent_rows(frusta))
+    out[:, 0] = frusta.chain_position
     out[:, 1] = frusta.material
     return out
 

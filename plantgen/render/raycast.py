@@ -22,11 +22,12 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.camera import Camera
-from ..geometry.framing_tmp import frusta_bounds
+from ..geometry.camera import box_corners
+from ..geometry.frusta import frusta_bounds
 from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
-from .passes import ShadowSettings, box_corners, frame_passes, program_variants
+from .passes import ShadowSettings, frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
 from .result import RaycastStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms

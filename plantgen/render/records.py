@@ -14,7 +14,6 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
-from ..geometry.mesh import continuing_parent_rows
 
 __all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "pack_records", "rc_buffer_bytes", "RecordStream", "RECORD_LAYOUT", "RECORD_ATTRIBUTES"]
@@ -66,14 +65,10 @@ def pack_records(frusta, origin) -> np.ndarray:
     rec[:, 20] = frusta.u_offset
     rec[:, 21] = frusta.twist
     rec[:, 22] = frusta.shell
-    parent_row = continuing_parent_rows(frusta) if n else np.zeros(0, np.int64)
-    open_lo = parent_row < 0
-    open_hi = np.ones(n, dtype=bool)
-    open_hi[parent_row[parent_row >= 0]] = False
     material = np.asarray(frusta.material, dtype=np.int64)
     if n and (material.min() < 0 or material.max() > 255):
         raise PlantgenError("material indices must lie in 0..255 for the ray caster")
-    rec[:, 23] = material + 256 * open_lo + 512 * open_hi
+    rec[:, 23] = material + 256 * frusta.open_lo + 512 * frusta.open_hi
     return rec.astype(np.float32)
 
 

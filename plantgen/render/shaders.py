@@ -9,7 +9,8 @@ A program file holds every stage, each behind a guard::
     #endif
 
 :func:`shader_source` assembles the text for one stage: the ``#version`` line, the stage
-macro, the caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHADOWS``),
+macro, the tolerances (``plantgen.tolerances.tol.glsl_defines()``: ``TOL_*`` macros), the
+caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHADOWS``),
 then the file with every ``#include "other.glsl"`` replaced by that file's text (looked up
 in :func:`plantgen._resources.shaders_dir`, each file included at most once per stage).
 ``#line`` directives keep compiler messages pointing at the right file and line; the
@@ -95,7 +96,7 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
     clash = sorted(set(shared) & set(defines or {}))
     if clash:
         raise ShaderError(f"defines {clash} are set by plantgen for every program")
-    out = [GLSL_VERSION, f"#define {stage}", *_define_lines({**shared, **(defines or {})})]
+    out = [GLSL_VERSION, f"#define {stage}", *_define_lines(shared), *_define_lines(defines)]
 
     def expand(fname: str, chain: tuple[str, ...]) -> None:
         if fname in chain:

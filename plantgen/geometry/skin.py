@@ -1,0 +1,675 @@
+"""Skinning: a skeleton's segments become the rows of :class:`~plantgen.geometry.frusta.Frusta`
+(Bhagvat et al. 2009, §2), vectorised over all segments.
+
+:func:`skin_skeleton` runs the phases in order, each a function below:
+
+1. segment axes and lengths (:func:`_segment_axes`), continuing children and side
+   branches (:func:`_continuing_children`);
+2. side-branch bases, moved back into the parent (:func:`_extend_side_branches`);
+3. joint planes (3)–(5) at continuing joints (:func:`_joint_cuts`: the planes of
+   :func:`_joint_planes`, the seam mismatch measured by :func:`_seam_mismatch_at` and
+   optionally fitted by :func:`_fit_seams`, §2.2);
+4. sharp joints (:func:`_sharp_joints`) and their knuckle fans (:func:`_row_layout`,
+   :func:`_fill_knuckle_fans`);
+5. texture frames: reference directions carried along each chain
+   (:func:`_reference_directions`) and u offsets (:func:`_u_offsets`, §2.3).
+
+Sharp bends (the paper's §4.1 leaves them open: past ``max_bend_deg``, a plane that no
+longer cuts a cone in an ellipse, or two planes of a segment crossing inside it) become
+*knuckles*: the two segments get planes perpendicular to their own axes through the joint
+J, and a fan of cylinder rows of radius r_joint, all based at J, fills the bend. Slice i
+(i = 0..m, m = ceil(bend / fan_step_deg)) has its axis turned by bend·i/m from the
+parent's and its planes at bend·(i ∓ 1/2)/m (clamped to 0 and bend, so the end slices
+meet their segments in the same circle). The two planes of a slice cross on the hinge
+line through J ⟂ the medial plane, by design: the slice is the wedge on the outer side of
+the bend; a second set of rows with the two planes swapped covers the opposite wedge on
+the inner side (needed when the segments are short next to r·sin(bend)). Together they
+sweep a ball of radius r_joint around J, as Max's cone-spheres do. Fan rows have
+``length`` ``tol.fan_length``·r, r1 = r2, ``segment`` = the child segment; outer slices
+continue the chain (shared planes, ``parent_row``), inner slices are open rows whose caps
+lie inside the knuckle. Side branches start back along their own axis, inside the parent,
+and their base is open (capped).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..tolerances import tol
+from . import relief
+from .frusta import Frusta, SkinReport, cone_slope, minor_semi_axis, plane_height
+from .skeleton import Skeleton
+from .vec import (
+    any_perpendicular,
+    cross,
+    dot,
+    norm,
+    plane_through,
+    reduce_to_root,
+    rotate,
+    tree_roots,
+    unit,
+)
+
+__all__ = ["skin_skeleton"]
+
+
+def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
+                  seam_tol: float = tol.seam_fit, seam_max_iter: int = 50,
+                  max_bend_deg: float = 120.0, fan_step_deg: float = 10.0, twist: float = 0.0,
+                  extend_side_branches: bool = True) -> Frusta:
+    """Skin a skeleton with conical frusta, vectorised over all segments (§2).
+
+    Parameters
+    ----------
+    skeleton : Skeleton with n segments (world units, y up)
+    shell : dict material name -> relief shell thickness, or None for
+        :data:`plantgen.geometry.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
+        segment's mean radius (r_start + r_end)/2; a value v < 0 means an absolute
+        thickness of -v world units. Names missing from a given dict get 0 (no relief).
+    seam_fit : run the minor-axis seam fitting of §2.2 (iterate each continuing child's
+        r1 until the minor semi-axes of the two cuts agree to ``seam_tol`` · radius)
+    max_bend_deg : joints bending more than this (degrees) become knuckles, as do joints
+        whose plane does not cut a cone in an ellipse and joints of segments whose two
+        planes would cross inside them
+    fan_step_deg : largest bend (degrees) of one knuckle fan slice
+    twist : twist θ (turns per segment) stored on every row
+    extend_side_branches : move each side branch's start back along its own axis into the
+        parent (keeping its slope) by min(rc·tan β, (rp - rc)/sin β), β the branch
+        angle: far enough that the base disc is under the parent's end plane, not so far
+        that its rim leaves the parent's side; the base is capped
+
+    Returns
+    -------
+    Frusta, with ``report`` a :class:`~plantgen.geometry.frusta.SkinReport`.
+    """
+    n = len(skeleton)
+    report = SkinReport(n_segments=n)
+    axis, length = _segment_axes(skeleton)
+    seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
+                    skeleton.r_end.copy())
+    child, side = _continuing_children(skeleton)
+    report.joints, report.side_branches = len(child), len(side)
+    if extend_side_branches and side.size:
+        _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
+    lo = plane_through(seg.axis, seg.base)
+    hi = plane_through(seg.axis, skeleton.end)
+    parent = skeleton.parent[child]
+    joints = _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child])
+    sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
+    if seam_fit:
+        report.seam_mismatch_max_after = report.seam_mismatch_mean_after = 0.0
+    if child.size:
+        normal, point, medial = _joint_cuts(seg, joints, seam_fit, seam_tol, seam_max_iter, report)
+        joint_plane = plane_through(normal, point)
+        lo[child] = joint_plane
+        hi[joints.parent] = joint_plane
+        sharp, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
+        hi[joints.parent[sharp]] = plane_through(joints.parent_axis[sharp], joints.point[sharp])
+        lo[child[sharp]] = plane_through(joints.child_axis[sharp], joints.point[sharp])
+
+    rows, row_of_seg, fan_count = _row_layout(seg, lo, hi, joints, sharp, bend, skeleton,
+                                              fan_step_deg)
+    report.fan_rows = len(rows.length) - n
+    report.n_rows = len(rows.length)
+    if np.any(sharp):
+        _fill_knuckle_fans(rows, seg, joints, np.flatnonzero(sharp), bend, medial, lo, hi,
+                           row_of_seg, fan_count)
+
+    n_rows = len(rows.length)
+    ref_dir = _reference_directions(rows.axis, rows.parent_row)
+    row_twist = np.full(n_rows, float(twist))
+    row_shell = np.zeros(n_rows)
+    mean_r = 0.5 * (skeleton.r_start + skeleton.r_end)
+    row_shell[:] = _material_shell(skeleton, shell, mean_r)[rows.segment] if n else 0.0
+    row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
+    u_offset = _u_offsets(rows, ref_dir, row_twist)
+    return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
+                  plane_lo=rows.plane_lo, plane_hi=rows.plane_hi, ref_dir=ref_dir,
+                  u_offset=u_offset, twist=row_twist, material=row_material, shell=row_shell,
+                  segment=rows.segment, material_names=skeleton.material_names,
+                  parent_row=rows.parent_row, report=report)
+
+
+# ============================================================================ working state
+@dataclass
+class _Segments:
+    """Per skeleton segment (n), as skinning refines them: ``base`` (n, 3) (side branches
+    move back into their parent), unit ``axis`` (n, 3), ``length`` (n,), radii ``r_start``
+    and ``r_end`` (n,) (seam fitting changes continuing children's ``r_start``)."""
+
+    base: np.ndarray
+    axis: np.ndarray
+    length: np.ndarray
+    r_start: np.ndarray
+    r_end: np.ndarray
+
+    @property
+    def slope(self) -> np.ndarray:
+        """(n,) k of every segment's cone."""
+        return cone_slope(self.r_start, self.r_end, self.length)
+
+
+@dataclass(frozen=True)
+class _Joints:
+    """The j continuing joints: ``child`` and ``parent`` (j,) segment indices, the joint
+    ``point`` J (j, 3) (the child's skeleton start), the unit axes ``parent_axis`` M1 and
+    ``child_axis`` M2 (j, 3)."""
+
+    child: np.ndarray
+    parent: np.ndarray
+    point: np.ndarray
+    parent_axis: np.ndarray
+    child_axis: np.ndarray
+
+
+@dataclass
+class _Rows:
+    """The rows of the frusta being built (segments and knuckle fan slices): the
+    contract's arrays that skinning lays out before the texture frames."""
+
+    base: np.ndarray
+    axis: np.ndarray
+    length: np.ndarray
+    r1: np.ndarray
+    r2: np.ndarray
+    plane_lo: np.ndarray
+    plane_hi: np.ndarray
+    segment: np.ndarray
+    parent_row: np.ndarray
+
+    @classmethod
+    def empty(cls, n_rows: int) -> _Rows:
+        return cls(np.empty((n_rows, 3)), np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows),
+                   np.empty(n_rows), np.empty((n_rows, 4)), np.empty((n_rows, 4)),
+                   np.empty(n_rows, dtype=np.int64), np.full(n_rows, -1, dtype=np.int64))
+
+
+# ============================================================================ segments
+def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) unit axes and (n,) lengths of the segments; a zero-length segment points up
+    and gets a length of ``tol.zero_length`` times its size."""
+    n = len(skeleton)
+    vec = skeleton.end - skeleton.start
+    length = norm(vec)
+    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (n, 3))
+    axis = np.where(length[:, None] > 0, vec / np.where(length > 0, length, 1)[:, None], up)
+    size = np.maximum(np.maximum(skeleton.r_start, skeleton.r_end), 1.0)
+    length = np.where(length > 0, length, tol.zero_length * size)
+    return axis, length
+
+
+def _continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """(j,) the continuing child of each parent that has one (the first marked
+    ``continues``) and (s,) the side branches (every other segment with a parent)."""
+    n = len(skeleton)
+    parent = skeleton.parent
+    cont = skeleton.continues & (parent >= 0)
+    first_child = np.full(n, -1, dtype=np.int64)
+    cand = np.flatnonzero(cont)[::-1]
+    first_child[parent[cand]] = cand         # last write wins: the lowest index
+    cont &= first_child[np.maximum(parent, 0)] == np.arange(n)
+    return np.flatnonzero(cont), np.flatnonzero((parent >= 0) & ~cont)
+
+
+def _extend_side_branches(seg: _Segments, start, host, side) -> None:
+    """Move the bases of side branches ``side`` (s,) back into their ``host`` (s,) segments
+    along their own axes, keeping their slopes (in place).
+
+    Far enough back that the base disc's rim is below the parent's end plane
+    (rc·tan β), not so far that the rim leaves the parent's side ((rp - rc)/sin β):
+    moving the base back by δ puts its centre δ·sin β off the parent's axis, so its rim
+    stays inside the parent while δ·sin β + rc <= rp.
+    """
+    rp_side, rc_side = seg.r_end[host], seg.r_start[side]
+    cos_b = np.clip(dot(seg.axis[side], seg.axis[host]), -1.0, 1.0)
+    sin_b = np.sqrt(1.0 - cos_b * cos_b)
+    room = np.maximum(rp_side - rc_side, 0.0) / np.maximum(sin_b, tol.parallel)
+    need = np.where(cos_b > tol.parallel, rc_side * sin_b / np.maximum(cos_b, tol.parallel), np.inf)
+    delta = np.minimum(need, room)
+    k_side = cone_slope(seg.r_start[side], seg.r_end[side], seg.length[side])
+    seg.base[side] = start[side] - delta[:, None] * seg.axis[side]
+    seg.r_start[side] = np.maximum(seg.r_start[side] - k_side * delta, 0.0)
+    seg.length[side] = seg.length[side] + delta
+
+
+def _material_shell(skeleton: Skeleton, shell, radius_mean):
+    """(n,) absolute shell thickness per segment from the per-material table ``shell``
+    (see :func:`skin_skeleton`) and the (n,) mean radii."""
+    table = dict(relief.DEFAULT_SHELL) if shell is None else dict(shell)
+    per_mat = np.array([float(table.get(name, relief.default_shell(name) if shell is None else 0.0))
+                        for name in skeleton.material_names] or [0.0])
+    frac = per_mat[skeleton.material] if len(skeleton) else np.zeros(0)
+    # positive: fraction of the segment's mean radius; negative: absolute thickness -value
+    return np.where(frac >= 0, frac * radius_mean, -frac)
+
+
+# ============================================================================ joint planes
+def _joint_planes(J, M1, M2, rp, rc, kp, kc):
+    """Cutting planes (3)–(5) at m joints, blended into the bisector where ill-conditioned.
+
+    J (m, 3) joint points; M1, M2 (m, 3) unit axes of parent and child; rp, rc (m,) radii
+    at J of parent and child; kp, kc (m,) slopes. Where the axes are collinear the medial
+    plane's normal is any vector ⟂ M1 (the paper's coordinate-axis fallback).
+
+    The boundary lines of each side σ = ±1 in the medial plane are
+    J + σ·rp·n1 + s·(M1 + σ·kp·n1) and J + σ·rc·n2 + s·(M2 + σ·kc·n2), n_i = M_i × N_m.
+    Their crossing is A (σ = +1) or B (σ = -1). Where the two boundary lines of a side are
+    close to parallel (their cross product below half that of the axes: the bend equals
+    the difference of the half-angles) the crossing of the axis-parallel lines through the
+    same rim points stands in, blended by a smoothstep in that ratio (0.25..0.5).
+    F_σ = J + σ·r̄·n_b is the rim point of the bisector plane (n_b = normalize(n1 + n2),
+    r̄ = (rp + rc)/2, bisector direction b = normalize(M1 + M2)). Split A - F = o·b + g·n_b;
+    the point used is F + w·o·b + clip(g, ±4r̄)·n_b with w = 1 while |o| <= r̄ and
+    w = (r̄/|o|)^4 beyond, so a crossing that runs away (nearly parallel boundary lines,
+    radius steps at small bends) fades continuously into the bisector plane, which is the
+    perpendicular plane at zero bend; no threshold switches the construction.
+
+    Returns plane normals (m, 3) (oriented along M1 + M2), plane points (m, 3), and the
+    medial normal N_m (m, 3).
+    """
+    axes_cross = cross(M1, M2)
+    sin_t = norm(axes_cross)
+    nm = axes_cross / np.where(sin_t > tol.tiny, sin_t, 1.0)[:, None]
+    collinear = sin_t <= tol.tiny
+    if collinear.any():
+        nm[collinear] = cross(M1[collinear], any_perpendicular(M1[collinear]))
+    nm = unit(nm)
+    n1, n2 = cross(M1, nm), cross(M2, nm)
+    nb = unit(n1 + n2, n1)
+    bis = unit(M1 + M2, cross(nm, nb))
+    rbar = 0.5 * (rp + rc)
+    scale = np.maximum(rbar, tol.tiny)
+    pts = []
+    for sigma in (1.0, -1.0):
+        p1 = J + sigma * rp[:, None] * n1
+        p2 = J + sigma * rc[:, None] * n2
+        d1 = M1 + sigma * kp[:, None] * n1
+        d2 = M2 + sigma * kc[:, None] * n2
+        s_slope, den = _line_crossing(p1, d1, p2, d2, nm, scale)
+        s_cyl, den_cyl = _line_crossing(p1, M1, p2, M2, nm, scale)
+        # conditioning of the slope lines' crossing relative to the axis-parallel lines'
+        q = np.abs(den) / np.maximum(np.abs(den_cyl), tol.tiny)
+        x = np.clip((q - 0.25) / 0.25, 0.0, 1.0)
+        w_slope = x * x * (3 - 2 * x)
+        A = (w_slope[:, None] * (p1 + s_slope[:, None] * d1)
+             + (1 - w_slope)[:, None] * (p1 + s_cyl[:, None] * M1))
+        F = J + sigma * rbar[:, None] * nb
+        # offset of A from the bisector plane (along the bisector direction)
+        off = dot(A - F, bis)
+        with np.errstate(over="ignore", invalid="ignore"):
+            w = np.where(np.abs(off) <= scale, 1.0, (scale / np.maximum(np.abs(off), scale)) ** 4)
+        w = np.where(np.isfinite(off), w, 0.0)
+        along = dot(A - F, nb)
+        along = np.where(np.isfinite(along), np.clip(along, -4 * scale, 4 * scale), 0.0)
+        pts.append(F + (w * np.where(np.isfinite(off), off, 0.0))[:, None] * bis
+                   + along[:, None] * nb)
+    A, B = pts
+    normal = cross(A - B, nm)
+    normal = unit(normal, unit(M1 + M2, M1))
+    normal = np.where((dot(normal, bis) < 0)[:, None], -normal, normal)
+    return normal, 0.5 * (A + B), nm
+
+
+def _line_crossing(p1, d1, p2, d2, nm, scale):
+    """Where the lines p1 + s·d1 and p2 + s'·d2 (m, 3) of the planes ⟂ ``nm`` (m, 3) cross:
+    s (m,) along the first line, clipped to ±``tol.runaway``·``scale`` (m,), and the
+    denominator (d1 × d2)·nm (m,) (0: parallel lines)."""
+    den = dot(cross(d1, d2), nm)
+    num = dot(cross(p2 - p1, d2), nm)
+    s = num / np.where(np.abs(den) > tol.tiny, den, tol.tiny)
+    return np.clip(s, -tol.runaway * scale, tol.runaway * scale), den
+
+
+def _seam_mismatch_at(seg: _Segments, joints: _Joints, point, rc) -> np.ndarray:
+    """(j,) minor semi-axis of the parent's cut minus the child's at joint planes through
+    ``point`` (j, 3), the children starting with radii ``rc`` (j,) (§2.2)."""
+    k = seg.slope
+    par, child = joints.parent, joints.child
+    b_parent = minor_semi_axis(point, seg.base[par], seg.axis[par], seg.r_start[par], k[par])
+    kc = cone_slope(rc, seg.r_end[child], seg.length[child])
+    return b_parent - minor_semi_axis(point, seg.base[child], seg.axis[child], rc, kc)
+
+
+def _joint_cuts(seg: _Segments, joints: _Joints, seam_fit: bool, seam_tol: float,
+                max_iter: int, report: SkinReport):
+    """The joint planes of every continuing joint: normals (j, 3), points (j, 3) and
+    medial normals (j, 3). Measures the seam mismatch into ``report`` and, with
+    ``seam_fit``, fits the children's base radii (``seg.r_start``, in place) first.
+
+    A radius step at a joint (more than ``tol.radius_step``) is modelled, not a seam
+    error: it is neither measured nor fitted.
+    """
+    par, child = joints.parent, joints.child
+    k = seg.slope
+    rp = seg.r_end[par]
+    rc = seg.r_start[child].copy()
+    normal, point, nm = _joint_planes(joints.point, joints.parent_axis, joints.child_axis,
+                                      rp, rc, k[par], k[child])
+    rel = np.abs(_seam_mismatch_at(seg, joints, point, rc)) / np.maximum(rp, tol.tiny)
+    smooth = np.abs(rp - rc) <= tol.radius_step * np.maximum(rp, rc)
+    report.step_joints = int((~smooth).sum())
+    if smooth.any():
+        report.seam_mismatch_max_before = float(rel[smooth].max())
+        report.seam_mismatch_mean_before = float(rel[smooth].mean())
+    if seam_fit and smooth.any():
+        sm = np.flatnonzero(smooth)
+        fitting = _Joints(child[sm], par[sm], joints.point[sm], joints.parent_axis[sm],
+                          joints.child_axis[sm])
+        fit = _fit_seams(seg, fitting, rc[sm], tolerance=seam_tol, max_iter=max_iter)
+        rc[sm], normal[sm], point[sm], nm[sm] = fit.radius, fit.normal, fit.point, fit.medial
+        seg.r_start[child] = rc
+        report.seam_mismatch_max_after = float(fit.mismatch.max())
+        report.seam_mismatch_mean_after = float(fit.mismatch.mean())
+        report.seam_fit_iterations = fit.iterations
+    return normal, point, nm
+
+
+@dataclass(frozen=True)
+class _SeamFit:
+    """What :func:`_fit_seams` found for j joints: the children's base ``radius`` (j,),
+    the joint planes (``normal``, ``point``, ``medial``: (j, 3) each), the ``iterations``
+    it took and the remaining ``mismatch`` (j,) relative to the parent radius."""
+
+    radius: np.ndarray
+    normal: np.ndarray
+    point: np.ndarray
+    medial: np.ndarray
+    iterations: int
+    mismatch: np.ndarray
+
+
+def _fit_seams(seg: _Segments, joints: _Joints, rc: np.ndarray, *, tolerance: float,
+               max_iter: int) -> _SeamFit:
+    """Secant iteration on each child's r1 (from ``rc`` (j,)) until the two minor
+    semi-axes agree to ``tolerance`` times the parent radius (§2.2), or ``max_iter``.
+
+    All joints iterate together; a child that is itself a parent at the next joint passes
+    its new slope on at once (the coupling along a chain), so the iteration works on the
+    current radii of every segment each round. ``seg`` is not changed.
+    """
+    trial = _Segments(seg.base, seg.axis, seg.length, seg.r_start.copy(), seg.r_end)
+    par, child = joints.parent, joints.child
+    rp = seg.r_end[par]
+
+    def residual(rc_try):
+        trial.r_start[child] = rc_try
+        k_all = trial.slope
+        planes = _joint_planes(joints.point, joints.parent_axis, joints.child_axis, rp, rc_try,
+                               k_all[par], k_all[child])
+        return _seam_mismatch_at(trial, joints, planes[1], rc_try), planes
+
+    scale = np.maximum(rp, tol.tiny)
+    x0 = rc.copy()
+    f0, planes = residual(x0)
+    x1 = np.maximum(x0 + f0, 0.0)
+    f1, planes = residual(x1)
+    it = 1
+    while it < max_iter and np.max(np.abs(f1) / scale) > tolerance:
+        den = f1 - f0
+        secant = f1 * (x1 - x0) / np.where(den != 0, den, 1)
+        step = np.where((np.abs(den) > tol.tiny) & np.isfinite(secant), secant, -f1)
+        x0, f0 = x1, f1
+        x1 = np.maximum(x1 - step, 0.0)
+        f1, planes = residual(x1)
+        it += 1
+    return _SeamFit(x1, planes[0], planes[1], planes[2], it, np.abs(f1) / scale)
+
+
+# ============================================================================ sharp joints
+def _sharp_joints(seg: _Segments, joints: _Joints, normal, lo, hi, max_bend_deg: float,
+                  report: SkinReport) -> tuple[np.ndarray, np.ndarray]:
+    """(j,) bool: the joints that become knuckles, and (j,) their bends in degrees.
+
+    Sharp: past ``max_bend_deg``; or the joint plane (normals (j, 3)) does not cut a cone
+    in an ellipse (within ``tol.ellipse_margin``); or a segment next to the joint would
+    have its two planes cross inside it, with the sharp joints so far given perpendicular
+    planes (``lo``, ``hi`` (n, 4): the planes before that; repeated while new joints turn
+    sharp). Counts go to ``report``.
+    """
+    n = len(seg.length)
+    k = seg.slope
+    par, child = joints.parent, joints.child
+    M1, M2, J = joints.parent_axis, joints.child_axis, joints.point
+    kp = k[par]
+    cos_b = np.clip(dot(M1, M2), -1, 1)
+    bend = np.degrees(np.arccos(cos_b))
+    past_limit = bend > max_bend_deg
+    sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
+    sin_c = np.abs(k[child]) / np.sqrt(1 + k[child] ** 2)
+    not_ellipse = ((dot(normal, M1) <= sin_p + tol.ellipse_margin)
+                   | (dot(normal, M2) <= sin_c + tol.ellipse_margin))
+    sharp = past_limit | not_ellipse
+    joint_of_child = np.full(n, -1, dtype=np.int64)
+    joint_of_child[child] = np.arange(len(child))
+    joint_of_parent = np.full(n, -1, dtype=np.int64)
+    joint_of_parent[par] = np.arange(len(child))
+    crossing_flag = np.zeros(len(child), dtype=bool)
+    for _ in range(8):
+        lo_now, hi_now = lo.copy(), hi.copy()
+        hi_now[par[sharp]] = plane_through(M1[sharp], J[sharp])
+        lo_now[child[sharp]] = plane_through(M2[sharp], J[sharp])
+        bad_rows = _crossing_rows(seg.base, seg.axis, seg.length, seg.r_start, seg.r_end,
+                                  lo_now, hi_now)
+        jl, jh = joint_of_child[bad_rows], joint_of_parent[bad_rows]
+        marks = np.concatenate([jl[jl >= 0], jh[jh >= 0]])
+        new = marks[~sharp[marks]]
+        if new.size == 0:
+            break
+        crossing_flag[new] = True
+        sharp[new] = True
+    report.bend_limit = int(past_limit.sum())
+    report.not_ellipse = int((not_ellipse & ~past_limit).sum())
+    report.planes_crossing = int((crossing_flag & ~past_limit & ~not_ellipse).sum())
+    report.sharp_joints = int(sharp.sum())
+    return sharp, bend
+
+
+def _crossing_rows(base, axis, length, r1, r2, lo, hi, samples=24):
+    """(n,) bool: the two planes meet inside the cone (y_hi <= y_lo on some generator) or a
+    plane does not cut every generator going forward (not an ellipse)."""
+    k = cone_slope(r1, r2, length)
+    # cheap exclusion: axial spread of each plane over the rim vs the gap between centres
+    rmax = np.maximum(np.abs(r1), np.abs(r2)) + np.abs(k) * length
+    centre_y, spread = [], []
+    for plane in (lo, hi):
+        na = dot(plane[:, :3], axis)
+        nperp = np.sqrt(np.maximum(1 - na * na, 0.0))
+        den = na - np.abs(k) * nperp
+        centre_y.append((plane[:, 3] - dot(plane[:, :3], base)) / np.where(na != 0, na, tol.tiny))
+        rises = den > tol.section_rise
+        spread.append(np.where(rises, rmax * nperp / np.where(rises, den, 1), np.inf) * (1 + np.abs(k)))
+    maybe = ~(centre_y[1] - centre_y[0] > 1.01 * (spread[0] + spread[1]) + tol.zero_length * length)
+    bad = np.zeros(len(length), dtype=bool)
+    if maybe.any():
+        m = np.flatnonzero(maybe)
+        bad[m] = _crossing_rows_sampled(base[m], axis[m], length[m], r1[m], r2[m], lo[m], hi[m], samples)
+    return bad
+
+
+def _crossing_rows_sampled(base, axis, length, r1, r2, lo, hi, samples):
+    """(m,) bool: on some of ``samples`` generators the planes are closer than
+    ``tol.same_length`` of the row's size, in the wrong order, or one is not met."""
+    k = cone_slope(r1, r2, length)
+    ref = any_perpendicular(axis)
+    side = cross(axis, ref)
+    psi = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+    e = np.cos(psi)[None, :, None] * ref[:, None, :] + np.sin(psi)[None, :, None] * side[:, None, :]
+    ys = []
+    for plane in (lo, hi):
+        y, rise = plane_height((plane[:, 3] - dot(plane[:, :3], base))[:, None],
+                               dot(plane[:, :3], axis)[:, None], dot(plane[:, None, :3], e),
+                               r1[:, None], k[:, None],
+                               guard=lambda rise: np.where(rise > tol.generator_rise, rise,
+                                                           tol.generator_rise))
+        ys.append(np.where(rise > tol.generator_rise, y, np.nan))
+    gap = ys[1] - ys[0]
+    return ~np.all(gap > tol.same_length * np.maximum(length, np.maximum(r1, r2))[:, None], axis=1)
+
+
+# ============================================================================ knuckle fans
+def _row_layout(seg: _Segments, lo, hi, joints: _Joints, sharp, bend, skeleton: Skeleton,
+                fan_step_deg: float):
+    """The rows: each segment's row, after ``2·(m + 1)`` rows for the knuckle fan of its
+    joint if that is sharp (m slices per side, ``fan_step_deg`` at most each).
+
+    Returns the :class:`_Rows` (segment rows filled, fan rows still empty), the row of
+    each segment (n,) and the fan rows before each segment (n,). A radius step in the
+    skeleton (beyond ``tol.same_length``) leaves an annulus on the shared plane: such
+    joints are not continuing for capping (both ends open, capped); the plane is still
+    shared bit for bit.
+    """
+    n = len(seg.length)
+    child, par = joints.child, joints.parent
+    sj = np.flatnonzero(sharp)
+    fan_count = np.zeros(n, dtype=np.int64)          # fan rows inserted before each segment
+    if sj.size:
+        theta = np.radians(bend[sj])
+        steps = np.maximum(1, np.ceil(np.degrees(theta) / fan_step_deg - tol.count_rounding))
+        fan_count[child[sj]] = 2 * (steps.astype(np.int64) + 1)   # outer + inner slices
+    row_of_seg = np.arange(n) + np.cumsum(fan_count)
+    rows = _Rows.empty(n + int(fan_count.sum()))
+    rows.base[row_of_seg], rows.axis[row_of_seg], rows.length[row_of_seg] = seg.base, seg.axis, seg.length
+    rows.r1[row_of_seg], rows.r2[row_of_seg] = seg.r_start, seg.r_end
+    rows.plane_lo[row_of_seg], rows.plane_hi[row_of_seg] = lo, hi
+    rows.segment[row_of_seg] = np.arange(n)
+    r_end0, r_start0 = skeleton.r_end[par], skeleton.r_start[child]
+    stepped = np.abs(r_end0 - r_start0) > tol.same_length * np.maximum(r_end0, r_start0)
+    rows.parent_row[row_of_seg[child[~stepped]]] = row_of_seg[par[~stepped]]
+    return rows, row_of_seg, fan_count
+
+
+def _fill_knuckle_fans(rows: _Rows, seg: _Segments, joints: _Joints, sj, bend, medial, lo, hi,
+                       row_of_seg, fan_count) -> None:
+    """Fill the fan rows of the sharp joints ``sj`` (s,) (see the module docstring), in
+    place. ``bend`` (j,) degrees and ``medial`` (j, 3) medial normals per joint; ``lo``,
+    ``hi`` (n, 4) the segments' planes."""
+    child, par = joints.child, joints.parent
+    cnt = fan_count[child[sj]]
+    fan_joint = np.repeat(np.arange(len(sj)), cnt)
+    first = np.cumsum(cnt) - cnt
+    slot_all = np.arange(len(fan_joint)) - np.repeat(first, cnt)
+    total = cnt[fan_joint] // 2             # slices per side
+    inner = slot_all >= total
+    slot = slot_all - inner * total
+    m_steps = total - 1
+    jj = sj[fan_joint]                          # index into joint arrays
+    Jf, M1f, M2f = joints.point[jj], joints.parent_axis[jj], joints.child_axis[jj]
+    th = np.radians(bend[jj])
+    # slice i has its axis at angle θ·i/m; its planes at θ·(i ∓ 1/2)/m, the end slices
+    # are half wedges whose outer planes are the segments' own perpendicular planes, so
+    # each end slice meets its segment in the same circle
+    ang0 = th * np.maximum(slot - 0.5, 0.0) / m_steps
+    ang1 = th * np.minimum(slot + 0.5, m_steps) / m_steps
+    first_slice, last_slice = (slot == 0)[:, None], (slot + 1 == total)[:, None]
+    rot_axis = unit(cross(M1f, M2f), medial[jj])
+    n0 = np.where(first_slice, M1f, rotate(M1f, rot_axis, ang0))
+    n1 = np.where(last_slice, M2f, rotate(M1f, rot_axis, ang1))
+    mid = np.where(first_slice, M1f,
+                   np.where(last_slice, M2f, rotate(M1f, rot_axis, th * slot / m_steps)))
+    t = slot / m_steps
+    radius = (1 - t) * seg.r_end[par[jj]] + t * seg.r_start[child[jj]]
+    fan = row_of_seg[child[jj]] - 2 * total + slot_all
+    rows.base[fan] = Jf
+    rows.axis[fan] = mid
+    rows.length[fan] = tol.fan_length * np.maximum(radius, tol.tiny)
+    rows.r1[fan] = rows.r2[fan] = radius
+    rows.segment[fan] = child[jj]
+    out = ~inner
+    lo_out = np.where(first_slice, hi[par[jj]], plane_through(n0, Jf))
+    hi_out = np.where(last_slice, lo[child[jj]], plane_through(n1, Jf))
+    rows.plane_lo[fan[out]], rows.plane_hi[fan[out]] = lo_out[out], hi_out[out]
+    # bit-for-bit sharing along the outer fan
+    later = out & (slot > 0)
+    rows.plane_lo[fan[later]] = rows.plane_hi[fan[later] - 1]
+    # inner slices: the same cylinders on the other side of the hinge line, i.e. the
+    # opposite dihedral wedge {n1·x >= d, n0·x <= d}: planes swapped (still facing along
+    # the slice axis). They cover the inside of the bend when the segments are short
+    # next to r·sin(bend); their ends are open (capped, hidden inside the knuckle).
+    rows.plane_lo[fan[inner]] = rows.plane_hi[fan[inner] - total[inner]]
+    rows.plane_hi[fan[inner]] = rows.plane_lo[fan[inner] - total[inner]]
+    rows.parent_row[fan[out]] = np.where(slot[out] == 0, row_of_seg[par[jj[out]]], fan[out] - 1)
+    last_out = out & (slot + 1 == total)
+    rows.parent_row[row_of_seg[child[jj[last_out]]]] = fan[last_out]
+
+
+# ============================================================================ texture frames
+def _reference_directions(axis, parent_row) -> np.ndarray:
+    """(n, 3) unit u = 0 directions ⟂ the row axes (n, 3): rotation-minimising frames
+    carried along each continuing chain (``parent_row`` (n,)); a chain (root or side
+    branch) starts from a fixed helper direction projected off its axis."""
+    n_rows = len(axis)
+    has_parent = parent_row >= 0
+    quat = np.zeros((n_rows, 4))
+    quat[:, 0] = 1.0
+    if has_parent.any():
+        quat[has_parent] = _min_rotation_quat(axis[parent_row[has_parent]], axis[has_parent])
+    chain = reduce_to_root(parent_row, quat, _quat_mul)
+    roots = np.flatnonzero(~has_parent)
+    root_perp = np.empty((n_rows, 3))
+    root_perp[roots] = any_perpendicular(axis[roots])
+    ref = _quat_rotate(chain, root_perp[tree_roots(parent_row)])
+    ref = ref - axis * dot(ref, axis)[:, None]
+    length = norm(ref)
+    weak = length < tol.frame_weak
+    ref = ref / np.where(weak, 1.0, length)[:, None]
+    if weak.any():
+        ref[weak] = any_perpendicular(axis[weak])
+    return ref
+
+
+def _u_offsets(rows: _Rows, ref_dir, twist) -> np.ndarray:
+    """(n,) u offsets (§2.3): the parent's u = 0 point on the shared plane gets the same u
+    from the child; offsets accumulate along each continuing chain. (The point lies on the
+    child's lower plane, v = 0 there, so the child's u is its angle alone.)"""
+    c = np.flatnonzero(rows.parent_row >= 0)
+    local = np.zeros(len(rows.length))
+    if c.size:
+        p = rows.parent_row[c]
+        ref_p, a_p, base_p, r1_p = ref_dir[p], rows.axis[p], rows.base[p], rows.r1[p]
+        k = cone_slope(rows.r1, rows.r2, rows.length)[p]
+        nrm, d = rows.plane_hi[p, :3], rows.plane_hi[p, 3]
+        y_u, _ = plane_height(d - dot(nrm, base_p), dot(nrm, a_p), dot(nrm, ref_p), r1_p, k)
+        point = base_p + y_u[:, None] * a_p + (r1_p + k * y_u)[:, None] * ref_p
+        rel = point - rows.base[c]
+        a_c, ref_c = rows.axis[c], ref_dir[c]
+        u_child = np.arctan2(dot(rel, cross(a_c, ref_c)), dot(rel, ref_c)) / (2 * np.pi)
+        local[c] = twist[p] - u_child
+    total = reduce_to_root(rows.parent_row, local, np.add)
+    wrapped = total - np.floor(total)
+    return np.where(wrapped < 1.0, wrapped, 0.0)      # -1e-17 wraps to 1.0 in floats
+
+
+def _quat_mul(p, q):
+    """(m, 4) Hamilton products of (m, 4) quaternions (w, x, y, z)."""
+    pw, px, py, pz = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
+    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    out = np.empty_like(p)
+    out[:, 0] = pw * qw - px * qx - py * qy - pz * qz
+    out[:, 1] = pw * qx + px * qw + py * qz - pz * qy
+    out[:, 2] = pw * qy - px * qz + py * qw + pz * qx
+    out[:, 3] = pw * qz + px * qy - py * qx + pz * qw
+    return out
+
+
+def _quat_rotate(q, v):
+    """(m, 3) vectors ``v`` (m, 3) rotated by unit (m, 4) quaternions."""
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * cross(u, v)
+    return v + w * t + cross(u, t)
+
+
+def _min_rotation_quat(a, b):
+    """(m, 4) unit quaternions of the smallest rotation taking unit a (m, 3) to unit b
+    (m, 3): the normalised (1 + a·b, a × b); for a = -b (within ``tol.parallel``) a half
+    turn about an axis ⟂ a."""
+    q = np.empty((len(a), 4))
+    q[:, 0] = 1.0 + dot(a, b)
+    q[:, 1:] = cross(a, b)
+    flat = q[:, 0] < tol.parallel
+    if flat.any():
+        q[flat, 0] = 0.0
+        q[flat, 1:] = any_perpendicular(a[flat])
+    return q / np.linalg.norm(q, axis=1, keepdims=True)

@@ -1,0 +1,122 @@
+"""Row-wise vector helpers and tree walks on numpy arrays, shared by every geometry stage.
+
+Vectors are the last axis of ``(..., 3)`` float64 arrays; each helper works on every row
+at once. The arithmetic order is part of the contract (outputs are compared bit for
+bit): :func:`dot` sums ``a0·b0 + a1·b1 + a2·b2`` left to right, which ``np.einsum`` does
+not promise.
+
+Trees are parent arrays: ``parent[i]`` is the parent of node ``i``, -1 for a root. The
+walks use pointer jumping: each round combines a node's value with its current jump
+target's and doubles the jump, so ``log2(depth)`` vectorised rounds replace a walk along
+every path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..tolerances import tol
+
+__all__ = ["dot", "norm", "cross", "unit", "any_perpendicular", "rotate", "plane_through",
+           "reduce_to_root", "ancestor_count", "tree_roots"]
+
+
+# ============================================================================ vectors
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...) row-wise dot products of (..., 3) arrays (broadcast), summed left to right."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def norm(a: np.ndarray) -> np.ndarray:
+    """(...) row-wise lengths of (..., 3) arrays."""
+    return np.sqrt(dot(a, a))
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 3) row-wise cross products of (..., 3) arrays (broadcast); ``np.cross``'s
+    arithmetic without its axis juggling (about 5x faster)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
+def unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
+    """(..., 3) the rows of ``v`` (..., 3) scaled to unit length.
+
+    Rows of length 0 stay 0; with ``fallback`` (broadcast against ``v``), rows shorter than
+    ``tol.tiny`` (no direction) take the fallback's row instead.
+    """
+    n = norm(v)[..., None]
+    if fallback is None:
+        return v / np.where(n > 0, n, 1.0)
+    return np.where(n > tol.tiny, v / np.where(n > 0, n, 1.0), fallback)
+
+
+def any_perpendicular(a: np.ndarray) -> np.ndarray:
+    """(m, 3) unit vectors ⟂ the unit rows of ``a`` (m, 3): x (or z where ``a`` is near x)
+    with its ``a`` part removed, a smooth choice within each of the two half-spaces."""
+    helper = np.where(np.abs(a[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0.0, 0, 1]]))
+    return unit(helper - a * dot(helper, a)[:, None])
+
+
+def rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """(m, 3) Rodrigues rotation of the rows of ``v`` (m, 3) about the unit rows of ``axis``
+    (m, 3) by ``angle`` (m,) radians (right-handed)::
+
+        v·cos θ + (axis × v)·sin θ + axis·((axis·v)·(1 - cos θ))
+
+    (the order of plantgen.lsystem.turtle's scalar rotation).
+    """
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + cross(axis, v) * s + axis * (dot(axis, v)[:, None] * (1 - c))
+
+
+def plane_through(normal: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """(m, 4) planes ``(nx, ny, nz, d)`` with unit normals ``normal`` (m, 3) through the
+    points ``point`` (m, 3): ``d = n·point``."""
+    return np.concatenate([normal, dot(normal, point)[:, None]], axis=1)
+
+
+# ============================================================================ trees
+def reduce_to_root(parent: np.ndarray, values: np.ndarray,
+                   combine: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """Per node ``i``: ``combine(values[i], combine(values[parent[i]], ...))`` down to its
+    root, by pointer jumping.
+
+    Parameters
+    ----------
+    parent : (n,) int, parent of each node, -1 for a root
+    values : (n, ...) per-node values
+    combine : associative ``combine(own, ancestors)`` on (k, ...) rows, e.g. ``np.add``
+
+    Returns
+    -------
+    (n, ...) combined values, ``values``' dtype
+    """
+    total = values.copy()
+    jump = np.asarray(parent, dtype=np.int64).copy()
+    live = np.flatnonzero(jump >= 0)
+    while live.size:
+        ancestor = jump[live]
+        total[live] = combine(total[live], total[ancestor])
+        jump[live] = jump[ancestor]
+        live = live[jump[live] >= 0]
+    return total
+
+
+def ancestor_count(parent: np.ndarray) -> np.ndarray:
+    """(n,) int64: how many ancestors each node has (0 for a root)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    return reduce_to_root(parent, (parent >= 0).astype(np.int64), np.add)
+
+
+def tree_roots(parent: np.ndarray) -> np.ndarray:
+    """(n,) int64: the root of each node's tree (a root is its own)."""
+    parent = np.asarray(parent, dtype=np.int64)
+    return reduce_to_root(parent, np.arange(len(parent)), lambda own, ancestor: ancestor)

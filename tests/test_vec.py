@@ -1,0 +1,75 @@
+"""Row-wise vector helpers and tree walks (plantgen.geometry.vec) against plain references."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from _geometry_helpers import random_tree
+from plantgen.geometry.vec import (ancestor_count, any_perpendicular, cross, dot, norm,
+                                   plane_through, reduce_to_root, rotate, tree_roots, unit)
+
+
+@pytest.fixture
+def vectors():
+    rng = np.random.default_rng(0)
+    return rng.normal(size=(200, 3)), rng.normal(size=(200, 3))
+
+
+def test_dot_cross_norm_match_numpy(vectors):
+    a, b = vectors
+    np.testing.assert_allclose(dot(a, b), np.einsum("ij,ij->i", a, b), rtol=1e-14, atol=1e-14)
+    np.testing.assert_array_equal(cross(a, b), np.cross(a, b))
+    np.testing.assert_allclose(norm(a), np.linalg.norm(a, axis=1), rtol=1e-15)
+    # broadcasting: one vector against many
+    np.testing.assert_array_equal(dot(a, b[:1]), dot(a, np.repeat(b[:1], len(a), 0)))
+
+
+def test_unit_vectors_and_their_fallback(vectors):
+    a, _ = vectors
+    np.testing.assert_allclose(norm(unit(a)), 1.0, rtol=1e-15)
+    zero = np.zeros((2, 3))
+    assert np.array_equal(unit(zero), zero)
+    fallback = np.array([[0.0, 1.0, 0.0]])
+    assert np.array_equal(unit(zero, fallback), np.repeat(fallback, 2, 0))
+
+
+def test_any_perpendicular_is_a_unit_normal(vectors):
+    a = unit(vectors[0])
+    p = any_perpendicular(a)
+    np.testing.assert_allclose(norm(p), 1.0, rtol=1e-15)
+    assert np.abs(dot(p, a)).max() < 1e-15
+
+
+def test_rotation_is_rodrigues(vectors):
+    v, axis = vectors
+    axis = unit(axis)
+    angle = np.random.default_rng(1).uniform(-np.pi, np.pi, len(v))
+    expected = Rotation.from_rotvec(axis * angle[:, None]).apply(v)
+    np.testing.assert_allclose(rotate(v, axis, angle), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_planes_pass_through_their_points(vectors):
+    n, p = unit(vectors[0]), vectors[1]
+    plane = plane_through(n, p)
+    np.testing.assert_allclose(dot(plane[:, :3], p) - plane[:, 3], 0.0, atol=1e-15)
+
+
+def _walk(parent, i):
+    path = [i]
+    while parent[path[-1]] >= 0:
+        path.append(parent[path[-1]])
+    return path
+
+
+def test_pointer_jumping_matches_a_walk_up_the_tree():
+    parent = random_tree(300, seed=4).parent
+    paths = [_walk(parent, i) for i in range(len(parent))]
+    assert ancestor_count(parent).tolist() == [len(p) - 1 for p in paths]
+    assert tree_roots(parent).tolist() == [p[-1] for p in paths]
+    values = np.random.default_rng(2).normal(size=len(parent))
+    np.testing.assert_allclose(reduce_to_root(parent, values, np.add),
+                               [values[p].sum() for p in paths], rtol=1e-12)
+    # an order-sensitive combine: own value first, then the ancestors'
+    labels = np.array([f"{i}," for i in range(len(parent))], dtype=object)
+    joined = reduce_to_root(parent, labels, lambda own, up: own + up)
+    assert joined.tolist() == ["".join(f"{j}," for j in p) for p in paths]
