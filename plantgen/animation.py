@@ -19,9 +19,9 @@ from typing import Protocol
 
 import numpy as np
 
+from .geometry.frusta import Frusta, frusta_bounds
 from .geometry.motion import pose, sway_rig
 from .geometry.skeleton import Skeleton
-from .geometry.frusta import Frusta, frusta_bounds
 from .geometry.skin import skin_skeleton
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink"]

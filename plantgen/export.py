@@ -14,9 +14,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import trimesh
-from trimesh.exchange.gltf import export_glb
-from trimesh.visual.material import PBRMaterial
 
 from .errors import PlantgenError
 from .files import write_atomically
@@ -64,6 +61,8 @@ def mesh_scene(mesh: TessellatedMesh, colours: Mapping[str, Sequence[float]] | S
     Each geometry carries vertex normals and a ``TextureVisuals`` with the uv and a
     ``PBRMaterial`` whose base colour is the material colour (linear RGB, opaque).
     """
+    import trimesh  # here, not at the top: importing trimesh takes about a second
+    from trimesh.visual.material import PBRMaterial
     rgb = _colours(mesh, colours)
     scene = trimesh.Scene()
     face_material = mesh.face_material
@@ -105,6 +104,9 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike,
     -------
     Path : the written file
     """
+    import trimesh  # here, not at the top: importing trimesh takes about a second
+    from trimesh.exchange.gltf import export_glb
+
     path = Path(path)
     file_type = export_file_type(path)
     if not path.parent.is_dir():

@@ -24,11 +24,13 @@ import numpy as np
 from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
-from .export import export_mesh
-from .files import write_atomically
+from .export import ExportError, export_file_type, export_mesh
+from .files import read_yaml, write_atomically
+from .geometry.camera import Camera, auto_camera
+from .geometry.frusta import Frusta
 from .geometry.mesh import tessellate, triangle_count
-from .files import read_yaml
 from .geometry.skeleton import Skeleton
+from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
 from .limits import limits
@@ -41,9 +43,6 @@ from .render.raycast import Raycaster, RaycastSettings
 from .render.records import RecordStream
 from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene, resolve_effects
-from .geometry.camera import Camera, auto_camera
-from .geometry.frusta import Frusta
-from .geometry.skin import skin_skeleton
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
            "Staging", "stage_model", "RenderReport", "render_file", "export_model"]
@@ -341,8 +340,6 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ``segments``, ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``, ``relief``,
     ``path``, ``timings`` (seconds per stage).
     """
-    from .export import ExportError, export_file_type  # noqa
-
     output_path = Path(output_path)
     export_file_type(output_path)  # fail on a bad suffix before any work
     t0 = time.perf_counter()

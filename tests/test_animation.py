@@ -6,16 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _cli import run_cli
 from PIL import Image
+from test_effects import SCENE
 
+from plantgen.animation import AnimatedScene
 from plantgen.geometry.camera import Camera
 from plantgen.pipeline import grow_file
-from plantgen.animation import AnimatedScene
-from plantgen.render.raycast import RaycastSettings, Raycaster
+from plantgen.render.raycast import Raycaster, RaycastSettings
 from plantgen.render.records import RECORD_BYTES, RecordStream
-
-from _cli import run_cli
-from test_effects import SCENE
 
 
 @pytest.fixture(scope="module")

@@ -13,14 +13,20 @@ import math
 
 import numpy as np
 import pytest
+from _cli import run_cli
 
 from plantgen import bench
-from plantgen.bench import (PAPER_TABLE1, BenchOptions, depth_shading, matched_level,
-                            pareto_front, silhouette_mismatch, ssim)
+from plantgen.bench import (
+    PAPER_TABLE1,
+    BenchOptions,
+    depth_shading,
+    matched_level,
+    pareto_front,
+    silhouette_mismatch,
+    ssim,
+)
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.skeleton import Skeleton
-
-from _cli import run_cli
 
 
 # ------------------------------------------------------------------------ metric helpers

@@ -7,13 +7,12 @@ from __future__ import annotations
 import itertools
 
 import pytest
+from _cli import run_cli
 
 from plantgen.errors import PlantgenError
-from plantgen.scene import resolve_effects
 from plantgen.pipeline import render_file
 from plantgen.render.shaders import build_program
-
-from _cli import run_cli
+from plantgen.scene import resolve_effects
 
 SCENE = """
 name: two_posts
@@ -65,7 +64,7 @@ def test_each_combination_compiles_and_runs_only_what_it_asks_for(gl_ctx, scene_
     # the compiled programs: no shadow map is sampled, no relief march is compiled in,
     # unless asked (the GLSL compiler keeps only the uniforms code uses)
     for name, flags in programs:
-        program = build_program(gl_ctx, name, {f: True for f in flags})
+        program = build_program(gl_ctx, name, dict.fromkeys(flags, True))
         assert ("shadow_map" in program) == ("SHADOWS" in flags)
         if name == "raycast.glsl":
             assert ("linear_steps" in program) == ("RELIEF" in flags)

@@ -12,11 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from test_mesh import BENT, chain_frusta, concat_frusta
 
 from plantgen.export import ExportError, export_mesh
 from plantgen.geometry.mesh import tessellate
-
-from test_mesh import BENT, chain_frusta, concat_frusta
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -193,8 +192,9 @@ def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
 def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path, monkeypatch):
     from dataclasses import replace
 
-    import plantgen.pipeline as pipeline_module
     from _cli import run_cli
+
+    import plantgen.pipeline as pipeline_module
 
     monkeypatch.setattr(pipeline_module, "limits", replace(pipeline_module.limits, max_export_triangles=100))
     skel_path = tmp_path / "y.npz"

@@ -5,12 +5,22 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
+
 from plantgen.geometry.camera import auto_camera, box_corners, depth_range
-from plantgen.geometry.frusta import (PYRAMID_TRIANGLES, Frusta, bounding_pyramids, frusta_bounds,
-                                      plane_height, plane_heights, pyramid_volume_ratio,
-                                      seam_mismatch, surface_normals, surface_uv, true_normals)
+from plantgen.geometry.frusta import (
+    PYRAMID_TRIANGLES,
+    Frusta,
+    bounding_pyramids,
+    frusta_bounds,
+    plane_height,
+    plane_heights,
+    pyramid_volume_ratio,
+    seam_mismatch,
+    surface_normals,
+    surface_uv,
+    true_normals,
+)
 from plantgen.geometry.reference import inside_frusta
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton

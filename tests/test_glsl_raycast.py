@@ -7,18 +7,17 @@ file runs in well under a minute on llvmpipe.
 
 from __future__ import annotations
 
+from itertools import pairwise
 
 import numpy as np
 import pytest
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import Frusta
-from plantgen.geometry.camera import auto_camera
-from plantgen.geometry.frusta import frusta_bounds
+from plantgen.geometry.camera import Camera, auto_camera
+from plantgen.geometry.frusta import Frusta, frusta_bounds
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
 from plantgen.render import materials as render_materials
-from plantgen.render.raycast import RaycastSettings, Raycaster
+from plantgen.render.raycast import Raycaster, RaycastSettings
 from plantgen.render.records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES, pack_records
 
 W, H = 160, 120
@@ -40,7 +39,7 @@ def frusta_chain(points, radii, *, shell=0.0, tilt_ends=(None, None)):
     length = np.linalg.norm(axis, axis=1)
     axis = axis / length[:, None]
     normal = np.concatenate([axis[:1], axis[:-1] + axis[1:], axis[-1:]])
-    for end, tilt in zip((0, -1), tilt_ends):
+    for end, tilt in zip((0, -1), tilt_ends, strict=True):
         if tilt is not None:
             normal[end] = tilt
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
@@ -58,7 +57,7 @@ def frusta_chain(points, radii, *, shell=0.0, tilt_ends=(None, None)):
 
 def join(*parts):
     offsets = np.cumsum([0] + [len(p.length) for p in parts[:-1]])
-    parent = [np.where(p.parent_row >= 0, p.parent_row + o, -1) for p, o in zip(parts, offsets)]
+    parent = [np.where(p.parent_row >= 0, p.parent_row + o, -1) for p, o in zip(parts, offsets, strict=True)]
     return Frusta(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in FIELDS},
                   parent_row=np.concatenate(parent))
 
@@ -360,7 +359,7 @@ def test_relief_error_falls_as_the_steps_rise(gl_ctx, relief_caster):
         w, u, v, on_caps = relief_coordinates(frusta, points)
         errors.append(np.mean(np.abs(w - bilinear(table, u, v))[~on_caps]))
     # measured: each doubling of the work lowers the mean distance from the relief surface
-    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+    assert all(b < a for a, b in pairwise(errors)), errors
     assert errors[-1] < errors[0] / 100, errors
 
 
@@ -545,5 +544,5 @@ def test_relief_agrees_with_the_reference_and_its_error_falls_with_the_steps(gl_
     assert np.percentile(rel, 99) < 1e-5
     # measured, not assumed: every step up lowers the (median) depth error against the
     # reference, from ~1e-3 at 4 steps to ~1e-7 at 256 + 10
-    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+    assert all(b < a for a, b in pairwise(errors)), errors
     assert errors[-1] < 1e-6, errors

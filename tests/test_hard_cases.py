@@ -4,8 +4,8 @@ marching, no holes from the medial axis, and float32 (the GPU) close to float64.
 
 import numpy as np
 import pytest
-
 from _geometry_helpers import chain_skeleton, y_junction
+
 from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import HARD_CASES, evaluate_case, medial_axis_rays, model_size

@@ -4,7 +4,8 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plantgen.lsystem import DEFAULT_MAX_MODULES, DerivationLimit, derive, interpret, parse_grammar
 from plantgen.lsystem.grammar import GrammarError

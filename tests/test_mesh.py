@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from plantgen.geometry.frusta import (ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals,
-                                      surface_uv)
+from plantgen.geometry.frusta import ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals, surface_uv
 from plantgen.geometry.mesh import (
-    bands_along, columns_around, lateral_triangles_per_row, tessellate, triangle_count,
+    bands_along,
+    columns_around,
+    lateral_triangles_per_row,
+    tessellate,
+    triangle_count,
 )
 from plantgen.geometry.skin import skin_skeleton
 
@@ -53,7 +57,7 @@ def chain_frusta(points, radii, *, twist=0.0, u_offset=0.0, shell=0.0, material=
 def concat_frusta(*parts):
     offsets = np.cumsum([0] + [len(p) for p in parts[:-1]])
     parent = np.concatenate([np.where(p.parent_row >= 0, p.parent_row + o, -1)
-                             for p, o in zip(parts, offsets)])
+                             for p, o in zip(parts, offsets, strict=True)])
     return Frusta(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in ROW_FIELDS},
                   material_names=parts[0].material_names, parent_row=parent)
 
@@ -229,7 +233,7 @@ def test_the_volume_approaches_the_analytic_frustum_volume(kind):
         frusta = chain_frusta([[0, 0, 0], [0, 2, 0]], [0.5, 0.2])
         exact = np.pi * 2 / 3 * (0.5**2 + 0.5 * 0.2 + 0.2**2)
     errors = [abs(tessellate(frusta, m).to_trimesh(merge=True).volume - exact) / exact for m in range(5)]
-    assert all(b < a for a, b in zip(errors, errors[1:]))
+    assert all(b < a for a, b in pairwise(errors))
     # Inscribed polygons lose area as 1 - sin(2π/N)/(2π/N) ≈ (2π/N)²/6: second order.
     assert errors[4] < 1.2 * (2 * np.pi / columns_around(4)) ** 2 / 6
     assert errors[-2] / errors[-1] > 3.5

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_mesh import BENT, chain_frusta, concat_frusta
 
 from plantgen.geometry.camera import Camera
+from plantgen.geometry.frusta import frusta_bounds
 from plantgen.geometry.mesh import tessellate
 from plantgen.render.raster import RasterRenderer, gs_buffer_bytes
-from plantgen.render.records import rc_buffer_bytes
-from plantgen.geometry.frusta import frusta_bounds
 from plantgen.render.raycast import Raycaster
-
-from test_mesh import BENT, chain_frusta, concat_frusta
+from plantgen.render.records import rc_buffer_bytes
 
 SIZE = (200, 150)
 
@@ -51,7 +50,7 @@ def test_gs_images_converge_to_the_rc_image_as_m_grows(gl_ctx):
         gs = raster.render(tessellate(frusta, m), frusta, camera)
         assert gs.stats.draw_calls == 1
         scores.append(compare(rc, gs))
-    colour, coverage, dist = (np.array(s) for s in zip(*scores))
+    colour, coverage, dist = (np.array(s) for s in zip(*scores, strict=True))
     assert np.all(np.diff(colour) < 0), colour
     assert np.all(np.diff(coverage) <= 0) and coverage[-1] < coverage[0] / 4, coverage
     # At m = 3 the two images differ by under one grey level on average, and the depths
@@ -113,7 +112,7 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
     raster = RasterRenderer(gl_ctx)
     scores = [compare(rc, raster.render(tessellate(frusta, m, relief=True), frusta, camera))
               for m in (0, 2, 4)]
-    colour, coverage, dist = (np.array(s) for s in zip(*scores))
+    colour, coverage, dist = (np.array(s) for s in zip(*scores, strict=True))
     assert np.all(np.diff(colour) < 0) and np.all(np.diff(coverage) <= 0), (colour, coverage)
     assert coverage[-1] < 0.01 and dist[-1] < 5e-3, (coverage, dist)
 
@@ -121,10 +120,10 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
 # ---------------------------------------------------------------- shadows and ground (GS)
 # The Table 1 scenes with shadow maps (well, desert, oasis, cacti) time GS with the same
 # passes as RC: the mesh and the ground write the light's depth map, both sample it.
+from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402
+
 from plantgen.geometry.skin import skin_skeleton  # noqa: E402
 from plantgen.render.passes import ShadowSettings  # noqa: E402
-
-from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402
 
 
 @pytest.mark.parametrize("elevation", [60.0, 10.0, 3.0])

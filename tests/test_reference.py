@@ -7,15 +7,22 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from plantgen.geometry import relief
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.frusta import Frusta, surface_uv, true_normals
-from plantgen.geometry.reference import (difference_of_products, inside_frusta, intersect_frusta,
-                                         march_rays, render_reference, shade_hits, solve_quadratic)
+from plantgen.geometry.reference import (
+    difference_of_products,
+    inside_frusta,
+    intersect_frusta,
+    march_rays,
+    render_reference,
+    shade_hits,
+    solve_quadratic,
+)
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stability import hit_residuals, medial_axis_rays, surface_samples
 
@@ -217,7 +224,7 @@ def test_difference_of_products_is_accurate_where_the_products_cancel(dtype):
     a = rng.uniform(1, 2, 2000).astype(dtype)
     c = (b * b / a * (1 + rng.uniform(-1e-5, 1e-5, 2000))).astype(dtype)   # b² ≈ a·c
     got = difference_of_products(b, b, a, c)
-    exact = np.array([float(x * x - y * z) for x, y, z in zip(_exact(b), _exact(a), _exact(c))])
+    exact = np.array([float(x * x - y * z) for x, y, z in zip(_exact(b), _exact(a), _exact(c), strict=True)])
     ulp = np.spacing(np.abs(exact).astype(dtype)).astype(np.float64)
     assert got.dtype == dtype
     assert np.all(np.abs(got - exact) <= 1.5 * ulp)
@@ -241,7 +248,7 @@ def test_solve_quadratic_roots_are_backward_stable(dtype):
     assert real.mean() > 0.9
     for t in (t_q[real], t_c[real]):
         exact = [abs(A * T * T + 2 * B * T + C) for A, B, C, T in
-                 zip(_exact(a[real]), _exact(b[real]), _exact(c[real]), _exact(t))]
+                 zip(_exact(a[real]), _exact(b[real]), _exact(c[real]), _exact(t), strict=True)]
         size = np.abs(a[real]) * t * t + 2 * np.abs(b[real] * t) + np.abs(c[real])
         assert np.all(np.array([float(x) for x in exact]) <= 8 * eps * size.astype(np.float64))
     # a line (a = 0): the one root -c/(2b); b = 0 and a·c = 0: a double root at 0

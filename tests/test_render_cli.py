@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from _cli import run_cli
 from PIL import Image
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.skeleton import Skeleton
-
-from _cli import run_cli
 
 SIZE = "96x72"
 
@@ -33,7 +32,7 @@ def skeleton_file(tmp_path):
 def distance_to_skeleton(points, skel):
     """(k,) distance of each point from the nearest segment's axis, minus its radius there."""
     best = np.full(len(points), np.inf)
-    for a, b, ra, rb in zip(skel.start, skel.end, skel.r_start, skel.r_end):
+    for a, b, ra, rb in zip(skel.start, skel.end, skel.r_start, skel.r_end, strict=True):
         ab = b - a
         s = np.clip((points - a) @ ab / (ab @ ab), 0, 1)
         d = np.linalg.norm(points - (a + s[:, None] * ab), axis=1) - (ra + s * (rb - ra))

@@ -7,13 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.camera import Camera
 from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.camera import Camera
+from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.render.passes import ShadowSettings
-from plantgen.render.raycast import RaycastSettings, Raycaster
+from plantgen.render.raycast import Raycaster, RaycastSettings
 
 GROUND = Ground(size=10.0, height=0.0, material="sand")
 RADIUS = 0.3
@@ -122,7 +122,8 @@ def test_shadow_starts_at_the_foot(gl_ctx, caster):
     facing = (points[..., [0, 2]] @ away[[0, 2]]) / np.maximum(radial, 1e-9)
     foot = ground & (radial > RADIUS) & (radial < RADIUS + 2 * texel + 0.06) & (facing > 0.9)
     assert foot.sum() >= 3
-    lum = lambda img: img.astype(int).sum(axis=-1)
+    def lum(img):
+        return img.astype(int).sum(axis=-1)
     assert (lum(plain.color)[foot] - lum(result.color)[foot]).min() >= 20
 
 

@@ -2,11 +2,21 @@
 
 import numpy as np
 import pytest
+from _geometry_helpers import random_tree
 from scipy.spatial.transform import Rotation
 
-from _geometry_helpers import random_tree
-from plantgen.geometry.vec import (ancestor_count, any_perpendicular, cross, dot, norm,
-                                   plane_through, reduce_to_root, rotate, tree_roots, unit)
+from plantgen.geometry.vec import (
+    ancestor_count,
+    any_perpendicular,
+    cross,
+    dot,
+    norm,
+    plane_through,
+    reduce_to_root,
+    rotate,
+    tree_roots,
+    unit,
+)
 
 
 @pytest.fixture

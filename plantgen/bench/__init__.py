@@ -36,8 +36,7 @@ The error metric and the quality criterion are documented in :mod:`plantgen.benc
 
 from __future__ import annotations
 
-from .metrics import (ImageError, depth_shading, image_error, matched_level, pareto_front,
-                      silhouette_mismatch, ssim)
+from .metrics import ImageError, depth_shading, image_error, matched_level, pareto_front, silhouette_mismatch, ssim
 from .models import check_models
 from .options import QUICK_MODELS, BenchOptions
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, TABLE1_MODELS

@@ -54,7 +54,7 @@ def _plot_family(ax, model: str, family: str, points: list[dict], size) -> None:
     ax.scatter(front_ms, front_error, s=80, facecolors="none", edgecolors="black")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("ms per frame (median, %dx%d)" % tuple(size))
+    ax.set_xlabel(f"ms per frame (median, {size[0]}x{size[1]})")
     ax.set_ylabel("error: (1 - SSIM) + silhouette mismatch (floor 1e-6)")   # ERROR_FLOOR
     ax.set_title(f"{model}, {'relief' if family == 'relief' else 'no relief'}: "
                  "error vs time", fontsize=9)

@@ -16,15 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.materials import material_height_maps
 from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..render.context import gl_context, renderer_name
 from ..render.passes import ShadowSettings
-from ..geometry.materials import material_height_maps
 from ..render.raster import gs_buffer_bytes
 from ..render.records import rc_buffer_bytes
-from .configs import (MATCHED_AGAINST, TABLE_METHODS, Config, bench_configs,
-                      default_relief_config, find_level)
+from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, bench_configs, default_relief_config, find_level
 from .images import save_images
 from .metrics import ERROR_FIELDS, image_error, matched_level
 from .models import BenchModel, check_models, load_model
@@ -253,7 +252,7 @@ def machine_info() -> dict:
             "gl_vendor": str(ctx.info.get("GL_VENDOR", "")), "cpu": _cpu_name(), "cpus": os.cpu_count(),
             "platform": platform.platform(), "python": platform.python_version(),
             "numpy": np.__version__,
-            "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+            "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")}
 
 
 def count_steps(opts: BenchOptions) -> int:

@@ -29,12 +29,12 @@ import sys
 
 import numpy as np
 
-from ..bench.renderers import time_after_warm_up
 from ..animation import AnimatedScene
+from ..bench.renderers import time_after_warm_up
 from ..pipeline import grow_file, stage_model
 from ..render.context import renderer_name
 from ..render.passes import ShadowSettings
-from ..render.raycast import RaycastSettings, Raycaster
+from ..render.raycast import Raycaster, RaycastSettings
 from ..render.records import RecordStream
 from .arguments import image_size
 

@@ -20,11 +20,11 @@ import sys
 from pathlib import Path
 
 from ..bench.renderers import time_after_warm_up
+from ..geometry.camera import auto_camera
 from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import renderer_name
-from ..geometry.camera import auto_camera
-from ..render.raycast import RaycastSettings, Raycaster
+from ..render.raycast import Raycaster, RaycastSettings
 from ..render.records import RECORD_BYTES, rc_buffer_bytes
 from .arguments import image_size, shipped_model_paths
 

@@ -14,13 +14,13 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..geometry.camera import Camera
-from ..geometry.skin import skin_skeleton
+from ..geometry.frusta import frusta_bounds
 from ..geometry.mesh import tessellate
+from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import gl_context
-from ..geometry.frusta import frusta_bounds
 from ..render.raster import RasterRenderer, gs_buffer_bytes
-from ..render.raycast import RaycastSettings, Raycaster
+from ..render.raycast import Raycaster, RaycastSettings
 from ..render.records import rc_buffer_bytes
 
 __all__ = ["side_by_side", "gallery_camera", "main"]

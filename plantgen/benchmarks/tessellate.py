@@ -22,9 +22,9 @@ import tracemalloc
 import numpy as np
 
 from .._resources import shipped_grammar
-from ..geometry.skin import skin_skeleton
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
+from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.raster import gs_buffer_bytes
 from ..render.records import rc_buffer_bytes

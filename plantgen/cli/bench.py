@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from ..bench import BenchOptions, check_models, count_steps, run_bench, write_outputs
 from ..errors import PlantgenError
 from .options import size_opt
 
@@ -33,23 +34,14 @@ def bench(models, size, frames, eval_size, max_triangles, quick, images, out_dir
     """Reproduce Table 1 (RC, RC+R, GS, GS+R fps, GS levels matched to the ray caster's
     quality by a computed criterion) and measure error against ms per frame for every
     accuracy knob. Prints the Markdown table; progress goes to stderr."""
-    from ..bench import (
-        BenchOptions,
-        check_models,
-        count_steps,
-        run_bench,
-        write_outputs,
-    )
 
     overrides = {}
     if models:
         overrides["models"] = tuple(s.strip() for s in models.split(",") if s.strip())
         if not overrides["models"]:
             raise PlantgenError("--models: no model named")
-    for key, value in (("size", size), ("frames", frames), ("eval_size", eval_size),
-                       ("max_triangles", max_triangles)):
-        if value is not None:
-            overrides[key] = value
+    given = {"size": size, "frames": frames, "eval_size": eval_size, "max_triangles": max_triangles}
+    overrides.update({key: value for key, value in given.items() if value is not None})
     overrides["images"] = images
     opts = BenchOptions.quick_run(**overrides) if quick else BenchOptions(**overrides)
     if frames is not None:   # the curves' many configurations use at most their default

@@ -256,7 +256,7 @@ class Frusta:
             np.array([names.index(m) for m in p.material_names], dtype=np.int32)[p.material]
             if len(p) else p.material for p in parts])
         parent = np.concatenate([np.where(p.parent_row >= 0, p.parent_row + o, -1)
-                                 for p, o in zip(parts, offsets)])
+                                 for p, o in zip(parts, offsets, strict=True)])
         return Frusta(**rows, material_names=tuple(names), parent_row=parent)
 
     def translated(self, offset) -> Frusta:

@@ -43,7 +43,7 @@ DEFAULT_SHELL = {"bark": 0.15, "cactus": 0.12, "stone": 0.10, "aloe": 0.05, "lea
 
 #: Texture repeats (around u, along v per segment) per material; all 1: (u, v) of the
 #: frusta index the map directly (mesh, ray caster and reference agree on this).
-REPEATS = {name: (1.0, 1.0) for name in MATERIALS}
+REPEATS = dict.fromkeys(MATERIALS, (1.0, 1.0))
 
 
 def default_shell(name: str) -> float:

@@ -146,7 +146,8 @@ def case_rays(case: HardCase, frusta: Frusta, count: int = 200, seed: int = 0):
         targets[: count // 2] = frusta.top[0]
     elif case.special == "generator":
         psi = rng.uniform(0, 2 * np.pi, count)
-        e = np.cos(psi)[:, None] * frusta.ref_dir[0] + np.sin(psi)[:, None] * np.cross(frusta.axis[0], frusta.ref_dir[0])
+        side = np.cross(frusta.axis[0], frusta.ref_dir[0])
+        e = np.cos(psi)[:, None] * frusta.ref_dir[0] + np.sin(psi)[:, None] * side
         g = frusta.axis[0] + frusta.slope[0] * e
         start = frusta.base[0] + frusta.r1[0] * e * (1 + rng.uniform(-0.5, 0.5, count))[:, None]
         eyes = start - g * 1.5
@@ -278,6 +279,6 @@ def format_table(results: list[dict]) -> str:
 
     rows = [[fmt(r.get(c, "")) for c in COLUMNS] for r in results]
     widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(COLUMNS)]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(COLUMNS, widths))]
-    lines += ["  ".join(x.ljust(w) for x, w in zip(r, widths)) for r in rows]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(COLUMNS, widths, strict=True))]
+    lines += ["  ".join(x.ljust(w) for x, w in zip(r, widths, strict=True)) for r in rows]
     return "\n".join(lines)

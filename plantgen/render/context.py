@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import threading
 
+import moderngl
+
 from ..errors import PlantgenError
 
 __all__ = ["GLContextError", "gl_context", "renderer_name", "release_framebuffer", "REQUIRED_GL_VERSION"]
@@ -30,17 +32,12 @@ def gl_context():
     Raises
     ------
     GLContextError
-        One line saying what is missing: moderngl itself, an EGL library, or an OpenGL
-        4.3 core driver.
+        One line saying what is missing: an EGL library or an OpenGL 4.3 core driver.
     """
     global _context
     with _lock:
         if _context is not None:
             return _context
-        try:
-            import moderngl
-        except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
-            raise GLContextError(f"moderngl is not installed ({exc})") from None
         try:
             ctx = moderngl.create_context(standalone=True, backend="egl",
                                           require=REQUIRED_GL_VERSION)

@@ -15,8 +15,7 @@ import time
 
 import numpy as np
 
-from ..geometry.camera import Camera
-from ..geometry.camera import box_corners
+from ..geometry.camera import Camera, box_corners
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.stage import Ground
 from .context import gl_context

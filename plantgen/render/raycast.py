@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.camera import Camera
-from ..geometry.camera import box_corners
+from ..geometry.camera import Camera, box_corners
 from ..geometry.frusta import frusta_bounds
 from ..geometry.stage import Ground
 from .context import gl_context
