@@ -137,6 +137,10 @@ class Tolerances:
     box_pad_floor: float = 1e-12
     """World units: the slab-test boxes grow by at least this."""
 
+    light_window_pad: float = 1e-9
+    """World units: the light's shadow-map window grows by at least this on every side,
+    so casters that are flat along a window axis still get a window of some extent."""
+
     behind_eye: float = 1e-9
     """Relative (to the row's corners' distance from the eye): a bounding-pyramid corner
     this close to the eye's plane, or behind it, puts its row in every screen tile."""

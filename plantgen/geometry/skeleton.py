@@ -27,6 +27,7 @@ import numpy as np
 
 from .. import tolerances
 from ..errors import PlantgenError
+from ..files import write_atomically
 
 __all__ = ["Skeleton", "SkeletonError"]
 
@@ -181,15 +182,14 @@ class Skeleton:
     # ------------------------------------------------------------------ files
     def save(self, path: str | Path) -> None:
         """Write the ``.npz`` format; written to a temporary name, then renamed."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh, start=self.start, end=self.end, r_start=self.r_start, r_end=self.r_end,
-                parent=self.parent, continues=self.continues, material=self.material,
-                material_names=np.array(self.material_names, dtype=str),
-            )
-        tmp.replace(path)
+        def write(tmp):
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(
+                    fh, start=self.start, end=self.end, r_start=self.r_start, r_end=self.r_end,
+                    parent=self.parent, continues=self.continues, material=self.material,
+                    material_names=np.array(self.material_names, dtype=str),
+                )
+        write_atomically(path, write, SkeletonError)
 
     @classmethod
     def load(cls, path: str | Path) -> Skeleton:
@@ -229,7 +229,5 @@ class Skeleton:
             x, y, z = self.end[i]
             lines.append(f"{nid} 3 {x:.9g} {y:.9g} {z:.9g} {self.r_end[i]:.9g} {start_id}")
             end_id[i] = nid
-        path = Path(path)
-        tmp = path.with_name(path.name + ".part")
-        tmp.write_text("\n".join(lines) + "\n")
-        tmp.replace(path)
+        text = "\n".join(lines) + "\n"
+        write_atomically(path, lambda tmp: Path(tmp).write_text(text), SkeletonError)

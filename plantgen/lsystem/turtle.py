@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.skeleton import Skeleton
+from ..tolerances import tol
 from .derive import ModuleString
 from .grammar import TurtleSettings
 
@@ -185,7 +186,7 @@ def _bend_towards(H, L, U, tropism, e):
     tx, ty, tz = tropism
     ax, ay, az = H[1] * tz - H[2] * ty, H[2] * tx - H[0] * tz, H[0] * ty - H[1] * tx
     s = sqrt(ax * ax + ay * ay + az * az)
-    if not s > 1e-12:
+    if not s > tol.parallel:
         return H, L, U
     ax, ay, az = ax / s, ay / s, az / s
     alpha = e * s
@@ -199,7 +200,7 @@ def _level_left(H, L, U):
     U = H × L. (L, U) unchanged when H is vertical."""
     lx, lz = H[2], -H[0]
     s = sqrt(lx * lx + lz * lz)
-    if not s > 1e-12:
+    if not s > tol.parallel:
         return L, U
     L = (lx / s, 0.0, lz / s)
     U = (H[1] * L[2] - H[2] * L[1], H[2] * L[0] - H[0] * L[2], H[0] * L[1] - H[1] * L[0])
@@ -207,7 +208,11 @@ def _level_left(H, L, U):
 
 
 def _rodrigues(v, ax, ay, az, c, s):
-    """Rotate v about the unit axis (ax, ay, az) by the angle with cosine c, sine s."""
+    """Rotate v about the unit axis (ax, ay, az) by the angle with cosine c, sine s.
+
+    The scalar twin of :func:`plantgen.geometry.vec.rotate` (same formula, same order of
+    operations): the turtle turns one module at a time, where numpy's per-call cost would
+    dominate."""
     vx, vy, vz = v
     d = (ax * vx + ay * vy + az * vz) * (1 - c)
     cx, cy, cz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx

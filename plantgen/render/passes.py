@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.camera import box_corners
+from ..tolerances import tol
 from .context import release_framebuffer
 
 __all__ = ["ShadowSettings", "LightWindow", "light_window", "ShadowPass",
@@ -147,7 +148,7 @@ def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> Ligh
     local = corners @ np.stack([right, up, forward]).T
     lo, hi = local.min(axis=0), local.max(axis=0)
     size = float(np.max(hi - lo)) or 1.0
-    pad = margin * size + 1e-9
+    pad = margin * size + tol.light_window_pad
     lo, hi = lo - pad, hi + pad
     centre_xy = 0.5 * (lo[:2] + hi[:2])
     origin_rel = centre_xy[0] * right + centre_xy[1] * up
