@@ -19,7 +19,7 @@ const float TWO_PI = 6.283185307179586;
 const float RAY_T_MAX = 1e30;   // beyond every hit: the open end of a ray's interval
 const float NO_HIT = 3.0e38;    // "no root", "no hit": the numpy reference's inf
 
-// One segment, unpacked from its record (see plantgen/render/raycast.py, pack_records).
+// One segment, unpacked from its record (see plantgen/render/records.py, pack_records).
 struct Frustum {
     vec3 base;      // C1, relative to the render origin
     float h;        // axis length

@@ -1,7 +1,7 @@
 // Shading shared by the ray caster and the raster renderer: material colours, one
 // directional light with Blinn-Phong, and a sky background. Include after declaring
-// nothing; it declares its own uniforms (their values: plantgen.render.raycast's
-// shading_uniforms and material_palette).
+// nothing; it declares its own uniforms (their values: plantgen.render.materials's
+// shading_uniforms and palette_uniforms; MAX_MATERIALS is a define from Python).
 
 #ifndef SHADING_GLSL
 #define SHADING_GLSL
