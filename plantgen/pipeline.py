@@ -45,7 +45,8 @@ from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene, resolve_effects
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
-           "Staging", "stage_model", "RenderReport", "render_file", "export_model"]
+           "Staging", "stage_model", "RenderReport", "check_render_outputs", "render_file",
+           "export_model"]
 
 
 @dataclass
@@ -205,17 +206,21 @@ class RenderReport:
     skin_calls: int = 0
 
 
-def _check_render_outputs(output: Path, frames, fps, depth_out, camera_out) -> None:
-    """Fail before any work on outputs :func:`render_file` cannot write."""
+def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None) -> None:
+    """Fail before any work on outputs :func:`render_file` cannot write: one line naming
+    the file. ``names`` maps the knobs ``frames``, ``fps`` and ``depth_out`` to how the
+    caller spells them (the CLI: ``--frames``, ...); default: the keyword names."""
+    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", **(names or {})}
     if frames is not None:
         if output.suffix.lower() not in ANIMATION_SUFFIXES:
-            raise PlantgenError(f"{output}: an animation must end in .gif or .webp")
+            raise PlantgenError(f"{output}: an animation ({name['frames']}) must end in .gif or .webp")
         if int(frames) < 1 or not fps > 0:
-            raise PlantgenError("an animation needs frames >= 1 and fps > 0")
+            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} > 0")
         if depth_out is not None:
-            raise PlantgenError(f"{depth_out}: a depth output holds one frame, not an animation")
+            raise PlantgenError(f"{name['depth_out']} writes one frame: leave out {name['frames']}")
     elif output.suffix.lower() != ".png":
-        raise PlantgenError(f"{output}: the image output must end in .png")
+        raise PlantgenError(f"{output}: the image output must end in .png "
+                            f"(or .gif/.webp with {name['frames']})")
     if depth_out is not None and Path(depth_out).suffix.lower() != ".npy":
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
@@ -270,7 +275,7 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
                 depth_out=None, seed=None, iterations=None, relief=None,
                 linear_steps=32, binary_steps=6, v_exact=False, timed_frames=3,
                 effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
-                time_s=None, frames=None, fps=12.0, progress=None) -> RenderReport:
+                time_s=None, frames=None, fps=12.0, progress=None, names=None) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene or skeleton ``.npz``), skin it, ray cast
     it and write a PNG (and optionally the camera JSON and the depth ``.npy``), or, with
     ``frames``, an animated GIF/WebP.
@@ -291,9 +296,10 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
     depth_out : path of a float32 (height, width) array of distances along each pixel's
         ray from the eye (``inf`` for a miss), row 0 the top row of the PNG
     timed_frames : frames rendered after a warm-up frame; the report quotes their median
+    names : how the caller spells the knobs in messages (see :func:`check_render_outputs`)
     """
     output = Path(output)
-    _check_render_outputs(output, frames, fps, depth_out, camera_out)
+    check_render_outputs(output, frames, fps, depth_out, camera_out, names)
     grown = grow_file(input_path, seed=seed, iterations=iterations)
     chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
                              add=[n for n, f in (("relief", relief), ("shadows", shadows)) if f],
