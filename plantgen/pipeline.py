@@ -273,7 +273,8 @@ def _write_render_outputs(output: Path, result: RenderResult, colors, fps, cam: 
 
 def render_file(input_path, output, *, size=None, camera="auto", camera_out=None,
                 depth_out=None, seed=None, iterations=None, relief=None,
-                linear_steps=32, binary_steps=6, v_exact=False, timed_frames=3,
+                linear_steps=None, binary_steps=None, v_exact=False, march=None,
+                march_density=None, timed_frames=3,
                 effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
                 time_s=None, frames=None, fps=12.0, progress=None, names=None) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene or skeleton ``.npz``), skin it, ray cast
@@ -286,6 +287,8 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
     camera : ``"auto"`` (the scene's camera if it has one, else the model framed to fill
         most of the viewport) or a path to a camera JSON
     relief, shadows : True/False add/remove that effect; None: as the effects say
+    linear_steps, binary_steps, march, march_density, v_exact : the relief march's knobs
+        (:class:`plantgen.render.raycast.RaycastSettings`; None: its default)
     effects : None (the scene's list; none for a grammar or skeleton) or a list of effect
         names that replaces it (plantgen.scene.EFFECTS; an unknown name is an error)
     shadow_res : shadow map texels per side; shadow_caster : "relief" or "inner"
@@ -313,8 +316,10 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
     staging = stage_model(grown, frusta, *(size or (1024, 768)),
                           camera=None if camera in ("auto", None) else _camera_file(camera, size))
     cam = staging.camera
-    settings = RaycastSettings(relief="relief" in chosen, linear_steps=linear_steps,
-                               binary_steps=binary_steps, v_exact=v_exact)
+    knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
+             "march_density": march_density}
+    settings = RaycastSettings(relief="relief" in chosen, v_exact=v_exact,
+                               **{k: v for k, v in knobs.items() if v is not None})
     shadow_settings = (ShadowSettings(resolution=int(shadow_res), caster=shadow_caster)
                        if "shadows" in chosen else None)
     view = {"camera": cam, "settings": settings, "material_names": frusta.material_names,

@@ -132,8 +132,25 @@ uniform vec3 cam_right_scaled;  // unit right * tan(fov_x / 2)
 uniform vec3 cam_up_scaled;     // unit up * tan(fov_y / 2)
 uniform vec2 depth_coeffs;      // projection m[2][2], m[2][3]: clip z = A*z_view + B
 #include "heights.glsl"
-uniform int linear_steps;
+uniform int linear_steps;        // fixed march: the samples; adaptive: their most
 uniform int binary_steps;
+uniform int march_min_steps;     // adaptive march: the fewest samples
+uniform float march_density;     // adaptive march: samples per relief texel crossed
+uniform float march_precision;   // adaptive march: bisect to this many pixel footprints
+uniform vec2 pixel_footprint;    // world size of a pixel at distance s: x*s + y
+
+#if defined STATS
+// Work counters of a diagnostic render (plantgen.render.raycast.Raycaster.work): the
+// fragments the shader ran for, the height samples the relief march took. Atomics are
+// side effects, so a counting render tests depth late: its fragment count is the work
+// without early depth rejection.
+layout(std430, binding = 2) buffer WorkCounts { uint counted_fragments; uint counted_samples; };
+void count_fragment() { atomicAdd(counted_fragments, 1u); }
+void count_samples(int n) { atomicAdd(counted_samples, uint(n)); }
+#else
+void count_fragment() {}
+void count_samples(int n) {}
+#endif
 
 #if !defined SHADOW_PASS
 layout(location = 0) out vec4 out_color;
@@ -167,40 +184,98 @@ vec3 pixel_ray() {
 }
 
 #if defined RELIEF
-// Relief height w of (12): 0 on the inner cone, 1 on the outer one.
-float shell_height(Frustum f, vec3 p) {
-    float y, radial; vec3 e_r;
-    frustum_local(f, p, y, radial, e_r);
-    return (radial - frustum_radius(f, 0.0, y)) / f.shell;
+// The ray o + t*d in the frame of frustum f, for the relief march: per sample everything
+// is linear in t but one length and one atan (the paper's remark after (12): the inner and
+// outer radii are linear along the ray, u is the angle in the plane across the axis).
+struct ShellRay {
+    vec2 q0, dq;    // the point's part across the axis, in the (ref_dir, axis x ref_dir)
+                    // frame: q0 + t*dq (its length is the radial distance, its angle u)
+    float y0, dy;   // the axial coordinate y0 + t*dy
+};
+
+ShellRay shell_ray(Frustum f, vec3 o, vec3 d) {
+    vec3 e = o - f.base;
+    vec3 bitangent = cross(f.axis, f.ref_dir);
+    ShellRay r;
+    r.q0 = vec2(dot(e, f.ref_dir), dot(e, bitangent));
+    r.dq = vec2(dot(d, f.ref_dir), dot(d, bitangent));
+    r.y0 = dot(e, f.axis);
+    r.dy = dot(d, f.axis);
+    return r;
 }
 
-vec2 sample_uv(Frustum f, vec3 p, float v_interp) {
+// Relief height w of (12) at t: 0 on the inner cone, 1 on the outer one.
+float shell_height_at(Frustum f, ShellRay r, float t) {
+    float radial = length(r.q0 + t * r.dq);
+    return (radial - (f.r1 + frustum_slope(f) * (r.y0 + t * r.dy))) / f.shell;
+}
+
+// (u, v) at t: u from the point's angle (6), v interpolated between entry and exit (the
+// paper's approximation, exact for parallel planes) or, with V_EXACT, v of (7).
+vec2 shell_uv_at(Frustum f, ShellRay r, vec3 o, vec3 d, float t, float v_interp) {
+    vec2 q = r.q0 + t * r.dq;
 #if defined V_EXACT
-    return frustum_uv_at(f, p, frustum_v(f, p));
+    float v = frustum_v(f, o + t * d);
 #else
-    return frustum_uv_at(f, p, v_interp);
+    float v = v_interp;
+#endif
+    return vec2(fract(atan(q.y, q.x) / TWO_PI + f.u_offset + v * f.twist), v);
+}
+
+// The march's samples for the shell interval [t_in, t_end] (plantgen.render.raycast.
+// RaycastSettings): x linear samples, y bisection steps. MARCH_FIXED: linear_steps and
+// binary_steps. Otherwise sized to what the pixel sees: march_density linear samples per
+// relief texel the ray crosses (in u and v), where a texel counts at least one pixel
+// footprint (a far branch's pixel covers many texels and needs few samples, a grazing ray
+// near the eye crosses many), clamped to [march_min_steps, linear_steps]; then bisection
+// until the bracket is shorter than march_precision pixel footprints, at most binary_steps.
+ivec2 march_steps(Frustum f, ShellRay r, HeightMap m, float t_in, float t_end, float v_in,
+                  float v_end, float distance) {
+#if defined MARCH_FIXED
+    return ivec2(max(linear_steps, 1), binary_steps);
+#else
+    vec2 q_in = r.q0 + t_in * r.dq, q_end = r.q0 + t_end * r.dq;
+    float turns = abs(atan(q_in.x * q_end.y - q_in.y * q_end.x, dot(q_in, q_end))) / TWO_PI;
+    float dv = abs(v_end - v_in);
+    vec2 texels_per_unit = m.size * m.repeat;    // texels per turn of u, per unit of v
+    float texels = (turns + dv * abs(f.twist)) * texels_per_unit.x + dv * texels_per_unit.y;
+    float radius = max(max(f.r1, f.r2), 1e-30);
+    float texel_world = min(TWO_PI * radius / texels_per_unit.x, f.h / texels_per_unit.y);
+    float pixel_world = max(pixel_footprint.x * distance + pixel_footprint.y, 1e-30);
+    float footprint = max(pixel_world / max(texel_world, 1e-30), 1.0);
+    float linear = clamp(ceil(march_density * texels / footprint),
+                         float(max(march_min_steps, 1)), float(max(linear_steps, 1)));
+    float bracket = (t_end - t_in) / linear;     // length of the interval bisected
+    float halvings = ceil(log2(max(bracket / (march_precision * pixel_world), 1.0)));
+    return ivec2(int(linear), int(min(halvings, float(binary_steps))));
 #endif
 }
 
 // March the shell from t_in to t_end: linear steps, then a bisection. True on a hit.
+// `distance` is the eye's (or the light's window's) distance to the entry, for the pixel
+// footprint; `samples` counts the height samples taken.
 bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_on_inner,
-                  out float t_hit) {
+                  float distance, out float t_hit, out int samples) {
+    HeightMap m = height_map(f.material);
+    ShellRay r = shell_ray(f, o, d);
     float v_in = frustum_v(f, o + t_in * d), v_end = frustum_v(f, o + t_end * d);
+    ivec2 plan = march_steps(f, r, m, t_in, t_end, v_in, v_end, distance);
+    int steps = plan.x;
     float t_prev = t_in;
-    int steps = max(linear_steps, 1);
+    samples = 0;
     for (int i = 0; i <= steps; ++i) {
         float s = float(i) / float(steps);
         float t = mix(t_in, t_end, s);
-        vec3 p = o + t * d;
-        float ground = height_at(f.material, sample_uv(f, p, mix(v_in, v_end, s)));
-        if (shell_height(f, p) <= ground || (i == steps && end_on_inner)) {
+        float ground = height_in(m, shell_uv_at(f, r, o, d, t, mix(v_in, v_end, s)));
+        ++samples;
+        if (shell_height_at(f, r, t) <= ground || (i == steps && end_on_inner)) {
             float t_out = t_prev, t_inside = t;      // bisect between above and below
-            for (int b = 0; b < binary_steps && i > 0; ++b) {
+            for (int b = 0; b < plan.y && i > 0; ++b) {
                 float t_mid = 0.5 * (t_out + t_inside);
-                vec3 pm = o + t_mid * d;
                 float sm = (t_mid - t_in) / max(t_end - t_in, 1e-30);
-                float gm = height_at(f.material, sample_uv(f, pm, mix(v_in, v_end, sm)));
-                if (shell_height(f, pm) <= gm) t_inside = t_mid; else t_out = t_mid;
+                float gm = height_in(m, shell_uv_at(f, r, o, d, t_mid, mix(v_in, v_end, sm)));
+                ++samples;
+                if (shell_height_at(f, r, t_mid) <= gm) t_inside = t_mid; else t_out = t_mid;
             }
             t_hit = t_inside;
             return true;
@@ -212,6 +287,7 @@ bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_o
 #endif
 
 void main() {
+    count_fragment();
     Frustum f = unpack_frustum();
 #if defined SHADOW_PASS
     // an orthographic ray of the light, starting on the window's near plane
@@ -240,7 +316,10 @@ void main() {
         bool inner = frustum_interval(f, 0.0, o, d, t_min, RAY_T_MAX, ti_enter, ti_exit, inner_face);
         bool end_on_inner = inner && inner_face != FACE_NONE && ti_enter <= t_end;
         if (end_on_inner) t_end = ti_enter;
-        if (!march_relief(f, o, d, t_enter, t_end, end_on_inner, t_hit)) discard;
+        int samples;
+        bool hit = march_relief(f, o, d, t_enter, t_end, end_on_inner, t_shift + t_enter, t_hit, samples);
+        count_samples(samples);
+        if (!hit) discard;
         cap = t_hit == t_enter && face_is_open_cap(f, face);
     } else
 #endif

@@ -324,8 +324,8 @@ def test_relief_hits_lie_on_the_relief_surface_and_silhouettes_follow_it(gl_ctx,
     caster = relief_caster(table)
     frusta = RELIEF_SEGMENT
     camera = look_at(frusta, (0.6, 0.35, 1.0))
-    result = caster.render(frusta, camera, RaycastSettings(relief=True, linear_steps=64,
-                                                           binary_steps=8))
+    result = caster.render(frusta, camera, RaycastSettings(relief=True, march="fixed",
+                                                           linear_steps=64, binary_steps=8))
     points, hit = hit_points(camera, result.distance)
     w, u, v, on_caps = relief_coordinates(frusta, points)
     side = ~on_caps
@@ -352,7 +352,7 @@ def test_relief_error_falls_as_the_steps_rise(gl_ctx, relief_caster):
     camera = look_at(frusta, (0.6, 0.35, 1.0))
     errors = []
     for linear, binary in ((2, 0), (4, 1), (8, 2), (16, 4), (64, 8)):
-        result = caster.render(frusta, camera, RaycastSettings(relief=True, v_exact=True,
+        result = caster.render(frusta, camera, RaycastSettings(relief=True, v_exact=True, march="fixed",
                                                                linear_steps=linear,
                                                                binary_steps=binary))
         points, _ = hit_points(camera, result.distance)
@@ -366,7 +366,7 @@ def test_relief_error_falls_as_the_steps_rise(gl_ctx, relief_caster):
 def test_exact_v_follows_oblique_planes_where_interpolated_v_swims(gl_ctx, relief_caster):
     table = height_table("helix")
     caster = relief_caster(table)
-    steps = {"linear_steps": 64, "binary_steps": 8}
+    steps = {"march": "fixed", "linear_steps": 64, "binary_steps": 8}
     oblique = frusta_chain([[0, 0, 0], [0, 2, 0]], [0.5, 0.35], shell=0.15,
                            tilt_ends=([0.6, 1, 0], [-0.5, 1, 0.4]))
     mean_error = {}
@@ -403,7 +403,8 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
     camera = look_at(frusta, (0.6, 0.35, 1.0))
     plain = caster.render(frusta, camera)
     assert plain.stats.passes == ["sky", "frusta"]
-    assert plain.stats.program[1] == {"RELIEF": False, "V_EXACT": False, "SCREEN_PROXY": False}
+    assert plain.stats.program[1] == {"RELIEF": False, "V_EXACT": False, "MARCH_FIXED": False,
+                                      "SCREEN_PROXY": False}
     # programs_used: (file, names of the defines switched on) of every program a frame used
     assert ("raycast.glsl", ()) in caster.programs_used
     assert all("RELIEF" not in defines for _, defines in caster.programs_used)
@@ -532,7 +533,7 @@ def test_relief_agrees_with_the_reference_and_its_error_falls_with_the_steps(gl_
     edges = silhouette_edges(ref.hit)
     errors = []
     for linear, binary in ((4, 0), (8, 2), (16, 4), (64, 6), (256, 10)):
-        settings = RaycastSettings(relief=True, v_exact=True, linear_steps=linear,
+        settings = RaycastSettings(relief=True, v_exact=True, march="fixed", linear_steps=linear,
                                    binary_steps=binary)
         gl = caster.render(frusta, camera, settings, frusta.material_names).distance
         hit = np.isfinite(gl)

@@ -137,11 +137,13 @@ def light_rays(window, resolution: int, eye) -> tuple[np.ndarray, np.ndarray]:
     return origins, window.forward
 
 
-@pytest.mark.parametrize("relief", [False, True])
-def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief):
+@pytest.mark.parametrize("relief,march", [(False, "default"), (True, "fine"), (True, "default")])
+def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief, march):
     """Each texel of the light's depth map holds the depth of the light ray's first hit
     with the true frustum (float64 reference), not with its bounding pyramid; with
-    relief the relief surface casts (between the inner cone and the shell)."""
+    relief the relief surface casts (between the inner cone and the shell): to float32
+    precision with a fine march, and within a fraction of a map texel (below the receivers'
+    half-texel bias) with the default march sized to the map's texels."""
     sk = Skeleton(np.array([[0.0, 0.0, 0.0], [0.0, 1.2, 0.0]]), np.array([[0.0, 1.2, 0.0], [0.5, 2.1, 0.2]]),
                   np.array([0.45, 0.35]), np.array([0.35, 0.05]), np.array([-1, 0]),
                   np.array([False, True]), np.zeros(2, int), ("bark",))
@@ -149,8 +151,9 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief)
     to_light = light_towards(35.0)
     camera = Camera((3.0, 2.0, 4.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 40.0, 32, 32)
     res = 96
+    knobs = {"march_density": 8.0, "march_precision": 1e-3} if march == "fine" else {}
     caster.render(frusta, camera, RaycastSettings(relief=relief), ("bark",), to_light,
-                  shadows=ShadowSettings(resolution=res))
+                  shadows=ShadowSettings(resolution=res, **knobs))
     depths = caster.shadow_depths()   # the map of the last render
     window = caster.last_light_window
     origins, direction = light_rays(window, res, camera.eye)
@@ -173,7 +176,12 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief)
         assert np.mean(drawn != relief_hits.hit) < 0.01
         both = drawn & relief_hits.hit
         err = np.abs(z[both] - relief_hits.t[both])
-        assert np.median(err) < 1e-4 * span and np.mean(err > 5e-3 * span) < 0.005
+        if march == "fine":
+            assert np.median(err) < 1e-4 * span and np.mean(err > 5e-3 * span) < 0.005
+        else:
+            texel = window.texel_size(res)
+            assert np.median(err) < 0.1 * texel and np.mean(err > 0.5 * texel) < 0.01, \
+                (np.median(err) / texel, np.mean(err > 0.5 * texel))
         # and it is not the inner cone's shadow: relief stands proud of it on many texels
         on_inner = both & inner.hit
         assert np.mean(z[on_inner] < inner.t[on_inner] - 1e-3 * span) > 0.2

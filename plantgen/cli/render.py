@@ -9,9 +9,13 @@ import click
 
 from ..errors import PlantgenError
 from ..pipeline import render_file
+from ..render.raycast import RaycastSettings
 from ..render.records import RECORD_BYTES
 from ..scene import EFFECTS, parse_effect_list
 from .options import input_arg, iterations_opt, output_opt, seed_opt, size_opt
+
+#: The ray caster's default knobs: the options' defaults.
+MARCH = RaycastSettings()
 
 #: How this command spells the knobs that the library's messages name.
 OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"}
@@ -50,16 +54,22 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
                    "eye (.npy), inf for a miss; rays go through pixel centres of --camera-out.")
 @seed_opt
 @iterations_opt
-@click.option("--linear-steps", type=click.IntRange(1, 4096), default=32, show_default=True,
-              help="Relief: uniform samples through the shell.")
-@click.option("--binary-steps", type=click.IntRange(0, 64), default=6, show_default=True,
-              help="Relief: bisection steps after the first sample below the surface.")
+@click.option("--march", type=click.Choice(["adaptive", "fixed"]), default=MARCH.march, show_default=True,
+              help="Relief: samples sized to what each pixel sees (adaptive), or --linear-steps "
+                   "for every ray (fixed, the paper's).")
+@click.option("--march-density", type=click.FloatRange(min=0, min_open=True), default=MARCH.march_density,
+              show_default=True, help="Relief, adaptive march: samples per relief texel the ray crosses.")
+@click.option("--linear-steps", type=click.IntRange(1, 4096), default=MARCH.linear_steps, show_default=True,
+              help="Relief: uniform samples through the shell (adaptive march: the most).")
+@click.option("--binary-steps", type=click.IntRange(0, 64), default=MARCH.binary_steps, show_default=True,
+              help="Relief: bisection steps after the first sample below the surface (adaptive "
+                   f"march: the most; it stops at {MARCH.march_precision:g} pixel).")
 @click.option("--v-exact/--v-interpolated", default=False, show_default=True,
               help="Relief: v of (7) per sample, or interpolated between entry and exit "
                    "(the paper's fast path).")
 def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shadow_caster, frames,
-           fps, time_s, size, camera, camera_out, depth_out, seed, iterations, linear_steps,
-           binary_steps, v_exact) -> None:
+           fps, time_s, size, camera, camera_out, depth_out, seed, iterations, march,
+           march_density, linear_steps, binary_steps, v_exact) -> None:
     """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz) into a PNG.
 
     Skins the skeleton with conical frusta and renders them with the analytic GLSL ray
@@ -90,11 +100,15 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
     report = render_file(input, output, size=size, camera=camera, camera_out=camera_out,
                          depth_out=depth_out, seed=seed, iterations=iterations, relief=relief,
                          linear_steps=linear_steps, binary_steps=binary_steps, v_exact=v_exact,
+                         march=march, march_density=march_density,
                          effects=chosen, shadows=shadows, shadow_res=shadow_res,
                          shadow_caster=shadow_caster, time_s=time_s, frames=frames, fps=fps,
                          progress=progress, names=OPTION_NAMES)
     s = report.settings
-    mode = (f"RC+R ({s.linear_steps} linear + {s.binary_steps} binary steps, "
+    steps = (f"{s.linear_steps} linear + {s.binary_steps} binary steps" if s.march == "fixed" else
+             f"adaptive march, {s.march_density:g} samples per texel, at most {s.linear_steps} linear "
+             f"+ {s.binary_steps} binary steps")
+    mode = (f"RC+R ({steps}, "
             f"v {'exact' if s.v_exact else 'interpolated'})" if s.relief else "RC")
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")

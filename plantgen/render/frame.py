@@ -56,6 +56,12 @@ class FrameView:
                 "cam_up_scaled": tuple(self.up * tan_y)}
 
 
+    def pixel_footprint(self) -> tuple[float, float]:
+        """(a, b): a pixel near the image centre spans about a*s + b world units at
+        distance s from the eye (the adaptive relief march's footprint)."""
+        return (float(2.0 * np.tan(np.radians(self.camera.fov_y) / 2) / self.camera.height), 0.0)
+
+
 def frame_view(camera: Camera, point_sets) -> FrameView:
     """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
     in ``point_sets`` (see :func:`plantgen.geometry.camera.depth_range`)."""

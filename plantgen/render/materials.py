@@ -39,7 +39,8 @@ def palette_uniforms(material_names) -> dict[str, np.ndarray]:
 
 class HeightTextures:
     """The relief height maps of each material list, uploaded once as an R8 texture array
-    (one layer per material slot; bilinear filtering is done in GLSL)."""
+    (one layer per material slot; shaders/heights.glsl gathers 2x2 texels and filters
+    them in float32)."""
 
     def __init__(self, ctx):
         self.ctx = ctx
@@ -52,7 +53,8 @@ class HeightTextures:
             maps, repeats = material_height_maps(material_names)
             layers, h, w = maps.shape
             tex = self.ctx.texture_array((w, h, layers), 1, maps.tobytes(), dtype="f1")
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)   # gathered: filtered in GLSL
+            tex.repeat_x, tex.repeat_y = True, False               # u repeats, v clamps
             self._textures[key] = (tex, repeats)
         return self._textures[key]
 

@@ -28,7 +28,7 @@ from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
 from .passes import ShadowSettings, frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
-from .result import RaycastStats, RenderResult
+from .result import RaycastStats, RenderResult, WorkCounter
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RaycastSettings", "Raycaster", "render_frusta"]
@@ -42,8 +42,18 @@ class RaycastSettings:
     """Knobs of one render. Every accuracy/speed trade-off is one field.
 
     relief : march the relief shell of segments with ``shell > 0`` (§3)
-    linear_steps : uniform samples along the shell interval
-    binary_steps : bisection steps after the first sample under the relief surface
+    march : ``"adaptive"``: the linear samples of each ray are sized to what its pixel
+        sees, ``march_density`` per relief texel the ray crosses in the shell, where a
+        texel counts at least one pixel's footprint (a far branch takes
+        ``march_min_steps``, a grazing close-up up to ``linear_steps``); ``"fixed"``:
+        ``linear_steps`` samples for every ray (the paper's uniform sampling)
+    linear_steps : fixed march: the samples along the shell interval; adaptive: the most
+    march_density : adaptive march: samples per relief texel crossed
+    march_min_steps : adaptive march: the fewest samples
+    march_precision : adaptive march: bisection stops when the bracket around the hit is
+        shorter than this many pixel footprints (along the ray)
+    binary_steps : bisection steps after the first sample under the relief surface (the
+        adaptive march: the most)
     v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
     hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
         a silhouette tangent to the pyramid are not lost to rasterisation rules
@@ -52,8 +62,12 @@ class RaycastSettings:
     """
 
     relief: bool = False
+    march: str = "adaptive"
     linear_steps: int = 32
-    binary_steps: int = 6
+    march_density: float = 2.0
+    march_min_steps: int = 4
+    march_precision: float = 0.02
+    binary_steps: int = 12
     v_exact: bool = False
     hull_padding: float = 0.02
     proxy: str = "pyramid"
@@ -61,20 +75,27 @@ class RaycastSettings:
     def __post_init__(self):
         if self.proxy not in ("pyramid", "screen"):
             raise PlantgenError(f"proxy must be 'pyramid' or 'screen', not {self.proxy!r}")
-        if self.linear_steps < 1 or self.binary_steps < 0:
-            raise PlantgenError("relief steps: linear steps must be >= 1, binary steps >= 0")
+        if self.march not in ("adaptive", "fixed"):
+            raise PlantgenError(f"march must be 'adaptive' or 'fixed', not {self.march!r}")
+        if self.linear_steps < 1 or self.binary_steps < 0 or self.march_min_steps < 1:
+            raise PlantgenError("relief steps: linear and minimum steps must be >= 1, binary steps >= 0")
+        if not (self.march_density > 0 and self.march_precision > 0):
+            raise PlantgenError("march density (samples per relief texel) and precision (pixels) must be > 0")
         if not 0 <= self.hull_padding < 1:
             raise PlantgenError("hull padding must lie in [0, 1)")
 
     def defines(self) -> dict[str, bool]:
         return {"RELIEF": self.relief, "V_EXACT": self.relief and self.v_exact,
+                "MARCH_FIXED": self.relief and self.march == "fixed",
                 "SCREEN_PROXY": self.proxy == "screen"}
 
     def march_uniforms(self) -> dict:
         """Uniforms of the pyramid and the relief march, shared by the eye's and the light's
         pass."""
         return {"hull_padding": self.hull_padding, "linear_steps": self.linear_steps,
-                "binary_steps": self.binary_steps, "height_maps": 0}
+                "binary_steps": self.binary_steps, "march_density": self.march_density,
+                "march_min_steps": self.march_min_steps, "march_precision": self.march_precision,
+                "height_maps": 0}
 
 
 class Raycaster(OffscreenRenderer):
@@ -93,7 +114,7 @@ class Raycaster(OffscreenRenderer):
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
                material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
-               shadow_box=None, record_buffer=None) -> RenderResult:
+               shadow_box=None, record_buffer=None, count_work: bool = False) -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
 
         Parameters
@@ -114,6 +135,8 @@ class Raycaster(OffscreenRenderer):
         record_buffer : a moderngl buffer already holding ``pack_records(frusta,
             camera.eye)`` (an animation updates only what moved); None: packed and
             uploaded here
+        count_work : a diagnostic render that also counts the fragments shaded and the
+            relief samples taken (``stats.work``); its time is not the plain program's
         """
         n = len(frusta.base)
         t0 = time.perf_counter()
@@ -123,7 +146,7 @@ class Raycaster(OffscreenRenderer):
         if n:
             points.append(box_corners(frusta_bounds(frusta)))
         view = frame_view(camera, points)
-        programs = self._programs(settings, shadows, ground is not None)
+        programs = self._programs(settings, shadows, ground is not None, count_work)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (frusta_bounds(frusta) if shadow_box is None
                                             else np.asarray(shadow_box, np.float64))
@@ -144,9 +167,11 @@ class Raycaster(OffscreenRenderer):
                                                             shadows, rec_buf, repeats, tex, n)
             shadow_draws.append(light_draw)
             garbage.append(light_vao)
+        counter = WorkCounter(self.ctx) if count_work else None
         frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting), ground_vao,
                                                draw_frusta, shadows, shadow_draws)
         color, dist = self._read_back(camera.width, camera.height)
+        work = counter.read(dist) if counter is not None else None
         for obj in (vao, *garbage):
             if obj is not None:
                 obj.release()
@@ -155,10 +180,10 @@ class Raycaster(OffscreenRenderer):
             far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
             pack_ms=pack_ms, program=("raycast.glsl", settings.defines()),
-            programs=programs["built"])
+            programs=programs["built"], work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
-    def _programs(self, settings: RaycastSettings, shadows, ground: bool) -> dict:
+    def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False) -> dict:
         """Build every program the frame uses (plantgen.render.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
@@ -169,7 +194,8 @@ class Raycaster(OffscreenRenderer):
         for name, defines in variants:
             build_program(self.ctx, name, defines)
         shadowed = shadows is not None
-        frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed})
+        frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
+                                                          "STATS": count_work})
         light = None
         if shadowed:
             light = build_program(self.ctx, "raycast.glsl", {
@@ -187,6 +213,7 @@ class Raycaster(OffscreenRenderer):
         """Set the eye's frusta program and return (draw callable, vertex array or None)."""
         set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver,
                      **settings.march_uniforms(), texture_repeat=repeats,
+                     pixel_footprint=view.pixel_footprint(),
                      view_projection=mat4(view.view_projection),
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
         if not n:
@@ -211,8 +238,11 @@ class Raycaster(OffscreenRenderer):
         """Set the light's frusta program (orthographic rays along the light, analytic hit
         depth into the map) and return (draw callable, vertex array)."""
         window = lighting.window
-        set_uniforms(caster, **window.uniforms(), **settings.march_uniforms(),
+        march = {**settings.march_uniforms(), "march_density": shadows.march_density,
+                 "march_precision": shadows.march_precision}
+        set_uniforms(caster, **window.uniforms(), **march,
                      viewport=(float(shadows.resolution),) * 2, texture_repeat=repeats,
+                     pixel_footprint=(0.0, window.texel_size(shadows.resolution)),
                      view_projection=mat4(window.matrix()))
         vao = self._instances(caster, rec_buf)
         ctx = self.ctx

@@ -9,7 +9,51 @@ import numpy as np
 from ..geometry.camera import Camera
 from .passes import LightWindow
 
-__all__ = ["RenderResult", "RenderStats", "RaycastStats", "RasterStats"]
+__all__ = ["RenderResult", "RenderStats", "RaycastStats", "RasterStats", "WorkCounts", "WorkCounter"]
+
+#: Shader storage binding of the work counters (``STATS`` programs).
+WORK_COUNTER_BINDING = 2
+
+
+@dataclass(frozen=True)
+class WorkCounts:
+    """The work of one counting render (``count_work=True``): ``fragments`` the fragment
+    shader ran for (atomics are side effects, so depth is tested late: no early rejection),
+    ``samples`` height samples of the relief march (0 without relief), ``covered`` pixels
+    with a hit (a frame without ground)."""
+
+    fragments: int
+    samples: int
+    covered: int
+
+    @property
+    def overdraw(self) -> float:
+        """Shaded fragments per covered pixel."""
+        return self.fragments / max(self.covered, 1)
+
+    @property
+    def samples_per_pixel(self) -> float:
+        """Mean relief height samples per covered pixel."""
+        return self.samples / max(self.covered, 1)
+
+    def as_dict(self) -> dict:
+        return {"fragments": self.fragments, "samples": self.samples, "covered": self.covered,
+                "overdraw": self.overdraw, "samples_per_pixel": self.samples_per_pixel}
+
+
+class WorkCounter:
+    """The zeroed counter buffer of one counting render, bound where ``STATS`` programs
+    count (two uint32: fragments, samples)."""
+
+    def __init__(self, ctx):
+        self.buffer = ctx.buffer(np.zeros(4, np.uint32).tobytes())
+        self.buffer.bind_to_storage_buffer(WORK_COUNTER_BINDING)
+
+    def read(self, distance: np.ndarray) -> WorkCounts:
+        """The counts (and the covered pixels of ``distance``); releases the buffer."""
+        fragments, samples = (int(x) for x in np.frombuffer(self.buffer.read(), np.uint32)[:2])
+        self.buffer.release()
+        return WorkCounts(fragments, samples, int(np.isfinite(distance).sum()))
 
 
 @dataclass(frozen=True)
@@ -37,7 +81,8 @@ class RaycastStats(RenderStats):
     """segments : frusta rows drawn; record_bytes : bytes of one record; upload_bytes :
     record bytes uploaded by this call (0 when the caller supplied the buffer); pack_ms :
     CPU milliseconds packing records; program : (file, defines) of the frusta program;
-    programs : (file, names of the defines switched on) of every program the frame used."""
+    programs : (file, names of the defines switched on) of every program the frame used;
+    work : the counts of a counting render, else None."""
 
     segments: int = 0
     record_bytes: int = 0
@@ -45,18 +90,21 @@ class RaycastStats(RenderStats):
     pack_ms: float = 0.0
     program: tuple = ()
     programs: list | None = None
+    work: WorkCounts | None = None
 
 
 @dataclass(frozen=True)
 class RasterStats(RenderStats):
     """triangles, vertices : the mesh's counts; level : its subdivision level m;
-    buffer_bytes : GPU bytes of the draw; draw_calls : draw calls of the frame."""
+    buffer_bytes : GPU bytes of the draw; draw_calls : draw calls of the frame; work : the
+    counts of a counting render, else None."""
 
     triangles: int = 0
     vertices: int = 0
     level: int = 0
     buffer_bytes: int = 0
     draw_calls: int = 0
+    work: WorkCounts | None = None
 
 
 @dataclass
