@@ -1,8 +1,9 @@
 """``plantgen bench``: the quick run end to end, the quality criterion, fps from timings.
 
-The metric helpers (SSIM, silhouette mismatch, depth shading, matched level, Pareto front)
-are tested on images with known answers; the GL parts run on the shared context
-(llvmpipe in CI) with tiny images so the file stays well under a minute.
+The metric helpers (SSIM, silhouette mismatch, depth shading, matched level, Pareto front),
+the level walk, the RC+R choice, the sweeps and the summary are tested on inputs with known
+answers; the GL parts run on the shared context (llvmpipe in CI) with tiny images so the
+file stays well under a minute.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -18,13 +20,23 @@ from _cli import run_cli
 from plantgen import bench
 from plantgen.bench import (
     PAPER_TABLE1,
+    RELIEF_ERROR,
     BenchOptions,
+    Sweep,
+    choose_relief_config,
     depth_shading,
+    geometric_mean,
+    image_error,
     matched_level,
     pareto_front,
+    relief_configs,
     silhouette_mismatch,
     ssim,
+    summarise,
+    summary_lines,
+    walk_levels,
 )
+from plantgen.errors import PlantgenError
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.skeleton import Skeleton
 
@@ -38,6 +50,55 @@ def test_ssim_is_one_for_identical_images_and_falls_with_noise():
     strongly = np.clip(image + 0.3 * rng.standard_normal(image.shape), 0, 1)
     assert 1.0 > ssim(image, slightly) > ssim(image, strongly)
     assert ssim(image, slightly) == pytest.approx(ssim(slightly, image))   # symmetric
+
+
+def test_dssim_is_zero_for_identical_images_and_grows_with_noise_and_shift():
+    """1 - SSIM: 0 for the same image, larger for a shifted one, and increasing with the
+    noise added (the same noise pattern, scaled)."""
+    rng = np.random.default_rng(2)
+    y, x = np.mgrid[0:48, 0:64]
+    image = 0.5 + 0.4 * np.sin(x / 5.0) * np.cos(y / 7.0)      # smooth, like a shading
+    assert 1.0 - ssim(image, image) == pytest.approx(0.0, abs=1e-12)
+    assert 1.0 - ssim(image, np.roll(image, 3, axis=1)) > 0.01
+    pattern = rng.standard_normal(image.shape)
+    dssim = [1.0 - ssim(image, np.clip(image + sigma * pattern, 0, 1)) for sigma in (0.0, 0.01, 0.03, 0.1, 0.3)]
+    assert dssim[0] == pytest.approx(0.0, abs=1e-12)
+    assert all(a < b for a, b in zip(dssim, dssim[1:], strict=False)), dssim
+
+
+def test_ssim_of_flat_images_is_the_luminance_term():
+    """Two constant images have no variance: SSIM = (2ab + C1) / (a² + b² + C1) with
+    C1 = (0.01·data_range)², the data range scaling the constant."""
+    a, b = np.full((20, 24), 0.2), np.full((20, 24), 0.6)
+    for data_range in (1.0, 4.0):
+        c1 = (0.01 * data_range) ** 2
+        assert ssim(a, b, data_range) == pytest.approx((2 * 0.2 * 0.6 + c1) / (0.2 ** 2 + 0.6 ** 2 + c1))
+
+
+def test_image_error_of_a_depth_image_against_itself_is_zero_and_a_moved_one_is_larger():
+    camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0), 40.0, 48, 36)
+    _, dirs = camera.rays()
+    y, x = np.mgrid[0:36, 0:48]
+    distance = (5.0 + 0.3 * np.sin(x / 3.0)) / dirs[..., 2]      # a corrugated wall
+    distance[:, :6] = np.inf
+    same = image_error(distance, distance, camera, (0.3, 0.4, -1.0))
+    assert same.total == pytest.approx(0.0, abs=1e-12) and same.silhouette == 0.0
+    moved = image_error(np.roll(distance, 2, axis=1), distance, camera, (0.3, 0.4, -1.0))
+    assert moved.dssim > 0.01 and moved.silhouette > 0.0
+    assert moved.total == pytest.approx(moved.dssim + moved.silhouette)
+
+
+def test_a_missing_scikit_image_is_one_line_naming_the_extra(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "skimage", None)          # `import skimage...` raises ImportError
+    monkeypatch.setitem(sys.modules, "skimage.metrics", None)
+    with pytest.raises(PlantgenError, match=r"pip install 'plantgen\[bench\]'"):
+        ssim(np.zeros((16, 16)), np.zeros((16, 16)))
+    code, stdout, stderr = run_cli("bench", "--quick", "--out", tmp_path / "b")
+    assert code == 2
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "scikit-image" in lines[0] and "pip install 'plantgen[bench]'" in lines[0], stderr
+    assert "Traceback" not in stderr
+    assert not (tmp_path / "b").exists()
 
 
 def test_silhouette_mismatch_counts_pixels_covered_by_one_only():
@@ -66,6 +127,107 @@ def test_matched_level_is_the_smallest_within_tolerance():
     assert matched_level(errors, 0.02, rel_tol=0.0, abs_tol=0.0) == (3, True)     # 0.021 > 0.02
     assert matched_level(errors, 0.001, rel_tol=0.1, abs_tol=0.0) == (3, False)  # best, unmatched
     assert matched_level({}, 0.1) == (None, False)
+
+
+def test_level_walk_stops_at_the_first_qualifying_level():
+    """m = 0, 1, ... are measured in turn; nothing past the first level within the bound
+    (target·1.1 + 0.01) is built."""
+    errors = {0: 0.5, 1: 0.2, 2: 0.03, 3: 0.001, 4: 0.0}
+    built = []
+
+    def measure(m):
+        built.append(m)
+        return errors[m]
+
+    match = walk_levels("GS+R", "rc+r:linear=8", 0.02, measure, lambda m: 100 * 4 ** m, 10 ** 9)
+    assert built == [0, 1, 2] and match.matched and match.level == 2
+    assert match.bound == pytest.approx(0.02 * 1.1 + 0.01)
+    record = match.as_dict()
+    assert record["text"] == "matched at m=2" and record["stopped_by"] == "match"
+    assert record["over_budget_level"] is None and record["target_key"] == "rc+r:linear=8"
+
+
+def test_level_walk_goes_past_five_until_the_budget_and_reports_the_best_level():
+    """No level qualifies: the walk goes on past m = 5 and stops at the first level whose
+    triangle count is over the budget (not built); Table 1 gets the level of least error."""
+    errors = {0: 0.6, 1: 0.4, 2: 0.3, 3: 0.2, 4: 0.15, 5: 0.12, 6: 0.08, 7: 0.09}
+    built = []
+
+    def measure(m):
+        built.append(m)
+        return errors[m]
+
+    triangles = lambda m: 30 * 16 * 4 ** m   # noqa: E731
+    match = walk_levels("GS+R", "rc+r:linear=8", 0.001, measure, triangles, triangles(7))
+    assert built == [0, 1, 2, 3, 4, 5, 6, 7]
+    assert not match.matched and match.level == 6 and match.over_budget == (8, triangles(8))
+    record = match.as_dict()
+    assert record["stopped_by"] == "budget" and record["error"] == 0.08
+    assert record["text"] == (f"not matched: m=8 over the triangle budget ({triangles(8):,} triangles), "
+                              "best measured error 0.0800 at m=6")
+    nothing = walk_levels("GS", "rc", 0.0, measure, lambda m: 10 ** 7, 100).as_dict()
+    assert nothing["level"] is None and not nothing["matched"]
+    assert nothing["text"] == "not matched: m=0 over the triangle budget (10,000,000 triangles), no level built"
+
+
+def test_relief_config_is_the_fastest_within_the_error_bound_else_the_most_accurate():
+    rows = [{"key": "rc+r:linear=4", "ms": 10.0, "error": 0.02},
+            {"key": "rc+r:linear=8", "ms": 12.0, "error": 0.008},
+            {"key": "rc+r:linear=16", "ms": 15.0, "error": 0.002},
+            {"key": "rc+r:binary=0", "ms": 11.0, "error": 0.009}]
+    choice = choose_relief_config(rows, 0.01)
+    assert choice["key"] == "rc+r:binary=0" and choice["within"]
+    assert choose_relief_config(rows, 0.005)["key"] == "rc+r:linear=16"
+    fallback = choose_relief_config(rows, 0.001)
+    assert fallback["key"] == "rc+r:linear=16" and not fallback["within"]
+    assert "most accurate" in fallback["rule"]
+
+
+def test_relief_sweeps_vary_one_field_from_the_defaults_and_a_new_knob_is_one_sweep():
+    from plantgen.render.raycast import RaycastSettings
+
+    opts = BenchOptions(linear_steps=(4, 32), binary_steps=(0, 6))
+    keys = [c.key for c in relief_configs(opts)]
+    # binary = 6 with 32 linear steps is the linear sweep's 32: measured once
+    assert keys == ["rc+r:linear=4", "rc+r:linear=32", "rc+r:binary=0", "rc+r:v=exact"]
+    default = RaycastSettings(relief=True)
+    for c in relief_configs(opts):
+        assert c.method == "RC+R" and c.settings.relief
+        changed = {f for f in ("linear_steps", "binary_steps", "v_exact")
+                   if getattr(c.settings, f) != getattr(default, f)}
+        assert len(changed) <= 1, (c.key, changed)
+    # a further knob: one Sweep, optionally on top of another setting (``base``)
+    extra = (Sweep("pad", "hull_padding", (0.05, 0.1), base=(("binary_steps", 2),)),)
+    added = relief_configs(opts, extra)
+    assert [c.key for c in added] == ["rc+r:pad=0.05", "rc+r:pad=0.1"]
+    assert added[0].settings == RaycastSettings(relief=True, binary_steps=2, hull_padding=0.05)
+    assert added[0].identity()["settings"]["hull_padding"] == 0.05
+
+
+def _summary_model(name, rc_ms, rcr_ms, gsr_ms, matched):
+    return {"model": name, "rc": {"ms": rc_ms, "fps": 1000 / rc_ms}, "rcr": {"ms": rcr_ms, "fps": 1000 / rcr_ms},
+            "gsr": {"ms": gsr_ms, "fps": 1000 / gsr_ms}, "gsr_matched": matched}
+
+
+def test_summary_counts_wins_and_takes_geometric_means():
+    models = [_summary_model("saguaro", 2.0, 8.0, 16.0, True),     # RC+R ÷ GS+R = 2, overhead 4
+              _summary_model("well", 1.0, 9.0, 4.5, False),        # 0.5, overhead 9
+              _summary_model("mine", 1.0, 1.0, 1.0, True)]         # 1 (not in the paper), overhead 1
+    s = summarise(models)
+    ratio = s["rcr_over_gsr"]
+    assert ratio["models"] == 3 and ratio["at_least_one"] == 2 and ratio["matched"] == 2
+    assert ratio["geomean"] == pytest.approx(geometric_mean([2.0, 0.5, 1.0])) == pytest.approx(1.0)
+    assert ratio["geomean_matched"] == pytest.approx(math.sqrt(2.0))
+    assert s["relief_overhead"]["geomean"] == pytest.approx(36 ** (1 / 3))
+    paper = s["paper"]["rcr_over_gsr"]
+    assert set(paper["per_model"]) == {"saguaro", "well"}
+    assert paper["geomean"] == pytest.approx(math.sqrt(PAPER_TABLE1["saguaro"].rcr_over_gsr
+                                                       * PAPER_TABLE1["well"].rcr_over_gsr))
+    lines = summary_lines(s)
+    assert lines[0] == ("- RC+R ÷ GS+R ≥ 1 on 2 of 3 models, geometric mean 1.00 (at matched quality on "
+                        "2 of 3; geometric mean over those 1.41)")
+    assert lines[1].startswith("- relief overhead RC+R ms ÷ RC ms: geometric mean 3.30 (per model: saguaro 4.00")
+    assert any(line.startswith("- paper (8800 GTX): RC+R ÷ GS+R ≥ 1 on 2 of 2 models") for line in lines)
 
 
 def test_pareto_front_keeps_only_undominated_points():
@@ -110,6 +272,68 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     sag = next(m for m in results["models"] if m["model"] == "saguaro")
     gs0 = next(c for c in sag["curve"] if c["key"] == "gs:m=0")
     assert sag["rc"]["error"] < 0.01 < gs0["error"]
+    for m in results["models"]:
+        _check_relief_choice(m, results["options"]["relief_error"])
+        for short in ("gs", "gsr"):
+            _check_level_walk(m, short, results["options"])
+    _check_summary(results, (out / "table.md").read_text(), rows)
+
+
+def _check_relief_choice(m, relief_error):
+    """Table 1's RC+R is the fastest RC+R curve point within the error bound (else the most
+    accurate one), timed under its key, and GS+R was matched against its error."""
+    rcr = [c for c in m["curve"] if c["method"] == "RC+R" and "error" in c]
+    within = [c for c in rcr if c["error"] <= relief_error]
+    # ties: the more accurate among equally fast ones, the faster among equally accurate ones
+    expected = (min(within, key=lambda c: (c["ms"], c["error"])) if within
+                else min(rcr, key=lambda c: (c["error"], c["ms"])))
+    choice = m["rcr_choice"]
+    assert choice["key"] == expected["key"] == m["rcr"]["key"], (choice, expected)
+    assert choice["within"] == bool(within)
+    assert m["gsr_match"]["target_key"] == choice["key"]
+    assert m["gsr_match"]["target_error"] == pytest.approx(expected["error"])
+
+
+def _check_level_walk(m, short, options):
+    """Levels were built from m = 0 up to the first one within the bound, and no further;
+    or, unmatched, up to the one before the first level over the triangle budget, which
+    has a 'skipped' row, and Table 1 times the level of least error."""
+    match = m[f"{short}_match"]
+    method = {"gs": "GS", "gsr": "GS+R"}[short]
+    rows = [c for c in m["curve"] if c["method"] == method]
+    built = {c["value"]: c["error"] for c in rows if "error" in c}
+    assert sorted(built) == list(range(len(built))) == match["levels_measured"]
+    assert [v for v in built.values() if v <= match["bound"]] == ([built[max(built)]] if match["matched"] else [])
+    assert m[f"{short}_matched"] == match["matched"] and m[f"{short}_level"] == match["level"]
+    assert m[short]["key"] == f"{method.lower()}:m={match['level']}"
+    if match["matched"]:
+        assert match["level"] == max(built) and match["text"] == f"matched at m={match['level']}"
+        assert not any("skipped" in c for c in rows)
+    else:
+        skipped = [c for c in rows if "skipped" in c]
+        assert [c["value"] for c in skipped] == [match["over_budget_level"]] == [max(built) + 1]
+        assert skipped[0]["triangles"] == match["over_budget_triangles"] > options["max_triangles"]
+        assert match["level"] == min(built, key=built.get)
+        assert match["text"].startswith(f"not matched: m={match['over_budget_level']} over the triangle budget")
+
+
+def _check_summary(results, table, csv_rows):
+    summary = results["summary"]
+    ratios = {m["model"]: m["rcr"]["fps"] / m["gsr"]["fps"] for m in results["models"]}
+    assert summary["rcr_over_gsr"]["per_model"] == pytest.approx(ratios)
+    assert summary["rcr_over_gsr"]["matched"] == sum(m["gsr_matched"] for m in results["models"])
+    assert summary["rcr_over_gsr"]["geomean"] == pytest.approx(math.exp(np.mean(np.log(list(ratios.values())))))
+    assert "- RC+R ÷ GS+R ≥ 1 on " in table and "- relief overhead RC+R ms ÷ RC ms: geometric mean" in table
+    assert "- paper (8800 GTX): RC+R ÷ GS+R ≥ 1 on 2 of 2 models" in table
+    for m, row in zip(results["models"], csv_rows, strict=True):
+        assert row["rcr_config"] == m["rcr_choice"]["key"]
+        assert row["gsr_match"] == m["gsr_match"]["text"] and row["gs_match"] == m["gs_match"]["text"]
+        assert row["rcr_over_gsr_matched"] == str(m["gsr_matched"])
+        table_row = next(line for line in table.splitlines() if line.startswith(f"| {m['model']} |"))
+        assert m["rcr_choice"]["key"].split(":", 1)[1] in table_row
+        assert table_row.rstrip(" |").split(" | ")[-2].endswith("✗") == (not m["gsr_matched"])
+        if not m["gsr_matched"]:
+            assert f"{m['model']}: GS+R {m['gsr_match']['text']}" in table
 
 
 # ------------------------------------------------------------------------ the criterion
@@ -139,8 +363,8 @@ def test_quality_criterion_picks_a_higher_level_for_a_finer_relief_map(gl_ctx, t
     monkeypatch.setitem(relief._GENERATORS, "ripple_coarse", _ripples(2))
     monkeypatch.setitem(relief._GENERATORS, "ripple_fine", _ripples(14))
     relief._cached.cache_clear()
-    opts = BenchOptions(size=(160, 120), frames=1, eval_size=(64, 48), levels=(0, 1, 2, 3, 4, 5),
-                        linear_steps=(32,), binary_steps=(6,), reference_relief_samples=96)
+    opts = BenchOptions(size=(160, 120), frames=1, eval_size=(64, 48), linear_steps=(32,),
+                        binary_steps=(6,), reference_relief_samples=96)
     levels = {}
     try:
         for name in ("ripple_coarse", "ripple_fine"):
@@ -150,6 +374,9 @@ def test_quality_criterion_picks_a_higher_level_for_a_finer_relief_map(gl_ctx, t
             assert result["relief"]
             assert result["rcr"]["error"] < 0.05
             levels[name] = (result["gsr_level"], result["gsr_matched"])
+            built = [c["value"] for c in result["curve"] if c["method"] == "GS+R"]
+            assert built == list(range(result["gsr_level"] + 1))     # nothing past the match
+            assert result["gsr_match"]["target_key"] == result["rcr_choice"]["key"] == result["rcr"]["key"]
     finally:
         relief._cached.cache_clear()
     assert levels["ripple_coarse"][1] and levels["ripple_fine"][1], levels
@@ -162,7 +389,8 @@ def test_fps_come_from_the_measured_frame_times(gl_ctx, monkeypatch):
     slower per frame and its reported fps follows, while GS (not slowed) does not."""
     from plantgen.render.raycast import Raycaster
 
-    opts = BenchOptions.quick_run(models=("saguaro",), frames=3, levels=(0, 1),
+    # a budget that stops GS and GS+R at m = 1 (30 segments x 64 triangles) keeps this short
+    opts = BenchOptions.quick_run(models=("saguaro",), frames=3, max_triangles=2000,
                                   linear_steps=(8,), binary_steps=())
     fast = bench.bench_model("saguaro", opts)
     for key in ("rc", "rcr", "gs", "gsr"):
@@ -195,13 +423,37 @@ def test_unknown_model_is_one_line_error_before_any_work(tmp_path):
     assert not (tmp_path / "b").exists()
 
 
-def test_levels_left_out_by_the_triangle_budget_are_named_when_no_level_matched():
-    """'>m' from a budget is not a quality verdict: the table says which levels were not
-    built; a matched method, or one with nothing skipped, gets no such note."""
-    curve = [{"method": "GS+R", "value": 2, "error": 0.2},
-             {"method": "GS+R", "value": 3, "skipped": "17 triangles over the budget of 6"},
-             {"method": "GS", "value": 1, "error": 0.0}]
-    model = {"gs_matched": True, "gsr_matched": False, "curve": curve}
-    notes = bench.budget_notes(model)
-    assert notes == ["GS+R m = 3 not built: 17 triangles over the budget of 6 (--max-triangles)"]
-    assert bench.budget_notes({**model, "gsr_matched": True}) == []
+def test_an_unmatched_method_gets_a_note_with_the_budget_and_the_ray_casters_edge():
+    """'m✗' is not a quality verdict on its own: the note says the budget stopped the walk,
+    the best level measured, and that the ray caster is more accurate and how much faster
+    or slower it ran; a matched method gets no note."""
+    match = {"matched": False, "level": 5, "error": 0.148, "target_key": "rc+r:linear=8",
+             "text": "not matched: m=6 over the triangle budget (524,288 triangles), best measured "
+                     "error 0.1480 at m=5"}
+    model = {"gs_match": {"matched": True, "text": "matched at m=3"}, "gsr_match": match,
+             "rcr": {"fps": 20.0, "error": 0.002}, "gsr": {"fps": 10.0, "error": 0.148}}
+    assert bench.match_notes(model) == [
+        "GS+R not matched: m=6 over the triangle budget (524,288 triangles), best measured error 0.1480 "
+        "at m=5 (--max-triangles); RC+R (rc+r:linear=8) is more accurate (err 0.0020 vs 0.1480) and "
+        "2.00× faster than the best GS+R mesh within the budget (m=5)"]
+    slower = bench.match_notes({**model, "rcr": {"fps": 4.0, "error": 0.002}})
+    assert "2.50× slower" in slower[0]
+    assert bench.match_notes({**model, "gsr_match": {**match, "matched": True}}) == []
+
+
+def test_cli_passes_the_relief_error_and_the_budget(tmp_path, monkeypatch):
+    """--relief-error and --max-triangles reach BenchOptions (the run itself is stubbed)."""
+    from plantgen.cli import bench as cli_bench
+
+    seen = []
+
+    def stub(opts, progress, out_dir):
+        seen.append(opts)
+        raise PlantgenError("stopped by the test")
+
+    monkeypatch.setattr(cli_bench, "run_bench", stub)
+    code, _, stderr = run_cli("bench", "--quick", "--relief-error", "0.02", "--max-triangles", "1000",
+                              "--out", tmp_path / "b")
+    assert code == 2 and "stopped by the test" in stderr
+    assert seen[0].relief_error == 0.02 and seen[0].max_triangles == 1000 and seen[0].quick
+    assert BenchOptions().relief_error == RELIEF_ERROR == 0.01

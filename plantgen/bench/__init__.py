@@ -18,11 +18,14 @@ For each model the bench (:func:`~plantgen.bench.runs.bench_model`)
    by an error of 7e-4, 512 and 1024 by 2e-3, while 192 samples still miss 1 % of the
    silhouette (error 0.011). The window is 128x96 by default so the nine references take
    about six minutes on two cores;
-4. renders every **configuration** (:mod:`plantgen.bench.configs`: RC, GS at m = 0..5,
-   RC+R over linear and binary relief steps and v exact/interpolated, GS+R at m = 0..5) in
-   the window for its error, and at the full size for its time;
-5. computes the **matched level** (the quality criterion, :mod:`plantgen.bench.metrics`)
-   of GS and GS+R;
+4. renders the ray caster's **configurations** (:mod:`plantgen.bench.configs`: RC, and RC+R
+   over linear and binary relief steps and v exact/interpolated, one knob at a time) in the
+   window for its error, and at the full size for its time;
+5. picks **RC+R's Table 1 configuration** from those curves: the fastest one with error at
+   most ``relief_error`` (0.01), else the most accurate (:mod:`plantgen.bench.matching`);
+   then walks **GS and GS+R up from m = 0** (measured the same way) until a level meets
+   the quality criterion (:mod:`plantgen.bench.metrics`) against RC and against that RC+R
+   configuration, or the next level is over the triangle budget (``max_triangles``);
 6. times RC, RC+R, GS at its level and GS+R at its level **in one interleaved run**
    (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
    all four methods: the shadow map and the ground where the scene asks for them, the
@@ -31,20 +34,36 @@ For each model the bench (:func:`~plantgen.bench.runs.bench_model`)
 7. counts the GPU bytes of each method (memory table).
 
 The error metric and the quality criterion are documented in :mod:`plantgen.bench.metrics`;
-:mod:`plantgen.bench.reports` writes the tables, CSV and JSON.
+:mod:`plantgen.bench.summary` sums Table 1 up over the models (ratios' geometric means, beside
+the paper's); :mod:`plantgen.bench.reports` writes the tables, CSV and JSON.
 """
 
 from __future__ import annotations
 
-from .metrics import ImageError, depth_shading, image_error, matched_level, pareto_front, silhouette_mismatch, ssim
+from .configs import RELIEF_SWEEPS, Sweep, relief_configs
+from .matching import LevelMatch, choose_relief_config, walk_levels
+from .metrics import (
+    ImageError,
+    depth_shading,
+    image_error,
+    matched_level,
+    pareto_front,
+    quality_bound,
+    require_skimage,
+    silhouette_mismatch,
+    ssim,
+)
 from .models import check_models
-from .options import QUICK_MODELS, BenchOptions
+from .options import QUICK_MODELS, RELIEF_ERROR, BenchOptions
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, TABLE1_MODELS
-from .reports import budget_notes, write_outputs
+from .reports import match_notes, write_outputs
 from .runs import bench_model, count_steps, run_bench
+from .summary import geometric_mean, summarise, summary_lines
 from .window import eval_camera
 
 __all__ = ["BenchOptions", "PAPER_TABLE1", "PAPER_MEMORY_RATIO", "TABLE1_MODELS", "QUICK_MODELS",
-           "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",
-           "ssim", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
-           "matched_level", "pareto_front", "eval_camera", "budget_notes"]
+           "RELIEF_ERROR", "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",
+           "ssim", "require_skimage", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
+           "matched_level", "quality_bound", "pareto_front", "eval_camera", "match_notes",
+           "Sweep", "RELIEF_SWEEPS", "relief_configs", "LevelMatch", "walk_levels",
+           "choose_relief_config", "summarise", "summary_lines", "geometric_mean"]

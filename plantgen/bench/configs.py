@@ -1,20 +1,32 @@
-"""The configurations the bench measures: the four methods of Table 1 and their knobs."""
+"""The configurations the bench measures: the four methods of Table 1 and their knobs.
+
+The ray caster's knobs are swept one at a time (:data:`RELIEF_SWEEPS`): each
+:class:`Sweep` sets one :class:`~plantgen.render.raycast.RaycastSettings` field over its
+values, every other field at the ray caster's default. Adding a swept RC+R knob is one
+line there, e.g. ``Sweep("march", "march", ("adaptive",))``, or, for a knob that only means
+something under another setting, ``Sweep("texel", "samples_per_texel", (0.5, 1, 2),
+base=(("march", "adaptive"),))``. The GS and GS+R levels are not a fixed list: the bench
+goes up from m = 0 (:func:`level_config`) until a level matches (:mod:`plantgen.bench.matching`).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
 
 from ..render.raycast import RaycastSettings
 from .options import BenchOptions
 
-__all__ = ["Config", "bench_configs", "default_relief_config", "find_level", "TABLE_METHODS",
-           "MATCHED_AGAINST"]
+__all__ = ["Config", "Sweep", "RELIEF_SWEEPS", "ray_cast_configs", "relief_configs", "level_config",
+           "TABLE_METHODS", "MATCHED_AGAINST", "LEVEL_METHODS"]
 
 #: The four methods of Table 1 by their short names in the results ("rc", "rcr", ...).
 TABLE_METHODS = {"rc": "RC", "rcr": "RC+R", "gs": "GS", "gsr": "GS+R"}
 #: The quality criterion: each polygonal method's level is matched against the error of
-#: the ray caster without relief (GS) or with it (GS+R).
+#: the ray caster without relief (GS) or with it (GS+R, at its Table 1 configuration).
 MATCHED_AGAINST = {"gs": "rc", "gsr": "rcr"}
+#: The methods measured level by level (m = 0, 1, ...).
+LEVEL_METHODS = ("GS", "GS+R")
 
 
 @dataclass
@@ -22,7 +34,7 @@ class Config:
     """One measured configuration: a method and the value of one of its knobs.
 
     method : RC, RC+R, GS or GS+R
-    knob : what varies ("", "m", "linear", "binary", "v")
+    knob : what varies ("", "m", or a :class:`Sweep`'s knob: "linear", "binary", "v", ...)
     value : the knob's value ("" for no knob)
     settings : the ray caster's settings (RC, RC+R)
     level : the subdivision level m (GS, GS+R)
@@ -51,55 +63,82 @@ class Config:
         return self.method.endswith("+R")
 
     def identity(self) -> dict:
-        """The fields that name this configuration in a results row."""
-        return {"key": self.key, "method": self.method, "knob": self.knob, "value": self.value}
+        """The fields that name this configuration in a results row (with the ray
+        caster's settings, all fields, for RC and RC+R)."""
+        out = {"key": self.key, "method": self.method, "knob": self.knob, "value": self.value}
+        if self.settings is not None:
+            out["settings"] = asdict(self.settings)
+        return out
 
 
-def _level_configs(method: str, levels) -> list[Config]:
-    return [Config(method, "m", m, level=m) for m in levels]
+def _same(value):
+    return value
 
 
-def _relief_step_configs(opts: BenchOptions) -> list[Config]:
-    """RC+R over the linear steps, then over the binary steps (the other knob at its
-    default; a pair already swept is left out), then with v exact."""
-    default = RaycastSettings(relief=True)
-    out = [Config("RC+R", "linear", n, RaycastSettings(relief=True, linear_steps=n,
-                                                        binary_steps=default.binary_steps))
-           for n in opts.linear_steps]
-    for n in opts.binary_steps:
-        if n == default.binary_steps and default.linear_steps in opts.linear_steps:
-            continue
-        out.append(Config("RC+R", "binary", n, RaycastSettings(relief=True, linear_steps=default.linear_steps,
-                                                               binary_steps=n)))
-    out.append(Config("RC+R", "v", "exact", RaycastSettings(relief=True, v_exact=True)))
+@dataclass(frozen=True)
+class Sweep:
+    """One swept RC+R knob.
+
+    knob : its name in the configuration keys (``rc+r:KNOB=VALUE``)
+    field : the :class:`RaycastSettings` field it sets
+    values : the values, or the name of the :class:`BenchOptions` field that holds them
+    base : ``(field, value)`` pairs set besides, e.g. the mode a density knob belongs to
+    label : value -> how the key shows it (default: the value itself)
+    """
+
+    knob: str
+    field: str
+    values: tuple | str
+    base: tuple = ()
+    label: Callable = _same
+
+    def values_of(self, opts: BenchOptions) -> tuple:
+        """The values swept in a run with ``opts``."""
+        return tuple(getattr(opts, self.values) if isinstance(self.values, str) else self.values)
+
+    def configs(self, opts: BenchOptions) -> list[Config]:
+        """One RC+R configuration per value, every other field at the ray caster's default."""
+        return [Config("RC+R", self.knob, self.label(v),
+                       RaycastSettings(relief=True, **dict(self.base), **{self.field: v}))
+                for v in self.values_of(opts)]
+
+
+def _exact(v_exact: bool) -> str:
+    return "exact" if v_exact else "interpolated"
+
+
+#: The RC+R knobs the bench sweeps, in order (one line per knob).
+RELIEF_SWEEPS = (
+    Sweep("linear", "linear_steps", "linear_steps"),
+    Sweep("binary", "binary_steps", "binary_steps"),
+    Sweep("v", "v_exact", (True,), label=_exact),
+)
+
+
+def relief_configs(opts: BenchOptions, sweeps=RELIEF_SWEEPS) -> list[Config]:
+    """The RC+R configurations of ``sweeps`` in order; a configuration whose settings an
+    earlier one already has (e.g. binary = 6, the default, after the linear sweep's 32) is
+    left out."""
+    out, seen = [], set()
+    for sweep in sweeps:
+        for cfg in sweep.configs(opts):
+            if cfg.settings not in seen:
+                seen.add(cfg.settings)
+                out.append(cfg)
     return out
 
 
-def bench_configs(opts: BenchOptions, relief: bool) -> list[Config]:
-    """Every configuration of a model, RC first (its image picks the evaluation window):
-    RC, GS at each level and, for a model with relief, the RC+R knobs and GS+R at each level."""
+def ray_cast_configs(opts: BenchOptions, relief: bool) -> list[Config]:
+    """The ray caster's configurations of a model, RC first (its image picks the evaluation
+    window), then, for a model with relief, the RC+R sweeps."""
     out = [Config("RC", settings=RaycastSettings())]
-    out += _level_configs("GS", opts.levels)
     if relief:
-        out += _relief_step_configs(opts)
-        out += _level_configs("GS+R", opts.levels)
+        out += relief_configs(opts)
     return out
 
 
-def default_relief_config(configs) -> Config:
-    """The RC+R configuration at the ray caster's default steps (32 linear, 6 binary): the
-    linear sweep's, else the binary sweep's, else the first RC+R one."""
-    default = RaycastSettings(relief=True)
-    relief = [c for c in configs if c.method == "RC+R"]
-    for knob, value in (("linear", default.linear_steps), ("binary", default.binary_steps)):
-        for c in relief:
-            if c.knob == knob and c.value == value:
-                return c
-    return relief[0]
-
-
-def find_level(configs, method: str, level: int | None) -> Config | None:
-    """The ``method`` configuration at subdivision ``level`` (None for no level)."""
-    if level is None:
-        return None
-    return next(c for c in configs if c.method == method and c.level == level)
+def level_config(method: str, level: int) -> Config:
+    """GS or GS+R at subdivision level ``level``."""
+    if method not in LEVEL_METHODS:
+        raise ValueError(f"{method} has no subdivision level")
+    return Config(method, "m", level, level=level)

@@ -7,10 +7,12 @@ from dataclasses import asdict, dataclass
 from .metrics import MATCH_ABS_TOL, MATCH_REL_TOL
 from .paper import TABLE1_MODELS
 
-__all__ = ["BenchOptions", "QUICK_MODELS"]
+__all__ = ["BenchOptions", "QUICK_MODELS", "RELIEF_ERROR"]
 
 #: The models of the quick (CI) run: two tiny ones, one of them with shadows and ground.
 QUICK_MODELS = ("saguaro", "well")
+#: Default error bound of the RC+R configuration Table 1 times (:attr:`BenchOptions.relief_error`).
+RELIEF_ERROR = 0.01
 
 
 @dataclass
@@ -22,10 +24,13 @@ class BenchOptions:
     frames : timed frames of each Table 1 method (after one warm-up frame)
     curve_frames : timed frames of each configuration of the accuracy curves
     eval_size : (width, height) of the evaluation window (same angle per pixel as ``size``)
-    levels : GS / GS+R subdivision levels tried
     linear_steps, binary_steps : relief step counts swept for RC+R (the other knob at
-        the ray caster's default, 32 linear / 6 binary)
-    max_triangles : GS meshes above this many triangles are not built (memory, time)
+        the ray caster's default, 32 linear / 6 binary); the swept knobs are listed in
+        :data:`plantgen.bench.configs.RELIEF_SWEEPS`
+    relief_error : Table 1 times the fastest RC+R configuration of the curves whose error
+        is at most this (the most accurate one if none is), and matches GS+R against it
+    max_triangles : the triangle budget: GS and GS+R go up from m = 0 until a level
+        qualifies or the next level has more triangles than this (not built)
     reference_relief_samples : linear samples of the reference's relief march before
         bisection to 1e-9
     rel_tol, abs_tol : the quality criterion's tolerance
@@ -38,9 +43,9 @@ class BenchOptions:
     frames: int = 9
     curve_frames: int = 5
     eval_size: tuple = (128, 96)
-    levels: tuple = (0, 1, 2, 3, 4, 5)
     linear_steps: tuple = (4, 8, 16, 32, 64, 128)
     binary_steps: tuple = (0, 2, 4, 6, 8)
+    relief_error: float = RELIEF_ERROR
     max_triangles: int = 6_000_000
     reference_relief_samples: int = 384
     rel_tol: float = MATCH_REL_TOL
@@ -52,7 +57,7 @@ class BenchOptions:
     def quick_run(cls, **overrides) -> BenchOptions:
         """The small run CI drives end to end (two tiny models, small images)."""
         base = dict(models=QUICK_MODELS, size=(256, 192), frames=2, curve_frames=2, eval_size=(64, 48),
-                    levels=(0, 1, 2), linear_steps=(4, 32), binary_steps=(0, 6),
+                    linear_steps=(4, 32), binary_steps=(0, 6),
                     max_triangles=500_000, reference_relief_samples=96, quick=True)
         base.update(overrides)
         return cls(**base)

@@ -10,22 +10,26 @@ __all__ = ["plot_curves", "ERROR_FLOOR"]
 
 #: Errors below this are drawn at it (log axis; the ray caster's error can be 0).
 ERROR_FLOOR = 1e-6
-#: Colour and marker of each method's series; the RC+R binary and v sweeps get their own.
+#: Colour and marker of each method's series, and of the RC+R sweeps other than "linear"
+#: (:data:`plantgen.bench.configs.RELIEF_SWEEPS`); a knob not listed takes the next of
+#: :data:`_EXTRA_STYLES` in order of appearance.
 _STYLES = {"GS": ("tab:blue", "o"), "GS+R": ("tab:orange", "s"), "RC": ("tab:green", "D"),
-           "RC+R": ("tab:red", "^")}
+           "RC+R": ("tab:red", "^"), "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*")}
+_EXTRA_STYLES = (("tab:pink", "P"), ("tab:olive", "X"), ("tab:cyan", "h"), ("tab:gray", "p"))
 
 
 def _shown(error: float) -> float:
     return max(error, ERROR_FLOOR)
 
 
-def _style(label: str) -> tuple[str, str]:
-    """(colour, marker) of a series label such as ``GS+R`` or ``RC+R binary``."""
-    if label.endswith("binary"):
-        return "tab:purple", "v"
-    if label.endswith(" v"):
-        return "tab:brown", "*"
-    return _STYLES[label.split(" ")[0]]
+def _style(label: str, extra: list) -> tuple[str, str]:
+    """(colour, marker) of a series label such as ``GS+R`` or ``RC+R binary``; ``extra``
+    collects the labels without a listed style, in order."""
+    if label in _STYLES:
+        return _STYLES[label]
+    if label not in extra:
+        extra.append(label)
+    return _EXTRA_STYLES[extra.index(label) % len(_EXTRA_STYLES)]
 
 
 def _series(points: list[dict]) -> dict:
@@ -38,8 +42,9 @@ def _series(points: list[dict]) -> dict:
 
 
 def _plot_family(ax, model: str, family: str, points: list[dict], size) -> None:
+    extra: list = []
     for label, cs in _series(points).items():
-        color, marker = _style(label)
+        color, marker = _style(label, extra)
         cs = sorted(cs, key=lambda c: c["ms"])
         ax.plot([c["ms"] for c in cs], [_shown(c["error"]) for c in cs], marker=marker,
                 color=color, linestyle="-" if len(cs) > 1 else "none", label=label, alpha=0.8)

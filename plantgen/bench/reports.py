@@ -9,18 +9,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .configs import MATCHED_AGAINST, TABLE_METHODS
+from .configs import MATCHED_AGAINST, RELIEF_SWEEPS, TABLE_METHODS
 from .curves import FAMILIES, family_front, family_points
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, PaperRow
 from .plots import plot_curves
+from .summary import rcr_over_gsr, summarise, summary_lines
 
-__all__ = ["markdown_table", "budget_notes", "table_rows", "curve_rows", "pareto_summary",
+__all__ = ["markdown_table", "match_notes", "table_rows", "curve_rows", "pareto_summary",
            "winners", "write_outputs", "rcr_over_gsr", "TABLE_FIELDS", "CURVE_FIELDS",
-           "QUALITY_LEVELS"]
+           "QUALITY_LEVELS", "UNMATCHED"]
 
 TABLE_FIELDS = ["model", "segments", "rc_fps", "rc_ms", "rc_error", "rcr_fps", "rcr_ms", "rcr_error",
-                "gs_fps", "gs_ms", "gs_level", "gs_matched", "gs_error", "gsr_fps", "gsr_ms",
-                "gsr_level", "gsr_matched", "gsr_error", "rcr_over_gsr",
+                "rcr_config", "rcr_config_rule",
+                "gs_fps", "gs_ms", "gs_level", "gs_matched", "gs_match", "gs_error", "gsr_fps", "gsr_ms",
+                "gsr_level", "gsr_matched", "gsr_match", "gsr_error", "rcr_over_gsr", "rcr_over_gsr_matched",
                 "paper_segments",
                 "paper_rc_fps", "paper_rcr_fps", "paper_gs_fps", "paper_gs_sub", "paper_gsr_fps",
                 "paper_gsr_sub", "paper_rcr_over_gsr", "rc_bytes", "rcr_bytes", "gs_bytes",
@@ -31,6 +33,8 @@ CURVE_FIELDS = ["model", "method", "knob", "value", "ms", "fps", "error", "dssim
 QUALITY_LEVELS = (0.3, 0.1, 0.03, 0.01, 0.003)
 #: What a table cell shows for a value not measured.
 MISSING = "–"
+#: The mark of a level (and of the ratio built on it) that did not reach matched quality.
+UNMATCHED = "✗"
 
 
 # ---------------------------------------------------------------------------- cells
@@ -45,35 +49,51 @@ def _entry_cell(entry: dict | None, field: str, spec: str) -> str:
 
 
 def _level_cell(model: dict, short: str) -> str:
-    """The matched level of a polygonal method: ``m``, ``>m`` when none matched, or –."""
-    level, matched = model[f"{short}_level"], model[f"{short}_matched"]
-    return MISSING if level is None else (str(level) if matched else f">{level}")
+    """The level of a polygonal method: ``m`` when matched, ``m✗`` when no level within the
+    budget matched (the best measured is shown), or –."""
+    level, matched = model.get(f"{short}_level"), model.get(f"{short}_matched")
+    return MISSING if level is None else (str(level) if matched else f"{level}{UNMATCHED}")
 
 
-def rcr_over_gsr(m: dict):
-    """RC+R fps over GS+R fps (the ratio column), None if either is missing."""
-    if m.get("rcr") and m.get("gsr"):
-        return m["rcr"]["fps"] / m["gsr"]["fps"]
-    return None
+def _ratio_cell(model: dict) -> str:
+    """RC+R/GS+R, marked :data:`UNMATCHED` where GS+R is not at matched quality."""
+    ratio = rcr_over_gsr(model)
+    return _cell(ratio, ".2f") + ("" if ratio is None or model.get("gsr_matched") else UNMATCHED)
+
+
+def _config_cell(model: dict) -> str:
+    """RC+R's Table 1 configuration, e.g. ``linear=8`` (``(best)`` when none reached the
+    error bound and the most accurate one is timed)."""
+    choice = model.get("rcr_choice")
+    if not choice:
+        return MISSING
+    name = choice["key"].split(":", 1)[1] if ":" in choice["key"] else choice["key"]
+    return name + ("" if choice["within"] else " (best)")
 
 
 # ---------------------------------------------------------------------------- Markdown
 def _header_lines(results: dict) -> list[str]:
     info = results["machine"]
     o = results["options"]
+    relief_error = o.get("relief_error", 0.01)
     return [f"# plantgen bench: Table 1 on {info['gl_renderer']}", "",
             f"{info['date_utc']} · GL {info['gl_version']} · {info['cpu']} ({info['cpus']} CPUs) · "
             f"{o['size'][0]}x{o['size'][1]} · median of {o['frames']} frames after a warm-up "
             f"(curves: {o['curve_frames']}) · "
             f"run took {results['wall_s']:.0f} s" + (" · QUICK run" if o.get("quick") else ""), "",
-            "fps = 1000 / median frame time (draw to glFinish). err = (1 - SSIM) + silhouette "
-            f"mismatch against the float64 reference in a {o['eval_size'][0]}x{o['eval_size'][1]} "
-            "window at full angular resolution. Level m: smallest m with err <= "
-            f"RC err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, GS+R vs RC+R); '>m': "
-            "none qualified, best measured shown. RC+R/GS+R: fps ratio of the Table 1 run, where "
-            "all four methods run the scene's passes (shadow map and ground where it lists "
-            "shadows; pose and re-skin, and re-tessellation for GS, in every frame of an "
-            "animated scene). Paper: 8800 GTX, 2009.", ""]
+            "fps = 1000 / median frame time (draw to glFinish). err = (1 - SSIM, scikit-image) + "
+            "silhouette mismatch against the float64 reference in a "
+            f"{o['eval_size'][0]}x{o['eval_size'][1]} window at full angular resolution. "
+            f"RC+R config: the fastest RC+R configuration of the curves with err ≤ {relief_error:g} "
+            "('(best)': none reached it, the most accurate is timed). Level m: GS and GS+R go up "
+            f"from m = 0 until err <= target err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, "
+            "GS+R vs RC+R at its config) or the next level is over the triangle budget "
+            f"({o['max_triangles']:,}, --max-triangles); 'm{UNMATCHED}': not matched, the best "
+            f"measured level is shown and timed, and the ratio beside it is not at matched quality "
+            "(see the notes). RC+R/GS+R: fps ratio of the Table 1 run, where all four methods run "
+            "the scene's passes (shadow map and ground where it lists shadows; pose and re-skin, "
+            "and re-tessellation for GS, in every frame of an animated scene). Paper: 8800 GTX, "
+            "2009.", ""]
 
 
 def _paper_suffixes(p: PaperRow | None) -> dict:
@@ -92,8 +112,11 @@ def _table1_row(m: dict) -> str:
         fps = _entry_cell(m[short], "fps", ".1f")
         if short in MATCHED_AGAINST:
             fps += f" / {_level_cell(m, short)}"
-        cells += [fps + paper[short], _entry_cell(m[short], "error", ".3f")]
-    cells += [_cell(rcr_over_gsr(m), ".2f"), _cell(None if p is None else p.rcr_over_gsr, ".2f")]
+        cells.append(fps + paper[short])
+        if short == "rcr":
+            cells.append(_config_cell(m))
+        cells.append(_entry_cell(m[short], "error", ".3f"))
+    cells += [_ratio_cell(m), _cell(None if p is None else p.rcr_over_gsr, ".2f")]
     return "| " + " | ".join(cells) + " |"
 
 
@@ -106,34 +129,71 @@ def _memory_row(m: dict) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def _settings_text(settings: dict | None) -> str:
+    """The ray caster's settings of a configuration that the RC+R sweeps vary
+    (:data:`RELIEF_SWEEPS`; the rest is at the ray caster's default)."""
+    swept = {f for sweep in RELIEF_SWEEPS for f in (sweep.field, *dict(sweep.base))}
+    return ", ".join(f"{k}={v}" for k, v in (settings or {}).items() if k in swept)
+
+
+def _choice_lines(results: dict) -> list[str]:
+    """Per model with relief: RC+R's Table 1 configuration and why it was chosen."""
+    lines = []
+    for m in results["models"]:
+        c = m.get("rcr_choice")
+        if c:
+            lines.append(f"- **{m['model']}**: {c['key']} ({_settings_text(c.get('settings'))}; "
+                         f"err {c['error']:.4f}, {c['ms']:.1f} ms in the curves): {c['rule']}")
+    return lines
+
+
 def markdown_table(results: dict) -> str:
-    """Table 1 beside the paper's, with errors, the ratio column and the memory table."""
+    """Table 1 beside the paper's, with errors, the ratio column, the summary, the RC+R
+    configurations, the memory table and the notes (matches, budgets, conditions)."""
     lines = _header_lines(results)
-    lines += ["| model | segments (paper) | RC fps (paper) | RC err | RC+R fps (paper) | RC+R err | "
-              "GS fps / m (paper) | GS err | GS+R fps / m (paper) | GS+R err | RC+R/GS+R ours | "
+    lines += ["| model | segments (paper) | RC fps (paper) | RC err | RC+R fps (paper) | RC+R config | "
+              "RC+R err | GS fps / m (paper) | GS err | GS+R fps / m (paper) | GS+R err | RC+R/GS+R ours | "
               "paper |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     lines += [_table1_row(m) for m in results["models"]]
+    summary = results.get("summary") or summarise(results["models"])
+    lines += ["", *summary_lines(summary)]
+    choices = _choice_lines(results)
+    if choices:
+        lines += ["", "RC+R's Table 1 configuration (GS+R is matched against its error):", "", *choices]
     lines += ["", "## Memory on the GPU (§4: relief-mapped frusta vs polygons)", "",
               "| model | RC records B | relief maps B | GS B (m) | GS/RC | GS+R B (m) | GS+R / RC+R | "
               "paper |",
               "|---|---|---|---|---|---|---|---|"]
     lines += [_memory_row(m) for m in results["models"]]
-    notes = sorted({f"{m['model']}: {n}" for m in results["models"] for n in m["notes"] + budget_notes(m)})
+    notes = sorted({f"{m['model']}: {n}" for m in results["models"] for n in m["notes"] + match_notes(m)})
     if notes:
         lines += ["", "Notes:", *[f"- {n}" for n in notes]]
     return "\n".join(lines) + "\n"
 
 
-def budget_notes(model: dict) -> list[str]:
-    """Notes for methods left unmatched (``>m``) whose finer levels were not built because
-    they exceeded the triangle budget: the criterion did not fail there, the budget did."""
+def _speed_text(ratio: float) -> str:
+    return f"{ratio:.2f}× faster" if ratio >= 1 else f"{1 / ratio:.2f}× slower"
+
+
+def match_notes(model: dict) -> list[str]:
+    """A note for each polygonal method that matched no level within the triangle budget:
+    why the walk stopped, the best level measured, and how the ray caster it was matched
+    against compares with that level in accuracy and in the Table 1 run's speed."""
     notes = []
-    for method, matched in (("GS", model.get("gs_matched")), ("GS+R", model.get("gsr_matched"))):
-        skipped = [c for c in model["curve"] if c["method"] == method and "skipped" in c]
-        if skipped and not matched:
-            levels = ", ".join(str(c["value"]) for c in skipped)
-            notes.append(f"{method} m = {levels} not built: {skipped[0]['skipped']} (--max-triangles)")
+    for short, against in MATCHED_AGAINST.items():
+        match = model.get(f"{short}_match")
+        if not match or match["matched"]:
+            continue
+        method, ray = TABLE_METHODS[short], TABLE_METHODS[against]
+        note = f"{method} {match['text']} (--max-triangles)"
+        mesh, caster = model.get(short), model.get(against)
+        if mesh and caster:
+            better = "more" if caster["error"] < mesh["error"] else "not more"
+            note += (f"; {ray} ({match['target_key']}) is {better} accurate (err {caster['error']:.4f} vs "
+                     f"{mesh['error']:.4f}) and {_speed_text(caster['fps'] / mesh['fps'])} than the best "
+                     f"{method} mesh within the budget (m={match['level']})")
+        notes.append(note)
     return notes
 
 
@@ -146,7 +206,14 @@ def table_rows(results: dict) -> list[dict]:
                "animated": m["animated"], "gl_renderer": results["machine"]["gl_renderer"],
                "gs_level": m["gs_level"], "gs_matched": m["gs_matched"],
                "gsr_level": m["gsr_level"], "gsr_matched": m["gsr_matched"],
-               "rcr_over_gsr": rcr_over_gsr(m)}
+               "rcr_over_gsr": rcr_over_gsr(m),
+               "rcr_over_gsr_matched": bool(m["gsr_matched"]) if rcr_over_gsr(m) is not None else None}
+        for short in MATCHED_AGAINST:
+            match = m.get(f"{short}_match")
+            row[f"{short}_match"] = match["text"] if match else None
+        choice = m.get("rcr_choice")
+        if choice:
+            row.update(rcr_config=choice["key"], rcr_config_rule=choice["rule"])
         for k in TABLE_METHODS:
             e = m[k]
             for field in ("fps", "ms", "error"):

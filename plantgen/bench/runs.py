@@ -23,12 +23,14 @@ from ..render.context import gl_context, renderer_name
 from ..render.passes import ShadowSettings
 from ..render.raster import gs_buffer_bytes
 from ..render.records import rc_buffer_bytes
-from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, bench_configs, default_relief_config, find_level
+from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, level_config, ray_cast_configs, relief_configs
 from .images import save_images
-from .metrics import ERROR_FIELDS, image_error, matched_level
+from .matching import LevelMatch, choose_relief_config, walk_levels
+from .metrics import ERROR_FIELDS, image_error, require_skimage
 from .models import BenchModel, check_models, load_model
 from .options import BenchOptions
 from .renderers import Renderers, median_ms, shadow_box, time_configs
+from .summary import summarise
 from .window import eval_camera
 
 __all__ = ["bench_model", "run_bench", "count_steps", "machine_info", "timing_fields"]
@@ -62,36 +64,60 @@ def _render_references(model: BenchModel, camera, relief_samples: int) -> _Refer
 
 
 # ---------------------------------------------------------------------------- accuracy curves
-def _skipped_row(cfg: Config, frusta_rows: int, max_triangles: int) -> dict:
-    triangles = triangle_count(frusta_rows, cfg.level, 0)
-    return {**cfg.identity(),
-            "skipped": f"{triangles:,} triangles over the budget of {max_triangles:,}"}
+class _Meter:
+    """Measures configurations one by one into the accuracy curve: each one's error in
+    the evaluation ``window`` and its bare frame time at full size."""
 
+    def __init__(self, renderers: Renderers, window, references: _References, opts: BenchOptions, step):
+        self.renderers, self.window, self.references = renderers, window, references
+        self.opts, self.step = opts, step
+        self.curve: list = []      # rows, in the order measured
+        self.results: dict = {}    # {key: RenderResult in the window}
 
-def _measure_configs(renderers: Renderers, configs, window, references: _References,
-                     opts: BenchOptions, step) -> tuple[list, dict]:
-    """Every configuration's error in the evaluation ``window`` and its bare frame time at
-    full size. Returns (curve rows, {key: RenderResult in the window})."""
-    model = renderers.model
-    curve, results = [], {}
-    for cfg in configs:
-        step(f"{model.name}: {cfg.key}")
-        res, _ = renderers.render_config(cfg, window)
+    def measure(self, cfg: Config) -> dict | None:
+        """Render, compare and time ``cfg``; returns its curve row (None over the budget)."""
+        renderers, model = self.renderers, self.renderers.model
+        self.step(f"{model.name}: {cfg.key}")
+        res, _ = renderers.render_config(cfg, self.window)
         if res is None:
-            curve.append(_skipped_row(cfg, len(model.frusta), opts.max_triangles))
-            continue
-        error = image_error(res.distance, references.distance[cfg.relief], window, model.light_dir)
-        samples = time_configs(renderers, [cfg], model.camera, opts.curve_frames,
+            self.skip(cfg)
+            return None
+        error = image_error(res.distance, self.references.distance[cfg.relief], self.window, model.light_dir)
+        samples = time_configs(renderers, [cfg], model.camera, self.opts.curve_frames,
                                conditions=False)[cfg.key]
         row = {**cfg.identity(), **timing_fields(samples), **error.as_dict()}
         if cfg.level is not None:
             mesh = renderers.mesh(cfg.level, cfg.relief)
             row["triangles"] = len(mesh.faces)
             row["gpu_bytes"] = int(gs_buffer_bytes(mesh))
-        curve.append(row)
-        results[cfg.key] = res
+        self.curve.append(row)
+        self.results[cfg.key] = res
         renderers.release_raster(cfg.key)
-    return curve, results
+        return row
+
+    def skip(self, cfg: Config) -> None:
+        """A level over the triangle budget: a curve row saying so, nothing built."""
+        triangles = self.triangles(cfg.level)
+        self.curve.append({**cfg.identity(), "triangles": triangles,
+                           "skipped": f"{triangles:,} triangles over the budget of {self.opts.max_triangles:,}"})
+
+    def triangles(self, level: int) -> int:
+        """Triangles of the model's tessellation at ``level`` (what the budget counts)."""
+        return triangle_count(len(self.renderers.model.frusta), level, 0)
+
+    def walk(self, method: str, target: dict) -> LevelMatch:
+        """GS or GS+R from m = 0 up until a level matches ``target`` (a curve row) or the
+        next one is over the budget (:func:`~plantgen.bench.matching.walk_levels`)."""
+        match = walk_levels(method, target["key"], target["error"],
+                            lambda m: self.measure(level_config(method, m))["error"], self.triangles,
+                            self.opts.max_triangles, self.opts.rel_tol, self.opts.abs_tol)
+        if match.over_budget is not None:
+            self.skip(level_config(method, match.over_budget[0]))
+        return match
+
+    def measured(self) -> dict:
+        """{key: row} of the configurations that were built and measured."""
+        return _measured(self.curve)
 
 
 def _measured(curve) -> dict:
@@ -102,10 +128,11 @@ def _measured(curve) -> dict:
 # ---------------------------------------------------------------------------- Table 1
 @dataclass
 class _TableChoice:
-    """The configuration of each Table 1 method, and the matched levels."""
+    """The configuration of each Table 1 method, the RC+R choice and the level walks."""
 
-    configs: dict      # {"rc" | "rcr" | "gs" | "gsr": Config or None}
-    levels: dict       # {"gs" | "gsr": (level or None, matched)}
+    configs: dict          # {"rc" | "rcr" | "gs" | "gsr": Config or None}
+    matches: dict          # {"gs" | "gsr": LevelMatch or None}
+    relief_choice: dict | None   # :func:`choose_relief_config`'s record (None without relief)
 
     @property
     def timed(self) -> list[Config]:
@@ -116,23 +143,22 @@ class _TableChoice:
         return {(c.level, c.relief) for c in self.timed if c.level is not None}
 
 
-def _match(curve, method: str, target: Config, opts: BenchOptions):
-    """(level, matched) of ``method`` against the error of the ``target`` configuration."""
-    errors = {r["value"]: r["error"] for r in curve if r["method"] == method and "error" in r}
-    return matched_level(errors, _measured(curve)[target.key]["error"], opts.rel_tol, opts.abs_tol)
-
-
-def _choose_table(configs, curve, opts: BenchOptions, relief: bool) -> _TableChoice:
-    """The quality criterion (:data:`MATCHED_AGAINST`): GS matched against RC, GS+R against
-    RC+R at the ray caster's default steps."""
-    chosen = {"rc": next(c for c in configs if c.method == "RC"),
-              "rcr": default_relief_config(configs) if relief else None}
-    levels = {}
+def _choose_table(meter: _Meter, ray_configs, opts: BenchOptions, relief: bool) -> _TableChoice:
+    """RC+R's configuration from the curves (:func:`choose_relief_config`), then the quality
+    criterion (:data:`MATCHED_AGAINST`): GS walked up against RC, GS+R against that RC+R."""
+    by_key = {c.key: c for c in ray_configs}
+    chosen, choice = {"rc": ray_configs[0], "rcr": None}, None
+    if relief:
+        rows = [r for r in meter.curve if r["method"] == "RC+R" and "error" in r]
+        choice = choose_relief_config(rows, opts.relief_error)
+        chosen["rcr"] = by_key[choice["key"]]
+    matches = {}
     for short, against in MATCHED_AGAINST.items():
         method, target = TABLE_METHODS[short], chosen[against]
-        levels[short] = (None, False) if target is None else _match(curve, method, target, opts)
-        chosen[short] = find_level(configs, method, levels[short][0])
-    return _TableChoice(chosen, levels)
+        matches[short] = None if target is None else meter.walk(method, meter.measured()[target.key])
+        level = None if matches[short] is None else matches[short].level
+        chosen[short] = None if level is None else level_config(method, level)
+    return _TableChoice(chosen, matches, choice)
 
 
 def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -> dict:
@@ -190,8 +216,12 @@ def _model_record(model: BenchModel, window, references: _References, table: _Ta
               "reference_s": references.seconds}
     for short in TABLE_METHODS:
         record[short] = entries[short]
-        if short in table.levels:
-            record[f"{short}_level"], record[f"{short}_matched"] = table.levels[short]
+        if short in table.matches:
+            match = table.matches[short]
+            record[f"{short}_level"] = None if match is None else match.level
+            record[f"{short}_matched"] = match is not None and match.matched
+            record[f"{short}_match"] = None if match is None else match.as_dict()
+    record["rcr_choice"] = table.relief_choice
     record.update(memory=_memory(model, table, curve), curve=curve, notes=_notes(model))
     return record
 
@@ -209,25 +239,27 @@ def bench_model(name: str, opts: BenchOptions, progress=None, images_dir: Path |
     step = progress if progress is not None else _ignore_progress
     model = load_model(name, opts.size)
     renderers = Renderers(model, opts.max_triangles, shadow_box(model, opts.frames))
-    configs = bench_configs(opts, model.relief)
+    configs = ray_cast_configs(opts, model.relief)
     try:
         # 1. evaluation window, from the timing image's coverage
         first, _ = renderers.render_config(configs[0], model.camera)
         window = eval_camera(model.camera, np.isfinite(first.distance), opts.eval_size)
         step(f"{model.name}: reference")
         references = _render_references(model, window, opts.reference_relief_samples)
-        # 2. every configuration: error in the window, time at full size
-        curve, window_results = _measure_configs(renderers, configs, window, references, opts, step)
-        # 3. the quality criterion
-        table = _choose_table(configs, curve, opts, model.relief)
+        # 2. the ray caster's configurations: error in the window, time at full size
+        meter = _Meter(renderers, window, references, opts, step)
+        for cfg in configs:
+            meter.measure(cfg)
+        # 3. RC+R's Table 1 configuration, then GS and GS+R walked up to the criterion
+        table = _choose_table(meter, configs, opts, model.relief)
         renderers.keep_meshes(table.mesh_keys())
         # 4. Table 1 timing: the four methods interleaved, under the paper's conditions
         step(f"{model.name}: Table 1 timing")
-        entries = _time_table(renderers, table, curve, opts.frames)
+        entries = _time_table(renderers, table, meter.curve, opts.frames)
         if images_dir is not None:
             save_images(images_dir, model.name, window, model.light_dir, references.distance,
-                        window_results, [c.key for c in table.timed])
-        return _model_record(model, window, references, table, entries, curve)
+                        meter.results, [c.key for c in table.timed])
+        return _model_record(model, window, references, table, entries, meter.curve)
     finally:
         renderers.release()
 
@@ -256,9 +288,12 @@ def machine_info() -> dict:
 
 
 def count_steps(opts: BenchOptions) -> int:
-    """Progress steps of a run (an upper bound: reference, configurations, table timing)."""
-    relief_cfgs = len(opts.linear_steps) + len(opts.binary_steps) + 1 + len(opts.levels)
-    return len(opts.models) * (3 + len(opts.levels) + relief_cfgs)
+    """Progress steps of a run (an upper bound: reference, configurations, the GS and GS+R
+    levels a one-segment model could reach within the budget, table timing)."""
+    levels = 0
+    while triangle_count(1, levels, 0) <= opts.max_triangles:
+        levels += 1
+    return len(opts.models) * (3 + len(relief_configs(opts)) + 2 * levels)
 
 
 def run_bench(opts: BenchOptions, progress=None, out_dir: str | Path | None = None) -> dict:
@@ -268,9 +303,10 @@ def run_bench(opts: BenchOptions, progress=None, out_dir: str | Path | None = No
     out_dir : where ``--images`` go (``out_dir/images``)
     """
     check_models(opts.models)
+    require_skimage()
     t0 = time.perf_counter()
     info = machine_info()
     images_dir = Path(out_dir) / "images" if (opts.images and out_dir is not None) else None
     models = [bench_model(name, opts, progress, images_dir) for name in opts.models]
-    return {"machine": info, "options": opts.as_json(), "models": models,
+    return {"machine": info, "options": opts.as_json(), "models": models, "summary": summarise(models),
             "wall_s": time.perf_counter() - t0}
