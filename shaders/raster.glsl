@@ -61,7 +61,15 @@ layout(location = 0) out vec4 out_color;
 layout(location = 1) out float out_distance;
 
 
+#if defined STATS
+// Work counter of a diagnostic render (plantgen.render.result.WorkCounter): fragments shaded.
+layout(std430, binding = 2) buffer WorkCounts { uint counted_fragments; uint counted_samples; };
+#endif
+
 void main() {
+#if defined STATS
+    atomicAdd(counted_fragments, 1u);
+#endif
     int primitive = gl_PrimitiveID;
     int row = primitive < n_rows * TRIANGLES_PER_ROW ? primitive / TRIANGLES_PER_ROW
                                                       : cap_row[primitive - n_rows * TRIANGLES_PER_ROW];

@@ -186,15 +186,20 @@ def test_relief_config_is_the_fastest_within_the_error_bound_else_the_most_accur
 def test_relief_sweeps_vary_one_field_from_the_defaults_and_a_new_knob_is_one_sweep():
     from plantgen.render.raycast import RaycastSettings
 
-    opts = BenchOptions(linear_steps=(4, 32), binary_steps=(0, 6))
+    opts = BenchOptions(linear_steps=(4, 32), binary_steps=(0, 6), march_densities=(1.0, 2.0))
     keys = [c.key for c in relief_configs(opts)]
-    # binary = 6 with 32 linear steps is the linear sweep's 32: measured once
-    assert keys == ["rc+r:linear=4", "rc+r:linear=32", "rc+r:binary=0", "rc+r:v=exact"]
+    # binary = 6 with 32 linear steps is the linear sweep's 32, density 2 the default: each
+    # measured once
+    assert keys == ["rc+r:linear=4", "rc+r:linear=32", "rc+r:binary=0", "rc+r:density=1.0",
+                    "rc+r:density=2.0", "rc+r:v=exact"]
     default = RaycastSettings(relief=True)
+    fixed = RaycastSettings(relief=True, march="fixed", linear_steps=32, binary_steps=6)
     for c in relief_configs(opts):
         assert c.method == "RC+R" and c.settings.relief
-        changed = {f for f in ("linear_steps", "binary_steps", "v_exact")
-                   if getattr(c.settings, f) != getattr(default, f)}
+        # one field varies, from the fixed march of the paper or from the default (adaptive)
+        base = fixed if c.settings.march == "fixed" else default
+        changed = {f for f in ("linear_steps", "binary_steps", "v_exact", "march_density")
+                   if getattr(c.settings, f) != getattr(base, f)}
         assert len(changed) <= 1, (c.key, changed)
     # a further knob: one Sweep, optionally on top of another setting (``base``)
     extra = (Sweep("pad", "hull_padding", (0.05, 0.1), base=(("binary_steps", 2),)),)

@@ -99,7 +99,7 @@ class Sweep:
     def configs(self, opts: BenchOptions) -> list[Config]:
         """One RC+R configuration per value, every other field at the ray caster's default."""
         return [Config("RC+R", self.knob, self.label(v),
-                       RaycastSettings(relief=True, **dict(self.base), **{self.field: v}))
+                       RaycastSettings(relief=True, **{**dict(self.base), self.field: v}))
                 for v in self.values_of(opts)]
 
 
@@ -107,10 +107,17 @@ def _exact(v_exact: bool) -> str:
     return "exact" if v_exact else "interpolated"
 
 
+#: The fixed march the paper measured: ``linear_steps`` samples for every ray, then 6
+#: bisection steps (the linear sweep's base; the binary sweep's linear count is 32).
+FIXED_MARCH = (("march", "fixed"), ("linear_steps", 32), ("binary_steps", 6))
+
 #: The RC+R knobs the bench sweeps, in order (one line per knob).
 RELIEF_SWEEPS = (
-    Sweep("linear", "linear_steps", "linear_steps"),
-    Sweep("binary", "binary_steps", "binary_steps"),
+    # the paper's march: a fixed count of uniform samples, then bisection
+    Sweep("linear", "linear_steps", "linear_steps", base=FIXED_MARCH),
+    Sweep("binary", "binary_steps", "binary_steps", base=FIXED_MARCH),
+    # the adaptive march (the ray caster's default): samples per relief texel crossed
+    Sweep("density", "march_density", "march_densities"),
     Sweep("v", "v_exact", (True,), label=_exact),
 )
 

@@ -24,8 +24,10 @@ class BenchOptions:
     frames : timed frames of each Table 1 method (after one warm-up frame)
     curve_frames : timed frames of each configuration of the accuracy curves
     eval_size : (width, height) of the evaluation window (same angle per pixel as ``size``)
-    linear_steps, binary_steps : relief step counts swept for RC+R (the other knob at
-        the ray caster's default, 32 linear / 6 binary); the swept knobs are listed in
+    linear_steps, binary_steps : relief step counts swept for RC+R with the paper's fixed
+        march (the other knob at 32 linear / 6 binary)
+    march_densities : samples per relief texel swept for RC+R with the adaptive march (the
+        ray caster's default); the swept knobs are listed in
         :data:`plantgen.bench.configs.RELIEF_SWEEPS`
     relief_error : Table 1 times the fastest RC+R configuration of the curves whose error
         is at most this (the most accurate one if none is), and matches GS+R against it
@@ -43,8 +45,9 @@ class BenchOptions:
     frames: int = 9
     curve_frames: int = 5
     eval_size: tuple = (128, 96)
-    linear_steps: tuple = (4, 8, 16, 32, 64, 128)
+    linear_steps: tuple = (4, 8, 16, 32, 64)
     binary_steps: tuple = (0, 2, 4, 6, 8)
+    march_densities: tuple = (0.5, 1.0, 2.0, 4.0, 8.0)
     relief_error: float = RELIEF_ERROR
     max_triangles: int = 6_000_000
     reference_relief_samples: int = 384
@@ -57,7 +60,7 @@ class BenchOptions:
     def quick_run(cls, **overrides) -> BenchOptions:
         """The small run CI drives end to end (two tiny models, small images)."""
         base = dict(models=QUICK_MODELS, size=(256, 192), frames=2, curve_frames=2, eval_size=(64, 48),
-                    linear_steps=(4, 32), binary_steps=(0, 6),
+                    linear_steps=(4, 32), binary_steps=(0, 6), march_densities=(2.0,),
                     max_triangles=500_000, reference_relief_samples=96, quick=True)
         base.update(overrides)
         return cls(**base)

@@ -136,6 +136,20 @@ class Renderers:
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 
+    def count_work(self, cfg: Config, camera):
+        """The work of one counting render of ``cfg`` (no scene passes): fragments shaded
+        and relief samples (:class:`plantgen.render.result.WorkCounts`), None over the
+        budget."""
+        m = self.model
+        if cfg.ray_cast:
+            return self.raycaster.render(m.frusta, camera, cfg.settings, m.names, m.light_dir,
+                                         count_work=True).stats.work
+        mesh = self.mesh(cfg.level, cfg.relief)
+        if mesh is None:
+            return None
+        return self.raster(cfg.key).render(mesh, m.frusta, camera, material_names=m.names,
+                                           light_dir=m.light_dir, count_work=True).stats.work
+
     def release_raster(self, key: str) -> None:
         """Free the GPU buffers of ``key``'s raster renderer (the mesh stays cached)."""
         raster = self.rasters.pop(key, None)

@@ -28,7 +28,7 @@ TABLE_FIELDS = ["model", "segments", "rc_fps", "rc_ms", "rc_error", "rcr_fps", "
                 "paper_gsr_sub", "paper_rcr_over_gsr", "rc_bytes", "rcr_bytes", "gs_bytes",
                 "gsr_bytes", "shadows", "animated", "gl_renderer"]
 CURVE_FIELDS = ["model", "method", "knob", "value", "ms", "fps", "error", "dssim", "silhouette",
-                "triangles", "gpu_bytes", "pareto", "skipped"]
+                "overdraw", "samples_per_pixel", "triangles", "gpu_bytes", "pareto", "skipped"]
 #: Error levels at which :func:`winners` names the fastest configuration.
 QUALITY_LEVELS = (0.3, 0.1, 0.03, 0.01, 0.003)
 #: What a table cell shows for a value not measured.
@@ -129,6 +129,19 @@ def _memory_row(m: dict) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def _work_cell(entry: dict | None, relief: bool) -> str:
+    """'ms · overdraw (· samples per pixel)' of a Table 1 entry."""
+    if not entry or entry.get("overdraw") is None:
+        return MISSING
+    text = f"{entry['ms']:.1f} · {entry['overdraw']:.2f}"
+    return text + (f" · {entry['samples_per_pixel']:.1f}" if relief else "")
+
+
+def _work_row(m: dict) -> str:
+    cells = [m["model"]] + [_work_cell(m[short], short == "rcr") for short in ("rc", "rcr", "gs", "gsr")]
+    return "| " + " | ".join(cells) + " |"
+
+
 def _settings_text(settings: dict | None) -> str:
     """The ray caster's settings of a configuration that the RC+R sweeps vary
     (:data:`RELIEF_SWEEPS`; the rest is at the ray caster's default)."""
@@ -161,6 +174,15 @@ def markdown_table(results: dict) -> str:
     choices = _choice_lines(results)
     if choices:
         lines += ["", "RC+R's Table 1 configuration (GS+R is matched against its error):", "", *choices]
+    lines += ["", "## Why: work per pixel (Table 1 configurations)", "",
+              "ms of the Table 1 run · shaded fragments per covered pixel (overdraw) · for RC+R, mean "
+              "relief height samples per covered pixel; counted in one render of the bare model at the "
+              "timed size (fragments the shader ran for, misses included, with depth tested after "
+              "the shader).", "",
+              "| model | RC ms · overdraw | RC+R ms · overdraw · samples/px | GS ms · overdraw | "
+              "GS+R ms · overdraw |",
+              "|---|---|---|---|---|"]
+    lines += [_work_row(m) for m in results["models"]]
     lines += ["", "## Memory on the GPU (§4: relief-mapped frusta vs polygons)", "",
               "| model | RC records B | relief maps B | GS B (m) | GS/RC | GS+R B (m) | GS+R / RC+R | "
               "paper |",

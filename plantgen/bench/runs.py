@@ -86,6 +86,8 @@ class _Meter:
         samples = time_configs(renderers, [cfg], model.camera, self.opts.curve_frames,
                                conditions=False)[cfg.key]
         row = {**cfg.identity(), **timing_fields(samples), **error.as_dict()}
+        work = renderers.count_work(cfg, model.camera)
+        row.update({k: work.as_dict()[k] for k in WORK_FIELDS})
         if cfg.level is not None:
             mesh = renderers.mesh(cfg.level, cfg.relief)
             row["triangles"] = len(mesh.faces)
@@ -123,6 +125,11 @@ class _Meter:
 def _measured(curve) -> dict:
     """{key: row} of the configurations that were built and measured."""
     return {r["key"]: r for r in curve if "error" in r}
+
+
+#: What each measured row records of a counting render at the timed size: shaded
+#: fragments per covered pixel, relief height samples per covered pixel.
+WORK_FIELDS = ("overdraw", "samples_per_pixel")
 
 
 # ---------------------------------------------------------------------------- Table 1
@@ -174,7 +181,7 @@ def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -
             return None
         row = measured[cfg.key]
         return {"key": cfg.key, **timing_fields(samples[cfg.key]),
-                "passes": passes.get(cfg.key, []), **{k: row[k] for k in ERROR_FIELDS}}
+                "passes": passes.get(cfg.key, []), **{k: row[k] for k in (*ERROR_FIELDS, *WORK_FIELDS)}}
 
     return {short: entry(cfg) for short, cfg in table.configs.items()}
 

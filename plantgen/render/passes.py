@@ -52,8 +52,8 @@ class ShadowSettings:
     bias: float = 0.5
     max_slope: float = 50.0
     caster: str = "relief"
-    march_density: float = 1.0
-    march_precision: float = 0.25
+    march_density: float = 0.5
+    march_precision: float = 0.5
 
     def __post_init__(self):
         if not 16 <= int(self.resolution) <= 16384:

@@ -21,7 +21,7 @@ from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
 from .passes import ShadowSettings, frame_passes
-from .result import RasterStats, RenderResult
+from .result import RasterStats, RenderResult, WorkCounter
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "row_data"]
@@ -92,7 +92,8 @@ class RasterRenderer(OffscreenRenderer):
 
     def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
-               shadows: ShadowSettings | None = None, shadow_box=None) -> RenderResult:
+               shadows: ShadowSettings | None = None, shadow_box=None,
+               count_work: bool = False) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -108,11 +109,14 @@ class RasterRenderer(OffscreenRenderer):
             the mesh and the ground first write their depth into the light's map
         shadow_box : (2, 3) world box the light's window must cover (default: the mesh's
             bounds), as for the ray caster
+        count_work : a diagnostic render that also counts the fragments shaded
+            (``stats.work``), as for the ray caster
         """
         names = tuple(material_names or mesh.material_names)
         shadowed = shadows is not None
         program = build_program(self.ctx, "raster.glsl",
-                                {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed})
+                                {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
+                                 "STATS": count_work})
         t0 = time.perf_counter()
         vao, origin = self.upload(mesh, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
@@ -133,18 +137,20 @@ class RasterRenderer(OffscreenRenderer):
             garbage.append(light_vao)
             if ground_light_draw is not None:
                 shadow_draws.append(ground_light_draw)
+        counter = WorkCounter(self.ctx) if count_work else None
         frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting), ground_vao,
                                                draw_mesh, shadows, shadow_draws)
         for obj in garbage:
             if obj is not None:
                 obj.release()
         color, dist = self._read_back(camera.width, camera.height)
+        work = counter.read(dist) if counter is not None else None
         stats = RasterStats(
             passes=frame_passes(shadowed, ground_vao is not None, len(mesh.faces) > 0),
             near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window,
             upload_ms=upload_ms, triangles=len(mesh.faces), vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
-            draw_calls=1 + (ground_vao is not None))
+            draw_calls=1 + (ground_vao is not None), work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
