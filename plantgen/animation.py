@@ -23,6 +23,7 @@ from .geometry.frusta import Frusta, frusta_bounds
 from .geometry.motion import pose, sway_rig
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
+from .geometry.sway_skin import SwaySkin
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink"]
 
@@ -85,6 +86,9 @@ class AnimatedScene:
         self._rig = sway_rig(self._moving_skeleton, self.segment_instance[self.moving_segments],
                              self.motions)
         self._static = self._skin(self.skeleton.subset(self.static_segments))
+        # the per-frame path of the default skinning: topology worked out once
+        self._plan = (SwaySkin.plan(self._moving_skeleton, self._rig)
+                      if self.animated and self.skin is skin_skeleton else None)
 
     @classmethod
     def from_scene(cls, scene, skin=skin_skeleton) -> AnimatedScene:
@@ -111,9 +115,18 @@ class AnimatedScene:
 
     def _frame(self, t: float):
         t0 = time.perf_counter()
-        posed = pose(self._moving_skeleton, self._rig, t) if self.animated else None
-        t1 = time.perf_counter()
-        moving = self._skin(posed) if self.animated else None
+        if self._plan is not None:
+            posed = self._plan.pose(t)
+            t1 = time.perf_counter()
+            moving = self._plan.skin(posed)
+            if moving is None:          # a sharp joint this frame: knuckle fans
+                moving = self._skin(self._plan.skeleton(posed, self._moving_skeleton))
+            else:
+                self.skin_calls += 1
+        else:
+            posed = pose(self._moving_skeleton, self._rig, t) if self.animated else None
+            t1 = time.perf_counter()
+            moving = self._skin(posed) if self.animated else None
         t2 = time.perf_counter()
         frusta = self._static if moving is None else Frusta.concatenate([self._static, moving])
         update = FrameUpdate(float(t), len(moving) if moving is not None else 0, 0,

@@ -4,7 +4,7 @@
 :func:`skin_skeleton` runs the phases in order, each a function below:
 
 1. segment axes and lengths (:func:`_segment_axes`), continuing children and side
-   branches (:func:`_continuing_children`);
+   branches (:func:`continuing_children`);
 2. side-branch bases, moved back into the parent (:func:`_extend_side_branches`);
 3. joint planes (3)–(5) at continuing joints (:func:`_joint_cuts`: the planes of
    :func:`_joint_planes`, the seam mismatch measured by :func:`_seam_mismatch_at` and
@@ -53,7 +53,7 @@ from .vec import (
     unit,
 )
 
-__all__ = ["skin_skeleton"]
+__all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled"]
 
 
 def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
@@ -90,7 +90,7 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
     axis, length = _segment_axes(skeleton)
     seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
                     skeleton.r_end.copy())
-    child, side = _continuing_children(skeleton)
+    child, side = continuing_children(skeleton)
     report.joints, report.side_branches = len(child), len(side)
     if extend_side_branches and side.size:
         _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
@@ -123,7 +123,7 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
     row_twist = np.full(n_rows, float(twist))
     row_shell = np.zeros(n_rows)
     mean_r = 0.5 * (skeleton.r_start + skeleton.r_end)
-    row_shell[:] = _material_shell(skeleton, shell, mean_r)[rows.segment] if n else 0.0
+    row_shell[:] = material_shell(skeleton, shell, mean_r)[rows.segment] if n else 0.0
     row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
     u_offset = _u_offsets(rows, ref_dir, row_twist)
     return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
@@ -201,7 +201,7 @@ def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     return axis, length
 
 
-def _continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+def continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     """(j,) the continuing child of each parent that has one (the first marked
     ``continues``) and (s,) the side branches (every other segment with a parent)."""
     n = len(skeleton)
@@ -235,7 +235,7 @@ def _extend_side_branches(seg: _Segments, start, host, side) -> None:
     seg.length[side] = seg.length[side] + delta
 
 
-def _material_shell(skeleton: Skeleton, shell, radius_mean):
+def material_shell(skeleton: Skeleton, shell, radius_mean):
     """(n,) absolute shell thickness per segment from the per-material table ``shell``
     (see :func:`skin_skeleton`) and the (n,) mean radii."""
     table = dict(relief.DEFAULT_SHELL) if shell is None else dict(shell)
@@ -485,11 +485,11 @@ def _crossing_rows(base, axis, length, r1, r2, lo, hi, samples=24):
     bad = np.zeros(len(length), dtype=bool)
     if maybe.any():
         m = np.flatnonzero(maybe)
-        bad[m] = _crossing_rows_sampled(base[m], axis[m], length[m], r1[m], r2[m], lo[m], hi[m], samples)
+        bad[m] = crossing_rows_sampled(base[m], axis[m], length[m], r1[m], r2[m], lo[m], hi[m], samples)
     return bad
 
 
-def _crossing_rows_sampled(base, axis, length, r1, r2, lo, hi, samples):
+def crossing_rows_sampled(base, axis, length, r1, r2, lo, hi, samples):
     """(m,) bool: on some of ``samples`` generators the planes are closer than
     ``tol.same_length`` of the row's size, in the wrong order, or one is not met."""
     k = cone_slope(r1, r2, length)

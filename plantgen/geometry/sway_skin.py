@@ -1,0 +1,459 @@
+"""Per-frame skinning of a swaying skeleton: :func:`~plantgen.geometry.skin.skin_skeleton`
+of :func:`~plantgen.geometry.motion.pose`, with everything that does not change between
+frames worked out once.
+
+A swaying skeleton keeps its topology: which segment continues which, the side branches,
+the chains of the texture frames, radii, lengths, materials. :class:`SwaySkin` keeps
+those (index arrays, constants), so a frame is a few dozen numpy operations on
+per-component arrays ((3, n) vectors, (n,) scalars):
+
+* pose: every joint of an instance turns about the instance's axis k, so a segment's
+  direction is its rest direction turned by the sum T of the angles on its path. T is a
+  closed form in t (the sine of the wave splits into sin(2πft + φ) and cos(2πft + φ)
+  terms with constant path sums); the parts of the rest directions ⟂ k are complex
+  numbers in a frame ⟂ k, turned by e^(iT), and the end points are their sums along
+  each root path (an Euler-tour cumulative sum: one pass, not one step per tree level);
+* joint planes (3)–(5): every vector of the construction lies in the medial plane, so it
+  runs on 2-d coordinates in the frame (M1, n1) of each joint, both sides σ = ±1 at once;
+* texture frames: the rotation-minimising transport from parent to child maps the
+  frame (N_m, n1) of a joint to (N_m, n2), so a reference direction is an angle ψ in
+  the frame ``any_perpendicular(axis)`` of its row, and ψ and the u offsets are sums
+  along the continuing chains (the same cumulative sum).
+
+The result equals ``skin_skeleton(pose(skeleton, rig, t))`` to float64 round-off
+(tests/test_sway_skin.py) whenever no joint is sharp (no knuckle fan: past 120°, not
+an ellipse cut, or planes crossing inside a segment next to a joint); :meth:`SwaySkin.skin`
+returns None for such a frame and the caller skins it the general way. The frames' report
+is None (the general path measures seam mismatches; nothing here reads them per frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..tolerances import tol
+from .frusta import Frusta
+from .motion import SwayRig
+from .skeleton import Skeleton
+from .skin import continuing_children, crossing_rows_sampled, material_shell
+from .vec import any_perpendicular, cross, reduce_to_root, tree_roots
+
+__all__ = ["SwaySkin", "SwayPose", "PathSum"]
+
+_MAX_BEND_DEG = 120.0      # skin_skeleton's default
+_TWO_PI = 2.0 * np.pi
+_MIN_COS = np.cos(np.radians(_MAX_BEND_DEG))
+
+
+class PathSum:
+    """Sums (or products) of per-node values along every root path of a forest
+    (``parent`` (n,), -1 for a root), inclusive, by pointer doubling: round r adds the
+    sum of the 2^r nodes above each node, so ceil(log2(depth + 1)) vectorised rounds, each
+    one gather and one add over all nodes (the jumps are worked out once)."""
+
+    def __init__(self, parent: np.ndarray):
+        n = len(parent)
+        jump = np.append(np.where(parent >= 0, parent, n), n)      # slot n: past the root
+        self.jumps = []
+        while np.any(jump[:n] < n):
+            self.jumps.append(jump)
+            jump = jump.take(jump)
+        self.n = n
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        total = np.append(values, values.dtype.type(0))
+        for jump in self.jumps:
+            total = total + total.take(jump)
+        return total[:self.n]
+
+    def product(self, values: np.ndarray) -> np.ndarray:
+        """Products along the root paths (of complex rotations, say)."""
+        total = np.append(values, values.dtype.type(1))
+        for jump in self.jumps:
+            total = total * total.take(jump)
+        return total[:self.n]
+
+
+@dataclass(frozen=True, eq=False)
+class SwayPose:
+    """A frame's pose: ``start``, ``end``, unit ``axis`` (3, n) per component."""
+
+    t: float
+    start: np.ndarray
+    end: np.ndarray
+    axis: np.ndarray
+
+
+class SwaySkin:
+    """What :meth:`pose` and :meth:`skin` need of a swaying skeleton, computed once (see
+    the module docstring). Build with :meth:`plan`."""
+
+    @classmethod
+    def plan(cls, skeleton: Skeleton, rig: SwayRig) -> SwaySkin | None:
+        """The plan for ``skeleton`` moving by ``rig``, or None where the pose is not a
+        turn about one axis per tree (a tree mixing instances) or the skeleton is empty."""
+        n = len(skeleton)
+        par = skeleton.parent
+        has_p = par >= 0
+        if n == 0:
+            return None
+        p = par[has_p]
+        for name in ("axis", "amplitude", "frequency", "phase", "max_depth"):
+            values = getattr(rig, name)
+            if not np.array_equal(values[has_p], values[p]):
+                return None
+        self = cls()
+        self._plan_pose(skeleton, rig)
+        self._plan_skin(skeleton)
+        return self
+
+    # ------------------------------------------------------------------ pose
+    def _plan_pose(self, sk: Skeleton, rig: SwayRig) -> None:
+        n = len(sk)
+        self.n = n
+        self.tree = PathSum(sk.parent)
+        d = sk.end - sk.start
+        k = rig.axis
+        kd = k * (k[:, 0] * d[:, 0] + k[:, 1] * d[:, 1] + k[:, 2] * d[:, 2])[:, None]
+        perp = d - kd
+        u1 = any_perpendicular(k)
+        u2 = cross(k, u1)
+        self.z = np.einsum("ij,ij->i", perp, u1) + 1j * np.einsum("ij,ij->i", perp, u2)
+        self.u = np.stack([u1.T, u2.T])                                   # (2, 3, n)
+        roots = np.flatnonzero(sk.parent < 0)
+        root_of = tree_roots(sk.parent)
+        self.fixed = (sk.start[root_of] + reduce_to_root(sk.parent, kd, np.add)).T.copy()
+        self.roots = roots
+        self.root_start = sk.start[roots].T.copy()
+        self.parent_or_self = np.where(sk.parent >= 0, sk.parent, np.arange(n))
+        # T(t) = sin(2πft + φ)·CA - cos(2πft + φ)·SA with CA, SA sums along the root path
+        wave = rig.amplitude / rig.max_depth
+        lag = _TWO_PI * rig.depth / rig.max_depth
+        self.ca = self.tree(wave * np.cos(lag))
+        self.sa = self.tree(wave * np.sin(lag))
+        self.omega = _TWO_PI * rig.frequency[roots]
+        self.phase = rig.phase[roots]
+        tree_index = np.zeros(n, dtype=np.int64)
+        tree_index[roots] = np.arange(len(roots))
+        self.tree_of = tree_index[root_of]
+        length = np.linalg.norm(d, axis=1)
+        self.zero = np.flatnonzero(length == 0)
+        self.zero_from = sk.parent[self.zero]
+        self.inv_length = np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
+
+    def pose(self, t: float) -> SwayPose:
+        """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.motion.pose`."""
+        x = self.omega * t + self.phase                       # per tree
+        total = np.sin(x).take(self.tree_of) * self.ca - np.cos(x).take(self.tree_of) * self.sa
+        turned = self.tree(self.z * np.exp(1j * total))
+        end = self.fixed + self.u[0] * turned.real + self.u[1] * turned.imag
+        for i, p in zip(self.zero, self.zero_from, strict=True):   # zero length: end = start
+            end[:, i] = end[:, p] if p >= 0 else self.root_start[:, self.tree_of[i]]
+        start = end.take(self.parent_or_self, axis=1)
+        start[:, self.roots] = self.root_start
+        axis = (end - start) * self.inv_length
+        if self.zero.size:
+            axis[:, self.zero] = np.array([[0.0], [1.0], [0.0]])
+        return SwayPose(float(t), start, end, axis)
+
+    def skeleton(self, posed: SwayPose, like: Skeleton) -> Skeleton:
+        """``posed`` as a Skeleton with the radii, topology and materials of ``like``."""
+        return Skeleton(posed.start.T, posed.end.T, like.r_start, like.r_end, like.parent,
+                        like.continues, like.material, like.material_names)
+
+    # ------------------------------------------------------------------ skin
+    def _plan_skin(self, sk: Skeleton) -> None:
+        n = self.n
+        child, side = continuing_children(sk)
+        par = sk.parent[child]
+        self.child, self.par, self.side, self.host = child, par, side, sk.parent[side]
+        self.r_start, self.r_end = sk.r_start.copy(), sk.r_end.copy()
+        size = np.maximum(np.maximum(sk.r_start, sk.r_end), 1.0)
+        rest = np.linalg.norm(sk.end - sk.start, axis=1)
+        self.length = np.where(rest > 0, rest, tol.zero_length * size)
+        self.slope = (self.r_end - self.r_start) / self.length
+        self.side_slope = self.slope[side]
+        self.side_r_start, self.side_r_end = self.r_start[side], self.r_end[side]
+        self.side_length = self.length[side]
+        self.side_room = np.maximum(self.r_end[self.host] - self.r_start[side], 0.0)
+        self.rp, self.rc = self.r_end[par], self.r_start[child]
+        self.abs_r_end = np.abs(self.r_end)
+        stepped = np.abs(self.rp - self.rc) > tol.same_length * np.maximum(self.rp, self.rc)
+        self.linked = np.flatnonzero(~stepped)          # joints whose child continues the chain
+        parent_row = np.full(n, -1, dtype=np.int64)
+        parent_row[child[~stepped]] = par[~stepped]
+        self.parent_row = parent_row
+        self.chains = PathSum(parent_row)
+        self.lo_free = np.setdiff1d(np.arange(n), child)
+        self.hi_free = np.setdiff1d(np.arange(n), par)
+        self.at_joint = np.zeros(n, dtype=bool)
+        self.at_joint[child] = self.at_joint[par] = True
+        self.link_par, self.link_child = par[self.linked], child[self.linked]
+        kc = self.slope[child]
+        self.sin_c = np.abs(kc) / np.sqrt(1 + kc * kc)
+        sigma = np.concatenate([np.ones(len(child)), -np.ones(len(child))])
+        rbar = 0.5 * (self.rp + self.rc)
+        scale = np.concatenate([np.maximum(rbar, tol.tiny)] * 2)
+        self.medial = {"sigma": sigma, "sigma_rp": sigma * np.concatenate([self.rp] * 2),
+                       "sigma_rc": sigma * np.concatenate([self.rc] * 2),
+                       "sigma_kc": sigma * np.concatenate([kc] * 2),
+                       "sigma_rbar": sigma * np.concatenate([rbar] * 2), "scale": scale,
+                       "lim": tol.runaway * scale, "clip": 4 * scale}
+        mean_r = 0.5 * (sk.r_start + sk.r_end)
+        self.constant = {"twist": np.zeros(n), "material": sk.material.copy(),
+                         "shell": material_shell(sk, None, mean_r), "segment": np.arange(n)}
+        for arr in self.constant.values():
+            arr.setflags(write=False)
+        self.material_names = sk.material_names
+
+    def skin(self, posed: SwayPose) -> Frusta | None:
+        """The frusta of ``posed``, equal to ``skin_skeleton`` of it (to round-off), or None
+        if a joint is sharp (the caller then skins the general way)."""
+        seg = _FrameSegments.of(self, posed)
+        joints = _frame_joints(self, posed, seg)
+        if joints is None or self._planes_cross(seg, joints):
+            return None
+        turn, u_offset = _texture_frames(self, seg, joints)
+        n = self.n
+        ref = _rows(seg.e1 * turn.real + seg.e2 * turn.imag)
+        lo, hi = np.empty((n, 4)), np.empty((n, 4))
+        lo.T[:3] = hi.T[:3] = seg.axis
+        free = self.lo_free
+        lo.T[3, free] = _dot3(seg.axis.take(free, 1), seg.base.take(free, 1))
+        free = self.hi_free
+        hi.T[3, free] = _dot3(seg.axis.take(free, 1), seg.end.take(free, 1))
+        plane = _rows(joints.plane)
+        lo[self.child] = plane
+        hi[self.par] = plane
+        c = self.constant
+        return Frusta(base=_rows(seg.base), axis=_rows(seg.axis), length=seg.length, r1=seg.r1,
+                      r2=self.r_end, plane_lo=lo, plane_hi=hi, ref_dir=ref,
+                      u_offset=u_offset, twist=c["twist"], material=c["material"],
+                      shell=c["shell"], segment=c["segment"], material_names=self.material_names,
+                      parent_row=self.parent_row)
+
+    def _planes_cross(self, seg, joints) -> bool:
+        """Whether a segment next to a joint has its two planes cross inside it
+        (skinning's crossing test: its cheap exclusion here, on the joint planes (free
+        planes are ⟂ their axes: centred at 0 and at the length, no spread), then its
+        sampled test on the rows the exclusion leaves)."""
+        k = np.abs(seg.slope)
+        rmax = np.maximum(np.abs(seg.r1), self.abs_r_end) + k * seg.length
+        centre = [np.zeros(self.n), seg.length.copy()]
+        spread = [np.zeros(self.n), np.zeros(self.n)]
+        gaps = (joints.gap, joints.gap + seg.length.take(self.par) * joints.alpha)
+        for side, rows, na, gap in ((0, self.child, joints.n_child, gaps[0]),
+                                    (1, self.par, joints.alpha, gaps[1])):
+            kr = k.take(rows)
+            nperp = np.sqrt(np.maximum(1 - na * na, 0.0))
+            den = na - kr * nperp
+            centre[side][rows] = gap / na                  # na > sin + margin > 0 here
+            rises = den > tol.section_rise
+            spread[side][rows] = (np.where(rises, rmax.take(rows) * nperp / np.where(rises, den, 1),
+                                           np.inf) * (1 + kr))
+        maybe = ~(centre[1] - centre[0] > 1.01 * (spread[0] + spread[1]) + tol.zero_length * seg.length)
+        maybe &= self.at_joint
+        if not maybe.any():
+            return False
+        m = np.flatnonzero(maybe)
+        lo = np.concatenate([seg.axis[:, m].T, np.zeros((len(m), 1))], axis=1)
+        hi = lo.copy()
+        lo[:, 3] = _dot3(seg.axis[:, m], seg.base[:, m])
+        hi[:, 3] = _dot3(seg.axis[:, m], seg.end[:, m])
+        jc = np.full(self.n, -1)
+        jc[self.child] = np.arange(len(self.child))
+        jp = np.full(self.n, -1)
+        jp[self.par] = np.arange(len(self.par))
+        lo[jc[m] >= 0] = joints.plane[:, jc[m][jc[m] >= 0]].T
+        hi[jp[m] >= 0] = joints.plane[:, jp[m][jp[m] >= 0]].T
+        return bool(crossing_rows_sampled(seg.base[:, m].T, seg.axis[:, m].T, seg.length[m],
+                                          seg.r1[m], self.r_end[m], lo, hi, 24).any())
+
+
+def _rows(soa: np.ndarray) -> np.ndarray:
+    """(n, k) rows of a (k, n) per-component array."""
+    out = np.empty(soa.shape[::-1])
+    out.T[...] = soa
+    return out
+
+
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross3(a, b):
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@dataclass
+class _FrameSegments:
+    """Per segment, this frame (3, n) / (n,): ``base`` (side branches moved back into
+    their parent), ``end``, ``axis``, ``length``, ``r1``, ``slope``, and the texture
+    helper frame ``e1`` = any_perpendicular(axis), ``e2`` = axis × e1."""
+
+    base: np.ndarray
+    end: np.ndarray
+    axis: np.ndarray
+    length: np.ndarray
+    r1: np.ndarray
+    slope: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+
+    @classmethod
+    def of(cls, plan: SwaySkin, posed: SwayPose) -> _FrameSegments:
+        a = posed.axis
+        base = posed.start
+        length, r1, slope = plan.length, plan.r_start, plan.slope
+        side = plan.side
+        if side.size:
+            a_s = a.take(side, 1)
+            cos_b = np.minimum(np.maximum(_dot3(a_s, a.take(plan.host, 1)), -1.0), 1.0)
+            sin_b = np.sqrt(1.0 - cos_b * cos_b)
+            room = plan.side_room / np.maximum(sin_b, tol.parallel)
+            need = np.where(cos_b > tol.parallel,
+                            plan.side_r_start * sin_b / np.maximum(cos_b, tol.parallel), np.inf)
+            delta = np.minimum(need, room)
+            base = base.copy()
+            base[:, side] -= delta * a_s
+            length, r1, slope = length.copy(), r1.copy(), slope.copy()
+            r1_side = np.maximum(plan.side_r_start - plan.side_slope * delta, 0.0)
+            length_side = plan.side_length + delta
+            r1[side] = r1_side
+            length[side] = length_side
+            slope[side] = (plan.side_r_end - r1_side) / length_side
+        # any_perpendicular: x (z where the axis is near x) with its axis part removed
+        near_x = np.abs(a[0]) >= 0.9
+        e1 = a * -np.where(near_x, a[2], a[0])
+        e1[0] += ~near_x
+        e1[2] += near_x
+        e1 *= 1.0 / np.sqrt(_dot3(e1, e1))
+        return cls(base, posed.end, a, length, r1, slope, e1, _cross3(a, e1))
+
+
+@dataclass
+class _FrameJoints:
+    """Per continuing joint, this frame: the shared ``plane`` (4, j); its normal's
+    components ``alpha`` along M1 and ``gamma`` along n1, its cosine with M2
+    (``n_child``), ``gap`` = normal·(point - J); the medial normal ``nm`` (3, j); the
+    bend's cosine ``c`` and sine ``s``."""
+
+    plane: np.ndarray
+    alpha: np.ndarray
+    gamma: np.ndarray
+    n_child: np.ndarray
+    gap: np.ndarray
+    nm: np.ndarray
+    c: np.ndarray
+    s: np.ndarray
+
+
+def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _FrameJoints | None:
+    """The joint planes (skinning's ``_joint_planes`` in each joint's medial frame), or
+    None if a joint is past the bend limit or its plane is not an ellipse cut."""
+    par, child = plan.par, plan.child
+    m1, m2 = seg.axis.take(par, 1), seg.axis.take(child, 1)
+    c = _dot3(m1, m2)
+    if np.any(c < _MIN_COS):
+        return None
+    x = _cross3(m1, m2)
+    s = np.sqrt(_dot3(x, x))
+    collinear = s <= tol.tiny
+    if collinear.any():
+        nm = x / np.where(collinear, 1.0, s)
+        m1c = m1[:, collinear].T
+        nm[:, collinear] = cross(m1c, any_perpendicular(m1c)).T
+    else:
+        nm = x * (1.0 / s)
+    kp = seg.slope.take(par)
+    alpha, gamma, xi, eta = _medial_planes(plan, c, s, kp)
+    n_child = alpha * c - gamma * s
+    sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
+    if np.any((alpha <= sin_p + tol.ellipse_margin) | (n_child <= plan.sin_c + tol.ellipse_margin)):
+        return None
+    n1 = _cross3(m1, nm)
+    normal = alpha * m1 + gamma * n1
+    point = posed.start.take(child, 1) + xi * m1 + eta * n1
+    plane = np.concatenate([normal, _dot3(normal, point)[None]])
+    return _FrameJoints(plane, alpha, gamma, n_child, alpha * xi + gamma * eta, nm, c, s)
+
+
+def _medial_planes(plan: SwaySkin, c, s, kp):
+    """skinning's joint planes (3)–(5) in 2-d: coordinates along M1 and n1 = M1 × N_m of
+    each joint (M2 = (c, -s), n2 = (s, c)), both sides σ = ±1 stacked (2j,); the bend
+    is at most 120°, so n1 + n2 and M1 + M2 have lengths >= 1. Returns the unit normal
+    (alpha, gamma) and the plane point (xi, eta) relative to J, (j,) each."""
+    j = len(c)
+    k = plan.medial                  # constants per joint side: see _plan_skin
+    c2, s2 = np.concatenate([c, c]), np.concatenate([s, s])
+    one_c = 1.0 + c2
+    inv = 1.0 / np.sqrt(s2 * s2 + one_c * one_c)
+    nb_x, nb_y = s2 * inv, one_c * inv
+    bis_x, bis_y = one_c * inv, -s2 * inv
+    p1_y = k["sigma_rp"]
+    q_x, q_y = k["sigma_rc"] * s2, k["sigma_rc"] * c2 - p1_y          # p2 - p1
+    d1_y = k["sigma"] * np.concatenate([kp, kp])
+    d2_x, d2_y = c2 + k["sigma_kc"] * s2, k["sigma_kc"] * c2 - s2
+    den = d1_y * d2_x - d2_y
+    den_abs = np.abs(den)
+    if np.any(den_abs <= tol.tiny):
+        den = np.where(den_abs > tol.tiny, den, tol.tiny)
+    lim = k["lim"]
+    s_slope = np.minimum(np.maximum((q_y * d2_x - q_x * d2_y) / den, -lim), lim)
+    den_cyl = np.maximum(s2, tol.tiny)
+    s_cyl = np.minimum(np.maximum((q_y * c2 + q_x * s2) / den_cyl, -lim), lim)
+    ramp = np.minimum(np.maximum((den_abs / den_cyl - 0.25) / 0.25, 0.0), 1.0)
+    w = ramp * ramp * (3 - 2 * ramp)
+    a_x = w * s_slope + (1 - w) * s_cyl
+    a_y = w * (p1_y + s_slope * d1_y) + (1 - w) * p1_y
+    f_x, f_y = k["sigma_rbar"] * nb_x, k["sigma_rbar"] * nb_y
+    g_x, g_y = a_x - f_x, a_y - f_y
+    off = g_x * bis_x + g_y * bis_y
+    fade = k["scale"] / np.maximum(np.abs(off), k["scale"])      # 1 while |off| <= scale
+    fade *= fade
+    fade *= fade
+    along = np.minimum(np.maximum(g_x * nb_x + g_y * nb_y, -k["clip"]), k["clip"])
+    pt_x = f_x + fade * off * bis_x + along * nb_x
+    pt_y = f_y + fade * off * bis_y + along * nb_y
+    diff_x, diff_y = pt_x[:j] - pt_x[j:], pt_y[:j] - pt_y[j:]
+    length = np.sqrt(diff_x * diff_x + diff_y * diff_y)
+    ok = length > tol.tiny
+    n_x, n_y = -diff_y / np.where(ok, length, 1.0), diff_x / np.where(ok, length, 1.0)
+    if not ok.all():         # the two points coincide: the bisector plane
+        fb = 1.0 / np.sqrt((1.0 + c) ** 2 + s * s)
+        n_x, n_y = np.where(ok, n_x, (1.0 + c) * fb), np.where(ok, n_y, -s * fb)
+    flip = np.where(n_x * bis_x[:j] + n_y * bis_y[:j] < 0, -1.0, 1.0)
+    return flip * n_x, flip * n_y, 0.5 * (pt_x[:j] + pt_x[j:]), 0.5 * (pt_y[:j] + pt_y[j:])
+
+
+def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
+    """(n,) unit complex e^(iψ): each row's reference direction in its frame (e1, e2),
+    and (n,) u offsets (skinning's ``_u_offsets``), from the medial frames (N_m, n1) and
+    (N_m, n2) of the linked joints, which the transport maps onto each other."""
+    li = plan.linked
+    p, ch = plan.link_par, plan.link_child
+    nm = joints.nm.take(li, 1)
+    at_p = _dot3(nm, seg.e1.take(p, 1)) + 1j * _dot3(nm, seg.e2.take(p, 1))
+    at_c = _dot3(nm, seg.e1.take(ch, 1)) + 1j * _dot3(nm, seg.e2.take(ch, 1))
+    step = np.ones(plan.n, dtype=complex)
+    step[ch] = at_c * at_p.conjugate()
+    turn = plan.chains.product(step)
+    turn /= np.abs(turn)
+    chi = turn.take(p) * at_p.conjugate()
+    cos_x, sin_x = chi.real, chi.imag
+    alpha, gamma = joints.alpha.take(li), joints.gamma.take(li)
+    c, s = joints.c.take(li), joints.s.take(li)
+    len_p, r1_p, k_p = seg.length.take(p), seg.r1.take(p), seg.slope.take(p)
+    n_r = gamma * sin_x
+    y = (joints.gap.take(li) + len_p * alpha - r1_p * n_r) / (alpha + k_p * n_r)
+    rho = r1_p + k_p * y
+    back = y - len_p
+    along_ref = back * s * sin_x + rho * (cos_x * cos_x + c * sin_x * sin_x)
+    along_side = back * s * cos_x + rho * sin_x * cos_x * (c - 1.0)
+    local = np.zeros(plan.n)
+    local[ch] = np.arctan2(along_side, along_ref) * (-1.0 / _TWO_PI)
+    total = plan.chains(local)
+    wrapped = total - np.floor(total)
+    return turn, np.where(wrapped < 1.0, wrapped, 0.0)
