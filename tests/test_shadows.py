@@ -180,7 +180,7 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief,
             assert np.median(err) < 1e-4 * span and np.mean(err > 5e-3 * span) < 0.005
         else:
             texel = window.texel_size(res)
-            assert np.median(err) < 0.1 * texel and np.mean(err > 0.5 * texel) < 0.01, \
+            assert np.median(err) < 0.25 * texel and np.mean(err > 0.5 * texel) < 0.01, \
                 (np.median(err) / texel, np.mean(err > 0.5 * texel))
         # and it is not the inner cone's shadow: relief stands proud of it on many texels
         on_inner = both & inner.hit
