@@ -33,7 +33,19 @@ float height_in(HeightMap m, vec2 uv) {
     vec2 xy = vec2(fract(uv.x * m.repeat.x), clamp(uv.y * m.repeat.y, 0.0, 1.0)) * m.size - 0.5;
     vec2 cell = floor(xy);
     vec2 w = xy - cell;
+#if defined HEIGHT_FETCH4
+    // the same four texels by four fetches with the wrap done here (the ablation's "off")
+    ivec2 size = ivec2(m.size), c = ivec2(cell);
+    int i0 = ((c.x % size.x) + size.x) % size.x, i1 = (i0 + 1) % size.x;
+    int j0 = clamp(c.y, 0, size.y - 1), j1 = clamp(c.y + 1, 0, size.y - 1);
+    int layer = int(m.layer);
+    vec4 g = vec4(texelFetch(height_maps, ivec3(i0, j1, layer), 0).r,
+                  texelFetch(height_maps, ivec3(i1, j1, layer), 0).r,
+                  texelFetch(height_maps, ivec3(i1, j0, layer), 0).r,
+                  texelFetch(height_maps, ivec3(i0, j0, layer), 0).r);
+#else
     vec4 g = textureGather(height_maps, vec3((cell + 1.0) / m.size, m.layer));
+#endif
     // gather order: (i, j+1), (i+1, j+1), (i+1, j), (i, j)
     return mix(mix(g.w, g.z, w.x), mix(g.x, g.y, w.x), w.y);
 }

@@ -154,3 +154,18 @@ def test_a_sparser_march_steps_over_ridges_and_the_density_knob_brings_them_back
     # measured: about 17 %, 4 % and 1 % of the hit pixels
     assert wrong[0.125] > 3 * wrong[ADAPTIVE.march_density] > 3 * wrong[8.0], wrong
     assert wrong[8.0] < 0.02, wrong
+
+
+def test_gathered_and_fetched_heights_are_the_same_surface(gl_ctx):
+    """The ablation's two height fetches (one textureGather, four texelFetch) interpolate
+    the same texels with the same weights: the same relief hits."""
+    frusta = relief_cases()["bark_chain"]
+    camera = auto_camera(frusta, 96, 72)
+    caster = Raycaster()
+    gather = caster.render(frusta, camera, ADAPTIVE, frusta.material_names).distance
+    fetch = caster.render(frusta, camera, dataclasses.replace(ADAPTIVE, height_fetch="texel"),
+                          frusta.material_names).distance
+    assert np.isfinite(gather).any()
+    assert np.array_equal(np.isfinite(gather), np.isfinite(fetch))
+    both = np.isfinite(gather)
+    assert np.allclose(gather[both], fetch[both], rtol=1e-6, atol=0)

@@ -59,6 +59,8 @@ class RaycastSettings:
         a silhouette tangent to the pyramid are not lost to rasterisation rules
     proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
         slow oracle that shows what a too-tight pyramid would lose (tests)
+    height_fetch : ``"gather"`` (one textureGather per bilinear height) or ``"texel"``
+        (four texelFetch with the wrap in GLSL): the same heights; the bench's ablation
     """
 
     relief: bool = False
@@ -71,10 +73,13 @@ class RaycastSettings:
     v_exact: bool = False
     hull_padding: float = 0.02
     proxy: str = "pyramid"
+    height_fetch: str = "gather"
 
     def __post_init__(self):
         if self.proxy not in ("pyramid", "screen"):
             raise PlantgenError(f"proxy must be 'pyramid' or 'screen', not {self.proxy!r}")
+        if self.height_fetch not in ("gather", "texel"):
+            raise PlantgenError(f"height fetch must be 'gather' or 'texel', not {self.height_fetch!r}")
         if self.march not in ("adaptive", "fixed"):
             raise PlantgenError(f"march must be 'adaptive' or 'fixed', not {self.march!r}")
         if self.linear_steps < 1 or self.binary_steps < 0 or self.march_min_steps < 1:
@@ -87,6 +92,7 @@ class RaycastSettings:
     def defines(self) -> dict[str, bool]:
         return {"RELIEF": self.relief, "V_EXACT": self.relief and self.v_exact,
                 "MARCH_FIXED": self.relief and self.march == "fixed",
+                "HEIGHT_FETCH4": self.height_fetch == "texel",
                 "SCREEN_PROXY": self.proxy == "screen"}
 
     def march_uniforms(self) -> dict:

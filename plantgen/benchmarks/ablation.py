@@ -1,0 +1,176 @@
+"""Relief levers on and off (issue 12): what each one buys per model, and what it costs in
+error, all measured in one run.
+
+Each lever is a pair of ray caster settings that differ only in that lever; the two are
+timed interleaved (median of ``--frames``) at the bench's size, and the eye's levers are
+scored against the float64 reference in the bench's evaluation window (err = 1 - SSIM of
+the depth-rebuilt shading + silhouette mismatch, :mod:`plantgen.bench.metrics`). The
+shadow lever is timed in the scene's own frame (ground, shadow map) and scored on the
+light's depth map against a finely marched one (share of covered texels more than half a
+texel off: the receivers' bias).
+
+Levers:
+
+* ``march``: the adaptive march (samples per relief texel the ray crosses, at least a pixel
+  footprint each; bisection to 1/50 pixel) against the paper's fixed 32 + 6 steps.
+* ``gather``: one textureGather per bilinear height against four texelFetch (same heights).
+* ``v``: v interpolated between entry and exit (the paper's) against v of (7) per sample.
+* ``light march``: the light's pass marched at the map's texel footprint (0.5 samples per
+  texel, half-texel bracket) against the eye's settings (2 per texel, 1/50 texel).
+
+Writes Markdown (``--out``) and prints it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..bench.metrics import image_error
+from ..bench.models import load_model
+from ..bench.paper import TABLE1_MODELS
+from ..bench.window import eval_camera
+from ..files import write_atomically
+from ..geometry.reference import render_reference
+from ..render.context import renderer_name
+from ..render.passes import ShadowSettings
+from ..render.raycast import Raycaster, RaycastSettings
+from .arguments import image_size
+
+__all__ = ["EYE_LEVERS", "measure_model", "main"]
+
+ON = RaycastSettings(relief=True)
+#: (lever, settings with it on, settings with it off) of the eye's pass.
+EYE_LEVERS = (
+    ("march", ON, RaycastSettings(relief=True, march="fixed", linear_steps=32, binary_steps=6)),
+    ("gather", ON, dataclasses.replace(ON, height_fetch="texel")),
+    ("v interpolated", ON, dataclasses.replace(ON, v_exact=True)),
+)
+#: The light's pass: on (the map's own footprint), off (the eye's density and precision),
+#: and the fine march the maps are scored against.
+LIGHT_ON = ShadowSettings()
+LIGHT_OFF = ShadowSettings(march_density=ON.march_density, march_precision=ON.march_precision)
+LIGHT_FINE = ShadowSettings(march_density=8.0, march_precision=0.01)
+
+
+def _interleaved(render_a, render_b, frames: int) -> tuple[float, float]:
+    """Median ms of two renders timed in alternation (one warm-up each)."""
+    render_a(), render_b()
+    a, b = [], []
+    for _ in range(frames):
+        a.append(render_a().frame_ms)
+        b.append(render_b().frame_ms)
+    return statistics.median(a), statistics.median(b)
+
+
+def _eye_rows(caster, model, window, reference, frames: int) -> list[dict]:
+    rows = []
+    for lever, on, off in EYE_LEVERS:
+        def render(settings, camera=model.camera):
+            return caster.render(model.frusta, camera, settings, model.names, model.light_dir)
+        on_ms, off_ms = _interleaved(lambda s=on: render(s), lambda s=off: render(s), frames)
+        errors = [image_error(render(s, window).distance, reference, window, model.light_dir).total
+                  for s in (on, off)]
+        rows.append({"lever": lever, "on_ms": on_ms, "off_ms": off_ms, "speedup": off_ms / on_ms,
+                     "on_error": errors[0], "off_error": errors[1], "unit": "err"})
+    return rows
+
+
+def _light_row(caster, model, frames: int) -> dict:
+    """The light's pass lever in the scene's frame (shadow ms; depth map error)."""
+    def render(shadows):
+        return caster.render(model.frusta, model.camera, ON, model.names, model.light_dir, model.ground,
+                             shadows=shadows)
+
+    def depth_map(shadows):
+        render(shadows)
+        return caster.shadow_depths(), caster.last_light_window
+
+    shadow_ms: dict[str, list] = {"on": [], "off": [], "plain": []}
+    render(LIGHT_ON), render(LIGHT_OFF)
+    for _ in range(frames):
+        for key, shadows in (("on", LIGHT_ON), ("off", LIGHT_OFF)):
+            shadow_ms[key].append(render(shadows).stats.shadow_ms)
+        plain = caster.render(model.frusta, model.camera, RaycastSettings(), model.names, model.light_dir,
+                              model.ground, shadows=LIGHT_ON)
+        shadow_ms["plain"].append(plain.stats.shadow_ms)
+    fine, window = depth_map(LIGHT_FINE)
+    span = window.depth[1] - window.depth[0]
+    texel = window.texel_size(LIGHT_FINE.resolution)
+    errors = []
+    for shadows in (LIGHT_ON, LIGHT_OFF):
+        depths, _ = depth_map(shadows)
+        covered = (depths < 1.0) | (fine < 1.0)
+        errors.append(float(np.mean(np.abs(depths - fine)[covered] * span > 0.5 * texel)))
+    on_ms, off_ms, plain_ms = (statistics.median(shadow_ms[k]) for k in ("on", "off", "plain"))
+    return {"lever": "light march", "on_ms": on_ms, "off_ms": off_ms, "speedup": off_ms / on_ms,
+            "on_error": errors[0], "off_error": errors[1], "unit": "texels off",
+            "plain_shadow_ms": plain_ms, "relief_over_plain": on_ms / plain_ms}
+
+
+def measure_model(name: str, size, eval_size, frames: int, caster: Raycaster) -> list[dict]:
+    """Every lever's rows for one model (the light's lever only where the scene has shadows)."""
+    model = load_model(name, size)
+    if not model.relief:
+        return []
+    first = caster.render(model.frusta, model.camera, RaycastSettings(), model.names)
+    window = eval_camera(model.camera, np.isfinite(first.distance), eval_size)
+    ref = render_reference(model.frusta, window, relief=True, relief_samples=384)
+    reference = np.where(ref.hit, ref.t, np.inf)
+    rows = _eye_rows(caster, model, window, reference, frames)
+    if model.shadows:
+        rows.append(_light_row(caster, model, frames))
+    return [{"model": model.name, **r} for r in rows]
+
+
+def markdown(rows: list[dict], size, frames: int) -> str:
+    lines = [f"# Relief levers on and off ({renderer_name()})", "",
+             f"{size[0]}x{size[1]}, median of {frames} frames timed in alternation. speed-up = off ms ÷ "
+             "on ms. err: (1 - SSIM) + silhouette mismatch against the float64 reference (the bench's "
+             "criterion); light march: ms of the shadow pass, error = share of covered map texels more "
+             "than half a texel from a finely marched map.", "",
+             "| model | lever | on ms | off ms | speed-up | on error | off error |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['model']} | {r['lever']} | {r['on_ms']:.1f} | {r['off_ms']:.1f} | "
+              f"{r['speedup']:.2f}x | {r['on_error']:.4f} | {r['off_error']:.4f} |" for r in rows]
+    by_lever: dict[str, list] = {}
+    for r in rows:
+        by_lever.setdefault(r["lever"], []).append(r["speedup"])
+    lines += ["", "Geometric mean speed-up per lever: " + ", ".join(
+        f"{k} {float(np.exp(np.mean(np.log(v)))):.2f}x ({len(v)} models)" for k, v in by_lever.items())]
+    light = [r for r in rows if "relief_over_plain" in r]
+    if light:
+        lines += ["", "Relief shadow pass ÷ plain shadow pass (same 2048² map): " + ", ".join(
+            f"{r['model']} {r['relief_over_plain']:.2f}x ({r['on_ms']:.0f} vs {r['plain_shadow_ms']:.0f} ms)"
+            for r in light)]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.ablation",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="*", help=f"grammar/scene names (default: {', '.join(TABLE1_MODELS)})")
+    parser.add_argument("--size", type=image_size, default="1024x768")
+    parser.add_argument("--eval-size", type=image_size, default="128x96")
+    parser.add_argument("--frames", type=int, default=5)
+    parser.add_argument("--out", type=Path, help="write the Markdown table here")
+    args = parser.parse_args(argv)
+    caster = Raycaster()
+    rows = []
+    for name in args.models or TABLE1_MODELS:
+        print(f"{name} ...", file=sys.stderr, flush=True)
+        rows += measure_model(name, args.size, args.eval_size, args.frames, caster)
+    text = markdown(rows, args.size, args.frames)
+    print(text)
+    if args.out is not None:
+        write_atomically(args.out, lambda path: Path(path).write_text(text))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
