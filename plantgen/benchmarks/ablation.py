@@ -15,6 +15,10 @@ Levers:
   footprint each; bisection to 1/50 pixel) against the paper's fixed 32 + 6 steps.
 * ``gather``: one textureGather per bilinear height against four texelFetch (same heights).
 * ``v``: v interpolated between entry and exit (the paper's) against v of (7) per sample.
+* ``skipping bound``: one linear sample per ray against the default march: the most that
+  empty-space skipping (relaxed cone stepping, maximum mipmaps) could save here, since
+  it can at best remove linear samples (its error column is the 1-sample march's, wrong
+  by design).
 * ``light march``: the light's pass marched at the map's texel footprint (0.5 samples per
   texel, half-texel bracket) against the eye's settings (2 per texel, 1/50 texel).
 
@@ -50,6 +54,10 @@ EYE_LEVERS = (
     ("march", ON, RaycastSettings(relief=True, march="fixed", linear_steps=32, binary_steps=6)),
     ("gather", ON, dataclasses.replace(ON, height_fetch="texel")),
     ("v interpolated", ON, dataclasses.replace(ON, v_exact=True)),
+    # not a lever but its bound: one linear sample per ray (then the same bisection) is
+    # what an oracle that skipped all empty space (cone stepping, maximum mipmaps) would
+    # leave of the linear march; its speed-up over the default is the most they can win
+    ("skipping bound", dataclasses.replace(ON, march="fixed", linear_steps=1), ON),
 )
 #: The light's pass: on (the map's own footprint), off (the eye's density and precision),
 #: and the fine march the maps are scored against.
