@@ -63,16 +63,18 @@ class PathSum:
         self.n = n
 
     def __call__(self, values: np.ndarray) -> np.ndarray:
-        total = np.append(values, values.dtype.type(0))
-        for jump in self.jumps:
-            total = total + total.take(jump)
-        return total[:self.n]
+        return self._fold(values, 0, np.add)
 
     def product(self, values: np.ndarray) -> np.ndarray:
         """Products along the root paths (of complex rotations, say)."""
-        total = np.append(values, values.dtype.type(1))
+        return self._fold(values, 1, np.multiply)
+
+    def _fold(self, values, identity, op):
+        total = np.empty(self.n + 1, dtype=values.dtype)
+        total[:self.n] = values
+        total[self.n] = identity                 # slot n: past the root
         for jump in self.jumps:
-            total = total * total.take(jump)
+            op(total, total.take(jump), out=total)
         return total[:self.n]
 
 
@@ -146,14 +148,23 @@ class SwaySkin:
     def pose(self, t: float) -> SwayPose:
         """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.motion.pose`."""
         x = self.omega * t + self.phase                       # per tree
-        total = np.sin(x).take(self.tree_of) * self.ca - np.cos(x).take(self.tree_of) * self.sa
-        turned = self.tree(self.z * np.exp(1j * total))
-        end = self.fixed + self.u[0] * turned.real + self.u[1] * turned.imag
+        total = np.sin(x).take(self.tree_of)
+        total *= self.ca
+        total -= np.cos(x).take(self.tree_of) * self.sa
+        turn = np.empty(self.n, dtype=complex)           # e^(i·total)
+        np.cos(total, out=turn.real)
+        np.sin(total, out=turn.imag)
+        turn *= self.z
+        turned = self.tree(turn)
+        end = self.u[0] * turned.real
+        end += self.fixed
+        end += self.u[1] * turned.imag
         for i, p in zip(self.zero, self.zero_from, strict=True):   # zero length: end = start
             end[:, i] = end[:, p] if p >= 0 else self.root_start[:, self.tree_of[i]]
         start = end.take(self.parent_or_self, axis=1)
         start[:, self.roots] = self.root_start
-        axis = (end - start) * self.inv_length
+        axis = end - start
+        axis *= self.inv_length
         if self.zero.size:
             axis[:, self.zero] = np.array([[0.0], [1.0], [0.0]])
         return SwayPose(float(t), start, end, axis)
@@ -491,13 +502,17 @@ def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
     li = plan.linked
     p, ch = plan.link_par, plan.link_child
     nm = joints.nm.take(li, 1)
-    at_p = _dot3(nm, seg.e1.take(p, 1)) + 1j * _dot3(nm, seg.e2.take(p, 1))
-    at_c = _dot3(nm, seg.e1.take(ch, 1)) + 1j * _dot3(nm, seg.e2.take(ch, 1))
+    at_p, at_c = np.empty(len(li), dtype=complex), np.empty(len(li), dtype=complex)
+    for at, rows in ((at_p, p), (at_c, ch)):
+        at.real = _dot3(nm, seg.e1.take(rows, 1))
+        at.imag = _dot3(nm, seg.e2.take(rows, 1))
+    np.conjugate(at_p, out=at_p)
     step = np.ones(plan.n, dtype=complex)
-    step[ch] = at_c * at_p.conjugate()
+    step[ch] = at_c * at_p
     turn = plan.chains.product(step)
     turn /= np.abs(turn)
-    chi = turn.take(p) * at_p.conjugate()
+    chi = turn.take(p)
+    chi *= at_p
     cos_x, sin_x = chi.real, chi.imag
     alpha, gamma = joints.alpha.take(li), joints.gamma.take(li)
     c, s = joints.c.take(li), joints.s.take(li)
