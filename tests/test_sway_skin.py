@@ -152,3 +152,28 @@ def test_path_sums_and_products_follow_the_root_paths():
     np.testing.assert_array_equal(paths(values), want)
     turns = np.exp(1j * values)
     np.testing.assert_allclose(paths.product(turns), np.exp(1j * want), rtol=1e-13)
+
+
+def test_per_frame_frusta_are_what_the_checked_constructor_builds(cacti):
+    """Frusta.from_rows skips the checks: the fast path's rows must already have the
+    contract's dtypes, shapes and layout, and open ends as the constructor derives them;
+    the records packed into a reused buffer equal freshly packed ones."""
+    from plantgen.geometry.frusta import Frusta
+    from plantgen.render.records import pack_records
+
+    skeleton, rig = cacti
+    plan = SwaySkin.plan(skeleton, rig)
+    fast = plan.skin(plan.pose(0.37))
+    checked = Frusta(**{f: getattr(fast, f) for f in ROW_FIELDS}, material_names=fast.material_names,
+                     parent_row=fast.parent_row)
+    for name in (*ROW_FIELDS, "parent_row", "open_lo", "open_hi"):
+        got, want = getattr(fast, name), getattr(checked, name)
+        assert got.dtype == want.dtype and got.shape == want.shape and got.flags.c_contiguous, name
+        np.testing.assert_array_equal(got, want, err_msg=name)
+    assert fast.material_names == checked.material_names and fast.report is None
+    origin = np.array([1.5, 2.0, -3.0])
+    buffer = np.full((len(fast), 24), np.nan, dtype=np.float32)
+    assert pack_records(fast, origin, out=buffer) is buffer
+    np.testing.assert_array_equal(buffer, pack_records(checked, origin))
+    with pytest.raises(ValueError):
+        pack_records(fast, origin, out=np.empty((len(fast), 24)))

@@ -227,6 +227,22 @@ class Frusta:
         return cls(**{f: np.zeros((0,) + _ROW_SHAPES.get(f, ()), dtype=_ROW_DTYPES.get(f, np.float64))
                       for f in ROW_FIELDS}, material_names=material_names)
 
+    @classmethod
+    def from_rows(cls, rows: dict, material_names: tuple[str, ...], parent_row: np.ndarray,
+                  open_lo: np.ndarray, open_hi: np.ndarray) -> Frusta:
+        """Frusta from ``rows`` (every name of ROW_FIELDS) already of the contract's dtypes
+        and shapes and C-contiguous, with ``parent_row`` and the ``open_lo``, ``open_hi``
+        the constructor derives from it: no checks, no copies, no report. For producers
+        that build the same kind of rows every frame (plantgen.geometry.sway_skin; its
+        tests compare them with the checked constructor's); anything else uses ``Frusta(...)``."""
+        self = object.__new__(cls)
+        for f in ROW_FIELDS:
+            object.__setattr__(self, f, rows[f])
+        for name, value in (("material_names", material_names), ("parent_row", parent_row),
+                            ("open_lo", open_lo), ("open_hi", open_hi), ("report", None)):
+            object.__setattr__(self, name, value)
+        return self
+
     def subset(self, rows) -> Frusta:
         """The given rows ((k,) int or (n,) bool) as a new Frusta (parent_row remapped; -1
         where the parent is dropped); no report."""

@@ -63,16 +63,18 @@ class PathSum:
         self.n = n
 
     def __call__(self, values: np.ndarray) -> np.ndarray:
-        total = np.append(values, values.dtype.type(0))
-        for jump in self.jumps:
-            total = total + total.take(jump)
-        return total[:self.n]
+        return self._fold(values, 0, np.add)
 
     def product(self, values: np.ndarray) -> np.ndarray:
         """Products along the root paths (of complex rotations, say)."""
-        total = np.append(values, values.dtype.type(1))
+        return self._fold(values, 1, np.multiply)
+
+    def _fold(self, values, identity, op):
+        total = np.empty(self.n + 1, dtype=values.dtype)
+        total[:self.n] = values
+        total[self.n] = identity                 # slot n: past the root
         for jump in self.jumps:
-            total = total * total.take(jump)
+            op(total, total.take(jump), out=total)
         return total[:self.n]
 
 
@@ -146,14 +148,23 @@ class SwaySkin:
     def pose(self, t: float) -> SwayPose:
         """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.motion.pose`."""
         x = self.omega * t + self.phase                       # per tree
-        total = np.sin(x).take(self.tree_of) * self.ca - np.cos(x).take(self.tree_of) * self.sa
-        turned = self.tree(self.z * np.exp(1j * total))
-        end = self.fixed + self.u[0] * turned.real + self.u[1] * turned.imag
+        total = np.sin(x).take(self.tree_of)
+        total *= self.ca
+        total -= np.cos(x).take(self.tree_of) * self.sa
+        turn = np.empty(self.n, dtype=complex)           # e^(i·total)
+        np.cos(total, out=turn.real)
+        np.sin(total, out=turn.imag)
+        turn *= self.z
+        turned = self.tree(turn)
+        end = self.u[0] * turned.real
+        end += self.fixed
+        end += self.u[1] * turned.imag
         for i, p in zip(self.zero, self.zero_from, strict=True):   # zero length: end = start
             end[:, i] = end[:, p] if p >= 0 else self.root_start[:, self.tree_of[i]]
         start = end.take(self.parent_or_self, axis=1)
         start[:, self.roots] = self.root_start
-        axis = (end - start) * self.inv_length
+        axis = end - start
+        axis *= self.inv_length
         if self.zero.size:
             axis[:, self.zero] = np.array([[0.0], [1.0], [0.0]])
         return SwayPose(float(t), start, end, axis)
@@ -193,20 +204,24 @@ class SwaySkin:
         self.link_par, self.link_child = par[self.linked], child[self.linked]
         kc = self.slope[child]
         self.sin_c = np.abs(kc) / np.sqrt(1 + kc * kc)
-        sigma = np.concatenate([np.ones(len(child)), -np.ones(len(child))])
+        sigma = np.array([[1.0], [-1.0]])               # (2, 1): the joint's two sides
         rbar = 0.5 * (self.rp + self.rc)
-        scale = np.concatenate([np.maximum(rbar, tol.tiny)] * 2)
-        self.medial = {"sigma": sigma, "sigma_rp": sigma * np.concatenate([self.rp] * 2),
-                       "sigma_rc": sigma * np.concatenate([self.rc] * 2),
-                       "sigma_kc": sigma * np.concatenate([kc] * 2),
-                       "sigma_rbar": sigma * np.concatenate([rbar] * 2), "scale": scale,
-                       "lim": tol.runaway * scale, "clip": 4 * scale}
+        scale = np.maximum(rbar, tol.tiny) * np.ones((2, 1))
+        self.medial = {"sigma": sigma, "sigma_rp": sigma * self.rp, "sigma_rc": sigma * self.rc,
+                       "sigma_kc": sigma * kc, "sigma_rbar": sigma * rbar, "scale": scale,
+                       "lim": tol.runaway * scale, "neg_lim": -tol.runaway * scale,
+                       "clip": 4 * scale, "neg_clip": -4 * scale}
         mean_r = 0.5 * (sk.r_start + sk.r_end)
-        self.constant = {"twist": np.zeros(n), "material": sk.material.copy(),
+        self.constant = {"twist": np.zeros(n), "material": sk.material.astype(np.int32),
                          "shell": material_shell(sk, None, mean_r), "segment": np.arange(n)}
-        for arr in self.constant.values():
+        for arr in (self.r_start, self.r_end, self.length):
             arr.setflags(write=False)
-        self.material_names = sk.material_names
+        self.material_names = tuple(str(m) for m in sk.material_names)
+        self.open_lo = parent_row < 0
+        self.open_hi = np.ones(n, dtype=bool)
+        self.open_hi[parent_row[parent_row >= 0]] = False
+        for arr in (*self.constant.values(), parent_row, self.open_lo, self.open_hi):
+            arr.setflags(write=False)
 
     def skin(self, posed: SwayPose) -> Frusta | None:
         """The frusta of ``posed``, equal to ``skin_skeleton`` of it (to round-off), or None
@@ -217,22 +232,17 @@ class SwaySkin:
             return None
         turn, u_offset = _texture_frames(self, seg, joints)
         n = self.n
-        ref = _rows(seg.e1 * turn.real + seg.e2 * turn.imag)
+        ref = np.empty((n, 3))
+        np.multiply(seg.e1, turn.real, out=ref.T)
+        ref.T[...] += seg.e2 * turn.imag
         lo, hi = np.empty((n, 4)), np.empty((n, 4))
-        lo.T[:3] = hi.T[:3] = seg.axis
-        free = self.lo_free
-        lo.T[3, free] = _dot3(seg.axis.take(free, 1), seg.base.take(free, 1))
-        free = self.hi_free
-        hi.T[3, free] = _dot3(seg.axis.take(free, 1), seg.end.take(free, 1))
-        plane = _rows(joints.plane)
-        lo[self.child] = plane
-        hi[self.par] = plane
-        c = self.constant
-        return Frusta(base=_rows(seg.base), axis=_rows(seg.axis), length=seg.length, r1=seg.r1,
-                      r2=self.r_end, plane_lo=lo, plane_hi=hi, ref_dir=ref,
-                      u_offset=u_offset, twist=c["twist"], material=c["material"],
-                      shell=c["shell"], segment=c["segment"], material_names=self.material_names,
-                      parent_row=self.parent_row)
+        for rows, ends, joint_rows in ((lo, seg.base, self.child), (hi, seg.end, self.par)):
+            rows.T[:3] = seg.axis
+            rows.T[3] = _dot3(seg.axis, ends)            # free ends: ⟂ the axis
+            rows.T[:, joint_rows] = joints.plane
+        rows = dict(self.constant, base=_rows(seg.base), axis=_rows(seg.axis), length=seg.length,
+                    r1=seg.r1, r2=self.r_end, plane_lo=lo, plane_hi=hi, ref_dir=ref, u_offset=u_offset)
+        return Frusta.from_rows(rows, self.material_names, self.parent_row, self.open_lo, self.open_hi)
 
     def _planes_cross(self, seg, joints) -> bool:
         """Whether a segment next to a joint has its two planes cross inside it
@@ -280,11 +290,18 @@ def _rows(soa: np.ndarray) -> np.ndarray:
 
 
 def _dot3(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    """(n,) a·b of (3, n) arrays: ((a0·b0 + a1·b1) + a2·b2), the rows summed in order."""
+    return np.multiply(a, b).sum(axis=0)
+
+
+_NEXT, _PREV = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
 def _cross3(a, b):
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    """(3, n) a × b of (3, n) arrays."""
+    out = a.take(_NEXT, 0) * b.take(_PREV, 0)
+    out -= a.take(_PREV, 0) * b.take(_NEXT, 0)
+    return out
 
 
 @dataclass
@@ -374,58 +391,108 @@ def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _Fram
     if np.any((alpha <= sin_p + tol.ellipse_margin) | (n_child <= plan.sin_c + tol.ellipse_margin)):
         return None
     n1 = _cross3(m1, nm)
-    normal = alpha * m1 + gamma * n1
-    point = posed.start.take(child, 1) + xi * m1 + eta * n1
-    plane = np.concatenate([normal, _dot3(normal, point)[None]])
+    plane = np.empty((4, len(c)))
+    normal = plane[:3]
+    np.multiply(alpha, m1, out=normal)
+    normal += gamma * n1
+    point = posed.start.take(child, 1)
+    point += xi * m1
+    point += eta * n1
+    plane[3] = _dot3(normal, point)
     return _FrameJoints(plane, alpha, gamma, n_child, alpha * xi + gamma * eta, nm, c, s)
 
 
 def _medial_planes(plan: SwaySkin, c, s, kp):
     """skinning's joint planes (3)–(5) in 2-d: coordinates along M1 and n1 = M1 × N_m of
-    each joint (M2 = (c, -s), n2 = (s, c)), both sides σ = ±1 stacked (2j,); the bend
-    is at most 120°, so n1 + n2 and M1 + M2 have lengths >= 1. Returns the unit normal
-    (alpha, gamma) and the plane point (xi, eta) relative to J, (j,) each."""
-    j = len(c)
+    each joint (M2 = (c, -s), n2 = (s, c)), both sides σ = ±1 as the rows of (2, j)
+    arrays; the bend is at most 120°, so n1 + n2 and M1 + M2 have lengths >= 1. The
+    bisector's normal is nb = (s, 1 + c)/|.|, the bisector itself (nb_y, -nb_x). Returns
+    the unit normal (alpha, gamma) and the plane point (xi, eta) relative to J, (j,) each."""
     k = plan.medial                  # constants per joint side: see _plan_skin
-    c2, s2 = np.concatenate([c, c]), np.concatenate([s, s])
-    one_c = 1.0 + c2
-    inv = 1.0 / np.sqrt(s2 * s2 + one_c * one_c)
-    nb_x, nb_y = s2 * inv, one_c * inv
-    bis_x, bis_y = one_c * inv, -s2 * inv
-    p1_y = k["sigma_rp"]
-    q_x, q_y = k["sigma_rc"] * s2, k["sigma_rc"] * c2 - p1_y          # p2 - p1
-    d1_y = k["sigma"] * np.concatenate([kp, kp])
-    d2_x, d2_y = c2 + k["sigma_kc"] * s2, k["sigma_kc"] * c2 - s2
-    den = d1_y * d2_x - d2_y
+    one_c = 1.0 + c
+    inv = s * s
+    inv += one_c * one_c
+    np.sqrt(inv, out=inv)
+    np.divide(1.0, inv, out=inv)
+    nb_x, nb_y = s * inv, one_c * inv
+    p1_y, rc = k["sigma_rp"], k["sigma_rc"]
+    q_x = rc * s                                       # p2 - p1
+    q_y = rc * c
+    q_y -= p1_y
+    d1_y = k["sigma"] * kp
+    d2_x = k["sigma_kc"] * s
+    d2_x += c
+    d2_y = k["sigma_kc"] * c
+    d2_y -= s
+    den = d1_y * d2_x
+    den -= d2_y
     den_abs = np.abs(den)
     if np.any(den_abs <= tol.tiny):
         den = np.where(den_abs > tol.tiny, den, tol.tiny)
-    lim = k["lim"]
-    s_slope = np.minimum(np.maximum((q_y * d2_x - q_x * d2_y) / den, -lim), lim)
-    den_cyl = np.maximum(s2, tol.tiny)
-    s_cyl = np.minimum(np.maximum((q_y * c2 + q_x * s2) / den_cyl, -lim), lim)
-    ramp = np.minimum(np.maximum((den_abs / den_cyl - 0.25) / 0.25, 0.0), 1.0)
-    w = ramp * ramp * (3 - 2 * ramp)
-    a_x = w * s_slope + (1 - w) * s_cyl
-    a_y = w * (p1_y + s_slope * d1_y) + (1 - w) * p1_y
+    s_slope = q_y * d2_x
+    s_slope -= q_x * d2_y
+    s_slope /= den
+    np.clip(s_slope, k["neg_lim"], k["lim"], out=s_slope)
+    den_cyl = np.maximum(s, tol.tiny)
+    s_cyl = q_y * c
+    s_cyl += q_x * s
+    s_cyl /= den_cyl
+    np.clip(s_cyl, k["neg_lim"], k["lim"], out=s_cyl)
+    ramp = den_abs
+    ramp /= den_cyl
+    ramp -= 0.25
+    ramp /= 0.25
+    np.clip(ramp, 0.0, 1.0, out=ramp)
+    w = ramp * ramp
+    ramp *= -2
+    ramp += 3
+    w *= ramp                                          # smoothstep: ramp²(3 - 2 ramp)
+    rest = 1 - w
+    a_x = w * s_slope
+    a_x += rest * s_cyl
+    a_y = s_slope
+    a_y *= d1_y
+    a_y += p1_y
+    a_y *= w
+    a_y += rest * p1_y
     f_x, f_y = k["sigma_rbar"] * nb_x, k["sigma_rbar"] * nb_y
-    g_x, g_y = a_x - f_x, a_y - f_y
-    off = g_x * bis_x + g_y * bis_y
-    fade = k["scale"] / np.maximum(np.abs(off), k["scale"])      # 1 while |off| <= scale
+    g_x, g_y = a_x, a_y
+    g_x -= f_x
+    g_y -= f_y
+    off = g_x * nb_y
+    off -= g_y * nb_x
+    fade = np.abs(off)
+    np.maximum(fade, k["scale"], out=fade)
+    np.divide(k["scale"], fade, out=fade)               # 1 while |off| <= scale
     fade *= fade
     fade *= fade
-    along = np.minimum(np.maximum(g_x * nb_x + g_y * nb_y, -k["clip"]), k["clip"])
-    pt_x = f_x + fade * off * bis_x + along * nb_x
-    pt_y = f_y + fade * off * bis_y + along * nb_y
-    diff_x, diff_y = pt_x[:j] - pt_x[j:], pt_y[:j] - pt_y[j:]
+    fade *= off
+    along = g_x
+    along *= nb_x
+    g_y *= nb_y
+    along += g_y
+    np.clip(along, k["neg_clip"], k["clip"], out=along)
+    pt_x = fade * nb_y
+    pt_x += f_x
+    pt_x += along * nb_x
+    pt_y = fade * nb_x
+    np.subtract(f_y, pt_y, out=pt_y)
+    pt_y += along * nb_y
+    diff_x, diff_y = pt_x[0] - pt_x[1], pt_y[0] - pt_y[1]
     length = np.sqrt(diff_x * diff_x + diff_y * diff_y)
     ok = length > tol.tiny
     n_x, n_y = -diff_y / np.where(ok, length, 1.0), diff_x / np.where(ok, length, 1.0)
     if not ok.all():         # the two points coincide: the bisector plane
         fb = 1.0 / np.sqrt((1.0 + c) ** 2 + s * s)
         n_x, n_y = np.where(ok, n_x, (1.0 + c) * fb), np.where(ok, n_y, -s * fb)
-    flip = np.where(n_x * bis_x[:j] + n_y * bis_y[:j] < 0, -1.0, 1.0)
-    return flip * n_x, flip * n_y, 0.5 * (pt_x[:j] + pt_x[j:]), 0.5 * (pt_y[:j] + pt_y[j:])
+    flip = n_x * nb_y - n_y * nb_x < 0
+    np.negative(n_x, out=n_x, where=flip)
+    np.negative(n_y, out=n_y, where=flip)
+    pt_x[0] += pt_x[1]
+    pt_y[0] += pt_y[1]
+    pt_x[0] *= 0.5
+    pt_y[0] *= 0.5
+    return n_x, n_y, pt_x[0], pt_y[0]
 
 
 def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
@@ -435,13 +502,17 @@ def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
     li = plan.linked
     p, ch = plan.link_par, plan.link_child
     nm = joints.nm.take(li, 1)
-    at_p = _dot3(nm, seg.e1.take(p, 1)) + 1j * _dot3(nm, seg.e2.take(p, 1))
-    at_c = _dot3(nm, seg.e1.take(ch, 1)) + 1j * _dot3(nm, seg.e2.take(ch, 1))
+    at_p, at_c = np.empty(len(li), dtype=complex), np.empty(len(li), dtype=complex)
+    for at, rows in ((at_p, p), (at_c, ch)):
+        at.real = _dot3(nm, seg.e1.take(rows, 1))
+        at.imag = _dot3(nm, seg.e2.take(rows, 1))
+    np.conjugate(at_p, out=at_p)
     step = np.ones(plan.n, dtype=complex)
-    step[ch] = at_c * at_p.conjugate()
+    step[ch] = at_c * at_p
     turn = plan.chains.product(step)
     turn /= np.abs(turn)
-    chi = turn.take(p) * at_p.conjugate()
+    chi = turn.take(p)
+    chi *= at_p
     cos_x, sin_x = chi.real, chi.imag
     alpha, gamma = joints.alpha.take(li), joints.gamma.take(li)
     c, s = joints.c.take(li), joints.s.take(li)

@@ -32,7 +32,7 @@ PYRAMID_CORNERS = _CORNERS_F64.astype(np.float32)
 PYRAMID_TRIANGLES = _TRIANGLES_I64.astype(np.int32)
 
 
-def pack_records(frusta, origin) -> np.ndarray:
+def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     """One float32 record per segment for upload.
 
     Parameters
@@ -40,36 +40,45 @@ def pack_records(frusta, origin) -> np.ndarray:
     frusta : Frusta (see plantgen.geometry.frusta), n rows, float64, world units
     origin : (3,) float64, the render origin (the camera eye); positions and plane offsets
         are made relative to it in float64 before the cast to float32
+    out : optional (n, 24) float32 C-contiguous array to write the records into (a buffer
+        reused frame after frame); a new one when None
 
     Returns
     -------
-    (n, 24) float32: base - origin, h | axis, r1 | ref_dir, r2 | plane_lo | plane_hi |
-    u_offset, twist, shell, tag. Plane offsets are relative to the base point
-    (d - n·base, formed in float64), as plantgen.geometry.reference uploads them. 96 bytes
-    per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open); an end is
-    open unless a continuing row shares its plane (open ends are capped surfaces, shared
-    joint planes are not).
+    (n, 24) float32 (``out`` when given): base - origin, h | axis, r1 | ref_dir, r2 |
+    plane_lo | plane_hi | u_offset, twist, shell, tag. Plane offsets are relative to the
+    base point (d - n·base, formed in float64), as plantgen.geometry.reference uploads them.
+    96 bytes per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open);
+    an end is open unless a continuing row shares its plane (open ends are capped surfaces,
+    shared joint planes are not). Every value is formed in float64 and rounded once to
+    float32 as it is written.
     """
     origin = np.asarray(origin, dtype=np.float64)
     n = len(frusta.base)
-    rec = np.empty((n, RECORD_FLOATS), dtype=np.float64)
-    rec[:, 0:3] = frusta.base - origin
-    rec[:, 3] = frusta.length
-    rec[:, 4:7] = frusta.axis
-    rec[:, 7] = frusta.r1
-    rec[:, 8:11] = frusta.ref_dir
-    rec[:, 11] = frusta.r2
-    for col, plane in ((12, frusta.plane_lo), (16, frusta.plane_hi)):
-        rec[:, col:col + 3] = plane[:, :3]
-        rec[:, col + 3] = plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base)
-    rec[:, 20] = frusta.u_offset
-    rec[:, 21] = frusta.twist
-    rec[:, 22] = frusta.shell
-    material = np.asarray(frusta.material, dtype=np.int64)
+    if out is None:
+        out = np.empty((n, RECORD_FLOATS), dtype=np.float32)
+    elif out.shape != (n, RECORD_FLOATS) or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(f"pack_records: out must be a C-contiguous ({n}, {RECORD_FLOATS}) float32 array")
+    material = np.asarray(frusta.material)
     if n and (material.min() < 0 or material.max() > 255):
         raise PlantgenError("material indices must lie in 0..255 for the ray caster")
-    rec[:, 23] = material + 256 * frusta.open_lo + 512 * frusta.open_hi
-    return rec.astype(np.float32)
+    np.subtract(frusta.base, origin, out=out[:, 0:3])
+    out[:, 3] = frusta.length
+    out[:, 4:7] = frusta.axis
+    out[:, 7] = frusta.r1
+    out[:, 8:11] = frusta.ref_dir
+    out[:, 11] = frusta.r2
+    for col, plane in ((12, frusta.plane_lo), (16, frusta.plane_hi)):
+        out[:, col:col + 3] = plane[:, :3]
+        out[:, col + 3] = plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base)
+    out[:, 20] = frusta.u_offset
+    out[:, 21] = frusta.twist
+    out[:, 22] = frusta.shell
+    tag = material.astype(np.int64)
+    tag += 256 * frusta.open_lo
+    tag += 512 * frusta.open_hi
+    out[:, 23] = tag
+    return out
 
 
 def rc_buffer_bytes(n_rows: int) -> int:
@@ -89,6 +98,7 @@ class RecordStream:
         self.buffer = None
         self._origin = None
         self._static_records = None
+        self._moving_records = None      # float32 records reused while the row count holds
 
     def write(self, static, moving, origin) -> tuple[float, float, int]:
         """Make :attr:`buffer` hold the records of ``static`` then ``moving`` (Frusta, or
@@ -101,7 +111,11 @@ class RecordStream:
         n_total = n_static + (len(moving) if moving is not None else 0)
         first = self.buffer is None or self._origin is None or not np.array_equal(origin, self._origin)
         t0 = time.perf_counter()
-        moving_records = pack_records(moving, origin) if moving is not None and len(moving) else None
+        moving_records = None
+        if moving is not None and len(moving):
+            reuse = self._moving_records is not None and len(self._moving_records) == len(moving)
+            moving_records = pack_records(moving, origin, self._moving_records if reuse else None)
+            self._moving_records = moving_records
         if first:
             self._static_records = pack_records(static, origin)
         t1 = time.perf_counter()
@@ -116,7 +130,7 @@ class RecordStream:
             self.buffer.write(self._static_records.tobytes(), offset=0)
             written += self._static_records.nbytes
         if moving_records is not None:
-            self.buffer.write(moving_records.tobytes(), offset=n_static * RECORD_BYTES)
+            self.buffer.write(moving_records, offset=n_static * RECORD_BYTES)
             written += moving_records.nbytes
         self._origin = origin
         t2 = time.perf_counter()
