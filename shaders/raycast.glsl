@@ -339,16 +339,15 @@ void main() {
     vec3 normal = frustum_normal(f, p, v);
     if (cap) normal = face == FACE_LO ? -f.plane_lo.xyz : f.plane_hi.xyz;
     vec2 uv = frustum_uv_at(f, p, v);
-    float texel = height_at(f.material, uv);
+    HeightMap heights = height_map(f.material);
+    float texel = height_in(heights, uv);
 #if defined RELIEF
     if (f.shell > 0.0 && !cap) {
         // Tilt the normal by the height map's gradient in the (u, v) frame.
-        ivec2 size = textureSize(height_maps, 0).xy;
-        vec2 rep = texture_repeat[clamp(f.material, 0, MAX_MATERIALS - 1)];
-        vec2 du = vec2(1.0 / (float(size.x) * rep.x), 0.0);
-        vec2 dv = vec2(0.0, 1.0 / (float(size.y) * rep.y));
-        float dh_du = (height_at(f.material, uv + du) - height_at(f.material, uv - du)) / (2.0 * du.x);
-        float dh_dv = (height_at(f.material, uv + dv) - height_at(f.material, uv - dv)) / (2.0 * dv.y);
+        vec2 du = vec2(1.0 / (heights.size.x * heights.repeat.x), 0.0);
+        vec2 dv = vec2(0.0, 1.0 / (heights.size.y * heights.repeat.y));
+        float dh_du = (height_in(heights, uv + du) - height_in(heights, uv - du)) / (2.0 * du.x);
+        float dh_dv = (height_in(heights, uv + dv) - height_in(heights, uv - dv)) / (2.0 * dv.y);
         float y, radial; vec3 e_r, g; float s_lo, s_hi;
         frustum_local(f, p, y, radial, e_r);
         generator_params(f, p, e_r, g, s_lo, s_hi);
