@@ -261,7 +261,11 @@ bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_o
     float v_in = frustum_v(f, o + t_in * d), v_end = frustum_v(f, o + t_end * d);
     ivec2 plan = march_steps(f, r, m, t_in, t_end, v_in, v_end, distance);
     int steps = plan.x;
-    float t_prev = t_in;
+    // Linear search for the first sample on or under the relief; then, outside the loop (so
+    // that neighbouring rays that stop at different samples share one bisection), bisect
+    // between the last sample above and that one.
+    float t_out = t_in, t_inside = t_in;
+    bool found = false;
     samples = 0;
     for (int i = 0; i <= steps; ++i) {
         float s = float(i) / float(steps);
@@ -269,20 +273,23 @@ bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_o
         float ground = height_in(m, shell_uv_at(f, r, o, d, t, mix(v_in, v_end, s)));
         ++samples;
         if (shell_height_at(f, r, t) <= ground || (i == steps && end_on_inner)) {
-            float t_out = t_prev, t_inside = t;      // bisect between above and below
-            for (int b = 0; b < plan.y && i > 0; ++b) {
-                float t_mid = 0.5 * (t_out + t_inside);
-                float sm = (t_mid - t_in) / max(t_end - t_in, 1e-30);
-                float gm = height_in(m, shell_uv_at(f, r, o, d, t_mid, mix(v_in, v_end, sm)));
-                ++samples;
-                if (shell_height_at(f, r, t_mid) <= gm) t_inside = t_mid; else t_out = t_mid;
-            }
-            t_hit = t_inside;
-            return true;
+            t_inside = t;
+            found = true;
+            break;
         }
-        t_prev = t;
+        t_out = t;
     }
-    return false;
+    if (!found) return false;
+    int halvings = t_inside > t_in ? plan.y : 0;    // a hit at the entry needs no bisection
+    for (int b = 0; b < halvings; ++b) {
+        float t_mid = 0.5 * (t_out + t_inside);
+        float sm = (t_mid - t_in) / max(t_end - t_in, 1e-30);
+        float gm = height_in(m, shell_uv_at(f, r, o, d, t_mid, mix(v_in, v_end, sm)));
+        ++samples;
+        if (shell_height_at(f, r, t_mid) <= gm) t_inside = t_mid; else t_out = t_mid;
+    }
+    t_hit = t_inside;
+    return true;
 }
 #endif
 
