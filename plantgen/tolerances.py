@@ -95,9 +95,12 @@ class Tolerances:
     """Relative (to the mean joint radius): clip of where a joint's two boundary lines
     cross (nearly parallel lines); the construction fades such crossings out anyway."""
 
-    seam_fit: float = 1e-9
-    """Relative (to the joint radius): seam fitting stops when the minor semi-axes of the
-    two cuts at every joint agree to this (§2.2; ``skin_skeleton(seam_tol=...)``)."""
+    seam_radius_change: float = 0.25
+    """Relative (to the skeleton's radius): closing a seam moves a continuing child's base
+    radius by about r·(k_c² - k_p²)/2 (``plantgen.geometry.skin.seam_radii``); a joint that
+    would move it by more than this (a short child tapering steeply next to its radius,
+    whose generators must then touch a sphere nearly as large as the child) becomes a
+    knuckle instead, which is closed at any taper."""
 
     fan_length: float = 1e-9
     """Relative (to the radius): the length of a knuckle fan row, a slice with no extent

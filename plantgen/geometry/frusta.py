@@ -66,7 +66,7 @@ __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRI
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
            "frusta_bounds", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
-           "minor_semi_axis", "seam_mismatch"]
+           "minor_semi_axis", "seam_mismatch", "seam_gap"]
 
 #: Names of the per-row arrays of the contract, in contract order.
 ROW_FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir",
@@ -104,8 +104,9 @@ class SkinReport:
     """What skinning did to a skeleton, for logs and benchmarks.
 
     ``seam_mismatch_*`` are the largest and mean difference of the minor semi-axes of the
-    two elliptical cuts at continuing joints, relative to the joint radius (§2.2); the
-    ``after`` values are None unless seam fitting ran. Joints with a radius step of more
+    two elliptical cuts at continuing joints, relative to the joint radius (§2.2): ``before``
+    with the paper's planes on the skeleton's radii, ``after`` as built with the seams fitted
+    (``skin_skeleton(seam_fit=True)``, the default; None without). Joints with a radius step of more
     than ``tol.radius_step`` (5 %, ``step_joints``) are left out of both: their mismatch is
     modelled.
     """
@@ -124,7 +125,6 @@ class SkinReport:
     seam_mismatch_mean_before: float = 0.0
     seam_mismatch_max_after: float | None = None
     seam_mismatch_mean_after: float | None = None
-    seam_fit_iterations: int = 0
 
     def lines(self) -> list[str]:
         s = [f"{self.n_segments} segments -> {self.n_rows} rows; {self.joints} joints, "
@@ -135,7 +135,7 @@ class SkinReport:
              f"seam mismatch (minor axes, / radius): max {self.seam_mismatch_max_before:.3g}, "
              f"mean {self.seam_mismatch_mean_before:.3g}"]
         if self.seam_mismatch_max_after is not None:
-            s[-1] += (f"; after fitting ({self.seam_fit_iterations} iterations): max "
+            s[-1] += (f"; fitted: max "
                       f"{self.seam_mismatch_max_after:.3g}, mean {self.seam_mismatch_mean_after:.3g}")
         return s
 
@@ -656,3 +656,32 @@ def seam_mismatch(frusta: Frusta) -> np.ndarray:
         centre = 0.5 * (ends[0] + ends[1])
         widths.append(minor_semi_axis(centre, frusta.base[rows], a, frusta.r1[rows], k))
     return np.abs(widths[0] - widths[1]) / np.maximum(frusta.r1[c], tol.tiny)
+
+
+def seam_gap(frusta: Frusta, samples: int = 256) -> np.ndarray:
+    """(j,) the largest radial gap of every continuing joint's seam, relative to the
+    child's base radius, in float64: points of the child's cut (its generators at
+    ``samples`` angles meeting the shared plane) measured against the parent's cone
+    (|axis distance - r(y)| at their axial height on the parent). 0 where the two cuts are
+    the same ellipse; the rim gap a ray from inside can escape through otherwise."""
+    c = np.flatnonzero(frusta.parent_row >= 0)
+    if c.size == 0:
+        return np.zeros(0)
+    p = frusta.parent_row[c]
+    plane = frusta.plane_lo[c]
+    a, base, r1, k = frusta.axis[c], frusta.base[c], frusta.r1[c], frusta.slope[c]
+    e1 = frusta.ref_dir[c]
+    e2 = np.cross(a, e1)
+    psi = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
+    e = np.cos(psi)[None, :, None] * e1[:, None, :] + np.sin(psi)[None, :, None] * e2[:, None, :]
+    nrm = plane[:, None, :3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y, _ = plane_height((plane[:, 3] - dot(plane[:, :3], base))[:, None], dot(plane[:, :3], a)[:, None],
+                            dot(nrm, e), r1[:, None], k[:, None])
+    point = base[:, None, :] + y[..., None] * a[:, None, :] + (r1[:, None] + k[:, None] * y)[..., None] * e
+    rel = point - frusta.base[p][:, None, :]
+    ap = frusta.axis[p][:, None, :]
+    yp = dot(rel, ap)
+    radial = norm(rel - yp[..., None] * ap)
+    gap = np.abs(radial - (frusta.r1[p][:, None] + frusta.slope[p][:, None] * yp))
+    return np.max(np.where(np.isfinite(gap), gap, np.inf), axis=1) / np.maximum(r1, tol.tiny)

@@ -6,9 +6,14 @@
 1. segment axes and lengths (:func:`_segment_axes`), continuing children and side
    branches (:func:`continuing_children`);
 2. side-branch bases, moved back into the parent (:func:`_extend_side_branches`);
-3. joint planes (3)–(5) at continuing joints (:func:`_joint_cuts`: the planes of
-   :func:`_joint_planes`, the seam mismatch measured by :func:`_seam_mismatch_at` and
-   optionally fitted by :func:`_fit_seams`, §2.2);
+3. joint planes at continuing joints (:func:`_joint_cuts`). By default the seams close
+   exactly: each continuing child's base radius is set so that both cones touch one
+   sphere around the joint (:func:`seam_radii`, the closed form of §2.2's minor-axis
+   fit), and the plane through the crossings of the boundary lines (3)–(5), found as
+   tangents of that sphere (:func:`_sphere_planes`), then cuts both cones in the same
+   ellipse. ``seam_fit=False`` keeps the paper's planes on the skeleton's radii
+   (:func:`_joint_planes`); the report measures their seam mismatch either way
+   (:func:`_seam_mismatch_at`);
 4. sharp joints (:func:`_sharp_joints`) and their knuckle fans (:func:`_row_layout`,
    :func:`_fill_knuckle_fans`);
 5. texture frames: reference directions carried along each chain
@@ -53,11 +58,11 @@ from .vec import (
     unit,
 )
 
-__all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled"]
+__all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled",
+           "seam_radii", "sphere_base_radius"]
 
 
-def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
-                  seam_tol: float = tol.seam_fit, seam_max_iter: int = 50,
+def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
                   max_bend_deg: float = 120.0, fan_step_deg: float = 10.0, twist: float = 0.0,
                   extend_side_branches: bool = True) -> Frusta:
     """Skin a skeleton with conical frusta, vectorised over all segments (§2).
@@ -69,9 +74,15 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
         :data:`plantgen.geometry.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
         segment's mean radius (r_start + r_end)/2; a value v < 0 means an absolute
         thickness of -v world units. Names missing from a given dict get 0 (no relief).
-    seam_fit : run the minor-axis seam fitting of §2.2 (iterate each continuing child's
-        r1 until the minor semi-axes of the two cuts agree to ``seam_tol`` · radius)
-    max_bend_deg : joints bending more than this (degrees) become knuckles, as do joints
+    seam_fit : close every continuing joint's seam exactly (the default): each continuing
+        child's r1 is set so that the two cones touch one sphere around the joint, and the
+        joint plane passes through the crossings of their boundary lines, which are then
+        tangent to that sphere's great circle (:func:`seam_radii`, :func:`_sphere_planes`).
+        This is §2.2's minor-axis fit in closed form. False: the paper's construction with
+        the skeleton's radii (:func:`_joint_planes`), whose seams leave a gap at tapering,
+        bent joints (measured in the report)
+    max_bend_deg : joints bending more than this (degrees) become knuckles (a fan of short
+        cylinder slices around the joint, see the module docstring), as do joints
         whose plane does not cut a cone in an ellipse and joints of segments whose two
         planes would cross inside them
     fan_step_deg : largest bend (degrees) of one knuckle fan slice
@@ -99,16 +110,8 @@ def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = False,
     parent = skeleton.parent[child]
     joints = _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child])
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
-    if seam_fit:
-        report.seam_mismatch_max_after = report.seam_mismatch_mean_after = 0.0
     if child.size:
-        normal, point, medial = _joint_cuts(seg, joints, seam_fit, seam_tol, seam_max_iter, report)
-        joint_plane = plane_through(normal, point)
-        lo[child] = joint_plane
-        hi[joints.parent] = joint_plane
-        sharp, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
-        hi[joints.parent[sharp]] = plane_through(joints.parent_axis[sharp], joints.point[sharp])
-        lo[child[sharp]] = plane_through(joints.child_axis[sharp], joints.point[sharp])
+        sharp, bend, medial = _joint_cuts(seg, joints, skeleton, lo, hi, seam_fit, max_bend_deg, report)
 
     rows, row_of_seg, fan_count = _row_layout(seg, lo, hi, joints, sharp, bend, skeleton,
                                               fan_step_deg)
@@ -270,13 +273,7 @@ def _joint_planes(J, M1, M2, rp, rc, kp, kc):
     Returns plane normals (m, 3) (oriented along M1 + M2), plane points (m, 3), and the
     medial normal N_m (m, 3).
     """
-    axes_cross = cross(M1, M2)
-    sin_t = norm(axes_cross)
-    nm = axes_cross / np.where(sin_t > tol.tiny, sin_t, 1.0)[:, None]
-    collinear = sin_t <= tol.tiny
-    if collinear.any():
-        nm[collinear] = cross(M1[collinear], any_perpendicular(M1[collinear]))
-    nm = unit(nm)
+    nm = _medial_normal(M1, M2)
     n1, n2 = cross(M1, nm), cross(M2, nm)
     nb = unit(n1 + n2, n1)
     bis = unit(M1 + M2, cross(nm, nb))
@@ -313,6 +310,115 @@ def _joint_planes(J, M1, M2, rp, rc, kp, kc):
     return normal, 0.5 * (A + B), nm
 
 
+def _medial_normal(M1, M2):
+    """(m, 3) unit normal N_m of the medial plane (3) of unit axes M1, M2 (m, 3), ⟂ M1 to
+    round-off at every bend; where they are collinear, any vector ⟂ M1 (the paper's
+    coordinate-axis fallback)."""
+    axes_cross = cross(M1, M2)
+    sin_t = norm(axes_cross)
+    nm = axes_cross / np.where(sin_t > tol.tiny, sin_t, 1.0)[:, None]
+    collinear = sin_t <= tol.tiny
+    if collinear.any():
+        nm[collinear] = cross(M1[collinear], any_perpendicular(M1[collinear]))
+    # M1 × M2 of nearly collinear axes loses digits to cancellation (relative error
+    # 1e-16 / sin of the bend), also along M1: remove that part so N_m ⟂ M1 exactly
+    return unit(nm - dot(nm, M1)[:, None] * M1)
+
+
+def _sphere_planes(J, M1, M2, rp, rc, kp, kc):
+    """The joint planes that close the seam exactly (arguments as :func:`_joint_planes`).
+
+    A cone of revolution r = r1 + k·y touches the sphere around an axis point J of radius
+    ρ = r(J)/sqrt(1 + k²) along a circle (ρ is the distance from J to the cone's
+    generators). Two cones that touch the same sphere meet in two plane conics (two
+    quadrics inscribed in one quadric intersect in plane curves), so when
+    ``rp/sqrt(1 + kp²) = rc/sqrt(1 + kc²)`` (:func:`seam_radii` makes it so) the plane of
+    one of those conics cuts both cones in the same ellipse: the seam is closed, not
+    nearly closed. In the medial plane each side's two boundary lines are tangent to the
+    circle of radius ρ around J, at the unit directions e_p = (σ·n1 - kp·M1)/sqrt(1 + kp²)
+    and e_c = (σ·n2 - kc·M2)/sqrt(1 + kc²); they cross at J + ρ·(e_p + e_c)/(1 + e_p·e_c)
+    (A for σ = +1, B for σ = -1: the paper's (4)-(5) points, found without intersecting
+    two nearly parallel lines: at a steep taper the two lines of one side nearly coincide,
+    and their crossing is then near their common tangent point). The plane holds A and B
+    and is ⟂ the medial plane. With unequal ρ (a radius step, capped on both sides) the
+    mean ρ is used. Points are found relative to J, so far from the origin the plane's
+    direction keeps its digits. Where 1 + e_p·e_c vanishes (the lines are parallel on
+    opposite sides of the circle, a fold-back) the plane falls back to the bisector; such a
+    joint is a knuckle anyway (:func:`_sharp_joints`).
+
+    Returns plane normals (m, 3) (oriented along M1 + M2), plane points (m, 3), and the
+    medial normal N_m (m, 3).
+    """
+    nm = _medial_normal(M1, M2)
+    n1, n2 = cross(M1, nm), cross(M2, nm)
+    sp, sc = np.sqrt(1.0 + kp * kp)[:, None], np.sqrt(1.0 + kc * kc)[:, None]
+    rho = 0.5 * (rp[:, None] / sp + rc[:, None] / sc)
+    rel = []
+    parallel = np.zeros(len(J), dtype=bool)
+    for sigma in (1.0, -1.0):
+        ep = (sigma * n1 - kp[:, None] * M1) / sp
+        ec = (sigma * n2 - kc[:, None] * M2) / sc
+        den = 1.0 + dot(ep, ec)
+        far = den <= tol.parallel
+        parallel |= far
+        rel.append(rho * (ep + ec) / np.where(far, 1.0, den)[:, None])
+    bis = unit(M1 + M2, cross(nm, unit(n1 + n2, n1)))
+    normal = unit(cross(rel[0] - rel[1], nm), bis)
+    normal = np.where((dot(normal, bis) < 0)[:, None], -normal, normal)
+    point = J + 0.5 * (rel[0] + rel[1])
+    if parallel.any():
+        normal[parallel], point[parallel] = bis[parallel], J[parallel]
+    return normal, point, nm
+
+
+def sphere_base_radius(rho, r_end, length):
+    """(m,) the base radius r1 of cones ending in ``r_end`` (m,) after ``length`` (m,)
+    whose generators keep the distance ``rho`` (m,) from the base centre:
+    r1/sqrt(1 + k²) = ρ with k = (r_end - r1)/length. Squared, a quadratic in r1; its
+    positive root, written without cancellation, is
+    ρ·(L² + R²) / (ρ·R + L·sqrt(L² + R² - ρ²)). NaN where there is none: the end rim lies
+    within the sphere (L² + R² <= ρ²), so no generator through it can touch the sphere."""
+    ll = length * length + r_end * r_end
+    outside = ll > rho * rho
+    den = rho * r_end + length * np.sqrt(np.where(outside, ll - rho * rho, 0.0))
+    ok = outside & (den > 0)
+    return np.where(ok, rho * ll / np.where(ok, den, 1.0), np.nan)
+
+
+def seam_radii(r_start, r_end, length, parent, child) -> np.ndarray:
+    """Set the base radii of the continuing children ``child`` (j,) of ``parent`` (j,) in
+    ``r_start`` (n,) (in place) so that at every joint the two cones touch one sphere
+    around the joint (see :func:`_sphere_planes`): r1 = ``sphere_base_radius`` of the
+    parent's ρ = r_end/sqrt(1 + k²). ``r_end`` and ``length`` are kept, so a child's slope
+    changes with its r1, and so does ρ at its own joint below: chains are resolved from
+    their roots, one joint per chain at a time. The shape changes little where it did not
+    already gap: ρ is unchanged between cones of equal slope, and the radius moves by
+    about r·(k_c² - k_p²)/2 for small slopes (§2.2's fit, which iterates to this).
+
+    Returns (j,) bool: the joints with no such radius (:func:`sphere_base_radius` is NaN);
+    their children keep their radius, and the caller must make them knuckles."""
+    n = len(r_start)
+    j = len(child)
+    joint_of_child = np.full(n, -1, dtype=np.int64)
+    joint_of_child[child] = np.arange(j)
+    above = joint_of_child[parent]            # the joint whose child is this joint's parent
+    below = np.full(j, -1, dtype=np.int64)
+    below[above[above >= 0]] = np.flatnonzero(above >= 0)
+    failed = np.zeros(j, dtype=bool)
+    frontier = np.flatnonzero(above < 0)
+    while frontier.size:
+        p, c = parent[frontier], child[frontier]
+        kp = cone_slope(r_start[p], r_end[p], length[p])
+        rho = r_end[p] / np.sqrt(1.0 + kp * kp)
+        r1 = sphere_base_radius(rho, r_end[c], length[c])
+        none = np.isnan(r1)
+        failed[frontier] = none
+        r_start[c] = np.where(none, r_start[c], r1)
+        frontier = below[frontier]
+        frontier = frontier[frontier >= 0]
+    return failed
+
+
 def _line_crossing(p1, d1, p2, d2, nm, scale):
     """Where the lines p1 + s·d1 and p2 + s'·d2 (m, 3) of the planes ⟂ ``nm`` (m, 3) cross:
     s (m,) along the first line, clipped to ±``tol.runaway``·``scale`` (m,), and the
@@ -333,89 +439,76 @@ def _seam_mismatch_at(seg: _Segments, joints: _Joints, point, rc) -> np.ndarray:
     return b_parent - minor_semi_axis(point, seg.base[child], seg.axis[child], rc, kc)
 
 
-def _joint_cuts(seg: _Segments, joints: _Joints, seam_fit: bool, seam_tol: float,
-                max_iter: int, report: SkinReport):
-    """The joint planes of every continuing joint: normals (j, 3), points (j, 3) and
-    medial normals (j, 3). Measures the seam mismatch into ``report`` and, with
-    ``seam_fit``, fits the children's base radii (``seg.r_start``, in place) first.
+def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, seam_fit: bool,
+                max_bend_deg: float, report: SkinReport):
+    """Cut every continuing joint: set the shared planes in ``lo`` and ``hi`` (n, 4), and
+    the sharp joints' perpendicular planes, in place. Returns (j,) sharp, (j,) bends in
+    degrees and (j, 3) medial normals.
 
-    A radius step at a joint (more than ``tol.radius_step``) is modelled, not a seam
-    error: it is neither measured nor fitted.
+    The report gets the paper's seam mismatch (§2.2: its planes, the skeleton's radii) at
+    smooth joints (radii within ``tol.radius_step``; a radius step is modelled, not a seam
+    error) and, with ``seam_fit``, the mismatch left at the linked joints that are not
+    knuckles. With ``seam_fit`` the linked joints' children get :func:`seam_radii` (in
+    ``seg.r_start``) and :func:`_sphere_planes`; a knuckle keeps the skeleton's radius
+    (its fan is a cylinder of that radius), as does a joint whose child's radius would
+    move more than ``tol.seam_radius_change`` or has no closing radius; as that changes the radii below it, the
+    planes and knuckles are found again until no new knuckle appears.
     """
     par, child = joints.parent, joints.child
+    J, M1, M2 = joints.point, joints.parent_axis, joints.child_axis
+    rp, rc0 = seg.r_end[par], seg.r_start[child].copy()
     k = seg.slope
-    rp = seg.r_end[par]
-    rc = seg.r_start[child].copy()
-    normal, point, nm = _joint_planes(joints.point, joints.parent_axis, joints.child_axis,
-                                      rp, rc, k[par], k[child])
-    rel = np.abs(_seam_mismatch_at(seg, joints, point, rc)) / np.maximum(rp, tol.tiny)
-    smooth = np.abs(rp - rc) <= tol.radius_step * np.maximum(rp, rc)
+    normal, point, nm = _joint_planes(J, M1, M2, rp, rc0, k[par], k[child])
+    smooth = np.abs(rp - rc0) <= tol.radius_step * np.maximum(rp, rc0)
     report.step_joints = int((~smooth).sum())
     if smooth.any():
-        report.seam_mismatch_max_before = float(rel[smooth].max())
-        report.seam_mismatch_mean_before = float(rel[smooth].mean())
-    if seam_fit and smooth.any():
-        sm = np.flatnonzero(smooth)
-        fitting = _Joints(child[sm], par[sm], joints.point[sm], joints.parent_axis[sm],
-                          joints.child_axis[sm])
-        fit = _fit_seams(seg, fitting, rc[sm], tolerance=seam_tol, max_iter=max_iter)
-        rc[sm], normal[sm], point[sm], nm[sm] = fit.radius, fit.normal, fit.point, fit.medial
-        seg.r_start[child] = rc
-        report.seam_mismatch_max_after = float(fit.mismatch.max())
-        report.seam_mismatch_mean_after = float(fit.mismatch.mean())
-        report.seam_fit_iterations = fit.iterations
-    return normal, point, nm
+        rel = np.abs(_seam_mismatch_at(seg, joints, point, rc0))[smooth] / np.maximum(rp[smooth], tol.tiny)
+        report.seam_mismatch_max_before = float(rel.max())
+        report.seam_mismatch_mean_before = float(rel.mean())
+    sharp = np.zeros(len(child), dtype=bool)
+    if not seam_fit:
+        _set_joint_planes(lo, hi, joints, normal, point)
+        sharp, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
+    else:
+        linked = _linked(skeleton, par, child)
+        for _ in range(4):
+            seg.r_start[child] = rc0
+            fit = linked & ~sharp
+            failed = np.zeros(len(child), dtype=bool)
+            failed[fit] = seam_radii(seg.r_start, seg.r_end, seg.length, par[fit], child[fit])
+            k = seg.slope
+            normal, point, nm = _sphere_planes(J, M1, M2, rp, seg.r_start[child], k[par], k[child])
+            _set_joint_planes(lo, hi, joints, normal, point)
+            found, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
+            moved = np.abs(seg.r_start[child] - rc0) > tol.seam_radius_change * np.maximum(rc0, tol.tiny)
+            found |= fit & (moved | failed)
+            if not (found & ~sharp).any():
+                break
+            sharp |= found
+        report.sharp_joints = int(sharp.sum())
+        fitted = linked & ~sharp
+        left = np.abs(_seam_mismatch_at(seg, joints, point, seg.r_start[child]))[fitted]
+        left = left / np.maximum(rp[fitted], tol.tiny)
+        report.seam_mismatch_max_after = float(left.max()) if left.size else 0.0
+        report.seam_mismatch_mean_after = float(left.mean()) if left.size else 0.0
+    hi[par[sharp]] = plane_through(M1[sharp], J[sharp])
+    lo[child[sharp]] = plane_through(M2[sharp], J[sharp])
+    return sharp, bend, nm
 
 
-@dataclass(frozen=True)
-class _SeamFit:
-    """What :func:`_fit_seams` found for j joints: the children's base ``radius`` (j,),
-    the joint planes (``normal``, ``point``, ``medial``: (j, 3) each), the ``iterations``
-    it took and the remaining ``mismatch`` (j,) relative to the parent radius."""
-
-    radius: np.ndarray
-    normal: np.ndarray
-    point: np.ndarray
-    medial: np.ndarray
-    iterations: int
-    mismatch: np.ndarray
+def _set_joint_planes(lo, hi, joints: _Joints, normal, point) -> None:
+    """Share each joint's plane (normals, points (j, 3)) between its parent's ``hi`` and
+    its child's ``lo`` (n, 4), in place, bit for bit."""
+    plane = plane_through(normal, point)
+    lo[joints.child] = plane
+    hi[joints.parent] = plane
 
 
-def _fit_seams(seg: _Segments, joints: _Joints, rc: np.ndarray, *, tolerance: float,
-               max_iter: int) -> _SeamFit:
-    """Secant iteration on each child's r1 (from ``rc`` (j,)) until the two minor
-    semi-axes agree to ``tolerance`` times the parent radius (§2.2), or ``max_iter``.
-
-    All joints iterate together; a child that is itself a parent at the next joint passes
-    its new slope on at once (the coupling along a chain), so the iteration works on the
-    current radii of every segment each round. ``seg`` is not changed.
-    """
-    trial = _Segments(seg.base, seg.axis, seg.length, seg.r_start.copy(), seg.r_end)
-    par, child = joints.parent, joints.child
-    rp = seg.r_end[par]
-
-    def residual(rc_try):
-        trial.r_start[child] = rc_try
-        k_all = trial.slope
-        planes = _joint_planes(joints.point, joints.parent_axis, joints.child_axis, rp, rc_try,
-                               k_all[par], k_all[child])
-        return _seam_mismatch_at(trial, joints, planes[1], rc_try), planes
-
-    scale = np.maximum(rp, tol.tiny)
-    x0 = rc.copy()
-    f0, planes = residual(x0)
-    x1 = np.maximum(x0 + f0, 0.0)
-    f1, planes = residual(x1)
-    it = 1
-    while it < max_iter and np.max(np.abs(f1) / scale) > tolerance:
-        den = f1 - f0
-        secant = f1 * (x1 - x0) / np.where(den != 0, den, 1)
-        step = np.where((np.abs(den) > tol.tiny) & np.isfinite(secant), secant, -f1)
-        x0, f0 = x1, f1
-        x1 = np.maximum(x1 - step, 0.0)
-        f1, planes = residual(x1)
-        it += 1
-    return _SeamFit(x1, planes[0], planes[1], planes[2], it, np.abs(f1) / scale)
+def _linked(skeleton: Skeleton, parent, child) -> np.ndarray:
+    """(j,) bool: the joints whose child continues the chain's surface (the skeleton's radii
+    agree to ``tol.same_length``); the others are radius steps, capped on both sides."""
+    r_end0, r_start0 = skeleton.r_end[parent], skeleton.r_start[child]
+    return np.abs(r_end0 - r_start0) <= tol.same_length * np.maximum(r_end0, r_start0)
 
 
 # ============================================================================ sharp joints
@@ -535,9 +628,8 @@ def _row_layout(seg: _Segments, lo, hi, joints: _Joints, sharp, bend, skeleton: 
     rows.r1[row_of_seg], rows.r2[row_of_seg] = seg.r_start, seg.r_end
     rows.plane_lo[row_of_seg], rows.plane_hi[row_of_seg] = lo, hi
     rows.segment[row_of_seg] = np.arange(n)
-    r_end0, r_start0 = skeleton.r_end[par], skeleton.r_start[child]
-    stepped = np.abs(r_end0 - r_start0) > tol.same_length * np.maximum(r_end0, r_start0)
-    rows.parent_row[row_of_seg[child[~stepped]]] = row_of_seg[par[~stepped]]
+    linked = _linked(skeleton, par, child)
+    rows.parent_row[row_of_seg[child[linked]]] = row_of_seg[par[linked]]
     return rows, row_of_seg, fan_count
 
 

@@ -13,6 +13,8 @@ per-component arrays ((3, n) vectors, (n,) scalars):
   terms with constant path sums); the parts of the rest directions ⟂ k are complex
   numbers in a frame ⟂ k, turned by e^(iT), and the end points are their sums along
   each root path (an Euler-tour cumulative sum: one pass, not one step per tree level);
+* seams: the children's base radii that close the seams (skinning's ``seam_radii``)
+  depend on radii and lengths only, not on the pose, so they are set once;
 * joint planes (3)–(5): every vector of the construction lies in the medial plane, so it
   runs on 2-d coordinates in the frame (M1, n1) of each joint, both sides σ = ±1 at once;
 * texture frames: the rotation-minimising transport from parent to child maps the
@@ -37,7 +39,7 @@ from ..tolerances import tol
 from .frusta import Frusta
 from .motion import SwayRig
 from .skeleton import Skeleton
-from .skin import continuing_children, crossing_rows_sampled, material_shell
+from .skin import continuing_children, crossing_rows_sampled, material_shell, seam_radii
 from .vec import any_perpendicular, cross, reduce_to_root, tree_roots
 
 __all__ = ["SwaySkin", "SwayPose", "PathSum"]
@@ -95,7 +97,8 @@ class SwaySkin:
     @classmethod
     def plan(cls, skeleton: Skeleton, rig: SwayRig) -> SwaySkin | None:
         """The plan for ``skeleton`` moving by ``rig``, or None where the pose is not a
-        turn about one axis per tree (a tree mixing instances) or the skeleton is empty."""
+        turn about one axis per tree (a tree mixing instances), the skeleton is empty, or a
+        seam would move a radius past ``tol.seam_radius_change`` (a knuckle in every pose)."""
         n = len(skeleton)
         par = skeleton.parent
         has_p = par >= 0
@@ -109,6 +112,9 @@ class SwaySkin:
         self = cls()
         self._plan_pose(skeleton, rig)
         self._plan_skin(skeleton)
+        moved = np.abs(self.rc - self.r0c) > tol.seam_radius_change * np.maximum(self.r0c, tol.tiny)
+        if np.any(moved[self.linked]) or self.seam_failed.any():   # knuckles in every pose
+            return None
         return self
 
     # ------------------------------------------------------------------ pose
@@ -180,10 +186,16 @@ class SwaySkin:
         child, side = continuing_children(sk)
         par = sk.parent[child]
         self.child, self.par, self.side, self.host = child, par, side, sk.parent[side]
-        self.r_start, self.r_end = sk.r_start.copy(), sk.r_end.copy()
         size = np.maximum(np.maximum(sk.r_start, sk.r_end), 1.0)
         rest = np.linalg.norm(sk.end - sk.start, axis=1)
         self.length = np.where(rest > 0, rest, tol.zero_length * size)
+        r0p, r0c = sk.r_end[par], sk.r_start[child]
+        self.r0c = r0c
+        stepped = np.abs(r0p - r0c) > tol.same_length * np.maximum(r0p, r0c)
+        self.linked = np.flatnonzero(~stepped)          # joints whose child continues the chain
+        # the seams' radii do not depend on the pose: set once (skinning's seam_radii)
+        self.r_start, self.r_end = sk.r_start.copy(), sk.r_end.copy()
+        self.seam_failed = seam_radii(self.r_start, self.r_end, self.length, par[~stepped], child[~stepped])
         self.slope = (self.r_end - self.r_start) / self.length
         self.side_slope = self.slope[side]
         self.side_r_start, self.side_r_end = self.r_start[side], self.r_end[side]
@@ -191,8 +203,6 @@ class SwaySkin:
         self.side_room = np.maximum(self.r_end[self.host] - self.r_start[side], 0.0)
         self.rp, self.rc = self.r_end[par], self.r_start[child]
         self.abs_r_end = np.abs(self.r_end)
-        stepped = np.abs(self.rp - self.rc) > tol.same_length * np.maximum(self.rp, self.rc)
-        self.linked = np.flatnonzero(~stepped)          # joints whose child continues the chain
         parent_row = np.full(n, -1, dtype=np.int64)
         parent_row[child[~stepped]] = par[~stepped]
         self.parent_row = parent_row
@@ -205,12 +215,9 @@ class SwaySkin:
         kc = self.slope[child]
         self.sin_c = np.abs(kc) / np.sqrt(1 + kc * kc)
         sigma = np.array([[1.0], [-1.0]])               # (2, 1): the joint's two sides
-        rbar = 0.5 * (self.rp + self.rc)
-        scale = np.maximum(rbar, tol.tiny) * np.ones((2, 1))
-        self.medial = {"sigma": sigma, "sigma_rp": sigma * self.rp, "sigma_rc": sigma * self.rc,
-                       "sigma_kc": sigma * kc, "sigma_rbar": sigma * rbar, "scale": scale,
-                       "lim": tol.runaway * scale, "neg_lim": -tol.runaway * scale,
-                       "clip": 4 * scale, "neg_clip": -4 * scale}
+        sc = np.sqrt(1.0 + kc * kc)
+        self.medial = {"sigma": sigma, "rp": self.rp, "rho_c": self.rc / sc,
+                       "ec_m": -kc / sc, "ec_n": sigma / sc}
         mean_r = 0.5 * (sk.r_start + sk.r_end)
         self.constant = {"twist": np.zeros(n), "material": sk.material.astype(np.int32),
                          "shell": material_shell(sk, None, mean_r), "segment": np.arange(n)}
@@ -384,6 +391,8 @@ def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _Fram
         nm[:, collinear] = cross(m1c, any_perpendicular(m1c)).T
     else:
         nm = x * (1.0 / s)
+    nm -= m1 * _dot3(nm, m1)                   # ⟂ M1 to round-off (skinning's _medial_normal)
+    nm *= 1.0 / np.sqrt(_dot3(nm, nm))
     kp = seg.slope.take(par)
     alpha, gamma, xi, eta = _medial_planes(plan, c, s, kp)
     n_child = alpha * c - gamma * s
@@ -403,96 +412,46 @@ def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _Fram
 
 
 def _medial_planes(plan: SwaySkin, c, s, kp):
-    """skinning's joint planes (3)–(5) in 2-d: coordinates along M1 and n1 = M1 × N_m of
-    each joint (M2 = (c, -s), n2 = (s, c)), both sides σ = ±1 as the rows of (2, j)
-    arrays; the bend is at most 120°, so n1 + n2 and M1 + M2 have lengths >= 1. The
-    bisector's normal is nb = (s, 1 + c)/|.|, the bisector itself (nb_y, -nb_x). Returns
-    the unit normal (alpha, gamma) and the plane point (xi, eta) relative to J, (j,) each."""
-    k = plan.medial                  # constants per joint side: see _plan_skin
-    one_c = 1.0 + c
-    inv = s * s
-    inv += one_c * one_c
-    np.sqrt(inv, out=inv)
-    np.divide(1.0, inv, out=inv)
-    nb_x, nb_y = s * inv, one_c * inv
-    p1_y, rc = k["sigma_rp"], k["sigma_rc"]
-    q_x = rc * s                                       # p2 - p1
-    q_y = rc * c
-    q_y -= p1_y
-    d1_y = k["sigma"] * kp
-    d2_x = k["sigma_kc"] * s
-    d2_x += c
-    d2_y = k["sigma_kc"] * c
-    d2_y -= s
-    den = d1_y * d2_x
-    den -= d2_y
-    den_abs = np.abs(den)
-    if np.any(den_abs <= tol.tiny):
-        den = np.where(den_abs > tol.tiny, den, tol.tiny)
-    s_slope = q_y * d2_x
-    s_slope -= q_x * d2_y
-    s_slope /= den
-    np.clip(s_slope, k["neg_lim"], k["lim"], out=s_slope)
-    den_cyl = np.maximum(s, tol.tiny)
-    s_cyl = q_y * c
-    s_cyl += q_x * s
-    s_cyl /= den_cyl
-    np.clip(s_cyl, k["neg_lim"], k["lim"], out=s_cyl)
-    ramp = den_abs
-    ramp /= den_cyl
-    ramp -= 0.25
-    ramp /= 0.25
-    np.clip(ramp, 0.0, 1.0, out=ramp)
-    w = ramp * ramp
-    ramp *= -2
-    ramp += 3
-    w *= ramp                                          # smoothstep: ramp²(3 - 2 ramp)
-    rest = 1 - w
-    a_x = w * s_slope
-    a_x += rest * s_cyl
-    a_y = s_slope
-    a_y *= d1_y
-    a_y += p1_y
-    a_y *= w
-    a_y += rest * p1_y
-    f_x, f_y = k["sigma_rbar"] * nb_x, k["sigma_rbar"] * nb_y
-    g_x, g_y = a_x, a_y
-    g_x -= f_x
-    g_y -= f_y
-    off = g_x * nb_y
-    off -= g_y * nb_x
-    fade = np.abs(off)
-    np.maximum(fade, k["scale"], out=fade)
-    np.divide(k["scale"], fade, out=fade)               # 1 while |off| <= scale
-    fade *= fade
-    fade *= fade
-    fade *= off
-    along = g_x
-    along *= nb_x
-    g_y *= nb_y
-    along += g_y
-    np.clip(along, k["neg_clip"], k["clip"], out=along)
-    pt_x = fade * nb_y
-    pt_x += f_x
-    pt_x += along * nb_x
-    pt_y = fade * nb_x
-    np.subtract(f_y, pt_y, out=pt_y)
-    pt_y += along * nb_y
-    diff_x, diff_y = pt_x[0] - pt_x[1], pt_y[0] - pt_y[1]
-    length = np.sqrt(diff_x * diff_x + diff_y * diff_y)
+    """skinning's ``_sphere_planes`` in 2-d: coordinates along M1 and n1 = M1 × N_m of each
+    joint (M2 = (c, -s), n2 = (s, c)), both sides σ = ±1 as the rows of (2, j) arrays.
+    The tangent directions are e_p = (-kp, σ)/sqrt(1 + kp²) and e_c = σ·n2 - kc·M2 over
+    sqrt(1 + kc²); each side's point is ρ·(e_p + e_c)/(1 + e_p·e_c). Returns the unit
+    normal (alpha, gamma) and the plane point (xi, eta) relative to J, (j,) each."""
+    k = plan.medial                  # constants per joint: see _plan_skin
+    inv_sp = 1.0 / np.sqrt(1.0 + kp * kp)
+    rho = k["rp"] * inv_sp
+    rho += k["rho_c"]
+    rho *= 0.5
+    ep_x, ep_y = -kp * inv_sp, k["sigma"] * inv_sp          # (j,), (2, j)
+    ec_x = k["ec_n"] * s                                     # σ·s/sc - kc·c/sc
+    ec_x += k["ec_m"] * c
+    ec_y = k["ec_n"] * c                                     # σ·c/sc + kc·s/sc
+    ec_y -= k["ec_m"] * s
+    den = ep_x * ec_x
+    den += ep_y * ec_y
+    den += 1.0
+    far = den <= tol.parallel                                # parallel on opposite sides
+    scale = rho / np.where(far, 1.0, den)
+    pt_x = (ep_x + ec_x) * scale
+    pt_y = (ep_y + ec_y) * scale
+    a_x, a_y = pt_x[0] - pt_x[1], pt_y[0] - pt_y[1]
+    n_x, n_y = -a_y, a_x                                     # (A - B) × N_m
+    length = np.sqrt(n_x * n_x + n_y * n_y)
     ok = length > tol.tiny
-    n_x, n_y = -diff_y / np.where(ok, length, 1.0), diff_x / np.where(ok, length, 1.0)
-    if not ok.all():         # the two points coincide: the bisector plane
+    n_x, n_y = n_x / np.where(ok, length, 1.0), n_y / np.where(ok, length, 1.0)
+    if not ok.all():         # A = B: the bisector's direction M1 + M2
         fb = 1.0 / np.sqrt((1.0 + c) ** 2 + s * s)
         n_x, n_y = np.where(ok, n_x, (1.0 + c) * fb), np.where(ok, n_y, -s * fb)
-    flip = n_x * nb_y - n_y * nb_x < 0
+    flip = n_x * (1.0 + c) - n_y * s < 0
     np.negative(n_x, out=n_x, where=flip)
     np.negative(n_y, out=n_y, where=flip)
-    pt_x[0] += pt_x[1]
-    pt_y[0] += pt_y[1]
-    pt_x[0] *= 0.5
-    pt_y[0] *= 0.5
-    return n_x, n_y, pt_x[0], pt_y[0]
+    xi, eta = 0.5 * (pt_x[0] + pt_x[1]), 0.5 * (pt_y[0] + pt_y[1])
+    far = far[0] | far[1]
+    if far.any():            # the bisector plane through J, as skinning falls back
+        fb = 1.0 / np.sqrt((1.0 + c) ** 2 + s * s)
+        n_x, n_y = np.where(far, (1.0 + c) * fb, n_x), np.where(far, -s * fb, n_y)
+        xi, eta = np.where(far, 0.0, xi), np.where(far, 0.0, eta)
+    return n_x, n_y, xi, eta
 
 
 def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
