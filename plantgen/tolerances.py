@@ -102,6 +102,13 @@ class Tolerances:
     whose generators must then touch a sphere nearly as large as the child) becomes a
     knuckle instead, which is closed at any taper."""
 
+    facing_min: float = 0.05
+    """Dimensionless: where the interpolated normal (8) makes a cosine below this with the
+    direction to the eye on a surface that faces the eye (the inside of a bend seen from
+    outside), it is bent towards the true normal instead of being negated
+    (``plantgen.geometry.frusta.facing_normals``, GLSL ``facing_normal``): its cosine
+    before normalising comes back to this, so after normalising it stays positive."""
+
     fan_length: float = 1e-9
     """Relative (to the radius): the length of a knuckle fan row, a slice with no extent
     along its axis."""
@@ -182,7 +189,7 @@ class Tolerances:
 
 
 #: The fields GLSL programs use, as macros ``TOL_<FIELD>``.
-GLSL_FIELDS = ("generator_rise", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
+GLSL_FIELDS = ("facing_min", "generator_rise", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
                "recenter_parallel", "shadow_normal", "tangent_floor_f32")
 
 #: The tolerances of plantgen.

@@ -80,10 +80,14 @@ void main() {
     float texel = height_at(material, uv);
     vec3 to_eye = normalize(-v_position);
     vec3 albedo = material_albedo(material, texel);
-#if defined SHADOWS
-    // receiver plane: the facet the rasteriser draws (the light's map holds facets too)
+    // the facet the rasteriser draws: the true normal here, which (8) is bent towards where
+    // it turns away from the eye, and the receiver plane (the light's map holds facets too)
     vec3 facet = cross(dFdx(v_position), dFdy(v_position));
-    float visibility = shadow_visibility(v_position, dot(facet, facet) > 0.0 ? normalize(facet) : normal);
+    vec3 true_normal = dot(facet, facet) > 0.0 ? normalize(facet) : normal;
+    if (dot(true_normal, normal) < 0.0) true_normal = -true_normal;
+    normal = facing_normal(normal, true_normal, to_eye);
+#if defined SHADOWS
+    float visibility = shadow_visibility(v_position, true_normal);
 #else
     float visibility = 1.0;
 #endif

@@ -366,19 +366,22 @@ void main() {
     }
 #endif
     vec3 albedo = material_albedo(f.material, texel);
-#if defined SHADOWS
-    // the receiver plane of the shadow test is the true tangent plane: the cone's own
-    // normal e_r - k*axis, not the interpolated shading normal (8), which leans radially
-    vec3 receiver_normal = normal;
-    bool on_relief = false;
-#if defined RELIEF
-    on_relief = f.shell > 0.0 && !cap;
-#endif
-    if (!cap && !on_relief) {
-        float y_r, radial_r; vec3 e_r_r;
-        frustum_local(f, p, y_r, radial_r, e_r_r);
-        receiver_normal = normalize(e_r_r - frustum_slope(f) * f.axis);
+    // the cone's own normal e_r - k*axis: what (8) is bent towards where it turns away from
+    // the eye, and (below) the receiver plane of the shadow test
+    vec3 true_normal = normal;
+    if (!cap) {
+        float y_t, radial_t; vec3 e_r_t;
+        frustum_local(f, p, y_t, radial_t, e_r_t);
+        true_normal = normalize(e_r_t - frustum_slope(f) * f.axis);
+        normal = facing_normal(normal, true_normal, -d);
     }
+#if defined SHADOWS
+    // the receiver plane of the shadow test is the true tangent plane, not the
+    // interpolated shading normal (8), which leans radially
+    vec3 receiver_normal = true_normal;
+#if defined RELIEF
+    if (f.shell > 0.0 && !cap) receiver_normal = normal;
+#endif
     float visibility = shadow_visibility(p, receiver_normal);
 #else
     float visibility = 1.0;

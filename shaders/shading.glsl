@@ -30,6 +30,21 @@ vec3 material_albedo(int material, float texel) {
     return mix(material_dark[m], material_light[m], texel);
 }
 
+// The shading normal that never turns its back on the eye (the numpy twin:
+// plantgen.geometry.frusta.facing_normals). n: the interpolated normal (8); n_true: the
+// surface's own; to_eye: unit. Seen from behind (inside a tube) both are negated first;
+// then where n's cosine with the eye is below TOL_FACING_MIN it is bent towards n_true by
+// the least amount that brings it back: continuous, never negated.
+vec3 facing_normal(vec3 n, vec3 n_true, vec3 to_eye) {
+    if (dot(n_true, to_eye) < 0.0) { n = -n; n_true = -n_true; }
+    float c = dot(n, to_eye);
+    if (c >= TOL_FACING_MIN) return n;
+    float lambda = (TOL_FACING_MIN - c) / max(dot(n_true, to_eye), 1e-30);
+    vec3 bent = n + lambda * n_true;
+    float len = length(bent);
+    return len > 0.0 ? bent / len : n_true;
+}
+
 // One directional light, Blinn-Phong, plus a hemispherical ambient term.
 // normal and to_eye are unit vectors; the normal is flipped to face the eye.
 // `light_visibility` in [0, 1] scales the direct light (1: lit, 0: in shadow; see shadow.glsl).

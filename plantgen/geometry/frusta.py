@@ -66,7 +66,7 @@ __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRI
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
            "frusta_bounds", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
-           "minor_semi_axis", "seam_mismatch", "seam_gap"]
+           "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals"]
 
 #: Names of the per-row arrays of the contract, in contract order.
 ROW_FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir",
@@ -457,6 +457,32 @@ def surface_normals(frusta: Frusta, rows, points, interpolated: bool = True) -> 
     n_l = unit(n_l, n_true)
     n_u = unit(n_u, n_true)
     return unit((1 - v)[:, None] * n_l + v[:, None] * n_u, n_true)
+
+
+def facing_normals(normals, true_normals, to_eye, facing_min: float = tol.facing_min) -> np.ndarray:
+    """(m, 3) shading normals that never turn their back on the eye (the GLSL twin is
+    ``facing_normal`` in ``shaders/cone.glsl``).
+
+    ``normals`` (m, 3) are the interpolated normals (8), ``true_normals`` (m, 3) the
+    surface's own, ``to_eye`` (m, 3) unit directions from the points to the eye. Where the
+    surface is seen from behind (true·to_eye < 0: from inside a tube) both are negated
+    first, as shading always did. Then where (8) makes a cosine c below ``facing_min`` with
+    the eye it becomes normalize(n + λ·n_true), λ = (facing_min - c)/(n_true·to_eye): the
+    bend towards the true normal that brings its cosine before normalising back to
+    ``facing_min`` (after normalising it is positive: the normal faces the eye). λ is 0 at
+    c = facing_min and grows continuously below it, so the
+    shading stays continuous where the old rule (negate n) jumped to a normal facing down:
+    the black slivers on the inside of bends.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    nt = np.asarray(true_normals, dtype=np.float64)
+    behind = dot(nt, to_eye) < 0
+    sign = np.where(behind, -1.0, 1.0)[:, None]
+    n, nt = n * sign, nt * sign
+    c = dot(n, to_eye)
+    c_true = np.maximum(dot(nt, to_eye), tol.tiny)
+    lam = np.where(c < facing_min, (facing_min - c) / c_true, 0.0)
+    return unit(n + lam[:, None] * nt, nt)
 
 
 def shade_rows_uv_normals(frusta: Frusta, rows, points, interpolated: bool = True):

@@ -43,7 +43,7 @@ import numpy as np
 from ..tolerances import tol
 from . import relief as relief_module
 from .camera import Camera
-from .frusta import Frusta, bounding_pyramids, shade_rows_uv_normals, surface_uv
+from .frusta import Frusta, bounding_pyramids, facing_normals, shade_rows_uv_normals, surface_uv, true_normals
 from .vec import dot
 
 __all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
@@ -67,7 +67,8 @@ class Hits:
 
 @dataclass
 class ReferenceImage:
-    """Per-pixel reference render, arrays of shape (height, width[, 3])."""
+    """Per-pixel reference render, arrays of shape (height, width[, 3]). ``normal`` is the
+    shading normal: (8) facing the eye (:func:`shade_hits` with ``to_eye``)."""
 
     hit: np.ndarray
     t: np.ndarray
@@ -468,10 +469,12 @@ def _make_hits(frusta, O, D, best_t, best_row, best_kind, shape):
                 cap=((best_kind > 0) & hit).reshape(shape))
 
 
-def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True):
+def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True, to_eye=None):
     """(u, v, normal) at the hits: (...) u, v (0 for misses) and (..., 3) unit normals
     (equation (8) if ``interpolated``, else the true cone normal; the plane's outward
-    normal on caps; 0 for misses)."""
+    normal on caps; 0 for misses). With ``to_eye`` ((..., 3) unit directions from the hits
+    to the eye) the lateral normals are the ones shading uses: (8) bent so that it faces
+    the eye (:func:`~plantgen.geometry.frusta.facing_normals`), as the GLSL caster does."""
     shape = hits.t.shape
     hit = hits.hit.ravel()
     rows = hits.row.ravel()[hit]
@@ -481,6 +484,8 @@ def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True):
     nrm = np.zeros(hit.shape + (3,))
     if rows.size:
         uu, vv, nn = shade_rows_uv_normals(frusta, rows, pts, interpolated)
+        if to_eye is not None:
+            nn = facing_normals(nn, true_normals(frusta, rows, pts), np.reshape(to_eye, (-1, 3))[hit])
         cap = hits.cap.ravel()[hit]
         if cap.any():
             lo_side = np.abs(dot(frusta.plane_lo[rows[cap], :3], pts[cap]) - frusta.plane_lo[rows[cap], 3]) <= \
@@ -575,7 +580,7 @@ def render_reference(frusta: Frusta, camera: Camera, *, relief=None, dtype=np.fl
                 flush()
         flush()
     hits = _make_hits(frusta, O, D, best_t, best_row, best_kind, (H, W))
-    u, v, nrm = shade_hits(frusta, hits, interpolated=interpolated)
+    u, v, nrm = shade_hits(frusta, hits, interpolated=interpolated, to_eye=-D)
     return ReferenceImage(hit=hits.hit, t=hits.t, row=hits.row, segment=hits.segment, u=u, v=v,
                           normal=nrm, camera=camera)
 
