@@ -102,6 +102,16 @@ class Tolerances:
     whose generators must then touch a sphere nearly as large as the child) becomes a
     knuckle instead, which is closed at any taper."""
 
+    joint_slack: float = 2.0
+    """Units of rounding (2^-24 in float32, the GPU's; the dtype's half epsilon in the
+    reference): a lateral hit counts as between a row's planes up to
+    ``joint_slack``·u·(|base| + h) beyond a plane it shares with a continuing neighbour
+    (|base|: the base's distance from the render origin). The plane test of a row runs
+    relative to its base, rounded at that size, and at a thin joint far from its base
+    (r = 1e-4 h, seen from 8 r) both rows could reject the front hit: the slab where both
+    accept closes that gap; the seams are closed, so the two cones agree in it. Open ends
+    (caps) get no slack."""
+
     facing_min: float = 0.05
     """Dimensionless: where the interpolated normal (8) makes a cosine below this with the
     direction to the eye on a surface that faces the eye (the inside of a bend seen from
@@ -189,7 +199,7 @@ class Tolerances:
 
 
 #: The fields GLSL programs use, as macros ``TOL_<FIELD>``.
-GLSL_FIELDS = ("facing_min", "generator_rise", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
+GLSL_FIELDS = ("facing_min", "generator_rise", "joint_slack", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
                "recenter_parallel", "shadow_normal", "tangent_floor_f32")
 
 #: The tolerances of plantgen.

@@ -43,6 +43,14 @@ float cone_slope(float r1, float r2, float h) { return (r2 - r1) / h; }
 
 float frustum_slope(Frustum f) { return cone_slope(f.r1, f.r2, f.h); }
 
+// How far beyond a cutting plane shared with a continuing neighbour a lateral hit still
+// counts (plantgen.tolerances.Tolerances.joint_slack): the float32 rounding of the plane
+// test, done relative to the base, which lies |base| from the render origin. 0 at an open
+// end (a cap). Twin: reference._joint_slack.
+float joint_slack(Frustum f, bool open_end) {
+    return open_end ? 0.0 : TOL_JOINT_SLACK * 5.9604645e-8 * (length(f.base) + f.h);
+}
+
 // Axial height y where the generator C1 + y*axis + (r1 + k*y)*e of a cone meets the plane
 // n.x = d, with gap = d - n.C1, n_axis = n.axis, n_radial = n.e: the GLSL twin of
 // plantgen.geometry.frusta.plane_height, y = (gap - r1*n_radial) / (n_axis + k*n_radial).
@@ -176,8 +184,9 @@ bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_
         int face = FACE_CONE;
         if (t0 <= t_min) { t0 = t_min; face = FACE_NONE; }
         if (t0 > t1) continue;
-        if (!clip_half_space(-f.plane_lo.xyz, -f.plane_lo.w, FACE_LO, e, d, t0, t1, face)) continue;
-        if (!clip_half_space(f.plane_hi.xyz, f.plane_hi.w, FACE_HI, e, d, t0, t1, face)) continue;
+        float w_lo = f.plane_lo.w - joint_slack(f, f.open_lo), w_hi = f.plane_hi.w + joint_slack(f, f.open_hi);
+        if (!clip_half_space(-f.plane_lo.xyz, -w_lo, FACE_LO, e, d, t0, t1, face)) continue;
+        if (!clip_half_space(f.plane_hi.xyz, w_hi, FACE_HI, e, d, t0, t1, face)) continue;
         float y_mid = e_y + 0.5 * (t0 + t1) * d_y;
         if (frustum_radius(f, dr, y_mid) < 0.0) continue;  // the mirror nappe
         t_enter = t0; t_exit = t1; enter_face = face;
@@ -215,14 +224,15 @@ bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out in
     float disc = solve_quadratic(A, B, C, t1, t2);
     t_hit = NO_HIT;
     kind = FACE_CONE;
+    float slack_lo = joint_slack(f, f.open_lo), slack_hi = joint_slack(f, f.open_hi);
     if (disc >= 0.0) {
         for (int i = 0; i < 2; ++i) {
             float t = i == 0 ? t1 : t2;
             vec3 X = E + t * d;
             float y = dot(X, f.axis);
             bool ok = abs(t) < NO_HIT && f.r1 + k * y >= 0.0;   // finite (NaN fails too)
-            ok = ok && dot(f.plane_lo.xyz, X) - f.plane_lo.w >= 0.0
-                    && dot(f.plane_hi.xyz, X) - f.plane_hi.w <= 0.0;
+            ok = ok && dot(f.plane_lo.xyz, X) - f.plane_lo.w >= -slack_lo
+                    && dot(f.plane_hi.xyz, X) - f.plane_hi.w <= slack_hi;
             ok = ok && t > t_min;
             if (ok && t < t_hit) t_hit = t;
         }
@@ -241,7 +251,7 @@ bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out in
         vec3 perp = X - y * f.axis;
         bool ok = abs(t) < NO_HIT && rr >= 0.0 && dot(perp, perp) <= rr * rr;
         float other_side = dot(other.xyz, X) - other.w;
-        ok = ok && (is_lo ? other_side <= 0.0 : other_side >= 0.0);
+        ok = ok && (is_lo ? other_side <= slack_hi : other_side >= -slack_lo);
         ok = ok && t > t_min;
         if (ok && t < t_hit) { t_hit = t; kind = is_lo ? FACE_LO : FACE_HI; }
     }

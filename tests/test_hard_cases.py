@@ -31,13 +31,14 @@ def test_hard_case(case):
     # float32, re-centred, eye-relative upload: the accuracy the GLSL caster is held to
     assert res["f32"] < 3e-4 and res["px"] < 0.5
     assert res["flips_off_silhouette"] == 0
+    assert res["far_side"] == 0          # no float32 ray sees through a joint (thin_closeup)
     assert res["flips"] <= (40 if case.special == "grazing" else 2)
 
 
 def test_recentring_reduces_float32_depth_error_over_the_suite():
     raw, rec = [], []
     for case in HARD_CASES:
-        if case.special in ("axis", "generator", "inside"):
+        if case.special in ("axis", "generator", "inside", "closeup"):
             continue
         res = evaluate_case(case, count=40, march=False)
         raw.append(res["f32_raw"])

@@ -213,3 +213,62 @@ def test_no_lit_pixel_is_darker_than_its_ambient_term(gl_ctx):
         color = result.color[..., :3].astype(np.float64)
         dark = interior[..., None] & (color < floor)
         assert not dark.any(), f"{renderer}: {int(dark.any(axis=2).sum())} pixels darker than the ambient term"
+
+
+# ---------------------------------------------------------------------------- thin joints, float32
+def seam_closeups(frusta, views=12, fov=0.5, size=64, seed=0):
+    """Cameras 8 r outside points of the seams, zoomed in (``fov`` degrees): a few
+    thousandths of r per pixel, so the slab next to the shared plane where float32
+    rounding decides which row owns a hit spans pixels."""
+    from plantgen.geometry.stability import seam_points
+
+    rng = np.random.default_rng(seed)
+    points, outward, radius = seam_points(frusta, views, rng)
+    for p, e, r in zip(points, outward, radius, strict=True):
+        look = e + 0.6 * rng.normal(size=3)
+        look /= np.linalg.norm(look)
+        up = np.cross(look, rng.normal(size=3))
+        yield Camera(tuple(p + 8 * r * look), tuple(p), tuple(up), fov, size, size)
+
+
+def smooth_depth(t):
+    """(H, W) bool: pixels hit whose 3x3 neighbours are hit at depths within 5 % (off every
+    silhouette, a row's own over another included; a seam between two rows is smooth)."""
+    ok = np.isfinite(t)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            tn = np.roll(np.roll(t, dy, 0), dx, 1)
+            with np.errstate(invalid="ignore"):
+                ok &= np.isfinite(tn) & (np.abs(tn - t) < 0.05 * t)
+    ok[[0, -1], :] = ok[:, [0, -1]] = False
+    return ok
+
+
+THIN = chain_skeleton([30.0, 20.0], 1.0, [1e-4, 1e-4, 9e-5, 8e-5])     # r = 1e-4 of the length
+
+
+@pytest.mark.parametrize("renderer", ["float32 emulation", "GLSL"])
+def test_thin_joints_in_float32_agree_with_float64_close_up(gl_ctx, renderer):
+    """At r = 1e-4 of the length, seen from 8 r at the seam, the rows' plane tests run
+    relative to bases 1e4 r away; without the joint slack both rows reject hits in a slab
+    by the shared plane and the ray sees the far side of the tube (hundreds of pixels in
+    these views). Off silhouettes float32 must agree with float64 to 1 % of depth."""
+    from plantgen.render.raycast import Raycaster
+
+    frusta = skin_skeleton(THIN)
+    caster = Raycaster(gl_ctx)
+    checked = 0
+    for camera in seam_closeups(frusta):
+        ref = render_reference(frusta, camera)
+        if renderer == "GLSL":
+            t = caster.render(frusta, camera).distance.astype(np.float64)
+        else:
+            low = render_reference(frusta, camera, dtype=np.float32)
+            t = np.where(low.hit, low.t, np.inf)
+        ref_t = np.where(ref.hit, ref.t, np.inf)
+        judge = smooth_depth(ref_t)
+        with np.errstate(invalid="ignore"):
+            wrong = judge & ~(np.abs(t - ref_t) <= 1e-2 * ref_t)
+        assert not wrong.any(), f"{int(wrong.sum())} pixels off by more than 1 % of depth"
+        checked += int(judge.sum())
+    assert checked > 20000

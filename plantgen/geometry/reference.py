@@ -21,7 +21,8 @@ One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
    q = -(B + copysign(√(B² - AC), B)), t = q/A, t = C/q (finite as A → 0: a ray
    parallel to a generator). These functions and ``shaders/cone.glsl`` are twins.
 4. A root counts if r(y) >= 0 (not the mirror nappe), n_lo·X - d_lo >= 0 and
-   n_hi·X - d_hi <= 0 (between the planes) and t > t_min.
+   n_hi·X - d_hi <= 0 (between the planes, each up to :func:`_joint_slack` beyond a
+   plane shared with a continuing neighbour, the rounding of this test) and t > t_min.
 5. Open ends (rows no continuing row shares the plane with) are capped: the plane's hit
    counts if |X⊥| <= r(y) and it lies on the inner side of the other plane.
 6. The nearest counting t (+ t0) is the hit.
@@ -203,6 +204,17 @@ def cone_quadratic(e, d, axis, r1, slope, dr=0.0):
     return a, b, c, e_y, d_y
 
 
+def _joint_slack(up: _Upload, rows):
+    """(m,) each, in ``up.dtype``: how far beyond its lower and upper plane a lateral hit of
+    rows (m,) still counts (0 at open ends): ``tol.joint_slack`` units of the dtype's
+    rounding times |base| + h, as ``joint_slack`` in shaders/cone.glsl."""
+    unit = np.finfo(up.dtype).eps / 2
+    size = np.sqrt(dot(up.c1[rows], up.c1[rows])) + up.h[rows]
+    slack = (tol.joint_slack * unit * size).astype(up.dtype)
+    zero = np.zeros_like(slack)
+    return np.where(up.open_lo[rows], zero, slack), np.where(up.open_hi[rows], zero, slack)
+
+
 def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
     """Nearest hit of ray i (O[i], D[i] in up.dtype, origin-relative) with row rows[i].
 
@@ -213,6 +225,7 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
     n_lo, n_hi, d_lo, d_hi = up.n_lo[rows], up.n_hi[rows], up.d_lo[rows], up.d_hi[rows]
     E = O - c1
     dd = dot(D, D)
+    slack_lo, slack_hi = _joint_slack(up, rows)
     if recenter:
         # the ray point nearest the axis segment {s·a, 0 <= s <= h}
         b_ = dot(D, a)
@@ -238,14 +251,14 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
             X = E + t[:, None] * D
             y = dot(X, a)
             ok = has_root & np.isfinite(t) & (r1 + k * y >= 0)
-            ok &= (dot(n_lo, X) - d_lo >= 0) & (dot(n_hi, X) - d_hi <= 0)
+            ok &= (dot(n_lo, X) - d_lo >= -slack_lo) & (dot(n_hi, X) - d_hi <= slack_hi)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
             better = ok & (tt < best)
             best = np.where(better, tt, best)
-        for cap_kind, n_c, d_c, n_o, d_o, sign_o, open_ in (
-                (1, n_lo, d_lo, n_hi, d_hi, -1, up.open_lo[rows]),
-                (2, n_hi, d_hi, n_lo, d_lo, 1, up.open_hi[rows])):
+        for cap_kind, n_c, d_c, n_o, d_o, sign_o, open_, slack_o in (
+                (1, n_lo, d_lo, n_hi, d_hi, -1, up.open_lo[rows], slack_hi),
+                (2, n_hi, d_hi, n_lo, d_lo, 1, up.open_hi[rows], -slack_lo)):
             if not open_.any():
                 continue
             den = dot(n_c, D)
@@ -256,7 +269,7 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
             perp = X - y[:, None] * a
             ok = open_ & (den != 0) & np.isfinite(t) & (rr >= 0) & (dot(perp, perp) <= rr * rr)
             other = dot(n_o, X) - d_o
-            ok &= (other <= 0) if sign_o < 0 else (other >= 0)
+            ok &= (other <= slack_o) if sign_o < 0 else (other >= slack_o)
             tt = t.astype(np.float64)
             ok &= tt > tmin_local
             better = ok & (tt < best)

@@ -20,7 +20,10 @@ each case :func:`evaluate_case` reports, against the float64 reference:
 - ``px``: worst float32 (re-centred) hit-point error in pixels of a 768-pixel-high,
   40° view; ``flips``: rays whose hit/miss differs between float32 and float64, and
   ``flips_off_silhouette``: those of them whose float64 hit/miss does not change when the
-  ray turns by 0.01 pixel (flips that are not silhouette rounding).
+  ray turns by 0.01 pixel (flips that are not silhouette rounding); ``far_side``: rays
+  whose float32 hit/miss or depth (by more than 1 %) differs from float64 while the
+  float64 hit and depth stay put when the ray turns by 0.05 pixel (off every silhouette,
+  a row's own over a row behind included): a float32 ray that sees through a joint.
 
 Nothing here imports GL or click.
 """
@@ -38,7 +41,7 @@ from .reference import inside_frusta, intersect_frusta, march_rays, shade_hits
 from .skeleton import Skeleton
 from .skin import skin_skeleton
 
-__all__ = ["HardCase", "HARD_CASES", "case_rays", "medial_axis_rays", "evaluate_case",
+__all__ = ["HardCase", "HARD_CASES", "case_rays", "medial_axis_rays", "evaluate_case", "seam_points",
            "format_table", "chain", "surface_samples", "model_size", "hit_residuals"]
 
 
@@ -68,7 +71,7 @@ class HardCase:
     name: str
     build: Callable[[], Skeleton]
     note: str = ""
-    special: str = ""          # "", "grazing", "axis", "generator", "inside"
+    special: str = ""          # "", "grazing", "axis", "generator", "inside", "closeup"
 
 
 HARD_CASES: tuple[HardCase, ...] = (
@@ -85,6 +88,8 @@ HARD_CASES: tuple[HardCase, ...] = (
     HardCase("fold_back_180", lambda: chain((180.0,), 1.0, [0.1, 0.1, 0.1])),
     HardCase("short_and_long", lambda: chain((20.0, 20.0), [3.0, 1e-3, 3.0], [0.1, 0.1, 0.1, 0.1])),
     HardCase("thin_1e-4", lambda: chain((30.0,), 1.0, [1e-4, 1e-4, 1e-4]), "r = 1e-4 h"),
+    HardCase("thin_closeup", lambda: chain((30.0, 20.0), 1.0, [1e-4, 1e-4, 9e-5, 8e-5]),
+             "r = 1e-4 h, eyes 8 r from the seams", "closeup"),
     HardCase("fat_1e3", lambda: chain((30.0,), 1.0, [1e3, 1e3, 1e3]), "r = 1e3 h"),
     HardCase("far_1e4", lambda: chain((30.0, 20.0), 1.0, [0.1, 0.09, 0.08, 0.07], (1e4, 1e4, 1e4)),
              "model 1.7e4 from the origin"),
@@ -121,6 +126,23 @@ def model_size(frusta: Frusta) -> float:
     return float(np.linalg.norm(pts.max(0) - pts.min(0)) + 2 * r)
 
 
+def seam_points(frusta: Frusta, count: int, rng):
+    """(count, 3) points on the seams of continuing joints (a child's generator meeting its
+    lower plane), (count, 3) the outward radial directions there and (count,) the radii."""
+    child = np.flatnonzero(frusta.parent_row >= 0)
+    rows = child[rng.integers(0, len(child), count)]
+    psi = rng.uniform(0.0, 2.0 * np.pi, count)
+    a, ref = frusta.axis[rows], frusta.ref_dir[rows]
+    e = np.cos(psi)[:, None] * ref + np.sin(psi)[:, None] * np.cross(a, ref)
+    plane = frusta.plane_lo[rows]
+    k = frusta.slope[rows]
+    y, _ = plane_height(plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base[rows]),
+                        np.einsum("ij,ij->i", plane[:, :3], a), np.einsum("ij,ij->i", plane[:, :3], e),
+                        frusta.r1[rows], k)
+    r = frusta.r1[rows] + k * y
+    return frusta.base[rows] + y[:, None] * a + r[:, None] * e, e, r
+
+
 def case_rays(case: HardCase, frusta: Frusta, count: int = 200, seed: int = 0):
     """(m, 3) origins, (m, 3) unit directions for a case, deterministic."""
     rng = np.random.default_rng(seed)
@@ -152,6 +174,14 @@ def case_rays(case: HardCase, frusta: Frusta, count: int = 200, seed: int = 0):
         start = frusta.base[0] + frusta.r1[0] * e * (1 + rng.uniform(-0.5, 0.5, count))[:, None]
         eyes = start - g * 1.5
         targets = start
+    elif case.special == "closeup":
+        targets, outward, r = seam_points(frusta, count, rng)
+        # just either side of the seam, within 1e-3 r of the shared plane (whose float32
+        # test runs relative to bases 1e4 r away), seen from 8 r outside it
+        pick = np.flatnonzero(frusta.parent_row >= 0)[0]
+        targets = targets + (r * rng.uniform(-1e-3, 1e-3, count))[:, None] * frusta.axis[pick]
+        look = outward + 0.6 * dirs_eye
+        eyes = targets + 8.0 * r[:, None] * look / np.linalg.norm(look, axis=1, keepdims=True)
     elif case.special == "inside":
         eyes = frusta.base[0] + 0.5 * frusta.axis[0] + frusta.ref_dir[0] * frusta.r1[0] * 1.2
         eyes = np.broadcast_to(eyes, (count, 3)).copy()
@@ -240,6 +270,10 @@ def evaluate_case(case: HardCase, count: int = 200, march: bool = True) -> dict:
         err = np.abs(np.where(both, h32.t, 0.0) - np.where(both, h64.t, 0.0))[both] / depth[both]
         out[key] = float(err.max()) if err.size else 0.0
         if key == "f32":
+            stable = _depth_stable(frusta, O, D, h64, 0.05 * pix)
+            with np.errstate(invalid="ignore"):
+                wrong = (h32.hit != h64.hit) | (np.abs(np.where(both, h32.t - h64.t, 0.0)) > 1e-2 * depth)
+            out["far_side"] = int((wrong & stable).sum())
             flipped = np.flatnonzero(h32.hit != h64.hit)
             out["flips"] = int(flipped.size)
             out["flips_off_silhouette"] = _off_silhouette(frusta, O[flipped], D[flipped],
@@ -247,6 +281,23 @@ def evaluate_case(case: HardCase, count: int = 200, march: bool = True) -> dict:
             dp = np.linalg.norm(h32.point - h64.point, axis=-1)[both] / (depth[both] * pix)
             out["px"] = float(dp.max()) if dp.size else 0.0
     return out
+
+
+def _depth_stable(frusta, O, D, h64, angle) -> np.ndarray:
+    """(m,) bool: rays whose float64 hit/miss and depth (to 1e-3) stay when the ray turns by
+    ``angle`` radians in four directions: off every silhouette, a row's own silhouette
+    over a row behind it included (a float32 flip there is rounding of a tangency)."""
+    a = np.where(np.abs(D[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0.0, 0, 1]]))
+    e1 = np.cross(D, a)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(D, e1)
+    stable = np.ones(len(O), dtype=bool)
+    for e in (e1, -e1, e2, -e2):
+        h = intersect_frusta(frusta, O, D + angle * e)
+        with np.errstate(invalid="ignore"):
+            same_t = np.abs(np.where(h.hit & h64.hit, h.t - h64.t, 0.0)) <= 1e-3 * np.where(h64.hit, h64.t, 1.0)
+        stable &= (h.hit == h64.hit) & same_t
+    return stable
 
 
 def _off_silhouette(frusta, O, D, hit64, angle) -> int:
@@ -267,7 +318,7 @@ def _off_silhouette(frusta, O, D, hit64, angle) -> int:
 
 COLUMNS = ("case", "rows", "hits", "nonfinite", "surface", "planes", "nearest", "later",
            "march_only", "holes", "f32_raw", "f32", "f32_world", "px", "flips",
-           "flips_off_silhouette")
+           "flips_off_silhouette", "far_side")
 
 
 def format_table(results: list[dict]) -> str:
