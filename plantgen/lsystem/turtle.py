@@ -24,6 +24,10 @@ A segment's end radius is the turtle's radius when it is drawn. A segment that c
 its parent starts with the parent's end radius, so the skin tapers without steps; a root
 or a side branch starts with the current radius. After each ``F`` the heading bends
 towards the tropism vector T by ``strength·|H × T|`` radians (ABOP, section 2.3).
+
+The segments drawn are counted before the walk (``max_segments`` of the limits in force),
+and the walk's result is checked: a coordinate or radius that is not finite or lies
+beyond ``tol.max_coordinate`` stops with one line naming the segment and its module.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.skeleton import Skeleton
+from ..limits import Limits
+from ..limits import limits as default_limits
 from ..tolerances import tol
 from .derive import ModuleString
 from .grammar import TurtleSettings
@@ -53,17 +59,21 @@ def _rot(a, b, c, s):
 
 
 def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
-              source: str = "<grammar>") -> Skeleton:
+              source: str = "<grammar>", limits: Limits | None = None) -> Skeleton:
     """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton.
 
     Three phases: :func:`_turtle_program` keeps the modules the turtle acts on, as action
     codes with their arguments; :func:`_walk` moves the turtle and collects the segments'
-    columns; the columns become the skeleton's arrays.
+    columns; the columns become the skeleton's arrays, checked finite and within
+    ``tol.max_coordinate``. More segments than ``limits.max_segments`` are refused
+    before the walk.
     """
+    drawn = _drawing_modules(ms, settings)
+    (limits or default_limits).check("segments", len(drawn), f"{source}: the derived string draws segments")
     columns = _walk(_turtle_program(ms), settings, materials, source)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
-    return Skeleton(
+    skel = Skeleton(
         start=np.array(starts, dtype=np.float64).reshape(n, 3),
         end=np.array(ends, dtype=np.float64).reshape(n, 3),
         r_start=np.array(r0s, dtype=np.float64),
@@ -73,6 +83,37 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
         material=np.array(mats, dtype=np.int32),
         material_names=materials,
     )
+    _check_extent(skel, ms, drawn, source)
+    return skel
+
+
+def _drawing_modules(ms: ModuleString, settings: TurtleSettings) -> np.ndarray:
+    """(k,) int: the modules that draw a segment (``F`` of non-zero length), in order."""
+    if "F" not in ms.symbols:
+        return np.zeros(0, dtype=np.int64)
+    is_f = ms.sym == ms.symbols.index("F")
+    length = np.where(ms.nparam > 0, ms.params[:, 0], settings.step)
+    return np.flatnonzero(is_f & (length != 0.0))
+
+
+def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: str) -> None:
+    """One line naming the first segment (and the module that drew it) whose end points or
+    radii are not finite or lie beyond ``tol.max_coordinate``."""
+    limit = tol.max_coordinate
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.all(np.abs(skel.start) <= limit, axis=1) & np.all(np.abs(skel.end) <= limit, axis=1)
+                & (skel.r_start <= limit) & (skel.r_end <= limit))
+    if not bad.any():
+        return
+    i = int(np.argmax(bad))
+    what = ("a radius" if np.all(np.abs(skel.end[i]) <= limit) and np.all(np.abs(skel.start[i]) <= limit)
+            else "an end point")
+    module = int(drawn[i])
+    k = int(ms.nparam[module])
+    text = "F" + ("(" + ", ".join(f"{x:g}" for x in ms.params[module, :k]) + ")" if k else "")
+    raise PlantgenError(f"{source}: segment {i} (module {module + 1} of the derived string, {text}) has "
+                        f"{what} that is not finite or beyond {limit:g}: an F length, a radius or "
+                        "the turtle step too large")
 
 
 def _turtle_program(ms: ModuleString):
