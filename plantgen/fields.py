@@ -82,7 +82,8 @@ def vector(value, what: str, where: str, error: type[PlantgenError], *, n: int =
            max_abs: float | None = None) -> np.ndarray:
     """``value`` as a (n,) float64 array of finite numbers (each at most ``max_abs``)."""
     if not isinstance(value, (list, tuple)) or len(value) != n or not all(_is_number(x) for x in value):
-        raise error(f"{where}: {what} must be {n} numbers, got {show(value)}")
+        count = {2: "two", 3: "three", 4: "four"}.get(n, str(n))
+        raise error(f"{where}: {what} must be {count} numbers, got {show(value)}")
     return np.array([number(x, what, where, error, max_abs=max_abs) for x in value], dtype=np.float64)
 
 
