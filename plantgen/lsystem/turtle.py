@@ -32,6 +32,7 @@ beyond ``tol.max_coordinate`` stops with one line naming the segment and its mod
 
 from __future__ import annotations
 
+from itertools import chain
 from math import cos, radians, sin, sqrt
 
 import numpy as np
@@ -48,6 +49,9 @@ __all__ = ["interpret"]
 
 # action codes
 _NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT = range(15)
+#: Modules turned into Python values at a time by :func:`_turtle_program`.
+PROGRAM_CHUNK = 65_536
+
 _ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
             "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT}
 
@@ -117,16 +121,22 @@ def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: s
 
 
 def _turtle_program(ms: ModuleString):
-    """The modules the turtle acts on, as four equal lists: action code, parameter count,
-    first and second parameter (0.0 where absent). Other symbols are dropped."""
+    """The modules the turtle acts on, as an iterator of (action code, parameter count,
+    first parameter, second parameter (0.0 where absent)). Other symbols are dropped. The
+    tuples are made PROGRAM_CHUNK modules at a time: a string of millions of modules is
+    never held as Python objects all at once."""
     table = np.array([_ACTIONS.get(s, _NONE) for s in ms.symbols] or [_NONE], dtype=np.int8)
     action = table[ms.sym]
     keep = np.flatnonzero(action != _NONE)
-    acts = action[keep].tolist()
-    nargs = ms.nparam[keep].tolist()
-    args = ms.params[keep, 0].tolist()
-    args2 = ms.params[keep, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(acts)
-    return acts, nargs, args, args2
+
+    def chunks():
+        for lo in range(0, len(keep), PROGRAM_CHUNK):
+            rows = keep[lo:lo + PROGRAM_CHUNK]
+            args2 = ms.params[rows, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(rows)
+            yield zip(action[rows].tolist(), ms.nparam[rows].tolist(), ms.params[rows, 0].tolist(), args2,
+                      strict=True)
+
+    return chain.from_iterable(chunks())
 
 
 def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str):
@@ -151,7 +161,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
-    for act, ha, arg, arg2 in zip(*program, strict=True):
+    for act, ha, arg, arg2 in program:
         if act == _F:
             length = arg if ha else step
             if length == 0.0:
