@@ -14,7 +14,7 @@ A scene is a YAML mapping with an ``instances`` list::
     camera: auto                          # or {eye, target, up, fov_y}
     light: {direction: [-0.4, -1, -0.3]}  # direction the light travels
     instances:
-      - grammar: saguaro                  # shipped name, or a path relative to this file
+      - grammar: saguaro                  # shipped name, or a path inside this file's folder
         seed: 3                           # default: scene seed + instance number
         position: [0, 0, 0]
         rotation: [0, 30, 0]              # degrees about x, then y, then z
@@ -30,6 +30,11 @@ A scene is a YAML mapping with an ``instances`` list::
 
 Copies made by ``grid`` get seeds ``seed + k`` and, if ``jitter`` is set, positions
 jittered and yaw turned from a generator seeded by the instance seed: deterministic.
+
+A scene is untrusted input: every value is typed and ranged (``plantgen.fields``), the
+instances (grid copies included) and the total segments are counted against the limits
+in force, a placed copy must stay finite and within ``tol.max_coordinate``, and a grammar
+path is read only inside the scene's folder (or a folder the caller allows).
 """
 
 from __future__ import annotations
