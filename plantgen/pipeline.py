@@ -20,6 +20,7 @@ render or an export estimates its memory from the sizes it knows before it alloc
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -239,16 +240,19 @@ class RenderReport:
     skin_calls: int = 0
 
 
-def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None) -> None:
-    """Fail before any work on outputs :func:`render_file` cannot write: one line naming
-    the file. ``names`` maps the knobs ``frames``, ``fps`` and ``depth_out`` to how the
-    caller spells them (the CLI: ``--frames``, ...); default: the keyword names."""
-    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", **(names or {})}
+def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
+    """Fail before any work on outputs :func:`render_file` cannot write (and on a time that
+    is not finite): one line naming the file. ``names`` maps the knobs ``frames``, ``fps``,
+    ``depth_out`` and ``time_s`` to how the caller spells them (the CLI: ``--frames``,
+    ...); default: the keyword names."""
+    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", "time_s": "time_s", **(names or {})}
+    if time_s is not None and not math.isfinite(time_s):
+        raise PlantgenError(f"{name['time_s']} must be a finite number, got {time_s!r}")
     if frames is not None:
         if output.suffix.lower() not in ANIMATION_SUFFIXES:
             raise PlantgenError(f"{output}: an animation ({name['frames']}) must end in .gif or .webp")
-        if int(frames) < 1 or not fps > 0:
-            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} > 0")
+        if int(frames) < 1 or not 0 < fps < math.inf:
+            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} finite and > 0")
         if depth_out is not None:
             raise PlantgenError(f"{name['depth_out']} writes one frame: leave out {name['frames']}")
     elif output.suffix.lower() != ".png":
@@ -368,7 +372,7 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
     """
     output = Path(output)
     limits = _in_force(limits)
-    check_render_outputs(output, frames, fps, depth_out, camera_out, names)
+    check_render_outputs(output, frames, fps, depth_out, camera_out, names, time_s=time_s)
     cam_file = None if camera in ("auto", None) else _camera_file(camera, size, limits)
     width, height = (cam_file.width, cam_file.height) if cam_file is not None else (size or (1024, 768))
     _check_render_memory(limits, str(output), width, height, frames, shadow_res)

@@ -7,6 +7,7 @@ its file or size is, a function that makes one (``@output_opt("...")``).
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from dataclasses import fields
@@ -17,7 +18,7 @@ import click
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
 
-__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "input_arg", "iterations_opt",
+__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "finite", "input_arg", "iterations_opt",
            "limit_opt", "limits_from", "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
@@ -35,6 +36,13 @@ def parse_size(ctx, param, value):
     if not m or not (0 < int(m.group(1)) <= MAX_SIDE and 0 < int(m.group(2)) <= MAX_SIDE):
         raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..{MAX_SIDE}, e.g. 1024x768")
     return int(m.group(1)), int(m.group(2))
+
+
+def finite(ctx, param, value):
+    """click callback for a float option: refuse ``nan`` and ``inf`` (click's float reads them)."""
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(f"{value!r} is not a finite number")
+    return value
 
 
 #: INPUT: a grammar or scene .yaml, a shipped model's name, or a skeleton .npz.

@@ -12,13 +12,23 @@ from ..pipeline import render_file
 from ..render.raycast import RaycastSettings
 from ..render.records import RECORD_BYTES
 from ..scene import EFFECTS, parse_effect_list
-from .options import allow_path_opt, input_arg, iterations_opt, limit_opt, limits_from, output_opt, seed_opt, size_opt
+from .options import (
+    allow_path_opt,
+    finite,
+    input_arg,
+    iterations_opt,
+    limit_opt,
+    limits_from,
+    output_opt,
+    seed_opt,
+    size_opt,
+)
 
 #: The ray caster's default knobs: the options' defaults.
 MARCH = RaycastSettings()
 
 #: How this command spells the knobs that the library's messages name.
-OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"}
+OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out", "time_s": "--time"}
 
 
 @click.command()
@@ -38,9 +48,9 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
                                       "the inner cone (cheaper).")
 @click.option("--frames", type=click.IntRange(1, 100000),
               help="Write an animation of this many frames (-o .gif or .webp).")
-@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=12.0,
+@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=12.0, callback=finite,
               show_default=True, help="Frames per second of the animation.")
-@click.option("--time", "time_s", type=float, metavar="T",
+@click.option("--time", "time_s", type=float, metavar="T", callback=finite,
               help="Seconds: the pose of an animated scene for a still (default 0), or the "
                    "first frame's time.")
 @size_opt(default="the camera file's, else 1024x768")
@@ -58,6 +68,7 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
               help="Relief: samples sized to what each pixel sees (adaptive), or --linear-steps "
                    "for every ray (fixed, the paper's).")
 @click.option("--march-density", type=click.FloatRange(min=0, min_open=True), default=MARCH.march_density,
+              callback=finite,
               show_default=True, help="Relief, adaptive march: samples per relief texel the ray crosses.")
 @click.option("--linear-steps", type=click.IntRange(1, 4096), default=MARCH.linear_steps, show_default=True,
               help="Relief: uniform samples through the shell (adaptive march: the most).")
