@@ -33,7 +33,7 @@ from .errors import PlantgenError
 from .export import ExportError, estimate_export_bytes, export_file_type, export_mesh
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, auto_camera
-from .geometry.frusta import Frusta
+from .geometry.frusta import ROW_FIELDS, Frusta
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
@@ -53,7 +53,8 @@ from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene, resolve_effects
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
-           "Staging", "stage_model", "RenderReport", "check_render_outputs", "estimate_render_bytes",
+           "Staging", "stage_model", "RenderReport", "check_finite_frusta", "check_finite_mesh",
+           "check_render_outputs", "estimate_render_bytes",
            "render_file", "export_model"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
@@ -210,6 +211,34 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     if scene is None:
         return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
     return Staging(camera, tuple(scene.light.towards()), scene.ground)
+
+
+def check_finite_frusta(frusta: Frusta, source) -> Frusta:
+    """``frusta`` if every row is finite; else one line naming the first segment whose skin
+    is not (so no inf or NaN reaches a renderer or a file)."""
+    with np.errstate(invalid="ignore"):
+        bad = np.zeros(len(frusta), dtype=bool)
+        for name in ROW_FIELDS:
+            values = getattr(frusta, name)
+            if values.dtype.kind == "f":
+                bad |= ~np.isfinite(values).reshape(len(frusta), -1).all(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise PlantgenError(f"{source}: the skin of segment {int(frusta.segment[row])} is not finite "
+                            f"(frustum row {row}): the segment is degenerate")
+    return frusta
+
+
+def check_finite_mesh(mesh, frusta: Frusta, source) -> None:
+    """One line naming the first segment whose tessellation holds a non-finite vertex,
+    normal or texture coordinate."""
+    bad = ~(np.isfinite(mesh.vertices).all(axis=1) & np.isfinite(mesh.normals).all(axis=1)
+            & np.isfinite(mesh.uv).all(axis=1))
+    if bad.any():
+        face = int(np.argmax(bad[mesh.faces].any(axis=1)))
+        row = int(mesh.face_row[face])
+        raise PlantgenError(f"{source}: the mesh of segment {int(frusta.segment[row])} is not finite "
+                            f"(frustum row {row}): the segment is degenerate")
 
 
 def animate_model(grown: GrowResult, effects) -> AnimatedScene:
@@ -385,9 +414,8 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in chosen else None, len(grown.skeleton))
-    anim = animate_model(grown, chosen)
-    t_start = float(time_s or 0.0)
-    frusta = anim.frusta_at(t_start)
+    anim, t_start = animate_model(grown, chosen), float(time_s or 0.0)
+    frusta = check_finite_frusta(anim.frusta_at(t_start), input_path)
     staging = stage_model(grown, frusta, width, height, camera=cam_file)
     cam = staging.camera
     knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
@@ -436,7 +464,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"{input_path}: the model has no segments")
     skeleton.validate()
     t1 = time.perf_counter()
-    frusta = skin_skeleton(skeleton)
+    frusta = check_finite_frusta(skin_skeleton(skeleton), input_path)
     t2 = time.perf_counter()
     estimate = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
     if estimate > limits.max_export_triangles:
@@ -450,6 +478,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                          f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
                          f"({hint('export_bytes')})")
     mesh = tessellate(frusta, level, relief=relief)
+    check_finite_mesh(mesh, frusta, input_path)
     t3 = time.perf_counter()
     export_mesh(mesh, output_path)
     t4 = time.perf_counter()

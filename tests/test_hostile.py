@@ -21,6 +21,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from _cli import run_cli
 from hypothesis import HealthCheck, given, settings
@@ -254,8 +255,32 @@ def test_non_finite_geometry_is_refused_naming_where_it_came_from(tmp_path):
     for command, suffix in (("grow", ".npz"), ("render", ".png"), ("export", ".glb")):
         cases.append([command, nan, "-o", tmp_path / f"nan_out{suffix}"])
         matches.append("nan.npz: end holds NaN or inf (segment 0)")
+    for option in ("--time", "--fps"):
+        cases.append(["render", "dancing_cacti", "-o", tmp_path / "t.gif", "--frames", "2", option, "nan"])
+        matches.append(f"Invalid value for '{option}': nan is not a finite number")
     for result, case, match in zip(run_cases(tmp_path, cases), cases, matches, strict=True):
         assert_refused(result, match, outputs=[case[3]])
+
+
+def test_skins_and_meshes_are_checked_finite_before_they_are_drawn_or_written():
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from plantgen.errors import PlantgenError
+    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.pipeline import check_finite_frusta, check_finite_mesh
+
+    frusta = skin_skeleton(grow("saguaro"))
+    r1 = frusta.r1.copy()
+    r1[3] = np.inf
+    with pytest.raises(PlantgenError, match=f"x.yaml: the skin of segment {frusta.segment[3]} is not finite"):
+        check_finite_frusta(replace(frusta, r1=r1), "x.yaml")
+    vertices = np.zeros((4, 3))
+    vertices[2] = np.nan
+    mesh = SimpleNamespace(vertices=vertices, normals=np.ones((4, 3)), uv=np.zeros((4, 2)),
+                           faces=np.array([[0, 1, 3], [1, 2, 3]]), face_row=np.array([0, 5]))
+    with pytest.raises(PlantgenError, match=f"the mesh of segment {frusta.segment[5]} is not finite"):
+        check_finite_mesh(mesh, frusta, "x.yaml")
 
 
 def test_a_huge_tropism_direction_keeps_its_direction():
