@@ -40,7 +40,8 @@ class Limits:
     """The budgets of one input (a grammar, a scene, a skeleton file). Every field is a
     count or a size in bytes; ``--limit NAME=N`` sets ``max_NAME``.
 
-    max_input_bytes : size of a YAML or camera JSON input file
+    max_input_bytes : size of a YAML or camera JSON input file (the largest shipped one
+        has 3 KiB; a grammar's parse and first step cost about 10 µs a byte at worst)
     max_skeleton_bytes : size of a skeleton input file (.npz, .swc) and of the arrays an
         .npz unpacks to
     max_yaml_nodes : nodes of a YAML document after its aliases are expanded, each scalar
@@ -62,7 +63,7 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     """
 
-    max_input_bytes: int = 1 << 20
+    max_input_bytes: int = 256 << 10
     max_skeleton_bytes: int = 256 << 20
     max_yaml_nodes: int = 2_000_000
     max_yaml_depth: int = 64

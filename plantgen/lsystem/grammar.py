@@ -197,16 +197,21 @@ def _check_params(mods: list, where: str, max_params: int | None) -> None:
 
 def parse_modules(text: str, names, where: str, max_params: int | None = None) -> tuple[ModuleTemplate, ...]:
     """Parse an axiom or successor like ``F(l*2)[+A(l,w)]`` into module templates (each
-    with at most ``max_params`` parameters, if given)."""
+    with at most ``max_params`` parameters, if given). An argument written several times
+    is compiled once (an expression holds no state: its random draws happen per call)."""
     mods = _scan_modules(text, where)
     _check_params(mods, where, max_params)
     _check_brackets(mods, where)
+    compiled: dict[str, Expr] = {}
     out = []
     for sym, args in mods:
         exprs = ()
         if args is not None:
             try:
-                exprs = tuple(compile_expr(a, names) for a in args)
+                for a in args:
+                    if a not in compiled:
+                        compiled[a] = compile_expr(a, names)
+                exprs = tuple(compiled[a] for a in args)
             except ExprError as exc:
                 raise GrammarError(f"{where}: {exc}") from None
         out.append(ModuleTemplate(sym, exprs))
