@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields, replace
 
 from .errors import PlantgenError
 
-__all__ = ["LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK", "hint", "limits"]
+__all__ = ["CONTEXT_WORK", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK", "hint", "limits"]
 
 #: The largest image side (pixels) plantgen renders: the GL texture size every OpenGL 4.3
 #: driver plantgen has met supports. A hard bound, not a budget: no option raises it.
@@ -29,6 +29,11 @@ MAX_IMAGE_SIDE = 16384
 #: a step over a tiny string costs about as much as rewriting this many modules, so a
 #: derivation that does not grow still spends its ``derive_work`` budget.
 STEP_WORK = 200
+
+#: How much more than rewriting a step of a context-sensitive grammar costs per module:
+#: finding each module's context neighbours walks the string in Python, about three
+#: times the vectorised rewriting's cost, so such a step counts its modules four times.
+CONTEXT_WORK = 4
 
 
 class LimitError(PlantgenError):
@@ -53,7 +58,8 @@ class Limits:
     max_derive_bytes : bytes of a derived module string (modules × (5 + 8 × parameters))
     max_derive_work : modules rewritten over all steps of all derivations of one input;
         each step also counts ``STEP_WORK`` per rule group (a derivation that does not
-        grow still ends)
+        grow still ends), and a context-sensitive one counts its modules ``CONTEXT_WORK``
+        times
     max_segments : segments of one input's skeleton (all instances of a scene together)
     max_instances : placed plants of a scene (grid copies included)
     max_export_triangles : triangles ``plantgen export`` builds at most

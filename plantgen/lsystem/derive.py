@@ -8,8 +8,9 @@ order, modules in string order), so a grammar and seed always give the same stri
 The derivation's budgets are those of :class:`plantgen.limits.Limits`: a step whose
 result would exceed ``max_modules`` modules or ``max_derive_bytes`` bytes stops with
 :class:`DerivationLimit` before anything of that size is allocated, and every step spends
-``max_derive_work`` (its modules, plus ``STEP_WORK`` per rule group), so a derivation that
-does not grow still ends. A grammar's ``max_modules`` may lower the limit, never raise it.
+``max_derive_work`` (its modules, ``CONTEXT_WORK`` times for a context-sensitive grammar,
+plus ``STEP_WORK`` per rule group), so a derivation that does not grow still ends. A
+grammar's ``max_modules`` may lower the limit, never raise it.
 
 A derivation whose state (the string and the random generator's state) comes back stops
 early: a fixed point (``F -> F``) at once, a cycle (``A -> B``, ``B -> A``) after one
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
-from ..limits import STEP_WORK, LimitError, Limits, Meter, hint
+from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
@@ -207,7 +208,8 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
         total = int(out_len.sum())
         _check_step(grammar, limits, step, total, width)
-        work.spend(total + STEP_WORK * (len(groups) + 1), f"{grammar.path}: derivation step {step + 1}")
+        work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
+                   f"{grammar.path}: derivation step {step + 1}")
         string = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
         step += 1
         if progress is not None:
