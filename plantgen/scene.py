@@ -246,11 +246,11 @@ class _Budget:
 
     def place(self, n: int, where: str) -> None:
         self.instances += n
-        self.limits.check("instances", self.instances, f"{where}: the scene places instances")
+        self.limits.check("instances", self.instances, f"{where}: instances placed")
 
     def add_segments(self, n: int, where: str) -> None:
         self.segments += n
-        self.limits.check("segments", self.segments, f"{where}: the scene's segments")
+        self.limits.check("segments", self.segments, f"{where}: segments placed in the scene")
 
 
 def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override, budget: _Budget) -> _Placement:

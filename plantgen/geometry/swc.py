@@ -77,7 +77,7 @@ def _parse_nodes(text: str, path, limits: Limits) -> list[tuple]:
             raise SkeletonError(f"{where}: parent {parent} is not a node listed before this one")
         rows[node_id] = len(nodes)
         nodes.append((x, y, z, r, rows[parent] if parent != -1 else -1))
-        limits.check("segments", len(nodes) - 1, f"{path}: SWC nodes")
+        limits.check("segments", len(nodes) - 1, f"{path}: SWC segments")
     return nodes
 
 

@@ -73,7 +73,7 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
     before the walk.
     """
     drawn = _drawing_modules(ms, settings)
-    (limits or default_limits).check("segments", len(drawn), f"{source}: the derived string draws segments")
+    (limits or default_limits).check("segments", len(drawn), f"{source}: segments drawn")
     columns = _walk(_turtle_program(ms), settings, materials, source)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
