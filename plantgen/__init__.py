@@ -13,8 +13,11 @@ __version__ = "0.1.0"
 __all__ = ["Skeleton", "SkeletonError", "grow", "__version__"]
 
 
-def grow(path, *, seed=None, iterations=None, max_modules=None):
-    """Grow a grammar or scene file into a Skeleton (see ``plantgen grow --help``)."""
+def grow(path, *, seed=None, iterations=None, max_modules=None, limits=None, allow_paths=()):
+    """Grow a grammar or scene file into a Skeleton (see ``plantgen grow --help``);
+    ``limits`` (a :class:`plantgen.limits.Limits`) and ``allow_paths`` as ``--limit`` and
+    ``--allow-path``."""
     from .pipeline import grow as _grow
 
-    return _grow(path, seed=seed, iterations=iterations, max_modules=max_modules)
+    return _grow(path, seed=seed, iterations=iterations, max_modules=max_modules, limits=limits,
+                 allow_paths=allow_paths)

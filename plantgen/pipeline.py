@@ -11,10 +11,16 @@ call:
 - :func:`render_file` (``plantgen render``): skin, ray cast, write PNG / GIF / WebP, the
   camera JSON and the depth ``.npy``;
 - :func:`export_model` (``plantgen export``): skin, tessellate, write a mesh file.
+
+Every entry point takes ``limits`` (the budgets in force, :class:`plantgen.limits.Limits`;
+default: ``plantgen.limits.limits``) and ``allow_paths`` (folders a scene may read grammars
+from besides its own). One input's derivations share one ``derive_work`` meter, and a
+render or an export estimates its memory from the sizes it knows before it allocates.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,16 +30,18 @@ import numpy as np
 from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
-from .export import ExportError, export_file_type, export_mesh
+from .export import ExportError, estimate_export_bytes, export_file_type, export_mesh
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, auto_camera
-from .geometry.frusta import Frusta
+from .geometry.frusta import ROW_FIELDS, Frusta
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
+from .geometry.swc import read_swc
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
-from .limits import limits
+from .limits import LimitError, Limits, hint
+from .limits import limits as default_limits
 from .lsystem.derive import derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import interpret
@@ -44,9 +52,18 @@ from .render.records import RecordStream
 from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene, resolve_effects
 
-__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "resolve_input",
-           "Staging", "stage_model", "RenderReport", "check_render_outputs", "render_file",
-           "export_model"]
+__all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
+           "Staging", "stage_model", "RenderReport", "check_finite_frusta", "check_finite_mesh",
+           "check_render_outputs", "estimate_render_bytes",
+           "render_file", "export_model"]
+
+#: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
+SKELETON_SUFFIXES = (".npz", ".swc")
+
+
+def _in_force(given: Limits | None) -> Limits:
+    """The limits a call runs under: the caller's, else the defaults."""
+    return given if given is not None else default_limits
 
 
 @dataclass
@@ -61,15 +78,15 @@ class GrowResult:
     scene: Scene | None = None
 
 
-def _grow_grammar_data(data, path: str, seed, iterations, max_modules, progress, timings) -> tuple[Skeleton, int]:
-    t0 = time.perf_counter()
-    grammar = parse_grammar(data, path)
+def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
+                  work) -> tuple[Skeleton, int]:
+    """Derive and interpret a parsed grammar, adding each stage's seconds to ``timings``."""
     t1 = time.perf_counter()
-    ms = derive(grammar, iterations=iterations, seed=seed, max_modules=max_modules, progress=progress)
+    ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work)
     t2 = time.perf_counter()
-    skel = interpret(ms, grammar.turtle, grammar.materials, path)
+    skel = interpret(ms, grammar.turtle, grammar.materials, path, limits)
     t3 = time.perf_counter()
-    for k, v in (("parse", t1 - t0), ("derive", t2 - t1), ("interpret", t3 - t2)):
+    for k, v in (("derive", t2 - t1), ("interpret", t3 - t2)):
         timings[k] = timings.get(k, 0.0) + v
     return skel, len(ms)
 
@@ -84,12 +101,13 @@ def resolve_input(path: str | Path) -> Path:
     return p
 
 
-def load_input(path: str | Path):
-    """Read a YAML input: returns ("grammar" | "scene", parsed mapping)."""
+def load_input(path: str | Path, limits: Limits | None = None):
+    """Read an input: returns ("grammar" | "scene", parsed mapping), or ("skeleton", None)
+    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`)."""
     path = Path(path)
-    if path.suffix.lower() == ".npz":
+    if path.suffix.lower() in SKELETON_SUFFIXES:
         return "skeleton", None
-    data = read_yaml(path, GrammarError)
+    data = read_yaml(path, GrammarError, _in_force(limits))
     if data is None:
         raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
@@ -99,20 +117,40 @@ def load_input(path: str | Path):
     raise PlantgenError(f"{path}: not a grammar or scene (a grammar has 'axiom', a scene 'instances')")
 
 
+def read_skeleton(path: str | Path, limits: Limits | None = None) -> Skeleton:
+    """A skeleton file, ``.npz`` or ``.swc``, read and validated (one line naming the file
+    for anything wrong with it)."""
+    path = Path(path)
+    if path.suffix.lower() == ".swc":
+        return read_swc(path, _in_force(limits))
+    return Skeleton.load(path, _in_force(limits))
+
+
 def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
-              max_modules: int | None = None, progress=None) -> GrowResult:
-    """Grow a grammar or scene, or load a skeleton ``.npz``; time every stage."""
+              max_modules: int | None = None, progress=None, limits: Limits | None = None,
+              allow_paths=()) -> GrowResult:
+    """Grow a grammar or scene, or load a skeleton ``.npz`` / ``.swc``; time every stage.
+
+    ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
+    of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones."""
+    limits = _in_force(limits).raised(modules=max_modules)
+    if iterations is not None:
+        limits.check("iterations", int(iterations), "--iterations")
     path = resolve_input(path)
-    kind, data = load_input(path)
+    kind, data = load_input(path, limits)
     timings: dict = {}
     if kind == "skeleton":
         t0 = time.perf_counter()
-        skel = Skeleton.load(path)
+        skel = read_skeleton(path, limits)
         timings["load"] = time.perf_counter() - t0
         return GrowResult(skel, kind, path.stem, 0, timings)
+    work = limits.meter("derive_work")    # one budget for every derivation of this input
     if kind == "grammar":
-        skel, n = _grow_grammar_data(data, str(path), seed, iterations, max_modules, progress, timings)
-        return GrowResult(skel, kind, str(data.get("name", path.stem)), n, timings)
+        t0 = time.perf_counter()
+        grammar = parse_grammar(data, str(path), limits)
+        timings["parse"] = time.perf_counter() - t0
+        skel, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
+        return GrowResult(skel, kind, grammar.name, n, timings)
 
     modules = [0]
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
@@ -121,19 +159,14 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
-            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError), key)
-        g = grammars[key]
-        t1 = time.perf_counter()
-        ms = derive(g, iterations=its, seed=s, max_modules=max_modules)
-        t2 = time.perf_counter()
-        skel = interpret(ms, g.turtle, g.materials, key)
-        t3 = time.perf_counter()
-        for k, v in (("parse", t1 - t0), ("derive", t2 - t1), ("interpret", t3 - t2)):
-            timings[k] = timings.get(k, 0.0) + v
-        modules[0] += len(ms)
+            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError, limits), key, limits)
+        timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
+        skel, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
+        modules[0] += n
         return skel
 
-    scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one)
+    scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
+                        allow_paths=allow_paths)
     t0 = time.perf_counter()
     skel = scene.skeleton()
     timings["place"] = time.perf_counter() - t0
@@ -141,14 +174,16 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
 
 
 def grow(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
-         max_modules: int | None = None) -> Skeleton:
+         max_modules: int | None = None, limits: Limits | None = None, allow_paths=()) -> Skeleton:
     """Grow a grammar or a scene file into a Skeleton (the twin of ``plantgen grow``)."""
-    return grow_file(path, seed=seed, iterations=iterations, max_modules=max_modules).skeleton
+    return grow_file(path, seed=seed, iterations=iterations, max_modules=max_modules, limits=limits,
+                     allow_paths=allow_paths).skeleton
 
 
-def load_skeleton(path: str | Path, *, seed: int | None = None, iterations: int | None = None) -> Skeleton:
-    """Any input kind (grammar, scene, ``.npz``) to a Skeleton."""
-    return grow_file(path, seed=seed, iterations=iterations).skeleton
+def load_skeleton(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
+                  limits: Limits | None = None, allow_paths=()) -> Skeleton:
+    """Any input kind (grammar, scene, ``.npz``, ``.swc``) to a Skeleton."""
+    return grow_file(path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths).skeleton
 
 
 # ---------------------------------------------------------------------- model -> renderer
@@ -176,6 +211,34 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     if scene is None:
         return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
     return Staging(camera, tuple(scene.light.towards()), scene.ground)
+
+
+def check_finite_frusta(frusta: Frusta, source) -> Frusta:
+    """``frusta`` if every row is finite; else one line naming the first segment whose skin
+    is not (so no inf or NaN reaches a renderer or a file)."""
+    with np.errstate(invalid="ignore"):
+        bad = np.zeros(len(frusta), dtype=bool)
+        for name in ROW_FIELDS:
+            values = getattr(frusta, name)
+            if values.dtype.kind == "f":
+                bad |= ~np.isfinite(values).reshape(len(frusta), -1).all(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise PlantgenError(f"{source}: the skin of segment {int(frusta.segment[row])} is not finite "
+                            f"(frustum row {row}): the segment is degenerate")
+    return frusta
+
+
+def check_finite_mesh(mesh, frusta: Frusta, source) -> None:
+    """One line naming the first segment whose tessellation holds a non-finite vertex,
+    normal or texture coordinate."""
+    bad = ~(np.isfinite(mesh.vertices).all(axis=1) & np.isfinite(mesh.normals).all(axis=1)
+            & np.isfinite(mesh.uv).all(axis=1))
+    if bad.any():
+        face = int(np.argmax(bad[mesh.faces].any(axis=1)))
+        row = int(mesh.face_row[face])
+        raise PlantgenError(f"{source}: the mesh of segment {int(frusta.segment[row])} is not finite "
+                            f"(frustum row {row}): the segment is degenerate")
 
 
 def animate_model(grown: GrowResult, effects) -> AnimatedScene:
@@ -206,16 +269,19 @@ class RenderReport:
     skin_calls: int = 0
 
 
-def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None) -> None:
-    """Fail before any work on outputs :func:`render_file` cannot write: one line naming
-    the file. ``names`` maps the knobs ``frames``, ``fps`` and ``depth_out`` to how the
-    caller spells them (the CLI: ``--frames``, ...); default: the keyword names."""
-    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", **(names or {})}
+def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
+    """Fail before any work on outputs :func:`render_file` cannot write (and on a time that
+    is not finite): one line naming the file. ``names`` maps the knobs ``frames``, ``fps``,
+    ``depth_out`` and ``time_s`` to how the caller spells them (the CLI: ``--frames``,
+    ...); default: the keyword names."""
+    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", "time_s": "time_s", **(names or {})}
+    if time_s is not None and not math.isfinite(time_s):
+        raise PlantgenError(f"{name['time_s']} must be a finite number, got {time_s!r}")
     if frames is not None:
         if output.suffix.lower() not in ANIMATION_SUFFIXES:
             raise PlantgenError(f"{output}: an animation ({name['frames']}) must end in .gif or .webp")
-        if int(frames) < 1 or not fps > 0:
-            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} > 0")
+        if int(frames) < 1 or not 0 < fps < math.inf:
+            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} finite and > 0")
         if depth_out is not None:
             raise PlantgenError(f"{name['depth_out']} writes one frame: leave out {name['frames']}")
     elif output.suffix.lower() != ".png":
@@ -227,12 +293,40 @@ def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names
         raise PlantgenError(f"{camera_out}: the camera output must end in .json")
 
 
-def _camera_file(path, size) -> Camera:
+def _camera_file(path, size, limits: Limits | None = None) -> Camera:
     """The camera JSON at ``path``, at ``size`` (width, height) if given, else the file's."""
-    cam = Camera.load(path)
+    cam = Camera.load(path, _in_force(limits))
     if size is not None:
         cam = Camera(cam.eye, cam.target, cam.up, cam.fov_y, size[0], size[1])
     return cam
+
+
+# Memory a render takes, measured (tracemalloc and the GL targets' sizes) and rounded up:
+RENDER_BYTES_PER_PIXEL = 64      # colour, depth and distance targets, read-backs, the result's arrays
+FRAME_BYTES_PER_PIXEL = 8        # one kept animation frame (RGB) and its share of the encoding
+SHADOW_BYTES_PER_TEXEL = 8       # the shadow map's depth target and its read of it
+SKIN_BYTES_PER_SEGMENT = 1024    # skinning (about 570 bytes a segment at its peak), records, knuckles
+
+
+def estimate_render_bytes(width: int, height: int, *, frames: int = 1, shadow_res: int | None = None,
+                          segments: int = 0) -> int:
+    """Bytes a render of ``width`` x ``height`` pixels takes (GPU and host together):
+    the frame's targets, ``frames`` kept animation frames, the shadow map, the skinned
+    ``segments``."""
+    pixels = int(width) * int(height)
+    return (pixels * RENDER_BYTES_PER_PIXEL + (int(frames) * pixels * FRAME_BYTES_PER_PIXEL if frames > 1 else 0)
+            + (int(shadow_res) ** 2 * SHADOW_BYTES_PER_TEXEL if shadow_res else 0)
+            + int(segments) * SKIN_BYTES_PER_SEGMENT)
+
+
+def _check_render_memory(limits: Limits, what: str, width, height, frames, shadow_res, segments=0) -> None:
+    """Refuse a render whose estimated memory is over ``limits.max_render_bytes``."""
+    need = estimate_render_bytes(width, height, frames=frames or 1, shadow_res=shadow_res, segments=segments)
+    if need > limits.max_render_bytes:
+        raise LimitError(f"{what}: {width}x{height} pixels, {frames or 1} frame(s), {segments:,} segments "
+                         f"need about {need / 2**20:,.0f} MiB, over the limit of "
+                         f"{limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
+                         "the size, the frames or the shadow resolution)")
 
 
 def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress):
@@ -276,7 +370,8 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
                 linear_steps=None, binary_steps=None, v_exact=False, march=None,
                 march_density=None, timed_frames=3,
                 effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
-                time_s=None, frames=None, fps=12.0, progress=None, names=None) -> RenderReport:
+                time_s=None, frames=None, fps=12.0, progress=None, names=None,
+                limits: Limits | None = None, allow_paths=()) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene or skeleton ``.npz``), skin it, ray cast
     it and write a PNG (and optionally the camera JSON and the depth ``.npy``), or, with
     ``frames``, an animated GIF/WebP.
@@ -300,21 +395,28 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
         ray from the eye (``inf`` for a miss), row 0 the top row of the PNG
     timed_frames : frames rendered after a warm-up frame; the report quotes their median
     names : how the caller spells the knobs in messages (see :func:`check_render_outputs`)
+    limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
+        render is estimated to take, before any is allocated) and the folders a scene may
+        read grammars from
     """
     output = Path(output)
-    check_render_outputs(output, frames, fps, depth_out, camera_out, names)
-    grown = grow_file(input_path, seed=seed, iterations=iterations)
+    limits = _in_force(limits)
+    check_render_outputs(output, frames, fps, depth_out, camera_out, names, time_s=time_s)
+    cam_file = None if camera in ("auto", None) else _camera_file(camera, size, limits)
+    width, height = (cam_file.width, cam_file.height) if cam_file is not None else (size or (1024, 768))
+    _check_render_memory(limits, str(output), width, height, frames, shadow_res)
+    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
     chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
                              add=[n for n, f in (("relief", relief), ("shadows", shadows)) if f],
                              remove=[n for n, f in (("relief", relief), ("shadows", shadows))
                                      if f is False])
     if len(grown.skeleton) == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
-    anim = animate_model(grown, chosen)
-    t_start = float(time_s or 0.0)
-    frusta = anim.frusta_at(t_start)
-    staging = stage_model(grown, frusta, *(size or (1024, 768)),
-                          camera=None if camera in ("auto", None) else _camera_file(camera, size))
+    _check_render_memory(limits, str(input_path), width, height, frames,
+                         shadow_res if "shadows" in chosen else None, len(grown.skeleton))
+    anim, t_start = animate_model(grown, chosen), float(time_s or 0.0)
+    frusta = check_finite_frusta(anim.frusta_at(t_start), input_path)
+    staging = stage_model(grown, frusta, width, height, camera=cam_file)
     cam = staging.camera
     knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
              "march_density": march_density}
@@ -344,28 +446,39 @@ def render_file(input_path, output, *, size=None, camera="auto", camera_out=None
 
 # ---------------------------------------------------------------------- plantgen export
 def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
-                 seed: int | None = None) -> dict:
+                 seed: int | None = None, limits: Limits | None = None, allow_paths=()) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file.
 
-    ``input_path`` is a skeleton ``.npz``, a grammar or a scene. Returns a summary dict:
-    ``segments``, ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``, ``relief``,
-    ``path``, ``timings`` (seconds per stage).
+    ``input_path`` is a skeleton ``.npz`` or ``.swc``, a grammar or a scene. Returns a
+    summary dict: ``segments``, ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``,
+    ``relief``, ``path``, ``timings`` (seconds per stage). The triangle count and the
+    memory the export takes are estimated before anything is built and refused over
+    ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
     """
     output_path = Path(output_path)
-    export_file_type(output_path)  # fail on a bad suffix before any work
+    limits = _in_force(limits)
+    file_type = export_file_type(output_path)  # fail on a bad suffix before any work
     t0 = time.perf_counter()
-    skeleton = load_skeleton(input_path, seed=seed)
+    skeleton = load_skeleton(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if len(skeleton) == 0:
         raise ExportError(f"{input_path}: the model has no segments")
     skeleton.validate()
     t1 = time.perf_counter()
-    frusta = skin_skeleton(skeleton)
+    frusta = check_finite_frusta(skin_skeleton(skeleton), input_path)
     t2 = time.perf_counter()
     estimate = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
     if estimate > limits.max_export_triangles:
         raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
-                          f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv")
+                          f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
+                          f"({hint('export_triangles')})")
+    need = estimate_export_bytes(estimate, file_type) + len(skeleton) * SKIN_BYTES_PER_SEGMENT
+    if need > limits.max_export_bytes:
+        raise LimitError(f"{output_path}: m = {level} gives {estimate:,} triangles, about "
+                         f"{need / 2**20:,.0f} MiB to build and write as {file_type}, over the limit of "
+                         f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
+                         f"({hint('export_bytes')})")
     mesh = tessellate(frusta, level, relief=relief)
+    check_finite_mesh(mesh, frusta, input_path)
     t3 = time.perf_counter()
     export_mesh(mesh, output_path)
     t4 = time.perf_counter()

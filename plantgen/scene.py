@@ -14,7 +14,7 @@ A scene is a YAML mapping with an ``instances`` list::
     camera: auto                          # or {eye, target, up, fov_y}
     light: {direction: [-0.4, -1, -0.3]}  # direction the light travels
     instances:
-      - grammar: saguaro                  # shipped name, or a path relative to this file
+      - grammar: saguaro                  # shipped name, or a path inside this file's folder
         seed: 3                           # default: scene seed + instance number
         position: [0, 0, 0]
         rotation: [0, 30, 0]              # degrees about x, then y, then z
@@ -30,6 +30,11 @@ A scene is a YAML mapping with an ``instances`` list::
 
 Copies made by ``grid`` get seeds ``seed + k`` and, if ``jitter`` is set, positions
 jittered and yaw turned from a generator seeded by the instance seed: deterministic.
+
+A scene is untrusted input: every value is typed and ranged (``plantgen.fields``), the
+instances (grid copies included) and the total segments are counted against the limits
+in force, a placed copy must stay finite and within ``tol.max_coordinate``, and a grammar
+path is read only inside the scene's folder (or a folder the caller allows).
 """
 
 from __future__ import annotations
@@ -39,13 +44,17 @@ from pathlib import Path
 
 import numpy as np
 
+from . import fields
 from ._resources import grammars_dir
 from .errors import PlantgenError
 from .files import read_yaml
-from .geometry.camera import Camera, CameraError
+from .geometry.camera import Camera, CameraError, box_corners
 from .geometry.skeleton import Skeleton, SkeletonError
 from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
+from .limits import Limits
+from .limits import limits as default_limits
 from .lsystem.grammar import GrammarError
+from .tolerances import tol
 
 __all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "is_scene",
            "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "rotation_matrix"]
@@ -149,43 +158,30 @@ def rotation_matrix(degrees_xyz) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- checks
+# Every value is read through plantgen.fields (typed, finite, ranged); lengths and
+# positions stay within tol.max_coordinate, so a placed model cannot overflow.
+_MAX = tol.max_coordinate
+
+
 def _vec3(value, what, where):
-    if (not isinstance(value, (list, tuple)) or len(value) != 3
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)):
-        raise SceneError(f"{where}: {what} must be three numbers, got {value!r}")
-    out = np.array(value, dtype=np.float64)
-    if not np.all(np.isfinite(out)):
-        raise SceneError(f"{where}: {what} must be finite")
-    return out
+    return fields.vector(value, what, where, SceneError, max_abs=_MAX)
 
 
-def _num(value, what, where, positive=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise SceneError(f"{where}: {what} must be a number, got {value!r}")
-    if positive and value <= 0:
-        raise SceneError(f"{where}: {what} must be positive")
-    return float(value)
+def _num(value, what, where, positive=False, lo=None):
+    return fields.number(value, what, where, SceneError, positive=positive, lo=lo, max_abs=_MAX)
 
 
 def _check_keys(d, allowed, where):
-    if not isinstance(d, dict):
-        raise SceneError(f"{where}: must be a mapping")
-    unknown = set(d) - allowed
-    if unknown:
-        raise SceneError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
-
-
-def _non_negative_int(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, int) and value >= 0
+    fields.keys(d, allowed, where, SceneError)
 
 
 # ---------------------------------------------------------------------------- scene header
 def _parse_effects(effects, path: str) -> tuple[str, ...]:
     if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
-        raise SceneError(f"{path}: effects must be a list of names")
+        raise SceneError(f"{path}: effects must be a list of names, got {fields.show(effects)}")
     bad = [e for e in effects if e not in EFFECTS]
     if bad:
-        raise SceneError(f"{path}: unknown effect(s) {bad} (known: {list(EFFECTS)})")
+        raise SceneError(f"{path}: unknown effect(s) {fields.show(bad)} (known: {list(EFFECTS)})")
     return tuple(effects)
 
 
@@ -196,14 +192,15 @@ def _parse_ground(ground, path: str) -> Ground | None:
     _check_keys(ground, GROUND_KEYS, where)
     return Ground(size=_num(ground.get("size", 10.0), "size", where, positive=True),
                   height=_num(ground.get("height", 0.0), "height", where),
-                  material=str(ground.get("material", "sand")))
+                  material=fields.text(ground.get("material", "sand"), "material", where, SceneError,
+                                       max_len=100))
 
 
 def _parse_camera(camera, path: str) -> CameraSpec | None:
     if camera == "auto":
         return None
     if not isinstance(camera, dict):
-        raise SceneError(f"{path}: camera must be 'auto' or a mapping")
+        raise SceneError(f"{path}: camera must be 'auto' or a mapping, got {fields.show(camera)}")
     try:   # the file may give a width and height: checked, though the render sets the size
         cam = Camera.from_dict(camera, f"{path}: camera")
     except CameraError as exc:
@@ -218,12 +215,9 @@ def _parse_light(light, path: str) -> Light:
     _check_keys(light, LIGHT_KEYS, where)
     travel, intensity = SCENE_LIGHT.travel, SCENE_LIGHT.intensity
     if "direction" in light:
-        d = _vec3(light["direction"], "direction", where)
-        if not np.linalg.norm(d):
-            raise SceneError(f"{path}: light direction must not be zero")
-        travel = tuple((d / np.linalg.norm(d)).tolist())
+        travel = fields.unit_vector(light["direction"], "direction", where, SceneError)
     if "intensity" in light:
-        intensity = _num(light["intensity"], "intensity", where)
+        intensity = _num(light["intensity"], "intensity", where, lo=0.0)
     return Light(travel, intensity)
 
 
@@ -242,24 +236,43 @@ class _Placement:
     copies: list                  # [(offset (3,), yaw degrees, copy number)]
 
 
-def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override) -> _Placement:
+@dataclass
+class _Budget:
+    """What a scene has placed so far, against ``max_instances`` and ``max_segments``."""
+
+    limits: Limits
+    instances: int = 0
+    segments: int = 0
+
+    def place(self, n: int, where: str) -> None:
+        self.instances += n
+        self.limits.check("instances", self.instances, f"{where}: instances placed")
+
+    def add_segments(self, n: int, where: str) -> None:
+        self.segments += n
+        self.limits.check("segments", self.segments, f"{where}: segments placed in the scene")
+
+
+def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override, budget: _Budget) -> _Placement:
     where = f"{path}: instance {k + 1}"
     _check_keys(inst, INSTANCE_KEYS, where)
     if ("grammar" in inst) == ("skeleton" in inst):
         raise SceneError(f"{where}: give exactly one of 'grammar' or 'skeleton'")
-    inst_seed = inst.get("seed", base_seed + k)
-    if not _non_negative_int(inst_seed):
-        raise SceneError(f"{where}: seed must be a non-negative integer")
+    inst_seed = fields.integer(inst.get("seed", base_seed + k), "seed", where, SceneError, hi=None)
     if seed_override is not None and "seed" in inst:
         inst_seed = inst_seed + int(seed_override)   # an override seed shifts every instance
     position = _vec3(inst.get("position", [0, 0, 0]), "position", where)
-    rotation = _vec3(inst.get("rotation", [0, 0, 0]), "rotation", where)
+    rotation = fields.vector(inst.get("rotation", [0, 0, 0]), "rotation", where, SceneError, max_abs=1e6)
     scale = _num(inst.get("scale", 1.0), "scale", where, positive=True)
     iterations = inst.get("iterations")
-    if iterations is not None and not _non_negative_int(iterations):
-        raise SceneError(f"{where}: iterations must be a non-negative integer")
+    if iterations is not None:
+        iterations = fields.integer(iterations, "iterations", where, SceneError, hi=None)
+        budget.limits.check("iterations", iterations, f"{where}: iterations")
     sway = _parse_sway(inst.get("motion"), where)
-    copies = _grid_copies(inst["grid"], where, inst_seed) if "grid" in inst else [(np.zeros(3), 0.0, 0)]
+    copies = (_grid_copies(inst["grid"], where, inst_seed, budget) if "grid" in inst
+              else [(np.zeros(3), 0.0, 0)])
+    if "grid" not in inst:
+        budget.place(1, where)
     return _Placement(where, inst_seed, position, rotation, scale, iterations, sway, copies)
 
 
@@ -272,7 +285,8 @@ def _parse_sway(motion, where: str) -> dict | None:
         return None
     sway = motion["sway"]
     _check_keys(sway, SWAY_KEYS, f"{where}: motion: sway")
-    return {key: _num(v, key, f"{where}: motion: sway") for key, v in sway.items()}
+    return {key: fields.number(v, key, f"{where}: motion: sway", SceneError, max_abs=1e6)
+            for key, v in sway.items()}
 
 
 def _copy_sway(sway: dict | None, copy_seed: int) -> Sway | None:
@@ -286,21 +300,22 @@ def _copy_sway(sway: dict | None, copy_seed: int) -> Sway | None:
                 phase=phase)
 
 
-def _grid_copies(grid, where: str, inst_seed: int) -> list:
+def _grid_copies(grid, where: str, inst_seed: int, budget: _Budget) -> list:
     """The copies a ``grid`` entry asks for: [(offset (3,), yaw degrees, copy number)], row
-    by row; jittered positions and yaws come from a generator seeded by ``inst_seed``."""
+    by row; jittered positions and yaws come from a generator seeded by ``inst_seed``.
+    Their number is counted against ``max_instances`` before any is made."""
     _check_keys(grid, GRID_KEYS, f"{where}: grid")
     count = grid.get("count", [1, 1])
-    if (not isinstance(count, list) or len(count) != 2
-            or not all(isinstance(c, int) and not isinstance(c, bool) and c > 0 for c in count)):
-        raise SceneError(f"{where}: grid count must be two positive integers")
+    if not isinstance(count, list) or len(count) != 2:
+        raise SceneError(f"{where}: grid count must be two positive integers, got {fields.show(count)}")
+    nx, nz = (fields.integer(c, "grid count", where, SceneError, lo=1, hi=None) for c in count)
+    budget.place(nx * nz, f"{where}: grid")
     spacing = grid.get("spacing", [1.0, 1.0])
     if not isinstance(spacing, list) or len(spacing) != 2:
-        raise SceneError(f"{where}: grid spacing must be two numbers")
+        raise SceneError(f"{where}: grid spacing must be two numbers, got {fields.show(spacing)}")
     sx, sz = (_num(s, "grid spacing", where, positive=True) for s in spacing)
-    jitter = _num(grid.get("jitter", 0.0), "grid jitter", where)
+    jitter = _num(grid.get("jitter", 0.0), "grid jitter", where, lo=0.0)
     rng = np.random.default_rng(inst_seed)
-    nx, nz = count
     copies = []
     for iz in range(nz):
         for ix in range(nx):
@@ -312,7 +327,27 @@ def _grid_copies(grid, where: str, inst_seed: int) -> list:
     return copies
 
 
-def _explicit_skeleton(d, where) -> Skeleton:
+def _explicit_segment(s, materials: list, cols: dict, w: str) -> None:
+    _check_keys(s, SEGMENT_KEYS, w)
+    for key in ("start", "end", "r_start", "r_end"):
+        if key not in s:
+            raise SceneError(f"{w}: missing {key}")
+    cols["start"].append(_vec3(s["start"], "start", w))
+    cols["end"].append(_vec3(s["end"], "end", w))
+    cols["r_start"].append(_num(s["r_start"], "r_start", w, lo=0.0))
+    cols["r_end"].append(_num(s["r_end"], "r_end", w, lo=0.0))
+    cols["parent"].append(fields.integer(s.get("parent", -1), "parent", w, SceneError, lo=-1))
+    continues = s.get("continues", False)
+    if not isinstance(continues, bool):
+        raise SceneError(f"{w}: continues must be true or false, got {fields.show(continues)}")
+    cols["continues"].append(continues)
+    mat = s.get("material", materials[0])
+    if mat not in materials:
+        raise SceneError(f"{w}: material {fields.show(mat)} not in {fields.show(materials)}")
+    cols["material"].append(materials.index(mat))
+
+
+def _explicit_skeleton(d, where, limits: Limits) -> Skeleton:
     _check_keys(d, SKELETON_KEYS, where)
     materials = d.get("materials", ["bark"])
     if not isinstance(materials, list) or not materials or not all(isinstance(m, str) for m in materials):
@@ -320,26 +355,10 @@ def _explicit_skeleton(d, where) -> Skeleton:
     segs = d.get("segments")
     if not isinstance(segs, list) or not segs:
         raise SceneError(f"{where}: segments must be a non-empty list")
+    limits.check("segments", len(segs), f"{where}: segments")
     cols = {k: [] for k in ("start", "end", "r_start", "r_end", "parent", "continues", "material")}
     for i, s in enumerate(segs):
-        w = f"{where}: segment {i}"
-        _check_keys(s, SEGMENT_KEYS, w)
-        for key in ("start", "end", "r_start", "r_end"):
-            if key not in s:
-                raise SceneError(f"{w}: missing {key}")
-        cols["start"].append(_vec3(s["start"], "start", w))
-        cols["end"].append(_vec3(s["end"], "end", w))
-        cols["r_start"].append(_num(s["r_start"], "r_start", w))
-        cols["r_end"].append(_num(s["r_end"], "r_end", w))
-        parent = s.get("parent", -1)
-        if isinstance(parent, bool) or not isinstance(parent, int):
-            raise SceneError(f"{w}: parent must be an integer")
-        cols["parent"].append(parent)
-        cols["continues"].append(bool(s.get("continues", False)))
-        mat = s.get("material", materials[0])
-        if mat not in materials:
-            raise SceneError(f"{w}: material {mat!r} not in {materials}")
-        cols["material"].append(materials.index(mat))
+        _explicit_segment(s, materials, cols, f"{where}: segment {i}")
     skel = Skeleton(**{k: np.array(v) for k, v in cols.items()}, material_names=tuple(materials))
     try:
         skel.validate(tol=1e-6)
@@ -348,12 +367,26 @@ def _explicit_skeleton(d, where) -> Skeleton:
     return skel
 
 
-def _resolve_grammar(name: str, base: Path, where: str) -> Path:
-    cand = [base / name, base / f"{name}.yaml", grammars_dir() / name, grammars_dir() / f"{name}.yaml"]
-    for c in cand:
-        if c.is_file():
-            return c
-    raise SceneError(f"{where}: grammar {name!r} not found next to the scene or among the shipped grammars")
+def _resolve_grammar(name: str, base: Path, where: str, allow_paths=()) -> Path:
+    """The grammar file an instance names: a path inside the scene's folder (or a folder of
+    ``allow_paths``), else a shipped grammar by plain name. A path that leaves the folder
+    (``../x``, ``/etc/passwd``, a link pointing out) is refused before it is opened."""
+    if not name or "\0" in name:
+        raise SceneError(f"{where}: grammar must name a file, got {fields.show(name)}")
+    roots = [base.resolve(), *(Path(p).resolve() for p in allow_paths)]
+    for cand in (base / name, base / f"{name}.yaml"):
+        real = cand.resolve()
+        if not any(real.is_relative_to(root) for root in roots):
+            raise SceneError(f"{where}: grammar {fields.show(name)} lies outside the scene's folder "
+                             f"(only files under it are read; pass --allow-path DIR to allow DIR)")
+        if real.is_file():
+            return real
+    if Path(name).name == name and name not in (".", ".."):   # a plain name: a shipped grammar
+        for cand in (grammars_dir() / name, grammars_dir() / f"{name}.yaml"):
+            if cand.is_file():
+                return cand
+    raise SceneError(f"{where}: grammar {fields.show(name)} not found next to the scene or among the "
+                     "shipped grammars")
 
 
 def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float) -> np.ndarray:
@@ -365,28 +398,48 @@ def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float) -> 
     return m
 
 
-def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar,
-                 cache: dict) -> list[SceneInstance]:
+def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str) -> None:
+    """Refuse a copy whose placed coordinates or radii would not be finite or would lie
+    beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing)."""
+    if not len(skel):
+        return
+    with np.errstate(all="ignore"):
+        corners = box_corners(skel.bounds) @ matrix[:3, :3].T + matrix[:3, 3]
+        radius = max(float(skel.r_start.max()), float(skel.r_end.max())) * float(np.abs(matrix[:3, :3]).max())
+        ok = bool(np.all(np.abs(corners) <= _MAX)) and radius <= _MAX
+    if not ok:
+        raise SceneError(f"{where}: placed, the plant reaches coordinates that are not finite or beyond "
+                         f"{_MAX:g} (position, scale or grid spacing too large)")
+
+
+def _copy_skeleton(inst, placement: _Placement, seed: int, base: Path, grow_grammar, cache: dict,
+                   limits: Limits, allow_paths) -> tuple[Skeleton, str]:
+    """The skeleton of one copy (in its own frame) and its source name."""
+    if "skeleton" in inst:
+        return _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton", limits), "skeleton"
+    name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
+    gpath = _resolve_grammar(name, base, placement.where, allow_paths)
+    key = (str(gpath), seed, placement.iterations)
+    if key not in cache:
+        try:
+            cache[key] = grow_grammar(gpath, seed, placement.iterations)
+        except PlantgenError as exc:
+            raise SceneError(f"{placement.where}: {exc}") from None
+    return cache[key], name
+
+
+def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: dict, budget: _Budget,
+                 allow_paths=()) -> list[SceneInstance]:
     """Every copy of one instance entry, grown (grammars once per seed and iteration count,
-    through ``cache``) and placed."""
+    through ``cache``), counted against the scene's segment budget and placed."""
     out = []
     for offset, yaw, c in placement.copies:
         s = placement.seed + c
-        if "grammar" in inst:
-            gpath = _resolve_grammar(str(inst["grammar"]), base, placement.where)
-            key = (str(gpath), s, placement.iterations)
-            if key not in cache:
-                try:
-                    cache[key] = grow_grammar(gpath, s, placement.iterations)
-                except PlantgenError as exc:
-                    raise SceneError(f"{placement.where}: {exc}") from None
-            skel = cache[key]
-            source = str(inst["grammar"])
-        else:
-            skel = _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton")
-            source = "skeleton"
-        out.append(SceneInstance(source, s, _placement_matrix(placement, offset, yaw), skel,
-                                 _copy_sway(placement.sway, s)))
+        skel, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits, allow_paths)
+        budget.add_segments(len(skel), placement.where)
+        matrix = _placement_matrix(placement, offset, yaw)
+        _check_placed(skel, matrix, placement.where)
+        out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s)))
     return out
 
 
@@ -395,32 +448,40 @@ def is_scene(data) -> bool:
     return isinstance(data, dict) and "instances" in data
 
 
-def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_grammar=None) -> Scene:
+def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_grammar=None,
+                limits: Limits | None = None, allow_paths=()) -> Scene:
     """Validate a scene mapping and grow its instances.
 
     ``grow_grammar(path, seed, iterations) -> Skeleton`` grows one grammar (injected by
-    the pipeline, which keeps this module free of L-system details).
+    the pipeline, which keeps this module free of L-system details). ``limits`` caps the
+    instances and the scene's total segments; grammars are read only from the scene's
+    folder, the folders of ``allow_paths`` and the shipped grammars.
     """
+    limits = limits or default_limits
     _check_keys(data, SCENE_KEYS, path)
     if not isinstance(data.get("instances"), list) or not data["instances"]:
         raise SceneError(f"{path}: instances must be a non-empty list")
-    base_seed = int(data.get("seed", 0)) if seed is None else int(seed)
+    base_seed = fields.integer(data.get("seed", 0), "seed", path, SceneError) if seed is None else int(seed)
     effects = _parse_effects(data.get("effects", []), path)
     ground = _parse_ground(data.get("ground"), path)
     camera = _parse_camera(data.get("camera", "auto"), path)
     light = _parse_light(data["light"], path) if "light" in data else SCENE_LIGHT
+    name = fields.text(data.get("name", Path(path).stem), "name", path, SceneError, max_len=200)
+    description = fields.text(data.get("description", ""), "description", path, SceneError, max_len=10_000)
 
     base = Path(path).parent
+    budget = _Budget(limits)
     instances: list[SceneInstance] = []
     cache: dict[tuple, Skeleton] = {}
     for k, inst in enumerate(data["instances"]):
-        placement = _parse_placement(inst, k, path, base_seed, seed)
-        instances += _grow_copies(inst, placement, base, grow_grammar, cache)
+        placement = _parse_placement(inst, k, path, base_seed, seed, budget)
+        instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)
 
-    return Scene(str(data.get("name", Path(path).stem)), str(data.get("description", "")),
-                 effects, tuple(instances), ground, camera, light, path)
+    return Scene(name, description, effects, tuple(instances), ground, camera, light, path)
 
 
-def load_scene(path: str | Path, *, seed: int | None = None, grow_grammar=None) -> Scene:
+def load_scene(path: str | Path, *, seed: int | None = None, grow_grammar=None,
+               limits: Limits | None = None, allow_paths=()) -> Scene:
     """Read a scene file and :func:`parse_scene` it."""
-    return parse_scene(read_yaml(path, GrammarError), str(path), seed=seed, grow_grammar=grow_grammar)
+    return parse_scene(read_yaml(path, GrammarError, limits), str(path), seed=seed, grow_grammar=grow_grammar,
+                       limits=limits, allow_paths=allow_paths)

@@ -33,6 +33,13 @@ class Tolerances:
     where ``x`` underflows to 0, and a vector shorter than this has no direction. Far below
     any length a model has, so it changes no result that is not degenerate."""
 
+    max_coordinate: float = 1e9
+    """World units: the largest magnitude a skeleton's coordinate or radius (and a scene's
+    position, a camera's eye) may have. Beyond it squares and products of lengths leave
+    float32's range on the GPU and lose float64's precision on the CPU, so a model that
+    reaches it (``F(1e308)``, ``!(1e308)``, a scale of 1e308) is refused, never drawn with
+    inf or NaN coordinates."""
+
     zero_length: float = 1e-12
     """Relative (to a row's size: its radius or its length): a length below this counts as
     zero. Gives a zero-length segment a length, finds a cone closing to a point on a

@@ -189,16 +189,16 @@ def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
         assert np.allclose(base, (palette["dark"][i] + palette["light"][i]) / 2, atol=1 / 255)
 
 
-def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path, monkeypatch):
-    from dataclasses import replace
-
+def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path):
     from _cli import run_cli
 
-    import plantgen.pipeline as pipeline_module
-
-    monkeypatch.setattr(pipeline_module, "limits", replace(pipeline_module.limits, max_export_triangles=100))
     skel_path = tmp_path / "y.npz"
     y_skeleton().save(skel_path)
-    code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--subdiv", "1")
-    assert code == 2 and "over the export limit" in stderr
+    code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--subdiv", "1",
+                              "--limit", "export_triangles=100")
+    assert code == 2 and "over the export limit" in stderr and "--limit export_triangles=N" in stderr
+    assert not (tmp_path / "y.glb").exists()
+    code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--subdiv", "1",
+                              "--limit", "export_bytes=1000")
+    assert code == 2 and "--limit export_bytes=N" in stderr and len(stderr.strip().splitlines()) == 1
     assert not (tmp_path / "y.glb").exists()

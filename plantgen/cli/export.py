@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..pipeline import export_model
-from .options import input_arg, output_opt, quiet_opt, seed_opt
+from .options import allow_path_opt, input_arg, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
 
 
 @click.command()
@@ -18,9 +18,11 @@ from .options import input_arg, output_opt, quiet_opt, seed_opt
 @click.option("--relief/--no-relief", default=False, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
 @seed_opt
+@limit_opt
+@allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, level: int, relief: bool, seed, quiet) -> None:
-    """Tessellate INPUT (a skeleton .npz, grammar or scene) and write a mesh file.
+def export(input: Path, output: Path, level: int, relief: bool, seed, limit_values, allow_paths, quiet) -> None:
+    """Tessellate INPUT (a skeleton .npz or .swc, grammar or scene) and write a mesh file.
 
     Vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
     caster; open chain ends are capped. glTF keeps material colours and uv.
@@ -29,7 +31,8 @@ def export(input: Path, output: Path, level: int, relief: bool, seed, quiet) -> 
     Example:
       plantgen export pine.npz -o pine.glb --subdiv 2 --relief
     """
-    info = export_model(input, output, level=level, relief=relief, seed=seed)
+    info = export_model(input, output, level=level, relief=relief, seed=seed, limits=limits_from(limit_values),
+                        allow_paths=allow_paths)
     if quiet:
         return
     t = info["timings"]

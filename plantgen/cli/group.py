@@ -1,20 +1,27 @@
 """The ``plantgen`` command group and the console entry point :func:`main`.
 
 The commands live in their own modules and know nothing of the group; they are added to
-it here, in one place. Errors a user can cause (``PlantgenError``, usage errors) print one
-line and exit 2.
+it here, in one place. No traceback reaches the user: errors a user can cause
+(``PlantgenError``, usage errors) print one line and exit 2; an unexpected failure prints
+one line and exits 1, with the traceback behind ``--debug``. Numpy's floating-point
+warnings and Python warnings never reach the terminal (the stages check finiteness
+themselves, and say so in one line).
 """
 
 from __future__ import annotations
 
 import sys
+import traceback
+import warnings
 
 import click
+import numpy as np
 
 from ..errors import PlantgenError
 from .bench import bench
 from .export import export
 from .grow import grow
+from .options import debug_opt, debug_requested
 from .render import render
 
 __all__ = ["cli", "main"]
@@ -22,6 +29,7 @@ __all__ = ["cli", "main"]
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="plantgen")
+@debug_opt
 def cli() -> None:
     """plantgen: L-system plants skinned with relief-mapped conical frusta.
 
@@ -31,15 +39,20 @@ def cli() -> None:
 
 
 for _command in (grow, export, render, bench):
-    cli.add_command(_command)
+    cli.add_command(debug_opt(_command))
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: user errors become one line on stderr and exit status 2."""
+    """Console entry point: user errors become one line on stderr and exit status 2, an
+    unexpected failure one line and exit status 1 (the traceback with ``--debug``)."""
+    debug_requested(reset=True)
     try:
-        cli.main(args=argv, prog_name="plantgen", standalone_mode=False)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            if not debug_requested():
+                warnings.simplefilter("ignore")
+            cli.main(args=argv, prog_name="plantgen", standalone_mode=False)
     except PlantgenError as exc:
-        click.echo(f"plantgen: error: {exc}", err=True)
+        click.echo(f"plantgen: error: {_one_line(exc)}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
         click.echo("plantgen: aborted", err=True)
@@ -53,3 +66,18 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(exc.exit_code if exc.exit_code else 2)
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
+    except MemoryError:
+        click.echo("plantgen: error: out of memory (lower the input's size or the budgets: --limit)", err=True)
+        sys.exit(1)
+    except Exception as exc:   # a bug: one line, the traceback only on request
+        if debug_requested():
+            traceback.print_exc()
+        click.echo(f"plantgen: error: unexpected failure: {exc.__class__.__name__}: {_one_line(exc)} "
+                   "(run with --debug for the traceback)", err=True)
+        sys.exit(1)
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line (a multi-line message keeps its first line)."""
+    lines = str(exc).strip().splitlines()
+    return lines[0][:500] if lines else exc.__class__.__name__

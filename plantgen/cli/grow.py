@@ -11,7 +11,10 @@ import numpy as np
 from ..errors import PlantgenError
 from ..lsystem.derive import DEFAULT_MAX_MODULES
 from ..pipeline import grow_file
-from .options import input_arg, iterations_opt, output_opt, quiet_opt, seed_opt
+from .options import allow_path_opt, input_arg, iterations_opt, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
+
+#: Seconds between two progress lines of a long derivation.
+PROGRESS_EVERY = 1.0
 
 
 @click.command()
@@ -22,12 +25,16 @@ from .options import input_arg, iterations_opt, output_opt, quiet_opt, seed_opt
 @iterations_opt
 @click.option("--max-modules", type=click.IntRange(min=1),
               help="Stop with an error if the module string would grow past this many modules "
-                   f"(default {DEFAULT_MAX_MODULES:,}).")
+                   f"(default {DEFAULT_MAX_MODULES:,}; the same as --limit modules=N).")
 @click.option("--format", "formats", type=click.Choice(["npz", "swc"]), multiple=True,
               help="Also write these formats (repeatable); swc is written beside the .npz.")
+@limit_opt
+@allow_path_opt
 @quiet_opt
-def grow(input: Path, output: Path | None, seed, iterations, max_modules, formats, quiet) -> None:
-    """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton.
+def grow(input: Path, output: Path | None, seed, iterations, max_modules, formats, limit_values, allow_paths,
+         quiet) -> None:
+    """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton;
+    a skeleton .npz or .swc is read back, checked and written again.
 
     Derives the L-system, walks the turtle, and writes the segment arrays (start, end,
     r_start, r_end, parent, continues, material, material_names) as .npz. A scene writes
@@ -39,14 +46,19 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, format
       plantgen grow grammars/pine.yaml -o pine.npz --seed 3 --format swc
     """
     t_start = time.perf_counter()
+    shown = [t_start]
 
     def progress(step, n):
-        # Only long derivations report progress, so quick ones print a clean summary.
-        if time.perf_counter() - t_start > 1.0:
-            click.echo(f"  derivation step {step}: {n:,} modules", err=True)
+        # Only long derivations report progress, at most one line a PROGRESS_EVERY seconds,
+        # so quick ones print a clean summary and a million steps print a few lines.
+        now = time.perf_counter()
+        if now - shown[0] >= PROGRESS_EVERY:
+            shown[0] = now
+            click.echo(f"  derivation step {step:,}: {n:,} modules", err=True)
 
     result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules,
-                       progress=progress if not quiet else None)
+                       progress=progress if not quiet else None, limits=limits_from(limit_values),
+                       allow_paths=allow_paths)
     skel = result.skeleton
     if len(skel) == 0:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")

@@ -7,16 +7,22 @@ its file or size is, a function that makes one (``@output_opt("...")``).
 
 from __future__ import annotations
 
+import math
+import os
 import re
+from dataclasses import fields
 from pathlib import Path
 
 import click
 
-__all__ = ["MAX_SIDE", "input_arg", "iterations_opt", "output_opt", "parse_size", "quiet_opt",
-           "seed_opt", "size_opt"]
+from ..limits import MAX_IMAGE_SIDE, Limits
+from ..limits import limits as default_limits
+
+__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "finite", "input_arg", "iterations_opt",
+           "limit_opt", "limits_from", "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
-MAX_SIDE = 16384
+MAX_SIDE = MAX_IMAGE_SIDE
 
 _SIZE = re.compile(r"\s*(\d+)\s*[xX]\s*(\d+)\s*")
 
@@ -30,6 +36,13 @@ def parse_size(ctx, param, value):
     if not m or not (0 < int(m.group(1)) <= MAX_SIDE and 0 < int(m.group(2)) <= MAX_SIDE):
         raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..{MAX_SIDE}, e.g. 1024x768")
     return int(m.group(1)), int(m.group(2))
+
+
+def finite(ctx, param, value):
+    """click callback for a float option: refuse ``nan`` and ``inf`` (click's float reads them)."""
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(f"{value!r} is not a finite number")
+    return value
 
 
 #: INPUT: a grammar or scene .yaml, a shipped model's name, or a skeleton .npz.
@@ -55,3 +68,69 @@ def size_opt(*param_decls: str, what: str = "Image size", default: str):
     (width, height) by :func:`parse_size`."""
     return click.option(*(param_decls or ("--size",)), callback=parse_size, metavar="WxH",
                         help=f"{what} (WIDTHxHEIGHT pixels; default: {default}).")
+
+
+# ---------------------------------------------------------------------------- budgets, paths
+def _parse_limits(ctx, param, values) -> dict:
+    """click callback for ``--limit NAME=N`` (repeatable): {name: int}."""
+    out = {}
+    for value in values:
+        name, _, number = value.partition("=")
+        name = name.strip().removeprefix("max_").replace("-", "_")
+        if name not in Limits.names():
+            raise click.BadParameter(f"{value!r}: unknown limit {name!r} (known: {', '.join(Limits.names())})")
+        try:
+            n = float(number.replace("_", "").replace(",", ""))
+            if not n.is_integer() or n < 1:
+                raise ValueError
+        except ValueError:
+            raise click.BadParameter(f"{value!r} is not NAME=N with N a positive integer, e.g. "
+                                     "derive_work=200000000") from None
+        out[name] = int(n)
+    return out
+
+
+def _limit_defaults() -> str:
+    return ", ".join(f"{f.name[4:]} {getattr(default_limits, f.name):,}" for f in fields(Limits))
+
+
+#: ``--limit NAME=N``: set a budget of plantgen.limits.Limits for this run.
+limit_opt = click.option(
+    "--limit", "limit_values", metavar="NAME=N", multiple=True, callback=_parse_limits,
+    help="Set a budget for this run, higher or lower (repeatable); a file may lower a budget, "
+         f"never raise it. Names and defaults: {_limit_defaults()} (README: 'Untrusted input').")
+
+
+def limits_from(values: dict) -> Limits:
+    """The limits a command runs under: the defaults with ``--limit`` values in place."""
+    return default_limits.raised(**values)
+
+
+#: ``--allow-path DIR``: a folder a scene may read grammars from besides its own.
+allow_path_opt = click.option(
+    "--allow-path", "allow_paths", metavar="DIR", multiple=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="A folder a scene may read grammars from besides its own folder and the shipped "
+         "grammars (repeatable). Without it, a grammar path that leaves the scene's folder "
+         "(../x.yaml, /abs/path, a link pointing out) is refused before it is opened.")
+
+_DEBUG = {"on": False}
+
+
+def _set_debug(ctx, param, value):
+    if value:
+        _DEBUG["on"] = True
+
+
+#: ``--debug``: an unexpected failure prints its Python traceback.
+debug_opt = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
+                         help="On an unexpected failure (a bug, exit status 1), print the Python "
+                              "traceback too; also PLANTGEN_DEBUG=1. Bad input stays one line.")
+
+
+def debug_requested(reset: bool = False) -> bool:
+    """Whether ``--debug`` (or ``PLANTGEN_DEBUG=1``) asks for tracebacks; ``reset`` starts
+    a new run with the environment's answer."""
+    if reset:
+        _DEBUG["on"] = os.environ.get("PLANTGEN_DEBUG", "") not in ("", "0")
+    return _DEBUG["on"]

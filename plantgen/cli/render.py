@@ -12,13 +12,23 @@ from ..pipeline import render_file
 from ..render.raycast import RaycastSettings
 from ..render.records import RECORD_BYTES
 from ..scene import EFFECTS, parse_effect_list
-from .options import input_arg, iterations_opt, output_opt, seed_opt, size_opt
+from .options import (
+    allow_path_opt,
+    finite,
+    input_arg,
+    iterations_opt,
+    limit_opt,
+    limits_from,
+    output_opt,
+    seed_opt,
+    size_opt,
+)
 
 #: The ray caster's default knobs: the options' defaults.
 MARCH = RaycastSettings()
 
 #: How this command spells the knobs that the library's messages name.
-OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"}
+OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out", "time_s": "--time"}
 
 
 @click.command()
@@ -38,9 +48,9 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
                                       "the inner cone (cheaper).")
 @click.option("--frames", type=click.IntRange(1, 100000),
               help="Write an animation of this many frames (-o .gif or .webp).")
-@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=12.0,
+@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=12.0, callback=finite,
               show_default=True, help="Frames per second of the animation.")
-@click.option("--time", "time_s", type=float, metavar="T",
+@click.option("--time", "time_s", type=float, metavar="T", callback=finite,
               help="Seconds: the pose of an animated scene for a still (default 0), or the "
                    "first frame's time.")
 @size_opt(default="the camera file's, else 1024x768")
@@ -58,6 +68,7 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
               help="Relief: samples sized to what each pixel sees (adaptive), or --linear-steps "
                    "for every ray (fixed, the paper's).")
 @click.option("--march-density", type=click.FloatRange(min=0, min_open=True), default=MARCH.march_density,
+              callback=finite,
               show_default=True, help="Relief, adaptive march: samples per relief texel the ray crosses.")
 @click.option("--linear-steps", type=click.IntRange(1, 4096), default=MARCH.linear_steps, show_default=True,
               help="Relief: uniform samples through the shell (adaptive march: the most).")
@@ -67,10 +78,13 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
 @click.option("--v-exact/--v-interpolated", default=False, show_default=True,
               help="Relief: v of (7) per sample, or interpolated between entry and exit "
                    "(the paper's fast path).")
+@limit_opt
+@allow_path_opt
 def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shadow_caster, frames,
            fps, time_s, size, camera, camera_out, depth_out, seed, iterations, march,
-           march_density, linear_steps, binary_steps, v_exact) -> None:
-    """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz) into a PNG.
+           march_density, linear_steps, binary_steps, v_exact, limit_values, allow_paths) -> None:
+    """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
+    into a PNG.
 
     Skins the skeleton with conical frusta and renders them with the analytic GLSL ray
     caster (headless EGL). Prints the GL renderer, segment count and frame time. Only
@@ -83,7 +97,7 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
           --camera-out cam.json --depth-out depth.npy
       plantgen render grammars/dancing_cacti.yaml --frames 48 --fps 24 -o dance.gif
     """
-    if camera != "auto" and not Path(camera).is_file():
+    if camera != "auto" and not Path(camera).exists():
         raise PlantgenError(f"{camera}: no such camera file (use 'auto' or a camera JSON)")
     chosen = parse_effect_list(effects) if effects is not None else None
     bar = None
@@ -103,7 +117,8 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
                          march=march, march_density=march_density,
                          effects=chosen, shadows=shadows, shadow_res=shadow_res,
                          shadow_caster=shadow_caster, time_s=time_s, frames=frames, fps=fps,
-                         progress=progress, names=OPTION_NAMES)
+                         progress=progress, names=OPTION_NAMES, limits=limits_from(limit_values),
+                         allow_paths=allow_paths)
     s = report.settings
     steps = (f"{s.linear_steps} linear + {s.binary_steps} binary steps" if s.march == "fixed" else
              f"adaptive march, {s.march_density:g} samples per texel, at most {s.linear_steps} linear "

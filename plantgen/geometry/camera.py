@@ -14,7 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import fields
 from ..errors import PlantgenError
+from ..files import read_input
+from ..limits import MAX_IMAGE_SIDE, Limits
+from ..limits import limits as default_limits
 from ..tolerances import tol
 from .frusta import Frusta, frusta_bounds, section_points
 
@@ -124,23 +128,22 @@ class Camera:
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "camera") -> Camera:
-        keys = {"eye", "target", "up", "fov_y", "width", "height"}
-        unknown = set(d) - keys
-        if unknown:
-            raise CameraError(f"{source}: unknown camera keys {sorted(unknown)}")
+        """A camera from a mapping (a camera JSON, a scene's ``camera``): every value typed
+        and ranged (points finite and within ``tol.max_coordinate``, ``fov_y`` in (0, 180),
+        sides 1..MAX_IMAGE_SIDE pixels), one line naming ``source`` otherwise."""
+        fields.keys(d, {"eye", "target", "up", "fov_y", "width", "height"}, source, CameraError)
         missing = {"eye", "target"} - set(d)
         if missing:
             raise CameraError(f"{source}: camera needs {sorted(missing)}")
-        try:
-            vec = lambda v: tuple(float(x) for x in v)  # noqa: E731
-            cam = cls(vec(d["eye"]), vec(d["target"]), vec(d.get("up", (0, 1, 0))),
-                      float(d.get("fov_y", 40.0)), int(d.get("width", 1024)), int(d.get("height", 768)))
-        except (TypeError, ValueError) as exc:
-            raise CameraError(f"{source}: bad camera value ({exc})") from None
-        if len(cam.eye) != 3 or len(cam.target) != 3 or len(cam.up) != 3:
-            raise CameraError(f"{source}: eye, target and up need three numbers each")
-        if not (0 < cam.fov_y < 180) or cam.width <= 0 or cam.height <= 0:
-            raise CameraError(f"{source}: fov_y must lie in (0, 180) and the size be positive")
+        vec = lambda key, v: tuple(fields.vector(v, key, source, CameraError,  # noqa: E731
+                                                 max_abs=tol.max_coordinate).tolist())
+        side = lambda key, v: fields.integer(v, f"camera {key}", source, CameraError,  # noqa: E731
+                                             lo=1, hi=MAX_IMAGE_SIDE)
+        cam = cls(vec("eye", d["eye"]), vec("target", d["target"]), vec("up", d.get("up", [0, 1, 0])),
+                  fields.number(d.get("fov_y", 40.0), "fov_y", source, CameraError),
+                  side("width", d.get("width", 1024)), side("height", d.get("height", 768)))
+        if not 0 < cam.fov_y < 180:
+            raise CameraError(f"{source}: fov_y must lie in (0, 180), got {cam.fov_y:g}")
         try:
             cam.basis()
         except CameraError as exc:
@@ -148,11 +151,16 @@ class Camera:
         return cam
 
     @classmethod
-    def load(cls, path: str | Path) -> Camera:
+    def load(cls, path: str | Path, limits: Limits | None = None) -> Camera:
+        """A camera JSON file (a regular file within ``limits.max_input_bytes``), checked by
+        :meth:`from_dict`."""
+        limits = limits or default_limits
+        data = read_input(path, CameraError, max_bytes=limits.max_input_bytes, limit="input_bytes",
+                          what="camera JSON")
         try:
-            d = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise CameraError(f"{path}: cannot read camera JSON ({exc})") from None
+            d = json.loads(data.decode("utf-8"))
+        except (ValueError, RecursionError) as exc:   # JSONDecodeError, UnicodeDecodeError, a deep nest
+            raise CameraError(f"{path}: cannot read camera JSON ({str(exc).splitlines()[0][:100]})") from None
         if not isinstance(d, dict):
             raise CameraError(f"{path}: camera JSON must be an object")
         return cls.from_dict(d, str(path))

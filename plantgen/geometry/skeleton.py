@@ -15,11 +15,16 @@ Bhagvat et al. 2009):
 ===============  ============  ==========================================================
 
 The file format (``.npz``) stores these arrays under the same names, plus
-``material_names`` as a unicode array. Nothing here imports GL or click.
+``material_names`` as a unicode array. :meth:`Skeleton.load` reads it as untrusted input:
+each array's header is checked (no pickled object arrays, the expected kinds and shapes,
+sizes within the limits) before its data is read, and the result is validated. Nothing
+here imports GL or click.
 """
 
 from __future__ import annotations
 
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,9 +32,18 @@ import numpy as np
 
 from .. import tolerances
 from ..errors import PlantgenError
-from ..files import write_atomically
+from ..files import open_input, write_atomically
+from ..limits import LimitError, Limits, hint
+from ..limits import limits as default_limits
 
 __all__ = ["Skeleton", "SkeletonError"]
+
+#: The arrays of the ``.npz`` format: (dtype kinds accepted, columns or None for (n,)).
+NPZ_ARRAYS = {
+    "start": ("fiu", 3), "end": ("fiu", 3), "r_start": ("fiu", None), "r_end": ("fiu", None),
+    "parent": ("iu", None), "continues": ("biu", None), "material": ("iu", None),
+    "material_names": ("U", None),
+}
 
 
 class SkeletonError(PlantgenError, ValueError):
@@ -100,14 +114,19 @@ class Skeleton:
     def validate(self, tol: float = tolerances.tol.joint_gap) -> None:
         """Raise SkeletonError if an invariant of the format does not hold.
 
-        Invariants: finite coordinates, radii >= 0, parents precede children, every
-        segment with a parent starts where its parent ends (within ``tol`` times the
-        model size, at least 1), roots do not continue, materials index ``material_names``.
+        Invariants: finite coordinates and radii within ``tol.max_coordinate``, radii >= 0,
+        parents precede children, every segment with a parent starts where its parent ends
+        (within ``tol`` times the model size, at least 1), roots do not continue,
+        materials index ``material_names``.
         """
         n = len(self)
         for name in ("start", "end", "r_start", "r_end"):
-            if not np.all(np.isfinite(getattr(self, name))):
-                raise SkeletonError(f"{name} holds NaN or inf")
+            values = getattr(self, name)
+            if not np.all(np.isfinite(values)):
+                bad = int(np.flatnonzero(~np.isfinite(values).reshape(n, -1).all(axis=1))[0])
+                raise SkeletonError(f"{name} holds NaN or inf (segment {bad})")
+            if n and float(np.abs(values).max()) > tolerances.tol.max_coordinate:
+                raise SkeletonError(f"{name} holds values beyond {tolerances.tol.max_coordinate:g}")
         if np.any(self.r_start < 0) or np.any(self.r_end < 0):
             raise SkeletonError("negative radius")
         idx = np.arange(n)
@@ -192,16 +211,28 @@ class Skeleton:
         write_atomically(path, write, SkeletonError)
 
     @classmethod
-    def load(cls, path: str | Path) -> Skeleton:
+    def load(cls, path: str | Path, limits: Limits | None = None) -> Skeleton:
+        """Read and validate the ``.npz`` format. Every failure is one line naming the file:
+        not a regular file or over ``max_skeleton_bytes``, a corrupt archive, a pickled
+        (object) array, a missing array, a wrong kind or shape, over ``max_segments``
+        segments, and a skeleton that breaks the contract (:meth:`validate`)."""
+        limits = limits or default_limits
+        with open_input(path, SkeletonError, max_bytes=limits.max_skeleton_bytes, limit="skeleton_bytes",
+                        what="skeleton") as fh:
+            try:
+                arrays = _read_npz(fh, path, limits)
+            except PlantgenError:
+                raise
+            except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, NotImplementedError) as exc:
+                raise SkeletonError(f"{path}: not a plantgen skeleton (corrupt .npz: "
+                                    f"{str(exc).splitlines()[0][:80] or exc.__class__.__name__})") from None
+        names = tuple(str(x) for x in arrays.pop("material_names", ("bark",)))
         try:
-            with np.load(path, allow_pickle=False) as z:
-                names = tuple(str(x) for x in z["material_names"]) if "material_names" in z else ("bark",)
-                return cls(z["start"], z["end"], z["r_start"], z["r_end"], z["parent"],
-                           z["continues"], z["material"], names)
-        except KeyError as exc:
-            raise SkeletonError(f"{path}: not a plantgen skeleton (missing array {exc})") from None
-        except (OSError, ValueError) as exc:
-            raise SkeletonError(f"{path}: not a plantgen skeleton ({exc})") from None
+            skel = cls(**arrays, material_names=names)
+            skel.validate()
+        except SkeletonError as exc:
+            raise SkeletonError(f"{path}: {exc}") from None
+        return skel
 
     def save_swc(self, path: str | Path) -> None:
         """Write the skeleton as SWC (one node per point, radius per node).
@@ -231,3 +262,50 @@ class Skeleton:
             end_id[i] = nid
         text = "\n".join(lines) + "\n"
         write_atomically(path, lambda tmp: Path(tmp).write_text(text), SkeletonError)
+
+
+def _read_npz(fh, path, limits: Limits) -> dict:
+    """The arrays of a skeleton ``.npz`` (an open binary file), each header checked before
+    its data is read: the kinds and shapes of :data:`NPZ_ARRAYS`, no object array (numpy
+    would unpickle it), at most ``max_segments`` rows, at most ``max_skeleton_bytes``
+    unpacked."""
+    with zipfile.ZipFile(fh) as archive:
+        members = {info.filename: info for info in archive.infolist()}
+        unpacked = sum(info.file_size for info in members.values())
+        if unpacked > limits.max_skeleton_bytes:
+            raise LimitError(f"{path}: unpacks to {unpacked:,} bytes, over the limit of "
+                             f"{limits.max_skeleton_bytes:,} ({hint('skeleton_bytes')})")
+        out = {}
+        for name, (kinds, columns) in NPZ_ARRAYS.items():
+            info = members.get(f"{name}.npy")
+            if info is None:
+                if name == "material_names":
+                    continue
+                raise SkeletonError(f"{path}: not a plantgen skeleton (missing array '{name}')")
+            with archive.open(info) as member:
+                out[name] = _read_npy(member, name, kinds, columns, path, limits)
+    return out
+
+
+def _read_npy(member, name: str, kinds: str, columns, path, limits: Limits) -> np.ndarray:
+    """One ``.npy`` member: header first (version, dtype, shape), then exactly its data."""
+    fmt = np.lib.format
+    version = fmt.read_magic(member)
+    if version not in ((1, 0), (2, 0)):
+        raise SkeletonError(f"{path}: array '{name}' has an unknown .npy version {version}")
+    read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+    shape, fortran, dtype = read_header(member)
+    if dtype.hasobject:
+        raise SkeletonError(f"{path}: array '{name}' holds Python objects (pickled data), which "
+                            "plantgen never loads")
+    want = (-1,) if columns is None else (-1, columns)
+    if dtype.kind not in kinds or len(shape) != len(want) or (columns is not None and shape[1] != columns):
+        expected = "(n,)" if columns is None else f"(n, {columns})"
+        raise SkeletonError(f"{path}: array '{name}' is {dtype.str} {shape}, expected {expected} of kind "
+                            f"{'/'.join(kinds)}")
+    limits.check("segments", shape[0], f"{path}: array '{name}' rows")
+    count = int(np.prod(shape, dtype=np.int64))
+    data = member.read(count * dtype.itemsize)
+    if len(data) != count * dtype.itemsize:
+        raise SkeletonError(f"{path}: array '{name}' is cut short")
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")

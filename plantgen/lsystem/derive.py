@@ -5,27 +5,43 @@ modules a rule matches are rewritten at once, their parameter expressions evalua
 numpy arrays. Random draws come from one seeded generator in a fixed order (rules in file
 order, modules in string order), so a grammar and seed always give the same string.
 
-A step whose result would exceed ``max_modules`` stops with :class:`DerivationLimit`
-before anything of that size is allocated.
+The derivation's budgets are those of :class:`plantgen.limits.Limits`: a step whose
+result would exceed ``max_modules`` modules or ``max_derive_bytes`` bytes stops with
+:class:`DerivationLimit` before anything of that size is allocated, and every step spends
+``max_derive_work`` (its modules, ``CONTEXT_WORK`` times for a context-sensitive grammar,
+plus ``STEP_WORK`` per rule group), so a derivation that does not grow still ends. A
+grammar's ``max_modules`` may lower the limit, never raise it.
+
+A derivation whose state (the string and the random generator's state) comes back stops
+early: a fixed point (``F -> F``) at once, a cycle (``A -> B``, ``B -> A``) after one
+period, the remaining steps skipped by their count modulo the period.
 """
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import PlantgenError
+from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
+from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
 
-__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "derive"]
+__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "derive", "module_bytes"]
 
-DEFAULT_MAX_MODULES = 5_000_000
+DEFAULT_MAX_MODULES = default_limits.max_modules
+
+#: Strings up to this many modules are fingerprinted after each step to find a fixed point
+#: or a cycle (hashing costs about as much as copying the string; longer strings that stop
+#: growing are bounded by the work budget instead).
+CYCLE_WINDOW = 65_536
 
 
-class DerivationLimit(PlantgenError):
-    """The module string would grow past the configured size limit."""
+class DerivationLimit(LimitError):
+    """The module string would grow past a budget of the limits in force."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,6 +72,11 @@ class ModuleString:
             else:
                 out.append(name)
         return "".join(out)
+
+
+def module_bytes(width: int) -> int:
+    """Bytes one module of a string takes with ``width`` parameter columns."""
+    return 4 + 1 + 8 * width
 
 
 def _width(grammar: Grammar) -> int:
@@ -142,7 +163,8 @@ def _match_context(idx, pats: tuple[Pattern, ...], neighbour, step_order, sym, n
 
 
 def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = None,
-           max_modules: int | None = None, progress=None) -> ModuleString:
+           max_modules: int | None = None, progress=None, *, limits: Limits | None = None,
+           work: Meter | None = None) -> ModuleString:
     """Rewrite the axiom ``iterations`` times (default: the grammar's).
 
     Each step has two phases: :func:`_select_rewrites` finds, rule group by rule group in
@@ -154,36 +176,78 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     ----------
     grammar : Grammar
     iterations, seed : override the grammar's values
-    max_modules : the size limit (default: the grammar's, else DEFAULT_MAX_MODULES)
+    max_modules : the size limit (default: ``limits.max_modules``; the grammar's
+        ``max_modules`` lowers either, never raises it)
     progress : optional callable(step, n_modules) called after each step
+    limits : the budgets (default: :data:`plantgen.limits.limits`)
+    work : the ``derive_work`` meter to spend (a scene shares one over its derivations);
+        default: a fresh one of ``limits``
     """
+    limits = (limits or default_limits).raised(modules=max_modules).lowered(modules=grammar.max_modules)
     iterations = grammar.iterations if iterations is None else int(iterations)
+    limits.check("iterations", iterations, f"{grammar.path}: iterations")
     seed = grammar.seed if seed is None else int(seed)
-    limit = max_modules or grammar.max_modules or DEFAULT_MAX_MODULES
+    work = work or limits.meter("derive_work")
     rng = np.random.default_rng(seed)
     codes = {s: i for i, s in enumerate(grammar.symbols)}
     width = _width(grammar)
 
     string = _axiom_string(grammar, rng, codes, width)
-    if len(string[0]) > limit:
-        raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limit} modules")
+    if len(string[0]) > limits.max_modules:
+        raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} modules")
     groups = _rule_groups(grammar.rules)
     needs_context = any(r.left or r.right for r in grammar.rules)
+    seen: dict[bytes, int] | None = {}    # fingerprint of a state -> the step it was reached
+    if len(string[0]) <= CYCLE_WINDOW:
+        seen[_fingerprint(string, rng)] = 0
 
-    for step in range(iterations):
+    step = 0
+    while step < iterations:
         neighbours = (_context_neighbours(string[0], grammar.symbols, grammar.ignore)
                       if needs_context else None)
         matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
         total = int(out_len.sum())
-        if total > limit:
-            raise DerivationLimit(
-                f"{grammar.path}: derivation step {step + 1} would make {total:,} modules, "
-                f"over the limit of {limit:,} (lower iterations or raise --max-modules)")
+        _check_step(grammar, limits, step, total, width)
+        work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
+                   f"{grammar.path}: derivation step {step + 1}")
         string = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
+        step += 1
         if progress is not None:
-            progress(step + 1, total)
+            progress(step, total)
+        if seen is not None and total <= CYCLE_WINDOW:
+            key = _fingerprint(string, rng)
+            if key in seen:           # the state of step seen[key] again: skip whole periods
+                period = step - seen[key]
+                iterations = step + (iterations - step) % period
+                seen = None
+            else:
+                seen[key] = step
 
     return ModuleString(*string, grammar.symbols)
+
+
+def _check_step(grammar: Grammar, limits: Limits, step: int, total: int, width: int) -> None:
+    """Refuse a step whose string would exceed ``max_modules`` or ``max_derive_bytes``."""
+    if total > limits.max_modules:
+        raise DerivationLimit(
+            f"{grammar.path}: derivation step {step + 1} would make {total:,} modules, "
+            f"over the limit of {limits.max_modules:,} (lower iterations or raise --max-modules)")
+    size = total * module_bytes(width)
+    if size > limits.max_derive_bytes:
+        raise DerivationLimit(
+            f"{grammar.path}: derivation step {step + 1} would make {total:,} modules of {width} "
+            f"parameters, {size:,} bytes, over the limit of {limits.max_derive_bytes:,} "
+            f"({hint('derive_bytes')})")
+
+
+def _fingerprint(string, rng) -> bytes:
+    """A digest of the derivation's state: the module string and the generator's state
+    (a step is a function of these two alone)."""
+    h = hashlib.blake2b(digest_size=16)
+    for array in string:
+        h.update(np.ascontiguousarray(array).tobytes())
+    h.update(repr(rng.bit_generator.state).encode())
+    return h.digest()
 
 
 def _axiom_string(grammar: Grammar, rng, codes: dict, width: int):

@@ -25,10 +25,13 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
+from .. import fields
 from ..errors import PlantgenError
 from ..files import read_yaml
+from ..geometry.materials import MAX_MATERIALS
+from ..limits import Limits, hint
+from ..limits import limits as default_limits
+from ..tolerances import tol
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
 
 __all__ = ["TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
@@ -185,25 +188,41 @@ def _check_brackets(mods: list, where: str) -> None:
         raise GrammarError(f"{where}: unbalanced brackets ({depth} '[' not closed)")
 
 
-def parse_modules(text: str, names, where: str) -> tuple[ModuleTemplate, ...]:
-    """Parse an axiom or successor like ``F(l*2)[+A(l,w)]`` into module templates."""
+def _check_params(mods: list, where: str, max_params: int | None) -> None:
+    for sym, args in mods:
+        if max_params is not None and args is not None and len(args) > max_params:
+            raise GrammarError(f"{where}: module {sym!r} has {len(args):,} parameters, over the limit "
+                               f"of {max_params} ({hint('params')})")
+
+
+def parse_modules(text: str, names, where: str, max_params: int | None = None) -> tuple[ModuleTemplate, ...]:
+    """Parse an axiom or successor like ``F(l*2)[+A(l,w)]`` into module templates (each
+    with at most ``max_params`` parameters, if given). An argument written several times
+    is compiled once (an expression holds no state: its random draws happen per call)."""
     mods = _scan_modules(text, where)
+    _check_params(mods, where, max_params)
     _check_brackets(mods, where)
+    compiled: dict[str, Expr] = {}
     out = []
     for sym, args in mods:
         exprs = ()
         if args is not None:
             try:
-                exprs = tuple(compile_expr(a, names) for a in args)
+                for a in args:
+                    if a not in compiled:
+                        compiled[a] = compile_expr(a, names)
+                exprs = tuple(compiled[a] for a in args)
             except ExprError as exc:
                 raise GrammarError(f"{where}: {exc}") from None
         out.append(ModuleTemplate(sym, exprs))
     return tuple(out)
 
 
-def _parse_patterns(text: str, where: str) -> tuple[Pattern, ...]:
+def _parse_patterns(text: str, where: str, max_params: int | None = None) -> tuple[Pattern, ...]:
+    mods = _scan_modules(text, where)
+    _check_params(mods, where, max_params)
     pats = []
-    for sym, args in _scan_modules(text, where):
+    for sym, args in mods:
         params = ()
         if args is not None:
             params = tuple(a.strip() for a in args)
@@ -217,23 +236,18 @@ def _parse_patterns(text: str, where: str) -> tuple[Pattern, ...]:
 
 
 # ---------------------------------------------------------------------------- rules
-def _parse_rule(index: int, entry, defines: dict, path: str) -> Rule:
+def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | None = None) -> Rule:
     where = f"{path}: rule {index + 1}"
     p = None
     if isinstance(entry, dict):
-        unknown = set(entry) - RULE_KEYS
-        if unknown:
-            raise GrammarError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: rule, p)")
+        fields.keys(entry, RULE_KEYS, where, GrammarError)
         if "rule" not in entry:
             raise GrammarError(f"{where}: a rule mapping needs a 'rule' string")
         if "p" in entry:
-            p = entry["p"]
-            if isinstance(p, bool) or not isinstance(p, (int, float)) or not (0 < p <= 1):
-                raise GrammarError(f"{where}: probability p must be a number in (0, 1], got {p!r}")
-            p = float(p)
+            p = fields.number(entry["p"], "probability p", where, GrammarError, hi=1.0, positive=True)
         entry = entry["rule"]
     if not isinstance(entry, str):
-        raise GrammarError(f"{where}: a rule must be a string like 'A -> F[+A]A'")
+        raise GrammarError(f"{where}: a rule must be a string like 'A -> F[+A]A', got {fields.show(entry)}")
     source = entry
     where = f"{path}: rule {index + 1} ({source.strip()!r})"
     parts = _ARROW.split(source)
@@ -264,14 +278,14 @@ def _parse_rule(index: int, entry, defines: dict, path: str) -> Rule:
             raise GrammarError(f"{where}: empty right context after '>'")
     if "<" in lhs or ">" in lhs:
         raise GrammarError(f"{where}: at most one '<' and one '>' in a predecessor")
-    pred = _parse_patterns(lhs, where)
+    pred = _parse_patterns(lhs, where, max_params)
     if len(pred) != 1:
         raise GrammarError(f"{where}: the predecessor must be exactly one module, got {len(pred)}")
     pred = pred[0]
     if pred.symbol in "[]":
         raise GrammarError(f"{where}: brackets cannot be rewritten")
-    left = _parse_patterns(left_src, where)
-    right = _parse_patterns(right_src, where)
+    left = _parse_patterns(left_src, where, max_params)
+    right = _parse_patterns(right_src, where, max_params)
     if any(pat.symbol in "[]" for pat in (*left, *right)):
         raise GrammarError(f"{where}: brackets are not supported in a context")
     formals = [n for pat in (*left, pred, *right) for n in pat.params]
@@ -285,51 +299,30 @@ def _parse_rule(index: int, entry, defines: dict, path: str) -> Rule:
             condition = compile_expr(cond_src, names)
         except ExprError as exc:
             raise GrammarError(f"{where}: {exc}") from None
-    successor = parse_modules(rhs, names, where)
+    successor = parse_modules(rhs, names, where, max_params)
     return Rule(index, source, pred, left, right, condition, successor, p)
 
 
 # ---------------------------------------------------------------------------- file
-def _number(value, what: str, where: str, *, integer=False, positive=False, nonneg=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise GrammarError(f"{where}: {what} must be a number, got {value!r}")
-    if integer and int(value) != value:
-        raise GrammarError(f"{where}: {what} must be an integer, got {value!r}")
-    if not np.isfinite(value):
-        raise GrammarError(f"{where}: {what} must be finite")
-    if positive and value <= 0:
-        raise GrammarError(f"{where}: {what} must be positive, got {value!r}")
-    if nonneg and value < 0:
-        raise GrammarError(f"{where}: {what} must not be negative, got {value!r}")
-    return int(value) if integer else float(value)
-
-
 def _parse_turtle(d, path: str) -> TurtleSettings:
     where = f"{path}: turtle"
     if d is None:
         return TurtleSettings()
-    if not isinstance(d, dict):
-        raise GrammarError(f"{where}: must be a mapping")
-    unknown = set(d) - TURTLE_KEYS
-    if unknown:
-        raise GrammarError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(TURTLE_KEYS)})")
+    fields.keys(d, TURTLE_KEYS, where, GrammarError)
     kw = {}
-    for key in ("step", "angle", "radius", "width_factor"):
+    for key in ("step", "radius"):   # lengths: within the coordinates a skeleton may hold
         if key in d:
-            kw[key] = _number(d[key], key, where, nonneg=(key != "angle"))
+            kw[key] = fields.number(d[key], key, where, GrammarError, lo=0.0, max_abs=tol.max_coordinate)
+    if "width_factor" in d:
+        kw["width_factor"] = fields.number(d["width_factor"], "width_factor", where, GrammarError, lo=0.0)
+    if "angle" in d:
+        kw["angle"] = fields.number(d["angle"], "angle", where, GrammarError)
     if "tropism" in d:
         t = d["tropism"]
-        if not isinstance(t, dict) or set(t) - {"direction", "strength"}:
-            raise GrammarError(f"{where}: tropism must be a mapping with 'direction' and 'strength'")
-        direction = t.get("direction", [0, -1, 0])
-        if not isinstance(direction, list) or len(direction) != 3:
-            raise GrammarError(f"{where}: tropism direction must be three numbers")
-        vec = np.array([_number(x, "tropism direction", where) for x in direction])
-        norm = np.linalg.norm(vec)
-        if norm == 0:
-            raise GrammarError(f"{where}: tropism direction must not be zero")
-        kw["tropism_direction"] = tuple((vec / norm).tolist())
-        kw["tropism_strength"] = _number(t.get("strength", 0.0), "tropism strength", where)
+        fields.keys(t, {"direction", "strength"}, f"{where}: tropism", GrammarError)
+        kw["tropism_direction"] = fields.unit_vector(t.get("direction", [0, -1, 0]), "tropism direction",
+                                                     where, GrammarError)
+        kw["tropism_strength"] = fields.number(t.get("strength", 0.0), "tropism strength", where, GrammarError)
     return TurtleSettings(**kw)
 
 
@@ -384,49 +377,76 @@ def _check_groups(rules: tuple[Rule, ...], path: str) -> None:
                                f"{first.where()} add up to {total:g}, not 1")
 
 
-def parse_grammar(data, path: str = "<grammar>") -> Grammar:
-    """Validate a parsed YAML mapping and build a :class:`Grammar`."""
+def _parse_defines(raw, path: str) -> dict[str, float]:
+    """The grammar's named constants, in file order; a value is a number or an expression
+    over the constants before it."""
+    defines: dict[str, float] = {}
+    if raw is None:
+        return defines
+    if not isinstance(raw, dict):
+        raise GrammarError(f"{path}: defines must be a mapping of names to numbers or expressions")
+    for key, value in raw.items():
+        name = fields.text(key, "a define's name", f"{path}: defines", GrammarError, max_len=100)
+        if not _IDENT.match(name) or name in FUNCTIONS:
+            raise GrammarError(f"{path}: defines: {name!r} is not a usable name")
+        where = f"{path}: defines: {name}"
+        if isinstance(value, str):
+            try:
+                defines[name] = evaluate(value, defines)
+            except ExprError as exc:
+                raise GrammarError(f"{where}: {exc}") from None
+        else:
+            defines[name] = fields.number(value, "value", where, GrammarError)
+    return defines
+
+
+def _parse_header(data, path: str, limits: Limits) -> dict:
+    """name, description, seed, iterations and max_modules: typed and ranged."""
+    iterations = fields.integer(data.get("iterations", 0), "iterations", path, GrammarError, hi=None)
+    limits.check("iterations", iterations, f"{path}: iterations")
+    max_modules = data.get("max_modules")
+    if max_modules is not None:   # a file may lower the limit, never raise it
+        max_modules = fields.integer(max_modules, "max_modules", path, GrammarError, lo=1)
+    return {
+        "name": fields.text(data.get("name", Path(path).stem), "name", path, GrammarError, max_len=200),
+        "description": fields.text(data.get("description", ""), "description", path, GrammarError,
+                                   max_len=10_000),
+        "seed": fields.integer(data.get("seed", 0), "seed", path, GrammarError),
+        "iterations": iterations,
+        "max_modules": max_modules,
+    }
+
+
+def _parse_materials(materials, path: str) -> tuple[str, ...]:
+    if (not isinstance(materials, list) or not materials
+            or not all(isinstance(m, str) and m for m in materials)):
+        raise GrammarError(f"{path}: materials must be a non-empty list of names")
+    if len(materials) > MAX_MATERIALS:
+        raise GrammarError(f"{path}: {len(materials)} materials, more than the {MAX_MATERIALS} a model may use")
+    return tuple(fields.text(m, "material", path, GrammarError, max_len=100) for m in materials)
+
+
+def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -> Grammar:
+    """Validate a parsed YAML mapping and build a :class:`Grammar`: every field typed and
+    ranged (``limits``: the iterations and the parameters a module may have)."""
+    limits = limits or default_limits
     if not isinstance(data, dict):
         raise GrammarError(f"{path}: not a grammar (expected a YAML mapping with 'axiom' and 'rules')")
-    unknown = set(data) - GRAMMAR_KEYS
-    if unknown:
-        raise GrammarError(f"{path}: unknown key(s) {sorted(unknown)} (allowed: {sorted(GRAMMAR_KEYS)})")
+    fields.keys(data, GRAMMAR_KEYS, path, GrammarError)
     if "axiom" not in data:
         raise GrammarError(f"{path}: not a grammar (no 'axiom')")
-    name = str(data.get("name", Path(path).stem))
-    description = str(data.get("description", ""))
-    seed = _number(data.get("seed", 0), "seed", path, integer=True, nonneg=True)
-    iterations = _number(data.get("iterations", 0), "iterations", path, integer=True, nonneg=True)
-    max_modules = data.get("max_modules")
-    if max_modules is not None:
-        max_modules = _number(max_modules, "max_modules", path, integer=True, positive=True)
-
-    defines: dict[str, float] = {}
-    raw_defines = data.get("defines") or {}
-    if not isinstance(raw_defines, dict):
-        raise GrammarError(f"{path}: defines must be a mapping of names to numbers or expressions")
-    for key, value in raw_defines.items():
-        key = str(key)
-        if not _IDENT.match(key) or key in FUNCTIONS:
-            raise GrammarError(f"{path}: defines: {key!r} is not a usable name")
-        try:
-            if isinstance(value, bool):
-                raise ExprError("booleans are not numbers")
-            defines[key] = float(value) if isinstance(value, (int, float)) else evaluate(str(value), defines)
-        except ExprError as exc:
-            raise GrammarError(f"{path}: defines: {key}: {exc}") from None
-        if not np.isfinite(defines[key]):
-            raise GrammarError(f"{path}: defines: {key} is not finite")
+    header = _parse_header(data, path, limits)
+    defines = _parse_defines(data.get("defines"), path)
 
     axiom_src = data["axiom"]
     if not isinstance(axiom_src, str) or not axiom_src.strip():
         raise GrammarError(f"{path}: axiom must be a non-empty string")
-    axiom = parse_modules(axiom_src, defines, f"{path}: axiom")
+    axiom = parse_modules(axiom_src, defines, f"{path}: axiom", limits.max_params)
 
     raw_rules = data.get("rules") or []
     if not isinstance(raw_rules, list):
         raise GrammarError(f"{path}: rules must be a list")
-    rules = tuple(_parse_rule(i, r, defines, path) for i, r in enumerate(raw_rules))
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params) for i, r in enumerate(raw_rules))
     _check_groups(rules, path)
     symbols = _check_arities(axiom, rules, path)
 
@@ -435,16 +455,12 @@ def parse_grammar(data, path: str = "<grammar>") -> Grammar:
         raise GrammarError(f"{path}: ignore must be a string of symbols, e.g. '+-F'")
     ignore = frozenset(ch for ch in ignore if not ch.isspace())
 
-    materials = data.get("materials", ["bark"])
-    if (not isinstance(materials, list) or not materials
-            or not all(isinstance(m, str) and m for m in materials)):
-        raise GrammarError(f"{path}: materials must be a non-empty list of names")
-
-    return Grammar(name, description, seed, iterations, defines, axiom, rules, ignore,
-                   _parse_turtle(data.get("turtle"), path), tuple(materials), max_modules,
+    return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
+                   axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
+                   _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
                    path, tuple(symbols))
 
 
-def load_grammar(path: str | Path) -> Grammar:
+def load_grammar(path: str | Path, limits: Limits | None = None) -> Grammar:
     """Read and validate a grammar file."""
-    return parse_grammar(read_yaml(path, GrammarError), str(path))
+    return parse_grammar(read_yaml(path, GrammarError, limits), str(path), limits)

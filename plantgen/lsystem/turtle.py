@@ -24,16 +24,23 @@ A segment's end radius is the turtle's radius when it is drawn. A segment that c
 its parent starts with the parent's end radius, so the skin tapers without steps; a root
 or a side branch starts with the current radius. After each ``F`` the heading bends
 towards the tropism vector T by ``strength·|H × T|`` radians (ABOP, section 2.3).
+
+The segments drawn are counted before the walk (``max_segments`` of the limits in force),
+and the walk's result is checked: a coordinate or radius that is not finite or lies
+beyond ``tol.max_coordinate`` stops with one line naming the segment and its module.
 """
 
 from __future__ import annotations
 
+from itertools import chain
 from math import cos, radians, sin, sqrt
 
 import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.skeleton import Skeleton
+from ..limits import Limits
+from ..limits import limits as default_limits
 from ..tolerances import tol
 from .derive import ModuleString
 from .grammar import TurtleSettings
@@ -42,6 +49,9 @@ __all__ = ["interpret"]
 
 # action codes
 _NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT = range(15)
+#: Modules turned into Python values at a time by :func:`_turtle_program`.
+PROGRAM_CHUNK = 65_536
+
 _ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
             "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT}
 
@@ -53,17 +63,21 @@ def _rot(a, b, c, s):
 
 
 def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
-              source: str = "<grammar>") -> Skeleton:
+              source: str = "<grammar>", limits: Limits | None = None) -> Skeleton:
     """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton.
 
     Three phases: :func:`_turtle_program` keeps the modules the turtle acts on, as action
     codes with their arguments; :func:`_walk` moves the turtle and collects the segments'
-    columns; the columns become the skeleton's arrays.
+    columns; the columns become the skeleton's arrays, checked finite and within
+    ``tol.max_coordinate``. More segments than ``limits.max_segments`` are refused
+    before the walk.
     """
+    drawn = _drawing_modules(ms, settings)
+    (limits or default_limits).check("segments", len(drawn), f"{source}: segments drawn")
     columns = _walk(_turtle_program(ms), settings, materials, source)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
-    return Skeleton(
+    skel = Skeleton(
         start=np.array(starts, dtype=np.float64).reshape(n, 3),
         end=np.array(ends, dtype=np.float64).reshape(n, 3),
         r_start=np.array(r0s, dtype=np.float64),
@@ -73,19 +87,56 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
         material=np.array(mats, dtype=np.int32),
         material_names=materials,
     )
+    _check_extent(skel, ms, drawn, source)
+    return skel
+
+
+def _drawing_modules(ms: ModuleString, settings: TurtleSettings) -> np.ndarray:
+    """(k,) int: the modules that draw a segment (``F`` of non-zero length), in order."""
+    if "F" not in ms.symbols:
+        return np.zeros(0, dtype=np.int64)
+    is_f = ms.sym == ms.symbols.index("F")
+    length = np.where(ms.nparam > 0, ms.params[:, 0], settings.step)
+    return np.flatnonzero(is_f & (length != 0.0))
+
+
+def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: str) -> None:
+    """One line naming the first segment (and the module that drew it) whose end points or
+    radii are not finite or lie beyond ``tol.max_coordinate``."""
+    limit = tol.max_coordinate
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.all(np.abs(skel.start) <= limit, axis=1) & np.all(np.abs(skel.end) <= limit, axis=1)
+                & (skel.r_start <= limit) & (skel.r_end <= limit))
+    if not bad.any():
+        return
+    i = int(np.argmax(bad))
+    what = ("a radius" if np.all(np.abs(skel.end[i]) <= limit) and np.all(np.abs(skel.start[i]) <= limit)
+            else "an end point")
+    module = int(drawn[i])
+    k = int(ms.nparam[module])
+    text = "F" + ("(" + ", ".join(f"{x:g}" for x in ms.params[module, :k]) + ")" if k else "")
+    raise PlantgenError(f"{source}: segment {i} (module {module + 1} of the derived string, {text}) has "
+                        f"{what} that is not finite or beyond {limit:g}: an F length, a radius or "
+                        "the turtle step too large")
 
 
 def _turtle_program(ms: ModuleString):
-    """The modules the turtle acts on, as four equal lists: action code, parameter count,
-    first and second parameter (0.0 where absent). Other symbols are dropped."""
+    """The modules the turtle acts on, as an iterator of (action code, parameter count,
+    first parameter, second parameter (0.0 where absent)). Other symbols are dropped. The
+    tuples are made PROGRAM_CHUNK modules at a time: a string of millions of modules is
+    never held as Python objects all at once."""
     table = np.array([_ACTIONS.get(s, _NONE) for s in ms.symbols] or [_NONE], dtype=np.int8)
     action = table[ms.sym]
     keep = np.flatnonzero(action != _NONE)
-    acts = action[keep].tolist()
-    nargs = ms.nparam[keep].tolist()
-    args = ms.params[keep, 0].tolist()
-    args2 = ms.params[keep, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(acts)
-    return acts, nargs, args, args2
+
+    def chunks():
+        for lo in range(0, len(keep), PROGRAM_CHUNK):
+            rows = keep[lo:lo + PROGRAM_CHUNK]
+            args2 = ms.params[rows, 1].tolist() if ms.params.shape[1] > 1 else [0.0] * len(rows)
+            yield zip(action[rows].tolist(), ms.nparam[rows].tolist(), ms.params[rows, 0].tolist(), args2,
+                      strict=True)
+
+    return chain.from_iterable(chunks())
 
 
 def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str):
@@ -110,7 +161,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
-    for act, ha, arg, arg2 in zip(*program, strict=True):
+    for act, ha, arg, arg2 in program:
         if act == _F:
             length = arg if ha else step
             if length == 0.0:
