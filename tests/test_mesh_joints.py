@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from plantgen.geometry.mesh import columns_around, slice_triangles, tessellate, triangle_count
+from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
 
 
@@ -132,20 +133,23 @@ def assert_closed(frusta, mesh, *, intersections=False):
 
 
 # ---------------------------------------------------------------------------- knuckles
+def radius_step(skeleton, joint, r_end, r_start):
+    """``skeleton`` with radii ``r_end`` before and ``r_start`` after joint ``joint``."""
+    r_s, r_e = np.array(skeleton.r_start, float), np.array(skeleton.r_end, float)
+    r_e[joint], r_s[joint + 1] = r_end, r_start
+    return Skeleton(skeleton.start, skeleton.end, r_s, r_e, skeleton.parent, skeleton.continues,
+                    skeleton.material, skeleton.material_names)
+
+
 def knuckle_chains():
     """Chains whose knuckles are local: segments long enough for the mitre (about
     2·r·tan(bend/2) and more), and no segment crossing another."""
-    def stepped():
-        sk = chain_skeleton([150], 1.0, 0.1)
-        sk.r_start[1], sk.r_end[0] = 0.08, 0.12          # a radius step at the knuckle
-        return sk
-
     return {
         "135": chain_skeleton([135], 1.0, 0.1),
         "135 zigzag": chain_skeleton([135, 135], 1.0, 0.1, plane_turn_deg=180),
         "135 turned": chain_skeleton([135, 135], 1.0, 0.1, plane_turn_deg=90),
         "150 tapering": chain_skeleton([150], 1.0, [0.12, 0.1, 0.06]),
-        "150 radius step": stepped(),
+        "150 radius step": radius_step(chain_skeleton([150], 1.0, 0.1), 0, 0.12, 0.08),
         "thick, 121": chain_skeleton([121], 1.0, 0.3),
     }
 
@@ -170,7 +174,7 @@ def test_the_issues_135_degree_chain_is_closed_at_level_3():
 @given(st.data())
 def test_random_chains_with_knuckles_are_closed(data):
     """Bends 0–179°, radii 1e-3..1 of the shortest segment, tapers up to 10:1 a segment,
-    2 to 4 segments in turning planes, m = 0..2, with and without relief. Self-overlap is
+    2 to 4 segments in turning planes, m = 0..2, with and without relief and twist. Self-overlap is
     allowed here (a chain may cross itself; a knuckle too tight for its segments, see
     plantgen.geometry.mesh), holes and zero-area faces are not."""
     n = data.draw(st.integers(2, 4), label="segments")
@@ -186,8 +190,9 @@ def test_random_chains_with_knuckles_are_closed(data):
     turn = data.draw(st.floats(0.0, 180.0), label="plane turn")
     m = data.draw(st.integers(0, 2), label="m")
     relief = data.draw(st.booleans(), label="relief")
+    twist = data.draw(st.sampled_from([0.0, 0.0, 0.05, 0.3]), label="twist")
     skeleton = chain_skeleton(bends, lengths, radii, plane_turn_deg=turn)
-    frusta = skin_skeleton(skeleton, shell={"bark": 0.1} if relief else {})
+    frusta = skin_skeleton(skeleton, shell={"bark": 0.1} if relief else {}, twist=twist)
     assert frusta.report.sharp_joints > 0
     assert_closed(frusta, tessellate(frusta, m, relief=relief))
 
@@ -319,3 +324,20 @@ def test_volume_converges_for_a_150_degree_knuckle_of_two_equal_cylinders():
     errors = _volume_errors(frusta, exact)
     assert all(b < a for a, b in pairwise(errors)), errors
     assert errors[-1] < 2e-3, errors
+
+
+@pytest.mark.parametrize("step", [False, True])
+def test_knuckles_without_bend_join_or_cap(step):
+    """A disc-like segment (radius 0.3 to 0.01 over 0.01) makes both its joints knuckles at
+    0° (no plane cuts it in an ellipse): P's and C's rings are joined where their radii
+    agree, both capped where they do not (as at a radius step)."""
+    skeleton = chain_skeleton([0.0, 0.0], [1.0, 0.01, 1.0], [0.3, 0.3, 0.01, 0.01])
+    if step:
+        skeleton = radius_step(skeleton, 0, 0.3, 0.25)
+    frusta = skin_skeleton(skeleton)
+    assert frusta.report.not_ellipse == 2
+    for m in (0, 1, 2):
+        mesh = tessellate(frusta, m)
+        tm = assert_closed(frusta, mesh, intersections=not step)
+        assert mesh.n_caps == 2 + 2 * step
+        assert len(tm.split(only_watertight=False)) == 1 + step

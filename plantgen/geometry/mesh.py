@@ -60,24 +60,30 @@ draws; the mesh is its boundary:
   the radius), a *bridge* band of ``N - 2`` triangles (``N`` if the hinge points differ)
   joins P's curve to C's in the cutting plane: the part of one cross-section the other
   does not cover. It is counted with P's row.
-- a trim may take at most 45 % of any generator of P or C (so two knuckles at both ends
-  of a short segment never cross); where the mitre would cut deeper (bends near 180° or
-  segments shorter than about ``2.2·r·tan(bend/2)``) P and C are cut by planes turned
-  less far, the bridge spans the gap and the mesh is still closed and consistently wound
-  but overlaps itself there (the true boundary of the union is not local to the joint:
-  it runs into the next segments, as chains that cross themselves do).
+- a trim may take at most 90 % of any generator of P or C (45 % at each end of a segment
+  between two knuckles, so the two never cross). Where the mitre would cut deeper (bends
+  near 180°, or segments shorter than about ``1.1·r·tan(bend/2)``, twice that between
+  two knuckles) P and C are cut by planes turned less far (both by the smaller of their
+  two limits, symmetric about the mitre), the bridge joins the two cuts, and the mesh is
+  still closed, consistently wound and positive but overlaps itself there: the
+  boundary of the union is then not local to the joint (it runs into the next segments
+  and their caps, as it does where a chain crosses itself).
 - a knuckle without bend (under 1e-6 rad) joins P's top ring to C's bottom ring directly
   (copies), or caps both where their radii differ (as a radius step).
 
-So a chain with knuckles is one closed surface without zero-area triangles; rows no
-longer all carry ``16·4^m`` triangles (:meth:`TessellatedMesh.uniform_rows`), and
-:func:`triangle_count` given the frusta counts them exactly. Vertices that the faces
-would not use (the inner half of slice rings, inner slices) are dropped, so meshes with
-knuckles have no fixed vertex layout.
+So a chain with knuckles is one closed surface without zero-area triangles. Its rows no
+longer all carry ``16·4^m`` triangles (:attr:`TessellatedMesh.uniform_rows` is False:
+a renderer must take each face's row from ``face_row``, not from index // 16·4^m), and
+:func:`triangle_count` given the frusta counts them exactly. Vertices that no face uses
+(the inner half of slice rings, inner slices) are dropped, so meshes with knuckles have
+no fixed vertex layout; texture coordinates stay continuous through the fan (its slices
+advance u by their twist), C's trimmed vertices carry C's (u, v), P's carry P's (copies
+at one position where they meet), so the mesh is closed once welded by position.
 
 Everything is vectorised over rows with index templates (one quad template shifted by
-ring and column strides); rows are processed in chunks only to bound memory. Knuckles
-and apexes are fixed up afterwards, vectorised over them.
+ring and column strides); rows are processed in chunks only to bound memory. Apex rings
+are fixed up afterwards vectorised over the rows, knuckles knuckle by knuckle (they are
+few).
 """
 
 from __future__ import annotations
@@ -510,6 +516,7 @@ def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
     share_p, share_c = (np.where(b, 0.5 * _TRIM_SHARE, _TRIM_SHARE) for b in both_ends)
     gamma_p = _trim_angle(frusta, kn.parent, joint, k, kn.inner_p, half, True, share_p)
     gamma_c = _trim_angle(frusta, kn.child, joint, k, kn.inner_c, half, False, share_c)
+    gamma_p = gamma_c = np.minimum(gamma_p, gamma_c)   # a short side holds both back
     kn.plane_p = _trim_plane(m1, kn.inner_p, joint, gamma_p, True)
     kn.plane_c = _trim_plane(m2, kn.inner_c, joint, gamma_c, False)
     at_mitre = (gamma_p == half) & (gamma_c == half) & ~kn.flat
@@ -539,7 +546,9 @@ class _Plan:
     band). ``owns_ring`` (n, B + 1) and ``ring_id`` (n, B + 1): the vertex ring of each
     row's ring (a continuing row shares its parent's top ring). ``row_faces`` (n,) lateral
     triangles per row; ``cap_rows``/``cap_is_top`` the caps; ``switch`` (K,) the lune ring
-    where the hinge vertices change from P's to C's (unmerged knuckles).
+    where the hinge vertices change from P's to C's (unmerged knuckles); ``bridge_ring``
+    (K,) the vertex ring after the ``n_rings`` lateral ones that copies C's ring at J for
+    P's bridge, with P's texture coordinates (-1: no bridge).
     """
 
     columns: int
@@ -557,10 +566,16 @@ class _Plan:
     cap_rows: np.ndarray
     cap_is_top: np.ndarray
     switch: np.ndarray
+    bridge_ring: np.ndarray
 
     @property
     def n_caps(self) -> int:
         return len(self.cap_rows)
+
+    @property
+    def n_vertex_rings(self) -> int:
+        """Rings of ``N + 1`` vertices before the caps: the lateral ones, the bridges'."""
+        return self.n_rings + int(np.count_nonzero(self.bridge_ring >= 0))
 
 
 def _apex_ends(frusta: Frusta, proper: np.ndarray):
@@ -608,7 +623,7 @@ def _plan(frusta: Frusta, m: int, caps) -> _Plan:
 
     row_faces = np.where(grid, lateral_triangles_per_row(m), 0).astype(np.int64)
     row_faces[lune] = slice_triangles(m)
-    switch = np.zeros(0, np.int64)
+    switch = bridge_ring = np.zeros(0, np.int64)
     open_lo = ~shared & ~hidden & ~apex_lo
     continued = np.zeros(n, bool)
     continued[parent[shared]] = True
@@ -621,6 +636,8 @@ def _plan(frusta: Frusta, m: int, caps) -> _Plan:
         row_faces[kn.slices[kn.start[:-1] + band // bands][split]] += 2
         bridged = ~kn.flat & ~kn.mitred
         row_faces[kn.parent[bridged]] += np.where(kn.merged[bridged], columns - 2, columns)
+        bridge_ring = np.full(len(kn.parent), -1, np.int64)
+        bridge_ring[bridged] = int(owns_ring.sum()) + np.arange(int(bridged.sum()))
         stepped = kn.flat & ~kn.merged
         open_hi[kn.parent[stepped]] = True
         open_lo[kn.child[stepped]] = True
@@ -629,7 +646,8 @@ def _plan(frusta: Frusta, m: int, caps) -> _Plan:
     top = np.flatnonzero(open_hi) if caps else none
     return _Plan(columns, bands, kn, grid, lune, hidden, apex_lo, apex_hi, owns_ring, ring_id,
                  int(owns_ring.sum()), row_faces, np.concatenate([bottom, top]),
-                 np.concatenate([np.zeros(len(bottom), bool), np.ones(len(top), bool)]), switch)
+                 np.concatenate([np.zeros(len(bottom), bool), np.ones(len(top), bool)]), switch,
+                 bridge_ring)
 
 
 def _column_turns(frusta: Frusta, plan: _Plan):
@@ -827,6 +845,14 @@ def _knuckle_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffer
             s = slots[inner[i]]
             buf.vertices[ring_c[i] * buf.ring_size + s] = buf.vertices[ring_p[i] * buf.ring_size + s]
         _hinge_points(plan, buf, np.flatnonzero(live))
+        size = buf.ring_size
+        for k in np.flatnonzero(plan.bridge_ring >= 0):   # C's cut, in P's texture frame
+            copy = slice(plan.bridge_ring[k] * size, (plan.bridge_ring[k] + 1) * size)
+            c0 = plan.ring_id[kn.child[k], 0] * size
+            p_top = plan.ring_id[kn.parent[k], bands] * size
+            buf.vertices[copy] = buf.vertices[c0:c0 + size]
+            buf.normals[copy] = buf.normals[c0:c0 + size]
+            buf.uv[copy] = buf.uv[p_top:p_top + size]
     for k in np.flatnonzero(kn.flat & kn.merged):
         top = plan.ring_id[kn.parent[k], bands] * buf.ring_size
         bottom = plan.ring_id[kn.child[k], 0] * buf.ring_size
@@ -930,7 +956,7 @@ def _knuckle_faces(plan: _Plan) -> dict:
         if not kn.mitred[k]:
             merged = bool(kn.merged[k])
             out[int(kn.parent[k])] = _strip_faces(plan.ring_id[kn.parent[k], bands] * size,
-                                                  plan.ring_id[kn.child[k], 0] * size,
+                                                  plan.bridge_ring[k] * size,
                                                   jh + columns // 2, columns, merged, merged)
     return out
 
@@ -1023,7 +1049,7 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
     turns = _column_turns(frusta, plan)
 
     size = plan.columns + 1  # seam column duplicated
-    n_lateral_vertices = plan.n_rings * size
+    n_lateral_vertices = plan.n_vertex_rings * size
     n_vertices = n_lateral_vertices + plan.n_caps * (size + 1)
     buf = _Buffers(np.empty((n_vertices, 3)), np.empty((n_vertices, 3), np.float32),
                    np.empty((n_vertices, 2), np.float32), size)
@@ -1032,7 +1058,7 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
         _apex_vertices(frusta, plan, turns, evaluate, buf)
     if plan.knuckles is not None:
         _knuckle_vertices(frusta, plan, turns, evaluate, buf)
-    seam = np.arange(plan.n_rings) * size
+    seam = np.arange(plan.n_vertex_rings) * size
     buf.vertices[seam + plan.columns] = buf.vertices[seam]   # the u = 1 copy, bit for bit
 
     dtype = np.int32 if n_vertices < 2**31 else np.int64
