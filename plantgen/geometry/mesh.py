@@ -27,8 +27,10 @@ height map's gradient, as the ray caster shades relief.
 **Cones closing to a point.** Where a row's radius reaches 0 on a cutting plane through
 its tip (the well's roof), the end ring is one point. Its band is graded instead of
 collapsed: the ring before the tip (``N`` columns) meets a half ring of ``N/2`` columns
-half a band further (``3N/2`` triangles), which a fan of ``N/2`` triangles joins to the
-apex: still ``2N`` triangles a band, ``16·4^m`` a row, none of zero area. The apex ring's
+a quarter band from the tip (``3N/2`` triangles), which a fan of ``N/2`` triangles joins
+to the apex: still ``2N`` triangles a band, ``16·4^m`` a row, none of zero area (the
+half ring sits close to the tip so that the coarser polygon costs little volume: at
+m = 0 a cone keeps 88 % of its volume, against 90 % for ``N`` columns to the tip). The apex ring's
 ``N + 1`` vertices hold the half ring (even columns) and the apex (odd columns, each with
 the ``u`` of its fan triangle); a closed end gets no cap. A row continuing from such a
 point owns its own apex ring.
@@ -759,14 +761,14 @@ def _ring_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers, 
 
 
 def _apex_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers) -> None:
-    """Apex rings: the half ring (even columns) half a band from the tip, and one apex
+    """Apex rings: the half ring (even columns) a quarter band from the tip, and one apex
     position for the odd columns (their mean: a relief shell moves them apart)."""
     columns, bands = plan.columns, plan.bands
     chain_v = frusta.chain_position.astype(np.float64)
     even = np.arange(0, columns + 1, 2)
     odd = np.arange(1, columns, 2)
-    for rows, ring, v_half in ((np.flatnonzero(plan.apex_hi), bands, 1 - 0.5 / bands),
-                               (np.flatnonzero(plan.apex_lo), 0, 0.5 / bands)):
+    for rows, ring, v_half in ((np.flatnonzero(plan.apex_hi), bands, 1 - 0.25 / bands),
+                               (np.flatnonzero(plan.apex_lo), 0, 0.25 / bands)):
         if rows.size == 0:
             continue
         u = even / columns + (turns[0][rows] + ring / bands * turns[1][rows])[:, None]
