@@ -341,3 +341,24 @@ def test_knuckles_without_bend_join_or_cap(step):
         tm = assert_closed(frusta, mesh, intersections=not step)
         assert mesh.n_caps == 2 + 2 * step
         assert len(tm.split(only_watertight=False)) == 1 + step
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".glb"])
+def test_exported_knuckle_chain_and_well_load_back_watertight(tmp_path, suffix):
+    """Written to a file (float32 in glTF) and welded again: still closed (the well: its
+    roof), no zero-area face."""
+    import trimesh
+
+    from plantgen.export import export_mesh
+    from plantgen.pipeline import grow_file
+
+    models = {"knuckles": skin_skeleton(knuckle_chains()["135 turned"]),
+              "well": skin_skeleton(grow_file("well").skeleton)}
+    for name, frusta in models.items():
+        mesh = tessellate(frusta, 1)
+        back = trimesh.load(export_mesh(mesh, tmp_path / f"{name}{suffix}"))
+        if isinstance(back, trimesh.Scene):
+            back = back.to_geometry()
+        back.merge_vertices(merge_tex=True, merge_norm=True)
+        assert back.is_watertight and back.is_winding_consistent and back.volume > 0, name
+        assert back.area_faces.min() > 0, name

@@ -393,10 +393,6 @@ class _Knuckles:
         """(S,) the knuckle of each outer slice."""
         return np.repeat(np.arange(len(self.parent)), np.diff(self.start))
 
-    @property
-    def slice_index(self) -> np.ndarray:
-        """(S,) each outer slice's place in its fan (0 next to P)."""
-        return np.arange(len(self.slices)) - np.repeat(self.start[:-1], np.diff(self.start))
 
 
 def _find_knuckles(frusta: Frusta) -> _Knuckles | None:
@@ -728,8 +724,7 @@ class _Buffers:
     def put(self, ring, slots, pts, nrm, u, v) -> None:
         """Write points, normals and texture coordinates (broadcast) at ``slots`` of the
         vertex rings ``ring`` (broadcast against ``slots``)."""
-        idx = np.asarray(ring)[..., None] * self.ring_size + slots if np.ndim(slots) else \
-            np.asarray(ring) * self.ring_size + slots
+        idx = np.asarray(ring)[..., None] * self.ring_size + slots
         self.vertices[idx] = pts
         self.normals[idx] = nrm
         self.uv[idx, 0] = u
