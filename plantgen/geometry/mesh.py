@@ -1,20 +1,19 @@
 """Geometric subdivision (GS, GS+R): tessellate conical frusta into triangle meshes.
 
-Level ``m`` puts ``8·2^m`` columns around each frustum's axis and ``2^m`` bands along it,
-so every frustum row gives exactly ``16·4^m`` lateral triangles, the count of Table 1's
-caption in Bhagvat et al. 2009. Open chain ends (``Frusta.open_lo`` / ``open_hi``) are
-closed by flat caps, ``8·2^m`` triangles each (a fan on the cutting plane), as the ray
-caster closes them; :func:`triangle_count` gives the total.
+Level ``m`` puts ``N = 8·2^m`` columns around each frustum's axis and ``B = 2^m`` bands
+along it, so every frustum row gives exactly ``16·4^m`` lateral triangles, the count of
+Table 1's caption in Bhagvat et al. 2009. Open chain ends (``Frusta.open_lo`` /
+``open_hi``) are closed by flat caps, ``8·2^m`` triangles each (a fan on the cutting
+plane), as the ray caster closes them. :func:`triangle_count` gives the total.
 
 Every vertex lies on the exact frustum surface, on a generator between the two cutting
-planes (§2.3): column ``j`` of ring ``r`` is the point with ``u = j/N`` (``N = 8·2^m``)
-and ``v = r/2^m``, so rings follow the oblique planes at both ends. Its normal is the
-interpolated normal (8). A continuing row reuses its parent's top ring as its bottom
-ring (the joint's plane is shared bit for bit), so chains are watertight; that ring lies
-on the parent's cone and meets the child's cone up to the seam mismatch of §2.2 (zero
-with ``skin_skeleton(..., seam_fit=True)``). The seam column ``u = 1`` is a copy of
-column ``u = 0`` (for texture coordinates); weld vertices by position to see the closed
-surface.
+planes (§2.3): column ``j`` of ring ``r`` is the point with ``u = j/N`` and ``v = r/B``,
+so rings follow the oblique planes at both ends. Its normal is the interpolated normal
+(8). A continuing row reuses its parent's top ring as its bottom ring (the joint's plane
+is shared bit for bit), so chains are watertight; that ring lies on the parent's cone and
+meets the child's cone up to the seam mismatch of §2.2 (zero with ``skin_skeleton(...,
+seam_fit=True)``). The seam column ``u = 1`` is a copy of column ``u = 0`` (same position,
+its own texture coordinate); weld vertices by position to see the closed surface.
 
 Texture coordinates are ``(u, v + k)`` with ``k`` the row's place in its continuing
 chain, so the shared joint ring has one ``v`` for both rows and no triangle interpolates
@@ -25,8 +24,68 @@ GS+R moves each vertex to the concentric cone ``r + w·shell`` at the same ``(u,
 normals" of §2.4, the surface the ray caster marches. Its normals are (8) tilted by the
 height map's gradient, as the ray caster shades relief.
 
+**Cones closing to a point.** Where a row's radius reaches 0 on a cutting plane through
+its tip (the well's roof), the end ring is one point. Its band is graded instead of
+collapsed: the ring before the tip (``N`` columns) meets a half ring of ``N/2`` columns
+a quarter band from the tip (``3N/2`` triangles), which a fan of ``N/2`` triangles joins
+to the apex: still ``2N`` triangles a band, ``16·4^m`` a row, none of zero area (the
+half ring sits close to the tip so that the coarser polygon costs little volume: at
+m = 0 a cone keeps 88 % of its volume, against 90 % for ``N`` columns to the tip). The apex ring's
+``N + 1`` vertices hold the half ring (even columns) and the apex (odd columns, each with
+the ``u`` of its fan triangle); a closed end gets no cap. A row continuing from such a
+point owns its own apex ring.
+
+**Knuckles** (``skin_skeleton(max_bend_deg=...)``: bends past 120° by default, and joints
+whose plane would not cut a cone in an ellipse or whose segments' planes would cross).
+Skinning gives the parent segment P and the child C planes ⟂ their axes through the
+joint J and fills the bend with fan slices around the hinge line (through J, ⟂ the medial
+plane): *outer* slices continue the chain and sweep the outer side, *inner* slices cover
+the inner side (see :mod:`plantgen.geometry.skin`). Their union is what the ray caster
+draws; the mesh is its boundary:
+
+- *outer side*: each outer slice is a cylinder strip between two planes through the
+  hinge line; on the outer half (``N/2`` columns from hinge point to hinge point) it has
+  width, on the inner half none. The mesh tessellates that half only, ``B`` bands across,
+  the two columns at the hinge points as triangle fans: ``(N - 2)·B`` triangles a slice,
+  every vertex on the slice's cylinder (the strips sweep the zone of the sphere of radius
+  r around J that the paper's bend should show, to 10° slices). Columns are turned (by at
+  most half a column, interpolated along P) so that two columns of P's top ring, of every
+  slice ring and of C's bottom ring sit exactly on the hinge points.
+- *inner side*: P's and C's cylinders overlap there; for equal radii the bisector
+  ("mitre") plane through the hinge line, normal ``M1 + M2``, cuts both in the same
+  ellipse and separates the parts that lie inside the other cylinder. P's generators on
+  the inner half end at that plane instead of at P's ⟂ plane (``min`` of the two heights;
+  they agree on the hinge line), C's start there; both rings keep ``N`` columns, every
+  vertex on its own cone at the ray caster's ``(u, v)`` and normal (8), and C's inner half
+  ring is a copy of P's. The inner slices lie inside P ∪ C and get no triangles, no caps.
+- where the two cut curves differ (radii or tapers that differ, by more than ``1e-6`` of
+  the radius), a *bridge* band of ``N - 2`` triangles (``N`` if the hinge points differ)
+  joins P's curve to C's in the cutting plane: the part of one cross-section the other
+  does not cover. It is counted with P's row.
+- a trim may take at most 90 % of any generator of P or C (45 % at each end of a segment
+  between two knuckles, so the two never cross). Where the mitre would cut deeper (bends
+  near 180°, or segments shorter than about ``1.1·r·tan(bend/2)``, twice that between
+  two knuckles) P and C are cut by planes turned less far (both by the smaller of their
+  two limits, symmetric about the mitre), the bridge joins the two cuts, and the mesh is
+  still closed, consistently wound and positive but overlaps itself there: the
+  boundary of the union is then not local to the joint (it runs into the next segments
+  and their caps, as it does where a chain crosses itself).
+- a knuckle without bend (under 1e-6 rad) joins P's top ring to C's bottom ring directly
+  (copies), or caps both where their radii differ (as a radius step).
+
+So a chain with knuckles is one closed surface without zero-area triangles. Its rows no
+longer all carry ``16·4^m`` triangles (:attr:`TessellatedMesh.uniform_rows` is False:
+a renderer must take each face's row from ``face_row``, not from index // 16·4^m), and
+:func:`triangle_count` given the frusta counts them exactly. Vertices that no face uses
+(the inner half of slice rings, inner slices) are dropped, so meshes with knuckles have
+no fixed vertex layout; texture coordinates stay continuous through the fan (its slices
+advance u by their twist), C's trimmed vertices carry C's (u, v), P's carry P's (copies
+at one position where they meet), so the mesh is closed once welded by position.
+
 Everything is vectorised over rows with index templates (one quad template shifted by
-ring and column strides); rows are processed in chunks only to bound memory.
+ring and column strides); rows are processed in chunks only to bound memory. Apex rings
+are fixed up afterwards vectorised over the rows, knuckles knuckle by knuckle (they are
+few).
 """
 
 from __future__ import annotations
@@ -39,14 +98,26 @@ import numpy as np
 from ..tolerances import tol
 from . import relief as relief_maps
 from .frusta import Frusta, plane_height
+from .vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_root, unit
 
 __all__ = [
     "TessellatedMesh", "tessellate", "triangle_count", "lateral_triangles_per_row",
-    "columns_around", "bands_along", "generator_points",
+    "slice_triangles", "columns_around", "bands_along", "generator_points",
 ]
 
 #: A relief height function: (material (k,) int, u (k,) float, v (k,) float) -> w (k,) in [0, 1].
 HeightFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+#: Relative (to the joint radius): two knuckle cut curves (or hinge points) closer than this
+#: are one (C's vertices take P's positions); farther apart, a bridge joins them.
+_SEAM_SNAP = 1e-6
+#: Most of a generator's length (between the row's own planes) a knuckle trim may take;
+#: half of it at each end of a segment between two knuckles.
+_TRIM_SHARE = 0.9
+#: Radians: a knuckle bending less than this is flat (no outer strips).
+_FLAT_BEND = 1e-6
+#: Generators sampled on the inner half to bound a trim and to compare the cut curves.
+_TRIM_SAMPLES = 33
 
 
 def columns_around(m: int) -> int:
@@ -60,8 +131,15 @@ def bands_along(m: int) -> int:
 
 
 def lateral_triangles_per_row(m: int) -> int:
-    """Lateral triangles per frustum row at level ``m``: ``16·4^m`` (Table 1's caption)."""
+    """Lateral triangles per frustum row at level ``m``: ``16·4^m`` (Table 1's caption),
+    a cone closing to a point included."""
     return 2 * columns_around(m) * bands_along(m)
+
+
+def slice_triangles(m: int) -> int:
+    """Triangles of one outer knuckle fan slice at level ``m``: ``(8·2^m - 2)·2^m``
+    (its outer half, fanned at the two hinge points)."""
+    return (columns_around(m) - 2) * bands_along(m)
 
 
 def _check_level(m) -> int:
@@ -177,11 +255,13 @@ class TessellatedMesh:
     ``normals``         (V, 3) f4     unit interpolated normals (8) (GS+R: tilted by relief)
     ``uv``              (V, 2) f4     ``(u, v + chain position)``, u in [0, 1]
     ``faces``           (F, 3) i4     counter-clockwise seen from outside
-    ``face_row``        (F,) i4       frustum row of each face
+    ``face_row``        (F,) i4       frustum row of each face (nondecreasing over the
+                                      lateral faces)
     ``material``        (n,) i4       material index per frustum row
     ``material_names``  tuple         names for ``material``
     ``level``           int           subdivision level m
-    ``n_caps``          int           number of caps (faces after ``16·4^m·n``)
+    ``n_caps``          int           number of caps: the last ``n_caps·8·2^m`` faces,
+                                      ``8·2^m`` a cap
     ==================  ============  ======================================================
     """
 
@@ -198,6 +278,17 @@ class TessellatedMesh:
     @property
     def n_rows(self) -> int:
         return len(self.material)
+
+    @property
+    def n_lateral(self) -> int:
+        """Lateral faces (all but the caps)."""
+        return len(self.faces) - self.n_caps * columns_around(self.level)
+
+    @property
+    def uniform_rows(self) -> bool:
+        """Every row has exactly ``16·4^m`` lateral faces, in row order (no knuckle fans):
+        a face's row is then its index // 16·4^m, as the raster shader assumes."""
+        return self.n_lateral == self.n_rows * lateral_triangles_per_row(self.level)
 
     @property
     def face_material(self) -> np.ndarray:
@@ -226,9 +317,23 @@ class TessellatedMesh:
         return mesh
 
 
-def triangle_count(n_rows: int, m: int, n_caps: int) -> int:
-    """Faces of a tessellation: ``16·4^m`` per row plus ``8·2^m`` per cap."""
-    return n_rows * lateral_triangles_per_row(m) + n_caps * columns_around(m)
+def triangle_count(rows, m: int, n_caps: int | None = None, *, caps: bool | str = True) -> int:
+    """Faces of a tessellation at level ``m``.
+
+    ``rows`` a number of rows: ``rows·16·4^m + n_caps·8·2^m``, exact for frusta without
+    knuckle fans (every row, a cone closing to a point included, gets ``16·4^m`` lateral
+    triangles, every cap ``8·2^m``) and an upper bound with them (a knuckle's rows get
+    fewer: ``(8·2^m - 2)·2^m`` an outer slice, none an inner slice, plus a bridge band
+    where P's and C's cuts differ).
+
+    ``rows`` a :class:`~plantgen.geometry.frusta.Frusta`: exactly
+    ``len(tessellate(rows, m, caps=caps).faces)`` (``n_caps`` is not used: ends closing
+    to a point and inner knuckle slices get no cap).
+    """
+    if isinstance(rows, Frusta):
+        plan = _plan(rows, _check_level(m), caps)
+        return int(plan.row_faces.sum()) + plan.n_caps * columns_around(m)
+    return int(rows) * lateral_triangles_per_row(m) + int(n_caps) * columns_around(m)
 
 
 def _default_height(material_names) -> HeightFunction:
@@ -248,6 +353,658 @@ def _default_height(material_names) -> HeightFunction:
     return height
 
 
+# ---------------------------------------------------------------------------- knuckles
+@dataclass
+class _Knuckles:
+    """The K knuckles of a frusta (see the module docstring), each the parent row P, its
+    outer fan slices and the child row C, with the cuts the mesh uses.
+
+    ``slices`` (S,) are the outer slice rows, knuckle by knuckle in chain order, knuckle k's
+    at ``slices[start[k]:start[k + 1]]``; ``inner`` the inner slice rows. Per knuckle (K,):
+    ``joint`` J, ``hinge`` the unit hinge direction k (the fan turns P's axis M1 about it
+    to C's axis M2), ``inner_p`` = k × M1 and ``inner_c`` = k × M2 (towards the inside of
+    the bend), ``bend`` (radians), ``radius_p``/``radius_c`` the radii at J, the trimming
+    planes ``plane_p`` (P keeps n·x <= d) and ``plane_c`` (C keeps n·x >= d), and flags
+    ``flat`` (no bend), ``merged`` (equal radii: one hinge point a side) and ``mitred``
+    (the two cut curves are one). ``hinge_col`` is the column on the hinge point k.
+    """
+
+    parent: np.ndarray
+    child: np.ndarray
+    slices: np.ndarray
+    start: np.ndarray
+    inner: np.ndarray
+    joint: np.ndarray = None
+    hinge: np.ndarray = None
+    inner_p: np.ndarray = None
+    inner_c: np.ndarray = None
+    bend: np.ndarray = None
+    radius_p: np.ndarray = None
+    radius_c: np.ndarray = None
+    plane_p: np.ndarray = None
+    plane_c: np.ndarray = None
+    flat: np.ndarray = None
+    merged: np.ndarray = None
+    mitred: np.ndarray = None
+    hinge_col: np.ndarray = None
+
+    @property
+    def slice_knuckle(self) -> np.ndarray:
+        """(S,) the knuckle of each outer slice."""
+        return np.repeat(np.arange(len(self.parent)), np.diff(self.start))
+
+
+
+def _find_knuckles(frusta: Frusta) -> _Knuckles | None:
+    """The knuckles of ``frusta``: runs of short continuing rows (fan slices) from a row
+    with length P to one C, all based at one point J where P ends and C starts; their
+    inner slices are the short open rows with an outer slice's planes swapped. Fan rows
+    that do not fit (no C, no common point, no radius) stay ordinary rows. None: no
+    knuckle."""
+    n = len(frusta.length)
+    short = ~frusta.has_length if n else np.zeros(0, bool)
+    if not short.any():
+        return None
+    parent = frusta.parent_row
+    has_parent = parent >= 0
+    child_of = np.full(n, -1, np.int64)
+    child_of[parent[has_parent]] = np.flatnonzero(has_parent)
+    first = np.flatnonzero(short & has_parent)
+    first = first[~short[parent[first]]]
+    top = frusta.top
+    rows_p, rows_c, slices, start = [], [], [], [0]
+    for f in first:
+        run, c = [int(f)], int(child_of[f])
+        while c >= 0 and short[c]:
+            run.append(c)
+            c = int(child_of[c])
+        if c < 0:
+            continue
+        p, joint = int(parent[f]), frusta.base[f]
+        radius = max(frusta.r2[p], frusta.r1[c], float(frusta.r1[run].max()))
+        slack = tol.joint_gap * max(1.0, float(np.abs(joint).max()) + radius)
+        gaps = np.concatenate([norm(frusta.base[run] - joint), norm(top[[p]] - joint),
+                               norm(frusta.base[[c]] - joint)])
+        smallest = min(frusta.r2[p], frusta.r1[c], float(frusta.r1[run].min()))
+        if gaps.max() > slack or not smallest > tol.zero_length * radius:
+            continue
+        rows_p.append(p)
+        rows_c.append(c)
+        slices.extend(run)
+        start.append(len(slices))
+    if not rows_p:
+        return None
+    outer = {frusta.plane_hi[o].tobytes() + frusta.plane_lo[o].tobytes() for o in slices}
+    candidates = np.flatnonzero(short & ~has_parent & (child_of < 0))
+    inner = [i for i in candidates
+             if frusta.plane_lo[i].tobytes() + frusta.plane_hi[i].tobytes() in outer]
+    kn = _Knuckles(np.array(rows_p, np.int64), np.array(rows_c, np.int64),
+                   np.array(slices, np.int64), np.array(start, np.int64), np.array(inner, np.int64))
+    _knuckle_cuts(frusta, kn)
+    return kn
+
+
+def _cut_height(frusta: Frusta, rows, e, plane):
+    """Axial heights (and rises) where generators of ``rows`` in radial directions ``e``
+    (..., 3) meet ``plane`` (..., 4) (:func:`plane_height`; arguments broadcast)."""
+    n, d = plane[..., :3], plane[..., 3]
+    return plane_height(d - dot(n, frusta.base[rows]), dot(n, frusta.axis[rows]), dot(n, e),
+                        frusta.r1[rows], frusta.slope[rows])
+
+
+def _inner_generators(frusta: Frusta, rows, hinge, inner):
+    """(K, S, 3) radial directions of ``rows`` (K,) from the hinge k over the inner half
+    (towards ``inner``), ends excluded."""
+    beta = np.linspace(0.0, np.pi, _TRIM_SAMPLES + 2)[1:-1]
+    axis = frusta.axis[rows]
+    k_perp = unit(hinge - axis * dot(hinge, axis)[:, None])
+    return (np.cos(beta)[None, :, None] * k_perp[:, None, :]
+            + np.sin(beta)[None, :, None] * inner[:, None, :])
+
+
+def _trim_plane(axis, inner, joint, gamma, below: bool):
+    """(K, 4) the plane through the hinge line turned by ``gamma`` from the ⟂ plane of
+    ``axis`` towards the inside (P: ``below``, it keeps n·x <= d) or back (C)."""
+    normal = axis * np.cos(gamma)[:, None] + inner * (np.sin(gamma) * (1 if below else -1))[:, None]
+    return plane_through(normal, joint)
+
+
+def _trim_angle(frusta: Frusta, rows, joint, hinge, inner, limit, below: bool, share):
+    """(K,) the largest turn of the trimming plane, up to ``limit`` (the mitre), whose cut
+    takes at most ``share`` (K,) of each sampled inner generator of ``rows`` (K,)."""
+    e = _inner_generators(frusta, rows, hinge, inner)
+    r = rows[:, None]
+    y_lo = _cut_height(frusta, r, e, frusta.plane_lo[r])[0]
+    y_hi = _cut_height(frusta, r, e, frusta.plane_hi[r])[0]
+    room = share[:, None] * (y_hi - y_lo)
+    axis = frusta.axis[rows]
+
+    def fits(gamma):
+        y, rise = _cut_height(frusta, r, e, _trim_plane(axis, inner, joint, gamma, below)[:, None, :])
+        cut = y_hi - y if below else y - y_lo
+        return np.all((rise > tol.generator_rise) & (np.abs(cut) <= room), axis=1)
+
+    lo, hi = np.zeros_like(limit), limit.copy()
+    whole = fits(hi)
+    lo[whole] = hi[whole]
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        good = fits(mid)
+        lo, hi = np.where(good, mid, lo), np.where(good, hi, mid)
+    return lo
+
+
+def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
+    """Hinge, bend, radii, trimming planes and flags of the knuckles (in place)."""
+    head = kn.slices[kn.start[:-1]]
+    n_lo, n_hi = frusta.plane_lo[kn.slices, :3], frusta.plane_hi[kn.slices, :3]
+    turn = cross(n_lo, n_hi)
+    kn.bend = np.add.reduceat(np.arctan2(norm(turn), dot(n_lo, n_hi)), kn.start[:-1])
+    m1, m2 = frusta.axis[kn.parent], frusta.axis[kn.child]
+    kn.flat = kn.bend < _FLAT_BEND
+    helper = any_perpendicular(m1)
+    k = np.where(kn.flat[:, None], helper, unit(np.add.reduceat(turn, kn.start[:-1], axis=0), helper))
+    kn.hinge = k = unit(k - m1 * dot(k, m1)[:, None], helper)
+    kn.inner_p, kn.inner_c = unit(cross(k, m1)), unit(cross(k, m2))
+    kn.joint = joint = frusta.base[head]
+    kn.radius_p = frusta.r1[kn.parent] + frusta.slope[kn.parent] * dot(joint - frusta.base[kn.parent], m1)
+    kn.radius_c = frusta.r1[kn.child] + frusta.slope[kn.child] * dot(joint - frusta.base[kn.child], m2)
+    half = np.where(kn.flat, 0.0, 0.5 * kn.bend)
+    both_ends = np.isin(kn.parent, kn.child), np.isin(kn.child, kn.parent)
+    share_p, share_c = (np.where(b, 0.5 * _TRIM_SHARE, _TRIM_SHARE) for b in both_ends)
+    gamma_p = _trim_angle(frusta, kn.parent, joint, k, kn.inner_p, half, True, share_p)
+    gamma_c = _trim_angle(frusta, kn.child, joint, k, kn.inner_c, half, False, share_c)
+    gamma_p = gamma_c = np.minimum(gamma_p, gamma_c)   # a short side holds both back
+    kn.plane_p = _trim_plane(m1, kn.inner_p, joint, gamma_p, True)
+    kn.plane_c = _trim_plane(m2, kn.inner_c, joint, gamma_c, False)
+    at_mitre = (gamma_p == half) & (gamma_c == half) & ~kn.flat
+    kn.plane_c[at_mitre] = kn.plane_p[at_mitre]          # one plane, bit for bit
+    radius = np.maximum(kn.radius_p, kn.radius_c)
+    kn.merged = np.abs(kn.radius_p - kn.radius_c) <= _SEAM_SNAP * radius
+    # the two cut curves, generator by generator (the mitre maps P's β to C's β)
+    ends = []
+    for rows, inner, plane in ((kn.parent, kn.inner_p, kn.plane_p), (kn.child, kn.inner_c, kn.plane_c)):
+        e = _inner_generators(frusta, rows, k, inner)
+        r = rows[:, None]
+        y = _cut_height(frusta, r, e, plane[:, None, :])[0]
+        ends.append(frusta.base[r] + y[..., None] * frusta.axis[r]
+                    + (frusta.r1[r] + frusta.slope[r] * y)[..., None] * e)
+    gap = norm(ends[0] - ends[1]).max(axis=1)
+    kn.mitred = at_mitre & kn.merged & (gap <= _SEAM_SNAP * radius)
+
+
+# ---------------------------------------------------------------------------- the plan
+@dataclass
+class _Plan:
+    """What :func:`tessellate` builds for each of the n rows, before any vertex.
+
+    ``grid`` rows get the ``N × B`` quad grid (``16·4^m`` triangles); ``lune`` rows are
+    outer knuckle slices (their outer half); ``hidden`` rows get nothing (inner knuckle
+    slices: no rings either). ``apex_lo``/``apex_hi``: the end ring is a point (graded
+    band). ``owns_ring`` (n, B + 1) and ``ring_id`` (n, B + 1): the vertex ring of each
+    row's ring (a continuing row shares its parent's top ring). ``row_faces`` (n,) lateral
+    triangles per row; ``cap_rows``/``cap_is_top`` the caps; ``switch`` (K,) the lune ring
+    where the hinge vertices change from P's to C's (unmerged knuckles); ``bridge_ring``
+    (K,) the vertex ring after the ``n_rings`` lateral ones that copies C's ring at J for
+    P's bridge, with P's texture coordinates (-1: no bridge).
+    """
+
+    columns: int
+    bands: int
+    knuckles: _Knuckles | None
+    grid: np.ndarray
+    lune: np.ndarray
+    hidden: np.ndarray
+    apex_lo: np.ndarray
+    apex_hi: np.ndarray
+    owns_ring: np.ndarray
+    ring_id: np.ndarray
+    n_rings: int
+    row_faces: np.ndarray
+    cap_rows: np.ndarray
+    cap_is_top: np.ndarray
+    switch: np.ndarray
+    bridge_ring: np.ndarray
+
+    @property
+    def n_caps(self) -> int:
+        return len(self.cap_rows)
+
+    @property
+    def n_vertex_rings(self) -> int:
+        """Rings of ``N + 1`` vertices before the caps: the lateral ones, the bridges'."""
+        return self.n_rings + int(np.count_nonzero(self.bridge_ring >= 0))
+
+
+def _apex_ends(frusta: Frusta, proper: np.ndarray):
+    """(n,) bool pairs: rows whose lower / upper end ring is one point (radius 0 on a
+    plane through the tip). A shared ring counts only where both rows agree; a row closing
+    at both ends (no surface) keeps the plain grid."""
+    scale = np.maximum(np.maximum(np.abs(frusta.r1), np.abs(frusta.r2)), frusta.length)
+    eps = tol.zero_length * scale
+    off_lo = np.abs(dot(frusta.plane_lo[:, :3], frusta.base) - frusta.plane_lo[:, 3])
+    off_hi = np.abs(dot(frusta.plane_hi[:, :3], frusta.top) - frusta.plane_hi[:, 3])
+    lo = proper & (np.abs(frusta.r1) <= eps) & (off_lo <= eps)
+    hi = proper & (np.abs(frusta.r2) <= eps) & (off_hi <= eps)
+    both = lo & hi
+    lo, hi = lo & ~both, hi & ~both
+    shared = np.flatnonzero(frusta.parent_row >= 0)
+    parent = frusta.parent_row[shared]
+    disagree = hi[parent] != lo[shared]
+    hi[parent[disagree]] = False
+    lo[shared[disagree]] = False
+    return lo, hi
+
+
+def _plan(frusta: Frusta, m: int, caps) -> _Plan:
+    """The :class:`_Plan` of ``frusta`` at level ``m`` with ``caps`` (see :func:`tessellate`)."""
+    if caps not in (True, False, "tips"):
+        raise ValueError(f"caps must be True, False or 'tips', got {caps!r}")
+    n = len(frusta.length)
+    columns, bands = columns_around(m), bands_along(m)
+    kn = _find_knuckles(frusta)
+    grid, lune, hidden = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    if kn is not None:
+        grid[kn.slices] = grid[kn.inner] = False
+        hidden[kn.inner] = True
+        lune[kn.slices[~kn.flat[kn.slice_knuckle]]] = True
+    apex_lo, apex_hi = _apex_ends(frusta, grid)
+    parent = frusta.parent_row
+    shared = parent >= 0
+    owns_ring = np.ones((n, bands + 1), dtype=bool)
+    owns_ring[:, 0] = ~shared | apex_lo
+    owns_ring[hidden] = False
+    ring_id = np.full((n, bands + 1), -1, np.int64)
+    ring_id[owns_ring] = np.arange(int(owns_ring.sum()))
+    borrow = np.flatnonzero(~owns_ring[:, 0] & ~hidden)     # parent first: one pass suffices
+    ring_id[borrow, 0] = ring_id[parent[borrow], bands]
+
+    row_faces = np.where(grid, lateral_triangles_per_row(m), 0).astype(np.int64)
+    row_faces[lune] = slice_triangles(m)
+    switch = bridge_ring = np.zeros(0, np.int64)
+    open_lo = ~shared & ~hidden & ~apex_lo
+    continued = np.zeros(n, bool)
+    continued[parent[shared]] = True
+    open_hi = ~continued & ~hidden & ~apex_hi
+    if kn is not None:
+        count = np.diff(kn.start)
+        switch = ((count * bands + 1) // 2).astype(np.int64)     # lune ring index ℓ, P's top is 0
+        split = ~kn.flat & ~kn.merged
+        band = switch - 1
+        row_faces[kn.slices[kn.start[:-1] + band // bands][split]] += 2
+        bridged = ~kn.flat & ~kn.mitred
+        row_faces[kn.parent[bridged]] += np.where(kn.merged[bridged], columns - 2, columns)
+        bridge_ring = np.full(len(kn.parent), -1, np.int64)
+        bridge_ring[bridged] = int(owns_ring.sum()) + np.arange(int(bridged.sum()))
+        stepped = kn.flat & ~kn.merged
+        open_hi[kn.parent[stepped]] = True
+        open_lo[kn.child[stepped]] = True
+    none = np.zeros(0, np.int64)
+    bottom = np.flatnonzero(open_lo) if caps is True else none
+    top = np.flatnonzero(open_hi) if caps else none
+    return _Plan(columns, bands, kn, grid, lune, hidden, apex_lo, apex_hi, owns_ring, ring_id,
+                 int(owns_ring.sum()), row_faces, np.concatenate([bottom, top]),
+                 np.concatenate([np.zeros(len(bottom), bool), np.ones(len(top), bool)]), switch,
+                 bridge_ring)
+
+
+def _column_turns(frusta: Frusta, plan: _Plan):
+    """(n,) pairs ``(delta_lo, delta_inc)``: ring r of a row puts its columns at
+    ``u = j/N + delta_lo + (r/B)·delta_inc``. Zero without knuckles. P's top ring turns by
+    at most half a column so that its column ``hinge_col`` sits on the hinge point;
+    slices carry that on (their increment is their twist, which keeps the hinge on one
+    column); later rows inherit the turn. Sets ``knuckles.hinge_col``."""
+    n, kn = len(frusta.length), plan.knuckles
+    inc = np.zeros(n)
+    if kn is None:
+        return inc, inc
+    columns, parent = plan.columns, frusta.parent_row
+    inc[kn.slices] = frusta.twist[kn.slices]
+    is_p = np.zeros(n, np.int64)
+    is_p[kn.parent] = 1
+    level = reduce_to_root(parent, is_p, np.add)[kn.parent] - 1   # knuckles upstream
+    kn.hinge_col = np.zeros(len(kn.parent), np.int64)
+    for lv in range(int(level.max()) + 1):
+        sel = (level == lv) & ~kn.flat
+        if not sel.any():
+            continue
+        rows = kn.parent[sel]
+        delta_lo = reduce_to_root(parent, inc, np.add)[rows] - inc[rows]
+        axis, ref = frusta.axis[rows], frusta.ref_dir[rows]
+        e = unit(kn.hinge[sel] - axis * dot(kn.hinge[sel], axis)[:, None])
+        phi = np.arctan2(dot(e, cross(axis, ref)), dot(e, ref))
+        u_hinge = phi / (2 * np.pi) + frusta.u_offset[rows] + frusta.twist[rows]
+        t = (u_hinge - delta_lo) * columns
+        nearest = np.round(t)
+        inc[rows] = (t - nearest) / columns
+        kn.hinge_col[sel] = np.mod(nearest, columns).astype(np.int64)
+    total = reduce_to_root(parent, inc, np.add)
+    return total - inc, inc
+
+
+# ---------------------------------------------------------------------------- vertices
+def _surface(frusta: Frusta, relief: bool, height, step_u: float, step_v: float):
+    """``evaluate(rows, u, v) -> (points, normals)``: :func:`generator_points` of rows
+    (k, 1) at texture coordinates (k, C) (broadcast), on the relief shell if ``relief``
+    (heights ``height``, gradient by central differences ``step_u``, ``step_v`` apart)."""
+    material, shell = frusta.material, frusta.shell
+
+    def evaluate(rows, u, v):
+        if not relief:
+            return generator_points(frusta, rows, u, v)
+        uu, vv = np.broadcast_arrays(u, v)
+        shape = np.broadcast_shapes(uu.shape, rows.shape)
+        uu, vv = np.broadcast_to(uu, shape), np.broadcast_to(vv, shape)
+        mm = np.broadcast_to(material[rows], shape).ravel()
+        uu, vv = uu.ravel() % 1.0, vv.ravel()
+
+        def w_at(du, dv):
+            return np.asarray(height(mm, (uu + du) % 1.0, vv + dv), dtype=np.float64).reshape(shape)
+
+        thick = shell[rows]
+        offset = np.clip(w_at(0.0, 0.0), 0.0, 1.0) * thick
+        # Central differences one texel apart, as the ray caster takes them.
+        slope = ((w_at(step_u, 0.0) - w_at(-step_u, 0.0)) / (2 * step_u) * thick,
+                 (w_at(0.0, step_v) - w_at(0.0, -step_v)) / (2 * step_v) * thick)
+        return generator_points(frusta, rows, u, v, offset, slope)
+
+    return evaluate
+
+
+@dataclass
+class _Buffers:
+    """The vertex arrays being filled: lateral rings (``N + 1`` slots each, ring by ring
+    in ``ring_id`` order) then the caps."""
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    uv: np.ndarray
+    ring_size: int
+
+    def put(self, ring, slots, pts, nrm, u, v) -> None:
+        """Write points, normals and texture coordinates (broadcast) at ``slots`` of the
+        vertex rings ``ring`` (broadcast against ``slots``)."""
+        idx = np.asarray(ring)[..., None] * self.ring_size + slots
+        self.vertices[idx] = pts
+        self.normals[idx] = nrm
+        self.uv[idx, 0] = u
+        self.uv[idx, 1] = v
+
+
+def _ring_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers, chunk: int) -> None:
+    """Every owned ring at ``u = j/N`` (turned by ``turns``) and ``v = r/B``, chunked."""
+    columns, bands = plan.columns, plan.bands
+    u_col = np.arange(columns + 1) / columns
+    chain_v = frusta.chain_position.astype(np.float64)
+    delta_lo, delta_inc = turns
+    turned = plan.knuckles is not None
+    rows_all, ring_all = np.nonzero(plan.owns_ring)  # row-major: matches ring_id order
+    step = max(1, int(chunk) // (columns + 1))
+    for lo in range(0, plan.n_rings, step):
+        hi = min(plan.n_rings, lo + step)
+        rows, ring = rows_all[lo:hi], ring_all[lo:hi]
+        v = (ring / bands)[:, None]
+        u = u_col[None, :]
+        if turned:
+            u = u + (delta_lo[rows] + ring / bands * delta_inc[rows])[:, None]
+        pts, nrm = evaluate(rows[:, None], u, v)
+        sl = slice(lo * (columns + 1), hi * (columns + 1))
+        buf.vertices[sl] = pts.reshape(-1, 3)
+        buf.normals[sl] = nrm.reshape(-1, 3)
+        buf.uv[sl, 0] = np.broadcast_to(u, pts.shape[:2]).ravel()
+        buf.uv[sl, 1] = np.broadcast_to(v + chain_v[rows][:, None], pts.shape[:2]).ravel()
+
+
+def _apex_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers) -> None:
+    """Apex rings: the half ring (even columns) a quarter band from the tip, and one apex
+    position for the odd columns (their mean: a relief shell moves them apart)."""
+    columns, bands = plan.columns, plan.bands
+    chain_v = frusta.chain_position.astype(np.float64)
+    even = np.arange(0, columns + 1, 2)
+    odd = np.arange(1, columns, 2)
+    for rows, ring, v_half in ((np.flatnonzero(plan.apex_hi), bands, 1 - 0.25 / bands),
+                               (np.flatnonzero(plan.apex_lo), 0, 0.25 / bands)):
+        if rows.size == 0:
+            continue
+        u = even / columns + (turns[0][rows] + ring / bands * turns[1][rows])[:, None]
+        pts, nrm = evaluate(rows[:, None], u, np.full((1, 1), v_half))
+        rid = plan.ring_id[rows, ring]
+        buf.put(rid, even, pts, nrm, u, v_half + chain_v[rows][:, None])
+        tip = rid[:, None] * buf.ring_size + odd
+        buf.vertices[tip] = buf.vertices[tip].mean(axis=1, keepdims=True)
+
+
+def _trimmed_rings(frusta: Frusta, plan: _Plan, turns, evaluate, rows):
+    """Rings 0..B of ``rows`` (T,) cut by their knuckles' trimming planes: each column's
+    generator (fixed by ``u = j/N`` turned and ``v = r/B``) runs from its lower to its
+    upper cut, where on the inner half a trimming plane may replace the row's own plane
+    (the nearer one wins); the vertex sits at the fraction r/B of that, with the ray
+    caster's (u, v) and normal (8) there. Returns points, normals, u, v (T, B + 1, N + 1)."""
+    kn, columns, bands = plan.knuckles, plan.columns, plan.bands
+    r = rows[:, None, None]
+    v_nom = (np.arange(bands + 1) / bands)[None, :, None]
+    u = (np.arange(columns + 1) / columns)[None, None, :] + (
+        turns[0][rows][:, None] + np.arange(bands + 1) / bands * turns[1][rows][:, None])[..., None]
+    phi = 2 * np.pi * (u - frusta.u_offset[r] - v_nom * frusta.twist[r])
+    ref = frusta.ref_dir[r]
+    e = np.cos(phi)[..., None] * ref + np.sin(phi)[..., None] * cross(frusta.axis[r], ref)
+    y_lo = _cut_height(frusta, r, e, frusta.plane_lo[r])[0]
+    y_hi = _cut_height(frusta, r, e, frusta.plane_hi[r])[0]
+    y_a, y_b = y_lo, y_hi
+    for ends, planes, inner in ((kn.child, kn.plane_c, kn.inner_c), (kn.parent, kn.plane_p, kn.inner_p)):
+        which = np.full(len(frusta.length), -1, np.int64)
+        keep = ~kn.flat
+        which[ends[keep]] = np.flatnonzero(keep)
+        k = which[rows]
+        has = k >= 0
+        if not has.any():
+            continue
+        kk = np.maximum(k, 0)[:, None, None]
+        y_t = _cut_height(frusta, r, e, planes[kk])[0]
+        side = has[:, None, None] & (dot(e, inner[kk]) > 0)
+        if ends is kn.child:
+            y_a = np.where(side, np.maximum(y_lo, y_t), y_a)
+        else:
+            y_b = np.where(side, np.minimum(y_hi, y_t), y_b)
+    y = y_a + v_nom * (y_b - y_a)
+    span = y_hi - y_lo
+    v = (y - y_lo) / np.where(span != 0, span, 1.0)
+    u_rc = u + (v - v_nom) * frusta.twist[r]
+    pts, nrm = evaluate(rows[:, None, None], u_rc, v)
+    return pts, nrm, u_rc, v
+
+
+def _knuckle_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers) -> None:
+    """Trimmed rings of P and C, C's inner half ring at J (a copy of P's where mitred),
+    one position per hinge point along each lune, and the flat knuckles' copies."""
+    kn, columns, bands = plan.knuckles, plan.columns, plan.bands
+    chain_v = frusta.chain_position.astype(np.float64)
+    live = ~kn.flat
+    rows = np.unique(np.concatenate([kn.parent[live], kn.child[live]]))
+    if rows.size:
+        pts, nrm, u, v = _trimmed_rings(frusta, plan, turns, evaluate, rows)
+        v_tex = v + chain_v[rows][:, None, None]
+        own = plan.owns_ring[rows]
+        buf.put(plan.ring_id[rows][own], np.arange(columns + 1), pts[own], nrm[own], u[own], v_tex[own])
+        # C's ring at J belongs to the last slice: C writes its inner half and hinges
+        at = np.searchsorted(rows, kn.child[live])
+        jh = kn.hinge_col[live]
+        slots = np.arange(columns + 1)
+        from_hinge = (slots[None, :] - jh[:, None]) % columns
+        inner = (from_hinge >= columns // 2) | (from_hinge == 0)
+        ring_c = plan.ring_id[kn.child[live], 0]
+        ring_p = plan.ring_id[kn.parent[live], bands]
+        for i in range(int(live.sum())):
+            s = slots[inner[i]]
+            buf.put(ring_c[i], s, pts[at[i], 0, s], nrm[at[i], 0, s], u[at[i], 0, s], v_tex[at[i], 0, s])
+        mitred = kn.mitred[live]
+        for i in np.flatnonzero(mitred):
+            s = slots[inner[i]]
+            buf.vertices[ring_c[i] * buf.ring_size + s] = buf.vertices[ring_p[i] * buf.ring_size + s]
+        _hinge_points(plan, buf, np.flatnonzero(live))
+        size = buf.ring_size
+        for k in np.flatnonzero(plan.bridge_ring >= 0):   # C's cut, in P's texture frame
+            copy = slice(plan.bridge_ring[k] * size, (plan.bridge_ring[k] + 1) * size)
+            c0 = plan.ring_id[kn.child[k], 0] * size
+            p_top = plan.ring_id[kn.parent[k], bands] * size
+            buf.vertices[copy] = buf.vertices[c0:c0 + size]
+            buf.normals[copy] = buf.normals[c0:c0 + size]
+            buf.uv[copy] = buf.uv[p_top:p_top + size]
+    for k in np.flatnonzero(kn.flat & kn.merged):
+        top = plan.ring_id[kn.parent[k], bands] * buf.ring_size
+        bottom = plan.ring_id[kn.child[k], 0] * buf.ring_size
+        buf.vertices[bottom:bottom + buf.ring_size] = buf.vertices[top:top + buf.ring_size]
+
+
+def _hinge_points(plan: _Plan, buf: _Buffers, knuckles) -> None:
+    """Give every lune ring's hinge columns one position a side: P's hinge point up to
+    the switch ring, C's after it (the same point where the knuckle is merged)."""
+    kn, columns, bands = plan.knuckles, plan.columns, plan.bands
+    size = buf.ring_size
+    for k in knuckles:
+        jh = int(kn.hinge_col[k])
+        sides = [[jh] + ([columns] if jh == 0 else []),
+                 [(jh + columns // 2) % columns] + ([columns] if (jh + columns // 2) % columns == 0 else [])]
+        ring_p = plan.ring_id[kn.parent[k], bands]
+        ring_c = plan.ring_id[kn.child[k], 0]
+        slices = kn.slices[kn.start[k]:kn.start[k + 1]]
+        lune = plan.ring_id[slices, 1:].ravel()          # ℓ = 1 .. L - 1
+        for side in sides:
+            h_p = buf.vertices[ring_p * size + side[0]].copy()
+            h_c = h_p if kn.merged[k] else buf.vertices[ring_c * size + side[0]].copy()
+            for ell, ring in enumerate(lune, start=1):
+                buf.vertices[ring * size + np.array(side)] = h_p if ell < plan.switch[k] else h_c
+            buf.vertices[ring_p * size + np.array(side)] = h_p
+
+
+# ---------------------------------------------------------------------------- faces
+def _quads(lower, upper, a, b):
+    """(..., 2, 3) the two triangles (l_a, l_b, u_b), (l_a, u_b, u_a) of the quads between
+    vertex indices ``lower + a``, ``lower + b`` and ``upper + b``, ``upper + a``
+    (broadcast): counter-clockwise from outside when ``b`` follows ``a`` around the axis
+    and ``upper`` is the ring above ``lower``."""
+    la, lb, ua, ub = lower + a, lower + b, upper + a, upper + b
+    out = np.empty(np.broadcast_shapes(la.shape, ub.shape) + (2, 3), np.result_type(la, ub))
+    out[..., 0, 0] = la
+    out[..., 0, 1] = lb
+    out[..., 0, 2] = ub
+    out[..., 1, 0] = la
+    out[..., 1, 1] = ub
+    out[..., 1, 2] = ua
+    return out
+
+
+def _grid_faces(plan: _Plan, rows, dtype) -> np.ndarray:
+    """(len(rows), 16·4^m, 3): the quad grid of each row, band by band (graded at apexes)."""
+    columns, bands, size = plan.columns, plan.bands, plan.columns + 1
+    band_start = (plan.ring_id[rows, :-1] * size).astype(dtype)
+    band_next = (plan.ring_id[rows, 1:] * size).astype(dtype)
+    j = np.arange(columns, dtype=dtype)
+    faces = _quads(band_start[:, :, None], band_next[:, :, None], j, j + 1)
+    faces = faces.reshape(len(rows), -1, 3)
+    half = np.arange(columns // 2, dtype=dtype)
+    for apex, band, at_top in ((plan.apex_hi[rows], bands - 1, True), (plan.apex_lo[rows], 0, False)):
+        if not apex.any():
+            continue
+        lo = band_start[apex, band][:, None]
+        hi = band_next[apex, band][:, None]
+        if at_top:
+            h0, h1, tip = hi + 2 * half, hi + 2 * half + 2, hi + 2 * half + 1
+            l0, l1, l2 = lo + 2 * half, lo + 2 * half + 1, lo + 2 * half + 2
+            graded = [(l0, l1, h0), (l1, l2, h1), (l1, h1, h0), (h0, h1, tip)]
+        else:
+            h0, h1, tip = lo + 2 * half, lo + 2 * half + 2, lo + 2 * half + 1
+            u0, u1, u2 = hi + 2 * half, hi + 2 * half + 1, hi + 2 * half + 2
+            graded = [(tip, h1, h0), (h0, h1, u1), (h1, u2, u1), (h0, u1, u0)]
+        block = np.stack([np.stack(t, -1) for t in graded], -2).reshape(int(apex.sum()), -1, 3)
+        faces[np.flatnonzero(apex), band * 2 * columns:(band + 1) * 2 * columns] = block
+    return faces
+
+
+def _strip_faces(lower, upper, first, columns, fan_a, fan_b) -> np.ndarray:
+    """Triangles of the ``columns // 2`` quads from column ``first`` on between the
+    vertex rings starting at ``lower`` and ``upper`` (scalars); where ``fan_a`` (``fan_b``)
+    the first (last) quad has one corner pair on a hinge point and keeps one triangle."""
+    t = np.arange(columns // 2)
+    a = (first + t) % columns
+    tri = _quads(lower, upper, a, a + 1)
+    keep = np.ones((len(t), 2), bool)
+    keep[0, 1] = not fan_a
+    keep[-1, 0] = not fan_b
+    return tri[keep]
+
+
+def _knuckle_faces(plan: _Plan) -> dict:
+    """{row: (k, 3) faces} of the knuckles: each outer slice's strips over the outer half
+    (fanned at the hinge points, except across the switch ring of an unmerged knuckle),
+    and P's bridge band to C's cut where they are not one curve."""
+    kn, columns, bands, size = plan.knuckles, plan.columns, plan.bands, plan.columns + 1
+    out = {}
+    for k in np.flatnonzero(~kn.flat):
+        jh = int(kn.hinge_col[k])
+        for i, row in enumerate(kn.slices[kn.start[k]:kn.start[k + 1]]):
+            strips = []
+            for band in range(bands):
+                ell = i * bands + band + 1                  # the upper ring's ℓ
+                fan = bool(kn.merged[k]) or ell != plan.switch[k]
+                strips.append(_strip_faces(plan.ring_id[row, band] * size,
+                                           plan.ring_id[row, band + 1] * size, jh, columns, fan, fan))
+            out[int(row)] = np.concatenate(strips)
+        if not kn.mitred[k]:
+            merged = bool(kn.merged[k])
+            out[int(kn.parent[k])] = _strip_faces(plan.ring_id[kn.parent[k], bands] * size,
+                                                  plan.bridge_ring[k] * size,
+                                                  jh + columns // 2, columns, merged, merged)
+    return out
+
+
+def _lateral_faces(plan: _Plan, dtype) -> np.ndarray:
+    """All lateral faces, row by row: each grid row's grid, then (P rows) its bridge;
+    each outer slice's strips."""
+    n = len(plan.grid)
+    total = int(plan.row_faces.sum())
+    grid_rows = np.flatnonzero(plan.grid)
+    per_row = 2 * plan.columns * plan.bands
+    if plan.knuckles is None:
+        return _grid_faces(plan, grid_rows, dtype).reshape(-1, 3)
+    first = np.concatenate([[0], np.cumsum(plan.row_faces)[:-1]]) if n else np.zeros(0, np.int64)
+    faces = np.empty((total, 3), dtype)
+    grid = _grid_faces(plan, grid_rows, dtype)
+    faces[(first[grid_rows][:, None] + np.arange(per_row)).ravel()] = grid.reshape(-1, 3)
+    for row, extra in _knuckle_faces(plan).items():
+        at = first[row] + (per_row if plan.grid[row] else 0)
+        faces[at:at + len(extra)] = extra
+    return faces
+
+
+def _cap_faces(frusta: Frusta, plan: _Plan, buf: _Buffers, first_vertex: int, dtype) -> np.ndarray:
+    """Caps: a copy of the end ring with the plane's normal, plus a centre vertex; a fan."""
+    columns, bands, size = plan.columns, plan.bands, plan.columns + 1
+    cap_rows, cap_is_top = plan.cap_rows, plan.cap_is_top
+    if not len(cap_rows):
+        return np.zeros((0, 3), dtype)
+    ring_of_cap = np.where(cap_is_top, plan.ring_id[cap_rows, bands], plan.ring_id[cap_rows, 0])
+    src = ring_of_cap[:, None] * size + np.arange(size)  # (n_caps, ring_size)
+    cap_first = first_vertex + np.arange(len(cap_rows)) * (size + 1)
+    dst = cap_first[:, None] + np.arange(size)
+    centre = cap_first + size
+    buf.vertices[dst] = buf.vertices[src]
+    buf.uv[dst] = buf.uv[src]
+    plane = np.where(cap_is_top[:, None], frusta.plane_hi[cap_rows], frusta.plane_lo[cap_rows])
+    outward = np.where(cap_is_top[:, None], plane[:, :3], -plane[:, :3])
+    buf.normals[dst] = outward[:, None, :]
+    buf.normals[centre] = outward
+    buf.vertices[centre] = buf.vertices[src[:, :columns]].mean(axis=1)  # centroid of the ring (on the plane)
+    buf.uv[centre, 0] = 0.5
+    buf.uv[centre, 1] = buf.uv[src[:, 0], 1]
+    first, second = dst[:, :columns], dst[:, 1:]
+    ctr = np.broadcast_to(centre[:, None], first.shape)
+    top_tri = np.stack([ctr, first, second], -1)
+    bottom_tri = np.stack([ctr, second, first], -1)
+    return np.where(cap_is_top[:, None, None], top_tri, bottom_tri).reshape(-1, 3).astype(dtype)
+
+
+# ---------------------------------------------------------------------------- tessellate
 def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: HeightFunction | None = None,
                caps: bool | str = True, gradient_step: tuple[float, float] | None = None,
                chunk_vertices: int = 1 << 19) -> TessellatedMesh:
@@ -256,7 +1013,8 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
     Parameters
     ----------
     frusta : a Frusta (see :mod:`plantgen.geometry.frusta`) with ``n`` rows
-    m : subdivision level, 0..8; ``16·4^m`` lateral triangles per row
+    m : subdivision level, 0..8; ``16·4^m`` lateral triangles per row (knuckle fan rows:
+        see the module docstring and :func:`triangle_count`)
     relief : displace vertices by ``w·shell`` onto the relief shell (rows with
         ``shell = 0`` stay on the base cone)
     height : ``height(material, u, v) -> w`` in [0, 1] for (k,) arrays; default: the
@@ -264,7 +1022,7 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
     caps : True: close every open chain end (roots, side branch starts, tips) with a flat
         cap, so each chain is a closed solid (export); ``"tips"``: cap only the upper
         ends (side branch bases sit inside their parent, unseen: the rendering choice);
-        False: no caps, exactly ``16·4^m`` triangles per row
+        False: no caps. Ends closing to a point need no cap and get none.
     gradient_step : (du, dv) of the central differences that tilt relief normals (GS+R);
         default one texel of the relief maps (1/256 for a custom ``height``)
     chunk_vertices : vertices computed at a time; bounds the float64 scratch memory
@@ -275,15 +1033,8 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
     TessellatedMesh
     """
     m = _check_level(m)
-    n = len(frusta.length)
-    columns, bands = columns_around(m), bands_along(m)
-    ring_size = columns + 1  # seam column duplicated
-    rings = bands + 1
-    parent_row = frusta.parent_row
-    shared = parent_row >= 0
-    chain_v = frusta.chain_position.astype(np.float64)
+    plan = _plan(frusta, m, caps)
     names = frusta.material_names
-    material = frusta.material
     step_u = step_v = 1.0 / 256
     if relief and height is None:
         height = _default_height(names)
@@ -291,118 +1042,34 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
         step_u, step_v = 1.0 / texels_u, 1.0 / texels_v
     if gradient_step is not None:
         step_u, step_v = (float(x) for x in gradient_step)
+    evaluate = _surface(frusta, relief, height, step_u, step_v)
+    turns = _column_turns(frusta, plan)
 
-    # Ring numbering: every row owns rings 1..bands, and ring 0 unless it is shared.
-    owns_ring = np.ones((n, rings), dtype=bool)
-    owns_ring[:, 0] = ~shared
-    ring_id = (np.cumsum(owns_ring.ravel()) - 1).reshape(n, rings)
-    ring_id[shared, 0] = ring_id[parent_row[shared], bands]
-    n_rings = int(owns_ring.sum())
+    size = plan.columns + 1  # seam column duplicated
+    n_lateral_vertices = plan.n_vertex_rings * size
+    n_vertices = n_lateral_vertices + plan.n_caps * (size + 1)
+    buf = _Buffers(np.empty((n_vertices, 3)), np.empty((n_vertices, 3), np.float32),
+                   np.empty((n_vertices, 2), np.float32), size)
+    _ring_vertices(frusta, plan, turns, evaluate, buf, chunk_vertices)
+    if plan.apex_lo.any() or plan.apex_hi.any():
+        _apex_vertices(frusta, plan, turns, evaluate, buf)
+    if plan.knuckles is not None:
+        _knuckle_vertices(frusta, plan, turns, evaluate, buf)
+    seam = np.arange(plan.n_vertex_rings) * size
+    buf.vertices[seam + plan.columns] = buf.vertices[seam]   # the u = 1 copy, bit for bit
 
-    # Caps: bottom of every unshared row, top of every row no row continues.
-    top_shared = np.zeros(n, dtype=bool)
-    top_shared[parent_row[shared]] = True
-    if caps not in (True, False, "tips"):
-        raise ValueError(f"caps must be True, False or 'tips', got {caps!r}")
-    none = np.zeros(0, np.int64)
-    bottom_cap_rows = np.flatnonzero(~shared) if caps is True else none
-    top_cap_rows = np.flatnonzero(~top_shared) if caps else none
-    cap_rows = np.concatenate([bottom_cap_rows, top_cap_rows])
-    cap_is_top = np.concatenate([np.zeros(len(bottom_cap_rows), bool), np.ones(len(top_cap_rows), bool)])
-    n_caps = len(cap_rows)
-
-    n_lateral_vertices = n_rings * ring_size
-    n_vertices = n_lateral_vertices + n_caps * (ring_size + 1)
-    vertices = np.empty((n_vertices, 3), dtype=np.float64)
-    normals = np.empty((n_vertices, 3), dtype=np.float32)
-    uv = np.empty((n_vertices, 2), dtype=np.float32)
-
-    u_col = np.arange(ring_size) / columns  # (ring_size,)
-    v_ring = np.arange(rings) / bands  # (rings,)
-    shell = frusta.shell
-
-    def ring_points(rows, ring_index):
-        """Points, normals, u, texture v of rings ``ring_index`` (k,) of ``rows`` (k,),
-        each (k, ring_size, ...): per-ring data broadcast against per-column data."""
-        rows_ = rows[:, None]
-        u = u_col[None, :]
-        v = v_ring[ring_index][:, None]
-        offset, relief_slope = 0.0, None
-        if relief:
-            uu, vv = np.broadcast_arrays(u, v)
-            mm = np.broadcast_to(material[rows_], uu.shape).ravel()
-            uu, vv = uu.ravel() % 1.0, vv.ravel()
-
-            def w_at(du, dv):
-                return np.asarray(height(mm, (uu + du) % 1.0, vv + dv), dtype=np.float64).reshape(len(rows), ring_size)
-
-            thick = shell[rows_]
-            offset = np.clip(w_at(0.0, 0.0), 0.0, 1.0) * thick
-            # Central differences one texel apart, as the ray caster takes them.
-            relief_slope = ((w_at(step_u, 0.0) - w_at(-step_u, 0.0)) / (2 * step_u) * thick,
-                            (w_at(0.0, step_v) - w_at(0.0, -step_v)) / (2 * step_v) * thick)
-        pts, nrm = generator_points(frusta, rows_, u, v, offset, relief_slope)
-        return pts, nrm, u, v + chain_v[rows_]
-
-    # Lateral vertices: all owned rings, chunked.
-    owned_rows, owned_ring_index = np.nonzero(owns_ring)  # row-major: matches ring_id order
-    step = max(1, int(chunk_vertices) // ring_size)  # rings per chunk
-    for lo in range(0, n_rings, step):
-        hi = min(n_rings, lo + step)
-        pts, nrm, uu, vv = ring_points(owned_rows[lo:hi], owned_ring_index[lo:hi])
-        sl = slice(lo * ring_size, hi * ring_size)
-        vertices[sl] = pts.reshape(-1, 3)
-        normals[sl] = nrm.reshape(-1, 3)
-        uv[sl, 0] = np.broadcast_to(uu, pts.shape[:2]).ravel()
-        uv[sl, 1] = np.broadcast_to(vv, pts.shape[:2]).ravel()
-
-    # Lateral faces: one quad template, (l, l+1, u+1) and (l, u+1, u) for lower ring l and
-    # upper ring u, shifted by ring and column strides.
-    index_dtype = np.int32 if n_vertices < 2**31 else np.int64
-    # (n, bands): first vertex of each band's lower and upper ring
-    band_start = (ring_id[:, :-1] * ring_size).astype(index_dtype)
-    band_next = (ring_id[:, 1:] * ring_size).astype(index_dtype)
-    j = np.arange(columns, dtype=index_dtype)
-    lower = band_start[:, :, None] + j  # (n, bands, columns): vertex (ring r, column j)
-    upper = band_next[:, :, None] + j
-    lateral = np.empty((n, bands, columns, 2, 3), dtype=index_dtype)
-    lateral[..., 0, 0] = lower
-    lateral[..., 0, 1] = lower + 1
-    lateral[..., 0, 2] = upper + 1
-    lateral[..., 1, 0] = lower
-    lateral[..., 1, 1] = upper + 1
-    lateral[..., 1, 2] = upper
-    lateral = lateral.reshape(-1, 3)
-    del lower, upper
-
-    # Caps: a copy of the end ring with the plane's normal, plus a centre vertex.
-    cap_faces = np.zeros((0, 3), dtype=lateral.dtype)
-    if n_caps:
-        ring_of_cap = np.where(cap_is_top, ring_id[cap_rows, bands], ring_id[cap_rows, 0])
-        src = ring_of_cap[:, None] * ring_size + np.arange(ring_size)  # (n_caps, ring_size)
-        cap_first = n_lateral_vertices + np.arange(n_caps) * (ring_size + 1)
-        dst = cap_first[:, None] + np.arange(ring_size)
-        centre = cap_first + ring_size
-        vertices[dst] = vertices[src]
-        uv[dst] = uv[src]
-        plane = np.where(cap_is_top[:, None], frusta.plane_hi[cap_rows], frusta.plane_lo[cap_rows])
-        outward = np.where(cap_is_top[:, None], plane[:, :3], -plane[:, :3])
-        normals[dst] = outward[:, None, :]
-        normals[centre] = outward
-        vertices[centre] = vertices[src[:, :columns]].mean(axis=1)  # centroid of the ring (on the plane)
-        uv[centre, 0] = 0.5
-        uv[centre, 1] = uv[src[:, 0], 1]
-        first = dst[:, :columns]
-        second = dst[:, 1:]
-        ctr = np.broadcast_to(centre[:, None], first.shape)
-        top_tri = np.stack([ctr, first, second], -1)
-        bottom_tri = np.stack([ctr, second, first], -1)
-        cap_faces = np.where(cap_is_top[:, None, None], top_tri, bottom_tri)
-        cap_faces = cap_faces.reshape(-1, 3).astype(lateral.dtype)
-
+    dtype = np.int32 if n_vertices < 2**31 else np.int64
+    lateral = _lateral_faces(plan, dtype)
+    cap_faces = _cap_faces(frusta, plan, buf, n_lateral_vertices, dtype)
     faces = np.concatenate([lateral, cap_faces])
-    face_row = np.concatenate([
-        np.repeat(np.arange(n, dtype=np.int32), lateral_triangles_per_row(m)),
-        np.repeat(cap_rows.astype(np.int32), columns),
-    ])
-    return TessellatedMesh(vertices, normals, uv, faces, face_row, material, names, m, n_caps)
+    face_row = np.concatenate([np.repeat(np.arange(len(plan.grid), dtype=np.int32), plan.row_faces),
+                               np.repeat(plan.cap_rows.astype(np.int32), plan.columns)])
+    vertices, normals, uv = buf.vertices, buf.normals, buf.uv
+    if plan.knuckles is not None:                          # drop the vertices no face uses
+        used = np.zeros(n_vertices, bool)
+        used[faces.ravel()] = True
+        if not used.all():
+            new_index = np.cumsum(used) - 1
+            faces = new_index[faces].astype(dtype)
+            vertices, normals, uv = vertices[used], normals[used], uv[used]
+    return TessellatedMesh(vertices, normals, uv, faces, face_row, frusta.material, names, m, plan.n_caps)
