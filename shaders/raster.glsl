@@ -11,7 +11,8 @@
 // Per-row data (chain position, material) sits in a storage buffer indexed by the
 // primitive: lateral triangles come row by row, TRIANGLES_PER_ROW each, caps after them.
 //
-// Variants (defines): TRIANGLES_PER_ROW (16·4^m); SHADOWS (sample the light's shadow map,
+// Variants (defines): TRIANGLES_PER_ROW (16·4^m); FACE_ROWS (a mesh with knuckles, whose
+// slices carry other counts: every face's row from the CapRows buffer); SHADOWS (sample the light's shadow map,
 // shaders/shadow.glsl, with the facet's own plane as the receiver plane, as the ray caster
 // uses the cone's tangent plane); SHADOW_PASS (depth only, into the light's map: the
 // mesh's front faces as the light sees them, as the ray caster writes its nearest hit).
@@ -52,7 +53,7 @@ in vec3 v_normal;
 in vec2 v_texcoord;
 
 layout(std430, binding = 0) readonly buffer RowData { vec2 row_data[]; };  // chain position, material
-layout(std430, binding = 1) readonly buffer CapRows { int cap_row[]; };
+layout(std430, binding = 1) readonly buffer CapRows { int cap_row[]; };   // caps' rows (FACE_ROWS: every face's)
 
 uniform int n_rows;
 #include "heights.glsl"
@@ -71,8 +72,12 @@ void main() {
     atomicAdd(counted_fragments, 1u);
 #endif
     int primitive = gl_PrimitiveID;
+#if defined FACE_ROWS
+    int row = cap_row[primitive];                        // knuckles: every face's row
+#else
     int row = primitive < n_rows * TRIANGLES_PER_ROW ? primitive / TRIANGLES_PER_ROW
                                                       : cap_row[primitive - n_rows * TRIANGLES_PER_ROW];
+#endif
     vec2 info = row_data[row];
     int material = int(info.y + 0.5);
     vec2 uv = vec2(v_texcoord.x, v_texcoord.y - info.x);   // per-row v of (7)

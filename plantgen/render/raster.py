@@ -41,8 +41,10 @@ def row_data(frusta) -> np.ndarray:
 
 def gs_buffer_bytes(mesh: TessellatedMesh) -> int:
     """GPU buffer bytes of a GS draw: vertices (32 B each), uint32 indices, 8 B per row,
-    4 B per cap (height maps, shared with RC, are not counted)."""
-    return mesh.buffer_bytes()["total"] + 8 * mesh.n_rows + 4 * mesh.n_caps
+    4 B per cap (4 B per face where knuckles break the rows' uniform counts; height maps,
+    shared with RC, are not counted)."""
+    looked_up = mesh.n_caps if mesh.uniform_rows else len(mesh.faces)
+    return mesh.buffer_bytes()["total"] + 8 * mesh.n_rows + 4 * looked_up
 
 
 class RasterRenderer(OffscreenRenderer):
@@ -82,8 +84,11 @@ class RasterRenderer(OffscreenRenderer):
         del interleaved
         ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, np.uint32).tobytes())
         rows = ctx.buffer(row_data(frusta).tobytes())
-        lateral = mesh.n_rows * 16 * 4 ** mesh.level
-        cap_rows = mesh.face_row[lateral::_cap_tris(mesh)] if mesh.n_caps else np.zeros(1, np.int32)
+        if mesh.uniform_rows:     # row of a face by division; the caps' rows looked up
+            lateral = mesh.n_rows * 16 * 4 ** mesh.level
+            cap_rows = mesh.face_row[lateral::_cap_tris(mesh)] if mesh.n_caps else np.zeros(1, np.int32)
+        else:                     # knuckle slices carry other counts: every face's row
+            cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
         vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")],
                                index_buffer=ibo, index_element_size=4)
@@ -116,7 +121,7 @@ class RasterRenderer(OffscreenRenderer):
         shadowed = shadows is not None
         program = build_program(self.ctx, "raster.glsl",
                                 {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
-                                 "STATS": count_work})
+                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows})
         t0 = time.perf_counter()
         vao, origin = self.upload(mesh, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
