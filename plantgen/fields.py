@@ -110,9 +110,14 @@ def text(value, what: str, where: str, error: type[PlantgenError], *, max_len: i
 
 
 def keys(value, allowed, where: str, error: type[PlantgenError]) -> dict:
-    """``value`` if it is a mapping whose keys are all in ``allowed``."""
+    """``value`` if it is a mapping whose keys are all in ``allowed`` (None: any string)."""
     if not isinstance(value, dict):
         raise error(f"{where}: must be a mapping, got {show(value)}")
+    if allowed is None:
+        bad = [k for k in value if not isinstance(k, str)]
+        if bad:
+            raise error(f"{where}: keys must be names, got {show(bad)}")
+        return value
     unknown = [k for k in value if k not in allowed]
     if unknown:
         raise error(f"{where}: unknown key(s) {show(sorted(map(str, unknown)))} "

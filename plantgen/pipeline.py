@@ -128,11 +128,13 @@ def read_skeleton(path: str | Path, limits: Limits | None = None) -> Skeleton:
 
 def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
               max_modules: int | None = None, progress=None, limits: Limits | None = None,
-              allow_paths=()) -> GrowResult:
+              allow_paths=(), defines=None) -> GrowResult:
     """Grow a grammar or scene, or load a skeleton ``.npz`` / ``.swc``; time every stage.
 
     ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
-    of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones."""
+    of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones.
+    ``defines`` ({name: number}) overrides a grammar's defines of those names (as
+    ``--define`` does; a name the grammar does not define is an error)."""
     limits = _in_force(limits).raised(modules=max_modules)
     if iterations is not None:
         limits.check("iterations", int(iterations), "--iterations")
@@ -145,6 +147,8 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         timings["load"] = time.perf_counter() - t0
         return GrowResult(skel, kind, path.stem, 0, timings)
     work = limits.meter("derive_work")    # one budget for every derivation of this input
+    if defines:
+        data = _override_defines(data, kind, dict(defines), path)
     if kind == "grammar":
         t0 = time.perf_counter()
         grammar = parse_grammar(data, str(path), limits)
@@ -171,6 +175,20 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     skel = scene.skeleton()
     timings["place"] = time.perf_counter() - t0
     return GrowResult(skel, kind, scene.name, modules[0], timings, scene)
+
+
+def _override_defines(data, kind: str, defines: dict, path) -> dict:
+    """A grammar's mapping with ``defines`` replacing the values of its defines of those names."""
+    if kind != "grammar":
+        raise PlantgenError(f"{path}: defines can be set for a grammar, not a {kind}")
+    own = data.get("defines")
+    own = dict(own) if isinstance(own, dict) else {}
+    unknown = sorted(set(defines) - set(own))
+    if unknown:
+        raise PlantgenError(f"{path}: the grammar has no define {', '.join(unknown)} "
+                            f"(it defines: {', '.join(sorted(map(str, own))) or 'none'})")
+    own.update(defines)
+    return {**data, "defines": own}
 
 
 def grow(path: str | Path, *, seed: int | None = None, iterations: int | None = None,

@@ -12,7 +12,8 @@
 // the light's shadow map, shaders/shadow.glsl), SHADOW_PASS (cast orthographic rays along
 // the light instead of the eye's rays and write only the hit's depth in the light's
 // window: the shadow map pass of plantgen.render.passes; with RELIEF the relief surface
-// is what casts the shadow).
+// is what casts the shadow), LABELS (write the row's material slot as a label, unshaded:
+// part masks, plantgen.render.raycast.label_image).
 
 #include "cone.glsl"
 
@@ -339,6 +340,12 @@ void main() {
 #if defined SHADOW_PASS
     float z_light = dot(p - light_origin, light_forward);
     gl_FragDepth = clamp((z_light - light_depth.x) / (light_depth.y - light_depth.x), 0.0, 1.0);
+#elif defined LABELS
+    // a part mask: the row's label (its material slot) in red, unshaded
+    out_color = vec4(float(f.material) / 255.0, 0.0, 0.0, 1.0);
+    out_distance = distance;
+    float z_view_l = -distance * dot(d, cam_forward);
+    gl_FragDepth = clamp(0.5 * (depth_coeffs.x * z_view_l + depth_coeffs.y) / (-z_view_l) + 0.5, 0.0, 1.0);
 #else
 
     // Shading: u, v and the interpolated normal (6)-(8), texture colour, one light.

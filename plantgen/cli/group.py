@@ -18,6 +18,7 @@ import click
 import numpy as np
 
 from ..errors import PlantgenError
+from .batch import batch
 from .bench import bench
 from .export import export
 from .grow import grow
@@ -38,7 +39,7 @@ def cli() -> None:
     """
 
 
-for _command in (grow, export, render, bench):
+for _command in (grow, export, render, bench, batch):
     cli.add_command(debug_opt(_command))
 
 

@@ -11,7 +11,17 @@ import numpy as np
 from ..errors import PlantgenError
 from ..lsystem.derive import DEFAULT_MAX_MODULES
 from ..pipeline import grow_file
-from .options import allow_path_opt, input_arg, iterations_opt, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
+from .options import (
+    allow_path_opt,
+    define_values,
+    input_arg,
+    iterations_opt,
+    limit_opt,
+    limits_from,
+    output_opt,
+    quiet_opt,
+    seed_opt,
+)
 
 #: Seconds between two progress lines of a long derivation.
 PROGRESS_EVERY = 1.0
@@ -26,13 +36,16 @@ PROGRESS_EVERY = 1.0
 @click.option("--max-modules", type=click.IntRange(min=1),
               help="Stop with an error if the module string would grow past this many modules "
                    f"(default {DEFAULT_MAX_MODULES:,}; the same as --limit modules=N).")
+@click.option("--define", "defines", multiple=True, metavar="NAME=VALUE",
+              help="Set one of the grammar's defines (repeatable), e.g. --define angle=25; "
+                   "as a batch's sweep does, so its manifest rows can be grown again alone.")
 @click.option("--format", "formats", type=click.Choice(["npz", "swc"]), multiple=True,
               help="Also write these formats (repeatable); swc is written beside the .npz.")
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def grow(input: Path, output: Path | None, seed, iterations, max_modules, formats, limit_values, allow_paths,
-         quiet) -> None:
+def grow(input: Path, output: Path | None, seed, iterations, max_modules, defines, formats, limit_values,
+         allow_paths, quiet) -> None:
     """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton;
     a skeleton .npz or .swc is read back, checked and written again.
 
@@ -58,7 +71,7 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, format
 
     result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules,
                        progress=progress if not quiet else None, limits=limits_from(limit_values),
-                       allow_paths=allow_paths)
+                       allow_paths=allow_paths, defines=define_values(defines))
     skel = result.skeleton
     if len(skel) == 0:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")

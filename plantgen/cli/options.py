@@ -18,8 +18,9 @@ import click
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
 
-__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "finite", "input_arg", "iterations_opt",
-           "limit_opt", "limits_from", "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt"]
+__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "define_values", "debug_requested", "finite", "input_arg",
+           "iterations_opt", "limit_opt", "limits_from", "output_opt", "parse_size", "quiet_opt", "seed_opt",
+           "size_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
@@ -36,6 +37,21 @@ def parse_size(ctx, param, value):
     if not m or not (0 < int(m.group(1)) <= MAX_SIDE and 0 < int(m.group(2)) <= MAX_SIDE):
         raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..{MAX_SIDE}, e.g. 1024x768")
     return int(m.group(1)), int(m.group(2))
+
+
+def define_values(items) -> dict[str, float]:
+    """``--define NAME=VALUE`` options as {name: finite float}."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not name.strip() or not math.isfinite(number):
+            raise click.BadParameter(f"{item!r} is not NAME=VALUE with a finite number", param_hint="--define")
+        out[name.strip()] = number
+    return out
 
 
 def finite(ctx, param, value):

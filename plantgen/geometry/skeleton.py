@@ -199,14 +199,22 @@ class Skeleton:
         return Skeleton(**{k: np.concatenate(v) for k, v in arrays.items()}, material_names=tuple(names))
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | Path) -> None:
-        """Write the ``.npz`` format; written to a temporary name, then renamed."""
+    def save(self, path: str | Path, extra=None) -> None:
+        """Write the ``.npz`` format; written to a temporary name, then renamed. ``extra``:
+        further (n,) per-segment arrays by name (labels such as ``branch_order``), written
+        beside the contract's; :meth:`load` reads the contract's only."""
+        extra = dict(extra or {})
+        clash = sorted(set(extra) & (set(NPZ_ARRAYS) | {"material_names"}))
+        if clash:
+            raise SkeletonError(f"{path}: extra arrays may not replace {', '.join(clash)}")
+
         def write(tmp):
             with open(tmp, "wb") as fh:
                 np.savez_compressed(
                     fh, start=self.start, end=self.end, r_start=self.r_start, r_end=self.r_end,
                     parent=self.parent, continues=self.continues, material=self.material,
                     material_names=np.array(self.material_names, dtype=str),
+                    **{k: np.asarray(v) for k, v in extra.items()},
                 )
         write_atomically(path, write, SkeletonError)
 

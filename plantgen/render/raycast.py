@@ -16,13 +16,13 @@ relief the relief shell is marched (``RELIEF``). Neither is compiled or run othe
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
-from ..geometry.frusta import frusta_bounds
+from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
 from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
@@ -31,7 +31,7 @@ from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECO
 from .result import RaycastStats, RenderResult, WorkCounter
 from .shaders import build_program, mat4, set_uniforms
 
-__all__ = ["RaycastSettings", "Raycaster", "render_frusta"]
+__all__ = ["RaycastSettings", "Raycaster", "render_frusta", "label_image"]
 
 #: Vertices of one instance's bounding pyramid (12 triangles).
 PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
@@ -57,6 +57,8 @@ class RaycastSettings:
     v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
     hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
         a silhouette tangent to the pyramid are not lost to rasterisation rules
+    labels : write each pixel's row label instead of its colour: red = the row's
+        ``material`` index / 255, unshaded (:meth:`Raycaster.render_labels`: part masks)
     proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
         slow oracle that shows what a too-tight pyramid would lose (tests)
     height_fetch : ``"gather"`` (one textureGather per bilinear height) or ``"texel"``
@@ -74,6 +76,7 @@ class RaycastSettings:
     hull_padding: float = 0.02
     proxy: str = "pyramid"
     height_fetch: str = "gather"
+    labels: bool = False
 
     def __post_init__(self):
         if self.proxy not in ("pyramid", "screen"):
@@ -93,7 +96,7 @@ class RaycastSettings:
         return {"RELIEF": self.relief, "V_EXACT": self.relief and self.v_exact,
                 "MARCH_FIXED": self.relief and self.march == "fixed",
                 "HEIGHT_FETCH4": self.height_fetch == "texel",
-                "SCREEN_PROXY": self.proxy == "screen"}
+                "SCREEN_PROXY": self.proxy == "screen", "LABELS": self.labels}
 
     def march_uniforms(self) -> dict:
         """Uniforms of the pyramid and the relief march, shared by the eye's and the light's
@@ -263,6 +266,19 @@ class Raycaster(OffscreenRenderer):
 
 
 _default_raycaster: Raycaster | None = None
+
+
+def label_image(caster: Raycaster, frusta, camera: Camera, labels, settings: RaycastSettings | None = None):
+    """(height, width) uint8: the label (``labels`` (rows,) in 1..255) of the row each pixel
+    of ``camera`` sees, 0 where it sees nothing; the same hits as the colour render."""
+    labels = np.asarray(labels)
+    if len(labels) != len(frusta) or (len(labels) and (labels.min() < 1 or labels.max() > 255)):
+        raise PlantgenError("labels must give every row a value in 1..255")
+    tagged = Frusta.from_rows({f: getattr(frusta, f) for f in ROW_FIELDS} | {"material": labels.astype(np.int32)},
+                              frusta.material_names, frusta.parent_row, frusta.open_lo, frusta.open_hi)
+    base = settings or RaycastSettings()
+    result = caster.render(tagged, camera, replace(base, labels=True), frusta.material_names)
+    return np.where(np.isfinite(result.distance), result.color[..., 0], 0).astype(np.uint8)
 
 
 def render_frusta(frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),

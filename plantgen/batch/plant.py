@@ -1,0 +1,177 @@
+"""One plant of a batch, start to finish, in whichever process runs it (a Dask worker):
+grow, write its files atomically, measure it, and return its manifest row.
+
+A plant that fails (a bad sweep value, a limit) does not raise: its row says ``failed``
+with the one-line error, and the batch goes on. Each process makes its GL context and
+ray caster once, on its first render (:func:`_caster`).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..files import write_atomically
+from ..geometry.camera import auto_camera
+from ..geometry.mesh import tessellate
+from ..geometry.skin import skin_skeleton
+from ..limits import Limits
+from ..pipeline import check_finite_frusta, check_finite_mesh, grow_file
+from .spec import Outputs, PlantTask
+
+__all__ = ["make_plant", "row_fields", "relative_files", "view_direction"]
+
+_CASTER: list = []          # this process's Raycaster, made on first use
+
+
+def _caster():
+    if not _CASTER:
+        from ..render.raycast import Raycaster
+
+        _CASTER.append(Raycaster())
+    return _CASTER[0]
+
+
+def view_direction(azimuth_deg: float, elevation_deg: float = 15.0) -> tuple[float, float, float]:
+    """From the plant towards the eye: ``azimuth`` degrees about +y from +z, raised by
+    ``elevation``."""
+    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
+    return (float(np.sin(a) * np.cos(e)), float(np.sin(e)), float(np.cos(a) * np.cos(e)))
+
+
+def _files_of(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
+    """Relative paths of every file a plant gets, by kind."""
+    views = [f"{task.id}_a{int(round(a)) % 360:03d}" for a in outputs.azimuths]
+    kinds = (("npz", outputs.npz, [f"npz/{task.id}.npz"]),
+             ("swc", outputs.swc, [f"swc/{task.id}.swc"]),
+             ("glb", outputs.glb is not None, [f"glb/{task.id}.glb"]),
+             ("png", outputs.png, [f"png/{v}.png" for v in views]),
+             ("depth", outputs.depth, [f"depth/{v}.npy" for v in views]),
+             ("mask", outputs.mask is not None, [f"mask/{v}.png" for v in views]))
+    return {kind: names for kind, on, names in kinds if on}
+
+
+relative_files = _files_of
+
+
+def row_fields() -> tuple[str, ...]:
+    """The manifest's columns, in order (see :mod:`plantgen.batch.manifest`)."""
+    return ("id", "grammar", "index", "seed", "defines", "status", "error", "files", "segments", "tips",
+            "height", "bbox", "metrics", "timings")
+
+
+def _save_npy(path, array) -> None:
+    with open(path, "wb") as fh:          # a handle: np.save would add .npy to a temporary name
+        np.save(fh, array)
+
+
+def _labels(frusta, skeleton, kind: str) -> np.ndarray:
+    """(rows,) label of each frustum row for a part mask (1-based; 0 is the background)."""
+    seg = frusta.segment
+    if kind == "material":
+        return frusta.material.astype(np.int64) + 1
+    if kind == "order":
+        from ..geometry.topology import branches
+
+        return branches(skeleton).segment_order[seg] + 1
+    return np.ones(len(seg), dtype=np.int64)          # instance: one plant per batch row
+
+
+def _render_views(task, outputs: Outputs, frusta, skeleton, root: Path, timings: dict) -> None:
+    from ..images import write_png
+    from ..render.raycast import RaycastSettings, label_image
+
+    t0 = time.perf_counter()
+    caster = _caster()
+    w, h = outputs.size
+    settings = RaycastSettings(relief=outputs.relief)
+    labels = _labels(frusta, skeleton, outputs.mask) if outputs.mask else None
+    if labels is not None and labels.max() > 255:
+        raise PlantgenError(f"{task.id}: {labels.max()} {outputs.mask} labels, over the 255 a mask PNG holds")
+    names = _files_of(task, outputs)
+    for i, az in enumerate(outputs.azimuths):
+        camera = auto_camera(frusta, w, h, direction=view_direction(az))
+        result = caster.render(frusta, camera, settings, frusta.material_names)
+        if outputs.png:
+            write_png(root / names["png"][i], result.color)
+        if outputs.depth:
+            write_atomically(root / names["depth"][i], lambda p, d=result.distance: _save_npy(p, d))
+        if labels is not None:
+            mask = label_image(caster, frusta, camera, labels, settings)
+            write_png(root / names["mask"][i], mask)
+    timings["render"] = time.perf_counter() - t0
+
+
+def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings: dict) -> None:
+    from ..geometry.topology import branches
+
+    names = _files_of(task, outputs)
+    t0 = time.perf_counter()
+    if outputs.npz:
+        b = branches(skeleton)
+        skeleton.save(root / names["npz"][0], extra={"branch_order": b.segment_order, "branch_id": b.branch})
+    if outputs.swc:
+        skeleton.save_swc(root / names["swc"][0])
+    timings["skeleton_files"] = time.perf_counter() - t0
+
+
+def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: dict) -> None:
+    from ..export import export_mesh
+    from ..geometry.topology import branches
+
+    t0 = time.perf_counter()
+    mesh = tessellate(frusta, outputs.glb)
+    check_finite_mesh(mesh, frusta, task.id)
+    order = branches(skeleton).segment_order[frusta.segment]
+    export_mesh(mesh, root / _files_of(task, outputs)["glb"][0], branch_order=order)
+    timings["glb"] = time.perf_counter() - t0
+
+
+def _measure(skeleton) -> dict:
+    from ..metrics import tree_metrics
+
+    return tree_metrics(skeleton)
+
+
+def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None) -> dict:
+    """Grow ``task``'s plant, write its ``outputs`` under ``out_dir`` and return its
+    manifest row (a dict of :func:`row_fields`; lists and mappings as JSON text)."""
+    root = Path(out_dir)
+    timings: dict = {}
+    row = {"id": task.id, "grammar": task.name, "index": task.index, "seed": task.seed,
+           "defines": json.dumps(dict(task.defines), sort_keys=True), "status": "ok", "error": "",
+           "files": json.dumps(_files_of(task, outputs), sort_keys=True), "segments": 0, "tips": 0,
+           "height": float("nan"), "bbox": json.dumps([]), "metrics": json.dumps({}), "timings": "{}"}
+    try:
+        t0 = time.perf_counter()
+        grown = grow_file(task.grammar, seed=task.seed, limits=limits, defines=dict(task.defines))
+        skeleton = grown.skeleton
+        timings["grow"] = time.perf_counter() - t0
+        if len(skeleton) == 0:
+            raise PlantgenError(f"{task.name}: the grammar draws no segments")
+        _write_skeleton_files(task, outputs, skeleton, root, timings)
+        if outputs.glb is not None or outputs.views:
+            t0 = time.perf_counter()
+            frusta = check_finite_frusta(skin_skeleton(skeleton), task.id)
+            timings["skin"] = time.perf_counter() - t0
+            if outputs.glb is not None:
+                _write_glb(task, outputs, frusta, skeleton, root, timings)
+            if outputs.views:
+                _render_views(task, outputs, frusta, skeleton, root, timings)
+        t0 = time.perf_counter()
+        metrics = _measure(skeleton)
+        timings["metrics"] = time.perf_counter() - t0
+        points = np.concatenate([skeleton.start, skeleton.end])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        row.update(segments=len(skeleton), tips=len(skeleton.tips), height=float(hi[1] - lo[1]),
+                   bbox=json.dumps([*map(float, lo), *map(float, hi)]), metrics=json.dumps(metrics, sort_keys=True))
+    except PlantgenError as exc:
+        row.update(status="failed", error=str(exc).splitlines()[0][:500] if str(exc) else type(exc).__name__)
+    except MemoryError:
+        row.update(status="failed", error=f"{task.id}: out of memory")
+    row["timings"] = json.dumps({k: round(v, 6) for k, v in timings.items()}, sort_keys=True)
+    return row

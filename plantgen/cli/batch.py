@@ -1,0 +1,100 @@
+"""``plantgen batch``: many plants on Dask, as a labelled dataset with a Parquet manifest."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from ..batch import BatchError, parse_spec, run_batch, simple_spec, summary_lines
+from ..batch.spec import MASK_KINDS
+from .options import limit_opt, limits_from, parse_size, quiet_opt
+
+__all__ = ["batch"]
+
+
+@click.command()
+@click.argument("source")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Folder of the dataset: manifest.parquet and one folder per output kind. "
+                   "A re-run skips the plants the manifest lists as done.")
+@click.option("--seeds", default=None, metavar="A:B",
+              help="Without a spec: plant indices A..B-1 of the grammar SOURCE (each plant's seed "
+                   "derives from --seed, the grammar and its index).")
+@click.option("--outputs", default="npz", metavar="LIST", show_default=True,
+              help="Without a spec: comma-separated outputs: npz, swc, glb, png, depth, mask.")
+@click.option("--size", callback=parse_size, metavar="WxH", help="Without a spec: view size (default 512x384).")
+@click.option("--azimuths", default=None, metavar="LIST", help="Without a spec: view azimuths in degrees, "
+              "comma-separated (default 0).")
+@click.option("--relief/--no-relief", default=False, help="Without a spec: relief-map the views.")
+@click.option("--subdiv", type=click.IntRange(0, 5), default=1, show_default=True,
+              help="Without a spec: the glb's subdivision level m.")
+@click.option("--mask", type=click.Choice(MASK_KINDS), default="order", show_default=True,
+              help="Without a spec: what the part mask labels.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Without a spec: the batch seed.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes of the local cluster (default: one per CPU).")
+@limit_opt
+@quiet_opt
+def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask, seed, scheduler, workers,
+          limit_values, quiet) -> None:
+    """Make many plants on Dask: SOURCE is a batch spec (.yaml with 'plants' and
+    'outputs'; see the README) or, with --seeds, one grammar (a path or a shipped name).
+
+    By default a LocalCluster of one single-threaded worker process per CPU runs the
+    plants and stops at the end; --scheduler uses an existing cluster. Each plant's files
+    are written atomically; the manifest (Parquet, one row per plant: seed, defines, files,
+    segments, height, tree metrics, timings, the error of a failed plant) is kept valid
+    throughout, Ctrl-C included, and a re-run finishes only what is missing.
+
+    Exit status: 0 when every plant is made; 2 for a bad spec or option; otherwise 2 plus
+    the number of plants that failed (at most 125), each a manifest row with its error.
+
+    \b
+    Examples:
+      plantgen batch pine --seeds 0:1000 --outputs npz,png --out pines/
+      plantgen batch forest.yaml --out forest/ --workers 2
+    """
+    limits = limits_from(limit_values)
+    if seeds is not None:
+        az = None if azimuths is None else tuple(_floats(azimuths, "--azimuths"))
+        spec = simple_spec(source, seeds, [o.strip() for o in outputs.split(",") if o.strip()], seed=seed,
+                           size=None if size is None else f"{size[0]}x{size[1]}", azimuths=az and list(az),
+                           relief=relief, glb_level=subdiv, mask=mask)
+    else:
+        if Path(source).suffix.lower() not in (".yaml", ".yml"):
+            raise BatchError(f"{source}: give a batch spec (.yaml), or a grammar with --seeds A:B")
+        spec = parse_spec(source, limits)
+
+    def started(dashboard, todo, skipped):
+        if not quiet:
+            click.echo(f"{len(spec.tasks):,} plants: {todo:,} to make, {skipped:,} already done"
+                       + (f"; Dask dashboard: {dashboard}" if dashboard else ""), err=True)
+
+    def progress(done, failed, todo, rate):
+        if not quiet:
+            width = 30
+            filled = int(width * (done + failed) / max(todo, 1))
+            click.echo(f"\r[{'#' * filled}{'.' * (width - filled)}] {done + failed:,}/{todo:,} "
+                       f"({failed:,} failed) {rate:.2f} plants/s", err=True, nl=(done + failed == todo))
+
+    result = run_batch(spec, out_dir, scheduler=scheduler, workers=workers, limits=limits, progress=progress,
+                       on_start=started)
+    if not quiet:
+        from ..batch.manifest import Manifest
+
+        for line in summary_lines(result, list(Manifest(out_dir).rows.values())):
+            click.echo(line)
+    if result.failed:
+        sys.exit(2 + min(result.failed, 123))
+
+
+def _floats(text: str, option: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise BatchError(f"{option}: {text!r} is not a comma-separated list of numbers") from None
