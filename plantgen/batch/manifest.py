@@ -3,8 +3,9 @@
 Columns (:func:`plantgen.batch.plant.row_fields`): ``id``, ``grammar``, ``index``,
 ``seed``, ``defines`` (JSON), ``status`` (``ok`` or ``failed``), ``error`` (the one-line
 error of a failed plant), ``files`` (JSON: kind -> paths relative to the batch folder),
-``segments``, ``tips``, ``height``, ``bbox`` (JSON: min x, y, z, max x, y, z of the axes),
-``metrics`` (JSON: the tree metrics of :mod:`plantgen.metrics`), ``timings`` (JSON:
+``segments``, ``tips``, ``height``, ``bbox`` (JSON: min x, y, z, max x, y, z of the
+geometry, radii included), ``metrics`` (JSON: the tree metrics of :mod:`plantgen.metrics`
+and the branch count per order), ``timings`` (JSON:
 seconds per stage). The file is replaced whole (a temporary name renamed onto it), so it
 is valid whenever it exists, an interrupted batch included.
 """

@@ -131,10 +131,16 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: di
     timings["glb"] = time.perf_counter() - t0
 
 
-def _measure(skeleton) -> dict:
+def _measure(skeleton) -> tuple[dict, np.ndarray]:
+    """(tree metrics by name, with the branch count per order; (2, 3) geometry bounds)."""
+    from ..geometry.topology import branches
     from ..metrics import tree_metrics
 
-    return tree_metrics(skeleton)
+    topology = branches(skeleton)
+    metrics = tree_metrics(skeleton, topology=topology)
+    out = metrics.as_dict()
+    out["branches_per_order"] = np.bincount(topology.order).tolist() if len(topology) else []
+    return out, metrics.bounds
 
 
 def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None) -> dict:
@@ -163,10 +169,8 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
             if outputs.views:
                 _render_views(task, outputs, frusta, skeleton, root, timings)
         t0 = time.perf_counter()
-        metrics = _measure(skeleton)
+        metrics, (lo, hi) = _measure(skeleton)
         timings["metrics"] = time.perf_counter() - t0
-        points = np.concatenate([skeleton.start, skeleton.end])
-        lo, hi = points.min(axis=0), points.max(axis=0)
         row.update(segments=len(skeleton), tips=len(skeleton.tips), height=float(hi[1] - lo[1]),
                    bbox=json.dumps([*map(float, lo), *map(float, hi)]), metrics=json.dumps(metrics, sort_keys=True))
     except PlantgenError as exc:

@@ -1,0 +1,172 @@
+"""``plantgen batch`` on a real Dask LocalCluster (2 worker processes): complete manifests,
+outputs identical to a 1-worker run, a worker killed mid-batch, a re-run after an
+interrupt, a failed sweep value, and seeds that do not depend on scheduling."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from _cli import run_cli
+from PIL import Image
+
+pytest.importorskip("dask.distributed", reason="plantgen[batch] (dask.distributed) is not installed")
+pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installed")
+
+from dask.distributed import Client, LocalCluster  # noqa: E402
+
+from plantgen.batch import parse_spec, plant_seed, run_batch  # noqa: E402
+from plantgen.batch.manifest import Manifest  # noqa: E402
+from plantgen.geometry.skeleton import Skeleton  # noqa: E402
+
+TWIG = """\
+name: twig
+seed: 1
+iterations: 3
+defines: {a: 28, l: 0.5, w: 0.03}
+axiom: "!(w) F(1) A"
+rules:
+  - "A -> !(w*0.7) [ &(a) F(l) A ] /(137.5) [ &(a) F(l) A ]"
+  - {rule: "F(x) -> F(x*1.1)", p: 1.0}
+materials: [bark]
+"""
+
+
+def write_spec(folder: Path, *, seeds="0:10", sweep=None, outputs=None) -> Path:
+    (folder / "twig.yaml").write_text(TWIG)
+    outputs = outputs or {"npz": True, "swc": True, "glb": {"level": 0},
+                          "png": {"size": "48x36", "azimuths": [0, 90]}, "depth": True, "mask": "order"}
+    spec = {"seed": 5, "plants": [{"grammar": "twig.yaml", "seeds": seeds, **({"sweep": sweep} if sweep else {})}],
+            "outputs": outputs}
+    path = folder / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                           silence_logs=50)
+    with Client(cluster) as c:
+        yield c
+    cluster.close()
+
+
+def dataset(folder: Path) -> dict:
+    """Every file of a batch folder by relative path: arrays, pixels or bytes."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = str(p.relative_to(folder))
+        if p.is_dir() or rel == "manifest.parquet":
+            continue
+        if p.suffix == ".npz":
+            with np.load(p) as z:
+                out[rel] = {k: z[k].tolist() for k in z.files}
+        elif p.suffix == ".npy":
+            out[rel] = np.load(p).tolist()
+        elif p.suffix == ".png":
+            out[rel] = np.asarray(Image.open(p)).tolist()
+        else:
+            out[rel] = p.read_bytes()
+    return out
+
+
+def test_a_batch_is_complete_and_the_same_on_one_or_two_workers(tmp_path, client):
+    spec = parse_spec(write_spec(tmp_path))
+    two = run_batch(spec, tmp_path / "two", client=client)
+    assert (two.done, two.failed, two.skipped) == (10, 0, 0)
+    rows = Manifest(tmp_path / "two").rows
+    assert sorted(rows) == sorted(t.id for t in spec.tasks)
+    for task in spec.tasks:
+        row = rows[task.id]
+        assert row["status"] == "ok" and row["seed"] == plant_seed(5, "twig.yaml", task.index)
+        files = json.loads(row["files"])
+        assert set(files) == {"npz", "swc", "glb", "png", "depth", "mask"}
+        skeleton = Skeleton.load(tmp_path / "two" / files["npz"][0])
+        assert row["segments"] == len(skeleton) > 3
+        with np.load(tmp_path / "two" / files["npz"][0]) as z:
+            assert z["branch_order"].shape == z["branch_id"].shape == (len(skeleton),)
+            assert z["branch_order"][0] == 0 and z["branch_order"].max() >= 1
+        mask = np.asarray(Image.open(tmp_path / "two" / files["mask"][0]))
+        depth = np.load(tmp_path / "two" / files["depth"][0])
+        assert np.array_equal(mask > 0, np.isfinite(depth))       # the mask covers what the view sees
+        assert set(np.unique(mask)) >= {0, 1, 2}                    # background, trunk, order-1 branches
+        metrics = json.loads(row["metrics"])
+        assert metrics["volume"] > 0 and metrics["height"] > 0
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
+                           silence_logs=50)
+    with Client(cluster) as one_client:
+        one = run_batch(spec, tmp_path / "one", client=one_client)
+    cluster.close()
+    assert one.done == 10
+    assert dataset(tmp_path / "one") == dataset(tmp_path / "two")
+
+
+def test_a_worker_killed_mid_batch_loses_nothing(tmp_path, client):
+    spec = parse_spec(write_spec(tmp_path, seeds="0:16", outputs={"npz": True, "png": {"size": "64x48"}}))
+    killed = threading.Event()
+
+    def progress(done, failed, todo, rate):
+        if done >= 2 and not killed.is_set():
+            killed.set()
+            pids = client.run(os.getpid)                     # {worker address: pid}
+            os.kill(pids[sorted(pids)[0]], signal.SIGKILL)
+
+    result = run_batch(spec, tmp_path / "out", client=client, progress=progress)
+    assert killed.is_set()
+    rows = Manifest(tmp_path / "out").rows
+    assert result.failed == 0 and len(rows) == 16
+    assert all(r["status"] == "ok" for r in rows.values())
+    client.wait_for_workers(2, timeout=60)        # the nanny restarts the worker
+
+
+def test_a_rerun_after_an_interrupt_makes_only_the_rest(tmp_path, client):
+    spec = parse_spec(write_spec(tmp_path, seeds="0:12", outputs={"npz": True}))
+
+    def interrupt(done, failed, todo, rate):
+        if done >= 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(spec, tmp_path / "out", client=client, progress=interrupt)
+    kept = Manifest(tmp_path / "out").rows            # a valid manifest after the interrupt
+    assert 4 <= len(kept) < 12
+    starts = []
+    again = run_batch(spec, tmp_path / "out", client=client, on_start=lambda d, todo, skipped: starts.append(skipped))
+    assert starts == [len(kept)] and again.done == 12 - len(kept)
+    assert len(Manifest(tmp_path / "out").rows) == 12
+    assert not list((tmp_path / "out").rglob(".*"))   # no temporary file left behind
+
+
+def test_a_bad_sweep_value_is_one_failed_row(tmp_path, client):
+    sweep = {"grid": {"l": [0.5, 1.0e300]}}            # 1e300 m internodes: over the coordinate limit
+    spec = parse_spec(write_spec(tmp_path, seeds="0:2", sweep=sweep, outputs={"npz": True}))
+    result = run_batch(spec, tmp_path / "out", client=client)
+    rows = Manifest(tmp_path / "out").rows
+    failed = [r for r in rows.values() if r["status"] == "failed"]
+    assert result.failed == len(failed) == 2 and result.done == 2
+    assert all(json.loads(r["defines"]) == {"l": 1e300} for r in failed)
+    assert all(r["error"] and "\n" not in r["error"] for r in failed)
+
+
+def test_the_command_line(tmp_path):
+    (tmp_path / "twig.yaml").write_text(TWIG)
+    code, out, err = run_cli("batch", tmp_path / "twig.yaml", "--seeds", "0:3", "--outputs", "npz,swc",
+                             "--out", tmp_path / "out", "--workers", "1")
+    assert code == 0, err
+    assert "3 plants: 3 made, 0 failed" in out
+    rows = Manifest(tmp_path / "out").rows
+    row = rows["twig-000001"]
+    # any plant can be grown again alone from its manifest row
+    code, _, err = run_cli("grow", tmp_path / "twig.yaml", "--seed", row["seed"], "-o", tmp_path / "a.npz")
+    assert code == 0, err
+    with np.load(tmp_path / "a.npz") as a, np.load(tmp_path / "out" / "npz" / "twig-000001.npz") as b:
+        assert np.array_equal(a["end"], b["end"])
+    code, _, err = run_cli("batch", tmp_path / "twig.yaml", "--out", tmp_path / "x")
+    assert code == 2 and len(err.strip().splitlines()) == 1
