@@ -170,3 +170,14 @@ def test_a_failing_reload_hands_back_its_error():
         done = job.result()
         time.sleep(0.01)
     assert isinstance(done[2], ZeroDivisionError)
+
+
+def test_the_readme_lists_the_keys_the_viewer_binds():
+    from pathlib import Path
+
+    readme = Path(__file__).resolve().parent.parent / "README.md"
+    if not readme.is_file():
+        pytest.skip("needs the source tree's README.md")
+    rows = [line for line in readme.read_text().splitlines() if line.startswith("| ")]
+    for keys, text in help_lines():
+        assert f"| {keys} | {text} |" in rows, (keys, text)

@@ -174,7 +174,7 @@ def print_report(report: RenderReport) -> None:
     if report.ssaa > 1:
         n = report.ssaa
         size += (f" with {n}x{n} supersampling ({n * n} samples a pixel: a {cam.width * n}x{cam.height * n} "
-                 "frame averaged down)")
+                 f"frame, averaged down in {report.result.stats.resolve_ms:.0f} ms more)")
     if report.frames > 1:
         click.echo(f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
                    f"{report.update_ms:.1f} ms update (pose, skin, upload) at {size}, {mode}")

@@ -68,11 +68,14 @@ def _keys_epilog() -> str:
               show_default=True, help="Folder for screenshots (P) and cameras (C).")
 @click.option("--watch/--no-watch", default=True, show_default=True,
               help="Re-grow the plant when the input file or a grammar it includes is saved.")
+@click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path), metavar="FILE.png",
+              help="Draw a few frames, save the window as shown (heads-up line included) and close: "
+                   "a screenshot for documentation.")
 @limit_opt
 @allow_path_opt
 def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, method, subdiv, effects, relief,
          shadows, shadow_res, ssaa, background, time_s, seed, iterations, linear_steps, binary_steps, march,
-         shots, watch, limit_values, allow_paths) -> None:
+         shots, watch, snapshot, limit_values, allow_paths) -> None:
     """Open INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     in a window and turn it around in real time.
 
@@ -97,6 +100,8 @@ def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, met
         raise click.BadParameter(f"{shots} is not a folder", param_hint="--shots")
     if not shots.exists():
         raise click.BadParameter(f"{shots}: no such folder", param_hint="--shots")
+    if snapshot is not None and snapshot.suffix.lower() != ".png":
+        raise click.BadParameter(f"{snapshot}: the snapshot must end in .png", param_hint="--snapshot")
     options = ViewOptions(
         input=input, size=size or (1024, 768), seed=seed, iterations=iterations,
         effects=parse_effect_list(effects) if effects is not None else None, relief=relief, shadows=shadows,
@@ -104,7 +109,7 @@ def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, met
         level=subdiv, ssaa=ssaa, background=parse_background(background),
         background_name=None if background == "sky" else background, camera=camera,
         orbit=orbit_from(azimuth, elevation, distance, zoom, fov), time_s=time_s, linear_steps=linear_steps,
-        binary_steps=binary_steps, march=march, shadow_res=shadow_res, shots=shots, watch=watch,
+        binary_steps=binary_steps, march=march, shadow_res=shadow_res, shots=shots, watch=watch, snapshot=snapshot,
         limits=limits_from(limit_values), allow_paths=tuple(allow_paths))
     how = run_viewer(options, say=click.echo, warn=lambda line: click.echo(line, err=True))
     click.echo("interrupted: window closed" if how == "interrupted" else "window closed")

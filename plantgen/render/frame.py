@@ -130,6 +130,7 @@ class OffscreenRenderer:
         self._shadow = ShadowPass(self.ctx)
         self._sky_vao = None
         self.last_light_window = None
+        self.last_resolve_ms = 0.0
 
     def release(self) -> None:
         """Free the framebuffer, the height textures and the shadow map (they are made
@@ -275,7 +276,11 @@ class OffscreenRenderer:
         color = color.reshape(h, w, k)[::-1]
         dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
                              np.float32).reshape(h, w)[::-1]
+        self.last_resolve_ms = 0.0
         if ssaa == 1:
             return color.copy(), dist.copy()
-        return resolve_supersamples(color, dist, ssaa)
+        t0 = time.perf_counter()
+        out = resolve_supersamples(color, dist, ssaa)
+        self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
+        return out
 

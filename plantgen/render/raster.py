@@ -152,7 +152,8 @@ class RasterRenderer(OffscreenRenderer):
         stats = RasterStats(
             passes=frame_passes(shadowed, ground_vao is not None, len(mesh.faces) > 0),
             near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window,
-            upload_ms=upload_ms, triangles=len(mesh.faces), vertices=len(mesh.vertices),
+            upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces),
+            vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
             draw_calls=1 + (ground_vao is not None), work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)

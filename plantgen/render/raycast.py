@@ -194,8 +194,8 @@ class Raycaster(OffscreenRenderer):
             passes=frame_passes(shadows is not None, ground is not None, n > 0), near=view.near,
             far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
-            pack_ms=pack_ms, program=("raycast.glsl", settings.defines()),
-            programs=programs["built"], work=work)
+            pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
+            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,

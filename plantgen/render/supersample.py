@@ -25,10 +25,19 @@ MAX_SSAA = 8
 _TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** DISPLAY_GAMMA).astype(np.float32)
 
 
-def _blocks(image: np.ndarray, n: int) -> np.ndarray:
-    """(h*n, w*n, ...) -> (h, n, w, n, ...) view of each pixel's n x n block."""
-    hn, wn = image.shape[:2]
-    return image.reshape(hn // n, n, wn // n, n, *image.shape[2:])
+def _block_sums(image: np.ndarray, n: int) -> np.ndarray:
+    """(h*n, w*n, c) float32 -> (h, w, c): the sum of each pixel's n x n block (slice adds:
+    several times faster than a reduction over two strided axes)."""
+    hn, wn, c = image.shape
+    cols = image.reshape(hn, wn // n, n, c)
+    across = cols[:, :, 0].copy()
+    for k in range(1, n):
+        across += cols[:, :, k]
+    rows = across.reshape(hn // n, n, wn // n, c)
+    total = rows[:, 0].copy()
+    for k in range(1, n):
+        total += rows[:, k]
+    return total
 
 
 def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -50,17 +59,18 @@ def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tup
     n = int(n)
     if n == 1:
         return color, distance
-    linear = _blocks(_TO_LINEAR[color[..., :3]], n)                     # (h, n, w, n, 3)
+    linear = _TO_LINEAR[color[..., :3]]                                  # (h*n, w*n, 3)
     if color.shape[-1] == 4:
-        alpha = _blocks(color[..., 3].astype(np.float32) / 255.0, n)[..., None]
-        weight = alpha.sum(axis=(1, 3))
-        mean = (linear * alpha).sum(axis=(1, 3)) / np.maximum(weight, 1e-12)
-        coverage = weight[..., 0] / (n * n)
+        alpha = color[..., 3:].astype(np.float32) / 255.0
+        weight = _block_sums(alpha, n)
+        mean = _block_sums(linear * alpha, n) / np.maximum(weight, 1e-12)
+        coverage = weight / (n * n)
     else:
-        mean = linear.mean(axis=(1, 3))
+        mean = _block_sums(linear, n) / (n * n)
         coverage = None
     rgb = np.round(255.0 * np.clip(mean, 0.0, 1.0) ** (1.0 / DISPLAY_GAMMA)).astype(np.uint8)
     if coverage is not None:
-        rgb = np.concatenate([rgb, np.round(255.0 * coverage)[..., None].astype(np.uint8)], axis=-1)
-    centre = _blocks(distance, n)[:, n // 2, :, n // 2]
+        rgb = np.concatenate([rgb, np.round(255.0 * coverage).astype(np.uint8)], axis=-1)
+    hn, wn = distance.shape
+    centre = distance.reshape(hn // n, n, wn // n, n)[:, n // 2, :, n // 2]
     return rgb, np.ascontiguousarray(centre)

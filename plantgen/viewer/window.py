@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from ..errors import PlantgenError
+from ..images import write_png
 from ..render.shaders import build_program, set_uniforms
 from .hud import help_panel, text_panel
 from .session import ViewerSession
@@ -34,6 +35,9 @@ WINDOW_GL = (4, 3)
 
 #: Seconds between redraws of an idle window (it redraws at once on any event).
 IDLE_REDRAW_S = 0.5
+
+#: Frames drawn before ``--snapshot`` saves the window (the heads-up medians settle).
+SNAPSHOT_FRAMES = 5
 
 
 class ViewerError(PlantgenError):
@@ -181,6 +185,17 @@ def _wire_events(window, session: ViewerSession, touched: list) -> None:
     window.exit_key = None          # Esc and Q are the session's "quit" (keys.py)
 
 
+def _snapshot(session: ViewerSession, presenter: Presenter) -> bool:
+    """``--snapshot FILE``: after :data:`SNAPSHOT_FRAMES` frames, save the window as shown
+    and say the loop may end (True); before, ask for another frame."""
+    if len(session.frames) < SNAPSHOT_FRAMES:
+        session.dirty = True
+        return False
+    path = write_png(session.options.snapshot, presenter.window_pixels())
+    session.say(f"saved window {path}")
+    return True
+
+
 def run_window(window, session: ViewerSession, ready=None) -> str:
     """The event loop until the window closes, Q or Esc, or Ctrl-C. Draws a frame when the
     session needs one, the window otherwise only on events (and every
@@ -207,6 +222,8 @@ def run_window(window, session: ViewerSession, ready=None) -> str:
                 presenter.draw()
                 if session.want_window_shot:
                     session.window_shot(presenter.window_pixels())
+                if drew and session.options.snapshot is not None and _snapshot(session, presenter):
+                    break
                 window.swap_buffers()       # also dispatches the window's events
                 last_draw, touched[0] = now, False
                 if drew:
