@@ -95,6 +95,10 @@ def test_orbit_methods_and_screenshots_match_plantgen_render(x_display, tmp_path
         rows = np.flatnonzero(differs.any(axis=1))
         assert differs[:10, :40].mean() > 0.2 and rows.max() < 120
         assert np.array_equal(window[rows.max() + 1:], frame[rows.max() + 1:])
+        viewer.keys("h", "shift+p")                                # H: the keys, under the heads-up line
+        helped = (png(saved(viewer, "window")) != frame).any(axis=-1)
+        assert np.flatnonzero(helped.any(axis=1)).max() > 2 * rows.max()
+        viewer.keys("h")
 
         # GS at m = 2 (the level goes 1 -> 2): the raster renderer's frame of the same camera
         viewer.keys("3", "bracketright", "p")
@@ -112,6 +116,14 @@ def test_orbit_methods_and_screenshots_match_plantgen_render(x_display, tmp_path
         viewer.keys("c")
         third, _ = camera_and_command(viewer)
         assert orbit_angles(Camera.load(third))[2] == pytest.approx(d1 / 1.1 ** 3)
+        viewer.drag((200, 100), (160, 130), button=3)        # a right drag moves the model with the cursor
+        viewer.keys("c")
+        fourth = Camera.load(camera_and_command(viewer)[0])
+        cam3 = Camera.load(third)
+        right, up, _ = cam3.basis()
+        per_pixel = 2 * orbit_angles(cam3)[2] * np.tan(np.radians(cam3.fov_y) / 2) / 240
+        assert np.allclose(np.subtract(fourth.target, cam3.target), (40 * right + 30 * up) * per_pixel)
+        assert orbit_angles(fourth)[:2] == pytest.approx(orbit_angles(cam3)[:2])
         viewer.keys("q")
         assert viewer.finish() == 0
         assert "window closed" in viewer.out[-1] and not viewer.err

@@ -130,6 +130,8 @@ class ViewerSession:
         self.t = float(options.time_s)
         self.playing = False
         self.show_help = False
+        self.closing = False                   # Q or Esc: the window's loop ends
+        self.want_window_shot = False          # Shift+P: the window saves itself after its next draw
         self.status, self.error = "", None
         self.frames: deque[FrameStats] = deque(maxlen=HUD_FRAMES)
         self.last = None                       # the last RenderResult
@@ -384,8 +386,6 @@ class ViewerSession:
     def quit(self) -> None:
         self.closing = True
 
-    closing = False
-
     # ------------------------------------------------------------------ saving
     def _next_name(self, suffix: str) -> Path:
         folder = Path(self.options.shots)
@@ -427,8 +427,6 @@ class ViewerSession:
         self.say(f"saved window {path}")
         self.status = f"saved {path.name}"
         return path
-
-    want_window_shot = False
 
     def save_camera(self) -> Path | None:
         """Write the camera of the last frame as JSON and print the ``plantgen render``
