@@ -40,10 +40,11 @@ def png(path) -> np.ndarray:
     return np.asarray(Image.open(path))
 
 
-def start(display, tmp_path, model, *args, title) -> Viewer:
+def start(display, tmp_path, model, *args, title, size=SIZE) -> Viewer:
     shots = tmp_path / "shots"
     shots.mkdir(exist_ok=True)
-    viewer = Viewer(display, [model, "--size", SIZE, "--shots", shots, *args], tmp_path, f"plantgen view: {title}")
+    sized = ["--size", size] if size else []
+    viewer = Viewer(display, [model, *sized, "--shots", shots, *args], tmp_path, f"plantgen view: {title}")
     try:
         viewer.wait_for(r"^ready: ")
         viewer.find_window()
@@ -196,6 +197,27 @@ def test_an_animated_scene_plays_pauses_and_scrubs(x_display, tmp_path):
         t = float(shlex.split(command)[shlex.split(command).index("--time") + 1])
         assert t > 0.4
         assert np.array_equal(png(later), render_command(command))
+        viewer.keys("q")
+        assert viewer.finish() == 0
+    finally:
+        viewer.stop()
+
+
+def test_a_saved_camera_opens_the_same_view_at_its_size(x_display, tmp_path):
+    viewer = start(x_display, tmp_path, "cactus", "--azimuth", "120", "--ssaa", "2", title="cactus", size="200x150")
+    try:
+        viewer.keys("c", "p")
+        camera, _ = camera_and_command(viewer)
+        first = png(saved(viewer))
+        viewer.keys("q")
+        assert viewer.finish() == 0
+    finally:
+        viewer.stop()
+    viewer = start(x_display, tmp_path, "cactus", "--camera", camera, "--ssaa", "2", title="cactus", size=None)
+    try:
+        viewer.keys("p")
+        again = png(saved(viewer))
+        assert again.shape == (150, 200, 3) and np.array_equal(again, first)
         viewer.keys("q")
         assert viewer.finish() == 0
     finally:

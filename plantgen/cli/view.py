@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..geometry.camera import Camera
 from ..images import parse_background
 from ..render.raycast import RaycastSettings
 from ..render.supersample import MAX_SSAA
@@ -38,7 +39,7 @@ def _keys_epilog() -> str:
 
 @click.command(epilog=_keys_epilog())
 @input_arg
-@size_opt(what="Window size", default="1024x768")
+@size_opt(what="Window size", default="the camera file's, else 1024x768")
 @click.option("--camera", type=click.Path(dir_okay=False, path_type=Path), metavar="FILE.json",
               help="Start from a camera JSON (written by C or by plantgen render --camera-out).")
 @orbit_options
@@ -96,6 +97,10 @@ def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, met
     """
     if camera is not None and not camera.is_file():
         raise click.BadParameter(f"{camera}: no such camera file", param_hint="--camera")
+    limits = limits_from(limit_values)
+    if size is None and camera is not None:
+        saved = Camera.load(camera, limits)
+        size = (saved.width, saved.height)
     if shots.exists() and not shots.is_dir():
         raise click.BadParameter(f"{shots} is not a folder", param_hint="--shots")
     if not shots.exists():
@@ -110,6 +115,6 @@ def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, met
         background_name=None if background == "sky" else background, camera=camera,
         orbit=orbit_from(azimuth, elevation, distance, zoom, fov), time_s=time_s, linear_steps=linear_steps,
         binary_steps=binary_steps, march=march, shadow_res=shadow_res, shots=shots, watch=watch, snapshot=snapshot,
-        limits=limits_from(limit_values), allow_paths=tuple(allow_paths))
+        limits=limits, allow_paths=tuple(allow_paths))
     how = run_viewer(options, say=click.echo, warn=lambda line: click.echo(line, err=True))
     click.echo("interrupted: window closed" if how == "interrupted" else "window closed")

@@ -168,19 +168,20 @@ class ViewerSession:
 
     def frusta(self):
         """The model's rows at the current time (skinned once for a still model)."""
-        key = (id(self.model), self.t if self.model.animated else 0.0)
-        if self._frusta_key != key:
-            self._frusta, self._frusta_key = self.model.frusta_at(key[1]), key
+        t = self.t if self.model.animated else 0.0
+        key = self._frusta_key
+        if key is None or key[0] is not self.model or key[1] != t:     # the objects, not their ids
+            self._frusta, self._frusta_key = self.model.frusta_at(t), (self.model, t)
         return self._frusta
 
     def mesh(self, frusta):
         """The GS / GS+R tessellation of ``frusta`` at the current level (cached)."""
         relief = self.method == "GS+R"
-        key = (id(frusta), self.level, relief)
-        if self._mesh_key != key:
+        key = self._mesh_key
+        if key is None or key[0] is not frusta or key[1:] != (self.level, relief):
             self._mesh = None
             self._mesh = tessellate(frusta, self.level, relief=relief)
-            self._mesh_key = key
+            self._mesh_key = (frusta, self.level, relief)
         return self._mesh
 
     # ------------------------------------------------------------------ the frame
@@ -268,10 +269,8 @@ class ViewerSession:
             return
         model, frusta, timings = value
         self.model, self.error = model, None
-        self._frusta, self._frusta_key = frusta, (id(model), t if model.animated else 0.0)
+        self._frusta, self._frusta_key = frusta, (model, t if model.animated else 0.0)
         self._mesh_key = None
-        if not model.animated:
-            self.t = t
         self.watcher.watch(model.grown.sources)
         waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
         self._reload_timings = {"detect": waited, **timings}
