@@ -16,14 +16,13 @@ FONT_SIZE = 14
 COLOURS = {"info": (235, 235, 235, 255), "status": (150, 225, 150, 255), "error": (255, 120, 110, 255),
            "key": (255, 220, 120, 255)}
 
-_font = None
+_fonts: dict = {}
 
 
-def _the_font():
-    global _font
-    if _font is None:
-        _font = ImageFont.load_default(size=FONT_SIZE)
-    return _font
+def _the_font(size: int = FONT_SIZE):
+    if size not in _fonts:
+        _fonts[size] = ImageFont.load_default(size=size)
+    return _fonts[size]
 
 
 def text_panel(lines, max_width: int) -> np.ndarray:
@@ -39,17 +38,33 @@ def text_panel(lines, max_width: int) -> np.ndarray:
     return np.asarray(image)
 
 
-def help_panel(max_width: int) -> np.ndarray:
-    """The keys, as :func:`text_panel` draws them (key names in yellow)."""
-    font = _the_font()
+def _help_layout(rows, max_width: int, max_height: int | None):
+    """(font size, columns, per column, key width, column width, width, height) of the
+    help panel: the largest font from :data:`FONT_SIZE` down to 9 pixels, in one column or
+    two, that fits the window (else the smallest, cut)."""
+    for size in range(FONT_SIZE, 8, -1):
+        font, pad, step = _the_font(size), 10, size + 5
+        key_w = max(int(font.getlength(k)) for k, _ in rows) + 16
+        col_w = key_w + max(int(font.getlength(t)) for _, t in rows) + 2 * pad
+        for columns in (1, 2):
+            per_column = -(-len(rows) // columns)
+            width, height = pad + columns * col_w, pad * 2 + step * (per_column + 1)
+            if width <= max_width and (max_height is None or height <= max_height):
+                return size, columns, per_column, key_w, col_w, width, height
+    return size, columns, per_column, key_w, col_w, min(width, max_width), height
+
+
+def help_panel(max_width: int, max_height: int | None = None) -> np.ndarray:
+    """The keys, as :func:`text_panel` draws them (key names in yellow), laid out to fit
+    ``max_width`` x ``max_height`` pixels (see :func:`_help_layout`)."""
     rows = help_lines()
-    pad, step = 10, FONT_SIZE + 5
-    key_w = max(int(font.getlength(k)) for k, _ in rows) + 16
-    width = min(max_width, pad * 2 + key_w + max(int(font.getlength(t)) for _, t in rows))
-    image = Image.new("RGBA", (width, pad * 2 + step * (len(rows) + 1)), (16, 18, 22, 210))
+    size, columns, per_column, key_w, col_w, width, height = _help_layout(rows, max_width, max_height)
+    font, pad, step = _the_font(size), 10, size + 5
+    image = Image.new("RGBA", (width, height), (16, 18, 22, 210))
     draw = ImageDraw.Draw(image)
     draw.text((pad, pad), "plantgen view: keys (H hides)", font=font, fill=COLOURS["status"])
-    for i, (keys, text) in enumerate(rows, start=1):
-        draw.text((pad, pad + i * step), keys, font=font, fill=COLOURS["key"])
-        draw.text((pad + key_w, pad + i * step), text, font=font, fill=COLOURS["info"])
+    for i, (keys, text) in enumerate(rows):
+        x, y = pad + (i // per_column) * col_w, pad + (i % per_column + 1) * step
+        draw.text((x, y), keys, font=font, fill=COLOURS["key"])
+        draw.text((x + key_w, y), text, font=font, fill=COLOURS["info"])
     return np.asarray(image)

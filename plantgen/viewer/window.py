@@ -104,14 +104,14 @@ class Presenter:
     def set_frame(self, color: np.ndarray) -> None:
         self.frame_tex = self._texture(self.frame_tex, color)
 
-    def set_hud(self, lines, show_help: bool, width: int) -> None:
-        key = (tuple(lines), show_help, width)
+    def set_hud(self, lines, show_help: bool, width: int, height: int) -> None:
+        key = (tuple(lines), show_help, width, height)
         if key == self._hud_key:
             return
         self._hud_key = key
         panel = text_panel(lines, width)
         if show_help:
-            keys = help_panel(width)
+            keys = help_panel(width, height - panel.shape[0])
             both = np.zeros((panel.shape[0] + keys.shape[0], max(panel.shape[1], keys.shape[1]), 4), np.uint8)
             both[:panel.shape[0], :panel.shape[1]] = panel
             both[panel.shape[0]:, :keys.shape[1]] = keys
@@ -217,7 +217,7 @@ def run_window(window, session: ViewerSession, ready=None) -> str:
             if drew:
                 shown = session.last
                 presenter.set_frame(shown.color)
-            presenter.set_hud(session.hud_lines(), session.show_help, w)
+            presenter.set_hud(session.hud_lines(), session.show_help, w, h)
             if drew or touched[0] or session.want_window_shot or now - last_draw > IDLE_REDRAW_S:
                 presenter.draw()
                 if session.want_window_shot:
