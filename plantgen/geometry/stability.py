@@ -283,17 +283,23 @@ def evaluate_case(case: HardCase, count: int = 200, march: bool = True) -> dict:
     return out
 
 
-def _depth_stable(frusta, O, D, h64, angle) -> np.ndarray:
-    """(m,) bool: rays whose float64 hit/miss and depth (to 1e-3) stay when the ray turns by
-    ``angle`` radians in four directions: off every silhouette, a row's own silhouette
-    over a row behind it included (a float32 flip there is rounding of a tangency)."""
+def _turned(D, angle):
+    """The four directions of rays ``D`` (m, 3) turned by ``angle`` radians: along two
+    perpendiculars of each ray, both ways."""
     a = np.where(np.abs(D[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0.0, 0, 1]]))
     e1 = np.cross(D, a)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
     e2 = np.cross(D, e1)
+    return [D + angle * e for e in (e1, -e1, e2, -e2)]
+
+
+def _depth_stable(frusta, O, D, h64, angle) -> np.ndarray:
+    """(m,) bool: rays whose float64 hit/miss and depth (to 1e-3) stay when the ray turns by
+    ``angle`` radians in four directions: off every silhouette, a row's own silhouette
+    over a row behind it included (a float32 flip there is rounding of a tangency)."""
     stable = np.ones(len(O), dtype=bool)
-    for e in (e1, -e1, e2, -e2):
-        h = intersect_frusta(frusta, O, D + angle * e)
+    for turned in _turned(D, angle):
+        h = intersect_frusta(frusta, O, turned)
         with np.errstate(invalid="ignore"):
             same_t = np.abs(np.where(h.hit & h64.hit, h.t - h64.t, 0.0)) <= 1e-3 * np.where(h64.hit, h64.t, 1.0)
         stable &= (h.hit == h64.hit) & same_t
@@ -305,14 +311,9 @@ def _off_silhouette(frusta, O, D, hit64, angle) -> int:
     in four directions: flips on such rays are not silhouette effects."""
     if len(O) == 0:
         return 0
-    a = np.where(np.abs(D[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0.0, 0, 1]]))
-    e1 = np.cross(D, a)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(D, e1)
     stable = np.ones(len(O), dtype=bool)
-    for e in (e1, -e1, e2, -e2):
-        h = intersect_frusta(frusta, O, D + angle * e)
-        stable &= h.hit == hit64
+    for turned in _turned(D, angle):
+        stable &= intersect_frusta(frusta, O, turned).hit == hit64
     return int(stable.sum())
 
 
