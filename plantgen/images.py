@@ -1,16 +1,82 @@
-"""Image files out: PNG stills and animated GIF/WebP, through Pillow, written atomically."""
+"""Images out: PNG stills and animated GIF/WebP through Pillow, written atomically; the
+background colours the command line names; :class:`RenderedImage`, what the Python API's
+``plantgen.render`` returns (it shows itself in a Jupyter notebook)."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageColor
 
 from .errors import PlantgenError
 from .files import write_atomically
 
-__all__ = ["ANIMATION_SUFFIXES", "write_png", "write_animation"]
+__all__ = ["ANIMATION_SUFFIXES", "TRANSPARENT", "RenderedImage", "parse_background", "write_png",
+           "write_animation"]
+
+#: The background value of a transparent image: (r, g, b, a) with a = 0.
+TRANSPARENT = (0.0, 0.0, 0.0, 0.0)
+
+
+def parse_background(text: str | None) -> tuple | None:
+    """A background as the renderers take it, from its name: ``sky`` (or None) -> None
+    (the shaded sky); ``none`` or ``transparent`` -> :data:`TRANSPARENT` (a PNG with an
+    alpha channel); any colour Pillow names (``white``, ``#20304a``, ``rgb(32,48,74)``)
+    -> (r, g, b, 1) in [0, 1], written to the image unchanged. One line for anything else."""
+    if text is None or text.strip().lower() == "sky":
+        return None
+    name = text.strip().lower()
+    if name in ("none", "transparent"):
+        return TRANSPARENT
+    try:
+        rgb = ImageColor.getrgb(name)
+    except ValueError:
+        raise PlantgenError(f"background {text!r} is not a colour: give a name (white), #rrggbb, "
+                            "'sky' or 'none' (transparent)") from None
+    return (rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0)
+
+
+class RenderedImage:
+    """A rendered image: ``array`` (h, w, 3) uint8 RGB, or (h, w, 4) RGBA over a transparent
+    background, row 0 the top row; ``distance`` (h, w) float32 along each pixel's ray (inf
+    for a miss), ``camera`` the view, ``report`` what the render did (frame time, GL
+    renderer, ...). In a Jupyter notebook it displays itself (``_repr_png_``);
+    :meth:`save` writes a PNG, :meth:`to_pil` gives a Pillow image."""
+
+    def __init__(self, array: np.ndarray, *, distance: np.ndarray | None = None, camera=None, report=None):
+        self.array = np.ascontiguousarray(array, dtype=np.uint8)
+        self.distance = distance
+        self.camera = camera
+        self.report = report
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return self.array.shape[1], self.array.shape[0]
+
+    def to_pil(self) -> Image.Image:
+        return Image.fromarray(self.array)
+
+    def save(self, path) -> Path:
+        """Write the image as a PNG at ``path`` (atomically)."""
+        path = Path(path)
+        if path.suffix.lower() != ".png":
+            raise PlantgenError(f"{path}: the image output must end in .png")
+        return write_png(path, self.array)
+
+    def _repr_png_(self) -> bytes:
+        buffer = io.BytesIO()
+        self.to_pil().save(buffer, format="PNG")
+        return buffer.getvalue()
+
+    def __array__(self, dtype=None, copy=None):
+        return self.array if dtype is None else self.array.astype(dtype)
+
+    def __repr__(self) -> str:
+        mode = "RGBA" if self.array.shape[-1] == 4 else "RGB"
+        return f"<plantgen.RenderedImage {mode} {self.size[0]}x{self.size[1]}>"
 
 ANIMATION_SUFFIXES = (".gif", ".webp")
 

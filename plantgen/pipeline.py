@@ -6,9 +6,13 @@ call:
 
 - :func:`grow_file` / :func:`grow` (``plantgen grow``): a grammar, scene or skeleton
   ``.npz`` to a :class:`~plantgen.geometry.skeleton.Skeleton`, with the time of each stage;
+- :func:`prepare_model`: a grown input with its effects settled and its animation ready
+  (what ``plantgen render`` and ``plantgen view`` draw);
 - :func:`stage_model`: what a renderer needs of a grown model besides its frusta (camera,
-  light, ground), from the scene where there is one;
-- :func:`render_file` (``plantgen render``): skin, ray cast, write PNG / GIF / WebP, the
+  light, ground), from the scene where there is one; :func:`frame_settings` and
+  :func:`frame_arguments`: the renderers' arguments for one frame, in one place;
+- :func:`render_model` (``plantgen.render``): skin and ray cast, in memory;
+  :func:`render_file` (``plantgen render``): the same, then write PNG / GIF / WebP, the
   camera JSON and the depth ``.npy``;
 - :func:`export_model` (``plantgen export``): skin, tessellate, write a mesh file.
 
@@ -32,7 +36,7 @@ from .animation import AnimatedScene
 from .errors import PlantgenError
 from .export import ExportError, estimate_export_bytes, export_file_type, export_mesh
 from .files import read_yaml, write_atomically
-from .geometry.camera import Camera, auto_camera
+from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frusta import ROW_FIELDS, Frusta
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.skeleton import Skeleton
@@ -40,7 +44,7 @@ from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .geometry.swc import read_swc
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
-from .limits import LimitError, Limits, hint
+from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.derive import derive
 from .lsystem.grammar import GrammarError, parse_grammar
@@ -50,12 +54,13 @@ from .render.passes import ShadowSettings
 from .render.raycast import Raycaster, RaycastSettings
 from .render.records import RecordStream
 from .render.result import RenderResult
+from .render.supersample import MAX_SSAA
 from .scene import Scene, is_scene, parse_scene, resolve_effects
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
-           "Staging", "stage_model", "RenderReport", "check_finite_frusta", "check_finite_mesh",
-           "check_render_outputs", "estimate_render_bytes",
-           "render_file", "export_model"]
+           "Staging", "stage_model", "PreparedModel", "prepare_model", "frame_settings", "frame_arguments",
+           "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
+           "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -76,6 +81,7 @@ class GrowResult:
     modules: int = 0
     timings: dict = field(default_factory=dict)   # stage -> seconds
     scene: Scene | None = None
+    sources: tuple = ()              # every file read: the input, and a scene's grammars
 
 
 def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
@@ -143,14 +149,14 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         t0 = time.perf_counter()
         skel = read_skeleton(path, limits)
         timings["load"] = time.perf_counter() - t0
-        return GrowResult(skel, kind, path.stem, 0, timings)
+        return GrowResult(skel, kind, path.stem, 0, timings, sources=(path,))
     work = limits.meter("derive_work")    # one budget for every derivation of this input
     if kind == "grammar":
         t0 = time.perf_counter()
         grammar = parse_grammar(data, str(path), limits)
         timings["parse"] = time.perf_counter() - t0
         skel, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
-        return GrowResult(skel, kind, grammar.name, n, timings)
+        return GrowResult(skel, kind, grammar.name, n, timings, sources=(path,))
 
     modules = [0]
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
@@ -170,7 +176,8 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     t0 = time.perf_counter()
     skel = scene.skeleton()
     timings["place"] = time.perf_counter() - t0
-    return GrowResult(skel, kind, scene.name, modules[0], timings, scene)
+    return GrowResult(skel, kind, scene.name, modules[0], timings, scene,
+                      sources=(path, *(Path(k) for k in grammars)))
 
 
 def grow(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
@@ -198,16 +205,22 @@ class Staging:
 
 
 def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
-                camera: Camera | None = None) -> Staging:
+                camera: Camera | None = None, orbit: Orbit | None = None) -> Staging:
     """The scene's camera (at ``width`` x ``height``), light and ground; for a grammar or a
     skeleton, or a scene whose camera is ``auto``, the model framed to fill the view
-    (:func:`auto_camera`) and the default model light. ``camera`` replaces the view."""
+    (:func:`auto_camera`) and the default model light. ``camera`` replaces the view;
+    ``orbit`` then turns, moves or zooms it around its target (:func:`orbit_view`; a
+    framed view is framed anew from the new direction)."""
     scene = grown.scene
+    framed = camera is None and (scene is None or scene.camera is None)
     if camera is None:
-        if scene is not None and scene.camera is not None:
-            camera = scene.camera.at_size(width, height)
-        else:
-            camera = auto_camera(frusta, width, height)
+        camera = scene.camera.at_size(width, height) if not framed else auto_camera(frusta, width, height)
+    if orbit is not None and not orbit.empty:
+        reframe = None
+        if framed:
+            def reframe(direction, fov_y):
+                return auto_camera(frusta, width, height, fov_y=fov_y, direction=direction)
+        camera = orbit_view(camera, orbit, reframe)
     if scene is None:
         return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
     return Staging(camera, tuple(scene.light.towards()), scene.ground)
@@ -249,10 +262,67 @@ def animate_model(grown: GrowResult, effects) -> AnimatedScene:
     return AnimatedScene.still(grown.skeleton)
 
 
+@dataclass
+class PreparedModel:
+    """An input grown and ready to draw, as ``plantgen render`` and ``plantgen view`` draw
+    it: the grown model, the effects in force (the scene's list with the caller's
+    overrides) and the :class:`AnimatedScene` (skinned once when nothing moves)."""
+
+    grown: GrowResult
+    effects: tuple
+    anim: AnimatedScene
+    source: str
+
+    @property
+    def animated(self) -> bool:
+        return self.anim.animated
+
+    def frusta_at(self, t: float = 0.0) -> Frusta:
+        """Every frustum row at ``t`` seconds (a still model's rows at any t), checked finite."""
+        return check_finite_frusta(self.anim.frusta_at(float(t)), self.source)
+
+
+def prepare_model(input_path, *, seed=None, iterations=None, effects=None, relief=None, shadows=None,
+                  limits: Limits | None = None, allow_paths=()) -> PreparedModel:
+    """Grow or load ``input_path`` and settle its effects: ``effects`` (a list of names)
+    replaces the scene's list, ``relief`` / ``shadows`` True or False add or remove that
+    effect (None: as the list says). One line for a model with no segment."""
+    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
+    flags = (("relief", relief), ("shadows", shadows))
+    chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
+                             add=[n for n, f in flags if f], remove=[n for n, f in flags if f is False])
+    if len(grown.skeleton) == 0:
+        raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
+    return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen), str(input_path))
+
+
+def frame_settings(effects, *, linear_steps=None, binary_steps=None, march=None, march_density=None,
+                   v_exact=False, shadow_res=2048, shadow_caster="relief"):
+    """The ray caster's knobs and the shadow map's for ``effects``: (RaycastSettings,
+    ShadowSettings or None without the ``shadows`` effect); a knob left None keeps its
+    default."""
+    knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
+             "march_density": march_density}
+    settings = RaycastSettings(relief="relief" in effects, v_exact=bool(v_exact),
+                               **{k: v for k, v in knobs.items() if v is not None})
+    shadow = (ShadowSettings(resolution=int(shadow_res), caster=shadow_caster) if "shadows" in effects
+              else None)
+    return settings, shadow
+
+
+def frame_arguments(frusta: Frusta, staging: Staging, shadows, *, background=None, ssaa: int = 1) -> dict:
+    """The keyword arguments both renderers take for one frame of a staged model
+    (``Raycaster.render`` adds ``settings``; ``RasterRenderer.render`` takes the mesh)."""
+    return {"camera": staging.camera, "material_names": frusta.material_names, "light_dir": staging.light_dir,
+            "ground": staging.ground, "shadows": shadows, "background": background, "ssaa": int(ssaa)}
+
+
 # ---------------------------------------------------------------------- plantgen render
 @dataclass
 class RenderReport:
-    """What :func:`render_file` did: for the CLI to print and tests to check."""
+    """What :func:`render_model` / :func:`render_file` did: for the CLI to print and tests
+    to check. ``frame_ms`` is the one draw's time (``timed`` = 0) or the median of
+    ``timed`` draws after a warm-up; ``colors`` holds an animation's frames."""
 
     renderer: str
     segments: int          # skeleton segments
@@ -267,6 +337,11 @@ class RenderReport:
     frames: int = 1
     update_ms: float = 0.0         # median per-frame CPU update (pose, skin, pack, upload)
     skin_calls: int = 0
+    timed: int = 0                 # draws the median was taken over (0: one untimed-median draw)
+    ssaa: int = 1
+    background: tuple | None = None
+    colors: list = field(default_factory=list)
+    distance: np.ndarray | None = None
 
 
 def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
@@ -275,13 +350,10 @@ def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names
     ``depth_out`` and ``time_s`` to how the caller spells them (the CLI: ``--frames``,
     ...); default: the keyword names."""
     name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", "time_s": "time_s", **(names or {})}
-    if time_s is not None and not math.isfinite(time_s):
-        raise PlantgenError(f"{name['time_s']} must be a finite number, got {time_s!r}")
+    check_render_request(frames, fps, time_s, name)
     if frames is not None:
         if output.suffix.lower() not in ANIMATION_SUFFIXES:
             raise PlantgenError(f"{output}: an animation ({name['frames']}) must end in .gif or .webp")
-        if int(frames) < 1 or not 0 < fps < math.inf:
-            raise PlantgenError(f"{name['frames']} must be >= 1 and {name['fps']} finite and > 0")
         if depth_out is not None:
             raise PlantgenError(f"{name['depth_out']} writes one frame: leave out {name['frames']}")
     elif output.suffix.lower() != ".png":
@@ -291,6 +363,18 @@ def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
         raise PlantgenError(f"{camera_out}: the camera output must end in .json")
+
+
+def check_render_request(frames, fps, time_s, name: dict, ssaa: int = 1, timed_frames: int = 0) -> None:
+    """One line for a frame count, rate, time, supersampling or timing count out of range."""
+    if time_s is not None and not math.isfinite(time_s):
+        raise PlantgenError(f"{name.get('time_s', 'time_s')} must be a finite number, got {time_s!r}")
+    if frames is not None and (int(frames) < 1 or not 0 < fps < math.inf):
+        raise PlantgenError(f"{name.get('frames', 'frames')} must be >= 1 and {name.get('fps', 'fps')} finite and > 0")
+    if int(ssaa) != ssaa or not 1 <= int(ssaa) <= MAX_SSAA:
+        raise PlantgenError(f"{name.get('ssaa', 'ssaa')} must be an integer in 1..{MAX_SSAA}, got {ssaa!r}")
+    if int(timed_frames) != timed_frames or int(timed_frames) < 0:
+        raise PlantgenError(f"{name.get('timed_frames', 'timed_frames')} must be an integer >= 0")
 
 
 def _camera_file(path, size, limits: Limits | None = None) -> Camera:
@@ -309,24 +393,32 @@ SKIN_BYTES_PER_SEGMENT = 1024    # skinning (about 570 bytes a segment at its pe
 
 
 def estimate_render_bytes(width: int, height: int, *, frames: int = 1, shadow_res: int | None = None,
-                          segments: int = 0) -> int:
+                          segments: int = 0, ssaa: int = 1) -> int:
     """Bytes a render of ``width`` x ``height`` pixels takes (GPU and host together):
-    the frame's targets, ``frames`` kept animation frames, the shadow map, the skinned
-    ``segments``."""
+    the frame's targets (``ssaa``² samples a pixel), ``frames`` kept animation frames, the
+    shadow map, the skinned ``segments``."""
     pixels = int(width) * int(height)
-    return (pixels * RENDER_BYTES_PER_PIXEL + (int(frames) * pixels * FRAME_BYTES_PER_PIXEL if frames > 1 else 0)
+    return (pixels * int(ssaa) ** 2 * RENDER_BYTES_PER_PIXEL
+            + (int(frames) * pixels * FRAME_BYTES_PER_PIXEL if frames > 1 else 0)
             + (int(shadow_res) ** 2 * SHADOW_BYTES_PER_TEXEL if shadow_res else 0)
             + int(segments) * SKIN_BYTES_PER_SEGMENT)
 
 
-def _check_render_memory(limits: Limits, what: str, width, height, frames, shadow_res, segments=0) -> None:
-    """Refuse a render whose estimated memory is over ``limits.max_render_bytes``."""
-    need = estimate_render_bytes(width, height, frames=frames or 1, shadow_res=shadow_res, segments=segments)
+def _check_render_memory(limits: Limits, what: str, width, height, frames, shadow_res, segments=0,
+                         ssaa: int = 1) -> None:
+    """Refuse a render whose estimated memory is over ``limits.max_render_bytes``, or whose
+    supersampled frame is over the largest image side."""
+    if max(width, height) * ssaa > MAX_IMAGE_SIDE:
+        raise LimitError(f"{what}: {width}x{height} pixels with {ssaa}x{ssaa} supersampling draw a "
+                         f"{width * ssaa}x{height * ssaa} frame, over the largest side of {MAX_IMAGE_SIDE:,} "
+                         "pixels (lower the size or the supersampling)")
+    need = estimate_render_bytes(width, height, frames=frames or 1, shadow_res=shadow_res, segments=segments,
+                                 ssaa=ssaa)
     if need > limits.max_render_bytes:
         raise LimitError(f"{what}: {width}x{height} pixels, {frames or 1} frame(s), {segments:,} segments "
                          f"need about {need / 2**20:,.0f} MiB, over the limit of "
                          f"{limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
-                         "the size, the frames or the shadow resolution)")
+                         "the size, the frames, the supersampling or the shadow resolution)")
 
 
 def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress):
@@ -352,96 +444,121 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
     return colors, frame_times, update_times, result
 
 
-def _write_render_outputs(output: Path, result: RenderResult, colors, fps, cam: Camera,
-                          camera_out, depth_out) -> list:
-    written = [write_animation(output, colors, fps) if colors else write_png(output, result.color)]
-    if camera_out is not None:
-        written.append(write_atomically(camera_out, cam.save))
-    if depth_out is not None:
-        def save_depth(p):
-            with open(p, "wb") as fh:
-                np.save(fh, result.distance.astype(np.float32))
-        written.append(write_atomically(depth_out, save_depth))
-    return written
+def _render_still(raycaster: Raycaster, frusta: Frusta, view: dict, timed_frames: int, exact_distance: bool):
+    """One draw, or a warm-up and ``timed_frames`` timed draws (the last is kept). With
+    supersampling and ``exact_distance``, the distances come from one more draw at one
+    sample a pixel (rays through the pixel centres). Returns (result, frame ms, distances)."""
+    runs = [raycaster.render(frusta, **view) for _ in range(int(timed_frames) + 1 if timed_frames else 1)]
+    result = runs[-1]
+    frame_times = [r.frame_ms for r in (runs[1:] if timed_frames else runs)]
+    distance = result.distance
+    if exact_distance and view["ssaa"] > 1:
+        distance = raycaster.render(frusta, **{**view, "ssaa": 1}).distance
+    return result, frame_times, distance
 
 
-def render_file(input_path, output, *, size=None, camera="auto", camera_out=None,
-                depth_out=None, seed=None, iterations=None, relief=None,
-                linear_steps=None, binary_steps=None, v_exact=False, march=None,
-                march_density=None, timed_frames=3,
-                effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
-                time_s=None, frames=None, fps=12.0, progress=None, names=None,
-                limits: Limits | None = None, allow_paths=()) -> RenderReport:
-    """Grow or load ``input_path`` (grammar, scene or skeleton ``.npz``), skin it, ray cast
-    it and write a PNG (and optionally the camera JSON and the depth ``.npy``), or, with
-    ``frames``, an animated GIF/WebP.
+def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = None, seed=None, iterations=None,
+                 relief=None, linear_steps=None, binary_steps=None, v_exact=False, march=None,
+                 march_density=None, effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
+                 background=None, ssaa: int = 1, time_s=None, frames=None, fps=12.0, timed_frames: int = 0,
+                 exact_distance: bool = False, progress=None, names=None, limits: Limits | None = None,
+                 allow_paths=()) -> RenderReport:
+    """Grow or load ``input_path`` (grammar, scene, skeleton ``.npz``/``.swc`` or shipped
+    name), skin it and ray cast it; nothing is written (see :func:`render_file`).
 
     Parameters
     ----------
     size : (width, height) in pixels; default: the camera file's size, else 1024x768
     camera : ``"auto"`` (the scene's camera if it has one, else the model framed to fill
-        most of the viewport) or a path to a camera JSON
+        most of the viewport), a :class:`Camera` or a path to a camera JSON
+    orbit : :class:`Orbit`: azimuth, elevation, distance or zoom and fov around the view's
+        target (a framed view is framed anew from the new direction)
     relief, shadows : True/False add/remove that effect; None: as the effects say
     linear_steps, binary_steps, march, march_density, v_exact : the relief march's knobs
         (:class:`plantgen.render.raycast.RaycastSettings`; None: its default)
     effects : None (the scene's list; none for a grammar or skeleton) or a list of effect
         names that replaces it (plantgen.scene.EFFECTS; an unknown name is an error)
     shadow_res : shadow map texels per side; shadow_caster : "relief" or "inner"
+    background : None (the sky) or (r, g, b, a) in [0, 1] (:func:`plantgen.images.parse_background`;
+        a = 0: transparent, the image gets an alpha channel)
+    ssaa : samples per pixel side (supersampling, 1..8): the frame is drawn ssaa² times larger
+        and averaged down in linear light
     time_s : seconds: the pose of an animated scene for a still (default 0), or the first
-        frame's time of an animation
-    frames, fps : write ``frames`` frames at ``fps`` to a ``.gif``/``.webp`` output
+        frame's time of an animation; frames, fps : render ``frames`` frames at ``fps``
+    timed_frames : 0 draws a still once; N draws a warm-up and N timed frames and the
+        report quotes their median
+    exact_distance : with ``ssaa`` > 1, one more draw at one sample a pixel gives the
+        distances through the pixel centres (else: the sub-sample nearest each centre)
     progress : callable(done, total) called after each animation frame
-    depth_out : path of a float32 (height, width) array of distances along each pixel's
-        ray from the eye (``inf`` for a miss), row 0 the top row of the PNG
-    timed_frames : frames rendered after a warm-up frame; the report quotes their median
     names : how the caller spells the knobs in messages (see :func:`check_render_outputs`)
     limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
         render is estimated to take, before any is allocated) and the folders a scene may
         read grammars from
     """
-    output = Path(output)
     limits = _in_force(limits)
-    check_render_outputs(output, frames, fps, depth_out, camera_out, names, time_s=time_s)
-    cam_file = None if camera in ("auto", None) else _camera_file(camera, size, limits)
+    check_render_request(frames, fps, time_s, {**(names or {})}, ssaa, timed_frames)
+    cam_file = camera if isinstance(camera, Camera) else (
+        None if camera in ("auto", None) else _camera_file(camera, size, limits))
+    if isinstance(camera, Camera) and size is not None:
+        cam_file = Camera(camera.eye, camera.target, camera.up, camera.fov_y, size[0], size[1])
     width, height = (cam_file.width, cam_file.height) if cam_file is not None else (size or (1024, 768))
-    _check_render_memory(limits, str(output), width, height, frames, shadow_res)
-    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
-    chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
-                             add=[n for n, f in (("relief", relief), ("shadows", shadows)) if f],
-                             remove=[n for n, f in (("relief", relief), ("shadows", shadows))
-                                     if f is False])
-    if len(grown.skeleton) == 0:
-        raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
+    _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=int(ssaa))
+    model = prepare_model(input_path, seed=seed, iterations=iterations, effects=effects, relief=relief,
+                          shadows=shadows, limits=limits, allow_paths=allow_paths)
     _check_render_memory(limits, str(input_path), width, height, frames,
-                         shadow_res if "shadows" in chosen else None, len(grown.skeleton))
-    anim, t_start = animate_model(grown, chosen), float(time_s or 0.0)
-    frusta = check_finite_frusta(anim.frusta_at(t_start), input_path)
-    staging = stage_model(grown, frusta, width, height, camera=cam_file)
-    cam = staging.camera
-    knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
-             "march_density": march_density}
-    settings = RaycastSettings(relief="relief" in chosen, v_exact=v_exact,
-                               **{k: v for k, v in knobs.items() if v is not None})
-    shadow_settings = (ShadowSettings(resolution=int(shadow_res), caster=shadow_caster)
-                       if "shadows" in chosen else None)
-    view = {"camera": cam, "settings": settings, "material_names": frusta.material_names,
-            "light_dir": staging.light_dir, "ground": staging.ground, "shadows": shadow_settings}
-    raycaster = Raycaster()
-    colors, update_times = [], []
+                         shadow_res if "shadows" in model.effects else None, len(model.grown.skeleton), int(ssaa))
+    t_start = float(time_s or 0.0)
+    frusta = model.frusta_at(t_start)
+    staging = stage_model(model.grown, frusta, width, height, camera=cam_file, orbit=orbit)
+    settings, shadow_settings = frame_settings(model.effects, linear_steps=linear_steps, binary_steps=binary_steps,
+                                               march=march, march_density=march_density, v_exact=v_exact,
+                                               shadow_res=shadow_res, shadow_caster=shadow_caster)
+    view = {**frame_arguments(frusta, staging, shadow_settings, background=background, ssaa=ssaa),
+            "settings": settings}
+    raycaster, anim, colors, update_times = Raycaster(), model.anim, [], []
     if frames is not None:
         times = t_start + np.arange(int(frames)) / float(fps)
         if shadow_settings is not None and anim.animated and len(times) > 1:
             view["shadow_box"] = anim.bounds(times[:: max(len(times) // 8, 1)])   # one window
-        colors, frame_times, update_times, result = _render_frames(raycaster, anim, times, view,
-                                                                   progress)
+        colors, frame_times, update_times, result = _render_frames(raycaster, anim, times, view, progress)
+        distance = result.distance
     else:
-        runs = [raycaster.render(frusta, **view) for _ in range(max(int(timed_frames), 1) + 1)]
-        result, frame_times = runs[-1], [r.frame_ms for r in runs[1:]]
-    written = _write_render_outputs(output, result, colors, fps, cam, camera_out, depth_out)
-    return RenderReport(renderer_name(), len(grown.skeleton), len(frusta.base),
-                        float(np.median(frame_times)), cam, settings, written, result, chosen,
-                        shadow_settings, len(colors) or 1,
-                        float(np.median(update_times)) if update_times else 0.0, anim.skin_calls)
+        result, frame_times, distance = _render_still(raycaster, frusta, view, timed_frames, exact_distance)
+    return RenderReport(renderer_name(), len(model.grown.skeleton), len(frusta.base),
+                        float(np.median(frame_times)), staging.camera, settings, [], result, model.effects,
+                        shadow_settings, len(colors) or 1, float(np.median(update_times)) if update_times else 0.0,
+                        anim.skin_calls, int(timed_frames) if frames is None else len(colors), int(ssaa),
+                        background, colors, distance)
+
+
+def _write_render_outputs(output: Path, report: RenderReport, fps, camera_out, depth_out) -> list:
+    result = report.result
+    written = [write_animation(output, report.colors, fps) if report.colors else write_png(output, result.color)]
+    if camera_out is not None:
+        written.append(write_atomically(camera_out, report.camera.save))
+    if depth_out is not None:
+        def save_depth(p):
+            with open(p, "wb") as fh:
+                np.save(fh, report.distance.astype(np.float32))
+        written.append(write_atomically(depth_out, save_depth))
+    return written
+
+
+def render_file(input_path, output, *, camera_out=None, depth_out=None, frames=None, fps=12.0, time_s=None,
+                names=None, **options) -> RenderReport:
+    """:func:`render_model`, then write the image: a PNG (RGBA over a transparent
+    background), or with ``frames`` an animated GIF/WebP; optionally the camera JSON
+    (``camera_out``) and the depth ``.npy`` (``depth_out``: float32 (height, width)
+    distances along each pixel's ray from the eye, ``inf`` for a miss, row 0 the top row
+    of the PNG; with supersampling, from one more draw through the pixel centres).
+    ``options`` are :func:`render_model`'s. Every output is written atomically, and the
+    outputs are checked before any work (one line naming a file that cannot be written)."""
+    output = Path(output)
+    check_render_outputs(output, frames, fps, depth_out, camera_out, names, time_s=time_s)
+    report = render_model(input_path, frames=frames, fps=fps, time_s=time_s, names=names,
+                          exact_distance=depth_out is not None, **options)
+    report.written = _write_render_outputs(output, report, fps, camera_out, depth_out)
+    return report
 
 
 # ---------------------------------------------------------------------- plantgen export

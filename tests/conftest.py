@@ -35,3 +35,20 @@ def gl_ctx():
     yield ctx
     after = ctx.error
     assert after == "GL_NO_ERROR", f"GL error raised during the test: {after}"
+
+
+@pytest.fixture(scope="session")
+def x_display():
+    """A virtual X display (Xvfb) for the viewer's window tests; skipped with the reason
+    when Xvfb, xdotool or the view extra is missing (a failure with PLANTGEN_REQUIRE_VIEWER=1)."""
+    from _viewer import VirtualDisplay, skip_or_fail, viewer_unavailable
+
+    reason = viewer_unavailable()
+    if reason is not None:
+        skip_or_fail(reason)
+    try:
+        display = VirtualDisplay()
+    except (OSError, RuntimeError) as exc:
+        skip_or_fail(f"cannot start Xvfb: {exc}")
+    yield display.name
+    display.stop()

@@ -23,6 +23,7 @@ from .export import export
 from .grow import grow
 from .options import debug_opt, debug_requested
 from .render import render
+from .view import view
 
 __all__ = ["cli", "main"]
 
@@ -38,7 +39,7 @@ def cli() -> None:
     """
 
 
-for _command in (grow, export, render, bench):
+for _command in (grow, export, render, view, bench):
     cli.add_command(debug_opt(_command))
 
 

@@ -15,11 +15,14 @@ from pathlib import Path
 
 import click
 
+from ..errors import PlantgenError
+from ..geometry.camera import MAX_ELEVATION, Orbit
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
 
 __all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "finite", "input_arg", "iterations_opt",
-           "limit_opt", "limits_from", "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt"]
+           "limit_opt", "limits_from", "orbit_from", "orbit_options", "output_opt", "parse_size", "quiet_opt",
+           "seed_opt", "size_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
@@ -68,6 +71,38 @@ def size_opt(*param_decls: str, what: str = "Image size", default: str):
     (width, height) by :func:`parse_size`."""
     return click.option(*(param_decls or ("--size",)), callback=parse_size, metavar="WxH",
                         help=f"{what} (WIDTHxHEIGHT pixels; default: {default}).")
+
+
+# ---------------------------------------------------------------------------- the camera
+def orbit_options(command):
+    """``--azimuth``, ``--elevation``, ``--distance``, ``--zoom``, ``--fov``: a view around
+    the automatically framed model (``plantgen render`` and ``plantgen view``)."""
+    decorators = [
+        click.option("--azimuth", type=float, callback=finite, metavar="DEG",
+                     help="Camera: degrees around the vertical axis (0 looks from +z, 90 from +x; "
+                          "default: the automatic camera's, about 19)."),
+        click.option("--elevation", type=click.FloatRange(-MAX_ELEVATION, MAX_ELEVATION), callback=finite,
+                     metavar="DEG", help="Camera: degrees above the horizontal (default: about 13)."),
+        click.option("--distance", type=click.FloatRange(min=0, min_open=True), callback=finite, metavar="D",
+                     help="Camera: distance from the target in world units (default: framed so the "
+                          "model fills the view)."),
+        click.option("--zoom", type=click.FloatRange(min=0, min_open=True), callback=finite, metavar="F",
+                     help="Camera: divide the distance by F (2: twice as close)."),
+        click.option("--fov", type=click.FloatRange(0, 180, min_open=True, max_open=True), callback=finite,
+                     metavar="DEG", help="Camera: vertical field of view in degrees (default: 40)."),
+    ]
+    for decorator in reversed(decorators):
+        command = decorator(command)
+    return command
+
+
+def orbit_from(azimuth, elevation, distance, zoom, fov) -> Orbit:
+    """The :class:`~plantgen.geometry.camera.Orbit` the camera options give (one line for a
+    value out of range)."""
+    try:
+        return Orbit(azimuth=azimuth, elevation=elevation, distance=distance, zoom=zoom, fov_y=fov)
+    except PlantgenError as exc:
+        raise click.BadParameter(str(exc)) from None
 
 
 # ---------------------------------------------------------------------------- budgets, paths

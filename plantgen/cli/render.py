@@ -8,9 +8,11 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from ..pipeline import render_file
+from ..images import parse_background
+from ..pipeline import RenderReport, render_file
 from ..render.raycast import RaycastSettings
 from ..render.records import RECORD_BYTES
+from ..render.supersample import MAX_SSAA
 from ..scene import EFFECTS, parse_effect_list
 from .options import (
     allow_path_opt,
@@ -19,6 +21,8 @@ from .options import (
     iterations_opt,
     limit_opt,
     limits_from,
+    orbit_from,
+    orbit_options,
     output_opt,
     seed_opt,
     size_opt,
@@ -28,7 +32,8 @@ from .options import (
 MARCH = RaycastSettings()
 
 #: How this command spells the knobs that the library's messages name.
-OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out", "time_s": "--time"}
+OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out", "time_s": "--time",
+                "ssaa": "--ssaa", "timed_frames": "--time-frames"}
 
 
 @click.command()
@@ -56,7 +61,9 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
 @size_opt(default="the camera file's, else 1024x768")
 @click.option("--camera", default="auto", show_default=True, metavar="auto|FILE.json",
               help="'auto' frames the model to span most of the viewport (or uses the "
-                   "scene's camera); a camera JSON written by --camera-out is taken back.")
+                   "scene's camera); a camera JSON written by --camera-out or by the viewer's "
+                   "C key is taken back.")
+@orbit_options
 @click.option("--camera-out", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the camera used (eye, target, up, fov_y, width, height) as JSON.")
 @click.option("--depth-out", type=click.Path(dir_okay=False, path_type=Path),
@@ -78,11 +85,21 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
 @click.option("--v-exact/--v-interpolated", default=False, show_default=True,
               help="Relief: v of (7) per sample, or interpolated between entry and exit "
                    "(the paper's fast path).")
+@click.option("--ssaa", type=click.IntRange(1, MAX_SSAA), default=1, show_default=True, metavar="N",
+              help="Supersampling: N x N rays a pixel, averaged in linear light (thin twigs stop "
+                   "breaking into dots; the frame costs about N² times as much).")
+@click.option("--background", default="sky", show_default=True, metavar="COLOUR|none",
+              help="The background: 'sky', a colour (white, '#20304a') or 'none' for a "
+                   "transparent PNG (RGBA: the alpha is the model's coverage).")
+@click.option("--time-frames", "timed_frames", type=click.IntRange(0, 10000), default=0, show_default=True,
+              metavar="N", help="Draw a still N more times after the first and print the median "
+                                "frame time (0: draw once).")
 @limit_opt
 @allow_path_opt
 def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shadow_caster, frames,
-           fps, time_s, size, camera, camera_out, depth_out, seed, iterations, march,
-           march_density, linear_steps, binary_steps, v_exact, limit_values, allow_paths) -> None:
+           fps, time_s, size, camera, azimuth, elevation, distance, zoom, fov, camera_out, depth_out, seed,
+           iterations, march, march_density, linear_steps, binary_steps, v_exact, ssaa, background,
+           timed_frames, limit_values, allow_paths) -> None:
     """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     into a PNG.
 
@@ -91,14 +108,25 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
     the effects in use are simulated: no shadow pass without shadows, no relief march
     without relief, no re-skinning of what does not move.
 
+    The camera is framed automatically (or is the scene's); --azimuth, --elevation,
+    --distance or --zoom and --fov turn it around the model, or --camera takes a camera
+    JSON back. A still is drawn once; --time-frames N times N more draws and prints the
+    median. An animation shows a progress bar on stderr.
+
     \b
-    Example:
+    Examples:
       plantgen render grammars/saguaro.yaml -o saguaro.png --relief --size 1024x768 \\
           --camera-out cam.json --depth-out depth.npy
+      plantgen render pine -o pine.png --azimuth 60 --elevation 20 --zoom 1.5 --ssaa 3
+      plantgen render elm -o elm.png --background none          # transparent PNG
       plantgen render grammars/dancing_cacti.yaml --frames 48 --fps 24 -o dance.gif
     """
+    orbit = orbit_from(azimuth, elevation, distance, zoom, fov)
     if camera != "auto" and not Path(camera).exists():
         raise PlantgenError(f"{camera}: no such camera file (use 'auto' or a camera JSON)")
+    if camera != "auto" and not orbit.empty:
+        raise click.UsageError("--azimuth, --elevation, --distance, --zoom and --fov turn the automatic "
+                               "camera: leave them out with --camera FILE")
     chosen = parse_effect_list(effects) if effects is not None else None
     bar = None
 
@@ -111,32 +139,49 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
         if done == total:
             bar.__exit__(None, None, None)
 
-    report = render_file(input, output, size=size, camera=camera, camera_out=camera_out,
+    report = render_file(input, output, size=size, camera=camera, orbit=orbit, camera_out=camera_out,
                          depth_out=depth_out, seed=seed, iterations=iterations, relief=relief,
                          linear_steps=linear_steps, binary_steps=binary_steps, v_exact=v_exact,
                          march=march, march_density=march_density,
                          effects=chosen, shadows=shadows, shadow_res=shadow_res,
                          shadow_caster=shadow_caster, time_s=time_s, frames=frames, fps=fps,
+                         background=parse_background(background), ssaa=ssaa, timed_frames=timed_frames,
                          progress=progress, names=OPTION_NAMES, limits=limits_from(limit_values),
                          allow_paths=allow_paths)
-    s = report.settings
+    print_report(report)
+
+
+def describe_method(s: RaycastSettings) -> str:
+    """RC, or RC+R with its march, as the report and the viewer's heads-up line name it."""
+    if not s.relief:
+        return "RC"
     steps = (f"{s.linear_steps} linear + {s.binary_steps} binary steps" if s.march == "fixed" else
              f"adaptive march, {s.march_density:g} samples per texel, at most {s.linear_steps} linear "
              f"+ {s.binary_steps} binary steps")
-    mode = (f"RC+R ({steps}, "
-            f"v {'exact' if s.v_exact else 'interpolated'})" if s.relief else "RC")
+    return f"RC+R ({steps}, v {'exact' if s.v_exact else 'interpolated'})"
+
+
+def print_report(report: RenderReport) -> None:
+    """The render's report on stdout: GL renderer, segments, effects, frame time, files."""
+    mode = describe_method(report.settings)
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")
     click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
                f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
     click.echo("effects: " + (", ".join(report.effects) or "none")
                + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
+    size = f"{cam.width}x{cam.height}"
+    if report.ssaa > 1:
+        n = report.ssaa
+        size += (f" with {n}x{n} supersampling ({n * n} samples a pixel: a {cam.width * n}x{cam.height * n} "
+                 f"frame, averaged down in {report.result.stats.resolve_ms:.0f} ms more)")
     if report.frames > 1:
         click.echo(f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
-                   f"{report.update_ms:.1f} ms update (pose, skin, upload) at "
-                   f"{cam.width}x{cam.height}, {mode}")
+                   f"{report.update_ms:.1f} ms update (pose, skin, upload) at {size}, {mode}")
+    elif report.timed:
+        click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
+                   f"(median of {report.timed} frames after a warm-up)")
     else:
-        click.echo(f"frame: {report.frame_ms:.1f} ms at {cam.width}x{cam.height}, {mode} "
-                   "(median of 3 frames after a warm-up)")
+        click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
+                   "(one draw, the driver's first: --time-frames N for a median)")
     click.echo("wrote " + ", ".join(str(p) for p in report.written))
-

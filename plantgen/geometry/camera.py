@@ -22,7 +22,15 @@ from ..limits import limits as default_limits
 from ..tolerances import tol
 from .frusta import Frusta, frusta_bounds, section_points
 
-__all__ = ["Camera", "CameraError", "auto_camera", "box_corners", "depth_range"]
+__all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "box_corners", "depth_range", "orbit_angles",
+           "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
+
+#: The direction :func:`auto_camera` looks from (from the model towards the eye, not unit).
+AUTO_DIRECTION = (0.35, 0.25, 1.0)
+
+#: Elevations are kept this far from the poles (degrees), where the view's up (+y) would be
+#: parallel to the view direction.
+MAX_ELEVATION = 89.0
 
 
 class CameraError(PlantgenError, ValueError):
@@ -123,6 +131,13 @@ class Camera:
         return {"eye": list(self.eye), "target": list(self.target), "up": list(self.up),
                 "fov_y": self.fov_y, "width": self.width, "height": self.height}
 
+    def scaled(self, factor: int) -> Camera:
+        """The same view at ``factor`` times the pixels per side: each pixel's
+        ``factor`` x ``factor`` sub-pixel centres are the rays of the larger image (the
+        samples of supersampling)."""
+        return Camera(self.eye, self.target, self.up, self.fov_y, self.width * int(factor),
+                      self.height * int(factor))
+
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
 
@@ -168,7 +183,7 @@ class Camera:
 
 # ---------------------------------------------------------------------- framing
 def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: float = 40.0,
-                direction=(0.35, 0.25, 1.0), fill: float = 0.9) -> Camera:
+                direction=AUTO_DIRECTION, fill: float = 0.9) -> Camera:
     """A camera looking from ``direction`` at the model, as close as it can be while every
     frustum stays inside ``fill`` of the viewport: the model spans most of the viewport
     (as the paper measured). Tighter than a bounding sphere for tall, thin plants.
@@ -207,6 +222,95 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
     dist = _framing_distance(rel @ right, rel @ up, rel @ fwd, radius, tan_x, tan_y)
     eye = target - fwd * dist
     return Camera(tuple(eye.tolist()), tuple(target.tolist()), (0.0, 1.0, 0.0), fov_y, width, height)
+
+
+# ---------------------------------------------------------------------- orbits
+@dataclass(frozen=True)
+class Orbit:
+    """A view given as angles around a target, as the command line and the viewer give it.
+
+    azimuth : degrees about +y; 0 looks from +z towards -z, 90 from +x (None: keep)
+    elevation : degrees above the horizontal, within +-89 (None: keep)
+    distance : eye-target distance in world units (None: keep, or frame the model anew)
+    zoom : divides the distance (2: twice as close; None: 1)
+    fov_y : vertical field of view in degrees (None: keep)
+    """
+
+    azimuth: float | None = None
+    elevation: float | None = None
+    distance: float | None = None
+    zoom: float | None = None
+    fov_y: float | None = None
+
+    def __post_init__(self):
+        for name in ("azimuth", "elevation", "distance", "zoom", "fov_y"):
+            value = getattr(self, name)
+            if value is not None and not np.isfinite(value):
+                raise CameraError(f"camera {name} must be a finite number, got {value!r}")
+        if self.elevation is not None and abs(self.elevation) > MAX_ELEVATION:
+            raise CameraError(f"camera elevation must lie within +-{MAX_ELEVATION:g} degrees, got {self.elevation:g}")
+        if self.distance is not None and not 0 < self.distance <= tol.max_coordinate:
+            raise CameraError(f"camera distance must lie in (0, {tol.max_coordinate:g}], got {self.distance:g}")
+        if self.zoom is not None and not 0 < self.zoom <= 1e6:
+            raise CameraError(f"camera zoom must lie in (0, 1e6], got {self.zoom:g}")
+        if self.fov_y is not None and not 0 < self.fov_y < 180:
+            raise CameraError(f"camera fov must lie in (0, 180) degrees, got {self.fov_y:g}")
+
+    @property
+    def empty(self) -> bool:
+        """True when no value is given (the view stays as it is)."""
+        return all(getattr(self, n) is None for n in ("azimuth", "elevation", "distance", "zoom", "fov_y"))
+
+    @property
+    def turns(self) -> bool:
+        """True when the direction or the field of view changes (a framed view is framed anew)."""
+        return any(getattr(self, n) is not None for n in ("azimuth", "elevation", "fov_y"))
+
+
+def orbit_direction(azimuth: float, elevation: float) -> np.ndarray:
+    """(3,) unit vector from the target towards the eye at ``azimuth``, ``elevation`` (degrees)."""
+    az, el = np.radians(azimuth), np.radians(elevation)
+    return np.array([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)])
+
+
+def orbit_angles(camera: Camera) -> tuple[float, float, float]:
+    """(azimuth, elevation, distance) of ``camera``'s eye around its target (degrees, world
+    units): the inverse of :func:`orbit_direction` times the distance."""
+    d = np.asarray(camera.eye, dtype=np.float64) - np.asarray(camera.target, dtype=np.float64)
+    dist = float(np.linalg.norm(d))
+    if dist == 0:
+        raise CameraError("camera eye and target coincide")
+    azimuth = float(np.degrees(np.arctan2(d[0], d[2])))
+    elevation = float(np.degrees(np.arcsin(np.clip(d[1] / dist, -1.0, 1.0))))
+    return azimuth, elevation, dist
+
+
+def orbit_view(base: Camera, orbit: Orbit, frame=None) -> Camera:
+    """``base`` turned, moved and zoomed as ``orbit`` says, around ``base``'s target.
+
+    Values ``orbit`` leaves out keep ``base``'s. ``frame`` (optional) is a callable
+    ``frame(direction, fov_y) -> Camera`` that frames the model from a new direction (the
+    auto camera): when ``orbit`` turns the view and gives no distance, the view is framed
+    anew, so the model still fills it. The up vector is +y; the elevation is kept within
+    +-89 degrees.
+    """
+    if orbit.empty:
+        return base
+    az0, el0, dist = orbit_angles(base)
+    azimuth = az0 if orbit.azimuth is None else orbit.azimuth
+    elevation = float(np.clip(el0 if orbit.elevation is None else orbit.elevation, -MAX_ELEVATION, MAX_ELEVATION))
+    fov_y = base.fov_y if orbit.fov_y is None else orbit.fov_y
+    direction = orbit_direction(azimuth, elevation)
+    target = np.asarray(base.target, dtype=np.float64)
+    if frame is not None and orbit.turns and orbit.distance is None:
+        framed = frame(direction, fov_y)
+        target = np.asarray(framed.target, dtype=np.float64)
+        dist = float(np.linalg.norm(np.asarray(framed.eye) - target))
+    if orbit.distance is not None:
+        dist = float(orbit.distance)
+    dist /= orbit.zoom or 1.0
+    eye = target + direction * dist
+    return Camera(tuple(eye.tolist()), tuple(target.tolist()), (0.0, 1.0, 0.0), fov_y, base.width, base.height)
 
 
 def _framing_distance(a, b, z, radius, tan_x, tan_y) -> float:

@@ -24,8 +24,29 @@ from .context import gl_context, release_framebuffer
 from .materials import HeightTextures, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, ShadowSettings, light_window
 from .shaders import build_program, mat4, set_uniforms
+from .supersample import MAX_SSAA, resolve_supersamples
 
-__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting"]
+__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "check_background", "check_ssaa"]
+
+
+def check_background(background) -> tuple | None:
+    """``background`` as the frame takes it: None (the sky) or (r, g, b, a) floats in
+    [0, 1], display-encoded; a = 0 makes the background transparent (the image gets an
+    alpha channel: coverage)."""
+    if background is None:
+        return None
+    values = tuple(float(v) for v in background)
+    if len(values) != 4 or not all(0.0 <= v <= 1.0 for v in values):
+        raise ValueError(f"background must be (r, g, b, a) in [0, 1], got {background!r}")
+    return values
+
+
+def check_ssaa(ssaa) -> int:
+    """The supersampling factor as an int in 1..MAX_SSAA."""
+    n = int(ssaa)
+    if n != ssaa or not 1 <= n <= MAX_SSAA:
+        raise ValueError(f"ssaa must be an integer in 1..{MAX_SSAA}, got {ssaa!r}")
+    return n
 
 
 @dataclass(frozen=True)
@@ -109,6 +130,7 @@ class OffscreenRenderer:
         self._shadow = ShadowPass(self.ctx)
         self._sky_vao = None
         self.last_light_window = None
+        self.last_resolve_ms = 0.0
 
     def release(self) -> None:
         """Free the framebuffer, the height textures and the shadow map (they are made
@@ -142,10 +164,15 @@ class OffscreenRenderer:
                         shadow_max_slope=shadows.max_slope, shadow_map=1)
         return FrameLighting(names, shading, window, receiver)
 
-    def _sky(self, view: FrameView, lighting: FrameLighting):
-        """The sky's full-screen triangle (vertex array cached per program)."""
-        sky = build_program(self.ctx, "sky.glsl")
-        set_uniforms(sky, **view.ray_uniforms(), **lighting.shading)
+    def _sky(self, view: FrameView, lighting: FrameLighting, background=None):
+        """The background's full-screen triangle (vertex array cached per program): the sky,
+        or with ``background`` (r, g, b, a) a flat colour (see :func:`check_background`)."""
+        if background is None:
+            sky = build_program(self.ctx, "sky.glsl")
+            set_uniforms(sky, **view.ray_uniforms(), **lighting.shading)
+        else:
+            sky = build_program(self.ctx, "sky.glsl", {"FLAT_BACKGROUND": True})
+            set_uniforms(sky, background=tuple(background))
         if self._sky_vao is None or self._sky_vao.program is not sky:
             self._sky_vao = self.ctx.vertex_array(sky, [])
         return self._sky_vao
@@ -237,13 +264,23 @@ class OffscreenRenderer:
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
         return frame_ms, shadow_ms
 
-    def _read_back(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-        """The frame's (height, width, 3) uint8 colour and (height, width) float32 distance,
-        row 0 the top row."""
+    def _read_back(self, width: int, height: int, *, ssaa: int = 1,
+                   alpha: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
+        and (height, width) float32 distance, row 0 the top row; a frame drawn with
+        ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
+        averaged down (:func:`plantgen.render.supersample.resolve_supersamples`)."""
         fbo = self._fbo
-        color = np.frombuffer(fbo.read(components=3, attachment=0, alignment=1), np.uint8)
-        color = color.reshape(height, width, 3)[::-1].copy()
+        w, h, k = width * ssaa, height * ssaa, 4 if alpha else 3
+        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)
+        color = color.reshape(h, w, k)[::-1]
         dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
-                             np.float32).reshape(height, width)[::-1].copy()
-        return color, dist
+                             np.float32).reshape(h, w)[::-1]
+        self.last_resolve_ms = 0.0
+        if ssaa == 1:
+            return color.copy(), dist.copy()
+        t0 = time.perf_counter()
+        out = resolve_supersamples(color, dist, ssaa)
+        self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
+        return out
 

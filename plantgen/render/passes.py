@@ -66,15 +66,16 @@ class ShadowSettings:
             raise PlantgenError("shadow march density and precision must be > 0")
 
 
-def program_variants(settings, shadows: ShadowSettings | None, ground: bool) -> list:
+def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False) -> list:
     """(program file, defines) of every program one frame uses.
 
     ``settings`` is the :class:`~plantgen.render.raycast.RaycastSettings` (relief on iff the
     effects hold ``relief``); ``shadows`` is None without the ``shadows`` effect (then no
-    shadow pass runs and no program samples a map); ``ground``: the scene has a ground.
+    shadow pass runs and no program samples a map); ``ground``: the scene has a ground;
+    ``flat_background``: a flat colour (or transparency) instead of the sky.
     """
     shadowed = shadows is not None
-    out = [("sky.glsl", {})]
+    out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
     if shadowed:
         out.append(("raycast.glsl", {"SHADOW_PASS": True,
                                      "RELIEF": settings.relief and shadows.caster == "relief"}))

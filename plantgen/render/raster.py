@@ -19,7 +19,7 @@ from ..geometry.camera import Camera, box_corners
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.stage import Ground
 from .context import gl_context
-from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
+from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
 from .passes import ShadowSettings, frame_passes
 from .result import RasterStats, RenderResult, WorkCounter
 from .shaders import build_program, mat4, set_uniforms
@@ -98,7 +98,7 @@ class RasterRenderer(OffscreenRenderer):
     def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None,
-               count_work: bool = False) -> RenderResult:
+               count_work: bool = False, background=None, ssaa: int = 1) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -116,8 +116,11 @@ class RasterRenderer(OffscreenRenderer):
             bounds), as for the ray caster
         count_work : a diagnostic render that also counts the fragments shaded
             (``stats.work``), as for the ray caster
+        background, ssaa : a flat or transparent background and supersampling, as for the
+            ray caster
         """
         names = tuple(material_names or mesh.material_names)
+        background, ssaa = check_background(background), check_ssaa(ssaa)
         shadowed = shadows is not None
         program = build_program(self.ctx, "raster.glsl",
                                 {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
@@ -126,7 +129,7 @@ class RasterRenderer(OffscreenRenderer):
         vao, origin = self.upload(mesh, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
         bounds = _mesh_bounds(mesh)
-        view = frame_view(camera, [box_corners(bounds)] + ([] if ground is None else [ground.quad()]))
+        view = frame_view(camera.scaled(ssaa), [box_corners(bounds)] + ([] if ground is None else [ground.quad()]))
         tex, repeats = self._heights.get(names)
         box = None if not shadowed else (bounds if shadow_box is None else np.asarray(shadow_box, np.float64))
         lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye)
@@ -143,17 +146,19 @@ class RasterRenderer(OffscreenRenderer):
             if ground_light_draw is not None:
                 shadow_draws.append(ground_light_draw)
         counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting), ground_vao,
+        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), ground_vao,
                                                draw_mesh, shadows, shadow_draws)
         for obj in garbage:
             if obj is not None:
                 obj.release()
-        color, dist = self._read_back(camera.width, camera.height)
+        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
+                                      alpha=background is not None and background[3] < 1)
         work = counter.read(dist) if counter is not None else None
         stats = RasterStats(
             passes=frame_passes(shadowed, ground_vao is not None, len(mesh.faces) > 0),
             near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window,
-            upload_ms=upload_ms, triangles=len(mesh.faces), vertices=len(mesh.vertices),
+            upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces),
+            vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
             draw_calls=1 + (ground_vao is not None), work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)

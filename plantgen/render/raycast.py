@@ -25,7 +25,7 @@ from ..geometry.camera import Camera, box_corners
 from ..geometry.frusta import frusta_bounds
 from ..geometry.stage import Ground
 from .context import gl_context
-from .frame import FrameLighting, FrameView, OffscreenRenderer, frame_view
+from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
 from .passes import ShadowSettings, frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
 from .result import RaycastStats, RenderResult, WorkCounter
@@ -120,7 +120,8 @@ class Raycaster(OffscreenRenderer):
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
                material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
-               shadow_box=None, record_buffer=None, count_work: bool = False) -> RenderResult:
+               shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
+               ssaa: int = 1) -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
 
         Parameters
@@ -143,16 +144,23 @@ class Raycaster(OffscreenRenderer):
             uploaded here
         count_work : a diagnostic render that also counts the fragments shaded and the
             relief samples taken (``stats.work``); its time is not the plain program's
+        background : None (the sky) or (r, g, b, a) in [0, 1], display-encoded: a flat
+            colour; a = 0 gives a transparent background and a colour with alpha
+            (``color`` is (h, w, 4))
+        ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
+            size and averaged down (:mod:`plantgen.render.supersample`); ``frame_ms`` is
+            the large frame's
         """
         n = len(frusta.base)
+        background, ssaa = check_background(background), check_ssaa(ssaa)
         t0 = time.perf_counter()
         records = pack_records(frusta, camera.eye) if record_buffer is None else None
         pack_ms = (time.perf_counter() - t0) * 1e3
         points = [] if ground is None else [ground.quad()]
         if n:
             points.append(box_corners(frusta_bounds(frusta)))
-        view = frame_view(camera, points)
-        programs = self._programs(settings, shadows, ground is not None, count_work)
+        view = frame_view(camera.scaled(ssaa), points)
+        programs = self._programs(settings, shadows, ground is not None, count_work, background is not None)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (frusta_bounds(frusta) if shadow_box is None
                                             else np.asarray(shadow_box, np.float64))
@@ -174,9 +182,10 @@ class Raycaster(OffscreenRenderer):
             shadow_draws.append(light_draw)
             garbage.append(light_vao)
         counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting), ground_vao,
+        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), ground_vao,
                                                draw_frusta, shadows, shadow_draws)
-        color, dist = self._read_back(camera.width, camera.height)
+        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
+                                      alpha=background is not None and background[3] < 1)
         work = counter.read(dist) if counter is not None else None
         for obj in (vao, *garbage):
             if obj is not None:
@@ -185,16 +194,17 @@ class Raycaster(OffscreenRenderer):
             passes=frame_passes(shadows is not None, ground is not None, n > 0), near=view.near,
             far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
-            pack_ms=pack_ms, program=("raycast.glsl", settings.defines()),
-            programs=programs["built"], work=work)
+            pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
+            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
-    def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False) -> dict:
+    def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
+                  flat_background: bool = False) -> dict:
         """Build every program the frame uses (plantgen.render.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
         (file, defines switched on) built."""
-        variants = program_variants(settings, shadows, ground)
+        variants = program_variants(settings, shadows, ground, flat_background)
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
         for name, defines in variants:

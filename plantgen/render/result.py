@@ -66,6 +66,8 @@ class RenderStats:
     light_window : the light's window of the shadow map, None without shadows
     upload_ms : CPU milliseconds spent uploading geometry inside the render call (a mesh
         for GS; 0 for the ray caster, whose records are timed by ``pack_ms``)
+    ssaa : samples per pixel side the frame was drawn with; resolve_ms : CPU milliseconds
+        averaging them down (0 without supersampling)
     """
 
     passes: list
@@ -74,6 +76,8 @@ class RenderStats:
     shadow_ms: float
     light_window: LightWindow | None
     upload_ms: float = 0.0
+    ssaa: int = 1
+    resolve_ms: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,508 @@
+"""What the viewer shows and how it changes, apart from any window: the model, the camera,
+the method and its knobs, the time of an animated scene, live reload, and the frames,
+drawn by the same :class:`~plantgen.render.raycast.Raycaster` (RC, RC+R) and
+:class:`~plantgen.render.raster.RasterRenderer` (GS, GS+R) as ``plantgen render``, with the
+same arguments (:func:`plantgen.pipeline.frame_arguments`), so a saved camera reproduces a
+frame pixel for pixel.
+
+A :class:`ViewerSession` needs only a moderngl context: the window (``window.py``) feeds it
+events and presents its frames; the tests drive it headless too.
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+import statistics
+import time
+from collections import deque
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..files import write_atomically
+from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
+from ..geometry.mesh import tessellate, triangle_count
+from ..images import write_png
+from ..limits import Limits
+from ..pipeline import PreparedModel, frame_arguments, frame_settings, prepare_model, stage_model
+from ..render.raster import RasterRenderer
+from ..render.raycast import Raycaster, RaycastSettings
+from ..render.supersample import MAX_SSAA
+from .keys import binding_for
+from .watch import BackgroundJob, FileWatcher
+
+__all__ = ["METHODS", "ViewOptions", "ViewerSession", "FrameStats", "one_line"]
+
+#: The methods of Table 1, as the keys 1..4 choose them.
+METHODS = ("RC", "RC+R", "GS", "GS+R")
+
+#: The most triangles a GS level may have in the viewer (the level is refused above).
+VIEW_MAX_TRIANGLES = 24_000_000
+
+#: Degrees the view turns per pixel of a left drag.
+DRAG_TURN = 0.4
+
+#: How many frames the heads-up line's medians look back.
+HUD_FRAMES = 30
+
+#: The largest GS subdivision level the keys reach (the triangle budget may stop it sooner).
+MAX_LEVEL = 6
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as the viewer shows it: a PlantgenError's message, else its class and
+    message, on one line."""
+    text = " ".join(str(exc).split()) or exc.__class__.__name__
+    if not isinstance(exc, PlantgenError):
+        text = f"unexpected failure: {exc.__class__.__name__}: {text}"
+    return text[:300]
+
+
+@dataclass
+class ViewOptions:
+    """How ``plantgen view`` was asked to start (its options; see ``plantgen view --help``)."""
+
+    input: Path
+    size: tuple = (1024, 768)
+    seed: int | None = None
+    iterations: int | None = None
+    effects: list | None = None
+    relief: bool | None = None
+    shadows: bool | None = None
+    method: str | None = None
+    level: int = 1
+    ssaa: int = 1
+    background: tuple | None = None
+    background_name: str | None = None
+    camera: Path | None = None
+    orbit: Orbit = field(default_factory=Orbit)
+    time_s: float = 0.0
+    linear_steps: int | None = None
+    binary_steps: int | None = None
+    march: str | None = None
+    shadow_res: int = 2048
+    shots: Path = Path(".")
+    watch: bool = True
+    poll_s: float = 0.025
+    snapshot: Path | None = None
+    limits: Limits | None = None
+    allow_paths: tuple = ()
+
+
+@dataclass
+class FrameStats:
+    """One drawn frame: the renderer's frame ms (draw to finish) and the wall ms of the
+    whole frame (skin or pose, draw, read-back), when it was drawn."""
+
+    frame_ms: float
+    wall_ms: float
+    at: float
+
+
+class ViewerSession:
+    """The viewer's state and its frames (see the module's docstring).
+
+    Parameters
+    ----------
+    ctx : the moderngl context to draw with (the window's)
+    options : :class:`ViewOptions`
+    model : the first model, grown by the caller (:func:`prepare_model`)
+    say, warn : callables printing one line on stdout / stderr
+    """
+
+    def __init__(self, ctx, options: ViewOptions, model: PreparedModel, *, say=print, warn=print):
+        self.ctx, self.options, self.say, self.warn = ctx, options, say, warn
+        self.model = model
+        self.renderer = str(ctx.info["GL_RENDERER"])
+        self.raycaster = Raycaster(ctx)
+        self.raster: RasterRenderer | None = None
+        self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
+        self.level = int(options.level)
+        defaults = RaycastSettings()
+        self.linear_steps = options.linear_steps or defaults.linear_steps
+        self.binary_steps = defaults.binary_steps if options.binary_steps is None else options.binary_steps
+        self.march = options.march or defaults.march
+        self.shadows = "shadows" in model.effects
+        self.ssaa = int(options.ssaa)
+        self.t = float(options.time_s)
+        self.playing = False
+        self.show_help = False
+        self.closing = False                   # Q or Esc: the window's loop ends
+        self.want_window_shot = False          # Shift+P: the window saves itself after its next draw
+        self.status, self.error = "", None
+        self.frames: deque[FrameStats] = deque(maxlen=HUD_FRAMES)
+        self.last = None                       # the last RenderResult
+        self.dirty = True
+        self._frusta_key = self._frusta = None
+        self._mesh_key = self._mesh = None
+        self._shadow_box = None
+        self._saved_ns = None                  # a reload's save time, until its frame is shown
+        self._reload_timings: dict = {}
+        self.camera = self._initial_camera(*options.size)
+        self.watcher = FileWatcher(model.grown.sources if options.watch else (), options.poll_s)
+        self.reloader = BackgroundJob(self._grow)
+
+    # ------------------------------------------------------------------ the model
+    def _grow(self, t: float, saved_ns: int):
+        """The reload's work (background thread): grow, skin at ``t``; returns (model, frusta,
+        seconds of each stage)."""
+        o = self.options
+        t0 = time.perf_counter()
+        model = prepare_model(o.input, seed=o.seed, iterations=o.iterations, effects=o.effects, relief=o.relief,
+                              shadows=o.shadows, limits=o.limits, allow_paths=o.allow_paths)
+        frusta = model.frusta_at(t)
+        total = time.perf_counter() - t0
+        grow = sum(model.grown.timings.values())      # read, parse, derive, interpret (place)
+        return model, frusta, {"grow": grow, "skin": max(total - grow, 0.0)}
+
+    def _initial_camera(self, width: int, height: int) -> Camera:
+        o = self.options
+        frusta = self.frusta()
+        base = Camera.load(o.camera, o.limits) if o.camera is not None else None
+        if base is not None:
+            base = Camera(base.eye, base.target, base.up, base.fov_y, width, height)
+        return stage_model(self.model.grown, frusta, width, height, camera=base, orbit=o.orbit).camera
+
+    def frusta(self):
+        """The model's rows at the current time (skinned once for a still model)."""
+        t = self.t if self.model.animated else 0.0
+        key = self._frusta_key
+        if key is None or key[0] is not self.model or key[1] != t:     # the objects, not their ids
+            self._frusta, self._frusta_key = self.model.frusta_at(t), (self.model, t)
+        return self._frusta
+
+    def mesh(self, frusta):
+        """The GS / GS+R tessellation of ``frusta`` at the current level (cached)."""
+        relief = self.method == "GS+R"
+        key = self._mesh_key
+        if key is None or key[0] is not frusta or key[1:] != (self.level, relief):
+            self._mesh = None
+            self._mesh = tessellate(frusta, self.level, relief=relief)
+            self._mesh_key = (frusta, self.level, relief)
+        return self._mesh
+
+    # ------------------------------------------------------------------ the frame
+    def effects(self) -> tuple:
+        """The effects of the frame: the model's, with relief and shadows as the viewer
+        has them now."""
+        keep = [e for e in self.model.effects if e not in ("relief", "shadows")]
+        return tuple(keep + (["relief"] if self.method.endswith("+R") else [])
+                     + (["shadows"] if self.shadows else []))
+
+    def settings(self) -> RaycastSettings:
+        return frame_settings(self.effects(), linear_steps=self.linear_steps, binary_steps=self.binary_steps,
+                              march=self.march)[0]
+
+    def draw(self, width: int, height: int):
+        """Render the current frame at ``width`` x ``height`` (the window's pixels);
+        returns the :class:`~plantgen.render.result.RenderResult`."""
+        if (width, height) != (self.camera.width, self.camera.height):
+            self.camera = replace(self.camera, width=int(width), height=int(height))
+        t0 = time.perf_counter()
+        frusta = self.frusta()
+        staging = stage_model(self.model.grown, frusta, width, height, camera=self.camera)
+        settings, shadow = frame_settings(self.effects(), linear_steps=self.linear_steps,
+                                          binary_steps=self.binary_steps, march=self.march,
+                                          shadow_res=self.options.shadow_res)
+        args = frame_arguments(frusta, staging, shadow, background=self.options.background, ssaa=self.ssaa)
+        if shadow is not None and self.playing and self.model.animated:
+            args["shadow_box"] = self._playing_shadow_box()
+        if self.method.startswith("RC"):
+            result = self.raycaster.render(frusta, settings=settings, **args)
+        else:
+            if self.raster is None:
+                self.raster = RasterRenderer(self.ctx)
+            result = self.raster.render(self.mesh(frusta), frusta, **args)
+        self.last = result
+        self.frames.append(FrameStats(result.frame_ms, (time.perf_counter() - t0) * 1e3, time.monotonic()))
+        self.dirty = False
+        return result
+
+    def _playing_shadow_box(self):
+        """One light window for the whole animation while it plays (shadows do not shimmer)."""
+        if self._shadow_box is None or self._shadow_box[0] is not self.model:
+            times = np.linspace(0.0, 10.0, 16, endpoint=False)
+            self._shadow_box = (self.model, self.model.anim.bounds(times))
+        return self._shadow_box[1]
+
+    def presented(self) -> dict | None:
+        """The window calls this after a frame is on screen: a reload's time from the save
+        to this frame is printed here, and returned ({"total": s, "detect": s, "grow": s,
+        "skin": s, "draw": s}; None when no reload waited for this frame)."""
+        if self._saved_ns is None:
+            return None
+        total = (time.time_ns() - self._saved_ns) / 1e9
+        timings = {**self._reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
+        parts = ", ".join(f"{k} {v:.2f}" for k, v in timings.items())
+        self.say(f"reloaded {self.model.source}: {len(self.model.grown.skeleton):,} segments, "
+                 f"{total:.2f} s from save to frame ({parts} s)")
+        self.status = f"reloaded: {total:.2f} s from save to frame"
+        self._saved_ns = None
+        return {"total": total, **timings}
+
+    # ------------------------------------------------------------------ time passes
+    def tick(self, dt: float, now: float | None = None) -> bool:
+        """Advance the clock by ``dt`` seconds: play an animation, poll the watched files
+        and take a finished reload in. Returns True when the frame must be drawn again."""
+        if self.playing and self.model.animated:
+            self.t += dt
+            self.dirty = True
+        if self.options.watch:
+            change = self.watcher.poll(now)
+            if change is not None:
+                self.reloader.start(self.t, change.saved_ns)
+                self.status = "reloading ..."
+        done = self.reloader.result()
+        if done is not None:
+            self._take_reload(*done)
+        return self.dirty
+
+    def _take_reload(self, args, value, exc) -> None:
+        t, saved_ns = args
+        if exc is not None:
+            self.error = one_line(exc)
+            self.status = ""
+            self.warn(f"plantgen view: error: {self.error} (keeping the last good model)")
+            return
+        model, frusta, timings = value
+        self.model, self.error = model, None
+        self._frusta, self._frusta_key = frusta, (model, t if model.animated else 0.0)
+        self._mesh_key = None
+        self.watcher.watch(model.grown.sources)
+        waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
+        self._reload_timings = {"detect": waited, **timings}
+        self._saved_ns = saved_ns
+        self.dirty = True
+
+    # ------------------------------------------------------------------ the controls
+    def key(self, name: str, shift: bool = False) -> bool:
+        """Handle key ``name`` (a pyglet key name); returns False for a key with no binding."""
+        binding = binding_for(name, shift)
+        if binding is None:
+            return False
+        getattr(self, binding.action)(*binding.args)
+        return True
+
+    def orbit(self, d_azimuth: float, d_elevation: float) -> None:
+        """Turn the view around its target by degrees."""
+        az, el, _ = orbit_angles(self.camera)
+        el = float(np.clip(el + d_elevation, -MAX_ELEVATION, MAX_ELEVATION))
+        self.camera = orbit_view(self.camera, Orbit(azimuth=(az + d_azimuth + 180.0) % 360.0 - 180.0, elevation=el))
+        self.dirty = True
+
+    def drag(self, dx: float, dy: float, pan: bool = False) -> None:
+        """A mouse drag of (dx, dy) window pixels (y down): turn, or with ``pan`` move."""
+        if pan:
+            self.pan(dx, dy)
+        else:
+            self.orbit(-DRAG_TURN * dx, DRAG_TURN * dy)
+
+    def pan(self, dx: float, dy: float) -> None:
+        """Move eye and target across the view by (dx, dy) pixels (the target follows the
+        cursor)."""
+        right, up, _ = self.camera.basis()
+        dist = float(np.linalg.norm(np.subtract(self.camera.eye, self.camera.target)))
+        per_pixel = 2.0 * dist * math.tan(math.radians(self.camera.fov_y) / 2) / self.camera.height
+        shift = (-dx * right + dy * up) * per_pixel
+        self.camera = replace(self.camera, eye=tuple((np.asarray(self.camera.eye) + shift).tolist()),
+                              target=tuple((np.asarray(self.camera.target) + shift).tolist()))
+        self.dirty = True
+
+    def pan_view(self, fx: float, fy: float) -> None:
+        """Move the view right and up by fractions of its height (keys; a drag moves the
+        model with the cursor instead)."""
+        self.pan(-fx * self.camera.height, fy * self.camera.height)
+
+    def zoom(self, factor: float) -> None:
+        """Move the eye ``factor`` times closer to the target."""
+        self.camera = orbit_view(self.camera, Orbit(zoom=factor))
+        self.dirty = True
+
+    def scroll(self, notches: float) -> None:
+        self.zoom(1.1 ** notches)
+
+    def reset_view(self) -> None:
+        self.camera = stage_model(self.model.grown, self.frusta(), self.camera.width, self.camera.height).camera
+        self.dirty = True
+
+    def set_method(self, method: str) -> None:
+        self.method = method
+        if method.startswith("GS"):
+            self.change_level(0)
+        self.dirty = True
+
+    def change_level(self, delta: int) -> None:
+        level = int(np.clip(self.level + delta, 0, MAX_LEVEL))
+        frusta = self.frusta()
+        n = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+        while n > VIEW_MAX_TRIANGLES and level > 0:
+            self.status = f"m = {level} would make {n:,} triangles, over the viewer's {VIEW_MAX_TRIANGLES:,}"
+            level -= 1
+            n = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+        self.level = level
+        self.dirty = True
+
+    def scale_linear_steps(self, factor: float) -> None:
+        self.linear_steps = int(np.clip(round(self.linear_steps * factor), 1, 4096))
+        self.dirty = True
+
+    def change_binary_steps(self, delta: int) -> None:
+        self.binary_steps = int(np.clip(self.binary_steps + delta, 0, 64))
+        self.dirty = True
+
+    def toggle_march(self) -> None:
+        self.march = "fixed" if self.march == "adaptive" else "adaptive"
+        self.dirty = True
+
+    def toggle_shadows(self) -> None:
+        self.shadows = not self.shadows
+        self.dirty = True
+
+    def cycle_ssaa(self) -> None:
+        self.ssaa = self.ssaa % min(4, MAX_SSAA) + 1
+        self.dirty = True
+
+    def toggle_play(self) -> None:
+        if not self.model.animated:
+            self.status = "nothing moves in this model (a scene with motion plays)"
+            return
+        self.playing = not self.playing
+        self.dirty = True
+
+    def scrub(self, dt: float) -> None:
+        if not self.model.animated:
+            self.status = "nothing moves in this model (a scene with motion plays)"
+            return
+        self.t = max(0.0, self.t + dt)
+        self.dirty = True
+
+    def toggle_help(self) -> None:
+        self.show_help = not self.show_help
+
+    def quit(self) -> None:
+        self.closing = True
+
+    # ------------------------------------------------------------------ saving
+    def _next_name(self, suffix: str) -> Path:
+        folder = Path(self.options.shots)
+        stem = self.model.grown.name or Path(self.model.source).stem
+        for i in range(1, 100000):
+            path = folder / f"{stem}-{i:03d}{suffix}"
+            if not path.exists() and not path.with_suffix(".png").exists() and not path.with_suffix(".json").exists():
+                return path
+        raise PlantgenError(f"{folder}: no free name for {stem}-NNN{suffix}")
+
+    def current(self):
+        """The frame of the current state: the last one, drawn again first if anything
+        changed since (a key pressed in the same moment as P or C counts)."""
+        if self.dirty or self.last is None:
+            self.draw(self.camera.width, self.camera.height)
+        return self.last
+
+    def screenshot(self) -> Path | None:
+        """Write the current frame as drawn (no heads-up line) as a PNG."""
+        self.current()
+        try:
+            path = write_png(self._next_name(".png"), self.last.color)
+        except PlantgenError as exc:
+            return self._failed(exc)
+        self.say(f"saved screenshot {path} ({self.last.camera.width}x{self.last.camera.height})")
+        self.status = f"saved {path.name}"
+        return path
+
+    def window_shot(self, pixels: np.ndarray | None = None) -> Path | None:
+        """Write ``pixels`` (the window as shown; the window passes them) as a PNG."""
+        if pixels is None:
+            self.want_window_shot = True
+            return None
+        self.want_window_shot = False
+        try:
+            path = write_png(self._next_name(".png"), pixels)
+        except PlantgenError as exc:
+            return self._failed(exc)
+        self.say(f"saved window {path}")
+        self.status = f"saved {path.name}"
+        return path
+
+    def save_camera(self) -> Path | None:
+        """Write the camera of the last frame as JSON and print the ``plantgen render``
+        command that draws the same frame."""
+        camera = self.current().camera
+        try:
+            path = write_atomically(self._next_name(".json"), camera.save)
+        except PlantgenError as exc:
+            return self._failed(exc)
+        self.say(f"saved camera {path}; the same frame: {self.render_command(path)}")
+        self.status = f"saved {path.name}"
+        return path
+
+    def _failed(self, exc) -> None:
+        self.error = one_line(exc)
+        self.warn(f"plantgen view: error: {self.error}")
+
+    def render_command(self, camera_path: Path) -> str:
+        """The ``plantgen render`` command line that draws the current frame from
+        ``camera_path`` (pixel for pixel for RC and RC+R)."""
+        o = self.options
+        out = Path(camera_path).with_suffix(".render.png")
+        args = ["plantgen", "render", str(o.input), "--camera", str(camera_path), "-o", str(out)]
+        if o.effects is not None:
+            args += ["--effects", ",".join(o.effects) or "none"]
+        args.append("--relief" if self.method.endswith("+R") else "--no-relief")
+        args.append("--shadows" if self.shadows else "--no-shadows")
+        defaults = RaycastSettings()
+        for flag, value, default in (("--linear-steps", self.linear_steps, defaults.linear_steps),
+                                     ("--binary-steps", self.binary_steps, defaults.binary_steps),
+                                     ("--march", self.march, defaults.march),
+                                     ("--shadow-res", o.shadow_res, 2048), ("--ssaa", self.ssaa, 1)):
+            if value != default:
+                args += [flag, str(value)]
+        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--background", o.background_name)):
+            if value is not None:
+                args += [flag, str(value)]
+        if self.model.animated:
+            args += ["--time", repr(float(self.t))]
+        text = shlex.join(args)
+        if self.method.startswith("GS"):
+            text += f"   (ray cast; the viewer drew {self.method} m = {self.level} with the raster renderer)"
+        return text
+
+    # ------------------------------------------------------------------ the heads-up line
+    def hud_lines(self) -> list[tuple[str, str]]:
+        """(text, kind) lines of the heads-up display; kind is "info", "status" or "error"."""
+        s = self.settings()
+        if self.method == "RC":
+            method = "RC"
+        elif self.method == "RC+R":
+            method = (f"RC+R adaptive <= {s.linear_steps} + {s.binary_steps} steps" if s.march == "adaptive"
+                      else f"RC+R fixed {s.linear_steps} + {s.binary_steps} steps")
+        else:
+            method = f"{self.method} m = {self.level}"
+            if self._mesh is not None and self._mesh_key is not None and self._mesh_key[1] == self.level:
+                method += f", {len(self._mesh.faces):,} triangles"
+        frames = list(self.frames)
+        timing = "-"
+        if frames:
+            frame_ms = statistics.median(f.frame_ms for f in frames)
+            wall_ms = statistics.median(f.wall_ms for f in frames)
+            timing = f"{frame_ms:.1f} ms frame, {1000.0 / max(wall_ms, 1e-3):.1f} fps (median of {len(frames)})"
+        cam = self.camera
+        lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments | {method} | shadows "
+                  f"{'on' if self.shadows else 'off'} | ssaa {self.ssaa}", "info"),
+                 (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
+        if self.model.animated:
+            lines.append((f"t = {self.t:.2f} s {'playing' if self.playing else 'paused'} (Space, , .)", "info"))
+        if self.error:
+            lines.append((self.error, "error"))
+        elif self.status:
+            lines.append((self.status, "status"))
+        return lines
+
+    def release(self) -> None:
+        """Free the renderers' GL objects."""
+        self.raycaster.release()
+        if self.raster is not None:
+            self.raster.release()

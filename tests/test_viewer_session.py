@@ -1,0 +1,183 @@
+"""The viewer's state and frames without a window (EGL): every control changes what it
+says, each frame equals ``plantgen render`` of the same state, and the file watcher and
+the reload thread behave (issue 13)."""
+
+from __future__ import annotations
+
+import os
+import shlex
+import time
+
+import numpy as np
+import pytest
+from _cli import run_cli
+from PIL import Image
+
+from plantgen.geometry.camera import auto_camera, orbit_angles
+from plantgen.pipeline import prepare_model, render_model
+from plantgen.viewer.keys import BINDINGS, binding_for, help_lines
+from plantgen.viewer.session import ViewerSession, ViewOptions
+from plantgen.viewer.watch import BackgroundJob, FileWatcher
+
+SIZE = (96, 72)
+
+
+@pytest.fixture
+def session(gl_ctx, tmp_path):
+    options = ViewOptions(input="saguaro", size=SIZE, watch=False, shots=tmp_path)
+    s = ViewerSession(gl_ctx, options, prepare_model("saguaro"), say=lambda line: None, warn=lambda line: None)
+    yield s
+    s.release()
+
+
+def test_every_binding_names_a_control_of_the_session():
+    for b in BINDINGS:
+        assert callable(getattr(ViewerSession, b.action)), b
+    assert binding_for("P", False).action == "screenshot" and binding_for("P", True).action == "window_shot"
+    assert {k for k, _ in help_lines()} >= {"P", "C", "H", "1 2 3 4", "Space"}
+
+
+def test_the_first_frame_is_plantgen_renders(session):
+    frame = session.draw(*SIZE)
+    assert np.array_equal(frame.color, render_model("saguaro", size=SIZE).result.color)
+
+
+def test_keys_change_method_knobs_and_frame_as_render_does(session, tmp_path):
+    session.key("_2")
+    session.key("S")
+    session.key("L", shift=True)        # linear steps 32 -> 16
+    session.key("B")                    # binary steps 12 -> 13
+    session.key("M")                    # fixed march
+    session.key("A")                    # 2 x 2 supersampling
+    assert (session.method, session.shadows, session.linear_steps, session.binary_steps, session.march,
+            session.ssaa) == ("RC+R", True, 16, 13, "fixed", 2)
+    frame = session.draw(*SIZE)
+    expected = render_model("saguaro", size=SIZE, relief=True, shadows=True, linear_steps=16, binary_steps=13,
+                            march="fixed", ssaa=2)
+    assert np.array_equal(frame.color, expected.result.color)
+    # the printed command draws the same frame
+    camera = session.save_camera()
+    args = shlex.split(session.render_command(camera))
+    assert run_cli(*args[1:])[0] == 0
+    assert np.array_equal(np.asarray(Image.open(args[args.index("-o") + 1])), frame.color)
+
+
+def test_orbit_pan_zoom_and_reset_move_the_camera_as_their_keys_say(session):
+    a0, e0, d0 = orbit_angles(session.camera)
+    session.key("LEFT")
+    session.key("UP")
+    a1, e1, d1 = orbit_angles(session.camera)
+    assert (a1 - a0, e1 - e0, d1) == (pytest.approx(-5.0), pytest.approx(5.0), pytest.approx(d0))
+    session.key("EQUAL")
+    assert orbit_angles(session.camera)[2] == pytest.approx(d0 / 1.1)
+    right = session.camera.basis()[0]
+    target = np.asarray(session.camera.target)
+    dist = orbit_angles(session.camera)[2]
+    session.key("RIGHT", shift=True)                  # pan 5 % of the view's height to the right
+    moved = np.asarray(session.camera.target) - target
+    view_height = 2 * dist * np.tan(np.radians(session.camera.fov_y) / 2)
+    assert np.allclose(moved, 0.05 * view_height * right)
+    session.drag(10, 0)                               # a drag to the right turns the other way
+    assert orbit_angles(session.camera)[0] == pytest.approx(a1 - 4.0)
+    session.key("R")
+    assert session.camera == auto_camera(session.frusta(), *SIZE)
+
+
+def test_gs_levels_stay_within_the_triangle_budget(session):
+    session.key("_3")
+    session.key("BRACKETRIGHT")
+    assert (session.method, session.level) == ("GS", 2)
+    frame = session.draw(*SIZE)
+    assert len(session.mesh(session.frusta()).faces) == 30 * 16 * 4 ** 2 + session.mesh(session.frusta()).n_caps * 32
+    assert frame.stats.triangles == len(session.mesh(session.frusta()).faces)
+    for _ in range(10):
+        session.key("BRACKETRIGHT")
+    assert session.level == 6                      # 30 segments: m = 6 is 2 M triangles, allowed
+    session.key("_4")
+    assert session.method == "GS+R"
+
+
+def test_a_still_model_does_not_play(session):
+    session.key("SPACE")
+    session.key("PERIOD")
+    assert (session.playing, session.t) == (False, 0.0) and "nothing moves" in session.status
+
+
+def test_screenshots_and_cameras_get_fresh_names(session, tmp_path):
+    paths = [session.screenshot(), session.save_camera(), session.screenshot()]
+    assert [p.name for p in paths] == ["saguaro-001.png", "saguaro-002.json", "saguaro-003.png"]
+    assert np.array_equal(np.asarray(Image.open(paths[0])), session.last.color)
+
+
+# ---------------------------------------------------------------------- watching files
+def test_a_change_is_reported_once_it_has_settled(tmp_path):
+    f = tmp_path / "g.yaml"
+    f.write_text("a")
+    watcher = FileWatcher([f], settle_s=0.05)
+    assert watcher.poll(0.0) is None
+    os.utime(f, ns=(time.time_ns(), time.time_ns() + 10**9))
+    assert watcher.poll(1.0) is None                  # seen moving
+    change = watcher.poll(1.06)
+    assert change is not None and change.paths == (f.resolve(),)
+    assert change.saved_ns == os.stat(f).st_mtime_ns
+    assert watcher.poll(2.0) is None                  # reported once
+
+
+def test_a_file_replaced_by_rename_is_seen_and_a_missing_one_waited_for(tmp_path):
+    f = tmp_path / "g.yaml"
+    f.write_text("one")
+    watcher = FileWatcher([f], settle_s=0.0)
+    tmp = tmp_path / "g.yaml.new"
+    tmp.write_text("two")
+    os.replace(tmp, f)                                # editors that write a new file and rename it
+    assert watcher.poll(0.0) is not None or watcher.poll(0.01) is not None
+    f.unlink()
+    assert watcher.poll(1.0) is None and watcher.poll(2.0) is None
+    f.write_text("three")
+    assert watcher.poll(3.0) is not None or watcher.poll(3.01) is not None
+
+
+def test_the_background_job_runs_the_newest_queued_arguments():
+    import threading
+
+    gate = threading.Event()
+    calls = []
+
+    def work(x):
+        gate.wait(5)
+        calls.append(x)
+        return x * 2
+
+    job = BackgroundJob(work)
+    job.start(1)
+    job.start(2)
+    job.start(3)                                       # supersedes 2
+    gate.set()
+    deadline = time.monotonic() + 5
+    done = None
+    while done is None and time.monotonic() < deadline:
+        done = job.result()
+        time.sleep(0.01)
+    assert done == ((3,), 6, None) and calls == [1, 3] and not job.busy
+
+
+def test_a_failing_reload_hands_back_its_error():
+    job = BackgroundJob(lambda: 1 / 0)
+    job.start()
+    deadline = time.monotonic() + 5
+    done = None
+    while done is None and time.monotonic() < deadline:
+        done = job.result()
+        time.sleep(0.01)
+    assert isinstance(done[2], ZeroDivisionError)
+
+
+def test_the_readme_lists_the_keys_the_viewer_binds():
+    from pathlib import Path
+
+    readme = Path(__file__).resolve().parent.parent / "README.md"
+    if not readme.is_file():
+        pytest.skip("needs the source tree's README.md")
+    rows = [line for line in readme.read_text().splitlines() if line.startswith("| ")]
+    for keys, text in help_lines():
+        assert f"| {keys} | {text} |" in rows, (keys, text)
