@@ -1,145 +1,93 @@
-"""Write tessellated meshes (GS, GS+R) as glTF binary, OBJ, PLY or STL through trimesh.
+"""Write one tessellated mesh (GS, GS+R) in any mesh format: :func:`export_mesh`.
 
-The format follows the file suffix. glTF keeps one primitive per material with its base
-colour, the vertex normals (8) and the texture coordinates; OBJ keeps normals and
-texture coordinates; PLY keeps normals; STL keeps triangles only. Every writer writes to
-a temporary name beside the target and renames it, so a failed export leaves nothing
-half-written.
+The format follows the file suffix (:mod:`plantgen.export.formats`): glTF (``.glb``,
+``.gltf`` + ``.bin``) and OBJ (+ ``.mtl``) through plantgen's writers, keeping material
+names, colours, normals and texture coordinates; PLY (normals) and STL (triangles only)
+through trimesh; USD through usd-core. ``up`` (default: the format's convention) turns the
+model. Every writer writes under temporary names and renames, so a failed export leaves
+nothing half-written.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
+from ..files import write_atomically
+from ..geometry.mesh import TessellatedMesh
+from ..geometry.skeleton import Skeleton
+from .formats import ExportError, check_extra, export_format
+from .plants import Colours, Plant, Progress, turned_mesh
 
-from .errors import PlantgenError
-from .files import write_atomically
-from .geometry.materials import material_colour
-from .geometry.mesh import TessellatedMesh
-
-__all__ = ["EXPORT_FORMATS", "ExportError", "estimate_export_bytes", "export_mesh", "export_file_type",
-           "mesh_scene"]
-
-#: File suffix -> trimesh file type.
-EXPORT_FORMATS = {".glb": "glb", ".obj": "obj", ".ply": "ply", ".stl": "stl"}
-
-#: Peak bytes per triangle of tessellating and writing each file type (tracemalloc on the
-#: shipped models at m = 1 and 2: the mesh about 110, then glb 250, obj 715, ply 275, stl
-#: 500 while writing), rounded up.
-EXPORT_BYTES_PER_TRIANGLE = {"glb": 400, "obj": 900, "ply": 400, "stl": 650}
-
-class ExportError(PlantgenError, ValueError):
-    """An export target plantgen cannot write (unknown suffix, unwritable place)."""
+__all__ = ["export_mesh", "write_plants", "write_trimesh"]
 
 
-def estimate_export_bytes(triangles: int, file_type: str) -> int:
-    """Memory an export of ``triangles`` triangles as ``file_type`` takes at its peak."""
-    return int(triangles) * EXPORT_BYTES_PER_TRIANGLE[file_type]
-
-
-def _colours(mesh: TessellatedMesh, colours) -> list[tuple[float, float, float]]:
-    out = []
-    for i, name in enumerate(mesh.material_names):
-        if colours is None:
-            c = material_colour(name)
-        elif isinstance(colours, Mapping):
-            c = colours.get(name, material_colour(name))
-        else:
-            c = colours[i]
-        c = tuple(float(x) for x in c)
-        if len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c):
-            raise ExportError(f"material {name!r}: colour must be three numbers in [0, 1], got {c}")
-        out.append(c)
-    return out
-
-
-def _submesh(mesh: TessellatedMesh, face_mask: np.ndarray | None):
-    """Vertices, normals, uv and re-indexed faces of the faces in ``face_mask`` (all if None)."""
-    if face_mask is None:
-        return mesh.vertices, mesh.normals, mesh.uv, mesh.faces
-    faces = mesh.faces[face_mask]
-    used, inverse = np.unique(faces, return_inverse=True)
-    return (mesh.vertices[used], mesh.normals[used], mesh.uv[used],
-            inverse.reshape(faces.shape).astype(np.int64))
-
-
-def mesh_scene(mesh: TessellatedMesh, colours: Mapping[str, Sequence[float]] | Sequence | None = None):
-    """A ``trimesh.Scene`` with one geometry per material used, named after the material.
-
-    Each geometry carries vertex normals and a ``TextureVisuals`` with the uv and a
-    ``PBRMaterial`` whose base colour is the material colour (linear RGB, opaque).
-    """
+def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str) -> Path:
+    """Binary PLY (with vertex normals) or binary STL through trimesh."""
     import trimesh  # here, not at the top: importing trimesh takes about a second
-    from trimesh.visual.material import PBRMaterial
-    rgb = _colours(mesh, colours)
-    scene = trimesh.Scene()
-    face_material = mesh.face_material
-    used = np.unique(face_material)
-    for mat in used:
-        mask = None if len(used) == 1 else face_material == mat
-        verts, norms, uv, faces = _submesh(mesh, mask)
-        name = mesh.material_names[int(mat)]
-        material = PBRMaterial(name=name, baseColorFactor=[*rgb[int(mat)], 1.0],
-                               metallicFactor=0.0, roughnessFactor=0.8)
-        geom = trimesh.Trimesh(verts, faces, vertex_normals=norms,
-                               visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
-                               process=False, validate=False)
-        scene.add_geometry(geom, geom_name=name, node_name=name)
-    return scene
+
+    path = Path(path)
+    vertices, normals = turned_mesh(mesh, up)
+    whole = trimesh.Trimesh(vertices, mesh.faces, vertex_normals=normals, process=False, validate=False)
+    if path.suffix.lower() == ".ply":
+        data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
+    else:
+        data = trimesh.exchange.stl.export_stl(whole)
+    return write_atomically(path, lambda tmp: Path(tmp).write_bytes(data), ExportError)
 
 
-def export_file_type(path: Path) -> str:
-    """The trimesh file type of ``path``'s suffix (one line naming the known ones if none)."""
-    try:
-        return EXPORT_FORMATS[path.suffix.lower()]
-    except KeyError:
-        known = ", ".join(EXPORT_FORMATS)
-        raise ExportError(f"{path}: unknown export format {path.suffix!r} (known: {known})") from None
+def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None, colours: Colours = None,
+                 instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
+                 progress: Progress = None) -> list[Path]:
+    """Write ``plants`` (see :class:`~plantgen.export.plants.Plant`) in the mesh format
+    ``path`` names; ``name`` names the scene (default: the file's stem). Formats without
+    instancing take one plant written in place. Returns the written paths (a ``.gltf`` or
+    ``.obj`` brings a second file)."""
+    path = Path(path)
+    fmt = export_format(path)
+    if fmt.kind != "mesh":
+        raise ExportError(f"{path}: {fmt.suffix} holds a skeleton, not a mesh")
+    check_extra(fmt, path)
+    if not path.parent.is_dir():
+        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    up = up or fmt.up
+    if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
+        raise ExportError(f"{path}: nothing to export (the model has no segments)")
+    if fmt.name in ("glb", "gltf"):
+        from .gltf import write_gltf
+        return write_gltf(plants, path, up=up, colours=colours, instancing=instancing, name=name,
+                          progress=progress)
+    if fmt.name.startswith("usd"):
+        from .usd import write_usd
+        return write_usd(plants, path, up=up, colours=colours, instancing=instancing, unit=unit, name=name,
+                         progress=progress)
+    if len(plants) != 1 or plants[0].matrices is not None:
+        raise ExportError(f"{path}: {fmt.suffix} holds one mesh in place; flatten the scene first")
+    if fmt.name == "obj":
+        from .obj import write_obj
+        return write_obj(plants[0].mesh, path, up=up, colours=colours, progress=progress)
+    return [write_trimesh(plants[0].mesh, path, up=up)]
 
 
-def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike,
-                colours: Mapping[str, Sequence[float]] | Sequence | None = None) -> Path:
-    """Write ``mesh`` to ``path``; the format follows the suffix (.glb, .obj, .ply, .stl).
+def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,
+                up: str | None = None, name: str | None = None) -> Path:
+    """Write ``mesh`` to ``path`` in the format its suffix names (.glb, .gltf, .obj, .ply,
+    .stl, .usda, .usdc, .usd).
 
     Parameters
     ----------
-    mesh : the tessellation to write (coordinates in model units, y up, as glTF expects)
-    path : target file; written under a temporary name beside it, then renamed
+    mesh : the tessellation to write (coordinates in model units, y up)
+    path : target file; written under a temporary name beside it, then renamed (a
+        ``.gltf``'s ``.bin`` and an ``.obj``'s ``.mtl`` are written beside it too)
     colours : material name -> linear RGB in [0, 1], or one colour per material index;
         default :func:`plantgen.geometry.materials.material_colour`
+    up : ``"y"`` or ``"z"``; default the format's convention (:mod:`plantgen.export.formats`)
+    name : the model's name in the file (default: the file's stem)
 
     Returns
     -------
     Path : the written file
     """
-    import trimesh  # here, not at the top: importing trimesh takes about a second
-    from trimesh.exchange.gltf import export_glb
-
     path = Path(path)
-    file_type = export_file_type(path)
-    if not path.parent.is_dir():
-        raise ExportError(f"{path}: directory {path.parent} does not exist")
-    if len(mesh.faces) == 0:
-        raise ExportError(f"{path}: nothing to export (the model has no segments)")
-    if file_type == "glb":
-        data = export_glb(mesh_scene(mesh, colours), include_normals=True)
-    else:
-        whole = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_normals=mesh.normals,
-                                process=False, validate=False)
-        if file_type == "obj":
-            whole.visual = trimesh.visual.TextureVisuals(uv=mesh.uv)
-            data = trimesh.exchange.obj.export_obj(whole, include_normals=True,
-                                                   include_color=False, include_texture=True,
-                                                   write_texture=False, mtl_name=None)
-        elif file_type == "ply":
-            data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
-        else:
-            data = trimesh.exchange.stl.export_stl(whole)
-
-    def write(tmp):
-        with open(tmp, "w" if isinstance(data, str) else "wb") as fh:
-            fh.write(data)
-    return write_atomically(path, write, ExportError)
+    plant = Plant(name or path.name.split(".")[0] or "plant", Skeleton.empty(mesh.material_names), mesh)
+    return write_plants([plant], path, up=up, colours=colours)[-1]
