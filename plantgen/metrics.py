@@ -27,6 +27,10 @@ plantgen's: y up, model units.
   bridges from one disc to another: every vertex lies on the true hull, and the chords
   along a round disc's arc lose a relative 2π²/(3·directions²) of its area (1.3e-5 at 720).
 
+A skeleton with several roots (a scene, a grammar's ``f`` moves) is measured as one model:
+its plants together, the trunk the first root's chain. For figures per plant, measure each
+plant of ``Scene.plants()`` (in its own frame) or each instance.
+
 Pure numpy, no GL, no click: for the exporters (QSM files) and for batch statistics.
 """
 
