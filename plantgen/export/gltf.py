@@ -8,8 +8,8 @@ name and base colour, linear RGB as glTF defines it). Nodes:
 - a scene's plant with copies, ``instancing="gpu"`` (the default): one node whose
   ``EXT_mesh_gpu_instancing`` attributes hold the copies' TRANSLATION, ROTATION (unit
   quaternions) and SCALE; the extension is listed in ``extensionsUsed`` and
-  ``extensionsRequired``, so a reader without it refuses the file instead of showing one
-  plant in place of many;
+  ``extensionsRequired``, so a reader without it that follows the specification refuses
+  the file instead of showing one plant in place of many;
 - ``instancing="nodes"``: one node per copy (translation, rotation, scale), all sharing
   the plant's mesh: core glTF, for readers without the extension;
 - a plant with a single copy: one such node either way.
