@@ -529,7 +529,7 @@ def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleto
     scene's distinct plants with their copies' placements when ``instanced``, else the
     whole model in place."""
     if instanced and grown.scene is not None:
-        return [(p.name, p.skeleton, p.matrices) for p in grown.scene.plants()]
+        return [(p.name, p.skeleton, p.matrices) for p in grown.scene.plants() if len(p.skeleton)]
     return [(grown.name, grown.skeleton, None)]
 
 

@@ -145,7 +145,10 @@ def swc_lines(skeleton: Skeleton, up: str = "y") -> list[str]:
 def write_swc(skeleton: Skeleton, path: str | Path, up: str = "y") -> Path:
     """Write ``skeleton`` as SWC (see the module docstring); written to a temporary name,
     then renamed. Returns the path."""
-    text = "\n".join(swc_lines(skeleton, up)) + "\n"
+    try:
+        text = "\n".join(swc_lines(skeleton, up)) + "\n"
+    except SkeletonError as exc:
+        raise SkeletonError(f"{path}: {exc}") from None
     return write_atomically(path, lambda tmp: Path(tmp).write_text(text, encoding="ascii"), SkeletonError)
 
 
