@@ -27,7 +27,7 @@ from .errors import PlantgenError
 from .limits import LimitError, Limits, hint
 from .limits import limits as default_limits
 
-__all__ = ["open_input", "read_input", "read_yaml", "write_atomically", "temporary_name"]
+__all__ = ["open_input", "read_input", "read_yaml", "write_atomically", "write_all_atomically", "temporary_name"]
 
 # The C parser where PyYAML has it (about 4x faster); the document is bounded before it
 # is composed, so its recursive composer never sees a deep nest.
@@ -182,3 +182,29 @@ def write_atomically(path: str | Path, write: Callable[[Path], object],
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]]],
+                         error: type[PlantgenError] = PlantgenError) -> list[Path]:
+    """:func:`write_atomically` for files that belong together (an OBJ and its MTL, a glTF
+    and its ``.bin``): every ``write(tmp_path)`` runs first, then the temporary files are
+    renamed onto their targets in the given order (put the file that names the others
+    last). On any failure no temporary file is left, and no target is touched unless the
+    failure comes between two renames. Returns the paths."""
+    done: list[tuple[Path, Path]] = []
+    try:
+        for path, write in writes:
+            path = Path(path)
+            done.append((path, temporary_name(path)))
+            write(done[-1][1])
+        for path, tmp in done:
+            tmp.replace(path)
+    except OSError as exc:
+        for _, tmp in done:
+            tmp.unlink(missing_ok=True)
+        raise error(f"{done[-1][0] if done else writes[0][0]}: cannot write ({exc.strerror or exc})") from None
+    except BaseException:
+        for _, tmp in done:
+            tmp.unlink(missing_ok=True)
+        raise
+    return [path for path, _ in done]

@@ -14,7 +14,9 @@ call:
 - :func:`render_model` (``plantgen.render``): skin and ray cast, in memory;
   :func:`render_file` (``plantgen render``): the same, then write PNG / GIF / WebP, the
   camera JSON and the depth ``.npy``;
-- :func:`export_model` (``plantgen export``): skin, tessellate, write a mesh file.
+- :func:`export_model` (``plantgen export``): skin, tessellate, write a mesh file (a
+  scene's repeated plants once, instanced, where the format can); or write the skeleton
+  as SWC or a forestry cylinder model.
 
 Every entry point takes ``limits`` (the budgets in force, :class:`plantgen.limits.Limits`;
 default: ``plantgen.limits.limits``) and ``allow_paths`` (folders a scene may read grammars
@@ -34,15 +36,17 @@ import numpy as np
 from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
-from .export import ExportError, estimate_export_bytes, export_file_type, export_mesh
+from .export import ExportError, Plant, check_extra, estimate_export_bytes, export_format, write_plants
+from .export.qsm import write_qsm
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
+from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
-from .geometry.swc import read_swc
+from .geometry.swc import read_swc, write_swc
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
@@ -60,7 +64,7 @@ from .scene import Scene, is_scene, parse_scene, resolve_effects
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "Staging", "stage_model", "PreparedModel", "prepare_model", "frame_settings", "frame_arguments",
            "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
-           "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model"]
+           "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -580,44 +584,117 @@ def render_file(input_path, output, *, camera_out=None, depth_out=None, frames=N
 
 
 # ---------------------------------------------------------------------- plantgen export
-def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
-                 seed: int | None = None, limits: Limits | None = None, allow_paths=()) -> dict:
-    """The library side of ``plantgen export``: input file -> skin -> tessellate -> file.
+#: How ``export_model`` writes a scene's repeated plants (see :func:`export_model`).
+INSTANCING = ("gpu", "nodes", "off")
 
-    ``input_path`` is a skeleton ``.npz`` or ``.swc``, a grammar or a scene. Returns a
-    summary dict: ``segments``, ``rows``, ``caps``, ``triangles``, ``vertices``, ``level``,
-    ``relief``, ``path``, ``timings`` (seconds per stage). The triangle count and the
-    memory the export takes are estimated before anything is built and refused over
+
+def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
+                 seed: int | None = None, limits: Limits | None = None, allow_paths=(),
+                 up: str | None = None, instancing: str = "gpu", unit: float = 1.0,
+                 qsm_tolerance: float = 1e-3, progress=None) -> dict:
+    """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
+    or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
+
+    Parameters
+    ----------
+    input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
+    output_path : the file; its suffix names the format (:mod:`plantgen.export.formats`)
+    level, relief : the tessellation (GS, GS+R) of the mesh formats
+    up : ``"y"`` or ``"z"``; default the format's convention
+    instancing : how a scene's repeated plants are written where the format can
+        (glTF, USD): ``"gpu"`` once, with glTF's ``EXT_mesh_gpu_instancing`` or a USD
+        ``PointInstancer``; ``"nodes"`` once, with one node per copy (core glTF; USD
+        instanceable references); ``"off"`` every copy's own mesh, as OBJ, PLY and STL
+    unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
+    qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.export.qsm`)
+    progress : ``progress(stage, done, total)``, called as plants are tessellated and
+        the file written
+
+    Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
+    written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
+    ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
+    ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
+    ``level``, ``relief``; for a cylinder model, what :func:`plantgen.export.qsm.write_qsm`
+    returns. Triangles and memory are estimated before anything is built and refused over
     ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
     """
-    output_path = Path(output_path)
-    limits = _in_force(limits)
-    file_type = export_file_type(output_path)  # fail on a bad suffix before any work
+    output_path, limits = Path(output_path), _in_force(limits)
+    fmt = export_format(output_path)  # fail on a bad suffix, a missing extra or option before any work
+    check_extra(fmt, output_path)
+    if up is not None and up not in UP_AXES:
+        raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
+    if instancing not in INSTANCING:
+        raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
+    if not output_path.parent.is_dir():
+        raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
+    up = up or fmt.up
     t0 = time.perf_counter()
-    skeleton = load_skeleton(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
-    if len(skeleton) == 0:
+    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
+    if len(grown.skeleton) == 0:
         raise ExportError(f"{input_path}: the model has no segments")
-    skeleton.validate()
+    grown.skeleton.validate()
+    timings = {"load": time.perf_counter() - t0}
+    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings}
+    if fmt.kind == "skeleton":
+        t1 = time.perf_counter()
+        if fmt.name == "swc":
+            summary["paths"] = [write_swc(grown.skeleton, output_path, up=up)]
+        else:
+            summary.update(write_qsm(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
+                                     name=grown.name))
+        timings["write"] = time.perf_counter() - t1
+        return dict(summary, path=summary["paths"][-1])
+    plants = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
+                                 input_path, output_path, timings, progress)
+    t3 = time.perf_counter()
+    paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
+                         unit=unit, name=grown.name, progress=progress)
+    timings["write"] = time.perf_counter() - t3
+    meshes = [p.mesh for p in plants]
+    summary.update(
+        rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
+        triangles=sum(len(m.faces) for m in meshes), vertices=sum(len(m.vertices) for m in meshes),
+        drawn=sum(len(p.mesh.faces) * p.copies for p in plants), plants=len(plants),
+        copies=sum(p.copies for p in plants), level=level, relief=relief, paths=paths, path=paths[-1])
+    return summary
+
+
+def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None]]:
+    """(name, skeleton in its own frame, placements or None) of every plant to write: a
+    scene's distinct plants with their copies' placements when ``instanced``, else the
+    whole model in place."""
+    if instanced and grown.scene is not None:
+        return [(p.name, p.skeleton, p.matrices) for p in grown.scene.plants() if len(p.skeleton)]
+    return [(grown.name, grown.skeleton, None)]
+
+
+def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
+                        input_path, output_path, timings: dict, progress) -> list[Plant]:
+    """Skin every plant, check the export's triangles and memory against the limits, and
+    tessellate (``timings`` gains ``skin`` and ``tessellate``)."""
     t1 = time.perf_counter()
-    frusta = check_finite_frusta(skin_skeleton(skeleton), input_path)
+    parts = _export_parts(grown, instancing != "off")
+    frusta = [check_finite_frusta(skin_skeleton(skel), input_path) for _, skel, _ in parts]
     t2 = time.perf_counter()
-    estimate = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+    timings["skin"] = t2 - t1
+    estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
     if estimate > limits.max_export_triangles:
         raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
                           f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
                           f"({hint('export_triangles')})")
-    need = estimate_export_bytes(estimate, file_type) + len(skeleton) * SKIN_BYTES_PER_SEGMENT
+    segments = sum(len(skel) for _, skel, _ in parts)
+    need = estimate_export_bytes(estimate, fmt.name) + segments * SKIN_BYTES_PER_SEGMENT
     if need > limits.max_export_bytes:
         raise LimitError(f"{output_path}: m = {level} gives {estimate:,} triangles, about "
-                         f"{need / 2**20:,.0f} MiB to build and write as {file_type}, over the limit of "
+                         f"{need / 2**20:,.0f} MiB to build and write as {fmt.name}, over the limit of "
                          f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
                          f"({hint('export_bytes')})")
-    mesh = tessellate(frusta, level, relief=relief)
-    check_finite_mesh(mesh, frusta, input_path)
-    t3 = time.perf_counter()
-    export_mesh(mesh, output_path)
-    t4 = time.perf_counter()
-    timings = {"load": t1 - t0, "skin": t2 - t1, "tessellate": t3 - t2, "write": t4 - t3}
-    return {"segments": len(skeleton), "rows": mesh.n_rows, "caps": mesh.n_caps,
-            "triangles": len(mesh.faces), "vertices": len(mesh.vertices), "level": level,
-            "relief": relief, "path": output_path, "timings": timings}
+    plants = []
+    for k, ((name, skel, matrices), fr) in enumerate(zip(parts, frusta, strict=True)):
+        mesh = tessellate(fr, level, relief=relief)
+        check_finite_mesh(mesh, fr, input_path)
+        plants.append(Plant(name, skel, mesh, matrices))
+        if progress is not None:
+            progress("tessellate", k + 1, len(parts))
+    timings["tessellate"] = time.perf_counter() - t2
+    return plants

@@ -39,6 +39,7 @@ path is read only inside the scene's folder (or a folder the caller allows).
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,7 +57,7 @@ from .limits import limits as default_limits
 from .lsystem.grammar import GrammarError
 from .tolerances import tol
 
-__all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "is_scene",
+__all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "ScenePlant", "is_scene",
            "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "rotation_matrix"]
 
 EFFECTS = ("relief", "shadows", "animation")
@@ -127,6 +128,27 @@ class SceneInstance:
     motion: Sway | None = None    # None: the plant stands still
 
 
+@dataclass(frozen=True, eq=False)
+class ScenePlant:
+    """One distinct plant of a scene and where its copies stand: ``skeleton`` in its own
+    frame, ``matrices`` (k, 4, 4) the placements of its k copies, ``instances`` (k,) their
+    numbers in :attr:`Scene.instances`."""
+
+    name: str
+    skeleton: Skeleton
+    matrices: np.ndarray
+    instances: np.ndarray
+
+
+def _skeleton_key(skel: Skeleton) -> bytes:
+    """Equal for skeletons with equal arrays and material names (a content digest)."""
+    digest = hashlib.sha256()
+    for name in ("start", "end", "r_start", "r_end", "parent", "continues", "material"):
+        digest.update(getattr(skel, name).tobytes())
+    digest.update("\0".join(skel.material_names).encode("utf-8"))
+    return digest.digest()
+
+
 @dataclass(frozen=True)
 class Scene:
     name: str
@@ -141,6 +163,24 @@ class Scene:
     def skeleton(self) -> Skeleton:
         """All instances in world coordinates, as one skeleton."""
         return Skeleton.concatenate([i.skeleton.transformed(i.matrix) for i in self.instances])
+
+    def plants(self) -> list[ScenePlant]:
+        """The scene's distinct plants, each with the placements of all its copies: copies
+        whose skeletons are equal (a grid of a deterministic grammar, an explicit skeleton
+        placed many times, the same grammar and seed twice) are one plant. Named after
+        their source (``saguaro``; ``saguaro-2``, ... where one source gives several)."""
+        groups: dict[bytes, list[int]] = {}
+        for k, inst in enumerate(self.instances):
+            groups.setdefault(_skeleton_key(inst.skeleton), []).append(k)
+        sources = [Path(self.instances[ks[0]].source).stem or "plant" for ks in groups.values()]
+        seen: dict[str, int] = {}
+        out = []
+        for ks, source in zip(groups.values(), sources, strict=True):
+            seen[source] = seen.get(source, 0) + 1
+            name = source if sources.count(source) == 1 else f"{source}-{seen[source]}"
+            out.append(ScenePlant(name, self.instances[ks[0]].skeleton,
+                                  np.stack([self.instances[k].matrix for k in ks]), np.array(ks)))
+        return out
 
     def segment_instance(self) -> np.ndarray:
         """(n,) int: the instance each segment of :meth:`skeleton` belongs to."""

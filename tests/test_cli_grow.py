@@ -111,3 +111,11 @@ def test_help_explains():
         assert word in stdout
     code, stdout, _ = run_cli("--help")
     assert code == 0 and "grow" in stdout
+
+
+def test_grow_prints_the_true_height_and_bounds(tmp_path):
+    """Issue 16: the well spans y 0..3.55; grow said height 4.85, min y -0.9 (each end point
+    padded by its radius every way)."""
+    code, stdout, stderr = run_cli("grow", "well", "-o", tmp_path / "w.npz")
+    assert code == 0, stderr
+    assert "height 3.55;" in stdout and "min [-1.35  0.   -1.35]" in stdout and "max [1.35 3.55 1.35]" in stdout

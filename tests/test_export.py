@@ -1,23 +1,27 @@
-"""Mesh export (issue 5): glTF / OBJ / PLY / STL load back whole; GLB passes the Khronos validator."""
+"""Mesh export (issues 5 and 16): every format is read back whole by an independent reader
+(trimesh, meshio, the Khronos validator), OBJ with its MTL, glTF as .glb and .gltf + .bin,
+each format in its up-axis convention and turned on request."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
+import meshio
 import numpy as np
 import pytest
 import trimesh
+from _cli import run_cli
+from _node import assert_khronos_valid, needs_node
 from test_mesh import BENT, chain_frusta, concat_frusta
 
-from plantgen.export import ExportError, export_mesh
+from plantgen.export import EXPORT_FORMATS, ExportError, export_mesh
+from plantgen.geometry.frames import up_rotation
 from plantgen.geometry.mesh import tessellate
 
-REPO = Path(__file__).resolve().parents[1]
+MESH_SUFFIXES = [".glb", ".gltf", ".obj", ".ply", ".stl"]
+CONVENTION = {".glb": "y", ".gltf": "y", ".obj": "y", ".ply": "z", ".stl": "z"}
 
 
 def two_material_model(m=2):
@@ -35,20 +39,61 @@ def load_back(path) -> trimesh.Trimesh:
     return loaded
 
 
-@pytest.mark.parametrize("suffix", [".glb", ".obj", ".ply", ".stl"])
+def turned_bounds(mesh, up: str) -> np.ndarray:
+    points = mesh.vertices @ up_rotation(up).T
+    return np.stack([points.min(axis=0), points.max(axis=0)])
+
+
+@pytest.mark.parametrize("suffix", MESH_SUFFIXES)
 def test_every_format_loads_back_with_the_exact_triangle_count(tmp_path, suffix):
     mesh = two_material_model()
     path = export_mesh(mesh, tmp_path / f"plant{suffix}")
-    assert path.is_file() and not list(tmp_path.glob("*.part"))
+    assert path.is_file() and not list(tmp_path.glob(".*part*"))
     back = load_back(path)
     assert len(back.faces) == len(mesh.faces)
-    # Same surface: same bounds, and the trunk chain is still closed once welded.
-    assert np.allclose(back.bounds, mesh.to_trimesh().bounds, atol=1e-5)
+    # Same surface, in the format's up-axis convention.
+    assert np.allclose(back.bounds, turned_bounds(mesh, CONVENTION[suffix]), atol=1e-5)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl"])
+def test_meshio_reads_the_same_triangles(tmp_path, suffix):
+    mesh = two_material_model(1)
+    path = export_mesh(mesh, tmp_path / f"plant{suffix}")
+    back = meshio.read(path)
+    triangles = sum(len(block.data) for block in back.cells if block.type == "triangle")
+    assert triangles == len(mesh.faces)
+    points = np.asarray(back.points, dtype=np.float64)
+    assert np.allclose([points.min(axis=0), points.max(axis=0)], turned_bounds(mesh, CONVENTION[suffix]), atol=1e-5)
+
+
+@pytest.mark.parametrize("suffix", MESH_SUFFIXES)
+@pytest.mark.parametrize("up", ["y", "z"])
+def test_up_turns_the_model_and_keeps_its_volume(tmp_path, suffix, up):
+    """--up: y keeps plantgen's frame, z turns it +90° about x; both keep the solid (a
+    mirrored model would have negative volume)."""
+    mesh = tessellate(chain_frusta(BENT, [0.3, 0.25, 0.25, 0.2, 0.15]), 2)
+    back = load_back(export_mesh(mesh, tmp_path / f"chain{suffix}", up=up))
+    assert np.allclose(back.bounds, turned_bounds(mesh, up), atol=1e-5)
+    back.merge_vertices(merge_tex=True, merge_norm=True)
+    assert back.is_watertight and back.volume > 0
+    assert back.volume == pytest.approx(mesh.to_trimesh(merge=True).volume, rel=1e-5)
+
+
+def test_the_up_conventions_are_the_documented_ones():
+    """PLY and STL open upright in z-up tools (Blender, slicers); glTF is y-up by its
+    specification; OBJ, USD and SWC keep y; TreeQSM's cylinder models are z-up."""
+    up = {suffix: fmt.up for suffix, fmt in EXPORT_FORMATS.items()}
+    assert up == {".glb": "y", ".gltf": "y", ".obj": "y", ".ply": "z", ".stl": "z", ".usda": "y", ".usdc": "y",
+                  ".usd": "y", ".swc": "y", ".qsm.csv": "z", ".qsm.mat": "z"}
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    rows = {cells[1].strip(): cells[3].strip() for line in readme.splitlines()
+            if line.startswith("| `.") and len(cells := line.split("|")) > 4}
+    assert {suffix: rows.get(f"`{suffix}`") for suffix in up} == up
 
 
 def test_a_continuing_chain_loads_back_watertight(tmp_path):
     mesh = tessellate(chain_frusta(BENT, [0.3, 0.25, 0.25, 0.2, 0.15]), 2)
-    for suffix in (".stl", ".glb"):
+    for suffix in (".stl", ".glb", ".obj"):
         back = load_back(export_mesh(mesh, tmp_path / f"chain{suffix}"))
         back.merge_vertices(merge_tex=True, merge_norm=True)
         assert back.is_watertight and back.volume > 0
@@ -57,17 +102,60 @@ def test_a_continuing_chain_loads_back_watertight(tmp_path):
 def test_gltf_keeps_material_colours_uv_and_normals(tmp_path):
     mesh = two_material_model()
     colours = {"bark": (0.3, 0.2, 0.1), "leaf": (0.1, 0.6, 0.2)}
-    scene = trimesh.load(export_mesh(mesh, tmp_path / "plant.glb", colours=colours))
-    assert set(scene.geometry) == {"bark", "leaf"}
-    for name, geom in scene.geometry.items():
-        base = np.asarray(geom.visual.material.baseColorFactor, dtype=float)
-        assert np.allclose(base[:3] / (255 if base.max() > 1 else 1), colours[name], atol=1 / 255)
-        faces_of = mesh.face_material == mesh.material_names.index(name)
-        assert len(geom.faces) == faces_of.sum()
-        used = np.unique(mesh.faces[faces_of])
-        assert geom.visual.uv.shape == (len(used), 2)
-        assert np.allclose(np.sort(geom.visual.uv[:, 0]), np.sort(mesh.uv[used, 0]), atol=1e-6)
-        assert np.allclose(np.linalg.norm(geom.vertex_normals, axis=1), 1, atol=1e-5)
+    for suffix in (".glb", ".gltf"):
+        scene = trimesh.load(export_mesh(mesh, tmp_path / f"plant{suffix}", colours=colours))
+        by_material = {geom.visual.material.name: geom for geom in scene.geometry.values()}
+        assert set(by_material) == {"bark", "leaf"}
+        for name, geom in by_material.items():
+            base = np.asarray(geom.visual.material.baseColorFactor, dtype=float)
+            assert np.allclose(base[:3] / (255 if base.max() > 1 else 1), colours[name], atol=1 / 255)
+            faces_of = mesh.face_material == mesh.material_names.index(name)
+            assert len(geom.faces) == faces_of.sum()
+            used = np.unique(mesh.faces[faces_of])
+            assert geom.visual.uv.shape == (len(used), 2)
+            assert np.allclose(np.sort(geom.visual.uv[:, 0]), np.sort(mesh.uv[used, 0]), atol=1e-6)
+            assert np.allclose(np.linalg.norm(geom.vertex_normals, axis=1), 1, atol=1e-5)
+
+
+def test_gltf_json_names_its_bin_and_both_are_written(tmp_path):
+    mesh = two_material_model(1)
+    path = export_mesh(mesh, tmp_path / "my plant.gltf")
+    doc = json.loads(path.read_text())
+    assert doc["buffers"][0]["uri"] == "my%20plant.bin"
+    assert (tmp_path / "my plant.bin").stat().st_size == doc["buffers"][0]["byteLength"]
+    assert doc["asset"]["version"] == "2.0"
+
+
+def test_obj_comes_with_its_mtl_one_material_per_plantgen_material(tmp_path):
+    """The defect of issue 16: OBJ named a material.mtl that was never written, and every
+    material collapsed into one."""
+    mesh = two_material_model()
+    colours = {"bark": (0.3, 0.2, 0.1), "leaf": (0.1, 0.6, 0.2)}
+    path = export_mesh(mesh, tmp_path / "plant.obj", colours=colours)
+    text = path.read_text()
+    assert "mtllib plant.mtl" in text
+    mtl = (tmp_path / "plant.mtl").read_text()
+    declared = [line.split()[1] for line in mtl.splitlines() if line.startswith("newmtl ")]
+    used = [line.split()[1] for line in text.splitlines() if line.startswith("usemtl ")]
+    assert declared == ["bark", "leaf"] and set(used) == set(declared)
+    # trimesh follows mtllib and keeps one material (with its Kd) per group of faces.
+    scene = trimesh.load(path, group_material=True, process=False, split_object=True)
+    geoms = list(scene.geometry.values()) if isinstance(scene, trimesh.Scene) else [scene]
+    by_material = {g.visual.material.name: g for g in geoms}
+    assert set(by_material) == {"bark", "leaf"}
+    for name, geom in by_material.items():
+        assert len(geom.faces) == int((mesh.face_material == mesh.material_names.index(name)).sum())
+        diffuse = np.asarray(geom.visual.material.diffuse, dtype=float)[:3] / 255
+        assert np.allclose(diffuse, colours[name], atol=1 / 255)
+
+
+def test_obj_material_names_with_spaces_stay_distinct(tmp_path):
+    mesh = dataclasses.replace(two_material_model(0), material_names=("dark bark", "dark  bark"))
+    path = export_mesh(mesh, tmp_path / "plant.obj")
+    mtl = (tmp_path / "plant.mtl").read_text()
+    assert [line.split(maxsplit=1)[1] for line in mtl.splitlines() if line.startswith("newmtl")] == \
+        ["dark_bark", "dark_bark_2"]
+    assert len(load_back(path).faces) == len(mesh.faces)
 
 
 def test_bad_targets_are_user_errors_and_leave_nothing(tmp_path):
@@ -76,48 +164,32 @@ def test_bad_targets_are_user_errors_and_leave_nothing(tmp_path):
         export_mesh(mesh, tmp_path / "plant.fbx")
     with pytest.raises(ExportError, match="does not exist"):
         export_mesh(mesh, tmp_path / "missing" / "plant.glb")
+    with pytest.raises(ExportError, match="holds a skeleton"):
+        export_mesh(mesh, tmp_path / "plant.swc")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_pair_leaves_neither_file(tmp_path, monkeypatch):
+    """OBJ + MTL and .gltf + .bin are written together: a failure in the second leaves
+    neither, and no temporary file."""
+    from plantgen.export import obj
+
+    mesh = two_material_model(0)
+
+    def broken(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(obj, "_rows", broken)
+    with pytest.raises(ExportError, match="No space left"):
+        export_mesh(mesh, tmp_path / "plant.obj")
     assert list(tmp_path.iterdir()) == []
 
 
 # ---------------------------------------------------------------------------- Khronos validator
-VALIDATE_JS = r"""
-const validator = require('gltf-validator');
-const fs = require('fs');
-const data = new Uint8Array(fs.readFileSync(process.argv[1]));
-validator.validateBytes(data, {maxIssues: 1000})
-  .then(report => console.log(JSON.stringify(report.issues)))
-  .catch(err => { console.error(String(err)); process.exit(3); });
-"""
-
-
-def validator_modules() -> Path:
-    """node_modules holding gltf-validator: $PLANTGEN_GLTF_VALIDATOR, .ci/node, or a user cache.
-
-    CI installs it with ``npm install --prefix .ci/node gltf-validator``; where none is
-    installed the test installs it into the user cache (needs the npm registry).
-    """
-    candidates = [os.environ.get("PLANTGEN_GLTF_VALIDATOR"), REPO / ".ci" / "node",
-                  Path.home() / ".cache" / "plantgen" / "gltf-validator"]
-    for prefix in filter(None, candidates):
-        modules = Path(prefix) / "node_modules"
-        if (modules / "gltf-validator").is_dir():
-            return modules
-    cache = Path(candidates[-1])
-    cache.mkdir(parents=True, exist_ok=True)
-    npm = shutil.which("npm")
-    assert npm, "node is installed but npm is not: install gltf-validator with npm to run this test"
-    done = subprocess.run([npm, "install", "--prefix", str(cache), "gltf-validator"],
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, f"cannot install gltf-validator: {done.stderr[-500:]}"
-    return cache / "node_modules"
-
-
-@pytest.mark.skipif(shutil.which("node") is None, reason="Node.js is not installed: the Khronos "
-                    "glTF validator is a Node package")
-@pytest.mark.parametrize("relief", [False, True])
-def test_plantgen_glb_passes_the_khronos_gltf_validator(tmp_path, relief):
-    if relief:
-        # A skinned chain with a knuckle (degenerate hinge triangles) and bark relief.
+@needs_node
+@pytest.mark.parametrize("case", ["two materials", "relief knuckle", "gltf + bin", "z-up"])
+def test_plantgen_gltf_passes_the_khronos_gltf_validator(tmp_path, case):
+    if case == "relief knuckle":
+        # A skinned chain with a knuckle and bark relief.
         from _geometry_helpers import chain_skeleton
 
         from plantgen.geometry.skin import skin_skeleton
@@ -126,15 +198,9 @@ def test_plantgen_glb_passes_the_khronos_gltf_validator(tmp_path, relief):
         mesh = tessellate(frusta, 2, relief=True)
     else:
         mesh = two_material_model()
-    path = export_mesh(mesh, tmp_path / "plant.glb")
-    env = dict(os.environ, NODE_PATH=str(validator_modules()))
-    done = subprocess.run(["node", "-e", VALIDATE_JS, str(path)], capture_output=True, text=True,
-                          env=env, timeout=120)
-    assert done.returncode == 0, done.stderr
-    issues = json.loads(done.stdout)
-    errors = [msg for msg in issues["messages"] if msg["severity"] == 0]
-    assert issues["numErrors"] == 0, errors
-    assert issues["numWarnings"] == 0, issues["messages"]
+    suffix = ".gltf" if case == "gltf + bin" else ".glb"
+    path = export_mesh(mesh, tmp_path / f"plant{suffix}", up="z" if case == "z-up" else None)
+    assert_khronos_valid(path)
 
 
 # ---------------------------------------------------------------------------- the command
@@ -147,10 +213,8 @@ def y_skeleton():
                     [False, True, True, False], [0, 0, 0, 1], ("bark", "leaf"))
 
 
-@pytest.mark.parametrize("suffix", [".glb", ".stl"])
+@pytest.mark.parametrize("suffix", [".glb", ".stl", ".obj", ".gltf", ".ply"])
 def test_the_export_command_writes_the_counted_triangles(tmp_path, suffix):
-    from _cli import run_cli
-
     skel_path = tmp_path / "y.npz"
     y_skeleton().save(skel_path)
     out = tmp_path / f"y{suffix}"
@@ -161,20 +225,39 @@ def test_the_export_command_writes_the_counted_triangles(tmp_path, suffix):
     frusta = skin_skeleton(y_skeleton())
     expected = len(tessellate(frusta, 2).faces)
     assert len(load_back(out).faces) == expected
-    assert f"{expected:,} triangles" in stdout
+    assert f"{expected:,} triangles" in stdout and f"{CONVENTION[suffix]}-up" in stdout
 
 
 def test_the_export_command_reports_bad_input_in_one_line(tmp_path):
-    from _cli import run_cli
-
     skel_path = tmp_path / "y.npz"
     y_skeleton().save(skel_path)
     code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.fbx")
     assert code == 2 and "unknown export format" in stderr and len(stderr.strip().splitlines()) == 1
+    code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.csv")
+    assert code == 2 and ".qsm.csv" in stderr and len(stderr.strip().splitlines()) == 1
+    code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--up", "x")
+    assert code == 2 and "--up" in stderr
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     code, _, stderr = run_cli("export", tmp_path / "junk.npz", "-o", tmp_path / "y.glb")
     assert code == 2 and stderr.startswith("plantgen: error:")
     assert not (tmp_path / "y.glb").exists()
+
+
+def test_a_missing_extra_is_one_line_naming_the_install_command(tmp_path, monkeypatch):
+    """usd-core and scipy are extras: without them the export stops before any work, in one
+    line that says what to install (exit status 2)."""
+    import importlib.util
+
+    from plantgen.export import formats
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(formats.importlib.util, "find_spec",
+                        lambda name, *a: None if name in ("pxr", "scipy") else real(name, *a))
+    for suffix, extra in ((".usda", "usd"), (".qsm.mat", "qsm")):
+        code, _, stderr = run_cli("export", "saguaro", "-o", tmp_path / f"s{suffix}")
+        assert code == 2 and f"pip install 'plantgen[{extra}]'" in stderr, stderr
+        assert len(stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
@@ -183,15 +266,14 @@ def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
     mesh = two_material_model(0)
     scene = trimesh.load(export_mesh(mesh, tmp_path / "plant.glb"))
     palette = material_palette(mesh.material_names)
+    by_material = {g.visual.material.name: g for g in scene.geometry.values()}
     for i, name in enumerate(mesh.material_names):
-        base = np.asarray(scene.geometry[name].visual.material.baseColorFactor, dtype=float)[:3]
+        base = np.asarray(by_material[name].visual.material.baseColorFactor, dtype=float)[:3]
         base = base / 255 if base.max() > 1 else base
         assert np.allclose(base, (palette["dark"][i] + palette["light"][i]) / 2, atol=1 / 255)
 
 
 def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path):
-    from _cli import run_cli
-
     skel_path = tmp_path / "y.npz"
     y_skeleton().save(skel_path)
     code, _, stderr = run_cli("export", skel_path, "-o", tmp_path / "y.glb", "--subdiv", "1",
@@ -202,3 +284,26 @@ def test_an_export_too_large_to_hold_is_refused_before_tessellating(tmp_path):
                               "--limit", "export_bytes=1000")
     assert code == 2 and "--limit export_bytes=N" in stderr and len(stderr.strip().splitlines()) == 1
     assert not (tmp_path / "y.glb").exists()
+
+
+def test_long_exports_show_progress_on_stderr(tmp_path, monkeypatch):
+    """Progress bars appear once an export has run past a threshold (0 here), on stderr,
+    never on stdout; --quiet shows none."""
+    from plantgen.cli import progress
+
+    monkeypatch.setattr(progress, "PROGRESS_AFTER_S", 0.0)
+    code, stdout, stderr = run_cli("export", "saguaro", "-o", tmp_path / "s.obj")
+    assert code == 0, stderr
+    assert "tessellating plants" in stderr and "writing" in stderr
+    assert "tessellating" not in stdout
+    code, stdout, stderr = run_cli("export", "saguaro", "-o", tmp_path / "t.obj", "-q")
+    assert code == 0 and stdout == "" and stderr == ""
+
+
+def test_export_help_documents_formats_and_up_conventions():
+    code, stdout, _ = run_cli("export", "--help")
+    assert code == 0
+    stdout = " ".join(stdout.split())
+    for word in (".qsm.csv", ".usda", ".gltf", "--up", "z for PLY, STL and QSM", "--instancing",
+                 "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance"):
+        assert word in stdout, word

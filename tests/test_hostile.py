@@ -28,6 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.swc import write_swc
 from plantgen.lsystem.grammar import parse_grammar
 from plantgen.pipeline import grow
 
@@ -330,7 +331,7 @@ def test_binary_inputs_are_validated(tmp_path):
 
 def test_swc_is_read_back_as_the_skeleton_it_was_written_from(tmp_path):
     skel = grow("abop_ternary")
-    skel.save_swc(tmp_path / "t.swc")
+    write_swc(skel, tmp_path / "t.swc")
     code, _, stderr = run_cli("grow", tmp_path / "t.swc", "-o", tmp_path / "back.npz", "-q")
     assert code == 0, stderr
     back = Skeleton.load(tmp_path / "back.npz")

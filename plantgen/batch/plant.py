@@ -107,6 +107,7 @@ def _render_views(task, outputs: Outputs, frusta, skeleton, root: Path, timings:
 
 
 def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings: dict) -> None:
+    from ..geometry.swc import write_swc
     from ..geometry.topology import branches
 
     names = _files_of(task, outputs)
@@ -115,7 +116,7 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
         b = branches(skeleton)
         skeleton.save(root / names["npz"][0], extra={"branch_order": b.segment_order, "branch_id": b.branch})
     if outputs.swc:
-        skeleton.save_swc(root / names["swc"][0])
+        write_swc(skeleton, root / names["swc"][0])
     timings["skeleton_files"] = time.perf_counter() - t0
 
 
@@ -127,7 +128,7 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: di
     mesh = tessellate(frusta, outputs.glb)
     check_finite_mesh(mesh, frusta, task.id)
     order = branches(skeleton).segment_order[frusta.segment]
-    export_mesh(mesh, root / _files_of(task, outputs)["glb"][0], branch_order=order)
+    export_mesh(mesh, root / _files_of(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order})
     timings["glb"] = time.perf_counter() - t0
 
 

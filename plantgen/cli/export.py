@@ -1,4 +1,5 @@
-"""``plantgen export``: tessellate a model (GS, GS+R) and write glTF / OBJ / PLY / STL."""
+"""``plantgen export``: tessellate a model (GS, GS+R) and write a mesh (glTF, OBJ, PLY,
+STL, USD), or write its skeleton (SWC) or forestry cylinder model (QSM)."""
 
 from __future__ import annotations
 
@@ -6,39 +7,95 @@ from pathlib import Path
 
 import click
 
-from ..pipeline import export_model
-from .options import allow_path_opt, input_arg, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
+from ..export import EXPORT_FORMATS
+from ..geometry.frames import UP_AXES
+from ..pipeline import INSTANCING, export_model
+from .options import allow_path_opt, finite, input_arg, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
+from .progress import StageBars
+
+_SUFFIXES = ", ".join(EXPORT_FORMATS)
 
 
 @click.command()
 @input_arg
-@output_opt("the mesh, in the format its suffix names: .glb, .obj, .ply or .stl.")
+@output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
+            ".obj its .mtl, a .qsm.csv a .treedata.csv.")
 @click.option("--subdiv", "level", type=click.IntRange(0, 8), default=1, show_default=True,
-              help="Subdivision level m: 16·4^m triangles per segment (Table 1).")
+              help="Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap "
+                   "(mesh formats).")
 @click.option("--relief/--no-relief", default=False, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
+@click.option("--up", type=click.Choice(UP_AXES), default=None,
+              help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
+                   "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
+@click.option("--instancing", type=click.Choice(INSTANCING), default="gpu", show_default=True,
+              help="A scene's repeated plants in glTF and USD: gpu writes each once with glTF's "
+                   "EXT_mesh_gpu_instancing / a USD PointInstancer; nodes writes each once with one "
+                   "node per copy (core glTF, for readers without the extension; USD instanceable "
+                   "references); off writes every copy's own mesh. OBJ, PLY and STL are always off.")
+@click.option("--unit", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+              callback=finite, metavar="METRES",
+              help="The length of one model unit in metres: USD's metersPerUnit; QSM files are "
+                   "written in metres and DBH is taken 1.3 m along the trunk.")
+@click.option("--qsm-tolerance", type=click.FloatRange(min=1e-6), default=1e-3, show_default=True,
+              callback=finite,
+              help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
+                   "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
 @seed_opt
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, level: int, relief: bool, seed, limit_values, allow_paths, quiet) -> None:
-    """Tessellate INPUT (a skeleton .npz or .swc, grammar or scene) and write a mesh file.
+def export(input: Path, output: Path, level: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
+           limit_values, allow_paths, quiet) -> None:
+    """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
+    skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
-    Vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
-    caster; open chain ends are capped. glTF keeps material colours and uv.
+    Meshes: vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
+    caster; open chain ends are capped. glTF, OBJ and USD keep material names and
+    colours. A scene's repeated plants are written once and instanced in glTF and USD.
 
     \b
-    Example:
-      plantgen export pine.npz -o pine.glb --subdiv 2 --relief
+    Examples:
+      plantgen export pine -o pine.glb --subdiv 2 --relief
+      plantgen export well -o well.obj              # and well.mtl
+      plantgen export oasis -o oasis.usda           # PointInstancer, y-up stage
+      plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
+      plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
+      plantgen export pine -o pine.swc --up z
     """
-    info = export_model(input, output, level=level, relief=relief, seed=seed, limits=limits_from(limit_values),
-                        allow_paths=allow_paths)
+    with StageBars(enabled=not quiet) as bars:
+        info = export_model(input, output, level=level, relief=relief, seed=seed,
+                            limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
+                            instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars)
     if quiet:
         return
-    t = info["timings"]
-    stages = ", ".join(f"{k} {v * 1000:.1f} ms" for k, v in t.items())
-    click.echo(f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {level}"
-               f"{' with relief' if relief else ''}: {info['triangles']:,} triangles "
-               f"({info['caps']:,} caps), {info['vertices']:,} vertices")
-    click.echo(f"time: {stages}")
-    click.echo(f"wrote {info['path']}")
+    if "triangles" in info:
+        _mesh_summary(info)
+    elif "cylinders" in info:
+        _qsm_summary(info)
+    else:
+        click.echo(f"{info['segments']:,} segments as SWC, {info['up']}-up")
+    click.echo("time: " + ", ".join(f"{k} {v * 1000:.1f} ms" for k, v in info["timings"].items()))
+    click.echo("wrote " + " and ".join(str(p) for p in info["paths"]))
+
+
+def _mesh_summary(info: dict) -> None:
+    click.echo(f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {info['level']}"
+               f"{' with relief' if info['relief'] else ''}: {info['triangles']:,} triangles "
+               f"({info['caps']:,} caps), {info['vertices']:,} vertices, {info['up']}-up")
+    if info["copies"] > 1:
+        click.echo(f"{info['plants']:,} distinct plants written once for {info['copies']:,} copies: "
+                   f"{info['drawn']:,} triangles drawn")
+
+
+def _qsm_summary(info: dict) -> None:
+    m = info["metrics"]
+    unit = m.unit
+    lost = 1 - info["volume"] / info["volume_frusta"] if info["volume_frusta"] else 0.0
+    click.echo(f"{info['segments']:,} segments -> {info['cylinders']:,} cylinders "
+               f"(volume {lost:.3%} under the frusta's; tolerance {info['tolerance']:g}), {info['up']}-up, metres")
+    dbh = (f"DBH {m.dbh * unit:.4g} m" if m.dbh is not None
+           else f"no DBH (the trunk is shorter than {m.breast_height * unit:g} m)")
+    click.echo(f"height {m.height * unit:.4g} m; {dbh}; wood volume {m.volume * unit ** 3:.4g} m³ "
+               f"({m.trunk_volume * unit ** 3:.4g} trunk); crown {m.crown.area * unit ** 2:.4g} m², "
+               f"width {m.crown.max_width * unit:.4g} m (mean {m.crown.mean_width * unit:.4g})")

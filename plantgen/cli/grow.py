@@ -9,7 +9,10 @@ import click
 import numpy as np
 
 from ..errors import PlantgenError
+from ..geometry.frames import UP_AXES
+from ..geometry.swc import write_swc
 from ..lsystem.derive import DEFAULT_MAX_MODULES
+from ..metrics import geometry_bounds
 from ..pipeline import grow_file
 from .options import (
     allow_path_opt,
@@ -29,8 +32,8 @@ PROGRESS_EVERY = 1.0
 
 @click.command()
 @input_arg
-@output_opt("the skeleton (.npz). Default: INPUT's name with .npz, in the current directory.",
-            required=False)
+@output_opt("the skeleton: .npz (plantgen's arrays, y-up) or .swc. Default: INPUT's name with "
+            ".npz, in the current directory.", required=False)
 @seed_opt
 @iterations_opt
 @click.option("--max-modules", type=click.IntRange(min=1),
@@ -40,24 +43,31 @@ PROGRESS_EVERY = 1.0
               help="Set one of the grammar's defines (repeatable), e.g. --define angle=25; "
                    "as a batch's sweep does, so its manifest rows can be grown again alone.")
 @click.option("--format", "formats", type=click.Choice(["npz", "swc"]), multiple=True,
-              help="Also write these formats (repeatable); swc is written beside the .npz.")
+              help="Also write these formats beside the output, under its name (repeatable).")
+@click.option("--up", type=click.Choice(UP_AXES), default="y", show_default=True,
+              help="The up axis of SWC output (z turns the model +90° about x; the file says so and "
+                   "reads back upright). The .npz is always y-up.")
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def grow(input: Path, output: Path | None, seed, iterations, max_modules, defines, formats, limit_values,
+def grow(input: Path, output: Path | None, seed, iterations, max_modules, defines, formats, up, limit_values,
          allow_paths, quiet) -> None:
     """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton;
     a skeleton .npz or .swc is read back, checked and written again.
 
     Derives the L-system, walks the turtle, and writes the segment arrays (start, end,
-    r_start, r_end, parent, continues, material, material_names) as .npz. A scene writes
-    all its instances as one skeleton. Prints segments, branch tips, height, bounding box
-    and the time of each stage.
+    r_start, r_end, parent, continues, material, material_names) as .npz, or the
+    skeleton as SWC (README: "Skeleton format"). A scene writes all its instances as one
+    skeleton. Prints segments, branch tips, the height and bounding box of the geometry
+    (the frusta, radii included where they reach) and the time of each stage.
 
     \b
-    Example:
+    Examples:
       plantgen grow grammars/pine.yaml -o pine.npz --seed 3 --format swc
+      plantgen grow desert -o desert.swc
     """
+    output = output or Path(input.stem + ".npz")
+    _check_outputs(output, formats, up)
     t_start = time.perf_counter()
     shown = [t_start]
 
@@ -75,23 +85,39 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
     skel = result.skeleton
     if len(skel) == 0:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")
-    output = output or Path(input.stem + ".npz")
-    if output.suffix.lower() != ".npz":
-        raise PlantgenError(f"{output}: the skeleton output must end in .npz")
-    try:
-        skel.save(output)
-        if "swc" in formats:
-            skel.save_swc(output.with_suffix(".swc"))
-    except OSError as exc:
-        raise PlantgenError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    written = _write_outputs(skel, output, formats, up)
     if quiet:
         return
-    b = skel.bounds
+    b = geometry_bounds(skel)
     t = result.timings
     stages = ", ".join(f"{k} {v * 1000:.1f} ms" for k, v in t.items())
     click.echo(f"{result.name} ({result.kind}): {len(skel):,} segments, {len(skel.tips):,} branch tips, "
                f"{result.modules:,} modules")
-    click.echo(f"height {skel.height:.4g}; bounds min {np.array2string(b[0], precision=3)} "
+    click.echo(f"height {b[1, 1] - b[0, 1]:.4g}; bounds min {np.array2string(b[0], precision=3)} "
                f"max {np.array2string(b[1], precision=3)}")
     click.echo(f"time: {stages}; total {sum(t.values()) * 1000:.1f} ms")
-    click.echo(f"wrote {output}" + (f" and {output.with_suffix('.swc')}" if "swc" in formats else ""))
+    click.echo("wrote " + " and ".join(str(p) for p in written))
+
+
+def _check_outputs(output: Path, formats, up: str) -> None:
+    """Refuse, before any work, an output grow cannot write."""
+    kind = output.suffix.lower().lstrip(".")
+    if kind not in ("npz", "swc"):
+        raise PlantgenError(f"{output}: the skeleton output must end in .npz or .swc")
+    if up != "y" and "swc" not in (kind, *formats):
+        raise PlantgenError("--up z applies to SWC output; the .npz skeleton is always y-up")
+
+
+def _write_outputs(skel, output: Path, formats, up: str) -> list[Path]:
+    """Write the skeleton as ``output`` (.npz or .swc) and as each of ``formats`` beside it."""
+    kind = output.suffix.lower().lstrip(".")
+    paths = [output] + [output.with_suffix(f".{f}") for f in dict.fromkeys(formats) if f != kind]
+    try:
+        for path in paths:
+            if path.suffix.lower() == ".swc":
+                write_swc(skel, path, up=up)
+            else:
+                skel.save(path)
+    except OSError as exc:
+        raise PlantgenError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    return paths

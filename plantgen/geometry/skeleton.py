@@ -98,7 +98,9 @@ class Skeleton:
 
     @property
     def bounds(self) -> np.ndarray:
-        """(2, 3) float: axis-aligned box of the segment end points, widened by radii."""
+        """(2, 3) float: axis-aligned box of the segment end points, widened by radii in
+        every direction: a safe box, larger than the model (its exact box is
+        :func:`plantgen.metrics.geometry_bounds`)."""
         if len(self) == 0:
             return np.zeros((2, 3))
         pts = np.concatenate([self.start, self.end])
@@ -107,7 +109,8 @@ class Skeleton:
 
     @property
     def height(self) -> float:
-        """Extent along y (up), radii included."""
+        """Extent of :attr:`bounds` along y (up) (the model's height is
+        :func:`plantgen.metrics.tree_metrics`' ``height``)."""
         b = self.bounds
         return float(b[1, 1] - b[0, 1])
 
@@ -241,35 +244,6 @@ class Skeleton:
         except SkeletonError as exc:
             raise SkeletonError(f"{path}: {exc}") from None
         return skel
-
-    def save_swc(self, path: str | Path) -> None:
-        """Write the skeleton as SWC (one node per point, radius per node).
-
-        Every segment contributes its end point as a node; roots and side branches also
-        contribute a start node so that their radius at the start is kept. Type codes:
-        1 for the first root node, 3 (dendrite) elsewhere, as SWC readers expect.
-        """
-        n = len(self)
-        lines = ["# plantgen skeleton, y-up", "# id type x y z radius parent"]
-        end_id = np.zeros(n, dtype=np.int64)
-        nid = 0
-        for i in range(n):
-            p = int(self.parent[i])
-            if p < 0 or not self.continues[i]:
-                nid += 1
-                x, y, z = self.start[i]
-                par = -1 if p < 0 else int(end_id[p])
-                typ = 1 if nid == 1 else 3
-                lines.append(f"{nid} {typ} {x:.9g} {y:.9g} {z:.9g} {self.r_start[i]:.9g} {par}")
-                start_id = nid
-            else:
-                start_id = int(end_id[p])
-            nid += 1
-            x, y, z = self.end[i]
-            lines.append(f"{nid} 3 {x:.9g} {y:.9g} {z:.9g} {self.r_end[i]:.9g} {start_id}")
-            end_id[i] = nid
-        text = "\n".join(lines) + "\n"
-        write_atomically(path, lambda tmp: Path(tmp).write_text(text), SkeletonError)
 
 
 def _read_npz(fh, path, limits: Limits) -> dict:

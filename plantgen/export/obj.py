@@ -1,0 +1,98 @@
+"""Wavefront OBJ with its material library: ``plant.obj`` and ``plant.mtl`` beside it.
+
+The OBJ holds every vertex once with its texture coordinate and normal (``v``, ``vt``,
+``vn``, same index), then the faces material by material, each run under a group named
+after the material and a ``usemtl`` of it (``f a/a/a b/b/b c/c/c``, counter-clockwise seen
+from outside). The MTL holds one material per plantgen material: ``Kd`` its colour
+(linear RGB, the glTF base colour), no specular, opaque. Names keep plantgen's material
+names, with white space turned to ``_`` (OBJ and MTL end a name at white space).
+
+Coordinates are y-up by default (OBJ has no rule; Blender's, Maya's and three.js's
+importers take y as up); ``up="z"`` turns the model. Both files are written under
+temporary names and renamed together, the OBJ last.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..files import write_all_atomically
+from ..geometry.mesh import TessellatedMesh
+from .formats import ExportError
+from .gltf import generator
+from .plants import Colours, Progress, material_colours, turned_mesh
+
+__all__ = ["obj_names", "write_obj"]
+
+#: Rows formatted at a time (bounds the text held in memory; one progress step each).
+ROWS = 1 << 16
+
+
+def obj_names(names) -> list[str]:
+    """Material names as OBJ/MTL can hold them: white space -> ``_``, made unique."""
+    out: list[str] = []
+    for name in names:
+        base = re.sub(r"\s+", "_", name.strip()) or "material"
+        candidate, k = base, 1
+        while candidate in out:
+            k += 1
+            candidate = f"{base}_{k}"
+        out.append(candidate)
+    return out
+
+
+def _rows(fh, prefix: str, fmt: str, array: np.ndarray, progress, done: list, total: int) -> None:
+    """Write ``array`` (n, w) as lines ``prefix fmt`` in chunks of :data:`ROWS` rows."""
+    line = f"{prefix} {fmt}\n"
+    for lo in range(0, len(array), ROWS):
+        chunk = array[lo:lo + ROWS]
+        fh.write((line * len(chunk)) % tuple(chunk.ravel().tolist()))
+        done[0] += 1
+        if progress is not None:
+            progress("write", done[0], total)
+
+
+def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours: Colours = None,
+              progress: Progress = None) -> list[Path]:
+    """Write ``mesh`` as ``path`` (.obj) and its ``.mtl`` (see the module docstring)."""
+    path = Path(path)
+    if len(mesh.faces) == 0:
+        raise ExportError(f"{path}: nothing to export (the model has no segments)")
+    mtl_path = path.with_suffix(".mtl")
+    names = obj_names(mesh.material_names)
+    rgb = material_colours(mesh.material_names, colours)
+    vertices, normals = turned_mesh(mesh, up)
+    order = np.argsort(mesh.face_material, kind="stable")
+    face_material = mesh.face_material[order]
+    faces = mesh.faces[order].astype(np.int64) + 1
+    runs = np.flatnonzero(np.diff(face_material)) + 1
+    starts = np.concatenate([[0], runs])
+    ends = np.concatenate([runs, [len(faces)]])
+    total = 3 * -(-len(vertices) // ROWS) + sum(-(-(b - a) // ROWS) for a, b in zip(starts, ends, strict=True))
+
+    def write_mtl(tmp):
+        lines = [f"# {generator()}: materials of {path.name}"]
+        for i, name in enumerate(names):
+            r, g, b = rgb[i]
+            lines += ["", f"newmtl {name}", "Ka 0 0 0", f"Kd {r:.6f} {g:.6f} {b:.6f}", "Ks 0 0 0", "Ns 10",
+                      "d 1", "illum 1"]
+        Path(tmp).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+    def write_geometry(tmp):
+        done = [0]
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(f"# {generator()}: {len(faces):,} triangles, {len(vertices):,} vertices, {up}-up\n"
+                     f"mtllib {mtl_path.name}\no {path.stem}\n")
+            _rows(fh, "v", "%.9g %.9g %.9g", vertices, progress, done, total)
+            _rows(fh, "vt", "%.7g %.7g", mesh.uv.astype(np.float64), progress, done, total)
+            _rows(fh, "vn", "%.7g %.7g %.7g", normals.astype(np.float64), progress, done, total)
+            for a, b in zip(starts, ends, strict=True):
+                name = names[int(face_material[a])]
+                fh.write(f"g {name}\nusemtl {name}\n")
+                _rows(fh, "f", "%d/%d/%d %d/%d/%d %d/%d/%d", np.repeat(faces[a:b], 3, axis=1), progress,
+                      done, total)
+
+    return write_all_atomically([(mtl_path, write_mtl), (path, write_geometry)], ExportError)

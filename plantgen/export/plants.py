@@ -1,0 +1,110 @@
+"""What the writers take: plants (a mesh and a skeleton in the plant's own frame, and
+where its copies stand), material colours, and meshes split by material."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.frames import up_rotation
+from ..geometry.materials import material_colour
+from ..geometry.mesh import TessellatedMesh
+from ..geometry.skeleton import Skeleton
+from .formats import ExportError
+
+__all__ = ["Colours", "Part", "Plant", "Progress", "material_colours", "material_parts", "turned_mesh"]
+
+#: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
+#: renderers' palette).
+Colours = Mapping[str, Sequence[float]] | Sequence | None
+#: ``progress(stage, done, total)``: a writer reports its steps (may be None).
+Progress = Callable[[str, int, int], None] | None
+
+
+@dataclass(frozen=True, eq=False)
+class Plant:
+    """One plant of an export.
+
+    ``mesh`` (None for the skeleton formats) and ``skeleton`` lie in the plant's own
+    frame; ``matrices`` (k, 4, 4) places its k copies (similarity transforms), or is None
+    for a model written where it is (a grammar, a skeleton file, a scene flattened)."""
+
+    name: str
+    skeleton: Skeleton
+    mesh: TessellatedMesh | None = None
+    matrices: np.ndarray | None = None
+    labels: Mapping[str, np.ndarray] | None = None   # per mesh row, by attribute name (glTF)
+
+    @property
+    def copies(self) -> int:
+        return 1 if self.matrices is None else len(self.matrices)
+
+
+@dataclass(frozen=True, eq=False)
+class Part:
+    """The faces of one material of a mesh, with only the vertices they use."""
+
+    material: int
+    vertices: np.ndarray      # (v, 3) float64
+    normals: np.ndarray       # (v, 3) float32, unit
+    uv: np.ndarray            # (v, 2) float32
+    faces: np.ndarray         # (f, 3) int, indices into this part's vertices
+    labels: dict | None = None  # name -> (v,) float32 per vertex (from per-row labels)
+
+
+def material_colours(names, colours: Colours = None) -> list[tuple[float, float, float]]:
+    """Linear RGB of every material name (see :data:`Colours`)."""
+    out = []
+    for i, name in enumerate(names):
+        if colours is None:
+            c = material_colour(name)
+        elif isinstance(colours, Mapping):
+            c = colours.get(name, material_colour(name))
+        else:
+            c = colours[i]
+        c = tuple(float(x) for x in c)
+        if len(c) != 3 or not all(0.0 <= x <= 1.0 for x in c):
+            raise ExportError(f"material {name!r}: colour must be three numbers in [0, 1], got {c}")
+        out.append(c)
+    return out
+
+
+def turned_mesh(mesh: TessellatedMesh, up: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (float64) and unit normals (float32) of ``mesh`` in the ``up`` frame."""
+    rot = up_rotation(up)
+    normals = mesh.normals.astype(np.float64) @ rot.T
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    return mesh.vertices @ rot.T, normals.astype(np.float32)
+
+
+def vertex_labels(mesh: TessellatedMesh, labels: Mapping[str, np.ndarray] | None) -> dict:
+    """Per-row ``labels`` ({name: (rows,) values}) as per-vertex float32 arrays: each vertex
+    takes the value of a row whose faces use it (a ring shared along a continuing chain
+    lies on rows of one branch, so labels by branch agree there)."""
+    out = {}
+    for name, values in (labels or {}).items():
+        values = np.asarray(values, dtype=np.float32)
+        if values.shape != (mesh.n_rows,):
+            raise ExportError(f"label {name}: {values.shape} values for {mesh.n_rows} mesh rows")
+        per_vertex = np.zeros(len(mesh.vertices), dtype=np.float32)
+        per_vertex[mesh.faces.ravel()] = np.repeat(values[mesh.face_row], 3)
+        out[name] = per_vertex
+    return out
+
+
+def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np.ndarray] | None = None) -> list[Part]:
+    """One :class:`Part` per material the mesh uses, in material order; ``labels``: per-row
+    values carried to the part's vertices (:func:`vertex_labels`)."""
+    vertices, normals = turned_mesh(mesh, up)
+    per_vertex = vertex_labels(mesh, labels)
+    face_material = mesh.face_material
+    used = np.unique(face_material)
+    parts = []
+    for mat in used:
+        faces = mesh.faces if len(used) == 1 else mesh.faces[face_material == mat]
+        keep, inverse = np.unique(faces, return_inverse=True)
+        parts.append(Part(int(mat), vertices[keep], normals[keep], mesh.uv[keep].astype(np.float32),
+                          inverse.reshape(faces.shape), {k: v[keep] for k, v in per_vertex.items()} or None))
+    return parts
