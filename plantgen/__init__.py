@@ -64,10 +64,12 @@ def render(path, output=None, *, size=None, camera="auto", azimuth=None, elevati
 
 
 def export(path, output, *, subdiv=1, relief=False, seed=None, limits=None, allow_paths=(), **options):
-    """Tessellate a grammar, scene, skeleton file or shipped name and write a mesh file
-    (``.glb``, ``.gltf``, ``.obj``, ``.ply``, ``.stl``), as ``plantgen export`` does:
-    ``subdiv`` is the level m (16·4^m triangles a segment), ``relief`` moves the vertices
-    onto the relief surface. Returns the summary dict of
+    """Tessellate a grammar, scene, skeleton file or shipped name and write the file
+    ``output`` names (mesh: ``.glb``, ``.gltf``, ``.obj``, ``.ply``, ``.stl``, ``.usda``,
+    ``.usdc``; skeleton: ``.swc``, ``.qsm.csv``, ``.qsm.mat``), as ``plantgen export`` does:
+    ``subdiv`` is the level m (16·4^m triangles per frustum plus 8·2^m per cap), ``relief``
+    moves the vertices onto the relief surface; ``options`` as the command's (``up``,
+    ``instancing``, ...). Returns the summary dict of
     :func:`plantgen.pipeline.export_model` (segments, triangles, vertices, path, timings)."""
     from .pipeline import export_model
 

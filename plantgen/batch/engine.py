@@ -4,7 +4,8 @@ the machine by default, or an existing cluster by its scheduler's address.
 Each plant is one task (:func:`plantgen.batch.plant.make_plant`, ``pure=False``), so
 Dask balances them, and reschedules the tasks of a worker that dies; a plant's files
 depend only on its task, so the result does not depend on which worker ran what. The
-manifest is rewritten (atomically) at most every ``save_every`` seconds and at the end,
+manifest is rewritten (atomically) at most every ``save_every`` seconds (and at most a
+tenth of the time: a save rewrites every row, 0.6 s at 100,000 rows) and at the end,
 Ctrl-C included, and a re-run skips every plant it lists as done.
 """
 
@@ -105,7 +106,7 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
             futures = client.map(make_plant, todo, outputs=spec.outputs, out_dir=str(folder), limits=limits,
                                  pure=False, key=[f"plant-{t.id}" for t in todo], retries=1)
             task_of = dict(zip((f.key for f in futures), todo, strict=True))
-            last_save = time.perf_counter()
+            last_save, wait = time.perf_counter(), save_every
             for future in as_completed(futures):
                 row = _row_of(future, task_of[future.key])
                 manifest.add(row)
@@ -114,9 +115,11 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
                 now = time.perf_counter()
                 if progress:
                     progress(len(made) - failed, failed, len(todo), len(made) / max(now - t0, 1e-9))
-                if now - last_save >= save_every:
+                if now - last_save >= wait:
                     manifest.save()
-                    last_save = now
+                    last_save = time.perf_counter()
+                    # a save rewrites every row: keep it under a tenth of the run's time
+                    wait = max(save_every, 10.0 * (last_save - now))
     finally:
         if futures:
             client.cancel(futures)

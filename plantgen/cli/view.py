@@ -47,7 +47,7 @@ def _keys_epilog() -> str:
               help="Start with RC, RC+R (ray casting, without and with relief), GS or GS+R "
                    "(tessellated meshes). Default: RC+R when the effects list relief, else RC.")
 @click.option("--subdiv", type=click.IntRange(0, MAX_LEVEL), default=1, show_default=True, metavar="M",
-              help="GS subdivision level m (16·4^m triangles a segment).")
+              help="GS subdivision level m (16·4^m triangles per frustum, 8·2^m per cap).")
 @click.option("--effects", metavar="LIST",
               help=f"Comma-separated effects replacing the scene's list (known: {', '.join(EFFECTS)}).")
 @click.option("--relief/--no-relief", default=None, help="Relief on or off at the start (default: the effects').")
