@@ -404,7 +404,7 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
     plain = caster.render(frusta, camera)
     assert plain.stats.passes == ["sky", "frusta"]
     assert plain.stats.program[1] == {"RELIEF": False, "V_EXACT": False, "MARCH_FIXED": False,
-                                      "HEIGHT_FETCH4": False, "SCREEN_PROXY": False}
+                                      "HEIGHT_FETCH4": False, "SCREEN_PROXY": False, "LABELS": False}
     # programs_used: (file, names of the defines switched on) of every program a frame used
     assert ("raycast.glsl", ()) in caster.programs_used
     assert all("RELIEF" not in defines for _, defines in caster.programs_used)
