@@ -48,6 +48,14 @@ class BatchResult:
         return (self.done + self.failed) / self.seconds if self.seconds > 0 else 0.0
 
 
+def _require_dask() -> None:
+    try:
+        import dask.distributed  # noqa: F401
+        import pyarrow  # noqa: F401
+    except ImportError:
+        raise PlantgenError("plantgen batch needs the batch extra: pip install 'plantgen[batch]'") from None
+
+
 def dask_client(scheduler: str | None, workers: int | None):
     """(client, cluster or None): a client of the cluster at ``scheduler``, or of a new
     ``LocalCluster`` of ``workers`` single-threaded processes (default: the CPU count)."""
@@ -86,6 +94,8 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
     ``client``: an existing ``dask.distributed.Client`` (tests, notebooks) instead of
     ``scheduler`` / ``workers``."""
     folder = Path(folder)
+    if client is None:
+        _require_dask()              # before anything is written
     manifest, todo = _prepare(spec, folder)
     skipped = len(spec.tasks) - len(todo)
     own = client is None
