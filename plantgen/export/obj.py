@@ -23,7 +23,7 @@ from ..files import write_all_atomically
 from ..geometry.mesh import TessellatedMesh
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Progress, material_colours, turned_mesh
+from .plants import Colours, Progress, material_colours, turned_mesh, unique_name
 
 __all__ = ["obj_names", "write_obj"]
 
@@ -35,12 +35,7 @@ def obj_names(names) -> list[str]:
     """Material names as OBJ/MTL can hold them: white space -> ``_``, made unique."""
     out: list[str] = []
     for name in names:
-        base = re.sub(r"\s+", "_", name.strip()) or "material"
-        candidate, k = base, 1
-        while candidate in out:
-            k += 1
-            candidate = f"{base}_{k}"
-        out.append(candidate)
+        out.append(unique_name(re.sub(r"\s+", "_", name.strip()) or "material", out))
     return out
 
 

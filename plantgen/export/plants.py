@@ -54,6 +54,15 @@ class Part:
     labels: dict | None = None  # name -> (v,) float32 per vertex (from per-row labels)
 
 
+def unique_name(base: str, taken) -> str:
+    """``base``, or ``base_2``, ``base_3``, ... : the first not in ``taken``."""
+    name, k = base, 1
+    while name in taken:
+        k += 1
+        name = f"{base}_{k}"
+    return name
+
+
 def material_colours(names, colours: Colours = None) -> list[tuple[float, float, float]]:
     """Linear RGB of every material name (see :data:`Colours`)."""
     out = []

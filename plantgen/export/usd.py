@@ -38,7 +38,7 @@ from ..geometry.skeleton import Skeleton
 from ..geometry.topology import branches
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Plant, Progress, material_colours, turned_mesh
+from .plants import Colours, Plant, Progress, material_colours, turned_mesh, unique_name
 
 __all__ = ["skeleton_curves", "write_usd"]
 
@@ -79,11 +79,7 @@ class _Writer:
         self.stage.GetRootLayer().documentation = f"written by {generator()}"
 
     def name(self, text: str, taken: set) -> str:
-        base = self.Tf.MakeValidIdentifier(text or "plant")
-        name, k = base, 1
-        while name in taken:
-            k += 1
-            name = f"{base}_{k}"
+        name = unique_name(self.Tf.MakeValidIdentifier(text or "plant"), taken)
         taken.add(name)
         return name
 
