@@ -7,6 +7,12 @@ joint constructions are timed, interleaved: closed seams (the default: the child
 radii fitted, :func:`plantgen.geometry.skin.seam_radii`) and the paper's planes, with the
 cost of closing the seams as their ratio. It also prints the skin report and the mean
 bounding-pyramid / frustum volume ratio.
+
+Smooth bends (issue 17): a two-segment chain bent by ``--bend`` degrees is skinned with
+``skin_skeleton(smooth_bends=...)`` at k = 1, 2, 4, 8, 16 frusta per arc, and the float64
+reference's hits of medial-axis rays are compared with the true bent tube (two cylinders
+joined by a torus section of the same centre-line radius R): the largest distance of a hit
+from that surface, over the tube radius r (:func:`torus_bend_error`).
 """
 
 from __future__ import annotations
@@ -18,8 +24,11 @@ import time
 import numpy as np
 
 from ..geometry.frusta import pyramid_volume_ratio
+from ..geometry.reference import intersect_frusta
 from ..geometry.skeleton import Skeleton
 from ..geometry.skin import skin_skeleton
+from ..geometry.smooth import DEFAULT_RADIUS_FACTOR, smooth_bends
+from ..geometry.stability import chain, medial_axis_rays
 from ..pipeline import load_skeleton
 
 
@@ -65,7 +74,10 @@ def main(argv=None) -> None:
     parser.add_argument("--grammars", nargs="*", metavar="YAML",
                         help="also skin these grammars with and without seam fitting and "
                              "print the seam mismatch before and after (§2.2)")
+    parser.add_argument("--bend", type=float, default=90.0,
+                        help="bend (degrees) of the smooth-bend error table (default 90)")
     args = parser.parse_args(argv)
+    _smooth_table(args.bend)
     if args.grammars:
         _seams(args.grammars)
     skeleton = synthetic_tree(args.segments)
@@ -98,6 +110,58 @@ def _seams(paths) -> None:
               f"max {r.seam_mismatch_max_before:.2e} mean {r.seam_mismatch_mean_before:.2e} -> "
               f"fitted max {r.seam_mismatch_max_after:.2e} ({dt * 1e3:.0f} ms); knuckles {r.sharp_joints}; "
               f"pyramid/frustum volume {_mean_ratio(fitted):.3f}")
+
+
+def torus_bend_error(bend_deg: float, k: int, radius: float = 0.1, length: float = 1.0,
+                     rays: int = 2000, seed: int = 1) -> dict:
+    """Skin a two-segment chain bent by ``bend_deg`` with k frusta per arc and measure the
+    reference hits of ``rays`` medial-axis rays against the true bent tube.
+
+    Returns ``error`` (max |distance of a hit from the centre line - r| / r over the hits
+    off the end caps), ``missed`` (rays with no hit: the chain is not closed),
+    ``segments_added`` (from the skin report) and ``R`` (the arc's centre-line radius)."""
+    skeleton = chain([bend_deg], lengths=length, radii=radius)
+    R = float(smooth_bends(skeleton, 0.5 * bend_deg).arc_radius[0])
+    frusta = skin_skeleton(skeleton, smooth_bends=0.5 * bend_deg, smooth_step_deg=bend_deg / k)
+    origins, dirs = medial_axis_rays(frusta, rays, seed=seed)
+    hits = intersect_frusta(frusta, origins, dirs)
+    side = hits.hit & ~hits.cap
+    dist = _bent_axis_distance(hits.point[side], np.radians(bend_deg), R, length)
+    return {"error": float(np.max(np.abs(dist - radius)) / radius), "missed": int((~hits.hit).sum()),
+            "segments_added": frusta.report.smooth_segments, "R": R}
+
+
+def _bent_axis_distance(points, theta: float, R: float, length: float) -> np.ndarray:
+    """Distance of ``points`` (m, 3) from the centre line of :func:`chain`'s two-segment
+    chain (up +y, then bent by ``theta`` towards +x at (0, length, 0)) smoothed by an arc
+    of radius ``R``: straight, arc, straight."""
+    d = R * np.tan(0.5 * theta)
+    a_p, n = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    a_c = np.cos(theta) * a_p + np.sin(theta) * n
+    J = length * a_p
+    P0, P1 = J - d * a_p, J + d * a_c
+    centre = P0 + R * n
+
+    def to_segment(a, b):
+        t = np.clip((points - a) @ (b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        return np.linalg.norm(points - (a + t[:, None] * (b - a)), axis=1)
+
+    w = points - centre
+    off_plane = w[:, 2]
+    phi = np.arctan2(w @ a_p, -(w @ n))
+    in_arc = (phi >= 0) & (phi <= theta)
+    to_arc = np.where(in_arc, np.hypot(np.hypot(w[:, 0], w[:, 1]) - R, off_plane), np.inf)
+    return np.minimum(np.minimum(to_segment(np.zeros(3), P0), to_segment(P1, J + length * a_c)), to_arc)
+
+
+def _smooth_table(bend_deg: float) -> None:
+    for k in (1, 2, 4, 8, 16):
+        e = torus_bend_error(bend_deg, k)
+        if k == 1:
+            print(f"smooth bends: {bend_deg:g} deg bend, r = 0.1, lengths 1, arc R = {e['R'] / 0.1:.3g} r "
+                  f"(at most {DEFAULT_RADIUS_FACTOR:g} r), float64 reference, 2000 medial-axis rays")
+        print(f"  k = {k:2d} frusta per arc (+{e['segments_added']} segments): max |hit - torus| / r = "
+              f"{e['error']:.3e}, rays missed {e['missed']}")
 
 
 def _mean_ratio(frusta) -> float:

@@ -125,6 +125,8 @@ class SkinReport:
     seam_mismatch_mean_before: float = 0.0
     seam_mismatch_max_after: float | None = None
     seam_mismatch_mean_after: float | None = None
+    smooth_joints: int = 0          # joints replaced by arcs (skin_skeleton(smooth_bends=...))
+    smooth_segments: int = 0        # segments those arcs added before skinning
 
     def lines(self) -> list[str]:
         s = [f"{self.n_segments} segments -> {self.n_rows} rows; {self.joints} joints, "
@@ -137,6 +139,8 @@ class SkinReport:
         if self.seam_mismatch_max_after is not None:
             s[-1] += (f"; fitted: max "
                       f"{self.seam_mismatch_max_after:.3g}, mean {self.seam_mismatch_mean_after:.3g}")
+        if self.smooth_joints:
+            s.append(f"smooth bends: {self.smooth_joints} joints -> arcs, +{self.smooth_segments} segments")
         return s
 
 

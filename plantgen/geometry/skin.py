@@ -38,6 +38,7 @@ and their base is open (capped).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,8 @@ from ..tolerances import tol
 from . import relief
 from .frusta import Frusta, SkinReport, cone_slope, minor_semi_axis, plane_height
 from .skeleton import Skeleton
+from .smooth import DEFAULT_STEP_DEG
+from .smooth import smooth_bends as smooth_bends_of
 from .vec import (
     any_perpendicular,
     cross,
@@ -62,9 +65,33 @@ __all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_r
            "seam_radii", "sphere_base_radius"]
 
 
-def skin_skeleton(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
-                  max_bend_deg: float = 120.0, fan_step_deg: float = 10.0, twist: float = 0.0,
-                  extend_side_branches: bool = True) -> Frusta:
+def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
+                  smooth_step_deg: float = DEFAULT_STEP_DEG, **options) -> Frusta:
+    """Skin a skeleton with conical frusta (§2), optionally smoothing its bends first.
+
+    smooth_bends : None (the default: the skeleton as it is), or an angle in degrees:
+        continuing joints bent by more than it are replaced by arcs of short segments
+        tangent to both segments before skinning (:func:`plantgen.geometry.smooth.smooth_bends`),
+        each arc chord bending at most ``smooth_step_deg``. The frusta's ``segment`` still
+        names the original skeleton's segments (an arc's rows: the joint's child), and the
+        report counts the joints smoothed and the segments added (``smooth_joints``,
+        ``smooth_segments``; ``n_segments`` is the original count).
+    options : the keyword arguments of :func:`_skin` (shell, seam_fit, max_bend_deg,
+        fan_step_deg, twist, extend_side_branches)
+    """
+    if smooth_bends is None:
+        return _skin(skeleton, **options)
+    refined = smooth_bends_of(skeleton, float(smooth_bends), step_deg=float(smooth_step_deg))
+    frusta = _skin(refined.skeleton, **options)
+    report = frusta.report
+    report.n_segments, report.smooth_joints = len(skeleton), refined.joints
+    report.smooth_segments = refined.added
+    return dataclasses.replace(frusta, segment=refined.origin[frusta.segment], report=report)
+
+
+def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
+          max_bend_deg: float = 120.0, fan_step_deg: float = 10.0, twist: float = 0.0,
+          extend_side_branches: bool = True) -> Frusta:
     """Skin a skeleton with conical frusta, vectorised over all segments (§2).
 
     Parameters

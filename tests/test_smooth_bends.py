@@ -1,0 +1,174 @@
+"""Smooth bends (issue 17): bent continuing joints become arcs of short frusta.
+
+Invariants with a physical meaning: the refined centre line is tangent to both segments
+and lies on a circle of the chosen radius; radii and the chain stay continuous; the
+segment count grows by what the report says; the skin stays closed (every medial-axis ray
+hits it, seams have no radial gap); and the skin converges to the true torus-section bend
+as the chord sag R·(1 - cos(θ/2k)) with k frusta per arc.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from plantgen.benchmarks.skinning import torus_bend_error
+from plantgen.geometry.frusta import seam_gap
+from plantgen.geometry.reference import intersect_frusta
+from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.smooth import DEFAULT_RADIUS_FACTOR, smooth_bends
+from plantgen.geometry.stability import chain, medial_axis_rays
+
+
+def _frusta_arrays(f):
+    return {name: getattr(f, name) for name in ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi",
+                                                 "ref_dir", "u_offset", "segment", "parent_row", "material")}
+
+
+def _closed(frusta, rays=600) -> int:
+    """Rays from inside the solid that escape (0: the skin is closed)."""
+    o, d = medial_axis_rays(frusta, rays)
+    return int((~intersect_frusta(frusta, o, d).hit).sum())
+
+
+def _links_continuous(sk: Skeleton) -> tuple[float, float]:
+    """Largest gap between a continuing segment's start and its parent's end, and the
+    largest radius step there."""
+    c = np.flatnonzero(sk.continues & (sk.parent >= 0))
+    p = sk.parent[c]
+    return (float(np.abs(sk.start[c] - sk.end[p]).max()), float(np.abs(sk.r_start[c] - sk.r_end[p]).max()))
+
+
+def test_option_off_or_above_every_bend_changes_no_skin():
+    sk = chain([10.0, 25.0, 40.0], lengths=[1.0, 0.8, 0.6, 0.5], radii=[0.12, 0.1, 0.09, 0.07, 0.05])
+    plain = _frusta_arrays(skin_skeleton(sk))
+    above = skin_skeleton(sk, smooth_bends=45.0)
+    assert above.report.smooth_joints == 0 and above.report.smooth_segments == 0
+    for name, value in _frusta_arrays(above).items():
+        np.testing.assert_array_equal(value, plain[name], err_msg=name)
+
+
+def test_arc_is_tangent_to_both_segments_and_lies_on_one_circle():
+    theta = 70.0
+    sk = chain([theta], lengths=1.0, radii=0.1)
+    res = smooth_bends(sk, 30.0, step_deg=10.0)
+    k = int(np.ceil(theta / 10.0))
+    assert res.joints == 1 and res.added == k and len(res.skeleton) == 2 + k
+    out = res.skeleton
+    np.testing.assert_array_equal(out.parent, np.arange(-1, len(out) - 1))   # one chain, in order
+    arc = slice(1, 1 + k)
+    R = DEFAULT_RADIUS_FACTOR * 0.1
+    d = R * np.tan(np.radians(theta) / 2)
+    J = sk.end[0]
+    # the two segments are shortened by the tangent length d, keeping their directions
+    np.testing.assert_allclose(np.linalg.norm(out.end[0] - J), d, rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(out.start[-1] - J), d, rtol=1e-12)
+    np.testing.assert_allclose(out.end[-1], sk.end[1], atol=1e-15)
+    # every arc vertex is R from one centre, which is R from both tangent points along
+    # their normals: the arc is tangent to both segments
+    verts = np.concatenate([out.start[arc], out.end[arc][-1:]])
+    centre = out.end[0] + R * np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.linalg.norm(verts - centre, axis=1), R, rtol=1e-12)
+    chords = out.end[arc] - out.start[arc]
+    turn = np.degrees(np.arctan2(chords[:, 0], chords[:, 1]))
+    np.testing.assert_allclose(np.diff(turn), theta / k, rtol=1e-9)       # equal chords
+    np.testing.assert_allclose(turn[0], theta / (2 * k), rtol=1e-9)     # symmetric about the tangents
+    assert _links_continuous(out) == pytest.approx((0.0, 0.0), abs=1e-15)
+
+
+def test_radii_taper_continuously_through_the_arc():
+    sk = chain([80.0], lengths=1.0, radii=[0.15, 0.1, 0.05])
+    out = smooth_bends(sk, 10.0, step_deg=8.0).skeleton
+    gap, step = _links_continuous(out)
+    assert gap < 1e-15 and step < 1e-15
+    radii = np.concatenate([out.r_start, out.r_end[-1:]])
+    assert np.all(np.diff(radii) < 0)                    # still tapering, never a bulge
+    assert radii[0] == 0.15 and radii[-1] == 0.05
+
+
+def test_report_counts_the_added_segments_and_rows_keep_original_segments():
+    sk = chain([50.0, 5.0, 95.0], lengths=1.0, radii=0.08)
+    sk = Skeleton(sk.start, sk.end, sk.r_start, sk.r_end, sk.parent, sk.continues, np.array([0, 1, 0, 1]),
+                  material_names=("bark", "moss"))
+    f = skin_skeleton(sk, smooth_bends=20.0, smooth_step_deg=10.0)
+    r = f.report
+    assert r.smooth_joints == 2
+    assert r.smooth_segments == 5 + 10                  # ceil(50/10) + ceil(95/10)
+    assert r.n_segments == 4
+    assert r.n_rows == 4 + r.smooth_segments + r.fan_rows
+    assert any("smooth bends: 2 joints" in line for line in r.lines())
+    assert set(f.segment) == {0, 1, 2, 3}
+    np.testing.assert_array_equal(f.material, sk.material[f.segment])
+    assert np.all(np.diff(f.segment) >= 0)               # rows in chain order
+
+
+def test_arc_rows_continue_the_chain_with_closed_seams():
+    f = skin_skeleton(chain([60.0, 40.0], lengths=1.0, radii=[0.1, 0.09, 0.08, 0.07]), smooth_bends=15.0)
+    assert f.report.sharp_joints == 0
+    # one chain: every row but the root shares its lower plane with the row before it,
+    # so v runs on and u is carried by the skinning's texture frames
+    np.testing.assert_array_equal(f.parent_row, np.arange(-1, len(f) - 1))
+    assert seam_gap(f).max() < 1e-9
+    assert _closed(f) == 0
+
+
+@pytest.mark.parametrize("bend", [45.0, 90.0, 135.0])
+def test_error_against_the_torus_decreases_with_frusta_per_arc(bend):
+    ks = (1, 2, 4, 8, 16)
+    res = [torus_bend_error(bend, k, rays=1500) for k in ks]
+    errors = np.array([e["error"] for e in res])
+    assert all(e["missed"] == 0 for e in res)            # the chain stays closed
+    assert [e["segments_added"] for e in res] == list(ks)
+    assert np.all(np.diff(errors) < 0)
+    # the chords sag inside the arc by R(1 - cos(θ/2k)); the outer wall follows them
+    R_over_r = res[0]["R"] / 0.1
+    assert R_over_r == pytest.approx(min(DEFAULT_RADIUS_FACTOR, 0.45 / np.tan(np.radians(bend) / 2) / 0.1))
+    sag = R_over_r * (1 - np.cos(np.radians(bend) / (2 * np.array(ks))))
+    # (from k = 2: one chord across a 135° bend meets its segments at 67.5° joints, whose
+    # seams, not the sag, set the largest distance)
+    np.testing.assert_allclose(errors[1:], sag[1:], rtol=0.1)
+    assert errors[-1] < 0.02
+
+
+def test_side_branch_at_a_smoothed_joint_moves_onto_the_arc():
+    base = chain([60.0], lengths=1.0, radii=0.1)
+    J = base.end[0]
+    side_end = J + np.array([-0.6, 0.3, 0.2])
+    start = np.vstack([base.start[:1], [J], base.start[1:]])
+    end = np.vstack([base.end[:1], [side_end], base.end[1:]])
+    sk = Skeleton(start, end, [0.1, 0.05, 0.1], [0.1, 0.03, 0.1], [-1, 0, 0], [False, False, True],
+                  np.zeros(3, int))
+    res = smooth_bends(sk, 20.0)
+    out = res.skeleton
+    side = int(np.flatnonzero(res.origin == 1)[0])
+    host = out.parent[side]
+    assert res.origin[host] == 2 and out.continues[host]          # hangs from an arc chord
+    mid = 0.5 * (out.start[host] + out.end[host])
+    np.testing.assert_allclose(out.start[side], mid, atol=1e-15)   # on the arc's axis
+    np.testing.assert_array_equal(out.end[side], side_end)
+    assert np.all(out.parent < np.arange(len(out)))
+    assert _closed(skin_skeleton(sk, smooth_bends=20.0)) == 0
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(bends=st.lists(st.floats(0.0, 150.0), min_size=1, max_size=4),
+       lengths=st.floats(0.2, 2.0), r0=st.floats(0.02, 0.3), taper=st.floats(0.3, 1.0),
+       threshold=st.floats(1.0, 60.0), step=st.floats(3.0, 30.0))
+def test_random_chains_stay_closed_and_continuous(bends, lengths, r0, taper, threshold, step):
+    n = len(bends) + 1
+    radii = r0 * np.linspace(1.0, taper, n + 1)
+    sk = chain(bends, lengths=lengths, radii=radii)
+    res = smooth_bends(sk, threshold, step_deg=step)
+    expect = sum(int(np.ceil(b / step - 1e-9)) for b in bends if threshold < b < 179.0)
+    assert res.added == expect
+    if res.added:
+        gap, rstep = _links_continuous(res.skeleton)
+        assert gap < 1e-12 * max(lengths, 1.0) and rstep < 1e-12
+        lengths_out = np.linalg.norm(res.skeleton.end - res.skeleton.start, axis=1)
+        assert np.all(lengths_out > 0)
+    f = skin_skeleton(sk, smooth_bends=threshold, smooth_step_deg=step)
+    assert f.report.smooth_segments == res.added
+    assert _closed(f, rays=300) == 0
