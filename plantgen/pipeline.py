@@ -26,6 +26,7 @@ render or an export estimates its memory from the sizes it knows before it alloc
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -276,12 +277,18 @@ def check_finite_mesh(mesh, frusta: Frusta, source) -> None:
                             f"(frustum row {row}): the segment is degenerate")
 
 
-def animate_model(grown: GrowResult, effects) -> AnimatedScene:
+def skinning(smooth_bends: float | None = None):
+    """The skinning function the commands use: :func:`skin_skeleton`, with bends past
+    ``smooth_bends`` degrees smoothed into arcs when given (``--smooth-bends``)."""
+    return skin_skeleton if smooth_bends is None else functools.partial(skin_skeleton, smooth_bends=smooth_bends)
+
+
+def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None) -> AnimatedScene:
     """The model as an :class:`AnimatedScene`: a scene's instances moving as their motion
-    says when ``effects`` hold ``animation``; otherwise skinned once."""
+    says when ``effects`` hold ``animation``; otherwise skinned once (by :func:`skinning`)."""
     if grown.scene is not None and "animation" in effects:
-        return AnimatedScene.from_scene(grown.scene)
-    return AnimatedScene.still(grown.skeleton)
+        return AnimatedScene.from_scene(grown.scene, skinning(smooth_bends))
+    return AnimatedScene.still(grown.skeleton, skinning(smooth_bends))
 
 
 @dataclass
@@ -305,17 +312,18 @@ class PreparedModel:
 
 
 def prepare_model(input_path, *, seed=None, iterations=None, effects=None, relief=None, shadows=None,
-                  limits: Limits | None = None, allow_paths=()) -> PreparedModel:
+                  limits: Limits | None = None, allow_paths=(), smooth_bends=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects: ``effects`` (a list of names)
     replaces the scene's list, ``relief`` / ``shadows`` True or False add or remove that
-    effect (None: as the list says). One line for a model with no segment."""
+    effect (None: as the list says); ``smooth_bends``: see :func:`skinning`. One line for a
+    model with no segment."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
     flags = (("relief", relief), ("shadows", shadows))
     chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
                              add=[n for n, f in flags if f], remove=[n for n, f in flags if f is False])
     if len(grown.skeleton) == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
-    return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen), str(input_path))
+    return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
 
 
 def frame_settings(effects, *, linear_steps=None, binary_steps=None, march=None, march_density=None,
@@ -484,7 +492,7 @@ def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = 
                  march_density=None, effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
                  background=None, ssaa: int = 1, time_s=None, frames=None, fps=12.0, timed_frames: int = 0,
                  exact_distance: bool = False, progress=None, names=None, limits: Limits | None = None,
-                 allow_paths=()) -> RenderReport:
+                 allow_paths=(), smooth_bends=None) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene, skeleton ``.npz``/``.swc`` or shipped
     name), skin it and ray cast it; nothing is written (see :func:`render_file`).
 
@@ -516,6 +524,7 @@ def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = 
     limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
         render is estimated to take, before any is allocated) and the folders a scene may
         read grammars from
+    smooth_bends : None, or bends past this many degrees become arcs (:func:`skinning`)
     """
     limits = _in_force(limits)
     check_render_request(frames, fps, time_s, {**(names or {})}, ssaa, timed_frames)
@@ -526,7 +535,7 @@ def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = 
     width, height = (cam_file.width, cam_file.height) if cam_file is not None else (size or (1024, 768))
     _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=int(ssaa))
     model = prepare_model(input_path, seed=seed, iterations=iterations, effects=effects, relief=relief,
-                          shadows=shadows, limits=limits, allow_paths=allow_paths)
+                          shadows=shadows, limits=limits, allow_paths=allow_paths, smooth_bends=smooth_bends)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, len(model.grown.skeleton), int(ssaa))
     t_start = float(time_s or 0.0)
@@ -591,7 +600,7 @@ INSTANCING = ("gpu", "nodes", "off")
 def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "gpu", unit: float = 1.0,
-                 qsm_tolerance: float = 1e-3, progress=None) -> dict:
+                 qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -609,6 +618,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.export.qsm`)
     progress : ``progress(stage, done, total)``, called as plants are tessellated and
         the file written
+    smooth_bends : None, or bends past this many degrees become arcs of frusta before the
+        mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
+        segments they add)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -644,8 +656,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                      name=grown.name))
         timings["write"] = time.perf_counter() - t1
         return dict(summary, path=summary["paths"][-1])
-    plants = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                 input_path, output_path, timings, progress)
+    plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
+                                 input_path, output_path, timings, progress, skinning(smooth_bends))
     t3 = time.perf_counter()
     paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
                          unit=unit, name=grown.name, progress=progress)
@@ -655,7 +667,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
         triangles=sum(len(m.faces) for m in meshes), vertices=sum(len(m.vertices) for m in meshes),
         drawn=sum(len(p.mesh.faces) * p.copies for p in plants), plants=len(plants),
-        copies=sum(p.copies for p in plants), level=level, relief=relief, paths=paths, path=paths[-1])
+        copies=sum(p.copies for p in plants), level=level, relief=relief, paths=paths, path=paths[-1],
+        smooth_segments=smoothed)
     return summary
 
 
@@ -669,12 +682,14 @@ def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleto
 
 
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
-                        input_path, output_path, timings: dict, progress) -> list[Plant]:
-    """Skin every plant, check the export's triangles and memory against the limits, and
-    tessellate (``timings`` gains ``skin`` and ``tessellate``)."""
+                        input_path, output_path, timings: dict, progress,
+                        skin=skin_skeleton) -> tuple[list[Plant], int]:
+    """Skin every plant with ``skin``, check the export's triangles and memory against the
+    limits, and tessellate (``timings`` gains ``skin`` and ``tessellate``); also the
+    segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
-    frusta = [check_finite_frusta(skin_skeleton(skel), input_path) for _, skel, _ in parts]
+    frusta = [check_finite_frusta(skin(skel), input_path) for _, skel, _ in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
     estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
@@ -697,4 +712,4 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
     timings["tessellate"] = time.perf_counter() - t2
-    return plants
+    return plants, sum(f.report.smooth_segments for f in frusta)

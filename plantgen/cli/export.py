@@ -10,7 +10,17 @@ import click
 from ..export import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
 from ..pipeline import INSTANCING, export_model
-from .options import allow_path_opt, finite, input_arg, limit_opt, limits_from, output_opt, quiet_opt, seed_opt
+from .options import (
+    allow_path_opt,
+    finite,
+    input_arg,
+    limit_opt,
+    limits_from,
+    output_opt,
+    quiet_opt,
+    seed_opt,
+    smooth_bends_opt,
+)
 from .progress import StageBars
 
 _SUFFIXES = ", ".join(EXPORT_FORMATS)
@@ -42,11 +52,12 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
                    "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
 @seed_opt
+@smooth_bends_opt
 @limit_opt
 @allow_path_opt
 @quiet_opt
 def export(input: Path, output: Path, level: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
-           limit_values, allow_paths, quiet) -> None:
+           smooth_bends, limit_values, allow_paths, quiet) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -66,7 +77,8 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
     with StageBars(enabled=not quiet) as bars:
         info = export_model(input, output, level=level, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
-                            instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars)
+                            instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
+                            smooth_bends=smooth_bends)
     if quiet:
         return
     if "triangles" in info:
@@ -83,6 +95,8 @@ def _mesh_summary(info: dict) -> None:
     click.echo(f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {info['level']}"
                f"{' with relief' if info['relief'] else ''}: {info['triangles']:,} triangles "
                f"({info['caps']:,} caps), {info['vertices']:,} vertices, {info['up']}-up")
+    if info.get("smooth_segments"):
+        click.echo(f"smooth bends: +{info['smooth_segments']:,} arc segments")
     if info["copies"] > 1:
         click.echo(f"{info['plants']:,} distinct plants written once for {info['copies']:,} copies: "
                    f"{info['drawn']:,} triangles drawn")

@@ -74,6 +74,14 @@ iterations_opt = click.option("--iterations", type=click.IntRange(min=0),
 
 quiet_opt = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 
+smooth_bends_opt = click.option(
+    "--smooth-bends", "smooth_bends", type=click.FloatRange(0, 180, max_open=True), default=None,
+    callback=finite, metavar="ANGLE",
+    help="Replace every continuing joint bent by more than ANGLE degrees by an arc of short "
+         "frusta tangent to both segments (at most 10° per frustum), so bent branches read as "
+         "smooth tubes rather than polylines; radii and texture stay continuous. Default: off "
+         "(the frusta meet at the skeleton's joints).")
+
 
 def output_opt(what: str, *, required: bool = True):
     """``-o/--output FILE``; ``what`` says what is written and how the suffix is read."""

@@ -26,6 +26,7 @@ from .options import (
     output_opt,
     seed_opt,
     size_opt,
+    smooth_bends_opt,
 )
 
 #: The ray caster's default knobs: the options' defaults.
@@ -94,12 +95,13 @@ OPTION_NAMES = {"frames": "--frames", "fps": "--fps", "depth_out": "--depth-out"
 @click.option("--time-frames", "timed_frames", type=click.IntRange(0, 10000), default=0, show_default=True,
               metavar="N", help="Draw a still N more times after the first and print the median "
                                 "frame time (0: draw once).")
+@smooth_bends_opt
 @limit_opt
 @allow_path_opt
 def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shadow_caster, frames,
            fps, time_s, size, camera, azimuth, elevation, distance, zoom, fov, camera_out, depth_out, seed,
            iterations, march, march_density, linear_steps, binary_steps, v_exact, ssaa, background,
-           timed_frames, limit_values, allow_paths) -> None:
+           timed_frames, smooth_bends, limit_values, allow_paths) -> None:
     """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     into a PNG.
 
@@ -147,7 +149,7 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
                          shadow_caster=shadow_caster, time_s=time_s, frames=frames, fps=fps,
                          background=parse_background(background), ssaa=ssaa, timed_frames=timed_frames,
                          progress=progress, names=OPTION_NAMES, limits=limits_from(limit_values),
-                         allow_paths=allow_paths)
+                         allow_paths=allow_paths, smooth_bends=smooth_bends)
     print_report(report)
 
 

@@ -83,6 +83,10 @@ def smooth_bends(skeleton: Skeleton, min_bend_deg: float, *, step_deg: float = D
     """Replace continuing joints bent by more than ``min_bend_deg`` degrees by arcs (see
     the module docstring). ``segments`` fixes the chords per arc; otherwise
     k = ceil(θ / ``step_deg``). A skeleton with no such joint comes back unchanged."""
+    if not (np.isfinite(min_bend_deg) and 0.0 <= min_bend_deg < 180.0):
+        raise ValueError(f"smooth_bends must be an angle in [0, 180) degrees, got {min_bend_deg!r}")
+    if not (np.isfinite(step_deg) and step_deg > 0.0) or (segments is not None and segments < 1):
+        raise ValueError(f"smooth_bends: step_deg must be > 0 and segments >= 1, got {step_deg!r}, {segments!r}")
     n = len(skeleton)
     p, c, theta, a_p, a_c = _joints(skeleton, min_bend_deg)
     if not len(c):
