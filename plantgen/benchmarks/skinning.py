@@ -97,6 +97,7 @@ def main(argv=None) -> None:
         print("  " + line)
     print(f"  bounding pyramid / frustum volume: mean {_mean_ratio(frusta[True]):.3f} "
           f"(straight cylinder: 4/pi = 1.273)")
+    _smooth_timing(skeleton, args.repeats, med[True])
 
 
 def _seams(paths) -> None:
@@ -152,6 +153,19 @@ def _bent_axis_distance(points, theta: float, R: float, length: float) -> np.nda
     in_arc = (phi >= 0) & (phi <= theta)
     to_arc = np.where(in_arc, np.hypot(np.hypot(w[:, 0], w[:, 1]) - R, off_plane), np.inf)
     return np.minimum(np.minimum(to_segment(np.zeros(3), P0), to_segment(P1, J + length * a_c)), to_arc)
+
+
+def _smooth_timing(skeleton: Skeleton, repeats: int, plain_s: float, angle: float = 15.0) -> None:
+    """Median time of ``skin_skeleton(smooth_bends=angle)`` against the plain skin's."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        smooth = skin_skeleton(skeleton, smooth_bends=angle)
+        times.append(time.perf_counter() - t0)
+    r, med = smooth.report, statistics.median(times)
+    print(f"skin_skeleton(smooth_bends={angle:g}): {r.smooth_joints} joints -> arcs, +{r.smooth_segments} "
+          f"segments, {r.n_rows} rows; median {med * 1e3:.1f} ms over {repeats} runs "
+          f"({med / plain_s:.2f}x the plain skin)")
 
 
 def _smooth_table(bend_deg: float) -> None:

@@ -19,6 +19,11 @@
 5. texture frames: reference directions carried along each chain
    (:func:`_reference_directions`) and u offsets (:func:`_u_offsets`, §2.3).
 
+With ``smooth_bends=ANGLE``, :func:`skin_skeleton` first refines the skeleton
+(:func:`plantgen.geometry.smooth.smooth_bends`: joints bent past ANGLE become arcs of short
+continuing segments tangent to both segments), skins the result as above and maps the
+rows' ``segment`` back to the original segments.
+
 Sharp bends (the paper's §4.1 leaves them open: past ``max_bend_deg``, a plane that no
 longer cuts a cone in an ellipse, or two planes of a segment crossing inside it) become
 *knuckles*: the two segments get planes perpendicular to their own axes through the joint
