@@ -291,3 +291,20 @@ def test_shipped_grammars_draw_what_they_drew_before(name, segments):
     result = grow_file(grammars_dir() / f"{name}.yaml")
     assert len(result.skeleton) == segments
     assert len(result.polygons) == 0 and result.warnings == ()
+
+
+def test_abop_figure_1_25_bush_grows_its_leaves():
+    # ABOP figure 1.25 with its leaves: the branches are unchanged (3,891 segments), every
+    # '{' of the derived string is one leaf, and each leaf, a rigid motion of the same
+    # outline, has the area of that outline drawn alone.
+    bush = grammar(axiom="A", iterations=7, turtle={"angle": 22.5},
+                   materials=["bark", "l1", "l2", "l3", "l4", "l5"],
+                   rules=["A -> [&FL!A]/////'[&FL!A]///////'[&FL!A]", "F -> S/////F", "S -> FL",
+                          "L -> ['''^^{-f+f+f-|-f+f+f}]"])
+    d = draw(bush)
+    assert len(d.skeleton) == 3891
+    assert len(d.polygons) == derive(bush).to_text(10**6).count("{") > 1000
+    leaf = draw(grammar(axiom="{-f+f+f-|-f+f+f}", turtle={"angle": 22.5}))
+    areas = np.bincount(d.polygons.polygon, d.polygons.triangle_areas())
+    assert np.allclose(areas, total_area(leaf), rtol=1e-9)
+    assert set(d.polygons.material.tolist()) == set(range(6))

@@ -78,8 +78,8 @@ _ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\
 #: Symbols with a turtle meaning in ABOP (or its program cpfg) that plantgen does not draw
 #: (yet): each present in a string being drawn gets one warning naming it.
 UNSUPPORTED = {
-    "~": "a predefined surface (ABOP chapter 5)",
-    "@": "cpfg's special shapes (@O sphere, @c circle)",
+    "~": "ABOP's predefined surfaces",
+    "@": "cpfg's spheres and circles",
     "#": "cpfg's width increment",
 }
 #: The most vertices one polygon may have (ear clipping is quadratic in them).
@@ -151,7 +151,7 @@ def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -
     for code, name in enumerate(ms.symbols):
         if name in UNSUPPORTED and counts[code]:
             out.append(f"{source}: warning: {name!r} ({UNSUPPORTED[name]}) has a turtle meaning in ABOP "
-                       f"but none in plantgen yet; its {int(counts[code]):,} module(s) are not drawn")
+                       f"but none in plantgen yet; {int(counts[code]):,} module(s) not drawn")
     if stray_dots:
         out.append(f"{source}: warning: {stray_dots:,} '.' outside any polygon '{{ }}' recorded nothing")
     if degenerate:
