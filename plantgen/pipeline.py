@@ -372,6 +372,7 @@ class RenderReport:
     background: tuple | None = None
     colors: list = field(default_factory=list)
     distance: np.ndarray | None = None
+    warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
 
 
 def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
@@ -558,7 +559,7 @@ def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = 
                         float(np.median(frame_times)), staging.camera, settings, [], result, model.effects,
                         shadow_settings, len(colors) or 1, float(np.median(update_times)) if update_times else 0.0,
                         anim.skin_calls, int(timed_frames) if frames is None else len(colors), int(ssaa),
-                        background, colors, distance)
+                        background, colors, distance, model.grown.warnings)
 
 
 def _write_render_outputs(output: Path, report: RenderReport, fps, camera_out, depth_out) -> list:
@@ -642,7 +643,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"{input_path}: the model has no segments")
     grown.skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
-    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings}
+    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
+               "warnings": grown.warnings}
     if fmt.kind == "skeleton":
         t1 = time.perf_counter()
         if fmt.name == "swc":

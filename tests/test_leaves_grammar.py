@@ -12,7 +12,7 @@ from plantgen.geometry.polygons import triangulate
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.derive import apply_interpretation, cut_branches
 from plantgen.lsystem.grammar import GrammarError
-from plantgen.lsystem.turtle import interpret_plant
+from plantgen.lsystem.turtle import MAX_POLYGON_VERTICES, interpret_plant
 from plantgen.pipeline import grow_file
 
 
@@ -107,6 +107,12 @@ def test_unbalanced_polygons_are_one_line_errors():
         with pytest.raises(Exception, match="polygon") as info:
             draw(grammar(axiom=axiom))
         assert "\n" not in str(info.value)
+
+
+def test_a_polygon_past_the_vertex_limit_is_refused_in_one_line():
+    with pytest.raises(Exception, match="more than 4,096 vertices") as info:
+        draw(grammar(axiom="{" + "+(1)G(0.01)." * (MAX_POLYGON_VERTICES + 1) + "}"))
+    assert "\n" not in str(info.value)
 
 
 # ------------------------------------------------------------------ triangulation
@@ -273,14 +279,18 @@ def test_unsupported_abop_symbol_warns_naming_it():
     assert draw(grammar(axiom="F[+F]F")).warnings == ()
 
 
-def test_cli_grow_prints_the_warning_on_stderr(tmp_path):
+@pytest.mark.parametrize("command", [("grow", "-o", "g.npz"), ("grow", "-o", "g.npz", "--quiet"),
+                                     ("export", "-o", "g.obj"), ("export", "-o", "g.swc", "--quiet"),
+                                     ("render", "-o", "g.png", "--size", "64x48")])
+def test_cli_prints_the_warning_on_stderr(tmp_path, command):
     src = tmp_path / "g.yaml"
     src.write_text('axiom: "F @(1) F"\n')
-    for extra in ((), ("--quiet",)):
-        code, out, err = run_cli("grow", src, "-o", tmp_path / "g.npz", *extra)
-        assert code == 0
-        lines = [line for line in err.splitlines() if "'@'" in line]
-        assert len(lines) == 1 and "warning" in lines[0]
+    verb, flag, out, *extra = command
+    code, _, err = run_cli(verb, src, flag, tmp_path / out, *extra)
+    assert code == 0, err
+    assert (tmp_path / out).is_file()
+    lines = [line for line in err.splitlines() if "'@'" in line]
+    assert len(lines) == 1 and "warning" in lines[0]
 
 
 # ------------------------------------------------------------------ shipped grammars

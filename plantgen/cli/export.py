@@ -67,6 +67,8 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
         info = export_model(input, output, level=level, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars)
+    for line in info["warnings"]:    # never silenced by --quiet, as in grow
+        click.echo(line, err=True)
     if quiet:
         return
     if "triangles" in info:

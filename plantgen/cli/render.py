@@ -148,6 +148,8 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
                          background=parse_background(background), ssaa=ssaa, timed_frames=timed_frames,
                          progress=progress, names=OPTION_NAMES, limits=limits_from(limit_values),
                          allow_paths=allow_paths)
+    for line in report.warnings:     # never silenced, as in grow
+        click.echo(line, err=True)
     print_report(report)
 
 
