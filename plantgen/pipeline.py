@@ -44,6 +44,7 @@ from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta
 from .geometry.mesh import tessellate, triangle_count
+from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
@@ -51,9 +52,9 @@ from .geometry.swc import read_swc, write_swc
 from .images import ANIMATION_SUFFIXES, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
-from .lsystem.derive import derive
+from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
-from .lsystem.turtle import interpret
+from .lsystem.turtle import Drawing, interpret_plant
 from .render.context import renderer_name
 from .render.passes import ShadowSettings
 from .render.raycast import Raycaster, RaycastSettings
@@ -87,19 +88,23 @@ class GrowResult:
     timings: dict = field(default_factory=dict)   # stage -> seconds
     scene: Scene | None = None
     sources: tuple = ()              # every file read: the input, and a scene's grammars
+    polygons: Polygons | None = None  # a grammar's filled polygons (leaves); None for others
+    warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
 
 
 def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
-                  work) -> tuple[Skeleton, int]:
-    """Derive and interpret a parsed grammar, adding each stage's seconds to ``timings``."""
+                  work) -> tuple[Drawing, int]:
+    """Derive a parsed grammar, apply its interpretation rules and draw the result, adding
+    each stage's seconds to ``timings``."""
     t1 = time.perf_counter()
     ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work)
     t2 = time.perf_counter()
-    skel = interpret(ms, grammar.turtle, grammar.materials, path, limits)
+    drawn = apply_interpretation(grammar, ms, seed, limits=limits, work=work)
+    drawing = interpret_plant(drawn, grammar.turtle, grammar.materials, path, limits)
     t3 = time.perf_counter()
     for k, v in (("derive", t2 - t1), ("interpret", t3 - t2)):
         timings[k] = timings.get(k, 0.0) + v
-    return skel, len(ms)
+    return drawing, len(ms)
 
 
 def resolve_input(path: str | Path) -> Path:
@@ -164,10 +169,12 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         t0 = time.perf_counter()
         grammar = parse_grammar(data, str(path), limits)
         timings["parse"] = time.perf_counter() - t0
-        skel, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
-        return GrowResult(skel, kind, grammar.name, n, timings, sources=(path,))
+        drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
+        return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
+                          polygons=drawing.polygons, warnings=drawing.warnings)
 
     modules = [0]
+    warnings: list[str] = []
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
     def grow_one(gpath, s, its):
@@ -176,9 +183,10 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         if key not in grammars:
             grammars[key] = parse_grammar(read_yaml(gpath, GrammarError, limits), key, limits)
         timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
-        skel, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
+        drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
         modules[0] += n
-        return skel
+        warnings.extend(w for w in drawing.warnings if w not in warnings)
+        return drawing.skeleton
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths)
@@ -186,7 +194,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     skel = scene.skeleton()
     timings["place"] = time.perf_counter() - t0
     return GrowResult(skel, kind, scene.name, modules[0], timings, scene,
-                      sources=(path, *(Path(k) for k in grammars)))
+                      sources=(path, *(Path(k) for k in grammars)), warnings=tuple(warnings))
 
 
 def _override_defines(data, kind: str, defines: dict, path) -> dict:
@@ -372,6 +380,7 @@ class RenderReport:
     background: tuple | None = None
     colors: list = field(default_factory=list)
     distance: np.ndarray | None = None
+    warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
 
 
 def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
@@ -559,7 +568,7 @@ def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = 
                         float(np.median(frame_times)), staging.camera, settings, [], result, model.effects,
                         shadow_settings, len(colors) or 1, float(np.median(update_times)) if update_times else 0.0,
                         anim.skin_calls, int(timed_frames) if frames is None else len(colors), int(ssaa),
-                        background, colors, distance)
+                        background, colors, distance, model.grown.warnings)
 
 
 def _write_render_outputs(output: Path, report: RenderReport, fps, camera_out, depth_out) -> list:
@@ -646,7 +655,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"{input_path}: the model has no segments")
     grown.skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
-    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings}
+    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
+               "warnings": grown.warnings}
     if fmt.kind == "skeleton":
         t1 = time.perf_counter()
         if fmt.name == "swc":

@@ -79,6 +79,8 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends)
+    for line in info["warnings"]:    # never silenced by --quiet, as in grow
+        click.echo(line, err=True)
     if quiet:
         return
     if "triangles" in info:

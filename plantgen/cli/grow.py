@@ -82,6 +82,8 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
     result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules,
                        progress=progress if not quiet else None, limits=limits_from(limit_values),
                        allow_paths=allow_paths, defines=define_values(defines))
+    for line in result.warnings:     # never silenced by --quiet: a symbol not drawn is news
+        click.echo(line, err=True)
     skel = result.skeleton
     if len(skel) == 0:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")

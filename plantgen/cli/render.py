@@ -150,6 +150,8 @@ def render(input: Path, output: Path, effects, relief, shadows, shadow_res, shad
                          background=parse_background(background), ssaa=ssaa, timed_frames=timed_frames,
                          progress=progress, names=OPTION_NAMES, limits=limits_from(limit_values),
                          allow_paths=allow_paths, smooth_bends=smooth_bends)
+    for line in report.warnings:     # never silenced, as in grow
+        click.echo(line, err=True)
     print_report(report)
 
 

@@ -15,12 +15,20 @@ grammar's ``max_modules`` may lower the limit, never raise it.
 A derivation whose state (the string and the random generator's state) comes back stops
 early: a fixed point (``F -> F``) at once, a cycle (``A -> B``, ``B -> A``) after one
 period, the remaining steps skipped by their count modulo the period.
+
+``%`` cuts a branch, as ABOP defines it: after the axiom is read and after every step,
+each ``%`` is removed with everything after it up to the ``]`` that closes its branch
+(to the end of the string on the main axis); the ``]`` stays.
+
+:func:`apply_interpretation` applies a grammar's ``interpretation:`` rules (ABOP's
+homomorphism, L-Py's ``interpretation:``) to a derived string ``interpretation_depth``
+times, for drawing only: it returns a new string and the derived one is never changed.
 """
 
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,7 +38,8 @@ from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
 
-__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "derive", "module_bytes"]
+__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "apply_interpretation", "cut_branches",
+           "derive", "module_bytes"]
 
 DEFAULT_MAX_MODULES = default_limits.max_modules
 
@@ -81,7 +90,7 @@ def module_bytes(width: int) -> int:
 
 def _width(grammar: Grammar) -> int:
     n = [len(m.args) for m in grammar.axiom]
-    for r in grammar.rules:
+    for r in (*grammar.rules, *grammar.interpretation):
         n += [len(m.args) for m in r.successor]
     return max([1, *n])
 
@@ -192,7 +201,7 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     codes = {s: i for i, s in enumerate(grammar.symbols)}
     width = _width(grammar)
 
-    string = _axiom_string(grammar, rng, codes, width)
+    string = _cut(_axiom_string(grammar, rng, codes, width), codes)
     if len(string[0]) > limits.max_modules:
         raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} modules")
     groups = _rule_groups(grammar.rules)
@@ -210,7 +219,7 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         _check_step(grammar, limits, step, total, width)
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
                    f"{grammar.path}: derivation step {step + 1}")
-        string = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
+        string = _cut(_rewrite(grammar, string, matched, out_len, applied, rng, codes, width), codes)
         step += 1
         if progress is not None:
             progress(step, total)
@@ -226,16 +235,85 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     return ModuleString(*string, grammar.symbols)
 
 
-def _check_step(grammar: Grammar, limits: Limits, step: int, total: int, width: int) -> None:
+def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = None, *,
+                         limits: Limits | None = None, work: Meter | None = None) -> ModuleString:
+    """The string to draw: ``ms`` rewritten by the grammar's ``interpretation:`` rules
+    ``grammar.interpretation_depth`` times (``ms`` itself when there are none). Each pass
+    is one parallel rewriting step like a derivation step (context, conditions,
+    stochastic choice from its own generator seeded by ``seed``, ``%`` cuts), under the
+    same size limits and work meter. ``ms`` is not modified."""
+    if not grammar.interpretation:
+        return ms
+    limits = (limits or default_limits).lowered(modules=grammar.max_modules)
+    work = work or limits.meter("derive_work")
+    seed = grammar.seed if seed is None else int(seed)
+    rng = np.random.default_rng([seed, 1])        # not the derivation's stream
+    codes = {s: i for i, s in enumerate(grammar.symbols)}
+    width = max(_width(grammar), ms.params.shape[1])
+    params = np.zeros((len(ms), width))
+    params[:, :ms.params.shape[1]] = ms.params
+    string = (ms.sym.copy(), ms.nparam.copy(), params)
+    view = replace(grammar, rules=grammar.interpretation)
+    groups = _rule_groups(view.rules)
+    needs_context = any(r.left or r.right for r in view.rules)
+    for step in range(grammar.interpretation_depth):
+        neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
+        matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
+        if not matched.any():
+            break
+        total = int(out_len.sum())
+        _check_step(view, limits, step, total, width, "interpretation pass")
+        work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
+                   f"{grammar.path}: interpretation pass {step + 1}")
+        string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
+    return ModuleString(*string, grammar.symbols)
+
+
+def cut_branches(ms: ModuleString) -> ModuleString:
+    """``ms`` with each ``%`` and the rest of its branch removed (see the module's notes)."""
+    return ModuleString(*_cut((ms.sym, ms.nparam, ms.params), {s: i for i, s in enumerate(ms.symbols)}),
+                        ms.symbols)
+
+
+def _cut(string, codes: dict):
+    """Remove each ``%`` and what follows it up to (not including) the ``]`` closing its
+    branch, or to the end of the string at depth 0. Vectorised: the closing ``]`` of a
+    ``%`` at depth d is the first ``]`` after it whose depth before it is d."""
+    sym, nparam, params = string
+    cut = codes.get("%")
+    if cut is None:
+        return string
+    at = np.flatnonzero(sym == cut)
+    if at.size == 0:
+        return string
+    n = len(sym)
+    opens = (sym == codes["["]).astype(np.int64) if "[" in codes else np.zeros(n, np.int64)
+    closes = (sym == codes["]"]).astype(np.int64) if "]" in codes else np.zeros(n, np.int64)
+    depth_before = np.cumsum(opens - closes) - opens + closes     # depth before each module
+    close_at = np.flatnonzero(closes)
+    keys = np.sort(depth_before[close_at] * (n + 1) + close_at)   # (depth, position) pairs
+    keys = np.append(keys, np.iinfo(np.int64).max)                # sentinel: no ] left
+    hit = keys[np.searchsorted(keys, depth_before[at] * (n + 1) + at)]
+    same_depth = hit // (n + 1) == depth_before[at]
+    end = np.where(same_depth, hit % (n + 1), n)
+    mark = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(mark, at, 1)
+    np.add.at(mark, end, -1)
+    keep = np.cumsum(mark[:n]) == 0
+    return sym[keep], nparam[keep], params[keep]
+
+
+def _check_step(grammar: Grammar, limits: Limits, step: int, total: int, width: int,
+                what: str = "derivation step") -> None:
     """Refuse a step whose string would exceed ``max_modules`` or ``max_derive_bytes``."""
     if total > limits.max_modules:
         raise DerivationLimit(
-            f"{grammar.path}: derivation step {step + 1} would make {total:,} modules, "
+            f"{grammar.path}: {what} {step + 1} would make {total:,} modules, "
             f"over the limit of {limits.max_modules:,} (lower iterations or raise --max-modules)")
     size = total * module_bytes(width)
     if size > limits.max_derive_bytes:
         raise DerivationLimit(
-            f"{grammar.path}: derivation step {step + 1} would make {total:,} modules of {width} "
+            f"{grammar.path}: {what} {step + 1} would make {total:,} modules of {width} "
             f"parameters, {size:,} bytes, over the limit of {limits.max_derive_bytes:,} "
             f"({hint('derive_bytes')})")
 

@@ -34,7 +34,7 @@ from ..limits import limits as default_limits
 from ..tolerances import tol
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
 
-__all__ = ["TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
+__all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
            "TurtleSettings", "load_grammar", "parse_grammar", "parse_modules"]
 
 # Turtle symbols (ABOP meanings) and the parameter counts each accepts.
@@ -43,10 +43,14 @@ TURTLE_ARITY: dict[str, tuple[int, ...]] = {
     "+": (0, 1), "-": (0, 1), "&": (0, 1), "^": (0, 1), "\\": (0, 1), "/": (0, 1),
     "|": (0,), "[": (0,), "]": (0,), "$": (0,),
     "!": (0, 1), ";": (0, 1),
+    "G": (0, 1), "{": (0,), "}": (0,), ".": (0,), "'": (0,), "%": (0,),
 }
+#: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
+MAX_INTERPRETATION_DEPTH = 8
 
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
-                "ignore", "turtle", "materials", "max_modules"}
+                "ignore", "turtle", "materials", "max_modules", "interpretation",
+                "interpretation_depth"}
 TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism"}
 RULE_KEYS = {"rule", "p"}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
@@ -84,6 +88,7 @@ class Rule:
     condition: Expr | None
     successor: tuple[ModuleTemplate, ...]
     p: float | None                 # probability within its stochastic group
+    section: str = "rule"           # "rule", or "interpretation rule" (drawing only)
 
     @property
     def group_key(self) -> tuple:
@@ -91,7 +96,7 @@ class Rule:
         return (self.pred, self.left, self.right, cond)
 
     def where(self) -> str:
-        return f"rule {self.index + 1} ({self.source.strip()!r})"
+        return f"{self.section} {self.index + 1} ({self.source.strip()!r})"
 
 
 @dataclass(frozen=True)
@@ -119,6 +124,8 @@ class Grammar:
     max_modules: int | None = None
     path: str = "<grammar>"
     symbols: tuple[str, ...] = field(default=())   # every symbol used, in first-seen order
+    interpretation: tuple[Rule, ...] = ()          # rules applied only for drawing
+    interpretation_depth: int = 1                  # how many times they are applied
 
 
 # ---------------------------------------------------------------------------- modules
@@ -236,8 +243,9 @@ def _parse_patterns(text: str, where: str, max_params: int | None = None) -> tup
 
 
 # ---------------------------------------------------------------------------- rules
-def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | None = None) -> Rule:
-    where = f"{path}: rule {index + 1}"
+def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | None = None,
+                section: str = "rule") -> Rule:
+    where = f"{path}: {section} {index + 1}"
     p = None
     if isinstance(entry, dict):
         fields.keys(entry, RULE_KEYS, where, GrammarError)
@@ -249,7 +257,7 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
     if not isinstance(entry, str):
         raise GrammarError(f"{where}: a rule must be a string like 'A -> F[+A]A', got {fields.show(entry)}")
     source = entry
-    where = f"{path}: rule {index + 1} ({source.strip()!r})"
+    where = f"{path}: {section} {index + 1} ({source.strip()!r})"
     parts = _ARROW.split(source)
     if len(parts) != 2:
         raise GrammarError(f"{where}: a rule needs exactly one '->'")
@@ -300,7 +308,7 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
         except ExprError as exc:
             raise GrammarError(f"{where}: {exc}") from None
     successor = parse_modules(rhs, names, where, max_params)
-    return Rule(index, source, pred, left, right, condition, successor, p)
+    return Rule(index, source, pred, left, right, condition, successor, p, section)
 
 
 # ---------------------------------------------------------------------------- file
@@ -448,7 +456,8 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
         raise GrammarError(f"{path}: rules must be a list")
     rules = tuple(_parse_rule(i, r, defines, path, limits.max_params) for i, r in enumerate(raw_rules))
     _check_groups(rules, path)
-    symbols = _check_arities(axiom, rules, path)
+    interpretation, depth = _parse_interpretation(data, defines, path, limits)
+    symbols = _check_arities(axiom, rules + interpretation, path)
 
     ignore = data.get("ignore", "")
     if not isinstance(ignore, str):
@@ -458,7 +467,21 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
     return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
                    axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
                    _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
-                   path, tuple(symbols))
+                   path, tuple(symbols), interpretation, depth)
+
+
+def _parse_interpretation(data: dict, defines: dict, path: str, limits: Limits) -> tuple[tuple[Rule, ...], int]:
+    """The ``interpretation:`` rules (same notation as ``rules``) and
+    ``interpretation_depth``, the times they are applied (1 to MAX_INTERPRETATION_DEPTH)."""
+    raw = data.get("interpretation") or []
+    if not isinstance(raw, list):
+        raise GrammarError(f"{path}: interpretation must be a list of rules like 'L -> {{.-f.+f.}}'")
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, "interpretation rule")
+                  for i, r in enumerate(raw))
+    _check_groups(rules, path)
+    depth = fields.integer(data.get("interpretation_depth", 1), "interpretation_depth", path, GrammarError,
+                           lo=1, hi=MAX_INTERPRETATION_DEPTH)
+    return rules, depth
 
 
 def load_grammar(path: str | Path, limits: Limits | None = None) -> Grammar:

@@ -18,7 +18,23 @@ heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meaning
 ``$``      roll about H so that L is horizontal
 ``;(i)``   select material i (index into the grammar's ``materials``); ``;`` the next one,
            cycling
+``'``      the next material, cycling (ABOP's colour index step)
+``G(l)``   move by l without drawing and without recording a polygon vertex; like ``f``,
+           the next segment starts a new root
+``{``      start a polygon; ``}`` closes the innermost open polygon, fills it with the
+           current material and triangulates it (concave outlines too)
+``.``      record the turtle's position as a vertex of the innermost open polygon
 =========  ===================================================================
+
+Polygons follow ABOP. A polygon's vertices are its ``.`` positions (chapter 5, "developmental
+surface models"); a polygon with no ``.`` uses chapter 1's convention instead (figure 1.27,
+the bush of figure 1.25): its vertices are the position at ``{`` and the position after each
+``f``. So ``f`` records a vertex only in a polygon without dots, ``G`` never does, and ``F``
+draws a segment as anywhere else. Polygons nest: ``{`` inside a polygon starts a new one, and
+the outer one resumes at its ``}``. The polygon stack is not part of the turtle state:
+vertices recorded inside a branch ``[...]`` belong to the polygon open around the branch.
+Symbols with a turtle meaning in ABOP (or cpfg) that plantgen does not draw yet
+(:data:`UNSUPPORTED`) are skipped with a warning naming them.
 
 A segment's end radius is the turtle's radius when it is drawn. A segment that continues
 its parent starts with the parent's end radius, so the skin tapers without steps; a root
@@ -32,12 +48,14 @@ beyond ``tol.max_coordinate`` stops with one line naming the segment and its mod
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from itertools import chain
 from math import cos, radians, sin, sqrt
 
 import numpy as np
 
 from ..errors import PlantgenError
+from ..geometry.polygons import PolygonBuilder, Polygons
 from ..geometry.skeleton import Skeleton
 from ..limits import Limits
 from ..limits import limits as default_limits
@@ -45,15 +63,37 @@ from ..tolerances import tol
 from .derive import ModuleString
 from .grammar import TurtleSettings
 
-__all__ = ["interpret"]
+__all__ = ["Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "interpret", "interpret_plant"]
 
 # action codes
-_NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT = range(15)
+(_NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT,
+ _G, _OPEN, _CLOSE, _DOT, _TICK) = range(20)
 #: Modules turned into Python values at a time by :func:`_turtle_program`.
 PROGRAM_CHUNK = 65_536
 
 _ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
-            "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT}
+            "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT,
+            "G": _G, "{": _OPEN, "}": _CLOSE, ".": _DOT, "'": _TICK}
+
+#: Symbols with a turtle meaning in ABOP (or its program cpfg) that plantgen does not draw
+#: (yet): each present in a string being drawn gets one warning naming it.
+UNSUPPORTED = {
+    "~": "ABOP's predefined surfaces",
+    "@": "cpfg's spheres and circles",
+    "#": "cpfg's width increment",
+}
+#: The most vertices one polygon may have (ear clipping is quadratic in them).
+MAX_POLYGON_VERTICES = 4096
+
+
+@dataclass(frozen=True, eq=False)
+class Drawing:
+    """What the turtle drew: the skeleton's segments, the filled polygons, and one line per
+    thing it skipped (to be shown to the user)."""
+
+    skeleton: Skeleton
+    polygons: Polygons
+    warnings: tuple[str, ...] = ()
 
 
 def _rot(a, b, c, s):
@@ -64,17 +104,25 @@ def _rot(a, b, c, s):
 
 def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
               source: str = "<grammar>", limits: Limits | None = None) -> Skeleton:
-    """Walk the turtle over ``ms`` and return the drawn segments as a Skeleton.
+    """The skeleton :func:`interpret_plant` draws (its polygons and warnings dropped)."""
+    return interpret_plant(ms, settings, materials, source, limits).skeleton
+
+
+def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
+                    source: str = "<grammar>", limits: Limits | None = None) -> Drawing:
+    """Walk the turtle over ``ms``: the drawn segments as a Skeleton, the filled polygons,
+    and the warnings (one line each, naming ``source``).
 
     Three phases: :func:`_turtle_program` keeps the modules the turtle acts on, as action
     codes with their arguments; :func:`_walk` moves the turtle and collects the segments'
-    columns; the columns become the skeleton's arrays, checked finite and within
-    ``tol.max_coordinate``. More segments than ``limits.max_segments`` are refused
+    columns and the polygons; the columns become the skeleton's arrays, checked finite and
+    within ``tol.max_coordinate``. More segments than ``limits.max_segments`` are refused
     before the walk.
     """
     drawn = _drawing_modules(ms, settings)
     (limits or default_limits).check("segments", len(drawn), f"{source}: segments drawn")
-    columns = _walk(_turtle_program(ms), settings, materials, source)
+    builder = PolygonBuilder()
+    columns, stray_dots = _walk(_turtle_program(ms), settings, materials, source, builder)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
     skel = Skeleton(
@@ -88,7 +136,28 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
         material_names=materials,
     )
     _check_extent(skel, ms, drawn, source)
-    return skel
+    polygons = builder.build()
+    if len(polygons) and not np.all(np.abs(polygons.vertices) <= tol.max_coordinate):
+        raise PlantgenError(f"{source}: a polygon vertex is not finite or beyond {tol.max_coordinate:g}: "
+                            "an f or G length or the turtle step too large")
+    return Drawing(skel, polygons, tuple(_warnings(ms, source, stray_dots, builder.degenerate)))
+
+
+def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -> list[str]:
+    """One line per symbol of :data:`UNSUPPORTED` in ``ms``, then the stray ``.`` and the
+    polygons dropped."""
+    out = []
+    counts = np.bincount(ms.sym, minlength=len(ms.symbols)) if len(ms) else np.zeros(len(ms.symbols), int)
+    for code, name in enumerate(ms.symbols):
+        if name in UNSUPPORTED and counts[code]:
+            out.append(f"{source}: warning: {name!r} ({UNSUPPORTED[name]}) has a turtle meaning in ABOP "
+                       f"but none in plantgen yet; {int(counts[code]):,} module(s) not drawn")
+    if stray_dots:
+        out.append(f"{source}: warning: {stray_dots:,} '.' outside any polygon '{{ }}' recorded nothing")
+    if degenerate:
+        out.append(f"{source}: warning: {degenerate:,} polygon(s) with fewer than 3 distinct vertices or "
+                   "no area were not drawn")
+    return out
 
 
 def _drawing_modules(ms: ModuleString, settings: TurtleSettings) -> np.ndarray:
@@ -139,11 +208,14 @@ def _turtle_program(ms: ModuleString):
     return chain.from_iterable(chunks())
 
 
-def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str):
-    """Run the turtle over ``program`` (see :func:`_turtle_program`).
+def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str,
+          builder: PolygonBuilder):
+    """Run the turtle over ``program`` (see :func:`_turtle_program`), handing each closed
+    polygon to ``builder``.
 
-    Returns the segment columns as lists: start and end (x, y, z) tuples, start and end
-    radius, parent index (-1 for a root), continues flag, material index.
+    Returns the segment columns as lists (start and end (x, y, z) tuples, start and end
+    radius, parent index (-1 for a root), continues flag, material index) and the number of
+    ``.`` met outside any polygon.
     """
     step, width_factor = settings.step, settings.width_factor
     dc, ds = cos(radians(settings.angle)), sin(radians(settings.angle))
@@ -158,6 +230,8 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
     last = -1            # last segment drawn from this state (-1: none, chain broken)
     side = False         # next segment starts a side branch
     stack = []
+    polygons = []        # open polygons, innermost last: (dot vertices, move vertices)
+    stray_dots = 0
 
     starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
 
@@ -220,6 +294,27 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             px, py, pz = px + H[0] * length, py + H[1] * length, pz + H[2] * length
             last = -1
             side = False
+            if polygons:
+                _record(polygons[-1][1], (px, py, pz), source)
+        elif act == _G:
+            length = arg if ha else step
+            px, py, pz = px + H[0] * length, py + H[1] * length, pz + H[2] * length
+            last = -1
+            side = False
+        elif act == _DOT:
+            if polygons:
+                _record(polygons[-1][0], (px, py, pz), source)
+            else:
+                stray_dots += 1
+        elif act == _OPEN:
+            polygons.append(([], [(px, py, pz)]))
+        elif act == _CLOSE:
+            if not polygons:
+                raise PlantgenError(f"{source}: '}}' without an open polygon '{{' in the derived string")
+            dots, moves = polygons.pop()
+            builder.add(dots or moves, material)
+        elif act == _TICK:
+            material = (material + 1) % n_mat
         elif act == _ROLLH:
             L, U = _level_left(H, L, U)
         elif act == _MAT:
@@ -228,7 +323,17 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
                 raise PlantgenError(f"{source}: material index {material} outside the grammar's "
                                     f"{n_mat} materials {list(materials)}")
 
-    return starts, ends, r0s, r1s, parents, conts, mats
+    if polygons:
+        raise PlantgenError(f"{source}: {len(polygons)} polygon(s) '{{' not closed by '}}' in the derived string")
+    return (starts, ends, r0s, r1s, parents, conts, mats), stray_dots
+
+
+def _record(vertices: list, position, source: str) -> None:
+    """Append a vertex to an open polygon, within :data:`MAX_POLYGON_VERTICES`."""
+    if len(vertices) >= MAX_POLYGON_VERTICES:
+        raise PlantgenError(f"{source}: a polygon with more than {MAX_POLYGON_VERTICES:,} vertices; "
+                            "close it with '}' sooner")
+    vertices.append(position)
 
 
 def _bend_towards(H, L, U, tropism, e):

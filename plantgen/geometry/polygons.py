@@ -1,0 +1,190 @@
+"""Leaf polygons: the turtle's filled ``{ ... }`` outlines, triangulated.
+
+A :class:`Polygons` of ``p`` polygons made of ``t`` triangles over ``v`` vertices:
+
+==============  ===========  ============================================================
+``vertices``    (v, 3) f8    vertex positions (y up, the skeleton's frame)
+``triangles``   (t, 3) i8    vertex indices, counter-clockwise seen from the polygon's
+                             ``normal`` (the right-hand rule gives the normal)
+``polygon``     (t,) i8      the polygon each triangle belongs to
+``material``    (p,) i4      material index per polygon (into the skeleton's names)
+``normal``      (p, 3) f8    unit normal of each polygon's best-fit plane
+==============  ===========  ============================================================
+
+:func:`triangulate` turns one outline (any simple polygon, concave too, not necessarily
+planar) into triangles by ear clipping in its best-fit plane. Nothing here imports GL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Polygons", "PolygonBuilder", "triangulate", "best_fit_normal"]
+
+#: Relative size under which two consecutive outline points are the same vertex, and a
+#: polygon's area counts as none.
+_EPS = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class Polygons:
+    vertices: np.ndarray
+    triangles: np.ndarray
+    polygon: np.ndarray
+    material: np.ndarray
+    normal: np.ndarray
+
+    @staticmethod
+    def empty() -> Polygons:
+        return Polygons(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
+                        np.zeros(0, np.int32), np.zeros((0, 3)))
+
+    def __len__(self) -> int:
+        return len(self.material)
+
+    @property
+    def triangle_material(self) -> np.ndarray:
+        """(t,) i4: the material of each triangle (its polygon's)."""
+        return self.material[self.polygon]
+
+    def triangle_areas(self) -> np.ndarray:
+        """(t,) f8: the area of each triangle."""
+        a, b, c = (self.vertices[self.triangles[:, k]] for k in range(3))
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def best_fit_normal(points: np.ndarray) -> np.ndarray:
+    """Unit normal of the plane that best fits an outline (Newell's method: exact for a
+    planar polygon, oriented by its winding; the least-squares plane's normal when the
+    Newell vector vanishes, e.g. for a self-cancelling figure eight)."""
+    p = np.asarray(points, dtype=np.float64)
+    q = np.roll(p, -1, axis=0)
+    n = np.array([np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
+                  np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
+                  np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1]))])
+    size = np.linalg.norm(n)
+    scale = max(float(np.ptp(p, axis=0).max()), _EPS)
+    if size > _EPS * scale * scale:
+        return n / size
+    _, _, vt = np.linalg.svd(p - p.mean(axis=0))
+    return vt[2]
+
+
+def _plane_coordinates(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(k, 2): the points in an orthonormal basis (e1, e2) of the plane with e1 × e2 = normal."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    rel = points - points.mean(axis=0)
+    return np.stack([rel @ e1, rel @ e2], axis=1)
+
+
+def _dedupe(points: np.ndarray) -> np.ndarray:
+    """The outline without repeated consecutive points (the closing one included)."""
+    scale = max(float(np.ptp(points, axis=0).max()) if len(points) else 0.0, _EPS)
+    keep = []
+    for i, p in enumerate(points):
+        if not keep or np.linalg.norm(p - points[keep[-1]]) > 1e-9 * scale:
+            keep.append(i)
+    if len(keep) > 1 and np.linalg.norm(points[keep[0]] - points[keep[-1]]) <= 1e-9 * scale:
+        keep.pop()
+    return points[keep]
+
+
+def _cross2(o, a, b) -> float:
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+def _inside(p, a, b, c) -> bool:
+    """p inside or on the counter-clockwise triangle abc."""
+    return _cross2(a, b, p) >= 0 and _cross2(b, c, p) >= 0 and _cross2(c, a, p) >= 0
+
+
+def _ear_clip(uv: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangles (index triples, counter-clockwise) of a counter-clockwise simple polygon
+    in the plane. An outline with no ear left (self-intersecting) is finished as a fan of
+    its remaining vertices rather than dropped."""
+    idx = list(range(len(uv)))
+    tris: list[tuple[int, int, int]] = []
+    scale = max(float(np.ptp(uv, axis=0).max()), _EPS)
+    flat = _EPS * scale * scale
+    while len(idx) > 3:
+        n = len(idx)
+        for k in range(n):
+            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % n]
+            a, b, c = uv[i0], uv[i1], uv[i2]
+            turn = _cross2(a, b, c)
+            if turn < -flat:
+                continue                      # reflex corner
+            if turn <= flat:
+                del idx[k]                    # collinear corner: no triangle, drop it
+                break
+            if any(_inside(uv[j], a, b, c) for j in idx if j not in (i0, i1, i2)):
+                continue
+            tris.append((i0, i1, i2))
+            del idx[k]
+            break
+        else:                                 # no ear: not a simple polygon
+            tris.extend((idx[0], idx[m], idx[m + 1]) for m in range(1, len(idx) - 1))
+            return tris
+    if len(idx) == 3 and abs(_cross2(uv[idx[0]], uv[idx[1]], uv[idx[2]])) > flat:
+        tris.append(tuple(idx))
+    return tris
+
+
+def triangulate(points) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Triangulate one outline in its best-fit plane.
+
+    Returns (vertices (k, 3), triangles (t, 3) indices into them, counter-clockwise about
+    the normal, unit normal (3,)), or None for an outline with fewer than three distinct
+    points or no area.
+    """
+    pts = _dedupe(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    if len(pts) < 3:
+        return None
+    normal = best_fit_normal(pts)
+    uv = _plane_coordinates(pts, normal)
+    x, y = uv[:, 0], uv[:, 1]
+    signed = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    if signed < 0:            # clockwise about the normal (least-squares case): flip the normal
+        normal = -normal
+        uv = _plane_coordinates(pts, normal)
+    tris = _ear_clip(uv)
+    if not tris:
+        return None
+    return pts, np.array(tris, dtype=np.int64).reshape(-1, 3), normal
+
+
+class PolygonBuilder:
+    """Collects outlines as the turtle closes them and builds the :class:`Polygons`."""
+
+    def __init__(self) -> None:
+        self._verts: list[np.ndarray] = []
+        self._tris: list[np.ndarray] = []
+        self._poly: list[np.ndarray] = []
+        self._mats: list[int] = []
+        self._normals: list[np.ndarray] = []
+        self._count = 0
+        self.degenerate = 0       # outlines dropped: under three distinct points or no area
+
+    def add(self, outline, material: int) -> None:
+        got = triangulate(outline) if len(outline) >= 3 else None
+        if got is None:
+            self.degenerate += 1
+            return
+        verts, tris, normal = got
+        self._tris.append(tris + self._count)
+        self._poly.append(np.full(len(tris), len(self._mats), dtype=np.int64))
+        self._verts.append(verts)
+        self._count += len(verts)
+        self._mats.append(material)
+        self._normals.append(normal)
+
+    def build(self) -> Polygons:
+        if not self._mats:
+            return Polygons.empty()
+        return Polygons(np.concatenate(self._verts), np.concatenate(self._tris), np.concatenate(self._poly),
+                        np.array(self._mats, dtype=np.int32), np.array(self._normals, dtype=np.float64))
