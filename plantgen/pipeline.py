@@ -90,6 +90,7 @@ class GrowResult:
     sources: tuple = ()              # every file read: the input, and a scene's grammars
     polygons: Polygons | None = None  # a grammar's filled polygons (leaves); None for others
     warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
+    smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
 
 
 def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
@@ -171,7 +172,8 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         timings["parse"] = time.perf_counter() - t0
         drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
         return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
-                          polygons=drawing.polygons, warnings=drawing.warnings)
+                          polygons=drawing.polygons, warnings=drawing.warnings,
+                          smooth_bends=grammar.turtle.smooth_bends)
 
     modules = [0]
     warnings: list[str] = []
@@ -291,12 +293,17 @@ def skinning(smooth_bends: float | None = None):
     return skin_skeleton if smooth_bends is None else functools.partial(skin_skeleton, smooth_bends=smooth_bends)
 
 
+def _smoothing(grown: GrowResult, smooth_bends):
+    """The command line's ``--smooth-bends``, else the grammar's ``turtle: smooth_bends``."""
+    return smooth_bends if smooth_bends is not None else grown.smooth_bends
+
+
 def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None) -> AnimatedScene:
     """The model as an :class:`AnimatedScene`: a scene's instances moving as their motion
     says when ``effects`` hold ``animation``; otherwise skinned once (by :func:`skinning`)."""
     if grown.scene is not None and "animation" in effects:
         return AnimatedScene.from_scene(grown.scene, skinning(smooth_bends))
-    return AnimatedScene.still(grown.skeleton, skinning(smooth_bends))
+    return AnimatedScene.still(grown.skeleton, skinning(_smoothing(grown, smooth_bends)))
 
 
 @dataclass
@@ -667,7 +674,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         timings["write"] = time.perf_counter() - t1
         return dict(summary, path=summary["paths"][-1])
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                 input_path, output_path, timings, progress, skinning(smooth_bends))
+                                 input_path, output_path, timings, progress,
+                                 skinning(_smoothing(grown, smooth_bends)))
     t3 = time.perf_counter()
     paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
                          unit=unit, name=grown.name, progress=progress)

@@ -227,3 +227,27 @@ def load_saguaro():
     from plantgen.pipeline import load_skeleton
 
     return load_skeleton("saguaro")
+
+
+def test_the_grammars_turtle_key_smooths_as_the_option_does(tmp_path):
+    """``turtle: {smooth_bends: ANGLE}`` in a grammar is the default of ``--smooth-bends``
+    (which overrides it): export, render and the viewer skin through the same default."""
+    from _cli import run_cli
+
+    from plantgen.pipeline import grow_file, prepare_model
+
+    text = ("name: bent\naxiom: \"F(1) &(60) F(1)\"\nturtle: {radius: 0.1, smooth_bends: 30}\n"
+            "materials: [bark]\n")
+    (tmp_path / "bent.yaml").write_text(text)
+    assert grow_file(tmp_path / "bent.yaml").smooth_bends == 30.0
+    code, stdout, stderr = run_cli("export", tmp_path / "bent.yaml", "-o", tmp_path / "a.obj")
+    assert code == 0, stderr
+    assert "smooth bends: +6 arc segments" in stdout                  # ceil(60° / 10°)
+    code, stdout, stderr = run_cli("export", tmp_path / "bent.yaml", "-o", tmp_path / "b.obj",
+                                   "--smooth-bends", "90")                # the option overrides
+    assert code == 0, stderr
+    assert "smooth bends" not in stdout
+    assert len(prepare_model(tmp_path / "bent.yaml").anim.frusta_at(0.0)) == 2 + 6
+    (tmp_path / "bad.yaml").write_text(text.replace("smooth_bends: 30", "smooth_bends: 200"))
+    code, _, stderr = run_cli("grow", tmp_path / "bad.yaml", "-o", tmp_path / "x.npz")
+    assert code == 2 and "smooth_bends" in stderr

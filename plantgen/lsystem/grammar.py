@@ -51,7 +51,7 @@ MAX_INTERPRETATION_DEPTH = 8
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
                 "ignore", "turtle", "materials", "max_modules", "interpretation",
                 "interpretation_depth"}
-TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism"}
+TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism", "smooth_bends"}
 RULE_KEYS = {"rule", "p"}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
 _ARROW = re.compile(r"->|→")
@@ -107,6 +107,7 @@ class TurtleSettings:
     width_factor: float = 0.7
     tropism_direction: tuple[float, float, float] = (0.0, -1.0, 0.0)
     tropism_strength: float = 0.0
+    smooth_bends: float | None = None   # degrees: skinning smooths bends past it into arcs
 
 
 @dataclass(frozen=True)
@@ -331,6 +332,9 @@ def _parse_turtle(d, path: str) -> TurtleSettings:
         kw["tropism_direction"] = fields.unit_vector(t.get("direction", [0, -1, 0]), "tropism direction",
                                                      where, GrammarError)
         kw["tropism_strength"] = fields.number(t.get("strength", 0.0), "tropism strength", where, GrammarError)
+    if d.get("smooth_bends") is not None:
+        kw["smooth_bends"] = fields.number(d["smooth_bends"], "smooth_bends (degrees)", where, GrammarError,
+                                           lo=0.0, hi=179.0)
     return TurtleSettings(**kw)
 
 
