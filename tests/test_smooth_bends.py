@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from plantgen.benchmarks.skinning import torus_bend_error
@@ -158,6 +158,8 @@ def test_side_branch_at_a_smoothed_joint_moves_onto_the_arc():
        lengths=st.floats(0.2, 2.0), r0=st.floats(0.02, 0.3), taper=st.floats(0.3, 1.0),
        threshold=st.floats(1.0, 60.0), step=st.floats(3.0, 30.0))
 def test_random_chains_stay_closed_and_continuous(bends, lengths, r0, taper, threshold, step):
+    # a bend equal to the threshold is measured from the axes to round-off: either side is right
+    assume(all(abs(b - threshold) > 1e-6 for b in bends))
     n = len(bends) + 1
     radii = r0 * np.linspace(1.0, taper, n + 1)
     sk = chain(bends, lengths=lengths, radii=radii)
