@@ -635,7 +635,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``; for a cylinder model, what :func:`plantgen.export.qsm.write_qsm`
+    ``level``, ``relief``, ``leaf_triangles`` (a grammar's leaf polygons, written beside
+    the frusta and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
+    model, what :func:`plantgen.export.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over
     ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
     """
@@ -675,16 +677,22 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
                          unit=unit, name=grown.name, progress=progress)
     timings["write"] = time.perf_counter() - t3
-    meshes = [p.mesh for p in plants]
-    summary.update(
-        rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
-        triangles=sum(len(m.faces) for m in meshes), vertices=sum(len(m.vertices) for m in meshes),
-        drawn=sum(len(p.mesh.faces) * p.copies for p in plants), plants=len(plants),
-        copies=sum(p.copies for p in plants), level=level, relief=relief, paths=paths, path=paths[-1],
-        smooth_segments=smoothed, leaf_triangles=sum(len(p.leaves.triangles) for p in plants if p.has_leaves))
-    summary["triangles"] += summary["leaf_triangles"]
-    summary["drawn"] += summary["leaf_triangles"]
+    summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
+                   smooth_segments=smoothed)
     return summary
+
+
+def _mesh_counts(plants: list[Plant]) -> dict:
+    """What an export wrote: rows, caps, triangles, vertices, drawn, plants, copies and
+    leaf_triangles (a grammar's leaves, counted in triangles, vertices and drawn too)."""
+    meshes = [p.mesh for p in plants]
+    leaf_triangles = sum(len(p.leaves.triangles) for p in plants if p.has_leaves)
+    leaf_vertices = sum(len(p.leaves.vertices) for p in plants if p.has_leaves)
+    return dict(rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
+                triangles=sum(len(m.faces) for m in meshes) + leaf_triangles,
+                vertices=sum(len(m.vertices) for m in meshes) + leaf_vertices,
+                drawn=sum(len(p.mesh.faces) * p.copies for p in plants) + leaf_triangles, plants=len(plants),
+                copies=sum(p.copies for p in plants), leaf_triangles=leaf_triangles)
 
 
 def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None]]:

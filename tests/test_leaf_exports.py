@@ -203,6 +203,13 @@ def test_cli_export_warns_on_stderr_for_swc(grammars, tmp_path):
     assert "skeleton only" in err
 
 
+def test_cli_export_counts_the_leaf_triangles(grammars, tmp_path):
+    frusta, leaf_tris, _ = counts(grammars[0])
+    code, out, _ = run_cli("export", grammars[0], "-o", tmp_path / "plant.glb")
+    assert code == 0
+    assert f"{frusta + leaf_tris:,} triangles" in out and f"{leaf_tris} of leaves, double-sided" in out
+
+
 @pytest.mark.parametrize("suffix", [".glb", ".gltf", ".obj", ".ply", ".stl"])
 def test_a_grammar_without_leaves_writes_what_the_frusta_writer_writes(grammars, tmp_path, suffix):
     _, bare = grammars
