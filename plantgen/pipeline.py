@@ -642,7 +642,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``; for a cylinder model, what :func:`plantgen.export.qsm.write_qsm`
+    ``level``, ``relief``, ``leaf_triangles`` (a grammar's leaf polygons, written beside
+    the frusta and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
+    model, what :func:`plantgen.export.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over
     ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
     """
@@ -665,6 +667,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
                "warnings": grown.warnings}
     if fmt.kind == "skeleton":
+        if grown.polygons is not None and len(grown.polygons):
+            summary["warnings"] = (*grown.warnings, f"{fmt.suffix} carries the skeleton only: "
+                                   f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
         t1 = time.perf_counter()
         if fmt.name == "swc":
             summary["paths"] = [write_swc(grown.skeleton, output_path, up=up)]
@@ -680,14 +685,22 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
                          unit=unit, name=grown.name, progress=progress)
     timings["write"] = time.perf_counter() - t3
-    meshes = [p.mesh for p in plants]
-    summary.update(
-        rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
-        triangles=sum(len(m.faces) for m in meshes), vertices=sum(len(m.vertices) for m in meshes),
-        drawn=sum(len(p.mesh.faces) * p.copies for p in plants), plants=len(plants),
-        copies=sum(p.copies for p in plants), level=level, relief=relief, paths=paths, path=paths[-1],
-        smooth_segments=smoothed)
+    summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
+                   smooth_segments=smoothed)
     return summary
+
+
+def _mesh_counts(plants: list[Plant]) -> dict:
+    """What an export wrote: rows, caps, triangles, vertices, drawn, plants, copies and
+    leaf_triangles (a grammar's leaves, counted in triangles, vertices and drawn too)."""
+    meshes = [p.mesh for p in plants]
+    leaf_triangles = sum(len(p.leaves.triangles) for p in plants if p.has_leaves)
+    leaf_vertices = sum(len(p.leaves.vertices) for p in plants if p.has_leaves)
+    return dict(rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
+                triangles=sum(len(m.faces) for m in meshes) + leaf_triangles,
+                vertices=sum(len(m.vertices) for m in meshes) + leaf_vertices,
+                drawn=sum(len(p.mesh.faces) * p.copies for p in plants) + leaf_triangles, plants=len(plants),
+                copies=sum(p.copies for p in plants), leaf_triangles=leaf_triangles)
 
 
 def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None]]:
@@ -697,6 +710,16 @@ def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleto
     if instanced and grown.scene is not None:
         return [(p.name, p.skeleton, p.matrices) for p in grown.scene.plants() if len(p.skeleton)]
     return [(grown.name, grown.skeleton, None)]
+
+
+def _leaves_of(polygons: Polygons | None, mesh, input_path) -> Polygons | None:
+    """``polygons`` if any, their materials checked against the mesh's names; else None."""
+    if polygons is None or len(polygons) == 0:
+        return None
+    if int(polygons.material.max()) >= len(mesh.material_names):
+        raise ExportError(f"{input_path}: a leaf polygon has material {int(polygons.material.max())}, "
+                          f"but the model names {len(mesh.material_names)} materials")
+    return polygons
 
 
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
@@ -711,6 +734,8 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
     estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
+    if instancing == "off" and grown.polygons is not None:
+        estimate += len(grown.polygons.triangles)   # the leaves, written in place
     if estimate > limits.max_export_triangles:
         raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
                           f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
@@ -726,7 +751,8 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     for k, ((name, skel, matrices), fr) in enumerate(zip(parts, frusta, strict=True)):
         mesh = tessellate(fr, level, relief=relief)
         check_finite_mesh(mesh, fr, input_path)
-        plants.append(Plant(name, skel, mesh, matrices))
+        leaves = grown.polygons if matrices is None else None   # a grammar's leaves, in place
+        plants.append(Plant(name, skel, mesh, matrices, leaves=_leaves_of(leaves, mesh, input_path)))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
     timings["tessellate"] = time.perf_counter() - t2

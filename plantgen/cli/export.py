@@ -64,6 +64,10 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
     Meshes: vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
     caster; open chain ends are capped. glTF, OBJ and USD keep material names and
     colours. A scene's repeated plants are written once and instanced in glTF and USD.
+    A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
+    their material: glTF gives them double-sided "<material> (leaf)" materials, USD a
+    double-sided Leaves mesh, PLY and STL plain triangles. SWC and the cylinder models
+    carry the skeleton only (a warning says so when leaves are dropped).
 
     \b
     Examples:
@@ -93,10 +97,15 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
     click.echo("wrote " + " and ".join(str(p) for p in info["paths"]))
 
 
+def _leaves(info: dict) -> str:
+    leaves = info.get("leaf_triangles", 0)
+    return f", {leaves:,} of leaves, double-sided" if leaves else ""
+
+
 def _mesh_summary(info: dict) -> None:
     click.echo(f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {info['level']}"
                f"{' with relief' if info['relief'] else ''}: {info['triangles']:,} triangles "
-               f"({info['caps']:,} caps), {info['vertices']:,} vertices, {info['up']}-up")
+               f"({info['caps']:,} caps{_leaves(info)}), {info['vertices']:,} vertices, {info['up']}-up")
     if info.get("smooth_segments"):
         click.echo(f"smooth bends: +{info['smooth_segments']:,} arc segments")
     if info["copies"] > 1:

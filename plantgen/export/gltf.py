@@ -14,6 +14,12 @@ name and base colour, linear RGB as glTF defines it). Nodes:
   the plant's mesh: core glTF, for readers without the extension;
 - a plant with a single copy: one such node either way.
 
+A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
+material, with a material of their own named ``"<material> (leaf)"`` that is
+``doubleSided`` (a leaf is seen from both sides; the frusta's materials stay single-sided,
+so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
+bounding box in its plane (:func:`~plantgen.export.plants.leaf_uv`).
+
 A plant's per-row ``labels`` ({"_BRANCH_ORDER": ...}: ``plantgen batch`` labels each
 mesh with its branch order) become application-specific vertex attributes of those
 names (FLOAT scalars; glTF reserves names starting with ``_`` for this).
@@ -35,7 +41,7 @@ import numpy as np
 from ..files import write_all_atomically, write_atomically
 from ..geometry.frames import similarity_trs, turn_placements
 from .formats import ExportError
-from .plants import Colours, Plant, Progress, material_colours, material_parts
+from .plants import Colours, Plant, Progress, leaf_name, leaf_parts, material_colours, material_parts
 
 __all__ = ["INSTANCING_EXTENSION", "gltf_document", "write_gltf"]
 
@@ -100,6 +106,14 @@ def _primitive(buffer: _Buffer, part, material: int) -> dict:
             "material": material, "mode": 4}
 
 
+def _material(name: str, rgb, double_sided: bool) -> dict:
+    material = {"name": name, "pbrMetallicRoughness": {
+        "baseColorFactor": [*rgb, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}
+    if double_sided:
+        material["doubleSided"] = True
+    return material
+
+
 def _trs_nodes(name: str, mesh: int, matrices: np.ndarray) -> list[dict]:
     t, q, s = similarity_trs(matrices)
     return [{"name": f"{name} {k + 1}" if len(matrices) > 1 else name, "mesh": mesh,
@@ -129,12 +143,11 @@ def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None
         names = plant.mesh.material_names
         rgb = material_colours(names, colours)
         primitives = []
-        for part in material_parts(plant.mesh, up, plant.labels):
-            mat_name = names[part.material]
+        for part in material_parts(plant.mesh, up, plant.labels) + leaf_parts(plant.leaves, up):
+            mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
             if mat_name not in material_index:
                 material_index[mat_name] = len(materials)
-                materials.append({"name": mat_name, "pbrMetallicRoughness": {
-                    "baseColorFactor": [*rgb[part.material], 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}})
+                materials.append(_material(mat_name, rgb[part.material], part.leaf))
             primitives.append(_primitive(buffer, part, material_index[mat_name]))
         meshes.append({"name": plant.name, "primitives": primitives})
         mesh = len(meshes) - 1

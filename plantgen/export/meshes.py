@@ -3,7 +3,9 @@
 The format follows the file suffix (:mod:`plantgen.export.formats`): glTF (``.glb``,
 ``.gltf`` + ``.bin``) and OBJ (+ ``.mtl``) through plantgen's writers, keeping material
 names, colours, normals and texture coordinates; PLY (normals) and STL (triangles only)
-through trimesh; USD through usd-core. ``up`` (default: the format's convention) turns the
+through trimesh; USD through usd-core. A plant's leaves (a grammar's ``{ . }`` polygons)
+go with it in every mesh format (see each writer; PLY and STL add them as plain
+triangles after the frusta's). ``up`` (default: the format's convention) turns the
 model. Every writer writes under temporary names and renames, so a failed export leaves
 nothing half-written.
 """
@@ -13,22 +15,36 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+
 from ..files import write_atomically
 from ..geometry.mesh import TessellatedMesh
+from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, check_extra, export_format
-from .plants import Colours, Plant, Progress, turned_mesh
+from .plants import Colours, Plant, Progress, leaf_parts, turned_mesh
 
 __all__ = ["export_mesh", "write_plants", "write_trimesh"]
 
 
-def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str) -> Path:
-    """Binary PLY (with vertex normals) or binary STL through trimesh."""
+def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str, leaves: Polygons | None = None) -> Path:
+    """Binary PLY (with vertex normals) or binary STL through trimesh; ``leaves`` follow the
+    frusta as plain triangles (their vertices, normals and faces after the mesh's)."""
     import trimesh  # here, not at the top: importing trimesh takes about a second
 
     path = Path(path)
     vertices, normals = turned_mesh(mesh, up)
-    whole = trimesh.Trimesh(vertices, mesh.faces, vertex_normals=normals, process=False, validate=False)
+    faces = [mesh.faces]
+    vertex_list, normal_list, first = [vertices], [normals], len(vertices)
+    for part in leaf_parts(leaves, up):
+        vertex_list.append(part.vertices)
+        normal_list.append(part.normals)
+        faces.append(part.faces + first)
+        first += len(part.vertices)
+    if len(faces) > 1:
+        vertices, normals = np.concatenate(vertex_list), np.concatenate(normal_list)
+    whole = trimesh.Trimesh(vertices, np.concatenate(faces) if len(faces) > 1 else mesh.faces,
+                            vertex_normals=normals, process=False, validate=False)
     if path.suffix.lower() == ".ply":
         data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
     else:
@@ -65,8 +81,8 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
         raise ExportError(f"{path}: {fmt.suffix} holds one mesh in place; flatten the scene first")
     if fmt.name == "obj":
         from .obj import write_obj
-        return write_obj(plants[0].mesh, path, up=up, colours=colours, progress=progress)
-    return [write_trimesh(plants[0].mesh, path, up=up)]
+        return write_obj(plants[0].mesh, path, up=up, colours=colours, progress=progress, leaves=plants[0].leaves)
+    return [write_trimesh(plants[0].mesh, path, up=up, leaves=plants[0].leaves)]
 
 
 def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,

@@ -7,6 +7,11 @@ from outside). The MTL holds one material per plantgen material: ``Kd`` its colo
 (linear RGB, the glTF base colour), no specular, opaque. Names keep plantgen's material
 names, with white space turned to ``_`` (OBJ and MTL end a name at white space).
 
+Leaves (a grammar's ``{ . }`` polygons, ``leaves``) follow: their vertices and normals
+(the polygon's) and texture coordinates (across each leaf's plane) after the frusta's,
+then their faces material by material under materials named ``<material>_(leaf)``. OBJ and MTL
+have no double-sided flag; readers draw OBJ faces from both sides by default.
+
 Coordinates are y-up by default (OBJ has no rule; Blender's, Maya's and three.js's
 importers take y as up); ``up="z"`` turns the model. Both files are written under
 temporary names and renamed together, the OBJ last.
@@ -21,9 +26,10 @@ import numpy as np
 
 from ..files import write_all_atomically
 from ..geometry.mesh import TessellatedMesh
+from ..geometry.polygons import Polygons
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Progress, material_colours, turned_mesh, unique_name
+from .plants import Colours, Progress, leaf_name, leaf_parts, material_colours, turned_mesh, unique_name
 
 __all__ = ["obj_names", "write_obj"]
 
@@ -50,15 +56,34 @@ def _rows(fh, prefix: str, fmt: str, array: np.ndarray, progress, done: list, to
             progress("write", done[0], total)
 
 
+def _leaf_runs(leaves: Polygons | None, up: str, first: int, count: int):
+    """Leaf vertices, normals and runs (material index into the MTL, faces, 1-based) of
+    :func:`~plantgen.export.plants.leaf_parts`, numbered after ``first`` vertices, their
+    materials after ``count``."""
+    parts = leaf_parts(leaves, up)
+    vertices = [p.vertices for p in parts]
+    normals = [p.normals.astype(np.float64) for p in parts]
+    uv = [p.uv.astype(np.float64) for p in parts]
+    runs = []
+    for k, part in enumerate(parts):
+        runs.append((count + k, part.faces.astype(np.int64) + 1 + first))
+        first += len(part.vertices)
+    return parts, vertices, uv, normals, runs
+
+
 def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours: Colours = None,
-              progress: Progress = None) -> list[Path]:
-    """Write ``mesh`` as ``path`` (.obj) and its ``.mtl`` (see the module docstring)."""
+              progress: Progress = None, leaves: Polygons | None = None) -> list[Path]:
+    """Write ``mesh`` (and ``leaves``, its material indices into ``mesh.material_names``) as
+    ``path`` (.obj) and its ``.mtl`` (see the module docstring)."""
     path = Path(path)
     if len(mesh.faces) == 0:
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     mtl_path = path.with_suffix(".mtl")
-    names = obj_names(mesh.material_names)
+    parts, leaf_vertices, leaf_uv, leaf_normals, leaf_runs = _leaf_runs(leaves, up, len(mesh.vertices),
+                                                               len(mesh.material_names))
+    names = obj_names([*mesh.material_names, *(leaf_name(mesh.material_names[p.material]) for p in parts)])
     rgb = material_colours(mesh.material_names, colours)
+    rgb += [rgb[p.material] for p in parts]
     vertices, normals = turned_mesh(mesh, up)
     order = np.argsort(mesh.face_material, kind="stable")
     face_material = mesh.face_material[order]
@@ -67,6 +92,9 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
     starts = np.concatenate([[0], runs])
     ends = np.concatenate([runs, [len(faces)]])
     total = 3 * -(-len(vertices) // ROWS) + sum(-(-(b - a) // ROWS) for a, b in zip(starts, ends, strict=True))
+    total += sum(3 * -(-len(v) // ROWS) for v in leaf_vertices) + sum(-(-len(f) // ROWS) for _, f in leaf_runs)
+    n_faces = len(faces) + sum(len(f) for _, f in leaf_runs)
+    n_vertices = len(vertices) + sum(len(v) for v in leaf_vertices)
 
     def write_mtl(tmp):
         lines = [f"# {generator()}: materials of {path.name}"]
@@ -79,7 +107,7 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
     def write_geometry(tmp):
         done = [0]
         with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(f"# {generator()}: {len(faces):,} triangles, {len(vertices):,} vertices, {up}-up\n"
+            fh.write(f"# {generator()}: {n_faces:,} triangles, {n_vertices:,} vertices, {up}-up\n"
                      f"mtllib {mtl_path.name}\no {path.stem}\n")
             _rows(fh, "v", "%.9g %.9g %.9g", vertices, progress, done, total)
             _rows(fh, "vt", "%.7g %.7g", mesh.uv.astype(np.float64), progress, done, total)
@@ -89,5 +117,15 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
                 fh.write(f"g {name}\nusemtl {name}\n")
                 _rows(fh, "f", "%d/%d/%d %d/%d/%d %d/%d/%d", np.repeat(faces[a:b], 3, axis=1), progress,
                       done, total)
+            for v in leaf_vertices:     # after the frusta's faces: vt and vn keep the v numbering
+                _rows(fh, "v", "%.9g %.9g %.9g", v, progress, done, total)
+            for t in leaf_uv:
+                _rows(fh, "vt", "%.7g %.7g", t, progress, done, total)
+            for n in leaf_normals:
+                _rows(fh, "vn", "%.7g %.7g %.7g", n, progress, done, total)
+            for material, leaf_faces in leaf_runs:
+                fh.write(f"g {names[material]}\nusemtl {names[material]}\n")
+                _rows(fh, "f", "%d/%d/%d %d/%d/%d %d/%d/%d", np.repeat(leaf_faces, 3, axis=1), progress, done,
+                      total)
 
     return write_all_atomically([(mtl_path, write_mtl), (path, write_geometry)], ExportError)

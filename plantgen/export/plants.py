@@ -11,10 +11,12 @@ import numpy as np
 from ..geometry.frames import up_rotation
 from ..geometry.materials import material_colour
 from ..geometry.mesh import TessellatedMesh
+from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError
 
-__all__ = ["Colours", "Part", "Plant", "Progress", "material_colours", "material_parts", "turned_mesh"]
+__all__ = ["Colours", "Part", "Plant", "Progress", "leaf_name", "leaf_parts", "leaf_uv", "material_colours",
+           "material_parts", "turned_mesh"]
 
 #: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
 #: renderers' palette).
@@ -29,13 +31,20 @@ class Plant:
 
     ``mesh`` (None for the skeleton formats) and ``skeleton`` lie in the plant's own
     frame; ``matrices`` (k, 4, 4) places its k copies (similarity transforms), or is None
-    for a model written where it is (a grammar, a skeleton file, a scene flattened)."""
+    for a model written where it is (a grammar, a skeleton file, a scene flattened).
+    ``leaves``: the grammar's filled polygons in the same frame, their material indices
+    into ``mesh.material_names`` (None or empty: no leaves; written double-sided)."""
 
     name: str
     skeleton: Skeleton
     mesh: TessellatedMesh | None = None
     matrices: np.ndarray | None = None
     labels: Mapping[str, np.ndarray] | None = None   # per mesh row, by attribute name (glTF)
+    leaves: Polygons | None = None
+
+    @property
+    def has_leaves(self) -> bool:
+        return self.leaves is not None and len(self.leaves.triangles) > 0
 
     @property
     def copies(self) -> int:
@@ -52,6 +61,7 @@ class Part:
     uv: np.ndarray            # (v, 2) float32
     faces: np.ndarray         # (f, 3) int, indices into this part's vertices
     labels: dict | None = None  # name -> (v,) float32 per vertex (from per-row labels)
+    leaf: bool = False        # leaf polygons (double-sided where the format says so)
 
 
 def unique_name(base: str, taken) -> str:
@@ -116,4 +126,50 @@ def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np
         keep, inverse = np.unique(faces, return_inverse=True)
         parts.append(Part(int(mat), vertices[keep], normals[keep], mesh.uv[keep].astype(np.float32),
                           inverse.reshape(faces.shape), {k: v[keep] for k, v in per_vertex.items()} or None))
+    return parts
+
+
+def leaf_name(material: str) -> str:
+    """The name of the double-sided material leaves of ``material`` are written with."""
+    return f"{material} (leaf)"
+
+
+def leaf_uv(polygons: Polygons) -> np.ndarray:
+    """(v, 2) float32 texture coordinates of the leaf vertices: each vertex's coordinates in
+    its polygon's plane (u along ``normal × x``, or ``normal × y`` for a polygon facing
+    ±x; v = normal × u), scaled so the polygon's bounding box spans [0, 1]² (a leaf texture
+    fills the leaf)."""
+    owner = np.zeros(len(polygons.vertices), dtype=np.int64)
+    owner[polygons.triangles] = polygons.polygon[:, None]
+    normal = polygons.normal[owner]
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(normal, e1)
+    uv = np.stack([np.einsum("ij,ij->i", polygons.vertices, e1), np.einsum("ij,ij->i", polygons.vertices, e2)], 1)
+    lo = np.full((len(polygons), 2), np.inf)
+    hi = np.full((len(polygons), 2), -np.inf)
+    np.minimum.at(lo, owner, uv)
+    np.maximum.at(hi, owner, uv)
+    return ((uv - lo[owner]) / np.maximum(hi - lo, 1e-30)[owner]).astype(np.float32)
+
+
+def leaf_parts(polygons: Polygons | None, up: str = "y") -> list[Part]:
+    """One leaf :class:`Part` per material the polygons use, in material order: each vertex
+    (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set."""
+    if polygons is None or len(polygons.triangles) == 0:
+        return []
+    rot = up_rotation(up)
+    vertices = polygons.vertices @ rot.T
+    per_vertex = np.zeros_like(polygons.vertices)
+    per_vertex[polygons.triangles] = polygons.normal[polygons.polygon][:, None, :]
+    normals = (per_vertex @ rot.T).astype(np.float32)
+    uv = leaf_uv(polygons)
+    triangle_material = polygons.triangle_material
+    parts = []
+    for mat in np.unique(triangle_material):
+        faces = polygons.triangles[triangle_material == mat]
+        keep, inverse = np.unique(faces, return_inverse=True)
+        parts.append(Part(int(mat), vertices[keep], normals[keep], uv[keep], inverse.reshape(faces.shape),
+                          leaf=True))
     return parts

@@ -8,6 +8,10 @@ One plant, written in place::
         Mesh                Mesh: points, triangles, vertex normals, primvars:st, no
                             subdivision; one GeomSubset per material (family materialBind,
                             a partition) bound to its material
+        Leaves              Mesh of the grammar's leaf polygons (only when it has some):
+                            points, triangles, vertex normals (the polygon's),
+                            primvars:st across each leaf, ``doubleSided = true``; bound to the
+                            plant's materials as Mesh is
         Skeleton            BasisCurves, linear, purpose "guide" (drawn on request, not
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
@@ -38,7 +42,7 @@ from ..geometry.skeleton import Skeleton
 from ..geometry.topology import branches
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Plant, Progress, material_colours, turned_mesh, unique_name
+from .plants import Colours, Plant, Progress, leaf_parts, material_colours, turned_mesh, unique_name
 
 __all__ = ["skeleton_curves", "write_usd"]
 
@@ -62,6 +66,14 @@ def skeleton_curves(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndar
     points[starts], widths[starts] = skeleton.start[order][restart], 2 * skeleton.r_start[order][restart]
     per_branch = np.bincount(topo.branch[order], weights=count, minlength=len(topo)).astype(np.int64)
     return points, widths, per_branch
+
+
+def _joined(parts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, normals, faces, material per face) of ``parts`` as one mesh."""
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+    return (np.concatenate([p.vertices for p in parts]), np.concatenate([p.normals for p in parts]),
+            np.concatenate([p.faces + o for p, o in zip(parts, offsets, strict=False)]),
+            np.concatenate([np.full(len(p.faces), p.material) for p in parts]))
 
 
 class _Writer:
@@ -92,7 +104,13 @@ class _Writer:
         """The plant's Xform at ``path``: materials, mesh, skeleton curves."""
         self.UsdGeom.Xform.Define(self.stage, path)
         materials = self._materials(path.AppendChild("Materials"), plant.mesh.material_names)
-        self._mesh(path.AppendChild("Mesh"), plant.mesh, materials)
+        vertices, normals = turned_mesh(plant.mesh, self.up)
+        self._mesh(path.AppendChild("Mesh"), (vertices, normals, plant.mesh.faces, plant.mesh.face_material),
+                   materials, plant.mesh.uv)
+        if plant.has_leaves:
+            parts = leaf_parts(plant.leaves, self.up)
+            self._mesh(path.AppendChild("Leaves"), _joined(parts), materials, np.concatenate([p.uv for p in parts]),
+                       double_sided=True)
         if len(plant.skeleton):
             self._curves(path.AppendChild("Skeleton"), plant.skeleton)
 
@@ -114,30 +132,35 @@ class _Writer:
             out.append(material)
         return out
 
-    def _mesh(self, path, mesh, materials) -> None:
+    def _mesh(self, path, arrays, materials, uv=None, double_sided: bool = False) -> None:
+        """A Mesh at ``path`` from ``arrays`` = (vertices, unit normals, faces, material per
+        face), with ``uv`` as primitive ``st`` where given."""
         UsdGeom, Vt, UsdShade = self.UsdGeom, self.Vt, self.UsdShade
-        vertices, normals = turned_mesh(mesh, self.up)
+        vertices, normals, faces, face_material = arrays
         points = Vt.Vec3fArray.FromNumpy(vertices.astype(np.float32))
         geom = UsdGeom.Mesh.Define(self.stage, path)
         geom.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         geom.CreatePointsAttr(points)
-        geom.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(mesh.faces), 3, dtype=np.int32)))
-        geom.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(mesh.faces.astype(np.int32).ravel()))
+        geom.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+        geom.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()))
         geom.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(normals))
         geom.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-        UsdGeom.PrimvarsAPI(geom).CreatePrimvar("st", self.Sdf.ValueTypeNames.TexCoord2fArray,
-                                                UsdGeom.Tokens.vertex).Set(
-            Vt.Vec2fArray.FromNumpy(mesh.uv.astype(np.float32)))
+        if uv is not None:
+            UsdGeom.PrimvarsAPI(geom).CreatePrimvar("st", self.Sdf.ValueTypeNames.TexCoord2fArray,
+                                                    UsdGeom.Tokens.vertex).Set(
+                Vt.Vec2fArray.FromNumpy(uv.astype(np.float32)))
+        if double_sided:
+            geom.CreateDoubleSidedAttr(True)
         geom.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
         binding = UsdShade.MaterialBindingAPI.Apply(geom.GetPrim())
-        used = np.unique(mesh.face_material)
+        used = np.unique(face_material)
         if len(used) == 1:
             binding.Bind(materials[int(used[0])])
             return
         for mat in used:
-            faces = np.flatnonzero(mesh.face_material == mat).astype(np.int32)
+            indices = np.flatnonzero(face_material == mat).astype(np.int32)
             subset = binding.CreateMaterialBindSubset(materials[int(mat)].GetPath().name,
-                                                      Vt.IntArray.FromNumpy(faces), UsdGeom.Tokens.face)
+                                                      Vt.IntArray.FromNumpy(indices), UsdGeom.Tokens.face)
             UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(materials[int(mat)])
         binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
 
