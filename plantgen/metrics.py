@@ -139,6 +139,21 @@ def _support_points(centres, normals, radii, theta) -> tuple[np.ndarray, np.ndar
     return np.sum(point * d, axis=1), point[:, [0, 2]]
 
 
+def _farthest(centres, normals, radii, theta) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) the largest support value of all discs in each direction θ_i, and (k,) the disc
+    that reaches it (the first on ties), over chunks of at most ``CHUNK`` values."""
+    best = np.full(len(theta), -np.inf)
+    where = np.zeros(len(theta), dtype=np.int64)
+    step = max(1, CHUNK // max(len(theta), 1))
+    for lo in range(0, len(radii), step):
+        value = _support_values(centres[lo:lo + step], normals[lo:lo + step], radii[lo:lo + step], theta)
+        arg = np.argmax(value, axis=0)
+        top = value[arg, np.arange(len(theta))]
+        better = top > best
+        best[better], where[better] = top[better], arg[better] + lo
+    return best, where
+
+
 def _bridges(centres, normals, radii, lo, hi, a, b, rounds: int = 24) -> list[np.ndarray]:
     """Tangent points where the hull passes from disc ``a[i]`` (the widest at ``lo[i]``)
     to disc ``b[i]`` (the widest at ``hi[i]``). The direction where the two reach as far is
@@ -155,15 +170,7 @@ def _bridges(centres, normals, radii, lo, hi, a, b, rounds: int = 24) -> list[np
                      >= _support_points(centres[b], normals[b], radii[b], mid)[0])
             left, right = np.where(ahead, mid, left), np.where(ahead, right, mid)
         value_a, point_a = _support_points(centres[a], normals[a], radii[a], left)
-        winner = np.empty(len(left), dtype=np.int64)
-        top = np.full(len(left), -np.inf)
-        step = max(1, CHUNK // len(left))
-        for k in range(0, len(radii), step):
-            values = _support_values(centres[k:k + step], normals[k:k + step], radii[k:k + step], left)
-            arg = np.argmax(values, axis=0)
-            best = values[arg, np.arange(len(left))]
-            better = best > top
-            top[better], winner[better] = best[better], arg[better] + k
+        top, winner = _farthest(centres, normals, radii, left)
         third = (top > value_a + 1e-12 * (1 + np.abs(value_a))) & (winner != a) & (winner != b)
         done = ~third
         out += [point_a[done], _support_points(centres[b[done]], normals[b[done]], radii[b[done]], left[done])[1]]
@@ -202,15 +209,7 @@ def crown_projection(skeleton: Skeleton, directions: int = CROWN_DIRECTIONS) -> 
     origin = centres.mean(axis=0)
     centres = centres - origin
     theta = 2 * np.pi * np.arange(int(directions)) / int(directions)
-    best = np.full(len(theta), -np.inf)
-    where = np.zeros(len(theta), dtype=np.int64)
-    step = max(1, CHUNK // len(theta))
-    for lo in range(0, len(radii), step):
-        value = _support_values(centres[lo:lo + step], normals[lo:lo + step], radii[lo:lo + step], theta)
-        arg = np.argmax(value, axis=0)
-        top = value[arg, np.arange(len(theta))]
-        better = top > best
-        best[better], where[better] = top[better], arg[better] + lo
+    best, where = _farthest(centres, normals, radii, theta)
     points = [_support_points(centres[where], normals[where], radii[where], theta)[1]]
     switch = np.flatnonzero(where != np.roll(where, -1))
     points += _bridges(centres, normals, radii, theta[switch], theta[switch] + 2 * np.pi / len(theta),
