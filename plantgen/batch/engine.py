@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import PlantgenError
 from ..limits import Limits
 from .manifest import Manifest
-from .plant import make_plant, relative_files
+from .plant import make_plant, plant_row, relative_files
 from .spec import BatchSpec
 
 __all__ = ["BatchResult", "run_batch", "dask_client"]
@@ -149,10 +149,7 @@ def _row_of(future, task) -> dict:
         return future.result()
     except Exception as exc:
         text = str(exc).strip().splitlines()
-        return {"id": task.id, "grammar": task.name, "index": task.index, "seed": task.seed,
-                "defines": json.dumps(dict(task.defines), sort_keys=True), "status": "failed",
-                "error": f"{exc.__class__.__name__}: {text[0][:400] if text else ''}", "files": "{}",
-                "segments": 0, "tips": 0, "height": float("nan"), "bbox": "[]", "metrics": "{}", "timings": "{}"}
+        return plant_row(task, {}, f"{exc.__class__.__name__}: {text[0][:400] if text else ''}")
 
 
 def summary_lines(result: BatchResult, rows: list) -> list[str]:

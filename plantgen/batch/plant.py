@@ -23,7 +23,7 @@ from ..limits import Limits
 from ..pipeline import check_finite_frusta, check_finite_mesh, grow_file
 from .spec import Outputs, PlantTask
 
-__all__ = ["make_plant", "row_fields", "relative_files", "view_direction"]
+__all__ = ["make_plant", "plant_row", "row_fields", "relative_files", "view_direction"]
 
 _CASTER: list = []          # this process's Raycaster, made on first use
 
@@ -43,7 +43,7 @@ def view_direction(azimuth_deg: float, elevation_deg: float = 15.0) -> tuple[flo
     return (float(np.sin(a) * np.cos(e)), float(np.sin(e)), float(np.cos(a) * np.cos(e)))
 
 
-def _files_of(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
+def relative_files(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
     """Relative paths of every file a plant gets, by kind."""
     views = [f"{task.id}_a{int(round(a)) % 360:03d}" for a in outputs.azimuths]
     kinds = (("npz", outputs.npz, [f"npz/{task.id}.npz"]),
@@ -55,7 +55,6 @@ def _files_of(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
     return {kind: names for kind, on, names in kinds if on}
 
 
-relative_files = _files_of
 
 
 def row_fields() -> tuple[str, ...]:
@@ -92,7 +91,7 @@ def _render_views(task, outputs: Outputs, frusta, skeleton, root: Path, timings:
     labels = _labels(frusta, skeleton, outputs.mask) if outputs.mask else None
     if labels is not None and labels.max() > 255:
         raise PlantgenError(f"{task.id}: {labels.max()} {outputs.mask} labels, over the 255 a mask PNG holds")
-    names = _files_of(task, outputs)
+    names = relative_files(task, outputs)
     for i, az in enumerate(outputs.azimuths):
         camera = auto_camera(frusta, w, h, direction=view_direction(az))
         result = caster.render(frusta, camera, settings, frusta.material_names)
@@ -110,7 +109,7 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
     from ..geometry.swc import write_swc
     from ..geometry.topology import branches
 
-    names = _files_of(task, outputs)
+    names = relative_files(task, outputs)
     t0 = time.perf_counter()
     if outputs.npz:
         b = branches(skeleton)
@@ -128,7 +127,7 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: di
     mesh = tessellate(frusta, outputs.glb)
     check_finite_mesh(mesh, frusta, task.id)
     order = branches(skeleton).segment_order[frusta.segment]
-    export_mesh(mesh, root / _files_of(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order})
+    export_mesh(mesh, root / relative_files(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order})
     timings["glb"] = time.perf_counter() - t0
 
 
@@ -144,15 +143,21 @@ def _measure(skeleton) -> tuple[dict, np.ndarray]:
     return out, metrics.bounds
 
 
+def plant_row(task: PlantTask, files: dict, error: str = "") -> dict:
+    """A manifest row of ``task`` before it is measured: ``ok`` with ``files``, or
+    ``failed`` with its one-line ``error``."""
+    return {"id": task.id, "grammar": task.name, "index": task.index, "seed": task.seed,
+            "defines": json.dumps(dict(task.defines), sort_keys=True), "status": "failed" if error else "ok",
+            "error": error, "files": json.dumps(files, sort_keys=True), "segments": 0, "tips": 0,
+            "height": float("nan"), "bbox": "[]", "metrics": "{}", "timings": "{}"}
+
+
 def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None) -> dict:
     """Grow ``task``'s plant, write its ``outputs`` under ``out_dir`` and return its
     manifest row (a dict of :func:`row_fields`; lists and mappings as JSON text)."""
     root = Path(out_dir)
     timings: dict = {}
-    row = {"id": task.id, "grammar": task.name, "index": task.index, "seed": task.seed,
-           "defines": json.dumps(dict(task.defines), sort_keys=True), "status": "ok", "error": "",
-           "files": json.dumps(_files_of(task, outputs), sort_keys=True), "segments": 0, "tips": 0,
-           "height": float("nan"), "bbox": json.dumps([]), "metrics": json.dumps({}), "timings": "{}"}
+    row = plant_row(task, relative_files(task, outputs))
     try:
         t0 = time.perf_counter()
         grown = grow_file(task.grammar, seed=task.seed, limits=limits, defines=dict(task.defines))
