@@ -179,6 +179,14 @@ bool face_is_open_cap(Frustum f, int face) {
 }
 
 
+// Window depth of a hit `distance` along the eye's ray direction d: the depth test against
+// other frusta and ordinary meshes (the projection's z of the view-space depth).
+float eye_depth(float distance, vec3 d) {
+    float z_view = -distance * dot(d, cam_forward);
+    float ndc_z = (depth_coeffs.x * z_view + depth_coeffs.y) / (-z_view);
+    return clamp(0.5 * ndc_z + 0.5, 0.0, 1.0);
+}
+
 vec3 pixel_ray() {
     vec2 ndc = 2.0 * gl_FragCoord.xy / viewport - 1.0;   // pixel centres; +y is up
     return normalize(cam_forward + ndc.x * cam_right_scaled + ndc.y * cam_up_scaled);
@@ -344,8 +352,7 @@ void main() {
     // a part mask: the row's label (its material slot) in red, unshaded
     out_color = vec4(float(f.material) / 255.0, 0.0, 0.0, 1.0);
     out_distance = distance;
-    float z_view_l = -distance * dot(d, cam_forward);
-    gl_FragDepth = clamp(0.5 * (depth_coeffs.x * z_view_l + depth_coeffs.y) / (-z_view_l) + 0.5, 0.0, 1.0);
+    gl_FragDepth = eye_depth(distance, d);
 #else
 
     // Shading: u, v and the interpolated normal (6)-(8), texture colour, one light.
@@ -397,10 +404,7 @@ void main() {
     out_color = vec4(to_display(color), 1.0);
     out_distance = distance;
 
-    // Depth of the hit for the depth test against other frusta and ordinary meshes.
-    float z_view = -distance * dot(d, cam_forward);
-    float ndc_z = (depth_coeffs.x * z_view + depth_coeffs.y) / (-z_view);
-    gl_FragDepth = clamp(0.5 * ndc_z + 0.5, 0.0, 1.0);
+    gl_FragDepth = eye_depth(distance, d);
 #endif
 }
 
