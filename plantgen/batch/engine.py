@@ -15,6 +15,7 @@ import json
 import os
 import statistics
 import time
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -113,8 +114,11 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
         if todo:
             from dask.distributed import as_completed
 
+            # keys unique to this run: a run after an interrupt on the same cluster must not
+            # share keys with the futures the interrupted run is still cancelling
+            run = uuid.uuid4().hex[:8]
             futures = client.map(make_plant, todo, outputs=spec.outputs, out_dir=str(folder), limits=limits,
-                                 pure=False, key=[f"plant-{t.id}" for t in todo], retries=1)
+                                 pure=False, key=[f"plant-{t.id}-{run}" for t in todo], retries=1)
             task_of = dict(zip((f.key for f in futures), todo, strict=True))
             last_save, wait = time.perf_counter(), save_every
             for future in as_completed(futures):
