@@ -235,6 +235,14 @@ class Staging:
     camera: Camera
     light_dir: tuple
     ground: Ground | None
+    leaves: Polygons | None = None   # the model's leaf polygons, drawn beside the frusta
+
+
+def model_leaves(grown: GrowResult) -> Polygons | None:
+    """The grown model's leaf polygons (a grammar's ``{ . }`` and ``~`` surfaces), None if
+    it has none: a model without leaves builds no leaf program and runs no leaf draw."""
+    polygons = grown.polygons
+    return polygons if polygons is not None and len(polygons.triangles) else None
 
 
 def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
@@ -244,19 +252,21 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     (:func:`auto_camera`) and the default model light. ``camera`` replaces the view;
     ``orbit`` then turns, moves or zooms it around its target (:func:`orbit_view`; a
     framed view is framed anew from the new direction)."""
-    scene = grown.scene
+    scene, leaves = grown.scene, model_leaves(grown)
+    points = None if leaves is None else leaves.vertices
     framed = camera is None and (scene is None or scene.camera is None)
     if camera is None:
-        camera = scene.camera.at_size(width, height) if not framed else auto_camera(frusta, width, height)
+        camera = (scene.camera.at_size(width, height) if not framed
+                  else auto_camera(frusta, width, height, points=points))
     if orbit is not None and not orbit.empty:
         reframe = None
         if framed:
             def reframe(direction, fov_y):
-                return auto_camera(frusta, width, height, fov_y=fov_y, direction=direction)
+                return auto_camera(frusta, width, height, fov_y=fov_y, direction=direction, points=points)
         camera = orbit_view(camera, orbit, reframe)
     if scene is None:
-        return Staging(camera, tuple(MODEL_LIGHT.towards()), None)
-    return Staging(camera, tuple(scene.light.towards()), scene.ground)
+        return Staging(camera, tuple(MODEL_LIGHT.towards()), None, leaves)
+    return Staging(camera, tuple(scene.light.towards()), scene.ground, leaves)
 
 
 def check_finite_frusta(frusta: Frusta, source) -> Frusta:
@@ -359,7 +369,8 @@ def frame_arguments(frusta: Frusta, staging: Staging, shadows, *, background=Non
     """The keyword arguments both renderers take for one frame of a staged model
     (``Raycaster.render`` adds ``settings``; ``RasterRenderer.render`` takes the mesh)."""
     return {"camera": staging.camera, "material_names": frusta.material_names, "light_dir": staging.light_dir,
-            "ground": staging.ground, "shadows": shadows, "background": background, "ssaa": int(ssaa)}
+            "ground": staging.ground, "shadows": shadows, "background": background, "ssaa": int(ssaa),
+            "leaves": staging.leaves}
 
 
 # ---------------------------------------------------------------------- plantgen render

@@ -183,7 +183,7 @@ class Camera:
 
 # ---------------------------------------------------------------------- framing
 def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: float = 40.0,
-                direction=AUTO_DIRECTION, fill: float = 0.9) -> Camera:
+                direction=AUTO_DIRECTION, fill: float = 0.9, points=None) -> Camera:
     """A camera looking from ``direction`` at the model, as close as it can be while every
     frustum stays inside ``fill`` of the viewport: the model spans most of the viewport
     (as the paper measured). Tighter than a bounding sphere for tall, thin plants.
@@ -195,8 +195,12 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
     fov_y : vertical field of view, degrees
     direction : (3,) from the model towards the eye (not normalised)
     fill : fraction of the half-width and half-height the model may reach
+    points : (k, 3) further points the view must hold (a model's leaf vertices), or None
     """
+    points = np.zeros((0, 3)) if points is None else np.asarray(points, np.float64).reshape(-1, 3)
     box = frusta_bounds(frusta)
+    if len(points):
+        box = np.stack([np.minimum(box[0], points.min(axis=0)), np.maximum(box[1], points.max(axis=0))])
     if len(frusta.base) == 0:
         return Camera.auto(box, width, height, fov_y=fov_y, direction=direction, fill=fill)
     toward_eye = np.asarray(direction, dtype=np.float64)
@@ -207,8 +211,8 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
     tan_x = tan_y * width / height
     # the solid frustum is the convex hull of its two plane sections: sample them
     centres, radius = section_points(frusta)
-    centres = centres.reshape(-1, 3)
-    radius = radius.reshape(-1) + tol.frame_extent
+    centres = np.concatenate([centres.reshape(-1, 3), points])
+    radius = np.concatenate([radius.reshape(-1), np.zeros(len(points))]) + tol.frame_extent
     target = 0.5 * (box[0] + box[1])
     for _ in range(2):   # solve the distance, re-centre on the projected extent, solve again
         rel = centres - target

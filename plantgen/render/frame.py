@@ -21,12 +21,14 @@ from ..geometry.camera import Camera, depth_range
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from .context import gl_context, release_framebuffer
+from .leaves import LeafLayer
 from .materials import HeightTextures, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, ShadowSettings, light_window
 from .shaders import build_program, mat4, set_uniforms
 from .supersample import MAX_SSAA, resolve_supersamples
 
-__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "check_background", "check_ssaa"]
+__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "check_background",
+           "check_ssaa"]
 
 
 def check_background(background) -> tuple | None:
@@ -96,6 +98,18 @@ def frame_view(camera: Camera, point_sets) -> FrameView:
 
 
 @dataclass(frozen=True)
+class Surroundings:
+    """What a frame draws besides the model: callables drawn before it (the ground) and
+    after it (the leaves), into the light's map (``light``), and GL objects to release once
+    the frame is drawn."""
+
+    before: list
+    after: list
+    light: list
+    garbage: list
+
+
+@dataclass(frozen=True)
 class FrameLighting:
     """The light and materials of one frame.
 
@@ -128,6 +142,7 @@ class OffscreenRenderer:
         self._fbo_size = None
         self._heights = HeightTextures(self.ctx)
         self._shadow = ShadowPass(self.ctx)
+        self._leaves = LeafLayer(self.ctx)
         self._sky_vao = None
         self.last_light_window = None
         self.last_resolve_ms = 0.0
@@ -140,6 +155,7 @@ class OffscreenRenderer:
         self._fbo = self._fbo_size = None
         self._heights.release()
         self._shadow.release()
+        self._leaves.release()
 
     def shadow_depths(self) -> np.ndarray:
         """(res, res) float32 light depth map of the last shadowed render, (z - near) /
@@ -178,10 +194,10 @@ class OffscreenRenderer:
         return self._sky_vao
 
     def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting):
-        """Draws of the ground square: its vertex array for the frame and, with a light
-        window, a callable drawing it into the light's map (for :meth:`_draw_frame`).
+        """Draws of the ground square: a callable drawing it into the frame and, with a light
+        window, one drawing it into the light's map (for :meth:`_draw_frame`).
 
-        Returns (frame vao, light draw or None, [objects to release after the frame]).
+        Returns (frame draw, light draw or None, [objects to release after the frame]).
         """
         ctx = self.ctx
         shadowed = lighting.window is not None
@@ -200,7 +216,29 @@ class OffscreenRenderer:
             def light_draw():
                 ctx.disable(ctx.CULL_FACE)
                 light_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-        return vao, light_draw, [vao, light_vao, buf]
+
+        def frame_draw():
+            ctx.disable(ctx.CULL_FACE)
+            vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
+        return frame_draw, light_draw, [vao, light_vao, buf]
+
+    def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
+                      *, labels=None) -> Surroundings:
+        """The frame's draws besides the model's own: the ground square and the leaves
+        (``leaves``: a Polygons or None; ``labels`` (p,): draw them as a part mask)."""
+        out = Surroundings([], [], [], [])
+        if ground is not None:
+            draw, light_draw, garbage = self._ground_draws(ground, view, lighting)
+            out.before.append(draw)
+            out.light.append(light_draw)
+            out.garbage.extend(garbage)
+        if leaves is not None and len(leaves.triangles):
+            draw, light_draw, garbage = self._leaves.draws(leaves, view, lighting, labels=labels)
+            out.after.append(draw)
+            out.light.append(light_draw)
+            out.garbage.extend(garbage)
+        out.light[:] = [d for d in out.light if d is not None]
+        return out
 
     def _framebuffer(self, width: int, height: int):
         if self._fbo_size != (width, height):
@@ -234,11 +272,12 @@ class OffscreenRenderer:
         self._shadow.texture.use(1)
         return (time.perf_counter() - t0) * 1e3
 
-    def _draw_frame(self, view: FrameView, sky_vao, ground_vao, draw_model: Callable[[], None],
-                    shadows: ShadowSettings | None, shadow_draws) -> tuple[float, float]:
+    def _draw_frame(self, view: FrameView, sky_vao, draw_model: Callable[[], None],
+                    shadows: ShadowSettings | None, shadow_draws, extras: Surroundings) -> tuple[float, float]:
         """Run one frame's passes in order: the shadow map (with ``shadows``: each callable of
-        ``shadow_draws``), the sky, the ground (``ground_vao`` or None) and the model
-        (``draw_model()``, called with the depth test on).
+        ``shadow_draws``, then the light draws of ``extras``), the sky, the ground
+        (``extras.before``), the model (``draw_model()``) and the leaves (``extras.after``),
+        with the depth test on from the ground on.
 
         Returns (frame_ms, shadow_ms): wall milliseconds from the first pass to glFinish,
         and those of the shadow pass alone.
@@ -248,7 +287,8 @@ class OffscreenRenderer:
         fbo = self._framebuffer(width, height)
         ctx.finish()
         t_draw = time.perf_counter()
-        shadow_ms = self._draw_shadow_map(shadows.resolution, shadow_draws) if shadows else 0.0
+        shadow_ms = (self._draw_shadow_map(shadows.resolution, [*shadow_draws, *extras.light])
+                     if shadows else 0.0)
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
@@ -256,12 +296,14 @@ class OffscreenRenderer:
         sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
         ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
-        if ground_vao is not None:
-            ground_vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-        draw_model()
+        for draw in (*extras.before, draw_model, *extras.after):
+            draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        for obj in extras.garbage:
+            if obj is not None:
+                obj.release()
         return frame_ms, shadow_ms
 
     def _read_back(self, width: int, height: int, *, ssaa: int = 1,

@@ -66,13 +66,15 @@ class ShadowSettings:
             raise PlantgenError("shadow march density and precision must be > 0")
 
 
-def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False) -> list:
+def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False,
+                     leaves: bool = False) -> list:
     """(program file, defines) of every program one frame uses.
 
     ``settings`` is the :class:`~plantgen.render.raycast.RaycastSettings` (relief on iff the
     effects hold ``relief``); ``shadows`` is None without the ``shadows`` effect (then no
     shadow pass runs and no program samples a map); ``ground``: the scene has a ground;
-    ``flat_background``: a flat colour (or transparency) instead of the sky.
+    ``flat_background``: a flat colour (or transparency) instead of the sky; ``leaves``:
+    the model has leaf polygons (shaders/leaf.glsl, drawn by either renderer).
     """
     shadowed = shadows is not None
     out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
@@ -81,16 +83,21 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
                                      "RELIEF": settings.relief and shadows.caster == "relief"}))
         if ground:
             out.append(("ground.glsl", {"SHADOW_PASS": True}))
+        if leaves:
+            out.append(("leaf.glsl", {"SHADOW_PASS": True}))
     if ground:
         out.append(("ground.glsl", {"SHADOWS": shadowed}))
     out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed}))
+    if leaves:
+        labels = bool(getattr(settings, "labels", False))
+        out.append(("leaf.glsl", {"SHADOWS": shadowed and not labels, "LABELS": labels}))
     return out
 
 
-def frame_passes(shadows: bool, ground: bool, segments: bool) -> list[str]:
+def frame_passes(shadows: bool, ground: bool, segments: bool, leaves: bool = False) -> list[str]:
     """Names of the passes of one frame, in order."""
-    return ((["shadow"] if shadows and (segments or ground) else []) + ["sky"]
-            + (["ground"] if ground else []) + (["frusta"] if segments else []))
+    return ((["shadow"] if shadows and (segments or ground or leaves) else []) + ["sky"]
+            + (["ground"] if ground else []) + (["frusta"] if segments else []) + (["leaves"] if leaves else []))
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
+from .leaves import leaf_bounds, union_box
 from .passes import ShadowSettings, frame_passes
 from .result import RasterStats, RenderResult, WorkCounter
 from .shaders import build_program, mat4, set_uniforms
@@ -98,7 +99,7 @@ class RasterRenderer(OffscreenRenderer):
     def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None,
-               count_work: bool = False, background=None, ssaa: int = 1) -> RenderResult:
+               count_work: bool = False, background=None, ssaa: int = 1, leaves=None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -118,6 +119,8 @@ class RasterRenderer(OffscreenRenderer):
             (``stats.work``), as for the ray caster
         background, ssaa : a flat or transparent background and supersampling, as for the
             ray caster
+        leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
+            caster
         """
         names = tuple(material_names or mesh.material_names)
         background, ssaa = check_background(background), check_ssaa(ssaa)
@@ -128,39 +131,32 @@ class RasterRenderer(OffscreenRenderer):
         t0 = time.perf_counter()
         vao, origin = self.upload(mesh, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
-        bounds = _mesh_bounds(mesh)
+        bounds = union_box(_mesh_bounds(mesh), leaf_bounds(leaves))
         view = frame_view(camera.scaled(ssaa), [box_corners(bounds)] + ([] if ground is None else [ground.quad()]))
         tex, repeats = self._heights.get(names)
         box = None if not shadowed else (bounds if shadow_box is None else np.asarray(shadow_box, np.float64))
         lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh)
-        garbage = []
-        ground_vao = ground_light_draw = None
-        if ground is not None:
-            ground_vao, ground_light_draw, garbage = self._ground_draws(ground, view, lighting)
+        extras = self._surroundings(ground, leaves, view, lighting)
         shadow_draws = []
         if shadowed:
             light_draw, light_vao = self._mesh_light_draw(origin, view, lighting, mesh)
             shadow_draws.append(light_draw)
-            garbage.append(light_vao)
-            if ground_light_draw is not None:
-                shadow_draws.append(ground_light_draw)
+            extras.garbage.append(light_vao)
         counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), ground_vao,
-                                               draw_mesh, shadows, shadow_draws)
-        for obj in garbage:
-            if obj is not None:
-                obj.release()
+        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_mesh,
+                                               shadows, shadow_draws, extras)
         color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
                                       alpha=background is not None and background[3] < 1)
         work = counter.read(dist) if counter is not None else None
+        leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
-            passes=frame_passes(shadowed, ground_vao is not None, len(mesh.faces) > 0),
+            passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),
             near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window,
-            upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces),
+            upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces) + leaf_tris,
             vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
-            draw_calls=1 + (ground_vao is not None), work=work)
+            draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,

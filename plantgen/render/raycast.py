@@ -26,6 +26,7 @@ from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
 from ..geometry.stage import Ground
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
+from .leaves import leaf_bounds, union_box
 from .passes import ShadowSettings, frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
 from .result import RaycastStats, RenderResult, WorkCounter
@@ -124,7 +125,7 @@ class Raycaster(OffscreenRenderer):
                material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
                shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
-               ssaa: int = 1) -> RenderResult:
+               ssaa: int = 1, leaves=None, leaf_labels=None) -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
 
         Parameters
@@ -159,55 +160,50 @@ class Raycaster(OffscreenRenderer):
         t0 = time.perf_counter()
         records = pack_records(frusta, camera.eye) if record_buffer is None else None
         pack_ms = (time.perf_counter() - t0) * 1e3
-        points = [] if ground is None else [ground.quad()]
-        if n:
-            points.append(box_corners(frusta_bounds(frusta)))
-        view = frame_view(camera.scaled(ssaa), points)
-        programs = self._programs(settings, shadows, ground is not None, count_work, background is not None)
+        model_box = union_box(frusta_bounds(frusta) if n else None, leaf_bounds(leaves))
+        view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
+                          + ([] if model_box is None else [box_corners(model_box)]))
+        programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
+                                  leaf_bounds(leaves) is not None)
         tex, repeats = self._heights.get(tuple(material_names))
-        box = None if shadows is None else (frusta_bounds(frusta) if shadow_box is None
-                                            else np.asarray(shadow_box, np.float64))
+        box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
+                                            else model_box if model_box is not None else frusta_bounds(frusta))
         lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye)
-        garbage = []
-        ground_vao = ground_light_draw = None
-        if ground is not None:
-            ground_vao, ground_light_draw, garbage = self._ground_draws(ground, view, lighting)
+        extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n else None)
         if record_buffer is None:
-            garbage.append(rec_buf)
+            extras.garbage.append(rec_buf)
         draw_frusta, vao = self._frusta_draw(programs["frame"], view, lighting, settings, rec_buf,
                                              repeats, tex, n)
-        shadow_draws = [] if ground_light_draw is None else [ground_light_draw]
+        extras.garbage.append(vao)
+        shadow_draws = []
         if shadows is not None and n:
             light_draw, light_vao = self._frusta_light_draw(programs["light"], lighting, settings,
                                                             shadows, rec_buf, repeats, tex, n)
             shadow_draws.append(light_draw)
-            garbage.append(light_vao)
+            extras.garbage.append(light_vao)
         counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), ground_vao,
-                                               draw_frusta, shadows, shadow_draws)
+        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_frusta,
+                                               shadows, shadow_draws, extras)
         color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
                                       alpha=background is not None and background[3] < 1)
         work = counter.read(dist) if counter is not None else None
-        for obj in (vao, *garbage):
-            if obj is not None:
-                obj.release()
         stats = RaycastStats(
-            passes=frame_passes(shadows is not None, ground is not None, n > 0), near=view.near,
-            far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
+            passes=frame_passes(shadows is not None, ground is not None, n > 0, bool(extras.after)),
+            near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
             pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
             resolve_ms=self.last_resolve_ms, programs=programs["built"], work=work)
         return RenderResult(color, dist, frame_ms, camera, stats)
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
-                  flat_background: bool = False) -> dict:
+                  flat_background: bool = False, leaves: bool = False) -> dict:
         """Build every program the frame uses (plantgen.render.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
         (file, defines switched on) built."""
-        variants = program_variants(settings, shadows, ground, flat_background)
+        variants = program_variants(settings, shadows, ground, flat_background, leaves)
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
         for name, defines in variants:

@@ -1,0 +1,147 @@
+"""Leaves in the frame: a grammar's filled polygons rasterised beside the frusta.
+
+Both renderers draw a model's :class:`~plantgen.geometry.polygons.Polygons` the same way
+(shaders/leaf.glsl): one indexed draw into the frame's depth buffer, where the ray-cast
+frusta write ``gl_FragDepth`` from the same projection (so leaves and frusta hide each
+other correctly), and, with shadows, one draw into the light's map, so leaves cast and
+receive shadows. A model without leaves builds no leaf program and runs no leaf draw.
+
+The vertex data (:func:`leaf_vertices`) is made once per ``Polygons`` object and kept on
+the GPU while the same object is drawn again (an orbit or an animation redraws it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry.polygons import Polygons
+from .shaders import build_program, mat4, set_uniforms
+
+__all__ = ["LeafLayer", "leaf_vertices", "leaf_bounds", "union_box", "LEAF_VERTEX_LAYOUT"]
+
+#: One interleaved float32 vertex: position (relative to the leaves' origin), normal,
+#: (material slot, tone).
+LEAF_VERTEX_LAYOUT = ("3f 3f 2f", "position", "normal", "shade")
+
+
+def _vertex_normals(polygons: Polygons) -> np.ndarray:
+    """(v, 3) unit normals: each vertex's area-weighted mean of its triangles' normals
+    (a curled blade shades smoothly); a vertex in no triangle takes its polygon's normal."""
+    v, t = polygons.vertices, polygons.triangles
+    normals = np.zeros_like(v)
+    if len(t):
+        face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])   # 2 * area * unit normal
+        for k in range(3):
+            np.add.at(normals, t[:, k], face)
+    length = np.linalg.norm(normals, axis=1)
+    fallback = length <= 0
+    if fallback.any():
+        owner = _vertex_polygon(polygons)
+        normals[fallback] = polygons.normal[owner[fallback]] if len(polygons) else (0.0, 1.0, 0.0)
+        length = np.linalg.norm(normals, axis=1)
+    return normals / np.maximum(length, 1e-300)[:, None]
+
+
+def _vertex_polygon(polygons: Polygons) -> np.ndarray:
+    """(v,) the polygon of each vertex (0 for a vertex no triangle uses)."""
+    owner = np.zeros(len(polygons.vertices), np.int64)
+    if len(polygons.triangles):
+        owner[polygons.triangles.ravel()] = np.repeat(polygons.polygon, 3)
+    return owner
+
+
+def leaf_tones(count: int) -> np.ndarray:
+    """(count,) tones in [0.25, 0.85]: where each leaf's albedo lies between its material's
+    dark and light colour, a fixed function of the polygon's index (deterministic), so
+    neighbouring leaves read apart."""
+    k = np.arange(count, dtype=np.uint64)
+    h = (k * np.uint64(2654435761) + np.uint64(40503)) % np.uint64(1 << 16)
+    return 0.25 + 0.6 * h.astype(np.float64) / float(1 << 16)
+
+
+def leaf_vertices(polygons: Polygons, origin, labels=None) -> np.ndarray:
+    """(v, 8) float32 interleaved vertices (:data:`LEAF_VERTEX_LAYOUT`), positions relative
+    to ``origin`` (float64 subtraction first). ``labels`` (p,) replaces each polygon's
+    material slot (a part mask)."""
+    owner = _vertex_polygon(polygons)
+    slot = polygons.material if labels is None else np.asarray(labels)
+    out = np.empty((len(polygons.vertices), 8), np.float32)
+    out[:, 0:3] = polygons.vertices - np.asarray(origin, np.float64)
+    out[:, 3:6] = _vertex_normals(polygons)
+    out[:, 6] = slot[owner] if len(polygons) else 0
+    out[:, 7] = leaf_tones(len(polygons))[owner] if len(polygons) else 0.5
+    return out
+
+
+def leaf_bounds(polygons: Polygons | None) -> np.ndarray | None:
+    """(2, 3) world box of the leaves' vertices, None without leaves."""
+    if polygons is None or len(polygons.triangles) == 0:
+        return None
+    return np.stack([polygons.vertices.min(axis=0), polygons.vertices.max(axis=0)])
+
+
+def union_box(*boxes) -> np.ndarray | None:
+    """(2, 3) box around every (2, 3) box of ``boxes`` that is not None; None if none is."""
+    given = [np.asarray(b, np.float64) for b in boxes if b is not None]
+    if not given:
+        return None
+    return np.stack([np.min([b[0] for b in given], axis=0), np.max([b[1] for b in given], axis=0)])
+
+
+class LeafLayer:
+    """The GL side of one renderer's leaves: the uploaded vertices of the last ``Polygons``
+    drawn, and the draws of one frame."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._uploaded = None   # (polygons, labels key, vbo, ibo, origin)
+
+    def release(self) -> None:
+        if self._uploaded is not None:
+            for obj in self._uploaded[2:4]:
+                obj.release()
+        self._uploaded = None
+
+    def _upload(self, polygons: Polygons, labels):
+        key = None if labels is None else np.asarray(labels).tobytes()
+        up = self._uploaded
+        if up is not None and up[0] is polygons and up[1] == key:
+            return up[2], up[3], up[4]
+        self.release()
+        origin = polygons.vertices.mean(axis=0)
+        vbo = self.ctx.buffer(leaf_vertices(polygons, origin, labels).tobytes())
+        ibo = self.ctx.buffer(np.ascontiguousarray(polygons.triangles, np.uint32).tobytes())
+        self._uploaded = (polygons, key, vbo, ibo, origin)
+        return vbo, ibo, origin
+
+    def draws(self, polygons: Polygons, view, lighting, *, labels=None):
+        """The leaves' draws for one frame seen through ``view`` (a FrameView) and lit by
+        ``lighting`` (a FrameLighting; its window, if any, gets the light's draw).
+
+        Returns (frame draw, light draw or None, [vertex arrays to release after the frame]).
+        """
+        ctx = self.ctx
+        vbo, ibo, origin = self._upload(polygons, labels)
+        shadowed = lighting.window is not None and labels is None
+        program = build_program(ctx, "leaf.glsl", {"SHADOWS": shadowed, "LABELS": labels is not None})
+        set_uniforms(program, **({} if labels is not None else {**lighting.shading, **lighting.receiver}),
+                     view_projection=mat4(view.view_projection),
+                     origin_from_eye=tuple((origin - view.eye).tolist()))
+        count = polygons.triangles.size
+        vao = ctx.vertex_array(program, [(vbo, *LEAF_VERTEX_LAYOUT)], index_buffer=ibo, index_element_size=4)
+
+        def frame_draw():
+            ctx.disable(ctx.CULL_FACE)
+            vao.render(mode=ctx.TRIANGLES, vertices=count)
+        if not shadowed:
+            return frame_draw, None, [vao]
+        caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})
+        set_uniforms(caster, view_projection=mat4(lighting.window.matrix()),
+                     origin_from_eye=tuple((origin - view.eye).tolist()))
+        light_vao = ctx.vertex_array(caster, [(vbo, "3f 20x", "position")], index_buffer=ibo,
+                                     index_element_size=4)
+
+        def light_draw():
+            ctx.disable(ctx.CULL_FACE)
+            light_vao.render(mode=ctx.TRIANGLES, vertices=count)
+        return frame_draw, light_draw, [vao, light_vao]

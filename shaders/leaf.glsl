@@ -1,0 +1,79 @@
+// Leaves: the grammar's filled polygons (plantgen.geometry.polygons), rasterised into the
+// same frame and depth buffer as the frusta. The ray-cast frusta write gl_FragDepth from
+// the same projection, so a leaf in front of a frustum hides it and one behind is hidden,
+// as the ground is (shaders/ground.glsl). Used by both renderers (RC and GS).
+//
+// Positions are relative to the leaves' own origin (float64 subtraction on the CPU) and
+// moved to the eye by `origin_from_eye`, as the raster renderer's mesh is.
+// A leaf is a thin sheet seen from either side: no face is culled, and the shading normal
+// is the leaf's normal turned towards the eye (lit on both sides). Leaves carry no relief.
+//
+// Variants: SHADOWS (receive: sample the light's map, shaders/shadow.glsl, with the
+// facet's own plane as the receiver plane); SHADOW_PASS (cast: depth only into the
+// light's map, both faces); LABELS (a part mask: the leaf's label in red, unshaded).
+
+#if defined VERTEX_SHADER
+
+in vec3 position;          // relative to the leaves' origin
+in vec3 normal;            // the leaf surface's normal (right-hand rule of its outline)
+in vec2 shade;             // (material slot or label, tone in [0, 1] of the leaf's albedo)
+
+uniform mat4 view_projection;   // eye-relative world -> clip (the light's window in SHADOW_PASS)
+uniform vec3 origin_from_eye;   // leaves' origin - eye
+
+out vec3 v_position;            // eye-relative
+out vec3 v_normal;
+flat out vec2 v_shade;
+
+void main() {
+    v_position = position + origin_from_eye;
+    v_normal = normal;
+    v_shade = shade;
+    gl_Position = view_projection * vec4(v_position, 1.0);
+}
+
+#elif defined FRAGMENT_SHADER
+
+#if defined SHADOW_PASS
+// the light's depth pass: the rasteriser's depth is the depth in the light's window
+void main() {}
+#else
+#include "shading.glsl"
+#if defined SHADOWS
+#include "shadow.glsl"
+#endif
+
+in vec3 v_position;
+in vec3 v_normal;
+flat in vec2 v_shade;
+
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out float out_distance;
+
+void main() {
+    int material = int(v_shade.x + 0.5);
+#if defined LABELS
+    out_color = vec4(float(material) / 255.0, 0.0, 0.0, 1.0);
+#else
+    vec3 to_eye = normalize(-v_position);
+    vec3 n = normalize(v_normal);
+    // the facet the rasteriser draws: the receiver plane for the shadow map, and the side
+    // of the sheet the eye sees
+    vec3 facet = cross(dFdx(v_position), dFdy(v_position));
+    vec3 flat_normal = dot(facet, facet) > 0.0 ? normalize(facet) : n;
+    if (dot(flat_normal, to_eye) < 0.0) flat_normal = -flat_normal;
+    if (dot(n, flat_normal) < 0.0) n = -n;          // the side facing the eye
+    n = facing_normal(n, flat_normal, to_eye);
+#if defined SHADOWS
+    float visibility = shadow_visibility(v_position, flat_normal);
+#else
+    float visibility = 1.0;
+#endif
+    vec3 albedo = material_albedo(material, v_shade.y);
+    out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility)), 1.0);
+#endif
+    out_distance = length(v_position);
+}
+#endif
+
+#endif
