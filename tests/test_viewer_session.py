@@ -181,3 +181,44 @@ def test_the_readme_lists_the_keys_the_viewer_binds():
     rows = [line for line in readme.read_text().splitlines() if line.startswith("| ")]
     for keys, text in help_lines():
         assert f"| {keys} | {text} |" in rows, (keys, text)
+
+
+def test_smooth_bends_reach_the_viewer_and_its_render_command(gl_ctx, tmp_path):
+    # --smooth-bends 10 turns the saguaro's bent joints into arcs; the frame the viewer
+    # draws is the one its printed command renders
+    options = ViewOptions(input="saguaro", size=SIZE, watch=False, shots=tmp_path, smooth_bends=10.0)
+    model = options.prepare()
+    assert len(model.frusta_at(0.0)) > len(prepare_model("saguaro").frusta_at(0.0))
+    s = ViewerSession(gl_ctx, options, model, say=lambda line: None, warn=lambda line: None)
+    try:
+        frame = s.draw(*SIZE)
+        args = shlex.split(s.render_command(s.save_camera()))
+        assert args[args.index("--smooth-bends") + 1] == "10.0"
+        assert run_cli(*args[1:])[0] == 0
+        assert np.array_equal(np.asarray(Image.open(args[args.index("-o") + 1])), frame.color)
+    finally:
+        s.release()
+
+
+@pytest.mark.parametrize("method", ["RC", "GS"])
+def test_the_viewer_draws_a_grammars_leaves(gl_ctx, tmp_path, method):
+    leafy = tmp_path / "leafy.yaml"
+    leafy.write_text('name: leafy\naxiom: "F[+(40)F{.+(30)G.-(30)G.-(30)G.}]F"\nmaterials: [bark, leaf]\n'
+                     'turtle: {angle: 30, step: 1.0}\nrules: []\n')
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(leafy.read_text().replace("{.+(30)G.-(30)G.-(30)G.}", "").replace("leafy", "bare"))
+    frames = {}
+    for path in (leafy, bare):
+        options = ViewOptions(input=path, size=SIZE, watch=False, shots=tmp_path, method=method)
+        s = ViewerSession(gl_ctx, options, options.prepare(), say=lambda line: None, warn=lambda line: None)
+        try:
+            if path is bare:
+                s.camera = frames[leafy][1]       # the leafy plant's framing for both
+            frames[path] = (s.draw(*SIZE), s.camera)
+        finally:
+            s.release()
+    with_leaf, without = frames[leafy][0], frames[bare][0]
+    # same camera: the leaf covers pixels where the bare plant shows the sky
+    gained = np.isfinite(with_leaf.distance) & ~np.isfinite(without.distance)
+    assert gained.sum() > 20
+    assert "leaves" in with_leaf.stats.passes and "leaves" not in without.stats.passes

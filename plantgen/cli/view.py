@@ -26,6 +26,7 @@ from .options import (
     orbit_options,
     seed_opt,
     size_opt,
+    smooth_bends_opt,
 )
 
 MARCH = RaycastSettings()
@@ -72,11 +73,12 @@ def _keys_epilog() -> str:
 @click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path), metavar="FILE.png",
               help="Draw a few frames, save the window as shown (heads-up line included) and close: "
                    "a screenshot for documentation.")
+@smooth_bends_opt
 @limit_opt
 @allow_path_opt
 def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, method, subdiv, effects, relief,
          shadows, shadow_res, ssaa, background, time_s, seed, iterations, linear_steps, binary_steps, march,
-         shots, watch, snapshot, limit_values, allow_paths) -> None:
+         shots, watch, snapshot, smooth_bends, limit_values, allow_paths) -> None:
     """Open INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     in a window and turn it around in real time.
 
@@ -115,6 +117,6 @@ def view(input: Path, size, camera, azimuth, elevation, distance, zoom, fov, met
         background_name=None if background == "sky" else background, camera=camera,
         orbit=orbit_from(azimuth, elevation, distance, zoom, fov), time_s=time_s, linear_steps=linear_steps,
         binary_steps=binary_steps, march=march, shadow_res=shadow_res, shots=shots, watch=watch, snapshot=snapshot,
-        limits=limits, allow_paths=tuple(allow_paths))
+        limits=limits, allow_paths=tuple(allow_paths), smooth_bends=smooth_bends)
     how = run_viewer(options, say=click.echo, warn=lambda line: click.echo(line, err=True))
     click.echo("interrupted: window closed" if how == "interrupted" else "window closed")

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 
-from ..pipeline import prepare_model
 from .session import ViewerSession, ViewOptions
 from .window import ViewerError, check_viewer_available, open_window, run_window
 
@@ -29,9 +28,7 @@ def run_viewer(options: ViewOptions, *, say=print, warn=print) -> str:
     check_viewer_available()
     say(f"growing {options.input} ...")
     t0 = time.perf_counter()
-    model = prepare_model(options.input, seed=options.seed, iterations=options.iterations, effects=options.effects,
-                          relief=options.relief, shadows=options.shadows, limits=options.limits,
-                          allow_paths=options.allow_paths)
+    model = options.prepare()
     say(f"{model.grown.name}: {len(model.grown.skeleton):,} segments in {time.perf_counter() - t0:.2f} s"
         + (f"; watching {len(model.grown.sources)} file(s) for changes" if options.watch else ""))
     window = open_window(f"plantgen view: {model.grown.name}", options.size)

@@ -90,6 +90,13 @@ class ViewOptions:
     snapshot: Path | None = None
     limits: Limits | None = None
     allow_paths: tuple = ()
+    smooth_bends: float | None = None
+
+    def prepare(self) -> PreparedModel:
+        """Grow the input with these options (the first model, and each reload)."""
+        return prepare_model(self.input, seed=self.seed, iterations=self.iterations, effects=self.effects,
+                             relief=self.relief, shadows=self.shadows, limits=self.limits,
+                             allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
 
 
 @dataclass
@@ -149,10 +156,8 @@ class ViewerSession:
     def _grow(self, t: float, saved_ns: int):
         """The reload's work (background thread): grow, skin at ``t``; returns (model, frusta,
         seconds of each stage)."""
-        o = self.options
         t0 = time.perf_counter()
-        model = prepare_model(o.input, seed=o.seed, iterations=o.iterations, effects=o.effects, relief=o.relief,
-                              shadows=o.shadows, limits=o.limits, allow_paths=o.allow_paths)
+        model = self.options.prepare()
         frusta = model.frusta_at(t)
         total = time.perf_counter() - t0
         grow = sum(model.grown.timings.values())      # read, parse, derive, interpret (place)
@@ -460,7 +465,8 @@ class ViewerSession:
                                      ("--shadow-res", o.shadow_res, 2048), ("--ssaa", self.ssaa, 1)):
             if value != default:
                 args += [flag, str(value)]
-        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--background", o.background_name)):
+        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--background", o.background_name),
+                            ("--smooth-bends", o.smooth_bends)):
             if value is not None:
                 args += [flag, str(value)]
         if self.model.animated:
