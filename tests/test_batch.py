@@ -205,3 +205,40 @@ def test_the_glb_labels_every_vertex_with_its_branch_order(tmp_path):
     if shutil.which("node") is None:
         pytest.skip("Node.js is not installed: the Khronos validator needs it (the rest of this test ran)")
     assert_khronos_valid(path)
+
+
+@pytest.mark.parametrize("mask", ["order", "material"])
+def test_a_leafy_plants_views_masks_and_glb_carry_its_leaves(tmp_path, mask):
+    """A grammar with leaves: the mask labels every pixel the colour view sees (frusta and
+    leaves, the same hits), leaves with their class (order mask: LEAF_ORDER_LABEL; material
+    mask: the leaf material + 1), and the glb holds the leaf triangles."""
+    import trimesh
+    from PIL import Image
+
+    from plantgen.batch.plant import LEAF_ORDER_LABEL, make_plant
+    from plantgen.batch.spec import simple_spec
+    from plantgen.pipeline import grow_file
+
+    leafy = TWIG.replace("materials: [bark]", "materials: [bark, leaf]").replace(
+        '"A -> !(w*0.7) [ &(a) F(l) A ] /(137.5) [ &(a) F(l) A ]"',
+        '"A -> !(w*0.7) [ &(a) F(l) A ] /(137.5) [ &(a) F(l) A ] [ ;(1) {.+(30)G(0.3).-(30)G(0.3).-(30)G(0.3).} ]"')
+    (tmp_path / "leafy.yaml").write_text(leafy)
+    for kind in ("png", "depth", "mask", "glb"):
+        (tmp_path / kind).mkdir()
+    spec = simple_spec(str(tmp_path / "leafy.yaml"), "0:1", ["png", "depth", "mask", "glb"], size="96x72",
+                       glb_level=0, mask=mask)
+    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path))
+    assert row["status"] == "ok", row["error"]
+    files = json.loads(row["files"])
+    labels = np.asarray(Image.open(tmp_path / files["mask"][0]))
+    depth = np.load(tmp_path / files["depth"][0])
+    assert np.array_equal(labels > 0, np.isfinite(depth))
+    leaf_label = LEAF_ORDER_LABEL if mask == "order" else 2
+    assert (labels == leaf_label).sum() > 20 and (labels == 1).sum() > 5
+    polygons = grow_file(tmp_path / "leafy.yaml", seed=spec.tasks[0].seed).polygons
+    data = (tmp_path / files["glb"][0]).read_bytes()
+    doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+    leaf_faces = sum(doc["accessors"][p["indices"]]["count"] // 3 for p in doc["meshes"][0]["primitives"]
+                     if doc["materials"][p["material"]]["name"].endswith("(leaf)"))
+    assert len(polygons) > 3 and leaf_faces == len(polygons.triangles)
+    assert len(trimesh.load(tmp_path / files["glb"][0]).geometry) >= 2     # trimesh reads frusta and leaves

@@ -20,7 +20,7 @@ from ..geometry.camera import auto_camera
 from ..geometry.mesh import tessellate
 from ..geometry.skin import skin_skeleton
 from ..limits import Limits
-from ..pipeline import check_finite_frusta, check_finite_mesh, grow_file
+from ..pipeline import check_finite_frusta, check_finite_mesh, grow_file, model_leaves
 from .spec import Outputs, PlantTask
 
 __all__ = ["make_plant", "plant_row", "row_fields", "relative_files", "view_direction"]
@@ -68,6 +68,18 @@ def _save_npy(path, array) -> None:
         np.save(fh, array)
 
 
+#: The label of every leaf in a branch-order mask (leaves hang from no one order).
+LEAF_ORDER_LABEL = 255
+
+
+def _leaf_labels(leaves, kind: str) -> np.ndarray:
+    """(p,) label of each leaf polygon for a part mask: its material + 1, the leaf class
+    (:data:`LEAF_ORDER_LABEL`) in an order mask, 1 in an instance mask."""
+    if kind == "material":
+        return leaves.material.astype(np.int64) + 1
+    return np.full(len(leaves), LEAF_ORDER_LABEL if kind == "order" else 1, dtype=np.int64)
+
+
 def _labels(frusta, skeleton, kind: str) -> np.ndarray:
     """(rows,) label of each frustum row for a part mask (1-based; 0 is the background)."""
     seg = frusta.segment
@@ -80,7 +92,7 @@ def _labels(frusta, skeleton, kind: str) -> np.ndarray:
     return np.ones(len(seg), dtype=np.int64)          # instance: one plant per batch row
 
 
-def _render_views(task, outputs: Outputs, frusta, skeleton, root: Path, timings: dict) -> None:
+def _render_views(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
     from ..images import write_png
     from ..render.raycast import RaycastSettings, label_image
 
@@ -89,18 +101,21 @@ def _render_views(task, outputs: Outputs, frusta, skeleton, root: Path, timings:
     w, h = outputs.size
     settings = RaycastSettings(relief=outputs.relief)
     labels = _labels(frusta, skeleton, outputs.mask) if outputs.mask else None
-    if labels is not None and labels.max() > 255:
-        raise PlantgenError(f"{task.id}: {labels.max()} {outputs.mask} labels, over the 255 a mask PNG holds")
+    top = 255 if leaves is None or outputs.mask != "order" else LEAF_ORDER_LABEL - 1
+    if labels is not None and labels.max() > top:
+        raise PlantgenError(f"{task.id}: {labels.max()} {outputs.mask} labels, over the {top} a mask PNG holds")
     names = relative_files(task, outputs)
+    points = None if leaves is None else leaves.vertices
     for i, az in enumerate(outputs.azimuths):
-        camera = auto_camera(frusta, w, h, direction=view_direction(az))
-        result = caster.render(frusta, camera, settings, frusta.material_names)
+        camera = auto_camera(frusta, w, h, direction=view_direction(az), points=points)
+        result = caster.render(frusta, camera, settings, frusta.material_names, leaves=leaves)
         if outputs.png:
             write_png(root / names["png"][i], result.color)
         if outputs.depth:
             write_atomically(root / names["depth"][i], lambda p, d=result.distance: _save_npy(p, d))
         if labels is not None:
-            mask = label_image(caster, frusta, camera, labels, settings)
+            mask = label_image(caster, frusta, camera, labels, settings, leaves=leaves,
+                               leaf_labels=None if leaves is None else _leaf_labels(leaves, outputs.mask))
             write_png(root / names["mask"][i], mask)
     timings["render"] = time.perf_counter() - t0
 
@@ -119,7 +134,7 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
     timings["skeleton_files"] = time.perf_counter() - t0
 
 
-def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: dict) -> None:
+def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
     from ..export import export_mesh
     from ..geometry.topology import branches
 
@@ -127,7 +142,8 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, root: Path, timings: di
     mesh = tessellate(frusta, outputs.glb)
     check_finite_mesh(mesh, frusta, task.id)
     order = branches(skeleton).segment_order[frusta.segment]
-    export_mesh(mesh, root / relative_files(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order})
+    export_mesh(mesh, root / relative_files(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order},
+                leaves=leaves)
     timings["glb"] = time.perf_counter() - t0
 
 
@@ -170,10 +186,11 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
             t0 = time.perf_counter()
             frusta = check_finite_frusta(skin_skeleton(skeleton), task.id)
             timings["skin"] = time.perf_counter() - t0
+            leaves = model_leaves(grown)
             if outputs.glb is not None:
-                _write_glb(task, outputs, frusta, skeleton, root, timings)
+                _write_glb(task, outputs, frusta, skeleton, leaves, root, timings)
             if outputs.views:
-                _render_views(task, outputs, frusta, skeleton, root, timings)
+                _render_views(task, outputs, frusta, skeleton, leaves, root, timings)
         t0 = time.perf_counter()
         metrics, (lo, hi) = _measure(skeleton)
         timings["metrics"] = time.perf_counter() - t0

@@ -86,7 +86,7 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
 
 
 def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,
-                up: str | None = None, name: str | None = None, labels=None) -> Path:
+                up: str | None = None, name: str | None = None, labels=None, leaves: Polygons | None = None) -> Path:
     """Write ``mesh`` to ``path`` in the format its suffix names (.glb, .gltf, .obj, .ply,
     .stl, .usda, .usdc, .usd).
 
@@ -101,6 +101,8 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
     name : the model's name in the file (default: the file's stem)
     labels : {name: (rows,) values} per mesh row, written by glTF as vertex attributes of
         those names (start them with ``_``; other formats ignore them)
+    leaves : the model's leaf polygons (a grammar's ``GrowResult.polygons``), written beside
+        the mesh as every format writes a grammar's leaves; None: none
 
     Returns
     -------
@@ -108,5 +110,5 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
     """
     path = Path(path)
     plant = Plant(name or path.name.split(".")[0] or "plant", Skeleton.empty(mesh.material_names), mesh,
-                  labels=labels)
+                  labels=labels, leaves=leaves if leaves is not None and len(leaves) else None)
     return write_plants([plant], path, up=up, colours=colours)[-1]

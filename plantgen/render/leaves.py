@@ -128,7 +128,8 @@ class LeafLayer:
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()))
         count = polygons.triangles.size
-        vao = ctx.vertex_array(program, [(vbo, *LEAF_VERTEX_LAYOUT)], index_buffer=ibo, index_element_size=4)
+        layout = LEAF_VERTEX_LAYOUT if labels is None else ("3f 12x 2f", "position", "shade")  # no normal
+        vao = ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
 
         def frame_draw():
             ctx.disable(ctx.CULL_FACE)

@@ -274,16 +274,23 @@ class Raycaster(OffscreenRenderer):
 _default_raycaster: Raycaster | None = None
 
 
-def label_image(caster: Raycaster, frusta, camera: Camera, labels, settings: RaycastSettings | None = None):
+def label_image(caster: Raycaster, frusta, camera: Camera, labels, settings: RaycastSettings | None = None, *,
+                leaves=None, leaf_labels=None):
     """(height, width) uint8: the label (``labels`` (rows,) in 1..255) of the row each pixel
-    of ``camera`` sees, 0 where it sees nothing; the same hits as the colour render."""
+    of ``camera`` sees, 0 where it sees nothing; the same hits as the colour render. With
+    ``leaves`` (a Polygons), a pixel that sees a leaf gets its ``leaf_labels`` (p,) value."""
     labels = np.asarray(labels)
     if len(labels) != len(frusta) or (len(labels) and (labels.min() < 1 or labels.max() > 255)):
         raise PlantgenError("labels must give every row a value in 1..255")
+    if leaves is not None:
+        leaf_labels = np.asarray(leaf_labels)
+        if len(leaf_labels) != len(leaves) or (len(leaf_labels) and (leaf_labels.min() < 1 or leaf_labels.max() > 255)):
+            raise PlantgenError("leaf labels must give every leaf polygon a value in 1..255")
     tagged = Frusta.from_rows({f: getattr(frusta, f) for f in ROW_FIELDS} | {"material": labels.astype(np.int32)},
                               frusta.material_names, frusta.parent_row, frusta.open_lo, frusta.open_hi)
     base = settings or RaycastSettings()
-    result = caster.render(tagged, camera, replace(base, labels=True), frusta.material_names)
+    result = caster.render(tagged, camera, replace(base, labels=True), frusta.material_names, leaves=leaves,
+                           leaf_labels=leaf_labels)
     return np.where(np.isfinite(result.distance), result.color[..., 0], 0).astype(np.uint8)
 
 
