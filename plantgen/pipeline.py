@@ -64,7 +64,8 @@ from .render.supersample import MAX_SSAA
 from .scene import Scene, is_scene, parse_scene, resolve_effects
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
-           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "frame_settings", "frame_arguments",
+           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "frame_settings",
+           "frame_arguments",
            "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
            "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
 

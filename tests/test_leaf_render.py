@@ -198,3 +198,25 @@ def test_only_a_model_with_leaves_builds_the_leaf_programs(renderers):
                           leaves=square((0.0, 1.0, 0.6), 0.3))
     assert {("leaf.glsl", ("SHADOW_PASS",)), ("leaf.glsl", ("SHADOWS",))} <= caster.programs_used
     assert leafy.stats.passes[-1] == "leaves"
+
+
+def test_render_frames_and_draws_a_grammars_leaves(tmp_path):
+    # a stem with one big leaf held out sideways, past the stem's own extent: the auto
+    # camera keeps every leaf vertex inside the image, and the leaf pass is drawn
+    from plantgen.pipeline import grow_file, render_model
+
+    path = tmp_path / "flag.yaml"
+    path.write_text('name: flag\naxiom: "F(2)[+(90){.G(1.5).-(90)G(0.6).-(90)G(1.5).}]"\n'
+                    'materials: [bark, leaf]\nturtle: {angle: 90, step: 1.0}\nrules: []\n')
+    leaves = grow_file(path).polygons
+    assert len(leaves) == 1
+    report = render_model(path, size=(96, 72))
+    assert report.result.stats.passes[-2:] == ["frusta", "leaves"]
+    camera = report.camera
+    right, up, fwd = camera.basis()
+    rel = leaves.vertices - np.asarray(camera.eye)
+    depth = rel @ fwd
+    tan_y = np.tan(np.radians(camera.fov_y) / 2)
+    assert np.all(np.abs(rel @ up / depth) <= tan_y) and np.all(np.abs(rel @ right / depth) <= tan_y * camera.aspect)
+    # the leaf is what the image's seen pixels mostly are: far more than the thin stem
+    assert np.isfinite(report.result.distance).mean() > 0.1

@@ -11,6 +11,7 @@ from ..animation import AnimatedScene
 from ..errors import PlantgenError
 from ..geometry.camera import Camera
 from ..geometry.frusta import Frusta
+from ..geometry.polygons import Polygons
 from ..geometry.stage import Ground
 from ..pipeline import animate_model, grow_file, resolve_input, stage_model
 from .paper import TABLE1_MODELS
@@ -31,6 +32,7 @@ class BenchModel:
     shadows: bool                # the scene lists shadows
     animation: AnimatedScene | None   # None unless the scene moves
     relief: bool                 # any row with a relief shell
+    leaves: Polygons | None = None   # a grammar's leaves, drawn the same way by RC and GS
 
 
 def load_model(name: str, size) -> BenchModel:
@@ -47,7 +49,7 @@ def load_model(name: str, size) -> BenchModel:
     stage = stage_model(grown, frusta, *size)
     return BenchModel(Path(str(name)).stem, frusta, tuple(frusta.material_names), stage.camera,
                       stage.light_dir, stage.ground, "shadows" in effects, animation,
-                      bool(np.any(np.asarray(frusta.shell) > 0)))
+                      bool(np.any(np.asarray(frusta.shell) > 0)), stage.leaves)
 
 
 def check_models(models) -> None:

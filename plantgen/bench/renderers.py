@@ -52,15 +52,18 @@ class _Conditions:
     shadows: ShadowSettings | None
     ground: dict | None
     animated: bool
+    leaves: object = None     # the model's leaf polygons (a Polygons), or None
 
     @classmethod
     def of(cls, model: BenchModel, paper: bool) -> _Conditions:
         """The paper's conditions for ``model`` (shadow map and ground where the scene lists
-        them, the animation posed every frame), or bare frames when ``paper`` is False."""
+        them, the animation posed every frame, a leafy model's leaves drawn by RC and GS
+        alike), or bare frames when ``paper`` is False: the error against the float64
+        reference, which casts frusta only, measures the frusta's accuracy."""
         if not paper:
             return cls(None, None, False)
         return cls(ShadowSettings() if model.shadows else None, model.ground,
-                   model.animation is not None)
+                   model.animation is not None, model.leaves)
 
 
 class Renderers:
@@ -113,7 +116,7 @@ class Renderers:
             frusta, records, update = m.animation.upload(self.records, t, camera.eye)
             box, update_ms = self.shadow_box, update.total_ms
         res = self.raycaster.render(frusta, camera, cfg.settings, m.names, m.light_dir, frame.ground,
-                                    shadows=frame.shadows, shadow_box=box, record_buffer=records)
+                                    shadows=frame.shadows, shadow_box=box, record_buffer=records, leaves=frame.leaves)
         return res, res.frame_ms + update_ms
 
     def _rasterise(self, cfg: Config, camera, frame: _Conditions, t: float):
@@ -132,7 +135,8 @@ class Renderers:
         res = self.raster(cfg.key).render(mesh, frusta, camera, material_names=m.names,
                                           light_dir=m.light_dir, ground=frame.ground,
                                           shadows=frame.shadows,
-                                          shadow_box=self.shadow_box if frame.animated else None)
+                                          shadow_box=self.shadow_box if frame.animated else None,
+                                          leaves=frame.leaves)
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 
