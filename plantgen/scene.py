@@ -215,6 +215,11 @@ class Scene:
         """(n,) int: the instance each segment of :meth:`skeleton` belongs to."""
         return np.repeat(np.arange(len(self.instances)), [len(i.skeleton) for i in self.instances])
 
+    def polygon_instance(self) -> np.ndarray:
+        """(p,) int: the instance each polygon of :meth:`polygons` belongs to."""
+        return np.repeat(np.arange(len(self.instances)),
+                         [len(i.polygons) if i.polygons is not None else 0 for i in self.instances])
+
 
 def rotation_matrix(degrees_xyz) -> np.ndarray:
     """(3, 3) rotation: about x, then y, then z, by the given angles in degrees."""

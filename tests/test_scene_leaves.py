@@ -84,6 +84,7 @@ def test_a_scene_carries_every_copys_leaves_where_its_placement_puts_them(grove,
         assert np.allclose(leaves.normal[k * npoly:(k + 1) * npoly], one.normal @ rot.T, atol=1e-12)
         assert np.array_equal(leaves.triangles[k * nt:(k + 1) * nt], one.triangles + k * nv)
         assert np.array_equal(leaves.polygon[k * nt:(k + 1) * nt], one.polygon + k * npoly)
+    assert grown.scene.polygon_instance().tolist() == [1] * npoly + [2] * npoly
     # the leaves' area scales with the copies' scales squared
     assert leaves.triangle_areas().sum() == pytest.approx(one.triangle_areas().sum() * (0.5**2 + 2.0**2))
 
