@@ -89,7 +89,8 @@ class GrowResult:
     timings: dict = field(default_factory=dict)   # stage -> seconds
     scene: Scene | None = None
     sources: tuple = ()              # every file read: the input, and a scene's grammars
-    polygons: Polygons | None = None  # a grammar's filled polygons (leaves); None for others
+    polygons: Polygons | None = None  # the filled polygons (leaves) of a grammar or a scene, in place;
+                                      # None for a skeleton file
     warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
     smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
 
@@ -189,15 +190,15 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
         modules[0] += n
         warnings.extend(w for w in drawing.warnings if w not in warnings)
-        return drawing.skeleton
+        return drawing             # the skeleton and its leaves: the scene's copies carry both
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths)
     t0 = time.perf_counter()
-    skel = scene.skeleton()
+    skel, polygons = scene.skeleton(), scene.polygons()
     timings["place"] = time.perf_counter() - t0
     return GrowResult(skel, kind, scene.name, modules[0], timings, scene,
-                      sources=(path, *(Path(k) for k in grammars)), warnings=tuple(warnings))
+                      sources=(path, *(Path(k) for k in grammars)), polygons=polygons, warnings=tuple(warnings))
 
 
 def _override_defines(data, kind: str, defines: dict, path) -> dict:
@@ -654,8 +655,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``, ``leaf_triangles`` (a grammar's leaf polygons, written beside
-    the frusta and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
+    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
+    a scene's plants (once per distinct plant when instanced), written beside the frusta
+    and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
     model, what :func:`plantgen.export.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over
     ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
@@ -706,22 +708,23 @@ def _mesh_counts(plants: list[Plant]) -> dict:
     """What an export wrote: rows, caps, triangles, vertices, drawn, plants, copies and
     leaf_triangles (a grammar's leaves, counted in triangles, vertices and drawn too)."""
     meshes = [p.mesh for p in plants]
-    leaf_triangles = sum(len(p.leaves.triangles) for p in plants if p.has_leaves)
+    leaves = [len(p.leaves.triangles) if p.has_leaves else 0 for p in plants]
     leaf_vertices = sum(len(p.leaves.vertices) for p in plants if p.has_leaves)
     return dict(rows=sum(m.n_rows for m in meshes), caps=sum(m.n_caps for m in meshes),
-                triangles=sum(len(m.faces) for m in meshes) + leaf_triangles,
+                triangles=sum(len(m.faces) for m in meshes) + sum(leaves),
                 vertices=sum(len(m.vertices) for m in meshes) + leaf_vertices,
-                drawn=sum(len(p.mesh.faces) * p.copies for p in plants) + leaf_triangles, plants=len(plants),
-                copies=sum(p.copies for p in plants), leaf_triangles=leaf_triangles)
+                drawn=sum((len(p.mesh.faces) + n) * p.copies for p, n in zip(plants, leaves, strict=True)),
+                plants=len(plants), copies=sum(p.copies for p in plants), leaf_triangles=sum(leaves))
 
 
-def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None]]:
-    """(name, skeleton in its own frame, placements or None) of every plant to write: a
-    scene's distinct plants with their copies' placements when ``instanced``, else the
-    whole model in place."""
+def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None,
+                                                                   Polygons | None]]:
+    """(name, skeleton in its own frame, placements or None, leaves in the same frame or
+    None) of every plant to write: a scene's distinct plants with their own grammar's
+    leaves and their copies' placements when ``instanced``, else the whole model in place."""
     if instanced and grown.scene is not None:
-        return [(p.name, p.skeleton, p.matrices) for p in grown.scene.plants() if len(p.skeleton)]
-    return [(grown.name, grown.skeleton, None)]
+        return [(p.name, p.skeleton, p.matrices, p.polygons) for p in grown.scene.plants() if len(p.skeleton)]
+    return [(grown.name, grown.skeleton, None, grown.polygons)]
 
 
 def _leaves_of(polygons: Polygons | None, mesh, input_path) -> Polygons | None:
@@ -742,17 +745,16 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
-    frusta = [check_finite_frusta(skin(skel), input_path) for _, skel, _ in parts]
+    frusta = [check_finite_frusta(skin(skel), input_path) for _, skel, _, _ in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
     estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
-    if instancing == "off" and grown.polygons is not None:
-        estimate += len(grown.polygons.triangles)   # the leaves, written in place
+    estimate += sum(len(leaves.triangles) for *_, leaves in parts if leaves is not None)   # written once each
     if estimate > limits.max_export_triangles:
         raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
                           f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
                           f"({hint('export_triangles')})")
-    segments = sum(len(skel) for _, skel, _ in parts)
+    segments = sum(len(skel) for _, skel, _, _ in parts)
     need = estimate_export_bytes(estimate, fmt.name) + segments * SKIN_BYTES_PER_SEGMENT
     if need > limits.max_export_bytes:
         raise LimitError(f"{output_path}: m = {level} gives {estimate:,} triangles, about "
@@ -760,10 +762,9 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
                          f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
                          f"({hint('export_bytes')})")
     plants = []
-    for k, ((name, skel, matrices), fr) in enumerate(zip(parts, frusta, strict=True)):
+    for k, ((name, skel, matrices, leaves), fr) in enumerate(zip(parts, frusta, strict=True)):
         mesh = tessellate(fr, level, relief=relief)
         check_finite_mesh(mesh, fr, input_path)
-        leaves = grown.polygons if matrices is None else None   # a grammar's leaves, in place
         plants.append(Plant(name, skel, mesh, matrices, leaves=_leaves_of(leaves, mesh, input_path)))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))

@@ -28,6 +28,10 @@ A scene is a YAML mapping with an ``instances`` list::
             - {start: [0, 0, 0], end: [0, 1, 0], r_start: 1, r_end: 1}
             - {start: [0, 1, 0], end: [0, 2, 0], r_start: 1, r_end: 0.5, parent: 0, continues: true}
 
+A grammar's copies carry its leaf polygons (its ``{ . }`` outlines) as well as its
+skeleton: :meth:`Scene.polygons` places them all in world coordinates, and
+:meth:`Scene.plants` gives each distinct plant its own, in its own frame.
+
 Copies made by ``grid`` get seeds ``seed + k`` and, if ``jitter`` is set, positions
 jittered and yaw turned from a generator seeded by the instance seed: deterministic.
 
@@ -50,6 +54,7 @@ from ._resources import grammars_dir
 from .errors import PlantgenError
 from .files import read_yaml
 from .geometry.camera import Camera, CameraError, box_corners
+from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton, SkeletonError
 from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
 from .limits import Limits
@@ -119,33 +124,43 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class SceneInstance:
-    """One placed plant. ``skeleton`` is in the plant's own frame; ``matrix`` places it."""
+    """One placed plant. ``skeleton`` and ``polygons`` (a grammar's leaves, their material
+    indices into the skeleton's names) are in the plant's own frame; ``matrix`` places it."""
 
     source: str
     seed: int
     matrix: np.ndarray            # (4, 4) similarity transform
     skeleton: Skeleton            # local coordinates
     motion: Sway | None = None    # None: the plant stands still
+    polygons: Polygons | None = None   # None: no leaves (an explicit skeleton)
 
 
 @dataclass(frozen=True, eq=False)
 class ScenePlant:
-    """One distinct plant of a scene and where its copies stand: ``skeleton`` in its own
-    frame, ``matrices`` (k, 4, 4) the placements of its k copies, ``instances`` (k,) their
-    numbers in :attr:`Scene.instances`."""
+    """One distinct plant of a scene and where its copies stand: ``skeleton`` and
+    ``polygons`` (its leaves, or None) in its own frame, ``matrices`` (k, 4, 4) the
+    placements of its k copies, ``instances`` (k,) their numbers in :attr:`Scene.instances`."""
 
     name: str
     skeleton: Skeleton
     matrices: np.ndarray
     instances: np.ndarray
+    polygons: Polygons | None = None
 
 
-def _skeleton_key(skel: Skeleton) -> bytes:
-    """Equal for skeletons with equal arrays and material names (a content digest)."""
+def _plant_key(skel: Skeleton, polygons: Polygons | None) -> bytes:
+    """Equal for plants with equal skeleton arrays, material names and leaf polygons (a
+    content digest): two copies with one skeleton but other leaves are two plants."""
     digest = hashlib.sha256()
     for name in ("start", "end", "r_start", "r_end", "parent", "continues", "material"):
         digest.update(getattr(skel, name).tobytes())
     digest.update("\0".join(skel.material_names).encode("utf-8"))
+    if polygons is not None and len(polygons):
+        digest.update(b"\0polygons")
+        for name in ("vertices", "triangles", "polygon", "material", "normal"):
+            array = getattr(polygons, name)
+            digest.update(str(array.shape).encode("ascii"))
+            digest.update(np.ascontiguousarray(array).tobytes())
     return digest.digest()
 
 
@@ -164,6 +179,19 @@ class Scene:
         """All instances in world coordinates, as one skeleton."""
         return Skeleton.concatenate([i.skeleton.transformed(i.matrix) for i in self.instances])
 
+    def polygons(self) -> Polygons:
+        """All instances' leaf polygons in world coordinates, as one :class:`Polygons`
+        (instance by instance, in order): each placed by its copy's matrix, material
+        indices into the names of :meth:`skeleton` (merged as its materials are)."""
+        names = Skeleton.merged_material_names([i.skeleton for i in self.instances])
+        parts = []
+        for inst in self.instances:
+            if inst.polygons is None or len(inst.polygons) == 0:
+                continue
+            remap = [names.index(m) for m in inst.skeleton.material_names]
+            parts.append(inst.polygons.with_materials(remap).transformed(inst.matrix))
+        return Polygons.concatenate(parts)
+
     def plants(self) -> list[ScenePlant]:
         """The scene's distinct plants, each with the placements of all its copies: copies
         whose skeletons are equal (a grid of a deterministic grammar, an explicit skeleton
@@ -171,20 +199,26 @@ class Scene:
         their source (``saguaro``; ``saguaro-2``, ... where one source gives several)."""
         groups: dict[bytes, list[int]] = {}
         for k, inst in enumerate(self.instances):
-            groups.setdefault(_skeleton_key(inst.skeleton), []).append(k)
+            groups.setdefault(_plant_key(inst.skeleton, inst.polygons), []).append(k)
         sources = [Path(self.instances[ks[0]].source).stem or "plant" for ks in groups.values()]
         seen: dict[str, int] = {}
         out = []
         for ks, source in zip(groups.values(), sources, strict=True):
             seen[source] = seen.get(source, 0) + 1
             name = source if sources.count(source) == 1 else f"{source}-{seen[source]}"
-            out.append(ScenePlant(name, self.instances[ks[0]].skeleton,
-                                  np.stack([self.instances[k].matrix for k in ks]), np.array(ks)))
+            first = self.instances[ks[0]]
+            out.append(ScenePlant(name, first.skeleton, np.stack([self.instances[k].matrix for k in ks]),
+                                  np.array(ks), first.polygons))
         return out
 
     def segment_instance(self) -> np.ndarray:
         """(n,) int: the instance each segment of :meth:`skeleton` belongs to."""
         return np.repeat(np.arange(len(self.instances)), [len(i.skeleton) for i in self.instances])
+
+    def polygon_instance(self) -> np.ndarray:
+        """(p,) int: the instance each polygon of :meth:`polygons` belongs to."""
+        return np.repeat(np.arange(len(self.instances)),
+                         [len(i.polygons) if i.polygons is not None else 0 for i in self.instances])
 
 
 def rotation_matrix(degrees_xyz) -> np.ndarray:
@@ -438,34 +472,49 @@ def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float) -> 
     return m
 
 
-def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str) -> None:
-    """Refuse a copy whose placed coordinates or radii would not be finite or would lie
-    beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing)."""
-    if not len(skel):
+def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Polygons | None = None) -> None:
+    """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
+    finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing)."""
+    leaves = polygons is not None and len(polygons.vertices) > 0
+    if not len(skel) and not leaves:
         return
     with np.errstate(all="ignore"):
-        corners = box_corners(skel.bounds) @ matrix[:3, :3].T + matrix[:3, 3]
-        radius = max(float(skel.r_start.max()), float(skel.r_end.max())) * float(np.abs(matrix[:3, :3]).max())
+        boxes = [skel.bounds] if len(skel) else []
+        if leaves:
+            boxes.append(np.stack([polygons.vertices.min(axis=0), polygons.vertices.max(axis=0)]))
+        box = np.stack([np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)])
+        corners = box_corners(box) @ matrix[:3, :3].T + matrix[:3, 3]
+        radius = (max(float(skel.r_start.max()), float(skel.r_end.max())) if len(skel) else 0.0) \
+            * float(np.abs(matrix[:3, :3]).max())
         ok = bool(np.all(np.abs(corners) <= _MAX)) and radius <= _MAX
     if not ok:
         raise SceneError(f"{where}: placed, the plant reaches coordinates that are not finite or beyond "
                          f"{_MAX:g} (position, scale or grid spacing too large)")
 
 
+def _grown_parts(grown) -> tuple[Skeleton, Polygons | None]:
+    """What ``grow_grammar`` returned, as (skeleton, leaf polygons or None): a Skeleton, or
+    a drawing with ``skeleton`` and ``polygons`` (:class:`plantgen.lsystem.turtle.Drawing`)."""
+    if isinstance(grown, Skeleton):
+        return grown, None
+    return grown.skeleton, grown.polygons
+
+
 def _copy_skeleton(inst, placement: _Placement, seed: int, base: Path, grow_grammar, cache: dict,
-                   limits: Limits, allow_paths) -> tuple[Skeleton, str]:
-    """The skeleton of one copy (in its own frame) and its source name."""
+                   limits: Limits, allow_paths) -> tuple[Skeleton, Polygons | None, str]:
+    """The skeleton and leaf polygons (None for none) of one copy, in its own frame, and
+    its source name."""
     if "skeleton" in inst:
-        return _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton", limits), "skeleton"
+        return _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton", limits), None, "skeleton"
     name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
     gpath = _resolve_grammar(name, base, placement.where, allow_paths)
     key = (str(gpath), seed, placement.iterations)
     if key not in cache:
         try:
-            cache[key] = grow_grammar(gpath, seed, placement.iterations)
+            cache[key] = _grown_parts(grow_grammar(gpath, seed, placement.iterations))
         except PlantgenError as exc:
             raise SceneError(f"{placement.where}: {exc}") from None
-    return cache[key], name
+    return *cache[key], name
 
 
 def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: dict, budget: _Budget,
@@ -475,11 +524,12 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
     out = []
     for offset, yaw, c in placement.copies:
         s = placement.seed + c
-        skel, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits, allow_paths)
+        skel, polygons, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits,
+                                                allow_paths)
         budget.add_segments(len(skel), placement.where)
         matrix = _placement_matrix(placement, offset, yaw)
-        _check_placed(skel, matrix, placement.where)
-        out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s)))
+        _check_placed(skel, matrix, placement.where, polygons)
+        out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s), polygons))
     return out
 
 
@@ -492,8 +542,9 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
                 limits: Limits | None = None, allow_paths=()) -> Scene:
     """Validate a scene mapping and grow its instances.
 
-    ``grow_grammar(path, seed, iterations) -> Skeleton`` grows one grammar (injected by
-    the pipeline, which keeps this module free of L-system details). ``limits`` caps the
+    ``grow_grammar(path, seed, iterations)`` grows one grammar (injected by the pipeline,
+    which keeps this module free of L-system details) into a Skeleton, or into a drawing
+    with ``skeleton`` and ``polygons`` (its leaves, which the copies carry). ``limits`` caps the
     instances and the scene's total segments; grammars are read only from the scene's
     folder, the folders of ``allow_paths`` and the shipped grammars.
     """
@@ -512,7 +563,7 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     base = Path(path).parent
     budget = _Budget(limits)
     instances: list[SceneInstance] = []
-    cache: dict[tuple, Skeleton] = {}
+    cache: dict[tuple, tuple] = {}
     for k, inst in enumerate(data["instances"]):
         placement = _parse_placement(inst, k, path, base_seed, seed, budget)
         instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)

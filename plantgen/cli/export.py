@@ -65,9 +65,10 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
     caster; open chain ends are capped. glTF, OBJ and USD keep material names and
     colours. A scene's repeated plants are written once and instanced in glTF and USD.
     A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
-    their material: glTF gives them double-sided "<material> (leaf)" materials, USD a
-    double-sided Leaves mesh, PLY and STL plain triangles. SWC and the cylinder models
-    carry the skeleton only (a warning says so when leaves are dropped).
+    their material (a scene's too: an instanced plant carries its own grammar's): glTF
+    gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves
+    mesh, PLY and STL plain triangles. SWC and the cylinder models carry the skeleton
+    only (a warning says so when leaves are dropped).
 
     \b
     Examples:

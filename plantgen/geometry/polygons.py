@@ -54,6 +54,39 @@ class Polygons:
         a, b, c = (self.vertices[self.triangles[:, k]] for k in range(3))
         return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
+    def transformed(self, matrix) -> Polygons:
+        """The polygons under a 4x4 affine ``matrix``: vertices by the affine map, normals by
+        the inverse transpose of its linear part, renormalised; a mirroring matrix (negative
+        determinant) reverses each triangle so it stays counter-clockwise about its normal."""
+        m = np.asarray(matrix, dtype=np.float64)
+        lin, t = m[:3, :3], m[:3, 3]
+        normal = self.normal @ np.linalg.inv(lin)          # (lin^-T n) for each row n
+        normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        triangles = self.triangles if np.linalg.det(lin) > 0 else self.triangles[:, ::-1].copy()
+        return Polygons(self.vertices @ lin.T + t, triangles, self.polygon, self.material, normal)
+
+    def with_materials(self, remap) -> Polygons:
+        """The polygons with each material index ``i`` replaced by ``remap[i]``."""
+        material = np.asarray(remap, dtype=np.int32)[self.material] if len(self) else self.material
+        return Polygons(self.vertices, self.triangles, self.polygon, material, self.normal)
+
+    @staticmethod
+    def concatenate(parts) -> Polygons:
+        """Join polygon sets into one (their material indices as they are: remap them first
+        with :meth:`with_materials` where the parts name materials differently)."""
+        parts = [p for p in parts if p is not None]
+        if not parts:
+            return Polygons.empty()
+        vertex_first = np.cumsum([0] + [len(p.vertices) for p in parts])
+        polygon_first = np.cumsum([0] + [len(p) for p in parts])
+        return Polygons(np.concatenate([p.vertices for p in parts]).reshape(-1, 3),
+                        np.concatenate([p.triangles + v for p, v in zip(parts, vertex_first, strict=False)])
+                        .reshape(-1, 3).astype(np.int64),
+                        np.concatenate([p.polygon + k for p, k in zip(parts, polygon_first, strict=False)])
+                        .astype(np.int64),
+                        np.concatenate([p.material for p in parts]).astype(np.int32),
+                        np.concatenate([p.normal for p in parts]).reshape(-1, 3))
+
 
 def best_fit_normal(points: np.ndarray) -> np.ndarray:
     """Unit normal of the plane that best fits an outline (Newell's method: exact for a

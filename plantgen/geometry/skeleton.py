@@ -178,13 +178,21 @@ class Skeleton:
                         parent, self.continues[rows], self.material[rows], self.material_names)
 
     @staticmethod
-    def concatenate(parts: list[Skeleton]) -> Skeleton:
-        """Join skeletons into one, re-indexing parents and merging material names."""
+    def merged_material_names(parts: list[Skeleton]) -> tuple[str, ...]:
+        """The material names of :meth:`concatenate`'s result: every part's names, in order
+        of first appearance (a part's index ``i`` becomes the merged index of its name ``i``)."""
         names: list[str] = []
         for p in parts:
             for m in p.material_names:
                 if m not in names:
                     names.append(m)
+        return tuple(names)
+
+    @staticmethod
+    def concatenate(parts: list[Skeleton]) -> Skeleton:
+        """Join skeletons into one, re-indexing parents and merging material names
+        (:meth:`merged_material_names`)."""
+        names = list(Skeleton.merged_material_names(parts))
         if not parts:
             return Skeleton.empty()
         arrays = {k: [] for k in ("start", "end", "r_start", "r_end", "parent", "continues", "material")}
