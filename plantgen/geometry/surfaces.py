@@ -143,7 +143,7 @@ def place(index: int, origins, frames, scales, materials) -> Polygons:
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     frames = np.asarray(frames, dtype=np.float64).reshape(-1, 3, 3)
     scales = np.asarray(scales, dtype=np.float64).reshape(-1)
-    n, nv, nt, npoly = len(origins), len(s.vertices), len(s.triangles), len(s.material)
+    n, nv, npoly = len(origins), len(s.vertices), len(s.material)
     verts = origins[:, None, :] + scales[:, None, None] * np.einsum("vk,nkj->nvj", s.vertices, frames)
     normals = np.einsum("pk,nkj->npj", s.normal, frames)
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)
