@@ -62,6 +62,9 @@ class Limits:
         times
     max_segments : segments of one input's skeleton (all instances of a scene together)
     max_instances : placed plants of a scene (grid copies included)
+    max_polygon_vertices : polygon vertices of one plant: its ``.`` and the vertices of
+        the surfaces its ``~`` place (each leaf 26, each needle tuft 56), counted before
+        the turtle walks
     max_export_triangles : triangles ``plantgen export`` builds at most
     max_export_bytes : memory an export may take while tessellating and writing
         (estimated from the triangle count before anything is built)
@@ -80,6 +83,7 @@ class Limits:
     max_derive_work: int = 50_000_000
     max_segments: int = 1_000_000
     max_instances: int = 10_000
+    max_polygon_vertices: int = 4_000_000
     max_export_triangles: int = 100_000_000
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30

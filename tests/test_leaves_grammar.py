@@ -272,8 +272,9 @@ def test_interpretation_rule_errors_name_the_section():
 
 # ------------------------------------------------------------------ warnings
 def test_unsupported_abop_symbol_warns_naming_it():
-    d = draw(grammar(axiom="F~(1)F~(2).", rules=[]))
-    assert any("'~'" in w and "2 module" in w for w in d.warnings)
+    d = draw(grammar(axiom="F@(1)F@(2)#.", rules=[]))
+    assert any("'@'" in w and "2 module" in w for w in d.warnings)
+    assert any("'#'" in w and "1 module" in w for w in d.warnings)
     assert any("'.'" in w for w in d.warnings)              # a dot outside any polygon
     assert len(d.skeleton) == 2
     assert draw(grammar(axiom="F[+F]F")).warnings == ()

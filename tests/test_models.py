@@ -30,14 +30,16 @@ TABLE1 = {
     "well": 8, "desert": 799, "oasis": 18557, "dancing_cacti": 2158,
 }
 SCENES = {"well", "desert", "oasis", "dancing_cacti"}
-EXTRAS = {"abop_monopodial", "abop_sympodial", "abop_ternary", "cactus", "ocotillo"}
-DETERMINISTIC = {"well", "abop_monopodial", "abop_sympodial", "abop_ternary"}
+EXTRAS = {"abop_monopodial", "abop_sympodial", "abop_ternary", "cactus", "ocotillo",
+          "abop_bush", "broadleaf", "pine_needles"}   # the last three with leaves
+DETERMINISTIC = {"well", "abop_monopodial", "abop_sympodial", "abop_ternary", "abop_bush"}
 ALL_MODELS = sorted(set(TABLE1) | EXTRAS)
 
 # plausible overall heights in metres (y extent of the segment axes)
 HEIGHTS = {
     "saguaro": (8, 12), "pine": (20, 30), "coconut": (15, 30), "elm": (15, 30),
     "aloe": (0.25, 1.0), "cactus": (1.5, 4), "ocotillo": (2.5, 6), "well": (3, 5),
+    "abop_bush": (1, 2.5), "broadleaf": (8, 16), "pine_needles": (20, 30),
 }
 
 
@@ -78,7 +80,7 @@ def test_model_grows_into_a_sane_skeleton(name):
     assert skel.r_start.max() < 2.0 and skel.r_end.max() < 2.0
     # everything stands on the ground (y = 0), nothing sinks below it
     assert skel.start[:, 1].min() >= -1e-9 and skel.end[:, 1].min() >= -1e-9
-    assert set(skel.material_names) <= {"bark", "leaf", "cactus", "aloe", "stone"}
+    assert set(skel.material_names) <= {"bark", "leaf", "cactus", "aloe", "stone", "stem", "needle"}
 
 
 @pytest.mark.parametrize("name", sorted(TABLE1))
@@ -117,7 +119,7 @@ def _count_F(ms) -> int:
 
 
 @pytest.mark.parametrize("name", sorted(set(ALL_MODELS) - SCENES - {"abop_monopodial", "abop_sympodial",
-                                                                     "abop_ternary"}))
+                                                                     "abop_ternary", "abop_bush"}))
 def test_default_iterations_finish_growth(name):
     """More derivation steps add nothing: the count is the grown plant's, not a cut-off.
 

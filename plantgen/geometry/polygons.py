@@ -216,6 +216,17 @@ class PolygonBuilder:
         self._mats.append(material)
         self._normals.append(normal)
 
+    def extend(self, polygons: Polygons) -> None:
+        """Append polygons already triangulated (placed surfaces), after those added so far."""
+        if not len(polygons):
+            return
+        self._tris.append(polygons.triangles + self._count)
+        self._poly.append(polygons.polygon + len(self._mats))
+        self._verts.append(polygons.vertices)
+        self._count += len(polygons.vertices)
+        self._mats.extend(polygons.material.tolist())
+        self._normals.extend(polygons.normal)
+
     def build(self) -> Polygons:
         if not self._mats:
             return Polygons.empty()

@@ -29,6 +29,7 @@ from .. import fields
 from ..errors import PlantgenError
 from ..files import read_yaml
 from ..geometry.materials import MAX_MATERIALS
+from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
@@ -43,7 +44,7 @@ TURTLE_ARITY: dict[str, tuple[int, ...]] = {
     "+": (0, 1), "-": (0, 1), "&": (0, 1), "^": (0, 1), "\\": (0, 1), "/": (0, 1),
     "|": (0,), "[": (0,), "]": (0,), "$": (0,),
     "!": (0, 1), ";": (0, 1),
-    "G": (0, 1), "{": (0,), "}": (0,), ".": (0,), "'": (0,), "%": (0,),
+    "G": (0, 1), "{": (0,), "}": (0,), ".": (0,), "'": (0,), "%": (0,), "~": (1, 2),
 }
 #: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
 MAX_INTERPRETATION_DEPTH = 8
@@ -215,15 +216,27 @@ def parse_modules(text: str, names, where: str, max_params: int | None = None) -
     for sym, args in mods:
         exprs = ()
         if args is not None:
+            head = (_surface_name(args[0], where),) if sym == "~" and args else ()
             try:
-                for a in args:
+                for a in args[len(head):]:
                     if a not in compiled:
                         compiled[a] = compile_expr(a, names)
-                exprs = tuple(compiled[a] for a in args)
+                exprs = head + tuple(compiled[a] for a in args[len(head):])
             except ExprError as exc:
                 raise GrammarError(f"{where}: {exc}") from None
         out.append(ModuleTemplate(sym, exprs))
     return tuple(out)
+
+
+def _surface_name(text: str, where: str) -> Expr:
+    """``~``'s first argument: the name of a built-in surface (``~(leaf, 0.5)``), written
+    out, never an expression. It becomes the surface's index, a constant, so the derived
+    string stays numbers and expressions never see a name that is not a number."""
+    name = text.strip()
+    if name not in SURFACES:
+        raise GrammarError(f"{where}: '~' takes the name of a surface first, one of {', '.join(SURFACES)}; "
+                           f"got {name[:40]!r}")
+    return compile_expr(str(SURFACES.index(name)))
 
 
 def _parse_patterns(text: str, where: str, max_params: int | None = None) -> tuple[Pattern, ...]:

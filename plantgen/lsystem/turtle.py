@@ -24,6 +24,9 @@ heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meaning
 ``{``      start a polygon; ``}`` closes the innermost open polygon, fills it with the
            current material and triangulates it (concave outlines too)
 ``.``      record the turtle's position as a vertex of the innermost open polygon
+``~(n, s)``  place the built-in surface named n (``leaf``, ``needles``: see
+           :mod:`plantgen.geometry.surfaces`) at the turtle, oriented by H, L, U and
+           scaled by s (default 1), in the current material; the turtle does not move
 =========  ===================================================================
 
 Polygons follow ABOP. A polygon's vertices are its ``.`` positions (chapter 5, "developmental
@@ -33,6 +36,7 @@ the bush of figure 1.25): its vertices are the position at ``{`` and the positio
 draws a segment as anywhere else. Polygons nest: ``{`` inside a polygon starts a new one, and
 the outer one resumes at its ``}``. The polygon stack is not part of the turtle state:
 vertices recorded inside a branch ``[...]`` belong to the polygon open around the branch.
+A surface's polygons follow the ``{ }`` polygons in :class:`Polygons`, in string order.
 Symbols with a turtle meaning in ABOP (or cpfg) that plantgen does not draw yet
 (:data:`UNSUPPORTED`) are skipped with a warning naming them.
 
@@ -55,6 +59,7 @@ from math import cos, radians, sin, sqrt
 import numpy as np
 
 from ..errors import PlantgenError
+from ..geometry import surfaces
 from ..geometry.polygons import PolygonBuilder, Polygons
 from ..geometry.skeleton import Skeleton
 from ..limits import Limits
@@ -67,18 +72,17 @@ __all__ = ["Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "interpret", "inter
 
 # action codes
 (_NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT,
- _G, _OPEN, _CLOSE, _DOT, _TICK) = range(20)
+ _G, _OPEN, _CLOSE, _DOT, _TICK, _SURF) = range(21)
 #: Modules turned into Python values at a time by :func:`_turtle_program`.
 PROGRAM_CHUNK = 65_536
 
 _ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
             "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT,
-            "G": _G, "{": _OPEN, "}": _CLOSE, ".": _DOT, "'": _TICK}
+            "G": _G, "{": _OPEN, "}": _CLOSE, ".": _DOT, "'": _TICK, "~": _SURF}
 
 #: Symbols with a turtle meaning in ABOP (or its program cpfg) that plantgen does not draw
 #: (yet): each present in a string being drawn gets one warning naming it.
 UNSUPPORTED = {
-    "~": "ABOP's predefined surfaces",
     "@": "cpfg's spheres and circles",
     "#": "cpfg's width increment",
 }
@@ -116,13 +120,17 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
     Three phases: :func:`_turtle_program` keeps the modules the turtle acts on, as action
     codes with their arguments; :func:`_walk` moves the turtle and collects the segments'
     columns and the polygons; the columns become the skeleton's arrays, checked finite and
-    within ``tol.max_coordinate``. More segments than ``limits.max_segments`` are refused
-    before the walk.
+    within ``tol.max_coordinate``. More segments than ``limits.max_segments``, or more
+    polygon vertices (``.`` and placed surfaces) than ``limits.max_polygon_vertices``, are
+    refused before the walk.
     """
+    limits = limits or default_limits
     drawn = _drawing_modules(ms, settings)
-    (limits or default_limits).check("segments", len(drawn), f"{source}: segments drawn")
+    limits.check("segments", len(drawn), f"{source}: segments drawn")
+    limits.check("polygon_vertices", _polygon_vertices(ms, source), f"{source}: polygon vertices")
     builder = PolygonBuilder()
-    columns, stray_dots = _walk(_turtle_program(ms), settings, materials, source, builder)
+    placed: list = []
+    columns, stray_dots = _walk(_turtle_program(ms), settings, materials, source, builder, placed)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
     skel = Skeleton(
@@ -136,6 +144,7 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
         material_names=materials,
     )
     _check_extent(skel, ms, drawn, source)
+    _place_surfaces(placed, builder)
     polygons = builder.build()
     if len(polygons) and not np.all(np.abs(polygons.vertices) <= tol.max_coordinate):
         raise PlantgenError(f"{source}: a polygon vertex is not finite or beyond {tol.max_coordinate:g}: "
@@ -158,6 +167,41 @@ def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -
         out.append(f"{source}: warning: {degenerate:,} polygon(s) with fewer than 3 distinct vertices or "
                    "no area were not drawn")
     return out
+
+
+def _polygon_vertices(ms: ModuleString, source: str) -> int:
+    """The polygon vertices ``ms`` records with ``.`` and places with ``~``; a ``~`` whose
+    surface index is not one of :data:`surfaces.SURFACES` stops with one line."""
+    total = 0
+    if "." in ms.symbols:
+        total += int(np.count_nonzero(ms.sym == ms.symbols.index(".")))
+    if "~" not in ms.symbols:
+        return total
+    rows = np.flatnonzero(ms.sym == ms.symbols.index("~"))
+    index = ms.params[rows, 0] if ms.params.shape[1] else np.full(len(rows), -1.0)
+    known = np.arange(len(surfaces.SURFACES))
+    bad = ~np.isin(index, known) | (ms.nparam[rows] < 1)
+    if bad.any():
+        raise PlantgenError(f"{source}: '~' in module {int(rows[np.argmax(bad)]) + 1} of the derived string "
+                            f"names no surface (known: {', '.join(surfaces.SURFACES)})")
+    counts = np.array([surfaces.surface(int(k)).vertex_count for k in known])
+    return total + int(counts[index.astype(np.int64)].sum())
+
+
+def _place_surfaces(placed: list, builder: PolygonBuilder) -> None:
+    """Hand the surfaces ``~`` placed (tuples of surface index, position, H, L, U, scale,
+    material, in string order) to ``builder``, transformed in one batch per run of the
+    same surface."""
+    start = 0
+    while start < len(placed):
+        index = placed[start][0]
+        stop = start
+        while stop < len(placed) and placed[stop][0] == index:
+            stop += 1
+        rows = placed[start:stop]
+        builder.extend(surfaces.place(index, [r[1] for r in rows], [(r[2], r[3], r[4]) for r in rows],
+                                      [r[5] for r in rows], [r[6] for r in rows]))
+        start = stop
 
 
 def _drawing_modules(ms: ModuleString, settings: TurtleSettings) -> np.ndarray:
@@ -209,9 +253,10 @@ def _turtle_program(ms: ModuleString):
 
 
 def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str,
-          builder: PolygonBuilder):
+          builder: PolygonBuilder, placed: list):
     """Run the turtle over ``program`` (see :func:`_turtle_program`), handing each closed
-    polygon to ``builder``.
+    polygon to ``builder`` and appending each surface ``~`` places to ``placed``
+    (surface index, position, H, L, U, scale, material).
 
     Returns the segment columns as lists (start and end (x, y, z) tuples, start and end
     radius, parent index (-1 for a root), continues flag, material index) and the number of
@@ -315,6 +360,13 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             builder.add(dots or moves, material)
         elif act == _TICK:
             material = (material + 1) % n_mat
+        elif act == _SURF:
+            scale = arg2 if ha == 2 else 1.0
+            if scale < 0:
+                raise PlantgenError(f"{source}: negative scale {scale:g} given to '~' "
+                                    f"({surfaces.SURFACES[int(arg)]})")
+            if scale > 0:
+                placed.append((int(arg), (px, py, pz), H, L, U, scale, material))
         elif act == _ROLLH:
             L, U = _level_left(H, L, U)
         elif act == _MAT:
