@@ -170,6 +170,17 @@ def test_the_issues_135_degree_chain_is_closed_at_level_3():
     assert_closed(frusta, tessellate(frusta, 3))
 
 
+@pytest.mark.parametrize("m", [0, 1, 2])
+def test_a_knuckle_after_a_steep_taper_is_closed(m):
+    # found by the random chains below: radii 0.1 -> 0.01 -> 0.001, then a 158° knuckle; the
+    # seam fit leaves the knuckle's parent tapering by 4e-5 of its radius, so its cut curve
+    # and the child's nearly coincide (a bridge of slivers, before the snap)
+    radii = np.clip(0.1 * 10 ** np.concatenate([[0.0], np.cumsum([-1.0, -1.0, 0.0, 0.0])]), 1e-3, 1.0)
+    frusta = skin_skeleton(chain_skeleton([0.0, 0.0, 158.0], 1.0, radii))
+    assert frusta.report.sharp_joints == 1
+    assert_closed(frusta, tessellate(frusta, m))
+
+
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_random_chains_with_knuckles_are_closed(data):

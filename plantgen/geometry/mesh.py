@@ -109,8 +109,11 @@ __all__ = [
 HeightFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 #: Relative (to the joint radius): two knuckle cut curves (or hinge points) closer than this
-#: are one (C's vertices take P's positions); farther apart, a bridge joins them.
-_SEAM_SNAP = 1e-6
+#: are one (C's vertices take P's positions); farther apart, a bridge joins them. A bridge
+#: narrower than this would be slivers (a nearly cylindrical P, tapering by 4e-5 of its
+#: radius, gave zero-area faces that welding folds); the snap moves C's cut by at most
+#: this, a tenth of the chord error of the finest level (m = 3: 1.2e-3 r).
+_SEAM_SNAP = 1e-4
 #: Most of a generator's length (between the row's own planes) a knuckle trim may take;
 #: half of it at each end of a segment between two knuckles.
 _TRIM_SHARE = 0.9
