@@ -5,6 +5,9 @@ step"): the moving instances' skeleton is posed at time t
 (:func:`plantgen.geometry.motion.pose`) and skinned again (:func:`skin_skeleton`,
 vectorised over every segment: cutting planes and texture offsets); the static instances
 are skinned once. A scene without motion is skinned once, whatever the frame count.
+Leaves (the grammar's polygons) move rigidly with the segment each hangs from: turned by
+that segment's total turn about its instance's axis, about the segment's start
+(:meth:`AnimatedScene.leaves_at`), as the pose turns the segment itself.
 
 The GPU side is a record sink (:class:`plantgen.render.records.RecordStream`): it packs
 and uploads the static rows once and the moving rows every frame. This module imports no
@@ -14,16 +17,18 @@ GL: :meth:`AnimatedScene.upload` is handed the sink.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
 
 from .geometry.frusta import Frusta, frusta_bounds
-from .geometry.motion import pose, sway_rig
+from .geometry.motion import pose, sway_rig, turn_at, turn_coefficients
+from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.sway_skin import SwaySkin
+from .geometry.vec import rotate
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink"]
 
@@ -66,6 +71,8 @@ class AnimatedScene:
     segment_instance : (n,) int, the instance of each segment
     motions : per instance, None or its :class:`plantgen.geometry.stage.Sway`
     skin : the skinning function (``skin_skeleton`` or one with bound options)
+    leaves : the scene's leaf polygons in world coordinates (``Polygons.segment``: the
+        segment each hangs from), or None
     """
 
     skeleton: Skeleton
@@ -74,6 +81,7 @@ class AnimatedScene:
     skin: object = skin_skeleton
     skin_calls: int = 0
     updates: list = field(default_factory=list)
+    leaves: Polygons | None = None
 
     def __post_init__(self):
         self.segment_instance = np.asarray(self.segment_instance, dtype=np.int64)
@@ -89,17 +97,35 @@ class AnimatedScene:
         # the per-frame path of the default skinning: topology worked out once
         self._plan = (SwaySkin.plan(self._moving_skeleton, self._rig)
                       if self.animated and self.skin is skin_skeleton else None)
+        self._leaf_rig = self._rig_leaves() if self.animated and self.leaves is not None else None
+        self._starts = (None, None)      # (t, (m, 3) posed starts of the moving segments)
+
+    def _rig_leaves(self):
+        """What posing the leaves needs, once: per polygon the moving segment it hangs from
+        (-1: still), the turns' coefficients and the rest starts of those segments."""
+        leaves = self.leaves
+        moving_index = np.full(len(self.skeleton) + 1, -1, dtype=np.int64)
+        moving_index[self.moving_segments] = np.arange(len(self.moving_segments))
+        anchor = moving_index[np.where(leaves.segment >= 0, leaves.segment, len(self.skeleton))]
+        if not np.any(anchor >= 0):
+            return None
+        owner = np.zeros(len(leaves.vertices), dtype=np.int64)
+        if len(leaves.triangles):
+            owner[leaves.triangles.ravel()] = np.repeat(leaves.polygon, 3)
+        return {"polygon": anchor, "vertex": anchor[owner],
+                "coefficients": turn_coefficients(self._moving_skeleton, self._rig)}
 
     @classmethod
     def from_scene(cls, scene, skin=skin_skeleton) -> AnimatedScene:
         """Every instance of ``scene`` (plantgen.scene.Scene), moving as its motion says."""
+        leaves = scene.polygons()
         return cls(scene.skeleton(), scene.segment_instance(), [i.motion for i in scene.instances],
-                   skin)
+                   skin, leaves=leaves if len(leaves) else None)
 
     @classmethod
-    def still(cls, skeleton: Skeleton, skin=skin_skeleton) -> AnimatedScene:
-        """A skeleton that does not move: skinned once."""
-        return cls(skeleton, np.zeros(len(skeleton), dtype=np.int64), [None], skin)
+    def still(cls, skeleton: Skeleton, skin=skin_skeleton, leaves: Polygons | None = None) -> AnimatedScene:
+        """A skeleton that does not move: skinned once (its ``leaves`` stay as they are)."""
+        return cls(skeleton, np.zeros(len(skeleton), dtype=np.int64), [None], skin, leaves=leaves)
 
     @property
     def animated(self) -> bool:
@@ -128,10 +154,36 @@ class AnimatedScene:
             t1 = time.perf_counter()
             moving = self._skin(posed) if self.animated else None
         t2 = time.perf_counter()
+        if posed is not None:
+            self._starts = (float(t), posed.start.T if self._plan is not None else posed.start)
         frusta = self._static if moving is None else Frusta.concatenate([self._static, moving])
         update = FrameUpdate(float(t), len(moving) if moving is not None else 0, 0,
                              (t1 - t0) * 1e3, (t2 - t1) * 1e3)
         return frusta, moving, update
+
+    def leaves_at(self, t: float) -> Polygons | None:
+        """The leaves at time ``t``: each moving one turned with the segment it hangs from
+        (its vertices about the segment's start, which moves to the posed start; its normal
+        with it); still ones as grown. Uses the pose of the last frame drawn at ``t``."""
+        rig = self._leaf_rig
+        if rig is None:
+            return self.leaves
+        if self._starts[0] != float(t):
+            self._frame(t)
+        posed_start = self._starts[1]
+        rest_start = self._moving_skeleton.start
+        leaves, vertex = self.leaves, rig["vertex"]
+        moves = vertex >= 0
+        seg = vertex[moves]
+        turn = turn_at(self._rig, rig["coefficients"], float(t), seg)
+        vertices = leaves.vertices.copy()
+        vertices[moves] = posed_start[seg] + rotate(leaves.vertices[moves] - rest_start[seg], self._rig.axis[seg], turn)
+        normal = leaves.normal.copy()
+        turning = rig["polygon"] >= 0
+        pseg = rig["polygon"][turning]
+        normal[turning] = rotate(leaves.normal[turning], self._rig.axis[pseg],
+                                 turn_at(self._rig, rig["coefficients"], float(t), pseg))
+        return replace(leaves, vertices=vertices, normal=normal)
 
     def bounds(self, times) -> np.ndarray:
         """(2, 3) world box around every row at each of ``times``: one light window for

@@ -315,7 +315,7 @@ def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None)
     says when ``effects`` hold ``animation``; otherwise skinned once (by :func:`skinning`)."""
     if grown.scene is not None and "animation" in effects:
         return AnimatedScene.from_scene(grown.scene, skinning(smooth_bends))
-    return AnimatedScene.still(grown.skeleton, skinning(_smoothing(grown, smooth_bends)))
+    return AnimatedScene.still(grown.skeleton, skinning(_smoothing(grown, smooth_bends)), model_leaves(grown))
 
 
 @dataclass
@@ -490,7 +490,7 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
     try:
         for i, t in enumerate([times[0], *times]):
             fr, buf, update = anim.upload(stream, t, camera.eye)
-            result = raycaster.render(fr, record_buffer=buf, **view)
+            result = raycaster.render(fr, record_buffer=buf, **{**view, "leaves": anim.leaves_at(t)})
             if i == 0:
                 continue
             colors.append(result.color)

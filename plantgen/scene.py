@@ -157,7 +157,7 @@ def _plant_key(skel: Skeleton, polygons: Polygons | None) -> bytes:
     digest.update("\0".join(skel.material_names).encode("utf-8"))
     if polygons is not None and len(polygons):
         digest.update(b"\0polygons")
-        for name in ("vertices", "triangles", "polygon", "material", "normal"):
+        for name in ("vertices", "triangles", "polygon", "material", "normal", "segment"):
             array = getattr(polygons, name)
             digest.update(str(array.shape).encode("ascii"))
             digest.update(np.ascontiguousarray(array).tobytes())
@@ -182,15 +182,17 @@ class Scene:
     def polygons(self) -> Polygons:
         """All instances' leaf polygons in world coordinates, as one :class:`Polygons`
         (instance by instance, in order): each placed by its copy's matrix, material
-        indices into the names of :meth:`skeleton` (merged as its materials are)."""
+        indices into the names of :meth:`skeleton` (merged as its materials are), segment
+        indices into :meth:`skeleton`'s segments."""
         names = Skeleton.merged_material_names([i.skeleton for i in self.instances])
-        parts = []
+        parts, offsets, first = [], [], 0
         for inst in self.instances:
-            if inst.polygons is None or len(inst.polygons) == 0:
-                continue
-            remap = [names.index(m) for m in inst.skeleton.material_names]
-            parts.append(inst.polygons.with_materials(remap).transformed(inst.matrix))
-        return Polygons.concatenate(parts)
+            if inst.polygons is not None and len(inst.polygons):
+                remap = [names.index(m) for m in inst.skeleton.material_names]
+                parts.append(inst.polygons.with_materials(remap).transformed(inst.matrix))
+                offsets.append(first)
+            first += len(inst.skeleton)
+        return Polygons.concatenate(parts, offsets)
 
     def plants(self) -> list[ScenePlant]:
         """The scene's distinct plants, each with the placements of all its copies: copies

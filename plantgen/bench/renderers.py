@@ -112,19 +112,25 @@ class Renderers:
     def _ray_cast(self, cfg: Config, camera, frame: _Conditions, t: float):
         m = self.model
         frusta, records, box, update_ms = m.frusta, None, None, 0.0
+        leaves = frame.leaves
         if frame.animated:
             frusta, records, update = m.animation.upload(self.records, t, camera.eye)
             box, update_ms = self.shadow_box, update.total_ms
+            if leaves is not None:                       # the leaves move with their branches
+                t0 = time.perf_counter()
+                leaves = m.animation.leaves_at(t)
+                update_ms += (time.perf_counter() - t0) * 1e3
         res = self.raycaster.render(frusta, camera, cfg.settings, m.names, m.light_dir, frame.ground,
-                                    shadows=frame.shadows, shadow_box=box, record_buffer=records, leaves=frame.leaves)
+                                    shadows=frame.shadows, shadow_box=box, record_buffer=records, leaves=leaves)
         return res, res.frame_ms + update_ms
 
     def _rasterise(self, cfg: Config, camera, frame: _Conditions, t: float):
         m = self.model
-        extra_ms = 0.0
+        extra_ms, leaves = 0.0, frame.leaves
         if frame.animated:
             t0 = time.perf_counter()
             frusta = m.animation.frusta_at(t)              # pose + re-skin, as RC does
+            leaves = m.animation.leaves_at(t) if leaves is not None else None
             mesh = self.mesh(cfg.level, cfg.relief, frusta)  # re-tessellate
             extra_ms = (time.perf_counter() - t0) * 1e3
         else:
@@ -136,7 +142,7 @@ class Renderers:
                                           light_dir=m.light_dir, ground=frame.ground,
                                           shadows=frame.shadows,
                                           shadow_box=self.shadow_box if frame.animated else None,
-                                          leaves=frame.leaves)
+                                          leaves=leaves)
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 

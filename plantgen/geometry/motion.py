@@ -26,7 +26,7 @@ from .skeleton import Skeleton
 from .stage import Sway
 from .vec import ancestor_count, rotate
 
-__all__ = ["SwayRig", "sway_rig", "pose"]
+__all__ = ["SwayRig", "sway_rig", "pose", "turn_coefficients", "turn_at"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,3 +101,32 @@ def pose(skeleton: Skeleton, rig: SwayRig, t: float) -> Skeleton:
         end[level] = s + rotate(d[level], rig.axis[level], total[level])
     return Skeleton(start, end, skeleton.r_start, skeleton.r_end, skeleton.parent, skeleton.continues,
                     skeleton.material, skeleton.material_names)
+
+
+def turn_coefficients(skeleton: Skeleton, rig: SwayRig) -> tuple[np.ndarray, np.ndarray]:
+    """(c, s), each (n,): the total turn of each segment (the sum of the joint angles on
+    its path from the root, by which :func:`pose` rotates it about its instance's axis) at
+    time t is ``c·sin X + s·cos X`` with ``X = 2π f t + φ`` (its instance's frequency and
+    phase): each joint angle is ``A/D·sin(X - β)``, ``β = 2π·depth/D``, and
+    ``sin(X - β) = sin X cos β - cos X sin β`` sums term by term along the path."""
+    beta = 2 * np.pi * rig.depth / rig.max_depth
+    own_c = rig.amplitude / rig.max_depth * np.cos(beta)
+    own_s = -rig.amplitude / rig.max_depth * np.sin(beta)
+    c, s = np.zeros(len(skeleton)), np.zeros(len(skeleton))
+    parent = skeleton.parent
+    for level in rig.levels:
+        p = parent[level]
+        has_p = p >= 0
+        up = np.where(has_p, p, 0)
+        c[level] = np.where(has_p, c[up], 0.0) + own_c[level]
+        s[level] = np.where(has_p, s[up], 0.0) + own_s[level]
+    return c, s
+
+
+def turn_at(rig: SwayRig, coefficients, t: float, rows=None) -> np.ndarray:
+    """The total turn (radians) at time ``t`` of the segments ``rows`` (default: all), from
+    :func:`turn_coefficients`."""
+    c, s = coefficients
+    rows = slice(None) if rows is None else rows
+    x = 2 * np.pi * rig.frequency[rows] * t + rig.phase[rows]
+    return c[rows] * np.sin(x) + s[rows] * np.cos(x)

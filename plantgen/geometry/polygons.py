@@ -9,6 +9,9 @@ A :class:`Polygons` of ``p`` polygons made of ``t`` triangles over ``v`` vertice
 ``polygon``     (t,) i8      the polygon each triangle belongs to
 ``material``    (p,) i4      material index per polygon (into the skeleton's names)
 ``normal``      (p, 3) f8    unit normal of each polygon's best-fit plane
+``segment``     (p,) i8      the skeleton segment each polygon hangs from: the last one
+                             the turtle drew on its path before ``{`` or ``~`` (-1: none);
+                             a swaying animation moves the polygon with it
 ==============  ===========  ============================================================
 
 :func:`triangulate` turns one outline (any simple polygon, concave too, not necessarily
@@ -35,6 +38,11 @@ class Polygons:
     polygon: np.ndarray
     material: np.ndarray
     normal: np.ndarray
+    segment: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.segment is None:
+            object.__setattr__(self, "segment", np.full(len(self.material), -1, dtype=np.int64))
 
     @staticmethod
     def empty() -> Polygons:
@@ -63,20 +71,31 @@ class Polygons:
         normal = self.normal @ np.linalg.inv(lin)          # (lin^-T n) for each row n
         normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
         triangles = self.triangles if np.linalg.det(lin) > 0 else self.triangles[:, ::-1].copy()
-        return Polygons(self.vertices @ lin.T + t, triangles, self.polygon, self.material, normal)
+        return Polygons(self.vertices @ lin.T + t, triangles, self.polygon, self.material, normal, self.segment)
 
     def with_materials(self, remap) -> Polygons:
         """The polygons with each material index ``i`` replaced by ``remap[i]``."""
         material = np.asarray(remap, dtype=np.int32)[self.material] if len(self) else self.material
-        return Polygons(self.vertices, self.triangles, self.polygon, material, self.normal)
+        return Polygons(self.vertices, self.triangles, self.polygon, material, self.normal, self.segment)
+
+    def hung_from(self, segment) -> Polygons:
+        """The polygons with every polygon hanging from segment index ``segment`` (an int,
+        or (p,) ints; -1: none)."""
+        hang = np.broadcast_to(np.asarray(segment, dtype=np.int64), (len(self),)).copy()
+        return Polygons(self.vertices, self.triangles, self.polygon, self.material, self.normal, hang)
 
     @staticmethod
-    def concatenate(parts) -> Polygons:
+    def concatenate(parts, segment_offsets=None) -> Polygons:
         """Join polygon sets into one (their material indices as they are: remap them first
-        with :meth:`with_materials` where the parts name materials differently)."""
-        parts = [p for p in parts if p is not None]
+        with :meth:`with_materials` where the parts name materials differently). With
+        ``segment_offsets`` (one per part), each part's segment indices (those >= 0) are
+        shifted by its offset, as skeletons joined in the same order number theirs."""
+        offsets = [0] * len(parts) if segment_offsets is None else list(segment_offsets)
+        kept = [(p, o) for p, o in zip(parts, offsets, strict=True) if p is not None]
+        parts = [p for p, _ in kept]
         if not parts:
             return Polygons.empty()
+        segment = np.concatenate([np.where(p.segment >= 0, p.segment + o, -1) for p, o in kept]).astype(np.int64)
         vertex_first = np.cumsum([0] + [len(p.vertices) for p in parts])
         polygon_first = np.cumsum([0] + [len(p) for p in parts])
         return Polygons(np.concatenate([p.vertices for p in parts]).reshape(-1, 3),
@@ -85,7 +104,7 @@ class Polygons:
                         np.concatenate([p.polygon + k for p, k in zip(parts, polygon_first, strict=False)])
                         .astype(np.int64),
                         np.concatenate([p.material for p in parts]).astype(np.int32),
-                        np.concatenate([p.normal for p in parts]).reshape(-1, 3))
+                        np.concatenate([p.normal for p in parts]).reshape(-1, 3), segment)
 
 
 def best_fit_normal(points: np.ndarray) -> np.ndarray:
@@ -200,10 +219,11 @@ class PolygonBuilder:
         self._poly: list[np.ndarray] = []
         self._mats: list[int] = []
         self._normals: list[np.ndarray] = []
+        self._segments: list[int] = []
         self._count = 0
         self.degenerate = 0       # outlines dropped: under three distinct points or no area
 
-    def add(self, outline, material: int) -> None:
+    def add(self, outline, material: int, segment: int = -1) -> None:
         got = triangulate(outline) if len(outline) >= 3 else None
         if got is None:
             self.degenerate += 1
@@ -215,6 +235,7 @@ class PolygonBuilder:
         self._count += len(verts)
         self._mats.append(material)
         self._normals.append(normal)
+        self._segments.append(segment)
 
     def extend(self, polygons: Polygons) -> None:
         """Append polygons already triangulated (placed surfaces), after those added so far."""
@@ -226,9 +247,11 @@ class PolygonBuilder:
         self._count += len(polygons.vertices)
         self._mats.extend(polygons.material.tolist())
         self._normals.extend(polygons.normal)
+        self._segments.extend(polygons.segment.tolist())
 
     def build(self) -> Polygons:
         if not self._mats:
             return Polygons.empty()
         return Polygons(np.concatenate(self._verts), np.concatenate(self._tris), np.concatenate(self._poly),
-                        np.array(self._mats, dtype=np.int32), np.array(self._normals, dtype=np.float64))
+                        np.array(self._mats, dtype=np.int32), np.array(self._normals, dtype=np.float64),
+                        np.array(self._segments, dtype=np.int64))

@@ -190,8 +190,8 @@ def _polygon_vertices(ms: ModuleString, source: str) -> int:
 
 def _place_surfaces(placed: list, builder: PolygonBuilder) -> None:
     """Hand the surfaces ``~`` placed (tuples of surface index, position, H, L, U, scale,
-    material, in string order) to ``builder``, transformed in one batch per run of the
-    same surface."""
+    material, segment hung from, in string order) to ``builder``, transformed in one batch
+    per run of the same surface."""
     start = 0
     while start < len(placed):
         index = placed[start][0]
@@ -199,8 +199,10 @@ def _place_surfaces(placed: list, builder: PolygonBuilder) -> None:
         while stop < len(placed) and placed[stop][0] == index:
             stop += 1
         rows = placed[start:stop]
-        builder.extend(surfaces.place(index, [r[1] for r in rows], [(r[2], r[3], r[4]) for r in rows],
-                                      [r[5] for r in rows], [r[6] for r in rows]))
+        placed_copies = surfaces.place(index, [r[1] for r in rows], [(r[2], r[3], r[4]) for r in rows],
+                                       [r[5] for r in rows], [r[6] for r in rows])
+        per_copy = len(surfaces.surface(index).polygons.material)
+        builder.extend(placed_copies.hung_from(np.repeat([r[7] for r in rows], per_copy)))
         start = stop
 
 
@@ -273,6 +275,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
     width = settings.radius
     material = 0
     last = -1            # last segment drawn from this state (-1: none, chain broken)
+    hang = -1            # last segment drawn on this path, moves or not: what a leaf hangs from
     side = False         # next segment starts a side branch
     stack = []
     polygons = []        # open polygons, innermost last: (dot vertices, move vertices)
@@ -299,7 +302,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             parents.append(last)
             conts.append(cont)
             mats.append(material)
-            last = len(ends) - 1
+            last = hang = len(ends) - 1
             side = False
             px, py, pz = ex, ey, ez
             if e != 0.0:
@@ -324,12 +327,12 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             H = (-H[0], -H[1], -H[2])
             L = (-L[0], -L[1], -L[2])
         elif act == _PUSH:
-            stack.append((px, py, pz, H, L, U, width, material, last, side))
+            stack.append((px, py, pz, H, L, U, width, material, last, side, hang))
             side = True
         elif act == _POP:
             if not stack:
                 raise PlantgenError(f"{source}: unbalanced brackets in the derived string")
-            px, py, pz, H, L, U, width, material, last, side = stack.pop()
+            px, py, pz, H, L, U, width, material, last, side, hang = stack.pop()
         elif act == _WIDTH:
             width = arg if ha else width * width_factor
             if width < 0:
@@ -352,12 +355,12 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
             else:
                 stray_dots += 1
         elif act == _OPEN:
-            polygons.append(([], [(px, py, pz)]))
+            polygons.append(([], [(px, py, pz)], hang))
         elif act == _CLOSE:
             if not polygons:
                 raise PlantgenError(f"{source}: '}}' without an open polygon '{{' in the derived string")
-            dots, moves = polygons.pop()
-            builder.add(dots or moves, material)
+            dots, moves, from_segment = polygons.pop()
+            builder.add(dots or moves, material, from_segment)
         elif act == _TICK:
             material = (material + 1) % n_mat
         elif act == _SURF:
@@ -366,7 +369,7 @@ def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source:
                 raise PlantgenError(f"{source}: negative scale {scale:g} given to '~' "
                                     f"({surfaces.SURFACES[int(arg)]})")
             if scale > 0:
-                placed.append((int(arg), (px, py, pz), H, L, U, scale, material))
+                placed.append((int(arg), (px, py, pz), H, L, U, scale, material, hang))
         elif act == _ROLLH:
             L, U = _level_left(H, L, U)
         elif act == _MAT:

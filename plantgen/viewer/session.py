@@ -215,6 +215,8 @@ class ViewerSession:
         args = frame_arguments(frusta, staging, shadow, background=self.options.background, ssaa=self.ssaa)
         if shadow is not None and self.playing and self.model.animated:
             args["shadow_box"] = self._playing_shadow_box()
+        if self.model.animated:
+            args["leaves"] = self.model.anim.leaves_at(self.t)     # moved with their branches
         if self.method.startswith("RC"):
             result = self.raycaster.render(frusta, settings=settings, **args)
         else:
