@@ -53,11 +53,18 @@ class Entry:
     slow: bool = False
 
 
+#: Shipped grammars with leaves, rendered beside Table 1's models.
+LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles")
+
+
 def entries() -> list[Entry]:
     """Every gallery entry, in the order they are built."""
     # the Table 1 models ray cast with relief; the scenes as their files ask (relief, shadows)
     out = [Entry(model, ("plantgen", "render", model, "-o", f"{{out}}/{model}.png", "--relief", "--ssaa", "2",
                          "--size", "{size}"), (f"{model}.png",)) for model in TABLE1_MODELS]
+    # the leafy models (issue 17): leaves rasterised beside the frusta, shadows on
+    out += [Entry(model, ("plantgen", "render", model, "-o", f"{{out}}/{model}.png", "--relief", "--shadows",
+                          "--ssaa", "2", "--size", "{size}"), (f"{model}.png",)) for model in LEAFY_MODELS]
     out += [Entry(f"scenes/{scene}", ("plantgen", "render", scene, "-o", f"{{out}}/scenes/{scene}.png", "--ssaa",
                                       "2", "--size", "{size}"), (f"scenes/{scene}.png",)) for scene in SCENES]
     out.append(Entry("scenes/dancing_cacti.gif", (
