@@ -220,3 +220,13 @@ def test_render_frames_and_draws_a_grammars_leaves(tmp_path):
     assert np.all(np.abs(rel @ up / depth) <= tan_y) and np.all(np.abs(rel @ right / depth) <= tan_y * camera.aspect)
     # the leaf is what the image's seen pixels mostly are: far more than the thin stem
     assert np.isfinite(report.result.distance).mean() > 0.1
+
+
+def test_the_leaf_benchmark_times_every_variant_of_both_renderers():
+    from plantgen.benchmarks.leaves import VARIANTS, measure
+    from plantgen.pipeline import grow_file
+
+    row = measure("abop_bush", 64, 48, 1, 0)
+    assert row["leaf_triangles"] == len(grow_file("abop_bush").polygons.triangles) > 0
+    for method in ("RC", "GS"):
+        assert all(row[f"{method} {label}"] > 0 for label, _, _ in VARIANTS)
