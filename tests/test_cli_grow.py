@@ -119,3 +119,16 @@ def test_grow_prints_the_true_height_and_bounds(tmp_path):
     code, stdout, stderr = run_cli("grow", "well", "-o", tmp_path / "w.npz")
     assert code == 0, stderr
     assert "height 3.55;" in stdout and "min [-1.35  0.   -1.35]" in stdout and "max [1.35 3.55 1.35]" in stdout
+
+
+def test_grow_counts_the_leaves_and_says_the_skeleton_file_holds_none(tmp_path):
+    from plantgen.pipeline import grow_file
+
+    polygons = grow_file("abop_bush").polygons
+    code, out, err = run_cli("grow", "abop_bush", "-o", str(tmp_path / "bush.npz"))
+    assert code == 0, err
+    assert f"{len(polygons):,} leaf polygons ({len(polygons.triangles):,} triangles)" in out.splitlines()[0]
+    [line] = [w for w in err.splitlines() if "leaf polygons not written" in w]
+    assert line.startswith("warning: .npz carries the skeleton only")
+    code, out, err = run_cli("grow", "saguaro", "-o", str(tmp_path / "saguaro.npz"))
+    assert code == 0 and "leaf" not in out + err

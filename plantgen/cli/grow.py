@@ -88,13 +88,19 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
     if len(skel) == 0:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")
     written = _write_outputs(skel, output, formats, up)
+    leaves = result.polygons
+    if leaves is not None and len(leaves):       # like SWC, the skeleton files hold no leaves
+        click.echo(f"warning: {', '.join(p.suffix for p in written)} carries the skeleton only: {len(leaves):,} "
+                   f"leaf polygons not written (plantgen render and export grow them from the grammar)", err=True)
     if quiet:
         return
     b = geometry_bounds(skel)
     t = result.timings
     stages = ", ".join(f"{k} {v * 1000:.1f} ms" for k, v in t.items())
+    leafy = (f", {len(leaves):,} leaf polygons ({len(leaves.triangles):,} triangles)"
+             if leaves is not None and len(leaves) else "")
     click.echo(f"{result.name} ({result.kind}): {len(skel):,} segments, {len(skel.tips):,} branch tips, "
-               f"{result.modules:,} modules")
+               f"{result.modules:,} modules{leafy}")
     click.echo(f"height {b[1, 1] - b[0, 1]:.4g}; bounds min {np.array2string(b[0], precision=3)} "
                f"max {np.array2string(b[1], precision=3)}")
     click.echo(f"time: {stages}; total {sum(t.values()) * 1000:.1f} ms")
