@@ -59,9 +59,7 @@ void main() {
     vec3 n = normalize(v_normal);
     // the facet the rasteriser draws: the receiver plane for the shadow map, and the side
     // of the sheet the eye sees
-    vec3 facet = cross(dFdx(v_position), dFdy(v_position));
-    vec3 flat_normal = dot(facet, facet) > 0.0 ? normalize(facet) : n;
-    if (dot(flat_normal, to_eye) < 0.0) flat_normal = -flat_normal;
+    vec3 flat_normal = facet_normal(v_position, to_eye);      // the side the eye sees
     if (dot(n, flat_normal) < 0.0) n = -n;          // the side facing the eye
     n = facing_normal(n, flat_normal, to_eye);
 #if defined SHADOWS

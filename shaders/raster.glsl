@@ -87,9 +87,7 @@ void main() {
     vec3 albedo = material_albedo(material, texel);
     // the facet the rasteriser draws: the true normal here, which (8) is bent towards where
     // it turns away from the eye, and the receiver plane (the light's map holds facets too)
-    vec3 facet = cross(dFdx(v_position), dFdy(v_position));
-    vec3 true_normal = dot(facet, facet) > 0.0 ? normalize(facet) : normal;
-    if (dot(true_normal, normal) < 0.0) true_normal = -true_normal;
+    vec3 true_normal = facet_normal(v_position, normal);
     normal = facing_normal(normal, true_normal, to_eye);
 #if defined SHADOWS
     float visibility = shadow_visibility(v_position, true_normal);

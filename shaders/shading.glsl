@@ -45,6 +45,17 @@ vec3 facing_normal(vec3 n, vec3 n_true, vec3 to_eye) {
     return len > 0.0 ? bent / len : n_true;
 }
 
+// The unit normal of the facet the rasteriser draws at eye-relative `position` (from the
+// screen-space derivatives), turned to agree with `fallback`, which it is where the
+// derivatives vanish. Fragment shaders only.
+#if defined FRAGMENT_SHADER
+vec3 facet_normal(vec3 position, vec3 fallback) {
+    vec3 facet = cross(dFdx(position), dFdy(position));
+    vec3 n = dot(facet, facet) > 0.0 ? normalize(facet) : fallback;
+    return dot(n, fallback) < 0.0 ? -n : n;
+}
+#endif
+
 // One directional light, Blinn-Phong, plus a hemispherical ambient term.
 // normal and to_eye are unit vectors; the normal is flipped to face the eye.
 // `light_visibility` in [0, 1] scales the direct light (1: lit, 0: in shadow; see shadow.glsl).
