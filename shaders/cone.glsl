@@ -35,7 +35,12 @@ struct Frustum {
     float twist;    // turns; u gains v*twist
     float shell;    // relief shell thickness (0: no relief)
     int material;   // material index
+    float v_slot;   // the row's slot of the texture's v, of v_slots (Frusta.v_part):
+    float v_slots;  // the texture is looked up at (v_slot + v) / v_slots
 };
+
+// The texture's v of the row's own v (the paper's v where v_slots is 1).
+float texture_v(Frustum f, float v) { return (f.v_slot + v) / f.v_slots; }
 
 // k = (r2 - r1)/h, the slope of a cone with radii r1, r2 an axis length h apart
 // (plantgen.geometry.frusta.cone_slope).
@@ -290,9 +295,10 @@ float frustum_angle_u(Frustum f, vec3 p) {
     return atan(dot(e, bitangent), dot(e, f.ref_dir)) / TWO_PI;
 }
 
-// Full (u, v): u in [0, 1) with the joint offset and twist, v in [0, 1].
+// Texture (u, v) at p with the row's own v: u in [0, 1) with the joint offset and twist,
+// v the texture's (texture_v).
 vec2 frustum_uv_at(Frustum f, vec3 p, float v) {
-    return vec2(fract(frustum_angle_u(f, p) + f.u_offset + v * f.twist), v);
+    return vec2(fract(frustum_angle_u(f, p) + f.u_offset + v * f.twist), texture_v(f, v));
 }
 
 // The interpolated normal of (8) at p (on the cone or a concentric one), with its v.

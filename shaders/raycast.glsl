@@ -25,7 +25,8 @@ in vec4 rec1;              // axis, r1
 in vec4 rec2;              // ref_dir, r2
 in vec4 rec3;              // plane_lo (n, d - n.base)
 in vec4 rec4;              // plane_hi (n, d - n.base)
-in vec4 rec5;              // u_offset, twist, shell, tag (material + 256 open_lo + 512 open_hi)
+in vec4 rec5;              // u_offset, twist, shell, tag (material + 256 open_lo + 512 open_hi
+                           // + 1024 v_slot + 131072 (v_slots - 1))
 
 uniform mat4 view_projection;   // render-origin-relative world -> clip
 uniform float hull_padding;     // relative growth of the pyramid (covers rasterisation edges)
@@ -169,6 +170,8 @@ Frustum unpack_frustum() {
     f.material = tag & 255;
     f.open_lo = (tag & 256) != 0;
     f.open_hi = (tag & 512) != 0;
+    f.v_slot = float((tag >> 10) & 127);
+    f.v_slots = float(((tag >> 17) & 127) + 1);
     return f;
 }
 
@@ -228,7 +231,7 @@ vec2 shell_uv_at(Frustum f, ShellRay r, vec3 o, vec3 d, float t, float v_interp)
 #else
     float v = v_interp;
 #endif
-    return vec2(fract(atan(q.y, q.x) / TWO_PI + f.u_offset + v * f.twist), v);
+    return vec2(fract(atan(q.y, q.x) / TWO_PI + f.u_offset + v * f.twist), texture_v(f, v));
 }
 
 // The march's samples for the shell interval [t_in, t_end] (plantgen.render.raycast.
@@ -245,11 +248,11 @@ ivec2 march_steps(Frustum f, ShellRay r, HeightMap m, float t_in, float t_end, f
 #else
     vec2 q_in = r.q0 + t_in * r.dq, q_end = r.q0 + t_end * r.dq;
     float turns = abs(atan(q_in.x * q_end.y - q_in.y * q_end.x, dot(q_in, q_end))) / TWO_PI;
-    float dv = abs(v_end - v_in);
-    vec2 texels_per_unit = m.size * m.repeat;    // texels per turn of u, per unit of v
-    float texels = (turns + dv * abs(f.twist)) * texels_per_unit.x + dv * texels_per_unit.y;
+    float dv = abs(v_end - v_in);                 // the row's own v
+    vec2 texels_per_unit = m.size * m.repeat;    // texels per turn of u, per unit of texture v
+    float texels = (turns + dv * abs(f.twist)) * texels_per_unit.x + dv / f.v_slots * texels_per_unit.y;
     float radius = max(max(f.r1, f.r2), 1e-30);
-    float texel_world = min(TWO_PI * radius / texels_per_unit.x, f.h / texels_per_unit.y);
+    float texel_world = min(TWO_PI * radius / texels_per_unit.x, f.h * f.v_slots / texels_per_unit.y);
     float pixel_world = max(pixel_footprint.x * distance + pixel_footprint.y, 1e-30);
     float footprint = max(pixel_world / max(texel_world, 1e-30), 1.0);
     float linear = clamp(ceil(march_density * texels / footprint),
@@ -374,7 +377,7 @@ void main() {
         generator_params(f, p, e_r, g, s_lo, s_hi);
         vec3 tangent_u = cross(f.axis, e_r);
         float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
-        float len_v = max((s_hi - s_lo) * length(g), TOL_TANGENT_FLOOR_F32);  // |dP/dv|
+        float len_v = max((s_hi - s_lo) * length(g) * f.v_slots, TOL_TANGENT_FLOOR_F32);  // |dP/dv_tex|
         normal = normalize(normal - f.shell * (dh_du / len_u * tangent_u
                                                + dh_dv / len_v * normalize(g)));
     }

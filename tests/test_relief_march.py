@@ -169,3 +169,29 @@ def test_gathered_and_fetched_heights_are_the_same_surface(gl_ctx):
     assert np.array_equal(np.isfinite(gather), np.isfinite(fetch))
     both = np.isfinite(gather)
     assert np.allclose(gather[both], fetch[both], rtol=1e-6, atol=0)
+
+
+def test_a_smoothed_bend_marches_the_texture_slots_the_reference_does(gl_ctx, monkeypatch):
+    # ridges across v (every 8th texel row): a row's texture v is (slot + v) / slots on
+    # the arc's chords (Frusta.v_part); the ray caster unpacks the slots from the record
+    # and must hit the surface the float64 reference hits
+    from _geometry_helpers import chain_skeleton
+
+    from plantgen.geometry.skin import skin_skeleton
+
+    table = np.zeros((TEX_H, TEX_W), np.uint8)
+    table[::8, :] = 255
+    monkeypatch.setattr(render_materials, "material_height_maps",
+                        lambda names: (np.repeat(table[None], max(len(names), 1), axis=0),
+                                       np.ones((MAX_MATERIALS, 2), np.float32)))
+    frusta = with_shell(skin_skeleton(chain_skeleton([90.0], 1.0, 0.2), smooth_bends=10.0), 0.3)
+    assert frusta.v_part[:, 1].max() > 1
+    camera = look_at(frusta, (0.3, 0.4, 1.0), width=96, height=72)
+    ref = render_reference(frusta, camera, relief=dict.fromkeys(frusta.material_names, table))
+    edges = depth_edges(ref, camera)
+    gl = Raycaster().render(frusta, camera, FINE_FIXED, frusta.material_names).distance
+    off_edge, disagree, _ = agreement(gl, ref, camera)
+    assert off_edge == 0 and disagree <= 0.01
+    both = np.isfinite(gl) & ref.hit & ~edges
+    err = np.abs(gl[both] - ref.t[both]) / pixel_size(camera, ref.t[both])
+    assert both.sum() > 200 and np.mean(err > 0.1) <= 0.01 and err.max() < 1.0

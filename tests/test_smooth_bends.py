@@ -253,3 +253,55 @@ def test_the_grammars_turtle_key_smooths_as_the_option_does(tmp_path):
     (tmp_path / "bad.yaml").write_text(text.replace("smooth_bends: 30", "smooth_bends: 200"))
     code, _, stderr = run_cli("grow", tmp_path / "bad.yaml", "-o", tmp_path / "x.npz")
     assert code == 2 and "smooth_bends" in stderr
+
+
+def _rim_texture_v(f, row, top: bool):
+    """The texture v (surface_uv) of points on ``row``'s rim at its upper (``top``) or lower plane."""
+    from plantgen.geometry.frusta import surface_uv
+
+    phi = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    e1 = f.ref_dir[row]
+    e2 = np.cross(f.axis[row], e1)
+    radius = f.r2[row] if top else f.r1[row]
+    y = f.length[row] if top else 0.0
+    pts = f.base[row] + y * f.axis[row] + radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+    # move each point along the axis onto the plane (the planes are oblique at joints)
+    plane = f.plane_hi[row] if top else f.plane_lo[row]
+    pts = pts + ((plane[3] - pts @ plane[:3]) / (f.axis[row] @ plane[:3]))[:, None] * f.axis[row]
+    return surface_uv(f, np.full(len(pts), row), pts)[1]
+
+
+@pytest.mark.parametrize("lengths", [1.0, [1.0, 0.25, 1.0]])
+def test_an_arc_spans_one_texture_period_and_v_runs_on(lengths):
+    # before: every chord of an arc took the whole texture (k periods squeezed into the
+    # arc); now chord i of k takes slot i, the texture v is continuous at every joint, and
+    # along the chain the texture advances about as fast per unit length on the arc as on
+    # the segments (an elbow shorter than its arc joins the arc's period)
+    f = skin_skeleton(chain([80.0, 70.0], lengths=lengths, radii=0.1), smooth_bends=10.0)
+    arcs = f.v_part[:, 1] > 1
+    assert arcs.sum() >= 14 and np.all(f.v_part[:, 0] < f.v_part[:, 1])
+    for row in range(1, len(f)):
+        top = _rim_texture_v(f, row - 1, True)
+        bottom = _rim_texture_v(f, row, False)
+        gap = np.abs((top - bottom + 0.5) % 1.0 - 0.5)          # continuous modulo whole periods
+        assert gap.max() < 1e-9, (row, f.v_part[row - 1], f.v_part[row])
+    density = 1.0 / (f.v_part[:, 1] * f.length)             # periods per unit length
+    assert density.max() / density.min() < 6.0, density     # a whole period per chord: 30-40x
+
+
+def test_texture_slots_reach_the_mesh_and_the_raster_renderers_rows():
+    # GS: the mesh's texture v, less its row's chain offset (what raster.glsl subtracts),
+    # is the texture v the ray caster and the reference take (surface_uv)
+    from plantgen.geometry.frusta import surface_uv
+    from plantgen.geometry.mesh import tessellate
+    from plantgen.render.raster import row_data
+
+    f = skin_skeleton(chain([80.0], lengths=1.0, radii=0.1), smooth_bends=10.0)
+    mesh = tessellate(f, 1, caps=False)
+    lateral = mesh.faces[: len(mesh.face_row)]
+    rows = np.repeat(mesh.face_row, 3)
+    verts = lateral.ravel()
+    v_mesh = mesh.uv[verts, 1] - row_data(f)[rows, 0]
+    v_ref = surface_uv(f, rows, mesh.vertices[verts])[1]
+    assert np.abs(v_mesh - v_ref).max() < 1e-5
+    assert (f.v_part[rows, 1] > 1).mean() > 0.5                 # most of it is the arc

@@ -22,6 +22,10 @@ Contract (float64 on the CPU; converted to float32 only at upload):
 ``shell``       (n,) f8     relief shell thickness (0: no relief on this segment)
 ``segment``     (n,) i8     index of the skeleton segment this row came from (sharp-bend
                             splitting can give one skeleton segment several rows)
+``v_part``      (n, 2) i8   (slot, slots): the row's share of the texture's v, a slot of
+                            ``slots`` equal ones (default (0, 1): the whole texture, the
+                            paper's); the k chords of a smoothed bend's arc take slots
+                            0..k-1 of k, so the arc spans one texture period, not k
 ==============  ==========  ==============================================================
 
 Besides the rows above, a :class:`Frusta` (frozen, built once) holds ``material_names``
@@ -39,7 +43,8 @@ u and v of a surface point P (equations (6)–(7)), with frame b = axis × ref_d
     u = atan2((P - C1)·b, (P - C1)·ref_dir) / 2π + u_offset + v·twist     (mod 1)
     v = |P - P_l| / |P_u - P_l|
 
-where P_l and P_u are the intersections of the generator through P (direction
+and the texture is looked up at ``v_tex = (slot + v) / slots`` (``v_part``; u keeps the
+row's own v in its twist term). Where P_l and P_u are the intersections of the generator through P (direction
 axis + k·e_r, e_r the unit radial direction of P) with the lower and upper planes.
 The interpolated normal (8) is normalize((1 - v)·N_l + v·N_u), N_l = normalize(P_l - C1),
 N_u = normalize(P_u - C2).
@@ -60,23 +65,27 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..tolerances import tol
-from .vec import ancestor_count, cross, dot, norm, unit
+from .vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
 
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
            "frusta_bounds", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
-           "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals"]
+           "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals", "MAX_V_SLOTS"]
 
 #: Names of the per-row arrays of the contract, in contract order.
 ROW_FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir",
-              "u_offset", "twist", "material", "shell", "segment")
+              "u_offset", "twist", "material", "shell", "segment", "v_part")
 
 #: dtype of each row array (float64 unless listed).
-_ROW_DTYPES = {"material": np.int32, "segment": np.int64}
+_ROW_DTYPES = {"material": np.int32, "segment": np.int64, "v_part": np.int64}
 
 #: trailing shape of each row array (scalar per row unless listed).
-_ROW_SHAPES = {"base": (3,), "axis": (3,), "plane_lo": (4,), "plane_hi": (4,), "ref_dir": (3,)}
+_ROW_SHAPES = {"base": (3,), "axis": (3,), "plane_lo": (4,), "plane_hi": (4,), "ref_dir": (3,), "v_part": (2,)}
+
+#: The most texture slots one row's ``v_part`` may name (the ray caster packs slot and
+#: slots into 7 bits each).
+MAX_V_SLOTS = 128
 
 
 def _pyramid_template() -> tuple[np.ndarray, np.ndarray]:
@@ -164,6 +173,7 @@ class Frusta:
     material: np.ndarray
     shell: np.ndarray
     segment: np.ndarray
+    v_part: np.ndarray | None = None           # None: (0, 1) for every row
     material_names: tuple[str, ...] = ("bark",)
     parent_row: np.ndarray | None = None
     report: SkinReport | None = field(default=None, repr=False)
@@ -174,6 +184,8 @@ class Frusta:
 
     def __post_init__(self) -> None:
         n = len(np.asarray(self.length))
+        if self.v_part is None:
+            object.__setattr__(self, "v_part", np.tile(np.array([0, 1], np.int64), (n, 1)))
         for f in ROW_FIELDS:
             arr = np.ascontiguousarray(getattr(self, f), dtype=_ROW_DTYPES.get(f, np.float64))
             want = (n,) + _ROW_SHAPES.get(f, ())
@@ -217,6 +229,19 @@ class Frusta:
     def chain_position(self) -> np.ndarray:
         """(n,) int64: how many rows precede each row in its continuing chain."""
         return ancestor_count(self.parent_row)
+
+    @property
+    def v_span(self) -> np.ndarray:
+        """(n,) the share of the texture's v each row spans: 1 / slots."""
+        return 1.0 / self.v_part[:, 1]
+
+    @property
+    def chain_texture_v(self) -> np.ndarray:
+        """(n,) float64: the texture v, counted along the row's continuing chain in periods,
+        where the row starts (the sum of the spans of the rows before it): what a mesh
+        adds to its rows' v so that rows sharing a ring share its texture coordinate."""
+        span = self.v_span
+        return reduce_to_root(self.parent_row, span, np.add) - span
 
     @property
     def has_length(self) -> np.ndarray:
@@ -413,7 +438,9 @@ def surface_uv(frusta: Frusta, rows, points, *, wrap: bool = True):
     Returns
     -------
     u : (m,) float, turns around the axis (+ u_offset + v·twist)
-    v : (m,) float, 0 on the lower plane, 1 on the upper plane, along the generator
+    v : (m,) float, the texture's v: the row's own v (0 on the lower plane, 1 on the
+        upper plane, along the generator) in its slot, ``(slot + v) / slots``
+        (``Frusta.v_part``; the paper's v where the row has the whole texture)
     """
     rows = np.asarray(rows)
     y, rho, e_r = _local(frusta, rows, points)
@@ -426,7 +453,8 @@ def surface_uv(frusta: Frusta, rows, points, *, wrap: bool = True):
     if wrap:
         u = u - np.floor(u)
         u = np.where(u < 1.0, u, 0.0)
-    return u, v
+    part = frusta.v_part[rows]
+    return u, (part[:, 0] + v) / part[:, 1]
 
 
 def true_normals(frusta: Frusta, rows, points) -> np.ndarray:

@@ -256,7 +256,9 @@ class TessellatedMesh:
     ==================  ============  ======================================================
     ``vertices``        (V, 3) f8     positions, model units (y up)
     ``normals``         (V, 3) f4     unit interpolated normals (8) (GS+R: tilted by relief)
-    ``uv``              (V, 2) f4     ``(u, v + chain position)``, u in [0, 1]
+    ``uv``              (V, 2) f4     ``(u, v_tex + chain)``, u in [0, 1]; v_tex the row's
+                                      share of the texture's v (``Frusta.v_part``), chain
+                                      the texture v of the rows before it in its chain
     ``faces``           (F, 3) i4     counter-clockwise seen from outside
     ``face_row``        (F,) i4       frustum row of each face (nondecreasing over the
                                       lateral faces)
@@ -691,6 +693,7 @@ def _surface(frusta: Frusta, relief: bool, height, step_u: float, step_v: float)
     (k, 1) at texture coordinates (k, C) (broadcast), on the relief shell if ``relief``
     (heights ``height``, gradient by central differences ``step_u``, ``step_v`` apart)."""
     material, shell = frusta.material, frusta.shell
+    slot, slots = frusta.v_part[:, 0].astype(np.float64), frusta.v_part[:, 1].astype(np.float64)
 
     def evaluate(rows, u, v):
         if not relief:
@@ -699,16 +702,19 @@ def _surface(frusta: Frusta, relief: bool, height, step_u: float, step_v: float)
         shape = np.broadcast_shapes(uu.shape, rows.shape)
         uu, vv = np.broadcast_to(uu, shape), np.broadcast_to(vv, shape)
         mm = np.broadcast_to(material[rows], shape).ravel()
-        uu, vv = uu.ravel() % 1.0, vv.ravel()
+        n_slots = np.broadcast_to(slots[rows], shape)
+        # the heights at the texture's v (Frusta.v_part), the geometry at the row's own v
+        uu, vv = uu.ravel() % 1.0, ((np.broadcast_to(slot[rows], shape) + vv) / n_slots).ravel()
 
         def w_at(du, dv):
             return np.asarray(height(mm, (uu + du) % 1.0, vv + dv), dtype=np.float64).reshape(shape)
 
         thick = shell[rows]
         offset = np.clip(w_at(0.0, 0.0), 0.0, 1.0) * thick
-        # Central differences one texel apart, as the ray caster takes them.
+        # Central differences one texel apart, as the ray caster takes them (per unit of the
+        # row's own v: the texture's v moves 1/slots as fast).
         slope = ((w_at(step_u, 0.0) - w_at(-step_u, 0.0)) / (2 * step_u) * thick,
-                 (w_at(0.0, step_v) - w_at(0.0, -step_v)) / (2 * step_v) * thick)
+                 (w_at(0.0, step_v) - w_at(0.0, -step_v)) / (2 * step_v) * thick / n_slots)
         return generator_points(frusta, rows, u, v, offset, slope)
 
     return evaluate
@@ -738,7 +744,7 @@ def _ring_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers, 
     """Every owned ring at ``u = j/N`` (turned by ``turns``) and ``v = r/B``, chunked."""
     columns, bands = plan.columns, plan.bands
     u_col = np.arange(columns + 1) / columns
-    chain_v = frusta.chain_position.astype(np.float64)
+    chain_v, span = frusta.chain_texture_v, frusta.v_span
     delta_lo, delta_inc = turns
     turned = plan.knuckles is not None
     rows_all, ring_all = np.nonzero(plan.owns_ring)  # row-major: matches ring_id order
@@ -755,14 +761,14 @@ def _ring_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers, 
         buf.vertices[sl] = pts.reshape(-1, 3)
         buf.normals[sl] = nrm.reshape(-1, 3)
         buf.uv[sl, 0] = np.broadcast_to(u, pts.shape[:2]).ravel()
-        buf.uv[sl, 1] = np.broadcast_to(v + chain_v[rows][:, None], pts.shape[:2]).ravel()
+        buf.uv[sl, 1] = np.broadcast_to(v * span[rows][:, None] + chain_v[rows][:, None], pts.shape[:2]).ravel()
 
 
 def _apex_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers) -> None:
     """Apex rings: the half ring (even columns) a quarter band from the tip, and one apex
     position for the odd columns (their mean: a relief shell moves them apart)."""
     columns, bands = plan.columns, plan.bands
-    chain_v = frusta.chain_position.astype(np.float64)
+    chain_v, span = frusta.chain_texture_v, frusta.v_span
     even = np.arange(0, columns + 1, 2)
     odd = np.arange(1, columns, 2)
     for rows, ring, v_half in ((np.flatnonzero(plan.apex_hi), bands, 1 - 0.25 / bands),
@@ -772,7 +778,7 @@ def _apex_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffers) 
         u = even / columns + (turns[0][rows] + ring / bands * turns[1][rows])[:, None]
         pts, nrm = evaluate(rows[:, None], u, np.full((1, 1), v_half))
         rid = plan.ring_id[rows, ring]
-        buf.put(rid, even, pts, nrm, u, v_half + chain_v[rows][:, None])
+        buf.put(rid, even, pts, nrm, u, v_half * span[rows][:, None] + chain_v[rows][:, None])
         tip = rid[:, None] * buf.ring_size + odd
         buf.vertices[tip] = buf.vertices[tip].mean(axis=1, keepdims=True)
 
@@ -821,12 +827,12 @@ def _knuckle_vertices(frusta: Frusta, plan: _Plan, turns, evaluate, buf: _Buffer
     """Trimmed rings of P and C, C's inner half ring at J (a copy of P's where mitred),
     one position per hinge point along each lune, and the flat knuckles' copies."""
     kn, columns, bands = plan.knuckles, plan.columns, plan.bands
-    chain_v = frusta.chain_position.astype(np.float64)
+    chain_v, span = frusta.chain_texture_v, frusta.v_span
     live = ~kn.flat
     rows = np.unique(np.concatenate([kn.parent[live], kn.child[live]]))
     if rows.size:
         pts, nrm, u, v = _trimmed_rings(frusta, plan, turns, evaluate, rows)
-        v_tex = v + chain_v[rows][:, None, None]
+        v_tex = v * span[rows][:, None, None] + chain_v[rows][:, None, None]
         own = plan.owns_ring[rows]
         buf.put(plan.ring_id[rows][own], np.arange(columns + 1), pts[own], nrm[own], u[own], v_tex[own])
         # C's ring at J belongs to the last slice: C writes its inner half and hinges

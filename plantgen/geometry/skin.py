@@ -78,9 +78,10 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
         continuing joints bent by more than it are replaced by arcs of short segments
         tangent to both segments before skinning (:func:`plantgen.geometry.smooth.smooth_bends`),
         each arc chord bending at most ``smooth_step_deg``. The frusta's ``segment`` still
-        names the original skeleton's segments (an arc's rows: the joint's child), and the
-        report counts the joints smoothed and the segments added (``smooth_joints``,
-        ``smooth_segments``; ``n_segments`` is the original count).
+        names the original skeleton's segments (an arc's rows: the joint's child), an arc's
+        rows share one period of the texture's v (``v_part``), and the report counts the
+        joints smoothed and the segments added (``smooth_joints``, ``smooth_segments``;
+        ``n_segments`` is the original count).
     options : the keyword arguments of :func:`_skin` (shell, seam_fit, max_bend_deg,
         fan_step_deg, twist, extend_side_branches)
     """
@@ -91,7 +92,8 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
     report = frusta.report
     report.n_segments, report.smooth_joints = len(skeleton), refined.joints
     report.smooth_segments = refined.added
-    return dataclasses.replace(frusta, segment=refined.origin[frusta.segment], report=report)
+    return dataclasses.replace(frusta, segment=refined.origin[frusta.segment], v_part=refined.v_part[frusta.segment],
+                               report=report)
 
 
 def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,

@@ -12,9 +12,12 @@ circular arc of short segments tangent to both segments, as a pipe bend is made:
 - both segments are shortened by the tangent length d = R·tan(θ/2): the parent ends at
   P0 = J - d·a_p, the child starts at P1 = J + d·a_c; their radii are the cones' own at
   those points, so the taper is kept;
-- k = max(1, ceil(θ / ``step_deg``)) chords of the arc are inserted between P0 and P1 (or
-  a fixed ``segments`` per arc); the arc's centre is C = P0 + R·n, n the unit direction in
-  the bend plane perpendicular to a_p towards a_c, and vertex i is
+- k = max(1, ceil(θ / ``step_deg``)) chords of the arc (at most :data:`MAX_CHORDS`) are
+  inserted between P0 and P1 (or a fixed ``segments`` per arc); chord i takes slot i of k
+  of the texture's v (``SmoothResult.v_part``, the frusta's ``v_part``), so the arc
+  spans one texture period, as one segment does, and v runs on continuously; the arc's
+  centre is C = P0 + R·n, n the unit direction in the bend plane perpendicular to a_p
+  towards a_c, and vertex i is
   C - R·cos(φ_i)·n + R·sin(φ_i)·a_p with φ_i = θ·i/k; radii interpolate linearly in φ from
   the parent's radius at P0 to the child's at P1;
 - side branches that started at J start instead on the middle chord's midpoint (J is off
@@ -34,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..tolerances import tol
+from .frusta import MAX_V_SLOTS
 from .skeleton import Skeleton
 from .topology import carried_on
 from .vec import dot, norm, unit
@@ -46,6 +50,8 @@ DEFAULT_STEP_DEG = 10.0
 DEFAULT_RADIUS_FACTOR = 3.0
 #: Largest share of a segment's length one arc may take (an arc at each end must fit).
 FIT_FRACTION = 0.45
+#: The most chords one arc gets (its chords share the texture's v period in that many slots).
+MAX_CHORDS = MAX_V_SLOTS
 #: Bends this close to 180° (degrees) are left to the skinning's knuckles.
 MAX_SMOOTH_DEG = 179.0
 
@@ -61,6 +67,7 @@ class SmoothResult:
     added: int                  # segments added (m - n)
     child: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (j,) each arc's child
     arc_radius: np.ndarray = field(default_factory=lambda: np.zeros(0))        # (j,) its R
+    v_part: np.ndarray | None = None   # (m, 2) texture slot, slots per segment: an arc's chords share one period
 
 
 def _joints(skeleton: Skeleton, min_bend_deg: float):
@@ -90,7 +97,7 @@ def smooth_bends(skeleton: Skeleton, min_bend_deg: float, *, step_deg: float = D
     n = len(skeleton)
     p, c, theta, a_p, a_c = _joints(skeleton, min_bend_deg)
     if not len(c):
-        return SmoothResult(skeleton, np.arange(n), 0, 0)
+        return SmoothResult(skeleton, np.arange(n), 0, 0, v_part=np.tile(np.array([0, 1], np.int64), (n, 1)))
     length = norm(skeleton.end - skeleton.start)
     r_joint = np.maximum(skeleton.r_end[p], skeleton.r_start[c])
     tan_half = np.tan(0.5 * theta)
@@ -99,6 +106,7 @@ def smooth_bends(skeleton: Skeleton, min_bend_deg: float, *, step_deg: float = D
     d = R * tan_half
     k = (np.full(len(c), int(segments)) if segments is not None
          else np.maximum(1, np.ceil(np.degrees(theta) / step_deg - 1e-9)).astype(np.int64))
+    k = np.minimum(k, MAX_CHORDS)
     # ---- shortened segments (a segment may lose length at both ends)
     d_start, d_end = np.zeros(n), np.zeros(n)
     d_start[c], d_end[p] = d, d
@@ -173,7 +181,23 @@ def _assemble(skeleton: Skeleton, p, c, k, jid, i, seg, arc) -> SmoothResult:
     origin = np.empty(m, np.int64)
     origin[new_idx], origin[arc_idx] = np.arange(n), c[jid]
     refined = Skeleton(**out, material_names=skeleton.material_names)
-    return SmoothResult(refined, origin, len(c), m - n)
+    return SmoothResult(refined, origin, len(c), m - n,
+                        v_part=_texture_slots(refined, new_idx[c], arc_idx, jid, i, k))
+
+
+def _texture_slots(refined: Skeleton, child_rows, arc_idx, jid, i, k) -> np.ndarray:
+    """(m, 2) texture slot, slots of each refined segment: chord i of an arc of k takes slot
+    i of k, so the arc spans one period of the texture's v as a segment does; where what
+    is left of the arc's child is shorter than the arc (an elbow between two bends), the
+    child joins the arc's period as slot k of k + 1, so the texture keeps its density."""
+    v_part = np.tile(np.array([0, 1], np.int64), (len(refined), 1))
+    arc_length = np.bincount(jid, norm(refined.end[arc_idx] - refined.start[arc_idx]), minlength=len(k))
+    left = norm(refined.end[child_rows] - refined.start[child_rows])
+    joins = (left < arc_length) & (k < MAX_CHORDS)
+    slots = k + joins
+    v_part[arc_idx, 0], v_part[arc_idx, 1] = i, slots[jid]
+    v_part[child_rows[joins], 0], v_part[child_rows[joins], 1] = k[joins], slots[joins]
+    return v_part
 
 
 def _empty_like(skeleton: Skeleton, m: int) -> dict:

@@ -220,7 +220,8 @@ class SwaySkin:
                        "ec_m": -kc / sc, "ec_n": sigma / sc}
         mean_r = 0.5 * (sk.r_start + sk.r_end)
         self.constant = {"twist": np.zeros(n), "material": sk.material.astype(np.int32),
-                         "shell": material_shell(sk, None, mean_r), "segment": np.arange(n)}
+                         "shell": material_shell(sk, None, mean_r), "segment": np.arange(n),
+                         "v_part": np.tile(np.array([0, 1], np.int64), (n, 1))}
         for arr in (self.r_start, self.r_end, self.length):
             arr.setflags(write=False)
         self.material_names = tuple(str(m) for m in sk.material_names)

@@ -29,13 +29,14 @@ __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "row_data"]
 
 
 def row_data(frusta) -> np.ndarray:
-    """(n, 2) float32 per frustum row: chain position, material (8 bytes a row).
+    """(n, 2) float32 per frustum row: chain offset, material (8 bytes a row).
 
-    The chain position turns the mesh's texture v (which counts rows along a chain) back
-    into the per-row v of (7) in the fragment shader.
+    The chain offset turns the mesh's texture v (which counts texture periods along a
+    chain, :attr:`Frusta.chain_texture_v`) back into the row's texture v in the fragment
+    shader: the row's v of (7) in its slot, ``(slot + v) / slots`` (``Frusta.v_part``).
     """
     out = np.zeros((len(frusta.length), 2), dtype=np.float32)
-    out[:, 0] = frusta.chain_position
+    out[:, 0] = frusta.chain_texture_v - frusta.v_part[:, 0] / frusta.v_part[:, 1]
     out[:, 1] = frusta.material
     return out
 

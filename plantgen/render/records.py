@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from ..errors import PlantgenError
+from ..geometry.frusta import MAX_V_SLOTS
 from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
 
@@ -48,7 +49,8 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     (n, 24) float32 (``out`` when given): base - origin, h | axis, r1 | ref_dir, r2 |
     plane_lo | plane_hi | u_offset, twist, shell, tag. Plane offsets are relative to the
     base point (d - n·base, formed in float64), as plantgen.geometry.reference uploads them.
-    96 bytes per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open);
+    96 bytes per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open)
+    + 1024·slot + 131072·(slots - 1) (``v_part``: 7 bits each; under 2^24, exact in float32);
     an end is open unless a continuing row shares its plane (open ends are capped surfaces,
     shared joint planes are not). Every value is formed in float64 and rounded once to
     float32 as it is written.
@@ -74,9 +76,14 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     out[:, 20] = frusta.u_offset
     out[:, 21] = frusta.twist
     out[:, 22] = frusta.shell
+    part = np.asarray(frusta.v_part)
+    if n and (part[:, 1].min() < 1 or part[:, 1].max() > MAX_V_SLOTS or part[:, 0].min() < 0
+              or np.any(part[:, 0] >= part[:, 1])):
+        raise PlantgenError(f"texture slots (v_part) must be 0 <= slot < slots <= {MAX_V_SLOTS}")
     tag = material.astype(np.int64)
     tag += 256 * frusta.open_lo
     tag += 512 * frusta.open_hi
+    tag += 1024 * part[:, 0] + 131072 * (part[:, 1] - 1)
     out[:, 23] = tag
     return out
 
