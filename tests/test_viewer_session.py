@@ -214,7 +214,7 @@ def test_the_viewer_draws_a_grammars_leaves(gl_ctx, tmp_path, method):
         try:
             if path is bare:
                 s.camera = frames[leafy][1]       # the leafy plant's framing for both
-            frames[path] = (s.draw(*SIZE), s.camera)
+            frames[path] = (s.draw(*SIZE), s.camera, s.hud_lines()[0][0])
         finally:
             s.release()
     with_leaf, without = frames[leafy][0], frames[bare][0]
@@ -222,3 +222,4 @@ def test_the_viewer_draws_a_grammars_leaves(gl_ctx, tmp_path, method):
     gained = np.isfinite(with_leaf.distance) & ~np.isfinite(without.distance)
     assert gained.sum() > 20
     assert "leaves" in with_leaf.stats.passes and "leaves" not in without.stats.passes
+    assert "1 leaf |" in frames[leafy][2] and "leaf" not in frames[bare][2]      # the heads-up line

@@ -498,7 +498,10 @@ class ViewerSession:
             wall_ms = statistics.median(f.wall_ms for f in frames)
             timing = f"{frame_ms:.1f} ms frame, {1000.0 / max(wall_ms, 1e-3):.1f} fps (median of {len(frames)})"
         cam = self.camera
-        lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments | {method} | shadows "
+        leaves = self.model.grown.polygons
+        count = 0 if leaves is None else len(leaves)
+        leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
+        lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments{leafy} | {method} | shadows "
                   f"{'on' if self.shadows else 'off'} | ssaa {self.ssaa}", "info"),
                  (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
         if self.model.animated:
