@@ -6,6 +6,11 @@ own test-suite does, so a test that leaves a GL error behind fails by name.
 
 Without any EGL driver the GL tests are skipped with the context error as the reason;
 set PLANTGEN_REQUIRE_GL=1 (CI does not need to: it has llvmpipe) to make that a failure.
+
+Property tests (hypothesis) draw fresh examples on every local run, so they keep looking
+for new failures; under CI (``CI`` set) they draw the same examples every run
+(``derandomize``), so a submission's CI result does not depend on luck. A failure found
+locally is kept in ``.hypothesis/`` and replayed until fixed; add it as a plain test.
 """
 
 from __future__ import annotations
@@ -13,6 +18,11 @@ from __future__ import annotations
 import os
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 
 def _context_or_skip():

@@ -8,7 +8,9 @@ circular arc of short segments tangent to both segments, as a pipe bend is made:
 - the arc's radius (of its centre line) is R = min(``radius_factor``·r_J, fit), r_J the
   larger of the two radii at the joint J and fit = ``fit_fraction``·L_min / tan(θ/2), L_min
   the shorter of the two segments, so the arc always fits (both ends of a segment may be
-  taken by arcs, hence ``fit_fraction`` < 1/2);
+  taken by arcs, hence ``fit_fraction`` < 1/2); a joint whose arc would be narrower than
+  :data:`MIN_ARC_RATIO` joint radii (segments short for their thickness) is left a joint:
+  the tube bent that tightly crushes its chords on the inside;
 - both segments are shortened by the tangent length d = R·tan(θ/2): the parent ends at
   P0 = J - d·a_p, the child starts at P1 = J + d·a_c; their radii are the cones' own at
   those points, so the taper is kept;
@@ -52,6 +54,10 @@ DEFAULT_RADIUS_FACTOR = 3.0
 FIT_FRACTION = 0.45
 #: The most chords one arc gets (its chords share the texture's v period in that many slots).
 MAX_CHORDS = MAX_V_SLOTS
+#: Smallest arc radius, in joint radii: a tighter arc leaves the joint as it is. Swept over
+#: bends of 30-100°, tapers and 3-6° chords, arcs from 1.5 r up skin closed (the saguaro's
+#: elbows, fitted between short segments, come to 1.95 r); below, rays escaped at 1.2-1.42 r.
+MIN_ARC_RATIO = 1.5
 #: Bends this close to 180° (degrees) are left to the skinning's knuckles.
 MAX_SMOOTH_DEG = 179.0
 
@@ -103,6 +109,15 @@ def smooth_bends(skeleton: Skeleton, min_bend_deg: float, *, step_deg: float = D
     tan_half = np.tan(0.5 * theta)
     fit = FIT_FRACTION * np.minimum(length[p], length[c]) / tan_half
     R = np.minimum(radius_factor * r_joint, fit)
+    # an arc barely wider than its tube squeezes its short thick chords until their planes
+    # cross inside them (and at R <= r_J the torus folds through itself): that joint stays a
+    # joint, which the skinning closes
+    keep = MIN_ARC_RATIO * r_joint <= R
+    if not keep.all():
+        p, c, theta, a_p, a_c, r_joint, tan_half, R = (x[keep] for x in (p, c, theta, a_p, a_c, r_joint,
+                                                                         tan_half, R))
+        if not len(c):
+            return SmoothResult(skeleton, np.arange(n), 0, 0, v_part=np.tile(np.array([0, 1], np.int64), (n, 1)))
     d = R * tan_half
     k = (np.full(len(c), int(segments)) if segments is not None
          else np.maximum(1, np.ceil(np.degrees(theta) / step_deg - 1e-9)).astype(np.int64))
