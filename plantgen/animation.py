@@ -101,18 +101,15 @@ class AnimatedScene:
         self._starts = (None, None)      # (t, (m, 3) posed starts of the moving segments)
 
     def _rig_leaves(self):
-        """What posing the leaves needs, once: per polygon the moving segment it hangs from
-        (-1: still), the turns' coefficients and the rest starts of those segments."""
+        """What posing the leaves needs, once: per polygon and per vertex the moving segment
+        it hangs from (-1: still), and the turns' coefficients (None: no leaf moves)."""
         leaves = self.leaves
         moving_index = np.full(len(self.skeleton) + 1, -1, dtype=np.int64)
         moving_index[self.moving_segments] = np.arange(len(self.moving_segments))
         anchor = moving_index[np.where(leaves.segment >= 0, leaves.segment, len(self.skeleton))]
         if not np.any(anchor >= 0):
             return None
-        owner = np.zeros(len(leaves.vertices), dtype=np.int64)
-        if len(leaves.triangles):
-            owner[leaves.triangles.ravel()] = np.repeat(leaves.polygon, 3)
-        return {"polygon": anchor, "vertex": anchor[owner],
+        return {"polygon": anchor, "vertex": anchor[leaves.vertex_polygon],
                 "coefficients": turn_coefficients(self._moving_skeleton, self._rig)}
 
     @classmethod
@@ -172,17 +169,15 @@ class AnimatedScene:
             self._frame(t)
         posed_start = self._starts[1]
         rest_start = self._moving_skeleton.start
-        leaves, vertex = self.leaves, rig["vertex"]
-        moves = vertex >= 0
-        seg = vertex[moves]
-        turn = turn_at(self._rig, rig["coefficients"], float(t), seg)
+        leaves, vertex, polygon = self.leaves, rig["vertex"], rig["polygon"]
+        turn = turn_at(self._rig, rig["coefficients"], float(t))      # per moving segment, once
+        axis = self._rig.axis
+        moves, turning = vertex >= 0, polygon >= 0
+        seg, pseg = vertex[moves], polygon[turning]
         vertices = leaves.vertices.copy()
-        vertices[moves] = posed_start[seg] + rotate(leaves.vertices[moves] - rest_start[seg], self._rig.axis[seg], turn)
+        vertices[moves] = posed_start[seg] + rotate(leaves.vertices[moves] - rest_start[seg], axis[seg], turn[seg])
         normal = leaves.normal.copy()
-        turning = rig["polygon"] >= 0
-        pseg = rig["polygon"][turning]
-        normal[turning] = rotate(leaves.normal[turning], self._rig.axis[pseg],
-                                 turn_at(self._rig, rig["coefficients"], float(t), pseg))
+        normal[turning] = rotate(leaves.normal[turning], axis[pseg], turn[pseg])
         return replace(leaves, vertices=vertices, normal=normal)
 
     def bounds(self, times) -> np.ndarray:

@@ -323,3 +323,16 @@ def test_auto_camera_frames_every_frustum_inside_the_viewport(direction):
     assert max(np.abs(x_ndc).max(), np.abs(y_ndc).max()) > 0.75
     near, far = depth_range([box_corners(frusta_bounds(f))], np.asarray(camera.eye), fwd)
     assert 0 < near < z.min() and far > z.max()
+
+
+def test_texture_slots_are_checked_where_frusta_are_made():
+    # (slot, slots) must name a slot that exists and fit the record's 7-bit fields
+    from plantgen.geometry.frusta import MAX_V_SLOTS
+
+    f = skin_skeleton(Skeleton(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.array([0.1]), np.array([0.1]),
+                               np.array([-1]), np.array([False]), np.zeros(1, int), ("bark",)))
+    assert f.v_part.tolist() == [[0, 1]]
+    for bad in ([[1, 1]], [[-1, 2]], [[0, MAX_V_SLOTS + 1]]):
+        with pytest.raises(ValueError, match="v_part"):
+            dataclasses.replace(f, v_part=np.array(bad))
+    assert dataclasses.replace(f, v_part=np.array([[MAX_V_SLOTS - 1, MAX_V_SLOTS]])).v_part[0, 0] == MAX_V_SLOTS - 1

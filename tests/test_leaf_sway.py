@@ -81,9 +81,7 @@ def test_swaying_leaves_keep_their_place_on_their_segment(tmp_path, t):
     # the whole scene posed at t independently (still instances have no sway: unchanged)
     skeleton = scene.skeleton()
     posed = pose(skeleton, sway_rig(skeleton, scene.segment_instance(), [i.motion for i in scene.instances]), t)
-    owner = np.zeros(len(rest.vertices), int)
-    owner[rest.triangles.ravel()] = np.repeat(rest.polygon, 3)
-    seg = rest.segment[owner]
+    seg = rest.segment[rest.vertex_polygon]
     for ends_rest, ends_posed in ((skeleton.start, posed.start), (skeleton.end, posed.end)):
         before = np.linalg.norm(rest.vertices - ends_rest[seg], axis=1)
         after = np.linalg.norm(moved.vertices - ends_posed[seg], axis=1)

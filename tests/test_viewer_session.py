@@ -137,6 +137,16 @@ def test_a_file_replaced_by_rename_is_seen_and_a_missing_one_waited_for(tmp_path
     assert watcher.poll(3.0) is not None or watcher.poll(3.01) is not None
 
 
+def finished(job, seconds: float = 5.0):
+    """The job's result once it has one (polling, at most ``seconds``), else None."""
+    deadline = time.monotonic() + seconds
+    done = job.result()
+    while done is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+        done = job.result()
+    return done
+
+
 def test_the_background_job_runs_the_newest_queued_arguments():
     import threading
 
@@ -153,22 +163,14 @@ def test_the_background_job_runs_the_newest_queued_arguments():
     job.start(2)
     job.start(3)                                       # supersedes 2
     gate.set()
-    deadline = time.monotonic() + 5
-    done = None
-    while done is None and time.monotonic() < deadline:
-        done = job.result()
-        time.sleep(0.01)
+    done = finished(job)
     assert done == ((3,), 6, None) and calls == [1, 3] and not job.busy
 
 
 def test_a_failing_reload_hands_back_its_error():
     job = BackgroundJob(lambda: 1 / 0)
     job.start()
-    deadline = time.monotonic() + 5
-    done = None
-    while done is None and time.monotonic() < deadline:
-        done = job.result()
-        time.sleep(0.01)
+    done = finished(job)
     assert isinstance(done[2], ZeroDivisionError)
 
 

@@ -192,6 +192,10 @@ class Frusta:
             if arr.shape != want:
                 raise ValueError(f"Frusta.{f} has shape {arr.shape}, expected {want}")
             object.__setattr__(self, f, arr)
+        part = self.v_part
+        if n and not (np.all(part[:, 0] >= 0) and np.all(part[:, 0] < part[:, 1])
+                      and part[:, 1].max() <= MAX_V_SLOTS):
+            raise ValueError(f"Frusta.v_part must hold 0 <= slot < slots <= {MAX_V_SLOTS}")
         parent_row = np.full(n, -1, dtype=np.int64) if self.parent_row is None else self.parent_row
         parent_row = np.ascontiguousarray(parent_row, dtype=np.int64)
         if parent_row.shape != (n,):

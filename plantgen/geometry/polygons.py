@@ -21,6 +21,7 @@ planar) into triangles by ear clipping in its best-fit plane. Nothing here impor
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -51,6 +52,21 @@ class Polygons:
 
     def __len__(self) -> int:
         return len(self.material)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) box of the vertices (computed once: renderers ask every frame)."""
+        if len(self.vertices) == 0:
+            return np.zeros((2, 3))
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def vertex_polygon(self) -> np.ndarray:
+        """(v,) i8: the polygon each vertex belongs to (0 for a vertex no triangle uses)."""
+        owner = np.zeros(len(self.vertices), np.int64)
+        if len(self.triangles):
+            owner[self.triangles.ravel()] = np.repeat(self.polygon, 3)
+        return owner
 
     @property
     def triangle_material(self) -> np.ndarray:

@@ -36,18 +36,10 @@ def _vertex_normals(polygons: Polygons) -> np.ndarray:
     length = np.linalg.norm(normals, axis=1)
     fallback = length <= 0
     if fallback.any():
-        owner = _vertex_polygon(polygons)
+        owner = polygons.vertex_polygon
         normals[fallback] = polygons.normal[owner[fallback]] if len(polygons) else (0.0, 1.0, 0.0)
         length = np.linalg.norm(normals, axis=1)
     return normals / np.maximum(length, 1e-300)[:, None]
-
-
-def _vertex_polygon(polygons: Polygons) -> np.ndarray:
-    """(v,) the polygon of each vertex (0 for a vertex no triangle uses)."""
-    owner = np.zeros(len(polygons.vertices), np.int64)
-    if len(polygons.triangles):
-        owner[polygons.triangles.ravel()] = np.repeat(polygons.polygon, 3)
-    return owner
 
 
 def leaf_tones(count: int) -> np.ndarray:
@@ -63,7 +55,7 @@ def leaf_vertices(polygons: Polygons, origin, labels=None) -> np.ndarray:
     """(v, 8) float32 interleaved vertices (:data:`LEAF_VERTEX_LAYOUT`), positions relative
     to ``origin`` (float64 subtraction first). ``labels`` (p,) replaces each polygon's
     material slot (a part mask)."""
-    owner = _vertex_polygon(polygons)
+    owner = polygons.vertex_polygon
     slot = polygons.material if labels is None else np.asarray(labels)
     out = np.empty((len(polygons.vertices), 8), np.float32)
     out[:, 0:3] = polygons.vertices - np.asarray(origin, np.float64)
@@ -77,7 +69,7 @@ def leaf_bounds(polygons: Polygons | None) -> np.ndarray | None:
     """(2, 3) world box of the leaves' vertices, None without leaves."""
     if polygons is None or len(polygons.triangles) == 0:
         return None
-    return np.stack([polygons.vertices.min(axis=0), polygons.vertices.max(axis=0)])
+    return polygons.bounds
 
 
 def union_box(*boxes) -> np.ndarray | None:

@@ -160,11 +160,12 @@ class Raycaster(OffscreenRenderer):
         t0 = time.perf_counter()
         records = pack_records(frusta, camera.eye) if record_buffer is None else None
         pack_ms = (time.perf_counter() - t0) * 1e3
-        model_box = union_box(frusta_bounds(frusta) if n else None, leaf_bounds(leaves))
+        leaf_box = leaf_bounds(leaves)
+        model_box = union_box(frusta_bounds(frusta) if n else None, leaf_box)
         view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
                           + ([] if model_box is None else [box_corners(model_box)]))
         programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
-                                  leaf_bounds(leaves) is not None)
+                                  leaf_box is not None)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
                                             else model_box if model_box is not None else frusta_bounds(frusta))
@@ -274,18 +275,22 @@ class Raycaster(OffscreenRenderer):
 _default_raycaster: Raycaster | None = None
 
 
+def _checked_labels(values, count: int, what: str) -> np.ndarray:
+    """``values`` as an array of ``count`` labels in 1..255, else one line: ``what`` a value."""
+    values = np.asarray(values)
+    if len(values) != count or (len(values) and (values.min() < 1 or values.max() > 255)):
+        raise PlantgenError(f"{what} a value in 1..255")
+    return values
+
+
 def label_image(caster: Raycaster, frusta, camera: Camera, labels, settings: RaycastSettings | None = None, *,
                 leaves=None, leaf_labels=None):
     """(height, width) uint8: the label (``labels`` (rows,) in 1..255) of the row each pixel
     of ``camera`` sees, 0 where it sees nothing; the same hits as the colour render. With
     ``leaves`` (a Polygons), a pixel that sees a leaf gets its ``leaf_labels`` (p,) value."""
-    labels = np.asarray(labels)
-    if len(labels) != len(frusta) or (len(labels) and (labels.min() < 1 or labels.max() > 255)):
-        raise PlantgenError("labels must give every row a value in 1..255")
+    labels = _checked_labels(labels, len(frusta), "labels must give every row")
     if leaves is not None:
-        leaf_labels = np.asarray(leaf_labels)
-        if len(leaf_labels) != len(leaves) or (len(leaf_labels) and (leaf_labels.min() < 1 or leaf_labels.max() > 255)):
-            raise PlantgenError("leaf labels must give every leaf polygon a value in 1..255")
+        leaf_labels = _checked_labels(leaf_labels, len(leaves), "leaf labels must give every leaf polygon")
     tagged = Frusta.from_rows({f: getattr(frusta, f) for f in ROW_FIELDS} | {"material": labels.astype(np.int32)},
                               frusta.material_names, frusta.parent_row, frusta.open_lo, frusta.open_hi)
     base = settings or RaycastSettings()

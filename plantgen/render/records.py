@@ -12,7 +12,6 @@ import time
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.frusta import MAX_V_SLOTS
 from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
 
@@ -76,10 +75,7 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     out[:, 20] = frusta.u_offset
     out[:, 21] = frusta.twist
     out[:, 22] = frusta.shell
-    part = np.asarray(frusta.v_part)
-    if n and (part[:, 1].min() < 1 or part[:, 1].max() > MAX_V_SLOTS or part[:, 0].min() < 0
-              or np.any(part[:, 0] >= part[:, 1])):
-        raise PlantgenError(f"texture slots (v_part) must be 0 <= slot < slots <= {MAX_V_SLOTS}")
+    part = frusta.v_part               # checked by the Frusta constructor (7 bits each)
     tag = material.astype(np.int64)
     tag += 256 * frusta.open_lo
     tag += 512 * frusta.open_hi
