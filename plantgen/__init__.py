@@ -29,34 +29,29 @@ def grow(path, *, seed=None, iterations=None, max_modules=None, limits=None, all
                  allow_paths=allow_paths)
 
 
-def render(path, output=None, *, size=None, camera="auto", azimuth=None, elevation=None, distance=None,
-           zoom=None, fov=None, relief=None, shadows=None, effects=None, ssaa=1, background="sky", time=None,
-           seed=None, iterations=None, linear_steps=None, binary_steps=None, march=None, march_density=None,
-           v_exact=False, shadow_res=2048, shadow_caster="relief", limits=None, allow_paths=()):
+def render(path, output=None, settings=None, *, seed=None, iterations=None, smooth_bends=None, limits=None,
+           allow_paths=(), **options):
     """Ray cast a grammar, scene, skeleton file or shipped name (``"pine"``) into an image,
-    as ``plantgen render`` does (see its ``--help`` for every option).
+    as ``plantgen render`` does.
+
+    The render's settings come whole (``settings``, a :class:`plantgen.settings.RenderSettings`)
+    or as keywords named as the command's options, with their defaults (see
+    ``plantgen render --help``): ``size=(w, h)``, ``camera`` (``"auto"``, a camera JSON
+    path or a :class:`plantgen.geometry.camera.Camera`), ``azimuth``, ``elevation``,
+    ``distance``, ``zoom``, ``fov``, ``effects``, ``relief``, ``shadows``, ``shadow_res``,
+    ``shadow_caster``, ``ssaa``, ``background`` (``"sky"``, a colour, ``"none"``), ``time``,
+    and the relief march's ``march``, ``linear_steps``, ``binary_steps``,
+    ``march_density``, ``v_exact``.
 
     Returns a :class:`plantgen.RenderedImage`: ``.array`` (h, w, 3) uint8 (RGBA with
     ``background="none"``), ``.distance``, ``.camera``, ``.report``, ``.save(path)``; in a
     Jupyter notebook it displays itself. ``output`` (a ``.png`` path) also writes it.
-
-    ``size`` is (width, height) (default 1024x768, or the camera file's); ``camera`` is
-    ``"auto"``, a camera JSON path or a :class:`plantgen.geometry.camera.Camera`;
-    ``azimuth``, ``elevation``, ``distance`` or ``zoom`` and ``fov`` turn the view around
-    the model; ``background`` is ``"sky"``, a colour name or ``#rrggbb``, or ``"none"``;
-    ``ssaa`` N draws N x N rays a pixel; ``time`` poses an animated scene.
     """
-    from .geometry.camera import Orbit
-    from .images import RenderedImage, parse_background
+    from .images import RenderedImage
     from .pipeline import render_model
 
-    back = parse_background(background) if isinstance(background, str) or background is None else background
-    report = render_model(path, size=size, camera=camera, orbit=Orbit(azimuth, elevation, distance, zoom, fov),
-                          relief=relief, shadows=shadows, effects=effects, ssaa=ssaa, background=back,
-                          time_s=time, seed=seed, iterations=iterations, linear_steps=linear_steps,
-                          binary_steps=binary_steps, march=march, march_density=march_density, v_exact=v_exact,
-                          shadow_res=shadow_res, shadow_caster=shadow_caster, limits=limits,
-                          allow_paths=allow_paths)
+    report = render_model(path, settings, seed=seed, iterations=iterations, smooth_bends=smooth_bends, limits=limits,
+                          allow_paths=allow_paths, **options)
     image = RenderedImage(report.result.color, distance=report.distance, camera=report.camera, report=report)
     if output is not None:
         report.written = [image.save(output)]

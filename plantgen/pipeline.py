@@ -9,8 +9,9 @@ call:
 - :func:`prepare_model`: a grown input with its effects settled and its animation ready
   (what ``plantgen render`` and ``plantgen view`` draw);
 - :func:`stage_model`: what a renderer needs of a grown model besides its frusta (camera,
-  light, ground), from the scene where there is one; :func:`frame_settings` and
-  :func:`frame_arguments`: the renderers' arguments for one frame, in one place;
+  light, ground), from the scene where there is one; :func:`frame_arguments`: the
+  renderers' arguments for one frame, in one place (the knobs come whole, as a
+  :class:`~plantgen.settings.RenderSettings`);
 - :func:`render_model` (``plantgen.render``): skin and ray cast, in memory;
   :func:`render_file` (``plantgen render``): the same, then write PNG / GIF / WebP, the
   camera JSON and the depth ``.npy``;
@@ -27,7 +28,6 @@ render or an export estimates its memory from the sizes it knows before it alloc
 from __future__ import annotations
 
 import functools
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,25 +49,34 @@ from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .geometry.swc import read_swc, write_swc
-from .images import ANIMATION_SUFFIXES, write_animation, write_png
+from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import Drawing, interpret_plant
 from .render.context import renderer_name
-from .render.passes import ShadowSettings
-from .render.raycast import Raycaster, RaycastSettings
+from .render.raycast import Raycaster
 from .render.records import RecordStream
 from .render.result import RenderResult
-from .render.supersample import MAX_SSAA
-from .scene import Scene, is_scene, parse_scene, resolve_effects
+from .scene import Scene, is_scene, parse_scene
+from .settings import (
+    DEFAULT_SIZE,
+    EffectSettings,
+    ImageSettings,
+    MotionSettings,
+    RaycastSettings,
+    RenderSettings,
+    ShadowSettings,
+    ViewSettings,
+    option_names,
+)
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
-           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "frame_settings",
-           "frame_arguments",
+           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model",
+           "frame_arguments", "request_settings",
            "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
-           "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
+           "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -338,41 +347,26 @@ class PreparedModel:
         return check_finite_frusta(self.anim.frusta_at(float(t)), self.source)
 
 
-def prepare_model(input_path, *, seed=None, iterations=None, effects=None, relief=None, shadows=None,
+def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
                   limits: Limits | None = None, allow_paths=(), smooth_bends=None) -> PreparedModel:
-    """Grow or load ``input_path`` and settle its effects: ``effects`` (a list of names)
-    replaces the scene's list, ``relief`` / ``shadows`` True or False add or remove that
-    effect (None: as the list says); ``smooth_bends``: see :func:`skinning`. One line for a
-    model with no segment."""
+    """Grow or load ``input_path`` and settle its effects (``effects``, an
+    :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
+    ``smooth_bends``: see :func:`skinning`. One line for a model with no segment."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
-    flags = (("relief", relief), ("shadows", shadows))
-    chosen = resolve_effects(grown.scene.effects if grown.scene is not None else (), replace=effects,
-                             add=[n for n, f in flags if f], remove=[n for n, f in flags if f is False])
+    chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
     if len(grown.skeleton) == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
     return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
 
 
-def frame_settings(effects, *, linear_steps=None, binary_steps=None, march=None, march_density=None,
-                   v_exact=False, shadow_res=2048, shadow_caster="relief"):
-    """The ray caster's knobs and the shadow map's for ``effects``: (RaycastSettings,
-    ShadowSettings or None without the ``shadows`` effect); a knob left None keeps its
-    default."""
-    knobs = {"linear_steps": linear_steps, "binary_steps": binary_steps, "march": march,
-             "march_density": march_density}
-    settings = RaycastSettings(relief="relief" in effects, v_exact=bool(v_exact),
-                               **{k: v for k, v in knobs.items() if v is not None})
-    shadow = (ShadowSettings(resolution=int(shadow_res), caster=shadow_caster) if "shadows" in effects
-              else None)
-    return settings, shadow
-
-
-def frame_arguments(frusta: Frusta, staging: Staging, shadows, *, background=None, ssaa: int = 1) -> dict:
+def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSettings = ImageSettings()) -> dict:
     """The keyword arguments both renderers take for one frame of a staged model
-    (``Raycaster.render`` adds ``settings``; ``RasterRenderer.render`` takes the mesh)."""
+    (``Raycaster.render`` adds ``settings``; ``RasterRenderer.render`` takes the mesh):
+    ``shadows`` the shadow map's settings or None, ``image`` the background and the
+    supersampling."""
     return {"camera": staging.camera, "material_names": frusta.material_names, "light_dir": staging.light_dir,
-            "ground": staging.ground, "shadows": shadows, "background": background, "ssaa": int(ssaa),
-            "leaves": staging.leaves}
+            "ground": staging.ground, "shadows": shadows, "background": parse_background(image.background),
+            "ssaa": image.ssaa, "leaves": staging.leaves}
 
 
 # ---------------------------------------------------------------------- plantgen render
@@ -387,7 +381,8 @@ class RenderReport:
     rows: int              # frusta rows drawn (sharp bends add knuckle rows)
     frame_ms: float
     camera: Camera
-    settings: RaycastSettings
+    settings: RaycastSettings      # the ray caster's knobs as drawn (relief as the effects say)
+    request: RenderSettings = RenderSettings()    # what was asked, whole
     written: list = field(default_factory=list)
     result: RenderResult | None = None
     effects: tuple = ()
@@ -396,52 +391,33 @@ class RenderReport:
     update_ms: float = 0.0         # median per-frame CPU update (pose, skin, pack, upload)
     skin_calls: int = 0
     timed: int = 0                 # draws the median was taken over (0: one untimed-median draw)
-    ssaa: int = 1
-    background: tuple | None = None
     colors: list = field(default_factory=list)
     distance: np.ndarray | None = None
     warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
 
+    @property
+    def ssaa(self) -> int:
+        return self.request.image.ssaa
 
-def check_render_outputs(output: Path, frames, fps, depth_out, camera_out, names=None, *, time_s=None) -> None:
-    """Fail before any work on outputs :func:`render_file` cannot write (and on a time that
-    is not finite): one line naming the file. ``names`` maps the knobs ``frames``, ``fps``,
-    ``depth_out`` and ``time_s`` to how the caller spells them (the CLI: ``--frames``,
-    ...); default: the keyword names."""
-    name = {"frames": "frames", "fps": "fps", "depth_out": "depth_out", "time_s": "time_s", **(names or {})}
-    check_render_request(frames, fps, time_s, name)
-    if frames is not None:
+    @property
+    def background(self) -> tuple | None:
+        return parse_background(self.request.image.background)
+
+
+def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, camera_out=None) -> None:
+    """Fail before any work on outputs :func:`render_file` cannot write: one line naming
+    the file."""
+    if motion.frames is not None:
         if output.suffix.lower() not in ANIMATION_SUFFIXES:
-            raise PlantgenError(f"{output}: an animation ({name['frames']}) must end in .gif or .webp")
+            raise PlantgenError(f"{output}: an animation (--frames) must end in .gif or .webp")
         if depth_out is not None:
-            raise PlantgenError(f"{name['depth_out']} writes one frame: leave out {name['frames']}")
+            raise PlantgenError("--depth-out writes one frame: leave out --frames")
     elif output.suffix.lower() != ".png":
-        raise PlantgenError(f"{output}: the image output must end in .png "
-                            f"(or .gif/.webp with {name['frames']})")
+        raise PlantgenError(f"{output}: the image output must end in .png (or .gif/.webp with --frames)")
     if depth_out is not None and Path(depth_out).suffix.lower() != ".npy":
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
         raise PlantgenError(f"{camera_out}: the camera output must end in .json")
-
-
-def check_render_request(frames, fps, time_s, name: dict, ssaa: int = 1, timed_frames: int = 0) -> None:
-    """One line for a frame count, rate, time, supersampling or timing count out of range."""
-    if time_s is not None and not math.isfinite(time_s):
-        raise PlantgenError(f"{name.get('time_s', 'time_s')} must be a finite number, got {time_s!r}")
-    if frames is not None and (int(frames) < 1 or not 0 < fps < math.inf):
-        raise PlantgenError(f"{name.get('frames', 'frames')} must be >= 1 and {name.get('fps', 'fps')} finite and > 0")
-    if int(ssaa) != ssaa or not 1 <= int(ssaa) <= MAX_SSAA:
-        raise PlantgenError(f"{name.get('ssaa', 'ssaa')} must be an integer in 1..{MAX_SSAA}, got {ssaa!r}")
-    if int(timed_frames) != timed_frames or int(timed_frames) < 0:
-        raise PlantgenError(f"{name.get('timed_frames', 'timed_frames')} must be an integer >= 0")
-
-
-def _camera_file(path, size, limits: Limits | None = None) -> Camera:
-    """The camera JSON at ``path``, at ``size`` (width, height) if given, else the file's."""
-    cam = Camera.load(path, _in_force(limits))
-    if size is not None:
-        cam = Camera(cam.eye, cam.target, cam.up, cam.fov_y, size[0], size[1])
-    return cam
 
 
 # Memory a render takes, measured (tracemalloc and the GL targets' sizes) and rounded up:
@@ -516,83 +492,88 @@ def _render_still(raycaster: Raycaster, frusta: Frusta, view: dict, timed_frames
     return result, frame_times, distance
 
 
-def render_model(input_path, *, size=None, camera="auto", orbit: Orbit | None = None, seed=None, iterations=None,
-                 relief=None, linear_steps=None, binary_steps=None, v_exact=False, march=None,
-                 march_density=None, effects=None, shadows=None, shadow_res=2048, shadow_caster="relief",
-                 background=None, ssaa: int = 1, time_s=None, frames=None, fps=12.0, timed_frames: int = 0,
-                 exact_distance: bool = False, progress=None, names=None, limits: Limits | None = None,
-                 allow_paths=(), smooth_bends=None) -> RenderReport:
+def request_settings(settings: RenderSettings | None, options: dict) -> RenderSettings:
+    """``settings`` whole, or built from flat keywords named as the command line's options
+    (:meth:`RenderSettings.from_options`); not both."""
+    if settings is not None and options:
+        raise PlantgenError(f"give the settings whole or as keywords, not both ({', '.join(sorted(options))})")
+    return settings if settings is not None else RenderSettings.from_options(**options)
+
+
+def _render_camera(view: ViewSettings, size, limits: Limits) -> Camera | None:
+    """The camera a render is given (a Camera, or a camera file's at ``size`` if given),
+    None for ``auto``."""
+    camera = view.camera
+    if view.auto or camera is None:
+        return None
+    if not isinstance(camera, Camera):
+        camera = Camera.load(camera, limits)
+    if size is not None:
+        camera = Camera(camera.eye, camera.target, camera.up, camera.fov_y, size[0], size[1])
+    return camera
+
+
+def render_model(input_path, settings: RenderSettings | None = None, *, seed=None, iterations=None,
+                 timed_frames: int = 0, exact_distance: bool = False, progress=None, limits: Limits | None = None,
+                 allow_paths=(), smooth_bends=None, **options) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene, skeleton ``.npz``/``.swc`` or shipped
-    name), skin it and ray cast it; nothing is written (see :func:`render_file`).
+    name), skin it and ray cast it as ``settings`` (a :class:`~plantgen.settings.RenderSettings`)
+    ask; nothing is written (see :func:`render_file`).
+
+    ``settings`` may instead be given as flat keywords named as ``plantgen render``'s
+    options (``size=(w, h)``, ``relief=True``, ``linear_steps=16``, ``shadow_res=1024``,
+    ``azimuth=60``, ``time=0.5``, ``frames=12``, ...: :meth:`RenderSettings.from_options`).
 
     Parameters
     ----------
-    size : (width, height) in pixels; default: the camera file's size, else 1024x768
-    camera : ``"auto"`` (the scene's camera if it has one, else the model framed to fill
-        most of the viewport), a :class:`Camera` or a path to a camera JSON
-    orbit : :class:`Orbit`: azimuth, elevation, distance or zoom and fov around the view's
-        target (a framed view is framed anew from the new direction)
-    relief, shadows : True/False add/remove that effect; None: as the effects say
-    linear_steps, binary_steps, march, march_density, v_exact : the relief march's knobs
-        (:class:`plantgen.render.raycast.RaycastSettings`; None: its default)
-    effects : None (the scene's list; none for a grammar or skeleton) or a list of effect
-        names that replaces it (plantgen.scene.EFFECTS; an unknown name is an error)
-    shadow_res : shadow map texels per side; shadow_caster : "relief" or "inner"
-    background : None (the sky) or (r, g, b, a) in [0, 1] (:func:`plantgen.images.parse_background`;
-        a = 0: transparent, the image gets an alpha channel)
-    ssaa : samples per pixel side (supersampling, 1..8): the frame is drawn ssaa² times larger
-        and averaged down in linear light
-    time_s : seconds: the pose of an animated scene for a still (default 0), or the first
-        frame's time of an animation; frames, fps : render ``frames`` frames at ``fps``
+    seed, iterations : override the file's
     timed_frames : 0 draws a still once; N draws a warm-up and N timed frames and the
         report quotes their median
-    exact_distance : with ``ssaa`` > 1, one more draw at one sample a pixel gives the
+    exact_distance : with supersampling, one more draw at one sample a pixel gives the
         distances through the pixel centres (else: the sub-sample nearest each centre)
     progress : callable(done, total) called after each animation frame
-    names : how the caller spells the knobs in messages (see :func:`check_render_outputs`)
     limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
         render is estimated to take, before any is allocated) and the folders a scene may
         read grammars from
     smooth_bends : None, or bends past this many degrees become arcs (:func:`skinning`)
     """
-    limits = _in_force(limits)
-    check_render_request(frames, fps, time_s, {**(names or {})}, ssaa, timed_frames)
-    cam_file = camera if isinstance(camera, Camera) else (
-        None if camera in ("auto", None) else _camera_file(camera, size, limits))
-    if isinstance(camera, Camera) and size is not None:
-        cam_file = Camera(camera.eye, camera.target, camera.up, camera.fov_y, size[0], size[1])
-    width, height = (cam_file.width, cam_file.height) if cam_file is not None else (size or (1024, 768))
-    _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=int(ssaa))
-    model = prepare_model(input_path, seed=seed, iterations=iterations, effects=effects, relief=relief,
-                          shadows=shadows, limits=limits, allow_paths=allow_paths, smooth_bends=smooth_bends)
+    limits, request = _in_force(limits), request_settings(settings, options)
+    if int(timed_frames) != timed_frames or int(timed_frames) < 0:
+        raise PlantgenError("--time-frames must be an integer >= 0")
+    image, motion = request.image, request.motion
+    camera = _render_camera(request.view, image.size, limits)
+    width, height = (camera.width, camera.height) if camera is not None else (image.size or DEFAULT_SIZE)
+    frames, shadow_res = motion.frames, request.shadows.resolution
+    _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=image.ssaa)
+    model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
+                          allow_paths=allow_paths, smooth_bends=smooth_bends)
     _check_render_memory(limits, str(input_path), width, height, frames,
-                         shadow_res if "shadows" in model.effects else None, len(model.grown.skeleton), int(ssaa))
-    t_start = float(time_s or 0.0)
-    frusta = model.frusta_at(t_start)
-    staging = stage_model(model.grown, frusta, width, height, camera=cam_file, orbit=orbit)
-    settings, shadow_settings = frame_settings(model.effects, linear_steps=linear_steps, binary_steps=binary_steps,
-                                               march=march, march_density=march_density, v_exact=v_exact,
-                                               shadow_res=shadow_res, shadow_caster=shadow_caster)
-    view = {**frame_arguments(frusta, staging, shadow_settings, background=background, ssaa=ssaa),
-            "settings": settings}
+                         shadow_res if "shadows" in model.effects else None, len(model.grown.skeleton), image.ssaa)
+    frusta = model.frusta_at(motion.start)
+    staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
+    march, shadows = request.frame(model.effects)
+    view = {**frame_arguments(frusta, staging, shadows, image), "settings": march}
     raycaster, anim, colors, update_times = Raycaster(), model.anim, [], []
     if frames is not None:
-        times = t_start + np.arange(int(frames)) / float(fps)
-        if shadow_settings is not None and anim.animated and len(times) > 1:
+        times = motion.start + np.arange(int(frames)) / float(motion.fps)
+        if shadows is not None and anim.animated and len(times) > 1:
             view["shadow_box"] = anim.bounds(times[:: max(len(times) // 8, 1)])   # one window
         colors, frame_times, update_times, result = _render_frames(raycaster, anim, times, view, progress)
         distance = result.distance
     else:
         result, frame_times, distance = _render_still(raycaster, frusta, view, timed_frames, exact_distance)
-    return RenderReport(renderer_name(), len(model.grown.skeleton), len(frusta.base),
-                        float(np.median(frame_times)), staging.camera, settings, [], result, model.effects,
-                        shadow_settings, len(colors) or 1, float(np.median(update_times)) if update_times else 0.0,
-                        anim.skin_calls, int(timed_frames) if frames is None else len(colors), int(ssaa),
-                        background, colors, distance, model.grown.warnings)
+    return RenderReport(
+        renderer=renderer_name(), segments=len(model.grown.skeleton), rows=len(frusta.base),
+        frame_ms=float(np.median(frame_times)), camera=staging.camera, settings=march, request=request,
+        result=result, effects=model.effects, shadows=shadows, frames=len(colors) or 1,
+        update_ms=float(np.median(update_times)) if update_times else 0.0, skin_calls=anim.skin_calls,
+        timed=int(timed_frames) if frames is None else len(colors), colors=colors, distance=distance,
+        warnings=model.grown.warnings)
 
 
-def _write_render_outputs(output: Path, report: RenderReport, fps, camera_out, depth_out) -> list:
+def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:
     result = report.result
+    fps = report.request.motion.fps
     written = [write_animation(output, report.colors, fps) if report.colors else write_png(output, result.color)]
     if camera_out is not None:
         written.append(write_atomically(camera_out, report.camera.save))
@@ -604,8 +585,8 @@ def _write_render_outputs(output: Path, report: RenderReport, fps, camera_out, d
     return written
 
 
-def render_file(input_path, output, *, camera_out=None, depth_out=None, frames=None, fps=12.0, time_s=None,
-                names=None, **options) -> RenderReport:
+def render_file(input_path, output, settings: RenderSettings | None = None, *, camera_out=None, depth_out=None,
+                **options) -> RenderReport:
     """:func:`render_model`, then write the image: a PNG (RGBA over a transparent
     background), or with ``frames`` an animated GIF/WebP; optionally the camera JSON
     (``camera_out``) and the depth ``.npy`` (``depth_out``: float32 (height, width)
@@ -614,10 +595,11 @@ def render_file(input_path, output, *, camera_out=None, depth_out=None, frames=N
     ``options`` are :func:`render_model`'s. Every output is written atomically, and the
     outputs are checked before any work (one line naming a file that cannot be written)."""
     output = Path(output)
-    check_render_outputs(output, frames, fps, depth_out, camera_out, names, time_s=time_s)
-    report = render_model(input_path, frames=frames, fps=fps, time_s=time_s, names=names,
-                          exact_distance=depth_out is not None, **options)
-    report.written = _write_render_outputs(output, report, fps, camera_out, depth_out)
+    keywords = {k: options.pop(k) for k in option_names(RenderSettings) if k in options}
+    request = request_settings(settings, keywords)
+    check_render_outputs(output, request.motion, depth_out, camera_out)
+    report = render_model(input_path, request, exact_distance=depth_out is not None, **options)
+    report.written = _write_render_outputs(output, report, camera_out, depth_out)
     return report
 
 

@@ -2,7 +2,8 @@
 effects and motion. This module loads, validates and grows them into a :class:`Scene` of
 typed values (:class:`~plantgen.geometry.stage.Ground`, :class:`~plantgen.geometry.stage.Light`,
 :class:`~plantgen.geometry.stage.Sway`, :class:`CameraSpec`); renderers read the result.
-It is also the home of the effects vocabulary (:data:`EFFECTS`, :func:`resolve_effects`).
+The effects vocabulary it reads (:data:`EFFECTS`, :func:`resolve_effects`) lives with the
+other settings in :mod:`plantgen.settings`.
 
 A scene is a YAML mapping with an ``instances`` list::
 
@@ -60,12 +61,12 @@ from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
 from .limits import Limits
 from .limits import limits as default_limits
 from .lsystem.grammar import GrammarError
+from .settings import EFFECTS, parse_effect_list, resolve_effects
 from .tolerances import tol
 
 __all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "ScenePlant", "is_scene",
            "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "rotation_matrix"]
 
-EFFECTS = ("relief", "shadows", "animation")
 SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances"}
 INSTANCE_KEYS = {"grammar", "skeleton", "seed", "position", "rotation", "scale", "iterations",
                  "grid", "motion"}
@@ -83,29 +84,6 @@ class SceneError(PlantgenError):
 
 
 # ---------------------------------------------------------------------------- effects
-def resolve_effects(scene_effects=(), *, replace=None, add=(), remove=()) -> tuple[str, ...]:
-    """The effects a render simulates: the scene's list, or ``replace``, plus ``add`` minus
-    ``remove`` (in :data:`EFFECTS` order).
-
-    Raises
-    ------
-    PlantgenError
-        An effect name that is not one of :data:`EFFECTS` (one line, naming the known ones).
-    """
-    chosen = list(scene_effects if replace is None else replace)
-    for name in (*chosen, *add, *remove):
-        if name not in EFFECTS:
-            raise PlantgenError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
-    wanted = (set(chosen) | set(add)) - set(remove)
-    return tuple(e for e in EFFECTS if e in wanted)
-
-
-def parse_effect_list(text: str) -> tuple[str, ...]:
-    """``"relief,shadows"`` -> ("relief", "shadows"); empty items are ignored; names checked."""
-    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
-    return resolve_effects(replace=names)
-
-
 # ---------------------------------------------------------------------------- values
 @dataclass(frozen=True)
 class CameraSpec:

@@ -13,8 +13,9 @@ from test_effects import SCENE
 from plantgen.animation import AnimatedScene
 from plantgen.geometry.camera import Camera
 from plantgen.pipeline import grow_file
-from plantgen.render.raycast import Raycaster, RaycastSettings
+from plantgen.render.raycast import Raycaster
 from plantgen.render.records import RECORD_BYTES, RecordStream
+from plantgen.settings import RaycastSettings
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from _cli import run_cli
 from plantgen.errors import PlantgenError
 from plantgen.pipeline import render_file
 from plantgen.render.shaders import build_program
-from plantgen.scene import resolve_effects
+from plantgen.settings import resolve_effects
 
 SCENE = """
 name: two_posts
@@ -48,7 +48,7 @@ COMBINATIONS = [c for n in range(4) for c in itertools.combinations(("relief", "
 @pytest.mark.parametrize("effects", COMBINATIONS, ids=lambda c: "+".join(c) or "none")
 def test_each_combination_compiles_and_runs_only_what_it_asks_for(gl_ctx, scene_file, tmp_path, effects):
     report = render_file(scene_file, tmp_path / "x.png", size=(40, 30), effects=list(effects),
-                         shadow_res=64, timed_frames=0, time_s=0.3)
+                         shadow_res=64, timed_frames=0, time=0.3)
     stats = report.result.stats
     relief, shadows, animation = ("relief" in effects, "shadows" in effects, "animation" in effects)
     assert report.effects == effects

@@ -17,8 +17,9 @@ from plantgen.geometry.frusta import Frusta, frusta_bounds
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
 from plantgen.render import materials as render_materials
-from plantgen.render.raycast import Raycaster, RaycastSettings
+from plantgen.render.raycast import Raycaster
 from plantgen.render.records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES, pack_records
+from plantgen.settings import RaycastSettings
 
 W, H = 160, 120
 FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir", "u_offset",

@@ -18,9 +18,9 @@ from plantgen.geometry.polygons import Polygons
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
-from plantgen.render.passes import ShadowSettings
 from plantgen.render.raster import RasterRenderer
-from plantgen.render.raycast import Raycaster, RaycastSettings
+from plantgen.render.raycast import Raycaster
+from plantgen.settings import RaycastSettings, ShadowSettings
 
 NAMES = ("bark", "leaf")
 RADIUS = 0.3

@@ -15,7 +15,8 @@ from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.reference import render_reference
 from plantgen.render import materials as render_materials
-from plantgen.render.raycast import Raycaster, RaycastSettings
+from plantgen.render.raycast import Raycaster
+from plantgen.settings import RaycastSettings
 
 ADAPTIVE = RaycastSettings(relief=True)
 FINE_FIXED = RaycastSettings(relief=True, march="fixed", linear_steps=256, binary_steps=12)

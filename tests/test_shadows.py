@@ -12,8 +12,8 @@ from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
-from plantgen.render.passes import ShadowSettings
-from plantgen.render.raycast import Raycaster, RaycastSettings
+from plantgen.render.raycast import Raycaster
+from plantgen.settings import RaycastSettings, ShadowSettings
 
 GROUND = Ground(size=10.0, height=0.0, material="sand")
 RADIUS = 0.3

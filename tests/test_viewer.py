@@ -20,8 +20,9 @@ from PIL import Image
 
 from plantgen.geometry.camera import Camera, orbit_angles
 from plantgen.geometry.mesh import tessellate
-from plantgen.pipeline import frame_arguments, frame_settings, prepare_model, stage_model
+from plantgen.pipeline import frame_arguments, prepare_model, stage_model
 from plantgen.render.raster import RasterRenderer
+from plantgen.settings import RenderSettings
 
 SIZE = "320x240"
 
@@ -106,7 +107,7 @@ def test_orbit_methods_and_screenshots_match_plantgen_render(x_display, tmp_path
         gs = png(saved(viewer))
         model = prepare_model("saguaro")
         frusta = model.frusta_at(0.0)
-        settings, shadows = frame_settings(("shadows",))
+        settings, shadows = RenderSettings().frame(("shadows",))
         staging = stage_model(model.grown, frusta, 320, 240, camera=Camera.load(second))
         expected = RasterRenderer(gl_ctx).render(tessellate(frusta, 2), frusta,
                                                  **frame_arguments(frusta, staging, shadows))

@@ -14,9 +14,11 @@ from _cli import run_cli
 from PIL import Image
 
 from plantgen.geometry.camera import auto_camera, orbit_angles
+from plantgen.geometry.mesh import triangle_count
 from plantgen.pipeline import prepare_model, render_model
+from plantgen.settings import MAX_SUBDIV
 from plantgen.viewer.keys import BINDINGS, binding_for, help_lines
-from plantgen.viewer.session import ViewerSession, ViewOptions
+from plantgen.viewer.session import VIEW_MAX_TRIANGLES, ViewerSession, ViewOptions
 from plantgen.viewer.watch import BackgroundJob, FileWatcher
 
 SIZE = (96, 72)
@@ -49,7 +51,8 @@ def test_keys_change_method_knobs_and_frame_as_render_does(session, tmp_path):
     session.key("B")                    # binary steps 12 -> 13
     session.key("M")                    # fixed march
     session.key("A")                    # 2 x 2 supersampling
-    assert (session.method, session.shadows, session.linear_steps, session.binary_steps, session.march,
+    march = session.march
+    assert (session.method, session.shadows, march.linear_steps, march.binary_steps, march.march,
             session.ssaa) == ("RC+R", True, 16, 13, "fixed", 2)
     frame = session.draw(*SIZE)
     expected = render_model("saguaro", size=SIZE, relief=True, shadows=True, linear_steps=16, binary_steps=13,
@@ -92,7 +95,13 @@ def test_gs_levels_stay_within_the_triangle_budget(session):
     assert frame.stats.triangles == len(session.mesh(session.frusta()).faces)
     for _ in range(10):
         session.key("BRACKETRIGHT")
-    assert session.level == 6                      # 30 segments: m = 6 is 2 M triangles, allowed
+    # the keys climb to the finest level the viewer's triangle budget allows (30 segments:
+    # m = 7 is 7.9 M triangles, m = 8 would be 31 M), never past the settings' finest level
+    frusta = session.frusta()
+    caps = int(frusta.open_lo.sum() + frusta.open_hi.sum())
+    assert session.level <= MAX_SUBDIV
+    assert triangle_count(len(frusta), session.level, caps) <= VIEW_MAX_TRIANGLES
+    assert triangle_count(len(frusta), session.level + 1, caps) > VIEW_MAX_TRIANGLES
     session.key("_4")
     assert session.method == "GS+R"
 

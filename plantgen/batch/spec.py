@@ -36,8 +36,10 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_yaml
+from ..knobs import knob_of
 from ..limits import Limits
 from ..limits import limits as default_limits
+from ..settings import MeshSettings
 
 __all__ = ["BatchError", "Outputs", "PlantTask", "BatchSpec", "plant_seed", "parse_spec", "simple_spec",
            "MASK_KINDS", "OUTPUT_KINDS", "MAX_PLANTS"]
@@ -182,9 +184,11 @@ def _parse_outputs(raw, where: str) -> Outputs:
             kw[flag] = raw[flag]
     kw.setdefault("npz", False)
     if raw.get("glb") not in (None, False):
-        glb = raw["glb"] if isinstance(raw["glb"], dict) else {"level": 1}
+        level = knob_of(MeshSettings, "level")
+        glb = raw["glb"] if isinstance(raw["glb"], dict) else {"level": MeshSettings().level}
         glb = fields.keys(glb, {"level"}, f"{where}: glb", BatchError)
-        kw["glb"] = fields.integer(glb.get("level", 1), "level", f"{where}: glb", BatchError, lo=0, hi=5)
+        kw["glb"] = fields.integer(glb.get("level", MeshSettings().level), "level", f"{where}: glb", BatchError,
+                                   lo=int(level.lo), hi=int(level.hi))
     if raw.get("png") not in (None, False):
         png = raw["png"] if isinstance(raw["png"], dict) else {}
         png = fields.keys(png, {"size", "azimuths", "relief"}, f"{where}: png", BatchError)

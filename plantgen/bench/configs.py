@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from ..render.raycast import RaycastSettings
+from ..settings import RaycastSettings
 from .options import BenchOptions
 
 __all__ = ["Config", "Sweep", "RELIEF_SWEEPS", "ray_cast_configs", "relief_configs", "level_config",

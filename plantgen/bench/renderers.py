@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
-from ..render.passes import ShadowSettings
 from ..render.raster import RasterRenderer
 from ..render.raycast import Raycaster
 from ..render.records import RecordStream
 from ..render.result import RenderResult
+from ..settings import ShadowSettings
 from .configs import Config
 from .models import BenchModel
 

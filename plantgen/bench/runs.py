@@ -20,9 +20,9 @@ from ..geometry.materials import material_height_maps
 from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..render.context import gl_context, renderer_name
-from ..render.passes import ShadowSettings
 from ..render.raster import gs_buffer_bytes
 from ..render.records import rc_buffer_bytes
+from ..settings import ShadowSettings
 from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, level_config, ray_cast_configs, relief_configs
 from .images import save_images
 from .matching import LevelMatch, choose_relief_config, walk_levels

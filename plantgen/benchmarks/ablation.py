@@ -42,8 +42,8 @@ from ..bench.window import eval_camera
 from ..files import write_atomically
 from ..geometry.reference import render_reference
 from ..render.context import renderer_name
-from ..render.passes import ShadowSettings
-from ..render.raycast import Raycaster, RaycastSettings
+from ..render.raycast import Raycaster
+from ..settings import RaycastSettings, ShadowSettings
 from .arguments import image_size
 
 __all__ = ["EYE_LEVERS", "measure_model", "main"]

@@ -33,9 +33,9 @@ from ..animation import AnimatedScene
 from ..bench.renderers import time_after_warm_up
 from ..pipeline import grow_file, stage_model
 from ..render.context import renderer_name
-from ..render.passes import ShadowSettings
-from ..render.raycast import Raycaster, RaycastSettings
+from ..render.raycast import Raycaster
 from ..render.records import RecordStream
+from ..settings import RaycastSettings, ShadowSettings
 from .arguments import image_size
 
 

@@ -19,9 +19,9 @@ from ..geometry.mesh import tessellate
 from ..geometry.skin import skin_skeleton
 from ..pipeline import grow_file, model_leaves, stage_model
 from ..render.context import renderer_name
-from ..render.passes import ShadowSettings
 from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster, RaycastSettings
+from ..render.raycast import Raycaster
+from ..settings import RaycastSettings, ShadowSettings
 from .arguments import image_size
 from .gallery import LEAFY_MODELS
 

@@ -26,8 +26,9 @@ from ..geometry.camera import auto_camera
 from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import renderer_name
-from ..render.raycast import Raycaster, RaycastSettings
+from ..render.raycast import Raycaster
 from ..render.records import RECORD_BYTES, rc_buffer_bytes
+from ..settings import RaycastSettings
 from .arguments import image_size, shipped_model_paths
 
 

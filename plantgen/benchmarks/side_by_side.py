@@ -20,8 +20,9 @@ from ..geometry.skin import skin_skeleton
 from ..pipeline import load_skeleton
 from ..render.context import gl_context
 from ..render.raster import RasterRenderer, gs_buffer_bytes
-from ..render.raycast import Raycaster, RaycastSettings
+from ..render.raycast import Raycaster
 from ..render.records import rc_buffer_bytes
+from ..settings import RaycastSettings
 
 __all__ = ["side_by_side", "gallery_camera", "main"]
 

@@ -9,7 +9,9 @@ import click
 
 from ..batch import BatchError, parse_spec, run_batch, simple_spec, summary_lines
 from ..batch.spec import MASK_KINDS
-from .options import limit_opt, limits_from, parse_size, quiet_opt
+from ..knobs import knob_of
+from ..settings import MeshSettings
+from .options import knob_option, limit_opt, limits_from, parse_size, quiet_opt
 
 __all__ = ["batch"]
 
@@ -28,8 +30,8 @@ __all__ = ["batch"]
 @click.option("--azimuths", default=None, metavar="LIST", help="Without a spec: view azimuths in degrees, "
               "comma-separated (default 0).")
 @click.option("--relief/--no-relief", default=False, help="Without a spec: relief-map the views.")
-@click.option("--subdiv", type=click.IntRange(0, 5), default=1, show_default=True,
-              help="Without a spec: the glb's subdivision level m.")
+@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level, help="Without a spec: the glb's subdivision "
+             "level m (16·4^m triangles per frustum, 8·2^m per cap).")
 @click.option("--mask", type=click.Choice(MASK_KINDS), default="order", show_default=True,
               help="Without a spec: what the part mask labels.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,

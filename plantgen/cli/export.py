@@ -9,11 +9,14 @@ import click
 
 from ..export import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
+from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model
+from ..settings import MeshSettings
 from .options import (
     allow_path_opt,
     finite,
     input_arg,
+    knob_option,
     limit_opt,
     limits_from,
     output_opt,
@@ -30,10 +33,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @input_arg
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
             ".obj its .mtl, a .qsm.csv a .treedata.csv.")
-@click.option("--subdiv", "level", type=click.IntRange(0, 8), default=1, show_default=True,
-              help="Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap "
-                   "(mesh formats).")
-@click.option("--relief/--no-relief", default=False, show_default=True,
+@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
+@click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
@@ -56,7 +57,7 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, level: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
+def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
            smooth_bends, limit_values, allow_paths, quiet) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
@@ -80,7 +81,7 @@ def export(input: Path, output: Path, level: int, relief: bool, up, instancing, 
       plantgen export pine -o pine.swc --up z
     """
     with StageBars(enabled=not quiet) as bars:
-        info = export_model(input, output, level=level, relief=relief, seed=seed,
+        info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends)

@@ -16,13 +16,15 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from ..geometry.camera import MAX_ELEVATION, Orbit
+from ..geometry.camera import Orbit
+from ..knobs import Knob
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
+from ..settings import build_settings, option_names, settings_knobs
 
 __all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "define_values", "finite", "input_arg",
-           "iterations_opt", "limit_opt", "limits_from", "orbit_from", "orbit_options", "output_opt", "parse_size",
-           "quiet_opt", "seed_opt", "size_opt"]
+           "iterations_opt", "knob_option", "knob_options", "limit_opt", "limits_from", "orbit_from", "output_opt",
+           "parse_size", "quiet_opt", "seed_opt", "size_opt", "smooth_bends_opt", "take_settings"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
@@ -96,27 +98,62 @@ def size_opt(*param_decls: str, what: str = "Image size", default: str):
                         help=f"{what} (WIDTHxHEIGHT pixels; default: {default}).")
 
 
-# ---------------------------------------------------------------------------- the camera
-def orbit_options(command):
-    """``--azimuth``, ``--elevation``, ``--distance``, ``--zoom``, ``--fov``: a view around
-    the automatically framed model (``plantgen render`` and ``plantgen view``)."""
-    decorators = [
-        click.option("--azimuth", type=float, callback=finite, metavar="DEG",
-                     help="Camera: degrees around the vertical axis (0 looks from +z, 90 from +x; "
-                          "default: the automatic camera's, about 19)."),
-        click.option("--elevation", type=click.FloatRange(-MAX_ELEVATION, MAX_ELEVATION), callback=finite,
-                     metavar="DEG", help="Camera: degrees above the horizontal (default: about 13)."),
-        click.option("--distance", type=click.FloatRange(min=0, min_open=True), callback=finite, metavar="D",
-                     help="Camera: distance from the target in world units (default: framed so the "
-                          "model fills the view)."),
-        click.option("--zoom", type=click.FloatRange(min=0, min_open=True), callback=finite, metavar="F",
-                     help="Camera: divide the distance by F (2: twice as close)."),
-        click.option("--fov", type=click.FloatRange(0, 180, min_open=True, max_open=True), callback=finite,
-                     metavar="DEG", help="Camera: vertical field of view in degrees (default: 40)."),
-    ]
-    for decorator in reversed(decorators):
-        command = decorator(command)
-    return command
+# ---------------------------------------------------------------------------- settings
+def _click_type(k: Knob):
+    """The click type of a knob: its range or choices, as the settings declare them."""
+    if k.kind == "int":
+        return click.IntRange(None if k.lo is None else int(k.lo), None if k.hi is None else int(k.hi))
+    if k.kind == "float":
+        if k.lo is None and k.hi is None:
+            return float
+        return click.FloatRange(k.lo, k.hi, min_open=k.lo_open, max_open=k.hi_open)
+    if k.kind == "choice":
+        return click.Choice(list(k.choices))
+    return str
+
+
+def knob_option(k: Knob, default, *, help: str | None = None):
+    """The click option of one knob: name, type, range, default and help from the settings."""
+    if k.kind == "bool":
+        flag = k.flag or f"--{k.name.replace('_', '-')}/--no-{k.name.replace('_', '-')}"
+        return click.option(flag, k.name, default=default, show_default=default is not None, help=help or k.help)
+    extra = {}
+    if k.kind == "size":
+        extra["callback"] = parse_size
+    elif k.kind == "float":
+        extra["callback"] = finite
+    shown = default is not None and k.kind != "size"
+    return click.option(k.option, k.name, type=_click_type(k), default=default, show_default=shown,
+                        metavar=k.metavar, help=help or k.help, **extra)
+
+
+def knob_options(*classes, skip=(), helps=None):
+    """Every knob of the settings ``classes`` (nested settings included) as click
+    options, in declaration order; ``skip`` names knobs a command does not take, ``helps``
+    replaces a knob's help text by name (a command that says it otherwise)."""
+    helps = helps or {}
+    decorators = []
+    for cls in classes:
+        for k, default in settings_knobs(cls):
+            if k.name not in skip:
+                decorators.append(knob_option(k, default, help=helps.get(k.name)))
+
+    def apply(command):
+        for decorator in reversed(decorators):
+            command = decorator(command)
+        return command
+    return apply
+
+
+def take_settings(cls, params: dict):
+    """Build ``cls`` from the command's parameters, removing the ones it used (one line for
+    a value the settings refuse)."""
+    names = set(option_names(cls))
+    mine = {k: params.pop(k) for k in list(params) if k in names}
+    try:
+        return build_settings(cls, mine)
+    except PlantgenError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 def orbit_from(azimuth, elevation, distance, zoom, fov) -> Orbit:

@@ -17,6 +17,7 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input
+from ..knobs import knob
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
 from ..tolerances import tol
@@ -240,11 +241,16 @@ class Orbit:
     fov_y : vertical field of view in degrees (None: keep)
     """
 
-    azimuth: float | None = None
-    elevation: float | None = None
-    distance: float | None = None
-    zoom: float | None = None
-    fov_y: float | None = None
+    azimuth: float | None = knob(None, "--azimuth", "Camera: degrees around the vertical axis (0 looks from +z, 90 "
+                                 "from +x; default: the automatic camera's, about 19).", metavar="DEG")
+    elevation: float | None = knob(None, "--elevation", "Camera: degrees above the horizontal (default: about 13).",
+                                   lo=-MAX_ELEVATION, hi=MAX_ELEVATION, metavar="DEG")
+    distance: float | None = knob(None, "--distance", "Camera: distance from the target in world units (default: "
+                                  "framed so the model fills the view).", lo=0, lo_open=True, metavar="D")
+    zoom: float | None = knob(None, "--zoom", "Camera: divide the distance by F (2: twice as close).", lo=0,
+                              lo_open=True, metavar="F")
+    fov_y: float | None = knob(None, "--fov", "Camera: vertical field of view in degrees (default: 40).", lo=0, hi=180,
+                               lo_open=True, hi_open=True, metavar="DEG")
 
     def __post_init__(self):
         for name in ("azimuth", "elevation", "distance", "zoom", "fov_y"):

@@ -20,12 +20,14 @@ import numpy as np
 from ..geometry.camera import Camera, depth_range
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
+from ..settings import MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .leaves import LeafLayer
 from .materials import HeightTextures, palette_uniforms, shading_uniforms
-from .passes import LightWindow, ShadowPass, ShadowSettings, light_window
+from .passes import LightWindow, ShadowPass, light_window
+from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
-from .supersample import MAX_SSAA, resolve_supersamples
+from .supersample import resolve_supersamples
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "check_background",
            "check_ssaa"]
@@ -128,6 +130,18 @@ class FrameLighting:
     def ground_material(self) -> int:
         """The ground's palette slot (the last name)."""
         return min(len(self.names) - 1, MAX_MATERIALS - 1)
+
+
+@dataclass(frozen=True)
+class FrameOutput:
+    """What a drawn frame gives back: the colour and distance images, the frame's and the
+    shadow pass's milliseconds, and the work counted (None unless asked)."""
+
+    color: np.ndarray
+    distance: np.ndarray
+    frame_ms: float
+    shadow_ms: float
+    work: object = None
 
 
 class OffscreenRenderer:
@@ -305,6 +319,20 @@ class OffscreenRenderer:
             if obj is not None:
                 obj.release()
         return frame_ms, shadow_ms
+
+    def _finish_frame(self, camera: Camera, view: FrameView, lighting: FrameLighting, background, draw_model,
+                      shadows: ShadowSettings | None, shadow_draws, extras: Surroundings, *, ssaa: int,
+                      count_work: bool) -> FrameOutput:
+        """The frame's tail, the same for both renderers: count the work if asked, run the
+        passes (:meth:`_draw_frame`), read the frame back at ``camera``'s size
+        (:meth:`_read_back`) and read the counters."""
+        counter = WorkCounter(self.ctx) if count_work else None
+        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
+                                               shadows, shadow_draws, extras)
+        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
+                                      alpha=background is not None and background[3] < 1)
+        work = counter.read(dist) if counter is not None else None
+        return FrameOutput(color, dist, frame_ms, shadow_ms, work)
 
     def _read_back(self, width: int, height: int, *, ssaa: int = 1,
                    alpha: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -20,50 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PlantgenError
 from ..geometry.camera import box_corners
+from ..settings import ShadowSettings
 from ..tolerances import tol
 from .context import release_framebuffer
 
-__all__ = ["ShadowSettings", "LightWindow", "light_window", "ShadowPass",
+__all__ = ["LightWindow", "light_window", "ShadowPass",
            "program_variants", "frame_passes"]
-
-
-@dataclass(frozen=True)
-class ShadowSettings:
-    """Knobs of the shadow map.
-
-    resolution : texels per side of the square map
-    bias : constant depth bias in texels (world size of one texel), subtracted from the
-        receiver's light depth after the receiver-plane extrapolation
-    max_slope : clamp of the receiver plane's depth gradient (|tan| of the light's angle
-        to the normal); only surfaces lit at more than atan(max_slope) from their normal
-        may self-shadow, where the diffuse term is below 1/max_slope anyway
-    caster : ``"relief"`` (the relief surface casts the shadow when relief is on) or
-        ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow pass)
-    march_density, march_precision : the relief caster's adaptive march in the light's
-        pass (see :class:`plantgen.render.raycast.RaycastSettings`), measured in the map's
-        texels instead of the eye's pixels: samples per relief texel the light's ray
-        crosses, and the bisection's bracket in map texels (the receivers' bias is half a
-        texel, so a finer depth is not seen)
-    """
-
-    resolution: int = 2048
-    bias: float = 0.5
-    max_slope: float = 50.0
-    caster: str = "relief"
-    march_density: float = 0.5
-    march_precision: float = 0.5
-
-    def __post_init__(self):
-        if not 16 <= int(self.resolution) <= 16384:
-            raise PlantgenError("shadow map resolution must lie in 16..16384")
-        if self.caster not in ("relief", "inner"):
-            raise PlantgenError(f"shadow caster must be 'relief' or 'inner', not {self.caster!r}")
-        if self.bias < 0 or self.max_slope <= 0:
-            raise PlantgenError("shadow bias must be >= 0 and max slope > 0")
-        if not (self.march_density > 0 and self.march_precision > 0):
-            raise PlantgenError("shadow march density and precision must be > 0")
 
 
 def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False,

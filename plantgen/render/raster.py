@@ -18,11 +18,12 @@ import numpy as np
 from ..geometry.camera import Camera, box_corners
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.stage import Ground
+from ..settings import ShadowSettings
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
 from .leaves import leaf_bounds, union_box
-from .passes import ShadowSettings, frame_passes
-from .result import RasterStats, RenderResult, WorkCounter
+from .passes import frame_passes
+from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "row_data"]
@@ -144,21 +145,17 @@ class RasterRenderer(OffscreenRenderer):
             light_draw, light_vao = self._mesh_light_draw(origin, view, lighting, mesh)
             shadow_draws.append(light_draw)
             extras.garbage.append(light_vao)
-        counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_mesh,
-                                               shadows, shadow_draws, extras)
-        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
-                                      alpha=background is not None and background[3] < 1)
-        work = counter.read(dist) if counter is not None else None
+        out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, shadow_draws, extras,
+                                 ssaa=ssaa, count_work=count_work)
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
             passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),
-            near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window,
+            near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window,
             upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces) + leaf_tris,
             vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
-            draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=work)
-        return RenderResult(color, dist, frame_ms, camera, stats)
+            draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work)
+        return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
                    repeats, tex, mesh: TessellatedMesh):

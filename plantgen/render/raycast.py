@@ -16,7 +16,7 @@ relief the relief shell is marched (``RELIEF``). Neither is compiled or run othe
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -24,88 +24,19 @@ from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
 from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
 from ..geometry.stage import Ground
+from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
 from .leaves import leaf_bounds, union_box
-from .passes import ShadowSettings, frame_passes, program_variants
+from .passes import frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
-from .result import RaycastStats, RenderResult, WorkCounter
+from .result import RaycastStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RaycastSettings", "Raycaster", "render_frusta", "label_image"]
 
 #: Vertices of one instance's bounding pyramid (12 triangles).
 PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
-
-
-@dataclass(frozen=True)
-class RaycastSettings:
-    """Knobs of one render. Every accuracy/speed trade-off is one field.
-
-    relief : march the relief shell of segments with ``shell > 0`` (§3)
-    march : ``"adaptive"``: the linear samples of each ray are sized to what its pixel
-        sees, ``march_density`` per relief texel the ray crosses in the shell, where a
-        texel counts at least one pixel's footprint (a far branch takes
-        ``march_min_steps``, a grazing close-up up to ``linear_steps``); ``"fixed"``:
-        ``linear_steps`` samples for every ray (the paper's uniform sampling)
-    linear_steps : fixed march: the samples along the shell interval; adaptive: the most
-    march_density : adaptive march: samples per relief texel crossed
-    march_min_steps : adaptive march: the fewest samples
-    march_precision : adaptive march: bisection stops when the bracket around the hit is
-        shorter than this many pixel footprints (along the ray)
-    binary_steps : bisection steps after the first sample under the relief surface (the
-        adaptive march: the most)
-    v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
-    hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
-        a silhouette tangent to the pyramid are not lost to rasterisation rules
-    labels : write each pixel's row label instead of its colour: red = the row's
-        ``material`` index / 255, unshaded (:meth:`Raycaster.render_labels`: part masks)
-    proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
-        slow oracle that shows what a too-tight pyramid would lose (tests)
-    height_fetch : ``"gather"`` (one textureGather per bilinear height) or ``"texel"``
-        (four texelFetch with the wrap in GLSL): the same heights; the bench's ablation
-    """
-
-    relief: bool = False
-    march: str = "adaptive"
-    linear_steps: int = 32
-    march_density: float = 2.0
-    march_min_steps: int = 4
-    march_precision: float = 0.02
-    binary_steps: int = 12
-    v_exact: bool = False
-    hull_padding: float = 0.02
-    proxy: str = "pyramid"
-    height_fetch: str = "gather"
-    labels: bool = False
-
-    def __post_init__(self):
-        if self.proxy not in ("pyramid", "screen"):
-            raise PlantgenError(f"proxy must be 'pyramid' or 'screen', not {self.proxy!r}")
-        if self.height_fetch not in ("gather", "texel"):
-            raise PlantgenError(f"height fetch must be 'gather' or 'texel', not {self.height_fetch!r}")
-        if self.march not in ("adaptive", "fixed"):
-            raise PlantgenError(f"march must be 'adaptive' or 'fixed', not {self.march!r}")
-        if self.linear_steps < 1 or self.binary_steps < 0 or self.march_min_steps < 1:
-            raise PlantgenError("relief steps: linear and minimum steps must be >= 1, binary steps >= 0")
-        if not (self.march_density > 0 and self.march_precision > 0):
-            raise PlantgenError("march density (samples per relief texel) and precision (pixels) must be > 0")
-        if not 0 <= self.hull_padding < 1:
-            raise PlantgenError("hull padding must lie in [0, 1)")
-
-    def defines(self) -> dict[str, bool]:
-        return {"RELIEF": self.relief, "V_EXACT": self.relief and self.v_exact,
-                "MARCH_FIXED": self.relief and self.march == "fixed",
-                "HEIGHT_FETCH4": self.height_fetch == "texel",
-                "SCREEN_PROXY": self.proxy == "screen", "LABELS": self.labels}
-
-    def march_uniforms(self) -> dict:
-        """Uniforms of the pyramid and the relief march, shared by the eye's and the light's
-        pass."""
-        return {"hull_padding": self.hull_padding, "linear_steps": self.linear_steps,
-                "binary_steps": self.binary_steps, "march_density": self.march_density,
-                "march_min_steps": self.march_min_steps, "march_precision": self.march_precision,
-                "height_maps": 0}
 
 
 class Raycaster(OffscreenRenderer):
@@ -184,19 +115,15 @@ class Raycaster(OffscreenRenderer):
                                                             shadows, rec_buf, repeats, tex, n)
             shadow_draws.append(light_draw)
             extras.garbage.append(light_vao)
-        counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_frusta,
-                                               shadows, shadow_draws, extras)
-        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
-                                      alpha=background is not None and background[3] < 1)
-        work = counter.read(dist) if counter is not None else None
+        out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, shadow_draws, extras,
+                                 ssaa=ssaa, count_work=count_work)
         stats = RaycastStats(
             passes=frame_passes(shadows is not None, ground is not None, n > 0, bool(extras.after)),
-            near=view.near, far=view.far, shadow_ms=shadow_ms, light_window=lighting.window, segments=n,
+            near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
             pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
-            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=work)
-        return RenderResult(color, dist, frame_ms, camera, stats)
+            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=out.work)
+        return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
                   flat_background: bool = False, leaves: bool = False) -> dict:

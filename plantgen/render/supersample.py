@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import MAX_SSAA  # the largest supersampling factor: its home is the settings
+
 __all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples"]
 
 #: The exponent of the shaders' display encoding: ``to_display(c) = c^(1/2.2)``.
 DISPLAY_GAMMA = 2.2
 
-#: The largest supersampling factor (N x N samples a pixel).
-MAX_SSAA = 8
 
 _TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** DISPLAY_GAMMA).astype(np.float32)
 

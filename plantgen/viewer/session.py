@@ -16,7 +16,7 @@ import shlex
 import statistics
 import time
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +26,22 @@ from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
 from ..geometry.mesh import tessellate, triangle_count
 from ..images import write_png
+from ..knobs import knob_args, knob_of
 from ..limits import Limits
-from ..pipeline import PreparedModel, frame_arguments, frame_settings, prepare_model, stage_model
+from ..pipeline import PreparedModel, frame_arguments, prepare_model, stage_model
 from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster, RaycastSettings
-from ..render.supersample import MAX_SSAA
+from ..render.raycast import Raycaster
+from ..settings import (
+    DEFAULT_SIZE,
+    MAX_SSAA,
+    MAX_SUBDIV,
+    EffectSettings,
+    MeshSettings,
+    MotionSettings,
+    RaycastSettings,
+    RenderSettings,
+    ViewSettings,
+)
 from .keys import binding_for
 from .watch import BackgroundJob, FileWatcher
 
@@ -48,8 +59,6 @@ DRAG_TURN = 0.4
 #: How many frames the heads-up line's medians look back.
 HUD_FRAMES = 30
 
-#: The largest GS subdivision level the keys reach (the triangle budget may stop it sooner).
-MAX_LEVEL = 6
 
 
 def one_line(exc: BaseException) -> str:
@@ -63,27 +72,17 @@ def one_line(exc: BaseException) -> str:
 
 @dataclass
 class ViewOptions:
-    """How ``plantgen view`` was asked to start (its options; see ``plantgen view --help``)."""
+    """How ``plantgen view`` was asked to start (its options; see ``plantgen view --help``):
+    the render settings whole (:class:`~plantgen.settings.RenderSettings`), the window's
+    ``size``, and what only the viewer has (the method, the GS level, shots, watching)."""
 
     input: Path
-    size: tuple = (1024, 768)
+    settings: RenderSettings = RenderSettings()
+    size: tuple = DEFAULT_SIZE
     seed: int | None = None
     iterations: int | None = None
-    effects: list | None = None
-    relief: bool | None = None
-    shadows: bool | None = None
     method: str | None = None
-    level: int = 1
-    ssaa: int = 1
-    background: tuple | None = None
-    background_name: str | None = None
-    camera: Path | None = None
-    orbit: Orbit = field(default_factory=Orbit)
-    time_s: float = 0.0
-    linear_steps: int | None = None
-    binary_steps: int | None = None
-    march: str | None = None
-    shadow_res: int = 2048
+    level: int = MeshSettings().level
     shots: Path = Path(".")
     watch: bool = True
     poll_s: float = 0.025
@@ -94,9 +93,8 @@ class ViewOptions:
 
     def prepare(self) -> PreparedModel:
         """Grow the input with these options (the first model, and each reload)."""
-        return prepare_model(self.input, seed=self.seed, iterations=self.iterations, effects=self.effects,
-                             relief=self.relief, shadows=self.shadows, limits=self.limits,
-                             allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
+        return prepare_model(self.input, effects=self.settings.effects, seed=self.seed, iterations=self.iterations,
+                             limits=self.limits, allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
 
 
 @dataclass
@@ -128,13 +126,10 @@ class ViewerSession:
         self.raster: RasterRenderer | None = None
         self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
         self.level = int(options.level)
-        defaults = RaycastSettings()
-        self.linear_steps = options.linear_steps or defaults.linear_steps
-        self.binary_steps = defaults.binary_steps if options.binary_steps is None else options.binary_steps
-        self.march = options.march or defaults.march
+        self.march = options.settings.march          # the knobs the keys change (relief: by the method)
         self.shadows = "shadows" in model.effects
-        self.ssaa = int(options.ssaa)
-        self.t = float(options.time_s)
+        self.ssaa = options.settings.image.ssaa
+        self.t = options.settings.motion.start
         self.playing = False
         self.show_help = False
         self.closing = False                   # Q or Esc: the window's loop ends
@@ -166,10 +161,11 @@ class ViewerSession:
     def _initial_camera(self, width: int, height: int) -> Camera:
         o = self.options
         frusta = self.frusta()
-        base = Camera.load(o.camera, o.limits) if o.camera is not None else None
+        view = o.settings.view
+        base = None if view.auto else Camera.load(view.camera, o.limits)
         if base is not None:
             base = Camera(base.eye, base.target, base.up, base.fov_y, width, height)
-        return stage_model(self.model.grown, frusta, width, height, camera=base, orbit=o.orbit).camera
+        return stage_model(self.model.grown, frusta, width, height, camera=base, orbit=view.orbit).camera
 
     def frusta(self):
         """The model's rows at the current time (skinned once for a still model)."""
@@ -197,9 +193,17 @@ class ViewerSession:
         return tuple(keep + (["relief"] if self.method.endswith("+R") else [])
                      + (["shadows"] if self.shadows else []))
 
+    def request(self) -> RenderSettings:
+        """What the frame asks for now: the options' settings with the keys' changes (the
+        method's relief, shadows, the march, supersampling, the time)."""
+        s = self.options.settings
+        return replace(s, effects=EffectSettings(effects=s.effects.effects, relief=self.method.endswith("+R"),
+                                                 shadows=self.shadows),
+                       march=self.march, image=replace(s.image, ssaa=self.ssaa),
+                       motion=MotionSettings(time=self.t if self.model.animated else None))
+
     def settings(self) -> RaycastSettings:
-        return frame_settings(self.effects(), linear_steps=self.linear_steps, binary_steps=self.binary_steps,
-                              march=self.march)[0]
+        return self.request().frame(self.effects())[0]
 
     def draw(self, width: int, height: int):
         """Render the current frame at ``width`` x ``height`` (the window's pixels);
@@ -209,10 +213,9 @@ class ViewerSession:
         t0 = time.perf_counter()
         frusta = self.frusta()
         staging = stage_model(self.model.grown, frusta, width, height, camera=self.camera)
-        settings, shadow = frame_settings(self.effects(), linear_steps=self.linear_steps,
-                                          binary_steps=self.binary_steps, march=self.march,
-                                          shadow_res=self.options.shadow_res)
-        args = frame_arguments(frusta, staging, shadow, background=self.options.background, ssaa=self.ssaa)
+        request = self.request()
+        settings, shadow = request.frame(self.effects())
+        args = frame_arguments(frusta, staging, shadow, request.image)
         if shadow is not None and self.playing and self.model.animated:
             args["shadow_box"] = self._playing_shadow_box()
         if self.model.animated:
@@ -342,7 +345,7 @@ class ViewerSession:
         self.dirty = True
 
     def change_level(self, delta: int) -> None:
-        level = int(np.clip(self.level + delta, 0, MAX_LEVEL))
+        level = int(np.clip(self.level + delta, 0, MAX_SUBDIV))
         frusta = self.frusta()
         n = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
         while n > VIEW_MAX_TRIANGLES and level > 0:
@@ -353,15 +356,17 @@ class ViewerSession:
         self.dirty = True
 
     def scale_linear_steps(self, factor: float) -> None:
-        self.linear_steps = int(np.clip(round(self.linear_steps * factor), 1, 4096))
+        steps = knob_of(RaycastSettings, "linear_steps").clamp(int(round(self.march.linear_steps * factor)))
+        self.march = replace(self.march, linear_steps=steps)
         self.dirty = True
 
     def change_binary_steps(self, delta: int) -> None:
-        self.binary_steps = int(np.clip(self.binary_steps + delta, 0, 64))
+        steps = knob_of(RaycastSettings, "binary_steps").clamp(self.march.binary_steps + delta)
+        self.march = replace(self.march, binary_steps=steps)
         self.dirty = True
 
     def toggle_march(self) -> None:
-        self.march = "fixed" if self.march == "adaptive" else "adaptive"
+        self.march = replace(self.march, march="fixed" if self.march.march == "adaptive" else "adaptive")
         self.dirty = True
 
     def toggle_shadows(self) -> None:
@@ -452,27 +457,16 @@ class ViewerSession:
 
     def render_command(self, camera_path: Path) -> str:
         """The ``plantgen render`` command line that draws the current frame from
-        ``camera_path`` (pixel for pixel for RC and RC+R)."""
+        ``camera_path`` (pixel for pixel for RC and RC+R): the options of the settings
+        that differ from their defaults (:func:`plantgen.knobs.knob_args`)."""
         o = self.options
         out = Path(camera_path).with_suffix(".render.png")
-        args = ["plantgen", "render", str(o.input), "--camera", str(camera_path), "-o", str(out)]
-        if o.effects is not None:
-            args += ["--effects", ",".join(o.effects) or "none"]
-        args.append("--relief" if self.method.endswith("+R") else "--no-relief")
-        args.append("--shadows" if self.shadows else "--no-shadows")
-        defaults = RaycastSettings()
-        for flag, value, default in (("--linear-steps", self.linear_steps, defaults.linear_steps),
-                                     ("--binary-steps", self.binary_steps, defaults.binary_steps),
-                                     ("--march", self.march, defaults.march),
-                                     ("--shadow-res", o.shadow_res, 2048), ("--ssaa", self.ssaa, 1)):
-            if value != default:
-                args += [flag, str(value)]
-        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--background", o.background_name),
-                            ("--smooth-bends", o.smooth_bends)):
+        request = replace(self.request(), view=ViewSettings(camera=str(camera_path)),
+                          image=replace(self.request().image, size=None))
+        args = ["plantgen", "render", str(o.input), "-o", str(out), *knob_args(request)]
+        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--smooth-bends", o.smooth_bends)):
             if value is not None:
                 args += [flag, str(value)]
-        if self.model.animated:
-            args += ["--time", repr(float(self.t))]
         text = shlex.join(args)
         if self.method.startswith("GS"):
             text += f"   (ray cast; the viewer drew {self.method} m = {self.level} with the raster renderer)"

@@ -1,0 +1,339 @@
+"""Every render setting in one home: frozen, typed values with one default each.
+
+A render is asked for once, where input enters (the command line, the API, the viewer,
+a batch spec, the bench), as a :class:`RenderSettings`, and the value travels whole down
+to the shader's defines and uniforms. Each field is a :func:`~plantgen.knobs.knob`: its
+default here is the only default, and the command line builds its options (name, type,
+range, help) from it. A new effect or knob is one field here plus the code that uses it.
+
+- :class:`EffectSettings`: the effects a frame simulates (``--effects``, ``--relief``,
+  ``--shadows``), resolved against a scene's list (:data:`EFFECTS`);
+- :class:`RaycastSettings`: the ray caster's knobs, the relief march's among them;
+- :class:`ShadowSettings`: the shadow map;
+- :class:`ImageSettings`: size, supersampling, background;
+- :class:`MotionSettings`: the time of a still, an animation's frames and rate;
+- :class:`ViewSettings`: the camera file or ``auto``, and the orbit around it;
+- :class:`RenderSettings`: all of them, built from flat keywords by :meth:`RenderSettings.from_options`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, is_dataclass, replace
+
+from .errors import PlantgenError
+from .geometry.camera import Orbit
+from .knobs import check_knobs, knob
+
+__all__ = ["EFFECTS", "DEFAULT_SIZE", "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
+           "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "resolve_effects",
+           "parse_effect_list", "build_settings", "option_names", "settings_knobs"]
+
+#: The effects a scene may list; a render simulates only those in force.
+EFFECTS = ("relief", "shadows", "animation")
+#: The image size when neither the command nor a camera file gives one.
+DEFAULT_SIZE = (1024, 768)
+#: The most samples per pixel side of supersampling.
+MAX_SSAA = 8
+#: The finest GS subdivision level m anyone may ask for (the triangle budgets may stop it sooner).
+MAX_SUBDIV = 8
+#: The adaptive march's bisection stops at this many pixel footprints.
+MARCH_PRECISION = 0.02
+
+
+def resolve_effects(scene_effects=(), *, replace=None, add=(), remove=()) -> tuple[str, ...]:
+    """The effects a render simulates: the scene's list, or ``replace``, plus ``add`` minus
+    ``remove`` (in :data:`EFFECTS` order). One line naming the known effects for an
+    unknown name."""
+    chosen = list(scene_effects if replace is None else replace)
+    for name in (*chosen, *add, *remove):
+        if name not in EFFECTS:
+            raise PlantgenError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
+    wanted = (set(chosen) | set(add)) - set(remove)
+    return tuple(e for e in EFFECTS if e in wanted)
+
+
+def parse_effect_list(text: str) -> tuple[str, ...]:
+    """``"relief,shadows"`` -> ("relief", "shadows"); empty items are ignored; names checked."""
+    names = tuple(s.strip() for s in str(text).split(",") if s.strip() and s.strip() != "none")
+    return resolve_effects(replace=names)
+
+
+@dataclass(frozen=True)
+class EffectSettings:
+    """Which effects a frame simulates: ``effects`` replaces the scene's list (None keeps
+    it); ``relief`` and ``shadows`` True or False add or remove that effect (None: as the
+    list says)."""
+
+    effects: tuple | None = knob(None, "--effects", "Comma-separated effects replacing the scene's list, e.g. "
+                                 f"relief,shadows (known: {', '.join(EFFECTS)}; 'none' for none).",
+                                 kind="list", metavar="LIST")
+    relief: bool | None = knob(None, "--relief", "Relief-map the frusta (§3). Default: on when the effects list it.",
+                               kind="bool")
+    shadows: bool | None = knob(None, "--shadows", "Shadow-map the light. Default: on when the effects list it.",
+                                kind="bool")
+
+    def __post_init__(self):
+        if isinstance(self.effects, str):
+            object.__setattr__(self, "effects", parse_effect_list(self.effects))
+        elif self.effects is not None:
+            object.__setattr__(self, "effects", resolve_effects(replace=tuple(self.effects)))
+
+    def resolve(self, scene_effects=()) -> tuple[str, ...]:
+        """The effects in force for a model whose scene lists ``scene_effects``."""
+        flags = (("relief", self.relief), ("shadows", self.shadows))
+        return resolve_effects(scene_effects, replace=self.effects, add=[n for n, f in flags if f],
+                               remove=[n for n, f in flags if f is False])
+
+
+@dataclass(frozen=True)
+class RaycastSettings:
+    """The ray caster's knobs. Every accuracy/speed trade-off is one field.
+
+    relief : march the relief shell of segments with ``shell > 0`` (§3); set from the
+        effects in force (:meth:`RenderSettings.frame`)
+    march : ``"adaptive"``: the linear samples of each ray are sized to what its pixel
+        sees, ``march_density`` per relief texel the ray crosses in the shell, where a
+        texel counts at least one pixel's footprint (a far branch takes
+        ``march_min_steps``, a grazing close-up up to ``linear_steps``); ``"fixed"``:
+        ``linear_steps`` samples for every ray (the paper's uniform sampling)
+    linear_steps : fixed march: the samples along the shell interval; adaptive: the most
+    march_density : adaptive march: samples per relief texel crossed
+    march_min_steps : adaptive march: the fewest samples
+    march_precision : adaptive march: bisection stops when the bracket around the hit is
+        shorter than this many pixel footprints (along the ray)
+    binary_steps : bisection steps after the first sample under the relief surface (the
+        adaptive march: the most)
+    v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
+    hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
+        a silhouette tangent to the pyramid are not lost to rasterisation rules
+    labels : write each pixel's row label instead of its colour: red = the row's
+        ``material`` index / 255, unshaded (part masks)
+    proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
+        slow oracle that shows what a too-tight pyramid would lose (tests)
+    height_fetch : ``"gather"`` (one textureGather per bilinear height) or ``"texel"``
+        (four texelFetch with the wrap in GLSL): the same heights; the bench's ablation
+    """
+
+    relief: bool = False
+    march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
+                      "--linear-steps for every ray (fixed, the paper's).", kind="choice",
+                      choices=("adaptive", "fixed"))
+    linear_steps: int = knob(32, "--linear-steps", "Relief: uniform samples through the shell (adaptive march: the "
+                             "most).", kind="int", lo=1, hi=4096)
+    march_density: float = knob(2.0, "--march-density", "Relief, adaptive march: samples per relief texel the ray "
+                                "crosses.", lo=0, lo_open=True)
+    march_min_steps: int = 4
+    march_precision: float = MARCH_PRECISION
+    binary_steps: int = knob(12, "--binary-steps", "Relief: bisection steps after the first sample below the surface "
+                             f"(adaptive march: the most; it stops at {MARCH_PRECISION:g} pixel).",
+                             kind="int", lo=0, hi=64)
+    v_exact: bool = knob(False, "--v-exact", "Relief: v of (7) per sample, or interpolated between entry and exit "
+                         "(the paper's fast path).", kind="bool", flag="--v-exact/--v-interpolated")
+    hull_padding: float = 0.02
+    proxy: str = "pyramid"
+    height_fetch: str = "gather"
+    labels: bool = False
+
+    def __post_init__(self):
+        check_knobs(self)
+        if self.proxy not in ("pyramid", "screen"):
+            raise PlantgenError(f"proxy must be 'pyramid' or 'screen', not {self.proxy!r}")
+        if self.height_fetch not in ("gather", "texel"):
+            raise PlantgenError(f"height fetch must be 'gather' or 'texel', not {self.height_fetch!r}")
+        if self.march_min_steps < 1:
+            raise PlantgenError("relief steps: the minimum steps must be >= 1")
+        if not self.march_precision > 0:
+            raise PlantgenError("march precision (pixels) must be > 0")
+        if not 0 <= self.hull_padding < 1:
+            raise PlantgenError("hull padding must lie in [0, 1)")
+
+    def defines(self) -> dict[str, bool]:
+        """The shader variant these settings select (preprocessor defines)."""
+        return {"RELIEF": self.relief, "V_EXACT": self.relief and self.v_exact,
+                "MARCH_FIXED": self.relief and self.march == "fixed",
+                "HEIGHT_FETCH4": self.height_fetch == "texel",
+                "SCREEN_PROXY": self.proxy == "screen", "LABELS": self.labels}
+
+    def march_uniforms(self) -> dict:
+        """Uniforms of the pyramid and the relief march, shared by the eye's and the light's
+        pass."""
+        return {"hull_padding": self.hull_padding, "linear_steps": self.linear_steps,
+                "binary_steps": self.binary_steps, "march_density": self.march_density,
+                "march_min_steps": self.march_min_steps, "march_precision": self.march_precision,
+                "height_maps": 0}
+
+    def describe(self) -> str:
+        """RC, or RC+R with its march, as reports and the viewer's heads-up line name it."""
+        if not self.relief:
+            return "RC"
+        steps = (f"{self.linear_steps} linear + {self.binary_steps} binary steps" if self.march == "fixed" else
+                 f"adaptive march, {self.march_density:g} samples per texel, at most {self.linear_steps} linear "
+                 f"+ {self.binary_steps} binary steps")
+        return f"RC+R ({steps}, v {'exact' if self.v_exact else 'interpolated'})"
+
+
+@dataclass(frozen=True)
+class ShadowSettings:
+    """The shadow map's knobs.
+
+    resolution : texels per side of the square map
+    caster : ``"relief"`` (the relief surface casts the shadow when relief is on) or
+        ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow pass)
+    bias : constant depth bias in texels (world size of one texel), subtracted from the
+        receiver's light depth after the receiver-plane extrapolation
+    max_slope : clamp of the receiver plane's depth gradient (|tan| of the light's angle
+        to the normal); only surfaces lit at more than atan(max_slope) from their normal
+        may self-shadow, where the diffuse term is below 1/max_slope anyway
+    march_density, march_precision : the relief caster's adaptive march in the light's
+        pass (see :class:`RaycastSettings`), measured in the map's texels instead of the
+        eye's pixels: samples per relief texel the light's ray crosses, and the
+        bisection's bracket in map texels (the receivers' bias is half a texel, so a finer
+        depth is not seen)
+    """
+
+    resolution: int = knob(2048, "--shadow-res", "Shadow map texels per side.", kind="int", lo=16, hi=16384)
+    caster: str = knob("relief", "--shadow-caster", "With relief: the relief surface casts the shadow, or the inner "
+                       "cone (cheaper).", kind="choice", choices=("relief", "inner"))
+    bias: float = 0.5
+    max_slope: float = 50.0
+    march_density: float = 0.5
+    march_precision: float = 0.5
+
+    def __post_init__(self):
+        check_knobs(self)
+        if self.bias < 0 or self.max_slope <= 0:
+            raise PlantgenError("shadow bias must be >= 0 and max slope > 0")
+        if not (self.march_density > 0 and self.march_precision > 0):
+            raise PlantgenError("shadow march density and precision must be > 0")
+
+
+@dataclass(frozen=True)
+class ImageSettings:
+    """The picture: ``size`` (width, height) in pixels (None: a camera file's, else
+    :data:`DEFAULT_SIZE`), ``ssaa`` samples per pixel side, ``background`` by name
+    (``sky``, a colour, ``none``: :func:`plantgen.images.parse_background`)."""
+
+    size: tuple | None = knob(None, "--size", "Image size (WIDTHxHEIGHT pixels; default: the camera file's, else "
+                              f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}).", kind="size", metavar="WxH")
+    ssaa: int = knob(1, "--ssaa", "Supersampling: N x N rays a pixel, averaged in linear light (thin twigs stop "
+                     "breaking into dots; the frame costs about N² times as much).", kind="int", lo=1, hi=MAX_SSAA,
+                     metavar="N")
+    background: str = knob("sky", "--background", "The background: 'sky', a colour (white, '#20304a') or 'none' "
+                           "for a transparent PNG (RGBA: the alpha is the model's coverage).", kind="str",
+                           metavar="COLOUR|none")
+
+    def __post_init__(self):
+        check_knobs(self)
+        if self.size is not None:
+            object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """Time: the pose of a still (``time``, seconds), or an animation of ``frames``
+    frames at ``fps`` starting there."""
+
+    time: float | None = knob(None, "--time", "Seconds: the pose of an animated scene for a still (default 0), or the "
+                              "first frame's time.", lo=0, metavar="T")
+    frames: int | None = knob(None, "--frames", "Write an animation of this many frames (-o .gif or .webp).",
+                              kind="int", lo=1, hi=100_000)
+    fps: float = knob(12.0, "--fps", "Frames per second of the animation.", lo=0, lo_open=True)
+
+    def __post_init__(self):
+        check_knobs(self)
+
+    @property
+    def start(self) -> float:
+        """The first (or only) pose's time."""
+        return float(self.time or 0.0)
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """Where the camera is: ``camera`` ``"auto"`` (the scene's, else the model framed), a
+    camera JSON path or a :class:`~plantgen.geometry.camera.Camera`; ``orbit`` turns it."""
+
+    camera: object = knob("auto", "--camera", "'auto' frames the model to span most of the viewport (or uses the "
+                          "scene's camera); a camera JSON written by --camera-out or by the viewer's C key is taken "
+                          "back.", kind="str", metavar="auto|FILE.json")
+    orbit: Orbit = Orbit()
+
+    @property
+    def auto(self) -> bool:
+        return isinstance(self.camera, str) and self.camera == "auto"
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """A tessellation (GS, GS+R): ``level`` m (16·4^m triangles per frustum, 8·2^m per
+    cap) and ``relief`` (vertices displaced onto the relief shell)."""
+
+    level: int = knob(1, "--subdiv", "Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap.",
+                      kind="int", lo=0, hi=MAX_SUBDIV, metavar="M")
+    relief: bool = False
+
+    def __post_init__(self):
+        check_knobs(self)
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Everything a render is asked for, whole (see the module's docstring)."""
+
+    effects: EffectSettings = EffectSettings()
+    march: RaycastSettings = RaycastSettings()
+    shadows: ShadowSettings = ShadowSettings()
+    image: ImageSettings = ImageSettings()
+    motion: MotionSettings = MotionSettings()
+    view: ViewSettings = ViewSettings()
+
+    @classmethod
+    def from_options(cls, **options) -> RenderSettings:
+        """The settings from flat keywords named as the command line's options
+        (``linear_steps=16, shadow_res=1024, azimuth=60, time=0.5``); a keyword left None
+        keeps its default; an unknown one is one line naming the known ones."""
+        return build_settings(cls, options)
+
+    def frame(self, effects) -> tuple[RaycastSettings, ShadowSettings | None]:
+        """The ray caster's knobs and the shadow map's for the ``effects`` in force: relief
+        on iff they hold ``relief``; no shadow map without ``shadows``."""
+        return (replace(self.march, relief="relief" in effects),
+                self.shadows if "shadows" in effects else None)
+
+
+def settings_knobs(cls) -> list:
+    """(knob, default) of every knob of ``cls``, nested settings included, in declaration order."""
+    out = []
+    for f in fields(cls):
+        k = f.metadata.get("knob")
+        if k is not None:
+            out.append((k, f.default))
+        elif is_dataclass(f.default):
+            out += settings_knobs(type(f.default))
+    return out
+
+
+def option_names(cls) -> tuple[str, ...]:
+    """Every knob name ``cls`` takes, nested settings included."""
+    return tuple(k.name for k, _ in settings_knobs(cls))
+
+
+def build_settings(cls, options: dict):
+    """``cls`` (a settings dataclass, nested ones built in turn) from flat keywords named as
+    the knobs; values left None keep their defaults."""
+    unknown = sorted(set(options) - set(option_names(cls)))
+    if unknown:
+        raise PlantgenError(f"unknown setting {', '.join(unknown)} (known: {', '.join(option_names(cls))})")
+    return _built(cls, options)
+
+
+def _built(cls, options: dict):
+    kw = {}
+    for f in fields(cls):
+        k = f.metadata.get("knob")
+        if k is not None:
+            if options.get(k.name) is not None:
+                kw[f.name] = options[k.name]
+        elif is_dataclass(f.default) and any(options.get(n) is not None for n in option_names(type(f.default))):
+            kw[f.name] = _built(type(f.default), options)
+    return cls(**kw)
