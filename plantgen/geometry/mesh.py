@@ -204,13 +204,28 @@ def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
     radial = cos_phi[..., None] * ref + sin_phi[..., None] * binormal
     points = frusta.base[rows] + y[..., None] * axis + (start_radius + slope * y)[..., None] * radial
 
-    # Normals (8): N_l = P_l - C1, N_u = P_u - C2, each made unit, blended by v. Both
-    # lie in the plane of the axis and the radial direction, so the blend is done on
-    # (axial, radial) components. Where a cone closes to a point on a plane (P_l = C1 or
-    # P_u = C2) the cone's own outward normal on that generator, (-k, 1), stands in.
     cone_len = np.hypot(slope, 1.0)
     scale = np.maximum(np.maximum(np.abs(r1), np.abs(frusta.r2[rows])), length)
+    n_axial, n_radial = _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale)
+    normals = n_axial[..., None] * axis + n_radial[..., None] * radial
+    if relief_slope is not None:
+        around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
+        along = (axis + slope[..., None] * radial) / cone_len[..., None]
+        normals = _relief_tilted(normals, relief_slope, around, along, start_radius + slope * y,
+                                 (y_hi - y_lo) * cone_len, tol.zero_length * scale)
+    return points, normals
 
+
+def _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale):
+    """(axial, radial) components of the interpolated normal (8) at ``v`` on generators cut
+    at axial heights ``y_lo`` and ``y_hi`` (from C1) of cones ``r(y) = start_radius +
+    slope·y`` of axial ``length``; ``cone_len = √(1 + slope²)``, ``scale`` the rows' size.
+
+    N_l = P_l - C1, N_u = P_u - C2, each made unit, blended by v. Both lie in the plane of
+    the axis and the radial direction, so the blend is done on (axial, radial) components.
+    Where a cone closes to a point on a plane (P_l = C1 or P_u = C2) the cone's own outward
+    normal on that generator, (-k, 1), stands in.
+    """
     def unit_or_cone(axial, radius):
         norm = np.hypot(axial, radius)
         tiny = norm <= tol.zero_length * scale
@@ -225,19 +240,20 @@ def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
     norm = np.hypot(n_axial, n_radial)
     degenerate = norm <= 0
     norm = np.where(degenerate, 1.0, norm)
-    n_axial = np.where(degenerate, -slope / cone_len, n_axial / norm)
-    n_radial = np.where(degenerate, 1.0 / cone_len, n_radial / norm)
-    normals = n_axial[..., None] * axis + n_radial[..., None] * radial
-    if relief_slope is not None:
-        du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
-        radius = np.maximum(start_radius + slope * y, tol.zero_length * scale)
-        generator_length = np.maximum((y_hi - y_lo) * cone_len, tol.zero_length * scale)
-        around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
-        along = (axis + slope[..., None] * radial) / cone_len[..., None]
-        tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
-            - (dv / generator_length)[..., None] * along
-        normals = tilted / np.linalg.norm(tilted, axis=-1, keepdims=True)
-    return points, normals
+    return (np.where(degenerate, -slope / cone_len, n_axial / norm),
+            np.where(degenerate, 1.0 / cone_len, n_radial / norm))
+
+
+def _relief_tilted(normals, relief_slope, around, along, radius, generator_length, floor):
+    """(..., 3) unit ``normals`` tilted by the relief's gradient ``relief_slope`` (see
+    :func:`generator_points`): ``around`` and ``along`` are the unit tangents t_u and t_v,
+    ``radius`` ρ and ``generator_length`` (|∂P/∂v|) are floored at ``floor``."""
+    du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
+    radius = np.maximum(radius, floor)
+    generator_length = np.maximum(generator_length, floor)
+    tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
+        - (dv / generator_length)[..., None] * along
+    return tilted / np.linalg.norm(tilted, axis=-1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------- the mesh
