@@ -42,6 +42,7 @@ import numpy as np
 
 from .geometry.skeleton import Skeleton
 from .geometry.topology import Branches, branches
+from .geometry.vec import unit
 
 __all__ = ["BREAST_HEIGHT_M", "CrownProjection", "TreeMetrics", "crown_projection", "end_discs",
            "geometry_bounds", "segment_lengths", "segment_volumes", "trunk_diameter_at", "tree_metrics"]
@@ -68,10 +69,7 @@ def segment_volumes(skeleton: Skeleton) -> np.ndarray:
 def end_discs(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Both end discs of every segment: centres (2n, 3), unit normals (2n, 3) and radii
     (2n,). A segment of zero length gets a zero normal (its discs count as balls)."""
-    axis = skeleton.end - skeleton.start
-    length = np.linalg.norm(axis, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis = np.where(length > 0, axis / np.where(length > 0, length, 1.0), 0.0)
+    axis = unit(skeleton.end - skeleton.start, np.zeros(3))
     centres = np.concatenate([skeleton.start, skeleton.end])
     return centres, np.concatenate([axis, axis]), np.concatenate([skeleton.r_start, skeleton.r_end])
 
@@ -133,8 +131,7 @@ def _support_points(centres, normals, radii, theta) -> tuple[np.ndarray, np.ndar
     """Support value (k,) and point (k, 2) in (x, z) of disc i in direction θ_i."""
     d = np.stack([np.cos(theta), np.zeros_like(theta), np.sin(theta)], axis=-1)       # (k, 3)
     toward = d - np.sum(normals * d, axis=1, keepdims=True) * normals                  # d less its a part
-    size = np.linalg.norm(toward, axis=1, keepdims=True)
-    toward = np.where(size > 1e-300, toward / np.where(size > 1e-300, size, 1.0), 0.0)
+    toward = unit(toward, np.zeros(3))                                                    # 0 where d ∥ a
     point = centres + radii[:, None] * toward
     return np.sum(point * d, axis=1), point[:, [0, 2]]
 

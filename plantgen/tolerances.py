@@ -152,6 +152,30 @@ class Tolerances:
     continues another found by shared planes only if its base lies this close to the
     other's top."""
 
+    # ------------------------------------------------------------------ tessellation
+    seam_snap: float = 1e-4
+    """Relative (to the larger joint radius): two knuckle cut curves (or hinge points) of
+    the mesh (``plantgen.geometry.mesh``) closer than this are one (C's vertices take P's
+    positions); farther apart, a bridge joins them. A bridge narrower than this would be
+    slivers (a nearly cylindrical P, tapering by 4e-5 of its radius, gave zero-area faces
+    that welding folds); the snap moves C's cut by at most this, a tenth of the chord error
+    of the finest level (m = 3: 1.2e-3 r)."""
+
+    flat_bend: float = 1e-6
+    """Radians: a knuckle of the mesh bending less than this is flat (no outer strips: P's
+    top ring joins C's bottom ring directly, or both are capped at a radius step)."""
+
+    # ------------------------------------------------------------------ leaf polygons
+    polygon_area: float = 1e-12
+    """Relative (to the square of an outline's extent, the extent floored at this many world
+    units): a leaf outline's Newell vector (twice its area) below this has no normal (the
+    least-squares plane's stands in), and an ear-clipping corner turning less (twice its
+    triangle's area) is collinear and dropped (``plantgen.geometry.polygons``)."""
+
+    outline_duplicate: float = 1e-9
+    """Relative (to an outline's extent, floored as for ``polygon_area``): consecutive
+    outline points (the last and the first included) closer than this are one vertex."""
+
     # ------------------------------------------------------------------ ray casting
     recenter_parallel: float = 1e-6
     """Relative (to D·D): a ray with ``D·D - (D·a)²`` below this runs along the axis;

@@ -1,6 +1,7 @@
-"""The hard-case suite of design.md, one test per case (plantgen.geometry.stability):
-finite outputs, hits on the skin between the planes, nearest against brute-force
-marching, no holes from the medial axis, and float32 (the GPU) close to float64."""
+"""The hard-case suite (README.md, "Accuracy and stability"), one test per case
+(plantgen.geometry.stability): finite outputs, hits on the skin between the planes,
+nearest against brute-force marching, no holes from the medial axis, and float32 (the
+GPU) close to float64."""
 
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
 """The layout's rules that import-linter and ruff do not check (issue 11): short functions
-where the render path lives, and no private name imported across modules."""
+everywhere in plantgen, and no private name imported across modules."""
 
 from __future__ import annotations
 
@@ -12,8 +12,12 @@ import plantgen
 
 PACKAGE = Path(plantgen.__file__).resolve().parent
 MAX_FUNCTION_LINES = 80
-SHORT_FUNCTION_FILES = ["geometry/skin.py", "scene.py", "pipeline.py",
-                        *sorted(str(p.relative_to(PACKAGE)) for p in (PACKAGE / "render").glob("*.py"))]
+#: Every module of plantgen: no function anywhere may be longer than MAX_FUNCTION_LINES
+#: (counted from the ``def`` line to the last line of the body). No module is exempt.
+#: Note (issue "every fact has one home"): until the split of ``_walk`` in
+#: lsystem/turtle.py (127 lines, done on another branch) is merged, the case
+#: "lsystem/turtle.py" fails; it is the only one.
+MODULES = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py"))
 
 
 def _functions(tree: ast.AST):
@@ -22,8 +26,8 @@ def _functions(tree: ast.AST):
             yield node
 
 
-@pytest.mark.parametrize("relative", SHORT_FUNCTION_FILES)
-def test_functions_of_the_render_path_fit_on_a_screen(relative):
+@pytest.mark.parametrize("relative", MODULES)
+def test_functions_fit_on_a_screen(relative):
     path = PACKAGE / relative
     assert path.is_file(), f"{relative} is part of the layout"
     long = [(f.name, f.end_lineno - f.lineno + 1) for f in _functions(ast.parse(path.read_text()))
@@ -47,9 +51,11 @@ def test_no_private_name_is_imported_across_modules():
 
 def test_the_checks_see_the_code():
     """The rules above would pass vacuously on an empty tree: make sure they read code."""
-    assert len(SHORT_FUNCTION_FILES) >= 8
-    sizes = [sum(1 for _ in _functions(ast.parse((PACKAGE / r).read_text()))) for r in SHORT_FUNCTION_FILES]
-    assert sum(sizes) > 50
+    assert len(MODULES) >= 80
+    assert {"pipeline.py", "scene.py", "geometry/skin.py", "lsystem/turtle.py", "render/raycast.py",
+            "cli/render.py", "export/gltf.py"} <= set(MODULES)
+    sizes = [sum(1 for _ in _functions(ast.parse((PACKAGE / r).read_text()))) for r in MODULES]
+    assert sum(sizes) > 500
     sample = ast.parse("from .x import _hidden, visible\n")
     tmp = [n for n in ast.walk(sample) if isinstance(n, ast.ImportFrom)]
     assert [a.name for a in tmp[0].names if a.name.startswith("_")] == ["_hidden"]

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..tolerances import tol
+
 __all__ = ["UP_AXES", "similarity_trs", "turn_placements", "up_rotation"]
 
 UP_AXES = ("y", "z")
@@ -61,7 +63,7 @@ def _quaternions(rot: np.ndarray) -> np.ndarray:
         sel = big == k
         if not sel.any():
             continue
-        root = np.sqrt(np.maximum(squares[sel, k], 1e-300))      # 2·|q_k|
+        root = np.sqrt(np.maximum(squares[sel, k], tol.tiny))      # 2·|q_k|
         comp = np.empty((int(sel.sum()), 4))
         comp[:, k] = root / 2
         for j in range(4):

@@ -58,10 +58,10 @@ draws; the mesh is its boundary:
   they agree on the hinge line), C's start there; both rings keep ``N`` columns, every
   vertex on its own cone at the ray caster's ``(u, v)`` and normal (8), and C's inner half
   ring is a copy of P's. The inner slices lie inside P ∪ C and get no triangles, no caps.
-- where the two cut curves differ (radii or tapers that differ, by more than ``1e-6`` of
-  the radius), a *bridge* band of ``N - 2`` triangles (``N`` if the hinge points differ)
-  joins P's curve to C's in the cutting plane: the part of one cross-section the other
-  does not cover. It is counted with P's row.
+- where the two cut curves differ (radii or tapers that differ, by more than
+  ``tol.seam_snap`` of the radius), a *bridge* band of ``N - 2`` triangles (``N`` if the
+  hinge points differ) joins P's curve to C's in the cutting plane: the part of one
+  cross-section the other does not cover. It is counted with P's row.
 - a trim may take at most 90 % of any generator of P or C (45 % at each end of a segment
   between two knuckles, so the two never cross). Where the mitre would cut deeper (bends
   near 180°, or segments shorter than about ``1.1·r·tan(bend/2)``, twice that between
@@ -70,8 +70,8 @@ draws; the mesh is its boundary:
   still closed, consistently wound and positive but overlaps itself there: the
   boundary of the union is then not local to the joint (it runs into the next segments
   and their caps, as it does where a chain crosses itself).
-- a knuckle without bend (under 1e-6 rad) joins P's top ring to C's bottom ring directly
-  (copies), or caps both where their radii differ (as a radius step).
+- a knuckle without bend (under ``tol.flat_bend`` rad) joins P's top ring to C's bottom
+  ring directly (copies), or caps both where their radii differ (as a radius step).
 
 So a chain with knuckles is one closed surface without zero-area triangles. Its rows no
 longer all carry ``16·4^m`` triangles (:attr:`TessellatedMesh.uniform_rows` is False:
@@ -108,17 +108,9 @@ __all__ = [
 #: A relief height function: (material (k,) int, u (k,) float, v (k,) float) -> w (k,) in [0, 1].
 HeightFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
-#: Relative (to the joint radius): two knuckle cut curves (or hinge points) closer than this
-#: are one (C's vertices take P's positions); farther apart, a bridge joins them. A bridge
-#: narrower than this would be slivers (a nearly cylindrical P, tapering by 4e-5 of its
-#: radius, gave zero-area faces that welding folds); the snap moves C's cut by at most
-#: this, a tenth of the chord error of the finest level (m = 3: 1.2e-3 r).
-_SEAM_SNAP = 1e-4
 #: Most of a generator's length (between the row's own planes) a knuckle trim may take;
 #: half of it at each end of a segment between two knuckles.
 _TRIM_SHARE = 0.9
-#: Radians: a knuckle bending less than this is flat (no outer strips).
-_FLAT_BEND = 1e-6
 #: Generators sampled on the inner half to bound a trim and to compare the cut curves.
 _TRIM_SAMPLES = 33
 
@@ -212,13 +204,28 @@ def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
     radial = cos_phi[..., None] * ref + sin_phi[..., None] * binormal
     points = frusta.base[rows] + y[..., None] * axis + (start_radius + slope * y)[..., None] * radial
 
-    # Normals (8): N_l = P_l - C1, N_u = P_u - C2, each made unit, blended by v. Both
-    # lie in the plane of the axis and the radial direction, so the blend is done on
-    # (axial, radial) components. Where a cone closes to a point on a plane (P_l = C1 or
-    # P_u = C2) the cone's own outward normal on that generator, (-k, 1), stands in.
     cone_len = np.hypot(slope, 1.0)
     scale = np.maximum(np.maximum(np.abs(r1), np.abs(frusta.r2[rows])), length)
+    n_axial, n_radial = _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale)
+    normals = n_axial[..., None] * axis + n_radial[..., None] * radial
+    if relief_slope is not None:
+        around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
+        along = (axis + slope[..., None] * radial) / cone_len[..., None]
+        normals = _relief_tilted(normals, relief_slope, around, along, start_radius + slope * y,
+                                 (y_hi - y_lo) * cone_len, tol.zero_length * scale)
+    return points, normals
 
+
+def _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale):
+    """(axial, radial) components of the interpolated normal (8) at ``v`` on generators cut
+    at axial heights ``y_lo`` and ``y_hi`` (from C1) of cones ``r(y) = start_radius +
+    slope·y`` of axial ``length``; ``cone_len = √(1 + slope²)``, ``scale`` the rows' size.
+
+    N_l = P_l - C1, N_u = P_u - C2, each made unit, blended by v. Both lie in the plane of
+    the axis and the radial direction, so the blend is done on (axial, radial) components.
+    Where a cone closes to a point on a plane (P_l = C1 or P_u = C2) the cone's own outward
+    normal on that generator, (-k, 1), stands in.
+    """
     def unit_or_cone(axial, radius):
         norm = np.hypot(axial, radius)
         tiny = norm <= tol.zero_length * scale
@@ -233,19 +240,20 @@ def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
     norm = np.hypot(n_axial, n_radial)
     degenerate = norm <= 0
     norm = np.where(degenerate, 1.0, norm)
-    n_axial = np.where(degenerate, -slope / cone_len, n_axial / norm)
-    n_radial = np.where(degenerate, 1.0 / cone_len, n_radial / norm)
-    normals = n_axial[..., None] * axis + n_radial[..., None] * radial
-    if relief_slope is not None:
-        du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
-        radius = np.maximum(start_radius + slope * y, tol.zero_length * scale)
-        generator_length = np.maximum((y_hi - y_lo) * cone_len, tol.zero_length * scale)
-        around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
-        along = (axis + slope[..., None] * radial) / cone_len[..., None]
-        tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
-            - (dv / generator_length)[..., None] * along
-        normals = tilted / np.linalg.norm(tilted, axis=-1, keepdims=True)
-    return points, normals
+    return (np.where(degenerate, -slope / cone_len, n_axial / norm),
+            np.where(degenerate, 1.0 / cone_len, n_radial / norm))
+
+
+def _relief_tilted(normals, relief_slope, around, along, radius, generator_length, floor):
+    """(..., 3) unit ``normals`` tilted by the relief's gradient ``relief_slope`` (see
+    :func:`generator_points`): ``around`` and ``along`` are the unit tangents t_u and t_v,
+    ``radius`` ρ and ``generator_length`` (|∂P/∂v|) are floored at ``floor``."""
+    du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
+    radius = np.maximum(radius, floor)
+    generator_length = np.maximum(generator_length, floor)
+    tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
+        - (dv / generator_length)[..., None] * along
+    return tilted / np.linalg.norm(tilted, axis=-1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------- the mesh
@@ -506,7 +514,7 @@ def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
     turn = cross(n_lo, n_hi)
     kn.bend = np.add.reduceat(np.arctan2(norm(turn), dot(n_lo, n_hi)), kn.start[:-1])
     m1, m2 = frusta.axis[kn.parent], frusta.axis[kn.child]
-    kn.flat = kn.bend < _FLAT_BEND
+    kn.flat = kn.bend < tol.flat_bend
     helper = any_perpendicular(m1)
     k = np.where(kn.flat[:, None], helper, unit(np.add.reduceat(turn, kn.start[:-1], axis=0), helper))
     kn.hinge = k = unit(k - m1 * dot(k, m1)[:, None], helper)
@@ -525,7 +533,7 @@ def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
     at_mitre = (gamma_p == half) & (gamma_c == half) & ~kn.flat
     kn.plane_c[at_mitre] = kn.plane_p[at_mitre]          # one plane, bit for bit
     radius = np.maximum(kn.radius_p, kn.radius_c)
-    kn.merged = np.abs(kn.radius_p - kn.radius_c) <= _SEAM_SNAP * radius
+    kn.merged = np.abs(kn.radius_p - kn.radius_c) <= tol.seam_snap * radius
     # the two cut curves, generator by generator (the mitre maps P's β to C's β)
     ends = []
     for rows, inner, plane in ((kn.parent, kn.inner_p, kn.plane_p), (kn.child, kn.inner_c, kn.plane_c)):
@@ -535,7 +543,7 @@ def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
         ends.append(frusta.base[r] + y[..., None] * frusta.axis[r]
                     + (frusta.r1[r] + frusta.slope[r] * y)[..., None] * e)
     gap = norm(ends[0] - ends[1]).max(axis=1)
-    kn.mitred = at_mitre & kn.merged & (gap <= _SEAM_SNAP * radius)
+    kn.mitred = at_mitre & kn.merged & (gap <= tol.seam_snap * radius)
 
 
 # ---------------------------------------------------------------------------- the plan

@@ -25,11 +25,10 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Polygons", "PolygonBuilder", "triangulate", "best_fit_normal"]
+from ..tolerances import tol
+from .vec import unit
 
-#: Relative size under which two consecutive outline points are the same vertex, and a
-#: polygon's area counts as none.
-_EPS = 1e-12
+__all__ = ["Polygons", "PolygonBuilder", "triangulate", "best_fit_normal"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +84,7 @@ class Polygons:
         m = np.asarray(matrix, dtype=np.float64)
         lin, t = m[:3, :3], m[:3, 3]
         normal = self.normal @ np.linalg.inv(lin)          # (lin^-T n) for each row n
-        normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        normal = unit(normal)
         triangles = self.triangles if np.linalg.det(lin) > 0 else self.triangles[:, ::-1].copy()
         return Polygons(self.vertices @ lin.T + t, triangles, self.polygon, self.material, normal, self.segment)
 
@@ -133,8 +132,8 @@ def best_fit_normal(points: np.ndarray) -> np.ndarray:
                   np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
                   np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1]))])
     size = np.linalg.norm(n)
-    scale = max(float(np.ptp(p, axis=0).max()), _EPS)
-    if size > _EPS * scale * scale:
+    scale = max(float(np.ptp(p, axis=0).max()), tol.polygon_area)
+    if size > tol.polygon_area * scale * scale:
         return n / size
     _, _, vt = np.linalg.svd(p - p.mean(axis=0))
     return vt[2]
@@ -152,12 +151,12 @@ def _plane_coordinates(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 def _dedupe(points: np.ndarray) -> np.ndarray:
     """The outline without repeated consecutive points (the closing one included)."""
-    scale = max(float(np.ptp(points, axis=0).max()) if len(points) else 0.0, _EPS)
+    scale = max(float(np.ptp(points, axis=0).max()) if len(points) else 0.0, tol.polygon_area)
     keep = []
     for i, p in enumerate(points):
-        if not keep or np.linalg.norm(p - points[keep[-1]]) > 1e-9 * scale:
+        if not keep or np.linalg.norm(p - points[keep[-1]]) > tol.outline_duplicate * scale:
             keep.append(i)
-    if len(keep) > 1 and np.linalg.norm(points[keep[0]] - points[keep[-1]]) <= 1e-9 * scale:
+    if len(keep) > 1 and np.linalg.norm(points[keep[0]] - points[keep[-1]]) <= tol.outline_duplicate * scale:
         keep.pop()
     return points[keep]
 
@@ -177,8 +176,8 @@ def _ear_clip(uv: np.ndarray) -> list[tuple[int, int, int]]:
     its remaining vertices rather than dropped."""
     idx = list(range(len(uv)))
     tris: list[tuple[int, int, int]] = []
-    scale = max(float(np.ptp(uv, axis=0).max()), _EPS)
-    flat = _EPS * scale * scale
+    scale = max(float(np.ptp(uv, axis=0).max()), tol.polygon_area)
+    flat = tol.polygon_area * scale * scale
     while len(idx) > 3:
         n = len(idx)
         for k in range(n):

@@ -528,74 +528,80 @@ def render_reference(frusta: Frusta, camera: Camera, *, relief=None, dtype=np.fl
     height = _resolve_relief(frusta, relief)
     eye = np.asarray(camera.eye, dtype=np.float64)
     up = _Upload(frusta, dtype, eye if isinstance(origin, str) else origin)
-    n = len(frusta)
     best_t = np.full(H * W, np.inf)
     best_row = np.full(H * W, -1, dtype=np.int64)
     best_kind = np.zeros(H * W, dtype=np.int8)
-    if n:
+    if len(frusta):
         corners = bounding_pyramids(frusta, shell=height is not None)
         spheres = _bounding_spheres(corners)
-        right, upv, fwd = camera.basis()
-        rel = corners - eye
-        z = rel @ fwd
-        tan_y = np.tan(np.radians(camera.fov_y) / 2)
-        tan_x = tan_y * camera.aspect
-        scale = np.abs(rel).max(axis=(1, 2))
-        behind = (z <= tol.behind_eye * np.maximum(scale, tol.tiny)[:, None]).any(axis=1)
-        zc = np.where(z > 0, z, 1.0)
-        px = ((rel @ right) / zc / tan_x + 1) / 2 * W - 0.5
-        py = (1 - (rel @ upv) / zc / tan_y) / 2 * H - 0.5
-        nx, ny = (W + tile - 1) // tile, (H + tile - 1) // tile
-        tx0 = np.where(behind, 0, np.clip(np.floor((px.min(1) - 1) / tile), 0, nx)).astype(np.int64)
-        tx1 = np.where(behind, nx - 1, np.clip(np.floor((px.max(1) + 1) / tile), -1, nx - 1)).astype(np.int64)
-        ty0 = np.where(behind, 0, np.clip(np.floor((py.min(1) - 1) / tile), 0, ny)).astype(np.int64)
-        ty1 = np.where(behind, ny - 1, np.clip(np.floor((py.max(1) + 1) / tile), -1, ny - 1)).astype(np.int64)
-        cx = np.maximum(tx1 - tx0 + 1, 0)
-        cy = np.maximum(ty1 - ty0 + 1, 0)
-        cnt = cx * cy
-        row_of = np.repeat(np.arange(n), cnt)
-        k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        tile_x = tx0[row_of] + k % np.repeat(np.maximum(cx, 1), cnt)
-        tile_y = ty0[row_of] + k // np.repeat(np.maximum(cx, 1), cnt)
-        tile_id = tile_y * nx + tile_x
-        order = np.argsort(tile_id, kind="stable")
-        tile_id, row_of = tile_id[order], row_of[order]
-        bounds = np.searchsorted(tile_id, np.arange(nx * ny + 1))
-        pending_r, pending_rows = [], []
-        pending = 0
-
-        def flush():
-            nonlocal pending
-            if not pending_r:
-                return
-            ri = np.concatenate(pending_r)
-            rows = np.concatenate(pending_rows)
+        for ri, rows in _tile_pairs(corners, camera, tile, max_pairs):
             t, kind = _test_pairs(frusta, up, ri, rows, O, D, recenter, 0.0, height, spheres,
                                   relief_samples)
             _reduce_nearest(H * W, ri, rows, t, kind, best_t, best_row, best_kind)
-            pending_r.clear()
-            pending_rows.clear()
-            pending = 0
-
-        for tid in range(nx * ny):
-            a, b = bounds[tid], bounds[tid + 1]
-            if a == b:
-                continue
-            ty, tx = divmod(tid, nx)
-            ys = np.arange(ty * tile, min((ty + 1) * tile, H))
-            xs = np.arange(tx * tile, min((tx + 1) * tile, W))
-            pix = (ys[:, None] * W + xs[None, :]).ravel()
-            rows = row_of[a:b]
-            pending_r.append(np.repeat(pix, len(rows)))
-            pending_rows.append(np.tile(rows, len(pix)))
-            pending += len(pix) * len(rows)
-            if pending >= max_pairs:
-                flush()
-        flush()
     hits = _make_hits(frusta, O, D, best_t, best_row, best_kind, (H, W))
     u, v, nrm = shade_hits(frusta, hits, interpolated=interpolated, to_eye=-D)
     return ReferenceImage(hit=hits.hit, t=hits.t, row=hits.row, segment=hits.segment, u=u, v=v,
                           normal=nrm, camera=camera)
+
+
+def _tile_bins(corners, camera: Camera, tile: int):
+    """Rows binned into the camera's ``tile`` × ``tile`` pixel tiles by the screen box of
+    their bounding pyramids' ``corners`` (n, 8, 3) (rows reaching behind the eye go to every
+    tile): (nx, ny) tiles, the rows (k,) sorted by tile, and where each tile's rows begin
+    (nx·ny + 1,)."""
+    H, W = camera.height, camera.width
+    n = len(corners)
+    right, upv, fwd = camera.basis()
+    rel = corners - np.asarray(camera.eye, dtype=np.float64)
+    z = rel @ fwd
+    tan_y = np.tan(np.radians(camera.fov_y) / 2)
+    tan_x = tan_y * camera.aspect
+    scale = np.abs(rel).max(axis=(1, 2))
+    behind = (z <= tol.behind_eye * np.maximum(scale, tol.tiny)[:, None]).any(axis=1)
+    zc = np.where(z > 0, z, 1.0)
+    px = ((rel @ right) / zc / tan_x + 1) / 2 * W - 0.5
+    py = (1 - (rel @ upv) / zc / tan_y) / 2 * H - 0.5
+    nx, ny = (W + tile - 1) // tile, (H + tile - 1) // tile
+    tx0 = np.where(behind, 0, np.clip(np.floor((px.min(1) - 1) / tile), 0, nx)).astype(np.int64)
+    tx1 = np.where(behind, nx - 1, np.clip(np.floor((px.max(1) + 1) / tile), -1, nx - 1)).astype(np.int64)
+    ty0 = np.where(behind, 0, np.clip(np.floor((py.min(1) - 1) / tile), 0, ny)).astype(np.int64)
+    ty1 = np.where(behind, ny - 1, np.clip(np.floor((py.max(1) + 1) / tile), -1, ny - 1)).astype(np.int64)
+    cx = np.maximum(tx1 - tx0 + 1, 0)
+    cy = np.maximum(ty1 - ty0 + 1, 0)
+    cnt = cx * cy
+    row_of = np.repeat(np.arange(n), cnt)
+    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    tile_x = tx0[row_of] + k % np.repeat(np.maximum(cx, 1), cnt)
+    tile_y = ty0[row_of] + k // np.repeat(np.maximum(cx, 1), cnt)
+    tile_id = tile_y * nx + tile_x
+    order = np.argsort(tile_id, kind="stable")
+    tile_id, row_of = tile_id[order], row_of[order]
+    return nx, ny, row_of, np.searchsorted(tile_id, np.arange(nx * ny + 1))
+
+
+def _tile_pairs(corners, camera: Camera, tile: int, max_pairs: int):
+    """Batches (pixel indices (k,), rows (k,)) of the (pixel, row) pairs to test, tile by
+    tile (:func:`_tile_bins`); a batch closes once it holds ``max_pairs`` pairs or more."""
+    H, W = camera.height, camera.width
+    nx, ny, row_of, bounds = _tile_bins(corners, camera, tile)
+    pending_r, pending_rows, pending = [], [], 0
+    for tid in range(nx * ny):
+        a, b = bounds[tid], bounds[tid + 1]
+        if a == b:
+            continue
+        ty, tx = divmod(tid, nx)
+        ys = np.arange(ty * tile, min((ty + 1) * tile, H))
+        xs = np.arange(tx * tile, min((tx + 1) * tile, W))
+        pix = (ys[:, None] * W + xs[None, :]).ravel()
+        rows = row_of[a:b]
+        pending_r.append(np.repeat(pix, len(rows)))
+        pending_rows.append(np.tile(rows, len(pix)))
+        pending += len(pix) * len(rows)
+        if pending >= max_pairs:
+            yield np.concatenate(pending_r), np.concatenate(pending_rows)
+            pending_r, pending_rows, pending = [], [], 0
+    if pending_r:
+        yield np.concatenate(pending_r), np.concatenate(pending_rows)
 
 
 # ------------------------------------------------------------------------------ brute force

@@ -120,7 +120,7 @@ def smooth_bends(skeleton: Skeleton, min_bend_deg: float, *, step_deg: float = D
             return SmoothResult(skeleton, np.arange(n), 0, 0, v_part=np.tile(np.array([0, 1], np.int64), (n, 1)))
     d = R * tan_half
     k = (np.full(len(c), int(segments)) if segments is not None
-         else np.maximum(1, np.ceil(np.degrees(theta) / step_deg - 1e-9)).astype(np.int64))
+         else np.maximum(1, np.ceil(np.degrees(theta) / step_deg - tol.count_rounding)).astype(np.int64))
     k = np.minimum(k, MAX_CHORDS)
     # ---- shortened segments (a segment may lose length at both ends)
     d_start, d_end = np.zeros(n), np.zeros(n)

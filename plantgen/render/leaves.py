@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.polygons import Polygons
+from ..geometry.vec import norm, unit
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["LeafLayer", "leaf_vertices", "leaf_bounds", "union_box", "LEAF_VERTEX_LAYOUT"]
@@ -33,13 +34,11 @@ def _vertex_normals(polygons: Polygons) -> np.ndarray:
         face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])   # 2 * area * unit normal
         for k in range(3):
             np.add.at(normals, t[:, k], face)
-    length = np.linalg.norm(normals, axis=1)
-    fallback = length <= 0
+    fallback = norm(normals) <= 0
     if fallback.any():
         owner = polygons.vertex_polygon
         normals[fallback] = polygons.normal[owner[fallback]] if len(polygons) else (0.0, 1.0, 0.0)
-        length = np.linalg.norm(normals, axis=1)
-    return normals / np.maximum(length, 1e-300)[:, None]
+    return unit(normals)
 
 
 def leaf_tones(count: int) -> np.ndarray:
