@@ -141,7 +141,8 @@ def test_effects_resolve_against_the_scenes_list():
 knob_values = st.fixed_dictionaries({}, optional={
     "linear_steps": st.integers(1, 4096), "binary_steps": st.integers(0, 64),
     "march": st.sampled_from(["adaptive", "fixed"]), "march_density": st.floats(0.01, 100),
-    "v_exact": st.booleans(), "shadow_res": st.integers(16, 16384), "shadow_caster": st.sampled_from(["relief", "inner"]),
+    "v_exact": st.booleans(), "shadow_res": st.integers(16, 16384),
+    "shadow_caster": st.sampled_from(["relief", "inner"]),
     "ssaa": st.integers(1, 8), "background": st.sampled_from(["sky", "white", "none", "#20304a"]),
     "time": st.floats(0, 1e4), "frames": st.integers(1, 100), "fps": st.floats(0.1, 120),
     "relief": st.booleans(), "shadows": st.booleans(),
