@@ -43,7 +43,7 @@ from ..files import write_atomically
 from ..geometry.reference import render_reference
 from ..render.context import renderer_name
 from ..render.raycast import Raycaster
-from ..settings import RaycastSettings, ShadowSettings
+from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from .arguments import image_size
 
 __all__ = ["EYE_LEVERS", "measure_model", "main"]
@@ -163,7 +163,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.ablation",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", help=f"grammar/scene names (default: {', '.join(TABLE1_MODELS)})")
-    parser.add_argument("--size", type=image_size, default="1024x768")
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)
     parser.add_argument("--eval-size", type=image_size, default="128x96")
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--out", type=Path, help="write the Markdown table here")

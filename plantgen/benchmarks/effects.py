@@ -35,7 +35,7 @@ from ..pipeline import grow_file, stage_model
 from ..render.context import renderer_name
 from ..render.raycast import Raycaster
 from ..render.records import RecordStream
-from ..settings import RaycastSettings, ShadowSettings
+from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from .arguments import image_size
 
 
@@ -154,7 +154,7 @@ def animation_update(width, height, frames):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.effects",
                                      description=__doc__.split("\n")[0])
-    parser.add_argument("--size", type=image_size, default="1024x768")
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--anim-frames", type=int, default=12)
     parser.add_argument("--scenes", nargs="*", default=["well", "desert"])

@@ -26,12 +26,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..bench.paper import TABLE1_MODELS
+from ..settings import DEFAULT_SIZE
 from .arguments import image_size, shipped_model_paths
 
 __all__ = ["Entry", "entries", "command_line", "main"]
 
-#: Where a render entry's image size goes in its command.
-DEFAULT_SIZE = (1024, 768)
 
 #: The scenes of the paper's figures, shaded as their files ask (relief and shadows).
 SCENES = ("well", "desert", "oasis", "dancing_cacti")

@@ -21,7 +21,7 @@ from ..pipeline import grow_file, model_leaves, stage_model
 from ..render.context import renderer_name
 from ..render.raster import RasterRenderer
 from ..render.raycast import Raycaster
-from ..settings import RaycastSettings, ShadowSettings
+from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from .arguments import image_size
 from .gallery import LEAFY_MODELS
 
@@ -68,7 +68,8 @@ def measure(name: str, width: int, height: int, frames: int, level: int) -> dict
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.leaves", description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", metavar="MODEL", help="grammar names or paths (default: the leafy ones)")
-    parser.add_argument("--size", type=image_size, default=(1024, 768), help="frame size WxH (default 1024x768)")
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE,
+                        help="frame size WxH (default: the renders', {}x{})".format(*DEFAULT_SIZE))
     parser.add_argument("--frames", type=int, default=7, help="timed frames of each variant (default 7)")
     parser.add_argument("--level", type=int, default=1, help="GS subdivision level m (default 1)")
     args = parser.parse_args(argv)

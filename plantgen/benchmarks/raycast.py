@@ -28,7 +28,7 @@ from ..pipeline import load_skeleton
 from ..render.context import renderer_name
 from ..render.raycast import Raycaster
 from ..render.records import RECORD_BYTES, rc_buffer_bytes
-from ..settings import RaycastSettings
+from ..settings import DEFAULT_SIZE, RaycastSettings
 from .arguments import image_size, shipped_model_paths
 
 
@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.raycast",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", help="grammar, scene or .npz (default: all shipped)")
-    parser.add_argument("--size", type=image_size, default="1024x768")
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)
     parser.add_argument("--frames", type=int, default=7)
     parser.add_argument("--linear-steps", type=int, default=32)
     parser.add_argument("--binary-steps", type=int, default=6)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from ..pipeline import prepare_model, resolve_input
 from ..render.context import gl_context, renderer_name
+from ..settings import DEFAULT_SIZE
 from ..viewer.session import ViewerSession, ViewOptions
 from .arguments import image_size
 
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("model", nargs="?", default="pine", help="a shipped grammar name or a grammar path")
     parser.add_argument("--edits", type=int, default=9)
-    parser.add_argument("--size", type=image_size, default=(1024, 768))
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         grammar = Path(tmp) / resolve_input(args.model).name
