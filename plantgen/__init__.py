@@ -9,9 +9,6 @@ The public API mirrors the command line::
     plantgen.export("pine", "pine.glb", subdiv=2)             # -> summary dict
 """
 
-import sys
-import types
-
 from .geometry.skeleton import Skeleton, SkeletonError
 
 __version__ = "0.1.0"
@@ -70,23 +67,6 @@ def export(path, output, *, subdiv=1, relief=False, seed=None, limits=None, allo
 
     return export_model(path, output, level=subdiv, relief=relief, seed=seed, limits=limits,
                         allow_paths=allow_paths, **options)
-
-
-class _Package(types.ModuleType):
-    """plantgen's module type: the names ``render`` and ``export`` stay the API functions.
-
-    Importing a submodule binds its name on the parent package, and plantgen has a
-    ``render`` subpackage and an ``export`` module; without this, the first
-    ``import plantgen.render.raycast`` (made by ``plantgen.render()`` itself) would replace
-    the function. The submodules stay importable by their full names."""
-
-    def __setattr__(self, name, value):
-        if name in ("render", "export") and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 def __getattr__(name):

@@ -9,7 +9,7 @@ Leaves (the grammar's polygons) move rigidly with the segment each hangs from: t
 that segment's total turn about its instance's axis, about the segment's start
 (:meth:`AnimatedScene.leaves_at`), as the pose turns the segment itself.
 
-The GPU side is a record sink (:class:`plantgen.render.records.RecordStream`): it packs
+The GPU side is a record sink (:class:`plantgen.gl.records.RecordStream`): it packs
 and uploads the static rows once and the moving rows every frame. This module imports no
 GL: :meth:`AnimatedScene.upload` is handed the sink.
 """
@@ -34,7 +34,7 @@ __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink"]
 
 
 class RecordSink(Protocol):
-    """Where an animation's records go each frame (plantgen.render.records.RecordStream)."""
+    """Where an animation's records go each frame (plantgen.gl.records.RecordStream)."""
 
     buffer: object
 

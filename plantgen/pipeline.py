@@ -37,8 +37,8 @@ import numpy as np
 from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
-from .export import ExportError, Plant, check_extra, estimate_export_bytes, export_format, write_plants
-from .export.qsm import write_qsm
+from .exporters import ExportError, Plant, check_extra, estimate_export_bytes, export_format, write_plants
+from .exporters.qsm import write_qsm
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
@@ -49,16 +49,16 @@ from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .geometry.swc import read_swc, write_swc
+from .gl.context import renderer_name
+from .gl.raycast import Raycaster
+from .gl.records import RecordStream
+from .gl.result import RenderResult
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import Drawing, interpret_plant
-from .render.context import renderer_name
-from .render.raycast import Raycaster
-from .render.records import RecordStream
-from .render.result import RenderResult
 from .scene import Scene, is_scene, parse_scene
 from .settings import (
     DEFAULT_SIZE,
@@ -618,7 +618,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     Parameters
     ----------
     input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
-    output_path : the file; its suffix names the format (:mod:`plantgen.export.formats`)
+    output_path : the file; its suffix names the format (:mod:`plantgen.exporters.formats`)
     level, relief : the tessellation (GS, GS+R) of the mesh formats
     up : ``"y"`` or ``"z"``; default the format's convention
     instancing : how a scene's repeated plants are written where the format can
@@ -626,7 +626,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         ``PointInstancer``; ``"nodes"`` once, with one node per copy (core glTF; USD
         instanceable references); ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
-    qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.export.qsm`)
+    qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
     progress : ``progress(stage, done, total)``, called as plants are tessellated and
         the file written
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
@@ -640,7 +640,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
     a scene's plants (once per distinct plant when instanced), written beside the frusta
     and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
-    model, what :func:`plantgen.export.qsm.write_qsm`
+    model, what :func:`plantgen.exporters.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over
     ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
     """

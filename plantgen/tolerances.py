@@ -11,7 +11,7 @@ axial height).
 
 GLSL programs see the fields in :data:`GLSL_FIELDS` as macros ``TOL_<FIELD>`` (for
 example ``TOL_RECENTER_PARALLEL``): :meth:`Tolerances.glsl_defines`, which the shader
-loader (``plantgen.render.shaders``) adds to every program. Their values are written with
+loader (``plantgen.gl.shaders``) adds to every program. Their values are written with
 ``repr`` (``1e-06``), which a GLSL compiler reads as the same float32 as the literal
 ``1e-6``.
 """

@@ -1,6 +1,6 @@
 """GL fixtures shared by every test that draws: one headless EGL context, error-checked.
 
-``gl_ctx`` hands out plantgen's shared context (plantgen.render.context, EGL: llvmpipe in
+``gl_ctx`` hands out plantgen's shared context (plantgen.gl.context, EGL: llvmpipe in
 CI) and asserts that the GL error flag is clear before and after each test, as moderngl's
 own test-suite does, so a test that leaves a GL error behind fails by name.
 
@@ -26,7 +26,7 @@ if os.environ.get("CI"):
 
 
 def _context_or_skip():
-    from plantgen.render.context import GLContextError, gl_context
+    from plantgen.gl.context import GLContextError, gl_context
 
     try:
         return gl_context()

@@ -12,9 +12,9 @@ from test_effects import SCENE
 
 from plantgen.animation import AnimatedScene
 from plantgen.geometry.camera import Camera
+from plantgen.gl.raycast import Raycaster
+from plantgen.gl.records import RECORD_BYTES, RecordStream
 from plantgen.pipeline import grow_file
-from plantgen.render.raycast import Raycaster
-from plantgen.render.records import RECORD_BYTES, RecordStream
 from plantgen.settings import RaycastSettings
 
 
@@ -142,7 +142,7 @@ def test_shadowed_frames_change_only_where_the_moving_plant_or_its_shadow_is(gl_
     change only on the moving plant and in its shadow, in either frame; the static post,
     its shadow and the open ground stay identical."""
     from plantgen.geometry.reference import intersect_frusta
-    from plantgen.render.passes import ShadowSettings
+    from plantgen.gl.passes import ShadowSettings
 
     anim = AnimatedScene.from_scene(scene)
     times = (0.30, 0.32)

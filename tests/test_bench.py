@@ -17,8 +17,11 @@ import numpy as np
 import pytest
 from _cli import run_cli
 
-from plantgen import bench
-from plantgen.bench import (
+from plantgen import table1
+from plantgen.errors import PlantgenError
+from plantgen.geometry.camera import Camera
+from plantgen.geometry.skeleton import Skeleton
+from plantgen.table1 import (
     PAPER_TABLE1,
     RELIEF_ERROR,
     BenchOptions,
@@ -36,9 +39,6 @@ from plantgen.bench import (
     summary_lines,
     walk_levels,
 )
-from plantgen.errors import PlantgenError
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.skeleton import Skeleton
 
 
 # ------------------------------------------------------------------------ metric helpers
@@ -184,7 +184,7 @@ def test_relief_config_is_the_fastest_within_the_error_bound_else_the_most_accur
 
 
 def test_relief_sweeps_vary_one_field_from_the_defaults_and_a_new_knob_is_one_sweep():
-    from plantgen.render.raycast import RaycastSettings
+    from plantgen.gl.raycast import RaycastSettings
 
     opts = BenchOptions(linear_steps=(4, 32), binary_steps=(0, 6), march_densities=(1.0, 2.0))
     keys = [c.key for c in relief_configs(opts)]
@@ -375,7 +375,7 @@ def test_quality_criterion_picks_a_higher_level_for_a_finer_relief_map(gl_ctx, t
         for name in ("ripple_coarse", "ripple_fine"):
             path = tmp_path / f"{name}.npz"
             _column(name).save(path)
-            result = bench.bench_model(str(path), opts)
+            result = table1.bench_model(str(path), opts)
             assert result["relief"]
             assert result["rcr"]["error"] < 0.05
             levels[name] = (result["gsr_level"], result["gsr_matched"])
@@ -392,12 +392,12 @@ def test_quality_criterion_picks_a_higher_level_for_a_finer_relief_map(gl_ctx, t
 def test_fps_come_from_the_measured_frame_times(gl_ctx, monkeypatch):
     """Each fps is 1000 / median of its own frame samples; make the ray caster 200 ms
     slower per frame and its reported fps follows, while GS (not slowed) does not."""
-    from plantgen.render.raycast import Raycaster
+    from plantgen.gl.raycast import Raycaster
 
     # a budget that stops GS and GS+R at m = 1 (30 segments x 64 triangles) keeps this short
     opts = BenchOptions.quick_run(models=("saguaro",), frames=3, max_triangles=2000,
                                   linear_steps=(8,), binary_steps=())
-    fast = bench.bench_model("saguaro", opts)
+    fast = table1.bench_model("saguaro", opts)
     for key in ("rc", "rcr", "gs", "gsr"):
         entry = fast[key]
         assert len(entry["ms_samples"]) == opts.frames
@@ -413,7 +413,7 @@ def test_fps_come_from_the_measured_frame_times(gl_ctx, monkeypatch):
         return result
 
     monkeypatch.setattr(Raycaster, "render", slow_render)
-    slow = bench.bench_model("saguaro", opts)
+    slow = table1.bench_model("saguaro", opts)
     assert slow["rc"]["fps"] < 5.0 < fast["rc"]["fps"]
     assert slow["rcr"]["fps"] < 5.0
     assert slow["gs"]["fps"] > 5.0
@@ -437,13 +437,13 @@ def test_an_unmatched_method_gets_a_note_with_the_budget_and_the_ray_casters_edg
                      "error 0.1480 at m=5"}
     model = {"gs_match": {"matched": True, "text": "matched at m=3"}, "gsr_match": match,
              "rcr": {"fps": 20.0, "error": 0.002}, "gsr": {"fps": 10.0, "error": 0.148}}
-    assert bench.match_notes(model) == [
+    assert table1.match_notes(model) == [
         "GS+R not matched: m=6 over the triangle budget (524,288 triangles), best measured error 0.1480 "
         "at m=5 (--max-triangles); RC+R (rc+r:linear=8) is more accurate (err 0.0020 vs 0.1480) and "
         "2.00× faster than the best GS+R mesh within the budget (m=5)"]
-    slower = bench.match_notes({**model, "rcr": {"fps": 4.0, "error": 0.002}})
+    slower = table1.match_notes({**model, "rcr": {"fps": 4.0, "error": 0.002}})
     assert "2.50× slower" in slower[0]
-    assert bench.match_notes({**model, "gsr_match": {**match, "matched": True}}) == []
+    assert table1.match_notes({**model, "gsr_match": {**match, "matched": True}}) == []
 
 
 def test_cli_passes_the_relief_error_and_the_budget(tmp_path, monkeypatch):
@@ -470,7 +470,7 @@ def test_the_ablation_turns_each_lever_off_alone_and_scores_both_sides(gl_ctx):
     import dataclasses
 
     from plantgen.benchmarks.ablation import EYE_LEVERS, markdown, measure_model
-    from plantgen.render.raycast import Raycaster
+    from plantgen.gl.raycast import Raycaster
 
     for lever, on, off in EYE_LEVERS:
         changed = {f.name for f in dataclasses.fields(on) if getattr(on, f.name) != getattr(off, f.name)}

@@ -17,8 +17,8 @@ import pytest
 from plantgen._resources import shaders_dir
 from plantgen.geometry.frusta import plane_height
 from plantgen.geometry.reference import difference_of_products, solve_quadratic
-from plantgen.render.context import release_framebuffer
-from plantgen.render.shaders import build_program
+from plantgen.gl.context import release_framebuffer
+from plantgen.gl.shaders import build_program
 
 PROGRAM = """
 #include "cone.glsl"

@@ -10,8 +10,8 @@ import pytest
 from _cli import run_cli
 
 from plantgen.errors import PlantgenError
+from plantgen.gl.shaders import build_program
 from plantgen.pipeline import render_file
-from plantgen.render.shaders import build_program
 from plantgen.settings import resolve_effects
 
 SCENE = """

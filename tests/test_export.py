@@ -16,7 +16,7 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node
 from test_mesh import BENT, chain_frusta, concat_frusta
 
-from plantgen.export import EXPORT_FORMATS, ExportError, export_mesh
+from plantgen.exporters import EXPORT_FORMATS, ExportError, export_mesh
 from plantgen.geometry.frames import up_rotation
 from plantgen.geometry.mesh import tessellate
 
@@ -172,7 +172,7 @@ def test_bad_targets_are_user_errors_and_leave_nothing(tmp_path):
 def test_a_failed_pair_leaves_neither_file(tmp_path, monkeypatch):
     """OBJ + MTL and .gltf + .bin are written together: a failure in the second leaves
     neither, and no temporary file."""
-    from plantgen.export import obj
+    from plantgen.exporters import obj
 
     mesh = two_material_model(0)
 
@@ -248,7 +248,7 @@ def test_a_missing_extra_is_one_line_naming_the_install_command(tmp_path, monkey
     line that says what to install (exit status 2)."""
     import importlib.util
 
-    from plantgen.export import formats
+    from plantgen.exporters import formats
 
     real = importlib.util.find_spec
     monkeypatch.setattr(formats.importlib.util, "find_spec",

@@ -13,7 +13,7 @@ import trimesh
 from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_meshes
 
-from plantgen.export import export_mesh
+from plantgen.exporters import export_mesh
 from plantgen.geometry.frames import turn_placements
 from plantgen.geometry.mesh import tessellate
 from plantgen.geometry.skeleton import Skeleton

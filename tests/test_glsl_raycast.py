@@ -16,9 +16,9 @@ from plantgen.geometry.camera import Camera, auto_camera
 from plantgen.geometry.frusta import Frusta, frusta_bounds
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
-from plantgen.render import materials as render_materials
-from plantgen.render.raycast import Raycaster
-from plantgen.render.records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES, pack_records
+from plantgen.gl import material_uniforms as render_materials
+from plantgen.gl.raycast import Raycaster
+from plantgen.gl.records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_BYTES, pack_records
 from plantgen.settings import RaycastSettings
 
 W, H = 160, 120
@@ -118,7 +118,7 @@ def holes_and_speckles(hit):
 
 @pytest.fixture(scope="module")
 def caster():
-    from plantgen.render.context import gl_context
+    from plantgen.gl.context import gl_context
     return Raycaster(gl_context())
 
 

@@ -116,7 +116,7 @@ def inside_cameras(skeleton, views=12, size=64, seed=0):
 
 @pytest.mark.parametrize("name", sorted(ISSUE_CHAINS))
 def test_a_camera_inside_the_tube_sees_no_background(gl_ctx, name):
-    from plantgen.render.raycast import Raycaster
+    from plantgen.gl.raycast import Raycaster
 
     bends, radii = ISSUE_CHAINS[name]
     skeleton = chain_skeleton(bends, 1.0, radii)
@@ -190,9 +190,9 @@ def test_no_lit_pixel_is_darker_than_its_ambient_term(gl_ctx):
     albedo of the material, sky light 0.5 + 0.5·n_y); negating (8) left black slivers."""
     from plantgen.geometry.materials import material_palette
     from plantgen.geometry.mesh import tessellate
-    from plantgen.render.materials import AMBIENT_COLOR
-    from plantgen.render.raster import RasterRenderer
-    from plantgen.render.raycast import Raycaster
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR
+    from plantgen.gl.raster import RasterRenderer
+    from plantgen.gl.raycast import Raycaster
 
     frusta = skin_skeleton(BENT_ARM)
     caster, raster = Raycaster(gl_ctx), RasterRenderer(gl_ctx)
@@ -253,7 +253,7 @@ def test_thin_joints_in_float32_agree_with_float64_close_up(gl_ctx, renderer):
     relative to bases 1e4 r away; without the joint slack both rows reject hits in a slab
     by the shared plane and the ray sees the far side of the tube (hundreds of pixels in
     these views). Off silhouettes float32 must agree with float64 to 1 % of depth."""
-    from plantgen.render.raycast import Raycaster
+    from plantgen.gl.raycast import Raycaster
 
     frusta = skin_skeleton(THIN)
     caster = Raycaster(gl_ctx)
@@ -280,7 +280,7 @@ def test_knuckle_meshes_rasterise_with_their_rows_materials(gl_ctx):
     segment the reference hits there (two materials far apart in colour; where the facets
     and the cones part at an edge, a pixel may show the other)."""
     from plantgen.geometry.mesh import tessellate
-    from plantgen.render.raster import RasterRenderer
+    from plantgen.gl.raster import RasterRenderer
 
     skeleton = chain_skeleton([150.0], 1.0, 0.15, material_names=("bark", "cactus"))
     skeleton = type(skeleton)(skeleton.start, skeleton.end, skeleton.r_start, skeleton.r_end,

@@ -17,8 +17,8 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node
 from test_export_scene import usd_problems
 
-from plantgen.export import export_mesh
-from plantgen.export.plants import leaf_uv
+from plantgen.exporters import export_mesh
+from plantgen.exporters.plants import leaf_uv
 from plantgen.geometry.mesh import tessellate
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.pipeline import export_model, grow_file

@@ -18,8 +18,8 @@ from plantgen.geometry.polygons import Polygons
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
-from plantgen.render.raster import RasterRenderer
-from plantgen.render.raycast import Raycaster
+from plantgen.gl.raster import RasterRenderer
+from plantgen.gl.raycast import Raycaster
 from plantgen.settings import RaycastSettings, ShadowSettings
 
 NAMES = ("bark", "leaf")
@@ -56,7 +56,7 @@ def square(centre, half: float, normal_axis: int = 2, flip: bool = False, materi
 
 @pytest.fixture(scope="module")
 def renderers():
-    from plantgen.render.context import gl_context
+    from plantgen.gl.context import gl_context
     ctx = gl_context()
     return {"rc": Raycaster(ctx), "gs": RasterRenderer(ctx)}
 
@@ -223,7 +223,7 @@ def test_render_frames_and_draws_a_grammars_leaves(tmp_path):
 
 
 def test_the_leaf_benchmark_times_every_variant_of_both_renderers():
-    from plantgen.benchmarks.leaves import VARIANTS, measure
+    from plantgen.benchmarks.leaf_cost import VARIANTS, measure
     from plantgen.pipeline import grow_file
 
     row = measure("abop_bush", 64, 48, 1, 0)

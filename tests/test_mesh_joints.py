@@ -360,7 +360,7 @@ def test_exported_knuckle_chain_and_well_load_back_watertight(tmp_path, suffix):
     roof), no zero-area face."""
     import trimesh
 
-    from plantgen.export import export_mesh
+    from plantgen.exporters import export_mesh
     from plantgen.pipeline import grow_file
 
     models = {"knuckles": skin_skeleton(knuckle_chains()["135 turned"]),

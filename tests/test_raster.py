@@ -9,9 +9,9 @@ from test_mesh import BENT, chain_frusta, concat_frusta
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.frusta import frusta_bounds
 from plantgen.geometry.mesh import tessellate
-from plantgen.render.raster import RasterRenderer, gs_buffer_bytes
-from plantgen.render.raycast import Raycaster
-from plantgen.render.records import rc_buffer_bytes
+from plantgen.gl.raster import RasterRenderer, gs_buffer_bytes
+from plantgen.gl.raycast import Raycaster
+from plantgen.gl.records import rc_buffer_bytes
 
 SIZE = (200, 150)
 
@@ -103,7 +103,7 @@ def test_gs_buffers_approach_fourfold_growth_per_level_and_dwarf_rc_records():
 
 def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
     """Same height maps, displaced geometry and tilted normals: the difference falls with m."""
-    from plantgen.render.raycast import RaycastSettings
+    from plantgen.gl.raycast import RaycastSettings
 
     frusta = chain_frusta(BENT, [0.3, 0.25, 0.25, 0.2, 0.15], shell=0.06)
     camera = view(frusta)
@@ -123,7 +123,7 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
 from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402
 
 from plantgen.geometry.skin import skin_skeleton  # noqa: E402
-from plantgen.render.passes import ShadowSettings  # noqa: E402
+from plantgen.gl.passes import ShadowSettings  # noqa: E402
 
 
 @pytest.mark.parametrize("elevation", [60.0, 10.0, 3.0])

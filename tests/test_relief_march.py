@@ -14,8 +14,8 @@ from plantgen.geometry.camera import auto_camera
 from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.reference import render_reference
-from plantgen.render import materials as render_materials
-from plantgen.render.raycast import Raycaster
+from plantgen.gl import material_uniforms as render_materials
+from plantgen.gl.raycast import Raycaster
 from plantgen.settings import RaycastSettings
 
 ADAPTIVE = RaycastSettings(relief=True)

@@ -1,4 +1,4 @@
-"""The GLSL loader and the EGL context factory (plantgen.render.shaders / .context)."""
+"""The GLSL loader and the EGL context factory (plantgen.gl.shaders / .context)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from plantgen._resources import shaders_dir
-from plantgen.render import context as context_module
-from plantgen.render.shaders import ShaderError, build_program, program_stages, shader_source
+from plantgen.gl import context as context_module
+from plantgen.gl.shaders import ShaderError, build_program, program_stages, shader_source
 
 
 def write(tmp_path, **files):
@@ -121,7 +121,7 @@ def test_a_draw_through_the_loader_reads_back(gl_ctx, tmp_path):
 def test_a_misspelt_uniform_fails_loudly_and_an_inactive_one_is_passed_over(gl_ctx):
     """set_uniforms checks names against what the program's stages declare: a typo is a
     bug (ShaderError naming it); a declared uniform this variant does not use is fine."""
-    from plantgen.render.shaders import set_uniforms
+    from plantgen.gl.shaders import set_uniforms
 
     sky = build_program(gl_ctx, "sky.glsl")
     set_uniforms(sky, viewport=(64.0, 48.0), material_gloss=np.zeros((16, 2), np.float32))
@@ -134,7 +134,7 @@ def test_a_misspelt_uniform_fails_loudly_and_an_inactive_one_is_passed_over(gl_c
 def test_every_program_gets_the_shared_defines():
     """MAX_MATERIALS and the tolerances reach GLSL from their one Python home."""
     from plantgen.geometry.materials import MAX_MATERIALS
-    from plantgen.render.shaders import shared_defines
+    from plantgen.gl.shaders import shared_defines
 
     src = shader_source("raycast.glsl", "FRAGMENT_SHADER")
     assert f"#define MAX_MATERIALS {MAX_MATERIALS}" in src.splitlines()

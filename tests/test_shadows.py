@@ -12,7 +12,7 @@ from plantgen.geometry.reference import intersect_frusta
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
-from plantgen.render.raycast import Raycaster
+from plantgen.gl.raycast import Raycaster
 from plantgen.settings import RaycastSettings, ShadowSettings
 
 GROUND = Ground(size=10.0, height=0.0, material="sand")
@@ -35,7 +35,7 @@ def light_towards(elevation_deg: float, azimuth_deg: float = 30.0) -> np.ndarray
 
 @pytest.fixture(scope="module")
 def caster():
-    from plantgen.render.context import gl_context
+    from plantgen.gl.context import gl_context
     return Raycaster(gl_context())
 
 

@@ -299,7 +299,7 @@ def test_texture_slots_reach_the_mesh_and_the_raster_renderers_rows():
     # is the texture v the ray caster and the reference take (surface_uv)
     from plantgen.geometry.frusta import surface_uv
     from plantgen.geometry.mesh import tessellate
-    from plantgen.render.raster import row_data
+    from plantgen.gl.raster import row_data
 
     f = skin_skeleton(chain([80.0], lengths=1.0, radii=0.1), smooth_bends=10.0)
     mesh = tessellate(f, 1, caps=False)

@@ -159,7 +159,7 @@ def test_per_frame_frusta_are_what_the_checked_constructor_builds(cacti):
     contract's dtypes, shapes and layout, and open ends as the constructor derives them;
     the records packed into a reused buffer equal freshly packed ones."""
     from plantgen.geometry.frusta import Frusta
-    from plantgen.render.records import pack_records
+    from plantgen.gl.records import pack_records
 
     skeleton, rig = cacti
     plan = SwaySkin.plan(skeleton, rig)

@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from plantgen.render.shaders import shader_source
+from plantgen.gl.shaders import shader_source
 from plantgen.tolerances import GLSL_FIELDS, Tolerances, tol
 
 

@@ -20,8 +20,8 @@ from PIL import Image
 
 from plantgen.geometry.camera import Camera, orbit_angles
 from plantgen.geometry.mesh import tessellate
+from plantgen.gl.raster import RasterRenderer
 from plantgen.pipeline import frame_arguments, prepare_model, stage_model
-from plantgen.render.raster import RasterRenderer
 from plantgen.settings import RenderSettings
 
 SIZE = "320x240"

@@ -30,7 +30,7 @@ _CASTER: list = []          # this process's Raycaster, made on first use
 
 def _caster():
     if not _CASTER:
-        from ..render.raycast import Raycaster
+        from ..gl.raycast import Raycaster
 
         _CASTER.append(Raycaster())
     return _CASTER[0]
@@ -93,8 +93,8 @@ def _labels(frusta, skeleton, kind: str) -> np.ndarray:
 
 
 def _render_views(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
+    from ..gl.raycast import RaycastSettings, label_image
     from ..images import write_png
-    from ..render.raycast import RaycastSettings, label_image
 
     t0 = time.perf_counter()
     caster = _caster()
@@ -135,7 +135,7 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
 
 
 def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
-    from ..export import export_mesh
+    from ..exporters import export_mesh
     from ..geometry.topology import branches
 
     t0 = time.perf_counter()

@@ -4,7 +4,7 @@ error, all measured in one run.
 Each lever is a pair of ray caster settings that differ only in that lever; the two are
 timed interleaved (median of ``--frames``) at the bench's size, and the eye's levers are
 scored against the float64 reference in the bench's evaluation window (err = 1 - SSIM of
-the depth-rebuilt shading + silhouette mismatch, :mod:`plantgen.bench.metrics`). The
+the depth-rebuilt shading + silhouette mismatch, :mod:`plantgen.table1.quality`). The
 shadow lever is timed in the scene's own frame (ground, shadow map) and scored on the
 light's depth map against a finely marched one (share of covered texels more than half a
 texel off: the receivers' bias).
@@ -35,15 +35,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bench.metrics import image_error
-from ..bench.models import load_model
-from ..bench.paper import TABLE1_MODELS
-from ..bench.window import eval_camera
 from ..files import write_atomically
 from ..geometry.reference import render_reference
-from ..render.context import renderer_name
-from ..render.raycast import Raycaster
+from ..gl.context import renderer_name
+from ..gl.raycast import Raycaster
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
+from ..table1.eval_window import eval_camera
+from ..table1.models import load_model
+from ..table1.paper import TABLE1_MODELS
+from ..table1.quality import image_error
 from .arguments import image_size
 
 __all__ = ["EYE_LEVERS", "measure_model", "main"]

@@ -57,7 +57,7 @@ def measure(client, grammar: str, outputs, size, plants: int, repeats: int) -> f
 def main(argv=None) -> int:
     from dask.distributed import Client, LocalCluster
 
-    from ..render.context import renderer_name
+    from ..gl.context import renderer_name
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--grammar", default="pine")

@@ -30,12 +30,12 @@ import sys
 import numpy as np
 
 from ..animation import AnimatedScene
-from ..bench.renderers import time_after_warm_up
+from ..gl.context import renderer_name
+from ..gl.raycast import Raycaster
+from ..gl.records import RecordStream
 from ..pipeline import grow_file, stage_model
-from ..render.context import renderer_name
-from ..render.raycast import Raycaster
-from ..render.records import RecordStream
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
+from ..table1.renderers import time_after_warm_up
 from .arguments import image_size
 
 

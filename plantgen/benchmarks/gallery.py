@@ -25,8 +25,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..bench.paper import TABLE1_MODELS
 from ..settings import DEFAULT_SIZE
+from ..table1.paper import TABLE1_MODELS
 from .arguments import image_size, shipped_model_paths
 
 __all__ = ["Entry", "entries", "command_line", "main"]

@@ -21,8 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..gl.context import gl_context, renderer_name
 from ..pipeline import prepare_model, resolve_input
-from ..render.context import gl_context, renderer_name
 from ..settings import DEFAULT_SIZE
 from ..viewer.session import ViewerSession, ViewOptions
 from .arguments import image_size

@@ -17,11 +17,11 @@ from ..geometry.camera import Camera
 from ..geometry.frusta import frusta_bounds
 from ..geometry.mesh import tessellate
 from ..geometry.skin import skin_skeleton
+from ..gl.context import gl_context
+from ..gl.raster import RasterRenderer, gs_buffer_bytes
+from ..gl.raycast import Raycaster
+from ..gl.records import rc_buffer_bytes
 from ..pipeline import load_skeleton
-from ..render.context import gl_context
-from ..render.raster import RasterRenderer, gs_buffer_bytes
-from ..render.raycast import Raycaster
-from ..render.records import rc_buffer_bytes
 from ..settings import RaycastSettings
 
 __all__ = ["side_by_side", "gallery_camera", "main"]

@@ -25,9 +25,9 @@ from .._resources import shipped_grammar
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
 from ..geometry.skin import skin_skeleton
+from ..gl.raster import gs_buffer_bytes
+from ..gl.records import rc_buffer_bytes
 from ..pipeline import load_skeleton
-from ..render.raster import gs_buffer_bytes
-from ..render.records import rc_buffer_bytes
 
 
 def synthetic_tree(n_segments: int = 16997, chain_length: int = 17, seed: int = 1) -> Skeleton:

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import click
 
-from ..bench import RELIEF_ERROR, BenchOptions, check_models, count_steps, require_skimage, run_bench, write_outputs
 from ..errors import PlantgenError
+from ..table1 import RELIEF_ERROR, BenchOptions, check_models, count_steps, require_skimage, run_bench, write_outputs
 from .options import size_opt
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..export import EXPORT_FORMATS
+from ..exporters import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
 from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model

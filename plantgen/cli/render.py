@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
+from ..gl.records import RECORD_BYTES
 from ..pipeline import RenderReport, render_file
-from ..render.records import RECORD_BYTES
 from ..settings import RenderSettings
 from .options import (
     allow_path_opt,

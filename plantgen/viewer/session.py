@@ -1,7 +1,7 @@
 """What the viewer shows and how it changes, apart from any window: the model, the camera,
 the method and its knobs, the time of an animated scene, live reload, and the frames,
-drawn by the same :class:`~plantgen.render.raycast.Raycaster` (RC, RC+R) and
-:class:`~plantgen.render.raster.RasterRenderer` (GS, GS+R) as ``plantgen render``, with the
+drawn by the same :class:`~plantgen.gl.raycast.Raycaster` (RC, RC+R) and
+:class:`~plantgen.gl.raster.RasterRenderer` (GS, GS+R) as ``plantgen render``, with the
 same arguments (:func:`plantgen.pipeline.frame_arguments`), so a saved camera reproduces a
 frame pixel for pixel.
 
@@ -25,12 +25,12 @@ from ..errors import PlantgenError
 from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
 from ..geometry.mesh import tessellate, triangle_count
+from ..gl.raster import RasterRenderer
+from ..gl.raycast import Raycaster
 from ..images import write_png
 from ..knobs import knob_args, knob_of
 from ..limits import Limits
 from ..pipeline import PreparedModel, frame_arguments, prepare_model, stage_model
-from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster
 from ..settings import (
     DEFAULT_SIZE,
     MAX_SSAA,
@@ -207,7 +207,7 @@ class ViewerSession:
 
     def draw(self, width: int, height: int):
         """Render the current frame at ``width`` x ``height`` (the window's pixels);
-        returns the :class:`~plantgen.render.result.RenderResult`."""
+        returns the :class:`~plantgen.gl.result.RenderResult`."""
         if (width, height) != (self.camera.width, self.camera.height):
             self.camera = replace(self.camera, width=int(width), height=int(height))
         t0 = time.perf_counter()

@@ -20,8 +20,8 @@ import time
 import numpy as np
 
 from ..errors import PlantgenError
+from ..gl.shaders import build_program, set_uniforms
 from ..images import write_png
-from ..render.shaders import build_program, set_uniforms
 from .hud import help_panel, text_panel
 from .session import ViewerSession
 

@@ -1,13 +1,13 @@
 """Exports: meshes (glTF, OBJ + MTL, PLY, STL, USD), skeletons (SWC) and forestry cylinder
 models (QSM), each in the form the tools that read it expect.
 
-- :mod:`~plantgen.export.formats`: the formats, their suffixes and up-axis conventions;
-- :mod:`~plantgen.export.plants`: what the writers take (:class:`Plant`: a mesh and a
+- :mod:`~plantgen.exporters.formats`: the formats, their suffixes and up-axis conventions;
+- :mod:`~plantgen.exporters.plants`: what the writers take (:class:`Plant`: a mesh and a
   skeleton with the placements of its copies);
-- :mod:`~plantgen.export.meshes`: :func:`export_mesh` (one mesh) and :func:`write_plants`
+- :mod:`~plantgen.exporters.meshes`: :func:`export_mesh` (one mesh) and :func:`write_plants`
   (a scene's plants, instanced where the format can);
-- :mod:`~plantgen.export.gltf`, :mod:`~plantgen.export.obj`, :mod:`~plantgen.export.usd`,
-  :mod:`~plantgen.export.qsm`: the writers. SWC is :func:`plantgen.geometry.swc.write_swc`.
+- :mod:`~plantgen.exporters.gltf`, :mod:`~plantgen.exporters.obj`, :mod:`~plantgen.exporters.usd`,
+  :mod:`~plantgen.exporters.qsm`: the writers. SWC is :func:`plantgen.geometry.swc.write_swc`.
 
 Every writer writes under temporary names and renames, so a failure leaves nothing
 half-written.

@@ -60,7 +60,7 @@ class WorkCounter:
 class RenderStats:
     """What one frame did, whichever renderer drew it.
 
-    passes : names of the passes run, in order (see :func:`plantgen.render.passes.frame_passes`)
+    passes : names of the passes run, in order (see :func:`plantgen.gl.passes.frame_passes`)
     near, far : depth range of the frame (world units along the view direction)
     shadow_ms : milliseconds of the shadow pass (0 without shadows)
     light_window : the light's window of the shadow map, None without shadows

@@ -19,19 +19,19 @@ import numpy as np
 from ..geometry.materials import material_height_maps
 from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
-from ..render.context import gl_context, renderer_name
-from ..render.raster import gs_buffer_bytes
-from ..render.records import rc_buffer_bytes
+from ..gl.context import gl_context, renderer_name
+from ..gl.raster import gs_buffer_bytes
+from ..gl.records import rc_buffer_bytes
 from ..settings import ShadowSettings
 from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, level_config, ray_cast_configs, relief_configs
-from .images import save_images
+from .eval_window import eval_camera
+from .figures import save_images
 from .matching import LevelMatch, choose_relief_config, walk_levels
-from .metrics import ERROR_FIELDS, image_error, require_skimage
 from .models import BenchModel, check_models, load_model
-from .options import BenchOptions
+from .params import BenchOptions
+from .quality import ERROR_FIELDS, image_error, require_skimage
 from .renderers import Renderers, median_ms, shadow_box, time_configs
 from .summary import summarise
-from .window import eval_camera
 
 __all__ = ["bench_model", "run_bench", "count_steps", "machine_info", "timing_fields"]
 
@@ -109,7 +109,7 @@ class _Meter:
 
     def walk(self, method: str, target: dict) -> LevelMatch:
         """GS or GS+R from m = 0 up until a level matches ``target`` (a curve row) or the
-        next one is over the budget (:func:`~plantgen.bench.matching.walk_levels`)."""
+        next one is over the budget (:func:`~plantgen.table1.matching.walk_levels`)."""
         match = walk_levels(method, target["key"], target["error"],
                             lambda m: self.measure(level_config(method, m))["error"], self.triangles,
                             self.opts.max_triangles, self.opts.rel_tol, self.opts.abs_tol)

@@ -1,6 +1,6 @@
 """Frame times of the GLSL ray caster, RC and RC+R, in the setting of Table 1.
 
-Run as ``python -m plantgen.benchmarks.raycast [--size 1024x768] [--frames 7] [--ssaa N] [MODEL ...]``.
+Run as ``python -m plantgen.benchmarks.frame_times [--size 1024x768] [--frames 7] [--ssaa N] [MODEL ...]``.
 MODEL is a grammar or scene (a shipped name such as ``saguaro``, or a path) or a skeleton
 ``.npz``; default: every shipped grammar and scene. Each model is framed by the ``auto``
 camera (spanning most of the viewport, as the paper measured) and rendered ``--frames``
@@ -21,14 +21,14 @@ import statistics
 import sys
 from pathlib import Path
 
-from ..bench.renderers import time_after_warm_up
 from ..geometry.camera import auto_camera
 from ..geometry.skin import skin_skeleton
+from ..gl.context import renderer_name
+from ..gl.raycast import Raycaster
+from ..gl.records import RECORD_BYTES, rc_buffer_bytes
 from ..pipeline import load_skeleton
-from ..render.context import renderer_name
-from ..render.raycast import Raycaster
-from ..render.records import RECORD_BYTES, rc_buffer_bytes
 from ..settings import DEFAULT_SIZE, RaycastSettings
+from ..table1.renderers import time_after_warm_up
 from .arguments import image_size, shipped_model_paths
 
 
@@ -65,7 +65,7 @@ def measure(path, width: int, height: int, frames: int, linear_steps: int, binar
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.raycast",
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.frame_times",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", help="grammar, scene or .npz (default: all shipped)")
     parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .metrics import pareto_front
+from .quality import pareto_front
 
 __all__ = ["FAMILIES", "family_points", "family_front"]
 

@@ -1,6 +1,6 @@
 """Print the hard-case table: each case's worst errors in float64 and float32.
 
-Run: ``python -m plantgen.benchmarks.stability [--rays N] [--no-march]``. Columns are
+Run: ``python -m plantgen.benchmarks.hard_cases [--rays N] [--no-march]``. Columns are
 described in :mod:`plantgen.geometry.stability`.
 """
 

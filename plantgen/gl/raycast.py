@@ -1,14 +1,14 @@
 """The GLSL ray caster for conical frusta (RC) and relief-mapped frusta (RC+R).
 
 Data path: :class:`plantgen.geometry.frusta.Frusta` (float64, world coordinates) ->
-:func:`plantgen.render.records.pack_records` (one 96-byte float32 record per segment,
+:func:`plantgen.gl.records.pack_records` (one 96-byte float32 record per segment,
 positions relative to the camera eye so float32 keeps its digits far from the world
 origin) -> one instanced draw of the 12-triangle bounding pyramid (built in the vertex
 shader from the record) -> the fragment shader in ``shaders/raycast.glsl`` intersects the
 pixel's ray with the frustum (``shaders/cone.glsl``), shades it and writes
 ``gl_FragDepth``.
 
-Effects (plantgen.render.passes): with shadows a first pass ray casts the same records
+Effects (plantgen.gl.passes): with shadows a first pass ray casts the same records
 along the light into a depth map that every surface then samples (``SHADOWS``); with
 relief the relief shell is marched (``RELIEF``). Neither is compiled or run otherwise.
 """
@@ -27,7 +27,7 @@ from ..geometry.stage import Ground
 from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
-from .leaves import leaf_bounds, union_box
+from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes, program_variants
 from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
 from .result import RaycastStats, RenderResult
@@ -70,7 +70,7 @@ class Raycaster(OffscreenRenderer):
         ground : optional ground square, rasterised into the same depth buffer
         shadows : None (no shadow pass, no shadow map sampled) or the shadow map's knobs:
             the frusta and the ground first write their depth into the light's map, then
-            every surface samples it (plantgen.render.passes)
+            every surface samples it (plantgen.gl.passes)
         shadow_box : (2, 3) world box the light's window must cover (default: the frusta's
             bounds); an animation passes one box for all frames, so the map's texels stay
             put and shadows do not shimmer
@@ -83,7 +83,7 @@ class Raycaster(OffscreenRenderer):
             colour; a = 0 gives a transparent background and a colour with alpha
             (``color`` is (h, w, 4))
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
-            size and averaged down (:mod:`plantgen.render.supersample`); ``frame_ms`` is
+            size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
         """
         n = len(frusta.base)
@@ -127,7 +127,7 @@ class Raycaster(OffscreenRenderer):
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
                   flat_background: bool = False, leaves: bool = False) -> dict:
-        """Build every program the frame uses (plantgen.render.passes.program_variants) and
+        """Build every program the frame uses (plantgen.gl.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
         (file, defines switched on) built."""

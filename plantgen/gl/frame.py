@@ -2,8 +2,8 @@
 
 :class:`OffscreenRenderer` owns the GL context's offscreen framebuffer (colour RGBA8 +
 float32 distance + depth, resized on demand), the relief height textures, the sky, the
-ground square and the light's shadow map. A renderer (:class:`~plantgen.render.raycast.
-Raycaster`, :class:`~plantgen.render.raster.RasterRenderer`) prepares its programs and
+ground square and the light's shadow map. A renderer (:class:`~plantgen.gl.raycast.
+Raycaster`, :class:`~plantgen.gl.raster.RasterRenderer`) prepares its programs and
 its model's draw, then :meth:`OffscreenRenderer._draw_frame` runs the passes in order
 (shadow map, sky, ground, model) and :meth:`OffscreenRenderer._read_back` returns the
 image and the distances.
@@ -22,8 +22,8 @@ from ..geometry.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from ..settings import MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
-from .leaves import LeafLayer
-from .materials import HeightTextures, palette_uniforms, shading_uniforms
+from .leaf_layer import LeafLayer
+from .material_uniforms import HeightTextures, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, light_window
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
@@ -148,7 +148,7 @@ class OffscreenRenderer:
     """What every plantgen renderer shares: the GL context, an offscreen framebuffer
     (colour RGBA8 + float32 distance + depth) resized on demand, the relief height maps
     uploaded once per material list, and the scene's extras: the ground square and the
-    light's shadow map (plantgen.render.passes), drawn the same way for RC and GS."""
+    light's shadow map (plantgen.gl.passes), drawn the same way for RC and GS."""
 
     def __init__(self, ctx=None):
         self.ctx = ctx if ctx is not None else gl_context()
@@ -339,7 +339,7 @@ class OffscreenRenderer:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
-        averaged down (:func:`plantgen.render.supersample.resolve_supersamples`)."""
+        averaged down (:func:`plantgen.gl.supersample.resolve_supersamples`)."""
         fbo = self._fbo
         w, h, k = width * ssaa, height * ssaa, 4 if alpha else 3
         color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)

@@ -33,7 +33,7 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
                      leaves: bool = False) -> list:
     """(program file, defines) of every program one frame uses.
 
-    ``settings`` is the :class:`~plantgen.render.raycast.RaycastSettings` (relief on iff the
+    ``settings`` is the :class:`~plantgen.gl.raycast.RaycastSettings` (relief on iff the
     effects hold ``relief``); ``shadows`` is None without the ``shadows`` effect (then no
     shadow pass runs and no program samples a map); ``ground``: the scene has a ground;
     ``flat_background``: a flat colour (or transparency) instead of the sky; ``leaves``:

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
-from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster
-from ..render.records import RecordStream
-from ..render.result import RenderResult
+from ..gl.raster import RasterRenderer
+from ..gl.raycast import Raycaster
+from ..gl.records import RecordStream
+from ..gl.result import RenderResult
 from ..settings import ShadowSettings
 from .configs import Config
 from .models import BenchModel
@@ -148,7 +148,7 @@ class Renderers:
 
     def count_work(self, cfg: Config, camera):
         """The work of one counting render of ``cfg`` (no scene passes): fragments shaded
-        and relief samples (:class:`plantgen.render.result.WorkCounts`), None over the
+        and relief samples (:class:`plantgen.gl.result.WorkCounts`), None over the
         budget."""
         m = self.model
         if cfg.ray_cast:

@@ -1,12 +1,12 @@
 """The configurations the bench measures: the four methods of Table 1 and their knobs.
 
 The ray caster's knobs are swept one at a time (:data:`RELIEF_SWEEPS`): each
-:class:`Sweep` sets one :class:`~plantgen.render.raycast.RaycastSettings` field over its
+:class:`Sweep` sets one :class:`~plantgen.gl.raycast.RaycastSettings` field over its
 values, every other field at the ray caster's default. Adding a swept RC+R knob is one
 line there, e.g. ``Sweep("march", "march", ("adaptive",))``, or, for a knob that only means
 something under another setting, ``Sweep("texel", "samples_per_texel", (0.5, 1, 2),
 base=(("march", "adaptive"),))``. The GS and GS+R levels are not a fixed list: the bench
-goes up from m = 0 (:func:`level_config`) until a level matches (:mod:`plantgen.bench.matching`).
+goes up from m = 0 (:func:`level_config`) until a level matches (:mod:`plantgen.table1.matching`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from ..settings import RaycastSettings
-from .options import BenchOptions
+from .params import BenchOptions
 
 __all__ = ["Config", "Sweep", "RELIEF_SWEEPS", "ray_cast_configs", "relief_configs", "level_config",
            "TABLE_METHODS", "MATCHED_AGAINST", "LEVEL_METHODS"]

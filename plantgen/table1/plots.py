@@ -11,7 +11,7 @@ __all__ = ["plot_curves", "ERROR_FLOOR"]
 #: Errors below this are drawn at it (log axis; the ray caster's error can be 0).
 ERROR_FLOOR = 1e-6
 #: Colour and marker of each method's series, and of the RC+R sweeps other than "linear"
-#: (:data:`plantgen.bench.configs.RELIEF_SWEEPS`); a knob not listed takes the next of
+#: (:data:`plantgen.table1.configs.RELIEF_SWEEPS`); a knob not listed takes the next of
 #: :data:`_EXTRA_STYLES` in order of appearance.
 _STYLES = {"GS": ("tab:blue", "o"), "GS+R": ("tab:orange", "s"), "RC": ("tab:green", "D"),
            "RC+R": ("tab:red", "^"), "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*")}

@@ -1,11 +1,11 @@
 """``plantgen bench``: Table 1 of Bhagvat et al. 2009 on the machine at hand, and what
 accuracy costs in time.
 
-For each model the bench (:func:`~plantgen.bench.runs.bench_model`)
+For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
 
 1. grows and skins it, frames it with the Table 1 camera (the scene's camera, else
    ``auto_camera``: the model spans most of the ``size`` viewport, 1024x768 by default);
-2. picks an **evaluation window** (:mod:`plantgen.bench.window`): a ``eval_size`` camera
+2. picks an **evaluation window** (:mod:`plantgen.table1.eval_window`): a ``eval_size`` camera
    with the same eye and the same angle per pixel as the timing camera, aimed at the
    window of the timing image with the most surface and silhouette (a crop at full angular
    resolution: the float64 reference is too slow for 1024x768 on a CPU, and a down-scaled
@@ -18,13 +18,13 @@ For each model the bench (:func:`~plantgen.bench.runs.bench_model`)
    by an error of 7e-4, 512 and 1024 by 2e-3, while 192 samples still miss 1 % of the
    silhouette (error 0.011). The window is 128x96 by default so the nine references take
    about six minutes on two cores;
-4. renders the ray caster's **configurations** (:mod:`plantgen.bench.configs`: RC, and RC+R
+4. renders the ray caster's **configurations** (:mod:`plantgen.table1.configs`: RC, and RC+R
    over linear and binary relief steps and v exact/interpolated, one knob at a time) in the
    window for its error, and at the full size for its time;
 5. picks **RC+R's Table 1 configuration** from those curves: the fastest one with error at
-   most ``relief_error`` (0.01), else the most accurate (:mod:`plantgen.bench.matching`);
+   most ``relief_error`` (0.01), else the most accurate (:mod:`plantgen.table1.matching`);
    then walks **GS and GS+R up from m = 0** (measured the same way) until a level meets
-   the quality criterion (:mod:`plantgen.bench.metrics`) against RC and against that RC+R
+   the quality criterion (:mod:`plantgen.table1.quality`) against RC and against that RC+R
    configuration, or the next level is over the triangle budget (``max_triangles``);
 6. times RC, RC+R, GS at its level and GS+R at its level **in one interleaved run**
    (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
@@ -33,16 +33,20 @@ For each model the bench (:func:`~plantgen.bench.runs.bench_model`)
    counted in the frame), leaves not relief mapped (their material has no shell);
 7. counts the GPU bytes of each method (memory table).
 
-The error metric and the quality criterion are documented in :mod:`plantgen.bench.metrics`;
-:mod:`plantgen.bench.summary` sums Table 1 up over the models (ratios' geometric means, beside
-the paper's); :mod:`plantgen.bench.reports` writes the tables, CSV and JSON.
+The error metric and the quality criterion are documented in :mod:`plantgen.table1.quality`;
+:mod:`plantgen.table1.summary` sums Table 1 up over the models (ratios' geometric means, beside
+the paper's); :mod:`plantgen.table1.reports` writes the tables, CSV and JSON.
 """
 
 from __future__ import annotations
 
 from .configs import RELIEF_SWEEPS, Sweep, relief_configs
+from .eval_window import eval_camera
 from .matching import LevelMatch, choose_relief_config, walk_levels
-from .metrics import (
+from .models import check_models
+from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, TABLE1_MODELS
+from .params import QUICK_MODELS, RELIEF_ERROR, BenchOptions
+from .quality import (
     ImageError,
     depth_shading,
     image_error,
@@ -53,13 +57,9 @@ from .metrics import (
     silhouette_mismatch,
     ssim,
 )
-from .models import check_models
-from .options import QUICK_MODELS, RELIEF_ERROR, BenchOptions
-from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, TABLE1_MODELS
 from .reports import match_notes, write_outputs
 from .runs import bench_model, count_steps, run_bench
 from .summary import geometric_mean, summarise, summary_lines
-from .window import eval_camera
 
 __all__ = ["BenchOptions", "PAPER_TABLE1", "PAPER_MEMORY_RATIO", "TABLE1_MODELS", "QUICK_MODELS",
            "RELIEF_ERROR", "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",

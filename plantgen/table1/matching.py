@@ -5,7 +5,7 @@ RC+R (:func:`choose_relief_config`): the fastest measured RC+R configuration who
 is at most ``relief_error`` (0.01 by default), else the most accurate one.
 
 GS and GS+R (:func:`walk_levels`): m = 0, 1, 2, ... are built and measured in turn until a
-level's error is within the quality criterion's bound (:func:`~plantgen.bench.metrics.quality_bound`
+level's error is within the quality criterion's bound (:func:`~plantgen.table1.quality.quality_bound`
 of the target's error): matched at that m, no finer level built. Before building a level
 its triangle count is checked against the budget (``max_triangles``); the first level over
 it stops the walk unmatched, and Table 1 then times the level of least error measured.
@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from .metrics import MATCH_ABS_TOL, MATCH_REL_TOL, quality_bound
+from .quality import MATCH_ABS_TOL, MATCH_REL_TOL, quality_bound
 
 __all__ = ["LevelMatch", "walk_levels", "choose_relief_config", "match_text"]
 

@@ -1,6 +1,6 @@
 """Write one tessellated mesh (GS, GS+R) in any mesh format: :func:`export_mesh`.
 
-The format follows the file suffix (:mod:`plantgen.export.formats`): glTF (``.glb``,
+The format follows the file suffix (:mod:`plantgen.exporters.formats`): glTF (``.glb``,
 ``.gltf`` + ``.bin``) and OBJ (+ ``.mtl``) through plantgen's writers, keeping material
 names, colours, normals and texture coordinates; PLY (normals) and STL (triangles only)
 through trimesh; USD through usd-core. A plant's leaves (a grammar's ``{ . }`` polygons)
@@ -55,7 +55,7 @@ def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str, leaves: P
 def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None, colours: Colours = None,
                  instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
                  progress: Progress = None) -> list[Path]:
-    """Write ``plants`` (see :class:`~plantgen.export.plants.Plant`) in the mesh format
+    """Write ``plants`` (see :class:`~plantgen.exporters.plants.Plant`) in the mesh format
     ``path`` names; ``name`` names the scene (default: the file's stem). Formats without
     instancing take one plant written in place. Returns the written paths (a ``.gltf`` or
     ``.obj`` brings a second file)."""
@@ -97,7 +97,7 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
         ``.gltf``'s ``.bin`` and an ``.obj``'s ``.mtl`` are written beside it too)
     colours : material name -> linear RGB in [0, 1], or one colour per material index;
         default :func:`plantgen.geometry.materials.material_colour`
-    up : ``"y"`` or ``"z"``; default the format's convention (:mod:`plantgen.export.formats`)
+    up : ``"y"`` or ``"z"``; default the format's convention (:mod:`plantgen.exporters.formats`)
     name : the model's name in the file (default: the file's stem)
     labels : {name: (rows,) values} per mesh row, written by glTF as vertex attributes of
         those names (start them with ``_``; other formats ignore them)

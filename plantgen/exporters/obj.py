@@ -58,7 +58,7 @@ def _rows(fh, prefix: str, fmt: str, array: np.ndarray, progress, done: list, to
 
 def _leaf_runs(leaves: Polygons | None, up: str, first: int, count: int):
     """Leaf vertices, normals and runs (material index into the MTL, faces, 1-based) of
-    :func:`~plantgen.export.plants.leaf_parts`, numbered after ``first`` vertices, their
+    :func:`~plantgen.exporters.plants.leaf_parts`, numbered after ``first`` vertices, their
     materials after ``count``."""
     parts = leaf_parts(leaves, up)
     vertices = [p.vertices for p in parts]

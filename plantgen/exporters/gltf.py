@@ -18,7 +18,7 @@ A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too
 material, with a material of their own named ``"<material> (leaf)"`` that is
 ``doubleSided`` (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
-bounding box in its plane (:func:`~plantgen.export.plants.leaf_uv`).
+bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`).
 
 A plant's per-row ``labels`` ({"_BRANCH_ORDER": ...}: ``plantgen batch`` labels each
 mesh with its branch order) become application-specific vertex attributes of those

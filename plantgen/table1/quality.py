@@ -22,7 +22,7 @@ times ``1 + rel_tol`` plus ``abs_tol`` (:func:`quality_bound`; defaults 10 % and
 SSIM difference of 0.01 is hard to see); GS is matched against RC (no relief, non-relief
 reference), GS+R against RC+R at its Table 1 configuration (relief reference). The levels
 are walked up from m = 0 until one qualifies or the next one is over the triangle budget
-(:mod:`plantgen.bench.matching`).
+(:mod:`plantgen.table1.matching`).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from .metrics import MATCH_ABS_TOL, MATCH_REL_TOL
 from .paper import TABLE1_MODELS
+from .quality import MATCH_ABS_TOL, MATCH_REL_TOL
 
 __all__ = ["BenchOptions", "QUICK_MODELS", "RELIEF_ERROR"]
 
@@ -28,7 +28,7 @@ class BenchOptions:
         march (the other knob at 32 linear / 6 binary)
     march_densities : samples per relief texel swept for RC+R with the adaptive march (the
         ray caster's default); the swept knobs are listed in
-        :data:`plantgen.bench.configs.RELIEF_SWEEPS`
+        :data:`plantgen.table1.configs.RELIEF_SWEEPS`
     relief_error : Table 1 times the fastest RC+R configuration of the curves whose error
         is at most this (the most accurate one if none is), and matches GS+R against it
     max_triangles : the triangle budget: GS and GS+R go up from m = 0 until a level

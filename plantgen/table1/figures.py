@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from .metrics import depth_shading
+from .quality import depth_shading
 
 __all__ = ["save_images"]
 

@@ -4,9 +4,9 @@ A :class:`~plantgen.geometry.mesh.TessellatedMesh` is uploaded once (float32 pos
 relative to the mesh's own origin, normals, texture coordinates, uint32 indices) and
 drawn with one indexed draw call, back faces culled (the mesh is closed). The camera,
 light, material palette, height maps, sky, ground and shadow map are the ray caster's
-(:mod:`plantgen.render.frame`, ``shaders/shading.glsl``), so an RC image and a GS image
+(:mod:`plantgen.gl.frame`, ``shaders/shading.glsl``), so an RC image and a GS image
 of the same model differ only by geometry. The output is the same
-:class:`~plantgen.render.result.RenderResult` (colour, distance along the ray, frame time).
+:class:`~plantgen.gl.result.RenderResult` (colour, distance along the ray, frame time).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from ..geometry.stage import Ground
 from ..settings import ShadowSettings
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
-from .leaves import leaf_bounds, union_box
+from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes
 from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms

@@ -1,6 +1,6 @@
 """What leaves cost a frame: the leafy models drawn with and without their leaves.
 
-Run as ``python -m plantgen.benchmarks.leaves [--size 1024x768] [--frames 7] [MODEL ...]``
+Run as ``python -m plantgen.benchmarks.leaf_cost [--size 1024x768] [--frames 7] [MODEL ...]``
 (default: the shipped grammars with leaves). For each model, in one interleaved run after
 a warm-up (so the ratios compare like with like on a noisy machine), the median frame
 time of RC (ray-cast frusta) and of GS (the frusta tessellated at ``--level``), each
@@ -17,10 +17,10 @@ import sys
 
 from ..geometry.mesh import tessellate
 from ..geometry.skin import skin_skeleton
+from ..gl.context import renderer_name
+from ..gl.raster import RasterRenderer
+from ..gl.raycast import Raycaster
 from ..pipeline import grow_file, model_leaves, stage_model
-from ..render.context import renderer_name
-from ..render.raster import RasterRenderer
-from ..render.raycast import Raycaster
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from .arguments import image_size
 from .gallery import LEAFY_MODELS
@@ -66,7 +66,8 @@ def measure(name: str, width: int, height: int, frames: int, level: int) -> dict
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.leaves", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.leaf_cost",
+                                     description=__doc__.split("\n\n")[0])
     parser.add_argument("models", nargs="*", metavar="MODEL", help="grammar names or paths (default: the leafy ones)")
     parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE,
                         help="frame size WxH (default: the renders', {}x{})".format(*DEFAULT_SIZE))
