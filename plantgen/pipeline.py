@@ -66,7 +66,7 @@ from .scene import Scene, is_scene, parse_scene, resolve_effects
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "frame_settings",
            "frame_arguments",
-           "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
+           "RenderReport", "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
            "check_render_request", "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
@@ -308,6 +308,15 @@ def skinning(smooth_bends: float | None = None):
 def _smoothing(grown: GrowResult, smooth_bends):
     """The command line's ``--smooth-bends``, else the grammar's ``turtle: smooth_bends``."""
     return smooth_bends if smooth_bends is not None else grown.smooth_bends
+
+
+def skin_model(grown: GrowResult, smooth_bends: float | None = None, source=None) -> Frusta:
+    """A still grown model's frusta, skinned as ``plantgen render`` and ``plantgen export``
+    skin it: bends past ``smooth_bends`` degrees (``--smooth-bends``), else past the
+    grammar's ``turtle: smooth_bends``, smoothed into arcs (:func:`skinning`); every row
+    checked finite (:func:`check_finite_frusta`, naming ``source``, default the model's name)."""
+    frusta = skinning(_smoothing(grown, smooth_bends))(grown.skeleton)
+    return check_finite_frusta(frusta, grown.name if source is None else source)
 
 
 def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None) -> AnimatedScene:
