@@ -295,3 +295,19 @@ def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
         assert code == 0, err
         triangles[name] = glb_triangles(tmp_path / f"{name}.glb")
     assert glb_triangles(tmp_path / "out" / files["glb"][0]) == triangles["smooth"] != triangles["plain"]
+
+
+def test_a_glb_over_the_export_limit_is_a_failed_row(tmp_path):
+    """The batch's glb is held to ``plantgen export``'s limits: over them, the row fails
+    with export's one line and no glb is written."""
+    from plantgen.batch.plant import make_plant
+    from plantgen.batch.spec import simple_spec
+    from plantgen.limits import Limits
+
+    (tmp_path / "twig.yaml").write_text(TWIG)
+    (tmp_path / "glb").mkdir()
+    spec = simple_spec(str(tmp_path / "twig.yaml"), "0:1", ["glb"], glb_level=0)
+    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path), Limits(max_export_triangles=50))
+    assert row["status"] == "failed" and "over the export limit of 50" in row["error"]
+    assert not list((tmp_path / "glb").iterdir())
+    assert make_plant(spec.tasks[0], spec.outputs, str(tmp_path))["status"] == "ok"

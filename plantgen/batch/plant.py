@@ -29,7 +29,7 @@ from ..geometry.topology import branches
 from ..images import write_png
 from ..limits import Limits
 from ..metrics import tree_metrics
-from ..pipeline import check_finite_mesh, grow_file, model_leaves, skin_model
+from ..pipeline import check_export_size, check_finite_mesh, grow_file, model_leaves, skin_model
 from ..render.raycast import Raycaster, RaycastSettings, label_image
 from .spec import Outputs, PlantTask
 
@@ -139,10 +139,13 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
     timings["skeleton_files"] = time.perf_counter() - t0
 
 
-def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
-    """The mesh ``plantgen export --subdiv m`` makes, with each vertex's branch order."""
+def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict,
+               limits: Limits | None) -> None:
+    """The mesh ``plantgen export --subdiv m`` makes (its size limits, its tessellation),
+    with each vertex's branch order."""
     t0 = time.perf_counter()
     path = root / relative_files(task, outputs)["glb"][0]
+    check_export_size([frusta], [leaves], len(skeleton), outputs.glb, "glb", limits, task.id, path)
     mesh = tessellate(frusta, outputs.glb)
     check_finite_mesh(mesh, frusta, task.id)
     order = branches(skeleton).segment_order[frusta.segment]
@@ -188,7 +191,7 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
             timings["skin"] = time.perf_counter() - t0
             leaves = model_leaves(grown)
             if outputs.glb is not None:
-                _write_glb(task, outputs, frusta, skeleton, leaves, root, timings)
+                _write_glb(task, outputs, frusta, skeleton, leaves, root, timings, limits)
             if outputs.views:
                 _render_views(task, outputs, frusta, skeleton, leaves, root, timings)
         t0 = time.perf_counter()
