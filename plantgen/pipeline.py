@@ -75,8 +75,8 @@ from .settings import (
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model",
            "frame_arguments", "request_settings",
-           "RenderReport", "check_finite_frusta", "check_finite_mesh", "check_render_outputs",
-           "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING"]
+           "RenderReport", "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
+           "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -317,6 +317,15 @@ def skinning(smooth_bends: float | None = None):
 def _smoothing(grown: GrowResult, smooth_bends):
     """The command line's ``--smooth-bends``, else the grammar's ``turtle: smooth_bends``."""
     return smooth_bends if smooth_bends is not None else grown.smooth_bends
+
+
+def skin_model(grown: GrowResult, smooth_bends: float | None = None, source=None) -> Frusta:
+    """A still grown model's frusta, skinned as ``plantgen render`` and ``plantgen export``
+    skin it: bends past ``smooth_bends`` degrees (``--smooth-bends``), else past the
+    grammar's ``turtle: smooth_bends``, smoothed into arcs (:func:`skinning`); every row
+    checked finite (:func:`check_finite_frusta`, naming ``source``, default the model's name)."""
+    frusta = skinning(_smoothing(grown, smooth_bends))(grown.skeleton)
+    return check_finite_frusta(frusta, grown.name if source is None else source)
 
 
 def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None) -> AnimatedScene:
@@ -719,6 +728,28 @@ def _leaves_of(polygons: Polygons | None, mesh, input_path) -> Polygons | None:
     return polygons
 
 
+def check_export_size(frusta: list[Frusta], leaves: list, segments: int, level: int, fmt_name: str,
+                      limits: Limits | None, source, output) -> int:
+    """The triangles an export of ``frusta`` at level m and of ``leaves`` (Polygons or None,
+    each written once) builds, refused before anything is built (one line naming ``source``
+    or ``output``) over ``limits.max_export_triangles``, or over ``limits.max_export_bytes``
+    to build and write as ``fmt_name`` with the skin of ``segments`` skeleton segments."""
+    limits = _in_force(limits)
+    estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
+    estimate += sum(len(p.triangles) for p in leaves if p is not None)
+    if estimate > limits.max_export_triangles:
+        raise ExportError(f"{source}: m = {level} gives {estimate:,} triangles, over the "
+                          f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
+                          f"({hint('export_triangles')})")
+    need = estimate_export_bytes(estimate, fmt_name) + segments * SKIN_BYTES_PER_SEGMENT
+    if need > limits.max_export_bytes:
+        raise LimitError(f"{output}: m = {level} gives {estimate:,} triangles, about "
+                         f"{need / 2**20:,.0f} MiB to build and write as {fmt_name}, over the limit of "
+                         f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
+                         f"({hint('export_bytes')})")
+    return estimate
+
+
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
                         input_path, output_path, timings: dict, progress,
                         skin=skin_skeleton) -> tuple[list[Plant], int]:
@@ -730,19 +761,8 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     frusta = [check_finite_frusta(skin(skel), input_path) for _, skel, _, _ in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
-    estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
-    estimate += sum(len(leaves.triangles) for *_, leaves in parts if leaves is not None)   # written once each
-    if estimate > limits.max_export_triangles:
-        raise ExportError(f"{input_path}: m = {level} gives {estimate:,} triangles, over the "
-                          f"export limit of {limits.max_export_triangles:,}; choose a lower --subdiv "
-                          f"({hint('export_triangles')})")
-    segments = sum(len(skel) for _, skel, _, _ in parts)
-    need = estimate_export_bytes(estimate, fmt.name) + segments * SKIN_BYTES_PER_SEGMENT
-    if need > limits.max_export_bytes:
-        raise LimitError(f"{output_path}: m = {level} gives {estimate:,} triangles, about "
-                         f"{need / 2**20:,.0f} MiB to build and write as {fmt.name}, over the limit of "
-                         f"{limits.max_export_bytes / 2**20:,.0f} MiB; choose a lower --subdiv "
-                         f"({hint('export_bytes')})")
+    check_export_size(frusta, [leaves for *_, leaves in parts], sum(len(skel) for _, skel, _, _ in parts), level,
+                      fmt.name, limits, input_path, output_path)
     plants = []
     for k, ((name, skel, matrices, leaves), fr) in enumerate(zip(parts, frusta, strict=True)):
         mesh = tessellate(fr, level, relief=relief)

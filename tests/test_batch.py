@@ -242,3 +242,72 @@ def test_a_leafy_plants_views_masks_and_glb_carry_its_leaves(tmp_path, mask):
                      if doc["materials"][p["material"]]["name"].endswith("(leaf)"))
     assert len(polygons) > 3 and leaf_faces == len(polygons.triangles)
     assert len(trimesh.load(tmp_path / files["glb"][0]).geometry) >= 2     # trimesh reads frusta and leaves
+
+
+def glb_triangles(path: Path) -> int:
+    """Triangles in a .glb: every primitive's indices over 3."""
+    data = path.read_bytes()
+    doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+    return sum(doc["accessors"][p["indices"]]["count"] // 3 for m in doc["meshes"] for p in m["primitives"])
+
+
+def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
+    """A grammar's ``turtle: smooth_bends`` reaches the batch: its view is, pixel for pixel,
+    the PNG ``plantgen render`` draws from the same camera, and its glb holds the triangles
+    of ``plantgen export`` at the same level; the grammar without smooth bends gives
+    another skin, another picture and another triangle count."""
+    from plantgen.batch.plant import view_camera
+    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.pipeline import grow_file, model_leaves, resolve_input, skin_model
+
+    data = yaml.safe_load(resolve_input("saguaro").read_text())
+    assert "turtle" not in data
+    (tmp_path / "plain.yaml").write_text(yaml.safe_dump(data))
+    (tmp_path / "smooth.yaml").write_text(yaml.safe_dump({**data, "turtle": {"smooth_bends": 30}}))
+    spec = {"seed": 5, "plants": [{"grammar": "smooth.yaml", "seeds": "0:1"}],
+            "outputs": {"npz": True, "glb": {"level": 0}, "png": {"size": "64x48", "azimuths": [30]}}}
+    (tmp_path / "spec.yaml").write_text(yaml.safe_dump(spec))
+    result = run_batch(parse_spec(tmp_path / "spec.yaml"), tmp_path / "out", client=client)
+    assert (result.done, result.failed) == (1, 0)
+    (row,) = Manifest(tmp_path / "out").rows.values()
+    files, seed = json.loads(row["files"]), row["seed"]
+
+    grown = grow_file(tmp_path / "smooth.yaml", seed=seed)
+    assert np.array_equal(Skeleton.load(tmp_path / "out" / files["npz"][0]).end, grown.skeleton.end)
+    frusta = skin_model(grown)
+    assert len(frusta) > len(skin_skeleton(grown.skeleton))          # the bends became arcs
+    view_camera(frusta, (64, 48), 30, model_leaves(grown)).save(tmp_path / "cam.json")
+    images = {}
+    for name in ("smooth", "plain"):
+        code, _, err = run_cli("render", tmp_path / f"{name}.yaml", "--seed", seed, "--camera", tmp_path / "cam.json",
+                               "--no-relief", "-o", tmp_path / f"{name}.png")
+        assert code == 0, err
+        images[name] = np.asarray(Image.open(tmp_path / f"{name}.png"))
+    batch_png = np.asarray(Image.open(tmp_path / "out" / files["png"][0]))
+    assert batch_png.shape == (48, 64, 3)
+    assert np.array_equal(batch_png, images["smooth"])
+    assert not np.array_equal(batch_png, images["plain"])
+
+    triangles = {}
+    for name in ("smooth", "plain"):
+        code, _, err = run_cli("export", tmp_path / f"{name}.yaml", "--seed", seed, "--subdiv", "0", "-q",
+                               "-o", tmp_path / f"{name}.glb")
+        assert code == 0, err
+        triangles[name] = glb_triangles(tmp_path / f"{name}.glb")
+    assert glb_triangles(tmp_path / "out" / files["glb"][0]) == triangles["smooth"] != triangles["plain"]
+
+
+def test_a_glb_over_the_export_limit_is_a_failed_row(tmp_path):
+    """The batch's glb is held to ``plantgen export``'s limits: over them, the row fails
+    with export's one line and no glb is written."""
+    from plantgen.batch.plant import make_plant
+    from plantgen.batch.spec import simple_spec
+    from plantgen.limits import Limits
+
+    (tmp_path / "twig.yaml").write_text(TWIG)
+    (tmp_path / "glb").mkdir()
+    spec = simple_spec(str(tmp_path / "twig.yaml"), "0:1", ["glb"], glb_level=0)
+    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path), Limits(max_export_triangles=50))
+    assert row["status"] == "failed" and "over the export limit of 50" in row["error"]
+    assert not list((tmp_path / "glb").iterdir())
+    assert make_plant(spec.tasks[0], spec.outputs, str(tmp_path))["status"] == "ok"

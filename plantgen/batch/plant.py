@@ -1,6 +1,11 @@
 """One plant of a batch, start to finish, in whichever process runs it (a Dask worker):
 grow, write its files atomically, measure it, and return its manifest row.
 
+It grows and skins through the same functions as ``plantgen render`` and ``plantgen export``
+(:func:`plantgen.pipeline.grow_file`, :func:`plantgen.pipeline.skin_model`, a grammar's
+``turtle: smooth_bends`` included), so a view is the PNG ``plantgen render`` draws from
+:func:`view_camera` and the glb holds the triangles of ``plantgen export --subdiv m``.
+
 A plant that fails (a bad sweep value, a limit) does not raise: its row says ``failed``
 with the one-line error, and the batch goes on. Each process makes its GL context and
 ray caster once, on its first render (:func:`_caster`).
@@ -15,23 +20,26 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlantgenError
+from ..exporters import export_mesh
 from ..files import write_atomically
-from ..geometry.camera import auto_camera
+from ..geometry.camera import Camera, auto_camera
 from ..geometry.mesh import tessellate
-from ..geometry.skin import skin_skeleton
+from ..geometry.swc import write_swc
+from ..geometry.topology import branches
+from ..gl.raycast import Raycaster, RaycastSettings, label_image
+from ..images import write_png
 from ..limits import Limits
-from ..pipeline import check_finite_frusta, check_finite_mesh, grow_file, model_leaves
+from ..metrics import tree_metrics
+from ..pipeline import check_export_size, check_finite_mesh, grow_file, model_leaves, skin_model
 from .spec import Outputs, PlantTask
 
-__all__ = ["make_plant", "plant_row", "row_fields", "relative_files", "view_direction"]
+__all__ = ["make_plant", "plant_row", "row_fields", "relative_files", "view_direction", "view_camera"]
 
 _CASTER: list = []          # this process's Raycaster, made on first use
 
 
-def _caster():
-    if not _CASTER:
-        from ..gl.raycast import Raycaster
-
+def _caster() -> Raycaster:
+    if not _CASTER:                      # the GL context is made here, not on import
         _CASTER.append(Raycaster())
     return _CASTER[0]
 
@@ -41,6 +49,13 @@ def view_direction(azimuth_deg: float, elevation_deg: float = 15.0) -> tuple[flo
     ``elevation``."""
     a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
     return (float(np.sin(a) * np.cos(e)), float(np.sin(e)), float(np.cos(a) * np.cos(e)))
+
+
+def view_camera(frusta, size: tuple[int, int], azimuth_deg: float, leaves=None) -> Camera:
+    """The camera of one view: the plant's ``frusta`` and ``leaves`` (Polygons or None)
+    framed to fill ``size`` (width, height) pixels from ``azimuth_deg`` (:func:`view_direction`)."""
+    return auto_camera(frusta, int(size[0]), int(size[1]), direction=view_direction(azimuth_deg),
+                       points=None if leaves is None else leaves.vertices)
 
 
 def relative_files(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
@@ -86,28 +101,21 @@ def _labels(frusta, skeleton, kind: str) -> np.ndarray:
     if kind == "material":
         return frusta.material.astype(np.int64) + 1
     if kind == "order":
-        from ..geometry.topology import branches
-
         return branches(skeleton).segment_order[seg] + 1
     return np.ones(len(seg), dtype=np.int64)          # instance: one plant per batch row
 
 
 def _render_views(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
-    from ..gl.raycast import RaycastSettings, label_image
-    from ..images import write_png
-
     t0 = time.perf_counter()
     caster = _caster()
-    w, h = outputs.size
     settings = RaycastSettings(relief=outputs.relief)
     labels = _labels(frusta, skeleton, outputs.mask) if outputs.mask else None
     top = 255 if leaves is None or outputs.mask != "order" else LEAF_ORDER_LABEL - 1
     if labels is not None and labels.max() > top:
         raise PlantgenError(f"{task.id}: {labels.max()} {outputs.mask} labels, over the {top} a mask PNG holds")
     names = relative_files(task, outputs)
-    points = None if leaves is None else leaves.vertices
     for i, az in enumerate(outputs.azimuths):
-        camera = auto_camera(frusta, w, h, direction=view_direction(az), points=points)
+        camera = view_camera(frusta, outputs.size, az, leaves)
         result = caster.render(frusta, camera, settings, frusta.material_names, leaves=leaves)
         if outputs.png:
             write_png(root / names["png"][i], result.color)
@@ -121,9 +129,6 @@ def _render_views(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, 
 
 
 def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings: dict) -> None:
-    from ..geometry.swc import write_swc
-    from ..geometry.topology import branches
-
     names = relative_files(task, outputs)
     t0 = time.perf_counter()
     if outputs.npz:
@@ -134,24 +139,22 @@ def _write_skeleton_files(task, outputs: Outputs, skeleton, root: Path, timings:
     timings["skeleton_files"] = time.perf_counter() - t0
 
 
-def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
-    from ..exporters import export_mesh
-    from ..geometry.topology import branches
-
+def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict,
+               limits: Limits | None) -> None:
+    """The mesh ``plantgen export --subdiv m`` makes (its size limits, its tessellation),
+    with each vertex's branch order."""
     t0 = time.perf_counter()
+    path = root / relative_files(task, outputs)["glb"][0]
+    check_export_size([frusta], [leaves], len(skeleton), outputs.glb, "glb", limits, task.id, path)
     mesh = tessellate(frusta, outputs.glb)
     check_finite_mesh(mesh, frusta, task.id)
     order = branches(skeleton).segment_order[frusta.segment]
-    export_mesh(mesh, root / relative_files(task, outputs)["glb"][0], labels={"_BRANCH_ORDER": order},
-                leaves=leaves)
+    export_mesh(mesh, path, labels={"_BRANCH_ORDER": order}, leaves=leaves)
     timings["glb"] = time.perf_counter() - t0
 
 
 def _measure(skeleton) -> tuple[dict, np.ndarray]:
     """(tree metrics by name, with the branch count per order; (2, 3) geometry bounds)."""
-    from ..geometry.topology import branches
-    from ..metrics import tree_metrics
-
     topology = branches(skeleton)
     metrics = tree_metrics(skeleton, topology=topology)
     out = metrics.as_dict()
@@ -184,11 +187,11 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
         _write_skeleton_files(task, outputs, skeleton, root, timings)
         if outputs.glb is not None or outputs.views:
             t0 = time.perf_counter()
-            frusta = check_finite_frusta(skin_skeleton(skeleton), task.id)
+            frusta = skin_model(grown, source=task.id)
             timings["skin"] = time.perf_counter() - t0
             leaves = model_leaves(grown)
             if outputs.glb is not None:
-                _write_glb(task, outputs, frusta, skeleton, leaves, root, timings)
+                _write_glb(task, outputs, frusta, skeleton, leaves, root, timings, limits)
             if outputs.views:
                 _render_views(task, outputs, frusta, skeleton, leaves, root, timings)
         t0 = time.perf_counter()
