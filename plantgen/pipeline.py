@@ -37,8 +37,15 @@ import numpy as np
 from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
-from .exporters import ExportError, Plant, check_extra, estimate_export_bytes, export_format, write_plants
-from .exporters.qsm import write_qsm
+from .exporters import (
+    ExportError,
+    Plant,
+    check_extra,
+    estimate_export_bytes,
+    export_format,
+    write_plants,
+    write_skeleton,
+)
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
@@ -48,7 +55,7 @@ from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton
 from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
-from .geometry.swc import read_swc, write_swc
+from .geometry.swc import read_swc
 from .gl.context import renderer_name
 from .gl.raycast import Raycaster
 from .gl.records import RecordStream
@@ -676,11 +683,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
             summary["warnings"] = (*grown.warnings, f"{fmt.suffix} carries the skeleton only: "
                                    f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
         t1 = time.perf_counter()
-        if fmt.name == "swc":
-            summary["paths"] = [write_swc(grown.skeleton, output_path, up=up)]
-        else:
-            summary.update(write_qsm(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
-                                     name=grown.name))
+        summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
+                                      name=grown.name))
         timings["write"] = time.perf_counter() - t1
         return dict(summary, path=summary["paths"][-1])
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,

@@ -33,6 +33,7 @@ from plantgen.table1 import (
     matched_level,
     pareto_front,
     relief_configs,
+    reports,
     silhouette_mismatch,
     ssim,
     summarise,
@@ -240,6 +241,85 @@ def test_pareto_front_keeps_only_undominated_points():
     err = [0.5, 0.2, 0.3, 0.1, 0.1]
     front = pareto_front(ms, err).tolist()
     assert front == [0, 1, 3]                 # (3.0, 0.3) and (10, 0.1) are dominated
+
+
+# ------------------------------------------------------------------------ the reports
+def _report_model(name, *, relief=True, gsr_matched=False):
+    entry = {"fps": 100.0, "ms": 10.0, "error": 0.004, "key": "rc", "overdraw": 1.5, "samples_per_pixel": 3.0}
+    match = {"matched": gsr_matched, "level": 3, "text": "matched at m=3" if gsr_matched else "not matched: m=4",
+             "target_key": "rc+r:linear=8"}
+    return {"model": name, "segments": 1234, "shadows": False, "animated": False, "notes": [],
+            "rc": entry, "rcr": dict(entry, fps=50.0, ms=20.0) if relief else None, "gs": entry,
+            "gsr": dict(entry, fps=25.0, ms=40.0), "gs_level": 1, "gs_matched": True, "gsr_level": 3,
+            "gsr_matched": gsr_matched, "gs_match": {"matched": True, "text": "matched at m=1"}, "gsr_match": match,
+            "rcr_choice": {"key": "rc+r:linear=8", "rule": "fastest", "within": True, "settings": {},
+                           "error": 0.004, "ms": 20.0} if relief else None,
+            "memory": {"rc_bytes": 100, "rcr_bytes": 200, "gs_bytes": 300, "gsr_bytes": None,
+                       "relief_map_bytes": 64, "gs_over_rc": 3.0, "gsr_over_rcr": None},
+            "curve": [{"method": "RC", "knob": "", "value": 0, "key": "rc", "ms": 10.0, "fps": 100.0,
+                       "error": 0.004}]}
+
+
+def _report_results():
+    """A run's results as the bench records them, made up: one model of the paper's, one not."""
+    return {"machine": {"gl_renderer": "test GL", "date_utc": "2024-01-01", "gl_version": "4.6", "cpu": "cpu",
+                        "cpus": 2},
+            "options": {"size": [64, 48], "frames": 3, "curve_frames": 2, "relief_error": 0.01, "eval_size": [32, 24],
+                        "rel_tol": 0.1, "abs_tol": 0.001, "max_triangles": 1000},
+            "wall_s": 1.0, "models": [_report_model("saguaro"), _report_model("mine", relief=False, gsr_matched=True)]}
+
+
+def _cells(line: str) -> list[str]:
+    assert line.startswith("| ") and line.endswith(" |"), line
+    return line[2:-2].split(" | ")
+
+
+@pytest.mark.parametrize("table", ["TABLE1_COLUMNS", "WORK_COLUMNS", "MEMORY_COLUMNS"])
+def test_a_tables_header_rule_and_rows_have_one_cell_per_declared_column(table):
+    columns = getattr(reports, table)
+    results = _report_results()
+    head, rule = reports.markdown_head(columns)
+    headers = [c.header for c in columns if c.header is not None]
+    assert _cells(head) == headers and rule == "|" + "---|" * len(headers)
+    for m in results["models"]:
+        assert len(_cells(reports.markdown_row(columns, m, results))) == len(headers)
+    text = reports.markdown_table(results)
+    assert f"{head}\n{rule}\n" in text
+
+
+def test_the_csv_columns_are_the_declared_columns(tmp_path):
+    """table1.csv's fields, TABLE_FIELDS and table_rows' keys all come from TABLE1_COLUMNS."""
+    declared = [c.name for c in reports.TABLE1_COLUMNS if c.name is not None]
+    assert len(set(declared)) == len(declared)
+    assert declared == reports.TABLE_FIELDS
+    results = _report_results()
+    reports.write_outputs(results, tmp_path)
+    with open(tmp_path / "table1.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == declared
+    assert [list(r) for r in reports.table_rows(results)] == [declared] * 2
+    assert [r["model"] for r in rows] == ["saguaro", "mine"]
+    assert rows[0]["paper_segments"] == str(PAPER_TABLE1["saguaro"].segments) and rows[1]["paper_segments"] == ""
+    assert rows[1]["rcr_fps"] == rows[1]["rcr_config"] == "" and rows[0]["rcr_config"] == "rc+r:linear=8"
+
+
+def test_a_new_column_is_one_line(tmp_path, monkeypatch):
+    """One Column in TABLE1_COLUMNS gives a CSV field, a Markdown header and a cell per row."""
+    extra = reports.Column("gs_triangles", "GS triangles", lambda m, results: 1000 * m["gs_level"], ",")
+    monkeypatch.setattr(reports, "TABLE1_COLUMNS", (*reports.TABLE1_COLUMNS, extra))
+    reports.write_outputs(_report_results(), tmp_path)
+    with open(tmp_path / "table1.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["gs_triangles"] for r in rows] == ["1000", "1000"]
+    table = (tmp_path / "table.md").read_text().splitlines()
+    head = next(line for line in table if line.startswith("| model | segments"))
+    assert _cells(head)[-1] == "GS triangles"
+    assert [_cells(line)[-1] for line in table if line.startswith(("| saguaro | 1,234", "| mine | 1,234"))] == [
+        "1,000", "1,000"]
+    with pytest.raises(ValueError, match="needs a CSV name, a Markdown header or both"):
+        reports.Column(None)
+    with pytest.raises(ValueError, match="'gs_triangles' needs a value"):
+        reports.Column("gs_triangles", "GS triangles", cell=lambda m: "")
 
 
 # ------------------------------------------------------------------------ GL: end to end

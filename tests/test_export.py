@@ -5,7 +5,11 @@ each format in its up-axis convention and turned on request."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import meshio
@@ -16,9 +20,14 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node
 from test_mesh import BENT, chain_frusta, concat_frusta
 
-from plantgen.exporters import EXPORT_FORMATS, ExportError, export_mesh
+import plantgen
+from plantgen.exporters import EXPORT_FORMATS, ExportError, Format, Plant, export_mesh, write_plants, write_skeleton
+from plantgen.exporters.formats import FORMAT_KINDS
+from plantgen.exporters.plants import MeshWriter, SkeletonWriter
 from plantgen.geometry.frames import up_rotation
 from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.skeleton import Skeleton
+from plantgen.pipeline import export_model, grow_file
 
 MESH_SUFFIXES = [".glb", ".gltf", ".obj", ".ply", ".stl"]
 CONVENTION = {".glb": "y", ".gltf": "y", ".obj": "y", ".ply": "z", ".stl": "z"}
@@ -89,6 +98,91 @@ def test_the_up_conventions_are_the_documented_ones():
     rows = {cells[1].strip(): cells[3].strip() for line in readme.splitlines()
             if line.startswith("| `.") and len(cells := line.split("|")) > 4}
     assert {suffix: rows.get(f"`{suffix}`") for suffix in up} == up
+
+
+def _convention(protocol) -> list[tuple[str, object]]:
+    """(name, kind) of the parameters of a writer convention's ``__call__``, self left out."""
+    params = list(inspect.signature(protocol.__call__).parameters.values())[1:]
+    return [(q.name, q.kind) for q in params]
+
+
+def test_every_format_row_names_a_writer_of_its_kinds_convention():
+    """Each row carries its writer ("module:function", imported on first use), under
+    plantgen.export, taking what its kind's convention passes (MeshWriter, SkeletonWriter)."""
+    conventions = {"mesh": _convention(MeshWriter), "skeleton": _convention(SkeletonWriter)}
+    assert set(conventions) == set(FORMAT_KINDS)
+    for suffix, fmt in EXPORT_FORMATS.items():
+        writer = fmt.load_writer()
+        assert writer.__module__.startswith("plantgen.exporters."), (suffix, writer.__module__)
+        params = [(q.name, q.kind) for q in inspect.signature(writer).parameters.values()]
+        expected = conventions[fmt.kind]
+        # the first two may be named after what the writer takes; the keywords are the convention's
+        assert [k for _, k in params] == [k for _, k in expected], (suffix, params)
+        assert params[2:] == expected[2:], (suffix, params)
+
+
+def test_the_writers_of_optional_extras_are_imported_on_first_use_only():
+    """Importing plantgen's pipeline imports neither the writers that need an optional
+    package (usd-core, scipy) nor those packages, nor trimesh."""
+    lazy = sorted({fmt.writer.split(":")[0] for fmt in EXPORT_FORMATS.values() if fmt.module})
+    assert lazy == ["plantgen.exporters.qsm", "plantgen.exporters.usd"]
+    code = "import json, sys, plantgen.pipeline; print(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(Path(plantgen.__file__).parents[1])}).stdout
+    loaded = json.loads(out)
+    assert "plantgen.exporters.formats" in loaded
+    assert not [m for m in loaded if m in lazy or m.split(".")[0] in ("pxr", "scipy", "trimesh")]
+
+
+def test_a_row_must_name_a_kind_and_a_writer():
+    with pytest.raises(ValueError, match="kind must be one of mesh, skeleton"):
+        Format("x", ".x", "cloud", "y", False, 0, "plantgen.exporters.gltf:write_gltf")
+    with pytest.raises(ValueError, match="module:function"):
+        Format("x", ".x", "mesh", "y", False, 0, "plantgen.exporters.gltf.write_gltf")
+
+
+def test_a_new_format_is_one_row_and_its_writer(tmp_path, monkeypatch):
+    """Nothing dispatches by format name: a row with its writer is enough for export_mesh,
+    write_skeleton and the export command's pipeline, which call it with the convention's
+    arguments and the row's up axis."""
+    calls = []
+
+    def write_points(plants, path, *, up, colours, instancing, unit, name, progress):
+        calls.append(("mesh", path.name, up, instancing, len(plants)))
+        path.write_text("points")
+        return [path]
+
+    def write_bones(skeleton, path, *, up, unit, tolerance, name):
+        calls.append(("skeleton", path.name, up, unit, name))
+        path.write_text("bones")
+        return {"paths": [path], "bones": len(skeleton)}
+
+    monkeypatch.setitem(EXPORT_FORMATS, ".pts", Format("pts", ".pts", "mesh", "z", True, 100, write_points))
+    monkeypatch.setitem(EXPORT_FORMATS, ".bones", Format("bones", ".bones", "skeleton", "z", False, 0, write_bones))
+    assert export_mesh(two_material_model(0), tmp_path / "plant.pts") == tmp_path / "plant.pts"
+    grown = grow_file("saguaro")
+    info = write_skeleton(grown.skeleton, tmp_path / "plant.bones", unit=0.5, name="cactus")
+    assert info == {"paths": [tmp_path / "plant.bones"], "bones": len(grown.skeleton)}
+    summary = export_model("saguaro", tmp_path / "model.bones")
+    assert summary["format"] == "bones" and summary["path"] == tmp_path / "model.bones"
+    assert calls == [("mesh", "plant.pts", "z", "gpu", 1), ("skeleton", "plant.bones", "z", 0.5, "cactus"),
+                     ("skeleton", "model.bones", "z", 1.0, "saguaro")]
+    with pytest.raises(ExportError, match="holds a mesh, not a skeleton"):
+        write_skeleton(grown.skeleton, tmp_path / "plant.glb")
+
+
+def test_a_format_without_instancing_refuses_a_scene_in_one_line(tmp_path):
+    """OBJ, PLY and STL hold one mesh in place: their writers refuse placed copies or several
+    plants, naming the format's suffix, and write nothing."""
+    mesh = two_material_model(0)
+    plant = Plant("p", Skeleton.empty(mesh.material_names), mesh)
+    placed = dataclasses.replace(plant, matrices=np.stack([np.eye(4)] * 2))
+    for suffix, fmt in EXPORT_FORMATS.items():
+        if fmt.kind == "mesh" and not fmt.instancing:
+            for plants in ([placed], [plant, plant]):
+                with pytest.raises(ExportError, match=rf"\{suffix} holds one mesh in place; flatten the scene first"):
+                    write_plants(plants, tmp_path / f"scene{suffix.upper()}")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_continuing_chain_loads_back_watertight(tmp_path):

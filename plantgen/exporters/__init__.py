@@ -6,8 +6,10 @@ models (QSM), each in the form the tools that read it expect.
   skeleton with the placements of its copies);
 - :mod:`~plantgen.exporters.meshes`: :func:`export_mesh` (one mesh) and :func:`write_plants`
   (a scene's plants, instanced where the format can);
+- :mod:`~plantgen.exporters.skeletons`: :func:`write_skeleton` (SWC, the cylinder models);
 - :mod:`~plantgen.exporters.gltf`, :mod:`~plantgen.exporters.obj`, :mod:`~plantgen.exporters.usd`,
-  :mod:`~plantgen.exporters.qsm`: the writers. SWC is :func:`plantgen.geometry.swc.write_swc`.
+  :mod:`~plantgen.exporters.qsm`: the writers, each named by its format's row. SWC is
+  :func:`plantgen.geometry.swc.write_swc`.
 
 Every writer writes under temporary names and renames, so a failure leaves nothing
 half-written.
@@ -24,6 +26,7 @@ from .formats import (
 )
 from .meshes import export_mesh, write_plants
 from .plants import Plant
+from .skeletons import write_skeleton
 
 __all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "check_extra", "estimate_export_bytes",
-           "export_file_type", "export_format", "export_mesh", "write_plants"]
+           "export_file_type", "export_format", "export_mesh", "write_plants", "write_skeleton"]

@@ -23,19 +23,35 @@ MeshLab's scans) take z as up; USD records its axis in the stage (``upAxis``, y 
 default here); SWC keeps plantgen's frame (neuron data has no up); TreeQSM's cylinder
 models are z-up (terrestrial laser scans). ``up="z"`` turns the model +90° about x,
 ``(x, y, z)`` -> ``(x, -z, y)``, which keeps handedness and windings.
+
+**Writers.** Each row of :data:`EXPORT_FORMATS` names the function that writes it, as a
+``"module:function"`` reference imported on first use (:meth:`Format.load_writer`; a row
+may hold the function itself), so that an optional package (usd-core, scipy) and a
+writer's import cost stay off ``import plantgen``. Writers of a kind share one calling
+convention: :class:`~plantgen.exporters.plants.MeshWriter` (called by
+:func:`~plantgen.exporters.meshes.write_plants`) and
+:class:`~plantgen.exporters.plants.SkeletonWriter` (called by
+:func:`~plantgen.exporters.skeletons.write_skeleton`). Nothing chooses a writer by the
+format's name: a new format is one row and its writer.
 """
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import PlantgenError
 from ..geometry.frames import UP_AXES
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "UP_AXES", "check_extra", "estimate_export_bytes",
-           "export_format", "export_file_type"]
+__all__ = ["EXPORT_FORMATS", "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",
+           "estimate_export_bytes", "export_format", "export_file_type"]
+
+#: What a format holds: a mesh (written by a :class:`~plantgen.exporters.plants.MeshWriter`)
+#: or a skeleton (a :class:`~plantgen.exporters.plants.SkeletonWriter`).
+FORMAT_KINDS = ("mesh", "skeleton")
 
 
 class ExportError(PlantgenError, ValueError):
@@ -44,37 +60,54 @@ class ExportError(PlantgenError, ValueError):
 
 @dataclass(frozen=True)
 class Format:
-    """One export format (see the module docstring)."""
+    """One export format (see the module docstring) and the function that writes it.
+
+    ``writer`` is a ``"module:function"`` reference, imported on first use, or the function
+    itself; it follows its kind's convention (:data:`FORMAT_KINDS`)."""
 
     name: str
     suffix: str
-    kind: str                    # "mesh" or "skeleton"
+    kind: str                    # "mesh" or "skeleton" (FORMAT_KINDS)
     up: str                      # the format's up-axis convention, the default of --up
     instancing: bool             # a scene's repeated plants can be written once
     bytes_per_triangle: int      # peak memory of writing, per triangle (mesh formats)
+    writer: str | Callable       # "module:function", or the function
     module: str | None = None    # the optional package the writer needs
     extra: str | None = None     # the plantgen extra that installs it
+
+    def __post_init__(self) -> None:
+        if self.kind not in FORMAT_KINDS:
+            raise ValueError(f"{self.suffix}: kind must be one of {', '.join(FORMAT_KINDS)}, got {self.kind!r}")
+        if not callable(self.writer) and self.writer.count(":") != 1:
+            raise ValueError(f"{self.suffix}: writer must be a function or 'module:function', got {self.writer!r}")
 
     @property
     def install(self) -> str:
         return f"pip install 'plantgen[{self.extra}]'"
+
+    def load_writer(self) -> Callable:
+        """The writer function, its module imported now (check :func:`check_extra` first)."""
+        if callable(self.writer):
+            return self.writer
+        module, function = self.writer.split(":")
+        return getattr(importlib.import_module(module), function)
 
 
 #: Peak bytes per triangle of tessellating and writing (the process's peak resident size
 #: over the tessellation and the write, coconut at m = 2, 1.08 M triangles: glb 170, gltf
 #: 173, obj 151, ply 186, stl 412, usda 175, usdc 117), rounded up generously.
 EXPORT_FORMATS = {f.suffix: f for f in (
-    Format("glb", ".glb", "mesh", "y", True, 250),
-    Format("gltf", ".gltf", "mesh", "y", True, 250),
-    Format("obj", ".obj", "mesh", "y", False, 250),
-    Format("ply", ".ply", "mesh", "z", False, 400),
-    Format("stl", ".stl", "mesh", "z", False, 650),
-    Format("usda", ".usda", "mesh", "y", True, 300, "pxr", "usd"),
-    Format("usdc", ".usdc", "mesh", "y", True, 250, "pxr", "usd"),
-    Format("usd", ".usd", "mesh", "y", True, 250, "pxr", "usd"),
-    Format("swc", ".swc", "skeleton", "y", False, 0),
-    Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0),
-    Format("qsm.mat", ".qsm.mat", "skeleton", "z", False, 0, "scipy", "qsm"),
+    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf"),
+    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf"),
+    Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant"),
+    Format("ply", ".ply", "mesh", "z", False, 400, "plantgen.exporters.meshes:write_ply"),
+    Format("stl", ".stl", "mesh", "z", False, 650, "plantgen.exporters.meshes:write_stl"),
+    Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
+    Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
+    Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
+    Format("swc", ".swc", "skeleton", "y", False, 0, "plantgen.exporters.skeletons:write_swc_skeleton"),
+    Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm"),
+    Format("qsm.mat", ".qsm.mat", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm", "scipy", "qsm"),
 )}
 
 

@@ -180,9 +180,12 @@ def _glb(doc: dict, data: bytes) -> bytes:
 
 
 def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
-               instancing: str = "gpu", name: str | None = None, progress: Progress = None) -> list[Path]:
+               instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
+               progress: Progress = None) -> list[Path]:
     """Write ``plants`` as ``.glb``, or as ``.gltf`` with its ``.bin`` beside it (see the
-    module docstring); nothing is left half-written. Returns the written paths."""
+    module docstring); nothing is left half-written. Returns the written paths (a
+    :class:`~plantgen.exporters.plants.MeshWriter`; ``unit`` is not written: glTF has no unit
+    field, and the model is written in model units)."""
     path = Path(path)
     if not any(plant.mesh is not None and len(plant.mesh.faces) for plant in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")

@@ -3,7 +3,9 @@
 The format follows the file suffix (:mod:`plantgen.exporters.formats`): glTF (``.glb``,
 ``.gltf`` + ``.bin``) and OBJ (+ ``.mtl``) through plantgen's writers, keeping material
 names, colours, normals and texture coordinates; PLY (normals) and STL (triangles only)
-through trimesh; USD through usd-core. A plant's leaves (a grammar's ``{ . }`` polygons)
+through trimesh; USD through usd-core. Each format's row names its writer
+(:data:`~plantgen.exporters.formats.EXPORT_FORMATS`), called the same way for every format
+(:class:`~plantgen.exporters.plants.MeshWriter`). A plant's leaves (a grammar's ``{ . }`` polygons)
 go with it in every mesh format (see each writer; PLY and STL add them as plain
 triangles after the frusta's). ``up`` (default: the format's convention) turns the
 model. Every writer writes under temporary names and renames, so a failed export leaves
@@ -22,21 +24,23 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, check_extra, export_format
-from .plants import Colours, Plant, Progress, leaf_parts, turned_mesh
+from .plants import Colours, MeshWriter, Plant, Progress, leaf_parts, single_plant, turned_mesh
 
-__all__ = ["export_mesh", "write_plants", "write_trimesh"]
+__all__ = ["export_mesh", "write_plants", "write_ply", "write_stl"]
 
 
-def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str, leaves: Polygons | None = None) -> Path:
-    """Binary PLY (with vertex normals) or binary STL through trimesh; ``leaves`` follow the
-    frusta as plain triangles (their vertices, normals and faces after the mesh's)."""
+def _write_trimesh(plants: list[Plant], path: str | Path, up: str, encode) -> list[Path]:
+    """The one plant of ``plants`` as a trimesh mesh with its vertex normals, its leaves
+    after the frusta as plain triangles (their vertices, normals and faces after the
+    mesh's), written as ``encode(trimesh.exchange, mesh)``."""
+    plant = single_plant(plants, path)
     import trimesh  # here, not at the top: importing trimesh takes about a second
 
-    path = Path(path)
+    mesh = plant.mesh
     vertices, normals = turned_mesh(mesh, up)
     faces = [mesh.faces]
     vertex_list, normal_list, first = [vertices], [normals], len(vertices)
-    for part in leaf_parts(leaves, up):
+    for part in leaf_parts(plant.leaves, up):
         vertex_list.append(part.vertices)
         normal_list.append(part.normals)
         faces.append(part.faces + first)
@@ -45,20 +49,37 @@ def write_trimesh(mesh: TessellatedMesh, path: str | Path, *, up: str, leaves: P
         vertices, normals = np.concatenate(vertex_list), np.concatenate(normal_list)
     whole = trimesh.Trimesh(vertices, np.concatenate(faces) if len(faces) > 1 else mesh.faces,
                             vertex_normals=normals, process=False, validate=False)
-    if path.suffix.lower() == ".ply":
-        data = trimesh.exchange.ply.export_ply(whole, encoding="binary", vertex_normal=True)
-    else:
-        data = trimesh.exchange.stl.export_stl(whole)
-    return write_atomically(path, lambda tmp: Path(tmp).write_bytes(data), ExportError)
+    data = encode(trimesh.exchange, whole)
+    return [write_atomically(Path(path), lambda tmp: Path(tmp).write_bytes(data), ExportError)]
+
+
+def write_ply(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
+              instancing: str = "off", unit: float = 1.0, name: str | None = None,
+              progress: Progress = None) -> list[Path]:
+    """Binary PLY with vertex normals through trimesh: the one plant of ``plants`` in place,
+    its leaves as plain triangles after the frusta (a
+    :class:`~plantgen.exporters.plants.MeshWriter`; PLY keeps no materials, names or units)."""
+    return _write_trimesh(plants, path, up, lambda exchange, whole: exchange.ply.export_ply(
+        whole, encoding="binary", vertex_normal=True))
+
+
+def write_stl(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
+              instancing: str = "off", unit: float = 1.0, name: str | None = None,
+              progress: Progress = None) -> list[Path]:
+    """Binary STL (triangles only) through trimesh: the one plant of ``plants`` in place,
+    its leaves as plain triangles after the frusta (a
+    :class:`~plantgen.exporters.plants.MeshWriter`; STL keeps no materials, names or units)."""
+    return _write_trimesh(plants, path, up, lambda exchange, whole: exchange.stl.export_stl(whole))
 
 
 def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None, colours: Colours = None,
                  instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
                  progress: Progress = None) -> list[Path]:
     """Write ``plants`` (see :class:`~plantgen.exporters.plants.Plant`) in the mesh format
-    ``path`` names; ``name`` names the scene (default: the file's stem). Formats without
-    instancing take one plant written in place. Returns the written paths (a ``.gltf`` or
-    ``.obj`` brings a second file)."""
+    ``path`` names, with the writer its row names
+    (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`); ``name`` names the scene (default:
+    the file's stem). Formats without instancing take one plant written in place. Returns
+    the written paths (a ``.gltf`` or ``.obj`` brings a second file)."""
     path = Path(path)
     fmt = export_format(path)
     if fmt.kind != "mesh":
@@ -66,23 +87,11 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
     check_extra(fmt, path)
     if not path.parent.is_dir():
         raise ExportError(f"{path}: directory {path.parent} does not exist")
-    up = up or fmt.up
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
-    if fmt.name in ("glb", "gltf"):
-        from .gltf import write_gltf
-        return write_gltf(plants, path, up=up, colours=colours, instancing=instancing, name=name,
-                          progress=progress)
-    if fmt.name.startswith("usd"):
-        from .usd import write_usd
-        return write_usd(plants, path, up=up, colours=colours, instancing=instancing, unit=unit, name=name,
-                         progress=progress)
-    if len(plants) != 1 or plants[0].matrices is not None:
-        raise ExportError(f"{path}: {fmt.suffix} holds one mesh in place; flatten the scene first")
-    if fmt.name == "obj":
-        from .obj import write_obj
-        return write_obj(plants[0].mesh, path, up=up, colours=colours, progress=progress, leaves=plants[0].leaves)
-    return [write_trimesh(plants[0].mesh, path, up=up, leaves=plants[0].leaves)]
+    writer: MeshWriter = fmt.load_writer()
+    return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,
+                  progress=progress)
 
 
 def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,

@@ -29,9 +29,19 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Progress, leaf_name, leaf_parts, material_colours, turned_mesh, unique_name
+from .plants import (
+    Colours,
+    Plant,
+    Progress,
+    leaf_name,
+    leaf_parts,
+    material_colours,
+    single_plant,
+    turned_mesh,
+    unique_name,
+)
 
-__all__ = ["obj_names", "write_obj"]
+__all__ = ["obj_names", "write_obj", "write_obj_plant"]
 
 #: Rows formatted at a time (bounds the text held in memory; one progress step each).
 ROWS = 1 << 16
@@ -129,3 +139,13 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
                       total)
 
     return write_all_atomically([(mtl_path, write_mtl), (path, write_geometry)], ExportError)
+
+
+def write_obj_plant(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
+                    instancing: str = "off", unit: float = 1.0, name: str | None = None,
+                    progress: Progress = None) -> list[Path]:
+    """:func:`write_obj` of the one plant of ``plants``, in place, with its leaves (a
+    :class:`~plantgen.exporters.plants.MeshWriter`; OBJ has no instancing and no units, and
+    its name is the file's)."""
+    plant = single_plant(plants, path)
+    return write_obj(plant.mesh, path, up=up, colours=colours, progress=progress, leaves=plant.leaves)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -13,10 +15,10 @@ from ..geometry.materials import material_colour
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
-from .formats import ExportError
+from .formats import ExportError, export_format
 
-__all__ = ["Colours", "Part", "Plant", "Progress", "leaf_name", "leaf_parts", "leaf_uv", "material_colours",
-           "material_parts", "turned_mesh"]
+__all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SkeletonWriter", "leaf_name", "leaf_parts",
+           "leaf_uv", "material_colours", "material_parts", "single_plant", "turned_mesh"]
 
 #: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
 #: renderers' palette).
@@ -49,6 +51,59 @@ class Plant:
     @property
     def copies(self) -> int:
         return 1 if self.matrices is None else len(self.matrices)
+
+
+class MeshWriter(Protocol):
+    """How every mesh format's writer is called (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`
+    names it; :func:`~plantgen.exporters.meshes.write_plants` calls it, the arguments checked).
+
+    Parameters
+    ----------
+    plants : the plants to write (:class:`Plant`); a format without instancing takes one
+        plant in place (:func:`single_plant`)
+    path : the file; its suffix is the format's
+    up : ``"y"`` or ``"z"``
+    colours : the material colours (:data:`Colours`)
+    instancing : ``"gpu"`` or ``"nodes"``: how a scene's copies are written where the format can
+    unit : metres per model unit, where the format records it (USD)
+    name : the model's name in the file (None: the file's stem)
+    progress : reports the writer's steps (:data:`Progress`)
+
+    A writer ignores what its format has no place for. Returns the written paths, the
+    main file last.
+    """
+
+    def __call__(self, plants: list[Plant], path: Path, *, up: str, colours: Colours, instancing: str,
+                 unit: float, name: str | None, progress: Progress) -> list[Path]: ...
+
+
+class SkeletonWriter(Protocol):
+    """How every skeleton format's writer is called (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`
+    names it; :func:`~plantgen.exporters.skeletons.write_skeleton` calls it).
+
+    Parameters
+    ----------
+    skeleton : the model's skeleton (a scene's plants together)
+    path : the file; its suffix is the format's
+    up : ``"y"`` or ``"z"``
+    unit : metres per model unit, where the format records lengths in metres (QSM)
+    tolerance : a cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
+    name : the model's name, where the format records it
+
+    A writer ignores what its format has no place for. Returns a summary: ``paths`` (the
+    written files, the main one last) and what else the format reports.
+    """
+
+    def __call__(self, skeleton: Skeleton, path: Path, *, up: str, unit: float, tolerance: float,
+                 name: str) -> dict: ...
+
+
+def single_plant(plants: list[Plant], path: str | Path) -> Plant:
+    """The one plant that a format without instancing (``path``'s) writes in place, or one
+    line saying the scene must be flattened first."""
+    if len(plants) != 1 or plants[0].matrices is not None:
+        raise ExportError(f"{path}: {export_format(path).suffix} holds one mesh in place; flatten the scene first")
+    return plants[0]
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -16,17 +18,10 @@ from .plots import plot_curves
 from .summary import rcr_over_gsr, summarise, summary_lines
 
 __all__ = ["markdown_table", "match_notes", "table_rows", "curve_rows", "pareto_summary",
-           "winners", "write_outputs", "rcr_over_gsr", "TABLE_FIELDS", "CURVE_FIELDS",
+           "winners", "write_outputs", "rcr_over_gsr", "Column", "TABLE1_COLUMNS", "WORK_COLUMNS",
+           "MEMORY_COLUMNS", "csv_fields", "markdown_head", "markdown_row", "TABLE_FIELDS", "CURVE_FIELDS",
            "QUALITY_LEVELS", "UNMATCHED"]
 
-TABLE_FIELDS = ["model", "segments", "rc_fps", "rc_ms", "rc_error", "rcr_fps", "rcr_ms", "rcr_error",
-                "rcr_config", "rcr_config_rule",
-                "gs_fps", "gs_ms", "gs_level", "gs_matched", "gs_match", "gs_error", "gsr_fps", "gsr_ms",
-                "gsr_level", "gsr_matched", "gsr_match", "gsr_error", "rcr_over_gsr", "rcr_over_gsr_matched",
-                "paper_segments",
-                "paper_rc_fps", "paper_rcr_fps", "paper_gs_fps", "paper_gs_sub", "paper_gsr_fps",
-                "paper_gsr_sub", "paper_rcr_over_gsr", "rc_bytes", "rcr_bytes", "gs_bytes",
-                "gsr_bytes", "shadows", "animated", "gl_renderer"]
 CURVE_FIELDS = ["model", "method", "knob", "value", "ms", "fps", "error", "dssim", "silhouette",
                 "overdraw", "samples_per_pixel", "triangles", "gpu_bytes", "pareto", "skipped"]
 #: Error levels at which :func:`winners` names the fastest configuration.
@@ -37,15 +32,105 @@ MISSING = "–"
 UNMATCHED = "✗"
 
 
+# ---------------------------------------------------------------------------- columns
+#: ``value(model, results)``: a column's value for one model of a run's results (None: not measured).
+Value = Callable[[dict, dict], object]
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a bench table, declared once: its CSV field, its Markdown header and
+    how its value is found and shown.
+
+    Parameters
+    ----------
+    name : the CSV field (``table1.csv``); None: Markdown only
+    header : the Markdown header; None: CSV only
+    value : ``value(model, results)``, the CSV value (None: an empty field) and the value a
+        Markdown cell shows
+    spec, suffix : the Markdown cell is ``format(value, spec) + suffix``, or :data:`MISSING`
+        for None
+    cell : ``cell(model)``, the Markdown cell where it is more than the value (paper values
+        beside ours, levels, marks)
+    """
+
+    name: str | None
+    header: str | None = None
+    value: Value | None = None
+    spec: str = ""
+    suffix: str = ""
+    cell: Callable[[dict], str] | None = None
+
+    def __post_init__(self) -> None:
+        if self.name is None and self.header is None:
+            raise ValueError("a column needs a CSV name, a Markdown header or both")
+        if self.value is None and (self.name is not None or self.cell is None):
+            raise ValueError(f"column {self.name or self.header!r} needs a value (a CSV field or a cell shows it)")
+
+    def text(self, model: dict, results: dict) -> str:
+        """The Markdown cell of ``model``."""
+        if self.cell is not None:
+            return self.cell(model)
+        return _cell(self.value(model, results), self.spec, self.suffix)
+
+
+def csv_fields(columns) -> list[str]:
+    """The CSV fields of ``columns``, in order."""
+    return [c.name for c in columns if c.name is not None]
+
+
+def markdown_head(columns) -> list[str]:
+    """The Markdown header line of ``columns`` (those with a header) and its rule."""
+    headers = [c.header for c in columns if c.header is not None]
+    return ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+
+
+def markdown_row(columns, model: dict, results: dict) -> str:
+    """The Markdown row of ``model`` under :func:`markdown_head`."""
+    return "| " + " | ".join(c.text(model, results) for c in columns if c.header is not None) + " |"
+
+
+def _key(key: str) -> Value:
+    return lambda m, results: m[key]
+
+
+def _entry(method: str, field: str) -> Value:
+    """A field of a Table 1 method's entry (None when the method did not run)."""
+    return lambda m, results: m[method][field] if m[method] else None
+
+
+def _choice(field: str) -> Value:
+    """A field of RC+R's Table 1 configuration (None without one)."""
+    return lambda m, results: m["rcr_choice"][field] if m.get("rcr_choice") else None
+
+
+def _match_text(method: str) -> Value:
+    """How a polygonal method's level walk ended (None without one)."""
+    return lambda m, results: m[f"{method}_match"]["text"] if m.get(f"{method}_match") else None
+
+
+def _paper(field: str, level: str | None = None) -> Value:
+    """A figure of the paper's Table 1 (of one of its polygonal methods, ``level``), None
+    off the paper."""
+    def value(m, results):
+        p = PAPER_TABLE1.get(m["model"])
+        return None if p is None else getattr(p if level is None else getattr(p, level), field)
+    return value
+
+
+def _memory(field: str) -> Value:
+    return lambda m, results: m["memory"][field]
+
+
+def _ratio_matched(m: dict, results: dict):
+    """Whether RC+R/GS+R is at matched quality (None without the ratio)."""
+    return bool(m["gsr_matched"]) if rcr_over_gsr(m) is not None else None
+
+
 # ---------------------------------------------------------------------------- cells
 def _cell(value, spec: str = "", suffix: str = "") -> str:
     """``value`` formatted with ``spec`` plus ``suffix``, or :data:`MISSING` for None."""
     return MISSING if value is None else format(value, spec) + suffix
-
-
-def _entry_cell(entry: dict | None, field: str, spec: str) -> str:
-    """A field of a Table 1 method's entry (None when the method did not run)."""
-    return _cell(None if entry is None else entry[field], spec)
 
 
 def _level_cell(model: dict, short: str) -> str:
@@ -69,6 +154,114 @@ def _config_cell(model: dict) -> str:
         return MISSING
     name = choice["key"].split(":", 1)[1] if ":" in choice["key"] else choice["key"]
     return name + ("" if choice["within"] else " (best)")
+
+
+def _paper_suffixes(p: PaperRow | None) -> dict:
+    """The paper's value of each Table 1 column, as `` (value)``; empty off the paper."""
+    if p is None:
+        return dict.fromkeys(("segments", *TABLE_METHODS), "")
+    return {"segments": f" ({p.segments})", "rc": f" ({p.rc_fps})", "rcr": f" ({p.rcr_fps})",
+            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})"}
+
+
+def _segments_cell(model: dict) -> str:
+    """Segments, the paper's in parentheses."""
+    return f"{model['segments']:,}" + _paper_suffixes(PAPER_TABLE1.get(model["model"]))["segments"]
+
+
+def _fps_cell(short: str) -> Callable[[dict], str]:
+    """A Table 1 method's fps, its level (polygonal methods, :func:`_level_cell`), the
+    paper's in parentheses."""
+    def cell(model: dict) -> str:
+        entry = model[short]
+        text = _cell(None if entry is None else entry["fps"], ".1f")
+        if short in MATCHED_AGAINST:
+            text += f" / {_level_cell(model, short)}"
+        return text + _paper_suffixes(PAPER_TABLE1.get(model["model"]))[short]
+    return cell
+
+
+def _work_cell(short: str, samples: bool = False) -> Callable[[dict], str]:
+    """'ms · overdraw (· relief samples per pixel)' of a Table 1 entry."""
+    def cell(model: dict) -> str:
+        entry = model[short]
+        if not entry or entry.get("overdraw") is None:
+            return MISSING
+        text = f"{entry['ms']:.1f} · {entry['overdraw']:.2f}"
+        return text + (f" · {entry['samples_per_pixel']:.1f}" if samples else "")
+    return cell
+
+
+def _bytes_cell(short: str) -> Callable[[dict], str]:
+    """A polygonal method's bytes on the GPU and its level."""
+    return lambda m: f"{_cell(m['memory'][f'{short}_bytes'], ',')} ({_level_cell(m, short)})"
+
+
+# ---------------------------------------------------------------------------- tables
+#: Table 1: ``table1.csv``'s fields (``name``) and ``table.md``'s columns (``header``), in order.
+TABLE1_COLUMNS = (
+    Column("model", "model", _key("model")),
+    Column("segments", "segments (paper)", _key("segments"), cell=_segments_cell),
+    Column("rc_fps", "RC fps (paper)", _entry("rc", "fps"), cell=_fps_cell("rc")),
+    Column("rc_ms", None, _entry("rc", "ms")),
+    Column("rc_error", "RC err", _entry("rc", "error"), ".3f"),
+    Column("rcr_fps", "RC+R fps (paper)", _entry("rcr", "fps"), cell=_fps_cell("rcr")),
+    Column("rcr_ms", None, _entry("rcr", "ms")),
+    Column(None, "RC+R config", cell=_config_cell),
+    Column("rcr_error", "RC+R err", _entry("rcr", "error"), ".3f"),
+    Column("rcr_config", None, _choice("key")),
+    Column("rcr_config_rule", None, _choice("rule")),
+    Column("gs_fps", "GS fps / m (paper)", _entry("gs", "fps"), cell=_fps_cell("gs")),
+    Column("gs_ms", None, _entry("gs", "ms")),
+    Column("gs_level", None, _key("gs_level")),
+    Column("gs_matched", None, _key("gs_matched")),
+    Column("gs_match", None, _match_text("gs")),
+    Column("gs_error", "GS err", _entry("gs", "error"), ".3f"),
+    Column("gsr_fps", "GS+R fps / m (paper)", _entry("gsr", "fps"), cell=_fps_cell("gsr")),
+    Column("gsr_ms", None, _entry("gsr", "ms")),
+    Column("gsr_level", None, _key("gsr_level")),
+    Column("gsr_matched", None, _key("gsr_matched")),
+    Column("gsr_match", None, _match_text("gsr")),
+    Column("gsr_error", "GS+R err", _entry("gsr", "error"), ".3f"),
+    Column("rcr_over_gsr", "RC+R/GS+R ours", lambda m, results: rcr_over_gsr(m), cell=_ratio_cell),
+    Column("rcr_over_gsr_matched", None, _ratio_matched),
+    Column("paper_segments", None, _paper("segments")),
+    Column("paper_rc_fps", None, _paper("rc_fps")),
+    Column("paper_rcr_fps", None, _paper("rcr_fps")),
+    Column("paper_gs_fps", None, _paper("fps", "gs")),
+    Column("paper_gs_sub", None, _paper("sub", "gs")),
+    Column("paper_gsr_fps", None, _paper("fps", "gsr")),
+    Column("paper_gsr_sub", None, _paper("sub", "gsr")),
+    Column("paper_rcr_over_gsr", "paper", _paper("rcr_over_gsr"), ".2f"),
+    Column("rc_bytes", None, _memory("rc_bytes")),
+    Column("rcr_bytes", None, _memory("rcr_bytes")),
+    Column("gs_bytes", None, _memory("gs_bytes")),
+    Column("gsr_bytes", None, _memory("gsr_bytes")),
+    Column("shadows", None, _key("shadows")),
+    Column("animated", None, _key("animated")),
+    Column("gl_renderer", None, lambda m, results: results["machine"]["gl_renderer"]),
+)
+#: The fields of ``table1.csv`` (:data:`TABLE1_COLUMNS`' names).
+TABLE_FIELDS = csv_fields(TABLE1_COLUMNS)
+#: ``table.md``'s work per pixel of the Table 1 configurations.
+WORK_COLUMNS = (
+    Column(None, "model", _key("model")),
+    Column(None, "RC ms · overdraw", cell=_work_cell("rc")),
+    Column(None, "RC+R ms · overdraw · samples/px", cell=_work_cell("rcr", samples=True)),
+    Column(None, "GS ms · overdraw", cell=_work_cell("gs")),
+    Column(None, "GS+R ms · overdraw", cell=_work_cell("gsr")),
+)
+#: ``table.md``'s memory on the GPU.
+MEMORY_COLUMNS = (
+    Column(None, "model", _key("model")),
+    Column(None, "RC records B", _memory("rc_bytes"), ","),
+    Column(None, "relief maps B", _memory("relief_map_bytes"), ","),
+    Column(None, "GS B (m)", cell=_bytes_cell("gs")),
+    Column(None, "GS/RC", _memory("gs_over_rc"), ".1f", "x"),
+    Column(None, "GS+R B (m)", cell=_bytes_cell("gsr")),
+    Column(None, "GS+R / RC+R", _memory("gsr_over_rcr"), ".1f", "x"),
+    Column(None, "paper", cell=lambda m: f"{PAPER_MEMORY_RATIO:.0f}x"),
+)
 
 
 # ---------------------------------------------------------------------------- Markdown
@@ -97,52 +290,6 @@ def _header_lines(results: dict) -> list[str]:
             "reference casts no leaves). Paper: 8800 GTX, 2009.", ""]
 
 
-def _paper_suffixes(p: PaperRow | None) -> dict:
-    """The paper's value of each Table 1 column, as `` (value)``; empty off the paper."""
-    if p is None:
-        return dict.fromkeys(("segments", *TABLE_METHODS), "")
-    return {"segments": f" ({p.segments})", "rc": f" ({p.rc_fps})", "rcr": f" ({p.rcr_fps})",
-            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})"}
-
-
-def _table1_row(m: dict) -> str:
-    p = PAPER_TABLE1.get(m["model"])
-    paper = _paper_suffixes(p)
-    cells = [m["model"], f"{m['segments']:,}{paper['segments']}"]
-    for short in TABLE_METHODS:
-        fps = _entry_cell(m[short], "fps", ".1f")
-        if short in MATCHED_AGAINST:
-            fps += f" / {_level_cell(m, short)}"
-        cells.append(fps + paper[short])
-        if short == "rcr":
-            cells.append(_config_cell(m))
-        cells.append(_entry_cell(m[short], "error", ".3f"))
-    cells += [_ratio_cell(m), _cell(None if p is None else p.rcr_over_gsr, ".2f")]
-    return "| " + " | ".join(cells) + " |"
-
-
-def _memory_row(m: dict) -> str:
-    mem = m["memory"]
-    cells = [m["model"], _cell(mem["rc_bytes"], ","), _cell(mem["relief_map_bytes"], ","),
-             f"{_cell(mem['gs_bytes'], ',')} ({_level_cell(m, 'gs')})", _cell(mem["gs_over_rc"], ".1f", "x"),
-             f"{_cell(mem['gsr_bytes'], ',')} ({_level_cell(m, 'gsr')})",
-             _cell(mem["gsr_over_rcr"], ".1f", "x"), f"{PAPER_MEMORY_RATIO:.0f}x"]
-    return "| " + " | ".join(cells) + " |"
-
-
-def _work_cell(entry: dict | None, relief: bool) -> str:
-    """'ms · overdraw (· samples per pixel)' of a Table 1 entry."""
-    if not entry or entry.get("overdraw") is None:
-        return MISSING
-    text = f"{entry['ms']:.1f} · {entry['overdraw']:.2f}"
-    return text + (f" · {entry['samples_per_pixel']:.1f}" if relief else "")
-
-
-def _work_row(m: dict) -> str:
-    cells = [m["model"]] + [_work_cell(m[short], short == "rcr") for short in ("rc", "rcr", "gs", "gsr")]
-    return "| " + " | ".join(cells) + " |"
-
-
 def _settings_text(settings: dict | None) -> str:
     """The ray caster's settings of a configuration that the RC+R sweeps vary
     (:data:`RELIEF_SWEEPS`; the rest is at the ray caster's default)."""
@@ -161,15 +308,15 @@ def _choice_lines(results: dict) -> list[str]:
     return lines
 
 
+def _table_lines(columns, results: dict) -> list[str]:
+    """A Markdown table of ``columns``: the header, its rule and a row per model."""
+    return [*markdown_head(columns), *(markdown_row(columns, m, results) for m in results["models"])]
+
+
 def markdown_table(results: dict) -> str:
     """Table 1 beside the paper's, with errors, the ratio column, the summary, the RC+R
     configurations, the memory table and the notes (matches, budgets, conditions)."""
-    lines = _header_lines(results)
-    lines += ["| model | segments (paper) | RC fps (paper) | RC err | RC+R fps (paper) | RC+R config | "
-              "RC+R err | GS fps / m (paper) | GS err | GS+R fps / m (paper) | GS+R err | RC+R/GS+R ours | "
-              "paper |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    lines += [_table1_row(m) for m in results["models"]]
+    lines = _header_lines(results) + _table_lines(TABLE1_COLUMNS, results)
     summary = results.get("summary") or summarise(results["models"])
     lines += ["", *summary_lines(summary)]
     choices = _choice_lines(results)
@@ -179,16 +326,9 @@ def markdown_table(results: dict) -> str:
               "ms of the Table 1 run · shaded fragments per covered pixel (overdraw) · for RC+R, mean "
               "relief height samples per covered pixel; counted in one render of the bare model at the "
               "timed size (fragments the shader ran for, misses included, with depth tested after "
-              "the shader).", "",
-              "| model | RC ms · overdraw | RC+R ms · overdraw · samples/px | GS ms · overdraw | "
-              "GS+R ms · overdraw |",
-              "|---|---|---|---|---|"]
-    lines += [_work_row(m) for m in results["models"]]
+              "the shader).", "", *_table_lines(WORK_COLUMNS, results)]
     lines += ["", "## Memory on the GPU (§4: relief-mapped frusta vs polygons)", "",
-              "| model | RC records B | relief maps B | GS B (m) | GS/RC | GS+R B (m) | GS+R / RC+R | "
-              "paper |",
-              "|---|---|---|---|---|---|---|---|"]
-    lines += [_memory_row(m) for m in results["models"]]
+              *_table_lines(MEMORY_COLUMNS, results)]
     notes = sorted({f"{m['model']}: {n}" for m in results["models"] for n in m["notes"] + match_notes(m)})
     if notes:
         lines += ["", "Notes:", *[f"- {n}" for n in notes]]
@@ -222,33 +362,9 @@ def match_notes(model: dict) -> list[str]:
 
 # ---------------------------------------------------------------------------- CSV rows
 def table_rows(results: dict) -> list[dict]:
-    """One row per model: the :data:`TABLE_FIELDS` of ``table1.csv``."""
-    rows = []
-    for m in results["models"]:
-        row = {"model": m["model"], "segments": m["segments"], "shadows": m["shadows"],
-               "animated": m["animated"], "gl_renderer": results["machine"]["gl_renderer"],
-               "gs_level": m["gs_level"], "gs_matched": m["gs_matched"],
-               "gsr_level": m["gsr_level"], "gsr_matched": m["gsr_matched"],
-               "rcr_over_gsr": rcr_over_gsr(m),
-               "rcr_over_gsr_matched": bool(m["gsr_matched"]) if rcr_over_gsr(m) is not None else None}
-        for short in MATCHED_AGAINST:
-            match = m.get(f"{short}_match")
-            row[f"{short}_match"] = match["text"] if match else None
-        choice = m.get("rcr_choice")
-        if choice:
-            row.update(rcr_config=choice["key"], rcr_config_rule=choice["rule"])
-        for k in TABLE_METHODS:
-            e = m[k]
-            for field in ("fps", "ms", "error"):
-                row[f"{k}_{field}"] = e[field] if e else None
-            row[f"{k}_bytes"] = m["memory"][f"{k}_bytes"]
-        p = PAPER_TABLE1.get(m["model"])
-        if p:
-            row.update(paper_segments=p.segments, paper_rc_fps=p.rc_fps, paper_rcr_fps=p.rcr_fps,
-                       paper_gs_fps=p.gs.fps, paper_gs_sub=p.gs.sub, paper_gsr_fps=p.gsr.fps,
-                       paper_gsr_sub=p.gsr.sub, paper_rcr_over_gsr=p.rcr_over_gsr)
-        rows.append(row)
-    return rows
+    """One row per model: the values of :data:`TABLE1_COLUMNS` by CSV field (``table1.csv``)."""
+    columns = [c for c in TABLE1_COLUMNS if c.name is not None]
+    return [{c.name: c.value(m, results) for c in columns} for m in results["models"]]
 
 
 def curve_rows(results: dict) -> list[dict]:
@@ -340,7 +456,7 @@ def write_outputs(results: dict, out_dir: str | Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     md = _full_markdown(results)
     (out / "table.md").write_text(md)
-    _write_csv(out / "table1.csv", TABLE_FIELDS, table_rows(results))
+    _write_csv(out / "table1.csv", csv_fields(TABLE1_COLUMNS), table_rows(results))
     _write_csv(out / "curves.csv", CURVE_FIELDS, curve_rows(results))
     with open(out / "results.json", "w") as fh:
         json.dump(results, fh, indent=1, default=_json_default)
