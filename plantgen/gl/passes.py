@@ -1,6 +1,6 @@
 """Effects decide programs and passes; the shadow-map pass of one directional light.
 
-A scene lists its effects (:data:`plantgen.scene.EFFECTS`; :func:`plantgen.scene.resolve_effects`
+A scene lists its effects (:data:`plantgen.settings.EFFECTS`; :class:`plantgen.settings.EffectSettings`
 applies the command line's overrides); :func:`program_variants` turns the effects into the shader
 variants (preprocessor defines) a frame needs, and :func:`frame_passes` into the passes it
 runs. Nothing more is built or run than asked: without ``shadows`` there is no shadow
