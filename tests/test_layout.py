@@ -14,9 +14,6 @@ PACKAGE = Path(plantgen.__file__).resolve().parent
 MAX_FUNCTION_LINES = 80
 #: Every module of plantgen: no function anywhere may be longer than MAX_FUNCTION_LINES
 #: (counted from the ``def`` line to the last line of the body). No module is exempt.
-#: Note (issue "every fact has one home"): until the split of ``_walk`` in
-#: lsystem/turtle.py (127 lines, done on another branch) is merged, the case
-#: "lsystem/turtle.py" fails; it is the only one.
 MODULES = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py"))
 
 

@@ -1,4 +1,5 @@
-"""L-systems: parse (grammar.py), derive (derive.py), interpret (turtle.py). No GL, no click."""
+"""L-systems: the turtle symbols (symbols.py), parse (grammar.py), derive (derive.py), interpret (turtle.py).
+No GL, no click."""
 
 from .derive import DEFAULT_MAX_MODULES, DerivationLimit, ModuleString, derive
 from .expr import ExprError, compile_expr

@@ -37,6 +37,7 @@ from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
+from .symbols import Action, by_action
 
 __all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "apply_interpretation", "cut_branches",
            "derive", "module_bytes"]
@@ -47,6 +48,8 @@ DEFAULT_MAX_MODULES = default_limits.max_modules
 #: or a cycle (hashing costs about as much as copying the string; longer strings that stop
 #: growing are bounded by the work budget instead).
 CYCLE_WINDOW = 65_536
+#: The symbol that cuts a branch (``%``).
+CUT_SYMBOL = by_action(Action.CUT)
 
 
 class DerivationLimit(LimitError):
@@ -280,7 +283,7 @@ def _cut(string, codes: dict):
     branch, or to the end of the string at depth 0. Vectorised: the closing ``]`` of a
     ``%`` at depth d is the first ``]`` after it whose depth before it is d."""
     sym, nparam, params = string
-    cut = codes.get("%")
+    cut = codes.get(CUT_SYMBOL)
     if cut is None:
         return string
     at = np.flatnonzero(sym == cut)

@@ -34,18 +34,15 @@ from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
+from .symbols import ARITY, Action, by_action
 
 __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
            "TurtleSettings", "load_grammar", "parse_grammar", "parse_modules"]
 
-# Turtle symbols (ABOP meanings) and the parameter counts each accepts.
-TURTLE_ARITY: dict[str, tuple[int, ...]] = {
-    "F": (0, 1, 2), "f": (0, 1),
-    "+": (0, 1), "-": (0, 1), "&": (0, 1), "^": (0, 1), "\\": (0, 1), "/": (0, 1),
-    "|": (0,), "[": (0,), "]": (0,), "$": (0,),
-    "!": (0, 1), ";": (0, 1),
-    "G": (0, 1), "{": (0,), "}": (0,), ".": (0,), "'": (0,), "%": (0,), "~": (1, 2),
-}
+#: The parameter counts each turtle symbol accepts (declared in :mod:`plantgen.lsystem.symbols`).
+TURTLE_ARITY: dict[str, tuple[int, ...]] = ARITY
+#: The symbol that places a predefined surface, whose first argument is the surface's name.
+SURFACE_SYMBOL = by_action(Action.SURFACE)
 #: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
 MAX_INTERPRETATION_DEPTH = 8
 
@@ -216,7 +213,7 @@ def parse_modules(text: str, names, where: str, max_params: int | None = None) -
     for sym, args in mods:
         exprs = ()
         if args is not None:
-            head = (_surface_name(args[0], where),) if sym == "~" and args else ()
+            head = (_surface_name(args[0], where),) if sym == SURFACE_SYMBOL and args else ()
             try:
                 for a in args[len(head):]:
                     if a not in compiled:
@@ -234,8 +231,8 @@ def _surface_name(text: str, where: str) -> Expr:
     string stays numbers and expressions never see a name that is not a number."""
     name = text.strip()
     if name not in SURFACES:
-        raise GrammarError(f"{where}: '~' takes the name of a surface first, one of {', '.join(SURFACES)}; "
-                           f"got {name[:40]!r}")
+        raise GrammarError(f"{where}: {SURFACE_SYMBOL!r} takes the name of a surface first, one of "
+                           f"{', '.join(SURFACES)}; got {name[:40]!r}")
     return compile_expr(str(SURFACES.index(name)))
 
 

@@ -1,33 +1,10 @@
 """Turtle interpretation: a derived module string to a :class:`Skeleton`.
 
 Coordinates are y-up (as in Bhagvat et al. 2009). The turtle starts at the origin with
-heading H = +y, left L = -x and up U = H × L = +z. Symbols, with ABOP's meanings:
-
-=========  ===================================================================
-``F(l)``   draw a segment of length l (default ``step``) along H;
-           ``F(l, w)`` also tapers it to end radius w (and sets the radius to w)
-``f(l)``   move by l without drawing; the next segment starts a new root
-``+(a)``   turn left by a degrees (default ``angle``) about U;  ``-`` turns right
-``&(a)``   pitch down about L;  ``^`` pitches up
-``\\(a)``  roll left about H;  ``/`` rolls right
-``|``      turn around (180° about U)
-``[`` ``]``  push and pop the turtle state; the first segment after ``[`` starts a
-           side branch (``continues`` False), the first after ``]`` carries on the
-           axis the branch grew from (``continues`` True)
-``!(w)``   set the radius to w; ``!`` multiplies it by ``width_factor``
-``$``      roll about H so that L is horizontal
-``;(i)``   select material i (index into the grammar's ``materials``); ``;`` the next one,
-           cycling
-``'``      the next material, cycling (ABOP's colour index step)
-``G(l)``   move by l without drawing and without recording a polygon vertex; like ``f``,
-           the next segment starts a new root
-``{``      start a polygon; ``}`` closes the innermost open polygon, fills it with the
-           current material and triangulates it (concave outlines too)
-``.``      record the turtle's position as a vertex of the innermost open polygon
-``~(n, s)``  place the built-in surface named n (``leaf``, ``needles``: see
-           :mod:`plantgen.geometry.surfaces`) at the turtle, oriented by H, L, U and
-           scaled by s (default 1), in the current material; the turtle does not move
-=========  ===================================================================
+heading H = +y, left L = -x and up U = H × L = +z. The symbols it acts on, their
+parameters and their meanings (ABOP's) are declared once, in :data:`plantgen.lsystem.symbols.SYMBOLS`;
+each names the :class:`~plantgen.lsystem.symbols.Action` the turtle runs, and the turtle has one
+handler per kind of action (:class:`Turtle`).
 
 Polygons follow ABOP. A polygon's vertices are its ``.`` positions (chapter 5, "developmental
 surface models"); a polygon with no ``.`` uses chapter 1's convention instead (figure 1.27,
@@ -67,25 +44,12 @@ from ..limits import limits as default_limits
 from ..tolerances import tol
 from .derive import ModuleString
 from .grammar import TurtleSettings
+from .symbols import SYMBOLS, UNSUPPORTED, Action, by_action, unsupported_warning
 
-__all__ = ["Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "interpret", "interpret_plant"]
+__all__ = ["HANDLERS", "Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "Turtle", "interpret", "interpret_plant"]
 
-# action codes
-(_NONE, _F, _f, _PLUS, _MINUS, _AND, _HAT, _BSL, _SL, _BAR, _PUSH, _POP, _WIDTH, _ROLLH, _MAT,
- _G, _OPEN, _CLOSE, _DOT, _TICK, _SURF) = range(21)
 #: Modules turned into Python values at a time by :func:`_turtle_program`.
 PROGRAM_CHUNK = 65_536
-
-_ACTIONS = {"F": _F, "f": _f, "+": _PLUS, "-": _MINUS, "&": _AND, "^": _HAT, "\\": _BSL,
-            "/": _SL, "|": _BAR, "[": _PUSH, "]": _POP, "!": _WIDTH, "$": _ROLLH, ";": _MAT,
-            "G": _G, "{": _OPEN, "}": _CLOSE, ".": _DOT, "'": _TICK, "~": _SURF}
-
-#: Symbols with a turtle meaning in ABOP (or its program cpfg) that plantgen does not draw
-#: (yet): each present in a string being drawn gets one warning naming it.
-UNSUPPORTED = {
-    "@": "cpfg's spheres and circles",
-    "#": "cpfg's width increment",
-}
 #: The most vertices one polygon may have (ear clipping is quadratic in them).
 MAX_POLYGON_VERTICES = 4096
 
@@ -159,8 +123,7 @@ def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -
     counts = np.bincount(ms.sym, minlength=len(ms.symbols)) if len(ms) else np.zeros(len(ms.symbols), int)
     for code, name in enumerate(ms.symbols):
         if name in UNSUPPORTED and counts[code]:
-            out.append(f"{source}: warning: {name!r} ({UNSUPPORTED[name]}) has a turtle meaning in ABOP "
-                       f"but none in plantgen yet; {int(counts[code]):,} module(s) not drawn")
+            out.append(unsupported_warning(source, name, int(counts[code])))
     if stray_dots:
         out.append(f"{source}: warning: {stray_dots:,} '.' outside any polygon '{{ }}' recorded nothing")
     if degenerate:
@@ -172,18 +135,16 @@ def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -
 def _polygon_vertices(ms: ModuleString, source: str) -> int:
     """The polygon vertices ``ms`` records with ``.`` and places with ``~``; a ``~`` whose
     surface index is not one of :data:`surfaces.SURFACES` stops with one line."""
-    total = 0
-    if "." in ms.symbols:
-        total += int(np.count_nonzero(ms.sym == ms.symbols.index(".")))
-    if "~" not in ms.symbols:
+    total = int(np.count_nonzero(_runs(ms, Action.VERTEX)))
+    rows = np.flatnonzero(_runs(ms, Action.SURFACE))
+    if not len(rows):
         return total
-    rows = np.flatnonzero(ms.sym == ms.symbols.index("~"))
     index = ms.params[rows, 0] if ms.params.shape[1] else np.full(len(rows), -1.0)
     known = np.arange(len(surfaces.SURFACES))
     bad = ~np.isin(index, known) | (ms.nparam[rows] < 1)
     if bad.any():
-        raise PlantgenError(f"{source}: '~' in module {int(rows[np.argmax(bad)]) + 1} of the derived string "
-                            f"names no surface (known: {', '.join(surfaces.SURFACES)})")
+        raise PlantgenError(f"{source}: {by_action(Action.SURFACE)!r} in module {int(rows[np.argmax(bad)]) + 1} "
+                            f"of the derived string names no surface (known: {', '.join(surfaces.SURFACES)})")
     counts = np.array([surfaces.surface(int(k)).vertex_count for k in known])
     return total + int(counts[index.astype(np.int64)].sum())
 
@@ -208,11 +169,17 @@ def _place_surfaces(placed: list, builder: PolygonBuilder) -> None:
 
 def _drawing_modules(ms: ModuleString, settings: TurtleSettings) -> np.ndarray:
     """(k,) int: the modules that draw a segment (``F`` of non-zero length), in order."""
-    if "F" not in ms.symbols:
+    draws = _runs(ms, Action.DRAW)
+    if not draws.any():
         return np.zeros(0, dtype=np.int64)
-    is_f = ms.sym == ms.symbols.index("F")
     length = np.where(ms.nparam > 0, ms.params[:, 0], settings.step)
-    return np.flatnonzero(is_f & (length != 0.0))
+    return np.flatnonzero(draws & (length != 0.0))
+
+
+def _runs(ms: ModuleString, action: Action) -> np.ndarray:
+    """(n,) bool: the modules of ``ms`` whose symbol runs ``action``."""
+    char = by_action(action)
+    return ms.sym == ms.symbols.index(char) if char in ms.symbols else np.zeros(len(ms), dtype=bool)
 
 
 def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: str) -> None:
@@ -229,7 +196,7 @@ def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: s
             else "an end point")
     module = int(drawn[i])
     k = int(ms.nparam[module])
-    text = "F" + ("(" + ", ".join(f"{x:g}" for x in ms.params[module, :k]) + ")" if k else "")
+    text = by_action(Action.DRAW) + ("(" + ", ".join(f"{x:g}" for x in ms.params[module, :k]) + ")" if k else "")
     raise PlantgenError(f"{source}: segment {i} (module {module + 1} of the derived string, {text}) has "
                         f"{what} that is not finite or beyond {limit:g}: an F length, a radius or "
                         "the turtle step too large")
@@ -240,9 +207,9 @@ def _turtle_program(ms: ModuleString):
     first parameter, second parameter (0.0 where absent)). Other symbols are dropped. The
     tuples are made PROGRAM_CHUNK modules at a time: a string of millions of modules is
     never held as Python objects all at once."""
-    table = np.array([_ACTIONS.get(s, _NONE) for s in ms.symbols] or [_NONE], dtype=np.int8)
+    table = np.array([_CODES.get(s, Action.NONE) for s in ms.symbols] or [Action.NONE], dtype=np.int8)
     action = table[ms.sym]
-    keep = np.flatnonzero(action != _NONE)
+    keep = np.flatnonzero(action != Action.NONE)
 
     def chunks():
         for lo in range(0, len(keep), PROGRAM_CHUNK):
@@ -254,133 +221,208 @@ def _turtle_program(ms: ModuleString):
     return chain.from_iterable(chunks())
 
 
+class Turtle:
+    """The turtle's state during one walk, and one handler per kind of action.
+
+    A handler takes the action code, the parameter count and the first two parameters
+    (0.0 where absent) of one module; :data:`HANDLERS` says which handler runs each
+    :class:`Action`. The state is the position, the frame H, L, U, the radius, the
+    material, the last segment drawn from this state (``last``, -1: none, the chain
+    broken), the last segment drawn on this path, moves or not (``hang``: what a leaf hangs
+    from), and whether the next segment starts a side branch; ``[`` pushes it, ``]`` pops
+    it. The open polygons (innermost last: dot vertices, move vertices, segment hung from)
+    are not part of it. ``segments`` collects seven values per segment drawn, one flat
+    list (cheaper on the hot path than a list per column or a tuple per row): start and end
+    (x, y, z), start and end radius, parent (-1 for a root), continues flag, material.
+    """
+
+    __slots__ = ("step", "width_factor", "default_turn", "tropism", "tropism_strength", "materials", "source",
+                 "builder", "placed", "pos", "frame", "width", "material", "last", "hang", "side", "stack",
+                 "polygons", "stray_dots", "segments")
+
+    def __init__(self, settings: TurtleSettings, materials: tuple[str, ...], source: str,
+                 builder: PolygonBuilder, placed: list):
+        self.step, self.width_factor = settings.step, settings.width_factor
+        self.default_turn = (cos(radians(settings.angle)), sin(radians(settings.angle)))
+        self.tropism, self.tropism_strength = settings.tropism_direction, settings.tropism_strength
+        self.materials, self.source, self.builder, self.placed = materials, source, builder, placed
+        self.pos = (0.0, 0.0, 0.0)
+        self.frame = ((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))    # H, L, U
+        self.width = settings.radius
+        self.material = 0
+        self.last = self.hang = -1
+        self.side = False
+        self.stack, self.polygons, self.segments = [], [], []
+        self.stray_dots = 0
+
+    def draw(self, act, n, length, end_radius):
+        """``F``: a segment along H (of ``step`` without parameters; none of length 0),
+        tapering to ``end_radius`` where given; then tropism bends H."""
+        if not n:
+            length = self.step
+        if length == 0.0:
+            return
+        r_start = self.width
+        if n == 2:
+            if end_radius < 0:
+                raise PlantgenError(f"{self.source}: negative radius {end_radius:g} given to "
+                                    f"{by_action(Action.DRAW)}")
+            self.width = end_radius
+        start = px, py, pz = self.pos
+        H, L, U = self.frame
+        self.pos = end = (px + H[0] * length, py + H[1] * length, pz + H[2] * length)
+        last, segments = self.last, self.segments
+        cont = last >= 0 and not self.side
+        segments.extend((start, end, segments[7 * last + 3] if cont else r_start, self.width, last, cont,
+                         self.material))
+        self.last = self.hang = len(segments) // 7 - 1
+        self.side = False
+        if self.tropism_strength != 0.0:
+            self.frame = _bend_towards(H, L, U, self.tropism, self.tropism_strength)
+
+    def move(self, act, n, length, _):
+        """``f`` and ``G``: move along H without drawing, breaking the chain of segments;
+        ``f`` records a vertex of the innermost open polygon (used if it has no dots)."""
+        if not n:
+            length = self.step
+        px, py, pz = self.pos
+        H = self.frame[0]
+        self.pos = (px + H[0] * length, py + H[1] * length, pz + H[2] * length)
+        self.last = -1
+        self.side = False
+        if act == _MOVE and self.polygons:
+            _record(self.polygons[-1][1], self.pos, self.source)
+
+    def turn(self, act, n, angle, _):
+        """``+`` and ``-``: turn left or right about U."""
+        c, s = (cos(radians(angle)), sin(radians(angle))) if n else self.default_turn
+        if act == _TURN_RIGHT:
+            s = -s
+        H, L, U = self.frame
+        H, L = _rot(H, L, c, s)
+        self.frame = (H, L, U)
+
+    def pitch(self, act, n, angle, _):
+        """``&`` and ``^``: pitch down or up about L."""
+        c, s = (cos(radians(angle)), sin(radians(angle))) if n else self.default_turn
+        if act == _PITCH_UP:
+            s = -s
+        H, L, U = self.frame
+        H, U = _rot(H, (-U[0], -U[1], -U[2]), c, s)
+        self.frame = (H, L, (-U[0], -U[1], -U[2]))
+
+    def roll(self, act, n, angle, _):
+        """``\\`` and ``/``: roll left or right about H."""
+        c, s = (cos(radians(angle)), sin(radians(angle))) if n else self.default_turn
+        if act == _ROLL_RIGHT:
+            s = -s
+        H, L, U = self.frame
+        L, U = _rot(L, U, c, s)
+        self.frame = (H, L, U)
+
+    def turn_around(self, act, n, arg, arg2):
+        """``|``: 180° about U."""
+        H, L, U = self.frame
+        self.frame = ((-H[0], -H[1], -H[2]), (-L[0], -L[1], -L[2]), U)
+
+    def level(self, act, n, arg, arg2):
+        """``$``: roll about H so that L is horizontal."""
+        H, L, U = self.frame
+        self.frame = (H, *_level_left(H, L, U))
+
+    def push(self, act, n, arg, arg2):
+        """``[``: save the state; the next segment starts a side branch."""
+        self.stack.append((self.pos, self.frame, self.width, self.material, self.last, self.side, self.hang))
+        self.side = True
+
+    def pop(self, act, n, arg, arg2):
+        """``]``: restore the state saved by the matching ``[``."""
+        if not self.stack:
+            raise PlantgenError(f"{self.source}: unbalanced brackets in the derived string")
+        self.pos, self.frame, self.width, self.material, self.last, self.side, self.hang = self.stack.pop()
+
+    def set_width(self, act, n, width, _):
+        """``!``: set the radius, or multiply it by ``width_factor``."""
+        self.width = width = width if n else self.width * self.width_factor
+        if width < 0:
+            raise PlantgenError(f"{self.source}: negative radius {width:g} set by {by_action(Action.WIDTH)!r}")
+
+    def select_material(self, act, n, index, _):
+        """``;`` selects material ``index``; ``;`` without it and ``'`` select the next one."""
+        count = len(self.materials)
+        self.material = material = int(index) if act == _MATERIAL and n else (self.material + 1) % count
+        if not 0 <= material < count:
+            raise PlantgenError(f"{self.source}: material index {material} outside the grammar's "
+                                f"{count} materials {list(self.materials)}")
+
+    def open_polygon(self, act, n, arg, arg2):
+        """``{``: a new innermost polygon, its first move vertex the position."""
+        self.polygons.append(([], [self.pos], self.hang))
+
+    def close_polygon(self, act, n, arg, arg2):
+        """``}``: hand the innermost polygon (its dots, or else its moves) to the builder."""
+        if not self.polygons:
+            raise PlantgenError(f"{self.source}: '}}' without an open polygon '{{' in the derived string")
+        dots, moves, from_segment = self.polygons.pop()
+        self.builder.add(dots or moves, self.material, from_segment)
+
+    def vertex(self, act, n, arg, arg2):
+        """``.``: the position, a vertex of the innermost polygon (counted as stray outside any)."""
+        if self.polygons:
+            _record(self.polygons[-1][0], self.pos, self.source)
+        else:
+            self.stray_dots += 1
+
+    def place_surface(self, act, n, index, scale):
+        """``~``: place surface ``index`` at the turtle, scaled (1 without a scale; nothing at 0)."""
+        if n != 2:
+            scale = 1.0
+        if scale < 0:
+            raise PlantgenError(f"{self.source}: negative scale {scale:g} given to {by_action(Action.SURFACE)!r} "
+                                f"({surfaces.SURFACES[int(index)]})")
+        if scale > 0:
+            self.placed.append((int(index), self.pos, *self.frame, scale, self.material, self.hang))
+
+
+#: The handler the turtle runs for each :class:`Action` it draws (the cut runs in the derivation).
+HANDLERS = {
+    Action.DRAW: Turtle.draw, Action.MOVE: Turtle.move, Action.MOVE_NO_VERTEX: Turtle.move,
+    Action.TURN_LEFT: Turtle.turn, Action.TURN_RIGHT: Turtle.turn,
+    Action.PITCH_DOWN: Turtle.pitch, Action.PITCH_UP: Turtle.pitch,
+    Action.ROLL_LEFT: Turtle.roll, Action.ROLL_RIGHT: Turtle.roll,
+    Action.TURN_AROUND: Turtle.turn_around, Action.LEVEL: Turtle.level,
+    Action.PUSH: Turtle.push, Action.POP: Turtle.pop, Action.WIDTH: Turtle.set_width,
+    Action.MATERIAL: Turtle.select_material, Action.NEXT_MATERIAL: Turtle.select_material,
+    Action.POLYGON_OPEN: Turtle.open_polygon, Action.POLYGON_CLOSE: Turtle.close_polygon,
+    Action.VERTEX: Turtle.vertex, Action.SURFACE: Turtle.place_surface,
+}
+# plain ints for the handlers' comparisons (an IntEnum member compares more slowly)
+_MOVE, _TURN_RIGHT, _PITCH_UP, _ROLL_RIGHT, _MATERIAL = (
+    int(a) for a in (Action.MOVE, Action.TURN_RIGHT, Action.PITCH_UP, Action.ROLL_RIGHT, Action.MATERIAL))
+#: Each symbol the turtle draws: its action code.
+_CODES = {s.char: int(s.action) for s in SYMBOLS if s.action in HANDLERS}
+
+
 def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str,
           builder: PolygonBuilder, placed: list):
-    """Run the turtle over ``program`` (see :func:`_turtle_program`), handing each closed
-    polygon to ``builder`` and appending each surface ``~`` places to ``placed``
-    (surface index, position, H, L, U, scale, material).
+    """Run a :class:`Turtle` over ``program`` (see :func:`_turtle_program`), handing each
+    closed polygon to ``builder`` and appending each surface ``~`` places to ``placed``
+    (surface index, position, H, L, U, scale, material, segment hung from).
 
     Returns the segment columns as lists (start and end (x, y, z) tuples, start and end
     radius, parent index (-1 for a root), continues flag, material index) and the number of
     ``.`` met outside any polygon.
     """
-    step, width_factor = settings.step, settings.width_factor
-    dc, ds = cos(radians(settings.angle)), sin(radians(settings.angle))
-    tropism = settings.tropism_direction
-    e = settings.tropism_strength
-    n_mat = len(materials)
-
-    px = py = pz = 0.0
-    H, L, U = (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
-    width = settings.radius
-    material = 0
-    last = -1            # last segment drawn from this state (-1: none, chain broken)
-    hang = -1            # last segment drawn on this path, moves or not: what a leaf hangs from
-    side = False         # next segment starts a side branch
-    stack = []
-    polygons = []        # open polygons, innermost last: (dot vertices, move vertices)
-    stray_dots = 0
-
-    starts, ends, r0s, r1s, parents, conts, mats = [], [], [], [], [], [], []
-
-    for act, ha, arg, arg2 in program:
-        if act == _F:
-            length = arg if ha else step
-            if length == 0.0:
-                continue
-            r_start = width
-            if ha == 2:
-                if arg2 < 0:
-                    raise PlantgenError(f"{source}: negative radius {arg2:g} given to F")
-                width = arg2
-            ex, ey, ez = px + H[0] * length, py + H[1] * length, pz + H[2] * length
-            cont = last >= 0 and not side
-            starts.append((px, py, pz))
-            ends.append((ex, ey, ez))
-            r0s.append(r1s[last] if cont else r_start)
-            r1s.append(width)
-            parents.append(last)
-            conts.append(cont)
-            mats.append(material)
-            last = hang = len(ends) - 1
-            side = False
-            px, py, pz = ex, ey, ez
-            if e != 0.0:
-                H, L, U = _bend_towards(H, L, U, tropism, e)
-        elif act == _PLUS or act == _MINUS:  # noqa: SIM109 (a tuple of globals is built per module)
-            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
-            if act == _MINUS:
-                s = -s
-            H, L = _rot(H, L, c, s)
-        elif act == _AND or act == _HAT:  # noqa: SIM109
-            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
-            if act == _HAT:
-                s = -s
-            H, U = _rot(H, (-U[0], -U[1], -U[2]), c, s)
-            U = (-U[0], -U[1], -U[2])
-        elif act == _BSL or act == _SL:  # noqa: SIM109
-            c, s = (cos(radians(arg)), sin(radians(arg))) if ha else (dc, ds)
-            if act == _SL:
-                s = -s
-            L, U = _rot(L, U, c, s)
-        elif act == _BAR:
-            H = (-H[0], -H[1], -H[2])
-            L = (-L[0], -L[1], -L[2])
-        elif act == _PUSH:
-            stack.append((px, py, pz, H, L, U, width, material, last, side, hang))
-            side = True
-        elif act == _POP:
-            if not stack:
-                raise PlantgenError(f"{source}: unbalanced brackets in the derived string")
-            px, py, pz, H, L, U, width, material, last, side, hang = stack.pop()
-        elif act == _WIDTH:
-            width = arg if ha else width * width_factor
-            if width < 0:
-                raise PlantgenError(f"{source}: negative radius {width:g} set by '!'")
-        elif act == _f:
-            length = arg if ha else step
-            px, py, pz = px + H[0] * length, py + H[1] * length, pz + H[2] * length
-            last = -1
-            side = False
-            if polygons:
-                _record(polygons[-1][1], (px, py, pz), source)
-        elif act == _G:
-            length = arg if ha else step
-            px, py, pz = px + H[0] * length, py + H[1] * length, pz + H[2] * length
-            last = -1
-            side = False
-        elif act == _DOT:
-            if polygons:
-                _record(polygons[-1][0], (px, py, pz), source)
-            else:
-                stray_dots += 1
-        elif act == _OPEN:
-            polygons.append(([], [(px, py, pz)], hang))
-        elif act == _CLOSE:
-            if not polygons:
-                raise PlantgenError(f"{source}: '}}' without an open polygon '{{' in the derived string")
-            dots, moves, from_segment = polygons.pop()
-            builder.add(dots or moves, material, from_segment)
-        elif act == _TICK:
-            material = (material + 1) % n_mat
-        elif act == _SURF:
-            scale = arg2 if ha == 2 else 1.0
-            if scale < 0:
-                raise PlantgenError(f"{source}: negative scale {scale:g} given to '~' "
-                                    f"({surfaces.SURFACES[int(arg)]})")
-            if scale > 0:
-                placed.append((int(arg), (px, py, pz), H, L, U, scale, material, hang))
-        elif act == _ROLLH:
-            L, U = _level_left(H, L, U)
-        elif act == _MAT:
-            material = int(arg) if ha else (material + 1) % n_mat
-            if not 0 <= material < n_mat:
-                raise PlantgenError(f"{source}: material index {material} outside the grammar's "
-                                    f"{n_mat} materials {list(materials)}")
-
-    if polygons:
-        raise PlantgenError(f"{source}: {len(polygons)} polygon(s) '{{' not closed by '}}' in the derived string")
-    return (starts, ends, r0s, r1s, parents, conts, mats), stray_dots
+    turtle = Turtle(settings, materials, source, builder, placed)
+    handlers = [None] * (max(HANDLERS) + 1)
+    for action, handler in HANDLERS.items():
+        handlers[action] = handler
+    for act, n, arg, arg2 in program:
+        handlers[act](turtle, act, n, arg, arg2)
+    if turtle.polygons:
+        raise PlantgenError(f"{source}: {len(turtle.polygons)} polygon(s) '{{' not closed by '}}' in the derived "
+                            "string")
+    return tuple(turtle.segments[k::7] for k in range(7)), turtle.stray_dots
 
 
 def _record(vertices: list, position, source: str) -> None:
