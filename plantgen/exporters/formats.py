@@ -135,6 +135,20 @@ def check_extra(fmt: Format, path) -> None:
                           f"{fmt.install}")
 
 
+def writable_format(path: str | Path, kind: str) -> Format:
+    """The format of ``path``, checked before any work: of ``kind`` ("mesh" or "skeleton"),
+    its optional package installed, its folder there (one line for each refusal)."""
+    path = Path(path)
+    fmt = export_format(path)
+    if fmt.kind != kind:
+        other = "mesh" if kind == "skeleton" else "skeleton"
+        raise ExportError(f"{path}: {fmt.suffix} holds a {other}, not a {kind}")
+    check_extra(fmt, path)
+    if not path.parent.is_dir():
+        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    return fmt
+
+
 def estimate_export_bytes(triangles: int, file_type: str) -> int:
     """Memory an export of ``triangles`` triangles as ``file_type`` takes at its peak."""
     fmt = next((f for f in EXPORT_FORMATS.values() if f.name == file_type), None)

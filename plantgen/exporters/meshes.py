@@ -23,7 +23,7 @@ from ..files import write_atomically
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
-from .formats import ExportError, check_extra, export_format
+from .formats import ExportError, writable_format
 from .plants import Colours, MeshWriter, Plant, Progress, leaf_parts, single_plant, turned_mesh
 
 __all__ = ["export_mesh", "write_plants", "write_ply", "write_stl"]
@@ -81,12 +81,7 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
     the file's stem). Formats without instancing take one plant written in place. Returns
     the written paths (a ``.gltf`` or ``.obj`` brings a second file)."""
     path = Path(path)
-    fmt = export_format(path)
-    if fmt.kind != "mesh":
-        raise ExportError(f"{path}: {fmt.suffix} holds a skeleton, not a mesh")
-    check_extra(fmt, path)
-    if not path.parent.is_dir():
-        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    fmt = writable_format(path, "mesh")
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     writer: MeshWriter = fmt.load_writer()

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..geometry.skeleton import Skeleton
 from ..geometry.swc import write_swc
-from .formats import ExportError, check_extra, export_format
+from .formats import writable_format
 from .plants import SkeletonWriter
 
 __all__ = ["write_skeleton", "write_swc_skeleton"]
@@ -47,11 +47,6 @@ def write_skeleton(skeleton: Skeleton, path: str | Path, *, up: str | None = Non
         else the format reports (:func:`plantgen.exporters.qsm.write_qsm`)
     """
     path = Path(path)
-    fmt = export_format(path)
-    if fmt.kind != "skeleton":
-        raise ExportError(f"{path}: {fmt.suffix} holds a mesh, not a skeleton")
-    check_extra(fmt, path)
-    if not path.parent.is_dir():
-        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    fmt = writable_format(path, "skeleton")
     writer: SkeletonWriter = fmt.load_writer()
     return writer(skeleton, path, up=up or fmt.up, unit=unit, tolerance=tolerance, name=name)
