@@ -812,8 +812,9 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     check_export_size(frusta, [part[3] for part in parts], sum(len(part[1]) for part in parts), level,
                       fmt.name, limits, input_path, output_path)
     if timeline is not None:
-        check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts], timeline,
-                        limits, output_path)
+        check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts
+                         if part[4] is not None and any(s is not None and s.moves for c in part[4][1] for s in c)],
+                        timeline, limits, output_path)
     plants = []
     for k, ((name, skel, matrices, leaves, sways), fr) in enumerate(zip(parts, frusta, strict=True)):
         mesh = tessellate(fr, level, relief=relief)
