@@ -12,7 +12,16 @@ name and base colour, linear RGB as glTF defines it). Nodes:
   the file instead of showing one plant in place of many;
 - ``instancing="nodes"``: one node per copy (translation, rotation, scale), all sharing
   the plant's mesh: core glTF, for readers without the extension;
-- a plant with a single copy: one such node either way.
+- a plant with a single copy: one such node either way;
+- a plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`):
+  its primitives carry ``JOINTS_0`` (8-bit, 16-bit past 256 joints) and ``WEIGHTS_0``
+  (normalized 8-bit, :func:`byte_weights`); per copy, whatever ``instancing`` says (each
+  copy sways on its own phase, so copies cannot share one skin), a node placing the copy
+  whose children are its joints (one per segment, nested as the segments are), a skin
+  over them (the inverse bind matrices shared by the copies) and the mesh's node with
+  that skin at the scene's root, untransformed. The document's one animation, ``"sway"``,
+  holds a ``LINEAR`` rotation channel per turning joint of every swaying copy, its keys
+  at the timeline's times.
 
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
 material, with a material of their own named ``"<material> (leaf)"`` that is

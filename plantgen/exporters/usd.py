@@ -23,6 +23,17 @@ and ``orientationsf`` (quatf, which takes precedence where it is read), ``scales
 the copies. ``instancing="nodes"``: one instanceable Xform per copy with its transform,
 referencing its plant under the abstract ``/<scene>/Prototypes``.
 
+A plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`) is
+UsdSkel: its prim is a SkelRoot with a Skeleton ``Joints`` (a joint per segment, paths
+``s0/s1/...``: :func:`joint_names`; bind transforms at the segments' starts, rest
+transforms the translations between them), its Mesh, Leaves and Skeleton curves bound
+to it (``primvars:skel:jointIndices`` and ``jointWeights``). It is written once under the
+abstract ``/<scene>/Prototypes``, each copy a SkelRoot referencing it (not instanceable:
+each has its own animation) with its transform and its SkelAnimation ``Sway`` (rotations
+time-sampled at the codes 0 .. keys - 1), the ``skel:animationSource`` of its Joints; a
+plant written in place holds its ``Sway`` itself. The stage's start and end time codes
+and its time codes (and frames) per second span the keys.
+
 Stage metadata: ``upAxis`` (Y, or Z with ``up="z"``: the model is turned, see
 :mod:`plantgen.geometry.frames`), ``metersPerUnit`` (``unit``: the length of a model unit
 in metres, default 1) and ``defaultPrim``. usd-core's compliance checker
