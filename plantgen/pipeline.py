@@ -655,8 +655,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
     keyframes : the keys of the sway a glTF or USD export writes for a scene that lists
-        ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; default
-        24 a second over one common period); a format without animation writes the
+        ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
+        defaults, over one common period); a format without animation writes the
         plants at rest and says so in ``warnings``
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
