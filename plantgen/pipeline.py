@@ -40,9 +40,12 @@ from .errors import PlantgenError
 from .exporters import (
     ExportError,
     Plant,
+    PlantSway,
+    Timeline,
     check_extra,
     estimate_export_bytes,
     export_format,
+    sway_timeline,
     write_plants,
     write_skeleton,
 )
@@ -71,6 +74,7 @@ from .settings import (
     DEFAULT_SIZE,
     EffectSettings,
     ImageSettings,
+    KeyframeSettings,
     MotionSettings,
     RaycastSettings,
     RenderSettings,
@@ -83,7 +87,8 @@ __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "re
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model",
            "frame_arguments", "request_settings",
            "RenderReport", "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
-           "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size"]
+           "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size",
+           "check_sway_size"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -627,7 +632,8 @@ INSTANCING = ("gpu", "nodes", "off")
 def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "gpu", unit: float = 1.0,
-                 qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None) -> dict:
+                 qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
+                 keyframes: KeyframeSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -648,6 +654,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
+    keyframes : the keys of the sway a glTF or USD export writes for a scene that lists
+        ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
+        defaults, over one common period); a format without animation writes the
+        plants at rest and says so in ``warnings``
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -655,10 +665,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
     ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
     a scene's plants (once per distinct plant when instanced), written beside the frusta
-    and counted in ``triangles``, ``vertices`` and ``drawn``); for a cylinder
-    model, what :func:`plantgen.exporters.qsm.write_qsm`
-    returns. Triangles and memory are estimated before anything is built and refused over
-    ``limits.max_export_triangles`` and ``limits.max_export_bytes``.
+    and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
+    sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``); for
+    a cylinder model, what :func:`plantgen.exporters.qsm.write_qsm` returns. Triangles and
+    memory are estimated before anything is built and refused over the ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
     fmt = export_format(output_path)  # fail on a bad suffix, a missing extra or option before any work
@@ -678,9 +688,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     timings = {"load": time.perf_counter() - t0}
     summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
                "warnings": grown.warnings}
+    timeline = _export_timeline(grown, fmt, keyframes, input_path, summary)
     if fmt.kind == "skeleton":
         if grown.polygons is not None and len(grown.polygons):
-            summary["warnings"] = (*grown.warnings, f"{fmt.suffix} carries the skeleton only: "
+            summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} carries the skeleton only: "
                                    f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
         t1 = time.perf_counter()
         summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
@@ -689,14 +700,40 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         return dict(summary, path=summary["paths"][-1])
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
                                  input_path, output_path, timings, progress,
-                                 skinning(_smoothing(grown, smooth_bends)))
+                                 skinning(_smoothing(grown, smooth_bends)), timeline)
     t3 = time.perf_counter()
     paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
-                         unit=unit, name=grown.name, progress=progress)
+                         unit=unit, name=grown.name, progress=progress, animation=timeline)
     timings["write"] = time.perf_counter() - t3
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
-                   smooth_segments=smoothed)
+                   smooth_segments=smoothed, animation=_animation_counts(plants, timeline))
     return summary
+
+
+def _export_timeline(grown: GrowResult, fmt, keyframes: KeyframeSettings | None, input_path,
+                     summary: dict) -> Timeline | None:
+    """The key times of the sway an export writes: a scene that lists ``animation`` and
+    sways, written in a format that animates; else None (a warning in ``summary`` says
+    when a format without animation leaves a sway out)."""
+    scene = grown.scene
+    if scene is None or "animation" not in scene.effects:
+        return None
+    sways = [i.motion for i in scene.instances]
+    if not fmt.animation:
+        if any(s is not None and s.moves for s in sways):
+            summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} holds no animation: the scene's sway is "
+                                   "not written, its plants stand at rest (glTF and USD carry the sway)")
+        return None
+    return sway_timeline(sways, keyframes or KeyframeSettings(), input_path)
+
+
+def _animation_counts(plants: list[Plant], timeline: Timeline | None) -> dict | None:
+    """What the sway written holds (see :func:`export_model`), or None."""
+    swaying = [p for p in plants if timeline is not None and p.sway is not None and p.sway.moves]
+    if not swaying:
+        return None
+    return dict(keys=timeline.keys, duration=timeline.duration, rate=timeline.rate, loops=timeline.loops,
+                joints=sum(len(p.skeleton) * p.copies for p in swaying), skins=sum(p.copies for p in swaying))
 
 
 def _mesh_counts(plants: list[Plant]) -> dict:
@@ -713,13 +750,20 @@ def _mesh_counts(plants: list[Plant]) -> dict:
 
 
 def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None,
-                                                                   Polygons | None]]:
+                                                                   Polygons | None, tuple | None]]:
     """(name, skeleton in its own frame, placements or None, leaves in the same frame or
-    None) of every plant to write: a scene's distinct plants with their own grammar's
-    leaves and their copies' placements when ``instanced``, else the whole model in place."""
-    if instanced and grown.scene is not None:
-        return [(p.name, p.skeleton, p.matrices, p.polygons) for p in grown.scene.plants() if len(p.skeleton)]
-    return [(grown.name, grown.skeleton, None, grown.polygons)]
+    None, sways) of every plant to write: a scene's distinct plants with their own
+    grammar's leaves and their copies' placements when ``instanced``, else the whole model
+    in place. ``sways`` (a scene's): (the sway group of each segment, per copy the
+    :class:`~plantgen.geometry.stage.Sway` or None of each group), as
+    :class:`~plantgen.exporters.PlantSway` takes them; None for a grammar or a skeleton."""
+    scene = grown.scene
+    if instanced and scene is not None:
+        return [(p.name, p.skeleton, p.matrices, p.polygons,
+                 (np.zeros(len(p.skeleton), np.int64), tuple((scene.instances[k].motion,) for k in p.instances)))
+                for p in scene.plants() if len(p.skeleton)]
+    sways = None if scene is None else (scene.segment_instance(), (tuple(i.motion for i in scene.instances),))
+    return [(grown.name, grown.skeleton, None, grown.polygons, sways)]
 
 
 def _leaves_of(polygons: Polygons | None, mesh, input_path) -> Polygons | None:
@@ -756,23 +800,49 @@ def check_export_size(frusta: list[Frusta], leaves: list, segments: int, level: 
 
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
                         input_path, output_path, timings: dict, progress,
-                        skin=skin_skeleton) -> tuple[list[Plant], int]:
+                        skin=skin_skeleton, timeline: Timeline | None = None) -> tuple[list[Plant], int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
-    limits, and tessellate (``timings`` gains ``skin`` and ``tessellate``); also the
-    segments smooth bends added."""
+    limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
+    ``skin`` and ``tessellate``); also the segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
-    frusta = [check_finite_frusta(skin(skel), input_path) for _, skel, _, _ in parts]
+    frusta = [check_finite_frusta(skin(part[1]), input_path) for part in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
-    check_export_size(frusta, [leaves for *_, leaves in parts], sum(len(skel) for _, skel, _, _ in parts), level,
+    check_export_size(frusta, [part[3] for part in parts], sum(len(part[1]) for part in parts), level,
                       fmt.name, limits, input_path, output_path)
+    if timeline is not None:
+        check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts
+                         if part[4] is not None and any(s is not None and s.moves for c in part[4][1] for s in c)],
+                        timeline, limits, output_path)
     plants = []
-    for k, ((name, skel, matrices, leaves), fr) in enumerate(zip(parts, frusta, strict=True)):
+    for k, ((name, skel, matrices, leaves, sways), fr) in enumerate(zip(parts, frusta, strict=True)):
         mesh = tessellate(fr, level, relief=relief)
         check_finite_mesh(mesh, fr, input_path)
-        plants.append(Plant(name, skel, mesh, matrices, leaves=_leaves_of(leaves, mesh, input_path)))
+        sway = PlantSway(sways[0], sways[1], fr.segment) if timeline is not None and sways is not None else None
+        plants.append(Plant(name, skel, mesh, matrices, leaves=_leaves_of(leaves, mesh, input_path), sway=sway))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
     timings["tessellate"] = time.perf_counter() - t2
     return plants, sum(f.report.smooth_segments for f in frusta)
+
+
+#: Bytes a written joint takes apart from its keys (its node, skin entry, channel and
+#: sampler, as Python objects and JSON), and a key while it is built and written
+#: (float64 angles and quaternions, the float32 copy, the written bytes), rounded up.
+SWAY_BYTES_PER_JOINT, SWAY_BYTES_PER_KEY = 2048, 160
+
+
+def check_sway_size(plants, timeline: Timeline, limits: Limits | None, output) -> int:
+    """The bytes writing a sway takes: ``plants`` [(segments, copies)] each a joint a
+    segment for every copy, ``timeline.keys`` keys each; one line naming ``output`` over
+    ``limits.max_export_bytes``."""
+    limits = _in_force(limits)
+    joints = sum(segments * copies for segments, copies in plants)
+    need = joints * (SWAY_BYTES_PER_JOINT + timeline.keys * SWAY_BYTES_PER_KEY)
+    if need > limits.max_export_bytes:
+        raise LimitError(f"{output}: the sway's {joints:,} joints x {timeline.keys:,} keys take about "
+                         f"{need / 2**20:,.0f} MiB to build and write, over the limit of "
+                         f"{limits.max_export_bytes / 2**20:,.0f} MiB; lower --key-rate or --duration "
+                         f"({hint('export_bytes')})")
+    return need

@@ -13,6 +13,7 @@ range, help) from it. A new effect or knob is one field here plus the code that 
 - :class:`ImageSettings`: size, supersampling, background;
 - :class:`MotionSettings`: the time of a still, an animation's frames and rate;
 - :class:`ViewSettings`: the camera file or ``auto``, and the orbit around it;
+- :class:`KeyframeSettings`: the keyframes of the sway an export writes (glTF, USD);
 - :class:`RenderSettings`: all of them, built from flat keywords by :meth:`RenderSettings.from_options`.
 """
 
@@ -25,7 +26,8 @@ from .geometry.camera import Orbit
 from .knobs import check_knobs, knob
 
 __all__ = ["EFFECTS", "DEFAULT_SIZE", "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
-           "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "resolve_effects",
+           "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "KeyframeSettings",
+           "resolve_effects",
            "parse_effect_list", "build_settings", "option_names", "settings_knobs"]
 
 #: The effects a scene may list; a render simulates only those in force.
@@ -271,6 +273,24 @@ class MeshSettings:
     level: int = knob(1, "--subdiv", "Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap.",
                       kind="int", lo=0, hi=MAX_SUBDIV, metavar="M")
     relief: bool = False
+
+    def __post_init__(self):
+        check_knobs(self)
+
+
+@dataclass(frozen=True)
+class KeyframeSettings:
+    """The sway an export writes as an animation (glTF, USD; a scene that lists
+    ``animation``): ``rate`` keyframes per second, interpolated linearly (slerp) by the
+    players, over ``duration`` seconds from t = 0 (None: one period of the scene's sway,
+    the common period of its plants', so that the animation loops)."""
+
+    rate: float = knob(24.0, "--key-rate", "Keyframes per second of the sway a glTF or USD export writes "
+                       "(interpolated linearly; see the README for the error).", lo=0, lo_open=True, hi=1000,
+                       metavar="HZ")
+    duration: float | None = knob(None, "--duration", "Seconds of sway a glTF or USD export writes, from t = 0. "
+                                  "Default: one period of the scene's sway (the common period of its plants'), "
+                                  "so that the animation loops.", lo=0, lo_open=True, hi=3600, metavar="SECONDS")
 
     def __post_init__(self):
         check_knobs(self)

@@ -66,6 +66,53 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
 """
 
 
+# three.js playing a .glb's animation: at each time, the AnimationMixer sets the clip's
+# time, the skeletons update and every SkinnedMesh's vertices are skinned as three.js
+# draws them (SkinnedMesh.getVertexPosition, then the mesh's world matrix). Positions go
+# to a float32 file, time by time, mesh by mesh in traversal order.
+THREE_SWAY_JS = r"""
+import fs from 'fs';
+import path from 'path';
+import { pathToFileURL } from 'url';
+const modules = process.env.THREE_MODULES;
+const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
+const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
+  'three/examples/jsm/loaders/GLTFLoader.js')).href);
+const buf = fs.readFileSync(process.argv[2]);
+const times = JSON.parse(process.argv[3]);
+new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
+  const mixer = new THREE.AnimationMixer(gltf.scene);
+  for (const clip of gltf.animations) mixer.clipAction(clip).play();
+  const meshes = [];
+  gltf.scene.traverse((o) => { if (o.isSkinnedMesh) meshes.push(o); });
+  const chunks = [];
+  const v = new THREE.Vector3();
+  for (const t of times) {
+    mixer.setTime(t);
+    gltf.scene.updateMatrixWorld(true);
+    for (const m of meshes) {
+      m.skeleton.update();
+      const n = m.geometry.attributes.position.count;
+      const out = new Float32Array(3 * n);
+      for (let i = 0; i < n; i++) {
+        m.getVertexPosition(i, v).applyMatrix4(m.matrixWorld);
+        out[3 * i] = v.x; out[3 * i + 1] = v.y; out[3 * i + 2] = v.z;
+      }
+      chunks.push(Buffer.from(out.buffer));
+    }
+  }
+  fs.writeFileSync(process.argv[4], Buffer.concat(chunks));
+  const assoc = gltf.parser.associations;
+  const node = (m) => { const own = assoc.get(m) || {}; return own.nodes !== undefined ? own.nodes
+    : (assoc.get(m.parent) || {}).nodes; };
+  console.log(JSON.stringify({
+    meshes: meshes.map((m) => ({name: m.name, node: node(m), primitive: (assoc.get(m) || {}).primitives,
+      count: m.geometry.attributes.position.count, material: m.material.name, bones: m.skeleton.bones.length})),
+    animations: gltf.animations.map((a) => ({name: a.name, duration: a.duration, tracks: a.tracks.length}))}));
+}, (err) => { console.error(String(err)); process.exit(3); });
+"""
+
+
 def node_modules(package: str) -> Path:
     """node_modules holding ``package``: $PLANTGEN_NODE_MODULES, .ci/node, or the user cache
     (installed there with npm if missing)."""
@@ -110,3 +157,31 @@ def three_js_meshes(path: Path, tmp_path: Path) -> list[dict]:
     done = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
+
+
+def three_js_sway(path: Path, times, tmp_path: Path) -> tuple[dict, list[list]]:
+    """three.js playing the animations of a .glb (see :data:`THREE_SWAY_JS`): its report
+    (``meshes``: every SkinnedMesh's name, the glTF node and primitive it comes from,
+    vertex count, material, bones;
+    ``animations``: name, duration, tracks) and, per time, per skinned mesh, the skinned
+    world positions (count, 3)."""
+    import numpy as np
+
+    script = tmp_path / "play_with_three.mjs"
+    script.write_text(THREE_SWAY_JS)
+    out = tmp_path / "skinned.f32"
+    env = dict(os.environ, THREE_MODULES=str(node_modules("three")))
+    done = subprocess.run(["node", str(script), str(path), json.dumps([float(t) for t in times]), str(out)],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    data = np.fromfile(out, dtype=np.float32)
+    positions, at = [], 0
+    for _ in times:
+        frame = []
+        for mesh in report["meshes"]:
+            frame.append(data[at:at + 3 * mesh["count"]].reshape(-1, 3).astype(np.float64))
+            at += 3 * mesh["count"]
+        positions.append(frame)
+    assert at == len(data)
+    return report, positions

@@ -22,6 +22,7 @@ from plantgen.settings import (
     MAX_SUBDIV,
     EffectSettings,
     ImageSettings,
+    KeyframeSettings,
     MeshSettings,
     MotionSettings,
     RaycastSettings,
@@ -33,7 +34,8 @@ from plantgen.settings import (
 )
 
 COMMANDS = {"render": render, "view": view, "export": export, "batch": batch}
-KNOBS = {k.name: (k, default) for k, default in settings_knobs(RenderSettings) + settings_knobs(MeshSettings)}
+KNOBS = {k.name: (k, default) for k, default in
+         settings_knobs(RenderSettings) + settings_knobs(MeshSettings) + settings_knobs(KeyframeSettings)}
 
 
 def params_of(command: click.Command) -> dict[str, click.Parameter]:
@@ -79,7 +81,7 @@ def test_every_commands_knob_options_have_the_settings_default_range_and_help(na
             assert got == want, (name, pname)
         if k.kind != "bool":
             assert k.option in param.opts, (name, pname)
-    assert checked >= {"render": 20, "view": 17, "export": 1, "batch": 1}[name]
+    assert checked >= {"render": 20, "view": 17, "export": 3, "batch": 1}[name]
 
 
 def test_render_and_view_declare_their_shared_options_once():
@@ -119,7 +121,8 @@ def test_the_api_takes_the_commands_names():
     (RaycastSettings, "linear_steps", 0), (RaycastSettings, "binary_steps", 65), (RaycastSettings, "march", "slow"),
     (RaycastSettings, "march_density", 0.0), (ShadowSettings, "resolution", 8), (ShadowSettings, "caster", "x"),
     (ImageSettings, "ssaa", 9), (MotionSettings, "fps", 0.0), (MotionSettings, "time", math.nan),
-    (MotionSettings, "frames", 0), (MeshSettings, "level", MAX_SUBDIV + 1)])
+    (MotionSettings, "frames", 0), (MeshSettings, "level", MAX_SUBDIV + 1), (KeyframeSettings, "rate", 0.0),
+    (KeyframeSettings, "duration", 3601.0)])
 def test_a_value_out_of_range_is_one_line_naming_the_option(cls, field, bad):
     with pytest.raises(PlantgenError) as info:
         cls(**{field: bad})

@@ -11,18 +11,20 @@ from ..exporters import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
 from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model
-from ..settings import MeshSettings
+from ..settings import KeyframeSettings, MeshSettings
 from .options import (
     allow_path_opt,
     finite,
     input_arg,
     knob_option,
+    knob_options,
     limit_opt,
     limits_from,
     output_opt,
     quiet_opt,
     seed_opt,
     smooth_bends_opt,
+    take_settings,
 )
 from .progress import StageBars
 
@@ -52,13 +54,14 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               callback=finite,
               help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
                    "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
+@knob_options(KeyframeSettings)
 @seed_opt
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
 @quiet_opt
 def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
-           smooth_bends, limit_values, allow_paths, quiet) -> None:
+           smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -71,11 +74,18 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
     mesh, PLY and STL plain triangles. SWC and the cylinder models carry the skeleton
     only (a warning says so when leaves are dropped).
 
+    A scene that lists the animation effect and sways is written with its sway by glTF
+    (a skin per plant copy, a joint per segment, a rotation channel per joint) and USD
+    (UsdSkel): keys at --key-rate a second over one period of the sway, so the
+    animation loops (or over --duration seconds); the other formats write the plants at
+    rest (a warning says so).
+
     \b
     Examples:
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
       plantgen export oasis -o oasis.usda           # PointInstancer, y-up stage
+      plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
       plantgen export pine -o pine.swc --up z
@@ -84,7 +94,7 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
-                            smooth_bends=smooth_bends)
+                            smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys))
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
@@ -113,6 +123,11 @@ def _mesh_summary(info: dict) -> None:
     if info["copies"] > 1:
         click.echo(f"{info['plants']:,} distinct plants written once for {info['copies']:,} copies: "
                    f"{info['drawn']:,} triangles drawn")
+    sway = info.get("animation")
+    if sway:
+        click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "
+                   f"{'looping' if sway['loops'] else 'not a whole period: no loop'}), {sway['joints']:,} joints "
+                   f"in {sway['skins']:,} {'skin' if sway['skins'] == 1 else 'skins'}")
 
 
 def _qsm_summary(info: dict) -> None:

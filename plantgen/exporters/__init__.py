@@ -7,6 +7,8 @@ models (QSM), each in the form the tools that read it expect.
 - :mod:`~plantgen.exporters.meshes`: :func:`export_mesh` (one mesh) and :func:`write_plants`
   (a scene's plants, instanced where the format can);
 - :mod:`~plantgen.exporters.skeletons`: :func:`write_skeleton` (SWC, the cylinder models);
+- :mod:`~plantgen.exporters.sway`: a scene's sway as joints, skin weights and keys (glTF
+  skins, UsdSkel): :class:`PlantSway`, :func:`sway_timeline`;
 - :mod:`~plantgen.exporters.gltf`, :mod:`~plantgen.exporters.obj`, :mod:`~plantgen.exporters.usd`,
   :mod:`~plantgen.exporters.qsm`: the writers, each named by its format's row. SWC is
   :func:`plantgen.geometry.swc.write_swc`.
@@ -27,6 +29,8 @@ from .formats import (
 from .meshes import export_mesh, write_plants
 from .plants import Plant
 from .skeletons import write_skeleton
+from .sway import PlantSway, Timeline, sway_timeline
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "check_extra", "estimate_export_bytes",
-           "export_file_type", "export_format", "export_mesh", "write_plants", "write_skeleton"]
+__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "PlantSway", "Timeline", "check_extra",
+           "estimate_export_bytes", "export_file_type", "export_format", "export_mesh", "sway_timeline",
+           "write_plants", "write_skeleton"]

@@ -1,20 +1,26 @@
 """The export formats: suffix, kind, up-axis convention, what each needs and costs.
 
-=============  ========  ====  ==========  =================================================
-suffix         kind      up    instancing  writer
-=============  ========  ====  ==========  =================================================
-``.glb``       mesh      y     yes         glTF 2.0 binary (plantgen's writer)
-``.gltf``      mesh      y     yes         glTF 2.0 JSON + ``.bin`` beside it
-``.obj``       mesh      y     no          Wavefront OBJ + ``.mtl`` beside it
-``.ply``       mesh      z     no          binary PLY (trimesh)
-``.stl``       mesh      z     no          binary STL (trimesh)
-``.usda``      mesh      y     yes         USD text (usd-core: ``plantgen[usd]``)
-``.usdc``      mesh      y     yes         USD crate (binary)
-``.usd``       mesh      y     yes         USD, crate encoding
-``.swc``       skeleton  y     --          SWC nodes (:mod:`plantgen.geometry.swc`)
-``.qsm.csv``   skeleton  z     --          TreeQSM cylinders + ``.treedata.csv`` beside it
-``.qsm.mat``   skeleton  z     --          TreeQSM's MATLAB struct (scipy: ``plantgen[qsm]``)
-=============  ========  ====  ==========  =================================================
+=============  ========  ====  ==========  =========  ======================================
+suffix         kind      up    instancing  animation  writer
+=============  ========  ====  ==========  =========  ======================================
+``.glb``       mesh      y     yes         yes        glTF 2.0 binary (plantgen's writer)
+``.gltf``      mesh      y     yes         yes        glTF 2.0 JSON + ``.bin`` beside it
+``.obj``       mesh      y     no          no         Wavefront OBJ + ``.mtl`` beside it
+``.ply``       mesh      z     no          no         binary PLY (trimesh)
+``.stl``       mesh      z     no          no         binary STL (trimesh)
+``.usda``      mesh      y     yes         yes        USD text (usd-core: ``plantgen[usd]``)
+``.usdc``      mesh      y     yes         yes        USD crate (binary)
+``.usd``       mesh      y     yes         yes        USD, crate encoding
+``.swc``       skeleton  y     --          no         SWC nodes (:mod:`plantgen.geometry.swc`)
+``.qsm.csv``   skeleton  z     --          no         TreeQSM cylinders + ``.treedata.csv`` beside it
+``.qsm.mat``   skeleton  z     --          no         TreeQSM's MATLAB struct (scipy: ``plantgen[qsm]``)
+=============  ========  ====  ==========  =========  ======================================
+
+**Animation.** A scene that lists ``animation`` and sways (:mod:`plantgen.geometry.motion`)
+is written with its sway by the formats that hold animation: glTF as skins (a joint per
+segment) with a rotation channel per joint, USD as UsdSkel skeletons with a
+SkelAnimation per copy (:mod:`plantgen.exporters.sway`); the others write the plants at
+rest.
 
 **Up.** plantgen models are y-up. Each format's default is its convention: glTF says +y
 is up; OBJ has no rule, and y-up is what Blender's, Maya's and three.js's importers
@@ -74,6 +80,7 @@ class Format:
     writer: str | Callable       # "module:function", or the function
     module: str | None = None    # the optional package the writer needs
     extra: str | None = None     # the plantgen extra that installs it
+    animation: bool = False      # writes a scene's sway as an animation
 
     def __post_init__(self) -> None:
         if self.kind not in FORMAT_KINDS:
@@ -97,14 +104,17 @@ class Format:
 #: over the tessellation and the write, coconut at m = 2, 1.08 M triangles: glb 170, gltf
 #: 173, obj 151, ply 186, stl 412, usda 175, usdc 117), rounded up generously.
 EXPORT_FORMATS = {f.suffix: f for f in (
-    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf"),
-    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf"),
+    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True),
+    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True),
     Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant"),
     Format("ply", ".ply", "mesh", "z", False, 400, "plantgen.exporters.meshes:write_ply"),
     Format("stl", ".stl", "mesh", "z", False, 650, "plantgen.exporters.meshes:write_stl"),
-    Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
-    Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
-    Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd"),
+    Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+           animation=True),
+    Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+           animation=True),
+    Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+           animation=True),
     Format("swc", ".swc", "skeleton", "y", False, 0, "plantgen.exporters.skeletons:write_swc_skeleton"),
     Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm"),
     Format("qsm.mat", ".qsm.mat", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm", "scipy", "qsm"),

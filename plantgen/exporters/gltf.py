@@ -12,7 +12,16 @@ name and base colour, linear RGB as glTF defines it). Nodes:
   the file instead of showing one plant in place of many;
 - ``instancing="nodes"``: one node per copy (translation, rotation, scale), all sharing
   the plant's mesh: core glTF, for readers without the extension;
-- a plant with a single copy: one such node either way.
+- a plant with a single copy: one such node either way;
+- a plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`):
+  its primitives carry ``JOINTS_0`` (8-bit, 16-bit past 256 joints) and ``WEIGHTS_0``
+  (normalized 8-bit, :func:`byte_weights`); per copy, whatever ``instancing`` says (each
+  copy sways on its own phase, so copies cannot share one skin), a node placing the copy
+  whose children are its joints (one per segment, nested as the segments are), a skin
+  over them (the inverse bind matrices shared by the copies) and the mesh's node with
+  that skin at the scene's root, untransformed. The document's one animation, ``"sway"``,
+  holds a ``LINEAR`` rotation channel per turning joint of every swaying copy, its keys
+  at the timeline's times.
 
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
 material, with a material of their own named ``"<material> (leaf)"`` that is
@@ -42,12 +51,13 @@ from ..files import write_all_atomically, write_atomically
 from ..geometry.frames import similarity_trs, turn_placements
 from .formats import ExportError
 from .plants import Colours, Plant, Progress, leaf_name, leaf_parts, material_colours, material_parts
+from .sway import JointRig, Timeline, copy_rotations, joint_rig
 
-__all__ = ["INSTANCING_EXTENSION", "gltf_document", "write_gltf"]
+__all__ = ["INSTANCING_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 
 INSTANCING_EXTENSION = "EXT_mesh_gpu_instancing"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
-FLOAT, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5123, 5125
+FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
@@ -68,9 +78,29 @@ class _Buffer:
         self.accessors: list[dict] = []
 
     def add(self, array: np.ndarray, kind: str, component: int, target: int | None = None,
-            bounds: bool = False) -> int:
+            bounds: bool = False, normalized: bool = False) -> int:
         """Append ``array`` ((count, width) or (count,)) as one view and one accessor; its index."""
-        data = np.ascontiguousarray(array).tobytes()
+        view = self._view(np.ascontiguousarray(array).tobytes(), target)
+        accessor = {"bufferView": view, "componentType": component, "count": int(len(array)), "type": kind}
+        if normalized:
+            accessor["normalized"] = True
+        if bounds:
+            accessor["min"] = [float(v) for v in np.atleast_1d(np.min(array, axis=0))]
+            accessor["max"] = [float(v) for v in np.atleast_1d(np.max(array, axis=0))]
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+    def add_blocks(self, blocks: np.ndarray, kind: str, component: int) -> list[int]:
+        """Append ``blocks`` (b, count, width) as one view holding b accessors, one a block
+        (float32 or 4-byte-aligned rows); their indices."""
+        view = self._view(np.ascontiguousarray(blocks).tobytes(), None)
+        size = blocks[0].nbytes if len(blocks) else 0
+        first = len(self.accessors)
+        self.accessors += [{"bufferView": view, "byteOffset": b * size, "componentType": component,
+                            "count": int(blocks.shape[1]), "type": kind} for b in range(len(blocks))]
+        return list(range(first, len(self.accessors)))
+
+    def _view(self, data: bytes, target: int | None) -> int:
         pad = (-self.size) % 4
         if pad:
             self.chunks.append(bytes(pad))
@@ -81,19 +111,25 @@ class _Buffer:
         self.chunks.append(data)
         self.size += len(data)
         self.views.append(view)
-        accessor = {"bufferView": len(self.views) - 1, "componentType": component, "count": int(len(array)),
-                    "type": kind}
-        if bounds:
-            accessor["min"] = [float(v) for v in np.min(array, axis=0)]
-            accessor["max"] = [float(v) for v in np.max(array, axis=0)]
-        self.accessors.append(accessor)
-        return len(self.accessors) - 1
+        return len(self.views) - 1
 
     def data(self) -> bytes:
         return b"".join(self.chunks)
 
 
-def _primitive(buffer: _Buffer, part, material: int) -> dict:
+def byte_weights(weights: np.ndarray) -> np.ndarray:
+    """(v, 4) uint8 normalized skin weights of (v, 4) weights that sum to 1: each rounded
+    down to 1/255ths, the shortfall given back one 1/255th at a time to the first nonzero
+    ones, so every row sums to 255 exactly (halves: 128 and 127)."""
+    weights = np.asarray(weights, dtype=np.float64)
+    out = np.floor(weights * 255.0 + 1e-9)
+    short = 255.0 - out.sum(axis=1)
+    nonzero = weights > 0
+    out += nonzero & (np.cumsum(nonzero, axis=1) <= short[:, None])
+    return out.astype(np.uint8)
+
+
+def _primitive(buffer: _Buffer, part, material: int, joint_count: int = 0) -> dict:
     positions = part.vertices.astype(np.float32)
     index_type = UNSIGNED_SHORT if len(positions) < 65536 else UNSIGNED_INT
     indices = part.faces.astype(np.uint16 if index_type == UNSIGNED_SHORT else np.uint32).ravel()
@@ -102,6 +138,12 @@ def _primitive(buffer: _Buffer, part, material: int) -> dict:
                   "TEXCOORD_0": buffer.add(part.uv, "VEC2", FLOAT, ARRAY_BUFFER)}
     for name, values in (part.labels or {}).items():     # application-specific: "_NAME"
         attributes[name] = buffer.add(values.astype(np.float32), "SCALAR", FLOAT, ARRAY_BUFFER)
+    if part.joints is not None:
+        joints = part.joints.astype(np.uint8 if joint_count <= 256 else np.uint16)
+        attributes["JOINTS_0"] = buffer.add(joints, "VEC4", UNSIGNED_BYTE if joint_count <= 256 else UNSIGNED_SHORT,
+                                            ARRAY_BUFFER)
+        attributes["WEIGHTS_0"] = buffer.add(byte_weights(part.weights), "VEC4", UNSIGNED_BYTE, ARRAY_BUFFER,
+                                             normalized=True)
     return {"attributes": attributes, "indices": buffer.add(indices, "SCALAR", index_type, ELEMENT_ARRAY_BUFFER),
             "material": material, "mode": 4}
 
@@ -114,11 +156,16 @@ def _material(name: str, rgb, double_sided: bool) -> dict:
     return material
 
 
-def _trs_nodes(name: str, mesh: int, matrices: np.ndarray) -> list[dict]:
+def _trs(matrices: np.ndarray) -> list[dict]:
+    """A node's translation, rotation and scale for each placement (k, 4, 4)."""
     t, q, s = similarity_trs(matrices)
-    return [{"name": f"{name} {k + 1}" if len(matrices) > 1 else name, "mesh": mesh,
-             "translation": [float(v) for v in t[k]], "rotation": [float(v) for v in q[k]],
+    return [{"translation": [float(v) for v in t[k]], "rotation": [float(v) for v in q[k]],
              "scale": [float(s[k])] * 3} for k in range(len(matrices))]
+
+
+def _trs_nodes(name: str, mesh: int, matrices: np.ndarray) -> list[dict]:
+    return [{"name": f"{name} {k + 1}" if len(matrices) > 1 else name, "mesh": mesh, **trs}
+            for k, trs in enumerate(_trs(matrices))]
 
 
 def _gpu_node(buffer: _Buffer, name: str, mesh: int, matrices: np.ndarray) -> dict:
@@ -130,43 +177,134 @@ def _gpu_node(buffer: _Buffer, name: str, mesh: int, matrices: np.ndarray) -> di
     return {"name": name, "mesh": mesh, "extensions": {INSTANCING_EXTENSION: {"attributes": attributes}}}
 
 
+class _Document:
+    """The document being built: buffer, materials, meshes, nodes (the scene's roots
+    among them), skins and the sway animation's channels."""
+
+    def __init__(self, up: str, colours: Colours, animation: Timeline | None) -> None:
+        self.up, self.colours, self.animation = up, colours, animation
+        self.buffer = _Buffer()
+        self.material_index: dict[str, int] = {}
+        self.materials, self.meshes, self.nodes, self.roots = [], [], [], []
+        self.skins, self.channels, self.samplers = [], [], []
+        self.times: int | None = None
+        self.used_extension = False
+
+    def node(self, node: dict, root: bool = True) -> int:
+        self.nodes.append(node)
+        if root:
+            self.roots.append(len(self.nodes) - 1)
+        return len(self.nodes) - 1
+
+    def mesh(self, plant: Plant, rig: JointRig | None) -> int:
+        """The plant's mesh: a primitive per material of its frusta and of its leaves (with
+        their joints and weights when ``rig`` skins it); its index."""
+        names = plant.mesh.material_names
+        rgb = material_colours(names, self.colours)
+        skin = None if rig is None else (rig.vertex_joints, rig.vertex_weights)
+        parts = (material_parts(plant.mesh, self.up, plant.labels, skin)
+                 + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints))
+        primitives = []
+        for part in parts:
+            mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
+            if mat_name not in self.material_index:
+                self.material_index[mat_name] = len(self.materials)
+                self.materials.append(_material(mat_name, rgb[part.material], part.leaf))
+            primitives.append(_primitive(self.buffer, part, self.material_index[mat_name],
+                                         0 if rig is None else rig.joints))
+        self.meshes.append({"name": plant.name, "primitives": primitives})
+        return len(self.meshes) - 1
+
+    def still(self, plant: Plant, mesh: int, instancing: str) -> None:
+        """A plant that does not sway: one node, its copies instanced or one node each."""
+        if plant.matrices is None:
+            self.node({"name": plant.name, "mesh": mesh})
+        elif instancing == "gpu" and len(plant.matrices) > 1:
+            self.node(_gpu_node(self.buffer, plant.name, mesh, turn_placements(plant.matrices, self.up)))
+            self.used_extension = True
+        else:
+            for node in _trs_nodes(plant.name, mesh, turn_placements(plant.matrices, self.up)):
+                self.node(node)
+
+    def swaying(self, plant: Plant, mesh: int, rig: JointRig) -> None:
+        """A swaying plant: per copy, a node placing its joints (one per segment, nested as
+        the segments are), a skin over them, the mesh's node with that skin (at the root,
+        untransformed: the joints place it) and, where the copy sways, a rotation channel
+        per turning joint."""
+        ibm = np.tile(np.eye(4, dtype=np.float32), (rig.joints, 1, 1))
+        ibm[:, 3, :3] = -rig.bind                           # column-major: the translation is the 4th column
+        inverse_binds = self.buffer.add(ibm.reshape(-1, 16), "MAT4", FLOAT)
+        placements = None if plant.matrices is None else turn_placements(plant.matrices, self.up)
+        children: list[list[int]] = [[] for _ in range(rig.joints)]
+        for joint, parent in enumerate(rig.parent.tolist()):
+            if parent >= 0:
+                children[parent].append(joint)
+        for copy in range(plant.copies):
+            name = f"{plant.name} {copy + 1}" if plant.copies > 1 else plant.name
+            first = len(self.nodes) + 1
+            roots = np.flatnonzero(rig.parent < 0).tolist()
+            holder = {"name": f"{name} joints", "children": [first + j for j in roots]}
+            if placements is not None:
+                holder.update(_trs(placements[copy:copy + 1])[0])
+            skeleton = self.node(holder)
+            for joint in range(rig.joints):
+                node = {"name": f"s{joint}", "translation": [float(v) for v in rig.offset[joint]]}
+                if children[joint]:
+                    node["children"] = [first + c for c in children[joint]]
+                self.node(node, root=False)
+            self.skins.append({"name": name, "inverseBindMatrices": inverse_binds, "skeleton": skeleton,
+                               "joints": list(range(first, first + rig.joints))})
+            self.node({"name": name, "mesh": mesh, "skin": len(self.skins) - 1})
+            if plant.sway.copy_moves(copy):
+                self.animate(first, copy_rotations(plant.skeleton, plant.sway, copy,
+                                                   None if plant.matrices is None else plant.matrices[copy],
+                                                   self.animation.times, self.up, rig.joints))
+
+    def animate(self, first: int, rotations: np.ndarray) -> None:
+        """Rotation channels for the joints ``first + j`` that turn: ``rotations`` (k, j, 4)
+        at the animation's key times, interpolated linearly (slerp)."""
+        if self.times is None:
+            self.times = self.buffer.add(self.animation.times.astype(np.float32), "SCALAR", FLOAT, bounds=True)
+        turning = np.flatnonzero(np.any(rotations[..., :3] != 0, axis=(0, 2)))
+        outputs = self.buffer.add_blocks(rotations[:, turning].transpose(1, 0, 2).astype(np.float32), "VEC4", FLOAT)
+        for joint, output in zip(turning.tolist(), outputs, strict=True):
+            self.channels.append({"sampler": len(self.samplers), "target": {"node": first + joint, "path": "rotation"}})
+            self.samplers.append({"input": self.times, "output": output, "interpolation": "LINEAR"})
+
+    def json(self, name: str) -> dict:
+        doc = {"asset": {"version": "2.0", "generator": generator()}, "scene": 0,
+               "scenes": [{"name": name, "nodes": self.roots}], "nodes": self.nodes, "meshes": self.meshes,
+               "materials": self.materials, "accessors": self.buffer.accessors, "bufferViews": self.buffer.views}
+        if self.skins:
+            doc["skins"] = self.skins
+        if self.channels:
+            doc["animations"] = [{"name": "sway", "channels": self.channels, "samplers": self.samplers}]
+        if self.used_extension:
+            doc["extensionsUsed"] = [INSTANCING_EXTENSION]
+            doc["extensionsRequired"] = [INSTANCING_EXTENSION]
+        return doc
+
+
 def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "gpu",
-                  name: str = "plantgen", progress: Progress = None) -> tuple[dict, bytes]:
-    """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``."""
+                  name: str = "plantgen", progress: Progress = None,
+                  animation: Timeline | None = None) -> tuple[dict, bytes]:
+    """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``; with
+    ``animation``, the plants that sway are skinned and their sway is the animation
+    ``"sway"`` (see the module docstring)."""
     if instancing not in ("gpu", "nodes"):
         raise ValueError(f"instancing must be 'gpu' or 'nodes', got {instancing!r}")
-    buffer = _Buffer()
-    material_index: dict[str, int] = {}
-    materials, meshes, nodes = [], [], []
-    used_extension = False
+    doc = _Document(up, colours, animation)
     for done, plant in enumerate(plants):
-        names = plant.mesh.material_names
-        rgb = material_colours(names, colours)
-        primitives = []
-        for part in material_parts(plant.mesh, up, plant.labels) + leaf_parts(plant.leaves, up):
-            mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
-            if mat_name not in material_index:
-                material_index[mat_name] = len(materials)
-                materials.append(_material(mat_name, rgb[part.material], part.leaf))
-            primitives.append(_primitive(buffer, part, material_index[mat_name]))
-        meshes.append({"name": plant.name, "primitives": primitives})
-        mesh = len(meshes) - 1
-        if plant.matrices is None:
-            nodes.append({"name": plant.name, "mesh": mesh})
-        elif instancing == "gpu" and len(plant.matrices) > 1:
-            nodes.append(_gpu_node(buffer, plant.name, mesh, turn_placements(plant.matrices, up)))
-            used_extension = True
+        sways = animation is not None and plant.sway is not None and plant.sway.moves
+        rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, up, plant.name) if sways else None
+        mesh = doc.mesh(plant, rig)
+        if rig is None:
+            doc.still(plant, mesh, instancing)
         else:
-            nodes += _trs_nodes(plant.name, mesh, turn_placements(plant.matrices, up))
+            doc.swaying(plant, mesh, rig)
         if progress is not None:
             progress("write", done + 1, len(plants))
-    doc = {"asset": {"version": "2.0", "generator": generator()}, "scene": 0,
-           "scenes": [{"name": name, "nodes": list(range(len(nodes)))}], "nodes": nodes, "meshes": meshes,
-           "materials": materials, "accessors": buffer.accessors, "bufferViews": buffer.views}
-    if used_extension:
-        doc["extensionsUsed"] = [INSTANCING_EXTENSION]
-        doc["extensionsRequired"] = [INSTANCING_EXTENSION]
-    return doc, buffer.data()
+    return doc.json(name), doc.buffer.data()
 
 
 def _glb(doc: dict, data: bytes) -> bytes:
@@ -181,7 +319,7 @@ def _glb(doc: dict, data: bytes) -> bytes:
 
 def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
                instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
-               progress: Progress = None) -> list[Path]:
+               progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
     """Write ``plants`` as ``.glb``, or as ``.gltf`` with its ``.bin`` beside it (see the
     module docstring); nothing is left half-written. Returns the written paths (a
     :class:`~plantgen.exporters.plants.MeshWriter`; ``unit`` is not written: glTF has no unit
@@ -190,7 +328,8 @@ def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours:
     if not any(plant.mesh is not None and len(plant.mesh.faces) for plant in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     doc, data = gltf_document(plants, up=up, colours=colours, instancing=instancing,
-                              name=name or path.name.split(".")[0] or "plantgen", progress=progress)
+                              name=name or path.name.split(".")[0] or "plantgen", progress=progress,
+                              animation=animation)
     if path.suffix.lower() == ".glb":
         blob = _glb(doc, data)
         return [write_atomically(path, lambda tmp: Path(tmp).write_bytes(blob), ExportError)]

@@ -40,6 +40,7 @@ from .plants import (
     turned_mesh,
     unique_name,
 )
+from .sway import Timeline
 
 __all__ = ["obj_names", "write_obj", "write_obj_plant"]
 
@@ -143,7 +144,7 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
 
 def write_obj_plant(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
                     instancing: str = "off", unit: float = 1.0, name: str | None = None,
-                    progress: Progress = None) -> list[Path]:
+                    progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
     """:func:`write_obj` of the one plant of ``plants``, in place, with its leaves (a
     :class:`~plantgen.exporters.plants.MeshWriter`; OBJ has no instancing and no units, and
     its name is the file's)."""

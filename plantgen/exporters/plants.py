@@ -16,6 +16,7 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, export_format
+from .sway import PlantSway, Timeline
 
 __all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SkeletonWriter", "leaf_name", "leaf_parts",
            "leaf_uv", "material_colours", "material_parts", "single_plant", "turned_mesh"]
@@ -35,7 +36,9 @@ class Plant:
     frame; ``matrices`` (k, 4, 4) places its k copies (similarity transforms), or is None
     for a model written where it is (a grammar, a skeleton file, a scene flattened).
     ``leaves``: the grammar's filled polygons in the same frame, their material indices
-    into ``mesh.material_names`` (None or empty: no leaves; written double-sided)."""
+    into ``mesh.material_names`` (None or empty: no leaves; written double-sided).
+    ``sway``: how its copies sway (:class:`~plantgen.exporters.sway.PlantSway`), for the
+    formats that write an animation; None: the plant stands still."""
 
     name: str
     skeleton: Skeleton
@@ -43,6 +46,7 @@ class Plant:
     matrices: np.ndarray | None = None
     labels: Mapping[str, np.ndarray] | None = None   # per mesh row, by attribute name (glTF)
     leaves: Polygons | None = None
+    sway: PlantSway | None = None
 
     @property
     def has_leaves(self) -> bool:
@@ -68,13 +72,16 @@ class MeshWriter(Protocol):
     unit : metres per model unit, where the format records it (USD)
     name : the model's name in the file (None: the file's stem)
     progress : reports the writer's steps (:data:`Progress`)
+    animation : the key times of the plants' sway (:class:`~plantgen.exporters.sway.Timeline`),
+        written by the formats that animate (glTF, USD) for the plants with a ``sway``;
+        None: no animation
 
     A writer ignores what its format has no place for. Returns the written paths, the
     main file last.
     """
 
     def __call__(self, plants: list[Plant], path: Path, *, up: str, colours: Colours, instancing: str,
-                 unit: float, name: str | None, progress: Progress) -> list[Path]: ...
+                 unit: float, name: str | None, progress: Progress, animation: Timeline | None) -> list[Path]: ...
 
 
 class SkeletonWriter(Protocol):
@@ -117,6 +124,8 @@ class Part:
     faces: np.ndarray         # (f, 3) int, indices into this part's vertices
     labels: dict | None = None  # name -> (v,) float32 per vertex (from per-row labels)
     leaf: bool = False        # leaf polygons (double-sided where the format says so)
+    joints: np.ndarray | None = None    # (v, 4) int, the joints each vertex follows (a swaying plant)
+    weights: np.ndarray | None = None   # (v, 4) float, their weights (summing to 1)
 
 
 def unique_name(base: str, taken) -> str:
@@ -168,9 +177,11 @@ def vertex_labels(mesh: TessellatedMesh, labels: Mapping[str, np.ndarray] | None
     return out
 
 
-def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np.ndarray] | None = None) -> list[Part]:
+def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np.ndarray] | None = None,
+                   influences: tuple[np.ndarray, np.ndarray] | None = None) -> list[Part]:
     """One :class:`Part` per material the mesh uses, in material order; ``labels``: per-row
-    values carried to the part's vertices (:func:`vertex_labels`)."""
+    values carried to the part's vertices (:func:`vertex_labels`); ``influences``: (joints,
+    weights), each (v, 4), per mesh vertex, carried likewise (a swaying plant's skin)."""
     vertices, normals = turned_mesh(mesh, up)
     per_vertex = vertex_labels(mesh, labels)
     face_material = mesh.face_material
@@ -179,8 +190,10 @@ def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np
     for mat in used:
         faces = mesh.faces if len(used) == 1 else mesh.faces[face_material == mat]
         keep, inverse = np.unique(faces, return_inverse=True)
+        joints, weights = (None, None) if influences is None else (influences[0][keep], influences[1][keep])
         parts.append(Part(int(mat), vertices[keep], normals[keep], mesh.uv[keep].astype(np.float32),
-                          inverse.reshape(faces.shape), {k: v[keep] for k, v in per_vertex.items()} or None))
+                          inverse.reshape(faces.shape), {k: v[keep] for k, v in per_vertex.items()} or None,
+                          joints=joints, weights=weights))
     return parts
 
 
@@ -209,9 +222,10 @@ def leaf_uv(polygons: Polygons) -> np.ndarray:
     return ((uv - lo[owner]) / np.maximum(hi - lo, 1e-30)[owner]).astype(np.float32)
 
 
-def leaf_parts(polygons: Polygons | None, up: str = "y") -> list[Part]:
+def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | None = None) -> list[Part]:
     """One leaf :class:`Part` per material the polygons use, in material order: each vertex
-    (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set."""
+    (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set.
+    ``joints``: (v,) the one joint each leaf vertex follows (a swaying plant's skin)."""
     if polygons is None or len(polygons.triangles) == 0:
         return []
     rot = up_rotation(up)
@@ -225,6 +239,12 @@ def leaf_parts(polygons: Polygons | None, up: str = "y") -> list[Part]:
     for mat in np.unique(triangle_material):
         faces = polygons.triangles[triangle_material == mat]
         keep, inverse = np.unique(faces, return_inverse=True)
+        skin = {}
+        if joints is not None:
+            skin["joints"] = np.zeros((len(keep), 4), np.int64)
+            skin["joints"][:, 0] = joints[keep]
+            skin["weights"] = np.zeros((len(keep), 4))
+            skin["weights"][:, 0] = 1.0
         parts.append(Part(int(mat), vertices[keep], normals[keep], uv[keep], inverse.reshape(faces.shape),
-                          leaf=True))
+                          leaf=True, **skin))
     return parts

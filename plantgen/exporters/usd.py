@@ -23,6 +23,17 @@ and ``orientationsf`` (quatf, which takes precedence where it is read), ``scales
 the copies. ``instancing="nodes"``: one instanceable Xform per copy with its transform,
 referencing its plant under the abstract ``/<scene>/Prototypes``.
 
+A plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`) is
+UsdSkel: its prim is a SkelRoot with a Skeleton ``Joints`` (a joint per segment, paths
+``s0/s1/...``: :func:`joint_names`; bind transforms at the segments' starts, rest
+transforms the translations between them), its Mesh, Leaves and Skeleton curves bound
+to it (``primvars:skel:jointIndices`` and ``jointWeights``). It is written once under the
+abstract ``/<scene>/Prototypes``, each copy a SkelRoot referencing it (not instanceable:
+each has its own animation) with its transform and its SkelAnimation ``Sway`` (rotations
+time-sampled at the codes 0 .. keys - 1), the ``skel:animationSource`` of its Joints; a
+plant written in place holds its ``Sway`` itself. The stage's start and end time codes
+and its time codes (and frames) per second span the keys.
+
 Stage metadata: ``upAxis`` (Y, or Z with ``up="z"``: the model is turned, see
 :mod:`plantgen.geometry.frames`), ``metersPerUnit`` (``unit``: the length of a model unit
 in metres, default 1) and ``defaultPrim``. usd-core's compliance checker
@@ -43,15 +54,17 @@ from ..geometry.topology import branches
 from .formats import ExportError
 from .gltf import generator
 from .plants import Colours, Plant, Progress, leaf_parts, material_colours, turned_mesh, unique_name
+from .sway import JointRig, Timeline, copy_rotations, joint_rig
 
-__all__ = ["skeleton_curves", "write_usd"]
+__all__ = ["joint_names", "skeleton_curves", "write_usd"]
 
 
-def skeleton_curves(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One polyline per branch: points (p, 3), widths (p,) (diameters) and the number of
-    points of each curve (b,). A branch's first point is its first segment's start; a
-    segment whose start radius differs from its parent's end radius repeats its start
-    point with the new width."""
+def skeleton_curves(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One polyline per branch: points (p, 3), widths (p,) (diameters), the number of
+    points of each curve (b,) and the segment each point lies on (p,) (the point is its
+    start or its end). A branch's first point is its first segment's start; a segment
+    whose start radius differs from its parent's end radius repeats its start point with
+    the new width."""
     topo = branches(skeleton)
     order = np.lexsort((topo.position, topo.branch))
     parent = skeleton.parent[order]
@@ -65,7 +78,7 @@ def skeleton_curves(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndar
     starts = first[restart]
     points[starts], widths[starts] = skeleton.start[order][restart], 2 * skeleton.r_start[order][restart]
     per_branch = np.bincount(topo.branch[order], weights=count, minlength=len(topo)).astype(np.int64)
-    return points, widths, per_branch
+    return points, widths, per_branch, np.repeat(order, count)
 
 
 def _joined(parts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -76,14 +89,31 @@ def _joined(parts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             np.concatenate([np.full(len(p.faces), p.material) for p in parts]))
 
 
+def _translations(points: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) translations by ``points`` (n, 3) in USD's row-vector layout (the
+    translation in the last row)."""
+    out = np.tile(np.eye(4), (len(points), 1, 1))
+    out[:, 3, :3] = points
+    return out
+
+
+def joint_names(parent: np.ndarray) -> list[str]:
+    """UsdSkel's joint paths of a forest of joints (``parent`` (j,), parents first): joint
+    i is ``s<i>`` under its parent's path (``s0/s1/s5``)."""
+    names: list[str] = []
+    for joint, up in enumerate(parent.tolist()):
+        names.append(f"s{joint}" if up < 0 else f"{names[up]}/s{joint}")
+    return names
+
+
 class _Writer:
     """Builds one stage (usd-core imported lazily: it takes about half a second)."""
 
     def __init__(self, up: str, unit: float, colours: Colours) -> None:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
+        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
-        self.Gf, self.Sdf, self.Tf, self.Usd, self.UsdGeom, self.UsdShade, self.Vt = (
-            Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt)
+        self.Gf, self.Sdf, self.Tf, self.Usd, self.UsdGeom, self.UsdShade, self.UsdSkel, self.Vt = (
+            Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt)
         self.up, self.colours = up, colours
         self.stage = Usd.Stage.CreateInMemory()
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.z if up == "z" else UsdGeom.Tokens.y)
@@ -100,19 +130,74 @@ class _Writer:
         self.stage.SetDefaultPrim(prim)
         return prim.GetPath()
 
-    def plant(self, path, plant: Plant) -> None:
-        """The plant's Xform at ``path``: materials, mesh, skeleton curves."""
-        self.UsdGeom.Xform.Define(self.stage, path)
+    def plant(self, path, plant: Plant, rig: JointRig | None = None) -> None:
+        """The plant's Xform at ``path``: materials, mesh, skeleton curves; with a ``rig``
+        a SkelRoot, its joints the UsdSkel Skeleton ``Joints`` and every mesh and curve
+        bound to them (see the module docstring)."""
+        if rig is None:
+            self.UsdGeom.Xform.Define(self.stage, path)
+        else:
+            self.UsdSkel.Root.Define(self.stage, path)
+            self._joints(path.AppendChild("Joints"), rig)
         materials = self._materials(path.AppendChild("Materials"), plant.mesh.material_names)
         vertices, normals = turned_mesh(plant.mesh, self.up)
-        self._mesh(path.AppendChild("Mesh"), (vertices, normals, plant.mesh.faces, plant.mesh.face_material),
-                   materials, plant.mesh.uv)
+        mesh = self._mesh(path.AppendChild("Mesh"), (vertices, normals, plant.mesh.faces, plant.mesh.face_material),
+                          materials, plant.mesh.uv)
+        if rig is not None:
+            self._bind(mesh, path.AppendChild("Joints"), rig.vertex_joints, rig.vertex_weights)
         if plant.has_leaves:
-            parts = leaf_parts(plant.leaves, self.up)
-            self._mesh(path.AppendChild("Leaves"), _joined(parts), materials, np.concatenate([p.uv for p in parts]),
-                       double_sided=True)
+            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints)
+            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts), materials,
+                                np.concatenate([p.uv for p in parts]), double_sided=True)
+            if rig is not None:
+                self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
+                           np.concatenate([p.weights for p in parts]))
         if len(plant.skeleton):
-            self._curves(path.AppendChild("Skeleton"), plant.skeleton)
+            curves, segment = self._curves(path.AppendChild("Skeleton"), plant.skeleton)
+            if rig is not None:
+                joints = np.zeros((len(segment), 4), np.int64)
+                joints[:, 0] = segment
+                self._bind(curves, path.AppendChild("Joints"), joints, (np.arange(4) == 0) * np.ones((len(segment), 1)))
+
+    def _joints(self, path, rig: JointRig) -> None:
+        """The UsdSkel Skeleton at ``path``: a joint per segment (and the still one), bound
+        and at rest where the segments start."""
+        skeleton = self.UsdSkel.Skeleton.Define(self.stage, path)
+        skeleton.CreateJointsAttr(self.Vt.TokenArray(joint_names(rig.parent)))
+        skeleton.CreateBindTransformsAttr(self.Vt.Matrix4dArray.FromNumpy(_translations(rig.bind)))
+        skeleton.CreateRestTransformsAttr(self.Vt.Matrix4dArray.FromNumpy(_translations(rig.offset)))
+
+    def _bind(self, prim, skeleton, joints: np.ndarray, weights: np.ndarray) -> None:
+        """Bind ``prim`` (a point-based geometry) to the Skeleton at ``skeleton``: each point
+        follows ``joints`` (p, 4) with ``weights`` (p, 4), as many of them as any point uses."""
+        used = max(1, int((weights > 0).sum(axis=1).max())) if len(weights) else 1
+        binding = self.UsdSkel.BindingAPI.Apply(prim.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skeleton])
+        binding.CreateJointIndicesPrimvar(False, used).Set(
+            self.Vt.IntArray.FromNumpy(np.ascontiguousarray(joints[:, :used], dtype=np.int32).ravel()))
+        binding.CreateJointWeightsPrimvar(False, used).Set(
+            self.Vt.FloatArray.FromNumpy(np.ascontiguousarray(weights[:, :used], dtype=np.float32).ravel()))
+        binding.CreateGeomBindTransformAttr(self.Gf.Matrix4d(1.0))
+
+    def sway(self, path, skeleton, rig: JointRig, rotations: np.ndarray, timeline: Timeline) -> None:
+        """A SkelAnimation at ``path`` turning the joints by ``rotations`` (k, j, 4) at the
+        time codes 0 .. k - 1 (the timeline's keys), the source of the Skeleton at
+        ``skeleton``."""
+        Vt = self.Vt
+        animation = self.UsdSkel.Animation.Define(self.stage, path)
+        animation.CreateJointsAttr(Vt.TokenArray(joint_names(rig.parent)))
+        animation.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(rig.offset.astype(np.float32)))
+        animation.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((rig.joints, 3), np.float16)))
+        attribute = animation.CreateRotationsAttr()
+        for code, frame in enumerate(rotations.astype(np.float32)):
+            attribute.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(frame)), self.Usd.TimeCode(code))
+        source = self.UsdSkel.BindingAPI.Apply(self.stage.GetPrimAtPath(skeleton))
+        source.CreateAnimationSourceRel().SetTargets([path])
+        stage = self.stage
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(timeline.keys - 1)
+        stage.SetTimeCodesPerSecond(timeline.rate)
+        stage.SetFramesPerSecond(timeline.rate)
 
     def _materials(self, scope, names) -> list:
         UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
@@ -132,9 +217,9 @@ class _Writer:
             out.append(material)
         return out
 
-    def _mesh(self, path, arrays, materials, uv=None, double_sided: bool = False) -> None:
+    def _mesh(self, path, arrays, materials, uv=None, double_sided: bool = False):
         """A Mesh at ``path`` from ``arrays`` = (vertices, unit normals, faces, material per
-        face), with ``uv`` as primitive ``st`` where given."""
+        face), with ``uv`` as primitive ``st`` where given; the Mesh."""
         UsdGeom, Vt, UsdShade = self.UsdGeom, self.Vt, self.UsdShade
         vertices, normals, faces, face_material = arrays
         points = Vt.Vec3fArray.FromNumpy(vertices.astype(np.float32))
@@ -156,17 +241,19 @@ class _Writer:
         used = np.unique(face_material)
         if len(used) == 1:
             binding.Bind(materials[int(used[0])])
-            return
+            return geom
         for mat in used:
             indices = np.flatnonzero(face_material == mat).astype(np.int32)
             subset = binding.CreateMaterialBindSubset(materials[int(mat)].GetPath().name,
                                                       Vt.IntArray.FromNumpy(indices), UsdGeom.Tokens.face)
             UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(materials[int(mat)])
         binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
+        return geom
 
-    def _curves(self, path, skeleton: Skeleton) -> None:
+    def _curves(self, path, skeleton: Skeleton):
+        """The skeleton's BasisCurves guide at ``path``; (the curves, the segment of each point)."""
         UsdGeom, Vt = self.UsdGeom, self.Vt
-        points, widths, counts = skeleton_curves(skeleton)
+        points, widths, counts, segment = skeleton_curves(skeleton)
         points = Vt.Vec3fArray.FromNumpy((points @ up_rotation(self.up).T).astype(np.float32))
         widths = Vt.FloatArray.FromNumpy(widths.astype(np.float32))
         curves = UsdGeom.BasisCurves.Define(self.stage, path)
@@ -178,6 +265,7 @@ class _Writer:
         curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
         curves.CreatePurposeAttr(UsdGeom.Tokens.guide)
         curves.CreateExtentAttr(UsdGeom.BasisCurves.ComputeExtent(points, widths))
+        return curves, segment
 
     def instancer(self, path, plants: list[Plant], names: list[str]) -> None:
         UsdGeom, Vt = self.UsdGeom, self.Vt
@@ -201,10 +289,11 @@ class _Writer:
         extent = instancer.ComputeExtentAtTime(self.Usd.TimeCode.Default(), self.Usd.TimeCode.Default())
         instancer.CreateExtentAttr(extent)
 
-    def references(self, root, plants: list[Plant], names: list[str]) -> None:
+    def references(self, root, plants: list[Plant], names: list[str], taken: set) -> None:
+        """Each copy an instanceable Xform referencing its plant under the abstract
+        ``Prototypes``."""
         protos = root.AppendChild("Prototypes")
         self.stage.CreateClassPrim(protos)
-        taken: set = set(names) | {"Prototypes"}
         for plant, name in zip(plants, names, strict=True):
             self.plant(protos.AppendChild(name), plant)
             for k, matrix in enumerate(turn_placements(plant.matrices, self.up)):
@@ -213,27 +302,53 @@ class _Writer:
                 copy.GetPrim().GetReferences().AddInternalReference(protos.AppendChild(name))
                 copy.GetPrim().SetInstanceable(True)
 
+    def swaying(self, root, plant: Plant, name: str, timeline: Timeline, taken: set) -> None:
+        """A swaying plant's copies: its SkelRoot once under the abstract ``Prototypes``,
+        each copy a SkelRoot referencing it (not instanceable: each holds its own
+        animation) with its transform and, where it sways, its SkelAnimation ``Sway``, the
+        source of its ``Joints``."""
+        rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, self.up, plant.name)
+        protos = root.AppendChild("Prototypes")
+        self.stage.CreateClassPrim(protos)
+        self.plant(protos.AppendChild(name), plant, rig)
+        for k, matrix in enumerate(turn_placements(plant.matrices, self.up)):
+            copy = self.UsdSkel.Root.Define(self.stage, root.AppendChild(self.name(f"{name}_{k + 1}", taken)))
+            copy.AddTransformOp().Set(self.Gf.Matrix4d(matrix.T.tolist()))
+            copy.GetPrim().GetReferences().AddInternalReference(protos.AppendChild(name))
+            if plant.sway.copy_moves(k):
+                rotations = copy_rotations(plant.skeleton, plant.sway, k, plant.matrices[k], timeline.times,
+                                           self.up, rig.joints)
+                self.sway(copy.GetPath().AppendChild("Sway"), copy.GetPath().AppendChild("Joints"), rig, rotations,
+                          timeline)
+
 
 def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
               instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
-              progress: Progress = None) -> list[Path]:
-    """Write ``plants`` as a USD stage at ``path`` (see the module docstring)."""
+              progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+    """Write ``plants`` as a USD stage at ``path`` (see the module docstring); with
+    ``animation``, the plants that sway as UsdSkel skeletons with their SkelAnimations."""
     path = Path(path)
     if not unit > 0:
         raise ExportError(f"{path}: the unit must be a positive number of metres, got {unit!r}")
     writer = _Writer(up, unit, colours)
     taken: set = set()
     stem = name or path.name.split(".")[0]
+    swaying = [animation is not None and p.sway is not None and p.sway.moves for p in plants]
     if len(plants) == 1 and plants[0].matrices is None:
-        writer.plant(writer.root(writer.name(plants[0].name or stem, taken)), plants[0])
+        _write_in_place(writer, writer.root(writer.name(plants[0].name or stem, taken)), plants[0],
+                        animation if swaying[0] else None)
     else:
         root = writer.root(writer.name(stem, taken))
         reserved = {"Plants", "Prototypes"}
         names = [writer.name(p.name, reserved) for p in plants]
-        if instancing == "gpu":
-            writer.instancer(root.AppendChild("Plants"), plants, names)
-        else:
-            writer.references(root, plants, names)
+        taken = set(names) | reserved
+        still = [k for k, moves in enumerate(swaying) if not moves]
+        if still and instancing == "gpu":
+            writer.instancer(root.AppendChild("Plants"), [plants[k] for k in still], [names[k] for k in still])
+        elif still:
+            writer.references(root, [plants[k] for k in still], [names[k] for k in still], taken)
+        for k in np.flatnonzero(swaying):
+            writer.swaying(root, plants[k], names[k], animation, taken)
     if progress is not None:
         progress("write", 1, 1)
 
@@ -241,3 +356,15 @@ def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: 
         if not writer.stage.GetRootLayer().Export(str(tmp)):
             raise OSError(f"usd-core could not write {tmp.name}")
     return [write_atomically(path, export, ExportError)]
+
+
+def _write_in_place(writer: _Writer, path, plant: Plant, animation: Timeline | None) -> None:
+    """One plant where it stands (a grammar, a skeleton, a scene written in place): an
+    Xform, or with ``animation`` a SkelRoot with its SkelAnimation ``Sway``."""
+    if animation is None:
+        writer.plant(path, plant)
+        return
+    rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, writer.up, plant.name)
+    writer.plant(path, plant, rig)
+    writer.sway(path.AppendChild("Sway"), path.AppendChild("Joints"), rig,
+                copy_rotations(plant.skeleton, plant.sway, 0, None, animation.times, writer.up, rig.joints), animation)

@@ -26,7 +26,7 @@ from .skeleton import Skeleton
 from .stage import Sway
 from .vec import ancestor_count, rotate
 
-__all__ = ["SwayRig", "sway_rig", "pose", "turn_coefficients", "turn_at"]
+__all__ = ["SwayRig", "sway_rig", "joint_angles", "pose", "turn_coefficients", "turn_at"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,10 +83,23 @@ def sway_rig(skeleton: Skeleton, segment_instance: np.ndarray,
                    amp[inst] != 0)
 
 
+def joint_angles(rig: SwayRig, t, rates: bool = False):
+    """The angle (radians) each joint turns at time ``t`` (seconds): ``theta_i(t)`` of the
+    module docstring, the turn of segment i about its instance's axis relative to its
+    parent (about its start). ``t`` a number gives (n,); an array of k times (k, n).
+    ``rates``: also dtheta_i/dt (radians per second), the same shape: ``(angles, rates)``."""
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    wave = 2 * np.pi * rig.frequency * t + rig.phase - 2 * np.pi * rig.depth / rig.max_depth
+    size = rig.amplitude / rig.max_depth
+    angles = size * np.sin(wave)
+    if not rates:
+        return angles
+    return angles, size * 2 * np.pi * rig.frequency * np.cos(wave)
+
+
 def pose(skeleton: Skeleton, rig: SwayRig, t: float) -> Skeleton:
     """The skeleton at time ``t`` (seconds). Deterministic in t; t = any value works."""
-    theta = rig.amplitude / rig.max_depth * np.sin(
-        2 * np.pi * rig.frequency * t + rig.phase - 2 * np.pi * rig.depth / rig.max_depth)
+    theta = joint_angles(rig, t)
     total = np.zeros(len(skeleton))
     start = skeleton.start.copy()
     end = skeleton.end.copy()
