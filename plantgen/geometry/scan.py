@@ -76,8 +76,9 @@ from .skeleton import Skeleton
 from .topology import Branches, branches
 from .vec import cross, dot, unit
 
-__all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "PointCloud", "ScanError", "ScanSettings",
-           "ScanTarget", "TerrestrialBeams", "cast_first_returns", "scan_plant", "scan_target", "scanner_positions"]
+__all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
+           "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_returns", "cast_first_returns", "scan_plant",
+           "scan_target", "scanner_positions"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -99,15 +100,16 @@ def _positions(value) -> tuple | None:
     sequence of triples; None stays None."""
     if value is None:
         return None
+    given = value
     if isinstance(value, str):
         items = [p for p in value.replace(" ", "").split(";") if p]
         value = [p.split(",") for p in items]
     try:
         out = tuple(tuple(float(c) for c in p) for p in value)
     except (TypeError, ValueError):
-        raise ScanError(f"--scanner-positions must be 'x,y,z;x,y,z...' (numbers), got {value!r}") from None
+        raise ScanError(f"--scanner-positions must be 'x,y,z;x,y,z...' (numbers), got {given!r}") from None
     if not out or any(len(p) != 3 or not all(math.isfinite(c) for c in p) for p in out):
-        raise ScanError(f"--scanner-positions must be finite x,y,z triples separated by ';', got {value!r}")
+        raise ScanError(f"--scanner-positions must be finite x,y,z triples separated by ';', got {given!r}")
     return out
 
 
@@ -693,6 +695,31 @@ def _labels(target: ScanTarget, prim: np.ndarray) -> dict:
     plant = np.where(wood, target.segment_plant[safe] if len(target.segment_plant) else 0, leaf_plant)
     part = np.where(wood, np.where(order == 0, STEM, BRANCH), LEAF)
     return {"plant": plant, "part": part, "order": order, "segment": segment, "leaf": np.where(wood, -1, polygon)}
+
+
+@dataclass(frozen=True, eq=False)
+class BeamReturns:
+    """One scanner's returns before noise: ``beam`` (k,) the beams with a return (index
+    a·nb + b into the scanner's grid, increasing), ``range`` (k,) their exact ranges and
+    ``primitive`` (k,) what each hit (a frustum row, or rows + a leaf triangle)."""
+
+    scanner: int
+    beam: np.ndarray
+    range: np.ndarray
+    primitive: np.ndarray
+    beams: int                       # beams the scanner fired
+
+
+def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
+                 max_pairs: int = 1 << 20) -> list[BeamReturns]:
+    """Every scanner's :class:`BeamReturns` (what :func:`scan_plant` turns into points;
+    the benchmark compares precisions beam by beam)."""
+    out = []
+    for k, grid in enumerate(_scan_grids(target, settings)):
+        sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs)
+        beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
+        out.append(BeamReturns(k, beam, t, prim, grid.count))
+    return out
 
 
 def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int) -> dict:
