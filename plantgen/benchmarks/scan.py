@@ -41,7 +41,8 @@ def machine() -> str:
             name = next((line.split(":", 1)[1].strip() for line in fh if line.startswith("model name")), name)
     except OSError:
         pass
-    return (f"{name}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}, "
+    load = f", load average {os.getloadavg()[0]:.2f}" if hasattr(os, "getloadavg") else ""
+    return (f"{name}, {os.cpu_count()} cores{load}, Python {platform.python_version()}, numpy {np.__version__}, "
             f"{platform.system()} {platform.release()}")
 
 

@@ -77,8 +77,8 @@ from .topology import Branches, branches
 from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
-           "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_returns", "cast_first_returns", "scan_plant",
-           "scan_target", "scanner_positions"]
+           "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_grids", "beam_returns", "cast_first_returns",
+           "scan_plant", "scan_target", "scanner_positions"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -534,8 +534,10 @@ def _reach(origins: np.ndarray, lo, hi) -> float:
     return float(np.sqrt((far ** 2).sum(axis=1)).max())
 
 
-def _scan_grids(target: ScanTarget, settings: ScanSettings) -> list:
-    """The beam grid of every scanner (airborne: of every flight line). With a divergence,
+def beam_grids(target: ScanTarget, settings: ScanSettings) -> list:
+    """The beam grid of every scanner (airborne: of every flight line):
+    :class:`TerrestrialBeams` or :class:`AirborneBeams`, whose ``rays(a, b)`` gives any
+    beam's origin and direction (beam k is (a0 + k // nb, b0 + k % nb)). With a divergence,
     each grid's ``pad`` widens the primitives' boxes by the beam's radius at its farthest
     range, so a sub-ray that hits is never left out of its beam's pairs."""
     lo, hi = target.box()
@@ -715,7 +717,7 @@ def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
     """Every scanner's :class:`BeamReturns` (what :func:`scan_plant` turns into points;
     the benchmark compares precisions beam by beam)."""
     out = []
-    for k, grid in enumerate(_scan_grids(target, settings)):
+    for k, grid in enumerate(beam_grids(target, settings)):
         sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs)
         beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
         out.append(BeamReturns(k, beam, t, prim, grid.count))
@@ -755,7 +757,7 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
-    grids = _scan_grids(target, settings)
+    grids = beam_grids(target, settings)
     rays = sum(g.count for g in grids) * settings.sub_rays
     (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
     parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
