@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -264,6 +265,15 @@ class ScanTarget:
     def rows(self) -> int:
         return len(self.frusta)
 
+    @cached_property
+    def triangle_edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, 3) each: the triangles' first vertex, their two edges from it, and (t,) the
+        product of the edges' lengths (the scale of a grazing ray's determinant)."""
+        v0 = np.ascontiguousarray(self.triangles[:, 0])
+        e1 = self.triangles[:, 1] - v0
+        e2 = self.triangles[:, 2] - v0
+        return v0, e1, e2, np.sqrt(dot(e1, e1) * dot(e2, e2))
+
     def __len__(self) -> int:
         return len(self.lo)
 
@@ -344,6 +354,21 @@ def _wrap(angle):
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
 
 
+#: How far past a grid step a box's edge may fall and still take that step's beam (in
+#: steps): with the boxes' padding, what keeps rounding from losing a beam.
+STEP_SLACK = 1e-9
+
+
+def _first(x) -> np.ndarray:
+    """The first grid index at or after ``x`` (in steps), less :data:`STEP_SLACK`."""
+    return np.ceil(np.asarray(x) - STEP_SLACK).astype(np.int64)
+
+
+def _last(x) -> np.ndarray:
+    """The last grid index at or before ``x`` (in steps), plus :data:`STEP_SLACK`."""
+    return np.floor(np.asarray(x) + STEP_SLACK).astype(np.int64)
+
+
 def _xz_corners(lo, hi) -> np.ndarray:
     """(k, 4, 2) the corners of boxes' horizontal (x, z) rectangles."""
     x = np.stack([lo[:, 0], hi[:, 0], hi[:, 0], lo[:, 0]], axis=1)
@@ -385,8 +410,8 @@ class TerrestrialBeams:
         centre = np.arctan2(mid[:, 1], mid[:, 0])
         rel = _wrap(np.arctan2(corners[..., 1], corners[..., 0]) - centre[:, None])
         off = _wrap(centre - self.phi)
-        a_lo = np.floor((off + rel.min(axis=1)) / self.step).astype(np.int64)
-        a_hi = np.ceil((off + rel.max(axis=1)) / self.step).astype(np.int64)
+        a_lo = _first((off + rel.min(axis=1)) / self.step)
+        a_hi = _last((off + rel.max(axis=1)) / self.step)
         full = inside | (rel.max(axis=1) - rel.min(axis=1) >= np.pi)
         if self.full_circle:                 # a range across the seam behind the plant: all of it
             full |= (a_lo < self.a0) | (a_hi > self.a1)
@@ -400,8 +425,8 @@ class TerrestrialBeams:
         top, bottom = hi[:, 1] - self.origin[1], lo[:, 1] - self.origin[1]
         theta_hi = np.arctan2(top, np.where(top >= 0, near, far))
         theta_lo = np.arctan2(bottom, np.where(bottom <= 0, near, far))
-        b_lo = np.maximum(np.floor(theta_lo / self.step).astype(np.int64), self.b0)
-        return b_lo, np.minimum(np.ceil(theta_hi / self.step).astype(np.int64), self.b1)
+        b_lo = np.maximum(_first(theta_lo / self.step), self.b0)
+        return b_lo, np.minimum(_last(theta_hi / self.step), self.b1)
 
     def blocks(self, lo, hi):
         """Per box (k,): the rectangle [a_lo, a_hi] × [b_lo, b_hi] of beams that can meet it
@@ -440,13 +465,13 @@ class AirborneBeams:
         corners = _xz_corners(lo, hi) - self.origin[[0, 2]]
         along = corners @ self.heading[[0, 2]]
         across = corners @ self.across[[0, 2]]
-        a_lo = np.maximum(np.floor(along.min(axis=1) / self.spacing).astype(np.int64), self.a0)
-        a_hi = np.minimum(np.ceil(along.max(axis=1) / self.spacing).astype(np.int64), self.a1)
+        a_lo = np.maximum(_first(along.min(axis=1) / self.spacing), self.a0)
+        a_hi = np.minimum(_last(along.max(axis=1) / self.spacing), self.a1)
         w_lo, w_hi = self.origin[1] - hi[:, 1], self.origin[1] - lo[:, 1]        # depth below the line
         u_lo, u_hi = across.min(axis=1), across.max(axis=1)
         angles = np.arctan2(np.stack([u_lo, u_hi, u_lo, u_hi], axis=1), np.stack([w_lo, w_lo, w_hi, w_hi], axis=1))
-        b_lo = np.maximum(np.floor(angles.min(axis=1) / self.step).astype(np.int64), self.b0)
-        b_hi = np.minimum(np.ceil(angles.max(axis=1) / self.step).astype(np.int64), self.b1)
+        b_lo = np.maximum(_first(angles.min(axis=1) / self.step), self.b0)
+        b_hi = np.minimum(_last(angles.max(axis=1) / self.step), self.b1)
         inside = (u_lo <= 0) & (u_hi >= 0) & (w_lo <= 0)
         b_lo, b_hi = np.where(inside, self.b0, b_lo), np.where(inside, self.b1, b_hi)
         above = w_hi <= 0
@@ -585,14 +610,13 @@ def _sub_rays(directions: np.ndarray, beam_ids: np.ndarray, seed: int, scanner: 
     return unit(directions[:, None, :] + off).reshape(-1, 3)
 
 
-def _triangle_hits(triangles: np.ndarray, tri: np.ndarray, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """(m,) t of rays (m,) against triangles ``tri`` (m,) (Möller-Trumbore, both faces,
-    float64; inf for a miss, a ray in the triangle's plane included)."""
-    v0, v1, v2 = triangles[tri, 0], triangles[tri, 1], triangles[tri, 2]
-    e1, e2 = v1 - v0, v2 - v0
+def _triangle_hits(target: ScanTarget, tri: np.ndarray, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """(m,) t of rays (m,) against the target's triangles ``tri`` (m,) (Möller-Trumbore,
+    both faces, float64; inf for a miss, a ray in the triangle's plane included)."""
+    v0, e1, e2, size = (a[tri] for a in target.triangle_edges)
     p = cross(dirs, e2)
     det = dot(e1, p)
-    scale = np.sqrt(dot(e1, e1) * dot(e2, e2)) * np.sqrt(dot(dirs, dirs))
+    scale = size * np.sqrt(dot(dirs, dirs))
     ok = np.abs(det) > 1e-12 * scale
     inv = 1.0 / np.where(ok, det, 1.0)
     s = origins - v0
@@ -627,7 +651,7 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
         tester = tester or PairTester(target.frusta, dtype=np.dtype(precision), origin=O[wood][0])
         t[wood] = tester(prim[wood], O[wood], D[wood])[0]
     if (~wood).any():
-        t[~wood] = _triangle_hits(target.triangles, prim[~wood] - target.rows, O[~wood], D[~wood])
+        t[~wood] = _triangle_hits(target, prim[~wood] - target.rows, O[~wood], D[~wood])
     return t, np.where(np.isfinite(t), prim, -1)
 
 
