@@ -301,3 +301,8 @@ def test_binning_loses_no_beam(settings):
         assert np.array_equal(got.primitive[where[found]], want.row[want.hit])
         hits += int(want.hit.sum())
     assert hits > 50
+
+
+def test_plant_labels_of_the_wrong_length_are_one_line():
+    with pytest.raises(ScanError, match="one per segment"):
+        scan_plant(two_columns([-2.0, 2.0], [0.0, 0.0]), None, ScanSettings(), plant=[1, 2, 3])

@@ -300,9 +300,12 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
     frusta = skin_skeleton(skeleton) if frusta is None else frusta
     topology = topology or branches(skeleton)
     n = len(skeleton)
+    p = len(leaves) if leaves is not None else 0
+    for name, value, count, what in (("plant", plant, n, "segment"), ("leaf_plant", leaf_plant, p, "leaf")):
+        if value is not None and np.ndim(value) and np.shape(value) != (count,):
+            raise ScanError(f"{name} must be one number or one per {what} ({count}), got {np.shape(value)[0]}")
     segment_plant = np.broadcast_to(np.asarray(plant, dtype=np.int64), (n,)).copy()
     triangles, triangle_polygon = _leaf_arrays(leaves)
-    p = len(leaves) if leaves is not None else 0
     polygon_segment = np.asarray(leaves.segment, np.int64) if p else np.zeros(0, np.int64)
     if leaf_plant is None:
         own = np.asarray(plant, dtype=np.int64)
