@@ -70,6 +70,8 @@ class Limits:
         (estimated from the triangle count before anything is built)
     max_render_bytes : memory a render may take (images, frames, depth, shadow map and
         skinned frusta, estimated before anything is allocated)
+    max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
+        sub-rays of a diverging beam), counted before any is cast
     """
 
     max_input_bytes: int = 256 << 10
@@ -87,6 +89,7 @@ class Limits:
     max_export_triangles: int = 100_000_000
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30
+    max_scan_rays: int = 200_000_000
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -6,23 +6,33 @@ the segment (the skin's oblique joint planes and knuckles move material between
 neighbouring segments, not the figures below, up to the bevel of a bend). Coordinates are
 plantgen's: y up, model units.
 
-- **bounds**, **height**: the exact axis-aligned box of the frusta (a disc of radius r
-  about the unit axis a reaches r·sqrt(1 - a_i²) along axis i), and its extent along y:
-  what ``plantgen grow`` prints. (``Skeleton.bounds`` pads every end point by its radius
-  in every direction: a safe box for framing, not the model's height.)
+- **bounds**: the exact axis-aligned box of the frusta (a disc of radius r about the unit
+  axis a reaches r·sqrt(1 - a_i²) along axis i): what ``plantgen grow`` prints.
+  (``Skeleton.bounds`` pads every end point by its radius in every direction: a safe box
+  for framing, not the model's.)
+- **height**: from the trunk's base point (the start of segment 0, where the stem meets
+  the ground) up to the highest point of any frustum's surface: the box's top less the
+  base's y. Geometry below the base (a leaning stem's base disc dipping under it, a
+  drooping branch, a grammar's parts drawn below the start) does not count, as a
+  forester's tree height is measured from the ground at the stem. (Until this was
+  written down it was the box's extent along y, which counted it.)
 - **volume**: the sum of the frusta, πh/3·(r1² + r1·r2 + r2²); trunk and branch volumes
   split it by branch (:mod:`plantgen.geometry.topology`: the trunk is branch 0, the
   chain of segment 0). Lengths likewise.
-- **DBH**: the trunk's diameter at breast height, 1.3 m along the trunk from its base
-  (the convention for leaning stems; the height above the base for an upright one), the
-  frustum's radius interpolated there. ``unit`` says how long a model unit is in metres
-  (default 1: model units are metres); a trunk shorter than breast height has no DBH
-  (None).
+- **DBH**: the trunk's diameter at breast height, 1.3 m along the trunk's axis from its
+  base (forestry's rule for a leaning stem, and TreeQSM's: the trunk cylinders' lengths
+  summed; for an upright stem, 1.3 m above the base), the frustum's radius interpolated
+  there. ``unit`` says how long a model unit is in metres (default 1: model units are
+  metres); a trunk shorter than breast height has no DBH (None; TreeQSM would take its
+  top cylinder's).
 - **crown**: the convex hull of the whole model's vertical projection (onto the ground
   plane, ⟂ y): its area (TreeQSM's ``CrownAreaConv``), its largest width
   (``CrownDiamMax``, the largest distance across it) and its mean width over all
-  directions (the hull's perimeter / π, Cauchy's formula; TreeQSM's ``CrownDiamAve``
-  averages the same widths). The hull is found from the support function of every end
+  directions (the hull's perimeter / π, Cauchy's formula: the mean caliper width;
+  TreeQSM's ``CrownDiamAve`` is instead the mean of 18 diameters through the hull's
+  centroid, each the farthest branch tips in opposite 10° sectors, which is at most the
+  width in that direction). Wood only, as TreeQSM's: leaves do not count. The hull is
+  found from the support function of every end
   disc in ``crown_directions`` directions, plus the exact tangent points where the hull
   bridges from one disc to another: every vertex lies on the true hull, and the chords
   along a round disc's arc lose a relative 2π²/(3·directions²) of its area (1.3e-5 at 720).
@@ -222,7 +232,8 @@ def crown_projection(skeleton: Skeleton, directions: int = CROWN_DIRECTIONS) -> 
 @dataclass(frozen=True)
 class TreeMetrics:
     """Tree-level figures (see the module docstring); lengths in model units, volumes in
-    model units³, areas in model units². ``unit``: metres per model unit."""
+    model units³, areas in model units². ``unit``: metres per model unit
+    (:meth:`as_dict` with ``metres=True`` converts)."""
 
     segments: int
     bounds: np.ndarray              # (2, 3)
@@ -242,15 +253,20 @@ class TreeMetrics:
     dbh: float | None
     crown: CrownProjection
 
-    def as_dict(self) -> dict:
-        """The scalar figures by name (for tables and JSON)."""
-        return {"segments": self.segments, "height": self.height, "volume": self.volume,
-                "trunk_volume": self.trunk_volume, "branch_volume": self.branch_volume,
-                "length": self.length, "trunk_length": self.trunk_length, "branch_length": self.branch_length,
-                "surface_area": self.surface_area, "branches": self.branches,
-                "max_branch_order": self.max_branch_order, "dbh": self.dbh, "breast_height": self.breast_height,
-                "crown_area": self.crown.area, "crown_width_max": self.crown.max_width,
-                "crown_width_mean": self.crown.mean_width, "unit": self.unit}
+    def as_dict(self, metres: bool = False) -> dict:
+        """The scalar figures by name (for tables and JSON), in model units; with
+        ``metres``, lengths in m, areas in m² and volumes in m³ (times ``unit`` to the
+        power each needs). ``units`` says which; ``unit`` is the factor either way."""
+        m = self.unit if metres else 1.0
+        dbh = None if self.dbh is None else self.dbh * m
+        return {"segments": self.segments, "height": self.height * m, "volume": self.volume * m ** 3,
+                "trunk_volume": self.trunk_volume * m ** 3, "branch_volume": self.branch_volume * m ** 3,
+                "length": self.length * m, "trunk_length": self.trunk_length * m,
+                "branch_length": self.branch_length * m, "surface_area": self.surface_area * m ** 2,
+                "branches": self.branches, "max_branch_order": self.max_branch_order, "dbh": dbh,
+                "breast_height": self.breast_height * m, "crown_area": self.crown.area * m ** 2,
+                "crown_width_max": self.crown.max_width * m, "crown_width_mean": self.crown.mean_width * m,
+                "unit": self.unit, "units": "m" if metres else "model"}
 
 
 def tree_metrics(skeleton: Skeleton, *, unit: float = 1.0, topology: Branches | None = None,
@@ -266,9 +282,10 @@ def tree_metrics(skeleton: Skeleton, *, unit: float = 1.0, topology: Branches | 
     slant = np.hypot(lengths, skeleton.r_end - skeleton.r_start)
     bounds = geometry_bounds(skeleton)
     breast = BREAST_HEIGHT_M / unit
+    base = skeleton.start[0].copy() if len(skeleton) else np.zeros(3)
     return TreeMetrics(
-        segments=len(skeleton), bounds=bounds, height=float(bounds[1, 1] - bounds[0, 1]),
-        base=skeleton.start[0].copy() if len(skeleton) else np.zeros(3),
+        segments=len(skeleton), bounds=bounds, height=float(bounds[1, 1] - base[1]) if len(skeleton) else 0.0,
+        base=base,
         volume=float(volumes.sum()), trunk_volume=float(volumes[trunk].sum()),
         branch_volume=float(volumes[~trunk].sum()), length=float(lengths.sum()),
         trunk_length=float(lengths[trunk].sum()), branch_length=float(lengths[~trunk].sum()),

@@ -24,6 +24,7 @@ from .export import export
 from .grow import grow
 from .options import debug_opt, debug_requested
 from .render import render
+from .scan import scan
 from .view import view
 
 __all__ = ["cli", "main"]
@@ -40,7 +41,7 @@ def cli() -> None:
     """
 
 
-for _command in (grow, export, render, view, bench, batch):
+for _command in (grow, export, render, scan, view, bench, batch):
     cli.add_command(debug_opt(_command))
 
 

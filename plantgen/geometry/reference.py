@@ -47,9 +47,9 @@ from .camera import Camera
 from .frusta import Frusta, bounding_pyramids, facing_normals, shade_rows_uv_normals, surface_uv, true_normals
 from .vec import dot
 
-__all__ = ["Hits", "ReferenceImage", "intersect_frusta", "shade_hits", "render_reference",
+__all__ = ["Hits", "ReferenceImage", "PairTester", "intersect_frusta", "shade_hits", "render_reference",
            "inside_frusta", "march_rays", "cone_quadratic", "solve_quadratic",
-           "difference_of_products"]
+           "difference_of_products", "row_boxes"]
 
 
 @dataclass
@@ -364,6 +364,42 @@ def _relief_pair_hits(frusta, rows, O, D, height, t_min, samples, spheres):
         need &= (t_in - t_out) > tol.relief_bisection * scale
     t_hit[hit_idx] = t_in
     return t_hit
+
+
+# ------------------------------------------------------------------------------ pairs
+class PairTester:
+    """Steps 1-6 of the module docstring for (ray, row) pairs a caller makes itself (a
+    laser scanner's angular bins, :mod:`plantgen.geometry.scan`): the rows are uploaded
+    once, in ``dtype`` relative to ``origin``; each call tests pairs.
+
+    ``tester(rows (m,), origins (m, 3), dirs (m, 3))`` -> (t (m,) float64, inf for a miss,
+    in units of |dir|; cap (m,) bool: the hit is on an end disc). Analytic cones only (no
+    relief); only hits with t > ``t_min`` count."""
+
+    def __init__(self, frusta: Frusta, *, dtype=np.float64, origin=None, recenter: bool = True,
+                 t_min: float = 0.0):
+        self.frusta = frusta
+        self.upload = _Upload(frusta, dtype, origin)
+        self.recenter = recenter
+        self.t_min = float(t_min)
+
+    def __call__(self, rows, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
+        rows = np.asarray(rows, dtype=np.int64)
+        if rows.size == 0:
+            return np.zeros(0), np.zeros(0, dtype=bool)
+        up = self.upload
+        O = (np.asarray(origins, dtype=np.float64) - up.origin).astype(up.dtype)
+        D = np.asarray(dirs, dtype=np.float64).astype(up.dtype)
+        t, kind = _pair_hits(up, rows, O, D, self.recenter, self.t_min)
+        return t, kind > 0
+
+
+def row_boxes(frusta: Frusta, shell: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) low and high corners of an axis-aligned box around each row: its bounding
+    pyramid's (relief shell included where ``shell``), padded as the reference pads them
+    so that rounding loses no ray."""
+    lo, hi, _ = _boxes(frusta, shell)
+    return lo, hi
 
 
 # ------------------------------------------------------------------------------ hits
