@@ -16,20 +16,21 @@
 // formed relative to each row's base from lengths and angles alone (the records'
 // convention, plantgen.gl.records.pack_records).
 //
-// Two schedules, one dispatch a frame or one a phase:
-// * SINGLE_GROUP: one work group runs the whole frame, rows in turn, with barriers between
-//   the steps: the turns and axes of every row; the ends level by level down the trees
-//   (each row's end is its parent's plus its turned direction: one read a row); every
-//   row's shape (side branches moved back into their hosts) and the joint below each
-//   continuing row; the texture frames' turns and u offsets level by level down the
-//   continuing chains; the records. One dispatch, a barrier a level.
+// Two schedules:
+// * GROUPS (one dispatch a frame): trees never depend on each other, so each work group
+//   takes whole trees (plantgen.gl.pose balances their rows) and runs the frame on them,
+//   with barriers between the steps: the turns and axes of its rows; their ends level by
+//   level down the trees (each row's end is its parent's plus its turned direction: one
+//   read a row) and their shapes (side branches moved back into their hosts); the joint
+//   below each continuing row; the texture frames' turns and u offsets level by level
+//   down the continuing chains; the records.
 // * PHASE (1..4, one dispatch each, every row an invocation): turns and axes; ends (each
 //   invocation walks its root path), shapes and joints; the texture frames' turns (chain
 //   walks) and each joint's local u offset; the u offsets (chain walks) and the records.
 // With RECORDS undefined (the vertex-skinned mesh, GS) only the ends are made, and each
 // segment's posed start and turn go into the pose buffer instead of records.
 //
-// Variants (defines): GROUP_SIZE; SINGLE_GROUP or PHASE; RECORDS; MAX_DEPTH, MAX_CHAIN
+// Variants (defines): GROUP_SIZE; GROUPS or PHASE; RECORDS; MAX_DEPTH, MAX_CHAIN
 // (the levels of the trees and of the chains: loop bounds); MIN_BEND_COS, ELLIPSE_MARGIN,
 // PARALLEL (plantgen.tolerances and the bend limit, as SwaySkin uses them).
 
@@ -82,11 +83,11 @@ layout(std430, binding = 4) writeonly buffer Records { Record records[]; };
 layout(std430, binding = 4) writeonly buffer Poses { vec4 poses[]; };   // (start - eye, T), (k, 0)
 #endif
 layout(std430, binding = 5) buffer Report { uint sharp_joints; };
-// SINGLE_GROUP: the first row of each tree level (MAX_DEPTH + 1), of each chain level
-// (MAX_CHAIN + 1), then the rows by tree level and by chain level
+// GROUPS: where each work group's block starts, then the blocks: the first entry of each
+// tree level (MAX_DEPTH + 1, the last one past the end), of each chain level (MAX_CHAIN +
+// 1), then the group's rows by tree level and by chain level (entries of `schedule`)
 layout(std430, binding = 6) readonly buffer Schedule { int schedule[]; };
 const int CHAIN_LEVELS = MAX_DEPTH + 1;
-const int TREE_ORDER = MAX_DEPTH + MAX_CHAIN + 2;
 
 uniform int n_rows;
 uniform int row_offset;         // the record of the first moving row
@@ -110,7 +111,7 @@ void phase_turns(int i) {
 }
 
 // ------------------------------------------------------------------ ends, shapes, joints
-// SINGLE_GROUP, one tree level: a row's end is its parent's plus its turned direction.
+// GROUPS, one tree level: a row's end is its parent's plus its turned direction.
 void tree_step(int i) {
     int p = parent_of(i);
     posed[i].end.xyz = (p >= 0 ? posed[p].end.xyz : vec3(0.0)) + posed[i].end.xyz;
@@ -249,7 +250,7 @@ float local_u(int i, int p, vec2 turn_p) {
     return atan(along_side, along_ref) * (-1.0 / TWO_PI);
 }
 
-// SINGLE_GROUP, one chain level: e^(iψ) and the u offset follow from the chain parent's.
+// GROUPS, one chain level: e^(iψ) and the u offset follow from the chain parent's.
 void chain_step(int i) {
     int p = rests[i].links.y;
     if (p < 0) {
@@ -278,7 +279,7 @@ void phase_frames(int i) {
 
 // ------------------------------------------------------------------ phase 4: records
 void phase_records(int i) {
-#if defined SINGLE_GROUP
+#if defined GROUPS
     float total = posed[i].turn.z;
 #else
     float total = 0.0;                               // PHASE 4: the chain's shares
@@ -312,31 +313,51 @@ void phase_poses(int i) {
 }
 #endif
 
-#if defined SINGLE_GROUP
-#define EACH_ROW(call) \
-    for (int row = int(gl_LocalInvocationID.x); row < n_rows; row += GROUP_SIZE) call(row); \
-    memoryBarrierBuffer(); barrier();
-// each level of a schedule in turn: levels [first, first + count) of `schedule`
-#define EACH_LEVEL(call, first, count, order) \
-    for (int level = 0; level < count; level++) { \
-        int stop = schedule[first + level + 1]; \
-        for (int k = schedule[first + level] + int(gl_LocalInvocationID.x); k < stop; k += GROUP_SIZE) \
-            call(schedule[order + k]); \
-        memoryBarrierBuffer(); barrier(); \
+#if defined GROUPS
+// every row of this group (its rows by tree level), then a barrier
+void each_row(int block, int step) {
+    int stop = schedule[block + MAX_DEPTH];
+    for (int k = schedule[block] + int(gl_LocalInvocationID.x); k < stop; k += GROUP_SIZE) {
+        int i = schedule[k];
+        if (step == 0) phase_turns(i);
+#if defined RECORDS
+        else if (step == 1) phase_joints(i);
+        else phase_records(i);
+#else
+        else phase_poses(i);
+#endif
     }
+    memoryBarrierBuffer();
+    barrier();
+}
+
+// each level in turn (the first entries of levels [first, first + count] in the block), a
+// barrier after each
+void each_level(int block, int first, int count) {
+    for (int level = 0; level < count; level++) {
+        int stop = schedule[block + first + level + 1];
+        for (int k = schedule[block + first + level] + int(gl_LocalInvocationID.x); k < stop; k += GROUP_SIZE) {
+#if defined RECORDS
+            if (first > 0) chain_step(schedule[k]); else
+#endif
+            tree_step(schedule[k]);
+        }
+        memoryBarrierBuffer();
+        barrier();
+    }
+}
 #endif
 
 void main() {
-#if defined SINGLE_GROUP
-    EACH_ROW(phase_turns)
-    EACH_LEVEL(tree_step, 0, MAX_DEPTH, TREE_ORDER)
+#if defined GROUPS
+    int block = schedule[gl_WorkGroupID.x];
+    each_row(block, 0);
+    each_level(block, 0, MAX_DEPTH);
 #if defined RECORDS
-    EACH_ROW(phase_joints)
-    EACH_LEVEL(chain_step, CHAIN_LEVELS, MAX_CHAIN, TREE_ORDER + n_rows)
-    EACH_ROW(phase_records)
-#else
-    EACH_ROW(phase_poses)
+    each_row(block, 1);
+    each_level(block, CHAIN_LEVELS, MAX_CHAIN);
 #endif
+    each_row(block, 2);
 #else
     int i = int(gl_GlobalInvocationID.x);
     if (i >= n_rows)

@@ -31,15 +31,16 @@ from ..tolerances import tol
 from .records import RecordStream, StreamedRows, record_tags
 from .shaders import build_compute, set_uniforms
 
-__all__ = ["GpuPose", "PoseStream", "POSE_MODES", "REST_BYTES", "SCRATCH_BYTES", "POSE_BYTES"]
+__all__ = ["GpuPose", "PoseStream", "POSE_MODES", "REST_BYTES", "SCRATCH_BYTES", "POSE_BYTES", "tree_groups"]
 
-#: How the phases run: ``"single"``: one work group runs them all, with barriers between
-#: (one dispatch a frame); ``"phases"``: one dispatch a phase over every row, in
-#: :data:`PHASE_GROUP`-wide groups. ``None`` picks ``single`` up to :data:`SINGLE_ROWS`.
-POSE_MODES = ("single", "phases")
-SINGLE_GROUP = 64
-PHASE_GROUP = 64
-SINGLE_ROWS = 8192
+#: How a frame runs: ``"groups"``: work groups of :data:`GROUP_SIZE` invocations, each
+#: taking whole trees (about :data:`ROWS_PER_GROUP` rows) through every step, level by
+#: level down the trees and chains, with barriers between: one dispatch a frame;
+#: ``"walks"``: one dispatch a phase, every row an invocation walking its root path and
+#: its chain. The bench (``python -m plantgen.benchmarks.effects``) measures both.
+POSE_MODES = ("groups", "walks")
+GROUP_SIZE = 64
+ROWS_PER_GROUP = 1024
 
 #: GPU bytes per moving row: rest data (uploaded once), scratch, the pose buffer (GS).
 REST_BYTES = 96
@@ -49,15 +50,41 @@ POSE_BYTES = 32
 _SIDE, _JOINT, _LINKED = 1, 2, 4
 
 
-def _schedule(plan: SwaySkin) -> np.ndarray:
-    """(int32) ``pose.glsl``'s ``schedule``: the first row of each tree level, of each
-    chain level, then the rows in tree-level order and in chain-level order."""
-    parts = []
-    for parent in (plan.parent, plan.parent_row):
-        depth = ancestor_count(parent)
-        order = np.argsort(depth, kind="stable")
-        parts.append((np.searchsorted(depth[order], np.arange(int(depth.max()) + 2)), order))
-    return np.concatenate([parts[0][0], parts[1][0], parts[0][1], parts[1][1]]).astype(np.int32)
+def tree_groups(plan: SwaySkin, rows_per_group: int) -> list[np.ndarray]:
+    """The rows of each work group: whole trees, in order, a group closed once it holds
+    ``rows_per_group`` rows (a larger tree is a group of its own)."""
+    counts = np.bincount(plan.tree_of, minlength=len(plan.roots))
+    groups, current, size = [], [], 0
+    for tree, count in enumerate(counts):
+        if current and size + count > rows_per_group:
+            groups.append(current)
+            current, size = [], 0
+        current.append(tree)
+        size += count
+    if current:
+        groups.append(current)
+    return [np.flatnonzero(np.isin(plan.tree_of, trees)) for trees in groups]
+
+
+def _schedule(plan: SwaySkin, groups: list[np.ndarray]) -> np.ndarray:
+    """(int32) ``pose.glsl``'s ``schedule`` for ``groups`` (each a sorted array of rows):
+    where each group's block starts, then the blocks (see the shader)."""
+    tree_depth, chain_depth = ancestor_count(plan.parent), ancestor_count(plan.parent_row)
+    levels = (int(tree_depth.max()) + 1, int(chain_depth.max()) + 1)
+    blocks, at = [], len(groups)
+    for rows in groups:
+        head = at + sum(levels) + 2
+        parts, starts = [], []
+        for depth, count in zip((tree_depth, chain_depth), levels, strict=True):
+            order = rows[np.argsort(depth[rows], kind="stable")]
+            starts.append(head + np.searchsorted(depth[order], np.arange(count + 1)))
+            parts.append(order)
+            head += len(order)
+        block = np.concatenate([*starts, *parts])
+        blocks.append(block)
+        at += len(block)
+    offsets = len(groups) + np.cumsum([0] + [len(b) for b in blocks[:-1]])
+    return np.concatenate([offsets, *blocks]).astype(np.int32)
 
 
 def _rest_data(plan: SwaySkin) -> np.ndarray:
@@ -90,20 +117,19 @@ def _rest_data(plan: SwaySkin) -> np.ndarray:
 
 class GpuPose:
     """One plan's rest data on the GPU and the programs that pose it (see the module's
-    docstring). ``mode``: one of :data:`POSE_MODES`, or None (``single`` up to
-    :data:`SINGLE_ROWS` rows)."""
+    docstring). ``mode``: one of :data:`POSE_MODES`; ``rows_per_group``: how many rows a
+    work group takes (``"groups"``)."""
 
-    def __init__(self, ctx, plan: SwaySkin, mode: str | None = None):
-        if mode is None:
-            mode = "single" if plan.n <= SINGLE_ROWS else "phases"
+    def __init__(self, ctx, plan: SwaySkin, mode: str = "groups", rows_per_group: int = ROWS_PER_GROUP):
         if mode not in POSE_MODES:
             raise ValueError(f"pose mode must be one of {POSE_MODES}, got {mode!r}")
         self.ctx, self.plan, self.mode, self.n = ctx, plan, mode, plan.n
+        self.groups = tree_groups(plan, rows_per_group)
         self.rest = ctx.buffer(_rest_data(plan).tobytes())
         self.scratch = ctx.buffer(reserve=SCRATCH_BYTES * self.n)
         self.poses = None                                       # made for the first GS frame
         self.report = ctx.buffer(np.zeros(1, np.uint32).tobytes())
-        self.schedule = ctx.buffer(_schedule(plan).tobytes())
+        self.schedule = ctx.buffer(_schedule(plan, self.groups).tobytes())
         omegas, slot = np.unique(plan.omega, return_inverse=True)
         self.frequencies = omegas / (2.0 * np.pi)
         self.cycles = ctx.buffer(reserve=4 * len(omegas))
@@ -123,9 +149,9 @@ class GpuPose:
     def programs(self, records: bool) -> list:
         """The compute programs of one frame, in order (built on first use)."""
         base = {**self.defines, "RECORDS": records}
-        if self.mode == "single":
-            return [build_compute(self.ctx, "pose.glsl", {**base, "SINGLE_GROUP": True, "GROUP_SIZE": SINGLE_GROUP})]
-        return [build_compute(self.ctx, "pose.glsl", {**base, "PHASE": phase, "GROUP_SIZE": PHASE_GROUP})
+        if self.mode == "groups":
+            return [build_compute(self.ctx, "pose.glsl", {**base, "GROUPS": True, "GROUP_SIZE": GROUP_SIZE})]
+        return [build_compute(self.ctx, "pose.glsl", {**base, "PHASE": phase, "GROUP_SIZE": GROUP_SIZE})
                 for phase in ((1, 2, 3, 4) if records else (1, 2, 3))]
 
     def set_origin(self, origin) -> int:
@@ -140,17 +166,18 @@ class GpuPose:
         self.origin = origin.copy()
         return frame.nbytes
 
-    def run(self, t: float, target, row_offset: int = 0, records: bool = True) -> int:
+    def run(self, t: float, target, row_offset: int = 0, records: bool = True, dry: bool = False) -> int:
         """Pose every row at time ``t`` (seconds) into ``target``: records from record
         ``row_offset`` on (``records``), else the pose buffer's (posed start - eye, turn),
-        (axis, 0) per segment. Returns the bytes written to the GPU (the phases)."""
+        (axis, 0) per segment. Returns the bytes written to the GPU (the phases). ``dry``:
+        every call but with no work group dispatched (the CPU's own share, for the bench)."""
         cycles = np.mod(self.frequencies * float(t), 1.0).astype(np.float32)
         self.cycles.write(cycles.tobytes())
         for binding, buf in enumerate((self.rest, self.trees, self.cycles, self.scratch, target, self.report,
                                        self.schedule)):
             buf.bind_to_storage_buffer(binding)
         programs = self.programs(records)
-        groups = 1 if self.mode == "single" else -(-self.n // PHASE_GROUP)
+        groups = 0 if dry else len(self.groups) if self.mode == "groups" else -(-self.n // GROUP_SIZE)
         for i, program in enumerate(programs):
             if i:
                 self.ctx.memory_barrier()
@@ -195,9 +222,9 @@ class PoseStream(RecordStream):
 
     poses_on_gpu = True
 
-    def __init__(self, ctx, mode: str | None = None):
+    def __init__(self, ctx, mode: str = "groups", rows_per_group: int = ROWS_PER_GROUP):
         super().__init__(ctx)
-        self.mode = mode
+        self.mode, self.rows_per_group = mode, rows_per_group
         self._gpu: GpuPose | None = None
 
     def gpu(self, plan: SwaySkin) -> GpuPose:
@@ -205,7 +232,7 @@ class PoseStream(RecordStream):
         if self._gpu is None or self._gpu.plan is not plan:
             if self._gpu is not None:
                 self._gpu.release()
-            self._gpu = GpuPose(self.ctx, plan, self.mode)
+            self._gpu = GpuPose(self.ctx, plan, self.mode, self.rows_per_group)
         return self._gpu
 
     def pose(self, plan: SwaySkin, static, t: float, origin, box) -> tuple[float, int, StreamedRows]:
