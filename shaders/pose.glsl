@@ -30,7 +30,8 @@
 // With RECORDS undefined (the vertex-skinned mesh, GS) only the ends are made, and each
 // segment's posed start and turn go into the pose buffer instead of records.
 //
-// Variants (defines): GROUP_SIZE; GROUPS or PHASE; RECORDS; MAX_DEPTH, MAX_CHAIN
+// Variants (defines): GROUP_SIZE; GROUPS or PHASE; DOUBLING (GROUPS: the ends by pointer
+// doubling, this many rounds of every row, instead of level by level); RECORDS; MAX_DEPTH, MAX_CHAIN
 // (the levels of the trees and of the chains: loop bounds); MIN_BEND_COS, ELLIPSE_MARGIN,
 // PARALLEL (plantgen.tolerances and the bend limit, as SwaySkin uses them).
 
@@ -70,6 +71,9 @@ struct Posed {
     vec4 medial;    // that joint's alpha, gamma (normal along M1, n1), cos and sin of the bend
     vec4 step;      // the texture frame's step across it (re, im), conj(at_p) (re, im)
     vec4 turn;      // e^(iψ) (re, im), u offset (PHASE: the joint's local share), 0
+    vec4 frame;     // e1 = any_perpendicular(axis), the texture frame's first axis; 0
+    vec4 hop;       // DOUBLING: the partial sum of the other round (xyz)
+    ivec4 jump;     // DOUBLING: the row 2^r above (x: the sum in end, y: in hop)
 };
 
 layout(std430, binding = 0) readonly buffer Rests { Rest rests[]; };
@@ -97,6 +101,13 @@ int tree_of(int i) { return rests[i].links.w >> 4; }
 bool flag(int i, int f) { return (rests[i].links.w & f) != 0; }
 vec2 cmul(vec2 a, vec2 b) { return vec2(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x); }
 
+// any_perpendicular(a): x (z where a is near x) with its part along a removed, made unit.
+vec3 first_perpendicular(vec3 a) {
+    bool near_x = abs(a.x) >= 0.9;
+    vec3 e = a * -(near_x ? a.z : a.x) + (near_x ? vec3(0.0, 0.0, 1.0) : vec3(1.0, 0.0, 0.0));
+    return normalize(e);
+}
+
 // ------------------------------------------------------------------ phase 1: turns, axes
 void phase_turns(int i) {
     Rest r = rests[i];
@@ -106,15 +117,28 @@ void phase_turns(int i) {
     vec2 w = cmul(r.wave.xy, vec2(cos(turn), sin(turn)));
     vec3 d = r.along.xyz + tree.u1.xyz * w.x + tree.u2.xyz * w.y;
     posed[i].w = vec4(w, turn, 0.0);
-    posed[i].axis = vec4(r.along.w > 0.0 ? normalize(d) : vec3(0.0, 1.0, 0.0), 0.0);
+    vec3 axis = r.along.w > 0.0 ? normalize(d) : vec3(0.0, 1.0, 0.0);
+    posed[i].axis = vec4(axis, 0.0);
     posed[i].end = vec4(d, 0.0);
+#if defined DOUBLING
+    posed[i].jump.x = r.links.x;
+#endif
+#if defined RECORDS
+    posed[i].frame = vec4(first_perpendicular(axis), 0.0);
+#endif
 }
 
 // ------------------------------------------------------------------ ends, shapes, joints
-// GROUPS, one tree level: a row's end is its parent's plus its turned direction.
+vec4 shape_of(int j);
+
+// GROUPS, one tree level: a row's end is its parent's plus its turned direction (and its
+// shape, which needs its host's axis).
 void tree_step(int i) {
     int p = parent_of(i);
     posed[i].end.xyz = (p >= 0 ? posed[p].end.xyz : vec3(0.0)) + posed[i].end.xyz;
+#if defined RECORDS
+    posed[i].shape = shape_of(i);
+#endif
 }
 
 // PHASE 2: row i's end, its fixed part plus the turned parts of its root path.
@@ -143,13 +167,6 @@ vec4 shape_of(int j) {
     float r1 = max(r.radii.x - r.radii.z * delta, 0.0);
     float length = r.still.w + delta;
     return vec4(length, r1, (r.radii.y - r1) / length, delta);
-}
-
-// any_perpendicular(a): x (z where a is near x) with its part along a removed, made unit.
-vec3 first_perpendicular(vec3 a) {
-    bool near_x = abs(a.x) >= 0.9;
-    vec3 e = a * -(near_x ? a.z : a.x) + (near_x ? vec3(0.0, 0.0, 1.0) : vec3(1.0, 0.0, 0.0));
-    return normalize(e);
 }
 
 // The joint plane in the medial frame (M1, n1) of a joint bent by (c, s): skinning's
@@ -198,7 +215,11 @@ void joint_below(int i) {
     float s = length(x);
     vec3 nm = s > 1e-30 ? x / s : cross(m1, first_perpendicular(m1));
     nm = normalize(nm - m1 * dot(nm, m1));               // ⟂ M1 to round-off
-    float kp = shape_of(p).z;
+#if defined GROUPS
+    float kp = posed[p].shape.z;                         // made level by level
+#else
+    float kp = shape_of(p).z;                            // made in this phase: again
+#endif
     Rest r = rests[i];
     vec4 mp = medial_plane(c, s, kp, rests[p].radii.y, r.radii.z, r.radii.x);
     float sin_p = abs(kp) / sqrt(1.0 + kp * kp);
@@ -209,7 +230,7 @@ void joint_below(int i) {
     vec3 n1 = cross(m1, nm);
     posed[i].plane = vec4(mp.x * m1 + mp.y * n1, mp.x * mp.z + mp.y * mp.w);
     posed[i].medial = vec4(mp.xy, c, s);
-    vec3 e1p = first_perpendicular(m1), e1c = first_perpendicular(m2);
+    vec3 e1p = posed[p].frame.xyz, e1c = posed[i].frame.xyz;
     vec2 at_p = vec2(dot(nm, e1p), -dot(nm, cross(m1, e1p)));        // conjugated
     vec2 at_c = vec2(dot(nm, e1c), dot(nm, cross(m2, e1c)));
     posed[i].step = vec4(flag(i, LINKED) ? cmul(at_c, at_p) : vec2(1.0, 0.0), at_p);
@@ -218,7 +239,9 @@ void joint_below(int i) {
 
 void phase_joints(int i) {
 #if defined RECORDS
+#if !defined GROUPS
     posed[i].shape = shape_of(i);
+#endif
     if (flag(i, JOINT))
         joint_below(i);
     else
@@ -292,7 +315,7 @@ void phase_records(int i) {
     Rest r = rests[i];
     vec4 shape = posed[i].shape;
     vec3 axis = posed[i].axis.xyz;
-    vec3 e1 = first_perpendicular(axis);
+    vec3 e1 = posed[i].frame.xyz;
     vec2 turn = posed[i].turn.xy;
     int below = r.links.z;
     Record rec;
@@ -313,6 +336,36 @@ void phase_poses(int i) {
 }
 #endif
 
+#if defined DOUBLING
+// One round of pointer doubling down the trees: each row adds the sum held by the row
+// 2^r above it and takes over that row's jump (the sums alternate between end and hop).
+void doubling_step(int i, bool even) {
+    vec3 sum = even ? posed[i].end.xyz : posed[i].hop.xyz;
+    int j = even ? posed[i].jump.x : posed[i].jump.y;
+    int next = -1;
+    if (j >= 0) {
+        sum += even ? posed[j].end.xyz : posed[j].hop.xyz;
+        next = even ? posed[j].jump.x : posed[j].jump.y;
+    }
+    if (even) {
+        posed[i].hop.xyz = sum;
+        posed[i].jump.y = next;
+    } else {
+        posed[i].end.xyz = sum;
+        posed[i].jump.x = next;
+    }
+}
+
+// After the last round: the ends in `end`, and the rows' shapes.
+void doubled(int i) {
+    if (DOUBLING % 2 == 1)
+        posed[i].end.xyz = posed[i].hop.xyz;
+#if defined RECORDS
+    posed[i].shape = shape_of(i);
+#endif
+}
+#endif
+
 #if defined GROUPS
 // every row of this group (its rows by tree level), then a barrier
 void each_row(int block, int step) {
@@ -320,6 +373,11 @@ void each_row(int block, int step) {
     for (int k = schedule[block] + int(gl_LocalInvocationID.x); k < stop; k += GROUP_SIZE) {
         int i = schedule[k];
         if (step == 0) phase_turns(i);
+#if defined DOUBLING
+        else if (step >= 3) {
+            if (step == 3 + DOUBLING) doubled(i); else doubling_step(i, (step - 3) % 2 == 0);
+        }
+#endif
 #if defined RECORDS
         else if (step == 1) phase_joints(i);
         else phase_records(i);
@@ -352,7 +410,12 @@ void main() {
 #if defined GROUPS
     int block = schedule[gl_WorkGroupID.x];
     each_row(block, 0);
+#if defined DOUBLING
+    for (int round = 0; round <= DOUBLING; round++)
+        each_row(block, 3 + round);
+#else
     each_level(block, 0, MAX_DEPTH);
+#endif
 #if defined RECORDS
     each_row(block, 1);
     each_level(block, CHAIN_LEVELS, MAX_CHAIN);

@@ -15,8 +15,9 @@ Run as ``python -m plantgen.benchmarks.effects [--size 1024x768] [--frames 5]
    GPU path in one interleaved run (frame by frame in turn), medians over
    ``--anim-frames`` frames: the per-frame update (CPU: pose, re-skin of the moving
    instances, pack, upload of only their records, as in the paper, §4; GPU: the compute
-   program of plantgen.gl.pose writing the records: work groups taking whole trees level
-   by level, or one dispatch a phase with every row walking its root path), the program's
+   program of plantgen.gl.pose writing the records: work groups taking whole trees, the
+   ends level by level or by pointer doubling, or one dispatch a phase with every row
+   walking its root path), the program's
    GPU time (glFinish-bracketed; a GL timer query beside it), the cost of an empty
    dispatch (every invocation returns at once), and the frame's render time; then GS and
    GS+R at
@@ -132,12 +133,13 @@ def _pose_paths(ctx, scene):
     """{label: (animation, record sink)}: the CPU path and the GPU path's schedules (work
     groups taking whole trees, level by level: the default, and all in one group; or one
     dispatch a phase, every row walking its root path and chain)."""
-    anims = [AnimatedScene.from_scene(scene) for _ in range(4)]
+    anims = [AnimatedScene.from_scene(scene) for _ in range(5)]
     groups = len(tree_groups(anims[1].plan, ROWS_PER_GROUP))
     return {"CPU (numpy)": (anims[0], RecordStream(ctx)),
             f"GPU, levels, {groups} groups": (anims[1], PoseStream(ctx, "groups")),
             "GPU, levels, 1 group": (anims[2], PoseStream(ctx, "groups", rows_per_group=anims[2].plan.n)),
-            "GPU, walks, 4 dispatches": (anims[3], PoseStream(ctx, "walks"))}
+            f"GPU, doubling, {groups} groups": (anims[3], PoseStream(ctx, "doubling")),
+            "GPU, walks, 4 dispatches": (anims[4], PoseStream(ctx, "walks"))}
 
 
 def _program_ms(ctx, gpu, target, offset, t, empty: bool = False) -> tuple[float, float]:
@@ -188,7 +190,7 @@ def _print_update_table(updates, renders, programs):
     def med(values):
         return statistics.median(values) if values else float("nan")
 
-    print(f"  {'path':<26}{'update ms':>10}{'program ms':>12}{'query ms':>10}{'empty ms':>10}{'render ms':>11}"
+    print(f"  {'path':<28}{'update ms':>10}{'program ms':>12}{'query ms':>10}{'empty ms':>10}{'render ms':>11}"
           f"{'frame ms':>10}  update split")
     totals = {}
     for label, ups in updates.items():
@@ -200,7 +202,7 @@ def _print_update_table(updates, renders, programs):
             *(med([getattr(u, k) for u in ups]) for k in ("pose_ms", "skin_ms", "pack_ms", "upload_ms")))
             if not prog else f"{sum(u.on_gpu for u in ups)} of {len(ups)} frames on the GPU, "
                              f"{med([u.upload_bytes for u in ups]):.0f} B uploaded a frame")
-        print(f"  {label:<26}{total:>10.3f}{med([p[0] for p in prog]):>12.3f}{med([p[1] for p in prog]):>10.3f}"
+        print(f"  {label:<28}{total:>10.3f}{med([p[0] for p in prog]):>12.3f}{med([p[1] for p in prog]):>10.3f}"
               f"{med([p[2] for p in prog]):>10.3f}{render:>11.1f}{render + total:>10.1f}  {split}")
     cpu = totals.pop("CPU (numpy)")
     for label, total in totals.items():

@@ -36,15 +36,17 @@ __all__ = ["GpuPose", "PoseStream", "POSE_MODES", "REST_BYTES", "SCRATCH_BYTES",
 #: How a frame runs: ``"groups"``: work groups of :data:`GROUP_SIZE` invocations, each
 #: taking whole trees (about :data:`ROWS_PER_GROUP` rows) through every step, level by
 #: level down the trees and chains, with barriers between: one dispatch a frame;
-#: ``"walks"``: one dispatch a phase, every row an invocation walking its root path and
-#: its chain. The bench (``python -m plantgen.benchmarks.effects``) measures both.
-POSE_MODES = ("groups", "walks")
+#: ``"doubling"``: the same, but the ends by pointer doubling (ceil(log2(depth)) rounds of
+#: every row) instead of level by level; ``"walks"``: one dispatch a phase, every row an
+#: invocation walking its root path and its chain. The bench (``python -m
+#: plantgen.benchmarks.effects``) measures all three.
+POSE_MODES = ("groups", "doubling", "walks")
 GROUP_SIZE = 64
 ROWS_PER_GROUP = 1024
 
 #: GPU bytes per moving row: rest data (uploaded once), scratch, the pose buffer (GS).
 REST_BYTES = 96
-SCRATCH_BYTES = 128
+SCRATCH_BYTES = 176
 POSE_BYTES = 32
 
 _SIDE, _JOINT, _LINKED = 1, 2, 4
@@ -149,8 +151,10 @@ class GpuPose:
     def programs(self, records: bool) -> list:
         """The compute programs of one frame, in order (built on first use)."""
         base = {**self.defines, "RECORDS": records}
-        if self.mode == "groups":
-            return [build_compute(self.ctx, "pose.glsl", {**base, "GROUPS": True, "GROUP_SIZE": GROUP_SIZE})]
+        if self.mode != "walks":
+            rounds = int(np.ceil(np.log2(self.defines["MAX_DEPTH"]))) if self.mode == "doubling" else None
+            return [build_compute(self.ctx, "pose.glsl", {**base, "GROUPS": True, "GROUP_SIZE": GROUP_SIZE,
+                                                          "DOUBLING": rounds})]
         return [build_compute(self.ctx, "pose.glsl", {**base, "PHASE": phase, "GROUP_SIZE": GROUP_SIZE})
                 for phase in ((1, 2, 3, 4) if records else (1, 2, 3))]
 
@@ -177,7 +181,7 @@ class GpuPose:
                                        self.schedule)):
             buf.bind_to_storage_buffer(binding)
         programs = self.programs(records)
-        groups = 0 if dry else len(self.groups) if self.mode == "groups" else -(-self.n // GROUP_SIZE)
+        groups = 0 if dry else -(-self.n // GROUP_SIZE) if self.mode == "walks" else len(self.groups)
         for i, program in enumerate(programs):
             if i:
                 self.ctx.memory_barrier()
