@@ -235,14 +235,13 @@ class AnimatedScene:
             boxes = [frusta_bounds(self._static)] if len(self._static) else []
             plan = self._plan
             if plan is not None:
-                trees = len(plan.roots)
+                trees, grow = len(plan.roots), plan.drift(np.pi / BOX_SAMPLES)
                 for x in np.arange(BOX_SAMPLES) * (2.0 * np.pi / BOX_SAMPLES):
                     posed = plan.pose_at_phase(np.full(trees, x))
                     frusta = plan.skin(posed)
                     if frusta is None:
                         frusta = self.skin(plan.skeleton(posed, self._moving_skeleton))
                     box = frusta_bounds(frusta)
-                    grow = plan.drift(np.pi / BOX_SAMPLES)
                     boxes.append(np.stack([box[0] - grow, box[1] + grow]))
             elif self.animated:
                 boxes.append(self.bounds(np.linspace(0.0, 10.0, BOX_SAMPLES)))

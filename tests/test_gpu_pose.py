@@ -378,3 +378,41 @@ def test_the_viewer_poses_a_playing_animation_on_the_gpu(gl_ctx, tmp_path, metho
     if method == "GS":
         assert "skinned on the GPU" not in session.hud_lines()[0][0]   # paused
     session.release()
+
+
+def test_leaves_sway_with_a_frame_posed_on_the_gpu(gl_ctx, tmp_path):
+    """Leaves are posed on the CPU (the plan's pose, no skin) for a frame the GPU posed:
+    the same leaves as after a CPU frame at that time."""
+    import shutil
+
+    from test_leaf_sway import SWAYING, TWIG
+
+    shutil.copy(TWIG, tmp_path / TWIG.name)
+    (tmp_path / "windy.yaml").write_text(SWAYING)
+    scene = grow_file(tmp_path / "windy.yaml").scene
+    gpu_anim, cpu_anim = AnimatedScene.from_scene(scene), AnimatedScene.from_scene(scene)
+    stream = PoseStream(gl_ctx)
+    for t in (0.3, 1.2):
+        _, _, update = gpu_anim.upload(stream, t, EYE)
+        assert update.on_gpu
+        calls = gpu_anim.skin_calls
+        leaves = gpu_anim.leaves_at(t)
+        assert gpu_anim.skin_calls == calls                # posed, not skinned
+        cpu_anim.frusta_at(t)
+        want = cpu_anim.leaves_at(t)
+        np.testing.assert_allclose(leaves.vertices, want.vertices, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(leaves.normal, want.normal, rtol=0, atol=1e-12)
+    stream.release()
+
+
+def test_the_motion_box_holds_every_frame():
+    """The box frames posed on the GPU are drawn with (their depth range, light window)
+    holds every frame the CPU skins, at times between the box's samples too."""
+    from plantgen.geometry.frusta import frusta_bounds
+
+    skeleton, motions = bending_joint()
+    for anim in (hard_plants(), AnimatedScene(skeleton, np.zeros(2, int), motions)):
+        box = anim.motion_box()
+        for t in np.linspace(0.0, 3.0, 61):
+            frame = frusta_bounds(anim.frusta_at(t))
+            assert np.all(frame[0] >= box[0]) and np.all(frame[1] <= box[1]), t

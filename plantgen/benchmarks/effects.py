@@ -18,8 +18,8 @@ Run as ``python -m plantgen.benchmarks.effects [--size 1024x768] [--frames 5]
    program of plantgen.gl.pose writing the records: work groups taking whole trees, the
    ends level by level or by pointer doubling, or one dispatch a phase with every row
    walking its root path), the program's
-   GPU time (glFinish-bracketed; a GL timer query beside it), the cost of an empty
-   dispatch (every invocation returns at once), and the frame's render time; then GS and
+   GPU time (glFinish-bracketed; a GL timer query beside it), the CPU's own share (the
+   same calls dispatching no work group), and the frame's render time; then GS and
    GS+R at
    ``--anim-level``: the posed frusta re-tessellated in numpy every frame against the mesh
    built once at rest and posed by the vertex shader.
@@ -142,16 +142,18 @@ def _pose_paths(ctx, scene):
             "GPU, walks, 4 dispatches": (anims[4], PoseStream(ctx, "walks"))}
 
 
-def _program_ms(ctx, gpu, target, offset, t, empty: bool = False) -> tuple[float, float]:
-    """(glFinish-bracketed ms, timer-query ms) of one frame's compute program (``empty``:
-    the same calls dispatching no work group: the CPU's own share)."""
+def _program_ms(ctx, gpu, target, offset, t) -> tuple[float, float, float]:
+    """(glFinish-bracketed ms, timer-query ms) of one frame's compute program, and the ms
+    of the same calls dispatching no work group (the CPU's own share of the update)."""
     ctx.finish()
     query = ctx.query(time=True)
     t0 = time.perf_counter()
     with query:
-        gpu.run(t, target, offset, dry=empty)
+        gpu.run(t, target, offset)
     ctx.finish()
-    return (time.perf_counter() - t0) * 1e3, query.elapsed / 1e6
+    t1 = time.perf_counter()
+    gpu.run(t, target, offset, dry=True)
+    return (t1 - t0) * 1e3, query.elapsed / 1e6, (time.perf_counter() - t1) * 1e3
 
 
 def animation_update(width, height, frames):
@@ -176,12 +178,14 @@ def animation_update(width, height, frames):
                 renders[label].append(result.frame_ms)
                 if update.on_gpu:
                     gpu = stream.gpu(anim.plan)
-                    programs[label].append((*_program_ms(ctx, gpu, buf, len(rows) - anim.plan.n, t),
-                                            _program_ms(ctx, gpu, buf, 0, t, empty=True)[0]))
+                    programs[label].append(_program_ms(ctx, gpu, buf, len(rows) - anim.plan.n, t))
     moving = len(paths["CPU (numpy)"][0].moving_segments)
     print(f"\n4. animation: dancing cacti, {moving:,} moving segments, {width}x{height}, relief + shadows, "
           f"median of {frames} frames, {renderer_name()}")
     _print_update_table(updates, renders, programs)
+    anim, stream = list(paths.values())[1]
+    print(f"  GPU memory of the pose: {stream.gpu(anim.plan).gpu_bytes() / 1024:.0f} KiB (rest data, uploaded once, "
+          "and scratch); per frame the CPU writes the wave's phase (4 B) and dispatches")
     for _, stream in paths.values():
         stream.release()
 
@@ -190,7 +194,7 @@ def _print_update_table(updates, renders, programs):
     def med(values):
         return statistics.median(values) if values else float("nan")
 
-    print(f"  {'path':<28}{'update ms':>10}{'program ms':>12}{'query ms':>10}{'empty ms':>10}{'render ms':>11}"
+    print(f"  {'path':<28}{'update ms':>10}{'program ms':>12}{'query ms':>10}{'CPU ms':>10}{'render ms':>11}"
           f"{'frame ms':>10}  update split")
     totals = {}
     for label, ups in updates.items():
