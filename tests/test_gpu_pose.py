@@ -11,7 +11,8 @@ Tolerances (float32 has a 24-bit significand, so one rounding of x costs up to 2
   the plant's size (its longest root path), D its depth. The CPU rounds base - eye once
   (2^-24·|base - eye|); the GPU rounds the tree's root start - eye once, then adds D + 1
   plant-sized terms (each addition rounds by at most 2^-24·H) and the root start: eight
-  times that budget. Measured on llvmpipe: 3.8e-6 at |base - eye| ~ 35 m (1.1e-7 of it).
+  times that budget. Measured on llvmpipe: 3.8e-6 at |base - eye| ~ 35 m (one float32
+  unit there, 1.1e-7 of it).
 * lengths, radii, plane offsets (formed relative to each row's base from lengths and
   angles): 2^-20·H.
 * unit directions (axis, reference direction, plane normals) and u offsets (turns, mod 1):
@@ -19,6 +20,10 @@ Tolerances (float32 has a 24-bit significand, so one rounding of x costs up to 2
   operations, the sine and cosine of the turn, and products along chains up to nine
   joints long. Measured: 5e-7.
 * twist, shell, tag: exact.
+* the skinned mesh away from joints: within 2^-20·(|eye| + 8) of its row's posed cone (the
+  pose buffer's float32 start, rounded at its distance from the eye, and its turn, good to
+  2^-17, times the vertex's offset from its pivot, under a metre here); a joint ring within
+  r·|θ|/2 (+1e-5) of both cones, θ the joint's angle.
 """
 
 from __future__ import annotations

@@ -18,8 +18,9 @@ Run as ``python -m plantgen.benchmarks.effects [--size 1024x768] [--frames 5]
    program of plantgen.gl.pose writing the records: work groups taking whole trees, the
    ends level by level or by pointer doubling, or one dispatch a phase with every row
    walking its root path), the program's
-   GPU time (glFinish-bracketed; a GL timer query beside it), the CPU's own share (the
-   same calls dispatching no work group), and the frame's render time; then GS and
+   GPU time (glFinish-bracketed, a GL timer query beside it, and warm: five runs in a row
+   with no frame drawn between), the CPU's own share (the same calls dispatching no work
+   group), and the frame's render time; then GS and
    GS+R at
    ``--anim-level``: the posed frusta re-tessellated in numpy every frame against the mesh
    built once at rest and posed by the vertex shader.
@@ -134,17 +135,23 @@ def _pose_paths(ctx, scene):
     groups taking whole trees, level by level: the default, and all in one group; or one
     dispatch a phase, every row walking its root path and chain)."""
     anims = [AnimatedScene.from_scene(scene) for _ in range(5)]
-    groups = len(tree_groups(anims[1].plan, ROWS_PER_GROUP))
+    quarter = -(-anims[1].plan.n // 4)
+
+    def groups(rows_per_group):
+        count = len(tree_groups(anims[1].plan, rows_per_group))
+        return f"{count} group{'s' if count > 1 else ''}"
+
     return {"CPU (numpy)": (anims[0], RecordStream(ctx)),
-            f"GPU, levels, {groups} groups": (anims[1], PoseStream(ctx, "groups")),
-            "GPU, levels, 1 group": (anims[2], PoseStream(ctx, "groups", rows_per_group=anims[2].plan.n)),
-            f"GPU, doubling, {groups} groups": (anims[3], PoseStream(ctx, "doubling")),
+            f"GPU, levels, {groups(ROWS_PER_GROUP)}": (anims[1], PoseStream(ctx, "groups")),
+            f"GPU, levels, {groups(quarter)}": (anims[2], PoseStream(ctx, "groups", rows_per_group=quarter)),
+            f"GPU, doubling, {groups(ROWS_PER_GROUP)}": (anims[3], PoseStream(ctx, "doubling")),
             "GPU, walks, 4 dispatches": (anims[4], PoseStream(ctx, "walks"))}
 
 
-def _program_ms(ctx, gpu, target, offset, t) -> tuple[float, float, float]:
-    """(glFinish-bracketed ms, timer-query ms) of one frame's compute program, and the ms
-    of the same calls dispatching no work group (the CPU's own share of the update)."""
+def _program_ms(ctx, gpu, target, offset, t) -> tuple[float, float, float, float]:
+    """(glFinish-bracketed ms, timer-query ms) of one frame's compute program, the median
+    ms of five runs in a row (warm: no frame drawn between them), and the ms of the same
+    calls dispatching no work group (the CPU's own share of the update)."""
     ctx.finish()
     query = ctx.query(time=True)
     t0 = time.perf_counter()
@@ -152,8 +159,15 @@ def _program_ms(ctx, gpu, target, offset, t) -> tuple[float, float, float]:
         gpu.run(t, target, offset)
     ctx.finish()
     t1 = time.perf_counter()
+    warm = []
+    for _ in range(5):
+        t2 = time.perf_counter()
+        gpu.run(t, target, offset)
+        warm.append((time.perf_counter() - t2) * 1e3)
+    ctx.finish()
+    t3 = time.perf_counter()
     gpu.run(t, target, offset, dry=True)
-    return (t1 - t0) * 1e3, query.elapsed / 1e6, (time.perf_counter() - t1) * 1e3
+    return (t1 - t0) * 1e3, query.elapsed / 1e6, statistics.median(warm), (time.perf_counter() - t3) * 1e3
 
 
 def animation_update(width, height, frames):
@@ -194,8 +208,8 @@ def _print_update_table(updates, renders, programs):
     def med(values):
         return statistics.median(values) if values else float("nan")
 
-    print(f"  {'path':<28}{'update ms':>10}{'program ms':>12}{'query ms':>10}{'CPU ms':>10}{'render ms':>11}"
-          f"{'frame ms':>10}  update split")
+    print(f"  {'path':<28}{'update ms':>10}{'finish ms':>10}{'query ms':>10}{'warm ms':>9}{'CPU ms':>8}"
+          f"{'render ms':>11}{'frame ms':>10}  update split")
     totals = {}
     for label, ups in updates.items():
         total = med([u.total_ms for u in ups])
@@ -206,8 +220,8 @@ def _print_update_table(updates, renders, programs):
             *(med([getattr(u, k) for u in ups]) for k in ("pose_ms", "skin_ms", "pack_ms", "upload_ms")))
             if not prog else f"{sum(u.on_gpu for u in ups)} of {len(ups)} frames on the GPU, "
                              f"{med([u.upload_bytes for u in ups]):.0f} B uploaded a frame")
-        print(f"  {label:<28}{total:>10.3f}{med([p[0] for p in prog]):>12.3f}{med([p[1] for p in prog]):>10.3f}"
-              f"{med([p[2] for p in prog]):>10.3f}{render:>11.1f}{render + total:>10.1f}  {split}")
+        cols = "".join(f"{med([p[k] for p in prog]):>{w}.3f}" for k, w in ((0, 10), (1, 10), (2, 9), (3, 8)))
+        print(f"  {label:<28}{total:>10.3f}{cols}{render:>11.1f}{render + total:>10.1f}  {split}")
     cpu = totals.pop("CPU (numpy)")
     for label, total in totals.items():
         print(f"  update, CPU path ÷ {label}: {cpu / total:.1f}x")

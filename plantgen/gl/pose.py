@@ -42,7 +42,7 @@ __all__ = ["GpuPose", "PoseStream", "POSE_MODES", "REST_BYTES", "SCRATCH_BYTES",
 #: plantgen.benchmarks.effects``) measures all three.
 POSE_MODES = ("groups", "doubling", "walks")
 GROUP_SIZE = 64
-ROWS_PER_GROUP = 1024
+ROWS_PER_GROUP = 4096
 
 #: GPU bytes per moving row: rest data (uploaded once), scratch, the pose buffer (GS).
 REST_BYTES = 96
