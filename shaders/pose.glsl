@@ -4,15 +4,15 @@
 //
 // Every joint of a tree turns about the tree's axis k, so segment i points along its rest
 // direction turned by its total turn T_i(t) = sin X·CA_i - cos X·SA_i (X the tree's wave
-// phase, CA and SA sums along the root path, uploaded once). Its end is the tree's fixed
-// part plus the sum, along the root path, of the rest directions' parts ⟂ k turned by
-// e^(iT): the invocations walk their ancestors (the trees are shallow). The joint planes
-// (3)-(5) are built in each joint's medial frame, the texture frames' reference angle ψ
-// and the u offsets are products and sums along the continuing chains (walked too).
+// phase, CA and SA sums along the root path, uploaded once). Its end is its root start
+// plus the sum, along the root path, of the turned directions (or: the tree's fixed part
+// plus the turned parts ⟂ k). The joint planes (3)-(5) are built in each joint's medial
+// frame; the texture frames' reference angle ψ and the u offsets are products and sums
+// along the continuing chains.
 //
 // Positions stay relative to the eye so float32 keeps its digits: a tree's root start is
-// uploaded relative to the eye (formed in float64, rounded once), each end's fixed part
-// relative to the root start, and the turned parts are plant-sized; plane offsets are
+// uploaded relative to the eye (formed in float64, rounded once), ends are summed relative
+// to their root start from plant-sized terms; plane offsets are
 // formed relative to each row's base from lengths and angles alone (the records'
 // convention, plantgen.gl.records.pack_records).
 //
@@ -31,9 +31,9 @@
 // segment's posed start and turn go into the pose buffer instead of records.
 //
 // Variants (defines): GROUP_SIZE; GROUPS or PHASE; DOUBLING (GROUPS: the ends by pointer
-// doubling, this many rounds of every row, instead of level by level); RECORDS; MAX_DEPTH, MAX_CHAIN
-// (the levels of the trees and of the chains: loop bounds); MIN_BEND_COS, ELLIPSE_MARGIN,
-// PARALLEL (plantgen.tolerances and the bend limit, as SwaySkin uses them).
+// doubling, this many rounds of every row, instead of level by level); RECORDS; MAX_DEPTH,
+// MAX_CHAIN (the levels of the trees and of the chains: loop bounds); MIN_BEND_COS,
+// ELLIPSE_MARGIN, PARALLEL (plantgen.tolerances and the bend limit, as SwaySkin uses them).
 
 #if defined COMPUTE_SHADER
 
