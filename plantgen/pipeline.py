@@ -60,6 +60,7 @@ from .geometry.skin import skin_skeleton
 from .geometry.stage import MODEL_LIGHT, Ground
 from .geometry.swc import read_swc
 from .gl.context import renderer_name
+from .gl.pose import PoseStream
 from .gl.raycast import Raycaster
 from .gl.records import RecordStream
 from .gl.result import RenderResult
@@ -409,8 +410,9 @@ class RenderReport:
     effects: tuple = ()
     shadows: ShadowSettings | None = None
     frames: int = 1
-    update_ms: float = 0.0         # median per-frame CPU update (pose, skin, pack, upload)
+    update_ms: float = 0.0         # median per-frame CPU update (pose, skin, pack, upload; or the dispatch)
     skin_calls: int = 0
+    gpu_frames: int = 0            # frames posed and skinned on the GPU (the rest: on the CPU)
     timed: int = 0                 # draws the median was taken over (0: one untimed-median draw)
     colors: list = field(default_factory=list)
     distance: np.ndarray | None = None
@@ -477,12 +479,13 @@ def _check_render_memory(limits: Limits, what: str, width, height, frames, shado
                          "the size, the frames, the supersampling or the shadow resolution)")
 
 
-def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress):
+def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress, on_gpu: bool = True):
     """Render the animation at ``times`` after one warm-up frame (it pays for the driver's
-    shader compilation). Returns (colours, frame ms, update ms, last result)."""
-    stream = RecordStream(raycaster.ctx)
+    shader compilation), posed on the GPU (``on_gpu``: :class:`PoseStream`) or on the CPU.
+    Returns (colours, frame ms, update ms, last result, frames posed on the GPU)."""
+    stream = PoseStream(raycaster.ctx) if on_gpu else RecordStream(raycaster.ctx)
     camera = view["camera"]
-    colors, frame_times, update_times = [], [], []
+    colors, frame_times, update_times, gpu_frames = [], [], [], 0
     result = None
     try:
         for i, t in enumerate([times[0], *times]):
@@ -493,11 +496,12 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
             colors.append(result.color)
             frame_times.append(result.frame_ms)
             update_times.append(update.total_ms)
+            gpu_frames += update.on_gpu
             if progress is not None:
                 progress(i, len(times))
     finally:
         stream.release()
-    return colors, frame_times, update_times, result
+    return colors, frame_times, update_times, result, gpu_frames
 
 
 def _render_still(raycaster: Raycaster, frusta: Frusta, view: dict, timed_frames: int, exact_distance: bool):
@@ -579,15 +583,18 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:
             view["shadow_box"] = anim.bounds(times[:: max(len(times) // 8, 1)])   # one window
-        colors, frame_times, update_times, result = _render_frames(raycaster, anim, times, view, progress)
+        colors, frame_times, update_times, result, gpu_frames = _render_frames(raycaster, anim, times, view,
+                                                                               progress, motion.pose == "gpu")
         distance = result.distance
     else:
+        gpu_frames = 0
         result, frame_times, distance = _render_still(raycaster, frusta, view, timed_frames, exact_distance)
     return RenderReport(
         renderer=renderer_name(), segments=len(model.grown.skeleton), rows=len(frusta.base),
         frame_ms=float(np.median(frame_times)), camera=staging.camera, settings=march, request=request,
         result=result, effects=model.effects, shadows=shadows, frames=len(colors) or 1,
         update_ms=float(np.median(update_times)) if update_times else 0.0, skin_calls=anim.skin_calls,
+        gpu_frames=gpu_frames,
         timed=int(timed_frames) if frames is None else len(colors), colors=colors, distance=distance,
         warnings=model.grown.warnings)
 

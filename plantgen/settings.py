@@ -233,13 +233,18 @@ class ImageSettings:
 @dataclass(frozen=True)
 class MotionSettings:
     """Time: the pose of a still (``time``, seconds), or an animation of ``frames``
-    frames at ``fps`` starting there."""
+    frames at ``fps`` starting there; ``pose``: where the frames are posed (``"gpu"``:
+    :mod:`plantgen.gl.pose` and the vertex-skinned mesh; ``"cpu"``: numpy every frame)."""
 
     time: float | None = knob(None, "--time", "Seconds: the pose of an animated scene for a still (default 0), or the "
                               "first frame's time.", lo=0, metavar="T")
     frames: int | None = knob(None, "--frames", "Write an animation of this many frames (-o .gif or .webp).",
                               kind="int", lo=1, hi=100_000)
     fps: float = knob(12.0, "--fps", "Frames per second of the animation.", lo=0, lo_open=True)
+    pose: str = knob("gpu", "--pose", "Where an animation's moving segments are posed and skinned each frame: a "
+                     "compute shader writing the ray caster's records, or the vertex shader skinning a mesh built once "
+                     "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu).",
+                     kind="choice", choices=("gpu", "cpu"))
 
     def __post_init__(self):
         check_knobs(self)

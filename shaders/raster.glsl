@@ -15,11 +15,15 @@
 // slices carry other counts: every face's row from the CapRows buffer); SHADOWS (sample the light's shadow map,
 // shaders/shadow.glsl, with the facet's own plane as the receiver plane, as the ray caster
 // uses the cone's tangent plane); SHADOW_PASS (depth only, into the light's map: the
-// mesh's front faces as the light sees them, as the ray caster writes its nearest hit).
+// mesh's front faces as the light sees them, as the ray caster writes its nearest hit);
+// SKINNED (a swaying scene's mesh, built once at rest, posed here: each vertex turns about
+// its pivot segment's posed start by the mean turn of its two segments, read from the
+// pose buffer that shaders/pose.glsl writes; plantgen.geometry.skinned_mesh).
 
 #if defined VERTEX_SHADER
 
-in vec3 position;          // relative to the mesh origin (float64 subtraction on the CPU)
+in vec3 position;          // relative to the mesh origin (float64 subtraction on the CPU);
+                           // SKINNED and moving: relative to the pivot segment's rest start
 in vec3 normal;            // interpolated normal (8)
 in vec2 texcoord;          // (u, v + chain position)
 
@@ -30,9 +34,33 @@ out vec3 v_position;            // eye-relative
 out vec3 v_normal;
 out vec2 v_texcoord;
 
+#if defined SKINNED
+in ivec2 bind;                  // pivot segment (-1: still), the other segment of a shared vertex
+// per segment: (posed start - eye, total turn), (its tree's unit axis, 0)
+layout(std430, binding = 3) readonly buffer Poses { vec4 poses[]; };
+
+vec3 turned(vec3 v, vec3 k, float c, float s) {
+    return v * c + cross(k, v) * s + k * (dot(k, v) * (1.0 - c));
+}
+#endif
+
 void main() {
+#if defined SKINNED
+    if (bind.x >= 0) {
+        vec4 at = poses[2 * bind.x];
+        vec3 k = poses[2 * bind.x + 1].xyz;
+        float angle = 0.5 * (at.w + poses[2 * bind.y].w);
+        float c = cos(angle), s = sin(angle);
+        v_position = at.xyz + turned(position, k, c, s);
+        v_normal = turned(normal, k, c, s);
+    } else {
+        v_position = position + origin_from_eye;
+        v_normal = normal;
+    }
+#else
     v_position = position + origin_from_eye;
     v_normal = normal;
+#endif
     v_texcoord = texcoord;
     gl_Position = view_projection * vec4(v_position, 1.0);
 }

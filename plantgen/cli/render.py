@@ -106,8 +106,10 @@ def print_report(report: RenderReport) -> None:
         size += (f" with {n}x{n} supersampling ({n * n} samples a pixel: a {cam.width * n}x{cam.height * n} "
                  f"frame, averaged down in {report.result.stats.resolve_ms:.0f} ms more)")
     if report.frames > 1:
+        where = (f"on the GPU in {report.gpu_frames} of {report.frames} frames" if report.gpu_frames
+                 else "on the CPU")
         click.echo(f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
-                   f"{report.update_ms:.1f} ms update (pose, skin, upload) at {size}, {mode}")
+                   f"{report.update_ms:.2f} ms update (pose, skin, upload: {where}) at {size}, {mode}")
     elif report.timed:
         click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
                    f"(median of {report.timed} frames after a warm-up)")

@@ -42,11 +42,16 @@ from .skeleton import Skeleton
 from .skin import continuing_children, crossing_rows_sampled, material_shell, seam_radii
 from .vec import any_perpendicular, cross, reduce_to_root, tree_roots
 
-__all__ = ["SwaySkin", "SwayPose", "PathSum"]
+__all__ = ["SwaySkin", "SwayPose", "PathSum", "BEND_LIMIT_COS", "SHARP_SAMPLES"]
 
 _MAX_BEND_DEG = 120.0      # skin_skeleton's default
 _TWO_PI = 2.0 * np.pi
 _MIN_COS = np.cos(np.radians(_MAX_BEND_DEG))
+#: The cosine of the sharpest bend a joint keeps its plane at (past it: knuckle fans).
+BEND_LIMIT_COS = float(_MIN_COS)
+#: Samples of each tree's wave phase in the table of where a joint may turn sharp
+#: (:meth:`SwaySkin.sharp_cells`).
+SHARP_SAMPLES = 128
 
 
 class PathSum:
@@ -125,6 +130,8 @@ class SwaySkin:
         d = sk.end - sk.start
         k = rig.axis
         kd = k * (k[:, 0] * d[:, 0] + k[:, 1] * d[:, 1] + k[:, 2] * d[:, 2])[:, None]
+        self.parent = sk.parent
+        self.along = kd.T.copy()                # (3, n) the rest directions' parts along k
         perp = d - kd
         u1 = any_perpendicular(k)
         u2 = cross(k, u1)
@@ -153,20 +160,18 @@ class SwaySkin:
 
     def pose(self, t: float) -> SwayPose:
         """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.motion.pose`."""
-        x = self.omega * t + self.phase                       # per tree
+        return self.pose_at_phase(self.omega * t + self.phase, t)
+
+    def pose_at_phase(self, x: np.ndarray, t: float = 0.0) -> SwayPose:
+        """The skeleton with tree j at wave phase ``x[j]`` (radians: 2πf·t + φ at time t),
+        stamped with time ``t``."""
         total = np.sin(x).take(self.tree_of)
         total *= self.ca
         total -= np.cos(x).take(self.tree_of) * self.sa
         turn = np.empty(self.n, dtype=complex)           # e^(i·total)
         np.cos(total, out=turn.real)
         np.sin(total, out=turn.imag)
-        turn *= self.z
-        turned = self.tree(turn)
-        end = self.u[0] * turned.real
-        end += self.fixed
-        end += self.u[1] * turned.imag
-        for i, p in zip(self.zero, self.zero_from, strict=True):   # zero length: end = start
-            end[:, i] = end[:, p] if p >= 0 else self.root_start[:, self.tree_of[i]]
+        end = self._ends(turn)
         start = end.take(self.parent_or_self, axis=1)
         start[:, self.roots] = self.root_start
         axis = end - start
@@ -174,6 +179,91 @@ class SwaySkin:
         if self.zero.size:
             axis[:, self.zero] = np.array([[0.0], [1.0], [0.0]])
         return SwayPose(float(t), start, end, axis)
+
+    def _ends(self, turn: np.ndarray) -> np.ndarray:
+        """(3, n) end points with each segment's ⟂ part turned by ``turn`` (n,) complex."""
+        turned = self.tree(turn * self.z)
+        end = self.u[0] * turned.real
+        end += self.fixed
+        end += self.u[1] * turned.imag
+        for i, p in zip(self.zero, self.zero_from, strict=True):   # zero length: end = start
+            end[:, i] = end[:, p] if p >= 0 else self.root_start[:, self.tree_of[i]]
+        return end
+
+    def turn_amplitude(self) -> np.ndarray:
+        """(n,) the largest total turn (radians) each segment reaches: |T(t)| <= hypot(CA, SA)."""
+        return np.hypot(self.ca, self.sa)
+
+    def reach_box(self, pad: np.ndarray) -> np.ndarray:
+        """(2, 3) world box that holds every segment's frustum in every pose: each end
+        point moves at most sum over its root path of |z|·|e^(iT) - 1| (<= 2·sin(T_max / 2))
+        from where it rests, and ``pad`` (n,) bounds how far a row's surface reaches past
+        its end points (radius, relief shell, oblique cuts, a side branch's base)."""
+        rest = self._ends(np.ones(self.n, dtype=complex))
+        swing = 2.0 * np.sin(np.minimum(self.turn_amplitude(), np.pi) / 2.0)
+        move = self.tree(np.abs(self.z) * swing)
+        start = rest.take(self.parent_or_self, axis=1)
+        start[:, self.roots] = self.root_start
+        move_start = np.where(self.parent_or_self == np.arange(self.n), 0.0, move.take(self.parent_or_self))
+        reach = [np.asarray(pad) + move, np.asarray(pad) + move_start]
+        lo = np.minimum((rest - reach[0]).min(axis=1), (start - reach[1]).min(axis=1))
+        hi = np.maximum((rest + reach[0]).max(axis=1), (start + reach[1]).max(axis=1))
+        return np.stack([lo, hi])
+
+    def drift(self, dx: float) -> float:
+        """The farthest any point of a row's surface moves when its tree's wave phase
+        changes by ``dx`` radians: a segment's turn changes by at most hypot(CA, SA)·dx,
+        which moves its end by |z| times that, summed down its root path, and its surface
+        (radius and shell) about its axis."""
+        rate = self.turn_amplitude()
+        reach = np.maximum(np.abs(self.r_start), np.abs(self.r_end)) + self.constant["shell"]
+        return float(np.max(self.tree(np.abs(self.z) * rate) + reach * rate) * abs(dx)) if self.n else 0.0
+
+    # ------------------------------------------------------------------ sharp frames
+    def sharp_cells(self) -> np.ndarray:
+        """(trees, :data:`SHARP_SAMPLES`) bool, worked out once: True where tree j's wave
+        phase in [2πk/K, 2π(k+1)/K) may make one of its joints sharp (:meth:`skin` would
+        return None). A tree's shape is a function of its phase alone, so each test of
+        :meth:`skin` (the bend limit, the two ellipse cuts, the planes' room) is sampled
+        at K phases, all trees at once; a cell is safe when the test's slack at both of its
+        ends exceeds twice the most it changes from one sample to the next anywhere (a
+        smooth slack cannot dip from there to 0 inside the cell)."""
+        if self._sharp is None:
+            k = SHARP_SAMPLES
+            trees = len(self.roots)
+            with np.errstate(all="ignore"):
+                slack = np.stack([self._slack(self.pose_at_phase(np.full(trees, x)))
+                                  for x in np.arange(k) * (_TWO_PI / k)])
+                after = np.roll(slack, -1, axis=0)
+                finite = np.isfinite(slack) & np.isfinite(after)
+                step = np.where(finite, np.abs(after - slack), 0.0)
+                margin = 2.0 * step.max(axis=0)
+                risky = ~(np.minimum(slack, after) > margin)              # (K, tests)
+            cells = np.zeros((trees, k), dtype=bool)
+            np.logical_or.at(cells, self._test_tree, risky.T)
+            self._sharp = cells
+            self._sharp_trees = np.flatnonzero(cells.any(axis=1))
+        return self._sharp
+
+    def may_be_sharp(self, t: float) -> bool:
+        """Whether a joint may be sharp at time ``t`` (:meth:`sharp_cells`; False means
+        :meth:`skin` returns frusta, not None)."""
+        cells = self.sharp_cells()
+        trees = self._sharp_trees
+        if not trees.size:
+            return False
+        x = np.mod(self.omega[trees] * float(t) + self.phase[trees], _TWO_PI)
+        cell = np.minimum((x * (SHARP_SAMPLES / _TWO_PI)).astype(np.int64), SHARP_SAMPLES - 1)
+        return bool(cells[trees, cell].any())
+
+    def _slack(self, posed: SwayPose) -> np.ndarray:
+        """(tests,) the slack of each of :meth:`skin`'s tests in ``posed``, above 0 where
+        it passes: per joint the bend limit and the two ellipse cuts, per row next to a
+        joint its planes' room (call under ``np.errstate``: a sharp joint gives NaN)."""
+        seg = _FrameSegments.of(self, posed)
+        values: list = []
+        joints = _frame_joints(self, posed, seg, values)
+        return np.concatenate([*values, self._crossing_room(seg, joints)[self.at_joint]])
 
     def skeleton(self, posed: SwayPose, like: Skeleton) -> Skeleton:
         """``posed`` as a Skeleton with the radii, topology and materials of ``like``."""
@@ -230,6 +320,9 @@ class SwaySkin:
         self.open_hi[parent_row[parent_row >= 0]] = False
         for arr in (*self.constant.values(), parent_row, self.open_lo, self.open_hi):
             arr.setflags(write=False)
+        joint_tree = self.tree_of[child]
+        self._test_tree = np.concatenate([joint_tree, joint_tree, joint_tree, self.tree_of[self.at_joint]])
+        self._sharp = self._sharp_trees = None
 
     def skin(self, posed: SwayPose) -> Frusta | None:
         """The frusta of ``posed``, equal to ``skin_skeleton`` of it (to round-off), or None
@@ -252,11 +345,11 @@ class SwaySkin:
                     r1=seg.r1, r2=self.r_end, plane_lo=lo, plane_hi=hi, ref_dir=ref, u_offset=u_offset)
         return Frusta.from_rows(rows, self.material_names, self.parent_row, self.open_lo, self.open_hi)
 
-    def _planes_cross(self, seg, joints) -> bool:
-        """Whether a segment next to a joint has its two planes cross inside it
-        (skinning's crossing test: its cheap exclusion here, on the joint planes (free
-        planes are ⟂ their axes: centred at 0 and at the length, no spread), then its
-        sampled test on the rows the exclusion leaves)."""
+    def _crossing_room(self, seg, joints) -> np.ndarray:
+        """(n,) how far apart each row's two planes stay inside it, less the spread of
+        their sections (the cheap exclusion of skinning's crossing test, on the joint
+        planes; free planes are ⟂ their axes: centred at 0 and at the length, no spread):
+        above 0 where they cannot cross."""
         k = np.abs(seg.slope)
         rmax = np.maximum(np.abs(seg.r1), self.abs_r_end) + k * seg.length
         centre = [np.zeros(self.n), seg.length.copy()]
@@ -271,7 +364,13 @@ class SwaySkin:
             rises = den > tol.section_rise
             spread[side][rows] = (np.where(rises, rmax.take(rows) * nperp / np.where(rises, den, 1),
                                            np.inf) * (1 + kr))
-        maybe = ~(centre[1] - centre[0] > 1.01 * (spread[0] + spread[1]) + tol.zero_length * seg.length)
+        return (centre[1] - centre[0]) - (1.01 * (spread[0] + spread[1]) + tol.zero_length * seg.length)
+
+    def _planes_cross(self, seg, joints) -> bool:
+        """Whether a segment next to a joint has its two planes cross inside it
+        (skinning's crossing test: its cheap exclusion here (:meth:`_crossing_room`), then
+        its sampled test on the rows the exclusion leaves)."""
+        maybe = ~(self._crossing_room(seg, joints) > 0)
         maybe &= self.at_joint
         if not maybe.any():
             return False
@@ -375,13 +474,16 @@ class _FrameJoints:
     s: np.ndarray
 
 
-def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _FrameJoints | None:
+def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments, slack: list | None = None
+                  ) -> _FrameJoints | None:
     """The joint planes (skinning's ``_joint_planes`` in each joint's medial frame), or
-    None if a joint is past the bend limit or its plane is not an ellipse cut."""
+    None if a joint is past the bend limit or its plane is not an ellipse cut. With
+    ``slack`` (a list), the joints are built whatever their bends and the list receives
+    (j,) arrays, one per test, each above 0 where its joint passes it."""
     par, child = plan.par, plan.child
     m1, m2 = seg.axis.take(par, 1), seg.axis.take(child, 1)
     c = _dot3(m1, m2)
-    if np.any(c < _MIN_COS):
+    if slack is None and np.any(c < _MIN_COS):
         return None
     x = _cross3(m1, m2)
     s = np.sqrt(_dot3(x, x))
@@ -398,7 +500,9 @@ def _frame_joints(plan: SwaySkin, posed: SwayPose, seg: _FrameSegments) -> _Fram
     alpha, gamma, xi, eta = _medial_planes(plan, c, s, kp)
     n_child = alpha * c - gamma * s
     sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
-    if np.any((alpha <= sin_p + tol.ellipse_margin) | (n_child <= plan.sin_c + tol.ellipse_margin)):
+    if slack is not None:
+        slack += [c - _MIN_COS, alpha - (sin_p + tol.ellipse_margin), n_child - (plan.sin_c + tol.ellipse_margin)]
+    elif np.any((alpha <= sin_p + tol.ellipse_margin) | (n_child <= plan.sin_c + tol.ellipse_margin)):
         return None
     n1 = _cross3(m1, nm)
     plane = np.empty((4, len(c)))

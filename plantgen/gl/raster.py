@@ -2,7 +2,10 @@
 
 A :class:`~plantgen.geometry.mesh.TessellatedMesh` is uploaded once (float32 positions
 relative to the mesh's own origin, normals, texture coordinates, uint32 indices) and
-drawn with one indexed draw call, back faces culled (the mesh is closed). The camera,
+drawn with one indexed draw call, back faces culled (the mesh is closed). A swaying
+scene's mesh is a :class:`~plantgen.geometry.skinned_mesh.SkinnedMesh`, uploaded once at
+rest (moving vertices relative to their pivot segment's rest start, and their binding)
+and posed by the vertex shader from the pose buffer of :mod:`plantgen.gl.pose`. The camera,
 light, material palette, height maps, sky, ground and shadow map are the ray caster's
 (:mod:`plantgen.gl.frame`, ``shaders/shading.glsl``), so an RC image and a GS image
 of the same model differ only by geometry. The output is the same
@@ -17,6 +20,7 @@ import numpy as np
 
 from ..geometry.camera import Camera, box_corners
 from ..geometry.mesh import TessellatedMesh
+from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
 from ..settings import ShadowSettings
 from .context import gl_context
@@ -42,12 +46,33 @@ def row_data(frusta) -> np.ndarray:
     return out
 
 
-def gs_buffer_bytes(mesh: TessellatedMesh) -> int:
-    """GPU buffer bytes of a GS draw: vertices (32 B each), uint32 indices, 8 B per row,
-    4 B per cap (4 B per face where knuckles break the rows' uniform counts; height maps,
-    shared with RC, are not counted)."""
+def gs_buffer_bytes(mesh: TessellatedMesh | SkinnedMesh) -> int:
+    """GPU buffer bytes of a GS draw: vertices (32 B each; a skinned mesh's 8 B more for
+    their binding), uint32 indices, 8 B per row, 4 B per cap (4 B per face where knuckles
+    break the rows' uniform counts; height maps, shared with RC, and the pose buffer are
+    not counted)."""
+    skinned = isinstance(mesh, SkinnedMesh)
+    mesh = mesh.mesh if skinned else mesh
     looked_up = mesh.n_caps if mesh.uniform_rows else len(mesh.faces)
-    return mesh.buffer_bytes()["total"] + 8 * mesh.n_rows + 4 * looked_up
+    return (mesh.buffer_bytes()["total"] + 8 * mesh.n_rows + 4 * looked_up
+            + (8 * len(mesh.vertices) if skinned else 0))
+
+
+def _vertex_data(mesh: TessellatedMesh | SkinnedMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(origin (3,), (V, 8) float32 interleaved position, normal, uv, (V, 2) int32 binding
+    or None): positions relative to the origin, a skinned mesh's moving ones to their
+    pivot's rest start (both formed in float64)."""
+    tm = mesh.mesh if isinstance(mesh, SkinnedMesh) else mesh
+    origin = tm.vertices.mean(axis=0) if len(tm.vertices) else np.zeros(3)
+    interleaved = np.empty((len(tm.vertices), 8), dtype=np.float32)
+    interleaved[:, 0:3] = tm.vertices - origin
+    interleaved[:, 3:6] = tm.normals
+    interleaved[:, 6:8] = tm.uv
+    if not isinstance(mesh, SkinnedMesh):
+        return origin, interleaved, None
+    moving = mesh.pivot >= 0
+    interleaved[moving, 0:3] = mesh.offset[moving]
+    return origin, interleaved, np.ascontiguousarray(np.stack([mesh.pivot, mesh.other], axis=1), np.int32)
 
 
 class RasterRenderer(OffscreenRenderer):
@@ -70,21 +95,19 @@ class RasterRenderer(OffscreenRenderer):
         self.release_mesh()
         super().release()
 
-    def upload(self, mesh: TessellatedMesh, frusta, program):
+    def upload(self, mesh: TessellatedMesh | SkinnedMesh, frusta, program):
         """Upload ``mesh`` (once per mesh object); returns (vao, origin)."""
         key = (mesh, program)  # strong references: identity stays valid while cached
         if self._uploaded is not None and self._uploaded[0][0] is mesh and self._uploaded[0][1] is program:
             return self._uploaded[2], self._uploaded[3]
         self.release_mesh()
         ctx = self.ctx
-        origin = mesh.vertices.mean(axis=0) if len(mesh.vertices) else np.zeros(3)
         # One interleaved buffer, 32 bytes a vertex: position, normal, uv (float32).
-        interleaved = np.empty((len(mesh.vertices), 8), dtype=np.float32)
-        interleaved[:, 0:3] = mesh.vertices - origin
-        interleaved[:, 3:6] = mesh.normals
-        interleaved[:, 6:8] = mesh.uv
+        origin, interleaved, binding = _vertex_data(mesh)
         vbo = ctx.buffer(interleaved.tobytes())
         del interleaved
+        bind = ctx.buffer(binding.tobytes() if binding is not None and len(binding) else b"\0" * 8)
+        mesh = mesh.mesh if binding is not None else mesh
         ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, np.uint32).tobytes())
         rows = ctx.buffer(row_data(frusta).tobytes())
         if mesh.uniform_rows:     # row of a face by division; the caps' rows looked up
@@ -93,21 +116,28 @@ class RasterRenderer(OffscreenRenderer):
         else:                     # knuckle slices carry other counts: every face's row
             cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
-        vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")],
+        vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")]
+                               + ([(bind, "2i", "bind")] if binding is not None else []),
                                index_buffer=ibo, index_element_size=4)
-        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao), vao, origin)
+        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind), vao, origin)
         return vao, origin
 
-    def render(self, mesh: TessellatedMesh, frusta, camera: Camera, *, material_names=None,
+    def render(self, mesh: TessellatedMesh | SkinnedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None,
-               count_work: bool = False, background=None, ssaa: int = 1, leaves=None) -> RenderResult:
+               count_work: bool = False, background=None, ssaa: int = 1, leaves=None,
+               poses=None, bounds=None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
         ----------
         mesh : the tessellation (GS, or GS+R when made with ``relief=True``: displaced,
-            with normals tilted as RC+R tilts them)
+            with normals tilted as RC+R tilts them), or a swaying scene's
+            :class:`SkinnedMesh` (built at rest), posed by the vertex shader from ``poses``
+        poses : with a SkinnedMesh: the GPU pose buffer (per segment its posed start
+            relative to the camera's eye and its turn: :meth:`plantgen.gl.pose.GpuPose.pose_buffer`)
+        bounds : (2, 3) world box the mesh lies in (default: its vertices' box; a skinned
+            mesh's posed vertices are not on the CPU: the animation's box)
         frusta : the rows it was made from (materials, chains)
         camera : the view, as for the ray caster
         material_names : default ``mesh.material_names``
@@ -124,25 +154,30 @@ class RasterRenderer(OffscreenRenderer):
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
         """
+        skinned = isinstance(mesh, SkinnedMesh)
+        if skinned and poses is None:
+            raise ValueError("a skinned mesh is drawn with its pose buffer (poses=...)")
+        uploaded, mesh = mesh, (mesh.mesh if skinned else mesh)
         names = tuple(material_names or mesh.material_names)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         shadowed = shadows is not None
         program = build_program(self.ctx, "raster.glsl",
                                 {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
-                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows})
+                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned})
         t0 = time.perf_counter()
-        vao, origin = self.upload(mesh, frusta, program)
+        vao, origin = self.upload(uploaded, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
-        bounds = union_box(_mesh_bounds(mesh), leaf_bounds(leaves))
+        bounds = union_box(_mesh_bounds(mesh) if bounds is None else np.asarray(bounds, np.float64),
+                           leaf_bounds(leaves))
         view = frame_view(camera.scaled(ssaa), [box_corners(bounds)] + ([] if ground is None else [ground.quad()]))
         tex, repeats = self._heights.get(names)
         box = None if not shadowed else (bounds if shadow_box is None else np.asarray(shadow_box, np.float64))
         lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye)
-        draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh)
+        draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
         extras = self._surroundings(ground, leaves, view, lighting)
         shadow_draws = []
         if shadowed:
-            light_draw, light_vao = self._mesh_light_draw(origin, view, lighting, mesh)
+            light_draw, light_vao = self._mesh_light_draw(origin, view, lighting, mesh, poses)
             shadow_draws.append(light_draw)
             extras.garbage.append(light_vao)
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, shadow_draws, extras,
@@ -153,13 +188,14 @@ class RasterRenderer(OffscreenRenderer):
             near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window,
             upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces) + leaf_tris,
             vertices=len(mesh.vertices),
-            level=mesh.level, buffer_bytes=gs_buffer_bytes(mesh),
+            level=mesh.level, buffer_bytes=gs_buffer_bytes(uploaded),
             draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
-                   repeats, tex, mesh: TessellatedMesh):
-        """Set the mesh program and return the callable that draws the mesh."""
+                   repeats, tex, mesh: TessellatedMesh, poses=None):
+        """Set the mesh program and return the callable that draws the mesh (posed from
+        ``poses`` when skinned)."""
         set_uniforms(program, **lighting.shading, **lighting.receiver,
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()), n_rows=mesh.n_rows,
@@ -174,24 +210,31 @@ class RasterRenderer(OffscreenRenderer):
             ctx.front_face = "ccw"
             ctx.cull_face = "back"
             tex.use(0)
+            if poses is not None:
+                poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return draw
 
     def _mesh_light_draw(self, origin, view: FrameView, lighting: FrameLighting,
-                         mesh: TessellatedMesh):
+                         mesh: TessellatedMesh, poses=None):
         """The mesh's front faces into the light's depth map: (draw callable, vertex array)."""
         ctx = self.ctx
-        caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True})
+        skinned = poses is not None
+        caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True, "SKINNED": skinned})
         set_uniforms(caster, view_projection=mat4(lighting.window.matrix()),
                      origin_from_eye=tuple((origin - view.eye).tolist()))
         buffers = self._uploaded[1]
-        vao = ctx.vertex_array(caster, [(buffers[0], "3f 20x", "position")],
-                               index_buffer=buffers[1], index_element_size=4)
+        attributes = [(buffers[0], "3f 20x", "position")]
+        if skinned:
+            attributes.append((buffers[5], "2i", "bind"))
+        vao = ctx.vertex_array(caster, attributes, index_buffer=buffers[1], index_element_size=4)
 
         def draw():
             ctx.enable(ctx.CULL_FACE)
             ctx.front_face = "ccw"
             ctx.cull_face = "back"
+            if skinned:
+                poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return draw, vao
 

@@ -22,14 +22,22 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
-from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
+from ..geometry.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
 from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
 from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes, program_variants
-from .records import PYRAMID_CORNERS, PYRAMID_TRIANGLES, RECORD_ATTRIBUTES, RECORD_BYTES, RECORD_LAYOUT, pack_records
+from .records import (
+    PYRAMID_CORNERS,
+    PYRAMID_TRIANGLES,
+    RECORD_ATTRIBUTES,
+    RECORD_BYTES,
+    RECORD_LAYOUT,
+    pack_records,
+    rows_box,
+)
 from .result import RaycastStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
@@ -61,7 +69,8 @@ class Raycaster(OffscreenRenderer):
 
         Parameters
         ----------
-        frusta : Frusta, n rows (world units, float64)
+        frusta : Frusta, n rows (world units, float64), or the rows of a frame posed on the
+            GPU (:class:`plantgen.gl.records.StreamedRows`, with ``record_buffer``)
         camera : the view; rays go through pixel centres
         settings : relief on/off and its step knobs
         material_names : names of the material indices (choose colours and height maps)
@@ -86,20 +95,20 @@ class Raycaster(OffscreenRenderer):
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
         """
-        n = len(frusta.base)
+        n = len(frusta)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         t0 = time.perf_counter()
         records = pack_records(frusta, camera.eye) if record_buffer is None else None
         pack_ms = (time.perf_counter() - t0) * 1e3
         leaf_box = leaf_bounds(leaves)
-        model_box = union_box(frusta_bounds(frusta) if n else None, leaf_box)
+        model_box = union_box(rows_box(frusta) if n else None, leaf_box)
         view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
                           + ([] if model_box is None else [box_corners(model_box)]))
         programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
                                   leaf_box is not None)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
-                                            else model_box if model_box is not None else frusta_bounds(frusta))
+                                            else model_box if model_box is not None else rows_box(frusta))
         lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye)
         extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
         rec_buf = record_buffer if record_buffer is not None else (

@@ -8,15 +8,18 @@ shader (``shaders/raycast.glsl``).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
+from ..geometry.frusta import frusta_bounds
 
 __all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
-           "pack_records", "rc_buffer_bytes", "RecordStream", "RECORD_LAYOUT", "RECORD_ATTRIBUTES"]
+           "pack_records", "record_tags", "rc_buffer_bytes", "RecordStream", "StreamedRows", "rows_box",
+           "RECORD_LAYOUT", "RECORD_ATTRIBUTES"]
 
 #: float32 values in one segment's record: base, h, axis, r1, ref_dir, r2, plane_lo,
 #: plane_hi, (u_offset, twist, shell, material).
@@ -75,13 +78,19 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     out[:, 20] = frusta.u_offset
     out[:, 21] = frusta.twist
     out[:, 22] = frusta.shell
-    part = frusta.v_part               # checked by the Frusta constructor (7 bits each)
-    tag = material.astype(np.int64)
-    tag += 256 * frusta.open_lo
-    tag += 512 * frusta.open_hi
-    tag += 1024 * part[:, 0] + 131072 * (part[:, 1] - 1)
-    out[:, 23] = tag
+    out[:, 23] = record_tags(material, frusta.open_lo, frusta.open_hi, frusta.v_part)
     return out
+
+
+def record_tags(material, open_lo, open_hi, v_part) -> np.ndarray:
+    """(n,) int64 records' tags (:func:`pack_records`): material + 256·open_lo +
+    512·open_hi + 1024·slot + 131072·(slots - 1), ``v_part`` (n, 2) (slot, slots), checked
+    by the Frusta constructor (7 bits each)."""
+    tag = np.asarray(material).astype(np.int64)
+    tag += 256 * np.asarray(open_lo)
+    tag += 512 * np.asarray(open_hi)
+    tag += 1024 * v_part[:, 0] + 131072 * (v_part[:, 1] - 1)
+    return tag
 
 
 def rc_buffer_bytes(n_rows: int) -> int:
@@ -110,18 +119,29 @@ class RecordStream:
         Returns (pack_ms, upload_ms, bytes written to the GPU by this call).
         """
         origin = np.asarray(origin, dtype=np.float64)
-        n_static = len(static)
-        n_total = n_static + (len(moving) if moving is not None else 0)
-        first = self.buffer is None or self._origin is None or not np.array_equal(origin, self._origin)
         t0 = time.perf_counter()
         moving_records = None
         if moving is not None and len(moving):
             reuse = self._moving_records is not None and len(self._moving_records) == len(moving)
             moving_records = pack_records(moving, origin, self._moving_records if reuse else None)
             self._moving_records = moving_records
+        t1 = time.perf_counter()
+        static_ms, written = self.prepare(static, len(static) + (len(moving) if moving is not None else 0), origin)
+        if moving_records is not None:
+            self.buffer.write(moving_records, offset=len(static) * RECORD_BYTES)
+            written += moving_records.nbytes
+        t2 = time.perf_counter()
+        return (t1 - t0) * 1e3 + static_ms, (t2 - t1) * 1e3 - static_ms, written
+
+    def prepare(self, static, n_total: int, origin: np.ndarray) -> tuple[float, int]:
+        """Make :attr:`buffer` hold room for ``n_total`` records, the first ``len(static)``
+        being ``static``'s relative to ``origin`` (packed and written only when the origin
+        changed or the buffer had to grow). Returns (pack ms, bytes written)."""
+        first = self.buffer is None or self._origin is None or not np.array_equal(origin, self._origin)
+        t0 = time.perf_counter()
         if first:
             self._static_records = pack_records(static, origin)
-        t1 = time.perf_counter()
+        pack_ms = (time.perf_counter() - t0) * 1e3
         need = max(n_total, 1) * RECORD_BYTES
         if self.buffer is None or self.buffer.size < need:
             if self.buffer is not None:
@@ -129,17 +149,33 @@ class RecordStream:
             self.buffer = self.ctx.buffer(reserve=need, dynamic=True)
             first = True
         written = 0
-        if first and n_static:
+        if first and len(static):
             self.buffer.write(self._static_records.tobytes(), offset=0)
             written += self._static_records.nbytes
-        if moving_records is not None:
-            self.buffer.write(moving_records, offset=n_static * RECORD_BYTES)
-            written += moving_records.nbytes
         self._origin = origin
-        t2 = time.perf_counter()
-        return (t1 - t0) * 1e3, (t2 - t1) * 1e3, written
+        return pack_ms, written
 
     def release(self) -> None:
         if self.buffer is not None:
             self.buffer.release()
             self.buffer = None
+
+
+@dataclass(frozen=True, eq=False)
+class StreamedRows:
+    """The rows of a frame whose records only the GPU holds (posed there by a compute
+    pass, :class:`plantgen.gl.pose.PoseStream`): how many, their materials' names and a
+    world ``box`` (2, 3) that holds them (the renderers' depth range and light window).
+    :meth:`plantgen.gl.raycast.Raycaster.render` draws them from its ``record_buffer``."""
+
+    count: int
+    material_names: tuple
+    box: np.ndarray
+
+    def __len__(self) -> int:
+        return self.count
+
+
+def rows_box(rows) -> np.ndarray:
+    """(2, 3) world box of ``rows``: a Frusta's bounds, or a :class:`StreamedRows`' box."""
+    return rows.box if isinstance(rows, StreamedRows) else frusta_bounds(rows)

@@ -35,11 +35,11 @@ from .._resources import shaders_dir
 from ..geometry.materials import MAX_MATERIALS
 from ..tolerances import tol
 
-__all__ = ["ShaderError", "shader_source", "build_program", "program_stages", "GLSL_VERSION",
+__all__ = ["ShaderError", "shader_source", "build_program", "build_compute", "program_stages", "GLSL_VERSION",
            "shared_defines", "set_uniforms", "mat4"]
 
 GLSL_VERSION = "#version 430 core"
-STAGES = ("VERTEX_SHADER", "GEOMETRY_SHADER", "FRAGMENT_SHADER")
+STAGES = ("VERTEX_SHADER", "GEOMETRY_SHADER", "FRAGMENT_SHADER", "COMPUTE_SHADER")
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 _DEFINE_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _UNIFORM = re.compile(r"^\s*uniform\s+\w+\s+(\w+)", re.MULTILINE)
@@ -84,7 +84,8 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
     Parameters
     ----------
     name : file name in the shaders directory, e.g. ``"raycast.glsl"``
-    stage : one of ``"VERTEX_SHADER"``, ``"GEOMETRY_SHADER"``, ``"FRAGMENT_SHADER"``
+    stage : one of ``"VERTEX_SHADER"``, ``"GEOMETRY_SHADER"``, ``"FRAGMENT_SHADER"``,
+        ``"COMPUTE_SHADER"``
     defines : macro name -> value; ``True`` defines a flag, ``False``/``None`` leaves it out
     directory : where to look for files (default: the shipped ``shaders/``)
     """
@@ -162,6 +163,29 @@ def build_program(ctx, name: str, defines: Mapping[str, object] | None = None,
     return program
 
 
+def build_compute(ctx, name: str, defines: Mapping[str, object] | None = None,
+                  directory: Path | None = None):
+    """Compile the ``COMPUTE_SHADER`` stage of program file ``name`` with ``defines``
+    (cached per context and variant, as :func:`build_program`); returns a
+    ``moderngl.ComputeShader`` that :func:`set_uniforms` can set."""
+    key = (id(ctx), name, "compute", tuple(sorted((k, repr(v)) for k, v in (defines or {}).items())),
+           str(directory))
+    program = _cache.get(key)
+    if program is not None and program.ctx is ctx:
+        return program
+    if "COMPUTE_SHADER" not in program_stages(name, directory):
+        raise ShaderError(f"{name}: no '#if defined COMPUTE_SHADER' section")
+    source = shader_source(name, "COMPUTE_SHADER", defines, directory)
+    try:
+        program = ctx.compute_shader(source)
+    except Exception as exc:  # moderngl.Error
+        raise ShaderError(f"{name} {dict(defines or {})}: {exc}\n{source.splitlines()[1]}") from None
+    program.extra = {"name": name, "defines": dict(defines or {}),
+                     "uniforms": {m.group(1) for m in _UNIFORM.finditer(source)}}
+    _cache[key] = program
+    return program
+
+
 def set_uniforms(program, **values) -> None:
     """Set uniforms of a program made by :func:`build_program`.
 
@@ -175,12 +199,13 @@ def set_uniforms(program, **values) -> None:
     for name, value in values.items():
         if name not in info["uniforms"]:
             raise ShaderError(f"{info['name']} {info['defines']}: no uniform named {name!r}")
-        if name not in program:
+        member = program.get(name, None)
+        if member is None:
             continue
         if isinstance(value, np.ndarray):
-            program[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
+            member.write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
         else:
-            program[name].value = value
+            member.value = value
 
 
 def mat4(matrix: np.ndarray) -> tuple:

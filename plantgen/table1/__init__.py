@@ -29,7 +29,8 @@ For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
 6. times RC, RC+R, GS at its level and GS+R at its level **in one interleaved run**
    (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
    all four methods: the shadow map and the ground where the scene asks for them, the
-   animated scene posed, re-skinned and uploaded in every frame (GS also re-tessellated;
+   animated scene posed and skinned on the GPU in every frame (RC: a compute pass writes
+   the records; GS: a mesh built once at rest, posed by the vertex shader; the dispatch
    counted in the frame), leaves not relief mapped (their material has no shell);
 7. counts the GPU bytes of each method (memory table).
 

@@ -1,7 +1,12 @@
 """The GL side of the bench: one model's renderers, and the interleaved frame timing.
 
 Frame times are measured by the renderers (draw calls to ``glFinish``, excluding
-read-back), plus the per-frame CPU update of an animated scene.
+read-back), plus the per-frame CPU update of an animated scene. An animated scene is posed
+on the GPU by every method (:mod:`plantgen.gl.pose`): RC and RC+R get their records from
+the compute program (a frame where a joint may turn sharp is skinned on the CPU), GS and
+GS+R draw a mesh built once at rest and posed by the vertex shader from the same program's
+pose buffer (:mod:`plantgen.geometry.skinned_mesh`); the CPU time of that (the dispatch)
+is added to each frame.
 """
 
 from __future__ import annotations
@@ -12,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
+from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
-from ..gl.records import RecordStream
 from ..gl.result import RenderResult
 from ..settings import ShadowSettings
 from .configs import Config
@@ -74,9 +79,10 @@ class Renderers:
         self.model = model
         self.max_triangles = max_triangles
         self.raycaster = Raycaster()
-        self.records = RecordStream(self.raycaster.ctx)   # an animation's records
+        self.records = PoseStream(self.raycaster.ctx)     # an animation's records, posed on the GPU
         self.rasters: dict = {}
         self.meshes: dict = {}
+        self.skinned: dict = {}          # an animation's vertex-skinned meshes, per (level, relief)
         self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
 
     def mesh(self, level: int, relief: bool, frusta=None) -> TessellatedMesh | None:
@@ -92,6 +98,17 @@ class Renderers:
         if static:
             self.meshes[key] = mesh
         return mesh
+
+    def skinned_mesh(self, level: int, relief: bool):
+        """The animation's mesh at rest, bound for vertex skinning (cached), or None over the
+        triangle budget."""
+        key = (level, relief)
+        if key not in self.skinned:
+            rest = self.model.animation.rest_frusta()[0]
+            if triangle_count(len(rest), level, 0) > self.max_triangles:
+                return None
+            self.skinned[key] = self.model.animation.skinned(tessellate(rest, level, relief=relief, caps="tips"))
+        return self.skinned[key]
 
     def raster(self, key: str) -> RasterRenderer:
         """The raster renderer of configuration ``key`` (made on first use)."""
@@ -127,6 +144,8 @@ class Renderers:
     def _rasterise(self, cfg: Config, camera, frame: _Conditions, t: float):
         m = self.model
         extra_ms, leaves = 0.0, frame.leaves
+        if frame.animated and m.animation.plan is not None:
+            return self._rasterise_skinned(cfg, camera, frame, t)
         if frame.animated:
             t0 = time.perf_counter()
             frusta = m.animation.frusta_at(t)              # pose + re-skin, as RC does
@@ -145,6 +164,24 @@ class Renderers:
                                           leaves=leaves)
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
+
+    def _rasterise_skinned(self, cfg: Config, camera, frame: _Conditions, t: float):
+        """An animated frame of GS / GS+R: the mesh built once at rest, posed by the vertex
+        shader from the pose buffer the compute program fills at ``t`` (its CPU time and
+        the leaves' counted in the frame)."""
+        m = self.model
+        mesh = self.skinned_mesh(cfg.level, cfg.relief)
+        if mesh is None:
+            return None, float("nan")
+        poses, update = m.animation.pose_segments(self.records, t, camera.eye)
+        t0 = time.perf_counter()
+        leaves = m.animation.leaves_at(t) if frame.leaves is not None else None
+        extra_ms = update.pose_ms + (time.perf_counter() - t0) * 1e3
+        res = self.raster(cfg.key).render(mesh, m.animation.rest_frusta()[0], camera, material_names=m.names,
+                                          light_dir=m.light_dir, ground=frame.ground, shadows=frame.shadows,
+                                          shadow_box=self.shadow_box, leaves=leaves, poses=poses,
+                                          bounds=m.animation.motion_box())
+        return res, res.frame_ms + extra_ms
 
     def count_work(self, cfg: Config, camera):
         """The work of one counting render of ``cfg`` (no scene passes): fragments shaded
@@ -169,6 +206,7 @@ class Renderers:
     def keep_meshes(self, keys) -> None:
         """Drop the cached meshes other than ``keys`` ((level, relief) pairs)."""
         self.meshes = {k: v for k, v in self.meshes.items() if k in keys}
+        self.skinned = {k: v for k, v in self.skinned.items() if k in keys}
 
     def release(self) -> None:
         """Free every GL object: the raster renderers, the ray caster, the animation's."""

@@ -208,7 +208,9 @@ def _notes(model: BenchModel) -> list[str]:
         notes.append(f"shadow map ({ShadowSettings().resolution}², PCF) and ground for RC, RC+R, "
                      "GS and GS+R alike")
     if model.animation is not None:
-        notes.append("animated: pose + re-skin (+ re-tessellate for GS) counted in every frame")
+        notes.append("animated: posed and skinned on the GPU in every frame (RC: a compute pass writes the "
+                     "records; GS: the mesh built once at rest, posed by the vertex shader), the dispatch "
+                     "counted in the frame")
     return notes
 
 

@@ -25,6 +25,7 @@ from ..errors import PlantgenError
 from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
 from ..geometry.mesh import tessellate, triangle_count
+from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
 from ..images import write_png
@@ -140,6 +141,7 @@ class ViewerSession:
         self.dirty = True
         self._frusta_key = self._frusta = None
         self._mesh_key = self._mesh = None
+        self._stream = self._skinned = None    # a playing animation's GPU pose, its skinned mesh
         self._shadow_box = None
         self._saved_ns = None                  # a reload's save time, until its frame is shown
         self._reload_timings: dict = {}
@@ -205,12 +207,61 @@ class ViewerSession:
     def settings(self) -> RaycastSettings:
         return self.request().frame(self.effects())[0]
 
+    def posing_on_gpu(self) -> bool:
+        """Whether this frame is posed on the GPU: an animation playing, ``--pose gpu``, and
+        a plan the GPU can pose (a paused frame is skinned on the CPU, as ``plantgen
+        render --time`` draws it)."""
+        anim = self.model.anim
+        return (self.playing and anim.animated and anim.plan is not None
+                and self.options.settings.motion.pose == "gpu")
+
+    def _draw_posed(self, staging, request, settings, shadow):
+        """A playing frame posed on the GPU: RC and RC+R draw the records the compute
+        program writes; GS and GS+R the mesh built once at rest, posed by the vertex shader."""
+        anim = self.model.anim
+        if self._stream is None or self._stream[0] is not self.model:
+            self._release_stream()
+            self._stream = (self.model, PoseStream(self.ctx))
+        stream = self._stream[1]
+        rest = anim.rest_frusta()[0]
+        args = frame_arguments(rest, staging, shadow, request.image)
+        if shadow is not None:
+            args["shadow_box"] = self._playing_shadow_box()
+        args["leaves"] = anim.leaves_at(self.t)
+        if self.method.startswith("RC"):
+            rows, records, _ = anim.upload(stream, self.t, self.camera.eye)
+            return self.raycaster.render(rows, settings=settings, record_buffer=records, **args)
+        if self.raster is None:
+            self.raster = RasterRenderer(self.ctx)
+        poses, _ = anim.pose_segments(stream, self.t, self.camera.eye)
+        return self.raster.render(self.skinned_mesh(rest), rest, poses=poses, bounds=anim.motion_box(), **args)
+
+    def skinned_mesh(self, rest):
+        """The playing animation's GS / GS+R mesh at rest, bound for vertex skinning (cached)."""
+        relief = self.method == "GS+R"
+        key = (self.model, self.level, relief)
+        if self._skinned is None or self._skinned[0] != key:
+            self._skinned = None
+            self._skinned = (key, self.model.anim.skinned(tessellate(rest, self.level, relief=relief)))
+        return self._skinned[1]
+
+    def _release_stream(self) -> None:
+        if self._stream is not None:
+            self._stream[1].release()
+            self._stream = None
+
     def draw(self, width: int, height: int):
         """Render the current frame at ``width`` x ``height`` (the window's pixels);
         returns the :class:`~plantgen.gl.result.RenderResult`."""
         if (width, height) != (self.camera.width, self.camera.height):
             self.camera = replace(self.camera, width=int(width), height=int(height))
         t0 = time.perf_counter()
+        if self.posing_on_gpu():
+            request = self.request()
+            settings, shadow = request.frame(self.effects())
+            staging = stage_model(self.model.grown, self.model.anim.rest_frusta()[0], width, height,
+                                  camera=self.camera)
+            return self._drawn(self._draw_posed(staging, request, settings, shadow), t0)
         frusta = self.frusta()
         staging = stage_model(self.model.grown, frusta, width, height, camera=self.camera)
         request = self.request()
@@ -226,6 +277,10 @@ class ViewerSession:
             if self.raster is None:
                 self.raster = RasterRenderer(self.ctx)
             result = self.raster.render(self.mesh(frusta), frusta, **args)
+        return self._drawn(result, t0)
+
+    def _drawn(self, result, t0: float):
+        """Keep ``result`` as the last frame and its times for the heads-up line."""
         self.last = result
         self.frames.append(FrameStats(result.frame_ms, (time.perf_counter() - t0) * 1e3, time.monotonic()))
         self.dirty = False
@@ -483,7 +538,9 @@ class ViewerSession:
                       else f"RC+R fixed {s.linear_steps} + {s.binary_steps} steps")
         else:
             method = f"{self.method} m = {self.level}"
-            if self._mesh is not None and self._mesh_key is not None and self._mesh_key[1] == self.level:
+            if self.posing_on_gpu() and self._skinned is not None and self._skinned[0][1] == self.level:
+                method += f", {len(self._skinned[1].mesh.faces):,} triangles, skinned on the GPU"
+            elif self._mesh is not None and self._mesh_key is not None and self._mesh_key[1] == self.level:
                 method += f", {len(self._mesh.faces):,} triangles"
         frames = list(self.frames)
         timing = "-"
@@ -508,6 +565,7 @@ class ViewerSession:
 
     def release(self) -> None:
         """Free the renderers' GL objects."""
+        self._release_stream()
         self.raycaster.release()
         if self.raster is not None:
             self.raster.release()
