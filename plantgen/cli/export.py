@@ -41,11 +41,13 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
-@click.option("--instancing", type=click.Choice(INSTANCING), default="gpu", show_default=True,
-              help="A scene's repeated plants in glTF and USD: gpu writes each once with glTF's "
-                   "EXT_mesh_gpu_instancing / a USD PointInstancer; nodes writes each once with one "
-                   "node per copy (core glTF, for readers without the extension; USD instanceable "
-                   "references); off writes every copy's own mesh. OBJ, PLY and STL are always off.")
+@click.option("--instancing", type=click.Choice(INSTANCING), default="nodes", show_default=True,
+              help="A scene's repeated plants in glTF and USD: nodes writes each once with one "
+                   "node per copy sharing its mesh (core glTF, which every reader opens; USD "
+                   "instanceable references); gpu writes each once with glTF's "
+                   "EXT_mesh_gpu_instancing, which the file then requires (Blender 3.4 refuses it) "
+                   "/ a USD PointInstancer; off writes every copy's own mesh. OBJ, PLY and STL are "
+                   "always off.")
 @click.option("--unit", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
               callback=finite, metavar="METRES",
               help="The length of one model unit in metres: USD's metersPerUnit; QSM files are "
