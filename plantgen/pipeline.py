@@ -668,7 +668,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
     a scene's plants (once per distinct plant when instanced), written beside the frusta
     and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
-    sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``); for
+    sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
+    ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
+    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar); for
     a cylinder model, what :func:`plantgen.exporters.qsm.write_qsm` returns. Triangles and
     memory are estimated before anything is built and refused over the ``limits``.
     """
@@ -691,25 +693,34 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                "warnings": grown.warnings}
     timeline = _export_timeline(grown, fmt, keyframes, input_path, summary)
     if fmt.kind == "skeleton":
-        if grown.polygons is not None and len(grown.polygons):
-            summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} carries the skeleton only: "
-                                   f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
-        t1 = time.perf_counter()
-        summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
-                                      name=grown.name))
-        timings["write"] = time.perf_counter() - t1
-        return dict(summary, path=summary["paths"][-1])
+        return _export_skeleton(grown, fmt, output_path, up, unit, qsm_tolerance, summary)
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
                                  input_path, output_path, timings, progress, skin, timeline)
     t3 = time.perf_counter()
+    extras = scene_extras(grown, skin, input_path) if fmt.scene else None
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes",
-                         unit=unit, name=grown.name, progress=progress, animation=timeline,
-                         extras=scene_extras(grown, skin, input_path) if fmt.scene else None)
+                         unit=unit, name=grown.name, progress=progress, animation=timeline, extras=extras)
     timings["write"] = time.perf_counter() - t3
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
-                   smooth_segments=smoothed, animation=_animation_counts(plants, timeline))
+                   smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
+                   scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
+                                                         if getattr(extras, k) is not None))
     return summary
+
+
+def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,
+                     summary: dict) -> dict:
+    """:func:`export_model` of a skeleton format: ``summary`` with what the writer returns
+    (a warning when a grammar's leaves are left out)."""
+    if grown.polygons is not None and len(grown.polygons):
+        summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} carries the skeleton only: "
+                               f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
+    t1 = time.perf_counter()
+    summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=tolerance,
+                                  name=grown.name))
+    summary["timings"]["write"] = time.perf_counter() - t1
+    return dict(summary, path=summary["paths"][-1])
 
 
 def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None) -> SceneExtras | None:

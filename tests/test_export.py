@@ -399,5 +399,6 @@ def test_export_help_documents_formats_and_up_conventions():
     assert code == 0
     stdout = " ".join(stdout.split())
     for word in (".qsm.csv", ".usda", ".gltf", "--up", "z for PLY, STL and QSM", "--instancing",
-                 "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance"):
+                 "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance", "[default: nodes]",
+                 "Blender 3.4", "camera, light and ground"):
         assert word in stdout, word

@@ -55,7 +55,7 @@ def unit(v) -> np.ndarray:
 
 
 def test_a_grammar_exports_no_camera_light_or_ground(tmp_path):
-    export_model("saguaro", tmp_path / "s.glb", level=0)
+    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ()
     doc = glb_json(tmp_path / "s.glb")
     assert "cameras" not in doc and "extensions" not in doc and "extensionsUsed" not in doc
     assert [m["name"] for m in doc["meshes"]] == ["saguaro"]
@@ -134,3 +134,15 @@ def test_usd_holds_the_scene_camera_light_and_ground(yard, tmp_path, up, instanc
 def test_obj_of_a_scene_holds_the_plants_only(yard, tmp_path):
     info = export_model(yard, tmp_path / "yard.obj", level=0)
     assert "Ground" not in (tmp_path / "yard.obj").read_text() and info["path"].exists()
+
+
+def test_the_export_command_says_what_of_the_scene_it_wrote(yard, tmp_path):
+    from _cli import run_cli
+
+    code, stdout, stderr = run_cli("export", yard, "-o", tmp_path / "yard.glb", "--subdiv", "0")
+    assert code == 0, stderr
+    assert "scene: camera, light, ground written with the plants" in stdout
+    code, stdout, stderr = run_cli("export", yard, "-o", tmp_path / "yard.ply", "--subdiv", "0",
+                                   "--instancing", "off")
+    assert code == 0, stderr
+    assert "scene:" not in stdout

@@ -69,7 +69,10 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
 
     Meshes: vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
     caster; open chain ends are capped. glTF, OBJ and USD keep material names and
-    colours. A scene's repeated plants are written once and instanced in glTF and USD.
+    colours. A scene's repeated plants are written once and instanced in glTF and USD
+    (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
+    camera, light and ground too (the camera render would use, a directional light, the
+    ground square in its material); a grammar gets none.
     A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
     their material (a scene's too: an instanced plant carries its own grammar's): glTF
     gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves
@@ -86,7 +89,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
     Examples:
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
-      plantgen export oasis -o oasis.usda           # PointInstancer, y-up stage
+      plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
+      plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
@@ -125,6 +129,8 @@ def _mesh_summary(info: dict) -> None:
     if info["copies"] > 1:
         click.echo(f"{info['plants']:,} distinct plants written once for {info['copies']:,} copies: "
                    f"{info['drawn']:,} triangles drawn")
+    if info.get("scene"):
+        click.echo(f"scene: {', '.join(info['scene'])} written with the plants")
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "
