@@ -18,8 +18,9 @@ One plant, written in place::
 
 A scene, ``instancing="nodes"`` (the default): one instanceable Xform per copy with its
 transform, referencing its plant under the abstract ``/<scene>/Prototypes`` (every copy a
-prim of its own that every USD reader composes, Blender's importer among them, whose
-PointInstancer support came later). ``instancing="gpu"``: ``/<scene>/Plants`` is a
+prim of its own, made by plain composition, which every USD reader performs; a
+PointInstancer is a schema a reader must implement, so the default matches glTF's: what
+opens everywhere). ``instancing="gpu"``: ``/<scene>/Plants`` is a
 ``PointInstancer`` whose
 prototypes (``Plants/Prototypes/<plant>``, each as above) are the scene's distinct plants,
 written once; ``protoIndices``, ``positions``, ``orientations`` (quath, for every reader)
