@@ -41,6 +41,7 @@ from .exporters import (
     ExportError,
     Plant,
     PlantSway,
+    SceneExtras,
     Timeline,
     check_extra,
     estimate_export_bytes,
@@ -89,7 +90,7 @@ __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "re
            "frame_arguments", "request_settings",
            "RenderReport", "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
            "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size",
-           "check_sway_size"]
+           "scene_extras", "check_sway_size"]
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
@@ -633,12 +634,12 @@ def render_file(input_path, output, settings: RenderSettings | None = None, *, c
 
 # ---------------------------------------------------------------------- plantgen export
 #: How ``export_model`` writes a scene's repeated plants (see :func:`export_model`).
-INSTANCING = ("gpu", "nodes", "off")
+INSTANCING = ("nodes", "gpu", "off")
 
 
 def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
-                 up: str | None = None, instancing: str = "gpu", unit: float = 1.0,
+                 up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
@@ -651,9 +652,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     level, relief : the tessellation (GS, GS+R) of the mesh formats
     up : ``"y"`` or ``"z"``; default the format's convention
     instancing : how a scene's repeated plants are written where the format can
-        (glTF, USD): ``"gpu"`` once, with glTF's ``EXT_mesh_gpu_instancing`` or a USD
-        ``PointInstancer``; ``"nodes"`` once, with one node per copy (core glTF; USD
-        instanceable references); ``"off"`` every copy's own mesh, as OBJ, PLY and STL
+        (glTF, USD): ``"nodes"`` (the default) once, with one node per copy sharing the
+        plant's mesh (core glTF, which every reader opens; USD instanceable references);
+        ``"gpu"`` once, with glTF's ``EXT_mesh_gpu_instancing`` (required by the file) or
+        a USD ``PointInstancer``; ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
     progress : ``progress(stage, done, total)``, called as plants are tessellated and
@@ -673,7 +675,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
     a scene's plants (once per distinct plant when instanced), written beside the frusta
     and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
-    sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``); for
+    sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
+    ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
+    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar); for
     a cylinder model, what :func:`plantgen.exporters.qsm.write_qsm` returns. Triangles and
     memory are estimated before anything is built and refused over the ``limits``.
     """
@@ -686,8 +690,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
     if not output_path.parent.is_dir():
         raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
-    up = up or fmt.up
-    t0 = time.perf_counter()
+    up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if len(grown.skeleton) == 0:
         raise ExportError(f"{input_path}: the model has no segments")
@@ -697,24 +700,51 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                "warnings": grown.warnings}
     timeline = _export_timeline(grown, fmt, keyframes, input_path, summary)
     if fmt.kind == "skeleton":
-        if grown.polygons is not None and len(grown.polygons):
-            summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} carries the skeleton only: "
-                                   f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
-        t1 = time.perf_counter()
-        summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=qsm_tolerance,
-                                      name=grown.name))
-        timings["write"] = time.perf_counter() - t1
-        return dict(summary, path=summary["paths"][-1])
+        return _export_skeleton(grown, fmt, output_path, up, unit, qsm_tolerance, summary)
+    skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                 input_path, output_path, timings, progress,
-                                 skinning(_smoothing(grown, smooth_bends)), timeline)
+                                 input_path, output_path, timings, progress, skin, timeline)
     t3 = time.perf_counter()
-    paths = write_plants(plants, output_path, up=up, instancing="nodes" if instancing == "nodes" else "gpu",
-                         unit=unit, name=grown.name, progress=progress, animation=timeline)
+    extras = scene_extras(grown, skin, input_path) if fmt.scene else None
+    paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes",
+                         unit=unit, name=grown.name, progress=progress, animation=timeline, extras=extras)
     timings["write"] = time.perf_counter() - t3
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
-                   smooth_segments=smoothed, animation=_animation_counts(plants, timeline))
+                   smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
+                   scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
+                                                         if getattr(extras, k) is not None))
     return summary
+
+
+def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,
+                     summary: dict) -> dict:
+    """:func:`export_model` of a skeleton format: ``summary`` with what the writer returns
+    (a warning when a grammar's leaves are left out)."""
+    if grown.polygons is not None and len(grown.polygons):
+        summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} carries the skeleton only: "
+                               f"{len(grown.polygons)} leaf polygons not written (a mesh format keeps them)")
+    t1 = time.perf_counter()
+    summary.update(write_skeleton(grown.skeleton, output_path, up=up, unit=unit, tolerance=tolerance,
+                                  name=grown.name))
+    summary["timings"]["write"] = time.perf_counter() - t1
+    return dict(summary, path=summary["paths"][-1])
+
+
+def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None) -> SceneExtras | None:
+    """What a glTF or USD export writes around a scene's plants: the camera ``plantgen
+    render`` would use at its default size (the scene's camera, or for ``camera: auto``
+    the model framed as :func:`stage_model` frames it, its frusta skinned with ``skin``),
+    the scene's light and its ground; None for a grammar or a skeleton."""
+    scene = grown.scene
+    if scene is None:
+        return None
+    width, height = DEFAULT_SIZE
+    if scene.camera is not None:
+        camera = scene.camera.at_size(width, height)
+    else:
+        camera = stage_model(grown, check_finite_frusta(skin(grown.skeleton), source or grown.name), width,
+                             height).camera
+    return SceneExtras(camera, scene.light, scene.ground)
 
 
 def _export_timeline(grown: GrowResult, fmt, keyframes: KeyframeSettings | None, input_path,

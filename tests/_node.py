@@ -113,6 +113,44 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
 """
 
 
+# three.js's GLTFLoader in Node: a scene's cameras (fov, aspect, world position and
+# direction), lights (type, intensity, world direction: towards its target) and the
+# world positions of the mesh named "Ground".
+THREE_SCENE_JS = r"""
+import fs from 'fs';
+import path from 'path';
+import { pathToFileURL } from 'url';
+const modules = process.env.THREE_MODULES;
+const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
+const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
+  'three/examples/jsm/loaders/GLTFLoader.js')).href);
+const buf = fs.readFileSync(process.argv[2]);
+new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
+  gltf.scene.updateMatrixWorld(true);
+  const v = (x) => [x.x, x.y, x.z];
+  const cameras = gltf.cameras.map((c) => {
+    c.updateMatrixWorld(true);
+    return {fov: c.fov, aspect: c.aspect, position: v(c.getWorldPosition(new THREE.Vector3())),
+            direction: v(c.getWorldDirection(new THREE.Vector3())), up: v(c.up.clone().applyQuaternion(
+              c.getWorldQuaternion(new THREE.Quaternion())))};
+  });
+  const lights = [], ground = [];
+  gltf.scene.traverse((o) => {
+    if (o.isLight) {
+      const from = o.getWorldPosition(new THREE.Vector3()), to = o.target.getWorldPosition(new THREE.Vector3());
+      lights.push({type: o.type, intensity: o.intensity, direction: v(to.sub(from).normalize())});
+    }
+    if (o.isMesh && o.name.startsWith('Ground')) {
+      const p = o.geometry.attributes.position;
+      for (let i = 0; i < p.count; i++) ground.push(v(new THREE.Vector3().fromBufferAttribute(p, i)
+        .applyMatrix4(o.matrixWorld)));
+    }
+  });
+  console.log(JSON.stringify({cameras, lights, ground}));
+}, (err) => { console.error(String(err)); process.exit(3); });
+"""
+
+
 def node_modules(package: str) -> Path:
     """node_modules holding ``package``: $PLANTGEN_NODE_MODULES, .ci/node, or the user cache
     (installed there with npm if missing)."""
@@ -185,3 +223,14 @@ def three_js_sway(path: Path, times, tmp_path: Path) -> tuple[dict, list[list]]:
         positions.append(frame)
     assert at == len(data)
     return report, positions
+
+
+def three_js_scene(path: Path, tmp_path: Path) -> dict:
+    """A .glb's cameras, lights and ground as three.js's GLTFLoader makes them (see
+    :data:`THREE_SCENE_JS`)."""
+    script = tmp_path / "scene_with_three.mjs"
+    script.write_text(THREE_SCENE_JS)
+    env = dict(os.environ, THREE_MODULES=str(node_modules("three")))
+    done = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)

@@ -147,7 +147,7 @@ def test_a_new_format_is_one_row_and_its_writer(tmp_path, monkeypatch):
     arguments and the row's up axis."""
     calls = []
 
-    def write_points(plants, path, *, up, colours, instancing, unit, name, progress, animation):
+    def write_points(plants, path, *, up, colours, instancing, unit, name, progress, animation, extras):
         calls.append(("mesh", path.name, up, instancing, len(plants)))
         path.write_text("points")
         return [path]
@@ -165,7 +165,7 @@ def test_a_new_format_is_one_row_and_its_writer(tmp_path, monkeypatch):
     assert info == {"paths": [tmp_path / "plant.bones"], "bones": len(grown.skeleton)}
     summary = export_model("saguaro", tmp_path / "model.bones")
     assert summary["format"] == "bones" and summary["path"] == tmp_path / "model.bones"
-    assert calls == [("mesh", "plant.pts", "z", "gpu", 1), ("skeleton", "plant.bones", "z", 0.5, "cactus"),
+    assert calls == [("mesh", "plant.pts", "z", "nodes", 1), ("skeleton", "plant.bones", "z", 0.5, "cactus"),
                      ("skeleton", "model.bones", "z", 1.0, "saguaro")]
     with pytest.raises(ExportError, match="holds a mesh, not a skeleton"):
         write_skeleton(grown.skeleton, tmp_path / "plant.glb")
@@ -399,5 +399,6 @@ def test_export_help_documents_formats_and_up_conventions():
     assert code == 0
     stdout = " ".join(stdout.split())
     for word in (".qsm.csv", ".usda", ".gltf", "--up", "z for PLY, STL and QSM", "--instancing",
-                 "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance"):
+                 "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance", "[default: nodes]",
+                 "Blender 3.4", "camera, light and ground"):
         assert word in stdout, word

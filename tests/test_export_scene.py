@@ -93,11 +93,12 @@ def trs_matrices(t, q, s) -> np.ndarray:
 
 @pytest.mark.parametrize("up", ["y", "z"])
 def test_gltf_gpu_instancing_places_every_copy(orchard, tmp_path, up):
-    info = export_model(orchard, tmp_path / "orchard.glb", up=up)
+    info = export_model(orchard, tmp_path / "orchard.glb", up=up, instancing="gpu")
     doc, blob = glb_json(tmp_path / "orchard.glb")
-    assert doc["extensionsUsed"] == doc["extensionsRequired"] == ["EXT_mesh_gpu_instancing"]
+    assert doc["extensionsRequired"] == ["EXT_mesh_gpu_instancing"]
+    assert doc["extensionsUsed"] == ["EXT_mesh_gpu_instancing", "KHR_lights_punctual"]   # the scene's light
     want = placed_matrices(grow_file(orchard), up)
-    nodes = {node["name"]: node for node in doc["nodes"]}
+    nodes = {node["name"]: node for node in doc["nodes"] if "mesh" in node}      # not the camera, the light
     assert set(nodes) == set(COPIES)
     for name, copies in COPIES.items():
         node = nodes[name]
@@ -124,8 +125,9 @@ def test_gltf_nodes_share_one_mesh_per_plant_and_load_anywhere(orchard, tmp_path
     once; trimesh draws every copy, the same solid as the flattened export."""
     info = export_model(orchard, tmp_path / "nodes.glb", instancing="nodes")
     doc, _ = glb_json(tmp_path / "nodes.glb")
-    assert "extensionsUsed" not in doc and len(doc["meshes"]) == len(COPIES)
-    assert len(doc["nodes"]) == sum(COPIES.values())
+    assert "extensionsRequired" not in doc and doc["extensionsUsed"] == ["KHR_lights_punctual"]   # its light
+    assert len(doc["meshes"]) == len(COPIES)
+    assert sum("mesh" in node for node in doc["nodes"]) == sum(COPIES.values())
     nodes = trimesh.load(tmp_path / "nodes.glb").to_geometry()
     export_model(orchard, tmp_path / "flat.glb", instancing="off")
     flat = trimesh.load(tmp_path / "flat.glb").to_geometry()
@@ -149,19 +151,42 @@ def test_the_instanced_gltf_passes_the_khronos_validator(orchard, tmp_path, inst
     assert_khronos_valid(tmp_path / "orchard.gltf")
 
 
+def test_the_default_scene_gltf_requires_no_extension(orchard, tmp_path):
+    """Issue 24: the default glTF of a scene with repeated plants opens in every reader
+    (Blender 3.4 refuses a file that requires EXT_mesh_gpu_instancing): core glTF nodes,
+    one per copy, sharing their plant's mesh."""
+    export_model(orchard, tmp_path / "orchard.glb")
+    doc, _ = glb_json(tmp_path / "orchard.glb")
+    assert "extensionsRequired" not in doc
+    assert "EXT_mesh_gpu_instancing" not in doc.get("extensionsUsed", [])
+    assert len(doc["meshes"]) == len(COPIES)
+    assert sum("mesh" in n for n in doc["nodes"]) == sum(COPIES.values())
+
+
 @needs_node
-def test_three_js_loads_the_instanced_gltf_with_every_copy_in_place(orchard, tmp_path):
-    info = export_model(orchard, tmp_path / "orchard.glb")
+@pytest.mark.parametrize("instancing", ["nodes", "gpu"])
+def test_three_js_loads_the_instanced_gltf_with_every_copy_in_place(orchard, tmp_path, instancing):
+    """Default (nodes): a mesh per copy, the plant's geometry shared; gpu: an
+    InstancedMesh per repeated plant."""
+    info = export_model(orchard, tmp_path / "orchard.glb", instancing=instancing)
+    if instancing == "nodes":
+        assert_khronos_valid(tmp_path / "orchard.glb")
     meshes = three_js_meshes(tmp_path / "orchard.glb", tmp_path)
     want = placed_matrices(grow_file(orchard))
-    drawn = 0
+    drawn, got_by_plant = 0, {}
     for mesh in meshes:
         plant = next(name for name in COPIES if mesh["name"].startswith(name))
-        assert mesh["instanced"] == (COPIES[plant] > 1)
+        assert mesh["instanced"] == (instancing == "gpu" and COPIES[plant] > 1)
         got = np.array(mesh["matrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)       # column-major
-        assert got.shape[0] == COPIES[plant]
-        assert np.allclose(got, want[plant], atol=1e-5)
+        got_by_plant.setdefault(plant, {}).setdefault(mesh["material"], []).extend(got)
         drawn += mesh["triangles"] * len(got)
+    for plant, by_material in got_by_plant.items():
+        for got in by_material.values():
+            got = np.array(got)
+            assert got.shape[0] == COPIES[plant]
+            order = np.lexsort(got[:, :3, 3].T)
+            want_sorted = want[plant][np.lexsort(want[plant][:, :3, 3].T)]
+            assert np.allclose(got[order], want_sorted, atol=1e-5)
     assert drawn == info["drawn"]
     assert {m["material"] for m in meshes} == {"bark", "stone", "leaf", "cactus"}
 
@@ -206,11 +231,12 @@ def test_a_usd_plant_passes_the_compliance_checker_with_its_materials(tmp_path, 
     assert usd_problems(info["path"]) == []
     stage = Usd.Stage.Open(str(info["path"]))
     assert UsdGeom.GetStageUpAxis(stage) == "Y" and UsdGeom.GetStageMetersPerUnit(stage) == 1
-    meshes = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    prims = list(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies()))   # the copies' too
+    meshes = [UsdGeom.Mesh(p) for p in prims if p.IsA(UsdGeom.Mesh) and "Ground" not in str(p.GetPath())]
     triangles = sum(len(m.GetFaceVertexCountsAttr().Get()) for m in meshes)
     assert triangles == info["drawn"]
     bound = set()
-    for prim in stage.Traverse():
+    for prim in prims:
         if prim.IsA(UsdGeom.Subset):
             material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
             bound.add(material.GetPrim().GetDisplayName() or material.GetPath().name)
@@ -244,7 +270,7 @@ def test_usd_and_gltf_hold_the_same_solid(tmp_path):
 def test_a_usd_scene_is_a_point_instancer_over_one_prototype_per_plant(orchard, tmp_path, up):
     from pxr import Usd, UsdGeom
 
-    info = export_model(orchard, tmp_path / "orchard.usda", up=up, unit=0.01)
+    info = export_model(orchard, tmp_path / "orchard.usda", up=up, unit=0.01, instancing="gpu")
     assert usd_problems(info["path"]) == []
     stage = Usd.Stage.Open(str(info["path"]))
     assert UsdGeom.GetStageUpAxis(stage) == up.upper() and UsdGeom.GetStageMetersPerUnit(stage) == 0.01
@@ -292,7 +318,7 @@ def test_usd_skeleton_curves_carry_diameters(tmp_path):
 def test_usd_nodes_are_instanceable_references(orchard, tmp_path):
     from pxr import Usd, UsdGeom
 
-    info = export_model(orchard, tmp_path / "orchard.usda", instancing="nodes")
+    info = export_model(orchard, tmp_path / "orchard.usda")       # the default: nodes
     assert usd_problems(info["path"]) == []
     stage = Usd.Stage.Open(str(info["path"]))
     copies = [p for p in stage.GetDefaultPrim().GetChildren() if p.IsInstance()]

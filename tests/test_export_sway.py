@@ -132,7 +132,7 @@ def test_the_dancing_cacti_glb_holds_one_looping_sway(tmp_path):
     assert sway == {"keys": 49, "duration": 2.0, "rate": 24.0, "loops": True, "joints": info["segments"],
                     "skins": 100}
     doc, blob = glb_json(tmp_path / "d.glb")
-    assert len(doc["skins"]) == 100 and "extensionsUsed" not in doc
+    assert len(doc["skins"]) == 100 and "extensionsRequired" not in doc
     (animation,) = doc["animations"]
     assert animation["name"] == "sway" and len(animation["channels"]) == info["segments"]
     assert {c["target"]["path"] for c in animation["channels"]} == {"rotation"}

@@ -41,11 +41,13 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
-@click.option("--instancing", type=click.Choice(INSTANCING), default="gpu", show_default=True,
-              help="A scene's repeated plants in glTF and USD: gpu writes each once with glTF's "
-                   "EXT_mesh_gpu_instancing / a USD PointInstancer; nodes writes each once with one "
-                   "node per copy (core glTF, for readers without the extension; USD instanceable "
-                   "references); off writes every copy's own mesh. OBJ, PLY and STL are always off.")
+@click.option("--instancing", type=click.Choice(INSTANCING), default="nodes", show_default=True,
+              help="A scene's repeated plants in glTF and USD: nodes writes each once with one "
+                   "node per copy sharing its mesh (core glTF, which every reader opens; USD "
+                   "instanceable references); gpu writes each once with glTF's "
+                   "EXT_mesh_gpu_instancing, which the file then requires (Blender 3.4 refuses it) "
+                   "/ a USD PointInstancer; off writes every copy's own mesh. OBJ, PLY and STL are "
+                   "always off.")
 @click.option("--unit", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
               callback=finite, metavar="METRES",
               help="The length of one model unit in metres: USD's metersPerUnit; QSM files are "
@@ -67,7 +69,10 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
 
     Meshes: vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
     caster; open chain ends are capped. glTF, OBJ and USD keep material names and
-    colours. A scene's repeated plants are written once and instanced in glTF and USD.
+    colours. A scene's repeated plants are written once and instanced in glTF and USD
+    (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
+    camera, light and ground too (the camera render would use, a directional light, the
+    ground square in its material); a grammar gets none.
     A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
     their material (a scene's too: an instanced plant carries its own grammar's): glTF
     gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves
@@ -84,7 +89,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
     Examples:
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
-      plantgen export oasis -o oasis.usda           # PointInstancer, y-up stage
+      plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
+      plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
@@ -123,6 +129,8 @@ def _mesh_summary(info: dict) -> None:
     if info["copies"] > 1:
         click.echo(f"{info['plants']:,} distinct plants written once for {info['copies']:,} copies: "
                    f"{info['drawn']:,} triangles drawn")
+    if info.get("scene"):
+        click.echo(f"scene: {', '.join(info['scene'])} written with the plants")
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "

@@ -3,7 +3,8 @@ models (QSM), each in the form the tools that read it expect.
 
 - :mod:`~plantgen.exporters.formats`: the formats, their suffixes and up-axis conventions;
 - :mod:`~plantgen.exporters.plants`: what the writers take (:class:`Plant`: a mesh and a
-  skeleton with the placements of its copies);
+  skeleton with the placements of its copies; :class:`SceneExtras`: a scene's camera,
+  light and ground);
 - :mod:`~plantgen.exporters.meshes`: :func:`export_mesh` (one mesh) and :func:`write_plants`
   (a scene's plants, instanced where the format can);
 - :mod:`~plantgen.exporters.skeletons`: :func:`write_skeleton` (SWC, the cylinder models);
@@ -27,10 +28,10 @@ from .formats import (
            export_format,
 )
 from .meshes import export_mesh, write_plants
-from .plants import Plant
+from .plants import Plant, SceneExtras
 from .skeletons import write_skeleton
 from .sway import PlantSway, Timeline, sway_timeline
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "PlantSway", "Timeline", "check_extra",
+__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "PlantSway", "SceneExtras", "Timeline", "check_extra",
            "estimate_export_bytes", "export_file_type", "export_format", "export_mesh", "sway_timeline",
            "write_plants", "write_skeleton"]

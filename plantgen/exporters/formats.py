@@ -22,6 +22,11 @@ segment) with a rotation channel per joint, USD as UsdSkel skeletons with a
 SkelAnimation per copy (:mod:`plantgen.exporters.sway`); the others write the plants at
 rest.
 
+**Scenes.** A scene's camera, light and ground are written by the formats that hold
+them (glTF: a perspective camera, a ``KHR_lights_punctual`` directional light, a ground
+mesh; USD: ``Camera``, ``DistantLight``, a ground ``Mesh``; the rows with ``scene``); OBJ,
+PLY and STL hold the plants only. A grammar or a skeleton has no scene: none is added.
+
 **Up.** plantgen models are y-up. Each format's default is its convention: glTF says +y
 is up; OBJ has no rule, and y-up is what Blender's, Maya's and three.js's importers
 assume; PLY and STL have none either, and the tools that open them (Blender, slicers,
@@ -81,6 +86,7 @@ class Format:
     module: str | None = None    # the optional package the writer needs
     extra: str | None = None     # the plantgen extra that installs it
     animation: bool = False      # writes a scene's sway as an animation
+    scene: bool = False          # writes a scene's camera, light and ground
 
     def __post_init__(self) -> None:
         if self.kind not in FORMAT_KINDS:
@@ -104,17 +110,18 @@ class Format:
 #: over the tessellation and the write, coconut at m = 2, 1.08 M triangles: glb 170, gltf
 #: 173, obj 151, ply 186, stl 412, usda 175, usdc 117), rounded up generously.
 EXPORT_FORMATS = {f.suffix: f for f in (
-    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True),
-    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True),
+    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True, scene=True),
+    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True,
+           scene=True),
     Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant"),
     Format("ply", ".ply", "mesh", "z", False, 400, "plantgen.exporters.meshes:write_ply"),
     Format("stl", ".stl", "mesh", "z", False, 650, "plantgen.exporters.meshes:write_stl"),
     Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True),
+           animation=True, scene=True),
     Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True),
+           animation=True, scene=True),
     Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True),
+           animation=True, scene=True),
     Format("swc", ".swc", "skeleton", "y", False, 0, "plantgen.exporters.skeletons:write_swc_skeleton"),
     Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm"),
     Format("qsm.mat", ".qsm.mat", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm", "scipy", "qsm"),

@@ -5,13 +5,17 @@ TEXCOORD_0 and indices; a metallic-roughness material per plantgen material with
 name and base colour, linear RGB as glTF defines it). Nodes:
 
 - a model written in place (a grammar, a skeleton, a flattened scene): one node;
-- a scene's plant with copies, ``instancing="gpu"`` (the default): one node whose
+- a scene's plant with copies, ``instancing="nodes"`` (the default): one node per copy
+  (translation, rotation, scale), all sharing the plant's mesh: core glTF, which every
+  reader opens (Blender 3.4's importer refuses a file that requires an extension it
+  lacks);
+- ``instancing="gpu"`` (on request): one node whose
   ``EXT_mesh_gpu_instancing`` attributes hold the copies' TRANSLATION, ROTATION (unit
   quaternions) and SCALE; the extension is listed in ``extensionsUsed`` and
   ``extensionsRequired``, so a reader without it that follows the specification refuses
-  the file instead of showing one plant in place of many;
-- ``instancing="nodes"``: one node per copy (translation, rotation, scale), all sharing
-  the plant's mesh: core glTF, for readers without the extension;
+  the file instead of showing one plant in place of many (a core fallback would need the
+  copies' nodes as well, which is ``"nodes"`` again: asking for ``gpu`` is asking for the
+  extension);
 - a plant with a single copy: one such node either way;
 - a plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`):
   its primitives carry ``JOINTS_0`` (8-bit, 16-bit past 256 joints) and ``WEIGHTS_0``
@@ -28,6 +32,17 @@ material, with a material of their own named ``"<material> (leaf)"`` that is
 ``doubleSided`` (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
 bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`).
+
+A scene (``extras``, :class:`~plantgen.exporters.plants.SceneExtras`) adds, at the scene's
+root: its ground, a mesh ``"Ground"`` (two triangles facing up, the ground material's
+colour, a material named as the ground's); its camera, a node ``"Camera"`` with a
+perspective camera (``yfov`` the camera's fov_y, ``aspectRatio`` its width over height,
+``znear`` and ``zfar`` 1/1000 and 1000 times the eye-target distance) placed at the eye,
+looking at the target with the camera's up; its light, a node ``"Sun"`` with a
+``KHR_lights_punctual`` directional light (white, ``intensity`` the scene light's, in
+plantgen's units: 1 is the renderer's full light; glTF reads lux) shining along the scene
+light's direction. ``KHR_lights_punctual`` is listed in ``extensionsUsed`` only: a reader
+without it shows the scene without that light. All turn with the model (``up``).
 
 A plant's per-row ``labels`` ({"_BRANCH_ORDER": ...}: ``plantgen batch`` labels each
 mesh with its branch order) become application-specific vertex attributes of those
@@ -50,12 +65,27 @@ import numpy as np
 from ..files import write_all_atomically, write_atomically
 from ..geometry.frames import similarity_trs, turn_placements
 from .formats import ExportError
-from .plants import Colours, Plant, Progress, leaf_name, leaf_parts, material_colours, material_parts
+from .plants import (
+    Colours,
+    Part,
+    Plant,
+    Progress,
+    SceneExtras,
+    camera_pose,
+    ground_colour,
+    ground_mesh,
+    leaf_name,
+    leaf_parts,
+    light_rotation,
+    material_colours,
+    material_parts,
+)
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
 
-__all__ = ["INSTANCING_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
+__all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 
 INSTANCING_EXTENSION = "EXT_mesh_gpu_instancing"
+LIGHTS_EXTENSION = "KHR_lights_punctual"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
@@ -168,6 +198,18 @@ def _trs_nodes(name: str, mesh: int, matrices: np.ndarray) -> list[dict]:
             for k, trs in enumerate(_trs(matrices))]
 
 
+def _pose(rotation: np.ndarray, translation=None) -> dict:
+    """A node's rotation (a unit quaternion, x y z w) of ``rotation`` (3, 3), and its
+    translation where given."""
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation
+    _, q, _ = similarity_trs(matrix[None])
+    pose = {"rotation": [float(v) for v in q[0]]}
+    if translation is not None:
+        pose["translation"] = [float(v) for v in translation]
+    return pose
+
+
 def _gpu_node(buffer: _Buffer, name: str, mesh: int, matrices: np.ndarray) -> dict:
     t, q, s = similarity_trs(matrices)
     scale = np.repeat(s[:, None], 3, axis=1)
@@ -189,6 +231,8 @@ class _Document:
         self.skins, self.channels, self.samplers = [], [], []
         self.times: int | None = None
         self.used_extension = False
+        self.cameras: list[dict] = []
+        self.lights: list[dict] = []
 
     def node(self, node: dict, root: bool = True) -> int:
         self.nodes.append(node)
@@ -207,13 +251,41 @@ class _Document:
         primitives = []
         for part in parts:
             mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
-            if mat_name not in self.material_index:
-                self.material_index[mat_name] = len(self.materials)
-                self.materials.append(_material(mat_name, rgb[part.material], part.leaf))
-            primitives.append(_primitive(self.buffer, part, self.material_index[mat_name],
+            primitives.append(_primitive(self.buffer, part, self.material(mat_name, rgb[part.material], part.leaf),
                                          0 if rig is None else rig.joints))
         self.meshes.append({"name": plant.name, "primitives": primitives})
         return len(self.meshes) - 1
+
+    def material(self, name: str, rgb, leaf: bool = False) -> int:
+        """The index of the material ``name``, made on first use."""
+        if name not in self.material_index:
+            self.material_index[name] = len(self.materials)
+            self.materials.append(_material(name, rgb, leaf))
+        return self.material_index[name]
+
+    def extras(self, extras: SceneExtras) -> None:
+        """A scene's ground (a mesh of its material), camera (perspective) and light
+        (``KHR_lights_punctual``, directional), each a node at the scene's root."""
+        if extras.ground is not None:
+            vertices, normals, faces = ground_mesh(extras.ground, self.up)
+            part = Part(0, vertices, normals.astype(np.float32), np.array([[0, 1], [1, 1], [0, 0], [1, 0]], np.float32),
+                        faces)
+            material = self.material(extras.ground.material, ground_colour(extras.ground, self.colours))
+            self.meshes.append({"name": "Ground", "primitives": [_primitive(self.buffer, part, material)]})
+            self.node({"name": "Ground", "mesh": len(self.meshes) - 1})
+        if extras.camera is not None:
+            camera = extras.camera
+            eye, rotation = camera_pose(camera, self.up)
+            distance = float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+            self.cameras.append({"name": "Camera", "type": "perspective", "perspective": {
+                "yfov": float(np.radians(camera.fov_y)), "aspectRatio": camera.width / camera.height,
+                "znear": distance / 1000, "zfar": distance * 1000}})
+            self.node({"name": "Camera", "camera": len(self.cameras) - 1, **_pose(rotation, eye)})
+        if extras.light is not None:
+            self.lights.append({"name": "Sun", "type": "directional", "color": [1.0, 1.0, 1.0],
+                                "intensity": float(extras.light.intensity)})
+            self.node({"name": "Sun", **_pose(light_rotation(extras.light, self.up)),
+                       "extensions": {LIGHTS_EXTENSION: {"light": len(self.lights) - 1}}})
 
     def still(self, plant: Plant, mesh: int, instancing: str) -> None:
         """A plant that does not sway: one node, its copies instanced or one node each."""
@@ -279,18 +351,26 @@ class _Document:
             doc["skins"] = self.skins
         if self.channels:
             doc["animations"] = [{"name": "sway", "channels": self.channels, "samplers": self.samplers}]
+        if self.cameras:
+            doc["cameras"] = self.cameras
+        used = [INSTANCING_EXTENSION] if self.used_extension else []
+        if self.lights:       # used, not required: a reader without it shows the scene unlit
+            doc["extensions"] = {LIGHTS_EXTENSION: {"lights": self.lights}}
+            used.append(LIGHTS_EXTENSION)
+        if used:
+            doc["extensionsUsed"] = used
         if self.used_extension:
-            doc["extensionsUsed"] = [INSTANCING_EXTENSION]
             doc["extensionsRequired"] = [INSTANCING_EXTENSION]
         return doc
 
 
-def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "gpu",
+def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "nodes",
                   name: str = "plantgen", progress: Progress = None,
-                  animation: Timeline | None = None) -> tuple[dict, bytes]:
+                  animation: Timeline | None = None, extras: SceneExtras | None = None) -> tuple[dict, bytes]:
     """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``; with
     ``animation``, the plants that sway are skinned and their sway is the animation
-    ``"sway"`` (see the module docstring)."""
+    ``"sway"``; with ``extras``, the scene's ground, camera and light (see the module
+    docstring)."""
     if instancing not in ("gpu", "nodes"):
         raise ValueError(f"instancing must be 'gpu' or 'nodes', got {instancing!r}")
     doc = _Document(up, colours, animation)
@@ -304,6 +384,8 @@ def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None
             doc.swaying(plant, mesh, rig)
         if progress is not None:
             progress("write", done + 1, len(plants))
+    if extras is not None:
+        doc.extras(extras)
     return doc.json(name), doc.buffer.data()
 
 
@@ -318,8 +400,9 @@ def _glb(doc: dict, data: bytes) -> bytes:
 
 
 def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
-               instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
-               progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+               instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
+               progress: Progress = None, animation: Timeline | None = None,
+               extras: SceneExtras | None = None) -> list[Path]:
     """Write ``plants`` as ``.glb``, or as ``.gltf`` with its ``.bin`` beside it (see the
     module docstring); nothing is left half-written. Returns the written paths (a
     :class:`~plantgen.exporters.plants.MeshWriter`; ``unit`` is not written: glTF has no unit
@@ -329,7 +412,7 @@ def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours:
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     doc, data = gltf_document(plants, up=up, colours=colours, instancing=instancing,
                               name=name or path.name.split(".")[0] or "plantgen", progress=progress,
-                              animation=animation)
+                              animation=animation, extras=extras)
     if path.suffix.lower() == ".glb":
         blob = _glb(doc, data)
         return [write_atomically(path, lambda tmp: Path(tmp).write_bytes(blob), ExportError)]

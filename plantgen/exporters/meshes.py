@@ -24,7 +24,7 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, writable_format
-from .plants import Colours, MeshWriter, Plant, Progress, leaf_parts, single_plant, turned_mesh
+from .plants import Colours, MeshWriter, Plant, Progress, SceneExtras, leaf_parts, single_plant, turned_mesh
 from .sway import Timeline
 
 __all__ = ["export_mesh", "write_plants", "write_ply", "write_stl"]
@@ -56,7 +56,8 @@ def _write_trimesh(plants: list[Plant], path: str | Path, up: str, encode) -> li
 
 def write_ply(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
               instancing: str = "off", unit: float = 1.0, name: str | None = None,
-              progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+              progress: Progress = None, animation: Timeline | None = None,
+              extras: SceneExtras | None = None) -> list[Path]:
     """Binary PLY with vertex normals through trimesh: the one plant of ``plants`` in place,
     its leaves as plain triangles after the frusta (a
     :class:`~plantgen.exporters.plants.MeshWriter`; PLY keeps no materials, names or units)."""
@@ -66,7 +67,8 @@ def write_ply(plants: list[Plant], path: str | Path, *, up: str = "z", colours: 
 
 def write_stl(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
               instancing: str = "off", unit: float = 1.0, name: str | None = None,
-              progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+              progress: Progress = None, animation: Timeline | None = None,
+              extras: SceneExtras | None = None) -> list[Path]:
     """Binary STL (triangles only) through trimesh: the one plant of ``plants`` in place,
     its leaves as plain triangles after the frusta (a
     :class:`~plantgen.exporters.plants.MeshWriter`; STL keeps no materials, names or units)."""
@@ -74,22 +76,24 @@ def write_stl(plants: list[Plant], path: str | Path, *, up: str = "z", colours: 
 
 
 def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None, colours: Colours = None,
-                 instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
-                 progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+                 instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
+                 progress: Progress = None, animation: Timeline | None = None,
+                 extras: SceneExtras | None = None) -> list[Path]:
     """Write ``plants`` (see :class:`~plantgen.exporters.plants.Plant`) in the mesh format
     ``path`` names, with the writer its row names
     (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`); ``name`` names the scene (default:
     the file's stem). Formats without instancing take one plant written in place; formats
     with animation write the sway of the plants that have one at the key times
-    ``animation`` (the others ignore it). Returns the written paths (a ``.gltf`` or
-    ``.obj`` brings a second file)."""
+    ``animation`` (the others ignore it); ``extras``: a scene's camera, light and ground
+    (:class:`~plantgen.exporters.plants.SceneExtras`), written by glTF and USD. Returns
+    the written paths (a ``.gltf`` or ``.obj`` brings a second file)."""
     path = Path(path)
     fmt = writable_format(path, "mesh")
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     writer: MeshWriter = fmt.load_writer()
     return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,
-                  progress=progress, animation=animation if fmt.animation else None)
+                  progress=progress, animation=animation if fmt.animation else None, extras=extras)
 
 
 def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,

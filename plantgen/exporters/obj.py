@@ -33,6 +33,7 @@ from .plants import (
     Colours,
     Plant,
     Progress,
+    SceneExtras,
     leaf_name,
     leaf_parts,
     material_colours,
@@ -144,9 +145,11 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
 
 def write_obj_plant(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
                     instancing: str = "off", unit: float = 1.0, name: str | None = None,
-                    progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+                    progress: Progress = None, animation: Timeline | None = None,
+                    extras: SceneExtras | None = None) -> list[Path]:
     """:func:`write_obj` of the one plant of ``plants``, in place, with its leaves (a
     :class:`~plantgen.exporters.plants.MeshWriter`; OBJ has no instancing and no units, and
-    its name is the file's)."""
+    its name is the file's; a scene's camera, light and ground are not written: OBJ has no
+    camera or light, and a ground square would be taken for part of the model)."""
     plant = single_plant(plants, path)
     return write_obj(plant.mesh, path, up=up, colours=colours, progress=progress, leaves=plant.leaves)

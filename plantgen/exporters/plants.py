@@ -10,16 +10,19 @@ from typing import Protocol
 
 import numpy as np
 
+from ..geometry.camera import Camera
 from ..geometry.frames import up_rotation
 from ..geometry.materials import material_colour
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
+from ..geometry.stage import Ground, Light
 from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
 
-__all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SkeletonWriter", "leaf_name", "leaf_parts",
-           "leaf_uv", "material_colours", "material_parts", "single_plant", "turned_mesh"]
+__all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SceneExtras", "SkeletonWriter", "camera_pose",
+           "ground_colour", "ground_mesh", "leaf_name", "leaf_parts", "leaf_uv", "light_rotation", "material_colours",
+           "material_parts", "single_plant", "turned_mesh"]
 
 #: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
 #: renderers' palette).
@@ -57,6 +60,58 @@ class Plant:
         return 1 if self.matrices is None else len(self.matrices)
 
 
+@dataclass(frozen=True)
+class SceneExtras:
+    """What a scene adds around its plants, written by the formats that hold it (glTF:
+    a camera, ``KHR_lights_punctual``, a ground mesh; USD: ``Camera``, ``DistantLight``,
+    a ground ``Mesh``), in the model's frame (y up; a writer turns them with the model).
+
+    ``camera``: the view plantgen render would use (a scene's camera, or for ``camera:
+    auto`` the model framed as the renderer frames it; its width and height give the
+    aspect ratio); ``light``: the scene's directional light; ``ground``: its ground
+    square. Each may be None (not written)."""
+
+    camera: Camera | None = None
+    light: Light | None = None
+    ground: Ground | None = None
+
+
+def camera_pose(camera: Camera, up: str = "y") -> tuple[np.ndarray, np.ndarray]:
+    """The camera's eye (3,) and its rotation (3, 3) in the ``up`` frame, as glTF and USD
+    place a camera: its columns the camera's right, up and back (it looks down its -z)."""
+    rot = up_rotation(up)
+    right, upward, forward = (np.asarray(v, np.float64) for v in camera.basis())
+    return rot @ np.asarray(camera.eye, np.float64), rot @ np.stack([right, upward, -forward], axis=1)
+
+
+def light_rotation(light: Light, up: str = "y") -> np.ndarray:
+    """(3, 3) rotation whose -z column is the direction ``light`` travels, in the ``up``
+    frame (glTF's and USD's directional lights shine down their -z)."""
+    travel = up_rotation(up) @ np.asarray(light.travel, np.float64)
+    back = -travel / np.linalg.norm(travel)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(back[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    helper = up_rotation(up) @ helper
+    x = np.cross(helper, back)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(back, x), back], axis=1)
+
+
+def ground_mesh(ground: Ground, up: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ground square's vertices (4, 3), unit normals (4, 3) and two triangles (2, 3),
+    facing up, in the ``up`` frame."""
+    rot = up_rotation(up)
+    normals = np.tile(rot @ np.array([0.0, 1.0, 0.0]), (4, 1))
+    return ground.quad() @ rot.T, normals, np.array([[0, 1, 2], [2, 1, 3]])
+
+
+def ground_colour(ground: Ground, colours: Colours = None) -> tuple[float, float, float]:
+    """The linear RGB of the ground's material: ``colours``' entry of its name where
+    ``colours`` is a mapping, else plantgen's palette."""
+    if isinstance(colours, Mapping):
+        return material_colours([ground.material], colours)[0]
+    return material_colours([ground.material])[0]
+
+
 class MeshWriter(Protocol):
     """How every mesh format's writer is called (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`
     names it; :func:`~plantgen.exporters.meshes.write_plants` calls it, the arguments checked).
@@ -68,20 +123,23 @@ class MeshWriter(Protocol):
     path : the file; its suffix is the format's
     up : ``"y"`` or ``"z"``
     colours : the material colours (:data:`Colours`)
-    instancing : ``"gpu"`` or ``"nodes"``: how a scene's copies are written where the format can
+    instancing : ``"nodes"`` or ``"gpu"``: how a scene's copies are written where the format can
     unit : metres per model unit, where the format records it (USD)
     name : the model's name in the file (None: the file's stem)
     progress : reports the writer's steps (:data:`Progress`)
     animation : the key times of the plants' sway (:class:`~plantgen.exporters.sway.Timeline`),
         written by the formats that animate (glTF, USD) for the plants with a ``sway``;
         None: no animation
+    extras : a scene's camera, light and ground (:class:`SceneExtras`), written by the
+        formats that hold them (glTF, USD; OBJ, PLY and STL hold the plants only); None: none
 
     A writer ignores what its format has no place for. Returns the written paths, the
     main file last.
     """
 
     def __call__(self, plants: list[Plant], path: Path, *, up: str, colours: Colours, instancing: str,
-                 unit: float, name: str | None, progress: Progress, animation: Timeline | None) -> list[Path]: ...
+                 unit: float, name: str | None, progress: Progress, animation: Timeline | None,
+                 extras: SceneExtras | None) -> list[Path]: ...
 
 
 class SkeletonWriter(Protocol):

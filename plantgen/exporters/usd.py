@@ -16,12 +16,16 @@ One plant, written in place::
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
 
-A scene, ``instancing="gpu"`` (default): ``/<scene>/Plants`` is a ``PointInstancer`` whose
+A scene, ``instancing="nodes"`` (the default): one instanceable Xform per copy with its
+transform, referencing its plant under the abstract ``/<scene>/Prototypes`` (every copy a
+prim of its own, made by plain composition, which every USD reader performs; a
+PointInstancer is a schema a reader must implement, so the default matches glTF's: what
+opens everywhere). ``instancing="gpu"``: ``/<scene>/Plants`` is a
+``PointInstancer`` whose
 prototypes (``Plants/Prototypes/<plant>``, each as above) are the scene's distinct plants,
 written once; ``protoIndices``, ``positions``, ``orientations`` (quath, for every reader)
 and ``orientationsf`` (quatf, which takes precedence where it is read), ``scales`` place
-the copies. ``instancing="nodes"``: one instanceable Xform per copy with its transform,
-referencing its plant under the abstract ``/<scene>/Prototypes``.
+the copies (compact for thousands of copies, for renderers that instance natively).
 
 A plant that sways (written with an ``animation``, :mod:`~plantgen.exporters.sway`) is
 UsdSkel: its prim is a SkelRoot with a Skeleton ``Joints`` (a joint per segment, paths
@@ -33,6 +37,16 @@ each has its own animation) with its transform and its SkelAnimation ``Sway`` (r
 time-sampled at the codes 0 .. keys - 1), the ``skel:animationSource`` of its Joints; a
 plant written in place holds its ``Sway`` itself. The stage's start and end time codes
 and its time codes (and frames) per second span the keys.
+
+A scene (``extras``, :class:`~plantgen.exporters.plants.SceneExtras`) adds, under the
+default prim: ``Ground``, an Xform with its ``Materials`` and a ``Mesh`` (two triangles
+facing up, bound to the ground's material); ``Camera``, a perspective ``Camera`` at the
+eye looking at the target with the camera's up (``verticalAperture`` 24, as the 35 mm
+frame's height, ``horizontalAperture`` that times width over height, ``focalLength``
+giving the camera's fov_y, ``clippingRange`` 1/1000 to 1000 times the eye-target
+distance); ``Sun``, a ``DistantLight`` shining along the scene light's direction (its -z),
+``intensity`` the scene light's (plantgen's units: 1 is the renderer's full light). All
+turn with the model (``up``).
 
 Stage metadata: ``upAxis`` (Y, or Z with ``up="z"``: the model is turned, see
 :mod:`plantgen.geometry.frames`), ``metersPerUnit`` (``unit``: the length of a model unit
@@ -53,7 +67,20 @@ from ..geometry.skeleton import Skeleton
 from ..geometry.topology import branches
 from .formats import ExportError
 from .gltf import generator
-from .plants import Colours, Plant, Progress, leaf_parts, material_colours, turned_mesh, unique_name
+from .plants import (
+    Colours,
+    Plant,
+    Progress,
+    SceneExtras,
+    camera_pose,
+    ground_colour,
+    ground_mesh,
+    leaf_parts,
+    light_rotation,
+    material_colours,
+    turned_mesh,
+    unique_name,
+)
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
 
 __all__ = ["joint_names", "skeleton_curves", "write_usd"]
@@ -89,6 +116,21 @@ def _joined(parts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             np.concatenate([np.full(len(p.faces), p.material) for p in parts]))
 
 
+#: The vertical aperture of a written camera (tenths of a scene unit, as USD reads it; the
+#: 35 mm frame's 24 mm): the focal length follows from the field of view.
+CAMERA_APERTURE = 24.0
+
+
+def _row_major(rotation: np.ndarray, translation=None) -> np.ndarray:
+    """(4, 4) transform of ``rotation`` (3, 3, acting on column vectors) and
+    ``translation`` in USD's row-vector layout."""
+    out = np.eye(4)
+    out[:3, :3] = rotation.T
+    if translation is not None:
+        out[3, :3] = translation
+    return out
+
+
 def _translations(points: np.ndarray) -> np.ndarray:
     """(n, 4, 4) translations by ``points`` (n, 3) in USD's row-vector layout (the
     translation in the last row)."""
@@ -110,10 +152,11 @@ class _Writer:
     """Builds one stage (usd-core imported lazily: it takes about half a second)."""
 
     def __init__(self, up: str, unit: float, colours: Colours) -> None:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, Vt
 
         self.Gf, self.Sdf, self.Tf, self.Usd, self.UsdGeom, self.UsdShade, self.UsdSkel, self.Vt = (
             Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt)
+        self.UsdLux = UsdLux
         self.up, self.colours = up, colours
         self.stage = Usd.Stage.CreateInMemory()
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.z if up == "z" else UsdGeom.Tokens.y)
@@ -199,12 +242,42 @@ class _Writer:
         stage.SetTimeCodesPerSecond(timeline.rate)
         stage.SetFramesPerSecond(timeline.rate)
 
-    def _materials(self, scope, names) -> list:
+    def extras(self, root, extras: SceneExtras, taken: set) -> None:
+        """A scene's ground (a Mesh bound to its material), camera (a Camera) and light (a
+        DistantLight) under ``root`` (see the module docstring)."""
+        Gf = self.Gf
+        if extras.ground is not None:
+            path = root.AppendChild(self.name("Ground", taken))
+            self.UsdGeom.Xform.Define(self.stage, path)
+            [material] = self._materials(path.AppendChild("Materials"), [extras.ground.material],
+                                         [ground_colour(extras.ground, self.colours)])
+            vertices, normals, faces = ground_mesh(extras.ground, self.up)
+            self._mesh(path.AppendChild("Mesh"), (vertices, normals.astype(np.float32), faces, np.zeros(2, np.int64)),
+                       [material], np.array([[0, 1], [1, 1], [0, 0], [1, 0]]))
+        if extras.camera is not None:
+            camera = extras.camera
+            eye, rotation = camera_pose(camera, self.up)
+            prim = self.UsdGeom.Camera.Define(self.stage, root.AppendChild(self.name("Camera", taken)))
+            prim.AddTransformOp().Set(Gf.Matrix4d(_row_major(rotation, eye).tolist()))
+            vertical = CAMERA_APERTURE
+            prim.CreateProjectionAttr(self.UsdGeom.Tokens.perspective)
+            prim.CreateVerticalApertureAttr(vertical)
+            prim.CreateHorizontalApertureAttr(vertical * camera.width / camera.height)
+            prim.CreateFocalLengthAttr(vertical / (2 * np.tan(np.radians(camera.fov_y) / 2)))
+            distance = float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+            prim.CreateClippingRangeAttr(Gf.Vec2f(distance / 1000, distance * 1000))
+        if extras.light is not None:
+            light = self.UsdLux.DistantLight.Define(self.stage, root.AppendChild(self.name("Sun", taken)))
+            light.AddTransformOp().Set(Gf.Matrix4d(_row_major(light_rotation(extras.light, self.up)).tolist()))
+            light.CreateIntensityAttr(float(extras.light.intensity))
+
+    def _materials(self, scope, names, colours=None) -> list:
         UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
         self.UsdGeom.Scope.Define(self.stage, scope)
         taken: set = set()
         out = []
-        for name, rgb in zip(names, material_colours(names, self.colours), strict=True):
+        colours = material_colours(names, self.colours) if colours is None else colours
+        for name, rgb in zip(names, colours, strict=True):
             material = UsdShade.Material.Define(self.stage, scope.AppendChild(self.name(name, taken)))
             if material.GetPath().name != name:
                 material.GetPrim().SetDisplayName(name)
@@ -323,10 +396,12 @@ class _Writer:
 
 
 def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
-              instancing: str = "gpu", unit: float = 1.0, name: str | None = None,
-              progress: Progress = None, animation: Timeline | None = None) -> list[Path]:
+              instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
+              progress: Progress = None, animation: Timeline | None = None,
+              extras: SceneExtras | None = None) -> list[Path]:
     """Write ``plants`` as a USD stage at ``path`` (see the module docstring); with
-    ``animation``, the plants that sway as UsdSkel skeletons with their SkelAnimations."""
+    ``animation``, the plants that sway as UsdSkel skeletons with their SkelAnimations;
+    with ``extras``, the scene's ground, camera and light."""
     path = Path(path)
     if not unit > 0:
         raise ExportError(f"{path}: the unit must be a positive number of metres, got {unit!r}")
@@ -335,8 +410,9 @@ def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: 
     stem = name or path.name.split(".")[0]
     swaying = [animation is not None and p.sway is not None and p.sway.moves for p in plants]
     if len(plants) == 1 and plants[0].matrices is None:
-        _write_in_place(writer, writer.root(writer.name(plants[0].name or stem, taken)), plants[0],
-                        animation if swaying[0] else None)
+        root = writer.root(writer.name(plants[0].name or stem, taken))
+        _write_in_place(writer, root, plants[0], animation if swaying[0] else None)
+        taken = {"Materials", "Mesh", "Leaves", "Skeleton", "Joints", "Sway"}
     else:
         root = writer.root(writer.name(stem, taken))
         reserved = {"Plants", "Prototypes"}
@@ -349,6 +425,8 @@ def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: 
             writer.references(root, [plants[k] for k in still], [names[k] for k in still], taken)
         for k in np.flatnonzero(swaying):
             writer.swaying(root, plants[k], names[k], animation, taken)
+    if extras is not None:
+        writer.extras(root, extras, taken)
     if progress is not None:
         progress("write", 1, 1)
 

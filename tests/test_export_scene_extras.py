@@ -1,0 +1,148 @@
+"""Scenes export whole (issue 24): a scene's camera, light and ground go into glTF (a
+perspective camera, a KHR_lights_punctual directional light, a ground mesh: read back by
+three.js and the Khronos validator) and USD (Camera, DistantLight, a ground Mesh: read back
+by usd-core); a grammar gets none of them. They turn with the model (--up z)."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+from _node import assert_khronos_valid, needs_node, three_js_scene
+
+from plantgen.geometry.frames import up_rotation
+from plantgen.pipeline import export_model, grow_file, scene_extras, skin_model, stage_model
+from plantgen.settings import DEFAULT_SIZE
+
+YARD = """\
+name: yard
+seed: 3
+ground: {size: 30, height: -0.5, material: sand}
+camera: {eye: [4, 6, 20], target: [1, 2, 0], up: [0, 1, 0], fov_y: 35}
+light: {direction: [-0.4, -1, -0.3], intensity: 2.5}
+instances:
+  - grammar: abop_monopodial
+    grid: {count: [2, 2], spacing: [8, 8]}
+    scale: 0.02
+"""
+
+
+@pytest.fixture
+def yard(tmp_path):
+    path = tmp_path / "yard.yaml"
+    path.write_text(YARD)
+    return path
+
+
+@pytest.fixture
+def auto_yard(tmp_path):
+    path = tmp_path / "auto.yaml"
+    path.write_text(YARD.replace("camera: {eye: [4, 6, 20], target: [1, 2, 0], up: [0, 1, 0], fov_y: 35}",
+                                 "camera: auto"))
+    return path
+
+
+def glb_json(path) -> dict:
+    data = path.read_bytes()
+    return json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
+
+
+def unit(v) -> np.ndarray:
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v)
+
+
+def test_a_grammar_exports_no_camera_light_or_ground(tmp_path):
+    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ()
+    doc = glb_json(tmp_path / "s.glb")
+    assert "cameras" not in doc and "extensions" not in doc and "extensionsUsed" not in doc
+    assert [m["name"] for m in doc["meshes"]] == ["saguaro"]
+    assert scene_extras(grow_file("saguaro")) is None
+
+
+def test_auto_camera_is_the_one_render_frames(auto_yard):
+    """camera: auto: the export's camera is the view plantgen render frames at its default size."""
+    grown = grow_file(auto_yard)
+    extras = scene_extras(grown)
+    want = stage_model(grown, skin_model(grown), *DEFAULT_SIZE).camera
+    assert extras.camera == want
+    assert extras.light == grown.scene.light and extras.ground == grown.scene.ground
+
+
+@needs_node
+@pytest.mark.parametrize("up", ["y", "z"])
+@pytest.mark.parametrize("auto", [False, True])
+def test_three_js_reads_the_scene_camera_light_and_ground(yard, auto_yard, tmp_path, up, auto):
+    source = auto_yard if auto else yard
+    export_model(source, tmp_path / "yard.glb", level=0, up=up)
+    assert_khronos_valid(tmp_path / "yard.glb")
+    doc = glb_json(tmp_path / "yard.glb")
+    assert "extensionsRequired" not in doc and doc["extensionsUsed"] == ["KHR_lights_punctual"]
+    got = three_js_scene(tmp_path / "yard.glb", tmp_path)
+    grown = grow_file(source)
+    camera, rot = scene_extras(grown).camera, up_rotation(up)
+    [cam] = got["cameras"]
+    assert cam["fov"] == pytest.approx(camera.fov_y) and cam["aspect"] == pytest.approx(4 / 3)
+    assert np.allclose(cam["position"], rot @ np.array(camera.eye), atol=1e-5)
+    assert np.allclose(cam["direction"], rot @ unit(np.subtract(camera.target, camera.eye)), atol=1e-6)
+    assert np.dot(cam["up"], rot @ np.array(camera.up)) > 0.5
+    if not auto:
+        assert cam["fov"] == pytest.approx(35)
+    [light] = got["lights"]
+    assert light["type"] == "DirectionalLight" and light["intensity"] == pytest.approx(2.5)
+    assert np.allclose(light["direction"], rot @ unit([-0.4, -1, -0.3]), atol=1e-6)
+    ground = np.array(got["ground"])
+    assert len(ground) == 4
+    assert np.allclose(ground, grown.scene.ground.quad() @ rot.T, atol=1e-6)
+    sand = next(m for m in doc["materials"] if m["name"] == "sand")
+    assert sand["pbrMetallicRoughness"]["baseColorFactor"][:3] == pytest.approx([0.575, 0.47, 0.3])
+
+
+@pytest.mark.parametrize("up", ["y", "z"])
+@pytest.mark.parametrize("instancing", ["nodes", "gpu", "off"])
+def test_usd_holds_the_scene_camera_light_and_ground(yard, tmp_path, up, instancing):
+    from pxr import Gf, Usd, UsdGeom, UsdLux
+    from test_export_scene import usd_problems
+
+    info = export_model(yard, tmp_path / "yard.usda", level=0, up=up, instancing=instancing)
+    assert usd_problems(info["path"]) == []
+    stage = Usd.Stage.Open(str(info["path"]))
+    rot = up_rotation(up)
+    root = stage.GetDefaultPrim().GetPath()
+    camera = UsdGeom.Camera(stage.GetPrimAtPath(root.AppendChild("Camera")))
+    gf = camera.GetCamera(Usd.TimeCode.Default())
+    assert gf.projection == Gf.Camera.Perspective
+    assert gf.GetFieldOfView(Gf.Camera.FOVVertical) == pytest.approx(35, abs=1e-4)
+    assert gf.aspectRatio == pytest.approx(4 / 3)
+    frustum = gf.frustum
+    assert np.allclose(frustum.GetPosition(), rot @ np.array([4, 6, 20]), atol=1e-5)
+    assert np.allclose(frustum.ComputeViewDirection(), rot @ unit([-3, -4, -20]), atol=1e-6)
+    assert np.dot(frustum.ComputeUpVector(), rot @ np.array([0, 1, 0])) > 0.5
+    light = UsdLux.DistantLight(stage.GetPrimAtPath(root.AppendChild("Sun")))
+    assert light.GetIntensityAttr().Get() == pytest.approx(2.5)
+    matrix = UsdGeom.Xformable(light).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    shines = np.array(matrix.TransformDir(Gf.Vec3d(0, 0, -1)))
+    assert np.allclose(unit(shines), rot @ unit([-0.4, -1, -0.3]), atol=1e-6)
+    ground = UsdGeom.Mesh(stage.GetPrimAtPath(root.AppendChild("Ground").AppendChild("Mesh")))
+    assert np.allclose(np.array(ground.GetPointsAttr().Get()), grow_file(yard).scene.ground.quad() @ rot.T)
+    normals = np.array(ground.GetNormalsAttr().Get())
+    assert np.allclose(normals, rot @ np.array([0, 1, 0]))
+
+
+def test_obj_of_a_scene_holds_the_plants_only(yard, tmp_path):
+    info = export_model(yard, tmp_path / "yard.obj", level=0)
+    assert "Ground" not in (tmp_path / "yard.obj").read_text() and info["path"].exists()
+
+
+def test_the_export_command_says_what_of_the_scene_it_wrote(yard, tmp_path):
+    from _cli import run_cli
+
+    code, stdout, stderr = run_cli("export", yard, "-o", tmp_path / "yard.glb", "--subdiv", "0")
+    assert code == 0, stderr
+    assert "scene: camera, light, ground written with the plants" in stdout
+    code, stdout, stderr = run_cli("export", yard, "-o", tmp_path / "yard.ply", "--subdiv", "0",
+                                   "--instancing", "off")
+    assert code == 0, stderr
+    assert "scene:" not in stdout
