@@ -87,8 +87,8 @@ from .settings import (
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model",
-           "frame_arguments", "request_settings",
-           "RenderReport", "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
+           "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
+           "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
            "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size",
            "scene_extras", "check_sway_size"]
 
@@ -393,6 +393,26 @@ def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSetti
 
 
 # ---------------------------------------------------------------------- plantgen render
+@dataclass(frozen=True)
+class ShadowUse:
+    """The shadow map over a render's draws (warm-up included): ``drawn`` draws drew it,
+    ``reused`` sampled a map drawn before (nothing it depends on had changed), ``ms`` the
+    median milliseconds of the draws that drew it."""
+
+    drawn: int
+    reused: int
+    ms: float
+
+    @classmethod
+    def of(cls, stats) -> ShadowUse | None:
+        """The use over the draws' ``stats`` (RenderResult.stats); None without a shadow pass."""
+        shadowed = [s for s in stats if "shadow" in s.passes]
+        if not shadowed:
+            return None
+        drawn = [s.shadow_ms for s in shadowed if not s.shadow_cached]
+        return cls(len(drawn), len(shadowed) - len(drawn), float(np.median(drawn)) if drawn else 0.0)
+
+
 @dataclass
 class RenderReport:
     """What :func:`render_model` / :func:`render_file` did: for the CLI to print and tests
@@ -418,6 +438,7 @@ class RenderReport:
     colors: list = field(default_factory=list)
     distance: np.ndarray | None = None
     warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
+    shadow_use: ShadowUse | None = None    # how often the shadow map was drawn and reused
 
     @property
     def ssaa(self) -> int:
@@ -483,15 +504,16 @@ def _check_render_memory(limits: Limits, what: str, width, height, frames, shado
 def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress, on_gpu: bool = True):
     """Render the animation at ``times`` after one warm-up frame (it pays for the driver's
     shader compilation), posed on the GPU (``on_gpu``: :class:`PoseStream`) or on the CPU.
-    Returns (colours, frame ms, update ms, last result, frames posed on the GPU)."""
+    Returns (colours, frame ms, update ms, last result, frames posed on the GPU, ShadowUse)."""
     stream = PoseStream(raycaster.ctx) if on_gpu else RecordStream(raycaster.ctx)
     camera = view["camera"]
     colors, frame_times, update_times, gpu_frames = [], [], [], 0
-    result = None
+    result, stats = None, []          # the last frame, and every frame's stats (the shadow map's use)
     try:
         for i, t in enumerate([times[0], *times]):
             fr, buf, update = anim.upload(stream, t, camera.eye)
             result = raycaster.render(fr, record_buffer=buf, **{**view, "leaves": anim.leaves_at(t)})
+            stats.append(result.stats)
             if i == 0:
                 continue
             colors.append(result.color)
@@ -502,20 +524,22 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
                 progress(i, len(times))
     finally:
         stream.release()
-    return colors, frame_times, update_times, result, gpu_frames
+    return colors, frame_times, update_times, result, gpu_frames, ShadowUse.of(stats)
 
 
 def _render_still(raycaster: Raycaster, frusta: Frusta, view: dict, timed_frames: int, exact_distance: bool):
     """One draw, or a warm-up and ``timed_frames`` timed draws (the last is kept). With
     supersampling and ``exact_distance``, the distances come from one more draw at one
-    sample a pixel (rays through the pixel centres). Returns (result, frame ms, distances)."""
+    sample a pixel (rays through the pixel centres). The shadow map is drawn by the first
+    draw and reused by the others (the light, the geometry and the map stay). Returns
+    (result, frame ms, distances, ShadowUse)."""
     runs = [raycaster.render(frusta, **view) for _ in range(int(timed_frames) + 1 if timed_frames else 1)]
     result = runs[-1]
     frame_times = [r.frame_ms for r in (runs[1:] if timed_frames else runs)]
     distance = result.distance
     if exact_distance and view["ssaa"] > 1:
         distance = raycaster.render(frusta, **{**view, "ssaa": 1}).distance
-    return result, frame_times, distance
+    return result, frame_times, distance, ShadowUse.of([r.stats for r in runs])
 
 
 def request_settings(settings: RenderSettings | None, options: dict) -> RenderSettings:
@@ -584,12 +608,13 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:
             view["shadow_box"] = anim.bounds(times[:: max(len(times) // 8, 1)])   # one window
-        colors, frame_times, update_times, result, gpu_frames = _render_frames(raycaster, anim, times, view,
-                                                                               progress, motion.pose == "gpu")
+        colors, frame_times, update_times, result, gpu_frames, shadow_use = _render_frames(
+            raycaster, anim, times, view, progress, motion.pose == "gpu")
         distance = result.distance
     else:
         gpu_frames = 0
-        result, frame_times, distance = _render_still(raycaster, frusta, view, timed_frames, exact_distance)
+        result, frame_times, distance, shadow_use = _render_still(raycaster, frusta, view, timed_frames,
+                                                                  exact_distance)
     return RenderReport(
         renderer=renderer_name(), segments=len(model.grown.skeleton), rows=len(frusta.base),
         frame_ms=float(np.median(frame_times)), camera=staging.camera, settings=march, request=request,
@@ -597,7 +622,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         update_ms=float(np.median(update_times)) if update_times else 0.0, skin_calls=anim.skin_calls,
         gpu_frames=gpu_frames,
         timed=int(timed_frames) if frames is None else len(colors), colors=colors, distance=distance,
-        warnings=model.grown.warnings)
+        warnings=model.grown.warnings, shadow_use=shadow_use)
 
 
 def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:

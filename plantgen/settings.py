@@ -181,32 +181,47 @@ class ShadowSettings:
     resolution : texels per side of the square map
     caster : ``"relief"`` (the relief surface casts the shadow when relief is on) or
         ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow pass)
+    march : how the relief caster's light rays find the relief surface: ``"secant"`` (the
+        light's own march, ``shaders/light_march.glsl``: only the band the relief occupies,
+        (u, v) interpolated along the ray from three angles instead of one per sample,
+        then regula falsi between the last sample above the relief and the first below)
+        or ``"bisect"`` (the eye's march at the map's footprint: an angle per sample, then
+        bisection)
+    march_density, march_precision : the relief caster's adaptive march in the light's
+        pass (see :class:`RaycastSettings`), measured in the map's texels instead of the
+        eye's pixels: samples per relief texel the light's ray crosses (a relief texel
+        counting at least one map texel), and the refinement's bracket in map texels (the
+        receivers' bias is half a texel, so a finer depth is not seen); the eye's
+        ``linear_steps``, ``march_min_steps`` and ``binary_steps`` bound the march
+    cache : keep the map and draw it again only when what it depends on changes (the
+        light, the casters' geometry and box, the map's size and caster, the relief's
+        knobs: :class:`plantgen.gl.frame.ShadowKey`); False draws it every frame (to time it)
     bias : constant depth bias in texels (world size of one texel), subtracted from the
         receiver's light depth after the receiver-plane extrapolation
     max_slope : clamp of the receiver plane's depth gradient (|tan| of the light's angle
         to the normal); only surfaces lit at more than atan(max_slope) from their normal
         may self-shadow, where the diffuse term is below 1/max_slope anyway
-    march_density, march_precision : the relief caster's adaptive march in the light's
-        pass (see :class:`RaycastSettings`), measured in the map's texels instead of the
-        eye's pixels: samples per relief texel the light's ray crosses, and the
-        bisection's bracket in map texels (the receivers' bias is half a texel, so a finer
-        depth is not seen)
     """
 
     resolution: int = knob(2048, "--shadow-res", "Shadow map texels per side.", kind="int", lo=16, hi=16384)
     caster: str = knob("relief", "--shadow-caster", "With relief: the relief surface casts the shadow, or the inner "
                        "cone (cheaper).", kind="choice", choices=("relief", "inner"))
+    march: str = knob("secant", "--shadow-march", "Relief caster: the light's march ((u, v) interpolated along each "
+                      "ray, regula falsi) or the eye's (an angle per sample, bisection).", kind="choice",
+                      choices=("secant", "bisect"))
+    march_density: float = knob(0.5, "--shadow-march-density", "Relief caster: samples per relief texel the light's "
+                                "ray crosses (a texel counts at least one map texel).", lo=0, lo_open=True)
+    march_precision: float = knob(0.5, "--shadow-march-precision", "Relief caster: refine each light ray's hit to this "
+                                  "many map texels (the receivers' bias is half a texel).", lo=0, lo_open=True)
+    cache: bool = knob(True, "--shadow-cache", "Draw the shadow map once and reuse it while the light, the geometry "
+                       "and the map's knobs stay (a camera move does not redraw it).", kind="bool")
     bias: float = 0.5
     max_slope: float = 50.0
-    march_density: float = 0.5
-    march_precision: float = 0.5
 
     def __post_init__(self):
         check_knobs(self)
         if self.bias < 0 or self.max_slope <= 0:
             raise PlantgenError("shadow bias must be >= 0 and max slope > 0")
-        if not (self.march_density > 0 and self.march_precision > 0):
-            raise PlantgenError("shadow march density and precision must be > 0")
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,9 @@
 // the light's shadow map, shaders/shadow.glsl), SHADOW_PASS (cast orthographic rays along
 // the light instead of the eye's rays and write only the hit's depth in the light's
 // window: the shadow map pass of plantgen.render.passes; with RELIEF the relief surface
-// is what casts the shadow), LABELS (write the row's material slot as a label, unshaded:
-// part masks, plantgen.render.raycast.label_image).
+// is what casts the shadow, found by light_march.glsl, or with LIGHT_BISECT by the eye's
+// march), LABELS (write the row's material slot as a label, unshaded: part masks,
+// plantgen.render.raycast.label_image).
 
 #include "cone.glsl"
 
@@ -303,6 +304,9 @@ bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_o
     t_hit = t_inside;
     return true;
 }
+#if defined SHADOW_PASS && !defined LIGHT_BISECT
+#include "light_march.glsl"
+#endif
 #endif
 
 void main() {
@@ -329,14 +333,19 @@ void main() {
     bool cap = false;
 #if defined RELIEF
     if (f.shell > 0.0) {
+        int samples;
+#if defined SHADOW_PASS && !defined LIGHT_BISECT
+        if (!frustum_interval(f, relief_band(f).y, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) discard;
+        bool hit = march_light(f, o, d, t_enter, t_exit, face == FACE_CONE, t_hit, samples);
+#else
         if (!frustum_interval(f, f.shell, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) discard;
         float t_end = t_exit;
         float ti_enter, ti_exit; int inner_face;
         bool inner = frustum_interval(f, 0.0, o, d, t_min, RAY_T_MAX, ti_enter, ti_exit, inner_face);
         bool end_on_inner = inner && inner_face != FACE_NONE && ti_enter <= t_end;
         if (end_on_inner) t_end = ti_enter;
-        int samples;
         bool hit = march_relief(f, o, d, t_enter, t_end, end_on_inner, t_shift + t_enter, t_hit, samples);
+#endif
         count_samples(samples);
         if (!hit) discard;
         cap = t_hit == t_enter && face_is_open_cap(f, face);

@@ -223,7 +223,7 @@ def usd_leaves(stage) -> dict:
 def test_usd_point_instancer_prototypes_carry_their_leaves(grove, twig, tmp_path):
     from pxr import Usd, UsdGeom
 
-    info = export_model(grove, tmp_path / "grove.usda")
+    info = export_model(grove, tmp_path / "grove.usda", instancing="gpu")
     assert not usd_problems(info["path"])
     stage = Usd.Stage.Open(str(info["path"]))
     [prim] = [p for p in stage.Traverse() if p.IsA(UsdGeom.PointInstancer)]
@@ -235,6 +235,28 @@ def test_usd_point_instancer_prototypes_carry_their_leaves(grove, twig, tmp_path
     assert faces == len(twig.polygons.triangles)
     # in the prototype's own frame: the grammar's leaves as grown alone
     assert np.allclose(points, twig.polygons.vertices, atol=1e-5)
+
+
+def test_usd_instanceable_references_place_each_copys_leaves(grove, twig, tmp_path):
+    """The default USD scene (instanceable references): each copy's leaves, read through
+    its instance proxy and its world transform, lie where the scene file puts them."""
+    from pxr import Usd, UsdGeom
+
+    info = export_model(grove, tmp_path / "grove.usda")
+    assert not usd_problems(info["path"])
+    stage = Usd.Stage.Open(str(info["path"]))
+    assert not [p for p in stage.Traverse() if p.IsA(UsdGeom.PointInstancer)]
+    cache = UsdGeom.XformCache()
+    placed_copies = []
+    for prim in stage.Traverse(predicate=Usd.TraverseInstanceProxies()):
+        if prim.GetName() == "Leaves" and prim.IsA(UsdGeom.Mesh):
+            points = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), dtype=np.float64)
+            world = np.array(cache.GetLocalToWorldTransform(prim), dtype=np.float64)   # row vectors
+            placed_copies.append(points @ world[:3, :3] + world[3, :3])
+    assert len(placed_copies) == len(PLACED)
+    for position, rotation, scale in PLACED:
+        want = placed(twig.polygons.vertices, position, rotation, scale)
+        assert any(got.shape == want.shape and np.allclose(got, want, atol=1e-4) for got in placed_copies)
 
 
 def test_usd_without_instancing_holds_the_merged_leaves_in_place(grove, tmp_path):

@@ -137,13 +137,15 @@ def light_rays(window, resolution: int, eye) -> tuple[np.ndarray, np.ndarray]:
     return origins, window.forward
 
 
-@pytest.mark.parametrize("relief,march", [(False, "default"), (True, "fine"), (True, "default")])
+@pytest.mark.parametrize("relief,march", [(False, "default"), (True, "fine"), (True, "default"),
+                                          (True, "bisect"), (True, "bisect-fine")])
 def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief, march):
     """Each texel of the light's depth map holds the depth of the light ray's first hit
     with the true frustum (float64 reference), not with its bounding pyramid; with
     relief the relief surface casts (between the inner cone and the shell): to float32
     precision with a fine march, and within a fraction of a map texel (below the receivers'
-    half-texel bias) with the default march sized to the map's texels."""
+    half-texel bias) with the default march sized to the map's texels; the light's own
+    (secant) march and the eye's (bisect) alike."""
     sk = Skeleton(np.array([[0.0, 0.0, 0.0], [0.0, 1.2, 0.0]]), np.array([[0.0, 1.2, 0.0], [0.5, 2.1, 0.2]]),
                   np.array([0.45, 0.35]), np.array([0.35, 0.05]), np.array([-1, 0]),
                   np.array([False, True]), np.zeros(2, int), ("bark",))
@@ -151,7 +153,8 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief,
     to_light = light_towards(35.0)
     camera = Camera((3.0, 2.0, 4.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 40.0, 32, 32)
     res = 96
-    knobs = {"march_density": 8.0, "march_precision": 1e-3} if march == "fine" else {}
+    knobs = {"march_density": 8.0, "march_precision": 1e-3} if march.endswith("fine") else {}
+    knobs |= {"march": "bisect"} if march.startswith("bisect") else {}
     caster.render(frusta, camera, RaycastSettings(relief=relief), ("bark",), to_light,
                   shadows=ShadowSettings(resolution=res, **knobs))
     depths = caster.shadow_depths()   # the map of the last render
@@ -176,7 +179,7 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief,
         assert np.mean(drawn != relief_hits.hit) < 0.01
         both = drawn & relief_hits.hit
         err = np.abs(z[both] - relief_hits.t[both])
-        if march == "fine":
+        if march.endswith("fine"):
             assert np.median(err) < 1e-4 * span and np.mean(err > 5e-3 * span) < 0.005
         else:
             texel = window.texel_size(res)
@@ -185,3 +188,25 @@ def test_light_depth_map_holds_the_analytic_intersection(gl_ctx, caster, relief,
         # and it is not the inner cone's shadow: relief stands proud of it on many texels
         on_inner = both & inner.hit
         assert np.mean(z[on_inner] < inner.t[on_inner] - 1e-3 * span) > 0.2
+
+
+def test_one_corner_texel_holds_the_four_heights_a_gather_returns():
+    """The light's march fetches a bilinear cell's four heights in one texel
+    (material_uniforms.corner_maps): interpolating them as shaders/heights.glsl does gives
+    the reference's bilinear height (u repeats, v clamps), at the map's edges too."""
+    from plantgen.geometry.relief import height_map, sample_height
+    from plantgen.gl.material_uniforms import corner_maps
+
+    maps = np.stack([height_map("bark", (16, 24)), height_map("stone", (16, 24))])
+    cells = corner_maps(maps).astype(np.float64) / 255.0
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(-0.5, 1.5, 400), np.concatenate([rng.uniform(-0.2, 1.2, 396), [0.0, 1.0, 0.01, 0.99]])
+    for layer in range(2):
+        h, w = maps[layer].shape
+        x = (u - np.floor(u)) * w - 0.5
+        y = np.clip(v, 0.0, 1.0) * h - 0.5
+        cx, cy = np.floor(x), np.floor(y)
+        fx, fy = x - cx, y - cy
+        g = cells[layer, cy.astype(int) + 1, np.where(cx < 0, cx + w, cx).astype(int)]
+        got = (g[:, 3] * (1 - fx) + g[:, 2] * fx) * (1 - fy) + (g[:, 0] * (1 - fx) + g[:, 1] * fx) * fy
+        assert np.allclose(got, sample_height(maps[layer], u, v), atol=1e-12)

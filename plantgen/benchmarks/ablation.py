@@ -5,9 +5,11 @@ Each lever is a pair of ray caster settings that differ only in that lever; the 
 timed interleaved (median of ``--frames``) at the bench's size, and the eye's levers are
 scored against the float64 reference in the bench's evaluation window (err = 1 - SSIM of
 the depth-rebuilt shading + silhouette mismatch, :mod:`plantgen.table1.quality`). The
-shadow lever is timed in the scene's own frame (ground, shadow map) and scored on the
-light's depth map against a finely marched one (share of covered texels more than half a
-texel off: the receivers' bias).
+shadow lever is timed in the scene's own frame (ground, shadow map drawn every frame) and
+scored on the light's depth map against the float64 reference (share of texels more than
+half a texel off: the receivers' bias); a scene with shadows also gets the light casters'
+table of :mod:`plantgen.benchmarks.light_caster` (the relief shadow pass ÷ the plain one,
+before and after, and each caster's error against the float64 reference).
 
 Levers:
 
@@ -20,7 +22,8 @@ Levers:
   it can at best remove linear samples (its error column is the 1-sample march's, wrong
   by design).
 * ``light march``: the light's pass marched at the map's texel footprint (0.5 samples per
-  texel, half-texel bracket) against the eye's settings (2 per texel, 1/50 texel).
+  texel, half-texel bracket) against the eye's settings (2 per texel, 1/50 texel), both
+  with the light's own (secant) march.
 
 Writes Markdown (``--out``) and prints it.
 """
@@ -45,8 +48,10 @@ from ..table1.models import load_model
 from ..table1.paper import TABLE1_MODELS
 from ..table1.quality import image_error
 from .arguments import image_size
+from .light_caster import CASTERS, REFERENCE_SAMPLES, Caster, measure_scene
+from .light_caster import markdown as light_markdown
 
-__all__ = ["EYE_LEVERS", "measure_model", "main"]
+__all__ = ["EYE_LEVERS", "LIGHT_EYE", "measure_model", "main"]
 
 ON = RaycastSettings(relief=True)
 #: (lever, settings with it on, settings with it off) of the eye's pass.
@@ -59,11 +64,9 @@ EYE_LEVERS = (
     # leave of the linear march; its speed-up over the default is the most they can win
     ("skipping bound", dataclasses.replace(ON, march="fixed", linear_steps=1), ON),
 )
-#: The light's pass: on (the map's own footprint), off (the eye's density and precision),
-#: and the fine march the maps are scored against.
-LIGHT_ON = ShadowSettings()
-LIGHT_OFF = ShadowSettings(march_density=ON.march_density, march_precision=ON.march_precision)
-LIGHT_FINE = ShadowSettings(march_density=8.0, march_precision=0.01)
+#: The light's pass at the eye's density and precision: the light march lever's "off".
+LIGHT_EYE = Caster("secant, the eye's density and precision", ON,
+                   ShadowSettings(cache=False, march_density=ON.march_density, march_precision=ON.march_precision))
 
 
 def _interleaved(render_a, render_b, frames: int) -> tuple[float, float]:
@@ -89,59 +92,43 @@ def _eye_rows(caster, model, window, reference, frames: int) -> list[dict]:
     return rows
 
 
-def _light_row(caster, model, frames: int) -> dict:
-    """The light's pass lever in the scene's frame (shadow ms; depth map error)."""
-    def render(shadows):
-        return caster.render(model.frusta, model.camera, ON, model.names, model.light_dir, model.ground,
-                             shadows=shadows)
-
-    def depth_map(shadows):
-        render(shadows)
-        return caster.shadow_depths(), caster.last_light_window
-
-    shadow_ms: dict[str, list] = {"on": [], "off": [], "plain": []}
-    render(LIGHT_ON), render(LIGHT_OFF)
-    for _ in range(frames):
-        for key, shadows in (("on", LIGHT_ON), ("off", LIGHT_OFF)):
-            shadow_ms[key].append(render(shadows).stats.shadow_ms)
-        plain = caster.render(model.frusta, model.camera, RaycastSettings(), model.names, model.light_dir,
-                              model.ground, shadows=LIGHT_ON)
-        shadow_ms["plain"].append(plain.stats.shadow_ms)
-    fine, window = depth_map(LIGHT_FINE)
-    span = window.depth[1] - window.depth[0]
-    texel = window.texel_size(LIGHT_FINE.resolution)
-    errors = []
-    for shadows in (LIGHT_ON, LIGHT_OFF):
-        depths, _ = depth_map(shadows)
-        covered = (depths < 1.0) | (fine < 1.0)
-        errors.append(float(np.mean(np.abs(depths - fine)[covered] * span > 0.5 * texel)))
-    on_ms, off_ms, plain_ms = (statistics.median(shadow_ms[k]) for k in ("on", "off", "plain"))
-    return {"lever": "light march", "on_ms": on_ms, "off_ms": off_ms, "speedup": off_ms / on_ms,
-            "on_error": errors[0], "off_error": errors[1], "unit": "texels off",
-            "plain_shadow_ms": plain_ms, "relief_over_plain": on_ms / plain_ms}
+def _light_row(casters: list[dict]) -> dict:
+    """The light's march lever from the light casters' rows of one scene (shadow ms; the
+    share of texels more than half a texel off the float64 reference)."""
+    by = {r["caster"]: r for r in casters}
+    on, off = by["secant"], by[LIGHT_EYE.label]
+    return {"lever": "light march", "on_ms": on["shadow_ms"], "off_ms": off["shadow_ms"],
+            "speedup": off["shadow_ms"] / on["shadow_ms"], "on_error": on["half_texel"],
+            "off_error": off["half_texel"], "unit": "texels off"}
 
 
-def measure_model(name: str, size, eval_size, frames: int, caster: Raycaster) -> list[dict]:
-    """Every lever's rows for one model (the light's lever only where the scene has shadows)."""
+def measure_model(name: str, size, eval_size, frames: int, caster: Raycaster, *, light_only: bool = False,
+                  rays: int = 20000) -> tuple[list[dict], list[dict]]:
+    """Every lever's rows for one model (the light's lever only where the scene has
+    shadows), and its light casters' rows (:func:`plantgen.benchmarks.light_caster.
+    measure_scene`; none without shadows). ``light_only``: the light's rows alone."""
     model = load_model(name, size)
     if not model.relief:
-        return []
-    first = caster.render(model.frusta, model.camera, RaycastSettings(), model.names)
-    window = eval_camera(model.camera, np.isfinite(first.distance), eval_size)
-    ref = render_reference(model.frusta, window, relief=True, relief_samples=384)
-    reference = np.where(ref.hit, ref.t, np.inf)
-    rows = _eye_rows(caster, model, window, reference, frames)
+        return [], []
+    rows, lights = [], []
+    if not light_only:
+        first = caster.render(model.frusta, model.camera, RaycastSettings(), model.names)
+        window = eval_camera(model.camera, np.isfinite(first.distance), eval_size)
+        ref = render_reference(model.frusta, window, relief=True, relief_samples=384)
+        reference = np.where(ref.hit, ref.t, np.inf)
+        rows = _eye_rows(caster, model, window, reference, frames)
     if model.shadows:
-        rows.append(_light_row(caster, model, frames))
-    return [{"model": model.name, **r} for r in rows]
+        lights = measure_scene(name, size, frames, rays, REFERENCE_SAMPLES, caster, casters=(*CASTERS, LIGHT_EYE))
+        rows.append(_light_row(lights))
+    return [{"model": model.name, **r} for r in rows], lights
 
 
-def markdown(rows: list[dict], size, frames: int) -> str:
+def markdown(rows: list[dict], size, frames: int, lights: list[dict] = ()) -> str:
     lines = [f"# Relief levers on and off ({renderer_name()})", "",
              f"{size[0]}x{size[1]}, median of {frames} frames timed in alternation. speed-up = off ms ÷ "
              "on ms. err: (1 - SSIM) + silhouette mismatch against the float64 reference (the bench's "
-             "criterion); light march: ms of the shadow pass, error = share of covered map texels more "
-             "than half a texel from a finely marched map.", "",
+             "criterion); light march: ms of the shadow pass (its map drawn every frame), error = share of "
+             "the light's texels more than half a texel from the float64 reference's depth.", "",
              "| model | lever | on ms | off ms | speed-up | on error | off error |",
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['model']} | {r['lever']} | {r['on_ms']:.1f} | {r['off_ms']:.1f} | "
@@ -151,11 +138,8 @@ def markdown(rows: list[dict], size, frames: int) -> str:
         by_lever.setdefault(r["lever"], []).append(r["speedup"])
     lines += ["", "Geometric mean speed-up per lever: " + ", ".join(
         f"{k} {float(np.exp(np.mean(np.log(v)))):.2f}x ({len(v)} models)" for k, v in by_lever.items())]
-    light = [r for r in rows if "relief_over_plain" in r]
-    if light:
-        lines += ["", "Relief shadow pass ÷ plain shadow pass (same 2048² map): " + ", ".join(
-            f"{r['model']} {r['relief_over_plain']:.2f}x ({r['on_ms']:.0f} vs {r['plain_shadow_ms']:.0f} ms)"
-            for r in light)]
+    if lights:
+        lines += ["", light_markdown(list(lights), size, frames, 20000, REFERENCE_SAMPLES).rstrip()]
     return "\n".join(lines) + "\n"
 
 
@@ -167,13 +151,18 @@ def main(argv=None) -> int:
     parser.add_argument("--eval-size", type=image_size, default="128x96")
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--out", type=Path, help="write the Markdown table here")
+    parser.add_argument("--light-only", action="store_true",
+                        help="only the light's pass (the shadowed models' light march lever and casters)")
     args = parser.parse_args(argv)
     caster = Raycaster()
-    rows = []
+    rows, lights = [], []
     for name in args.models or TABLE1_MODELS:
         print(f"{name} ...", file=sys.stderr, flush=True)
-        rows += measure_model(name, args.size, args.eval_size, args.frames, caster)
-    text = markdown(rows, args.size, args.frames)
+        model_rows, model_lights = measure_model(name, args.size, args.eval_size, args.frames, caster,
+                                                 light_only=args.light_only)
+        rows += model_rows
+        lights += model_lights
+    text = markdown(rows, args.size, args.frames, lights)
     print(text)
     if args.out is not None:
         write_atomically(args.out, lambda path: Path(path).write_text(text))

@@ -9,7 +9,7 @@ import click
 
 from ..errors import PlantgenError
 from ..gl.records import RECORD_BYTES
-from ..pipeline import RenderReport, render_file
+from ..pipeline import RenderReport, ShadowUse, render_file
 from ..settings import RenderSettings
 from .options import (
     allow_path_opt,
@@ -91,6 +91,16 @@ def render(input: Path, output: Path, camera_out, depth_out, seed, iterations, t
     print_report(report)
 
 
+def shadow_line(use: ShadowUse) -> str:
+    """How the render paid for its shadow map: drawn how often (and its median ms), reused
+    by how many draws."""
+    drawn = "drawn once" if use.drawn == 1 else f"drawn {use.drawn} times"
+    text = f"shadow map: {drawn} ({use.ms:.1f} ms{'' if use.drawn == 1 else ' median'})"
+    if use.reused:
+        return text + f", reused by {use.reused} draw{'s' if use.reused > 1 else ''} (the light and the geometry held)"
+    return text + (", every draw (the geometry moves)" if use.drawn > 1 else "")
+
+
 def print_report(report: RenderReport) -> None:
     """The render's report on stdout: GL renderer, segments, effects, frame time, files."""
     mode = report.settings.describe()
@@ -100,6 +110,8 @@ def print_report(report: RenderReport) -> None:
                f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
     click.echo("effects: " + (", ".join(report.effects) or "none")
                + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
+    if report.shadow_use is not None:
+        click.echo(shadow_line(report.shadow_use))
     size = f"{cam.width}x{cam.height}"
     if report.ssaa > 1:
         n = report.ssaa

@@ -7,6 +7,11 @@ Raycaster`, :class:`~plantgen.gl.raster.RasterRenderer`) prepares its programs a
 its model's draw, then :meth:`OffscreenRenderer._draw_frame` runs the passes in order
 (shadow map, sky, ground, model) and :meth:`OffscreenRenderer._read_back` returns the
 image and the distances.
+
+The shadow map is paid once: the light's pass is drawn relative to its own origin (the
+*anchor*: the centre of the casters' box), never the eye's, and each renderer names what
+its map depends on in a :class:`ShadowKey`; a frame whose key matches a kept map
+(:class:`~plantgen.gl.passes.ShadowPass`) samples that map and draws no light pass.
 """
 
 from __future__ import annotations
@@ -29,8 +34,8 @@ from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
 from .supersample import resolve_supersamples
 
-__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "check_background",
-           "check_ssaa"]
+__all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "ShadowKey", "LightPass",
+           "light_anchor", "check_background", "check_ssaa"]
 
 
 def check_background(background) -> tuple | None:
@@ -117,14 +122,20 @@ class FrameLighting:
 
     names : material slot names of the model, plus the ground's material when there is one
     shading : uniforms of shaders/shading.glsl (light, ambient, sky) and the palette
-    window : the light's window (None without shadows)
+    window : the light's window as the eye's receivers see it (relative to the eye; None
+        without shadows)
     receiver : uniforms of shaders/shadow.glsl for surfaces that sample the map ({} without)
+    anchor : (3,) float64 world origin of the light's pass (None without shadows): the
+        casters are drawn into the map relative to it, so the map does not depend on the eye
+    caster_window : the light's window relative to ``anchor`` (the light pass's)
     """
 
     names: tuple
     shading: dict
     window: LightWindow | None
     receiver: dict
+    anchor: np.ndarray | None = None
+    caster_window: LightWindow | None = None
 
     @property
     def ground_material(self) -> int:
@@ -132,16 +143,73 @@ class FrameLighting:
         return min(len(self.names) - 1, MAX_MATERIALS - 1)
 
 
+def light_anchor(caster_box) -> np.ndarray:
+    """The light pass's origin for casters in ``caster_box`` (2, 3): the box's centre, a
+    world point that depends on the casters alone (not on the eye)."""
+    box = np.asarray(caster_box, dtype=np.float64)
+    return 0.5 * (box[0] + box[1])
+
+
+class ShadowKey:
+    """Everything the light's depth map depends on, and nothing else (not the eye).
+
+    caster : values: the renderer's light program (its defines), the relief knobs that
+        shape the caster (march, density, precision, steps), the material list (height
+        maps), the frusta's hull padding
+    objects : the geometry drawn into the map, compared by identity: the Frusta (or the
+        tessellated mesh) and the leaves (a Polygons or None). These are frozen values,
+        built once and never written: a moving frame brings new objects, so its map is
+        drawn again. (Records a caller packed and may rewrite in place are no such value:
+        a frame drawn from them has no key, and draws its map every time.)
+    ground : the ground (a frozen value, compared by value) or None
+    resolution : texels per side
+    anchor : the light pass's origin (world)
+    window : the light's window relative to the anchor (its direction, extent and depth
+        range: the light direction and the casters' box)
+    """
+
+    __slots__ = ("caster", "objects", "ground", "resolution", "anchor", "window")
+
+    def __init__(self, caster: tuple, objects: tuple, ground, resolution: int, anchor, window: LightWindow):
+        self.caster = tuple(caster)
+        self.objects = tuple(objects)
+        self.ground = ground
+        self.resolution = int(resolution)
+        self.anchor = tuple(float(x) for x in anchor)
+        self.window = window.values()
+
+    def __eq__(self, other) -> bool:
+        return (isinstance(other, ShadowKey) and self.caster == other.caster and self.ground == other.ground
+                and self.resolution == other.resolution and self.anchor == other.anchor
+                and self.window == other.window and len(self.objects) == len(other.objects)
+                and all(a is b for a, b in zip(self.objects, other.objects, strict=True)))
+
+    __hash__ = None     # compared, never hashed: the objects count by identity
+
+
+@dataclass(frozen=True)
+class LightPass:
+    """A renderer's part of the light's pass for one frame: its :class:`ShadowKey` (None:
+    the map cannot be kept, it is drawn every frame), and ``draws()`` returning (draw
+    callables, GL objects to release after the frame), called only when the map must be
+    drawn (nothing is packed, uploaded or bound for a reused map)."""
+
+    key: ShadowKey | None
+    draws: Callable[[], tuple]
+
+
 @dataclass(frozen=True)
 class FrameOutput:
     """What a drawn frame gives back: the colour and distance images, the frame's and the
-    shadow pass's milliseconds, and the work counted (None unless asked)."""
+    shadow pass's milliseconds (0 when the map was reused: ``shadow_cached``), and the work
+    counted (None unless asked)."""
 
     color: np.ndarray
     distance: np.ndarray
     frame_ms: float
     shadow_ms: float
     work: object = None
+    shadow_cached: bool = False
 
 
 class OffscreenRenderer:
@@ -176,23 +244,31 @@ class OffscreenRenderer:
         (far - near) in :attr:`last_light_window`, row 0 the window's bottom; 1: empty."""
         return self._shadow.depths()
 
+    def forget_shadow_maps(self) -> None:
+        """Draw the next frame's shadow map again even if a kept map fits it (the maps stay
+        allocated)."""
+        self._shadow.forget()
+
     # ------------------------------------------------------------------ frame set-up
     def _lighting(self, material_names, ground: Ground | None, light_dir, shadows, caster_box,
-                  eye) -> FrameLighting:
+                  eye, anchor=None) -> FrameLighting:
         """The frame's palette and light: ``light_dir`` (3,) towards the light (None: the
         model light); with ``shadows``, the light's window around ``caster_box`` (2, 3)
-        world box."""
+        world box, relative to the light pass's ``anchor`` (default :func:`light_anchor`
+        of the box) and, for the receivers, to ``eye``."""
         if light_dir is None:
             light_dir = MODEL_LIGHT.towards()
         names = tuple(material_names) + ((ground.material,) if ground is not None else ())
         shading = {**shading_uniforms(light_dir), **palette_uniforms(names)}
         if shadows is None:
             return FrameLighting(names, shading, None, {})
-        window = light_window(caster_box, -np.asarray(light_dir, dtype=np.float64), eye)
+        anchor = light_anchor(caster_box) if anchor is None else np.asarray(anchor, dtype=np.float64)
+        caster_window = light_window(caster_box, -np.asarray(light_dir, dtype=np.float64), anchor)
+        window = caster_window.shifted(anchor - np.asarray(eye, dtype=np.float64))
         self.last_light_window = window
         receiver = dict(window.uniforms(), shadow_bias=shadows.bias * window.texel_size(shadows.resolution),
                         shadow_max_slope=shadows.max_slope, shadow_map=1)
-        return FrameLighting(names, shading, window, receiver)
+        return FrameLighting(names, shading, window, receiver, anchor, caster_window)
 
     def _sky(self, view: FrameView, lighting: FrameLighting, background=None):
         """The background's full-screen triangle (vertex array cached per program): the sky,
@@ -209,7 +285,8 @@ class OffscreenRenderer:
 
     def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting):
         """Draws of the ground square: a callable drawing it into the frame and, with a light
-        window, one drawing it into the light's map (for :meth:`_draw_frame`).
+        window, one drawing it into the light's map (relative to the light's anchor; for
+        :meth:`_draw_frame`).
 
         Returns (frame draw, light draw or None, [objects to release after the frame]).
         """
@@ -221,11 +298,12 @@ class OffscreenRenderer:
                      ground_material=lighting.ground_material, origin_offset=tuple(view.eye))
         buf = ctx.buffer((ground.quad() - view.eye).astype(np.float32).tobytes())
         vao = ctx.vertex_array(program, [(buf, "3f", "position")])
-        light_vao = light_draw = None
+        light_vao = light_buf = light_draw = None
         if shadowed:
             caster = build_program(ctx, "ground.glsl", {"SHADOW_PASS": True})
-            set_uniforms(caster, view_projection=mat4(lighting.window.matrix()))
-            light_vao = ctx.vertex_array(caster, [(buf, "3f", "position")])
+            set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()))
+            light_buf = ctx.buffer((ground.quad() - lighting.anchor).astype(np.float32).tobytes())
+            light_vao = ctx.vertex_array(caster, [(light_buf, "3f", "position")])
 
             def light_draw():
                 ctx.disable(ctx.CULL_FACE)
@@ -234,7 +312,7 @@ class OffscreenRenderer:
         def frame_draw():
             ctx.disable(ctx.CULL_FACE)
             vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4)
-        return frame_draw, light_draw, [vao, light_vao, buf]
+        return frame_draw, light_draw, [vao, light_vao, buf, light_buf]
 
     def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
                       *, labels=None) -> Surroundings:
@@ -267,42 +345,54 @@ class OffscreenRenderer:
         return self._fbo
 
     # ------------------------------------------------------------------ the frame
-    def _draw_shadow_map(self, resolution: int, draws) -> float:
-        """Clear the light's depth map, run each callable of ``draws`` into it with the depth
-        test on, and bind the map to texture unit 1 for the receivers. Returns the pass's
-        milliseconds (to glFinish)."""
+    def _draw_shadow_map(self, shadows: ShadowSettings, light: LightPass, extra_draws) -> tuple[float, bool]:
+        """The light's depth map for ``light.key``: a kept map when one fits (with
+        ``shadows.cache``), else cleared and drawn (``light.draws()``, then each callable
+        of ``extra_draws``) with the depth test on. The map is bound to texture unit 1 for
+        the receivers. Returns (milliseconds of the pass to glFinish, 0 for a kept map;
+        whether the map was kept)."""
         ctx = self.ctx
+        if shadows.cache and light.key is not None and self._shadow.find(light.key) is not None:
+            self._shadow.texture.use(1)
+            return 0.0, True
         t0 = time.perf_counter()
-        fbo = self._shadow.target(int(resolution))
+        resolution = shadows.resolution
+        fbo = self._shadow.target(light.key, resolution)
         fbo.use()
         fbo.viewport = (0, 0, resolution, resolution)
         fbo.clear(depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
-        for draw in draws:
+        draws, garbage = light.draws()
+        for draw in (*draws, *extra_draws):
             draw()
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
         ctx.finish()
         self._shadow.texture.use(1)
-        return (time.perf_counter() - t0) * 1e3
+        for obj in garbage:
+            if obj is not None:
+                obj.release()
+        return (time.perf_counter() - t0) * 1e3, False
 
     def _draw_frame(self, view: FrameView, sky_vao, draw_model: Callable[[], None],
-                    shadows: ShadowSettings | None, shadow_draws, extras: Surroundings) -> tuple[float, float]:
-        """Run one frame's passes in order: the shadow map (with ``shadows``: each callable of
-        ``shadow_draws``, then the light draws of ``extras``), the sky, the ground
-        (``extras.before``), the model (``draw_model()``) and the leaves (``extras.after``),
-        with the depth test on from the ground on.
+                    shadows: ShadowSettings | None, light: LightPass | None,
+                    extras: Surroundings) -> tuple[float, float, bool]:
+        """Run one frame's passes in order: the shadow map (with ``shadows``: drawn by
+        ``light`` and the light draws of ``extras``, or reused, :meth:`_draw_shadow_map`),
+        the sky, the ground (``extras.before``), the model (``draw_model()``) and the
+        leaves (``extras.after``), with the depth test on from the ground on.
 
-        Returns (frame_ms, shadow_ms): wall milliseconds from the first pass to glFinish,
-        and those of the shadow pass alone.
+        Returns (frame_ms, shadow_ms, shadow_cached): wall milliseconds from the first pass
+        to glFinish, those of the shadow pass alone (0 for a reused map), and whether the
+        map was reused.
         """
         ctx = self.ctx
         width, height = view.camera.width, view.camera.height
         fbo = self._framebuffer(width, height)
         ctx.finish()
         t_draw = time.perf_counter()
-        shadow_ms = (self._draw_shadow_map(shadows.resolution, [*shadow_draws, *extras.light])
-                     if shadows else 0.0)
+        shadow_ms, cached = (self._draw_shadow_map(shadows, light, extras.light)
+                             if shadows is not None and light is not None else (0.0, False))
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
@@ -318,21 +408,21 @@ class OffscreenRenderer:
         for obj in extras.garbage:
             if obj is not None:
                 obj.release()
-        return frame_ms, shadow_ms
+        return frame_ms, shadow_ms, cached
 
     def _finish_frame(self, camera: Camera, view: FrameView, lighting: FrameLighting, background, draw_model,
-                      shadows: ShadowSettings | None, shadow_draws, extras: Surroundings, *, ssaa: int,
+                      shadows: ShadowSettings | None, light: LightPass | None, extras: Surroundings, *, ssaa: int,
                       count_work: bool) -> FrameOutput:
         """The frame's tail, the same for both renderers: count the work if asked, run the
-        passes (:meth:`_draw_frame`), read the frame back at ``camera``'s size
-        (:meth:`_read_back`) and read the counters."""
+        passes (:meth:`_draw_frame`; ``light`` the renderer's part of the light's pass),
+        read the frame back at ``camera``'s size (:meth:`_read_back`) and read the counters."""
         counter = WorkCounter(self.ctx) if count_work else None
-        frame_ms, shadow_ms = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
-                                               shadows, shadow_draws, extras)
+        frame_ms, shadow_ms, cached = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
+                                                       shadows, light, extras)
         color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
                                       alpha=background is not None and background[3] < 1)
         work = counter.read(dist) if counter is not None else None
-        return FrameOutput(color, dist, frame_ms, shadow_ms, work)
+        return FrameOutput(color, dist, frame_ms, shadow_ms, work, cached)
 
     def _read_back(self, width: int, height: int, *, ssaa: int = 1,
                    alpha: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -127,9 +127,9 @@ class LeafLayer:
             vao.render(mode=ctx.TRIANGLES, vertices=count)
         if not shadowed:
             return frame_draw, None, [vao]
-        caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})
-        set_uniforms(caster, view_projection=mat4(lighting.window.matrix()),
-                     origin_from_eye=tuple((origin - view.eye).tolist()))
+        caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor
+        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
+                     origin_from_eye=tuple((origin - lighting.anchor).tolist()))
         light_vao = ctx.vertex_array(caster, [(vbo, "3f 20x", "position")], index_buffer=ibo,
                                      index_element_size=4)
 

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.materials import material_height_maps, material_palette
+from ..geometry.materials import MAX_MATERIALS, material_height_maps, material_palette
 
 __all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms",
-           "HeightTextures"]
+           "HeightTextures", "corner_maps"]
 
 LIGHT_COLOR = (1.0, 0.96, 0.9)
 AMBIENT_COLOR = (0.35, 0.4, 0.5)
@@ -37,6 +37,22 @@ def palette_uniforms(material_names) -> dict[str, np.ndarray]:
     return {f"material_{key}": palette[key] for key in ("dark", "light", "gloss")}
 
 
+def corner_maps(maps: np.ndarray) -> np.ndarray:
+    """(n, H + 1, W, 4) uint8: the four texels of every bilinear cell of the (n, H, W)
+    height maps, in textureGather's order, so one texel fetch gives what one gather gives
+    (shaders/light_march.glsl). Texel (i, j) holds the cell whose lower-left texel is
+    (i, j - 1): (i, j), (i + 1, j), (i + 1, j - 1), (i, j - 1), with i + 1 wrapping (u
+    repeats) and rows clamped to 0..H - 1 (v clamps)."""
+    n, h, w = maps.shape
+    rows = np.arange(h + 1)
+    lower, upper = np.clip(rows - 1, 0, h - 1), np.clip(rows, 0, h - 1)
+    left, right = np.arange(w), (np.arange(w) + 1) % w
+    out = np.empty((n, h + 1, w, 4), np.uint8)
+    for k, (r, c) in enumerate(((upper, left), (upper, right), (lower, right), (lower, left))):
+        out[..., k] = maps[:, r][:, :, c]
+    return out
+
+
 class HeightTextures:
     """The relief height maps of each material list, uploaded once as an R8 texture array
     (one layer per material slot; shaders/heights.glsl gathers 2x2 texels and filters
@@ -45,6 +61,7 @@ class HeightTextures:
     def __init__(self, ctx):
         self.ctx = ctx
         self._textures: dict[tuple, tuple] = {}
+        self._corners: dict[tuple, object] = {}
 
     def get(self, material_names):
         """(texture array, (MAX_MATERIALS, 2) float32 texture repeats) of the material list."""
@@ -58,7 +75,31 @@ class HeightTextures:
             self._textures[key] = (tex, repeats)
         return self._textures[key]
 
+    def corners(self, material_names):
+        """The RGBA8 texture array of :func:`corner_maps` of the material list (the light's
+        relief march fetches a bilinear cell's four heights in one texel fetch)."""
+        key = tuple(material_names)
+        if key not in self._corners:
+            maps, _ = material_height_maps(material_names)
+            cells = corner_maps(maps)
+            layers, rows, cols, _ = cells.shape
+            tex = self.ctx.texture_array((cols, rows, layers), 4, cells.tobytes(), dtype="f1")
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self._corners[key] = tex
+        return self._corners[key]
+
+    def ranges(self, material_names) -> np.ndarray:
+        """(MAX_MATERIALS, 2) float32: the lowest and highest height of each material's
+        map, in [0, 1]: the band of the shell its relief occupies (a slot past the list
+        has the last map's, as the texture array clamps its layer)."""
+        maps, _ = material_height_maps(material_names)
+        layer = np.minimum(np.arange(MAX_MATERIALS), len(maps) - 1)
+        low, high = maps.min(axis=(1, 2)) / 255.0, maps.max(axis=(1, 2)) / 255.0
+        return np.stack([low[layer], high[layer]], axis=1).astype(np.float32)
+
     def release(self) -> None:
         for tex, _ in self._textures.values():
             tex.release()
-        self._textures = {}
+        for tex in self._corners.values():
+            tex.release()
+        self._textures, self._corners = {}, {}

@@ -9,9 +9,15 @@ pass and no program samples a shadow map; without ``relief`` no relief march is 
 The shadow map (:class:`ShadowPass`) is an orthographic depth image along the light. The
 ray-cast frusta write their *analytic* hit depth into it (``shaders/raycast.glsl`` with
 ``SHADOW_PASS``: the light's parallel rays are intersected with each cone in the fragment
-shader, so the shadow is the frustum's, not its bounding pyramid's); the ground writes
-its plane. Receivers filter it with percentage-closer filtering and a receiver-plane bias
+shader, so the shadow is the frustum's, not its bounding pyramid's; with relief the relief
+surface casts, found by ``shaders/light_march.glsl``); the ground writes its plane.
+Receivers filter it with percentage-closer filtering and a receiver-plane bias
 (``shaders/shadow.glsl``).
+
+The light's pass does not depend on the eye: it is drawn relative to its own origin (the
+*anchor*, a world point of the casters' box), so a map drawn for one camera serves every
+other, and :class:`ShadowPass` keeps the last few maps by what they depend on
+(:class:`plantgen.gl.frame.ShadowKey`) for the frames that follow.
 """
 
 from __future__ import annotations
@@ -25,8 +31,20 @@ from ..settings import ShadowSettings
 from ..tolerances import tol
 from .context import release_framebuffer
 
-__all__ = ["LightWindow", "light_window", "ShadowPass",
+__all__ = ["LightWindow", "light_window", "ShadowPass", "light_defines",
            "program_variants", "frame_passes"]
+
+#: Shadow maps a renderer keeps (by what they depend on): two, so a run that alternates
+#: two casters (the bench's RC and RC+R) reuses both.
+SHADOW_MAPS_KEPT = 2
+
+
+def light_defines(settings, shadows: ShadowSettings) -> dict:
+    """The defines of the frusta's program for the light's pass: the relief surface casts
+    when relief is on and the caster is ``relief``; ``LIGHT_BISECT`` marches it with the
+    eye's march instead of the light's own (``shaders/light_march.glsl``)."""
+    relief = bool(settings.relief) and shadows.caster == "relief"
+    return {"SHADOW_PASS": True, "RELIEF": relief, "LIGHT_BISECT": relief and shadows.march == "bisect"}
 
 
 def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False,
@@ -42,8 +60,7 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
     shadowed = shadows is not None
     out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
     if shadowed:
-        out.append(("raycast.glsl", {"SHADOW_PASS": True,
-                                     "RELIEF": settings.relief and shadows.caster == "relief"}))
+        out.append(("raycast.glsl", light_defines(settings, shadows)))
         if ground:
             out.append(("ground.glsl", {"SHADOW_PASS": True}))
         if leaves:
@@ -102,6 +119,19 @@ class LightWindow:
         """World size of one texel (the larger side)."""
         return float(2.0 * self.half.max() / resolution)
 
+    def shifted(self, offset) -> LightWindow:
+        """The same window relative to an origin ``offset`` (3,) behind this one's: the
+        light pass's window (relative to its anchor) as the eye's receivers see it
+        (``offset`` = anchor - eye, formed in float64). Depths along the light stay as
+        they are: they are measured from the window's origin."""
+        return LightWindow(self.origin + np.asarray(offset, dtype=np.float64), self.right, self.up, self.forward,
+                           self.half, self.depth)
+
+    def values(self) -> tuple:
+        """Every number of the window, as a tuple of floats (a cache key's part)."""
+        return tuple(float(x) for x in np.concatenate([self.origin, self.right, self.up, self.forward,
+                                                         self.half, self.depth]))
+
 
 def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> LightWindow:
     """The light's window around every shadow caster.
@@ -137,32 +167,64 @@ def light_window(caster_box, light_travel, origin, margin: float = 0.02) -> Ligh
 
 
 class ShadowPass:
-    """The light's depth map: a depth texture of ``resolution``² and its framebuffer."""
+    """The light's depth maps: a depth texture of ``resolution``² and its framebuffer per
+    map, the last :data:`SHADOW_MAPS_KEPT` kept with the key they were drawn for, the most
+    recent first. :attr:`texture` is the map of the last frame (the receivers sample it)."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, kept: int = SHADOW_MAPS_KEPT):
         self.ctx = ctx
-        self._fbo = None
+        self.kept = max(int(kept), 1)
+        self._maps: list[list] = []      # [key, texture, framebuffer, resolution], most recent first
         self.texture = None
         self.resolution = None
 
-    def target(self, resolution: int):
-        """The framebuffer (depth only) for a map of ``resolution`` texels per side."""
-        if self.resolution != resolution:
-            self.release()
-            self.texture = self.ctx.depth_texture((resolution, resolution))
-            self.texture.compare_func = ""          # read depths, compare in the shader
-            self.texture.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            self._fbo = self.ctx.framebuffer(depth_attachment=self.texture)
-            self.resolution = resolution
-        return self._fbo
+    def find(self, key):
+        """The map drawn for ``key`` (now the current one), or None."""
+        for entry in self._maps:
+            if entry[0] is not None and entry[0] == key:
+                self._use(entry)
+                return entry[1]
+        return None
+
+    def target(self, key, resolution: int):
+        """The framebuffer (depth only) of a map of ``resolution`` texels per side for
+        ``key``: the oldest map's textures when the maps kept are all in use."""
+        resolution = int(resolution)
+        entry = next((e for e in self._maps if e[0] is None and e[3] == resolution), None)
+        if entry is None and len(self._maps) >= self.kept:
+            entry = self._maps[-1]
+            if entry[3] != resolution:
+                release_framebuffer(entry[2])
+                self._maps.remove(entry)
+                entry = None
+        if entry is None:
+            texture = self.ctx.depth_texture((resolution, resolution))
+            texture.compare_func = ""          # read depths, compare in the shader
+            texture.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            entry = [None, texture, self.ctx.framebuffer(depth_attachment=texture), resolution]
+            self._maps.append(entry)
+        entry[0] = key
+        self._use(entry)
+        return entry[2]
+
+    def _use(self, entry) -> None:
+        self._maps.remove(entry)
+        self._maps.insert(0, entry)
+        self.texture, self.resolution = entry[1], entry[3]
+
+    def forget(self) -> None:
+        """Forget what the maps were drawn for (the next frame draws its map again)."""
+        for entry in self._maps:
+            entry[0] = None
 
     def depths(self) -> np.ndarray:
-        """(resolution, resolution) float32 window depths in [0, 1], row 0 the window's
-        bottom (light_up = -1); 1 where nothing was drawn."""
+        """(resolution, resolution) float32 window depths in [0, 1] of the current map, row
+        0 the window's bottom (light_up = -1); 1 where nothing was drawn."""
         raw = self.texture.read(alignment=1)
         return np.frombuffer(raw, dtype=np.float32).reshape(self.resolution, self.resolution).copy()
 
     def release(self) -> None:
-        if self._fbo is not None:
-            release_framebuffer(self._fbo)
-        self._fbo = self.texture = self.resolution = None
+        for entry in self._maps:
+            release_framebuffer(entry[2])
+        self._maps = []
+        self.texture = self.resolution = None

@@ -24,7 +24,16 @@ from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
 from ..settings import ShadowSettings
 from .context import gl_context
-from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
+from .frame import (
+    FrameLighting,
+    FrameView,
+    LightPass,
+    OffscreenRenderer,
+    ShadowKey,
+    check_background,
+    check_ssaa,
+    frame_view,
+)
 from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes
 from .result import RasterStats, RenderResult
@@ -172,15 +181,17 @@ class RasterRenderer(OffscreenRenderer):
         view = frame_view(camera.scaled(ssaa), [box_corners(bounds)] + ([] if ground is None else [ground.quad()]))
         tex, repeats = self._heights.get(names)
         box = None if not shadowed else (bounds if shadow_box is None else np.asarray(shadow_box, np.float64))
-        lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye)
+        lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye,
+                                  anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
         extras = self._surroundings(ground, leaves, view, lighting)
-        shadow_draws = []
+        light = None
         if shadowed:
-            light_draw, light_vao = self._mesh_light_draw(origin, view, lighting, mesh, poses)
-            shadow_draws.append(light_draw)
-            extras.garbage.append(light_vao)
-        out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, shadow_draws, extras,
+            # a skinned mesh is posed by a buffer rewritten every frame: no key, its map drawn each time
+            key = None if skinned else ShadowKey(("raster.glsl", mesh.level), (mesh, leaves if extras.after else None),
+                                                 ground, shadows.resolution, lighting.anchor, lighting.caster_window)
+            light = LightPass(key, lambda: self._mesh_light_draw(origin, lighting, mesh, poses))
+        out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
                                  ssaa=ssaa, count_work=count_work)
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
@@ -189,7 +200,7 @@ class RasterRenderer(OffscreenRenderer):
             upload_ms=upload_ms, ssaa=ssaa, resolve_ms=self.last_resolve_ms, triangles=len(mesh.faces) + leaf_tris,
             vertices=len(mesh.vertices),
             level=mesh.level, buffer_bytes=gs_buffer_bytes(uploaded),
-            draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work)
+            draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work, shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
@@ -215,14 +226,15 @@ class RasterRenderer(OffscreenRenderer):
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return draw
 
-    def _mesh_light_draw(self, origin, view: FrameView, lighting: FrameLighting,
-                         mesh: TessellatedMesh, poses=None):
-        """The mesh's front faces into the light's depth map: (draw callable, vertex array)."""
+    def _mesh_light_draw(self, origin, lighting: FrameLighting, mesh: TessellatedMesh, poses=None):
+        """The mesh's front faces into the light's depth map, relative to the light's
+        anchor (a skinned mesh's: the eye, as its poses are): ([draw callable], [vertex
+        array to release after the frame])."""
         ctx = self.ctx
         skinned = poses is not None
         caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True, "SKINNED": skinned})
-        set_uniforms(caster, view_projection=mat4(lighting.window.matrix()),
-                     origin_from_eye=tuple((origin - view.eye).tolist()))
+        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
+                     origin_from_eye=tuple((origin - lighting.anchor).tolist()))
         buffers = self._uploaded[1]
         attributes = [(buffers[0], "3f 20x", "position")]
         if skinned:
@@ -236,7 +248,7 @@ class RasterRenderer(OffscreenRenderer):
             if skinned:
                 poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
-        return draw, vao
+        return [draw], [vao]
 
 
 def _cap_tris(mesh: TessellatedMesh) -> int:

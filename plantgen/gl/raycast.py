@@ -8,9 +8,12 @@ shader from the record) -> the fragment shader in ``shaders/raycast.glsl`` inter
 pixel's ray with the frustum (``shaders/cone.glsl``), shades it and writes
 ``gl_FragDepth``.
 
-Effects (plantgen.gl.passes): with shadows a first pass ray casts the same records
-along the light into a depth map that every surface then samples (``SHADOWS``); with
-relief the relief shell is marched (``RELIEF``). Neither is compiled or run otherwise.
+Effects (plantgen.gl.passes): with shadows a first pass ray casts the same rows along
+the light into a depth map that every surface then samples (``SHADOWS``); with relief the
+relief shell is marched (``RELIEF``). Neither is compiled or run otherwise. The light's
+pass packs its own records, relative to the light's anchor instead of the eye, and only
+when its map must be drawn (:class:`~plantgen.gl.frame.ShadowKey`): a static scene draws
+it once.
 """
 
 from __future__ import annotations
@@ -26,9 +29,18 @@ from ..geometry.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
-from .frame import FrameLighting, FrameView, OffscreenRenderer, check_background, check_ssaa, frame_view
+from .frame import (
+    FrameLighting,
+    FrameView,
+    LightPass,
+    OffscreenRenderer,
+    ShadowKey,
+    check_background,
+    check_ssaa,
+    frame_view,
+)
 from .leaf_layer import leaf_bounds, union_box
-from .passes import frame_passes, program_variants
+from .passes import frame_passes, light_defines, program_variants
 from .records import (
     PYRAMID_CORNERS,
     PYRAMID_TRIANGLES,
@@ -85,7 +97,10 @@ class Raycaster(OffscreenRenderer):
             put and shadows do not shimmer
         record_buffer : a moderngl buffer already holding ``pack_records(frusta,
             camera.eye)`` (an animation updates only what moved); None: packed and
-            uploaded here
+            uploaded here. Its contents are the caller's (an animation rewrites them in
+            place), so the light's pass draws them as they are (relative to the eye) and
+            its map is drawn every frame, never kept; without it the light's records are
+            packed relative to the light's anchor, once per map, and the map is kept
         count_work : a diagnostic render that also counts the fragments shaded and the
             relief samples taken (``stats.work``); its time is not the plain program's
         background : None (the sky) or (r, g, b, a) in [0, 1], display-encoded: a flat
@@ -109,7 +124,8 @@ class Raycaster(OffscreenRenderer):
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
                                             else model_box if model_box is not None else rows_box(frusta))
-        lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye)
+        lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye,
+                                  anchor=None if record_buffer is None else view.eye)
         extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n else None)
@@ -118,20 +134,18 @@ class Raycaster(OffscreenRenderer):
         draw_frusta, vao = self._frusta_draw(programs["frame"], view, lighting, settings, rec_buf,
                                              repeats, tex, n)
         extras.garbage.append(vao)
-        shadow_draws = []
-        if shadows is not None and n:
-            light_draw, light_vao = self._frusta_light_draw(programs["light"], lighting, settings,
-                                                            shadows, rec_buf, repeats, tex, n)
-            shadow_draws.append(light_draw)
-            extras.garbage.append(light_vao)
-        out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, shadow_draws, extras,
+        light = None if shadows is None else self._light_pass(
+            frusta, programs["light"], lighting, settings, shadows, tuple(material_names), record_buffer,
+            (leaves if extras.after else None, ground))
+        out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, light, extras,
                                  ssaa=ssaa, count_work=count_work)
         stats = RaycastStats(
             passes=frame_passes(shadows is not None, ground is not None, n > 0, bool(extras.after)),
             near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=n,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
             pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
-            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=out.work)
+            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=out.work,
+            shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
@@ -148,10 +162,7 @@ class Raycaster(OffscreenRenderer):
         shadowed = shadows is not None
         frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
                                                           "STATS": count_work})
-        light = None
-        if shadowed:
-            light = build_program(self.ctx, "raycast.glsl", {
-                "SHADOW_PASS": True, "RELIEF": settings.relief and shadows.caster == "relief"})
+        light = build_program(self.ctx, "raycast.glsl", light_defines(settings, shadows)) if shadowed else None
         return {"frame": frame, "light": light, "built": built}
 
     def _instances(self, program, rec_buf, *, indexed: bool = True):
@@ -185,14 +196,44 @@ class Raycaster(OffscreenRenderer):
             vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=n)
         return draw, vao
 
-    def _frusta_light_draw(self, caster, lighting: FrameLighting, settings: RaycastSettings,
-                           shadows: ShadowSettings, rec_buf, repeats, tex, n: int):
-        """Set the light's frusta program (orthographic rays along the light, analytic hit
-        depth into the map) and return (draw callable, vertex array)."""
-        window = lighting.window
+    def _light_pass(self, frusta, caster, lighting: FrameLighting, settings: RaycastSettings,
+                    shadows: ShadowSettings, material_names: tuple, record_buffer, surroundings) -> LightPass:
+        """The frusta's part of the light's pass: the :class:`ShadowKey` of the map (the
+        light program's defines and knobs, the materials, the frusta and
+        ``surroundings`` = (leaves or None, ground), the map's size, anchor and window; no
+        key for a caller's ``record_buffer``, whose contents the renderer cannot vouch for),
+        and the draws, made only when the map is drawn: orthographic rays along the light,
+        the analytic (or relief) hit's depth into the map."""
+        defines = light_defines(settings, shadows)
+        knobs = (settings.hull_padding, settings.linear_steps, settings.march_min_steps, settings.binary_steps,
+                 shadows.march_density, shadows.march_precision) if defines["RELIEF"] else (settings.hull_padding,)
+        leaves, ground = surroundings
+        key = None if record_buffer is not None else ShadowKey(
+            ("raycast.glsl", tuple(sorted(defines.items())), knobs, material_names), (frusta, leaves), ground,
+            shadows.resolution, lighting.anchor, lighting.caster_window)
+
+        def draws():
+            n = len(frusta)
+            if not n:
+                return [], []
+            own = None if record_buffer is not None else self.ctx.buffer(
+                pack_records(frusta, lighting.anchor).tobytes())
+            return self._frusta_light_draw(caster, defines, lighting, settings, shadows,
+                                           own if own is not None else record_buffer, material_names, n, own)
+        return LightPass(key, draws)
+
+    def _frusta_light_draw(self, caster, defines: dict, lighting: FrameLighting, settings: RaycastSettings,
+                           shadows: ShadowSettings, rec_buf, material_names, n: int, own_buffer):
+        """Set the light's frusta program (its window relative to the light's anchor) and
+        return ([draw callable], [GL objects to release after the frame])."""
+        window = lighting.caster_window
+        tex, repeats = self._heights.get(material_names)
         march = {**settings.march_uniforms(), "march_density": shadows.march_density,
                  "march_precision": shadows.march_precision}
-        set_uniforms(caster, **window.uniforms(), **march,
+        secant = defines["RELIEF"] and not defines["LIGHT_BISECT"]     # shaders/light_march.glsl
+        corners = self._heights.corners(material_names) if secant else None
+        band = {"height_corners": 2, "height_range": self._heights.ranges(material_names)} if secant else {}
+        set_uniforms(caster, **window.uniforms(), **march, **band,
                      viewport=(float(shadows.resolution),) * 2, texture_repeat=repeats,
                      pixel_footprint=(0.0, window.texel_size(shadows.resolution)),
                      view_projection=mat4(window.matrix()))
@@ -201,11 +242,13 @@ class Raycaster(OffscreenRenderer):
 
         def draw():
             tex.use(0)
+            if corners is not None:
+                corners.use(2)
             ctx.enable(ctx.CULL_FACE)
             ctx.front_face = "ccw"
             ctx.cull_face = "front"
             vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=n)
-        return draw, vao
+        return [draw], [vao, own_buffer]
 
 
 _default_raycaster: Raycaster | None = None

@@ -60,14 +60,19 @@ class WorkCounter:
 class RenderStats:
     """What one frame did, whichever renderer drew it.
 
-    passes : names of the passes run, in order (see :func:`plantgen.gl.passes.frame_passes`)
+    passes : names of the passes run, in order (see :func:`plantgen.gl.passes.frame_passes`);
+        ``shadow`` is there whenever the frame samples a shadow map, drawn or reused
     near, far : depth range of the frame (world units along the view direction)
-    shadow_ms : milliseconds of the shadow pass (0 without shadows)
-    light_window : the light's window of the shadow map, None without shadows
+    shadow_ms : milliseconds of the shadow pass (0 without shadows, and 0 when the map
+        was reused)
+    light_window : the light's window of the shadow map (relative to the eye), None
+        without shadows
     upload_ms : CPU milliseconds spent uploading geometry inside the render call (a mesh
         for GS; 0 for the ray caster, whose records are timed by ``pack_ms``)
     ssaa : samples per pixel side the frame was drawn with; resolve_ms : CPU milliseconds
         averaging them down (0 without supersampling)
+    shadow_cached : the shadow map was not drawn for this frame but reused: nothing it
+        depends on changed since it was drawn (:class:`plantgen.gl.frame.ShadowKey`)
     """
 
     passes: list
@@ -78,6 +83,7 @@ class RenderStats:
     upload_ms: float = 0.0
     ssaa: int = 1
     resolve_ms: float = 0.0
+    shadow_cached: bool = False
 
 
 @dataclass(frozen=True)

@@ -217,12 +217,16 @@ class Renderers:
 
 
 def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditions: bool,
-                 passes: dict | None = None) -> dict:
+                 passes: dict | None = None, reused: dict | None = None) -> dict:
     """Interleaved timing: one warm-up frame each, then ``frames`` rounds rendering every
-    config once per round, round i at animation time (i + 1) / 30 s.
+    config once per round, round i at animation time (i + 1) / 30 s. A still scene's
+    shadow map is drawn by each config's warm-up and reused by its timed frames (the
+    renderers keep it while nothing it depends on changes); an animated scene's moves, so
+    each frame draws its map.
 
     Returns {key: [ms, ...]} (empty for a level over the budget); ``passes``, if given,
-    receives {key: the render passes of the warm-up frame}.
+    receives {key: the render passes of the warm-up frame}, ``reused`` {key: timed frames
+    that reused their shadow map}.
     """
     samples = {c.key: [] for c in configs}
     alive = []
@@ -236,8 +240,10 @@ def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditio
     for i in range(frames):
         t = animation_time(i + 1)
         for c in alive:
-            _, ms = renderers.render_config(c, camera, conditions=conditions, t=t)
+            res, ms = renderers.render_config(c, camera, conditions=conditions, t=t)
             samples[c.key].append(ms)
+            if reused is not None:
+                reused[c.key] = reused.get(c.key, 0) + int(res.stats.shadow_cached)
     return samples
 
 

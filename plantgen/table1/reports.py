@@ -284,9 +284,11 @@ def _header_lines(results: dict) -> list[str]:
             f"({o['max_triangles']:,}, --max-triangles); 'm{UNMATCHED}': not matched, the best "
             f"measured level is shown and timed, and the ratio beside it is not at matched quality "
             "(see the notes). RC+R/GS+R: fps ratio of the Table 1 run, where all four methods run "
-            "the scene's passes (shadow map and ground where it lists shadows; an animated scene posed "
-            "and skinned on the GPU in every frame: records by a compute pass for RC, a mesh built once "
-            "and posed by the vertex shader for GS; a leafy model's leaves, "
+            "the scene's passes (shadow map and ground where it lists shadows: a still scene's map is "
+            "drawn by the warm-up frame and reused by the timed ones, as a viewer's would be, an animated "
+            "scene's drawn in every frame; an animated scene posed and skinned on the GPU in every frame: "
+            "records by a compute pass for RC, a mesh built once and posed by the vertex shader for GS; "
+            "a leafy model's leaves, "
             "rasterised the same way by all four; the errors are of the frusta alone, as the float64 "
             "reference casts no leaves). Paper: 8800 GTX, 2009.", ""]
 

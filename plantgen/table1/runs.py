@@ -172,8 +172,9 @@ def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -
     """The four methods timed in one interleaved run under the paper's conditions.
     Returns {"rc" | "rcr" | "gs" | "gsr": results entry or None}."""
     passes: dict = {}
+    reused: dict = {}
     samples = time_configs(renderers, table.timed, renderers.model.camera, frames,
-                           conditions=True, passes=passes)
+                           conditions=True, passes=passes, reused=reused)
     measured = _measured(curve)
 
     def entry(cfg):
@@ -181,7 +182,8 @@ def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -
             return None
         row = measured[cfg.key]
         return {"key": cfg.key, **timing_fields(samples[cfg.key]),
-                "passes": passes.get(cfg.key, []), **{k: row[k] for k in (*ERROR_FIELDS, *WORK_FIELDS)}}
+                "passes": passes.get(cfg.key, []), "shadow_reused": reused.get(cfg.key, 0),
+                **{k: row[k] for k in (*ERROR_FIELDS, *WORK_FIELDS)}}
 
     return {short: entry(cfg) for short, cfg in table.configs.items()}
 

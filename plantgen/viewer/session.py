@@ -139,7 +139,7 @@ class ViewerSession:
         self.frames: deque[FrameStats] = deque(maxlen=HUD_FRAMES)
         self.last = None                       # the last RenderResult
         self.dirty = True
-        self._frusta_key = self._frusta = None
+        self._frusta_key = self._frusta = self._leaves = None
         self._mesh_key = self._mesh = None
         self._stream = self._skinned = None    # a playing animation's GPU pose, its skinned mesh
         self._shadow_box = None
@@ -175,7 +175,15 @@ class ViewerSession:
         key = self._frusta_key
         if key is None or key[0] is not self.model or key[1] != t:     # the objects, not their ids
             self._frusta, self._frusta_key = self.model.frusta_at(t), (self.model, t)
+            self._leaves = self.model.anim.leaves_at(t) if self.model.animated else None
         return self._frusta
+
+    def leaves(self):
+        """An animated model's leaves at the current time, posed once per time (the same
+        object while the time holds, so the shadow map drawn with them is reused); None for
+        a still model (its leaves come with the staging)."""
+        self.frusta()
+        return self._leaves
 
     def mesh(self, frusta):
         """The GS / GS+R tessellation of ``frusta`` at the current level (cached)."""
@@ -270,7 +278,7 @@ class ViewerSession:
         if shadow is not None and self.playing and self.model.animated:
             args["shadow_box"] = self._playing_shadow_box()
         if self.model.animated:
-            args["leaves"] = self.model.anim.leaves_at(self.t)     # moved with their branches
+            args["leaves"] = self.leaves()     # moved with their branches
         if self.method.startswith("RC"):
             result = self.raycaster.render(frusta, settings=settings, **args)
         else:
@@ -553,7 +561,7 @@ class ViewerSession:
         count = 0 if leaves is None else len(leaves)
         leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
         lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments{leafy} | {method} | shadows "
-                  f"{'on' if self.shadows else 'off'} | ssaa {self.ssaa}", "info"),
+                  f"{self._shadow_text()} | ssaa {self.ssaa}", "info"),
                  (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
         if self.model.animated:
             lines.append((f"t = {self.t:.2f} s {'playing' if self.playing else 'paused'} (Space, , .)", "info"))
@@ -562,6 +570,16 @@ class ViewerSession:
         elif self.status:
             lines.append((self.status, "status"))
         return lines
+
+    def _shadow_text(self) -> str:
+        """``off``, or ``on`` and how the last frame had its map: drawn (in how many ms) or
+        reused (a camera move does not draw it again)."""
+        if not self.shadows:
+            return "off"
+        stats = self.last.stats if self.last is not None else None
+        if stats is None or "shadow" not in stats.passes:
+            return "on"
+        return "on (map reused)" if stats.shadow_cached else f"on (map drawn, {stats.shadow_ms:.0f} ms)"
 
     def release(self) -> None:
         """Free the renderers' GL objects."""

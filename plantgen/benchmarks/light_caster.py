@@ -1,0 +1,210 @@
+"""The light's relief caster: what the shadow pass costs against the plain one, and how far
+its depth map lies from the float64 reference, for every shipped scene with shadows, all
+in one run.
+
+Run as ``python -m plantgen.benchmarks.light_caster [SCENE ...] [--size 1024x768]
+[--frames 5] [--rays 20000] [--samples 2048] [--out light.md]`` (default: every shipped
+scene whose effects list shadows). ``python -m plantgen.benchmarks.ablation`` prints the
+same table for the shadowed models it measures.
+
+Casters, each timed in the scene's own frame (its ground, leaves and 2048² map; the map
+drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by frame:
+
+* ``plain``: RC's light pass, the frusta's analytic hit (no relief): the denominator;
+* ``bisect``: the relief caster before (the eye's march at the map's footprint: an angle
+  per sample, bisection to half a texel);
+* ``secant``: the relief caster now, the default (``shaders/light_march.glsl``: (u, v)
+  interpolated along the ray, one texel fetch a height, regula falsi to half a texel),
+  and the same with each accuracy knob (``--shadow-march-density``,
+  ``--shadow-march-precision``) moved, its error beside its time.
+
+Error: the light's rays through ``--rays`` texels picked at random where any caster drew
+(and two texels around) are cast by :func:`plantgen.geometry.reference.intersect_frusta`
+(float64, the relief marched with ``--samples`` samples and bisected to 1e-9 of the row)
+into the same frusta (no ground, no leaves); per caster: the share of those texels covered
+by one of the map and the reference only, and, where both hit, the share of texels whose
+depth is more than half a texel (the receivers' bias) and two texels off, and the median
+error in texels. The plain caster's row shows what casting no relief costs in accuracy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .._resources import grammars_dir
+from ..files import read_yaml, write_atomically
+from ..geometry.reference import intersect_frusta
+from ..gl.context import renderer_name
+from ..gl.raycast import Raycaster
+from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
+from ..table1.models import BenchModel, load_model
+from .arguments import image_size
+
+#: The float64 reference's relief samples a row (its map of the relief caster is the truth
+#: the casters are measured against).
+REFERENCE_SAMPLES = 2048
+
+__all__ = ["CASTERS", "Caster", "shadowed_scenes", "measure_scene", "markdown", "main"]
+
+
+@dataclass(frozen=True)
+class Caster:
+    """One light pass: its label, the ray caster's settings (relief on or off) and the map's."""
+
+    label: str
+    settings: RaycastSettings
+    shadows: ShadowSettings
+
+
+_MAP = ShadowSettings(cache=False)
+_RELIEF = RaycastSettings(relief=True)
+#: The casters compared: the plain one, the relief caster before and now, and now with
+#: each accuracy knob moved.
+CASTERS = (
+    Caster("plain", RaycastSettings(), _MAP),
+    Caster("bisect", _RELIEF, replace(_MAP, march="bisect")),
+    Caster("secant", _RELIEF, _MAP),
+    Caster("secant, density 0.25", _RELIEF, replace(_MAP, march_density=0.25)),
+    Caster("secant, density 1", _RELIEF, replace(_MAP, march_density=1.0)),
+    Caster("secant, precision 0.25", _RELIEF, replace(_MAP, march_precision=0.25)),
+    Caster("secant, precision 1", _RELIEF, replace(_MAP, march_precision=1.0)),
+)
+
+
+def shadowed_scenes() -> list[str]:
+    """The shipped scenes whose effects list shadows, by name."""
+    names = []
+    for path in sorted(grammars_dir().glob("*.yaml")):
+        doc = read_yaml(path)
+        if isinstance(doc, dict) and "shadows" in (doc.get("effects") or ()):
+            names.append(path.stem)
+    return names
+
+
+def _time(caster: Raycaster, model: BenchModel, casters, frames: int) -> dict:
+    """Median shadow-pass ms of each caster in the scene's frame, timed in alternation after
+    one warm-up each."""
+    def render(c: Caster):
+        return caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, model.ground,
+                             shadows=c.shadows, leaves=model.leaves).stats.shadow_ms
+    for c in casters:
+        render(c)
+    samples: dict = {c.label: [] for c in casters}
+    for _ in range(frames):
+        for c in casters:
+            samples[c.label].append(render(c))
+    return {k: statistics.median(v) for k, v in samples.items()}
+
+
+def _maps(caster: Raycaster, model: BenchModel, casters) -> tuple[dict, object]:
+    """Each caster's light depth map of the frusta alone (no ground, no leaves), and the
+    light's window (relative to the eye)."""
+    maps = {}
+    for c in casters:
+        caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, shadows=c.shadows)
+        maps[c.label] = caster.shadow_depths().astype(np.float64)
+    return maps, caster.last_light_window
+
+
+def _reference(model: BenchModel, maps: dict, window, rays: int, samples: int):
+    """(texel rows, columns, reference depths in [0, 1], 1 for a miss) of ``rays`` texels
+    picked where any map drew, or two texels around, cast in float64."""
+    res = len(next(iter(maps.values())))
+    drawn = np.zeros((res, res), bool)
+    for depths in maps.values():
+        drawn |= depths < 1.0
+    near = drawn.copy()
+    for axis in (0, 1):
+        for shift in (-2, -1, 1, 2):
+            near |= np.roll(drawn, shift, axis=axis)
+    candidates = np.flatnonzero(near)
+    pick = np.random.default_rng(0).choice(candidates, size=min(rays, len(candidates)), replace=False)
+    rows, cols = np.divmod(pick, res)
+    x, y = 2 * (cols + 0.5) / res - 1, 2 * (rows + 0.5) / res - 1
+    origins = (np.asarray(model.camera.eye, np.float64) + window.origin + window.depth[0] * window.forward
+               + x[:, None] * window.half[0] * window.right + y[:, None] * window.half[1] * window.up)
+    hits = intersect_frusta(model.frusta, origins, np.broadcast_to(window.forward, origins.shape), relief=True,
+                            relief_samples=samples)
+    span = window.depth[1] - window.depth[0]
+    return rows, cols, np.where(hits.hit, hits.t / span, 1.0)
+
+
+def _errors(depths: np.ndarray, reference, window) -> dict:
+    """The map's errors at the reference's texels (see the module's docstring)."""
+    rows, cols, ref = reference
+    got = depths[rows, cols]
+    both = (got < 1.0) & (ref < 1.0)
+    texels = np.abs(got - ref)[both] * (window.depth[1] - window.depth[0]) / window.texel_size(len(depths))
+    return {"coverage": float(np.mean((got < 1.0) != (ref < 1.0))),
+            "half_texel": float(np.mean(texels > 0.5)) if texels.size else 0.0,
+            "two_texels": float(np.mean(texels > 2.0)) if texels.size else 0.0,
+            "median_texels": float(np.median(texels)) if texels.size else 0.0}
+
+
+def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster: Raycaster,
+                  casters=CASTERS) -> list[dict]:
+    """One row per caster: shadow-pass ms, its ratio to the plain pass's and the errors."""
+    model = load_model(name, size)
+    ms = _time(caster, model, casters, frames)
+    maps, window = _maps(caster, model, casters)
+    reference = _reference(model, maps, window, rays, samples)
+    plain, before = ms[casters[0].label], ms.get("bisect")
+    return [{"scene": model.name, "caster": c.label, "shadow_ms": ms[c.label], "over_plain": ms[c.label] / plain,
+             "over_bisect": ms[c.label] / before if before else float("nan"),
+             **_errors(maps[c.label], reference, window)} for c in casters]
+
+
+def markdown(rows: list[dict], size, frames: int, rays: int, samples: int) -> str:
+    lines = [f"# The light's relief caster ({renderer_name()})", "",
+             f"{size[0]}x{size[1]} frame, {ShadowSettings().resolution}² map drawn every frame, shadow-pass ms "
+             f"median of {frames} frames timed in alternation. Error against the float64 reference at {rays:,} "
+             f"texels ({samples} samples a row, bisected): coverage = texels one of map and reference covers; "
+             "> ½ and > 2 texels: depth off by more (where both hit); median in texels.", "",
+             "| scene | caster | shadow ms | ÷ plain | ÷ bisect | coverage | > ½ texel | > 2 texels | median |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['scene']} | {r['caster']} | {r['shadow_ms']:.1f} | {r['over_plain']:.2f}x | "
+              f"{r['over_bisect']:.2f}x | {r['coverage'] * 100:.3f} % | {r['half_texel'] * 100:.3f} % | "
+              f"{r['two_texels'] * 100:.3f} % | {r['median_texels']:.3f} |" for r in rows]
+    return "\n".join(lines) + "\n\n" + summary(rows) + "\n"
+
+
+def summary(rows: list[dict]) -> str:
+    """The 'relief shadow pass ÷ plain shadow pass' line, before and after, per scene."""
+    by_scene: dict = {}
+    for r in rows:
+        by_scene.setdefault(r["scene"], {})[r["caster"]] = r
+    parts = [f"{scene} {c['bisect']['over_plain']:.2f}x -> {c['secant']['over_plain']:.2f}x "
+             f"({c['bisect']['shadow_ms']:.0f} -> {c['secant']['shadow_ms']:.0f} vs {c['plain']['shadow_ms']:.0f} ms)"
+             for scene, c in by_scene.items() if {"plain", "bisect", "secant"} <= set(c)]
+    return "Relief shadow pass ÷ plain shadow pass, before (bisect) -> after (secant): " + ", ".join(parts)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m plantgen.benchmarks.light_caster",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("scenes", nargs="*", help="scene names (default: every shipped scene with shadows)")
+    parser.add_argument("--size", type=image_size, default=DEFAULT_SIZE)
+    parser.add_argument("--frames", type=int, default=5)
+    parser.add_argument("--rays", type=int, default=20000, help="texels checked against the float64 reference")
+    parser.add_argument("--samples", type=int, default=REFERENCE_SAMPLES, help="the reference's relief samples a row")
+    parser.add_argument("--out", type=Path, help="write the Markdown table here")
+    args = parser.parse_args(argv)
+    caster, rows = Raycaster(), []
+    for name in args.scenes or shadowed_scenes():
+        print(f"{name} ...", file=sys.stderr, flush=True)
+        rows += measure_scene(name, args.size, args.frames, args.rays, args.samples, caster)
+    text = markdown(rows, args.size, args.frames, args.rays, args.samples)
+    print(text)
+    if args.out is not None:
+        write_atomically(args.out, lambda path: Path(path).write_text(text))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
