@@ -38,7 +38,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import write_atomically
 from ..geometry.reference import render_reference
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
@@ -47,7 +46,7 @@ from ..table1.eval_window import eval_camera
 from ..table1.models import load_model
 from ..table1.paper import TABLE1_MODELS
 from ..table1.quality import image_error
-from .arguments import image_size
+from .arguments import image_size, report
 from .light_caster import CASTERS, REFERENCE_SAMPLES, Caster, measure_scene
 from .light_caster import markdown as light_markdown
 
@@ -162,11 +161,7 @@ def main(argv=None) -> int:
                                                  light_only=args.light_only)
         rows += model_rows
         lights += model_lights
-    text = markdown(rows, args.size, args.frames, lights)
-    print(text)
-    if args.out is not None:
-        write_atomically(args.out, lambda path: Path(path).write_text(text))
-    return 0
+    return report(markdown(rows, args.size, args.frames, lights), args.out)
 
 
 if __name__ == "__main__":

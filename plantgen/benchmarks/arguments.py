@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._resources import grammars_dir
+from ..files import write_atomically
 
-__all__ = ["image_size", "shipped_model_paths"]
+__all__ = ["image_size", "shipped_model_paths", "report"]
 
 
 def image_size(text: str) -> tuple[int, int]:
@@ -19,3 +20,12 @@ def shipped_model_paths() -> list[Path]:
     """Every shipped grammar and scene (``grammars/*.yaml``), sorted by path: the default
     model list of the scripts that take ``MODEL ...``."""
     return sorted(grammars_dir().glob("*.yaml"))
+
+
+def report(text: str, out: Path | None) -> int:
+    """Print a benchmark's Markdown ``text`` and, with ``out``, write it there whole
+    (atomically). Returns the script's exit status (0)."""
+    print(text)
+    if out is not None:
+        write_atomically(out, lambda path: Path(path).write_text(text))
+    return 0

@@ -38,13 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from .._resources import grammars_dir
-from ..files import read_yaml, write_atomically
+from ..files import read_yaml
 from ..geometry.reference import intersect_frusta
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from ..table1.models import BenchModel, load_model
-from .arguments import image_size
+from .arguments import image_size, report
 
 #: The float64 reference's relief samples a row (its map of the relief caster is the truth
 #: the casters are measured against).
@@ -199,11 +199,7 @@ def main(argv=None) -> int:
     for name in args.scenes or shadowed_scenes():
         print(f"{name} ...", file=sys.stderr, flush=True)
         rows += measure_scene(name, args.size, args.frames, args.rays, args.samples, caster)
-    text = markdown(rows, args.size, args.frames, args.rays, args.samples)
-    print(text)
-    if args.out is not None:
-        write_atomically(args.out, lambda path: Path(path).write_text(text))
-    return 0
+    return report(markdown(rows, args.size, args.frames, args.rays, args.samples), args.out)
 
 
 if __name__ == "__main__":
