@@ -775,10 +775,10 @@ def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None) -> SceneExt
 def _export_timeline(grown: GrowResult, fmt, keyframes: KeyframeSettings | None, input_path,
                      summary: dict) -> Timeline | None:
     """The key times of the sway an export writes: a scene that lists ``animation`` and
-    sways, written in a format that animates; else None (a warning in ``summary`` says
+    sways, written in a format that animates, unless ``keyframes.sway`` is off; else None (a warning in ``summary`` says
     when a format without animation leaves a sway out)."""
-    scene = grown.scene
-    if scene is None or "animation" not in scene.effects:
+    scene, keyframes = grown.scene, keyframes or KeyframeSettings()
+    if scene is None or "animation" not in scene.effects or not keyframes.sway:
         return None
     sways = [i.motion for i in scene.instances]
     if not fmt.animation:
@@ -786,7 +786,7 @@ def _export_timeline(grown: GrowResult, fmt, keyframes: KeyframeSettings | None,
             summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} holds no animation: the scene's sway is "
                                    "not written, its plants stand at rest (glTF and USD carry the sway)")
         return None
-    return sway_timeline(sways, keyframes or KeyframeSettings(), input_path)
+    return sway_timeline(sways, keyframes, input_path)
 
 
 def _animation_counts(plants: list[Plant], timeline: Timeline | None) -> dict | None:

@@ -301,10 +301,13 @@ class MeshSettings:
 @dataclass(frozen=True)
 class KeyframeSettings:
     """The sway an export writes as an animation (glTF, USD; a scene that lists
-    ``animation``): ``rate`` keyframes per second, interpolated linearly (slerp) by the
-    players, over ``duration`` seconds from t = 0 (None: one period of the scene's sway,
-    the common period of its plants', so that the animation loops)."""
+    ``animation``; ``sway`` False: none, the plants at rest): ``rate`` keyframes per
+    second, interpolated linearly (slerp) by the players, over ``duration`` seconds from
+    t = 0 (None: one period of the scene's sway, the common period of its plants', so that
+    the animation loops)."""
 
+    sway: bool = knob(True, "--sway", "Write a swaying scene's sway as a looping animation (glTF, USD); "
+                      "--no-sway writes its plants at rest, as a still file.", kind="bool")
     rate: float = knob(24.0, "--key-rate", "Keyframes per second of the sway a glTF or USD export writes "
                        "(interpolated linearly; see the README for the error).", lo=0, lo_open=True, hi=1000,
                        metavar="HZ")

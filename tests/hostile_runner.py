@@ -6,7 +6,8 @@ Used by ``test_hostile.py`` as a subprocess::
 
 ``CASES.json`` holds a list of ``{"argv": [...]}``. The process first limits its address
 space (``RLIMIT_AS``, default 1 GiB, ``--memory`` bytes), then runs each case in-process
-through ``plantgen.cli.main`` with its stdout and stderr captured, timing it, and records
+through ``plantgen.cli.main`` with its stdout and stderr captured, timing it (wall and
+this process's CPU seconds: on a shared machine the CPU time is what the case cost), and records
 every file the case opens (an audit hook on ``open``). It prints one JSON list: per case
 the exit status, stdout, stderr, seconds and the files opened outside Python's own
 installation.
@@ -53,7 +54,7 @@ def main(argv: list[str]) -> int:
         out, err = io.StringIO(), io.StringIO()
         opened.clear()
         code = 0
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         recording[0] = True
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
@@ -64,7 +65,8 @@ def main(argv: list[str]) -> int:
                 code = f"escaped: {exc.__class__.__name__}: {exc}"
         recording[0] = False
         report.append({"argv": case["argv"], "code": code, "stdout": out.getvalue(), "stderr": err.getvalue(),
-                       "seconds": time.perf_counter() - start, "opened": sorted(set(opened))})
+                       "seconds": time.perf_counter() - start,
+                       "cpu_seconds": time.process_time() - cpu_start, "opened": sorted(set(opened))})
     sys.stdout.write(json.dumps(report))
     return 0
 

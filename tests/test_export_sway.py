@@ -147,6 +147,34 @@ def test_the_dancing_cacti_glb_holds_one_looping_sway(tmp_path):
         assert skin["skeleton"] in roots and "translation" in doc["nodes"][skin["skeleton"]]
 
 
+def test_no_sway_writes_the_swaying_scene_still_where_its_copies_stand(tmp_path):
+    """``--no-sway``: no skin and no animation, and every cactus placed by its node as in
+    a still scene (the skins' root nodes carry no placement, so a reader that ignores
+    skins would stack them): the file's plant vertices span the scene's grid as the
+    rendered skeleton's do."""
+    code, out, err = run_cli("export", "dancing_cacti", "-o", tmp_path / "d.glb", "--no-sway")
+    assert code == 0, err
+    assert "sway:" not in out
+    doc, _ = glb_json(tmp_path / "d.glb")
+    assert "animations" not in doc and "skins" not in doc
+    assert not any("JOINTS_0" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
+    import trimesh
+
+    scene = trimesh.load(tmp_path / "d.glb", force="scene")
+    placed_parts = []
+    for node in scene.graph.nodes_geometry:
+        matrix, name = scene.graph[node]
+        if "ground" not in name.lower():
+            vertices = np.asarray(scene.geometry[name].vertices, dtype=np.float64)
+            placed_parts.append(vertices @ matrix[:3, :3].T + matrix[:3, 3])
+    plants = np.vstack(placed_parts)
+    skeleton = grow_file("dancing_cacti").skeleton
+    lo, hi = np.minimum(skeleton.start, skeleton.end).min(0), np.maximum(skeleton.start, skeleton.end).max(0)
+    spread = hi - lo
+    got = plants.max(0) - plants.min(0)
+    assert np.all(got[[0, 2]] > 0.9 * spread[[0, 2]])     # the grid's width in x and z, not one cactus's
+
+
 def test_a_format_without_animation_says_it_leaves_the_sway_out(tmp_path):
     code, out, err = run_cli("export", "dancing_cacti", "-o", tmp_path / "d.obj")
     assert code == 0 and ".obj holds no animation" in err

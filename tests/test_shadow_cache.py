@@ -203,6 +203,16 @@ def test_the_key_compares_geometry_by_identity_and_the_rest_by_value(frusta):
     assert key != ShadowKey(("a", 1), (frusta, None), GROUND, 256, (0.0, 0.0, 0.0), window.shifted((0, 1e-9, 0)))
 
 
+def test_a_frusta_cannot_be_changed_in_place_under_a_kept_map(frusta):
+    """The key holds the geometry by identity, so the geometry must be a value: writing into
+    a Frusta's rows is refused (a changed copy is a new object, and draws its map again)."""
+    for name in ("base", "axis", "r1", "plane_hi", "material", "parent_row"):
+        with pytest.raises(ValueError):
+            getattr(frusta, name)[...] = 0
+    moved = replace(frusta, base=frusta.base + 1.0)
+    assert moved is not frusta and not moved.base.flags.writeable
+
+
 # ---------------------------------------------------------------- the paths that redraw
 def test_render_time_frames_draws_the_map_once_and_says_so(gl_ctx, tmp_path):
     from _cli import run_cli
@@ -219,6 +229,7 @@ def test_render_time_frames_draws_the_map_once_and_says_so(gl_ctx, tmp_path):
     code, stdout, stderr = run_cli("render", "well", "-o", tmp_path / "w.png", "--size", "48x36",
                                    "--shadow-res", "128", "--time-frames", "2", "--no-shadow-cache")
     assert code == 0 and "shadow map: drawn 3 times" in stdout and "reused" not in stdout
+    assert "every draw (--no-shadow-cache)" in stdout and "geometry moves" not in stdout   # the cause, not motion
 
 
 def test_an_animation_whose_rows_move_draws_its_map_every_frame(gl_ctx):

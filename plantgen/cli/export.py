@@ -82,8 +82,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
     A scene that lists the animation effect and sways is written with its sway by glTF
     (a skin per plant copy, a joint per segment, a rotation channel per joint) and USD
     (UsdSkel): keys at --key-rate a second over one period of the sway, so the
-    animation loops (or over --duration seconds); the other formats write the plants at
-    rest (a warning says so).
+    animation loops (or over --duration seconds); --no-sway, and the other formats,
+    write the plants at rest (a warning says so for the formats).
 
     \b
     Examples:

@@ -91,14 +91,16 @@ def render(input: Path, output: Path, camera_out, depth_out, seed, iterations, t
     print_report(report)
 
 
-def shadow_line(use: ShadowUse) -> str:
+def shadow_line(use: ShadowUse, cache: bool = True) -> str:
     """How the render paid for its shadow map: drawn how often (and its median ms), reused
-    by how many draws."""
+    by how many draws; why every draw drew it (``cache`` off, or the geometry moves)."""
     drawn = "drawn once" if use.drawn == 1 else f"drawn {use.drawn} times"
     text = f"shadow map: {drawn} ({use.ms:.1f} ms{'' if use.drawn == 1 else ' median'})"
     if use.reused:
         return text + f", reused by {use.reused} draw{'s' if use.reused > 1 else ''} (the light and the geometry held)"
-    return text + (", every draw (the geometry moves)" if use.drawn > 1 else "")
+    if use.drawn <= 1:
+        return text
+    return text + (", every draw (the geometry moves)" if cache else ", every draw (--no-shadow-cache)")
 
 
 def print_report(report: RenderReport) -> None:
@@ -111,7 +113,7 @@ def print_report(report: RenderReport) -> None:
     click.echo("effects: " + (", ".join(report.effects) or "none")
                + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
     if report.shadow_use is not None:
-        click.echo(shadow_line(report.shadow_use))
+        click.echo(shadow_line(report.shadow_use, report.shadows.cache))
     size = f"{cam.width}x{cam.height}"
     if report.ssaa > 1:
         n = report.ssaa

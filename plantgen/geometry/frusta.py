@@ -153,12 +153,20 @@ class SkinReport:
         return s
 
 
+def _read_only(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of ``arr``: a Frusta's rows are a value (renderers key kept work,
+    such as a shadow map, on the object), so writing into them in place is refused."""
+    view = arr.view()
+    view.setflags(write=False)
+    return view
+
+
 @dataclass(frozen=True, eq=False)
 class Frusta:
     """The rows of the contract (see the module docstring), with ``material_names``,
     ``parent_row`` (default: every row starts a chain) and ``report``; ``open_lo`` and
-    ``open_hi`` are derived from ``parent_row`` at construction. Frozen: a changed copy is
-    ``dataclasses.replace(frusta, ...)``."""
+    ``open_hi`` are derived from ``parent_row`` at construction. Frozen, its arrays read-only
+    views: a changed copy is ``dataclasses.replace(frusta, ...)``."""
 
     base: np.ndarray
     axis: np.ndarray
@@ -191,7 +199,7 @@ class Frusta:
             want = (n,) + _ROW_SHAPES.get(f, ())
             if arr.shape != want:
                 raise ValueError(f"Frusta.{f} has shape {arr.shape}, expected {want}")
-            object.__setattr__(self, f, arr)
+            object.__setattr__(self, f, _read_only(arr))
         part = self.v_part
         if n and not (np.all(part[:, 0] >= 0) and np.all(part[:, 0] < part[:, 1])
                       and part[:, 1].max() <= MAX_V_SLOTS):
@@ -202,9 +210,9 @@ class Frusta:
             raise ValueError(f"Frusta.parent_row has shape {parent_row.shape}, expected {(n,)}")
         open_hi = np.ones(n, dtype=bool)
         open_hi[parent_row[parent_row >= 0]] = False
-        object.__setattr__(self, "parent_row", parent_row)
-        object.__setattr__(self, "open_lo", parent_row < 0)
-        object.__setattr__(self, "open_hi", open_hi)
+        object.__setattr__(self, "parent_row", _read_only(parent_row))
+        object.__setattr__(self, "open_lo", _read_only(parent_row < 0))
+        object.__setattr__(self, "open_hi", _read_only(open_hi))
         object.__setattr__(self, "material_names", tuple(str(m) for m in self.material_names))
 
     def __len__(self) -> int:
