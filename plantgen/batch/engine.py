@@ -11,7 +11,6 @@ Ctrl-C included, and a re-run skips every plant it lists as done.
 
 from __future__ import annotations
 
-import json
 import os
 import statistics
 import time
@@ -24,6 +23,7 @@ from ..errors import PlantgenError
 from ..limits import Limits
 from .manifest import Manifest
 from .plant import make_plant, plant_row, relative_files
+from .schema import METRIC_COLUMNS
 from .spec import BatchSpec
 
 __all__ = ["BatchResult", "run_batch", "dask_client"]
@@ -78,7 +78,7 @@ def dask_client(scheduler: str | None, workers: int | None):
 def _prepare(spec: BatchSpec, folder: Path) -> tuple[Manifest, list]:
     folder.mkdir(parents=True, exist_ok=True)
     manifest = Manifest(folder)
-    todo = [t for t in spec.tasks if not manifest.done(t, folder)]
+    todo = [t for t in spec.tasks if not manifest.done(t, spec.outputs, folder)]
     kinds = {k for t in todo[:1] for k in relative_files(t, spec.outputs)}
     for kind in kinds:
         (folder / kind).mkdir(exist_ok=True)
@@ -163,18 +163,15 @@ def summary_lines(result: BatchResult, rows: list) -> list[str]:
              f"{result.skipped:,} already done; {result.seconds:.1f} s, {result.rate:.2f} plants/s",
              f"manifest: {result.manifest}"]
     ok = [r for r in rows if r.get("status") == "ok"]
-    columns: dict[str, list[float]] = {"segments": [float(r["segments"]) for r in ok],
-                                       "height": [float(r["height"]) for r in ok]}
-    for r in ok:
-        for k, v in json.loads(r.get("metrics") or "{}").items():
-            if isinstance(v, (int, float)) and not isinstance(v, bool):
-                columns.setdefault(k, []).append(float(v))
+    columns = {k: [float(r[k]) for r in ok if r.get(k) is not None] for k in ("segments", *METRIC_COLUMNS)}
     if ok:
         lines.append(f"{'metric':<22}{'p5':>12}{'median':>12}{'p95':>12}")
         for k, values in columns.items():
             if len(values) >= 1:
+                unit = METRIC_COLUMNS.get(k, ("", ""))[1]
                 qs = statistics.quantiles(values, n=20) if len(values) > 1 else [values[0]] * 19
-                lines.append(f"{k:<22}{qs[0]:>12.4g}{statistics.median(values):>12.4g}{qs[-1]:>12.4g}")
+                name = f"{k} ({unit})" if unit else k
+                lines.append(f"{name:<22}{qs[0]:>12.4g}{statistics.median(values):>12.4g}{qs[-1]:>12.4g}")
     errors = [r for r in result.rows if r.get("status") != "ok"][:5]
     lines += [f"failed: {r['id']}: {r['error']}" for r in errors]
     return lines

@@ -13,7 +13,6 @@ ray caster once, on its first render (:func:`_caster`).
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -31,9 +30,10 @@ from ..images import write_png
 from ..limits import Limits
 from ..metrics import tree_metrics
 from ..pipeline import check_export_size, check_finite_mesh, grow_file, model_leaves, skin_model
+from .schema import METRIC_COLUMNS, SINGLE_FILE_KINDS, empty_row
 from .spec import Outputs, PlantTask
 
-__all__ = ["make_plant", "plant_row", "row_fields", "relative_files", "view_direction", "view_camera"]
+__all__ = ["make_plant", "plant_row", "relative_files", "view_direction", "view_camera"]
 
 _CASTER: list = []          # this process's Raycaster, made on first use
 
@@ -70,12 +70,10 @@ def relative_files(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
     return {kind: names for kind, on, names in kinds if on}
 
 
-
-
-def row_fields() -> tuple[str, ...]:
-    """The manifest's columns, in order (see :mod:`plantgen.batch.manifest`)."""
-    return ("id", "grammar", "index", "seed", "defines", "status", "error", "files", "segments", "tips",
-            "height", "bbox", "metrics", "timings")
+def files_column(files: dict[str, list[str]]) -> dict:
+    """The manifest's ``files`` struct of :func:`relative_files`: a path for a kind with one
+    file per plant, a list for a kind with one per view."""
+    return {k: (v[0] if k in SINGLE_FILE_KINDS else v) for k, v in files.items()}
 
 
 def _save_npy(path, array) -> None:
@@ -153,27 +151,33 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, tim
     timings["glb"] = time.perf_counter() - t0
 
 
-def _measure(skeleton) -> tuple[dict, np.ndarray]:
-    """(tree metrics by name, with the branch count per order; (2, 3) geometry bounds)."""
+def measure(skeleton) -> dict:
+    """The manifest's figures of a skeleton (:mod:`plantgen.batch.schema`): segments, tips,
+    the tree metrics in metres (a model unit taken as a metre), the branch count per order
+    and the geometry's box."""
     topology = branches(skeleton)
     metrics = tree_metrics(skeleton, topology=topology)
-    out = metrics.as_dict()
-    out["branches_per_order"] = np.bincount(topology.order).tolist() if len(topology) else []
-    return out, metrics.bounds
+    figures = metrics.as_dict(metres=True)
+    row = {k: figures[k] for k in METRIC_COLUMNS}
+    row.update(segments=len(skeleton), tips=len(skeleton.tips),
+               branches_per_order=np.bincount(topology.order).tolist() if len(topology) else [])
+    for end, values in zip(("min", "max"), metrics.bounds, strict=True):
+        row.update({f"bbox_{end}_{axis}": float(v) for axis, v in zip("xyz", values, strict=True)})
+    return row
 
 
 def plant_row(task: PlantTask, files: dict, error: str = "") -> dict:
-    """A manifest row of ``task`` before it is measured: ``ok`` with ``files``, or
-    ``failed`` with its one-line ``error``."""
-    return {"id": task.id, "grammar": task.name, "index": task.index, "seed": task.seed,
-            "defines": json.dumps(dict(task.defines), sort_keys=True), "status": "failed" if error else "ok",
-            "error": error, "files": json.dumps(files, sort_keys=True), "segments": 0, "tips": 0,
-            "height": float("nan"), "bbox": "[]", "metrics": "{}", "timings": "{}"}
+    """A manifest row of ``task`` before it is measured (figures null): ``ok`` with
+    ``files`` (kind -> relative paths), or ``failed`` with its one-line ``error``."""
+    row = empty_row()
+    row.update(id=task.id, grammar=task.name, index=task.index, seed=task.seed, defines=list(task.defines),
+               status="failed" if error else "ok", error=error, files=files_column(files))
+    return row
 
 
 def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None) -> dict:
     """Grow ``task``'s plant, write its ``outputs`` under ``out_dir`` and return its
-    manifest row (a dict of :func:`row_fields`; lists and mappings as JSON text)."""
+    manifest row (a dict of the columns of :mod:`plantgen.batch.schema`)."""
     root = Path(out_dir)
     timings: dict = {}
     row = plant_row(task, relative_files(task, outputs))
@@ -195,13 +199,11 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
             if outputs.views:
                 _render_views(task, outputs, frusta, skeleton, leaves, root, timings)
         t0 = time.perf_counter()
-        metrics, (lo, hi) = _measure(skeleton)
+        row.update(measure(skeleton))
         timings["metrics"] = time.perf_counter() - t0
-        row.update(segments=len(skeleton), tips=len(skeleton.tips), height=float(hi[1] - lo[1]),
-                   bbox=json.dumps([*map(float, lo), *map(float, hi)]), metrics=json.dumps(metrics, sort_keys=True))
     except PlantgenError as exc:
         row.update(status="failed", error=str(exc).splitlines()[0][:500] if str(exc) else type(exc).__name__)
     except MemoryError:
         row.update(status="failed", error=f"{task.id}: out of memory")
-    row["timings"] = json.dumps({k: round(v, 6) for k, v in timings.items()}, sort_keys=True)
+    row["timings"] = {k: round(v, 6) for k, v in timings.items()}
     return row

@@ -49,8 +49,8 @@ def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask,
 
     By default a LocalCluster of one single-threaded worker process per CPU runs the
     plants and stops at the end; --scheduler uses an existing cluster. Each plant's files
-    are written atomically; the manifest (Parquet, one row per plant: seed, defines, files,
-    segments, height, tree metrics, timings, the error of a failed plant) is kept valid
+    are written atomically; the manifest (Parquet, one row per plant, typed columns: seed,
+    defines, files, tree figures in metres, timings, the error of a failed plant) is kept valid
     throughout, Ctrl-C included, and a re-run finishes only what is missing.
 
     Exit status: 0 when every plant is made; 2 for a bad spec or option; otherwise 2 plus
