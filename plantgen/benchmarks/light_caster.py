@@ -3,7 +3,7 @@ its depth map lies from the float64 reference, for every shipped scene with shad
 in one run.
 
 Run as ``python -m plantgen.benchmarks.light_caster [SCENE ...] [--size 1024x768]
-[--frames 5] [--rays 20000] [--samples 2048] [--out light.md]`` (default: every shipped
+[--frames 5] [--rays 20000] [--samples 2048] [--cpu] [--out light.md]`` (default: every shipped
 scene whose effects list shadows). ``python -m plantgen.benchmarks.ablation`` prints the
 same table for the shadowed models it measures.
 
@@ -30,8 +30,10 @@ error in texels. The plain caster's row shows what casting no relief costs in ac
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -49,6 +51,9 @@ from .arguments import image_size, report
 #: The float64 reference's relief samples a row (its map of the relief caster is the truth
 #: the casters are measured against).
 REFERENCE_SAMPLES = 2048
+
+#: The frame of ``--cpu`` timings: so small that a render's CPU time is its light pass's.
+CPU_FRAME = (16, 12)
 
 __all__ = ["CASTERS", "Caster", "shadowed_scenes", "measure_scene", "markdown", "main"]
 
@@ -87,12 +92,15 @@ def shadowed_scenes() -> list[str]:
     return names
 
 
-def _time(caster: Raycaster, model: BenchModel, casters, frames: int) -> dict:
+def _time(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:
     """Median shadow-pass ms of each caster in the scene's frame, timed in alternation after
-    one warm-up each."""
+    one warm-up each: the pass's wall ms, or with ``cpu`` the whole render's CPU ms of this
+    process (:data:`CPU_FRAME`)."""
     def render(c: Caster):
-        return caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, model.ground,
-                             shadows=c.shadows, leaves=model.leaves).stats.shadow_ms
+        t0 = time.process_time()
+        result = caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, model.ground,
+                               shadows=c.shadows, leaves=model.leaves)
+        return (time.process_time() - t0) * 1e3 if cpu else result.stats.shadow_ms
     for c in casters:
         render(c)
     samples: dict = {c.label: [] for c in casters}
@@ -148,10 +156,11 @@ def _errors(depths: np.ndarray, reference, window) -> dict:
 
 
 def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster: Raycaster,
-                  casters=CASTERS) -> list[dict]:
-    """One row per caster: shadow-pass ms, its ratio to the plain pass's and the errors."""
-    model = load_model(name, size)
-    ms = _time(caster, model, casters, frames)
+                  casters=CASTERS, cpu: bool = False) -> list[dict]:
+    """One row per caster: shadow-pass ms (with ``cpu``: CPU ms, :data:`CPU_FRAME`), its
+    ratio to the plain pass's and the errors."""
+    model = load_model(name, CPU_FRAME if cpu else size)
+    ms = _time(caster, model, casters, frames, cpu)
     maps, window = _maps(caster, model, casters)
     reference = _reference(model, maps, window, rays, samples)
     plain, before = ms[casters[0].label], ms.get("bisect")
@@ -160,11 +169,14 @@ def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster:
              **_errors(maps[c.label], reference, window)} for c in casters]
 
 
-def markdown(rows: list[dict], size, frames: int, rays: int, samples: int) -> str:
+def markdown(rows: list[dict], size, frames: int, rays: int, samples: int, cpu: bool = False) -> str:
+    timing = (f"{CPU_FRAME[0]}x{CPU_FRAME[1]} frame (the render is its light pass), {ShadowSettings().resolution}² "
+              f"map drawn every frame, CPU ms of the render (LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', '')})"
+              if cpu else f"{size[0]}x{size[1]} frame, {ShadowSettings().resolution}² map drawn every frame, "
+              "shadow-pass ms")
     lines = [f"# The light's relief caster ({renderer_name()})", "",
-             f"{size[0]}x{size[1]} frame, {ShadowSettings().resolution}² map drawn every frame, shadow-pass ms "
-             f"median of {frames} frames timed in alternation. Error against the float64 reference at {rays:,} "
-             f"texels ({samples} samples a row, bisected): coverage = texels one of map and reference covers; "
+             f"{timing} median of {frames} frames timed in alternation. Error against the float64 reference at "
+             f"{rays:,} texels ({samples} samples a row, bisected): coverage = texels one of map and reference covers; "
              "> ½ and > 2 texels: depth off by more (where both hit); median in texels.", "",
              "| scene | caster | shadow ms | ÷ plain | ÷ bisect | coverage | > ½ texel | > 2 texels | median |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -193,13 +205,19 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=5)
     parser.add_argument("--rays", type=int, default=20000, help="texels checked against the float64 reference")
     parser.add_argument("--samples", type=int, default=REFERENCE_SAMPLES, help="the reference's relief samples a row")
+    parser.add_argument("--cpu", action="store_true",
+                        help="time by this process's CPU time, llvmpipe on one thread (LP_NUM_THREADS=1) and a "
+                             f"{CPU_FRAME[0]}x{CPU_FRAME[1]} frame, so that the render is its light pass: steady where "
+                             "the cores are shared (llvmpipe only: a GPU's time is not this process's)")
     parser.add_argument("--out", type=Path, help="write the Markdown table here")
     args = parser.parse_args(argv)
+    if args.cpu:
+        os.environ["LP_NUM_THREADS"] = "1"        # read by Mesa when the context is made, below
     caster, rows = Raycaster(), []
     for name in args.scenes or shadowed_scenes():
         print(f"{name} ...", file=sys.stderr, flush=True)
-        rows += measure_scene(name, args.size, args.frames, args.rays, args.samples, caster)
-    return report(markdown(rows, args.size, args.frames, args.rays, args.samples), args.out)
+        rows += measure_scene(name, args.size, args.frames, args.rays, args.samples, caster, cpu=args.cpu)
+    return report(markdown(rows, args.size, args.frames, args.rays, args.samples, args.cpu), args.out)
 
 
 if __name__ == "__main__":
