@@ -591,13 +591,13 @@ def test_the_light_casters_can_be_timed_by_this_processs_cpu_time(gl_ctx):
     """``--cpu``: each caster's render in a frame so small that it is its light pass, timed
     by this process's CPU time (steady where the cores are shared); the relief caster's
     pass costs more than the plain one's, as the wall-clock timing has it."""
-    from plantgen.benchmarks.light_caster import CASTERS, CPU_FRAME, _time, markdown
+    from plantgen.benchmarks.light_caster import CASTERS, CPU_FRAME, markdown, time_casters
     from plantgen.gl.raycast import Raycaster
     from plantgen.table1.models import load_model
 
     model = load_model("well", CPU_FRAME)
     assert (model.camera.width, model.camera.height) == CPU_FRAME
-    ms = _time(Raycaster(), model, CASTERS[:3], 1, cpu=True)
+    ms = time_casters(Raycaster(), model, CASTERS[:3], 1, cpu=True)
     assert set(ms) == {"plain", "bisect", "secant"} and all(v > 0 for v in ms.values())
     assert ms["secant"] > ms["plain"]
     row = {"scene": "well", "caster": "plain", "shadow_ms": ms["plain"], "over_plain": 1.0, "over_bisect": 1.0,

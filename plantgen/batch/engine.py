@@ -163,7 +163,8 @@ def summary_lines(result: BatchResult, rows: list) -> list[str]:
              f"{result.skipped:,} already done; {result.seconds:.1f} s, {result.rate:.2f} plants/s",
              f"manifest: {result.manifest}"]
     ok = [r for r in rows if r.get("status") == "ok"]
-    columns = {k: [float(r[k]) for r in ok if r.get(k) is not None] for k in ("segments", *METRIC_COLUMNS)}
+    shown = ("segments", "scan_points", *METRIC_COLUMNS)
+    columns = {k: [float(r[k]) for r in ok if r.get(k) is not None] for k in shown}
     if ok:
         lines.append(f"{'metric':<22}{'p5':>12}{'median':>12}{'p95':>12}")
         for k, values in columns.items():

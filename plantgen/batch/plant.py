@@ -23,6 +23,7 @@ from ..exporters import export_mesh
 from ..files import write_atomically
 from ..geometry.camera import Camera, auto_camera
 from ..geometry.mesh import tessellate
+from ..geometry.scan import scan_plant
 from ..geometry.swc import write_swc
 from ..geometry.topology import branches
 from ..gl.raycast import Raycaster, RaycastSettings, label_image
@@ -30,6 +31,7 @@ from ..images import write_png
 from ..limits import Limits
 from ..metrics import tree_metrics
 from ..pipeline import check_export_size, check_finite_mesh, grow_file, model_leaves, skin_model
+from ..scanfiles import write_points
 from .schema import METRIC_COLUMNS, SINGLE_FILE_KINDS, empty_row
 from .spec import Outputs, PlantTask
 
@@ -66,7 +68,8 @@ def relative_files(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
              ("glb", outputs.glb is not None, [f"glb/{task.id}.glb"]),
              ("png", outputs.png, [f"png/{v}.png" for v in views]),
              ("depth", outputs.depth, [f"depth/{v}.npy" for v in views]),
-             ("mask", outputs.mask is not None, [f"mask/{v}.png" for v in views]))
+             ("mask", outputs.mask is not None, [f"mask/{v}.png" for v in views]),
+             ("points", outputs.points is not None, [f"points/{task.id}.{outputs.points}"]))
     return {kind: names for kind, on, names in kinds if on}
 
 
@@ -151,6 +154,17 @@ def _write_glb(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, tim
     timings["glb"] = time.perf_counter() - t0
 
 
+def _write_points(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict,
+                  limits: Limits | None) -> int:
+    """The plant's simulated laser scan (what ``plantgen scan`` makes with the same knobs
+    and ``--scan-seed`` the plant's seed), z up as LAS has it; returns its point count."""
+    t0 = time.perf_counter()
+    cloud = scan_plant(skeleton, leaves, outputs.scan, task.seed, frusta=frusta, limits=limits)
+    write_points(cloud, root / relative_files(task, outputs)["points"][0], up="z")
+    timings["scan"] = time.perf_counter() - t0
+    return len(cloud)
+
+
 def measure(skeleton) -> dict:
     """The manifest's figures of a skeleton (:mod:`plantgen.batch.schema`): segments, tips,
     the tree metrics in metres (a model unit taken as a metre), the branch count per order
@@ -189,7 +203,7 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
         if len(skeleton) == 0:
             raise PlantgenError(f"{task.name}: the grammar draws no segments")
         _write_skeleton_files(task, outputs, skeleton, root, timings)
-        if outputs.glb is not None or outputs.views:
+        if outputs.glb is not None or outputs.views or outputs.points is not None:
             t0 = time.perf_counter()
             frusta = skin_model(grown, source=task.id)
             timings["skin"] = time.perf_counter() - t0
@@ -198,6 +212,8 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
                 _write_glb(task, outputs, frusta, skeleton, leaves, root, timings, limits)
             if outputs.views:
                 _render_views(task, outputs, frusta, skeleton, leaves, root, timings)
+            if outputs.points is not None:
+                row["scan_points"] = _write_points(task, outputs, frusta, skeleton, leaves, root, timings, limits)
         t0 = time.perf_counter()
         row.update(measure(skeleton))
         timings["metrics"] = time.perf_counter() - t0

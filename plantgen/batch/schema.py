@@ -22,10 +22,10 @@ __all__ = ["COLUMNS", "FORMAT", "METRIC_COLUMNS", "STAGES", "arrow_schema", "col
 FORMAT = "plantgen-batch-manifest/2"
 
 #: The stages a plant's ``timings`` may hold, in the order they run.
-STAGES = ("grow", "skeleton_files", "skin", "glb", "render", "metrics")
+STAGES = ("grow", "skeleton_files", "skin", "glb", "render", "scan", "metrics")
 
 #: Output kinds with one file per plant (the others have one file per view).
-SINGLE_FILE_KINDS = ("npz", "swc", "glb")
+SINGLE_FILE_KINDS = ("npz", "swc", "glb", "points")
 
 #: The scalar tree figures (:meth:`plantgen.metrics.TreeMetrics.as_dict`, in metres), by
 #: column: (Arrow type name, unit, meaning).
@@ -56,9 +56,10 @@ COLUMNS = (
     ("defines", "map<string, float64>", "", "the defines a sweep set (empty without a sweep)"),
     ("status", "string", "", "`ok` or `failed`"),
     ("error", "string", "", "the one-line error of a failed plant (empty when ok)"),
-    ("files", "struct<npz, swc, glb: string; png, depth, mask: list<string>>", "",
+    ("files", "struct<npz, swc, glb, points: string; png, depth, mask: list<string>>", "",
      "the plant's files by kind, relative to the batch folder (null: not asked for)"),
     ("segments", "int64", "", "skeleton segments"),
+    ("scan_points", "int64", "", "points of the plant's simulated scan (null without the points output)"),
     ("tips", "int64", "", "branch tips: segments with no child"),
     *((name, kind, unit, meaning) for name, (kind, unit, meaning) in METRIC_COLUMNS.items()),
     ("branches_per_order", "list<int64>", "", "branches of each order, order 0 (the trunk) first"),

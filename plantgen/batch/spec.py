@@ -25,6 +25,7 @@ the same files, and ``plantgen grow GRAMMAR --seed S --define k=v`` makes any on
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import re
@@ -36,18 +37,22 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_yaml
+from ..geometry.scan import ScanSettings
 from ..knobs import knob_of
 from ..limits import Limits
 from ..limits import limits as default_limits
+from ..scanfiles import check_point_output
 from ..settings import MeshSettings
 
 __all__ = ["BatchError", "Outputs", "PlantTask", "BatchSpec", "plant_seed", "parse_spec", "simple_spec",
-           "MASK_KINDS", "OUTPUT_KINDS", "MAX_PLANTS"]
+           "MASK_KINDS", "OUTPUT_KINDS", "POINT_FORMATS", "MAX_PLANTS"]
 
 #: Per-pixel labels a part mask can hold.
 MASK_KINDS = ("instance", "order", "material")
 #: The outputs a plant may get.
-OUTPUT_KINDS = ("npz", "swc", "glb", "png", "depth", "mask")
+OUTPUT_KINDS = ("npz", "swc", "glb", "png", "depth", "mask", "points")
+#: Point file formats of the ``points`` output (a simulated laser scan), by suffix.
+POINT_FORMATS = ("ply", "las", "laz")
 #: Plants one batch may hold.
 MAX_PLANTS = 10_000_000
 
@@ -62,7 +67,9 @@ class BatchError(PlantgenError):
 class Outputs:
     """What each plant gets: ``npz``, ``swc`` (bool), ``glb`` (level m or None), views
     (``size`` (w, h), ``azimuths`` degrees, ``relief``) as ``png`` and optionally ``depth``
-    and a ``mask`` (one of :data:`MASK_KINDS` or None)."""
+    and a ``mask`` (one of :data:`MASK_KINDS` or None), and ``points``: a simulated laser
+    scan (:func:`plantgen.geometry.scan.scan_plant` with ``scan``'s knobs, its noise drawn
+    from the plant's seed) written in that format (one of :data:`POINT_FORMATS`, or None)."""
 
     npz: bool = True
     swc: bool = False
@@ -73,6 +80,8 @@ class Outputs:
     relief: bool = False
     depth: bool = False
     mask: str | None = None
+    points: str | None = None
+    scan: ScanSettings = ScanSettings()
 
     @property
     def views(self) -> bool:
@@ -198,10 +207,30 @@ def _parse_outputs(raw, where: str) -> Outputs:
         if raw["mask"] not in MASK_KINDS:
             raise BatchError(f"{where}: mask must be one of {', '.join(MASK_KINDS)}, got {fields.show(raw['mask'])}")
         kw["mask"] = raw["mask"]
+    if raw.get("points") not in (None, False):
+        kw.update(_point_fields(raw["points"], f"{where}: points"))
     out = Outputs(**kw)
-    if not (out.npz or out.swc or out.glb is not None or out.views):
+    if not (out.npz or out.swc or out.glb is not None or out.views or out.points):
         raise BatchError(f"{where}: no output asked for")
     return out
+
+
+def _point_fields(raw, where: str) -> dict:
+    """``points`` and ``scan`` of :class:`Outputs` from a spec's ``points:`` (true, or a
+    mapping of ``format`` and :class:`~plantgen.geometry.scan.ScanSettings` knobs by field
+    name)."""
+    raw = raw if isinstance(raw, dict) else {}
+    knobs = {f.name for f in dataclasses.fields(ScanSettings)}
+    raw = fields.keys(raw, {"format", *knobs}, where, BatchError)
+    fmt = raw.get("format", POINT_FORMATS[0])
+    if fmt not in POINT_FORMATS:
+        raise BatchError(f"{where}: format must be one of {', '.join(POINT_FORMATS)}, got {fields.show(fmt)}")
+    try:
+        check_point_output(Path(f"points.{fmt}"))       # laspy (and lazrs) for LAS and LAZ, before any work
+        settings = ScanSettings(**{k: v for k, v in raw.items() if k != "format"})
+    except (PlantgenError, TypeError, ValueError) as exc:
+        raise BatchError(f"{where}: {str(exc).splitlines()[0]}") from None
+    return {"points": fmt, "scan": settings}
 
 
 def _view_fields(png: dict, where: str) -> dict:
@@ -262,8 +291,10 @@ def parse_spec(path: str | Path, limits: Limits | None = None) -> BatchSpec:
 
 
 def simple_spec(grammar: str, seeds: str, outputs: list[str], *, seed: int = 0, size=None,
-                azimuths=None, relief: bool = False, glb_level: int = 1, mask: str = "order") -> BatchSpec:
-    """The spec of ``plantgen batch GRAMMAR --seeds a:b --outputs npz,png,...``."""
+                azimuths=None, relief: bool = False, glb_level: int = 1, mask: str = "order",
+                scan: ScanSettings | None = None) -> BatchSpec:
+    """The spec of ``plantgen batch GRAMMAR --seeds a:b --outputs npz,png,...`` (``scan``:
+    the knobs of the ``points`` output's scan; its points are PLY)."""
     unknown = sorted(set(outputs) - set(OUTPUT_KINDS))
     if unknown:
         raise BatchError(f"--outputs: unknown {', '.join(unknown)} (known: {', '.join(OUTPUT_KINDS)})")
@@ -275,8 +306,12 @@ def simple_spec(grammar: str, seeds: str, outputs: list[str], *, seed: int = 0, 
         raw["png"] = view
     if "mask" in outputs:
         raw["mask"] = mask
+    if "points" in outputs:
+        raw["points"] = True
     folder = Path.cwd()
     out = _parse_outputs(raw, "--outputs")
+    if out.points is not None and scan is not None:
+        out = dataclasses.replace(out, scan=scan)
     if ("depth" in outputs or "mask" in outputs) and "png" not in outputs:
         out = Outputs(**{**out.__dict__, **_view_fields(view, "--outputs")})
     tasks = _tasks([{"grammar": grammar, "seeds": seeds}], seed, folder, "batch")

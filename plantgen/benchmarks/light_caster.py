@@ -55,7 +55,7 @@ REFERENCE_SAMPLES = 2048
 #: The frame of ``--cpu`` timings: so small that a render's CPU time is its light pass's.
 CPU_FRAME = (16, 12)
 
-__all__ = ["CASTERS", "Caster", "shadowed_scenes", "measure_scene", "markdown", "main"]
+__all__ = ["CASTERS", "CPU_FRAME", "Caster", "shadowed_scenes", "time_casters", "measure_scene", "markdown", "main"]
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def shadowed_scenes() -> list[str]:
     return names
 
 
-def _time(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:
+def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:
     """Median shadow-pass ms of each caster in the scene's frame, timed in alternation after
     one warm-up each: the pass's wall ms, or with ``cpu`` the whole render's CPU ms of this
     process (:data:`CPU_FRAME`)."""
@@ -160,7 +160,7 @@ def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster:
     """One row per caster: shadow-pass ms (with ``cpu``: CPU ms, :data:`CPU_FRAME`), its
     ratio to the plain pass's and the errors."""
     model = load_model(name, CPU_FRAME if cpu else size)
-    ms = _time(caster, model, casters, frames, cpu)
+    ms = time_casters(caster, model, casters, frames, cpu)
     maps, window = _maps(caster, model, casters)
     reference = _reference(model, maps, window, rays, samples)
     plain, before = ms[casters[0].label], ms.get("bisect")

@@ -9,9 +9,10 @@ import click
 
 from ..batch import BatchError, parse_spec, run_batch, simple_spec, summary_lines
 from ..batch.spec import MASK_KINDS
+from ..geometry.scan import ScanSettings
 from ..knobs import knob_of
 from ..settings import MeshSettings
-from .options import knob_option, limit_opt, limits_from, parse_size, quiet_opt
+from .options import knob_option, knob_options, limit_opt, limits_from, parse_size, quiet_opt, take_settings
 
 __all__ = ["batch"]
 
@@ -25,7 +26,8 @@ __all__ = ["batch"]
               help="Without a spec: plant indices A..B-1 of the grammar SOURCE (each plant's seed "
                    "derives from --seed, the grammar and its index).")
 @click.option("--outputs", default="npz", metavar="LIST", show_default=True,
-              help="Without a spec: comma-separated outputs: npz, swc, glb, png, depth, mask.")
+              help="Without a spec: comma-separated outputs: npz, swc, glb, png, depth, mask, points (a "
+                   "simulated laser scan as PLY, the scan knobs below; a spec may ask for LAS or LAZ).")
 @click.option("--size", callback=parse_size, metavar="WxH", help="Without a spec: view size (default 512x384).")
 @click.option("--azimuths", default=None, metavar="LIST", help="Without a spec: view azimuths in degrees, "
               "comma-separated (default 0).")
@@ -40,10 +42,11 @@ __all__ = ["batch"]
               help="Run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one.")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes of the local cluster (default: one per CPU).")
+@knob_options(ScanSettings)
 @limit_opt
 @quiet_opt
 def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask, seed, scheduler, workers,
-          limit_values, quiet) -> None:
+          limit_values, quiet, **scan_knobs) -> None:
     """Make many plants on Dask: SOURCE is a batch spec (.yaml with 'plants' and
     'outputs'; see the README) or, with --seeds, one grammar (a path or a shipped name).
 
@@ -66,7 +69,8 @@ def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask,
         az = None if azimuths is None else tuple(_floats(azimuths, "--azimuths"))
         spec = simple_spec(source, seeds, [o.strip() for o in outputs.split(",") if o.strip()], seed=seed,
                            size=None if size is None else f"{size[0]}x{size[1]}", azimuths=az and list(az),
-                           relief=relief, glb_level=subdiv, mask=mask)
+                           relief=relief, glb_level=subdiv, mask=mask,
+                           scan=take_settings(ScanSettings, scan_knobs))
     else:
         if Path(source).suffix.lower() not in (".yaml", ".yml"):
             raise BatchError(f"{source}: give a batch spec (.yaml), or a grammar with --seeds A:B")
