@@ -23,7 +23,7 @@ __all__ = ["CONFIGS", "main"]
 
 #: (label, outputs, view size) of each measured configuration.
 CONFIGS = (("grow + npz", ["npz"], None), ("grow + png 512x384", ["png"], "512x384"),
-           ("grow + glb m=1", ["glb"], None))
+           ("grow + glb m=1", ["glb"], None), ("grow + points (scan, PLY)", ["points"], None))
 
 
 def _noop(x):
