@@ -64,7 +64,7 @@ def assert_refused(result: dict, match: str | tuple[str, ...], *, outputs=(), se
     wall time is the neighbours' as much as ours)."""
     where = f"{result['argv']}: {result['stderr']!r}"
     assert result["code"] == 2, where
-    *progress, last = result["stderr"].strip().splitlines() or [""]
+    *progress, last = [line for line in result["stderr"].splitlines() if line.strip()] or [""]
     assert all(line.startswith("  ") for line in progress), where
     lines = [last]
     assert lines[0].startswith("plantgen: error: "), where
