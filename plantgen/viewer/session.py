@@ -310,7 +310,7 @@ class ViewerSession:
         total = (time.time_ns() - self._saved_ns) / 1e9
         timings = {**self._reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
         parts = ", ".join(f"{k} {v:.2f}" for k, v in timings.items())
-        self.say(f"reloaded {self.model.source}: {len(self.model.grown.skeleton):,} segments, "
+        self.say(f"reloaded {self.model.source}: {self.model.grown.segments:,} segments, "
                  f"{total:.2f} s from save to frame ({parts} s)")
         self.status = f"reloaded: {total:.2f} s from save to frame"
         self._saved_ns = None
@@ -560,7 +560,7 @@ class ViewerSession:
         leaves = self.model.grown.polygons
         count = 0 if leaves is None else len(leaves)
         leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
-        lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments{leafy} | {method} | shadows "
+        lines = [(f"{self.model.grown.name}: {self.model.grown.segments:,} segments{leafy} | {method} | shadows "
                   f"{self._shadow_text()} | ssaa {self.ssaa}", "info"),
                  (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
         if self.model.animated:
