@@ -489,6 +489,9 @@ class RenderReport:
     distance: np.ndarray | None = None
     warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
     shadow_use: ShadowUse | None = None    # how often the shadow map was drawn and reused
+    placed: PlacedPlants | None = None     # a scene drawn instanced (the lod effect), else None
+    lod_pixels: float = 0.0                # its level of detail's threshold
+
 
     @property
     def ssaa(self) -> int:
@@ -676,7 +679,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         skin_calls=anim.skin_calls if anim is not None else len(model.placed.plants),
         gpu_frames=gpu_frames,
         timed=int(timed_frames) if frames is None else len(colors), colors=colors, distance=distance,
-        warnings=model.grown.warnings, shadow_use=shadow_use)
+        warnings=model.grown.warnings, shadow_use=shadow_use, placed=model.placed,
+        lod_pixels=view.get("lod_pixels", 0.0))
 
 
 def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:

@@ -205,3 +205,65 @@ def test_instanced_raster_draws_the_merged_mesh(relief):
     assert same[hit].mean() >= 0.99
     assert instanced.stats.triangles == meshes.triangles == len(merged_mesh.faces)
     assert instanced.stats.buffer_bytes < 0.5 * merged.stats.buffer_bytes
+
+
+GROVE = ("effects: [relief, shadows, lod]\nground: {size: 60, material: grass}\n"
+         "camera: {eye: [0, 1.7, 30], target: [0, 4, 0], fov_y: 50}\n"
+         "instances:\n  - {grammar: abop_monopodial, grid: {count: [4, 3], spacing: [8, 8], jitter: 0.3, seeds: 1,"
+         " scale_jitter: 0.2}}\n  - {grammar: aloe, seed: 3, position: [2, 0, 12], grid: {count: [5, 2],"
+         " spacing: [3, 3], jitter: 0.4, seeds: 2}}\n")
+
+
+def test_a_grove_renders_instanced_from_the_command_line(tmp_path):
+    from _cli import run_cli
+
+    scene = tmp_path / "grove.yaml"
+    scene.write_text(GROVE)
+    out = tmp_path / "grove.png"
+    code, stdout, stderr = run_cli("render", scene, "-o", out, "--size", "160x120", "--lod-pixels", "1.5")
+    assert code == 0, stderr
+    assert "22 copies of 3 plants" in stdout and "level of detail: 1.5 px" in stdout
+    assert out.is_file()
+
+
+def test_placed_segments_have_a_limit_the_command_line_raises(tmp_path):
+    from _cli import run_cli
+
+    scene = tmp_path / "grove.yaml"
+    scene.write_text(GROVE)
+    out = tmp_path / "grove.npz"
+    code, _, stderr = run_cli("grow", scene, "-o", out, "--limit", "drawn_segments=5000")
+    assert code == 2 and len(stderr.strip().splitlines()) == 1 and "drawn_segments" in stderr
+    assert not out.exists()
+    code, _, stderr = run_cli("grow", scene, "-o", out, "--limit", "drawn_segments=20000")
+    assert code == 0, stderr
+    code, _, stderr = run_cli("grow", scene, "-o", out, "--limit", "instances=10")
+    assert code == 2 and "instances" in stderr
+
+
+def test_grid_seeds_cycle_and_scales_jitter():
+    from plantgen.scene import parse_scene
+
+    grown = []
+
+    def grow(path, seed, iterations):
+        grown.append(seed)
+        return _tree("aloe")[0]
+
+    scene = parse_scene({"instances": [{"grammar": "aloe", "seed": 4, "grid": {
+        "count": [5, 4], "spacing": [3, 3], "jitter": 0.2, "seeds": 3, "scale_jitter": 0.25}}]},
+        "grammars/x.yaml", grow_grammar=grow)
+    assert sorted(set(grown)) == [4, 5, 6] and len(grown) == 3       # each seed grown once
+    assert [i.seed for i in scene.instances[:4]] == [4, 5, 6, 4]
+    scales = similarity_parts(np.stack([i.matrix for i in scene.instances]))[1]
+    assert scales.min() >= 0.75 and scales.max() <= 1.25 and scales.std() > 0.05
+
+
+def test_the_shipped_forest_is_a_thousand_plants_from_a_few_grown_ones():
+    grown = grow_file("grammars/forest.yaml")
+    scene = grown.scene
+    plants = scene.plants()
+    assert len(scene.instances) >= 1000 and len(plants) >= 10
+    assert grown.segments >= 5_000_000 and "skeleton" not in vars(grown)     # never merged here
+    assert {"lod", "shadows", "relief"} <= set(scene.effects)
+    assert scene.camera.eye[1] < 2.0          # eye height
