@@ -775,11 +775,12 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
-    if len(grown.skeleton) == 0:
+    if grown.segments == 0:
         raise ExportError(f"{input_path}: the model has no segments")
-    grown.skeleton.validate()
+    for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
+        skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
-    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
+    summary = {"format": fmt.name, "up": up, "segments": grown.segments, "timings": timings,
                "warnings": grown.warnings}
     timeline = _export_timeline(grown, fmt, keyframes, input_path, summary)
     if fmt.kind == "skeleton":
@@ -797,6 +798,15 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
                                                          if getattr(extras, k) is not None))
     return summary
+
+
+def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
+    """The skeletons an export checks: the whole model (``merged``, or not a scene), else a
+    scene's distinct plants, each once (placing a valid plant keeps it valid: a placed
+    copy was checked finite when the scene was read)."""
+    if merged or grown.scene is None:
+        return [grown.skeleton]
+    return [plant.skeleton for plant in grown.scene.plants()]
 
 
 def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,

@@ -235,7 +235,7 @@ class DetailSettings:
     than ``lod_pixels`` pixels from the copy's nearest point are left out, twigs first
     (in the light's pass: texels of the shadow map); 0 draws every segment."""
 
-    lod_pixels: float = knob(1.0, "--lod-pixels", "With the lod effect: leave out, per plant copy, the segments "
+    lod_pixels: float = knob(2.0, "--lod-pixels", "With the lod effect: leave out, per plant copy, the segments "
                              "(and their subtrees) that span fewer pixels than this (0: full detail).", lo=0, hi=1e6,
                              metavar="PX")
 

@@ -267,3 +267,23 @@ def test_the_shipped_forest_is_a_thousand_plants_from_a_few_grown_ones():
     assert grown.segments >= 5_000_000 and "skeleton" not in vars(grown)     # never merged here
     assert {"lod", "shadows", "relief"} <= set(scene.effects)
     assert scene.camera.eye[1] < 2.0          # eye height
+
+
+def test_the_forest_bench_keeps_a_small_forest_within_the_error_goal(tmp_path):
+    """The bench's own measure on a CI-sized forest (pines far off, ABOP trees near, seen
+    at eye height): one pixel of detail draws far fewer rows at an error of at most 0.01."""
+    from plantgen.benchmarks.forest import markdown, measure
+
+    scene = tmp_path / "stand.yaml"
+    scene.write_text("effects: [relief, shadows, lod]\nground: {size: 200, material: grass}\n"
+                     "camera: {eye: [0, 1.7, 60], target: [0, 6, 0], fov_y: 50}\ninstances:\n"
+                     "  - {grammar: abop_ternary, position: [0, 0, -20], grid: {count: [6, 6], spacing: [9, 9],"
+                     " jitter: 0.3, seeds: 1, scale_jitter: 0.2}}\n"
+                     "  - {grammar: pine, seed: 1, position: [0, 0, -100], grid: {count: [4, 2], spacing: [10, 10],"
+                     " jitter: 0.3, seeds: 1}}\n")
+    result = measure(str(scene), (256, 192), (0.0, 1.0), frames=0, say=lambda line: None, renderers=("RC+R",))
+    full, lod = result["rows"]
+    assert lod["error"] <= 0.01
+    drawn = [int(r["drawn"].split()[0].replace(",", "")) for r in (full, lod)]
+    assert drawn[0] == result["placed"] and drawn[1] < 0.6 * drawn[0]
+    assert "| RC+R | 1 |" in markdown(result)
