@@ -60,7 +60,10 @@ class Limits:
         each step also counts ``STEP_WORK`` per rule group (a derivation that does not
         grow still ends), and a context-sensitive one counts its modules ``CONTEXT_WORK``
         times
-    max_segments : segments of one input's skeleton (all instances of a scene together)
+    max_segments : segments of one input's skeleton; for a scene, the segments grown (each
+        distinct plant once, an explicit skeleton per copy)
+    max_drawn_segments : segments a scene places (every copy's: what a merged skeleton, a
+        ``plantgen grow`` output or a full-detail render holds)
     max_instances : placed plants of a scene (grid copies included)
     max_polygon_vertices : polygon vertices of one plant: its ``.`` and the vertices of
         the surfaces its ``~`` place (each leaf 26, each needle tuft 56), counted before
@@ -84,6 +87,7 @@ class Limits:
     max_derive_bytes: int = 128 << 20
     max_derive_work: int = 50_000_000
     max_segments: int = 1_000_000
+    max_drawn_segments: int = 20_000_000
     max_instances: int = 10_000
     max_polygon_vertices: int = 4_000_000
     max_export_triangles: int = 100_000_000

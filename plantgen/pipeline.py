@@ -54,6 +54,7 @@ from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta
+from .geometry.instances import PlacedPlants
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton
@@ -86,7 +87,7 @@ from .settings import (
 )
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
-           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model",
+           "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "place_scene",
            "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
            "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
            "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size",
@@ -103,9 +104,11 @@ def _in_force(given: Limits | None) -> Limits:
 
 @dataclass
 class GrowResult:
-    """A grown skeleton with what it took: module count and seconds per stage."""
+    """A grown skeleton with what it took: module count and seconds per stage. A scene's
+    merged skeleton (every copy placed) is built on first use: an instanced render of a
+    forest never builds it."""
 
-    skeleton: Skeleton
+    skeleton: Skeleton | None
     kind: str                        # "grammar", "scene" or "skeleton"
     name: str
     modules: int = 0
@@ -116,6 +119,26 @@ class GrowResult:
                                       # None for a skeleton file
     warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
     smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
+
+    def __post_init__(self):
+        if self.skeleton is None and self.scene is not None:
+            del self.skeleton            # a scene's: placed on first use (__getattr__)
+
+    def __getattr__(self, name):
+        scene = self.__dict__.get("scene")
+        if name != "skeleton" or scene is None:
+            raise AttributeError(name)
+        t0 = time.perf_counter()
+        self.skeleton = scene.skeleton()
+        self.timings["place"] = self.timings.get("place", 0.0) + time.perf_counter() - t0
+        return self.skeleton
+
+    @property
+    def segments(self) -> int:
+        """Segments placed (a scene's every copy), without building a scene's skeleton."""
+        if "skeleton" not in self.__dict__ and self.scene is not None:
+            return sum(len(i.skeleton) for i in self.scene.instances)
+        return len(self.skeleton)
 
 
 def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
@@ -218,9 +241,9 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths)
     t0 = time.perf_counter()
-    skel, polygons = scene.skeleton(), scene.polygons()
+    polygons = scene.polygons()
     timings["place"] = time.perf_counter() - t0
-    return GrowResult(skel, kind, scene.name, modules[0], timings, scene,
+    return GrowResult(None, kind, scene.name, modules[0], timings, scene,
                       sources=(path, *(Path(k) for k in grammars)), polygons=polygons, warnings=tuple(warnings))
 
 
@@ -280,6 +303,8 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     scene, leaves = grown.scene, model_leaves(grown)
     points = None if leaves is None else leaves.vertices
     framed = camera is None and (scene is None or scene.camera is None)
+    if framed and isinstance(frusta, PlacedPlants):     # frame the copies' box
+        camera = Camera.auto(frusta.box, width, height)
     if camera is None:
         camera = (scene.camera.at_size(width, height) if not framed
                   else auto_camera(frusta, width, height, points=points))
@@ -354,31 +379,56 @@ def animate_model(grown: GrowResult, effects, smooth_bends: float | None = None)
 class PreparedModel:
     """An input grown and ready to draw, as ``plantgen render`` and ``plantgen view`` draw
     it: the grown model, the effects in force (the scene's list with the caller's
-    overrides) and the :class:`AnimatedScene` (skinned once when nothing moves)."""
+    overrides) and the :class:`AnimatedScene` (skinned once when nothing moves); or, for
+    a still scene with the ``lod`` effect, its :class:`PlacedPlants` (each distinct plant
+    skinned once, drawn instanced; ``anim`` is None)."""
 
     grown: GrowResult
     effects: tuple
-    anim: AnimatedScene
+    anim: AnimatedScene | None
     source: str
+    placed: PlacedPlants | None = None
 
     @property
     def animated(self) -> bool:
-        return self.anim.animated
+        return self.anim is not None and self.anim.animated
 
-    def frusta_at(self, t: float = 0.0) -> Frusta:
-        """Every frustum row at ``t`` seconds (a still model's rows at any t), checked finite."""
+    @property
+    def skinned_segments(self) -> int:
+        """Segments skinned (and held) for drawing: a placed scene's distinct plants', else all."""
+        return self.placed.unique_rows if self.placed is not None else self.grown.segments
+
+    def frusta_at(self, t: float = 0.0) -> Frusta | PlacedPlants:
+        """Every frustum row at ``t`` seconds (a still model's rows at any t), checked
+        finite; a placed scene's :class:`PlacedPlants`."""
+        if self.placed is not None:
+            return self.placed
         return check_finite_frusta(self.anim.frusta_at(float(t)), self.source)
+
+
+def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlants:
+    """A scene's distinct plants (:meth:`Scene.plants`), each skinned once in its own
+    frame (checked finite), with its copies' placements: what the instanced renderers draw."""
+    plants = []
+    for plant in scene.plants():
+        frusta = check_finite_frusta(skin(plant.skeleton), f"{source}: {plant.name}")
+        plants.append((plant.name, frusta, plant.skeleton.parent, plant.matrices))
+    return PlacedPlants.build(plants)
 
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
                   limits: Limits | None = None, allow_paths=(), smooth_bends=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
-    ``smooth_bends``: see :func:`skinning`. One line for a model with no segment."""
+    ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
+    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
-    if len(grown.skeleton) == 0:
+    if grown.segments == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
+    if grown.scene is not None and "lod" in chosen and "animation" not in chosen:
+        placed = place_scene(grown.scene, skinning(smooth_bends), str(input_path))
+        return PreparedModel(grown, tuple(chosen), None, str(input_path), placed)
     return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
 
 
@@ -439,6 +489,9 @@ class RenderReport:
     distance: np.ndarray | None = None
     warnings: tuple = ()           # the turtle's warnings (GrowResult.warnings), for stderr
     shadow_use: ShadowUse | None = None    # how often the shadow map was drawn and reused
+    placed: PlacedPlants | None = None     # a scene drawn instanced (the lod effect), else None
+    lod_pixels: float = 0.0                # its level of detail's threshold
+
 
     @property
     def ssaa(self) -> int:
@@ -598,11 +651,14 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
                           allow_paths=allow_paths, smooth_bends=smooth_bends)
     _check_render_memory(limits, str(input_path), width, height, frames,
-                         shadow_res if "shadows" in model.effects else None, len(model.grown.skeleton), image.ssaa)
+                         shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
+    if frames is not None and model.placed is not None:
+        raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
-    view = {**frame_arguments(frusta, staging, shadows, image), "settings": march}
+    view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
+            **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
     raycaster, anim, colors, update_times = Raycaster(), model.anim, [], []
     if frames is not None:
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
@@ -616,13 +672,15 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         result, frame_times, distance, shadow_use = _render_still(raycaster, frusta, view, timed_frames,
                                                                   exact_distance)
     return RenderReport(
-        renderer=renderer_name(), segments=len(model.grown.skeleton), rows=len(frusta.base),
+        renderer=renderer_name(), segments=model.grown.segments, rows=len(frusta),
         frame_ms=float(np.median(frame_times)), camera=staging.camera, settings=march, request=request,
         result=result, effects=model.effects, shadows=shadows, frames=len(colors) or 1,
-        update_ms=float(np.median(update_times)) if update_times else 0.0, skin_calls=anim.skin_calls,
+        update_ms=float(np.median(update_times)) if update_times else 0.0,
+        skin_calls=anim.skin_calls if anim is not None else len(model.placed.plants),
         gpu_frames=gpu_frames,
         timed=int(timed_frames) if frames is None else len(colors), colors=colors, distance=distance,
-        warnings=model.grown.warnings, shadow_use=shadow_use)
+        warnings=model.grown.warnings, shadow_use=shadow_use, placed=model.placed,
+        lod_pixels=view.get("lod_pixels", 0.0))
 
 
 def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:
@@ -717,11 +775,12 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
-    if len(grown.skeleton) == 0:
+    if grown.segments == 0:
         raise ExportError(f"{input_path}: the model has no segments")
-    grown.skeleton.validate()
+    for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
+        skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
-    summary = {"format": fmt.name, "up": up, "segments": len(grown.skeleton), "timings": timings,
+    summary = {"format": fmt.name, "up": up, "segments": grown.segments, "timings": timings,
                "warnings": grown.warnings}
     timeline = _export_timeline(grown, fmt, keyframes, input_path, summary)
     if fmt.kind == "skeleton":
@@ -739,6 +798,15 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
                                                          if getattr(extras, k) is not None))
     return summary
+
+
+def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
+    """The skeletons an export checks: the whole model (``merged``, or not a scene), else a
+    scene's distinct plants, each once (placing a valid plant keeps it valid: a placed
+    copy was checked finite when the scene was read)."""
+    if merged or grown.scene is None:
+        return [grown.skeleton]
+    return [plant.skeleton for plant in grown.scene.plants()]
 
 
 def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,

@@ -22,6 +22,7 @@ A scene is a YAML mapping with an ``instances`` list::
         scale: 1.0
         iterations: 4                     # optional override
         grid: {count: [10, 10], spacing: [3, 3], jitter: 0.4}   # optional: many copies
+        # grid extras: seeds: 3 (copies cycle through 3 grown plants), scale_jitter: 0.2
         motion: {sway: {amplitude: 8, frequency: 0.5}}          # optional (animation)
       - skeleton:                         # explicit segments (no L-system)
           materials: [stone]
@@ -33,13 +34,16 @@ A grammar's copies carry its leaf polygons (its ``{ . }`` outlines) as well as i
 skeleton: :meth:`Scene.polygons` places them all in world coordinates, and
 :meth:`Scene.plants` gives each distinct plant its own, in its own frame.
 
-Copies made by ``grid`` get seeds ``seed + k`` and, if ``jitter`` is set, positions
-jittered and yaw turned from a generator seeded by the instance seed: deterministic.
+Copies made by ``grid`` get seeds ``seed + k`` (with ``seeds: m``, ``seed + k mod m``: a
+forest of m grown plants repeated) and, if ``jitter`` is set, positions jittered and yaw
+turned, and with ``scale_jitter: j`` scales multiplied by a factor in [1 - j, 1 + j], from
+a generator seeded by the instance seed: deterministic.
 
 A scene is untrusted input: every value is typed and ranged (``plantgen.fields``), the
-instances (grid copies included) and the total segments are counted against the limits
-in force, a placed copy must stay finite and within ``tol.max_coordinate``, and a grammar
-path is read only inside the scene's folder (or a folder the caller allows).
+instances (grid copies included), the segments grown (each distinct plant once) and the
+segments placed (every copy's) are counted against the limits in force, a placed copy
+must stay finite and within ``tol.max_coordinate``, and a grammar path is read only
+inside the scene's folder (or a folder the caller allows).
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ GROUND_KEYS = {"size", "height", "material"}
 LIGHT_KEYS = {"direction", "intensity"}
 MOTION_KEYS = {"sway"}
 SWAY_KEYS = {"amplitude", "frequency", "phase"}
-GRID_KEYS = {"count", "spacing", "jitter"}
+GRID_KEYS = {"count", "spacing", "jitter", "seeds", "scale_jitter"}
 SKELETON_KEYS = {"materials", "segments"}
 SEGMENT_KEYS = {"start", "end", "r_start", "r_end", "parent", "continues", "material"}
 
@@ -287,16 +291,18 @@ class _Placement:
     scale: float
     iterations: int | None
     sway: dict | None             # the file's sway values; a missing phase is drawn per copy
-    copies: list                  # [(offset (3,), yaw degrees, copy number)]
+    copies: list                  # [(offset (3,), yaw degrees, seed offset, scale factor)]
 
 
 @dataclass
 class _Budget:
-    """What a scene has placed so far, against ``max_instances`` and ``max_segments``."""
+    """What a scene has placed so far, against ``max_instances``, ``max_segments`` (the
+    segments grown: each distinct plant once) and ``max_drawn_segments`` (every copy's)."""
 
     limits: Limits
     instances: int = 0
     segments: int = 0
+    drawn: int = 0
 
     def place(self, n: int, where: str) -> None:
         self.instances += n
@@ -304,7 +310,11 @@ class _Budget:
 
     def add_segments(self, n: int, where: str) -> None:
         self.segments += n
-        self.limits.check("segments", self.segments, f"{where}: segments placed in the scene")
+        self.limits.check("segments", self.segments, f"{where}: segments grown for the scene")
+
+    def add_drawn(self, n: int, where: str) -> None:
+        self.drawn += n
+        self.limits.check("drawn_segments", self.drawn, f"{where}: segments placed in the scene")
 
 
 def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override, budget: _Budget) -> _Placement:
@@ -324,7 +334,7 @@ def _parse_placement(inst, k: int, path: str, base_seed: int, seed_override, bud
         budget.limits.check("iterations", iterations, f"{where}: iterations")
     sway = _parse_sway(inst.get("motion"), where)
     copies = (_grid_copies(inst["grid"], where, inst_seed, budget) if "grid" in inst
-              else [(np.zeros(3), 0.0, 0)])
+              else [(np.zeros(3), 0.0, 0, 1.0)])
     if "grid" not in inst:
         budget.place(1, where)
     return _Placement(where, inst_seed, position, rotation, scale, iterations, sway, copies)
@@ -355,9 +365,9 @@ def _copy_sway(sway: dict | None, copy_seed: int) -> Sway | None:
 
 
 def _grid_copies(grid, where: str, inst_seed: int, budget: _Budget) -> list:
-    """The copies a ``grid`` entry asks for: [(offset (3,), yaw degrees, copy number)], row
-    by row; jittered positions and yaws come from a generator seeded by ``inst_seed``.
-    Their number is counted against ``max_instances`` before any is made."""
+    """The copies a ``grid`` entry asks for: [(offset (3,), yaw degrees, seed offset, scale
+    factor)], row by row; jittered positions, yaws and scales come from a generator seeded
+    by ``inst_seed``. Their number is counted against ``max_instances`` before any is made."""
     _check_keys(grid, GRID_KEYS, f"{where}: grid")
     count = grid.get("count", [1, 1])
     if not isinstance(count, list) or len(count) != 2:
@@ -369,6 +379,9 @@ def _grid_copies(grid, where: str, inst_seed: int, budget: _Budget) -> list:
         raise SceneError(f"{where}: grid spacing must be two numbers, got {fields.show(spacing)}")
     sx, sz = (_num(s, "grid spacing", where, positive=True) for s in spacing)
     jitter = _num(grid.get("jitter", 0.0), "grid jitter", where, lo=0.0)
+    seeds = fields.integer(grid.get("seeds", nx * nz), "grid seeds", where, SceneError, lo=1, hi=None)
+    scale_jitter = fields.number(grid.get("scale_jitter", 0.0), "grid scale_jitter", where, SceneError,
+                                 lo=0.0, hi=0.9)
     rng = np.random.default_rng(inst_seed)
     copies = []
     for iz in range(nz):
@@ -377,7 +390,8 @@ def _grid_copies(grid, where: str, inst_seed: int, budget: _Budget) -> list:
             if jitter:
                 off[[0, 2]] += rng.uniform(-jitter, jitter, 2) * np.array([sx, sz])
             yaw = float(rng.uniform(0, 360)) if jitter else 0.0
-            copies.append((off, yaw, len(copies)))
+            factor = float(rng.uniform(1 - scale_jitter, 1 + scale_jitter)) if scale_jitter else 1.0
+            copies.append((off, yaw, len(copies) % seeds, factor))
     return copies
 
 
@@ -443,11 +457,12 @@ def _resolve_grammar(name: str, base: Path, where: str, allow_paths=()) -> Path:
                      "shipped grammars")
 
 
-def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float) -> np.ndarray:
-    """(4, 4) similarity transform of one copy: scale, rotation (plus the copy's yaw about
-    y), then the instance's position plus the copy's offset."""
+def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float, factor: float = 1.0) -> np.ndarray:
+    """(4, 4) similarity transform of one copy: scale (times the copy's ``factor``),
+    rotation (plus the copy's yaw about y), then the instance's position plus the copy's
+    offset."""
     m = np.eye(4)
-    m[:3, :3] = placement.scale * rotation_matrix(placement.rotation + np.array([0.0, yaw, 0.0]))
+    m[:3, :3] = placement.scale * factor * rotation_matrix(placement.rotation + np.array([0.0, yaw, 0.0]))
     m[:3, 3] = placement.position + offset
     return m
 
@@ -494,6 +509,8 @@ def _copy_skeleton(inst, placement: _Placement, seed: int, base: Path, grow_gram
             cache[key] = _grown_parts(grow_grammar(gpath, seed, placement.iterations))
         except PlantgenError as exc:
             raise SceneError(f"{placement.where}: {exc}") from None
+        limits.check("segments", sum(len(parts[0]) for parts in cache.values()),
+                     f"{placement.where}: segments grown for the scene")
     return *cache[key], name
 
 
@@ -502,12 +519,14 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
     """Every copy of one instance entry, grown (grammars once per seed and iteration count,
     through ``cache``), counted against the scene's segment budget and placed."""
     out = []
-    for offset, yaw, c in placement.copies:
+    for offset, yaw, c, factor in placement.copies:
         s = placement.seed + c
         skel, polygons, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits,
                                                 allow_paths)
-        budget.add_segments(len(skel), placement.where)
-        matrix = _placement_matrix(placement, offset, yaw)
+        if "skeleton" in inst:
+            budget.add_segments(len(skel), placement.where)
+        budget.add_drawn(len(skel), placement.where)
+        matrix = _placement_matrix(placement, offset, yaw, factor)
         _check_placed(skel, matrix, placement.where, polygons)
         out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s), polygons))
     return out

@@ -10,6 +10,7 @@ range, help) from it. A new effect or knob is one field here plus the code that 
   ``--shadows``), resolved against a scene's list (:data:`EFFECTS`);
 - :class:`RaycastSettings`: the ray caster's knobs, the relief march's among them;
 - :class:`ShadowSettings`: the shadow map;
+- :class:`DetailSettings`: the level of detail of an instanced scene (``lod``);
 - :class:`ImageSettings`: size, supersampling, background;
 - :class:`MotionSettings`: the time of a still, an animation's frames and rate;
 - :class:`ViewSettings`: the camera file or ``auto``, and the orbit around it;
@@ -26,12 +27,15 @@ from .geometry.camera import Orbit
 from .knobs import check_knobs, knob
 
 __all__ = ["EFFECTS", "DEFAULT_SIZE", "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
+           "DetailSettings",
            "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "KeyframeSettings",
            "resolve_effects",
            "parse_effect_list", "build_settings", "option_names", "settings_knobs"]
 
-#: The effects a scene may list; a render simulates only those in force.
-EFFECTS = ("relief", "shadows", "animation")
+#: The effects a scene may list; a render simulates only those in force. ``lod``: a still
+#: scene is drawn instanced (each distinct plant once on the GPU, a transform per copy)
+#: with detail that follows the pixel (:class:`DetailSettings`).
+EFFECTS = ("relief", "shadows", "animation", "lod")
 #: The image size when neither the command nor a camera file gives one.
 DEFAULT_SIZE = (1024, 768)
 #: The most samples per pixel side of supersampling.
@@ -225,6 +229,21 @@ class ShadowSettings:
 
 
 @dataclass(frozen=True)
+class DetailSettings:
+    """The level of detail of a scene drawn instanced (the ``lod`` effect;
+    :mod:`plantgen.geometry.instances`): per copy, the segments whose subtree spans fewer
+    than ``lod_pixels`` pixels from the copy's nearest point are left out, twigs first
+    (in the light's pass: texels of the shadow map); 0 draws every segment."""
+
+    lod_pixels: float = knob(2.0, "--lod-pixels", "With the lod effect: leave out, per plant copy, the segments "
+                             "(and their subtrees) that span fewer pixels than this (0: full detail).", lo=0, hi=1e6,
+                             metavar="PX")
+
+    def __post_init__(self):
+        check_knobs(self)
+
+
+@dataclass(frozen=True)
 class ImageSettings:
     """The picture: ``size`` (width, height) in pixels (None: a camera file's, else
     :data:`DEFAULT_SIZE`), ``ssaa`` samples per pixel side, ``background`` by name
@@ -329,6 +348,7 @@ class RenderSettings:
     image: ImageSettings = ImageSettings()
     motion: MotionSettings = MotionSettings()
     view: ViewSettings = ViewSettings()
+    detail: DetailSettings = DetailSettings()
 
     @classmethod
     def from_options(cls, **options) -> RenderSettings:
@@ -342,6 +362,11 @@ class RenderSettings:
         on iff they hold ``relief``; no shadow map without ``shadows``."""
         return (replace(self.march, relief="relief" in effects),
                 self.shadows if "shadows" in effects else None)
+
+    def lod_pixels(self, effects) -> float:
+        """The level of detail's threshold in pixels for the ``effects`` in force (0: full
+        detail; without ``lod`` a scene is drawn merged and whole)."""
+        return self.detail.lod_pixels if "lod" in effects else 0.0
 
 
 def settings_knobs(cls) -> list:

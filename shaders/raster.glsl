@@ -28,7 +28,11 @@ in vec3 normal;            // interpolated normal (8)
 in vec2 texcoord;          // (u, v + chain position)
 
 uniform mat4 view_projection;   // eye-relative world -> clip
-uniform vec3 origin_from_eye;   // mesh origin - eye
+uniform vec3 origin_from_eye;   // mesh origin - eye (a placed copy's: its placed origin - eye)
+// A placed copy (plantgen.gl.instanced): positions and normals turned and scaled into
+// place; the identity for a merged mesh (exact in float32).
+uniform mat3 copy_turn;
+uniform float copy_scale;
 
 out vec3 v_position;            // eye-relative
 out vec3 v_normal;
@@ -54,12 +58,12 @@ void main() {
         v_position = at.xyz + turned(position, k, c, s);
         v_normal = turned(normal, k, c, s);
     } else {
-        v_position = position + origin_from_eye;
-        v_normal = normal;
+        v_position = copy_turn * (copy_scale * position) + origin_from_eye;
+        v_normal = copy_turn * normal;
     }
 #else
-    v_position = position + origin_from_eye;
-    v_normal = normal;
+    v_position = copy_turn * (copy_scale * position) + origin_from_eye;
+    v_normal = copy_turn * normal;
 #endif
     v_texcoord = texcoord;
     gl_Position = view_projection * vec4(v_position, 1.0);

@@ -31,6 +31,12 @@ in vec4 rec5;              // u_offset, twist, shell, tag (material + 256 open_l
 
 uniform mat4 view_projection;   // render-origin-relative world -> clip
 uniform float hull_padding;     // relative growth of the pyramid (covers rasterisation edges)
+// The copy's placement (plantgen.geometry.instances): a record in its plant's frame is
+// turned, scaled and moved to copy_offset (the copy's origin minus the render origin,
+// formed in float64 on the CPU). Merged records draw with the identity (exact in float32).
+uniform mat3 copy_turn;
+uniform float copy_scale;
+uniform vec3 copy_offset;
 
 flat out vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 
@@ -91,24 +97,30 @@ vec3 pyramid_corner(vec3 base, vec3 axis, vec3 ref_dir, vec3 side, float r1, flo
 }
 
 void main() {
-    vec3 base = rec0.xyz; float h = rec0.w;
-    vec3 axis = rec1.xyz; vec3 ref_dir = rec2.xyz;
-    float shell = rec5.z;
-    float r1 = rec1.w + shell, r2 = rec2.w + shell;
+    // the record placed (directions turned; lengths, radii, plane offsets, shell scaled)
+    f_rec0 = vec4(copy_turn * (copy_scale * rec0.xyz) + copy_offset, copy_scale * rec0.w);
+    f_rec1 = vec4(copy_turn * rec1.xyz, copy_scale * rec1.w);
+    f_rec2 = vec4(copy_turn * rec2.xyz, copy_scale * rec2.w);
+    f_rec3 = vec4(copy_turn * rec3.xyz, copy_scale * rec3.w);
+    f_rec4 = vec4(copy_turn * rec4.xyz, copy_scale * rec4.w);
+    f_rec5 = vec4(rec5.xy, copy_scale * rec5.z, rec5.w);
+    vec3 base = f_rec0.xyz; float h = f_rec0.w;
+    vec3 axis = f_rec1.xyz; vec3 ref_dir = f_rec2.xyz;
+    float shell = f_rec5.z;
+    float r1 = f_rec1.w + shell, r2 = f_rec2.w + shell;
     float r_max = max(r1, r2);
     float pad = hull_padding * r_max + TOL_PYRAMID_PAD * (h + r_max);
     float k = cone_slope(r1, r2, h);
     vec3 side = cross(ref_dir, axis);
     // planes relative to the render origin, grown by `pad` all round (moved outwards)
-    vec4 plane_lo = vec4(rec3.xyz, rec3.w + dot(rec3.xyz, base) - pad);
-    vec4 plane_hi = vec4(rec4.xyz, rec4.w + dot(rec4.xyz, base) + pad);
+    vec4 plane_lo = vec4(f_rec3.xyz, f_rec3.w + dot(f_rec3.xyz, base) - pad);
+    vec4 plane_hi = vec4(f_rec4.xyz, f_rec4.w + dot(f_rec4.xyz, base) + pad);
     vec3 p = pyramid_corner(base, axis, ref_dir, side, r1 + pad, k, plane_lo, plane_hi, corner);
     gl_Position = view_projection * vec4(p, 1.0);
 #if defined SCREEN_PROXY
     vec2 screen = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);   // one full-screen triangle
     gl_Position = vec4(2.0 * screen - 1.0, 1e-9 * corner.z, 1.0);   // (keeps `corner` live)
 #endif
-    f_rec0 = rec0; f_rec1 = rec1; f_rec2 = rec2; f_rec3 = rec3; f_rec4 = rec4; f_rec5 = rec5;
 }
 
 #elif defined FRAGMENT_SHADER

@@ -442,7 +442,8 @@ def test_mutated_grammars_and_scenes_grow_or_fail_in_one_line(tmp_path, data):
     src = write(folder, "in.yaml", yaml.safe_dump(_mutate(_BASE_SCENE if scene else _BASE_GRAMMAR, data)))
     out = folder / "out.npz"
     code, _, stderr = run_cli("grow", src, "-o", out, "-q", "--limit", "derive_work=2000000",
-                              "--limit", "segments=20000", "--limit", "instances=100")
+                              "--limit", "segments=20000", "--limit", "drawn_segments=20000",
+                              "--limit", "instances=100")
     assert code in (0, 2), stderr
     if code == 2:
         assert len(stderr.strip().splitlines()) == 1 and stderr.startswith("plantgen: error: "), stderr

@@ -234,3 +234,20 @@ def test_the_viewer_draws_a_grammars_leaves(gl_ctx, tmp_path, method):
     assert gained.sum() > 20
     assert "leaves" in with_leaf.stats.passes and "leaves" not in without.stats.passes
     assert "1 leaf |" in frames[leafy][2] and "leaf" not in frames[bare][2]      # the heads-up line
+
+
+def test_a_placed_forest_opens_in_every_method(gl_ctx, tmp_path):
+    """A scene with the lod effect is drawn instanced in the viewer, RC to GS+R."""
+    scene = tmp_path / "grove.yaml"
+    scene.write_text("effects: [shadows, lod]\nground: {size: 40}\ncamera: {eye: [0, 2, 30], target: [0, 3, 0]}\n"
+                     "instances:\n  - {grammar: abop_monopodial, grid: {count: [3, 3], spacing: [8, 8], jitter: 0.3,"
+                     " seeds: 1}}\n")
+    options = ViewOptions(input=str(scene), size=SIZE, watch=False, shots=tmp_path)
+    s = ViewerSession(gl_ctx, options, prepare_model(scene), say=lambda line: None, warn=lambda line: None)
+    try:
+        for key in ("_1", "_2", "_3", "_4"):
+            s.key(key)
+            frame = s.draw(*SIZE)
+            assert np.isfinite(frame.distance).mean() > 0.05, key
+    finally:
+        s.release()

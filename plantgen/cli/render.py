@@ -108,8 +108,15 @@ def print_report(report: RenderReport) -> None:
     mode = report.settings.describe()
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")
-    click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
-               f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
+    placed = report.placed
+    if placed is not None:
+        drawn = report.result.stats.segments
+        click.echo(f"segments: {report.segments:,} placed ({placed.copies:,} copies of {len(placed.plants)} plants), "
+                   f"{placed.unique_rows:,} frusta on the GPU ({placed.unique_rows * RECORD_BYTES / 1024:.1f} KiB), "
+                   f"{drawn:,} drawn (level of detail: {report.lod_pixels:g} px)")
+    else:
+        click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
+                   f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
     click.echo("effects: " + (", ".join(report.effects) or "none")
                + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
     if report.shadow_use is not None:

@@ -70,7 +70,7 @@ from .vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
-           "frusta_bounds", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
+           "frusta_bounds", "row_end_balls", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
            "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals", "MAX_V_SLOTS"]
 
 #: Names of the per-row arrays of the contract, in contract order.
@@ -539,19 +539,18 @@ def shade_rows_uv_normals(frusta: Frusta, rows, points, interpolated: bool = Tru
 # ============================================================================ bounds
 # frusta_bounds and section_points dot with np.einsum, as the renderer's originals did:
 # their rounding reaches the automatic camera, which must not move.
-def frusta_bounds(frusta: Frusta) -> np.ndarray:
-    """(2, 3) float64 axis-aligned box around every frustum, relief shells included.
+def row_end_balls(frusta: Frusta) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(centres (n, 3), radii (n,)) of the lower ends, those of the upper ends]: a ball
+    around each end section of each row, relief shell included.
 
     An oblique cutting plane cuts the cone in an ellipse that reaches past the axis end
-    point (up to R / cos θ from it, θ the plane's tilt from the axis), so each end
-    contributes a ball of that radius around where its plane crosses the axis.
+    point (up to R / cos θ from it, θ the plane's tilt from the axis), so each end is a
+    ball of that radius around where its plane crosses the axis.
     """
-    if len(frusta.base) == 0:
-        return np.zeros((2, 3))
     h = frusta.length
     k = frusta.slope
     slope = np.abs(k)
-    centres, reach = [], []
+    out = []
     for plane, r_end, y_end in ((frusta.plane_lo, frusta.r1, 0.0), (frusta.plane_hi, frusta.r2, h)):
         normal, offset = plane[:, :3], plane[:, 3]
         cos_t = np.clip(np.einsum("ij,ij->i", normal, frusta.axis), tol.plane_tilt_cos, 1.0)
@@ -560,10 +559,18 @@ def frusta_bounds(frusta: Frusta) -> np.ndarray:
         y_cross = np.where(np.isfinite(y_cross), y_cross, y_end)
         radius = np.maximum(frusta.r1 + k * y_cross, 0.0) + frusta.shell
         grow = 1.0 / np.maximum(cos_t - slope * sin_t, tol.section_reach_cos)
-        centres.append(frusta.base + frusta.axis * y_cross[:, None])
-        reach.append(np.maximum(radius, r_end + frusta.shell) * grow)
-    pts = np.concatenate(centres)
-    r = np.concatenate(reach)[:, None]
+        out.append((frusta.base + frusta.axis * y_cross[:, None], np.maximum(radius, r_end + frusta.shell) * grow))
+    return out
+
+
+def frusta_bounds(frusta: Frusta) -> np.ndarray:
+    """(2, 3) float64 axis-aligned box around every frustum, relief shells included (the
+    balls of :func:`row_end_balls`)."""
+    if len(frusta.base) == 0:
+        return np.zeros((2, 3))
+    balls = row_end_balls(frusta)
+    pts = np.concatenate([c for c, _ in balls])
+    r = np.concatenate([r for _, r in balls])[:, None]
     return np.stack([(pts - r).min(axis=0), (pts + r).max(axis=0)])
 
 

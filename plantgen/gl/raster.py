@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from ..geometry.camera import Camera, box_corners
+from ..geometry.instances import PlacedMeshes
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
@@ -34,12 +35,13 @@ from .frame import (
     check_ssaa,
     frame_view,
 )
+from .instanced import IDENTITY_TURN, draw_copies, eye_copy_draws, light_copy_draws
 from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes
 from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
-__all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "row_data"]
+__all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "row_data"]
 
 
 def row_data(frusta) -> np.ndarray:
@@ -90,6 +92,7 @@ class RasterRenderer(OffscreenRenderer):
     def __init__(self, ctx=None):
         super().__init__(ctx)
         self._uploaded = None  # (mesh id, buffers, vao, origin)
+        self._placed = None    # (PlacedMeshes, program, [per plant buffers, vao, origin])
 
     def release_mesh(self) -> None:
         """Free the uploaded mesh's buffers (the renderer stays usable)."""
@@ -102,6 +105,7 @@ class RasterRenderer(OffscreenRenderer):
         """Free every GL object of this renderer: the mesh's buffers, the framebuffer, the
         height textures and the shadow map."""
         self.release_mesh()
+        self.release_placed()
         super().release()
 
     def upload(self, mesh: TessellatedMesh | SkinnedMesh, frusta, program):
@@ -207,7 +211,7 @@ class RasterRenderer(OffscreenRenderer):
                    repeats, tex, mesh: TessellatedMesh, poses=None):
         """Set the mesh program and return the callable that draws the mesh (posed from
         ``poses`` when skinned)."""
-        set_uniforms(program, **lighting.shading, **lighting.receiver,
+        set_uniforms(program, **lighting.shading, **lighting.receiver, **IDENTITY_TURN,
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()), n_rows=mesh.n_rows,
                      height_maps=0, texture_repeat=repeats)
@@ -233,7 +237,7 @@ class RasterRenderer(OffscreenRenderer):
         ctx = self.ctx
         skinned = poses is not None
         caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True, "SKINNED": skinned})
-        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
+        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN,
                      origin_from_eye=tuple((origin - lighting.anchor).tolist()))
         buffers = self._uploaded[1]
         attributes = [(buffers[0], "3f 20x", "position")]
@@ -249,6 +253,116 @@ class RasterRenderer(OffscreenRenderer):
                 poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return [draw], [vao]
+
+
+    # ------------------------------------------------------------------ placed scenes
+    def placed_upload(self, meshes: PlacedMeshes, program) -> list:
+        """Per plant of ``meshes`` (vbo, ibo, rows, face rows, vao, local origin), uploaded
+        once per PlacedMeshes object (faces in row order; every face's row looked up)."""
+        if self._placed is not None and self._placed[0] is meshes and self._placed[1] is program:
+            return self._placed[2]
+        self.release_placed()
+        ctx, out = self.ctx, []
+        for pm, plant in zip(meshes.meshes, meshes.placed.plants, strict=True):
+            origin, interleaved, _ = _vertex_data(pm.mesh)
+            vbo, ibo = ctx.buffer(interleaved.tobytes()), ctx.buffer(pm.faces.astype(np.uint32).tobytes())
+            rows = ctx.buffer(row_data(plant.frusta).tobytes())
+            face_rows = ctx.buffer(pm.face_row.tobytes() if len(pm.face_row) else b"\0" * 4)
+            vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")],
+                                   index_buffer=ibo, index_element_size=4)
+            out.append((vbo, ibo, rows, face_rows, vao, origin))
+        self._placed = (meshes, program, out)
+        return out
+
+    def release_placed(self) -> None:
+        if self._placed is not None:
+            for objects in self._placed[2]:
+                for obj in objects[:5]:
+                    obj.release()
+            self._placed = None
+
+    def render_placed(self, meshes: PlacedMeshes, camera: Camera, *, light_dir=None, ground: Ground | None = None,
+                      shadows: ShadowSettings | None = None, shadow_box=None, background=None, ssaa: int = 1,
+                      lod_pixels: float = 0.0) -> RenderResult:
+        """Rasterise a placed scene's meshes (GS, GS+R), each plant's mesh uploaded once and
+        drawn once per copy the view sees (:mod:`plantgen.gl.instanced`), each copy's first
+        rows of the detail order as ``lod_pixels`` asks (the light's pass: in its texels).
+        The arguments are :meth:`render`'s."""
+        placed, names = meshes.placed, meshes.placed.material_names
+        background, ssaa = check_background(background), check_ssaa(ssaa)
+        shadowed = shadows is not None
+        program = build_program(self.ctx, "raster.glsl", {"TRIANGLES_PER_ROW": 16 * 4 ** meshes.level,
+                                                          "SHADOWS": shadowed, "FACE_ROWS": True})
+        uploads = self.placed_upload(meshes, program)
+        origins = [u[5] for u in uploads]
+        view = frame_view(camera.scaled(ssaa), [box_corners(placed.box)] + ([] if ground is None else [ground.quad()]))
+        tex, repeats = self._heights.get(names)
+        box = None if not shadowed else (placed.box if shadow_box is None else np.asarray(shadow_box, np.float64))
+        lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye)
+        set_uniforms(program, **lighting.shading, **lighting.receiver, view_projection=mat4(view.view_projection),
+                     height_maps=0, texture_repeat=repeats, n_rows=0)
+        plan = eye_copy_draws(placed, view, lod_pixels, origins)
+        draw = self._placed_draws(program, uploads, meshes, plan, "origin_from_eye", tex)
+        extras = self._surroundings(ground, None, view, lighting)
+        light = None
+        if shadowed:
+            key = ShadowKey(("raster.glsl", meshes.level, float(lod_pixels)), (meshes,), ground, shadows.resolution,
+                            lighting.anchor, lighting.caster_window)
+            light = LightPass(key, lambda: self._placed_light_draw(meshes, uploads, lighting, shadows, lod_pixels))
+        out = self._finish_frame(camera, view, lighting, background, draw, shadows, light, extras, ssaa=ssaa,
+                                 count_work=False)
+        triangles = sum(int(pm.row_faces[c]) for pm, d in zip(meshes.meshes, plan, strict=True)
+                        for c in d.counts.tolist())
+        stats = RasterStats(
+            passes=frame_passes(shadowed, ground is not None, triangles > 0, False), near=view.near, far=view.far,
+            shadow_ms=out.shadow_ms, light_window=lighting.window, ssaa=ssaa, resolve_ms=self.last_resolve_ms,
+            triangles=triangles, vertices=sum(len(pm.mesh.vertices) for pm in meshes.meshes), level=meshes.level,
+            buffer_bytes=placed_buffer_bytes(meshes),
+            draw_calls=sum(len(d.copies) for d in plan) + (ground is not None),
+            shadow_cached=out.shadow_cached)
+        return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
+
+    def _placed_draws(self, program, uploads, meshes: PlacedMeshes, plan, offset_name: str, tex=None,
+                      vaos=None):
+        """The callable drawing ``plan`` (CopyDraws per plant): per plant its rows bound,
+        per copy the faces of its first rows."""
+        ctx = self.ctx
+        vaos = vaos if vaos is not None else [u[4] for u in uploads]
+
+        def draw():
+            ctx.enable(ctx.CULL_FACE)
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+            if tex is not None:
+                tex.use(0)
+            for u, vao, pm, copies in zip(uploads, vaos, meshes.meshes, plan, strict=True):
+                u[2].bind_to_storage_buffer(0)
+                u[3].bind_to_storage_buffer(1)
+                faces = pm.row_faces
+
+                def render(v, count, faces=faces):
+                    v.render(mode=ctx.TRIANGLES, vertices=3 * int(faces[count]))
+                draw_copies(program, vao, copies, render, offset_name)
+            set_uniforms(program, **IDENTITY_TURN)
+        return draw
+
+    def _placed_light_draw(self, meshes: PlacedMeshes, uploads, lighting: FrameLighting, shadows: ShadowSettings,
+                           lod_pixels: float):
+        """A placed scene's copies into the light's map, relative to its anchor, each as
+        many rows as ``lod_pixels`` texels ask: ([draw], [vertex arrays to release])."""
+        caster = build_program(self.ctx, "raster.glsl", {"SHADOW_PASS": True})
+        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN)
+        texel = lighting.caster_window.texel_size(shadows.resolution)
+        plan = light_copy_draws(meshes.placed, lighting.anchor, texel, lod_pixels, [u[5] for u in uploads])
+        vaos = [self.ctx.vertex_array(caster, [(u[0], "3f 20x", "position")], index_buffer=u[1],
+                                      index_element_size=4) for u in uploads]
+        return [self._placed_draws(caster, uploads, meshes, plan, "origin_from_eye", vaos=vaos)], vaos
+
+
+def placed_buffer_bytes(meshes: PlacedMeshes) -> int:
+    """GPU buffer bytes of a placed scene's GS draw: per plant its mesh's vertices and
+    indices, 8 B a row and 4 B a face (every face's row); nothing per copy."""
+    return sum(pm.mesh.buffer_bytes()["total"] + 8 * pm.mesh.n_rows + 4 * len(pm.faces) for pm in meshes.meshes)
 
 
 def _cap_tris(mesh: TessellatedMesh) -> int:

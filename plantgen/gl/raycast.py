@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
 from ..geometry.frusta import ROW_FIELDS, Frusta
+from ..geometry.instances import PlacedPlants
 from ..geometry.stage import Ground
 from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
@@ -39,6 +40,7 @@ from .frame import (
     check_ssaa,
     frame_view,
 )
+from .instanced import IDENTITY_PLACEMENT, draw_copies, eye_copy_draws, light_copy_draws
 from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes, light_defines, program_variants
 from .records import (
@@ -71,18 +73,41 @@ class Raycaster(OffscreenRenderer):
         self._template_vbo = self.ctx.buffer(PYRAMID_CORNERS.tobytes())
         self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
         self.programs_used: set[tuple] = set()
+        self._placed = None      # (PlacedPlants, [record buffer per plant]): uploaded once
+
+    def release(self) -> None:
+        """Free every GL object of this renderer, a placed scene's records included."""
+        self._release_placed()
+        super().release()
+
+    def _release_placed(self) -> None:
+        if self._placed is not None:
+            for buf in self._placed[1]:
+                buf.release()
+            self._placed = None
+
+    def placed_buffers(self, placed: PlacedPlants) -> list:
+        """The record buffer of each plant of ``placed`` (in its own frame), uploaded once
+        per PlacedPlants object."""
+        if self._placed is None or self._placed[0] is not placed:
+            self._release_placed()
+            self._placed = (placed, [self.ctx.buffer(pack_records(p.frusta, np.zeros(3)).tobytes())
+                                     for p in placed.plants])
+        return self._placed[1]
 
     def render(self, frusta, camera: Camera, settings: RaycastSettings = RaycastSettings(),
                material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
                shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
-               ssaa: int = 1, leaves=None, leaf_labels=None) -> RenderResult:
+               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0) -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
 
         Parameters
         ----------
         frusta : Frusta, n rows (world units, float64), or the rows of a frame posed on the
-            GPU (:class:`plantgen.gl.records.StreamedRows`, with ``record_buffer``)
+            GPU (:class:`plantgen.gl.records.StreamedRows`, with ``record_buffer``), or a
+            :class:`~plantgen.geometry.instances.PlacedPlants` drawn instanced
+            (:mod:`plantgen.gl.instanced`: records per distinct plant, uploaded once)
         camera : the view; rays go through pixel centres
         settings : relief on/off and its step knobs
         material_names : names of the material indices (choose colours and height maps)
@@ -109,11 +134,14 @@ class Raycaster(OffscreenRenderer):
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
+        lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
+            least this many pixels (the light's pass: texels of its map); 0 draws all
         """
         n = len(frusta)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         t0 = time.perf_counter()
-        records = pack_records(frusta, camera.eye) if record_buffer is None else None
+        placed = isinstance(frusta, PlacedPlants)
+        records = pack_records(frusta, camera.eye) if record_buffer is None and not placed else None
         pack_ms = (time.perf_counter() - t0) * 1e3
         leaf_box = leaf_bounds(leaves)
         model_box = union_box(rows_box(frusta) if n else None, leaf_box)
@@ -128,20 +156,20 @@ class Raycaster(OffscreenRenderer):
                                   anchor=None if record_buffer is None else view.eye)
         extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
         rec_buf = record_buffer if record_buffer is not None else (
-            self.ctx.buffer(records.tobytes()) if n else None)
+            self.ctx.buffer(records.tobytes()) if n and not placed else None)
         if record_buffer is None:
             extras.garbage.append(rec_buf)
-        draw_frusta, vao = self._frusta_draw(programs["frame"], view, lighting, settings, rec_buf,
-                                             repeats, tex, n)
-        extras.garbage.append(vao)
+        draw_frusta, vaos, drawn = self._frusta_draw(programs["frame"], view, lighting, settings,
+                                                     frusta if placed else rec_buf, repeats, tex, n, lod_pixels)
+        extras.garbage.extend(vaos)
         light = None if shadows is None else self._light_pass(
             frusta, programs["light"], lighting, settings, shadows, tuple(material_names), record_buffer,
-            (leaves if extras.after else None, ground))
+            (leaves if extras.after else None, ground), lod_pixels)
         out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, light, extras,
                                  ssaa=ssaa, count_work=count_work)
         stats = RaycastStats(
             passes=frame_passes(shadows is not None, ground is not None, n > 0, bool(extras.after)),
-            near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=n,
+            near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=drawn,
             record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
             pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
             resolve_ms=self.last_resolve_ms, programs=programs["built"], work=out.work,
@@ -172,50 +200,71 @@ class Raycaster(OffscreenRenderer):
             index_buffer=self._template_ibo if indexed else None, index_element_size=4)
 
     def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting,
-                     settings: RaycastSettings, rec_buf, repeats, tex, n: int):
-        """Set the eye's frusta program and return (draw callable, vertex array or None)."""
+                     settings: RaycastSettings, rec_buf, repeats, tex, n: int, lod_pixels: float = 0.0):
+        """Set the eye's frusta program and return (draw callable, vertex arrays to release,
+        rows drawn). ``rec_buf``: the records' buffer, or a PlacedPlants drawn copy by copy
+        (:mod:`plantgen.gl.instanced`) with ``lod_pixels``."""
         set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver,
-                     **settings.march_uniforms(), texture_repeat=repeats,
+                     **settings.march_uniforms(), **IDENTITY_PLACEMENT, texture_repeat=repeats,
                      pixel_footprint=view.pixel_footprint(),
                      view_projection=mat4(view.view_projection),
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
         if not n:
-            return (lambda: None), None
+            return (lambda: None), [], 0
         ctx = self.ctx
         screen_proxy = settings.proxy == "screen"
-        vao = self._instances(program, rec_buf, indexed=not screen_proxy)
+        placed = rec_buf if isinstance(rec_buf, PlacedPlants) else None
+        buffers = self.placed_buffers(placed) if placed is not None else [rec_buf]
+        vaos = [self._instances(program, buf, indexed=not screen_proxy) for buf in buffers]
+        plan = eye_copy_draws(placed, view, lod_pixels) if placed is not None else None
+
+        def render(vao, count):
+            if screen_proxy:
+                vao.render(mode=ctx.TRIANGLES, vertices=3, instances=count)
+            else:
+                vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=count)
 
         def draw():
             tex.use(0)
-            if screen_proxy:
-                vao.render(mode=ctx.TRIANGLES, vertices=3, instances=n)
+            if not screen_proxy:
+                ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+                ctx.front_face = "ccw"
+                ctx.cull_face = "front"   # back faces: an eye inside a pyramid still sees it
+            if plan is None:
+                render(vaos[0], n)
                 return
-            ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
-            ctx.front_face = "ccw"
-            ctx.cull_face = "front"   # back faces: an eye inside a pyramid still sees it
-            vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=n)
-        return draw, vao
+            for vao, copies in zip(vaos, plan, strict=True):
+                draw_copies(program, vao, copies, render)
+            set_uniforms(program, **IDENTITY_PLACEMENT)
+        return draw, vaos, (n if plan is None else sum(c.rows for c in plan))
 
     def _light_pass(self, frusta, caster, lighting: FrameLighting, settings: RaycastSettings,
-                    shadows: ShadowSettings, material_names: tuple, record_buffer, surroundings) -> LightPass:
+                    shadows: ShadowSettings, material_names: tuple, record_buffer, surroundings,
+                    lod_pixels: float = 0.0) -> LightPass:
         """The frusta's part of the light's pass: the :class:`ShadowKey` of the map (the
         light program's defines and knobs, the materials, the frusta and
         ``surroundings`` = (leaves or None, ground), the map's size, anchor and window; no
         key for a caller's ``record_buffer``, whose contents the renderer cannot vouch for),
         and the draws, made only when the map is drawn: orthographic rays along the light,
-        the analytic (or relief) hit's depth into the map."""
+        the analytic (or relief) hit's depth into the map. A PlacedPlants is drawn copy by
+        copy relative to the anchor, ``lod_pixels`` counted in the map's texels (the key
+        holds it: the map does not depend on the eye)."""
         defines = light_defines(settings, shadows)
         knobs = (settings.hull_padding, settings.linear_steps, settings.march_min_steps, settings.binary_steps,
                  shadows.march_density, shadows.march_precision) if defines["RELIEF"] else (settings.hull_padding,)
         leaves, ground = surroundings
         key = None if record_buffer is not None else ShadowKey(
-            ("raycast.glsl", tuple(sorted(defines.items())), knobs, material_names), (frusta, leaves), ground,
+            ("raycast.glsl", tuple(sorted(defines.items())), knobs, material_names, float(lod_pixels)),
+            (frusta, leaves), ground,
             shadows.resolution, lighting.anchor, lighting.caster_window)
 
         def draws():
             n = len(frusta)
             if not n:
                 return [], []
+            if isinstance(frusta, PlacedPlants):
+                return self._frusta_light_draw(caster, defines, lighting, settings, shadows, frusta,
+                                               material_names, n, None, lod_pixels)
             own = None if record_buffer is not None else self.ctx.buffer(
                 pack_records(frusta, lighting.anchor).tobytes())
             return self._frusta_light_draw(caster, defines, lighting, settings, shadows,
@@ -223,9 +272,11 @@ class Raycaster(OffscreenRenderer):
         return LightPass(key, draws)
 
     def _frusta_light_draw(self, caster, defines: dict, lighting: FrameLighting, settings: RaycastSettings,
-                           shadows: ShadowSettings, rec_buf, material_names, n: int, own_buffer):
+                           shadows: ShadowSettings, rec_buf, material_names, n: int, own_buffer,
+                           lod_pixels: float = 0.0):
         """Set the light's frusta program (its window relative to the light's anchor) and
-        return ([draw callable], [GL objects to release after the frame])."""
+        return ([draw callable], [GL objects to release after the frame]); ``rec_buf`` a
+        buffer of records, or a PlacedPlants drawn copy by copy."""
         window = lighting.caster_window
         tex, repeats = self._heights.get(material_names)
         march = {**settings.march_uniforms(), "march_density": shadows.march_density,
@@ -233,12 +284,17 @@ class Raycaster(OffscreenRenderer):
         secant = defines["RELIEF"] and not defines["LIGHT_BISECT"]     # shaders/light_march.glsl
         corners = self._heights.corners(material_names) if secant else None
         band = {"height_corners": 2, "height_range": self._heights.ranges(material_names)} if secant else {}
-        set_uniforms(caster, **window.uniforms(), **march, **band,
+        texel = window.texel_size(shadows.resolution)
+        set_uniforms(caster, **window.uniforms(), **march, **band, **IDENTITY_PLACEMENT,
                      viewport=(float(shadows.resolution),) * 2, texture_repeat=repeats,
-                     pixel_footprint=(0.0, window.texel_size(shadows.resolution)),
-                     view_projection=mat4(window.matrix()))
-        vao = self._instances(caster, rec_buf)
+                     pixel_footprint=(0.0, texel), view_projection=mat4(window.matrix()))
+        placed = rec_buf if isinstance(rec_buf, PlacedPlants) else None
+        vaos = [self._instances(caster, buf) for buf in (self.placed_buffers(placed) if placed else [rec_buf])]
+        plan = light_copy_draws(placed, lighting.anchor, texel, lod_pixels) if placed else None
         ctx = self.ctx
+
+        def render(vao, count):
+            vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=count)
 
         def draw():
             tex.use(0)
@@ -247,8 +303,13 @@ class Raycaster(OffscreenRenderer):
             ctx.enable(ctx.CULL_FACE)
             ctx.front_face = "ccw"
             ctx.cull_face = "front"
-            vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=n)
-        return [draw], [vao, own_buffer]
+            if plan is None:
+                render(vaos[0], n)
+                return
+            for vao, copies in zip(vaos, plan, strict=True):
+                draw_copies(caster, vao, copies, render)
+            set_uniforms(caster, **IDENTITY_PLACEMENT)
+        return [draw], [*vaos, own_buffer]
 
 
 _default_raycaster: Raycaster | None = None

@@ -16,6 +16,7 @@ from ..errors import PlantgenError
 from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
 from ..geometry.frusta import frusta_bounds
+from ..geometry.instances import PlacedPlants
 
 __all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "pack_records", "record_tags", "rc_buffer_bytes", "RecordStream", "StreamedRows", "rows_box",
@@ -177,5 +178,6 @@ class StreamedRows:
 
 
 def rows_box(rows) -> np.ndarray:
-    """(2, 3) world box of ``rows``: a Frusta's bounds, or a :class:`StreamedRows`' box."""
-    return rows.box if isinstance(rows, StreamedRows) else frusta_bounds(rows)
+    """(2, 3) world box of ``rows``: a Frusta's bounds, or the ``box`` of a
+    :class:`StreamedRows` or a :class:`~plantgen.geometry.instances.PlacedPlants`."""
+    return rows.box if isinstance(rows, (StreamedRows, PlacedPlants)) else frusta_bounds(rows)

@@ -29,7 +29,7 @@ def run_viewer(options: ViewOptions, *, say=print, warn=print) -> str:
     say(f"growing {options.input} ...")
     t0 = time.perf_counter()
     model = options.prepare()
-    say(f"{model.grown.name}: {len(model.grown.skeleton):,} segments in {time.perf_counter() - t0:.2f} s"
+    say(f"{model.grown.name}: {model.grown.segments:,} segments in {time.perf_counter() - t0:.2f} s"
         + (f"; watching {len(model.grown.sources)} file(s) for changes" if options.watch else ""))
     window = open_window(f"plantgen view: {model.grown.name}", options.size)
     try:

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
+from ..geometry.instances import PlacedMeshes, PlacedPlants
 from ..geometry.mesh import tessellate, triangle_count
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
@@ -46,7 +47,14 @@ from ..settings import (
 from .keys import binding_for
 from .watch import BackgroundJob, FileWatcher
 
-__all__ = ["METHODS", "ViewOptions", "ViewerSession", "FrameStats", "one_line"]
+__all__ = ["METHODS", "ViewOptions", "ViewerSession", "FrameStats", "one_line", "stored_triangles"]
+
+
+def stored_triangles(frusta, level: int) -> int:
+    """Triangles the GS mesh of ``frusta`` holds at ``level``: a placed scene's distinct
+    plants once each (its copies share them)."""
+    parts = [p.frusta for p in frusta.plants] if isinstance(frusta, PlacedPlants) else [frusta]
+    return sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in parts)
 
 #: The methods of Table 1, as the keys 1..4 choose them.
 METHODS = ("RC", "RC+R", "GS", "GS+R")
@@ -191,7 +199,8 @@ class ViewerSession:
         key = self._mesh_key
         if key is None or key[0] is not frusta or key[1:] != (self.level, relief):
             self._mesh = None
-            self._mesh = tessellate(frusta, self.level, relief=relief)
+            self._mesh = (PlacedMeshes.tessellate(frusta, self.level, relief) if isinstance(frusta, PlacedPlants)
+                          else tessellate(frusta, self.level, relief=relief))
             self._mesh_key = (frusta, self.level, relief)
         return self._mesh
 
@@ -279,13 +288,23 @@ class ViewerSession:
             args["shadow_box"] = self._playing_shadow_box()
         if self.model.animated:
             args["leaves"] = self.leaves()     # moved with their branches
+        if self.raster is None and not self.method.startswith("RC"):
+            self.raster = RasterRenderer(self.ctx)
+        if isinstance(frusta, PlacedPlants):   # a forest: instanced, its detail as the knob says
+            return self._drawn(self._draw_placed(frusta, args, settings, request.lod_pixels(self.effects())), t0)
         if self.method.startswith("RC"):
             result = self.raycaster.render(frusta, settings=settings, **args)
         else:
-            if self.raster is None:
-                self.raster = RasterRenderer(self.ctx)
             result = self.raster.render(self.mesh(frusta), frusta, **args)
         return self._drawn(result, t0)
+
+    def _draw_placed(self, placed: PlacedPlants, args: dict, settings, lod_pixels: float):
+        """A placed scene's frame: RC and RC+R from its records per plant, GS and GS+R from
+        its meshes per plant."""
+        if self.method.startswith("RC"):
+            return self.raycaster.render(placed, settings=settings, lod_pixels=lod_pixels, **args)
+        keep = {k: v for k, v in args.items() if k not in ("material_names", "leaves")}
+        return self.raster.render_placed(self.mesh(placed), lod_pixels=lod_pixels, **keep)
 
     def _drawn(self, result, t0: float):
         """Keep ``result`` as the last frame and its times for the heads-up line."""
@@ -310,7 +329,7 @@ class ViewerSession:
         total = (time.time_ns() - self._saved_ns) / 1e9
         timings = {**self._reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
         parts = ", ".join(f"{k} {v:.2f}" for k, v in timings.items())
-        self.say(f"reloaded {self.model.source}: {len(self.model.grown.skeleton):,} segments, "
+        self.say(f"reloaded {self.model.source}: {self.model.grown.segments:,} segments, "
                  f"{total:.2f} s from save to frame ({parts} s)")
         self.status = f"reloaded: {total:.2f} s from save to frame"
         self._saved_ns = None
@@ -410,11 +429,11 @@ class ViewerSession:
     def change_level(self, delta: int) -> None:
         level = int(np.clip(self.level + delta, 0, MAX_SUBDIV))
         frusta = self.frusta()
-        n = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+        n = stored_triangles(frusta, level)
         while n > VIEW_MAX_TRIANGLES and level > 0:
             self.status = f"m = {level} would make {n:,} triangles, over the viewer's {VIEW_MAX_TRIANGLES:,}"
             level -= 1
-            n = triangle_count(len(frusta), level, int(frusta.open_lo.sum() + frusta.open_hi.sum()))
+            n = stored_triangles(frusta, level)
         self.level = level
         self.dirty = True
 
@@ -560,7 +579,7 @@ class ViewerSession:
         leaves = self.model.grown.polygons
         count = 0 if leaves is None else len(leaves)
         leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
-        lines = [(f"{self.model.grown.name}: {len(self.model.grown.skeleton):,} segments{leafy} | {method} | shadows "
+        lines = [(f"{self.model.grown.name}: {self.model.grown.segments:,} segments{leafy} | {method} | shadows "
                   f"{self._shadow_text()} | ssaa {self.ssaa}", "info"),
                  (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
         if self.model.animated:
