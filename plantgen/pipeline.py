@@ -50,6 +50,7 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.textures import bake_textures
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
@@ -666,7 +667,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
-                 keyframes: KeyframeSettings | None = None) -> dict:
+                 keyframes: KeyframeSettings | None = None, textures: bool = True) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -692,6 +693,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
         defaults, over one common period); a format without animation writes the
         plants at rest and says so in ``warnings``
+    textures : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base colour only)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -702,9 +704,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
-    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar); for
-    a cylinder model, what :func:`plantgen.exporters.qsm.write_qsm` returns. Triangles and
-    memory are estimated before anything is built and refused over the ``limits``.
+    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar), ``textures``
+    (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
+    returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
     fmt = export_format(output_path)  # fail on a bad suffix, a missing extra or option before any work
@@ -731,14 +733,24 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                  input_path, output_path, timings, progress, skin, timeline)
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes",
-                         unit=unit, name=grown.name, progress=progress, animation=timeline, extras=extras)
+    baked = bake_textures([p.mesh for p in plants], displaced=relief) if textures and fmt.textures else None
+    paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
+                         name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
                    smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
-                                                         if getattr(extras, k) is not None))
+                                                         if getattr(extras, k) is not None),
+                   textures=_texture_summary(baked))
     return summary
+
+
+def _texture_summary(baked) -> dict:
+    """{material: {"size": (H, W), "aspect", "kinds"}} of the baked textures (empty: none)."""
+    if baked is None:
+        return {}
+    return {name: {"size": t.size.shape, "aspect": t.aspect, "kinds": baked.kinds}
+            for name, t in baked.materials.items()}
 
 
 def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,

@@ -217,6 +217,7 @@ def test_a_grammar_without_leaves_writes_what_the_frusta_writer_writes(grammars,
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
     export_model(bare, tmp_path / "a" / f"{grown.name}{suffix}")
-    export_mesh(tessellate(skin_skeleton(grown.skeleton), 1), tmp_path / "b" / f"{grown.name}{suffix}")
+    export_mesh(tessellate(skin_skeleton(grown.skeleton), 1), tmp_path / "b" / f"{grown.name}{suffix}",
+                textures=True)
     for a in sorted((tmp_path / "a").iterdir()):
         assert a.read_bytes() == (tmp_path / "b" / a.name).read_bytes(), a.name

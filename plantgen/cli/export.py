@@ -38,6 +38,9 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
+@click.option("--textures/--no-textures", default=True, show_default=True,
+              help="glTF, OBJ, USD: bake each relief material into PNG maps (base colour, tangent-space "
+                   "normal, height) the file's materials use; with --relief the base colour only.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
@@ -62,8 +65,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
-           smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, up, instancing, unit, qsm_tolerance,
+           seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -100,7 +103,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
-                            smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys))
+                            smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
+                            textures=textures)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
@@ -131,6 +135,11 @@ def _mesh_summary(info: dict) -> None:
                    f"{info['drawn']:,} triangles drawn")
     if info.get("scene"):
         click.echo(f"scene: {', '.join(info['scene'])} written with the plants")
+    for name, baked in info.get("textures", {}).items():
+        kinds = {"basecolor": "base colour", "normal": "normal", "height": "height"}
+        click.echo(f"textures of {name}: {baked['size'][1]}x{baked['size'][0]} "
+                   f"({', '.join(kinds[k] for k in baked['kinds'])}"
+                   f"{'; normal map at r/L ' + format(baked['aspect'], '.3g') if 'normal' in baked['kinds'] else ''})")
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "

@@ -42,8 +42,9 @@ from .plants import (
     unique_name,
 )
 from .sway import Timeline
+from .textures import Textures, texture_files
 
-__all__ = ["obj_names", "write_obj", "write_obj_plant"]
+__all__ = ["mtl_maps", "obj_names", "write_obj", "write_obj_plant"]
 
 #: Rows formatted at a time (bounds the text held in memory; one progress step each).
 ROWS = 1 << 16
@@ -84,9 +85,11 @@ def _leaf_runs(leaves: Polygons | None, up: str, first: int, count: int):
 
 
 def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours: Colours = None,
-              progress: Progress = None, leaves: Polygons | None = None) -> list[Path]:
+              progress: Progress = None, leaves: Polygons | None = None,
+              textures: Textures | None = None) -> list[Path]:
     """Write ``mesh`` (and ``leaves``, its material indices into ``mesh.material_names``) as
-    ``path`` (.obj) and its ``.mtl`` (see the module docstring)."""
+    ``path`` (.obj) and its ``.mtl`` (see the module docstring), with ``textures`` the
+    relief's maps as PNG files beside them (:func:`mtl_maps`)."""
     path = Path(path)
     if len(mesh.faces) == 0:
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
@@ -108,12 +111,16 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
     n_faces = len(faces) + sum(len(f) for _, f in leaf_runs)
     n_vertices = len(vertices) + sum(len(v) for v in leaf_vertices)
 
+    files = {} if textures is None else texture_files(path, textures, mesh.material_names, v_up=True)
+    maps = {i: mtl_maps(files[name], textures.get(name), colours is None)
+            for i, name in enumerate(mesh.material_names) if name in files}
+
     def write_mtl(tmp):
         lines = [f"# {generator()}: materials of {path.name}"]
         for i, name in enumerate(names):
-            r, g, b = rgb[i]
+            r, g, b = (1.0, 1.0, 1.0) if any(m.startswith("map_Kd") for m in maps.get(i, ())) else rgb[i]
             lines += ["", f"newmtl {name}", "Ka 0 0 0", f"Kd {r:.6f} {g:.6f} {b:.6f}", "Ks 0 0 0", "Ns 10",
-                      "d 1", "illum 1"]
+                      "d 1", "illum 1", *maps.get(i, ())]
         Path(tmp).write_text("\n".join(lines) + "\n", encoding="utf-8")
 
     def write_geometry(tmp):
@@ -140,16 +147,36 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
                 _rows(fh, "f", "%d/%d/%d %d/%d/%d %d/%d/%d", np.repeat(leaf_faces, 3, axis=1), progress, done,
                       total)
 
-    return write_all_atomically([(mtl_path, write_mtl), (path, write_geometry)], ExportError)
+    pngs = [(png, lambda tmp, blob=blob: Path(tmp).write_bytes(blob)) for kinds in files.values()
+            for png, blob in kinds.values()]
+    return write_all_atomically([*pngs, (mtl_path, write_mtl), (path, write_geometry)], ExportError)
+
+
+def mtl_maps(files: dict, baked, base_colour: bool = True) -> list[str]:
+    """The MTL lines naming a material's maps ``files`` ({kind: (path, bytes)}):
+    ``map_Kd`` the base colour (where ``base_colour``: no colour was given), ``norm``
+    (the PBR extension's tangent-space normal map) and ``map_Bump`` naming the same
+    normal map (what Blender's importer reads as one), ``disp`` the height map, its
+    amplitude in a comment (the shell of a segment of the median radius)."""
+    lines = []
+    if "basecolor" in files and base_colour:
+        lines.append(f"map_Kd {files['basecolor'][0].name}")
+    if "normal" in files:
+        lines += [f"norm {files['normal'][0].name}", f"map_Bump {files['normal'][0].name}"]
+    if "height" in files:
+        lines += [f"# height: 0..1 of the relief shell, {baked.amplitude:.6g} model units at the median radius "
+                  f"(shell {baked.shell:g} of each segment's mean radius)", f"disp {files['height'][0].name}"]
+    return lines
 
 
 def write_obj_plant(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
                     instancing: str = "off", unit: float = 1.0, name: str | None = None,
                     progress: Progress = None, animation: Timeline | None = None,
-                    extras: SceneExtras | None = None) -> list[Path]:
+                    extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """:func:`write_obj` of the one plant of ``plants``, in place, with its leaves (a
     :class:`~plantgen.exporters.plants.MeshWriter`; OBJ has no instancing and no units, and
     its name is the file's; a scene's camera, light and ground are not written: OBJ has no
     camera or light, and a ground square would be taken for part of the model)."""
     plant = single_plant(plants, path)
-    return write_obj(plant.mesh, path, up=up, colours=colours, progress=progress, leaves=plant.leaves)
+    return write_obj(plant.mesh, path, up=up, colours=colours, progress=progress, leaves=plant.leaves,
+                     textures=textures)

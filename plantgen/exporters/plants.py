@@ -132,6 +132,8 @@ class MeshWriter(Protocol):
         None: no animation
     extras : a scene's camera, light and ground (:class:`SceneExtras`), written by the
         formats that hold them (glTF, USD; OBJ, PLY and STL hold the plants only); None: none
+    textures : the relief's baked maps (:class:`~plantgen.exporters.textures.Textures`),
+        given to the formats whose row says ``textures`` (glTF, OBJ, USD); None: none
 
     A writer ignores what its format has no place for. Returns the written paths, the
     main file last.
@@ -139,7 +141,7 @@ class MeshWriter(Protocol):
 
     def __call__(self, plants: list[Plant], path: Path, *, up: str, colours: Colours, instancing: str,
                  unit: float, name: str | None, progress: Progress, animation: Timeline | None,
-                 extras: SceneExtras | None) -> list[Path]: ...
+                 extras: SceneExtras | None, textures=None) -> list[Path]: ...
 
 
 class SkeletonWriter(Protocol):

@@ -1,0 +1,186 @@
+"""The relief's textures in the files, read back by other projects' readers: the Khronos
+glTF validator and three.js (glTF), usd-core (USD: its shader network and compliance
+checker), trimesh and meshio (OBJ), Pillow (the PNGs), Blender where it is installed."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import struct
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _cli import run_cli
+from _node import assert_khronos_valid, khronos_issues, needs_node, three_js_materials
+
+from plantgen.exporters import ExportError
+from plantgen.exporters.textures import texture_image
+from plantgen.geometry.textures import bake_material
+from plantgen.pipeline import export_model
+
+Image = pytest.importorskip("PIL.Image", reason="Pillow reads the PNGs back")
+
+
+def _glb(path: Path) -> tuple[dict, bytes]:
+    data = path.read_bytes()
+    (json_len,) = struct.unpack_from("<I", data, 12)
+    doc = json.loads(data[20:20 + json_len])
+    return doc, data[20 + json_len + 8:]
+
+
+def _png(data: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(data)))
+
+
+def test_glb_materials_carry_the_baked_maps(tmp_path):
+    summary = export_model("well", tmp_path / "well.glb")
+    assert set(summary["textures"]) == {"stone", "bark"}
+    doc, blob = _glb(tmp_path / "well.glb")
+    materials = {m["name"]: m for m in doc["materials"]}
+    for name in ("stone", "bark"):
+        m = materials[name]
+        pbr = m["pbrMetallicRoughness"]
+        assert pbr["baseColorFactor"] == [1.0, 1.0, 1.0, 1.0]
+        baked = bake_material(name, np.array([m["extras"]["plantgen"]["normalAspect"]]))
+        for kind, index in (("basecolor", pbr["baseColorTexture"]["index"]),
+                            ("normal", m["normalTexture"]["index"]),
+                            ("height", m["extras"]["plantgen"]["heightTexture"])):
+            image = doc["images"][doc["textures"][index]["source"]]
+            view = doc["bufferViews"][image["bufferView"]]
+            png = blob[view["byteOffset"]:view["byteOffset"] + view["byteLength"]]
+            assert np.array_equal(_png(png), texture_image(baked, kind)), (name, kind)
+        assert m["extras"]["plantgen"]["shellFraction"] == pytest.approx(baked.shell)
+    # every primitive of a normal-mapped material has unit tangents with a sign
+    textured = {i for i, m in enumerate(doc["materials"]) if "normalTexture" in m}
+    prims = [p for mesh in doc["meshes"] for p in mesh["primitives"] if p["material"] in textured]
+    assert prims and all("TANGENT" in p["attributes"] for p in prims)
+    # the ground's material and every other one without relief stay plain
+    assert all("normalTexture" not in m for n, m in materials.items() if n not in ("stone", "bark"))
+    assert len(materials) > 2
+    sampler = doc["samplers"][0]
+    assert sampler["wrapS"] == sampler["wrapT"] == 10497       # REPEAT: v runs on along a chain
+
+
+@needs_node
+def test_the_validator_and_three_js_read_the_textured_glb(tmp_path):
+    export_model("saguaro", tmp_path / "saguaro.glb")
+    issues = assert_khronos_valid(tmp_path / "saguaro.glb")
+    # the height map is named only by the material's extras: the validator notes it as unused
+    assert [m["code"] for m in issues["messages"]] == ["UNUSED_OBJECT"]
+    [material] = three_js_materials(tmp_path / "saguaro.glb", tmp_path)
+    assert material["map"] == [256, 256] and material["normalMap"] == [256, 256]
+    assert material["tangents"] and material["normalScale"] == [1, 1] and material["colorSpace"] == "srgb"
+
+
+@needs_node
+def test_gltf_names_its_texture_files_beside_it(tmp_path):
+    paths = export_model("saguaro", tmp_path / "cactus.gltf")["paths"]
+    names = sorted(p.name for p in paths)
+    assert names == ["cactus.bin", "cactus.gltf", "cactus_cactus_basecolor.png", "cactus_cactus_height.png",
+                     "cactus_cactus_normal.png"]
+    assert khronos_issues(tmp_path / "cactus.gltf")["numErrors"] == 0     # it resolves the files
+    doc = json.loads((tmp_path / "cactus.gltf").read_text())
+    assert {im["uri"] for im in doc["images"]} == {n for n in names if n.endswith(".png")}
+
+
+def test_relief_meshes_get_the_base_colour_only_and_no_textures_means_none(tmp_path):
+    export_model("saguaro", tmp_path / "r.glb", relief=True)
+    doc, _ = _glb(tmp_path / "r.glb")
+    [m] = doc["materials"]
+    assert "baseColorTexture" in m["pbrMetallicRoughness"] and "normalTexture" not in m and "extras" not in m
+    assert all("TANGENT" not in p["attributes"] for p in doc["meshes"][0]["primitives"])
+    export_model("saguaro", tmp_path / "n.glb", textures=False)
+    doc, _ = _glb(tmp_path / "n.glb")
+    assert "images" not in doc and "textures" not in doc
+    assert export_model("saguaro", tmp_path / "n.obj", textures=False)["textures"] == {}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["n.glb", "n.mtl", "n.obj", "r.glb"]
+
+
+def test_obj_mtl_names_its_maps_and_trimesh_reads_them(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    export_model("well", tmp_path / "well.obj")
+    mtl = (tmp_path / "well.mtl").read_text()
+    block = mtl.split("newmtl stone")[1].split("newmtl")[0]
+    for line in ("map_Kd well_stone_basecolor.png", "norm well_stone_normal.png", "map_Bump well_stone_normal.png",
+                 "disp well_stone_height.png", "Kd 1.000000 1.000000 1.000000"):
+        assert line in block
+    for png in ("basecolor", "normal", "height"):
+        assert (tmp_path / f"well_stone_{png}.png").is_file()
+    scene = trimesh.load(tmp_path / "well.obj", process=False)
+    meshes = scene.geometry.values() if hasattr(scene, "geometry") else [scene]
+    stone = [m for m in meshes if getattr(m.visual.material, "name", "") == "stone"]
+    assert stone and stone[0].visual.material.image.size == (256, 256)
+    # trimesh's own sampling of the image (nearest texel, v = 0 at the bottom row) gives at
+    # (u, v) the baked colour of v's row: the image is right side up for OBJ's convention
+    uv = np.random.default_rng(5).random((500, 2))
+    colours = trimesh.visual.uv_to_color(uv, stone[0].visual.material.image)[:, :3]
+    baked = bake_material("stone").base_colour
+    rows, cols = np.rint(uv[:, 1] * 255).astype(int), np.rint(uv[:, 0] * 255).astype(int)
+    assert np.array_equal(colours, baked[rows, cols])
+    assert not np.array_equal(colours, baked[255 - rows, cols])
+
+
+def test_meshio_reads_the_textured_obj(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    summary = export_model("saguaro", tmp_path / "s.obj")
+    mesh = meshio.read(tmp_path / "s.obj")
+    assert len(mesh.points) == summary["vertices"]
+
+
+def test_usd_shader_network_resolves_its_textures(tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (plantgen[usd]) is not installed")
+    from pxr import Usd, UsdShade
+    from test_export_scene import usd_problems
+
+    export_model("saguaro", tmp_path / "s.usda")
+    assert usd_problems(tmp_path / "s.usda") == []
+    stage = Usd.Stage.Open(str(tmp_path / "s.usda"))
+    surface = UsdShade.Shader(stage.GetPrimAtPath("/saguaro/Materials/cactus/PreviewSurface"))
+    baked = bake_material("cactus", np.array([0.3]))
+    for target, kind in (("diffuseColor", "basecolor"), ("normal", "normal"), ("displacement", "height")):
+        source, _, _ = surface.GetInput(target).GetConnectedSource()
+        texture = UsdShade.Shader(source.GetPrim())
+        assert texture.GetIdAttr().Get() == "UsdUVTexture"
+        asset = texture.GetInput("file").Get()
+        assert Path(asset.resolvedPath).is_file(), asset
+        image = _png(Path(asset.resolvedPath).read_bytes())
+        if kind != "normal":       # the normal map's x and y depend on the aspect it was baked at
+            assert np.array_equal(image, texture_image(baked, kind, v_up=True))
+        space = texture.GetInput("sourceColorSpace").Get()
+        assert space == ("sRGB" if kind == "basecolor" else "raw")
+        reader, _, _ = texture.GetInput("st").GetConnectedSource()
+        assert UsdShade.Shader(reader.GetPrim()).GetInput("varname").Get() == "st"
+
+
+def test_a_failed_textured_export_leaves_nothing(tmp_path):
+    (tmp_path / "s_cactus_normal.png").mkdir()          # a PNG target that cannot be written
+    with pytest.raises(ExportError):
+        export_model("saguaro", tmp_path / "s.obj")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s_cactus_normal.png"]
+
+
+def test_the_command_reports_the_texture_sizes(tmp_path):
+    code, out, _ = run_cli("export", "saguaro", "-o", tmp_path / "s.glb")
+    assert code == 0 and "textures of cactus: 256x256 (base colour, normal, height" in out
+
+
+def test_blender_imports_the_textured_glb(tmp_path):
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Blender is not installed: its glTF importer cannot be tried here")
+    export_model("saguaro", tmp_path / "s.glb")
+    script = tmp_path / "check.py"
+    script.write_text(
+        "import bpy, json, sys\n"
+        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        f"bpy.ops.import_scene.gltf(filepath={str(tmp_path / 's.glb')!r})\n"
+        "out = {m.name: sorted(n.type for n in m.node_tree.nodes) for m in bpy.data.materials if m.use_nodes}\n"
+        "print('RESULT' + json.dumps(out))\n")
+    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script)],
+                          capture_output=True, text=True, timeout=300)
+    line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
+    nodes = json.loads(line[len("RESULT"):])["cactus"]
+    assert "NORMAL_MAP" in nodes and nodes.count("TEX_IMAGE") >= 2
