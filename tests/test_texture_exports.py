@@ -184,3 +184,72 @@ def test_blender_imports_the_textured_glb(tmp_path):
     line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
     nodes = json.loads(line[len("RESULT"):])["cactus"]
     assert "NORMAL_MAP" in nodes and nodes.count("TEX_IMAGE") >= 2
+
+
+def _leaf_colours(doc: dict, blob: bytes) -> np.ndarray:
+    leaf = {i for i, m in enumerate(doc["materials"]) if m["name"].endswith("(leaf)")}
+    out = []
+    for prim in (p for mesh in doc["meshes"] for p in mesh["primitives"] if p["material"] in leaf):
+        accessor = doc["accessors"][prim["attributes"]["COLOR_0"]]
+        view = doc["bufferViews"][accessor["bufferView"]]
+        out.append(np.frombuffer(blob, np.float32, accessor["count"] * 3, view["byteOffset"]).reshape(-1, 3))
+    return np.concatenate(out)
+
+
+def test_bush_materials_are_one_per_name_and_leaves_keep_their_shades(tmp_path):
+    """abop_bush's colour table names bark twice and leaf 13 times (' steps through it):
+    one material of each name, and each leaf its own shade (glTF: COLOR_0)."""
+    from plantgen.geometry.materials import material_palette
+
+    export_model("abop_bush", tmp_path / "bush.glb", level=0)
+    doc, blob = _glb(tmp_path / "bush.glb")
+    names = [m["name"] for m in doc["materials"]]
+    assert sorted(names) == ["bark", "leaf", "leaf (leaf)", "stem"]
+    colours = _leaf_colours(doc, blob)
+    palette = material_palette(["leaf"])
+    dark, light = palette["dark"][0], palette["light"][0]
+    tone = (colours - dark) @ (light - dark) / np.sum((light - dark) ** 2)
+    assert np.allclose(dark + tone[:, None] * (light - dark), colours, atol=1e-6)   # on the dark-light line
+    assert tone.min() >= 0.25 - 1e-6 and tone.max() <= 0.85 + 1e-6
+    assert len(np.unique(np.round(tone, 5))) > 100                                  # leaf by leaf
+    leaf = next(m for m in doc["materials"] if m["name"] == "leaf (leaf)")
+    assert leaf["pbrMetallicRoughness"]["baseColorFactor"] == [1.0, 1.0, 1.0, 1.0]
+
+
+@needs_node
+def test_three_js_colours_the_leaves_by_vertex(tmp_path):
+    export_model("abop_bush", tmp_path / "bush.glb", level=0)
+    materials = {m["material"]: m for m in three_js_materials(tmp_path / "bush.glb", tmp_path)}
+    assert materials["leaf (leaf)"]["vertexColors"] and not materials["bark"]["vertexColors"]
+    assert materials["bark"]["map"] == [256, 256]
+
+
+def test_bush_obj_has_no_duplicate_materials(tmp_path):
+    export_model("abop_bush", tmp_path / "bush.obj", level=0)
+    blocks = (tmp_path / "bush.mtl").read_text().split("newmtl ")[1:]
+    names = [b.split()[0] for b in blocks]
+    kd = [b.split("Kd ")[1].split("\n")[0] for b in blocks]
+    assert len(set(names)) == len(names) and len(names) <= 3 + 8      # was 28
+    leaf_kd = [k for n, k in zip(names, kd, strict=True) if n.startswith("leaf_(leaf)")]
+    assert len(leaf_kd) > 1 and len(set(leaf_kd)) == len(leaf_kd)
+
+
+def test_usd_leaves_carry_their_shades(tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (plantgen[usd]) is not installed")
+    from pxr import Usd, UsdGeom, UsdShade
+    from test_export_scene import usd_problems
+
+    export_model("abop_bush", tmp_path / "bush.usda", level=0)
+    assert usd_problems(tmp_path / "bush.usda") == []
+    stage = Usd.Stage.Open(str(tmp_path / "bush.usda"))
+    leaves = stage.GetDefaultPrim().GetChild("Leaves")
+    colours = np.array(UsdGeom.PrimvarsAPI(leaves).GetPrimvar("displayColor").Get())
+    assert len(colours) == len(UsdGeom.Mesh(leaves).GetPointsAttr().Get())
+    assert len(np.unique(np.round(colours, 5), axis=0)) > 100
+    material, _ = UsdShade.MaterialBindingAPI(leaves).ComputeBoundMaterial()
+    surface = material.ComputeSurfaceSource()[0]
+    source, _, _ = surface.GetInput("diffuseColor").GetConnectedSource()
+    reader = UsdShade.Shader(source.GetPrim())
+    assert reader.GetIdAttr().Get() == "UsdPrimvarReader_float3" and reader.GetInput("varname").Get() == "displayColor"
+    names = [c.GetName() for c in stage.GetDefaultPrim().GetChild("Materials").GetChildren()]
+    assert sorted(names) == ["bark", "leaf", "leaf_leaf", "stem"]

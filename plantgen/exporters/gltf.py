@@ -29,7 +29,9 @@ name and base colour, linear RGB as glTF defines it). Nodes:
 
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
 material, with a material of their own named ``"<material> (leaf)"`` that is
-``doubleSided`` (a leaf is seen from both sides; the frusta's materials stay single-sided,
+``doubleSided``, white, each vertex's ``COLOR_0`` its leaf's shade as the renderers draw
+it (between the material's dark and light colour; with ``colours`` given: that colour,
+no COLOR_0) (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
 bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`).
 
@@ -169,6 +171,8 @@ def _primitive(buffer: _Buffer, part, material: int, joint_count: int = 0) -> di
     attributes = {"POSITION": buffer.add(positions, "VEC3", FLOAT, ARRAY_BUFFER, bounds=True),
                   "NORMAL": buffer.add(part.normals, "VEC3", FLOAT, ARRAY_BUFFER),
                   "TEXCOORD_0": buffer.add(part.uv, "VEC2", FLOAT, ARRAY_BUFFER)}
+    if part.colours is not None:
+        attributes["COLOR_0"] = buffer.add(part.colours.astype(np.float32), "VEC3", FLOAT, ARRAY_BUFFER)
     for name, values in (part.labels or {}).items():     # application-specific: "_NAME"
         attributes[name] = buffer.add(values.astype(np.float32), "SCALAR", FLOAT, ARRAY_BUFFER)
     if part.joints is not None:
@@ -256,11 +260,13 @@ class _Document:
         rgb = material_colours(names, self.colours)
         skin = None if rig is None else (rig.vertex_joints, rig.vertex_weights)
         parts = (material_parts(plant.mesh, self.up, plant.labels, skin)
-                 + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints))
+                 + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
+                              names if self.colours is None else None))
         primitives = []
         for part in parts:
             mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
-            material = self.material(mat_name, rgb[part.material], part.leaf)
+            white = part.colours is not None          # COLOR_0 holds each leaf's own colour
+            material = self.material(mat_name, (1.0, 1.0, 1.0) if white else rgb[part.material], part.leaf)
             primitives.append(_primitive(self.buffer, part, material, 0 if rig is None else rig.joints))
             if self.normal_mapped(mat_name, part.leaf):
                 tangents = mesh_tangents(part.vertices, part.normals, part.uv, part.faces)

@@ -24,7 +24,17 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, writable_format
-from .plants import Colours, MeshWriter, Plant, Progress, SceneExtras, leaf_parts, single_plant, turned_mesh
+from .plants import (
+    Colours,
+    MeshWriter,
+    Plant,
+    Progress,
+    SceneExtras,
+    leaf_parts,
+    merged_materials,
+    single_plant,
+    turned_mesh,
+)
 from .sway import Timeline
 from .textures import Textures, bake_textures
 
@@ -95,6 +105,7 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     writer: MeshWriter = fmt.load_writer()
+    plants = [merged_materials(p) for p in plants]      # one material of each name
     return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,
                   progress=progress, animation=animation if fmt.animation else None, extras=extras,
                   textures=textures if fmt.textures else None)

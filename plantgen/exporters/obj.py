@@ -9,7 +9,10 @@ names, with white space turned to ``_`` (OBJ and MTL end a name at white space).
 
 Leaves (a grammar's ``{ . }`` polygons, ``leaves``) follow: their vertices and normals
 (the polygon's) and texture coordinates (across each leaf's plane) after the frusta's,
-then their faces material by material under materials named ``<material>_(leaf)``. OBJ and MTL
+then their faces material by material and shade by shade under materials named
+``<material>_(leaf)_<k>``: OBJ has no per-vertex colour, so each leaf takes the nearest
+of :data:`LEAF_SHADES` shades of the renderers' (each a distinct colour; with ``colours``
+given, one material ``<material>_(leaf)`` in that colour). OBJ and MTL
 have no double-sided flag; readers draw OBJ faces from both sides by default.
 
 Coordinates are y-up by default (OBJ has no rule; Blender's, Maya's and three.js's
@@ -25,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_all_atomically
+from ..geometry.materials import material_palette
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from .formats import ExportError
@@ -69,17 +73,43 @@ def _rows(fh, prefix: str, fmt: str, array: np.ndarray, progress, done: list, to
             progress("write", done[0], total)
 
 
-def _leaf_runs(leaves: Polygons | None, up: str, first: int, count: int):
-    """Leaf vertices, normals and runs (material index into the MTL, faces, 1-based) of
-    :func:`~plantgen.exporters.plants.leaf_parts`, numbered after ``first`` vertices, their
-    materials after ``count``."""
-    parts = leaf_parts(leaves, up)
+#: Shades a leaf material is written in (OBJ has no per-vertex colour): each leaf takes
+#: the nearest of LEAF_SHADES tones spread over the renderers' range (leaf_tones: 0.25..0.85).
+LEAF_SHADES = 8
+
+
+def leaf_shades(names, material: int, colours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shade of each leaf vertex of ``material`` from its colour (v, 3): its level (v,)
+    among :data:`LEAF_SHADES`, and the levels' colours (LEAF_SHADES, 3), linear RGB."""
+    palette = material_palette(names)
+    dark, light = palette["dark"][material].astype(np.float64), palette["light"][material].astype(np.float64)
+    span = light - dark
+    tone = (np.asarray(colours, np.float64) - dark) @ span / max(float(span @ span), 1e-30)
+    level = np.clip(np.rint((tone - 0.25) / 0.6 * (LEAF_SHADES - 1)), 0, LEAF_SHADES - 1).astype(np.int64)
+    tones = 0.25 + 0.6 * np.arange(LEAF_SHADES) / (LEAF_SHADES - 1)
+    return level, dark + tones[:, None] * span
+
+
+def _leaf_runs(leaves: Polygons | None, up: str, first: int, names, shaded: bool):
+    """Leaf vertices, normals and runs (material name, linear RGB, faces 1-based) of
+    :func:`~plantgen.exporters.plants.leaf_parts`, numbered after ``first`` vertices; with
+    ``shaded`` one run per shade a material's leaves take (:func:`leaf_shades`), else one
+    per material in its colour (None: the MTL's)."""
+    parts = leaf_parts(leaves, up, names=names if shaded else None)
     vertices = [p.vertices for p in parts]
     normals = [p.normals.astype(np.float64) for p in parts]
     uv = [p.uv.astype(np.float64) for p in parts]
     runs = []
-    for k, part in enumerate(parts):
-        runs.append((count + k, part.faces.astype(np.int64) + 1 + first))
+    for part in parts:
+        faces = part.faces.astype(np.int64) + 1 + first
+        name = leaf_name(names[part.material])
+        if part.colours is None:
+            runs.append((name, None, part.material, faces))
+        else:
+            level, shades = leaf_shades(names, part.material, part.colours)
+            face_level = level[part.faces[:, 0]]
+            runs += [(f"{name} {k + 1}", tuple(shades[k]), part.material, faces[face_level == k])
+                     for k in np.unique(face_level)]
         first += len(part.vertices)
     return parts, vertices, uv, normals, runs
 
@@ -94,11 +124,12 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
     if len(mesh.faces) == 0:
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     mtl_path = path.with_suffix(".mtl")
-    parts, leaf_vertices, leaf_uv, leaf_normals, leaf_runs = _leaf_runs(leaves, up, len(mesh.vertices),
-                                                               len(mesh.material_names))
-    names = obj_names([*mesh.material_names, *(leaf_name(mesh.material_names[p.material]) for p in parts)])
+    parts, leaf_vertices, leaf_uv, leaf_normals, runs = _leaf_runs(leaves, up, len(mesh.vertices),
+                                                                   mesh.material_names, colours is None)
+    names = obj_names([*mesh.material_names, *(run[0] for run in runs)])
     rgb = material_colours(mesh.material_names, colours)
-    rgb += [rgb[p.material] for p in parts]
+    rgb += [rgb[material] if shade is None else shade for _, shade, material, _ in runs]
+    leaf_runs = [(len(mesh.material_names) + k, run[3]) for k, run in enumerate(runs)]
     vertices, normals = turned_mesh(mesh, up)
     order = np.argsort(mesh.face_material, kind="stable")
     face_material = mesh.face_material[order]

@@ -10,8 +10,11 @@ One plant, written in place::
                             a partition) bound to its material
         Leaves              Mesh of the grammar's leaf polygons (only when it has some):
                             points, triangles, vertex normals (the polygon's),
-                            primvars:st across each leaf, ``doubleSided = true``; bound to the
-                            plant's materials as Mesh is
+                            primvars:st across each leaf, ``doubleSided = true``,
+                            primvars:displayColor each leaf's shade (as the renderers
+                            draw it); bound to materials ``<name>_leaf`` whose surface
+                            reads displayColor (with ``colours`` given: to the plant's
+                            materials, as Mesh is)
         Skeleton            BasisCurves, linear, purpose "guide" (drawn on request, not
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
@@ -192,9 +195,17 @@ class _Writer:
         if rig is not None:
             self._bind(mesh, path.AppendChild("Joints"), rig.vertex_joints, rig.vertex_weights)
         if plant.has_leaves:
-            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints)
-            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts), materials,
-                                np.concatenate([p.uv for p in parts]), double_sided=True)
+            names = plant.mesh.material_names
+            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
+                               names if self.colours is None else None)
+            shaded = parts[0].colours is not None
+            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts),
+                                self._leaf_materials(path.AppendChild("Materials"), names, {p.material for p in parts})
+                                if shaded else materials, np.concatenate([p.uv for p in parts]), double_sided=True)
+            if shaded:
+                self.UsdGeom.PrimvarsAPI(leaves).CreatePrimvar(
+                    "displayColor", self.Sdf.ValueTypeNames.Color3fArray, self.UsdGeom.Tokens.vertex).Set(
+                    self.Vt.Vec3fArray.FromNumpy(np.concatenate([p.colours for p in parts]).astype(np.float32)))
             if rig is not None:
                 self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
                            np.concatenate([p.weights for p in parts]))
@@ -293,6 +304,30 @@ class _Writer:
             if name in self.files:
                 self._textured(material, shader, name)
             out.append(material)
+        return out
+
+    def _leaf_materials(self, scope, names, used) -> list:
+        """Materials ``<name>_leaf`` (for the indices ``used`` of ``names``; None at the
+        others) whose UsdPreviewSurface takes its diffuseColor from the Leaves' vertex
+        primvar ``displayColor`` (each leaf's shade), the material's colour its fallback."""
+        UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
+        taken = {child.GetName() for child in self.stage.GetPrimAtPath(scope).GetChildren()}
+        rgb = material_colours(names)
+        out: list = [None] * len(names)
+        for index in sorted(used):
+            material = UsdShade.Material.Define(self.stage, scope.AppendChild(self.name(f"{names[index]}_leaf", taken)))
+            shader = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild("PreviewSurface"))
+            shader.CreateIdAttr("UsdPreviewSurface")
+            reader = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild("LeafColour"))
+            reader.CreateIdAttr("UsdPrimvarReader_float3")
+            reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("displayColor")
+            reader.CreateInput("fallback", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*rgb[index]))
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+                reader.CreateOutput("result", Sdf.ValueTypeNames.Float3))
+            shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.8)
+            shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+            material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            out[index] = material
         return out
 
     def _textured(self, material, surface, name: str) -> None:
