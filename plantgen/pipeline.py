@@ -50,7 +50,7 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
-from .exporters.textures import bake_textures
+from .exporters.textures import bake_textures, split_by_aspect
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
@@ -667,7 +667,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
-                 keyframes: KeyframeSettings | None = None, textures: bool = True) -> dict:
+                 keyframes: KeyframeSettings | None = None, textures: bool = True,
+                 aspect_step: float | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -675,8 +676,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ----------
     input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
     output_path : the file; its suffix names the format (:mod:`plantgen.exporters.formats`)
-    level, relief : the tessellation (GS, GS+R) of the mesh formats
-    up : ``"y"`` or ``"z"``; default the format's convention
+    level, relief, up : the tessellation (GS, GS+R); ``"y"`` or ``"z"`` (default: the format's)
     instancing : how a scene's repeated plants are written where the format can
         (glTF, USD): ``"nodes"`` (the default) once, with one node per copy sharing the
         plant's mesh (core glTF, which every reader opens; USD instanceable references);
@@ -684,8 +684,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         a USD ``PointInstancer``; ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
-    progress : ``progress(stage, done, total)``, called as plants are tessellated and
-        the file written
+    progress : ``progress(stage, done, total)``, as plants are tessellated and the file written
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
@@ -693,15 +692,16 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
         defaults, over one common period); a format without animation writes the
         plants at rest and says so in ``warnings``
-    textures : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base colour only)
+    textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
+        colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
-    a scene's plants (once per distinct plant when instanced), written beside the frusta
-    and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
+    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's
+    plants (once per distinct plant when instanced), beside the frusta and counted in
+    ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
     besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar), ``textures``
@@ -733,7 +733,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                  input_path, output_path, timings, progress, skin, timeline)
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    baked = bake_textures([p.mesh for p in plants], displaced=relief) if textures and fmt.textures else None
+    plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
@@ -743,6 +743,16 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                                          if getattr(extras, k) is not None),
                    textures=_texture_summary(baked))
     return summary
+
+
+def _textured(plants: list[Plant], relief: bool, aspect_step: float | None) -> tuple[list[Plant], object]:
+    """The plants (split by aspect where ``aspect_step`` is given and the mesh is not
+    displaced: :func:`~plantgen.exporters.textures.split_by_aspect`) and their baked maps
+    (:func:`~plantgen.exporters.textures.bake_textures`)."""
+    bases = None
+    if aspect_step and not relief:
+        plants, bases = split_by_aspect(plants, aspect_step)
+    return plants, bake_textures([p.mesh for p in plants], displaced=relief, bases=bases)
 
 
 def _texture_summary(baked) -> dict:

@@ -253,3 +253,41 @@ def test_usd_leaves_carry_their_shades(tmp_path):
     assert reader.GetIdAttr().Get() == "UsdPrimvarReader_float3" and reader.GetInput("varname").Get() == "displayColor"
     names = [c.GetName() for c in stage.GetDefaultPrim().GetChild("Materials").GetChildren()]
     assert sorted(names) == ["bark", "leaf", "leaf_leaf", "stem"]
+
+
+def test_aspect_buckets_give_their_rows_their_own_normal_maps(tmp_path):
+    """--aspect-step: the well's stone and bark rows split by aspect, each bucket a material
+    with its own normal map baked at its rows' aspect; the base colour and height are the
+    material's, written once."""
+    summary = export_model("well", tmp_path / "well.obj", aspect_step=2.0)
+    buckets = {n: t for n, t in summary["textures"].items() if " (r/L " in n}
+    assert buckets and {n.split(" (")[0] for n in buckets} == {"stone", "bark"}
+    aspects = [t["aspect"] for n, t in summary["textures"].items() if n.startswith("stone")]
+    assert max(aspects) / min(aspects) > 8                      # the well's stone spans a wide range
+    mtl = (tmp_path / "well.mtl").read_text()
+    blocks = {b.split("\n")[0]: b for b in mtl.split("newmtl ")[1:]}
+    stone_buckets = [b for n, b in blocks.items() if n.startswith("stone_(r/L")]
+    assert stone_buckets and all("map_Kd well_stone_basecolor.png" in b for b in stone_buckets)
+    normals = {line.split()[1] for b in blocks.values() for line in b.splitlines() if line.startswith("norm ")}
+    assert len(normals) == len(summary["textures"])             # one normal map per material and bucket
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert len(pngs) == len(normals) + 4                        # + stone's and bark's colour and height, once
+
+
+@needs_node
+def test_aspect_buckets_pass_the_validator(tmp_path):
+    export_model("well", tmp_path / "well.glb", aspect_step=2.0)
+    assert_khronos_valid(tmp_path / "well.glb")
+    doc, _ = _glb(tmp_path / "well.glb")
+    stone = [m for m in doc["materials"] if m["name"].startswith("stone")]
+    assert len(stone) > 1 and len({m["pbrMetallicRoughness"]["baseColorTexture"]["index"] for m in stone}) == 1
+    assert len({m["normalTexture"]["index"] for m in stone}) == len(stone)
+
+
+def test_the_aspect_benchmark_prints_its_table(capsys):
+    from plantgen.benchmarks import texture_aspects
+
+    assert texture_aspects.main(["saguaro", "--step", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "| saguaro | cactus |" in out
+    assert texture_aspects.main(["saguaro", "--step", "1"]) == 2

@@ -41,6 +41,11 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @click.option("--textures/--no-textures", default=True, show_default=True,
               help="glTF, OBJ, USD: bake each relief material into PNG maps (base colour, tangent-space "
                    "normal, height) the file's materials use; with --relief the base colour only.")
+@click.option("--aspect-step", type=click.FloatRange(min=1, min_open=True), default=None, callback=finite,
+              metavar="RATIO",
+              help="Normal maps per aspect: split each relief material's segments into buckets RATIO apart in "
+                   "radius over length, each with its own normal map (exact for its aspect; e.g. 2). "
+                   "Default: one normal map per material, at its median aspect.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
@@ -65,8 +70,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, up, instancing, unit, qsm_tolerance,
-           seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing, unit,
+           qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -104,7 +109,7 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
-                            textures=textures)
+                            textures=textures, aspect_step=aspect_step)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:

@@ -84,7 +84,7 @@ from .plants import (
     material_parts,
 )
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
-from .textures import Textures, png_bytes, texture_files, texture_image
+from .textures import Textures, png_bytes, png_writes, texture_files, texture_image
 
 __all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 
@@ -236,6 +236,7 @@ class _Document:
         self.textures, self.image_uris = textures, image_uris
         self.images: list[dict] = []
         self.texture_list: list[dict] = []
+        self.texture_keys: dict = {}
         self.samplers_tex = [{"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR, "wrapS": REPEAT,
                               "wrapT": REPEAT}]
         self.buffer = _Buffer()
@@ -291,13 +292,18 @@ class _Document:
     def texture(self, name: str, kind: str) -> int:
         """A texture (repeat, trilinear) of the map ``kind`` of material ``name``: its image
         in the buffer, or a file named by ``image_uris``; its index."""
-        image = {"name": f"{name} {kind}", "mimeType": "image/png"}
+        baked = self.textures.get(name)
+        key = (name if kind == "normal" else baked.base or name, kind)   # buckets share colour and height
+        if key in self.texture_keys:
+            return self.texture_keys[key]
+        image = {"name": f"{key[0]} {kind}", "mimeType": "image/png"}
         if self.image_uris is not None:
             image = {"name": image["name"], "uri": quote(self.image_uris[name][kind][0].name)}
         else:
             image["bufferView"] = self.buffer._view(png_bytes(texture_image(self.textures.get(name), kind)), None)
         self.images.append(image)
         self.texture_list.append({"sampler": 0, "source": len(self.images) - 1})
+        self.texture_keys[key] = len(self.texture_list) - 1
         return len(self.texture_list) - 1
 
     def textured(self, material: dict, name: str) -> None:
@@ -486,8 +492,6 @@ def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours:
 
 def _png_writes(files: dict | None, doc: dict) -> list:
     """The (path, write) pairs of the texture files the document names (see
-    :func:`~plantgen.exporters.textures.texture_files`)."""
+    :func:`~plantgen.exporters.textures.texture_files`), each once."""
     named = {image.get("uri") for image in doc.get("images", [])}
-    return [(png_path, lambda tmp, blob=blob: Path(tmp).write_bytes(blob))
-            for kinds in (files or {}).values() for png_path, blob in kinds.values()
-            if quote(png_path.name) in named]
+    return [(png, write) for png, write in png_writes(files or {}) if quote(png.name) in named]

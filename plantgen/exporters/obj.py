@@ -46,7 +46,7 @@ from .plants import (
     unique_name,
 )
 from .sway import Timeline
-from .textures import Textures, texture_files
+from .textures import Textures, png_writes, texture_files
 
 __all__ = ["mtl_maps", "obj_names", "write_obj", "write_obj_plant"]
 
@@ -178,8 +178,7 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
                 _rows(fh, "f", "%d/%d/%d %d/%d/%d %d/%d/%d", np.repeat(leaf_faces, 3, axis=1), progress, done,
                       total)
 
-    pngs = [(png, lambda tmp, blob=blob: Path(tmp).write_bytes(blob)) for kinds in files.values()
-            for png, blob in kinds.values()]
+    pngs = png_writes(files)
     return write_all_atomically([*pngs, (mtl_path, write_mtl), (path, write_geometry)], ExportError)
 
 

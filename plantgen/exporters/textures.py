@@ -28,7 +28,8 @@ import numpy as np
 
 from ..geometry.textures import MaterialTextures, bake_material, mesh_aspects, weighted_median
 
-__all__ = ["KINDS", "Textures", "bake_textures", "png_bytes", "texture_files", "texture_image"]
+__all__ = ["KINDS", "Textures", "bake_textures", "bucket_name", "png_bytes", "png_writes", "split_by_aspect",
+           "texture_files", "texture_image"]
 
 #: The maps, in the order files list them: base colour (sRGB), normal (linear), height (linear).
 KINDS = ("basecolor", "normal", "height")
@@ -50,11 +51,13 @@ class Textures:
         return len(self.materials)
 
 
-def bake_textures(meshes, *, displaced: bool = False) -> Textures:
+def bake_textures(meshes, *, displaced: bool = False, bases: dict | None = None) -> Textures:
     """The textures of every relief material the tessellated ``meshes`` (an iterable of
     :class:`~plantgen.geometry.mesh.TessellatedMesh`, None skipped) use, keyed by material
     name; each normal map at the area-weighted median aspect of that material's faces over
-    all the meshes. ``displaced``: the meshes carry their relief (GS+R): base colour only."""
+    all the meshes. ``displaced``: the meshes carry their relief (GS+R): base colour only.
+    ``bases``: {name: material} for names that stand for another material's relief (the
+    aspect buckets of :func:`split_by_aspect`)."""
     faces: dict[str, list] = {}
     for mesh in meshes:
         if mesh is None:
@@ -64,10 +67,69 @@ def bake_textures(meshes, *, displaced: bool = False) -> Textures:
     out = {}
     for name, chunks in faces.items():
         aspect, area, radius = (np.concatenate(c) for c in zip(*chunks, strict=True))
-        baked = bake_material(name, aspect, area, weighted_median(radius, area) if len(radius) else 1.0)
+        baked = bake_material(name, aspect, area, weighted_median(radius, area) if len(radius) else 1.0,
+                              base=(bases or {}).get(name))
         if baked is not None:
             out[name] = baked
     return Textures(out, ("basecolor",) if displaced else KINDS)
+
+
+def bucket_name(name: str, aspect: float) -> str:
+    """The material name of ``name``'s rows whose normal map is baked at ``aspect``."""
+    return f"{name} (r/L {aspect:.3g})"
+
+
+def split_by_aspect(plants, step: float) -> tuple[list, dict]:
+    """``plants`` with each relief material's rows split by their aspect ρ/L (radius over
+    texture period) into buckets ``step`` apart in ratio around the material's median over
+    every plant: rows within a factor √step of the median keep the material, the others go
+    to a material :func:`bucket_name` of their bucket's aspect (appended to the mesh's
+    names, so the leaves' indices stand), each with its own normal map. Returns the plants
+    and {bucket name: material} (``bases`` of :func:`bake_textures`)."""
+    from ..geometry.relief import default_shell
+    from ..geometry.textures import row_aspects
+
+    rows = [None if p.mesh is None else row_aspects(p.mesh) for p in plants]
+    gathered: dict[str, list] = {}
+    for plant, r in zip(plants, rows, strict=True):
+        if r is None:
+            continue
+        row_names = np.asarray(plant.mesh.material_names)[plant.mesh.material]
+        for name in set(row_names.tolist()):
+            use = (row_names == name) & (r[1] > 0)
+            if default_shell(name) > 0 and use.any():
+                gathered.setdefault(name, []).append((r[0][use], r[1][use]))
+    median = {name: weighted_median(np.concatenate([a for a, _ in c]), np.concatenate([w for _, w in c]))
+              for name, c in gathered.items()}
+    bases: dict[str, str] = {}
+    out = []
+    for plant, r in zip(plants, rows, strict=True):
+        out.append(plant if r is None else _split_plant(plant, r, median, step, bases))
+    return out, bases
+
+
+def _split_plant(plant, row_aspect, median: dict, step: float, bases: dict):
+    """One plant of :func:`split_by_aspect`."""
+    from dataclasses import replace
+
+    names = list(plant.mesh.material_names)
+    material = plant.mesh.material.copy()
+    aspect, area = row_aspect
+    for row in np.flatnonzero(area > 0):
+        name = plant.mesh.material_names[material[row]]
+        if name not in median:
+            continue
+        k = int(np.rint(np.log(aspect[row] / median[name]) / np.log(step)))
+        if k == 0:
+            continue
+        bucket = bucket_name(name, median[name] * step ** k)
+        bases[bucket] = name
+        if bucket not in names:
+            names.append(bucket)
+        material[row] = names.index(bucket)
+    if len(names) == len(plant.mesh.material_names):
+        return plant
+    return replace(plant, mesh=replace(plant.mesh, material=material, material_names=tuple(names)))
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -114,6 +176,7 @@ def texture_files(path: str | Path, textures: Textures, names, *, v_up: bool) ->
     stem = path.name.split(".")[0] or "plant"
     out: dict = {}
     taken: set = set()
+    shared: dict = {}          # an aspect bucket's base colour and height are its material's
     for name in dict.fromkeys(names):
         baked = textures.get(name)
         if baked is None:
@@ -123,6 +186,17 @@ def texture_files(path: str | Path, textures: Textures, names, *, v_up: bool) ->
             k += 1
             base = f"{file_stem(name)}_{k}"
         taken.add(base)
-        out[name] = {kind: (path.with_name(f"{stem}_{base}_{kind}.png"),
-                            png_bytes(texture_image(baked, kind, v_up=v_up))) for kind in textures.kinds}
+        out[name] = {}
+        for kind in textures.kinds:
+            key = (baked.base or name, kind) if kind != "normal" else (name, kind)
+            if key not in shared:
+                shared[key] = (path.with_name(f"{stem}_{base}_{kind}.png"), png_bytes(texture_image(baked, kind,
+                                                                                                     v_up=v_up)))
+            out[name][kind] = shared[key]
     return out
+
+
+def png_writes(files: dict) -> list:
+    """The (path, write) pairs of :func:`texture_files`' PNGs, each file once."""
+    unique = {png: blob for kinds in files.values() for png, blob in kinds.values()}
+    return [(png, lambda tmp, blob=blob: Path(tmp).write_bytes(blob)) for png, blob in unique.items()]

@@ -85,7 +85,7 @@ from .plants import (
     unique_name,
 )
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
-from .textures import Textures, texture_files
+from .textures import Textures, png_writes, texture_files
 
 __all__ = ["joint_names", "skeleton_curves", "write_usd"]
 
@@ -510,8 +510,7 @@ def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: 
     def export(tmp):
         if not writer.stage.GetRootLayer().Export(str(tmp)):
             raise OSError(f"usd-core could not write {tmp.name}")
-    pngs = [(png, lambda tmp, blob=blob: Path(tmp).write_bytes(blob)) for kinds in files.values()
-            for png, blob in kinds.values()]
+    pngs = png_writes(files)
     return write_all_atomically([*pngs, (path, export)], ExportError)
 
 

@@ -38,7 +38,7 @@ from .vec import any_perpendicular
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
            "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents",
-           "resample_height", "texture_size", "face_derivatives"]
+           "resample_height", "row_aspects", "texture_size", "face_derivatives", "weighted_median"]
 
 #: Largest difference, in units of the 8-bit height, a texture size may leave against the
 #: renderers' map (:func:`texture_size`): one step, 1/255.
@@ -73,6 +73,7 @@ class MaterialTextures:
     aspect: float
     amplitude: float
     size: TextureSize
+    base: str | None = None     # the material whose relief and colours these are (None: ``name``)
 
 
 def resample_height(hmap: np.ndarray, shape) -> np.ndarray:
@@ -190,6 +191,19 @@ def mesh_aspects(mesh) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
             for m in np.unique(material[ok])}
 
 
+def row_aspects(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Per mesh row (n,): the area-weighted mean aspect ρ/L of its lateral faces and their
+    area (0 and 0 for a row without one)."""
+    dp_du, dp_dv, area, ok = face_derivatives(mesh.vertices, mesh.uv, mesh.faces)
+    lu, lv = np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)
+    ok &= (lv > 0) & (area > 0)
+    weight = np.where(ok, area, 0.0)
+    aspect = np.where(ok, lu / (2.0 * np.pi * np.where(ok, lv, 1.0)), 0.0)
+    total = np.bincount(mesh.face_row, weight, minlength=mesh.n_rows)
+    summed = np.bincount(mesh.face_row, weight * aspect, minlength=mesh.n_rows)
+    return summed / np.where(total > 0, total, 1.0), total
+
+
 def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
     """The value below which half the total weight lies."""
     order = np.argsort(values)
@@ -223,15 +237,17 @@ def aspect_error(height: np.ndarray, shell: float, aspect: float, aspects: np.nd
 
 
 def bake_material(name: str, aspects: np.ndarray | None = None, weights: np.ndarray | None = None,
-                  radius: float = 1.0) -> MaterialTextures | None:
+                  radius: float = 1.0, base: str | None = None) -> MaterialTextures | None:
     """The baked maps of material ``name`` (None for a material without relief), the normal
     map at the area-weighted median of ``aspects`` (k,) (faces' ρ/L, weighted by
     ``weights``; None: aspect 1/(2π), a segment as long as it is round); ``radius``: the
-    median mean radius, for ``amplitude``."""
-    shell = relief.default_shell(name)
+    median mean radius, for ``amplitude``; ``base``: the material whose relief and colours
+    they are, where ``name`` is another name for it (an aspect bucket's)."""
+    source = name if base is None else base
+    shell = relief.default_shell(source)
     if shell <= 0.0:
         return None
-    native = relief.height_map(name)
+    native = relief.height_map(source)
     size = texture_size(native)
     height = resample_height(native, size.shape)
     if aspects is None or len(aspects) == 0:
@@ -239,7 +255,7 @@ def bake_material(name: str, aspects: np.ndarray | None = None, weights: np.ndar
     else:
         aspect = weighted_median(aspects, np.ones(len(aspects)) if weights is None else weights)
     return MaterialTextures(name, np.rint(height * 255.0).astype(np.uint8), bake_normal_map(height, shell, aspect),
-                            bake_base_colour(name, height), shell, aspect, shell * float(radius), size)
+                            bake_base_colour(source, height), shell, aspect, shell * float(radius), size, base)
 
 
 def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
