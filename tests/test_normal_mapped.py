@@ -153,3 +153,16 @@ def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, 
 
     assert mean_difference(gs_n) < 10.0 and mean_difference(gs_n) < 0.5 * mean_difference(gs)
     assert np.count_nonzero(np.isfinite(rc_r.distance) & ~np.isfinite(gs_n.distance)) > 0
+
+
+def test_the_gallery_picture_has_three_panels(gl_ctx):
+    """RC+R | GS+N | GS (benchmarks.normal_mapped): the middle panel differs from the plain
+    mesh's, the normal maps having something to show."""
+    from plantgen.benchmarks.normal_mapped import normal_mapped
+    from plantgen.benchmarks.side_by_side import gallery_camera
+    from plantgen.pipeline import load_skeleton
+
+    frusta = skin_skeleton(load_skeleton("well"))
+    image = normal_mapped(frusta, gallery_camera(frusta, 80, 60, zoom=0.6), level=1, aspect_step=2.0)
+    assert image.shape == (60, 240, 3)
+    assert np.abs(image[:, 80:160].astype(int) - image[:, 160:].astype(int)).mean() > 0.5

@@ -80,7 +80,9 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
     colours. A scene's repeated plants are written once and instanced in glTF and USD
     (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
     camera, light and ground too (the camera render would use, a directional light, the
-    ground square in its material); a grammar gets none.
+    ground square in its material); a grammar gets none. glTF, OBJ and USD carry the
+    relief as textures: per relief material a base colour, a tangent-space normal map
+    and a height map, PNG (inside a .glb, beside the others; --no-textures: none).
     A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
     their material (a scene's too: an instanced plant carries its own grammar's): glTF
     gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves

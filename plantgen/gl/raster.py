@@ -172,9 +172,10 @@ class RasterRenderer(OffscreenRenderer):
             ray caster
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
-        normal_maps : GS+N: {material name: (H, W, 3) uint8 tangent-space normal map}
-            (:func:`~plantgen.geometry.textures.bake_normal_map`, glTF's convention) shading
-            the lateral faces of a still mesh as a glTF reader would; None: none
+        normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
+            normal map} (:func:`~plantgen.geometry.textures.bake_normal_map`, glTF's
+            convention) shading the lateral faces of a still mesh as a glTF reader would;
+            None: none
         """
         skinned = isinstance(mesh, SkinnedMesh)
         if skinned and poses is None:
@@ -246,7 +247,7 @@ class RasterRenderer(OffscreenRenderer):
         reads one (NORMAL_MAP): built once per list of names and maps."""
         if "normal_maps" not in program:
             return draw
-        key = (tuple(names), tuple(id(normal_maps.get(n)) for n in names))
+        key = (tuple(names), tuple(id(normal_maps.get(k, normal_maps.get(n))) for k, n in enumerate(names)))
         if self._normal_tex is None or self._normal_tex[0] != key:
             if self._normal_tex is not None:
                 self._normal_tex[1].release()
@@ -293,11 +294,12 @@ def _tangent_buffer(ctx, mesh: TessellatedMesh, program):
 
 
 def normal_map_texture(ctx, names, normal_maps):
-    """RGB8 texture array of the normal maps (name -> (H, W, 3) uint8, glTF convention) of
-    the material slots ``names`` (a slot without one: the flat (128, 128, 255)), every
+    """RGB8 texture array of the normal maps ((H, W, 3) uint8, glTF convention, by slot
+    index or by material name) of the material slots ``names`` (a slot without one: the
+    flat (128, 128, 255)), every
     layer at the largest map's size (smaller ones repeated texel by texel), repeating in
     u and v, trilinear: as an engine samples the exported map."""
-    maps = [normal_maps.get(n) for n in names]
+    maps = [normal_maps.get(k, normal_maps.get(n)) for k, n in enumerate(names)]
     shape = max((m.shape[:2] for m in maps if m is not None), default=(1, 1), key=lambda s: s[0] * s[1])
     layers = np.empty((len(names), *shape, 3), np.uint8)
     for k, m in enumerate(maps):
