@@ -190,21 +190,27 @@ def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]
     and its ``.bin``): every ``write(tmp_path)`` runs first, then the temporary files are
     renamed onto their targets in the given order (put the file that names the others
     last). On any failure no temporary file is left, and no target is touched unless the
-    failure comes between two renames. Returns the paths."""
+    failure comes between two renames; then the targets this call created are removed
+    again (an existing file already replaced stays replaced). Returns the paths."""
     done: list[tuple[Path, Path]] = []
+    created: list[Path] = []
+    failing = None
     try:
         for path, write in writes:
-            path = Path(path)
+            path = failing = Path(path)
             done.append((path, temporary_name(path)))
             write(done[-1][1])
         for path, tmp in done:
+            failing, new = path, not path.exists()
             tmp.replace(path)
+            if new:
+                created.append(path)
     except OSError as exc:
-        for _, tmp in done:
-            tmp.unlink(missing_ok=True)
-        raise error(f"{done[-1][0] if done else writes[0][0]}: cannot write ({exc.strerror or exc})") from None
+        for path in [tmp for _, tmp in done] + created:
+            path.unlink(missing_ok=True)
+        raise error(f"{failing or writes[0][0]}: cannot write ({exc.strerror or exc})") from None
     except BaseException:
-        for _, tmp in done:
-            tmp.unlink(missing_ok=True)
+        for path in [tmp for _, tmp in done] + created:
+            path.unlink(missing_ok=True)
         raise
     return [path for path, _ in done]

@@ -50,6 +50,7 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.textures import bake_textures, split_by_aspect
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
@@ -724,7 +725,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
-                 keyframes: KeyframeSettings | None = None) -> dict:
+                 keyframes: KeyframeSettings | None = None, textures: bool = True,
+                 aspect_step: float | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -732,8 +734,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ----------
     input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
     output_path : the file; its suffix names the format (:mod:`plantgen.exporters.formats`)
-    level, relief : the tessellation (GS, GS+R) of the mesh formats
-    up : ``"y"`` or ``"z"``; default the format's convention
+    level, relief, up : the tessellation (GS, GS+R); ``"y"`` or ``"z"`` (default: the format's)
     instancing : how a scene's repeated plants are written where the format can
         (glTF, USD): ``"nodes"`` (the default) once, with one node per copy sharing the
         plant's mesh (core glTF, which every reader opens; USD instanceable references);
@@ -741,8 +742,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         a USD ``PointInstancer``; ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
-    progress : ``progress(stage, done, total)``, called as plants are tessellated and
-        the file written
+    progress : ``progress(stage, done, total)``, as plants are tessellated and the file written
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
@@ -750,29 +750,24 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
         defaults, over one common period); a format without animation writes the
         plants at rest and says so in ``warnings``
+    textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
+        colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of
-    a scene's plants (once per distinct plant when instanced), written beside the frusta
-    and counted in ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
+    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's
+    plants (once per distinct plant when instanced), beside the frusta and counted in
+    ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
-    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar); for
-    a cylinder model, what :func:`plantgen.exporters.qsm.write_qsm` returns. Triangles and
-    memory are estimated before anything is built and refused over the ``limits``.
+    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar), ``textures``
+    (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
+    returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = export_format(output_path)  # fail on a bad suffix, a missing extra or option before any work
-    check_extra(fmt, output_path)
-    if up is not None and up not in UP_AXES:
-        raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
-    if instancing not in INSTANCING:
-        raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
-    if not output_path.parent.is_dir():
-        raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
+    fmt = _export_checks(output_path, up, instancing)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if grown.segments == 0:
@@ -787,17 +782,33 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         return _export_skeleton(grown, fmt, output_path, up, unit, qsm_tolerance, summary)
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                 input_path, output_path, timings, progress, skin, timeline)
+                                           input_path, output_path, timings, progress, skin, timeline)
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes",
-                         unit=unit, name=grown.name, progress=progress, animation=timeline, extras=extras)
+    plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
+    paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
+                         name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
                    smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
-                                                         if getattr(extras, k) is not None))
+                                                         if getattr(extras, k) is not None),
+                   textures=_texture_summary(baked))
     return summary
+
+
+def _export_checks(output_path: Path, up: str | None, instancing: str):
+    """The export's format, after every check that needs no work: a known suffix, its
+    extra installed, the up axis, the instancing, the folder there (one line each)."""
+    fmt = export_format(output_path)
+    check_extra(fmt, output_path)
+    if up is not None and up not in UP_AXES:
+        raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
+    if instancing not in INSTANCING:
+        raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
+    if not output_path.parent.is_dir():
+        raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
+    return fmt
 
 
 def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
@@ -807,6 +818,24 @@ def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
     if merged or grown.scene is None:
         return [grown.skeleton]
     return [plant.skeleton for plant in grown.scene.plants()]
+
+
+def _textured(plants: list[Plant], relief: bool, aspect_step: float | None) -> tuple[list[Plant], object]:
+    """The plants (split by aspect where ``aspect_step`` is given and the mesh is not
+    displaced: :func:`~plantgen.exporters.textures.split_by_aspect`) and their baked maps
+    (:func:`~plantgen.exporters.textures.bake_textures`)."""
+    bases = None
+    if aspect_step and not relief:
+        plants, bases = split_by_aspect(plants, aspect_step)
+    return plants, bake_textures([p.mesh for p in plants], displaced=relief, bases=bases)
+
+
+def _texture_summary(baked) -> dict:
+    """{material: {"size": (H, W), "aspect", "kinds"}} of the baked textures (empty: none)."""
+    if baked is None:
+        return {}
+    return {name: {"size": t.size.shape, "aspect": t.aspect, "kinds": baked.kinds}
+            for name, t in baked.materials.items()}
 
 
 def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: float, tolerance: float,

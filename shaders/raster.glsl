@@ -18,7 +18,10 @@
 // mesh's front faces as the light sees them, as the ray caster writes its nearest hit);
 // SKINNED (a swaying scene's mesh, built once at rest, posed here: each vertex turns about
 // its pivot segment's posed start by the mean turn of its two segments, read from the
-// pose buffer that shaders/pose.glsl writes; plantgen.geometry.skinned_mesh).
+// pose buffer that shaders/pose.glsl writes; plantgen.geometry.skinned_mesh); NORMAL_MAP (GS+N:
+// the relief as a baked tangent-space normal map, plantgen.geometry.textures, read as glTF
+// readers read one: T the vertex tangent, B = cross(N, T)·w, n = T·x + B·y + N·z; caps,
+// which the ray caster leaves unrelieved, keep their normal).
 
 #if defined VERTEX_SHADER
 
@@ -37,6 +40,10 @@ uniform float copy_scale;
 out vec3 v_position;            // eye-relative
 out vec3 v_normal;
 out vec2 v_texcoord;
+#if defined NORMAL_MAP
+in vec4 tangent;                // unit tangent along +u, w: the bitangent's sign (glTF's TANGENT)
+out vec4 v_tangent;
+#endif
 
 #if defined SKINNED
 in ivec2 bind;                  // pivot segment (-1: still), the other segment of a shared vertex
@@ -66,6 +73,9 @@ void main() {
     v_normal = copy_turn * normal;
 #endif
     v_texcoord = texcoord;
+#if defined NORMAL_MAP
+    v_tangent = tangent;        // (not turned by SKINNED: the normal-mapped path draws still meshes)
+#endif
     gl_Position = view_projection * vec4(v_position, 1.0);
 }
 
@@ -83,6 +93,18 @@ void main() {}
 in vec3 v_position;
 in vec3 v_normal;
 in vec2 v_texcoord;
+#if defined NORMAL_MAP
+in vec4 v_tangent;
+uniform sampler2DArray normal_maps;    // RGB8 baked normal maps, layer = material (repeat, trilinear)
+
+// The normal map's normal at the mesh's (u, v + chain) in the frame (T, cross(N, T)·w, N).
+vec3 normal_mapped(vec3 n, int material) {
+    vec3 t = normalize(v_tangent.xyz);
+    vec3 b = cross(n, t) * v_tangent.w;
+    vec3 m = texture(normal_maps, vec3(v_texcoord, float(material))).xyz * 2.0 - 1.0;
+    return normalize(m.x * t + m.y * b + m.z * n);
+}
+#endif
 
 layout(std430, binding = 0) readonly buffer RowData { vec2 row_data[]; };  // chain position, material
 layout(std430, binding = 1) readonly buffer CapRows { int cap_row[]; };   // caps' rows (FACE_ROWS: every face's)
@@ -114,6 +136,13 @@ void main() {
     int material = int(info.y + 0.5);
     vec2 uv = vec2(v_texcoord.x, v_texcoord.y - info.x);   // per-row v of (7)
     vec3 normal = normalize(v_normal);
+#if defined NORMAL_MAP
+#if defined FACE_ROWS
+    normal = normal_mapped(normal, material);
+#else
+    if (primitive < n_rows * TRIANGLES_PER_ROW) normal = normal_mapped(normal, material);
+#endif
+#endif
     float texel = height_at(material, uv);
     vec3 to_eye = normalize(-v_position);
     vec3 albedo = material_albedo(material, texel);

@@ -36,6 +36,23 @@ validator.validateBytes(new Uint8Array(fs.readFileSync(file)),
   .catch(err => { console.error(String(err)); process.exit(3); });
 """
 
+# Node has no image decoder: every script below gives three.js's ImageBitmapLoader one that
+# fetches an image's bytes (a .glb's buffer view, or the file beside a .gltf) and reads the
+# PNG header's width and height (what the scripts report); the rest is three.js's own.
+NODE_IMAGES = r"""
+globalThis.self = globalThis;
+globalThis.createImageBitmap = async () => { throw new Error('not used'); };
+THREE.ImageBitmapLoader.prototype.load = function (url, onLoad, onProgress, onError) {
+  const bytes = url.startsWith('blob:') ? fetch(url).then((r) => r.arrayBuffer())
+    : Promise.resolve(fs.readFileSync(path.join(path.dirname(process.argv[2]), decodeURIComponent(url))));
+  bytes.then((b) => {
+    const v = new DataView(b.buffer ? b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength) : b);
+    onLoad({width: v.getUint32(16), height: v.getUint32(20), close() {}});
+  }).catch(onError);
+};
+"""
+
+
 # three.js's GLTFLoader in Node: every mesh it builds, with its world matrix per instance
 # (an InstancedMesh's instance matrices times its node's world matrix).
 THREE_JS = r"""
@@ -46,6 +63,7 @@ const modules = process.env.THREE_MODULES;
 const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
 const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
   'three/examples/jsm/loaders/GLTFLoader.js')).href);
+${NODE_IMAGES}
 const buf = fs.readFileSync(process.argv[2]);
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   const out = [];
@@ -78,6 +96,7 @@ const modules = process.env.THREE_MODULES;
 const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
 const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
   'three/examples/jsm/loaders/GLTFLoader.js')).href);
+${NODE_IMAGES}
 const buf = fs.readFileSync(process.argv[2]);
 const times = JSON.parse(process.argv[3]);
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
@@ -124,6 +143,7 @@ const modules = process.env.THREE_MODULES;
 const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
 const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
   'three/examples/jsm/loaders/GLTFLoader.js')).href);
+${NODE_IMAGES}
 const buf = fs.readFileSync(process.argv[2]);
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   gltf.scene.updateMatrixWorld(true);
@@ -149,6 +169,10 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
   console.log(JSON.stringify({cameras, lights, ground}));
 }, (err) => { console.error(String(err)); process.exit(3); });
 """
+
+
+THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS = (script.replace("${NODE_IMAGES}", NODE_IMAGES)
+                                          for script in (THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS))
 
 
 def node_modules(package: str) -> Path:
@@ -230,6 +254,47 @@ def three_js_scene(path: Path, tmp_path: Path) -> dict:
     :data:`THREE_SCENE_JS`)."""
     script = tmp_path / "scene_with_three.mjs"
     script.write_text(THREE_SCENE_JS)
+    env = dict(os.environ, THREE_MODULES=str(node_modules("three")))
+    done = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+# three.js's GLTFLoader in Node: every mesh's material as three.js builds it (its colour
+# map and normal map: the PNG's width and height, :data:`NODE_IMAGES`; the normal scale,
+# whether the geometry has tangents and vertex colours).
+THREE_MATERIALS_JS = r"""
+import fs from 'fs';
+import path from 'path';
+import { pathToFileURL } from 'url';
+const modules = process.env.THREE_MODULES;
+const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
+const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
+  'three/examples/jsm/loaders/GLTFLoader.js')).href);
+${NODE_IMAGES}
+const buf = fs.readFileSync(process.argv[2]);
+const image = (t) => t ? [t.image.width, t.image.height] : null;
+new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
+  const out = [];
+  gltf.scene.traverse((o) => {
+    if (!o.isMesh) return;
+    const m = o.material;
+    out.push({mesh: o.name, material: m.name, type: m.type, map: image(m.map), normalMap: image(m.normalMap),
+              normalScale: m.normalScale ? [m.normalScale.x, m.normalScale.y] : null,
+              tangents: !!o.geometry.attributes.tangent, vertexColors: !!m.vertexColors,
+              colorSpace: m.map ? m.map.colorSpace : null, color: [m.color.r, m.color.g, m.color.b],
+              wrap: m.map ? [m.map.wrapS, m.map.wrapT] : null, extras: m.userData || {}});
+  });
+  console.log(JSON.stringify(out));
+}, (err) => { console.error(String(err)); process.exit(3); });
+"""
+
+
+def three_js_materials(path: Path, tmp_path: Path) -> list[dict]:
+    """Every mesh's material as three.js's GLTFLoader makes it from a .glb or .gltf (see
+    :data:`THREE_MATERIALS_JS`)."""
+    script = tmp_path / "materials_with_three.mjs"
+    script.write_text(THREE_MATERIALS_JS.replace("${NODE_IMAGES}", NODE_IMAGES))
     env = dict(os.environ, THREE_MODULES=str(node_modules("three")))
     done = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr

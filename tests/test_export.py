@@ -147,7 +147,8 @@ def test_a_new_format_is_one_row_and_its_writer(tmp_path, monkeypatch):
     arguments and the row's up axis."""
     calls = []
 
-    def write_points(plants, path, *, up, colours, instancing, unit, name, progress, animation, extras):
+    def write_points(plants, path, *, up, colours, instancing, unit, name, progress, animation, extras,
+                     textures):
         calls.append(("mesh", path.name, up, instancing, len(plants)))
         path.write_text("points")
         return [path]

@@ -112,8 +112,9 @@ def test_gltf_leaves_have_their_own_double_sided_material(grammars, tmp_path):
     assert [m["name"] for m in materials] == ["bark", "leaf (leaf)"]
     assert materials[1]["doubleSided"] is True
     assert "doubleSided" not in materials[0]                # the frusta keep back-face culling
-    assert materials[1]["pbrMetallicRoughness"]["baseColorFactor"] != materials[0]["pbrMetallicRoughness"][
-        "baseColorFactor"]
+    # bark's colour is its baked map, each leaf's its vertices' COLOR_0 (the leaf material white)
+    assert "baseColorTexture" in materials[0]["pbrMetallicRoughness"]
+    assert all("COLOR_0" in p["attributes"] for p in doc["meshes"][0]["primitives"] if p["material"] == 1)
     by_material = {}
     for prim in doc["meshes"][0]["primitives"]:
         count = doc["accessors"][prim["indices"]]["count"] // 3
@@ -163,9 +164,13 @@ def test_obj_leaves_use_their_own_mtl_material(grammars, tmp_path):
     _, leaf_tris, _ = counts(leafy)
     path = tmp_path / "plant.obj"
     export_model(leafy, path)
-    assert "newmtl leaf_(leaf)" in (tmp_path / "plant.mtl").read_text()
+    # one material per shade the leaves take (OBJ has no vertex colours), each a distinct colour
+    mtl = (tmp_path / "plant.mtl").read_text().split("newmtl ")[1:]
+    shades = {block.split()[0]: block.split("Kd ")[1].split("\n")[0] for block in mtl
+              if block.startswith("leaf_(leaf)_")}
+    assert shades and len(set(shades.values())) == len(shades)
     lines = path.read_text().splitlines()
-    start = lines.index("usemtl leaf_(leaf)")
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("usemtl leaf_(leaf)"))
     faces = [ln for ln in lines[start + 1:] if ln.startswith("f ")]
     assert len(faces) == leaf_tris
 
@@ -217,6 +222,7 @@ def test_a_grammar_without_leaves_writes_what_the_frusta_writer_writes(grammars,
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
     export_model(bare, tmp_path / "a" / f"{grown.name}{suffix}")
-    export_mesh(tessellate(skin_skeleton(grown.skeleton), 1), tmp_path / "b" / f"{grown.name}{suffix}")
+    export_mesh(tessellate(skin_skeleton(grown.skeleton), 1), tmp_path / "b" / f"{grown.name}{suffix}",
+                textures=True)
     for a in sorted((tmp_path / "a").iterdir()):
         assert a.read_bytes() == (tmp_path / "b" / a.name).read_bytes(), a.name

@@ -76,6 +76,13 @@ def entries() -> list[Entry]:
     out.append(Entry("rc_gs_gsr_saguaro", (
         "python", "-m", "plantgen.benchmarks.side_by_side", "saguaro", "{out}/rc_gs_gsr_saguaro.png",
         "--zoom", "0.3", "--raise", "0.1", "--size", "{width}", "{height}"), ("rc_gs_gsr_saguaro.png",), (400, 400)))
+    # the exported normal maps on the smooth mesh (issue 24): RC+R | GS+N | GS
+    out.append(Entry("rc_gsn_gs_saguaro", (
+        "python", "-m", "plantgen.benchmarks.normal_mapped", "saguaro", "{out}/rc_gsn_gs_saguaro.png",
+        "--zoom", "0.3", "--raise", "0.1", "--size", "{width}", "{height}"), ("rc_gsn_gs_saguaro.png",), (400, 400)))
+    out.append(Entry("rc_gsn_gs_well", (
+        "python", "-m", "plantgen.benchmarks.normal_mapped", "well", "{out}/rc_gsn_gs_well.png", "--zoom", "0.6",
+        "--aspect-step", "2", "--size", "{width}", "{height}"), ("rc_gsn_gs_well.png",), (400, 400)))
     out.append(Entry("skeletons", ("python", "-m", "plantgen.benchmarks.draw_skeletons", "{out}/skeletons"),
                      tuple(f"skeletons/{p.stem}.png" for p in shipped_model_paths())))
     out.append(Entry("viewer", (

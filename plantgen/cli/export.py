@@ -38,6 +38,14 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
+@click.option("--textures/--no-textures", default=True, show_default=True,
+              help="glTF, OBJ, USD: bake each relief material into PNG maps (base colour, tangent-space "
+                   "normal, height) the file's materials use; with --relief the base colour only.")
+@click.option("--aspect-step", type=click.FloatRange(min=1, min_open=True), default=None, callback=finite,
+              metavar="RATIO",
+              help="Normal maps per aspect: split each relief material's segments into buckets RATIO apart in "
+                   "radius over length, each with its own normal map (exact for its aspect; e.g. 2). "
+                   "Default: one normal map per material, at its median aspect.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
@@ -62,8 +70,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing, unit, qsm_tolerance, seed,
-           smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing, unit,
+           qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -72,7 +80,9 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
     colours. A scene's repeated plants are written once and instanced in glTF and USD
     (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
     camera, light and ground too (the camera render would use, a directional light, the
-    ground square in its material); a grammar gets none.
+    ground square in its material); a grammar gets none. glTF, OBJ and USD carry the
+    relief as textures: per relief material a base colour, a tangent-space normal map
+    and a height map, PNG (inside a .glb, beside the others; --no-textures: none).
     A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
     their material (a scene's too: an instanced plant carries its own grammar's): glTF
     gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves
@@ -100,7 +110,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, up, instancing,
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
-                            smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys))
+                            smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
+                            textures=textures, aspect_step=aspect_step)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
@@ -131,6 +142,11 @@ def _mesh_summary(info: dict) -> None:
                    f"{info['drawn']:,} triangles drawn")
     if info.get("scene"):
         click.echo(f"scene: {', '.join(info['scene'])} written with the plants")
+    for name, baked in info.get("textures", {}).items():
+        kinds = {"basecolor": "base colour", "normal": "normal", "height": "height"}
+        click.echo(f"textures of {name}: {baked['size'][1]}x{baked['size'][0]} "
+                   f"({', '.join(kinds[k] for k in baked['kinds'])}"
+                   f"{'; normal map at r/L ' + format(baked['aspect'], '.3g') if 'normal' in baked['kinds'] else ''})")
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "

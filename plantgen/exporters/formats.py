@@ -87,6 +87,7 @@ class Format:
     extra: str | None = None     # the plantgen extra that installs it
     animation: bool = False      # writes a scene's sway as an animation
     scene: bool = False          # writes a scene's camera, light and ground
+    textures: bool = False       # holds the relief's baked maps (plantgen.exporters.textures)
 
     def __post_init__(self) -> None:
         if self.kind not in FORMAT_KINDS:
@@ -110,18 +111,19 @@ class Format:
 #: over the tessellation and the write, coconut at m = 2, 1.08 M triangles: glb 170, gltf
 #: 173, obj 151, ply 186, stl 412, usda 175, usdc 117), rounded up generously.
 EXPORT_FORMATS = {f.suffix: f for f in (
-    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True, scene=True),
+    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True, scene=True,
+           textures=True),
     Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True,
-           scene=True),
-    Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant"),
+           scene=True, textures=True),
+    Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant", textures=True),
     Format("ply", ".ply", "mesh", "z", False, 400, "plantgen.exporters.meshes:write_ply"),
     Format("stl", ".stl", "mesh", "z", False, 650, "plantgen.exporters.meshes:write_stl"),
     Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True, scene=True),
+           animation=True, scene=True, textures=True),
     Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True, scene=True),
+           animation=True, scene=True, textures=True),
     Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
-           animation=True, scene=True),
+           animation=True, scene=True, textures=True),
     Format("swc", ".swc", "skeleton", "y", False, 0, "plantgen.exporters.skeletons:write_swc_skeleton"),
     Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm"),
     Format("qsm.mat", ".qsm.mat", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm", "scipy", "qsm"),

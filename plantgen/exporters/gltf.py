@@ -29,7 +29,9 @@ name and base colour, linear RGB as glTF defines it). Nodes:
 
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
 material, with a material of their own named ``"<material> (leaf)"`` that is
-``doubleSided`` (a leaf is seen from both sides; the frusta's materials stay single-sided,
+``doubleSided``, white, each vertex's ``COLOR_0`` its leaf's shade as the renderers draw
+it (between the material's dark and light colour; with ``colours`` given: that colour,
+no COLOR_0) (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
 bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`).
 
@@ -64,6 +66,7 @@ import numpy as np
 
 from ..files import write_all_atomically, write_atomically
 from ..geometry.frames import similarity_trs, turn_placements
+from ..geometry.textures import mesh_tangents
 from .formats import ExportError
 from .plants import (
     Colours,
@@ -81,6 +84,7 @@ from .plants import (
     material_parts,
 )
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
+from .textures import Textures, png_bytes, png_writes, texture_files, texture_image
 
 __all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 
@@ -89,6 +93,7 @@ LIGHTS_EXTENSION = "KHR_lights_punctual"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
+LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT = 9729, 9987, 10497
 
 
 def generator() -> str:
@@ -166,6 +171,8 @@ def _primitive(buffer: _Buffer, part, material: int, joint_count: int = 0) -> di
     attributes = {"POSITION": buffer.add(positions, "VEC3", FLOAT, ARRAY_BUFFER, bounds=True),
                   "NORMAL": buffer.add(part.normals, "VEC3", FLOAT, ARRAY_BUFFER),
                   "TEXCOORD_0": buffer.add(part.uv, "VEC2", FLOAT, ARRAY_BUFFER)}
+    if part.colours is not None:
+        attributes["COLOR_0"] = buffer.add(part.colours.astype(np.float32), "VEC3", FLOAT, ARRAY_BUFFER)
     for name, values in (part.labels or {}).items():     # application-specific: "_NAME"
         attributes[name] = buffer.add(values.astype(np.float32), "SCALAR", FLOAT, ARRAY_BUFFER)
     if part.joints is not None:
@@ -223,8 +230,15 @@ class _Document:
     """The document being built: buffer, materials, meshes, nodes (the scene's roots
     among them), skins and the sway animation's channels."""
 
-    def __init__(self, up: str, colours: Colours, animation: Timeline | None) -> None:
+    def __init__(self, up: str, colours: Colours, animation: Timeline | None,
+                 textures: Textures | None = None, image_uris: dict | None = None) -> None:
         self.up, self.colours, self.animation = up, colours, animation
+        self.textures, self.image_uris = textures, image_uris
+        self.images: list[dict] = []
+        self.texture_list: list[dict] = []
+        self.texture_keys: dict = {}
+        self.samplers_tex = [{"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR, "wrapS": REPEAT,
+                              "wrapT": REPEAT}]
         self.buffer = _Buffer()
         self.material_index: dict[str, int] = {}
         self.materials, self.meshes, self.nodes, self.roots = [], [], [], []
@@ -247,12 +261,17 @@ class _Document:
         rgb = material_colours(names, self.colours)
         skin = None if rig is None else (rig.vertex_joints, rig.vertex_weights)
         parts = (material_parts(plant.mesh, self.up, plant.labels, skin)
-                 + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints))
+                 + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
+                              names if self.colours is None else None))
         primitives = []
         for part in parts:
             mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
-            primitives.append(_primitive(self.buffer, part, self.material(mat_name, rgb[part.material], part.leaf),
-                                         0 if rig is None else rig.joints))
+            white = part.colours is not None          # COLOR_0 holds each leaf's own colour
+            material = self.material(mat_name, (1.0, 1.0, 1.0) if white else rgb[part.material], part.leaf)
+            primitives.append(_primitive(self.buffer, part, material, 0 if rig is None else rig.joints))
+            if self.normal_mapped(mat_name, part.leaf):
+                tangents = mesh_tangents(part.vertices, part.normals, part.uv, part.faces)
+                primitives[-1]["attributes"]["TANGENT"] = self.buffer.add(tangents, "VEC4", FLOAT, ARRAY_BUFFER)
         self.meshes.append({"name": plant.name, "primitives": primitives})
         return len(self.meshes) - 1
 
@@ -261,7 +280,46 @@ class _Document:
         if name not in self.material_index:
             self.material_index[name] = len(self.materials)
             self.materials.append(_material(name, rgb, leaf))
+            if not leaf and self.textures is not None and self.textures.get(name) is not None:
+                self.textured(self.materials[-1], name)
         return self.material_index[name]
+
+    def normal_mapped(self, name: str, leaf: bool) -> bool:
+        """Whether the material ``name`` has a normal map (its primitives need TANGENT)."""
+        return (not leaf and self.textures is not None and "normal" in self.textures.kinds
+                and self.textures.get(name) is not None)
+
+    def texture(self, name: str, kind: str) -> int:
+        """A texture (repeat, trilinear) of the map ``kind`` of material ``name``: its image
+        in the buffer, or a file named by ``image_uris``; its index."""
+        baked = self.textures.get(name)
+        key = (name if kind == "normal" else baked.base or name, kind)   # buckets share colour and height
+        if key in self.texture_keys:
+            return self.texture_keys[key]
+        image = {"name": f"{key[0]} {kind}", "mimeType": "image/png"}
+        if self.image_uris is not None:
+            image = {"name": image["name"], "uri": quote(self.image_uris[name][kind][0].name)}
+        else:
+            image["bufferView"] = self.buffer._view(png_bytes(texture_image(self.textures.get(name), kind)), None)
+        self.images.append(image)
+        self.texture_list.append({"sampler": 0, "source": len(self.images) - 1})
+        self.texture_keys[key] = len(self.texture_list) - 1
+        return len(self.texture_list) - 1
+
+    def textured(self, material: dict, name: str) -> None:
+        """Give ``material`` the baked maps of ``name``: base colour (where ``colours`` does
+        not set one), normal map (TANGENT on its primitives), the height map in ``extras``."""
+        baked, kinds = self.textures.get(name), self.textures.kinds
+        pbr = material["pbrMetallicRoughness"]
+        if "basecolor" in kinds and self.colours is None:
+            pbr["baseColorTexture"] = {"index": self.texture(name, "basecolor")}
+            pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 1.0]
+        if "normal" in kinds:
+            material["normalTexture"] = {"index": self.texture(name, "normal")}
+        if "height" in kinds:
+            material["extras"] = {"plantgen": {
+                "heightTexture": self.texture(name, "height"), "shellFraction": baked.shell,
+                "displacement": baked.amplitude, "normalAspect": baked.aspect}}
 
     def extras(self, extras: SceneExtras) -> None:
         """A scene's ground (a mesh of its material), camera (perspective) and light
@@ -347,6 +405,8 @@ class _Document:
         doc = {"asset": {"version": "2.0", "generator": generator()}, "scene": 0,
                "scenes": [{"name": name, "nodes": self.roots}], "nodes": self.nodes, "meshes": self.meshes,
                "materials": self.materials, "accessors": self.buffer.accessors, "bufferViews": self.buffer.views}
+        if self.texture_list:
+            doc.update(images=self.images, textures=self.texture_list, samplers=self.samplers_tex)
         if self.skins:
             doc["skins"] = self.skins
         if self.channels:
@@ -366,14 +426,16 @@ class _Document:
 
 def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "nodes",
                   name: str = "plantgen", progress: Progress = None,
-                  animation: Timeline | None = None, extras: SceneExtras | None = None) -> tuple[dict, bytes]:
+                  animation: Timeline | None = None, extras: SceneExtras | None = None,
+                  textures: Textures | None = None, image_uris: dict | None = None) -> tuple[dict, bytes]:
     """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``; with
     ``animation``, the plants that sway are skinned and their sway is the animation
-    ``"sway"``; with ``extras``, the scene's ground, camera and light (see the module
-    docstring)."""
+    ``"sway"``; with ``extras``, the scene's ground, camera and light; with ``textures``,
+    the relief's maps (images in the buffer, or the files ``image_uris`` names:
+    :func:`~plantgen.exporters.textures.texture_files`) (see the module docstring)."""
     if instancing not in ("gpu", "nodes"):
         raise ValueError(f"instancing must be 'gpu' or 'nodes', got {instancing!r}")
-    doc = _Document(up, colours, animation)
+    doc = _Document(up, colours, animation, textures, image_uris)
     for done, plant in enumerate(plants):
         sways = animation is not None and plant.sway is not None and plant.sway.moves
         rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, up, plant.name) if sways else None
@@ -402,22 +464,34 @@ def _glb(doc: dict, data: bytes) -> bytes:
 def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
                instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
                progress: Progress = None, animation: Timeline | None = None,
-               extras: SceneExtras | None = None) -> list[Path]:
+               extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """Write ``plants`` as ``.glb``, or as ``.gltf`` with its ``.bin`` beside it (see the
-    module docstring); nothing is left half-written. Returns the written paths (a
-    :class:`~plantgen.exporters.plants.MeshWriter`; ``unit`` is not written: glTF has no unit
-    field, and the model is written in model units)."""
+    module docstring); ``textures``: the relief's maps, inside the ``.glb``, or as PNG files
+    beside a ``.gltf`` (``<stem>_<material>_<kind>.png``); nothing is left half-written.
+    Returns the written paths (a :class:`~plantgen.exporters.plants.MeshWriter`; ``unit`` is
+    not written: glTF has no unit field, and the model is written in model units)."""
     path = Path(path)
     if not any(plant.mesh is not None and len(plant.mesh.faces) for plant in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
+    glb = path.suffix.lower() == ".glb"
+    files = None
+    if textures is not None and not glb:
+        files = texture_files(path, textures, [n for p in plants for n in p.mesh.material_names], v_up=False)
     doc, data = gltf_document(plants, up=up, colours=colours, instancing=instancing,
                               name=name or path.name.split(".")[0] or "plantgen", progress=progress,
-                              animation=animation, extras=extras)
-    if path.suffix.lower() == ".glb":
+                              animation=animation, extras=extras, textures=textures, image_uris=files)
+    if glb:
         blob = _glb(doc, data)
         return [write_atomically(path, lambda tmp: Path(tmp).write_bytes(blob), ExportError)]
     bin_path = path.with_suffix(".bin")
     doc = dict(doc, buffers=[{"byteLength": len(data), "uri": quote(bin_path.name)}])
     text = json.dumps(doc, indent=1)
-    return write_all_atomically([(bin_path, lambda tmp: Path(tmp).write_bytes(data)),
+    return write_all_atomically([*_png_writes(files, doc), (bin_path, lambda tmp: Path(tmp).write_bytes(data)),
                                  (path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))], ExportError)
+
+
+def _png_writes(files: dict | None, doc: dict) -> list:
+    """The (path, write) pairs of the texture files the document names (see
+    :func:`~plantgen.exporters.textures.texture_files`), each once."""
+    named = {image.get("uri") for image in doc.get("images", [])}
+    return [(png, write) for png, write in png_writes(files or {}) if quote(png.name) in named]

@@ -24,8 +24,19 @@ from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
 from .formats import ExportError, writable_format
-from .plants import Colours, MeshWriter, Plant, Progress, SceneExtras, leaf_parts, single_plant, turned_mesh
+from .plants import (
+    Colours,
+    MeshWriter,
+    Plant,
+    Progress,
+    SceneExtras,
+    leaf_parts,
+    merged_materials,
+    single_plant,
+    turned_mesh,
+)
 from .sway import Timeline
+from .textures import Textures, bake_textures
 
 __all__ = ["export_mesh", "write_plants", "write_ply", "write_stl"]
 
@@ -57,7 +68,7 @@ def _write_trimesh(plants: list[Plant], path: str | Path, up: str, encode) -> li
 def write_ply(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
               instancing: str = "off", unit: float = 1.0, name: str | None = None,
               progress: Progress = None, animation: Timeline | None = None,
-              extras: SceneExtras | None = None) -> list[Path]:
+              extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """Binary PLY with vertex normals through trimesh: the one plant of ``plants`` in place,
     its leaves as plain triangles after the frusta (a
     :class:`~plantgen.exporters.plants.MeshWriter`; PLY keeps no materials, names or units)."""
@@ -68,7 +79,7 @@ def write_ply(plants: list[Plant], path: str | Path, *, up: str = "z", colours: 
 def write_stl(plants: list[Plant], path: str | Path, *, up: str = "z", colours: Colours = None,
               instancing: str = "off", unit: float = 1.0, name: str | None = None,
               progress: Progress = None, animation: Timeline | None = None,
-              extras: SceneExtras | None = None) -> list[Path]:
+              extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """Binary STL (triangles only) through trimesh: the one plant of ``plants`` in place,
     its leaves as plain triangles after the frusta (a
     :class:`~plantgen.exporters.plants.MeshWriter`; STL keeps no materials, names or units)."""
@@ -78,26 +89,31 @@ def write_stl(plants: list[Plant], path: str | Path, *, up: str = "z", colours: 
 def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None, colours: Colours = None,
                  instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
                  progress: Progress = None, animation: Timeline | None = None,
-                 extras: SceneExtras | None = None) -> list[Path]:
+                 extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """Write ``plants`` (see :class:`~plantgen.exporters.plants.Plant`) in the mesh format
     ``path`` names, with the writer its row names
     (:data:`~plantgen.exporters.formats.EXPORT_FORMATS`); ``name`` names the scene (default:
     the file's stem). Formats without instancing take one plant written in place; formats
     with animation write the sway of the plants that have one at the key times
     ``animation`` (the others ignore it); ``extras``: a scene's camera, light and ground
-    (:class:`~plantgen.exporters.plants.SceneExtras`), written by glTF and USD. Returns
+    (:class:`~plantgen.exporters.plants.SceneExtras`), written by glTF and USD; ``textures``:
+    the relief's maps (:func:`~plantgen.exporters.textures.bake_textures`), written by glTF,
+    OBJ and USD (PLY and STL have no place for them). Returns
     the written paths (a ``.gltf`` or ``.obj`` brings a second file)."""
     path = Path(path)
     fmt = writable_format(path, "mesh")
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
     writer: MeshWriter = fmt.load_writer()
+    plants = [merged_materials(p) for p in plants]      # one material of each name
     return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,
-                  progress=progress, animation=animation if fmt.animation else None, extras=extras)
+                  progress=progress, animation=animation if fmt.animation else None, extras=extras,
+                  textures=textures if fmt.textures else None)
 
 
 def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours = None, *,
-                up: str | None = None, name: str | None = None, labels=None, leaves: Polygons | None = None) -> Path:
+                up: str | None = None, name: str | None = None, labels=None, leaves: Polygons | None = None,
+                textures: bool | Textures = False) -> Path:
     """Write ``mesh`` to ``path`` in the format its suffix names (.glb, .gltf, .obj, .ply,
     .stl, .usda, .usdc, .usd).
 
@@ -114,6 +130,9 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
         those names (start them with ``_``; other formats ignore them)
     leaves : the model's leaf polygons (a grammar's ``GrowResult.polygons``), written beside
         the mesh as every format writes a grammar's leaves; None: none
+    textures : True: bake the relief's maps from ``mesh`` (not displaced: GS) and write them
+        where the format holds them; or the maps (:func:`~plantgen.exporters.textures.
+        bake_textures`); False: none
 
     Returns
     -------
@@ -122,4 +141,6 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
     path = Path(path)
     plant = Plant(name or path.name.split(".")[0] or "plant", Skeleton.empty(mesh.material_names), mesh,
                   labels=labels, leaves=leaves if leaves is not None and len(leaves) else None)
-    return write_plants([plant], path, up=up, colours=colours)[-1]
+    if textures is True:
+        textures = bake_textures([mesh]) if writable_format(path, "mesh").textures else None
+    return write_plants([plant], path, up=up, colours=colours, textures=textures or None)[-1]

@@ -4,7 +4,7 @@ where its copies stand), material colours, and meshes split by material."""
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.frames import up_rotation
-from ..geometry.materials import material_colour
+from ..geometry.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
@@ -22,7 +22,7 @@ from .sway import PlantSway, Timeline
 
 __all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SceneExtras", "SkeletonWriter", "camera_pose",
            "ground_colour", "ground_mesh", "leaf_name", "leaf_parts", "leaf_uv", "light_rotation", "material_colours",
-           "material_parts", "single_plant", "turned_mesh"]
+           "material_parts", "merged_materials", "single_plant", "turned_mesh"]
 
 #: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
 #: renderers' palette).
@@ -132,6 +132,8 @@ class MeshWriter(Protocol):
         None: no animation
     extras : a scene's camera, light and ground (:class:`SceneExtras`), written by the
         formats that hold them (glTF, USD; OBJ, PLY and STL hold the plants only); None: none
+    textures : the relief's baked maps (:class:`~plantgen.exporters.textures.Textures`),
+        given to the formats whose row says ``textures`` (glTF, OBJ, USD); None: none
 
     A writer ignores what its format has no place for. Returns the written paths, the
     main file last.
@@ -139,7 +141,7 @@ class MeshWriter(Protocol):
 
     def __call__(self, plants: list[Plant], path: Path, *, up: str, colours: Colours, instancing: str,
                  unit: float, name: str | None, progress: Progress, animation: Timeline | None,
-                 extras: SceneExtras | None) -> list[Path]: ...
+                 extras: SceneExtras | None, textures=None) -> list[Path]: ...
 
 
 class SkeletonWriter(Protocol):
@@ -184,6 +186,7 @@ class Part:
     leaf: bool = False        # leaf polygons (double-sided where the format says so)
     joints: np.ndarray | None = None    # (v, 4) int, the joints each vertex follows (a swaying plant)
     weights: np.ndarray | None = None   # (v, 4) float, their weights (summing to 1)
+    colours: np.ndarray | None = None   # (v, 3) float32 linear RGB per vertex (leaves: each leaf's shade)
 
 
 def unique_name(base: str, taken) -> str:
@@ -280,10 +283,13 @@ def leaf_uv(polygons: Polygons) -> np.ndarray:
     return ((uv - lo[owner]) / np.maximum(hi - lo, 1e-30)[owner]).astype(np.float32)
 
 
-def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | None = None) -> list[Part]:
+def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | None = None,
+               names=None) -> list[Part]:
     """One leaf :class:`Part` per material the polygons use, in material order: each vertex
     (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set.
-    ``joints``: (v,) the one joint each leaf vertex follows (a swaying plant's skin)."""
+    ``joints``: (v,) the one joint each leaf vertex follows (a swaying plant's skin);
+    ``names``: the material names, to give each vertex its leaf's colour (``colours``: the
+    renderers' shade of that leaf, :func:`~plantgen.geometry.materials.leaf_colours`)."""
     if polygons is None or len(polygons.triangles) == 0:
         return []
     rot = up_rotation(up)
@@ -292,6 +298,10 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
     per_vertex[polygons.triangles] = polygons.normal[polygons.polygon][:, None, :]
     normals = (per_vertex @ rot.T).astype(np.float32)
     uv = leaf_uv(polygons)
+    shade = None
+    if names is not None:
+        owner = polygons.vertex_polygon
+        shade = leaf_colours(names, polygons.material[owner], leaf_tones(len(polygons))[owner]).astype(np.float32)
     triangle_material = polygons.triangle_material
     parts = []
     for mat in np.unique(triangle_material):
@@ -304,5 +314,22 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
             skin["weights"] = np.zeros((len(keep), 4))
             skin["weights"][:, 0] = 1.0
         parts.append(Part(int(mat), vertices[keep], normals[keep], uv[keep], inverse.reshape(faces.shape),
-                          leaf=True, **skin))
+                          leaf=True, colours=None if shade is None else shade[keep], **skin))
     return parts
+
+
+def merged_materials(plant: Plant) -> Plant:
+    """``plant`` with its materials of one name made one (a grammar's ``'`` steps through
+    its material list, which may name a material many times: ``[bark, bark, stem, leaf,
+    leaf, ...]``): names kept in order of first appearance, the mesh rows' and leaves'
+    indices mapped onto them. A plant whose names are distinct comes back as it is."""
+    if plant.mesh is None:
+        return plant
+    names = plant.mesh.material_names
+    unique = tuple(dict.fromkeys(names))
+    if len(unique) == len(names):
+        return plant
+    index = np.array([unique.index(n) for n in names], dtype=np.int32)
+    mesh = replace(plant.mesh, material=index[plant.mesh.material], material_names=unique)
+    leaves = plant.leaves if plant.leaves is None else replace(plant.leaves, material=index[plant.leaves.material])
+    return replace(plant, mesh=mesh, leaves=leaves)

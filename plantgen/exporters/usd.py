@@ -10,8 +10,11 @@ One plant, written in place::
                             a partition) bound to its material
         Leaves              Mesh of the grammar's leaf polygons (only when it has some):
                             points, triangles, vertex normals (the polygon's),
-                            primvars:st across each leaf, ``doubleSided = true``; bound to the
-                            plant's materials as Mesh is
+                            primvars:st across each leaf, ``doubleSided = true``,
+                            primvars:displayColor each leaf's shade (as the renderers
+                            draw it); bound to materials ``<name>_leaf`` whose surface
+                            reads displayColor (with ``colours`` given: to the plant's
+                            materials, as Mesh is)
         Skeleton            BasisCurves, linear, purpose "guide" (drawn on request, not
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
@@ -61,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import write_atomically
+from ..files import write_all_atomically
 from ..geometry.frames import similarity_trs, turn_placements, up_rotation
 from ..geometry.skeleton import Skeleton
 from ..geometry.topology import branches
@@ -82,6 +85,7 @@ from .plants import (
     unique_name,
 )
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
+from .textures import Textures, png_writes, texture_files
 
 __all__ = ["joint_names", "skeleton_curves", "write_usd"]
 
@@ -151,13 +155,15 @@ def joint_names(parent: np.ndarray) -> list[str]:
 class _Writer:
     """Builds one stage (usd-core imported lazily: it takes about half a second)."""
 
-    def __init__(self, up: str, unit: float, colours: Colours) -> None:
+    def __init__(self, up: str, unit: float, colours: Colours, textures: Textures | None = None,
+                 files: dict | None = None) -> None:
         from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, Vt
 
         self.Gf, self.Sdf, self.Tf, self.Usd, self.UsdGeom, self.UsdShade, self.UsdSkel, self.Vt = (
             Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt)
         self.UsdLux = UsdLux
         self.up, self.colours = up, colours
+        self.textures, self.files = textures, files or {}
         self.stage = Usd.Stage.CreateInMemory()
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.z if up == "z" else UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(self.stage, float(unit))
@@ -189,9 +195,17 @@ class _Writer:
         if rig is not None:
             self._bind(mesh, path.AppendChild("Joints"), rig.vertex_joints, rig.vertex_weights)
         if plant.has_leaves:
-            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints)
-            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts), materials,
-                                np.concatenate([p.uv for p in parts]), double_sided=True)
+            names = plant.mesh.material_names
+            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
+                               names if self.colours is None else None)
+            shaded = parts[0].colours is not None
+            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts),
+                                self._leaf_materials(path.AppendChild("Materials"), names, {p.material for p in parts})
+                                if shaded else materials, np.concatenate([p.uv for p in parts]), double_sided=True)
+            if shaded:
+                self.UsdGeom.PrimvarsAPI(leaves).CreatePrimvar(
+                    "displayColor", self.Sdf.ValueTypeNames.Color3fArray, self.UsdGeom.Tokens.vertex).Set(
+                    self.Vt.Vec3fArray.FromNumpy(np.concatenate([p.colours for p in parts]).astype(np.float32)))
             if rig is not None:
                 self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
                            np.concatenate([p.weights for p in parts]))
@@ -287,8 +301,67 @@ class _Writer:
             shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.8)
             shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
             material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            if name in self.files:
+                self._textured(material, shader, name)
             out.append(material)
         return out
+
+    def _leaf_materials(self, scope, names, used) -> list:
+        """Materials ``<name>_leaf`` (for the indices ``used`` of ``names``; None at the
+        others) whose UsdPreviewSurface takes its diffuseColor from the Leaves' vertex
+        primvar ``displayColor`` (each leaf's shade), the material's colour its fallback."""
+        UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
+        taken = {child.GetName() for child in self.stage.GetPrimAtPath(scope).GetChildren()}
+        rgb = material_colours(names)
+        out: list = [None] * len(names)
+        for index in sorted(used):
+            material = UsdShade.Material.Define(self.stage, scope.AppendChild(self.name(f"{names[index]}_leaf", taken)))
+            shader = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild("PreviewSurface"))
+            shader.CreateIdAttr("UsdPreviewSurface")
+            reader = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild("LeafColour"))
+            reader.CreateIdAttr("UsdPrimvarReader_float3")
+            reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("displayColor")
+            reader.CreateInput("fallback", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*rgb[index]))
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+                reader.CreateOutput("result", Sdf.ValueTypeNames.Float3))
+            shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.8)
+            shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+            material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            out[index] = material
+        return out
+
+    def _textured(self, material, surface, name: str) -> None:
+        """Feed ``surface`` (the UsdPreviewSurface of ``material``) the baked maps of ``name``
+        through UsdUVTexture readers of its files at ``st``: diffuseColor (sRGB; where no
+        colour was given), normal (raw, scale 2 bias -1: tangent space) and displacement
+        (raw, the height map times the shell of a segment of the median radius)."""
+        UsdShade, Sdf = self.UsdShade, self.Sdf
+        files, baked = self.files[name], self.textures.get(name)
+        reader = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild("TexCoord"))
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        st = reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+        feeds = {"basecolor": ("diffuseColor", Sdf.ValueTypeNames.Color3f, "rgb", "sRGB", None),
+                 "normal": ("normal", Sdf.ValueTypeNames.Normal3f, "rgb", "raw", (2.0, -1.0)),
+                 "height": ("displacement", Sdf.ValueTypeNames.Float, "r", "raw", (baked.amplitude, 0.0))}
+        for kind, (png, _) in files.items():
+            target, value_type, channel, space, scale_bias = feeds[kind]
+            if kind == "basecolor" and self.colours is not None:
+                continue
+            texture = UsdShade.Shader.Define(self.stage, material.GetPath().AppendChild(f"{kind.capitalize()}Map"))
+            texture.CreateIdAttr("UsdUVTexture")
+            texture.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{png.name}"))
+            texture.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+            texture.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
+            texture.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
+            texture.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+            if scale_bias is not None:
+                scale, bias = scale_bias
+                texture.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(scale, scale, scale, 1.0))
+                texture.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(bias, bias, bias, 0.0))
+            output = texture.CreateOutput(channel, Sdf.ValueTypeNames.Float3 if channel == "rgb" else
+                                          Sdf.ValueTypeNames.Float)
+            surface.CreateInput(target, value_type).ConnectToSource(output)
 
     def _mesh(self, path, arrays, materials, uv=None, double_sided: bool = False):
         """A Mesh at ``path`` from ``arrays`` = (vertices, unit normals, faces, material per
@@ -398,14 +471,18 @@ class _Writer:
 def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
               instancing: str = "nodes", unit: float = 1.0, name: str | None = None,
               progress: Progress = None, animation: Timeline | None = None,
-              extras: SceneExtras | None = None) -> list[Path]:
+              extras: SceneExtras | None = None, textures: Textures | None = None) -> list[Path]:
     """Write ``plants`` as a USD stage at ``path`` (see the module docstring); with
     ``animation``, the plants that sway as UsdSkel skeletons with their SkelAnimations;
-    with ``extras``, the scene's ground, camera and light."""
+    with ``extras``, the scene's ground, camera and light; with ``textures``, the relief's
+    maps as PNG files beside it (``<stem>_<material>_<kind>.png``) that each material's
+    UsdPreviewSurface reads through UsdUVTexture."""
     path = Path(path)
     if not unit > 0:
         raise ExportError(f"{path}: the unit must be a positive number of metres, got {unit!r}")
-    writer = _Writer(up, unit, colours)
+    files = {} if textures is None else texture_files(path, textures, [n for p in plants for n in
+                                                                        p.mesh.material_names], v_up=True)
+    writer = _Writer(up, unit, colours, textures, files)
     taken: set = set()
     stem = name or path.name.split(".")[0]
     swaying = [animation is not None and p.sway is not None and p.sway.moves for p in plants]
@@ -433,7 +510,8 @@ def write_usd(plants: list[Plant], path: str | Path, *, up: str = "y", colours: 
     def export(tmp):
         if not writer.stage.GetRootLayer().Export(str(tmp)):
             raise OSError(f"usd-core could not write {tmp.name}")
-    return [write_atomically(path, export, ExportError)]
+    pngs = png_writes(files)
+    return write_all_atomically([*pngs, (path, export)], ExportError)
 
 
 def _write_in_place(writer: _Writer, path, plant: Plant, animation: Timeline | None) -> None:

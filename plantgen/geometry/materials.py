@@ -11,8 +11,8 @@ import numpy as np
 
 from . import relief
 
-__all__ = ["MAX_MATERIALS", "PALETTE", "DEFAULT_SHADE", "material_palette", "material_colour",
-           "material_height_maps"]
+__all__ = ["MAX_MATERIALS", "PALETTE", "DEFAULT_SHADE", "leaf_colours", "leaf_tones", "material_palette",
+           "material_colour", "material_height_maps"]
 
 #: Material slots of one draw (the GLSL arrays' size, passed to every shader as a define).
 MAX_MATERIALS = 16
@@ -74,3 +74,21 @@ def material_height_maps(material_names) -> tuple[np.ndarray, np.ndarray]:
     maps, rep = relief.height_maps(names)
     repeats[:len(rep)] = np.asarray(rep, dtype=np.float32)[:MAX_MATERIALS]
     return np.ascontiguousarray(maps, dtype=np.uint8), repeats
+
+
+def leaf_tones(count: int) -> np.ndarray:
+    """(count,) tones in [0.25, 0.85]: where each leaf's albedo lies between its material's
+    dark and light colour, a fixed function of the polygon's index (deterministic), so
+    neighbouring leaves read apart."""
+    k = np.arange(count, dtype=np.uint64)
+    h = (k * np.uint64(2654435761) + np.uint64(40503)) % np.uint64(1 << 16)
+    return 0.25 + 0.6 * h.astype(np.float64) / float(1 << 16)
+
+
+def leaf_colours(names, material: np.ndarray, tones: np.ndarray) -> np.ndarray:
+    """(k, 3) float64 linear RGB of leaves of ``material`` (k,) (indices into ``names``) at
+    ``tones`` (k,) (:func:`leaf_tones`): mix(dark, light, tone), the leaf renderer's albedo."""
+    palette = material_palette(names)
+    slot = np.clip(np.asarray(material), 0, MAX_MATERIALS - 1)
+    dark, light = palette["dark"][slot].astype(np.float64), palette["light"][slot].astype(np.float64)
+    return dark + (light - dark) * np.asarray(tones, dtype=np.float64)[:, None]

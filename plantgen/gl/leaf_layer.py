@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.materials import leaf_tones
 from ..geometry.polygons import Polygons
 from ..geometry.vec import norm, unit
 from .shaders import build_program, mat4, set_uniforms
@@ -39,15 +40,6 @@ def _vertex_normals(polygons: Polygons) -> np.ndarray:
         owner = polygons.vertex_polygon
         normals[fallback] = polygons.normal[owner[fallback]] if len(polygons) else (0.0, 1.0, 0.0)
     return unit(normals)
-
-
-def leaf_tones(count: int) -> np.ndarray:
-    """(count,) tones in [0.25, 0.85]: where each leaf's albedo lies between its material's
-    dark and light colour, a fixed function of the polygon's index (deterministic), so
-    neighbouring leaves read apart."""
-    k = np.arange(count, dtype=np.uint64)
-    h = (k * np.uint64(2654435761) + np.uint64(40503)) % np.uint64(1 << 16)
-    return 0.25 + 0.6 * h.astype(np.float64) / float(1 << 16)
 
 
 def leaf_vertices(polygons: Polygons, origin, labels=None) -> np.ndarray:

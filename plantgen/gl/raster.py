@@ -23,6 +23,7 @@ from ..geometry.instances import PlacedMeshes
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
+from ..geometry.textures import mesh_tangents
 from ..settings import ShadowSettings
 from .context import gl_context
 from .frame import (
@@ -41,7 +42,8 @@ from .passes import frame_passes
 from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
-__all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "row_data"]
+__all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "normal_map_texture",
+           "row_data"]
 
 
 def row_data(frusta) -> np.ndarray:
@@ -93,6 +95,7 @@ class RasterRenderer(OffscreenRenderer):
         super().__init__(ctx)
         self._uploaded = None  # (mesh id, buffers, vao, origin)
         self._placed = None    # (PlacedMeshes, program, [per plant buffers, vao, origin])
+        self._normal_tex = None  # (names and maps, texture array) of GS+N
 
     def release_mesh(self) -> None:
         """Free the uploaded mesh's buffers (the renderer stays usable)."""
@@ -106,10 +109,15 @@ class RasterRenderer(OffscreenRenderer):
         height textures and the shadow map."""
         self.release_mesh()
         self.release_placed()
+        if self._normal_tex is not None:
+            self._normal_tex[1].release()
+            self._normal_tex = None
         super().release()
 
     def upload(self, mesh: TessellatedMesh | SkinnedMesh, frusta, program):
-        """Upload ``mesh`` (once per mesh object); returns (vao, origin)."""
+        """Upload ``mesh`` (once per mesh object and program; a NORMAL_MAP program's with
+        the mesh's tangents, :func:`~plantgen.geometry.textures.mesh_tangents`); returns
+        (vao, origin)."""
         key = (mesh, program)  # strong references: identity stays valid while cached
         if self._uploaded is not None and self._uploaded[0][0] is mesh and self._uploaded[0][1] is program:
             return self._uploaded[2], self._uploaded[3]
@@ -129,17 +137,20 @@ class RasterRenderer(OffscreenRenderer):
         else:                     # knuckle slices carry other counts: every face's row
             cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
+        tangents = _tangent_buffer(ctx, mesh, program)
         vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")]
-                               + ([(bind, "2i", "bind")] if binding is not None else []),
+                               + ([(bind, "2i", "bind")] if binding is not None else [])
+                               + ([(tangents, "4f", "tangent")] if tangents is not None else []),
                                index_buffer=ibo, index_element_size=4)
-        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind), vao, origin)
+        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind) + ((tangents,) if tangents else ()), vao,
+                          origin)
         return vao, origin
 
     def render(self, mesh: TessellatedMesh | SkinnedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None,
                count_work: bool = False, background=None, ssaa: int = 1, leaves=None,
-               poses=None, bounds=None) -> RenderResult:
+               poses=None, bounds=None, normal_maps=None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -166,6 +177,10 @@ class RasterRenderer(OffscreenRenderer):
             ray caster
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
+        normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
+            normal map} (:func:`~plantgen.geometry.textures.bake_normal_map`, glTF's
+            convention) shading the lateral faces of a still mesh as a glTF reader would;
+            None: none
         """
         skinned = isinstance(mesh, SkinnedMesh)
         if skinned and poses is None:
@@ -176,7 +191,8 @@ class RasterRenderer(OffscreenRenderer):
         shadowed = shadows is not None
         program = build_program(self.ctx, "raster.glsl",
                                 {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
-                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned})
+                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned,
+                                 "NORMAL_MAP": normal_maps is not None and not skinned})
         t0 = time.perf_counter()
         vao, origin = self.upload(uploaded, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
@@ -188,6 +204,7 @@ class RasterRenderer(OffscreenRenderer):
         lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye,
                                   anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
+        draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh)
         extras = self._surroundings(ground, leaves, view, lighting)
         light = None
         if shadowed:
@@ -229,6 +246,24 @@ class RasterRenderer(OffscreenRenderer):
                 poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return draw
+
+    def _normal_mapped(self, program, names, normal_maps, draw):
+        """``draw`` with the normal maps' texture array bound (unit 1), where ``program``
+        reads one (NORMAL_MAP): built once per list of names and maps."""
+        if "normal_maps" not in program:
+            return draw
+        key = (tuple(names), tuple(id(normal_maps.get(k, normal_maps.get(n))) for k, n in enumerate(names)))
+        if self._normal_tex is None or self._normal_tex[0] != key:
+            if self._normal_tex is not None:
+                self._normal_tex[1].release()
+            self._normal_tex = (key, normal_map_texture(self.ctx, names, normal_maps))
+        tex = self._normal_tex[1]
+        program["normal_maps"] = 1
+
+        def mapped():
+            tex.use(1)
+            draw()
+        return mapped
 
     def _mesh_light_draw(self, origin, lighting: FrameLighting, mesh: TessellatedMesh, poses=None):
         """The mesh's front faces into the light's depth map, relative to the light's
@@ -363,6 +398,35 @@ def placed_buffer_bytes(meshes: PlacedMeshes) -> int:
     """GPU buffer bytes of a placed scene's GS draw: per plant its mesh's vertices and
     indices, 8 B a row and 4 B a face (every face's row); nothing per copy."""
     return sum(pm.mesh.buffer_bytes()["total"] + 8 * pm.mesh.n_rows + 4 * len(pm.faces) for pm in meshes.meshes)
+
+
+def _tangent_buffer(ctx, mesh: TessellatedMesh, program):
+    """The mesh's (V, 4) float32 tangents as a buffer where ``program`` reads them
+    (NORMAL_MAP), else None."""
+    if "tangent" not in program:
+        return None
+    return ctx.buffer(mesh_tangents(mesh.vertices, mesh.normals, mesh.uv, mesh.faces).tobytes())
+
+
+def normal_map_texture(ctx, names, normal_maps):
+    """RGB8 texture array of the normal maps ((H, W, 3) uint8, glTF convention, by slot
+    index or by material name) of the material slots ``names`` (a slot without one: the
+    flat (128, 128, 255)), every
+    layer at the largest map's size (smaller ones repeated texel by texel), repeating in
+    u and v, trilinear: as an engine samples the exported map."""
+    maps = [normal_maps.get(k, normal_maps.get(n)) for k, n in enumerate(names)]
+    shape = max((m.shape[:2] for m in maps if m is not None), default=(1, 1), key=lambda s: s[0] * s[1])
+    layers = np.empty((len(names), *shape, 3), np.uint8)
+    for k, m in enumerate(maps):
+        if m is None:
+            layers[k] = (128, 128, 255)
+        else:
+            layers[k] = np.repeat(np.repeat(m, shape[0] // m.shape[0], axis=0), shape[1] // m.shape[1], axis=1)
+    tex = ctx.texture_array((shape[1], shape[0], len(names)), 3, layers.tobytes(), dtype="f1")
+    tex.build_mipmaps()
+    tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
+    tex.repeat_x, tex.repeat_y = True, True
+    return tex
 
 
 def _cap_tris(mesh: TessellatedMesh) -> int:

@@ -1,0 +1,86 @@
+"""The RC+R | GS+N | GS image of one model: the ray caster's relief, the smooth mesh with the
+exported normal maps (what a glTF reader shows of ``plantgen export``), the mesh without.
+
+Run as ``python -m plantgen.benchmarks.normal_mapped MODEL OUT.png [--level M] [--zoom F]
+[--raise F] [--size W H] [--aspect-step R]``. The normal maps are the ones ``plantgen
+export`` bakes (:func:`plantgen.exporters.textures.bake_textures`: one per material, at
+its median aspect, or one per aspect bucket), drawn by plantgen's rasteriser as a glTF
+reader draws them (``raster.glsl``'s NORMAL_MAP). Each panel is labelled; the camera is
+the gallery's (:func:`~plantgen.benchmarks.side_by_side.gallery_camera`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from ..exporters import Plant
+from ..exporters.textures import bake_textures, split_by_aspect
+from ..geometry.mesh import tessellate
+from ..geometry.skeleton import Skeleton
+from ..geometry.skin import skin_skeleton
+from ..gl.context import gl_context
+from ..gl.raster import RasterRenderer
+from ..gl.raycast import Raycaster
+from ..pipeline import load_skeleton
+from ..settings import RaycastSettings
+from .side_by_side import gallery_camera
+
+__all__ = ["main", "normal_mapped"]
+
+
+def normal_mapped(frusta, camera, *, level: int = 2, aspect_step: float | None = None) -> np.ndarray:
+    """RC+R | GS+N | GS of ``frusta`` seen by ``camera``, labelled, (h, 3w, 3) uint8; with
+    ``aspect_step`` GS+N has a normal map per aspect bucket (``plantgen export
+    --aspect-step``), each bucket drawn in a material slot of its own."""
+    names = frusta.material_names
+    ctx = gl_context()
+    rc = Raycaster(ctx).render(frusta, camera, RaycastSettings(relief=True), names)
+    mesh = tessellate(frusta, level, caps="tips")
+    plant, bases = Plant("model", Skeleton.empty(names), mesh), {}
+    if aspect_step:
+        [plant], bases = split_by_aspect([plant], aspect_step)
+    baked = bake_textures([plant.mesh], bases=bases)
+    slots = [bases.get(n, n) for n in plant.mesh.material_names]      # a bucket's relief and colours: its material's
+    maps = {k: baked.get(n).normal for k, n in enumerate(plant.mesh.material_names) if baked.get(n) is not None}
+    raster = RasterRenderer(ctx)
+    gs_n = raster.render(plant.mesh, replace(frusta, material=plant.mesh.material.astype(np.int32)), camera,
+                         material_names=slots, normal_maps=maps)
+    gs = raster.render(mesh, frusta, camera, material_names=names)
+    raster.release()
+    maps = len(baked)
+    panels = [(rc.color, f"RC+R: {len(frusta.length):,} frusta"),
+              (gs_n.color, f"GS+N m={level}: {len(mesh.faces):,} triangles, {maps} normal map{'s' * (maps > 1)}"),
+              (gs.color, f"GS m={level}: no normal map")]
+    image = Image.fromarray(np.concatenate([p[0][..., :3] for p in panels], axis=1))
+    draw = ImageDraw.Draw(image)
+    for i, (_, label) in enumerate(panels):
+        x = i * camera.width + 4
+        draw.rectangle(draw.textbbox((x, 3), label), fill=(255, 255, 255))
+        draw.text((x, 3), label, fill=(0, 0, 0))
+    return np.asarray(image)
+
+
+def main(argv=None) -> None:
+    """``python -m plantgen.benchmarks.normal_mapped MODEL OUT.png``: the RC+R | GS+N | GS image."""
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("model", help="grammar, scene or skeleton .npz")
+    parser.add_argument("output")
+    parser.add_argument("--level", type=int, default=2, help="GS subdivision level (default 2)")
+    parser.add_argument("--aspect-step", type=float, default=None, help="normal maps per aspect bucket (ratio)")
+    parser.add_argument("--zoom", type=float, default=1.0, help="eye distance factor (< 1: closer)")
+    parser.add_argument("--raise", dest="lift", type=float, default=0.0,
+                        help="raise the target by this fraction of the model's extent")
+    parser.add_argument("--size", type=int, nargs=2, default=(400, 400))
+    args = parser.parse_args(argv)
+    frusta = skin_skeleton(load_skeleton(args.model))
+    camera = gallery_camera(frusta, *args.size, zoom=args.zoom, lift=args.lift)
+    Image.fromarray(normal_mapped(frusta, camera, level=args.level, aspect_step=args.aspect_step)).save(args.output)
+    print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()
