@@ -107,6 +107,11 @@ def _probe(scheduler: str) -> None:
         await comm.close()
 
     try:
+        asyncio.get_running_loop()
+        return                       # inside an event loop (a notebook): the Client itself says
+    except RuntimeError:
+        pass
+    try:
         asyncio.run(reach())
     except (Exception, MemoryError) as exc:     # a bad address, a refusal, a time-out, something else answering
         text = str(exc).strip().splitlines()
@@ -209,10 +214,12 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
     own = client is None
     cluster = None
     flying: dict = {}
+    made_folders = False
     try:
         if own:
             client, cluster = dask_client(scheduler, workers)
         make_folders(folder, spec)
+        made_folders = True
         result.dashboard = getattr(client, "dashboard_link", None)
         if on_start:
             on_start(result.dashboard, result)
@@ -220,7 +227,8 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
     finally:
         if flying:
             client.cancel([f for f, _ in flying.values()])
-        manifest.close()
+        if made_folders:                 # nothing is written before the work starts
+            manifest.close()
         if own and client is not None:
             client.close()
             if cluster is not None:
