@@ -181,3 +181,16 @@ def test_sigterm_writes_the_manifest_as_ctrl_c_does(tmp_path):
     top = max(r["index"] for r in rows.values()) + 1
     again = run_batch(simple_spec("saguaro", f"0:{top}", ["npz"]), out, workers=1)
     assert again.skipped == len(rows) and again.skipped + again.done == top
+
+
+def test_readers_leave_a_running_batchs_temporary_part_alone(tmp_path):
+    spec = twig_spec(tmp_path, ["npz"], seeds="0:2")
+    manifest = Manifest(tmp_path)
+    for t in spec.tasks():
+        manifest.add(plant_row(t, {}))
+    manifest.flush()
+    writing = tmp_path / MANIFEST_NAME / ".part-000001.parquet.part.parquet"     # a part being written
+    writing.write_bytes(b"half")
+    assert len(read_manifest(tmp_path)) == 2 and writing.exists()
+    Manifest(tmp_path)                                # a run starting: what a killed run left goes
+    assert not writing.exists()

@@ -65,10 +65,11 @@ def _check_part(path: Path) -> None:
         raise PlantgenError(f"{path}: {what}, not {FORMAT}; {_MOVE_AWAY}")
 
 
-def manifest_parts(path: Path) -> dict[int, Path]:
+def manifest_parts(path: Path, tidy: bool = False) -> dict[int, Path]:
     """The parts of the manifest folder ``path`` by number ({} if there is none); one line
     for anything else there (a file in its place, a foreign file, a part of another format).
-    Hidden temporary parts a killed run left are removed."""
+    Hidden temporary parts are passed over (a running batch may be writing one); with
+    ``tidy`` (a run about to write) they are removed, as a killed run left them."""
     if not path.exists() and not path.is_symlink():
         return {}
     if not path.is_dir():
@@ -84,7 +85,8 @@ def manifest_parts(path: Path) -> dict[int, Path]:
             _check_part(entry)
             parts[int(m.group(1))] = entry
         elif _TEMPORARY.fullmatch(entry.name) and entry.is_file():
-            entry.unlink(missing_ok=True)          # a temporary part a killed run left
+            if tidy:
+                entry.unlink(missing_ok=True)
         else:
             raise PlantgenError(f"{path}: not a plantgen manifest (it holds {entry.name!r}); {_MOVE_AWAY}")
     return parts
@@ -129,7 +131,11 @@ class _Index:
 
         cols: dict[str, list] = {"id": [], "part": [], "ok": [], "seed": [], "fingerprint": []}
         for number, path in parts.items():
-            t = pq.read_table(path, columns=["id", "status", "seed", "fingerprint"], schema=arrow_schema())
+            try:
+                t = pq.read_table(path, columns=["id", "status", "seed", "fingerprint"], schema=arrow_schema())
+            except Exception as exc:   # a part whose schema reads but whose data does not
+                raise PlantgenError(f"{path}: not a readable manifest part ({exc.__class__.__name__}); "
+                                    f"{_MOVE_AWAY}") from None
             cols["id"].append(t["id"].to_numpy(zero_copy_only=False).astype("S"))
             cols["ok"].append(pc.fill_null(pc.equal(t["status"], "ok"), False).to_numpy(zero_copy_only=False))
             cols["seed"].append(pc.fill_null(t["seed"], -1).to_numpy())
@@ -168,7 +174,7 @@ class Manifest:
     def __init__(self, folder: Path):
         self.folder = Path(folder)
         self.path = self.folder / MANIFEST_NAME
-        self.parts = manifest_parts(self.path)
+        self.parts = manifest_parts(self.path, tidy=True)
         self.index = _Index(self.parts)
         self.part = max(self.parts, default=-1) + 1
         self.rows = 0                      # rows added this run
