@@ -15,6 +15,7 @@ error line, never a hang, an exhausted memory or a crash. Every failure is one
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 from collections.abc import Callable
@@ -176,12 +177,19 @@ def write_atomically(path: str | Path, write: Callable[[Path], object],
         write(tmp)
         tmp.replace(path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise error(f"{path}: cannot write ({exc.strerror or exc})") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise
     return path
+
+
+def _discard(tmp: Path) -> None:
+    """Remove a temporary file if it is there; an error doing so (a read-only file system
+    refuses even to unlink a name that is not there) does not hide the first one."""
+    with contextlib.suppress(OSError):
+        tmp.unlink(missing_ok=True)
 
 
 def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]]],
@@ -207,10 +215,10 @@ def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]
                 created.append(path)
     except OSError as exc:
         for path in [tmp for _, tmp in done] + created:
-            path.unlink(missing_ok=True)
+            _discard(path)
         raise error(f"{failing or writes[0][0]}: cannot write ({exc.strerror or exc})") from None
     except BaseException:
         for path in [tmp for _, tmp in done] + created:
-            path.unlink(missing_ok=True)
+            _discard(path)
         raise
     return [path for path, _ in done]

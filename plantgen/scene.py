@@ -69,7 +69,7 @@ from .settings import EFFECTS, parse_effect_list, resolve_effects
 from .tolerances import tol
 
 __all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "ScenePlant", "is_scene",
-           "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "rotation_matrix"]
+           "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "resolve_grammar", "rotation_matrix"]
 
 SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances"}
 INSTANCE_KEYS = {"grammar", "skeleton", "seed", "position", "rotation", "scale", "iterations",
@@ -435,17 +435,19 @@ def _explicit_skeleton(d, where, limits: Limits) -> Skeleton:
     return skel
 
 
-def _resolve_grammar(name: str, base: Path, where: str, allow_paths=()) -> Path:
-    """The grammar file an instance names: a path inside the scene's folder (or a folder of
-    ``allow_paths``), else a shipped grammar by plain name. A path that leaves the folder
-    (``../x``, ``/etc/passwd``, a link pointing out) is refused before it is opened."""
+def resolve_grammar(name: str, base: Path, where: str, allow_paths=(), *, error: type[PlantgenError] = SceneError,
+                    owner: str = "scene") -> Path:
+    """The grammar file an instance (or a batch spec's entry: ``owner``, ``error``) names:
+    a path inside the scene's folder (or a folder of ``allow_paths``), else a shipped
+    grammar by plain name. A path that leaves the folder (``../x``, ``/etc/passwd``, a
+    link pointing out) is refused before it is opened."""
     if not name or "\0" in name:
-        raise SceneError(f"{where}: grammar must name a file, got {fields.show(name)}")
+        raise error(f"{where}: grammar must name a file, got {fields.show(name)}")
     roots = [base.resolve(), *(Path(p).resolve() for p in allow_paths)]
     for cand in (base / name, base / f"{name}.yaml"):
         real = cand.resolve()
         if not any(real.is_relative_to(root) for root in roots):
-            raise SceneError(f"{where}: grammar {fields.show(name)} lies outside the scene's folder "
+            raise error(f"{where}: grammar {fields.show(name)} lies outside the {owner}'s folder "
                              f"(only files under it are read; pass --allow-path DIR to allow DIR)")
         if real.is_file():
             return real
@@ -453,7 +455,7 @@ def _resolve_grammar(name: str, base: Path, where: str, allow_paths=()) -> Path:
         for cand in (grammars_dir() / name, grammars_dir() / f"{name}.yaml"):
             if cand.is_file():
                 return cand
-    raise SceneError(f"{where}: grammar {fields.show(name)} not found next to the scene or among the "
+    raise error(f"{where}: grammar {fields.show(name)} not found next to the {owner} or among the "
                      "shipped grammars")
 
 
@@ -502,7 +504,7 @@ def _copy_skeleton(inst, placement: _Placement, seed: int, base: Path, grow_gram
     if "skeleton" in inst:
         return _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton", limits), None, "skeleton"
     name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
-    gpath = _resolve_grammar(name, base, placement.where, allow_paths)
+    gpath = resolve_grammar(name, base, placement.where, allow_paths)
     key = (str(gpath), seed, placement.iterations)
     if key not in cache:
         try:

@@ -22,7 +22,7 @@ pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installe
 from dask.distributed import Client, LocalCluster  # noqa: E402
 
 from plantgen.batch import parse_spec, plant_seed, run_batch  # noqa: E402
-from plantgen.batch.manifest import Manifest  # noqa: E402
+from plantgen.batch.manifest import read_manifest  # noqa: E402
 from plantgen.geometry.skeleton import Skeleton  # noqa: E402
 
 TWIG = """\
@@ -58,12 +58,17 @@ def client():
     cluster.close()
 
 
+def rows_of(folder: Path) -> dict:
+    """The manifest's rows of a batch folder, by plant id."""
+    return {r["id"]: r for r in read_manifest(folder).to_pylist()}
+
+
 def dataset(folder: Path) -> dict:
     """Every file of a batch folder by relative path: arrays, pixels or bytes."""
     out = {}
     for p in sorted(folder.rglob("*")):
         rel = str(p.relative_to(folder))
-        if p.is_dir() or rel == "manifest.parquet":
+        if p.is_dir() or rel.startswith("manifest.parquet"):
             continue
         if p.suffix == ".npz":
             with np.load(p) as z:
@@ -81,9 +86,9 @@ def test_a_batch_is_complete_and_the_same_on_one_or_two_workers(tmp_path, client
     spec = parse_spec(write_spec(tmp_path))
     two = run_batch(spec, tmp_path / "two", client=client)
     assert (two.done, two.failed, two.skipped) == (10, 0, 0)
-    rows = Manifest(tmp_path / "two").rows
-    assert sorted(rows) == sorted(t.id for t in spec.tasks)
-    for task in spec.tasks:
+    rows = rows_of(tmp_path / "two")
+    assert sorted(rows) == sorted(t.id for t in spec.tasks())
+    for task in spec.tasks():
         row = rows[task.id]
         assert row["status"] == "ok" and row["seed"] == plant_seed(5, "twig.yaml", task.index)
         files = row["files"]
@@ -111,15 +116,15 @@ def test_a_worker_killed_mid_batch_loses_nothing(tmp_path, client):
     spec = parse_spec(write_spec(tmp_path, seeds="0:16", outputs={"npz": True, "png": {"size": "64x48"}}))
     killed = threading.Event()
 
-    def progress(done, failed, todo, rate):
-        if done >= 2 and not killed.is_set():
+    def progress(result):
+        if result.done >= 2 and not killed.is_set():
             killed.set()
             pids = client.run(os.getpid)                     # {worker address: pid}
             os.kill(pids[sorted(pids)[0]], signal.SIGKILL)
 
     result = run_batch(spec, tmp_path / "out", client=client, progress=progress)
     assert killed.is_set()
-    rows = Manifest(tmp_path / "out").rows
+    rows = rows_of(tmp_path / "out")
     assert result.failed == 0 and len(rows) == 16
     assert all(r["status"] == "ok" for r in rows.values())
     client.wait_for_workers(2, timeout=60)        # the nanny restarts the worker
@@ -128,18 +133,17 @@ def test_a_worker_killed_mid_batch_loses_nothing(tmp_path, client):
 def test_a_rerun_after_an_interrupt_makes_only_the_rest(tmp_path, client):
     spec = parse_spec(write_spec(tmp_path, seeds="0:12", outputs={"npz": True}))
 
-    def interrupt(done, failed, todo, rate):
-        if done >= 4:
+    def interrupt(result):
+        if result.done >= 4:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
         run_batch(spec, tmp_path / "out", client=client, progress=interrupt)
-    kept = Manifest(tmp_path / "out").rows            # a valid manifest after the interrupt
+    kept = rows_of(tmp_path / "out")            # a valid manifest after the interrupt
     assert 4 <= len(kept) < 12
-    starts = []
-    again = run_batch(spec, tmp_path / "out", client=client, on_start=lambda d, todo, skipped: starts.append(skipped))
-    assert starts == [len(kept)] and again.done == 12 - len(kept)
-    assert len(Manifest(tmp_path / "out").rows) == 12
+    again = run_batch(spec, tmp_path / "out", client=client)
+    assert (again.listed, again.skipped, again.done) == (len(kept), len(kept), 12 - len(kept))
+    assert len(rows_of(tmp_path / "out")) == 12
     assert not list((tmp_path / "out").rglob(".*"))   # no temporary file left behind
 
 
@@ -147,7 +151,7 @@ def test_a_bad_sweep_value_is_one_failed_row(tmp_path, client):
     sweep = {"grid": {"l": [0.5, 1.0e300]}}            # 1e300 m internodes: over the coordinate limit
     spec = parse_spec(write_spec(tmp_path, seeds="0:2", sweep=sweep, outputs={"npz": True}))
     result = run_batch(spec, tmp_path / "out", client=client)
-    rows = Manifest(tmp_path / "out").rows
+    rows = rows_of(tmp_path / "out")
     failed = [r for r in rows.values() if r["status"] == "failed"]
     assert result.failed == len(failed) == 2 and result.done == 2
     assert all(r["defines"] == [("l", 1e300)] for r in failed)
@@ -160,7 +164,7 @@ def test_the_command_line(tmp_path):
                              "--out", tmp_path / "out", "--workers", "1")
     assert code == 0, err
     assert "3 plants: 3 made, 0 failed" in out
-    rows = Manifest(tmp_path / "out").rows
+    rows = rows_of(tmp_path / "out")
     row = rows["twig-000001"]
     # any plant can be grown again alone from its manifest row
     code, _, err = run_cli("grow", tmp_path / "twig.yaml", "--seed", row["seed"], "-o", tmp_path / "a.npz")
@@ -186,7 +190,7 @@ def test_the_glb_labels_every_vertex_with_its_branch_order(tmp_path):
     (tmp_path / "glb").mkdir()
     (tmp_path / "npz").mkdir()
     spec = simple_spec(str(tmp_path / "twig.yaml"), "0:1", ["glb", "npz"], glb_level=0)
-    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path))
+    row = make_plant(next(spec.tasks()), spec.outputs, str(tmp_path))
     assert row["status"] == "ok", row["error"]
     path = tmp_path / row["files"]["glb"]
     data = path.read_bytes()
@@ -226,7 +230,7 @@ def test_a_leafy_plants_views_masks_and_glb_carry_its_leaves(tmp_path, mask):
         (tmp_path / kind).mkdir()
     spec = simple_spec(str(tmp_path / "leafy.yaml"), "0:1", ["png", "depth", "mask", "glb"], size="96x72",
                        glb_level=0, mask=mask)
-    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path))
+    row = make_plant(next(spec.tasks()), spec.outputs, str(tmp_path))
     assert row["status"] == "ok", row["error"]
     files = row["files"]
     labels = np.asarray(Image.open(tmp_path / files["mask"][0]))
@@ -234,7 +238,7 @@ def test_a_leafy_plants_views_masks_and_glb_carry_its_leaves(tmp_path, mask):
     assert np.array_equal(labels > 0, np.isfinite(depth))
     leaf_label = LEAF_ORDER_LABEL if mask == "order" else 2
     assert (labels == leaf_label).sum() > 20 and (labels == 1).sum() > 5
-    polygons = grow_file(tmp_path / "leafy.yaml", seed=spec.tasks[0].seed).polygons
+    polygons = grow_file(tmp_path / "leafy.yaml", seed=next(spec.tasks()).seed).polygons
     data = (tmp_path / files["glb"]).read_bytes()
     doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
     leaf_faces = sum(doc["accessors"][p["indices"]]["count"] // 3 for p in doc["meshes"][0]["primitives"]
@@ -268,7 +272,7 @@ def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
     (tmp_path / "spec.yaml").write_text(yaml.safe_dump(spec))
     result = run_batch(parse_spec(tmp_path / "spec.yaml"), tmp_path / "out", client=client)
     assert (result.done, result.failed) == (1, 0)
-    (row,) = Manifest(tmp_path / "out").rows.values()
+    (row,) = rows_of(tmp_path / "out").values()
     files, seed = row["files"], row["seed"]
 
     grown = grow_file(tmp_path / "smooth.yaml", seed=seed)
@@ -306,7 +310,7 @@ def test_a_glb_over_the_export_limit_is_a_failed_row(tmp_path):
     (tmp_path / "twig.yaml").write_text(TWIG)
     (tmp_path / "glb").mkdir()
     spec = simple_spec(str(tmp_path / "twig.yaml"), "0:1", ["glb"], glb_level=0)
-    row = make_plant(spec.tasks[0], spec.outputs, str(tmp_path), Limits(max_export_triangles=50))
+    row = make_plant(next(spec.tasks()), spec.outputs, str(tmp_path), Limits(max_export_triangles=50))
     assert row["status"] == "failed" and "over the export limit of 50" in row["error"]
     assert not list((tmp_path / "glb").iterdir())
-    assert make_plant(spec.tasks[0], spec.outputs, str(tmp_path))["status"] == "ok"
+    assert make_plant(next(spec.tasks()), spec.outputs, str(tmp_path))["status"] == "ok"

@@ -1,7 +1,8 @@
 """``plantgen batch --scheduler`` on a real cluster started by hand, as a user would: a
 ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1 (ports the system picks),
 one worker killed mid-batch. Nothing is lost: every plant is ok, and the files are those
-of a clean local run."""
+of a clean local run. The client runs in another working directory than the workers and
+names ``--out`` relative to its own: the files land there."""
 
 from __future__ import annotations
 
@@ -18,9 +19,7 @@ import pytest
 pytest.importorskip("dask.distributed", reason="plantgen[batch] (dask.distributed) is not installed")
 pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installed")
 
-from test_batch import dataset  # noqa: E402
-
-from plantgen.batch.manifest import Manifest  # noqa: E402
+from test_batch import dataset, rows_of  # noqa: E402
 
 PLANTS = 32
 #: Seconds any one step may take on a loaded machine before the test gives up.
@@ -84,16 +83,18 @@ def cluster(tmp_path):
         log.close()
 
 
-def _batch(*args) -> subprocess.Popen:
+def _batch(*args, cwd=None) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "plantgen", "batch", "saguaro", "--seeds", f"0:{PLANTS}",
                              "--outputs", "npz,png", "--size", "96x72", *map(str, args)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=cwd)
 
 
 def test_a_worker_killed_mid_batch_on_a_real_cluster_loses_nothing(tmp_path, cluster):
     address, workers = cluster
-    out = tmp_path / "out"
-    batch = _batch("--out", out, "--scheduler", address)
+    here = tmp_path / "client"        # the workers run in tmp_path: a relative --out is the client's
+    here.mkdir()
+    out = here / "out"
+    batch = _batch("--out", "out", "--scheduler", address, cwd=here)
     try:
         _wait_for(lambda: len(list((out / "png").glob("*.png"))) >= 2 if (out / "png").is_dir() else False,
                   "the first plants")
@@ -106,7 +107,7 @@ def test_a_worker_killed_mid_batch_on_a_real_cluster_loses_nothing(tmp_path, clu
         _stop(batch)
     assert batch.returncode == 0, stderr.decode(errors="replace")[-2000:]
     assert f"{PLANTS} plants: {PLANTS} made, 0 failed" in stdout.decode()
-    rows = Manifest(out).rows
+    rows = rows_of(out)
     assert len(rows) == PLANTS and all(r["status"] == "ok" for r in rows.values())
 
     local = _batch("--out", tmp_path / "local", "--workers", "1", "-q")

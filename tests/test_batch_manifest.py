@@ -17,8 +17,9 @@ pa = pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not ins
 import pyarrow.compute as pc  # noqa: E402
 import pyarrow.dataset as ds  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
+from test_batch import rows_of  # noqa: E402
 
-from plantgen.batch.manifest import MANIFEST_NAME, Manifest  # noqa: E402
+from plantgen.batch.manifest import MANIFEST_NAME  # noqa: E402
 from plantgen.batch.plant import measure  # noqa: E402
 from plantgen.batch.schema import COLUMNS, FORMAT, arrow_schema  # noqa: E402
 from plantgen.geometry.skeleton import Skeleton  # noqa: E402
@@ -63,13 +64,14 @@ def test_figures_are_float_columns_a_user_filters(saguaros):
 def test_duckdb_queries_the_manifest_with_sql(saguaros):
     duckdb = pytest.importorskip("duckdb", reason="DuckDB (the test extra) is not installed")
     path = str(saguaros / MANIFEST_NAME)
-    rows = duckdb.sql(f"SELECT id, volume, files.npz AS npz FROM '{path}' WHERE volume > 0 ORDER BY id").fetchall()
+    rows = duckdb.sql(f"SELECT id, volume, files.npz AS npz FROM '{path}/*.parquet' WHERE volume > 0 ORDER BY id"
+                      ).fetchall()
     assert [r[0] for r in rows] == [f"saguaro-{i:06d}" for i in range(6)]
     assert all(npz == f"npz/{i}.npz" for i, _, npz in rows)
 
 
 def test_a_row_regrows_identically_alone(saguaros, tmp_path):
-    row = Manifest(saguaros).rows["saguaro-000003"]
+    row = rows_of(saguaros)["saguaro-000003"]
     code, _, err = run_cli("grow", "saguaro", "--seed", row["seed"], "-o", tmp_path / "alone.npz")
     assert code == 0, err
     alone = Skeleton.load(tmp_path / "alone.npz")
@@ -99,34 +101,64 @@ def test_a_resume_reads_the_typed_manifest(tmp_path):
     before = (out / "npz" / "saguaro-000001.npz").stat().st_mtime_ns
     code, text, err = run_cli(*args)
     assert code == 0, err
-    assert "1 made, 0 failed, 3 already done" in text
+    assert "1 made, 0 failed, 3 already done" in text and "1 files missing" in text
     assert (out / "swc" / "saguaro-000002.swc").is_file()
     assert (out / "npz" / "saguaro-000001.npz").stat().st_mtime_ns == before
-    assert len(Manifest(out).rows) == 4
+    assert len(rows_of(out)) == 4
 
 
 def _old_json_manifest(path: Path) -> None:
-    """A manifest as plantgen wrote it before issue 27: lists and mappings as JSON text."""
+    """A manifest as plantgen wrote it before issue 27: one file, lists and mappings as JSON text."""
     pq.write_table(pa.table({"id": ["saguaro-000000"], "grammar": ["saguaro"], "index": [0], "seed": [1],
                              "defines": ["{}"], "status": ["ok"], "error": [""],
                              "files": ['{"npz": ["npz/saguaro-000000.npz"]}'], "segments": [30], "tips": [5],
                              "height": [9.0], "bbox": ["[]"], "metrics": ['{"dbh": 0.6}'], "timings": ["{}"]}), path)
 
 
-@pytest.mark.parametrize("kind", ["old-json", "foreign", "damaged"])
+def _foreign_part(path: Path) -> None:
+    path.mkdir()
+    pq.write_table(pa.table({"x": [1, 2, 3]}), path / "part-000000.parquet")
+
+
+def _typed_single_file(path: Path) -> None:
+    """A typed manifest in one file (this branch before the manifest became a folder)."""
+    pq.write_table(arrow_schema().empty_table().replace_schema_metadata({"plantgen": "plantgen-batch-manifest/2"}),
+                   path)
+
+
+def _stray_file(path: Path) -> None:
+    path.mkdir()
+    (path / "notes.txt").write_text("mine")
+
+
+def _damaged_part(path: Path) -> None:
+    path.mkdir()
+    (path / "part-000000.parquet").write_bytes(b"PAR1 not really parquet")
+
+
+MANIFESTS = {"old-json": _old_json_manifest, "typed-file": _typed_single_file, "foreign-part": _foreign_part,
+             "stray-file": _stray_file, "damaged-part": _damaged_part,
+             "foreign-file": lambda p: pq.write_table(pa.table({"x": [1]}), p),
+             "garbage-file": lambda p: p.write_bytes(b"not parquet at all")}
+
+
+def _snapshot(path: Path) -> dict:
+    if path.is_file():
+        return {"": path.read_bytes()}
+    return {q.name: q.read_bytes() for q in sorted(path.iterdir())}
+
+
+@pytest.mark.parametrize("kind", sorted(MANIFESTS))
 def test_a_manifest_of_another_format_is_one_line_and_left_alone(tmp_path, kind):
     out = tmp_path / "out"
     out.mkdir()
     path = out / MANIFEST_NAME
-    if kind == "old-json":
-        _old_json_manifest(path)
-    elif kind == "foreign":
-        pq.write_table(pa.table({"x": [1, 2, 3]}), path)
-    else:
-        path.write_bytes(b"PAR1 not really parquet")
-    before = path.read_bytes()
-    code, text, err = run_cli("batch", "saguaro", "--seeds", "0:2", "--outputs", "npz", "--out", out, "-q")
+    MANIFESTS[kind](path)
+    before = _snapshot(path)
+    code, text, err = run_cli("batch", "saguaro", "--seeds", "0:2", "--outputs", "npz", "--out", out, "-q",
+                              "--scheduler", "tcp://127.0.0.1:1")      # refused before any connection
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and str(path) in err and "Traceback" not in err
-    assert path.read_bytes() == before
-    assert not (out / "npz").exists() or not list((out / "npz").iterdir())     # no plant made
+    assert "cannot connect" not in err
+    assert _snapshot(path) == before
+    assert not (out / "npz").exists()                   # nothing made

@@ -19,7 +19,7 @@ pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installe
 from test_batch import TWIG, client  # noqa: E402, F401  (client: the module's LocalCluster fixture)
 
 from plantgen.batch import parse_spec, run_batch  # noqa: E402
-from plantgen.batch.manifest import Manifest  # noqa: E402
+from plantgen.batch.manifest import read_manifest  # noqa: E402
 from plantgen.pipeline import grow_file, skin_model  # noqa: E402
 from plantgen.scanfiles import read_points  # noqa: E402
 
@@ -42,7 +42,7 @@ def test_a_rows_points_are_the_scan_plantgen_scan_makes_of_that_plant(tmp_path, 
     spec = spec_file(tmp_path, {"format": "laz", **KNOBS})
     result = run_batch(parse_spec(spec), tmp_path / "out", client=client)
     assert (result.done, result.failed) == (2, 0)
-    rows = Manifest(tmp_path / "out").rows.values()
+    rows = read_manifest(tmp_path / "out").to_pylist()
     for row in rows:
         path = tmp_path / "out" / row["files"]["points"]
         assert path.suffix == ".laz" and row["timings"]["scan"] > 0
@@ -75,7 +75,7 @@ def test_the_command_line_writes_ply_with_the_scan_options(tmp_path):
     code, stdout, err = run_cli("batch", "saguaro", "--seeds", "0:1", "--outputs", "npz,points",
                                 "--angular-step", "1", "--workers", "1", "-q", "--out", out)
     assert code == 0, err
-    (row,) = Manifest(out).rows.values()
+    (row,) = read_manifest(out).to_pylist()
     cloud = read_points(out / row["files"]["points"])
     assert row["files"]["points"].endswith(".ply") and len(cloud) == row["scan_points"] > 0
     assert set(np.unique(cloud.part)) <= {0, 1}          # stem and branches: the saguaro has no leaves
@@ -97,3 +97,23 @@ def test_a_bad_scan_option_is_one_line(tmp_path):
                            "--out", tmp_path / "out")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--angular-step" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_rerun_with_other_scan_knobs_scans_again_and_an_npz_batch_does_not_care(tmp_path):
+    """The scan's knobs are part of a row's fingerprint where there are points, and only
+    there: a coarser --angular-step makes the points again, the same knobs skip them, and
+    an npz-only batch is done whatever the scan options say."""
+    def run(out, *args):
+        code, stdout, err = run_cli("batch", "saguaro", "--seeds", "0:1", "--workers", "1", "--out", out, *args)
+        assert code == 0, err
+        return read_manifest(out).to_pylist(), stdout + err
+
+    (first,), _ = run(tmp_path / "p", "--outputs", "npz,points", "--angular-step", "1")
+    (same,), text = run(tmp_path / "p", "--outputs", "npz,points", "--angular-step", "1")
+    assert same["fingerprint"] == first["fingerprint"] and "1 already done" in text
+    (coarser,), text = run(tmp_path / "p", "--outputs", "npz,points", "--angular-step", "2")
+    assert coarser["fingerprint"] != first["fingerprint"] and "made again" in text
+    assert 0 < coarser["scan_points"] < first["scan_points"]
+    run(tmp_path / "n", "--outputs", "npz", "--angular-step", "1")
+    _, text = run(tmp_path / "n", "--outputs", "npz", "--angular-step", "2")
+    assert "1 already done" in text and "made again" not in text

@@ -1,52 +1,91 @@
 """Run a batch on Dask (dask.distributed): a ``LocalCluster`` of worker processes sized to
 the machine by default, or an existing cluster by its scheduler's address.
 
-Each plant is one task (:func:`plantgen.batch.plant.make_plant`, ``pure=False``), so
-Dask balances them, and reschedules the tasks of a worker that dies; a plant's files
-depend only on its task, so the result does not depend on which worker ran what. The
-manifest is rewritten (atomically) at most every ``save_every`` seconds (and at most a
-tenth of the time: a save rewrites every row, 0.6 s at 100,000 rows) and at the end,
-Ctrl-C included, and a re-run skips every plant it lists as done.
+The work streams: plants come one at a time from the spec (:meth:`BatchSpec.tasks`), a
+plant the manifest lists as done is skipped, and the others are submitted as tasks with a
+bounded number in flight (``as_completed``, one submitted as one finishes), so the
+client's memory does not grow with the number of plants. Each plant is one task
+(:func:`plantgen.batch.plant.make_plant`, ``pure=False``); Dask reschedules the tasks of a
+worker that dies, and a plant's files depend only on its task, so the result does not
+depend on which worker ran what. Rows go to the manifest's current part every
+``save_every`` seconds (at most a tenth of the time) and at the end, Ctrl-C (and SIGTERM,
+through the command) included.
+
+Before any task is sent the client checks what it can: the output folder (made absolute:
+a worker's working directory is its own), the manifest (one of another format is
+refused), the scheduler's address (a short probe). Nothing is created before the cluster
+answers.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
-import statistics
+import tempfile
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import PlantgenError
 from ..limits import Limits
-from .manifest import Manifest
-from .plant import make_plant, plant_row, relative_files
+from .manifest import MANIFEST_NAME, Manifest
+from .plant import make_plant, output_kinds, plant_row
 from .schema import METRIC_COLUMNS
-from .spec import BatchSpec
+from .spec import BatchError, BatchSpec
 
-__all__ = ["BatchResult", "run_batch", "dask_client"]
+__all__ = ["BatchResult", "run_batch", "dask_client", "summary_lines", "tasks_in_flight", "CONNECT_SECONDS"]
+
+#: Seconds to reach an existing scheduler before giving up.
+CONNECT_SECONDS = 5
+#: Failed rows a result keeps for its summary.
+FAILURES_KEPT = 5
 
 
 @dataclass
 class BatchResult:
-    """What a run did: plants in the spec, already done before, made now (ok), failed
-    now, seconds, the dashboard address, the manifest's path and the rows made now."""
+    """What a run did, kept up to date while it runs: plants in the spec, already done
+    before (skipped), made now (ok), failed now, made again and why (``remade``: reason ->
+    count, of the plants made now the manifest listed before), seconds in all, seconds
+    before the first task was sent (``startup``: checks, the cluster) and to the first
+    plant made, the dashboard's address, the manifest's path, the rows the manifest listed at the
+    start and the first few failed rows."""
 
     total: int
-    skipped: int
-    done: int
-    failed: int
-    seconds: float
-    dashboard: str | None
-    manifest: Path
-    rows: list = field(default_factory=list)
+    startup: float = 0.0
+    skipped: int = 0
+    done: int = 0
+    failed: int = 0
+    seconds: float = 0.0
+    first_plant: float | None = None
+    dashboard: str | None = None
+    manifest: Path = Path(MANIFEST_NAME)
+    listed: int = 0
+    remade: dict = field(default_factory=dict)
+    failures: list = field(default_factory=list)
 
     @property
     def rate(self) -> float:
-        """Plants made (ok or failed) per second of this run."""
-        return (self.done + self.failed) / self.seconds if self.seconds > 0 else 0.0
+        """Plants made (ok or failed) per second since the first task was sent."""
+        busy = self.seconds - self.startup
+        return (self.done + self.failed) / busy if busy > 0 else 0.0
+
+    @property
+    def finished(self) -> int:
+        """Plants accounted for so far: skipped, made or failed."""
+        return self.skipped + self.done + self.failed
+
+    def record(self, row: dict, seconds: float) -> None:
+        self.seconds = seconds
+        if self.first_plant is None:
+            self.first_plant = seconds
+        if row["status"] == "ok":
+            self.done += 1
+        else:
+            self.failed += 1
+            if len(self.failures) < FAILURES_KEPT:
+                self.failures.append({"id": row["id"], "error": row["error"]})
 
 
 def _require_dask() -> None:
@@ -57,93 +96,180 @@ def _require_dask() -> None:
         raise PlantgenError("plantgen batch needs the batch extra: pip install 'plantgen[batch]'") from None
 
 
+def _probe(scheduler: str) -> None:
+    """One line unless a Dask scheduler answers at ``scheduler`` within CONNECT_SECONDS."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def reach():
+        comm = await connect(scheduler, timeout=CONNECT_SECONDS)
+        await comm.close()
+
+    try:
+        asyncio.get_running_loop()
+        return                       # inside an event loop (a notebook): the Client itself says
+    except RuntimeError:
+        pass
+    try:
+        asyncio.run(reach())
+    except (Exception, MemoryError) as exc:     # a bad address, a refusal, a time-out, something else answering
+        text = str(exc).strip().splitlines()
+        raise BatchError(f"--scheduler {scheduler}: cannot connect ({exc.__class__.__name__}"
+                         f"{': ' + text[0][:200] if text else ''})") from None
+
+
 def dask_client(scheduler: str | None, workers: int | None):
     """(client, cluster or None): a client of the cluster at ``scheduler``, or of a new
     ``LocalCluster`` of ``workers`` single-threaded processes (default: the CPU count)."""
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise PlantgenError("plantgen batch needs the batch extra: pip install 'plantgen[batch]'") from None
+    _require_dask()
+    from dask.distributed import Client, LocalCluster
+
     if scheduler:
+        _probe(scheduler)
         try:
-            return Client(scheduler, timeout="20s"), None
-        except (OSError, TimeoutError) as exc:
-            raise PlantgenError(f"--scheduler {scheduler}: cannot connect ({exc.__class__.__name__})") from None
+            return Client(scheduler, timeout=f"{CONNECT_SECONDS}s"), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise BatchError(f"--scheduler {scheduler}: cannot connect ({exc.__class__.__name__})") from None
     n = workers or max(os.cpu_count() or 1, 1)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=50)
     return Client(cluster), cluster
 
 
-def _prepare(spec: BatchSpec, folder: Path) -> tuple[Manifest, list]:
-    folder.mkdir(parents=True, exist_ok=True)
-    manifest = Manifest(folder)
-    todo = [t for t in spec.tasks if not manifest.done(t, spec.outputs, folder)]
-    kinds = {k for t in todo[:1] for k in relative_files(t, spec.outputs)}
-    for kind in kinds:
-        (folder / kind).mkdir(exist_ok=True)
-    return manifest, todo
+def check_out_folder(folder: Path) -> None:
+    """One line if the batch folder cannot be made or written (a file in the way, a
+    read-only file system, no permission), before anything is made."""
+    p = folder
+    while not p.exists():
+        if p.is_symlink():
+            raise BatchError(f"--out {folder}: {p} is a link to nothing")
+        p = p.parent
+    if not p.is_dir():
+        raise BatchError(f"--out {folder}: {p} is not a folder")
+    try:
+        read_only = bool(os.statvfs(p).f_flag & os.ST_RDONLY)
+    except OSError:
+        read_only = False
+    if read_only:
+        raise BatchError(f"--out {folder}: cannot write (read-only file system)")
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise BatchError(f"--out {folder}: cannot write (permission denied)")
+
+
+def make_folders(folder: Path, spec: BatchSpec) -> None:
+    """The batch folder, its manifest folder and one folder per output kind, each shown
+    writable by a file made and removed there; one line for an OS error."""
+    for path in (folder, folder / MANIFEST_NAME, *(folder / k for k in output_kinds(spec.outputs))):
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=path, prefix=".plantgen-"):
+                pass
+        except OSError as exc:
+            raise BatchError(f"{path}: cannot write ({exc.strerror or exc.__class__.__name__})") from None
+
+
+def _to_make(spec: BatchSpec, manifest: Manifest, result: BatchResult, progress) -> Iterator:
+    """The plants of ``spec`` still to make, one at a time; the rest counted as skipped,
+    the plants made again counted by reason."""
+    shown = time.perf_counter()
+    for task in spec.tasks():
+        reason = manifest.check(task, spec.outputs)
+        if reason is None:
+            result.skipped += 1
+            if progress and time.perf_counter() - shown > 0.5:
+                shown = time.perf_counter()
+                progress(result)
+            continue
+        if reason != "new":
+            result.remade[reason] = result.remade.get(reason, 0) + 1
+        yield task
+
+
+def tasks_in_flight(client) -> int:
+    """Tasks kept in flight: four per worker thread of ``client``'s cluster (so none
+    waits), at least 16."""
+    try:
+        threads = sum(client.nthreads().values())
+    except Exception:   # a scheduler that does not say
+        threads = 0
+    return max(16, 4 * threads)
 
 
 def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = None, workers: int | None = None,
-              limits: Limits | None = None, progress: Callable[[int, int, int, float], None] | None = None,
-              on_start: Callable[[str | None, int, int], None] | None = None, save_every: float = 2.0,
+              limits: Limits | None = None, progress: Callable[[BatchResult], None] | None = None,
+              on_start: Callable[[str | None, BatchResult], None] | None = None, save_every: float = 2.0,
               client=None) -> BatchResult:
     """Make every plant of ``spec`` not done yet under ``folder``; returns a
-    :class:`BatchResult`. ``progress(done, failed, to_do, plants_per_second)`` is called
-    as plants finish; ``on_start(dashboard, to_do, skipped)`` once the cluster is up.
+    :class:`BatchResult`. ``progress(result)`` is called as plants finish (and while done
+    plants are skipped); ``on_start(dashboard, result)`` once the cluster is up.
     ``client``: an existing ``dask.distributed.Client`` (tests, notebooks) instead of
     ``scheduler`` / ``workers``."""
-    folder = Path(folder)
-    if client is None:
-        _require_dask()              # before anything is written
-    manifest, todo = _prepare(spec, folder)
-    skipped = len(spec.tasks) - len(todo)
+    start = time.perf_counter()
+    folder = Path(folder).absolute()
+    _require_dask()
+    check_out_folder(folder)
+    manifest = Manifest(folder)                 # one of another format: refused here
+    result = BatchResult(spec.total, manifest=manifest.path, listed=len(manifest.index))
     own = client is None
     cluster = None
-    if own and todo:
-        client, cluster = dask_client(scheduler, workers)
-    dashboard = getattr(client, "dashboard_link", None) if todo else None
-    if on_start:
-        on_start(dashboard, len(todo), skipped)
-    t0 = time.perf_counter()
-    made: list = []
-    failed = 0
-    futures = []
+    flying: dict = {}
+    made_folders = False
     try:
-        if todo:
-            from dask.distributed import as_completed
-
-            # keys unique to this run: a run after an interrupt on the same cluster must not
-            # share keys with the futures the interrupted run is still cancelling
-            run = uuid.uuid4().hex[:8]
-            futures = client.map(make_plant, todo, outputs=spec.outputs, out_dir=str(folder), limits=limits,
-                                 pure=False, key=[f"plant-{t.id}-{run}" for t in todo], retries=1)
-            task_of = dict(zip((f.key for f in futures), todo, strict=True))
-            last_save, wait = time.perf_counter(), save_every
-            for future in as_completed(futures):
-                row = _row_of(future, task_of[future.key])
-                manifest.add(row)
-                made.append(row)
-                failed += row["status"] != "ok"
-                now = time.perf_counter()
-                if progress:
-                    progress(len(made) - failed, failed, len(todo), len(made) / max(now - t0, 1e-9))
-                if now - last_save >= wait:
-                    manifest.save()
-                    last_save = time.perf_counter()
-                    # a save rewrites every row: keep it under a tenth of the run's time
-                    wait = max(save_every, 10.0 * (last_save - now))
+        if own:
+            client, cluster = dask_client(scheduler, workers)
+        make_folders(folder, spec)
+        made_folders = True
+        result.dashboard = getattr(client, "dashboard_link", None)
+        if on_start:
+            on_start(result.dashboard, result)
+        _stream(client, spec, folder, manifest, result, limits, progress, save_every, flying, start)
     finally:
-        if futures:
-            client.cancel(futures)
-        manifest.save()
-        if own and client is not None and todo:
+        if flying:
+            client.cancel([f for f, _ in flying.values()])
+        if made_folders:                 # nothing is written before the work starts
+            manifest.close()
+        if own and client is not None:
             client.close()
             if cluster is not None:
                 cluster.close()
-    return BatchResult(len(spec.tasks), skipped, len(made) - failed, failed, time.perf_counter() - t0,
-                       dashboard, manifest.path, made)
+        result.seconds = time.perf_counter() - start
+    return result
+
+
+def _stream(client, spec: BatchSpec, folder: Path, manifest: Manifest, result: BatchResult, limits, progress,
+            save_every: float, flying: dict, start: float) -> None:
+    """Submit the plants still to make, a bounded number in flight, and record each row as
+    it comes back."""
+    from dask.distributed import as_completed
+
+    run = uuid.uuid4().hex[:8]       # keys unique to this run (an interrupted run's may still be cancelling)
+    todo = _to_make(spec, manifest, result, progress)
+    finished = as_completed()
+
+    def submit(n: int) -> None:
+        for task in itertools.islice(todo, n):
+            future = client.submit(make_plant, task, spec.outputs, str(folder), limits, spec.allow_paths,
+                                   key=f"plant-{task.id}-{run}", pure=False, retries=1)
+            flying[future.key] = (future, task)
+            finished.add(future)
+
+    result.startup = time.perf_counter() - start
+    submit(tasks_in_flight(client))
+    last_save, wait = time.perf_counter(), save_every
+    for future in finished:
+        _, task = flying.pop(future.key)
+        row = _row_of(future, task)
+        manifest.add(row)
+        result.record(row, time.perf_counter() - start)
+        if progress:
+            progress(result)
+        submit(1)
+        now = time.perf_counter()
+        if now - last_save >= wait:
+            manifest.flush()
+            last_save = time.perf_counter()
+            wait = max(save_every, 10.0 * (last_save - now))     # a flush: under a tenth of the time
 
 
 def _row_of(future, task) -> dict:
@@ -156,23 +282,20 @@ def _row_of(future, task) -> dict:
         return plant_row(task, {}, f"{exc.__class__.__name__}: {text[0][:400] if text else ''}")
 
 
-def summary_lines(result: BatchResult, rows: list) -> list[str]:
-    """A one-screen summary: counts, failures, throughput and percentiles of the metrics of
-    ``rows`` (the manifest's ok rows)."""
+def summary_lines(result: BatchResult, quantiles: dict) -> list[str]:
+    """A one-screen summary: counts, plants made again and why, failures, throughput and
+    ``quantiles`` (figure -> 5th, 50th, 95th percentile: :func:`~plantgen.batch.manifest.figure_quantiles`)."""
     lines = [f"{result.total:,} plants: {result.done:,} made, {result.failed:,} failed, "
-             f"{result.skipped:,} already done; {result.seconds:.1f} s, {result.rate:.2f} plants/s",
-             f"manifest: {result.manifest}"]
-    ok = [r for r in rows if r.get("status") == "ok"]
-    shown = ("segments", "scan_points", *METRIC_COLUMNS)
-    columns = {k: [float(r[k]) for r in ok if r.get(k) is not None] for k in shown}
-    if ok:
-        lines.append(f"{'metric':<22}{'p5':>12}{'median':>12}{'p95':>12}")
-        for k, values in columns.items():
-            if len(values) >= 1:
-                unit = METRIC_COLUMNS.get(k, ("", ""))[1]
-                qs = statistics.quantiles(values, n=20) if len(values) > 1 else [values[0]] * 19
-                name = f"{k} ({unit})" if unit else k
-                lines.append(f"{name:<22}{qs[0]:>12.4g}{statistics.median(values):>12.4g}{qs[-1]:>12.4g}")
-    errors = [r for r in result.rows if r.get("status") != "ok"][:5]
-    lines += [f"failed: {r['id']}: {r['error']}" for r in errors]
+             f"{result.skipped:,} already done; {result.seconds:.1f} s, {result.rate:.2f} plants/s"]
+    if result.remade:
+        why = ", ".join(f"{n:,} {reason}" for reason, n in sorted(result.remade.items()))
+        lines.append(f"made again: {sum(result.remade.values()):,} listed before ({why})")
+    lines.append(f"manifest: {result.manifest}")
+    if quantiles:
+        lines.append(f"{'figure':<22}{'p5':>12}{'median':>12}{'p95':>12}")
+        for k, (p5, p50, p95) in quantiles.items():
+            unit = METRIC_COLUMNS.get(k, ("", ""))[1]
+            name = f"{k} ({unit})" if unit else k
+            lines.append(f"{name:<22}{p5:>12.4g}{p50:>12.4g}{p95:>12.4g}")
+    lines += [f"failed: {r['id']}: {r['error']}" for r in result.failures]
     return lines

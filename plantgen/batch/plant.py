@@ -35,7 +35,7 @@ from ..scanfiles import write_points
 from .schema import METRIC_COLUMNS, SINGLE_FILE_KINDS, empty_row
 from .spec import Outputs, PlantTask
 
-__all__ = ["make_plant", "plant_row", "relative_files", "view_direction", "view_camera"]
+__all__ = ["make_plant", "plant_row", "output_kinds", "relative_files", "view_direction", "view_camera"]
 
 _CASTER: list = []          # this process's Raycaster, made on first use
 
@@ -60,17 +60,21 @@ def view_camera(frusta, size: tuple[int, int], azimuth_deg: float, leaves=None) 
                        points=None if leaves is None else leaves.vertices)
 
 
+def output_kinds(outputs: Outputs) -> list[str]:
+    """The kinds of file each plant gets, in :data:`~plantgen.batch.spec.OUTPUT_KINDS` order
+    (one folder each)."""
+    flags = (("npz", outputs.npz), ("swc", outputs.swc), ("glb", outputs.glb is not None), ("png", outputs.png),
+             ("depth", outputs.depth), ("mask", outputs.mask is not None), ("points", outputs.points is not None))
+    return [kind for kind, on in flags if on]
+
+
 def relative_files(task: PlantTask, outputs: Outputs) -> dict[str, list[str]]:
     """Relative paths of every file a plant gets, by kind."""
     views = [f"{task.id}_a{int(round(a)) % 360:03d}" for a in outputs.azimuths]
-    kinds = (("npz", outputs.npz, [f"npz/{task.id}.npz"]),
-             ("swc", outputs.swc, [f"swc/{task.id}.swc"]),
-             ("glb", outputs.glb is not None, [f"glb/{task.id}.glb"]),
-             ("png", outputs.png, [f"png/{v}.png" for v in views]),
-             ("depth", outputs.depth, [f"depth/{v}.npy" for v in views]),
-             ("mask", outputs.mask is not None, [f"mask/{v}.png" for v in views]),
-             ("points", outputs.points is not None, [f"points/{task.id}.{outputs.points}"]))
-    return {kind: names for kind, on, names in kinds if on}
+    names = {"npz": [f"npz/{task.id}.npz"], "swc": [f"swc/{task.id}.swc"], "glb": [f"glb/{task.id}.glb"],
+             "png": [f"png/{v}.png" for v in views], "depth": [f"depth/{v}.npy" for v in views],
+             "mask": [f"mask/{v}.png" for v in views], "points": [f"points/{task.id}.{outputs.points}"]}
+    return {kind: names[kind] for kind in output_kinds(outputs)}
 
 
 def files_column(files: dict[str, list[str]]) -> dict:
@@ -185,19 +189,23 @@ def plant_row(task: PlantTask, files: dict, error: str = "") -> dict:
     ``files`` (kind -> relative paths), or ``failed`` with its one-line ``error``."""
     row = empty_row()
     row.update(id=task.id, grammar=task.name, index=task.index, seed=task.seed, defines=list(task.defines),
-               status="failed" if error else "ok", error=error, files=files_column(files))
+               status="failed" if error else "ok", error=error, files=files_column(files), fingerprint=task.fingerprint)
     return row
 
 
-def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None) -> dict:
-    """Grow ``task``'s plant, write its ``outputs`` under ``out_dir`` and return its
-    manifest row (a dict of the columns of :mod:`plantgen.batch.schema`)."""
+def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits | None = None,
+               allow_paths=()) -> dict:
+    """Grow ``task``'s plant, write its ``outputs`` under ``out_dir`` (absolute: a worker's
+    working directory is its own) and return its manifest row (a dict of the columns of
+    :mod:`plantgen.batch.schema`). ``allow_paths``: folders a scene used as a grammar may
+    read grammars from."""
     root = Path(out_dir)
     timings: dict = {}
     row = plant_row(task, relative_files(task, outputs))
     try:
         t0 = time.perf_counter()
-        grown = grow_file(task.grammar, seed=task.seed, limits=limits, defines=dict(task.defines))
+        grown = grow_file(task.grammar, seed=task.seed, limits=limits, defines=dict(task.defines),
+                          allow_paths=allow_paths)
         skeleton = grown.skeleton
         timings["grow"] = time.perf_counter() - t0
         if len(skeleton) == 0:

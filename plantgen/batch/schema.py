@@ -19,7 +19,7 @@ __all__ = ["COLUMNS", "FORMAT", "METRIC_COLUMNS", "STAGES", "arrow_schema", "col
 #: The manifest format: written into the Parquet schema's metadata (key ``plantgen``), so
 #: a manifest of another format (an older plantgen's JSON text columns, a foreign file) is
 #: told apart before any work.
-FORMAT = "plantgen-batch-manifest/2"
+FORMAT = "plantgen-batch-manifest/3"
 
 #: The stages a plant's ``timings`` may hold, in the order they run.
 STAGES = ("grow", "skeleton_files", "skin", "glb", "render", "scan", "metrics")
@@ -58,6 +58,8 @@ COLUMNS = (
     ("error", "string", "", "the one-line error of a failed plant (empty when ok)"),
     ("files", "struct<npz, swc, glb, points: string; png, depth, mask: list<string>>", "",
      "the plant's files by kind, relative to the batch folder (null: not asked for)"),
+    ("fingerprint", "string", "", "a digest of what shapes the files besides the seed: the outputs, views and "
+     "scan knobs, the grammar file's bytes, the defines, plantgen's version"),
     ("segments", "int64", "", "skeleton segments"),
     ("scan_points", "int64", "", "points of the plant's simulated scan (null without the points output)"),
     ("tips", "int64", "", "branch tips: segments with no child"),

@@ -201,12 +201,12 @@ def limits_from(values: dict) -> Limits:
     return default_limits.raised(**values)
 
 
-#: ``--allow-path DIR``: a folder a scene may read grammars from besides its own.
+#: ``--allow-path DIR``: a folder a scene or a batch spec may read grammars from besides its own.
 allow_path_opt = click.option(
     "--allow-path", "allow_paths", metavar="DIR", multiple=True,
     type=click.Path(exists=True, file_okay=False, path_type=Path),
-    help="A folder a scene may read grammars from besides its own folder and the shipped "
-         "grammars (repeatable). Without it, a grammar path that leaves the scene's folder "
+    help="A folder a scene (or a batch spec) may read grammars from besides its own folder and "
+         "the shipped grammars (repeatable). Without it, a grammar path that leaves its folder "
          "(../x.yaml, /abs/path, a link pointing out) is refused before it is opened.")
 
 _DEBUG = {"on": False}
