@@ -54,7 +54,7 @@ from .geometry.skeleton import Skeleton
 from .geometry.topology import Branches, branches
 from .geometry.vec import unit
 
-__all__ = ["BREAST_HEIGHT_M", "CrownProjection", "TreeMetrics", "crown_projection", "end_discs",
+__all__ = ["BREAST_HEIGHT_M", "CrownProjection", "TreeMetrics", "crown_projection", "end_discs", "may_reach_hull",
            "geometry_bounds", "segment_lengths", "segment_volumes", "trunk_diameter_at", "tree_metrics"]
 
 #: Breast height in metres, where DBH is measured.
@@ -206,6 +206,26 @@ def _hull(points: np.ndarray) -> np.ndarray:
     return np.array(half(rows)[:-1] + half(rows[::-1])[:-1])
 
 
+def may_reach_hull(xz: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(k,) bool: the discs (centres ``xz`` (k, 2), ``radii`` (k,)) whose projection may
+    reach the hull of them all. A disc's projection lies within its radius of its centre,
+    and in every direction the hull reaches at least as far as the centres' hull; so a disc
+    whose centre lies deeper inside the centres' hull than its radius is never extreme and
+    is left out (exactly: the crown is the same, in a fraction of the time)."""
+    hull = _hull(xz)
+    if len(hull) < 3:
+        return np.ones(len(xz), dtype=bool)
+    edge = np.roll(hull, -1, axis=0) - hull
+    outward = np.stack([edge[:, 1], -edge[:, 0]], axis=1) / np.linalg.norm(edge, axis=1)[:, None]
+    offset = np.einsum("ej,ej->e", hull, outward)                  # each edge's line: outward·p = offset
+    depth = np.empty(len(xz))                                         # inside the hull: >= 0
+    step = max(1, CHUNK // len(hull))
+    for lo in range(0, len(xz), step):
+        depth[lo:lo + step] = np.min(offset[None, :] - xz[lo:lo + step] @ outward.T, axis=1)
+    scale = float(np.abs(xz).max()) + float(radii.max())
+    return depth <= radii + 1e-9 * scale
+
+
 def crown_projection(skeleton: Skeleton, directions: int = CROWN_DIRECTIONS) -> CrownProjection:
     """The model's projected crown (see the module docstring)."""
     if len(skeleton) == 0:
@@ -215,6 +235,8 @@ def crown_projection(skeleton: Skeleton, directions: int = CROWN_DIRECTIONS) -> 
     centres, normals, radii = end_discs(skeleton)
     origin = centres.mean(axis=0)
     centres = centres - origin
+    keep = may_reach_hull(centres[:, [0, 2]], radii)
+    centres, normals, radii = centres[keep], normals[keep], radii[keep]
     theta = 2 * np.pi * np.arange(int(directions)) / int(directions)
     best, where = _farthest(centres, normals, radii, theta)
     points = [_support_points(centres[where], normals[where], radii[where], theta)[1]]

@@ -204,3 +204,20 @@ def test_the_crown_hull_holds_every_rim_point(segments):
     size = np.linalg.norm(axis, axis=1)
     a_y = np.where(size > 0, np.abs(axis[:, 1]) / np.where(size > 0, size, 1), 1.0)
     assert crown.area >= (np.pi * radius ** 2 * a_y).max() * (1 - 1e-4)
+
+
+@pytest.mark.parametrize("name", ["pine", "abop_bush", "oasis"])
+def test_the_crown_leaves_out_only_discs_that_cannot_reach_its_hull(name, monkeypatch):
+    """The crown's pruning (discs deeper inside the centres' hull than their radius) is
+    exact: the same polygon, area and widths as with every disc, and it does leave many out."""
+    import plantgen.metrics as metrics
+
+    skeleton = grow_file(name).skeleton
+    pruned = metrics.crown_projection(skeleton)
+    centres, _, radii = metrics.end_discs(skeleton)
+    kept = metrics.may_reach_hull(centres[:, [0, 2]] - centres.mean(axis=0)[[0, 2]], radii)
+    assert kept.sum() < 0.5 * len(kept)
+    monkeypatch.setattr(metrics, "may_reach_hull", lambda xz, r: np.ones(len(xz), dtype=bool))
+    full = metrics.crown_projection(skeleton)
+    assert np.array_equal(pruned.polygon, full.polygon)
+    assert (pruned.area, pruned.max_width, pruned.mean_width) == (full.area, full.max_width, full.mean_width)
