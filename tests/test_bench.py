@@ -339,19 +339,19 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     assert [r["model"] for r in rows] == ["saguaro", "well"]
     for r in rows:
         assert r["gl_renderer"] == renderer
-        for key in ("rc_fps", "rcr_fps", "gs_fps", "gsr_fps"):
+        for key in ("rc_fps", "rcr_fps", "gs_fps", "gsr_fps", "gsn_fps"):
             assert math.isfinite(float(r[key])) and float(r[key]) > 0
     with open(out / "curves.csv") as fh:
         curve = list(csv.DictReader(fh))
     methods = {r["method"] for r in curve}
-    assert methods == {"RC", "RC+R", "GS", "GS+R"}
+    assert methods == {"RC", "RC+R", "GS", "GS+R", "GS+N"}
     assert any(r["pareto"] == "True" for r in curve)
     assert (out / "images" / "saguaro_reference_relief.png").is_file()
     assert (out / "curves_saguaro.png").is_file()          # matplotlib is in the test extra
     assert (out / "images" / "saguaro_rc_color.png").is_file()
-    # the well lists shadows: all four methods ran the shadow pass and drew the ground
+    # the well lists shadows: every method ran the shadow pass and drew the ground
     well = next(m for m in results["models"] if m["model"] == "well")
-    for key in ("rc", "rcr", "gs", "gsr"):
+    for key in ("rc", "rcr", "gs", "gsr", "gsn"):
         assert well[key]["passes"] == ["shadow", "sky", "ground", "frusta"], (key, well[key])
         assert well[key]["shadow_reused"] > 0, (key, well[key])      # a still scene: its map is kept
     # the ray caster agrees with the float64 reference far better than GS at level 0
@@ -360,9 +360,28 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     assert sag["rc"]["error"] < 0.01 < gs0["error"]
     for m in results["models"]:
         _check_relief_choice(m, results["options"]["relief_error"])
-        for short in ("gs", "gsr"):
+        for short in ("gs", "gsr", "gsn"):
             _check_level_walk(m, short, results["options"])
+        _check_gsn(m, curve)
     _check_summary(results, (out / "table.md").read_text(), rows)
+
+
+def _check_gsn(m, curve_rows):
+    """GS+N: matched against RC+R's Table 1 configuration like GS+R, in the relief family's
+    curves (and on its Pareto front or not, as any point), and its bytes are its mesh's,
+    its tangents' and its normal maps' (more than GS's mesh at the same level)."""
+    assert m["gsn_match"]["target_key"] == m["rcr_choice"]["key"]
+    assert m["gsn_match"]["target_error"] == pytest.approx(m["rcr_choice"]["error"])
+    rows = [r for r in curve_rows if r["model"] == m["model"] and r["method"] == "GS+N" and r["error"]]
+    assert rows and all(r["pareto"] in ("True", "False") for r in rows)
+    assert all(int(r["texture_bytes"]) > 0 for r in rows)
+    memory, key = m["memory"], m["gsn"]["key"]
+    row = next(c for c in m["curve"] if c["key"] == key)
+    assert memory["gsn_bytes"] == row["gpu_bytes"] and memory["normal_map_bytes"] == row["texture_bytes"] > 0
+    gs = next((c for c in m["curve"] if c["key"] == key.replace("gs+n", "gs")), None)
+    if gs is not None:       # the same smooth mesh, with tangents and maps besides
+        assert row["triangles"] == gs["triangles"]
+        assert row["gpu_bytes"] - gs["gpu_bytes"] > row["texture_bytes"]
 
 
 def _check_relief_choice(m, relief_error):
@@ -385,7 +404,7 @@ def _check_level_walk(m, short, options):
     or, unmatched, up to the one before the first level over the triangle budget, which
     has a 'skipped' row, and Table 1 times the level of least error."""
     match = m[f"{short}_match"]
-    method = {"gs": "GS", "gsr": "GS+R"}[short]
+    method = {"gs": "GS", "gsr": "GS+R", "gsn": "GS+N"}[short]
     rows = [c for c in m["curve"] if c["method"] == method]
     built = {c["value"]: c["error"] for c in rows if "error" in c}
     assert sorted(built) == list(range(len(built))) == match["levels_measured"]
@@ -479,7 +498,7 @@ def test_fps_come_from_the_measured_frame_times(gl_ctx, monkeypatch):
     opts = BenchOptions.quick_run(models=("saguaro",), frames=3, max_triangles=2000,
                                   linear_steps=(8,), binary_steps=())
     fast = table1.bench_model("saguaro", opts)
-    for key in ("rc", "rcr", "gs", "gsr"):
+    for key in ("rc", "rcr", "gs", "gsr", "gsn"):
         entry = fast[key]
         assert len(entry["ms_samples"]) == opts.frames
         assert entry["fps"] == pytest.approx(1000.0 / np.median(entry["ms_samples"]))
@@ -603,3 +622,69 @@ def test_the_light_casters_can_be_timed_by_this_processs_cpu_time(gl_ctx):
     row = {"scene": "well", "caster": "plain", "shadow_ms": ms["plain"], "over_plain": 1.0, "over_bisect": 1.0,
            "coverage": 0.0, "half_texel": 0.0, "two_texels": 0.0, "median_texels": 0.0}
     assert "CPU ms of the render" in markdown([row], (64, 48), 1, 10, 10, cpu=True)
+
+
+# ------------------------------------------------------------------------ GS+N
+def test_gs_n_is_measured_against_the_relief_reference_on_the_smooth_mesh():
+    """GS+N is compared with the relief surface (as RC+R and GS+R), but draws GS's smooth
+    mesh: only GS+R's vertices carry the relief."""
+    from plantgen.table1.configs import level_config
+
+    gs, gsr, gsn = (level_config(m, 2) for m in ("GS", "GS+R", "GS+N"))
+    assert (gs.relief, gsr.relief, gsn.relief) == (False, True, True)
+    assert (gs.displaced, gsr.displaced, gsn.displaced) == (False, True, False)
+    assert [c.normal_mapped for c in (gs, gsr, gsn)] == [False, False, True]
+    assert gsn.key == "gs+n:m=2" and not gsn.ray_cast
+
+
+def test_normal_map_bytes_count_every_layer_and_its_mipmaps():
+    """RGB8 layers at the largest map's size, each halved down to 1x1: a (4, 8) map over
+    two slots is (32 + 8 + 2 + 1) texels x 3 bytes x 2 layers."""
+    from plantgen.gl.raster import normal_map_bytes
+
+    small = np.zeros((2, 4, 3), np.uint8)
+    big = np.zeros((4, 8, 3), np.uint8)
+    assert normal_map_bytes(("bark", "stone"), {"bark": big, 1: small}) == (32 + 8 + 2 + 1) * 3 * 2
+    assert normal_map_bytes(("bark",), {}) == 3            # no map: one flat 1x1 layer
+
+
+def test_gs_n_draws_gs_depth_with_other_shading(gl_ctx):
+    """At the same level GS+N's distance image is GS's to float precision (a normal map moves
+    no surface: the bench's error, which is of the geometry, is the smooth mesh's against the
+    relief reference) while its colours differ where the relief is (the map shades)."""
+    from plantgen.table1.configs import level_config
+    from plantgen.table1.models import load_model
+    from plantgen.table1.renderers import Renderers
+
+    model = load_model("saguaro", (160, 120))
+    renderers = Renderers(model, 100_000)
+    try:
+        gs, _ = renderers.render_config(level_config("GS", 2), model.camera)
+        gsn, _ = renderers.render_config(level_config("GS+N", 2), model.camera)
+        assert renderers.texture_bytes(2) > 0 and set(renderers.normal_maps(2)) <= set(model.names)
+    finally:
+        renderers.release()
+    hit = np.isfinite(gs.distance)
+    assert hit.sum() > 100 and np.array_equal(hit, np.isfinite(gsn.distance))
+    np.testing.assert_allclose(gsn.distance[hit], gs.distance[hit], rtol=1e-5)
+    differs = np.any(gs.color[hit][:, :3] != gsn.color[hit][:, :3], axis=-1)
+    assert differs.mean() > 0.2, differs.mean()
+
+
+def test_gs_n_draws_under_a_shadow_map_and_on_the_ground(gl_ctx):
+    """The well lists shadows and a ground: GS+N's normal maps and the shadow map are
+    bound side by side (on distinct texture units: the fixture fails on any GL error), and
+    the frame runs the scene's passes as GS's does."""
+    from plantgen.table1.configs import level_config
+    from plantgen.table1.models import load_model
+    from plantgen.table1.renderers import Renderers
+
+    model = load_model("well", (96, 72))
+    renderers = Renderers(model, 100_000)
+    try:
+        gs, _ = renderers.render_config(level_config("GS", 1), model.camera, conditions=True)
+        gsn, _ = renderers.render_config(level_config("GS+N", 1), model.camera, conditions=True)
+    finally:
+        renderers.release()
+    assert gsn.stats.passes == gs.stats.passes == ["shadow", "sky", "ground", "frusta"]
+    np.testing.assert_array_equal(np.isfinite(gsn.distance), np.isfinite(gs.distance))

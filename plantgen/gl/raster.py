@@ -43,6 +43,7 @@ from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "normal_map_texture",
+           "normal_map_bytes",
            "row_data"]
 
 
@@ -248,8 +249,9 @@ class RasterRenderer(OffscreenRenderer):
         return draw
 
     def _normal_mapped(self, program, names, normal_maps, draw):
-        """``draw`` with the normal maps' texture array bound (unit 1), where ``program``
-        reads one (NORMAL_MAP): built once per list of names and maps."""
+        """``draw`` with the normal maps' texture array bound (unit :data:`NORMAL_MAP_UNIT`:
+        0 holds the height maps, 1 the shadow map), where ``program`` reads one
+        (NORMAL_MAP): built once per list of names and maps."""
         if "normal_maps" not in program:
             return draw
         key = (tuple(names), tuple(id(normal_maps.get(k, normal_maps.get(n))) for k, n in enumerate(names)))
@@ -258,10 +260,10 @@ class RasterRenderer(OffscreenRenderer):
                 self._normal_tex[1].release()
             self._normal_tex = (key, normal_map_texture(self.ctx, names, normal_maps))
         tex = self._normal_tex[1]
-        program["normal_maps"] = 1
+        program["normal_maps"] = NORMAL_MAP_UNIT
 
         def mapped():
-            tex.use(1)
+            tex.use(NORMAL_MAP_UNIT)
             draw()
         return mapped
 
@@ -408,14 +410,36 @@ def _tangent_buffer(ctx, mesh: TessellatedMesh, program):
     return ctx.buffer(mesh_tangents(mesh.vertices, mesh.normals, mesh.uv, mesh.faces).tobytes())
 
 
+#: The texture unit of GS+N's normal maps (the height maps are on 0, the shadow map on 1).
+NORMAL_MAP_UNIT = 2
+
+
+def _normal_layers(names, normal_maps) -> tuple[list, tuple]:
+    """The map of each slot of ``names`` (None: none) and the texture array's layer size."""
+    maps = [normal_maps.get(k, normal_maps.get(n)) for k, n in enumerate(names)]
+    shape = max((m.shape[:2] for m in maps if m is not None), default=(1, 1), key=lambda s: s[0] * s[1])
+    return maps, shape
+
+
+def normal_map_bytes(names, normal_maps) -> int:
+    """GPU bytes of :func:`normal_map_texture`'s array for these slots and maps: RGB8
+    layers at the largest map's size, with their mipmap chain."""
+    _, (h, w) = _normal_layers(names, normal_maps)
+    total = 0
+    while True:
+        total += h * w * 3 * len(names)
+        if h == 1 and w == 1:
+            return total
+        h, w = max(h // 2, 1), max(w // 2, 1)
+
+
 def normal_map_texture(ctx, names, normal_maps):
     """RGB8 texture array of the normal maps ((H, W, 3) uint8, glTF convention, by slot
     index or by material name) of the material slots ``names`` (a slot without one: the
     flat (128, 128, 255)), every
     layer at the largest map's size (smaller ones repeated texel by texel), repeating in
     u and v, trilinear: as an engine samples the exported map."""
-    maps = [normal_maps.get(k, normal_maps.get(n)) for k, n in enumerate(names)]
-    shape = max((m.shape[:2] for m in maps if m is not None), default=(1, 1), key=lambda s: s[0] * s[1])
+    maps, shape = _normal_layers(names, normal_maps)
     layers = np.empty((len(names), *shape, 3), np.uint8)
     for k, m in enumerate(maps):
         if m is None:

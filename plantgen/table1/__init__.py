@@ -23,16 +23,22 @@ For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
    window for its error, and at the full size for its time;
 5. picks **RC+R's Table 1 configuration** from those curves: the fastest one with error at
    most ``relief_error`` (0.01), else the most accurate (:mod:`plantgen.table1.matching`);
-   then walks **GS and GS+R up from m = 0** (measured the same way) until a level meets
-   the quality criterion (:mod:`plantgen.table1.quality`) against RC and against that RC+R
-   configuration, or the next level is over the triangle budget (``max_triangles``);
-6. times RC, RC+R, GS at its level and GS+R at its level **in one interleaved run**
+   then walks **GS, GS+R and GS+N up from m = 0** (measured the same way) until a level
+   meets the quality criterion (:mod:`plantgen.table1.quality`) against RC (GS) and against
+   that RC+R configuration (GS+R, GS+N), or the next level is over the triangle budget
+   (``max_triangles``). GS+N is GS's smooth mesh drawn with the relief baked into normal
+   maps (:func:`plantgen.exporters.textures.bake_textures`, as ``plantgen export`` writes
+   them), measured against the relief reference: the metric sees geometry only, so its
+   error is the smooth mesh's against the relief surface (the map shades, it moves no
+   pixel's depth or silhouette);
+6. times RC, RC+R, and GS, GS+R, GS+N at their levels **in one interleaved run**
    (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
-   all four methods: the shadow map and the ground where the scene asks for them, the
+   all methods: the shadow map and the ground where the scene asks for them, the
    animated scene posed and skinned on the GPU in every frame (RC: a compute pass writes
    the records; GS: a mesh built once at rest, posed by the vertex shader; the dispatch
    counted in the frame), leaves not relief mapped (their material has no shell);
-7. counts the GPU bytes of each method (memory table).
+7. counts the GPU bytes of each method (memory table; GS+N's with its tangents and its
+   normal maps' texture array, mipmaps included).
 
 The error metric and the quality criterion are documented in :mod:`plantgen.table1.quality`;
 :mod:`plantgen.table1.summary` sums Table 1 up over the models (ratios' geometric means, beside

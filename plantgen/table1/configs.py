@@ -1,11 +1,11 @@
-"""The configurations the bench measures: the four methods of Table 1 and their knobs.
+"""The configurations the bench measures: the four methods of Table 1, GS+N, and their knobs.
 
 The ray caster's knobs are swept one at a time (:data:`RELIEF_SWEEPS`): each
 :class:`Sweep` sets one :class:`~plantgen.gl.raycast.RaycastSettings` field over its
 values, every other field at the ray caster's default. Adding a swept RC+R knob is one
 line there, e.g. ``Sweep("march", "march", ("adaptive",))``, or, for a knob that only means
 something under another setting, ``Sweep("texel", "samples_per_texel", (0.5, 1, 2),
-base=(("march", "adaptive"),))``. The GS and GS+R levels are not a fixed list: the bench
+base=(("march", "adaptive"),))``. The GS, GS+R and GS+N levels are not a fixed list: the bench
 goes up from m = 0 (:func:`level_config`) until a level matches (:mod:`plantgen.table1.matching`).
 """
 
@@ -20,24 +20,27 @@ from .params import BenchOptions
 __all__ = ["Config", "Sweep", "RELIEF_SWEEPS", "ray_cast_configs", "relief_configs", "level_config",
            "TABLE_METHODS", "MATCHED_AGAINST", "LEVEL_METHODS"]
 
-#: The four methods of Table 1 by their short names in the results ("rc", "rcr", ...).
-TABLE_METHODS = {"rc": "RC", "rcr": "RC+R", "gs": "GS", "gsr": "GS+R"}
+#: The methods of the bench by their short names in the results ("rc", "rcr", ...): the
+#: four of Table 1, then GS+N (the smooth mesh at level m with the relief baked into a
+#: normal map, :func:`plantgen.exporters.textures.bake_textures`, as a glTF reader draws it).
+TABLE_METHODS = {"rc": "RC", "rcr": "RC+R", "gs": "GS", "gsr": "GS+R", "gsn": "GS+N"}
 #: The quality criterion: each polygonal method's level is matched against the error of
-#: the ray caster without relief (GS) or with it (GS+R, at its Table 1 configuration).
-MATCHED_AGAINST = {"gs": "rc", "gsr": "rcr"}
+#: the ray caster without relief (GS) or with it (GS+R and GS+N, at RC+R's Table 1
+#: configuration).
+MATCHED_AGAINST = {"gs": "rc", "gsr": "rcr", "gsn": "rcr"}
 #: The methods measured level by level (m = 0, 1, ...).
-LEVEL_METHODS = ("GS", "GS+R")
+LEVEL_METHODS = ("GS", "GS+R", "GS+N")
 
 
 @dataclass
 class Config:
     """One measured configuration: a method and the value of one of its knobs.
 
-    method : RC, RC+R, GS or GS+R
+    method : RC, RC+R, GS, GS+R or GS+N
     knob : what varies ("", "m", or a :class:`Sweep`'s knob: "linear", "binary", "v", ...)
     value : the knob's value ("" for no knob)
     settings : the ray caster's settings (RC, RC+R)
-    level : the subdivision level m (GS, GS+R)
+    level : the subdivision level m (GS, GS+R, GS+N)
     """
 
     method: str
@@ -59,8 +62,18 @@ class Config:
 
     @property
     def relief(self) -> bool:
-        """RC+R or GS+R: measured against the relief reference."""
-        return self.method.endswith("+R")
+        """RC+R, GS+R or GS+N: measured against the relief reference."""
+        return self.method.endswith("+R") or self.normal_mapped
+
+    @property
+    def displaced(self) -> bool:
+        """GS+R: a mesh with the relief in its vertices (GS+N's mesh is GS's, smooth)."""
+        return self.method == "GS+R"
+
+    @property
+    def normal_mapped(self) -> bool:
+        """GS+N: the smooth mesh drawn with the baked normal maps."""
+        return self.method == "GS+N"
 
     def identity(self) -> dict:
         """The fields that name this configuration in a results row (with the ray
@@ -145,7 +158,7 @@ def ray_cast_configs(opts: BenchOptions, relief: bool) -> list[Config]:
 
 
 def level_config(method: str, level: int) -> Config:
-    """GS or GS+R at subdivision level ``level``."""
+    """GS, GS+R or GS+N at subdivision level ``level``."""
     if method not in LEVEL_METHODS:
         raise ValueError(f"{method} has no subdivision level")
     return Config(method, "m", level, level=level)

@@ -10,7 +10,7 @@ __all__ = ["FAMILIES", "family_points", "family_front"]
 
 #: The two families of the accuracy curves: each is measured against its own reference
 #: (analytic cones, or the relief surface), so each has its own Pareto front.
-FAMILIES = {"plain": ("RC", "GS"), "relief": ("RC+R", "GS+R")}
+FAMILIES = {"plain": ("RC", "GS"), "relief": ("RC+R", "GS+R", "GS+N")}
 
 
 def family_points(model: dict, family: str) -> list[dict]:

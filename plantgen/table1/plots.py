@@ -14,8 +14,9 @@ ERROR_FLOOR = 1e-6
 #: (:data:`plantgen.table1.configs.RELIEF_SWEEPS`); a knob not listed takes the next of
 #: :data:`_EXTRA_STYLES` in order of appearance.
 _STYLES = {"GS": ("tab:blue", "o"), "GS+R": ("tab:orange", "s"), "RC": ("tab:green", "D"),
-           "RC+R": ("tab:red", "^"), "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*")}
-_EXTRA_STYLES = (("tab:pink", "P"), ("tab:olive", "X"), ("tab:cyan", "h"), ("tab:gray", "p"))
+           "RC+R": ("tab:red", "^"), "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*"),
+           "GS+N": ("tab:cyan", "p")}
+_EXTRA_STYLES = (("tab:pink", "P"), ("tab:olive", "X"), ("tab:gray", "h"), ("black", "8"))
 
 
 def _shown(error: float) -> float:

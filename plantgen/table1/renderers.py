@@ -16,9 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..exporters.textures import bake_textures
 from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
 from ..gl.pose import PoseStream
-from ..gl.raster import RasterRenderer
+from ..gl.raster import RasterRenderer, normal_map_bytes
 from ..gl.raycast import Raycaster
 from ..gl.result import RenderResult
 from ..settings import ShadowSettings
@@ -73,7 +74,7 @@ class _Conditions:
 
 class Renderers:
     """The GL side of one model: one ray caster, one raster renderer per configuration key
-    (so the interleaved run does not re-upload), meshes cached per (level, relief)."""
+    (so the interleaved run does not re-upload), meshes cached per (level, displaced)."""
 
     def __init__(self, model: BenchModel, max_triangles: int, shadow_box=None):
         self.model = model
@@ -83,6 +84,7 @@ class Renderers:
         self.rasters: dict = {}
         self.meshes: dict = {}
         self.skinned: dict = {}          # an animation's vertex-skinned meshes, per (level, relief)
+        self.baked: dict = {}            # GS+N: {level: {material name: (H, W, 3) uint8 normal map}}
         self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
 
     def mesh(self, level: int, relief: bool, frusta=None) -> TessellatedMesh | None:
@@ -98,6 +100,24 @@ class Renderers:
         if static:
             self.meshes[key] = mesh
         return mesh
+
+    def normal_maps(self, level: int) -> dict | None:
+        """GS+N's normal maps of the still mesh at ``level`` (cached): {material name: (H, W, 3)
+        uint8}, each baked as ``plantgen export`` bakes it (at the median aspect of the
+        material's faces); None over the triangle budget."""
+        if level not in self.baked:
+            mesh = self.mesh(level, False)
+            if mesh is None:
+                return None
+            baked = bake_textures([mesh])
+            self.baked[level] = {n: baked.get(n).normal for n in mesh.material_names if baked.get(n) is not None}
+        return self.baked[level]
+
+    def texture_bytes(self, level: int) -> int:
+        """GPU bytes of GS+N's normal-map texture array at ``level`` (mipmaps included),
+        0 over the budget."""
+        maps = self.normal_maps(level)
+        return 0 if maps is None else normal_map_bytes(self.model.names, maps)
 
     def skinned_mesh(self, level: int, relief: bool):
         """The animation's mesh at rest, bound for vertex skinning (cached), or None over the
@@ -150,27 +170,28 @@ class Renderers:
             t0 = time.perf_counter()
             frusta = m.animation.frusta_at(t)              # pose + re-skin, as RC does
             leaves = m.animation.leaves_at(t) if leaves is not None else None
-            mesh = self.mesh(cfg.level, cfg.relief, frusta)  # re-tessellate
+            mesh = self.mesh(cfg.level, cfg.displaced, frusta)  # re-tessellate
             extra_ms = (time.perf_counter() - t0) * 1e3
         else:
             frusta = m.frusta
-            mesh = self.mesh(cfg.level, cfg.relief)
+            mesh = self.mesh(cfg.level, cfg.displaced)
         if mesh is None:
             return None, float("nan")
         res = self.raster(cfg.key).render(mesh, frusta, camera, material_names=m.names,
                                           light_dir=m.light_dir, ground=frame.ground,
                                           shadows=frame.shadows,
                                           shadow_box=self.shadow_box if frame.animated else None,
-                                          leaves=leaves)
+                                          leaves=leaves, normal_maps=self._maps_of(cfg))
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 
     def _rasterise_skinned(self, cfg: Config, camera, frame: _Conditions, t: float):
-        """An animated frame of GS / GS+R: the mesh built once at rest, posed by the vertex
-        shader from the pose buffer the compute program fills at ``t`` (its CPU time and
-        the leaves' counted in the frame)."""
+        """An animated frame of GS / GS+R / GS+N: the mesh built once at rest, posed by the
+        vertex shader from the pose buffer the compute program fills at ``t`` (its CPU time
+        and the leaves' counted in the frame; the rasteriser draws a skinned mesh without
+        normal maps, so GS+N is GS there)."""
         m = self.model
-        mesh = self.skinned_mesh(cfg.level, cfg.relief)
+        mesh = self.skinned_mesh(cfg.level, cfg.displaced)
         if mesh is None:
             return None, float("nan")
         poses, update = m.animation.pose_segments(self.records, t, camera.eye)
@@ -191,11 +212,15 @@ class Renderers:
         if cfg.ray_cast:
             return self.raycaster.render(m.frusta, camera, cfg.settings, m.names, m.light_dir,
                                          count_work=True).stats.work
-        mesh = self.mesh(cfg.level, cfg.relief)
+        mesh = self.mesh(cfg.level, cfg.displaced)
         if mesh is None:
             return None
-        return self.raster(cfg.key).render(mesh, m.frusta, camera, material_names=m.names,
-                                           light_dir=m.light_dir, count_work=True).stats.work
+        return self.raster(cfg.key).render(mesh, m.frusta, camera, material_names=m.names, light_dir=m.light_dir,
+                                           count_work=True, normal_maps=self._maps_of(cfg)).stats.work
+
+    def _maps_of(self, cfg: Config) -> dict | None:
+        """The normal maps ``cfg`` draws with (GS+N), else None."""
+        return self.normal_maps(cfg.level) if cfg.normal_mapped else None
 
     def release_raster(self, key: str) -> None:
         """Free the GPU buffers of ``key``'s raster renderer (the mesh stays cached)."""
@@ -204,8 +229,10 @@ class Renderers:
             raster.release()
 
     def keep_meshes(self, keys) -> None:
-        """Drop the cached meshes other than ``keys`` ((level, relief) pairs)."""
+        """Drop the cached meshes other than ``keys`` ((level, displaced) pairs), and the
+        normal maps of levels not among them."""
         self.meshes = {k: v for k, v in self.meshes.items() if k in keys}
+        self.baked = {k: v for k, v in self.baked.items() if (k, False) in keys}
         self.skinned = {k: v for k, v in self.skinned.items() if k in keys}
 
     def release(self) -> None:

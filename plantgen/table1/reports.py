@@ -15,7 +15,7 @@ from .configs import MATCHED_AGAINST, RELIEF_SWEEPS, TABLE_METHODS
 from .curves import FAMILIES, family_front, family_points
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, PaperRow
 from .plots import plot_curves
-from .summary import rcr_over_gsr, summarise, summary_lines
+from .summary import rcr_over_gsn, rcr_over_gsr, summarise, summary_lines
 
 __all__ = ["markdown_table", "match_notes", "table_rows", "curve_rows", "pareto_summary",
            "winners", "write_outputs", "rcr_over_gsr", "Column", "TABLE1_COLUMNS", "WORK_COLUMNS",
@@ -23,7 +23,7 @@ __all__ = ["markdown_table", "match_notes", "table_rows", "curve_rows", "pareto_
            "QUALITY_LEVELS", "UNMATCHED"]
 
 CURVE_FIELDS = ["model", "method", "knob", "value", "ms", "fps", "error", "dssim", "silhouette",
-                "overdraw", "samples_per_pixel", "triangles", "gpu_bytes", "pareto", "skipped"]
+                "overdraw", "samples_per_pixel", "triangles", "gpu_bytes", "texture_bytes", "pareto", "skipped"]
 #: Error levels at which :func:`winners` names the fastest configuration.
 QUALITY_LEVELS = (0.3, 0.1, 0.03, 0.01, 0.003)
 #: What a table cell shows for a value not measured.
@@ -94,9 +94,14 @@ def _key(key: str) -> Value:
     return lambda m, results: m[key]
 
 
+def _key_or_none(key: str) -> Value:
+    """A model's field that results from before it was added lack (None there)."""
+    return lambda m, results: m.get(key)
+
+
 def _entry(method: str, field: str) -> Value:
     """A field of a Table 1 method's entry (None when the method did not run)."""
-    return lambda m, results: m[method][field] if m[method] else None
+    return lambda m, results: m[method][field] if m.get(method) else None
 
 
 def _choice(field: str) -> Value:
@@ -119,7 +124,7 @@ def _paper(field: str, level: str | None = None) -> Value:
 
 
 def _memory(field: str) -> Value:
-    return lambda m, results: m["memory"][field]
+    return lambda m, results: m["memory"].get(field)
 
 
 def _ratio_matched(m: dict, results: dict):
@@ -161,7 +166,7 @@ def _paper_suffixes(p: PaperRow | None) -> dict:
     if p is None:
         return dict.fromkeys(("segments", *TABLE_METHODS), "")
     return {"segments": f" ({p.segments})", "rc": f" ({p.rc_fps})", "rcr": f" ({p.rcr_fps})",
-            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})"}
+            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})", "gsn": ""}
 
 
 def _segments_cell(model: dict) -> str:
@@ -173,7 +178,7 @@ def _fps_cell(short: str) -> Callable[[dict], str]:
     """A Table 1 method's fps, its level (polygonal methods, :func:`_level_cell`), the
     paper's in parentheses."""
     def cell(model: dict) -> str:
-        entry = model[short]
+        entry = model.get(short)
         text = _cell(None if entry is None else entry["fps"], ".1f")
         if short in MATCHED_AGAINST:
             text += f" / {_level_cell(model, short)}"
@@ -184,7 +189,7 @@ def _fps_cell(short: str) -> Callable[[dict], str]:
 def _work_cell(short: str, samples: bool = False) -> Callable[[dict], str]:
     """'ms · overdraw (· relief samples per pixel)' of a Table 1 entry."""
     def cell(model: dict) -> str:
-        entry = model[short]
+        entry = model.get(short)
         if not entry or entry.get("overdraw") is None:
             return MISSING
         text = f"{entry['ms']:.1f} · {entry['overdraw']:.2f}"
@@ -194,7 +199,7 @@ def _work_cell(short: str, samples: bool = False) -> Callable[[dict], str]:
 
 def _bytes_cell(short: str) -> Callable[[dict], str]:
     """A polygonal method's bytes on the GPU and its level."""
-    return lambda m: f"{_cell(m['memory'][f'{short}_bytes'], ',')} ({_level_cell(m, short)})"
+    return lambda m: f"{_cell(m['memory'].get(f'{short}_bytes'), ',')} ({_level_cell(m, short)})"
 
 
 # ---------------------------------------------------------------------------- tables
@@ -223,8 +228,15 @@ TABLE1_COLUMNS = (
     Column("gsr_matched", None, _key("gsr_matched")),
     Column("gsr_match", None, _match_text("gsr")),
     Column("gsr_error", "GS+R err", _entry("gsr", "error"), ".3f"),
+    Column("gsn_fps", "GS+N fps / m", _entry("gsn", "fps"), cell=_fps_cell("gsn")),
+    Column("gsn_ms", None, _entry("gsn", "ms")),
+    Column("gsn_level", None, _key_or_none("gsn_level")),
+    Column("gsn_matched", None, _key_or_none("gsn_matched")),
+    Column("gsn_match", None, _match_text("gsn")),
+    Column("gsn_error", "GS+N err", _entry("gsn", "error"), ".3f"),
     Column("rcr_over_gsr", "RC+R/GS+R ours", lambda m, results: rcr_over_gsr(m), cell=_ratio_cell),
     Column("rcr_over_gsr_matched", None, _ratio_matched),
+    Column("rcr_over_gsn", None, lambda m, results: rcr_over_gsn(m)),
     Column("paper_segments", None, _paper("segments")),
     Column("paper_rc_fps", None, _paper("rc_fps")),
     Column("paper_rcr_fps", None, _paper("rcr_fps")),
@@ -237,6 +249,8 @@ TABLE1_COLUMNS = (
     Column("rcr_bytes", None, _memory("rcr_bytes")),
     Column("gs_bytes", None, _memory("gs_bytes")),
     Column("gsr_bytes", None, _memory("gsr_bytes")),
+    Column("gsn_bytes", None, _memory("gsn_bytes")),
+    Column("normal_map_bytes", None, _memory("normal_map_bytes")),
     Column("shadows", None, _key("shadows")),
     Column("animated", None, _key("animated")),
     Column("gl_renderer", None, lambda m, results: results["machine"]["gl_renderer"]),
@@ -250,6 +264,7 @@ WORK_COLUMNS = (
     Column(None, "RC+R ms · overdraw · samples/px", cell=_work_cell("rcr", samples=True)),
     Column(None, "GS ms · overdraw", cell=_work_cell("gs")),
     Column(None, "GS+R ms · overdraw", cell=_work_cell("gsr")),
+    Column(None, "GS+N ms · overdraw", cell=_work_cell("gsn")),
 )
 #: ``table.md``'s memory on the GPU.
 MEMORY_COLUMNS = (
@@ -260,6 +275,9 @@ MEMORY_COLUMNS = (
     Column(None, "GS/RC", _memory("gs_over_rc"), ".1f", "x"),
     Column(None, "GS+R B (m)", cell=_bytes_cell("gsr")),
     Column(None, "GS+R / RC+R", _memory("gsr_over_rcr"), ".1f", "x"),
+    Column(None, "GS+N B (m)", cell=_bytes_cell("gsn")),
+    Column(None, "normal maps B", _memory("normal_map_bytes"), ","),
+    Column(None, "GS+N / RC+R", _memory("gsn_over_rcr"), ".1f", "x"),
     Column(None, "paper", cell=lambda m: f"{PAPER_MEMORY_RATIO:.0f}x"),
 )
 
@@ -280,7 +298,7 @@ def _header_lines(results: dict) -> list[str]:
             f"RC+R config: the fastest RC+R configuration of the curves with err ≤ {relief_error:g} "
             "('(best)': none reached it, the most accurate is timed). Level m: GS and GS+R go up "
             f"from m = 0 until err <= target err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, "
-            "GS+R vs RC+R at its config) or the next level is over the triangle budget "
+            "GS+R and GS+N vs RC+R at its config) or the next level is over the triangle budget "
             f"({o['max_triangles']:,}, --max-triangles); 'm{UNMATCHED}': not matched, the best "
             f"measured level is shown and timed, and the ratio beside it is not at matched quality "
             "(see the notes). RC+R/GS+R: fps ratio of the Table 1 run, where all four methods run "
@@ -290,7 +308,9 @@ def _header_lines(results: dict) -> list[str]:
             "records by a compute pass for RC, a mesh built once and posed by the vertex shader for GS; "
             "a leafy model's leaves, "
             "rasterised the same way by all four; the errors are of the frusta alone, as the float64 "
-            "reference casts no leaves). Paper: 8800 GTX, 2009.", ""]
+            "reference casts no leaves). GS+N (not in the paper): GS's smooth mesh at level m with the relief "
+            "baked into normal maps (as plantgen export writes them), measured against the relief reference; "
+            "its bytes count the tangents and the normal maps (mipmaps included). Paper: 8800 GTX, 2009.", ""]
 
 
 def _settings_text(settings: dict | None) -> str:
@@ -324,7 +344,7 @@ def markdown_table(results: dict) -> str:
     lines += ["", *summary_lines(summary)]
     choices = _choice_lines(results)
     if choices:
-        lines += ["", "RC+R's Table 1 configuration (GS+R is matched against its error):", "", *choices]
+        lines += ["", "RC+R's Table 1 configuration (GS+R and GS+N are matched against its error):", "", *choices]
     lines += ["", "## Why: work per pixel (Table 1 configurations)", "",
               "ms of the Table 1 run · shaded fragments per covered pixel (overdraw) · for RC+R, mean "
               "relief height samples per covered pixel; counted in one render of the bare model at the "

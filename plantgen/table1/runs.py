@@ -23,7 +23,15 @@ from ..gl.context import gl_context, renderer_name
 from ..gl.raster import gs_buffer_bytes
 from ..gl.records import rc_buffer_bytes
 from ..settings import ShadowSettings
-from .configs import MATCHED_AGAINST, TABLE_METHODS, Config, level_config, ray_cast_configs, relief_configs
+from .configs import (
+    LEVEL_METHODS,
+    MATCHED_AGAINST,
+    TABLE_METHODS,
+    Config,
+    level_config,
+    ray_cast_configs,
+    relief_configs,
+)
 from .eval_window import eval_camera
 from .figures import save_images
 from .matching import LevelMatch, choose_relief_config, walk_levels
@@ -89,9 +97,12 @@ class _Meter:
         work = renderers.count_work(cfg, model.camera)
         row.update({k: work.as_dict()[k] for k in WORK_FIELDS})
         if cfg.level is not None:
-            mesh = renderers.mesh(cfg.level, cfg.relief)
+            mesh = renderers.mesh(cfg.level, cfg.displaced)
             row["triangles"] = len(mesh.faces)
             row["gpu_bytes"] = int(gs_buffer_bytes(mesh))
+            if cfg.normal_mapped:     # GS+N: its tangents and its normal maps besides
+                row["texture_bytes"] = renderers.texture_bytes(cfg.level)
+                row["gpu_bytes"] += TANGENT_BYTES * len(mesh.vertices) + row["texture_bytes"]
         self.curve.append(row)
         self.results[cfg.key] = res
         renderers.release_raster(cfg.key)
@@ -127,6 +138,9 @@ def _measured(curve) -> dict:
     return {r["key"]: r for r in curve if "error" in r}
 
 
+#: GPU bytes of one vertex's tangent (GS+N: vec4 float32).
+TANGENT_BYTES = 16
+
 #: What each measured row records of a counting render at the timed size: shaded
 #: fragments per covered pixel, relief height samples per covered pixel.
 WORK_FIELDS = ("overdraw", "samples_per_pixel")
@@ -137,8 +151,8 @@ WORK_FIELDS = ("overdraw", "samples_per_pixel")
 class _TableChoice:
     """The configuration of each Table 1 method, the RC+R choice and the level walks."""
 
-    configs: dict          # {"rc" | "rcr" | "gs" | "gsr": Config or None}
-    matches: dict          # {"gs" | "gsr": LevelMatch or None}
+    configs: dict          # {"rc" | "rcr" | "gs" | "gsr" | "gsn": Config or None}
+    matches: dict          # {"gs" | "gsr" | "gsn": LevelMatch or None}
     relief_choice: dict | None   # :func:`choose_relief_config`'s record (None without relief)
 
     @property
@@ -146,13 +160,14 @@ class _TableChoice:
         return [c for c in self.configs.values() if c is not None]
 
     def mesh_keys(self) -> set:
-        """The (level, relief) meshes the Table 1 timing draws."""
-        return {(c.level, c.relief) for c in self.timed if c.level is not None}
+        """The (level, displaced) meshes the Table 1 timing draws."""
+        return {(c.level, c.displaced) for c in self.timed if c.level is not None}
 
 
 def _choose_table(meter: _Meter, ray_configs, opts: BenchOptions, relief: bool) -> _TableChoice:
     """RC+R's configuration from the curves (:func:`choose_relief_config`), then the quality
-    criterion (:data:`MATCHED_AGAINST`): GS walked up against RC, GS+R against that RC+R."""
+    criterion (:data:`MATCHED_AGAINST`): GS walked up against RC, GS+R and GS+N against
+    that RC+R."""
     by_key = {c.key: c for c in ray_configs}
     chosen, choice = {"rc": ray_configs[0], "rcr": None}, None
     if relief:
@@ -169,8 +184,8 @@ def _choose_table(meter: _Meter, ray_configs, opts: BenchOptions, relief: bool) 
 
 
 def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -> dict:
-    """The four methods timed in one interleaved run under the paper's conditions.
-    Returns {"rc" | "rcr" | "gs" | "gsr": results entry or None}."""
+    """The methods timed in one interleaved run under the paper's conditions.
+    Returns {"rc" | "rcr" | "gs" | "gsr" | "gsn": results entry or None}."""
     passes: dict = {}
     reused: dict = {}
     samples = time_configs(renderers, table.timed, renderers.model.camera, frames,
@@ -189,7 +204,8 @@ def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -
 
 
 def _memory(model: BenchModel, table: _TableChoice, curve) -> dict:
-    """Bytes on the GPU of each method (height maps counted for the relief methods)."""
+    """Bytes on the GPU of each method (height maps counted for the relief methods; GS+N's
+    mesh with its tangents and its normal-map texture array)."""
     measured = _measured(curve)
 
     def gpu_bytes(cfg):
@@ -198,21 +214,28 @@ def _memory(model: BenchModel, table: _TableChoice, curve) -> dict:
     rc_bytes = rc_buffer_bytes(len(model.frusta))
     map_bytes = int(material_height_maps(model.names)[0].nbytes) if model.relief else 0
     gs_bytes, gsr_bytes = gpu_bytes(table.configs["gs"]), gpu_bytes(table.configs["gsr"])
+    gsn_bytes = gpu_bytes(table.configs["gsn"])
+    gsn = table.configs["gsn"]
+    texture_bytes = None if gsn is None else measured.get(gsn.key, {}).get("texture_bytes")
     return {"rc_bytes": rc_bytes, "relief_map_bytes": map_bytes, "rcr_bytes": rc_bytes + map_bytes,
-            "gs_bytes": gs_bytes, "gsr_bytes": gsr_bytes,
+            "gs_bytes": gs_bytes, "gsr_bytes": gsr_bytes, "gsn_bytes": gsn_bytes,
+            "normal_map_bytes": texture_bytes,
             "gs_over_rc": gs_bytes / rc_bytes if gs_bytes else None,
-            "gsr_over_rcr": gsr_bytes / (rc_bytes + map_bytes) if gsr_bytes else None}
+            "gsr_over_rcr": gsr_bytes / (rc_bytes + map_bytes) if gsr_bytes else None,
+            "gsn_over_rcr": gsn_bytes / (rc_bytes + map_bytes) if gsn_bytes else None}
 
 
 def _notes(model: BenchModel) -> list[str]:
     notes = []
     if model.shadows:
         notes.append(f"shadow map ({ShadowSettings().resolution}², PCF) and ground for RC, RC+R, "
-                     "GS and GS+R alike")
+                     "GS, GS+R and GS+N alike")
     if model.animation is not None:
         notes.append("animated: posed and skinned on the GPU in every frame (RC: a compute pass writes the "
                      "records; GS: the mesh built once at rest, posed by the vertex shader), the dispatch "
                      "counted in the frame")
+        if model.relief and model.animation.plan is not None:
+            notes.append("GS+N timed as GS: the rasteriser draws a vertex-skinned mesh without its normal maps")
     return notes
 
 
@@ -261,10 +284,10 @@ def bench_model(name: str, opts: BenchOptions, progress=None, images_dir: Path |
         meter = _Meter(renderers, window, references, opts, step)
         for cfg in configs:
             meter.measure(cfg)
-        # 3. RC+R's Table 1 configuration, then GS and GS+R walked up to the criterion
+        # 3. RC+R's Table 1 configuration, then GS, GS+R and GS+N walked up to the criterion
         table = _choose_table(meter, configs, opts, model.relief)
         renderers.keep_meshes(table.mesh_keys())
-        # 4. Table 1 timing: the four methods interleaved, under the paper's conditions
+        # 4. Table 1 timing: the methods interleaved, under the paper's conditions
         step(f"{model.name}: Table 1 timing")
         entries = _time_table(renderers, table, meter.curve, opts.frames)
         if images_dir is not None:
@@ -299,12 +322,12 @@ def machine_info() -> dict:
 
 
 def count_steps(opts: BenchOptions) -> int:
-    """Progress steps of a run (an upper bound: reference, configurations, the GS and GS+R
-    levels a one-segment model could reach within the budget, table timing)."""
+    """Progress steps of a run (an upper bound: reference, configurations, the GS, GS+R and
+    GS+N levels a one-segment model could reach within the budget, table timing)."""
     levels = 0
     while triangle_count(1, levels, 0) <= opts.max_triangles:
         levels += 1
-    return len(opts.models) * (3 + len(relief_configs(opts)) + 2 * levels)
+    return len(opts.models) * (3 + len(relief_configs(opts)) + len(LEVEL_METHODS) * levels)
 
 
 def run_bench(opts: BenchOptions, progress=None, out_dir: str | Path | None = None) -> dict:

@@ -7,7 +7,14 @@ import math
 
 from .paper import PAPER_TABLE1
 
-__all__ = ["rcr_over_gsr", "relief_overhead", "geometric_mean", "summarise", "summary_lines"]
+__all__ = ["rcr_over_gsr", "rcr_over_gsn", "relief_overhead", "geometric_mean", "summarise", "summary_lines"]
+
+
+def rcr_over_gsn(m: dict):
+    """RC+R fps over GS+N fps of a model's Table 1 run, None if either did not run."""
+    if m.get("rcr") and m.get("gsn"):
+        return m["rcr"]["fps"] / m["gsn"]["fps"]
+    return None
 
 
 def rcr_over_gsr(m: dict):
