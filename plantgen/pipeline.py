@@ -1036,8 +1036,9 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
     frusta = [check_finite_frusta(skin(part[1]), input_path) for part in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
-    check_export_size(frusta, [part[3] for part in parts], sum(len(part[1]) for part in parts), level,
-                      fmt.name, limits, input_path, output_path)
+    copies = 2 if detail[0] > 1 else 1      # the lower levels hold under n/2 + n/4 + ... rows: under the full's
+    check_export_size(frusta * copies, [part[3] for part in parts] * copies, sum(len(part[1]) for part in parts),
+                      level, fmt.name, limits, input_path, output_path)
     if timeline is not None:
         check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts
                          if part[4] is not None and any(s is not None and s.moves for c in part[4][1] for s in c)],

@@ -254,3 +254,16 @@ def test_a_grammar_written_in_place_gets_levels_when_asked(tmp_path):
     assert len(ids) == 2 and root not in ids
     triangles = [mesh_arrays(doc, blob, doc["nodes"][i]["mesh"])[1] for i in [root, *ids]]
     assert triangles == [t for _, t in summary["levels"]] and triangles[1] <= triangles[0] // 2 + 64
+
+
+def test_the_export_limit_counts_the_levels(grove, tmp_path):
+    """The levels hold under the full level's rows again: the triangle budget counts them
+    as twice the full level, before anything is built."""
+    out = tmp_path / "grove.glb"
+    args = ("export", grove, "-o", out, "--subdiv", "0", "--no-textures", "--limit", "export_triangles=200000")
+    code, _, stderr = run_cli(*args, "--lod-levels", "1")
+    assert code == 0, stderr
+    out.unlink()
+    code, _, stderr = run_cli(*args)
+    assert code == 2 and len(stderr.strip().splitlines()) == 1 and "export_triangles" in stderr
+    assert not out.exists()
