@@ -61,15 +61,17 @@ def export(path, output, *, subdiv=1, relief=False, seed=None, limits=None, allo
     ``.usdc``; skeleton: ``.swc``, ``.qsm.csv``, ``.qsm.mat``), as ``plantgen export`` does:
     ``subdiv`` is the level m (16·4^m triangles per frustum plus 8·2^m per cap), ``relief``
     moves the vertices onto the relief surface; ``options`` as the command's (``up``,
-    ``instancing``, ``key_rate`` and ``duration`` of a swaying scene's animation, ...).
+    ``instancing``, ``key_rate`` and ``duration`` of a swaying scene's animation,
+    ``lod_levels`` and ``lod_pixels`` of the levels of detail, ...).
     Returns the summary dict of :func:`plantgen.pipeline.export_model` (segments,
     triangles, vertices, path, timings, animation)."""
     from .pipeline import export_model
-    from .settings import KeyframeSettings, build_settings, option_names
+    from .settings import DetailSettings, KeyframeSettings, LevelSettings, build_settings, option_names
 
-    keys = {name: options.pop(name) for name in option_names(KeyframeSettings) if name in options}
-    if keys:
-        options["keyframes"] = build_settings(KeyframeSettings, keys)
+    for cls, keyword in ((KeyframeSettings, "keyframes"), (LevelSettings, "levels"), (DetailSettings, "detail")):
+        keys = {name: options.pop(name) for name in option_names(cls) if name in options}
+        if keys:
+            options[keyword] = build_settings(cls, keys)
     return export_model(path, output, level=subdiv, relief=relief, seed=seed, limits=limits,
                         allow_paths=allow_paths, **options)
 

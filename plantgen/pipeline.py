@@ -38,8 +38,10 @@ from ._resources import grammars_dir
 from .animation import AnimatedScene
 from .errors import PlantgenError
 from .exporters import (
+    DetailLevel,
     ExportError,
     Plant,
+    PlantDetail,
     PlantSway,
     SceneExtras,
     Timeline,
@@ -50,12 +52,13 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
 from .files import read_yaml, write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
-from .geometry.frusta import ROW_FIELDS, Frusta
-from .geometry.instances import PlacedPlants
+from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
+from .geometry.instances import PlacedPlants, detail_levels, detail_order, screen_coverage
 from .geometry.mesh import tessellate, triangle_count
 from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton
@@ -76,9 +79,11 @@ from .lsystem.turtle import Drawing, interpret_plant
 from .scene import Scene, is_scene, parse_scene
 from .settings import (
     DEFAULT_SIZE,
+    DetailSettings,
     EffectSettings,
     ImageSettings,
     KeyframeSettings,
+    LevelSettings,
     MotionSettings,
     RaycastSettings,
     RenderSettings,
@@ -726,7 +731,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
-                 aspect_step: float | None = None) -> dict:
+                 aspect_step: float | None = None, detail: DetailSettings | None = None,
+                 levels: LevelSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -752,6 +758,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         plants at rest and says so in ``warnings``
     textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
         colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
+    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`:
+        ``--lod-levels``, else 4 for a scene listing ``lod``; :func:`plant_detail`), their
+        screen coverages for ``detail.lod_pixels``
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -761,7 +770,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     plants (once per distinct plant when instanced), beside the frusta and counted in
     ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
-    ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
+    ``levels`` ([(rows, triangles)] per level of detail, summed over the plants written
+    once; empty: none), ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
     besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar), ``textures``
     (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
@@ -782,7 +792,8 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         return _export_skeleton(grown, fmt, output_path, up, unit, qsm_tolerance, summary)
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                           input_path, output_path, timings, progress, skin, timeline)
+                                           input_path, output_path, timings, progress, skin, timeline,
+                                           _export_detail(grown, fmt, levels, detail, summary))
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
     plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
@@ -895,6 +906,44 @@ def _animation_counts(plants: list[Plant], timeline: Timeline | None) -> dict | 
                 joints=sum(len(p.skeleton) * p.copies for p in swaying), skins=sum(p.copies for p in swaying))
 
 
+def _export_detail(grown: GrowResult, fmt, levels: LevelSettings | None, detail: DetailSettings | None,
+                   summary: dict) -> tuple[int, float]:
+    """(levels, pixels) of the levels of detail the export writes (:func:`plant_detail`):
+    1 (none) for a format without them, where a warning in ``summary`` says so if they
+    were asked for."""
+    asked, pixels = levels or LevelSettings(), (detail or DetailSettings()).lod_pixels
+    count = asked.export_levels(grown.scene.effects if grown.scene is not None else ())
+    if count > 1 and not fmt.instancing:
+        if asked.levels is not None:
+            summary["warnings"] = (*summary["warnings"], f"{fmt.suffix} holds no levels of detail: the full "
+                                   "mesh only (glTF and USD carry them)")
+        return 1, pixels
+    return count, pixels
+
+
+def plant_detail(frusta: Frusta, parent, mesh, leaves: Polygons | None, levels: int, pixels: float,
+                 relief: bool = False, height: int = DEFAULT_SIZE[1]) -> PlantDetail | None:
+    """A plant's levels of detail (None for ``levels`` < 2, or a plant too small to have
+    two): level k tessellates the rows of ``frusta`` (``parent``: the skeleton's) that
+    :func:`~plantgen.geometry.instances.detail_levels` keeps, at ``mesh``'s level (with
+    ``relief``: displaced), with the ``leaves`` hanging from a kept segment; the screen coverages are for
+    ``pixels`` on an image ``height`` pixels high (:func:`screen_coverage`)."""
+    if levels < 2:
+        return None
+    order, sizes = detail_order(frusta, parent)
+    counts, thresholds = detail_levels(sizes, levels)
+    if len(counts) < 2:
+        return None
+    out = [DetailLevel(np.arange(len(frusta)), mesh, np.arange(0 if leaves is None else len(leaves)), 0.0)]
+    for count, size in zip(counts[1:].tolist(), thresholds[1:].tolist(), strict=True):
+        rows = np.sort(order[:count])
+        kept = np.flatnonzero(np.isin(leaves.segment, frusta.segment[rows])) if leaves is not None else np.zeros(0, int)
+        out.append(DetailLevel(rows, tessellate(frusta.subset(rows), mesh.level, relief=relief), kept, size))
+    box = frusta_bounds(frusta)
+    diameter = float(np.linalg.norm(box[1] - box[0]))
+    return PlantDetail(tuple(out), screen_coverage(thresholds, float(sizes[0]), diameter, pixels, height))
+
+
 def _mesh_counts(plants: list[Plant]) -> dict:
     """What an export wrote: rows, caps, triangles, vertices, drawn, plants, copies and
     leaf_triangles (a grammar's leaves, counted in triangles, vertices and drawn too)."""
@@ -905,7 +954,24 @@ def _mesh_counts(plants: list[Plant]) -> dict:
                 triangles=sum(len(m.faces) for m in meshes) + sum(leaves),
                 vertices=sum(len(m.vertices) for m in meshes) + leaf_vertices,
                 drawn=sum((len(p.mesh.faces) + n) * p.copies for p, n in zip(plants, leaves, strict=True)),
-                plants=len(plants), copies=sum(p.copies for p in plants), leaf_triangles=sum(leaves))
+                plants=len(plants), copies=sum(p.copies for p in plants), leaf_triangles=sum(leaves),
+                levels=_level_counts(plants))
+
+
+def _level_counts(plants: list[Plant]) -> list[tuple[int, int]]:
+    """[(rows, triangles)] of each level of detail written, summed over the plants (each
+    once; a plant with fewer levels counted at its last); empty when none has levels."""
+    depth = max((len(p.detail.levels) for p in plants if p.detail is not None), default=0)
+    out = []
+    for k in range(depth):
+        rows = triangles = 0
+        for plant in plants:
+            lod = 0 if plant.detail is None else min(k, len(plant.detail.levels) - 1)
+            at = level_plant(plant, lod)
+            rows += plant.mesh.n_rows if plant.detail is None else len(plant.detail.levels[lod].rows)
+            triangles += len(at.mesh.faces) + (len(at.leaves.triangles) if at.has_leaves else 0)
+        out.append((rows, triangles))
+    return out
 
 
 def _export_parts(grown: GrowResult, instanced: bool) -> list[tuple[str, Skeleton, np.ndarray | None,
@@ -959,17 +1025,20 @@ def check_export_size(frusta: list[Frusta], leaves: list, segments: int, level: 
 
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
                         input_path, output_path, timings: dict, progress,
-                        skin=skin_skeleton, timeline: Timeline | None = None) -> tuple[list[Plant], int]:
+                        skin=skin_skeleton, timeline: Timeline | None = None,
+                        detail: tuple[int, float] = (1, 0.0)) -> tuple[list[Plant], int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
     limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
-    ``skin`` and ``tessellate``); also the segments smooth bends added."""
+    ``skin`` and ``tessellate``), each still plant at ``detail`` = (levels, pixels)
+    (:func:`plant_detail`); also the segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
     frusta = [check_finite_frusta(skin(part[1]), input_path) for part in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
-    check_export_size(frusta, [part[3] for part in parts], sum(len(part[1]) for part in parts), level,
-                      fmt.name, limits, input_path, output_path)
+    copies = 2 if detail[0] > 1 else 1      # the lower levels hold under n/2 + n/4 + ... rows: under the full's
+    check_export_size(frusta * copies, [part[3] for part in parts] * copies, sum(len(part[1]) for part in parts),
+                      level, fmt.name, limits, input_path, output_path)
     if timeline is not None:
         check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts
                          if part[4] is not None and any(s is not None and s.moves for c in part[4][1] for s in c)],
@@ -979,7 +1048,10 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         mesh = tessellate(fr, level, relief=relief)
         check_finite_mesh(mesh, fr, input_path)
         sway = PlantSway(sways[0], sways[1], fr.segment) if timeline is not None and sways is not None else None
-        plants.append(Plant(name, skel, mesh, matrices, leaves=_leaves_of(leaves, mesh, input_path), sway=sway))
+        leaves = _leaves_of(leaves, mesh, input_path)
+        lod = None if sway is not None and sway.moves else plant_detail(fr, skel.parent, mesh, leaves, *detail,
+                                                                           relief=relief)
+        plants.append(Plant(name, skel, mesh, matrices, leaves=leaves, sway=sway, detail=lod))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
     timings["tessellate"] = time.perf_counter() - t2

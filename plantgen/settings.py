@@ -14,6 +14,7 @@ range, help) from it. A new effect or knob is one field here plus the code that 
 - :class:`ImageSettings`: size, supersampling, background;
 - :class:`MotionSettings`: the time of a still, an animation's frames and rate;
 - :class:`ViewSettings`: the camera file or ``auto``, and the orbit around it;
+- :class:`LevelSettings`: the levels of detail an export writes (glTF, USD);
 - :class:`KeyframeSettings`: the keyframes of the sway an export writes (glTF, USD);
 - :class:`RenderSettings`: all of them, built from flat keywords by :meth:`RenderSettings.from_options`.
 """
@@ -26,9 +27,11 @@ from .errors import PlantgenError
 from .geometry.camera import Orbit
 from .knobs import check_knobs, knob
 
-__all__ = ["EFFECTS", "DEFAULT_SIZE", "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
+__all__ = ["EFFECTS", "DEFAULT_SIZE", "LOD_EXPORT_LEVELS",
+           "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
            "DetailSettings",
-           "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "KeyframeSettings",
+           "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "LevelSettings",
+           "KeyframeSettings",
            "resolve_effects",
            "parse_effect_list", "build_settings", "option_names", "settings_knobs"]
 
@@ -36,6 +39,8 @@ __all__ = ["EFFECTS", "DEFAULT_SIZE", "MAX_SSAA", "MAX_SUBDIV", "EffectSettings"
 #: scene is drawn instanced (each distinct plant once on the GPU, a transform per copy)
 #: with detail that follows the pixel (:class:`DetailSettings`).
 EFFECTS = ("relief", "shadows", "animation", "lod")
+#: The levels of detail an export writes for a scene that lists ``lod`` (level 0 full).
+LOD_EXPORT_LEVELS = 4
 #: The image size when neither the command nor a camera file gives one.
 DEFAULT_SIZE = (1024, 768)
 #: The most samples per pixel side of supersampling.
@@ -315,6 +320,30 @@ class MeshSettings:
 
     def __post_init__(self):
         check_knobs(self)
+
+
+@dataclass(frozen=True)
+class LevelSettings:
+    """The levels of detail an export writes (glTF ``MSFT_lod``, a USD variantSet
+    ``lod``): ``levels`` per plant, level 0 the full mesh and each next one at most half the
+    rows of the one above (:func:`plantgen.geometry.instances.detail_levels`); None: as the
+    scene's effects say (:meth:`export_levels`). Their screen coverages follow
+    :class:`DetailSettings`' ``lod_pixels``."""
+
+    levels: int | None = knob(None, "--lod-levels", "glTF, USD: write N levels of detail per plant (level 0 full, "
+                              "each next one at most half the segments, twigs first); 1 writes none. Default: 4 for "
+                              "a scene that lists the lod effect, else 1.", kind="int", lo=1, hi=8, metavar="N",
+                              param="lod_levels")
+
+    def __post_init__(self):
+        check_knobs(self)
+
+    def export_levels(self, effects) -> int:
+        """The levels of detail an export writes for a model whose effects are ``effects``:
+        ``levels`` where given, else :data:`LOD_EXPORT_LEVELS` with ``lod`` and 1 without."""
+        if self.levels is not None:
+            return int(self.levels)
+        return LOD_EXPORT_LEVELS if "lod" in effects else 1
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from ..exporters import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
 from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model
-from ..settings import KeyframeSettings, MeshSettings
+from ..settings import DetailSettings, KeyframeSettings, LevelSettings, MeshSettings
 from .options import (
     allow_path_opt,
     finite,
@@ -65,6 +65,9 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
                    "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
 @knob_options(KeyframeSettings)
+@knob_options(LevelSettings, DetailSettings, helps={
+    "lod_pixels": "glTF, USD levels of detail: their screen coverages let a level go where the segments it drops "
+                  "span fewer pixels than this (on a 768-pixel-high image)."})
 @seed_opt
 @smooth_bends_opt
 @limit_opt
@@ -95,12 +98,17 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
     animation loops (or over --duration seconds); --no-sway, and the other formats,
     write the plants at rest (a warning says so for the formats).
 
+    A scene that lists the lod effect is written with levels of detail (--lod-levels,
+    default 4): glTF MSFT_lod (used, not required: other readers show the full level)
+    with screen coverages for --lod-pixels, and a USD variantSet "lod" per plant.
+
     \b
     Examples:
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
       plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
       plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
+      plantgen export forest -o forest.glb --subdiv 0       # 4 levels of detail per plant (MSFT_lod)
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
@@ -111,7 +119,8 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
-                            textures=textures, aspect_step=aspect_step)
+                            textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
+                            levels=take_settings(LevelSettings, keys))
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
@@ -147,11 +156,20 @@ def _mesh_summary(info: dict) -> None:
         click.echo(f"textures of {name}: {baked['size'][1]}x{baked['size'][0]} "
                    f"({', '.join(kinds[k] for k in baked['kinds'])}"
                    f"{'; normal map at r/L ' + format(baked['aspect'], '.3g') if 'normal' in baked['kinds'] else ''})")
+    _levels_summary(info)
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "
                    f"{'looping' if sway['loops'] else 'not a whole period: no loop'}), {sway['joints']:,} joints "
                    f"in {sway['skins']:,} {'skin' if sway['skins'] == 1 else 'skins'}")
+
+
+def _levels_summary(info: dict) -> None:
+    levels = info.get("levels")
+    if levels:
+        click.echo(f"levels of detail: {len(levels)} (" + "; ".join(
+            f"lod{k} {rows:,} rows, {triangles:,} triangles" for k, (rows, triangles) in enumerate(levels))
+            + "; each plant written once)")
 
 
 def _qsm_summary(info: dict) -> None:

@@ -28,10 +28,11 @@ from .formats import (
            export_format,
 )
 from .meshes import export_mesh, write_plants
-from .plants import Plant, SceneExtras
+from .plants import DetailLevel, Plant, PlantDetail, SceneExtras
 from .skeletons import write_skeleton
 from .sway import PlantSway, Timeline, sway_timeline
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "Format", "Plant", "PlantSway", "SceneExtras", "Timeline", "check_extra",
+__all__ = ["EXPORT_FORMATS", "DetailLevel", "ExportError", "Format", "Plant", "PlantDetail", "PlantSway",
+           "SceneExtras", "Timeline", "check_extra",
            "estimate_export_bytes", "export_file_type", "export_format", "export_mesh", "sway_timeline",
            "write_plants", "write_skeleton"]

@@ -27,6 +27,14 @@ name and base colour, linear RGB as glTF defines it). Nodes:
   holds a ``LINEAR`` rotation channel per turning joint of every swaying copy, its keys
   at the timeline's times.
 
+A still plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
+each of its nodes (a copy's, the instanced node, the plant in place) carries ``MSFT_lod``
+whose ``ids`` name one node per lower level (``"<name> lod<k>"``, that level's mesh, the
+node's placement or instancing attributes), nodes outside the scene's tree, and
+``extras.MSFT_screencoverage`` (one coverage per level: below ``coverage[k]`` level k + 1
+may be shown; below the last, nothing). ``MSFT_lod`` is in ``extensionsUsed`` only: a
+reader without it shows the full level.
+
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
 material, with a material of their own named ``"<material> (leaf)"`` that is
 ``doubleSided``, white, each vertex's ``COLOR_0`` its leaf's shade as the renderers draw
@@ -58,6 +66,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from urllib.parse import quote
@@ -79,6 +88,7 @@ from .plants import (
     ground_mesh,
     leaf_name,
     leaf_parts,
+    level_plant,
     light_rotation,
     material_colours,
     material_parts,
@@ -86,9 +96,10 @@ from .plants import (
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
 from .textures import Textures, png_bytes, png_writes, texture_files, texture_image
 
-__all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
+__all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "LOD_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 
 INSTANCING_EXTENSION = "EXT_mesh_gpu_instancing"
+LOD_EXTENSION = "MSFT_lod"
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
@@ -245,6 +256,7 @@ class _Document:
         self.skins, self.channels, self.samplers = [], [], []
         self.times: int | None = None
         self.used_extension = False
+        self.used_lod = False
         self.cameras: list[dict] = []
         self.lights: list[dict] = []
 
@@ -345,16 +357,34 @@ class _Document:
             self.node({"name": "Sun", **_pose(light_rotation(extras.light, self.up)),
                        "extensions": {LIGHTS_EXTENSION: {"light": len(self.lights) - 1}}})
 
-    def still(self, plant: Plant, mesh: int, instancing: str) -> None:
-        """A plant that does not sway: one node, its copies instanced or one node each."""
+    def still(self, plant: Plant, mesh: int, instancing: str, lower: list[int] = ()) -> None:
+        """A plant that does not sway: one node, its copies instanced or one node each;
+        with ``lower`` (the meshes of its levels of detail below the full one) each node
+        names its levels' nodes in ``MSFT_lod`` (:meth:`levels`)."""
         if plant.matrices is None:
-            self.node({"name": plant.name, "mesh": mesh})
+            nodes = [{"name": plant.name, "mesh": mesh}]
         elif instancing == "gpu" and len(plant.matrices) > 1:
-            self.node(_gpu_node(self.buffer, plant.name, mesh, turn_placements(plant.matrices, self.up)))
+            nodes = [_gpu_node(self.buffer, plant.name, mesh, turn_placements(plant.matrices, self.up))]
             self.used_extension = True
         else:
-            for node in _trs_nodes(plant.name, mesh, turn_placements(plant.matrices, self.up)):
-                self.node(node)
+            nodes = _trs_nodes(plant.name, mesh, turn_placements(plant.matrices, self.up))
+        for node in nodes:
+            self.node(node)
+            if lower:
+                self.levels(node, lower, plant.detail.coverage)
+
+    def levels(self, node: dict, lower: list[int], coverage) -> None:
+        """``node`` (the full level) gains ``MSFT_lod``: per lower level a node outside the
+        scene's tree (a reader without the extension shows the full level only) with that
+        level's mesh and the node's placement; ``extras.MSFT_screencoverage`` the coverage
+        below which each level gives way to the next (after the last: nothing)."""
+        ids = []
+        for k, mesh in enumerate(lower, start=1):
+            level = {key: value for key, value in node.items() if key not in ("name", "mesh")}
+            ids.append(self.node({"name": f"{node['name']} lod{k}", "mesh": mesh, **level}, root=False))
+        node.setdefault("extensions", {})[LOD_EXTENSION] = {"ids": ids}
+        node["extras"] = {"MSFT_screencoverage": [float(c) for c in coverage]}
+        self.used_lod = True
 
     def swaying(self, plant: Plant, mesh: int, rig: JointRig) -> None:
         """A swaying plant: per copy, a node placing its joints (one per segment, nested as
@@ -414,6 +444,8 @@ class _Document:
         if self.cameras:
             doc["cameras"] = self.cameras
         used = [INSTANCING_EXTENSION] if self.used_extension else []
+        if self.used_lod:     # used, not required: a reader without it shows the full level
+            used.append(LOD_EXTENSION)
         if self.lights:       # used, not required: a reader without it shows the scene unlit
             doc["extensions"] = {LIGHTS_EXTENSION: {"lights": self.lights}}
             used.append(LIGHTS_EXTENSION)
@@ -441,7 +473,9 @@ def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None
         rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, up, plant.name) if sways else None
         mesh = doc.mesh(plant, rig)
         if rig is None:
-            doc.still(plant, mesh, instancing)
+            levels = () if plant.detail is None else range(1, len(plant.detail.levels))
+            lower = [doc.mesh(replace(level_plant(plant, k), name=f"{plant.name} lod{k}"), None) for k in levels]
+            doc.still(plant, mesh, instancing, lower)
         else:
             doc.swaying(plant, mesh, rig)
         if progress is not None:

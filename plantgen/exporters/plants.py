@@ -20,15 +20,42 @@ from ..geometry.stage import Ground, Light
 from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
 
-__all__ = ["Colours", "MeshWriter", "Part", "Plant", "Progress", "SceneExtras", "SkeletonWriter", "camera_pose",
-           "ground_colour", "ground_mesh", "leaf_name", "leaf_parts", "leaf_uv", "light_rotation", "material_colours",
-           "material_parts", "merged_materials", "single_plant", "turned_mesh"]
+__all__ = ["Colours", "DetailLevel", "MeshWriter", "PlantDetail", "Part", "Plant", "Progress", "SceneExtras",
+           "SkeletonWriter", "camera_pose", "ground_colour", "ground_mesh", "leaf_name", "leaf_parts", "leaf_subset",
+           "leaf_uv", "level_plant", "light_rotation", "material_colours", "material_parts", "merged_materials",
+           "single_plant", "turned_mesh"]
 
 #: Material name -> linear RGB in [0, 1], or one colour per material index, or None (the
 #: renderers' palette).
 Colours = Mapping[str, Sequence[float]] | Sequence | None
 #: ``progress(stage, done, total)``: a writer reports its steps (may be None).
 Progress = Callable[[str, int, int], None] | None
+
+
+@dataclass(frozen=True, eq=False)
+class DetailLevel:
+    """One level of detail of a plant: ``rows`` (r,) the mesh rows it keeps (ascending; a
+    prefix of the detail order, :func:`~plantgen.geometry.instances.detail_levels`, so
+    every kept row's parent is kept), ``mesh`` their tessellation (its row i is the plant
+    mesh's row ``rows[i]``; chains cut where a child is dropped are capped), ``leaves`` (p,)
+    the leaf polygons it keeps (those hanging from a kept segment) and ``size``: the kept
+    rows' detail sizes are above it (0: every row)."""
+
+    rows: np.ndarray
+    mesh: TessellatedMesh
+    leaves: np.ndarray
+    size: float
+
+
+@dataclass(frozen=True, eq=False)
+class PlantDetail:
+    """A plant's levels of detail, level 0 (every row) first, and ``coverage`` (L,): the
+    screen coverage (projected bounding diameter over the image height) below which level
+    k + 1 may stand in for level k (the last: below it the plant may be left out);
+    :func:`~plantgen.geometry.instances.screen_coverage`."""
+
+    levels: tuple
+    coverage: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,7 +68,8 @@ class Plant:
     ``leaves``: the grammar's filled polygons in the same frame, their material indices
     into ``mesh.material_names`` (None or empty: no leaves; written double-sided).
     ``sway``: how its copies sway (:class:`~plantgen.exporters.sway.PlantSway`), for the
-    formats that write an animation; None: the plant stands still."""
+    formats that write an animation; None: the plant stands still. ``detail``: its levels
+    of detail (:class:`PlantDetail`), written by glTF and USD; None: the full mesh only."""
 
     name: str
     skeleton: Skeleton
@@ -50,6 +78,7 @@ class Plant:
     labels: Mapping[str, np.ndarray] | None = None   # per mesh row, by attribute name (glTF)
     leaves: Polygons | None = None
     sway: PlantSway | None = None
+    detail: PlantDetail | None = None
 
     @property
     def has_leaves(self) -> bool:
@@ -333,3 +362,27 @@ def merged_materials(plant: Plant) -> Plant:
     mesh = replace(plant.mesh, material=index[plant.mesh.material], material_names=unique)
     leaves = plant.leaves if plant.leaves is None else replace(plant.leaves, material=index[plant.leaves.material])
     return replace(plant, mesh=mesh, leaves=leaves)
+
+
+def leaf_subset(polygons: Polygons, keep) -> Polygons:
+    """The polygons ``keep`` ((p,) int) of ``polygons``, with only the vertices they use."""
+    keep = np.asarray(keep, dtype=np.int64)
+    renumber = np.full(len(polygons), -1, dtype=np.int64)
+    renumber[keep] = np.arange(len(keep))
+    triangles = np.flatnonzero(renumber[polygons.polygon] >= 0)
+    used, inverse = np.unique(polygons.triangles[triangles], return_inverse=True)
+    return Polygons(polygons.vertices[used], inverse.reshape(-1, 3), renumber[polygons.polygon[triangles]],
+                    polygons.material[keep], polygons.normal[keep], polygons.segment[keep])
+
+
+def level_plant(plant: Plant, level: int) -> Plant:
+    """``plant`` at its level of detail ``level`` (0: itself): the level's mesh, its rows'
+    materials and labels taken from the plant's mesh (so a renaming of the plant's
+    materials holds for every level), and the leaves it keeps; no levels of its own."""
+    if level == 0 or plant.detail is None:
+        return plant
+    lod = plant.detail.levels[level]
+    mesh = replace(lod.mesh, material=plant.mesh.material[lod.rows], material_names=plant.mesh.material_names)
+    labels = None if plant.labels is None else {k: np.asarray(v)[lod.rows] for k, v in plant.labels.items()}
+    leaves = None if not plant.has_leaves or not len(lod.leaves) else leaf_subset(plant.leaves, lod.leaves)
+    return replace(plant, mesh=mesh, labels=labels, leaves=leaves, detail=None)

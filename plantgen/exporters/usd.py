@@ -19,6 +19,12 @@ One plant, written in place::
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
 
+A still plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
+its prim holds a variantSet ``lod``, variants ``lod0`` (full, selected) to ``lod<N-1>``,
+each authoring that level's ``Mesh`` and ``Leaves`` (materials and ``Skeleton`` stay
+outside, shared); the screen coverages in its customData ``plantgen:lodScreenCoverage``.
+A copy referencing the plant holds the set too, so its selection switches that copy.
+
 A scene, ``instancing="nodes"`` (the default): one instanceable Xform per copy with its
 transform, referencing its plant under the abstract ``/<scene>/Prototypes`` (every copy a
 prim of its own, made by plain composition, which every USD reader performs; a
@@ -79,6 +85,7 @@ from .plants import (
     ground_colour,
     ground_mesh,
     leaf_parts,
+    level_plant,
     light_rotation,
     material_colours,
     turned_mesh,
@@ -189,32 +196,59 @@ class _Writer:
             self.UsdSkel.Root.Define(self.stage, path)
             self._joints(path.AppendChild("Joints"), rig)
         materials = self._materials(path.AppendChild("Materials"), plant.mesh.material_names)
-        vertices, normals = turned_mesh(plant.mesh, self.up)
-        mesh = self._mesh(path.AppendChild("Mesh"), (vertices, normals, plant.mesh.faces, plant.mesh.face_material),
-                          materials, plant.mesh.uv)
-        if rig is not None:
-            self._bind(mesh, path.AppendChild("Joints"), rig.vertex_joints, rig.vertex_weights)
-        if plant.has_leaves:
-            names = plant.mesh.material_names
-            parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
-                               names if self.colours is None else None)
-            shaded = parts[0].colours is not None
-            leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts),
-                                self._leaf_materials(path.AppendChild("Materials"), names, {p.material for p in parts})
-                                if shaded else materials, np.concatenate([p.uv for p in parts]), double_sided=True)
-            if shaded:
-                self.UsdGeom.PrimvarsAPI(leaves).CreatePrimvar(
-                    "displayColor", self.Sdf.ValueTypeNames.Color3fArray, self.UsdGeom.Tokens.vertex).Set(
-                    self.Vt.Vec3fArray.FromNumpy(np.concatenate([p.colours for p in parts]).astype(np.float32)))
-            if rig is not None:
-                self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
-                           np.concatenate([p.weights for p in parts]))
+        leaf_materials = materials
+        if plant.has_leaves and self.colours is None:
+            leaf_materials = self._leaf_materials(path.AppendChild("Materials"), plant.mesh.material_names,
+                                                  set(np.unique(plant.leaves.material).tolist()))
+        if plant.detail is None:
+            self._surfaces(path, plant, materials, leaf_materials, rig)
+        else:
+            self._levels(path, plant, materials, leaf_materials)
         if len(plant.skeleton):
             curves, segment = self._curves(path.AppendChild("Skeleton"), plant.skeleton)
             if rig is not None:
                 joints = np.zeros((len(segment), 4), np.int64)
                 joints[:, 0] = segment
                 self._bind(curves, path.AppendChild("Joints"), joints, (np.arange(4) == 0) * np.ones((len(segment), 1)))
+
+    def _surfaces(self, path, plant: Plant, materials, leaf_materials, rig: JointRig | None) -> None:
+        """The plant's ``Mesh`` and (where it has leaves) ``Leaves`` under ``path``, bound
+        to ``materials`` and ``leaf_materials`` (and with a ``rig`` to its ``Joints``)."""
+        vertices, normals = turned_mesh(plant.mesh, self.up)
+        mesh = self._mesh(path.AppendChild("Mesh"), (vertices, normals, plant.mesh.faces, plant.mesh.face_material),
+                          materials, plant.mesh.uv)
+        if rig is not None:
+            self._bind(mesh, path.AppendChild("Joints"), rig.vertex_joints, rig.vertex_weights)
+        if not plant.has_leaves:
+            return
+        names = plant.mesh.material_names
+        parts = leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
+                           names if self.colours is None else None)
+        leaves = self._mesh(path.AppendChild("Leaves"), _joined(parts), leaf_materials,
+                            np.concatenate([p.uv for p in parts]), double_sided=True)
+        if parts[0].colours is not None:
+            self.UsdGeom.PrimvarsAPI(leaves).CreatePrimvar(
+                "displayColor", self.Sdf.ValueTypeNames.Color3fArray, self.UsdGeom.Tokens.vertex).Set(
+                self.Vt.Vec3fArray.FromNumpy(np.concatenate([p.colours for p in parts]).astype(np.float32)))
+        if rig is not None:
+            self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
+                       np.concatenate([p.weights for p in parts]))
+
+    def _levels(self, path, plant: Plant, materials, leaf_materials) -> None:
+        """The plant's levels of detail: a variantSet ``lod`` on its prim, variant ``lodk``
+        holding level k's ``Mesh`` and ``Leaves`` (the materials and the skeleton curves
+        outside it, shared), ``lod0`` (full) selected; the screen coverages in the prim's
+        customData ``plantgen:lodScreenCoverage``."""
+        prim = self.stage.GetPrimAtPath(path)
+        variants = prim.GetVariantSets().AddVariantSet("lod")
+        for k in range(len(plant.detail.levels)):
+            variants.AddVariant(f"lod{k}")
+            variants.SetVariantSelection(f"lod{k}")
+            with variants.GetVariantEditContext():
+                self._surfaces(path, level_plant(plant, k), materials, leaf_materials, None)
+        variants.SetVariantSelection("lod0")
+        prim.SetCustomDataByKey("plantgen:lodScreenCoverage",
+                                self.Vt.DoubleArray([float(c) for c in plant.detail.coverage]))
 
     def _joints(self, path, rig: JointRig) -> None:
         """The UsdSkel Skeleton at ``path``: a joint per segment (and the still one), bound

@@ -32,7 +32,8 @@ from .mesh import tessellate
 from .vec import reduce_to_root
 
 __all__ = ["PlacedPlants", "PlantCopies", "PlacedMesh", "PlacedMeshes", "place_frusta", "row_spheres",
-           "detail_sizes", "detail_order", "detail_counts", "similarity_parts", "pixels_per_radian"]
+           "detail_sizes", "detail_order", "detail_counts", "detail_levels", "screen_coverage", "similarity_parts",
+           "pixels_per_radian"]
 
 
 def similarity_parts(matrices) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -126,6 +127,42 @@ def detail_counts(sizes, copy_scale, copy_distance, pixels_per_radian: float, th
         smallest = np.where(distance > 0, threshold * distance / (np.asarray(copy_scale) * pixels_per_radian), 0.0)
     # rows with size >= smallest: sizes are non-increasing, so count via the negated order
     return np.searchsorted(-sizes, -smallest, side="right").astype(np.int64)
+
+
+def detail_levels(sizes, levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """(counts (L,) int, thresholds (L,) float64): the levels of detail an export writes
+    for a plant whose detail sizes (:func:`detail_order`, non-increasing) are ``sizes``.
+
+    Level 0 is every row (threshold 0). Level k keeps the prefix of rows whose detail size
+    is above its threshold, the size of the first row past ``n / 2^j`` rows (j >= k: the
+    next halving that drops rows), so each level holds at most half the rows of the one
+    above it and every kept row's parent (a prefix of the detail order). Fewer than
+    ``levels`` levels come back where the rows run out (a level must keep a row and drop
+    one)."""
+    sizes = np.asarray(sizes, dtype=np.float64)
+    counts, thresholds = [len(sizes)], [0.0]
+    target = len(sizes)
+    while len(counts) < levels and target > 1:
+        target //= 2
+        size = float(sizes[target])
+        count = int(np.searchsorted(-sizes, -size, side="left"))     # rows strictly larger
+        if count == 0:
+            break
+        if count < counts[-1]:
+            counts.append(count)
+            thresholds.append(size)
+    return np.asarray(counts, dtype=np.int64), np.asarray(thresholds)
+
+
+def screen_coverage(thresholds, largest: float, diameter: float, pixels: float, height: int) -> np.ndarray:
+    """(L,) MSFT_lod's screen coverage per level: below ``coverage[k]`` (the plant's
+    bounding ball's projected diameter over the image's ``height`` pixels) an engine may
+    draw level k + 1, whose dropped rows (detail size at most ``thresholds[k + 1]``) then
+    span fewer than ``pixels`` pixels; below the last, even the ``largest`` row does (draw
+    nothing, as the renderers do). A row of size s at distance d spans s·f/d pixels and
+    the plant D·f/d, so the coverage is ``pixels · diameter / (s · height)``, capped at 1."""
+    sizes = np.append(np.asarray(thresholds, dtype=np.float64)[1:], largest)
+    return np.minimum(1.0, pixels * diameter / (np.maximum(sizes, 1e-300) * height))
 
 
 @dataclass(frozen=True, eq=False)
