@@ -53,18 +53,28 @@ THREE.ImageBitmapLoader.prototype.load = function (url, onLoad, onProgress, onEr
 """
 
 
-# three.js's GLTFLoader in Node: every mesh it builds, with its world matrix per instance
-# (an InstancedMesh's instance matrices times its node's world matrix).
-THREE_JS = r"""
-import fs from 'fs';
+# What every three.js script begins with: Node's modules, three.js and its GLTFLoader from
+# THREE_MODULES, the image shim above, and the file's bytes (its first argument).
+THREE_PRELUDE = """import fs from 'fs';
 import path from 'path';
 import { pathToFileURL } from 'url';
 const modules = process.env.THREE_MODULES;
 const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
 const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
   'three/examples/jsm/loaders/GLTFLoader.js')).href);
-${NODE_IMAGES}
-const buf = fs.readFileSync(process.argv[2]);
+""" + NODE_IMAGES + """
+const buf = fs.readFileSync(process.argv[2]);"""
+
+
+def three_script(script: str) -> str:
+    """A three.js script with :data:`THREE_PRELUDE` in place."""
+    return script.replace("${THREE_PRELUDE}", THREE_PRELUDE)
+
+
+# three.js's GLTFLoader in Node: every mesh it builds, with its world matrix per instance
+# (an InstancedMesh's instance matrices times its node's world matrix).
+THREE_JS = r"""
+${THREE_PRELUDE}
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   const out = [];
   gltf.scene.updateMatrixWorld(true);
@@ -89,15 +99,7 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
 # draws them (SkinnedMesh.getVertexPosition, then the mesh's world matrix). Positions go
 # to a float32 file, time by time, mesh by mesh in traversal order.
 THREE_SWAY_JS = r"""
-import fs from 'fs';
-import path from 'path';
-import { pathToFileURL } from 'url';
-const modules = process.env.THREE_MODULES;
-const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
-const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
-  'three/examples/jsm/loaders/GLTFLoader.js')).href);
-${NODE_IMAGES}
-const buf = fs.readFileSync(process.argv[2]);
+${THREE_PRELUDE}
 const times = JSON.parse(process.argv[3]);
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   const mixer = new THREE.AnimationMixer(gltf.scene);
@@ -136,15 +138,7 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
 # direction), lights (type, intensity, world direction: towards its target) and the
 # world positions of the mesh named "Ground".
 THREE_SCENE_JS = r"""
-import fs from 'fs';
-import path from 'path';
-import { pathToFileURL } from 'url';
-const modules = process.env.THREE_MODULES;
-const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
-const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
-  'three/examples/jsm/loaders/GLTFLoader.js')).href);
-${NODE_IMAGES}
-const buf = fs.readFileSync(process.argv[2]);
+${THREE_PRELUDE}
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   gltf.scene.updateMatrixWorld(true);
   const v = (x) => [x.x, x.y, x.z];
@@ -171,8 +165,7 @@ new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byt
 """
 
 
-THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS = (script.replace("${NODE_IMAGES}", NODE_IMAGES)
-                                          for script in (THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS))
+THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS = (three_script(script) for script in (THREE_JS, THREE_SWAY_JS, THREE_SCENE_JS))
 
 
 def node_modules(package: str) -> Path:
@@ -264,15 +257,7 @@ def three_js_scene(path: Path, tmp_path: Path) -> dict:
 # map and normal map: the PNG's width and height, :data:`NODE_IMAGES`; the normal scale,
 # whether the geometry has tangents and vertex colours).
 THREE_MATERIALS_JS = r"""
-import fs from 'fs';
-import path from 'path';
-import { pathToFileURL } from 'url';
-const modules = process.env.THREE_MODULES;
-const THREE = await import(pathToFileURL(path.join(modules, 'three/build/three.module.js')).href);
-const { GLTFLoader } = await import(pathToFileURL(path.join(modules,
-  'three/examples/jsm/loaders/GLTFLoader.js')).href);
-${NODE_IMAGES}
-const buf = fs.readFileSync(process.argv[2]);
+${THREE_PRELUDE}
 const image = (t) => t ? [t.image.width, t.image.height] : null;
 new GLTFLoader().parse(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength), '', (gltf) => {
   const out = [];
@@ -294,7 +279,7 @@ def three_js_materials(path: Path, tmp_path: Path) -> list[dict]:
     """Every mesh's material as three.js's GLTFLoader makes it from a .glb or .gltf (see
     :data:`THREE_MATERIALS_JS`)."""
     script = tmp_path / "materials_with_three.mjs"
-    script.write_text(THREE_MATERIALS_JS.replace("${NODE_IMAGES}", NODE_IMAGES))
+    script.write_text(three_script(THREE_MATERIALS_JS))
     env = dict(os.environ, THREE_MODULES=str(node_modules("three")))
     done = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr

@@ -62,3 +62,15 @@ def x_display():
         skip_or_fail(f"cannot start Xvfb: {exc}")
     yield display.name
     display.stop()
+
+
+@pytest.fixture(scope="module")
+def client():
+    """A Dask LocalCluster of two single-threaded worker processes and its client, for the
+    batch tests of one module (they skip, saying why, without the batch extra)."""
+    distributed = pytest.importorskip("dask.distributed", reason="plantgen[batch] (dask.distributed) is not installed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       silence_logs=50)
+    with distributed.Client(cluster) as c:
+        yield c
+    cluster.close()

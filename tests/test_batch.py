@@ -49,13 +49,6 @@ def write_spec(folder: Path, *, seeds="0:10", sweep=None, outputs=None) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def client():
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=50)
-    with Client(cluster) as c:
-        yield c
-    cluster.close()
 
 
 def rows_of(folder: Path) -> dict:

@@ -16,7 +16,7 @@ from _scan_helpers import labelled_residuals
 pytest.importorskip("dask.distributed", reason="plantgen[batch] (dask.distributed) is not installed")
 pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installed")
 
-from test_batch import TWIG, client  # noqa: E402, F401  (client: the module's LocalCluster fixture)
+from test_batch import TWIG  # noqa: E402
 
 from plantgen.batch import parse_spec, run_batch  # noqa: E402
 from plantgen.batch.manifest import read_manifest  # noqa: E402
@@ -35,7 +35,7 @@ def spec_file(folder: Path, points, seeds="0:2") -> Path:
     return path
 
 
-def test_a_rows_points_are_the_scan_plantgen_scan_makes_of_that_plant(tmp_path, client):  # noqa: F811
+def test_a_rows_points_are_the_scan_plantgen_scan_makes_of_that_plant(tmp_path, client):
     pytest.importorskip("laspy", reason="plantgen[scan] (laspy) is not installed: LAZ needs it")
     import laspy
 

@@ -21,7 +21,6 @@ pytest.importorskip("dask.distributed", reason="plantgen[batch] (dask.distribute
 pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not installed")
 
 import pyarrow.parquet as pq  # noqa: E402
-from dask.distributed import Client, LocalCluster  # noqa: E402
 from test_batch import TWIG, rows_of, write_spec  # noqa: E402
 
 from plantgen.batch import manifest as manifest_module  # noqa: E402
@@ -29,15 +28,6 @@ from plantgen.batch import parse_spec, run_batch, simple_spec, summary_lines  # 
 from plantgen.batch.engine import tasks_in_flight  # noqa: E402
 from plantgen.batch.manifest import MANIFEST_NAME, Manifest, read_manifest  # noqa: E402
 from plantgen.batch.plant import plant_row  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def client():
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=50)
-    with Client(cluster) as c:
-        yield c
-    cluster.close()
 
 
 def twig_spec(folder: Path, outputs: list[str], seeds: str = "0:5", **kw):

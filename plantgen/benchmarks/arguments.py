@@ -7,7 +7,7 @@ from pathlib import Path
 from .._resources import grammars_dir
 from ..files import write_atomically
 
-__all__ = ["image_size", "shipped_model_paths", "report"]
+__all__ = ["image_size", "shipped_model_paths", "report", "view_options"]
 
 
 def image_size(text: str) -> tuple[int, int]:
@@ -29,3 +29,13 @@ def report(text: str, out: Path | None) -> int:
     if out is not None:
         write_atomically(out, lambda path: Path(path).write_text(text))
     return 0
+
+
+def view_options(parser) -> None:
+    """The options of a script that draws one model from the gallery's camera: --zoom,
+    --raise, --size (read back by :func:`plantgen.benchmarks.side_by_side.model_view`)."""
+    parser.add_argument("--zoom", type=float, default=1.0, help="eye distance factor (< 1: closer)")
+    parser.add_argument("--raise", dest="lift", type=float, default=0.0,
+                        help="raise the target by this fraction of the model's extent")
+    parser.add_argument("--size", type=int, nargs=2, default=(400, 400))
+

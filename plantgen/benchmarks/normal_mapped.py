@@ -21,13 +21,12 @@ from ..exporters import Plant
 from ..exporters.textures import bake_textures, split_by_aspect
 from ..geometry.mesh import tessellate
 from ..geometry.skeleton import Skeleton
-from ..geometry.skin import skin_skeleton
 from ..gl.context import gl_context
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
-from ..pipeline import load_skeleton
 from ..settings import RaycastSettings
-from .side_by_side import gallery_camera
+from .arguments import view_options
+from .side_by_side import model_view
 
 __all__ = ["main", "normal_mapped"]
 
@@ -71,13 +70,9 @@ def main(argv=None) -> None:
     parser.add_argument("output")
     parser.add_argument("--level", type=int, default=2, help="GS subdivision level (default 2)")
     parser.add_argument("--aspect-step", type=float, default=None, help="normal maps per aspect bucket (ratio)")
-    parser.add_argument("--zoom", type=float, default=1.0, help="eye distance factor (< 1: closer)")
-    parser.add_argument("--raise", dest="lift", type=float, default=0.0,
-                        help="raise the target by this fraction of the model's extent")
-    parser.add_argument("--size", type=int, nargs=2, default=(400, 400))
+    view_options(parser)
     args = parser.parse_args(argv)
-    frusta = skin_skeleton(load_skeleton(args.model))
-    camera = gallery_camera(frusta, *args.size, zoom=args.zoom, lift=args.lift)
+    frusta, camera = model_view(args)
     Image.fromarray(normal_mapped(frusta, camera, level=args.level, aspect_step=args.aspect_step)).save(args.output)
     print(f"wrote {args.output}")
 

@@ -23,8 +23,9 @@ from ..gl.raycast import Raycaster
 from ..gl.records import rc_buffer_bytes
 from ..pipeline import load_skeleton
 from ..settings import RaycastSettings
+from .arguments import view_options
 
-__all__ = ["side_by_side", "gallery_camera", "main"]
+__all__ = ["side_by_side", "gallery_camera", "model_view", "main"]
 
 #: The direction the gallery camera looks from (as ``Camera.auto``'s ``direction``).
 GALLERY_DIRECTION = (0.3, 0.1, 1.0)
@@ -71,6 +72,13 @@ def gallery_camera(frusta, width: int, height: int, zoom: float = 1.0, lift: flo
     return Camera(tuple(eye), tuple(target), (0.0, 1.0, 0.0), full.fov_y, width, height)
 
 
+def model_view(args):
+    """(frusta, camera) of ``args.model`` skinned and framed by :func:`gallery_camera` with
+    the options of :func:`~plantgen.benchmarks.arguments.view_options`."""
+    frusta = skin_skeleton(load_skeleton(args.model))
+    return frusta, gallery_camera(frusta, *args.size, zoom=args.zoom, lift=args.lift)
+
+
 def main(argv=None) -> None:
     """``python -m plantgen.benchmarks.side_by_side MODEL OUT.png``: the RC+R | GS | GS+R gallery image."""
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
@@ -78,13 +86,9 @@ def main(argv=None) -> None:
     parser.add_argument("output")
     parser.add_argument("--gs", type=int, default=2, help="GS subdivision level")
     parser.add_argument("--gsr", type=int, default=4, help="GS+R subdivision level")
-    parser.add_argument("--zoom", type=float, default=1.0, help="eye distance factor (< 1: closer)")
-    parser.add_argument("--raise", dest="lift", type=float, default=0.0,
-                        help="raise the target by this fraction of the model's extent")
-    parser.add_argument("--size", type=int, nargs=2, default=(400, 400))
+    view_options(parser)
     args = parser.parse_args(argv)
-    frusta = skin_skeleton(load_skeleton(args.model))
-    camera = gallery_camera(frusta, *args.size, zoom=args.zoom, lift=args.lift)
+    frusta, camera = model_view(args)
     image = side_by_side(frusta, camera, gs_level=args.gs, gsr_level=args.gsr,
                          material_names=frusta.material_names)
     Image.fromarray(image).save(args.output)
