@@ -13,7 +13,7 @@ from PIL import Image, ImageColor
 from .errors import PlantgenError
 from .files import write_atomically
 
-__all__ = ["ANIMATION_SUFFIXES", "TRANSPARENT", "RenderedImage", "parse_background", "write_png",
+__all__ = ["ANIMATION_SUFFIXES", "TRANSPARENT", "RenderedImage", "parse_background", "write_png", "png_bytes",
            "write_animation"]
 
 #: The background value of a transparent image: (r, g, b, a) with a = 0.
@@ -84,6 +84,14 @@ ANIMATION_SUFFIXES = (".gif", ".webp")
 def write_png(path, color: np.ndarray) -> Path:
     """Write (h, w, 3) or (h, w, 4) uint8 ``color`` as a PNG at ``path``."""
     return write_atomically(path, lambda p: Image.fromarray(color).save(p, format="PNG"))
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """The bytes of a PNG of ``image``: (h, w) grey, (h, w, 3) or (h, w, 4) uint8, row 0 at
+    the top (an exporter's texture, embedded in a file or written beside it)."""
+    out = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).save(out, format="PNG")
+    return out.getvalue()
 
 
 def write_animation(path, frames, fps: float) -> Path:

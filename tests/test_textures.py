@@ -10,13 +10,14 @@ import io
 import numpy as np
 import pytest
 
-from plantgen.exporters.textures import bake_textures, png_bytes, texture_image
+from plantgen.exporters.textures import bake_textures, texture_image
 from plantgen.geometry import relief
 from plantgen.geometry import textures as tx
 from plantgen.geometry.materials import material_palette
 from plantgen.geometry.mesh import columns_around, generator_points, tessellate
 from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
+from plantgen.images import png_bytes
 
 
 def _cylinder(radius=0.5, length=2.0, material="cactus"):
@@ -158,7 +159,8 @@ def test_bake_textures_by_material_name():
 
 
 def test_png_bytes_read_back_by_pillow():
-    pil = pytest.importorskip("PIL.Image")
+    from PIL import Image as pil
+
     rng = np.random.default_rng(3)
     for image in (rng.integers(0, 256, (5, 7), dtype=np.uint8), rng.integers(0, 256, (4, 3, 3), dtype=np.uint8)):
         back = np.asarray(pil.open(io.BytesIO(png_bytes(image))))

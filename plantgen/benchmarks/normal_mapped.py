@@ -15,7 +15,7 @@ import argparse
 from dataclasses import replace
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image
 
 from ..exporters import Plant
 from ..exporters.textures import bake_textures, split_by_aspect
@@ -26,7 +26,7 @@ from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
 from ..settings import RaycastSettings
 from .arguments import view_options
-from .side_by_side import model_view
+from .side_by_side import labelled_panels, model_view
 
 __all__ = ["main", "normal_mapped"]
 
@@ -54,13 +54,7 @@ def normal_mapped(frusta, camera, *, level: int = 2, aspect_step: float | None =
     panels = [(rc.color, f"RC+R: {len(frusta.length):,} frusta"),
               (gs_n.color, f"GS+N m={level}: {len(mesh.faces):,} triangles, {maps} normal map{'s' * (maps > 1)}"),
               (gs.color, f"GS m={level}: no normal map")]
-    image = Image.fromarray(np.concatenate([p[0][..., :3] for p in panels], axis=1))
-    draw = ImageDraw.Draw(image)
-    for i, (_, label) in enumerate(panels):
-        x = i * camera.width + 4
-        draw.rectangle(draw.textbbox((x, 3), label), fill=(255, 255, 255))
-        draw.text((x, 3), label, fill=(0, 0, 0))
-    return np.asarray(image)
+    return labelled_panels(panels, camera.width)
 
 
 def main(argv=None) -> None:

@@ -25,7 +25,7 @@ from ..pipeline import load_skeleton
 from ..settings import RaycastSettings
 from .arguments import view_options
 
-__all__ = ["side_by_side", "gallery_camera", "model_view", "main"]
+__all__ = ["side_by_side", "labelled_panels", "gallery_camera", "model_view", "main"]
 
 #: The direction the gallery camera looks from (as ``Camera.auto``'s ``direction``).
 GALLERY_DIRECTION = (0.3, 0.1, 1.0)
@@ -53,10 +53,16 @@ def side_by_side(frusta, camera: Camera, *, gs_level: int = 2, gsr_level: int = 
                          f"{gs_buffer_bytes(gs_mesh):,} B"),
               (gsr.color, f"GS+R m={gsr_level}: {len(gsr_mesh.faces):,} triangles, "
                           f"{gs_buffer_bytes(gsr_mesh):,} B")]
-    image = Image.fromarray(np.concatenate([p[0] for p in panels], axis=1))
+    return labelled_panels(panels, camera.width)
+
+
+def labelled_panels(panels, width: int) -> np.ndarray:
+    """(h, k·width, 3) uint8: the images of ``panels`` ((image (h, width, 3 or 4), label),
+    ...) side by side, each labelled in its top-left corner."""
+    image = Image.fromarray(np.concatenate([p[0][..., :3] for p in panels], axis=1))
     draw = ImageDraw.Draw(image)
     for i, (_, label) in enumerate(panels):
-        x = i * camera.width + 4
+        x = i * width + 4
         draw.rectangle(draw.textbbox((x, 3), label), fill=(255, 255, 255))
         draw.text((x, 3), label, fill=(0, 0, 0))
     return np.asarray(image)

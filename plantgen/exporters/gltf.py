@@ -76,6 +76,7 @@ import numpy as np
 from ..files import write_all_atomically, write_atomically
 from ..geometry.frames import similarity_trs, turn_placements
 from ..geometry.textures import mesh_tangents
+from ..images import png_bytes
 from .formats import ExportError
 from .plants import (
     Colours,
@@ -94,7 +95,7 @@ from .plants import (
     material_parts,
 )
 from .sway import JointRig, Timeline, copy_rotations, joint_rig
-from .textures import Textures, png_bytes, png_writes, texture_files, texture_image
+from .textures import Textures, png_writes, texture_files, texture_image
 
 __all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "LOD_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
 

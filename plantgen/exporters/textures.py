@@ -1,6 +1,5 @@
 """The relief's textures in the files: which maps a model's materials get, their PNG bytes,
-and the companion files' names (:func:`bake_textures`, :func:`png_bytes`,
-:func:`texture_files`).
+and the companion files' names (:func:`bake_textures`, :func:`texture_files`).
 
 :func:`bake_textures` bakes, for each material name with relief that the plants' meshes
 use, the maps of :mod:`plantgen.geometry.textures` (base colour, tangent-space normal,
@@ -9,8 +8,8 @@ whose vertices already carry the relief (GS+R, ``displaced``) gets the base colo
 a normal map on top of its tilted normals would count the relief twice, and a height map
 would displace it twice.
 
-PNG is written here, by :func:`png_bytes` (zlib, no filter: the exporters write no images
-through Pillow, a layer rule of pyproject.toml). Orientation: glTF's texture coordinates
+PNG bytes come from :func:`plantgen.images.png_bytes` (Pillow, as every image plantgen
+writes). Orientation: glTF's texture coordinates
 have v = 0 at the image's top row, as plantgen's maps lay out v (row 0 at v = 0), so glTF
 takes the maps as they are; OBJ and USD put v = 0 at the bottom row, so their images are
 flipped upside down, and the normal map's green channel (its "up in the image") negated.
@@ -19,16 +18,15 @@ flipped upside down, and the normal map's green channel (its "up in the image") 
 from __future__ import annotations
 
 import re
-import struct
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..geometry.textures import MaterialTextures, bake_material, mesh_aspects, weighted_median
+from ..images import png_bytes
 
-__all__ = ["KINDS", "Textures", "bake_textures", "bucket_name", "png_bytes", "png_writes", "split_by_aspect",
+__all__ = ["KINDS", "Textures", "bake_textures", "bucket_name", "png_writes", "split_by_aspect",
            "texture_files", "texture_image"]
 
 #: The maps, in the order files list them: base colour (sRGB), normal (linear), height (linear).
@@ -130,23 +128,6 @@ def _split_plant(plant, row_aspect, median: dict, step: float, bases: dict):
     if len(names) == len(plant.mesh.material_names):
         return plant
     return replace(plant, mesh=replace(plant.mesh, material=material, material_names=tuple(names)))
-
-
-def _chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-
-def png_bytes(image: np.ndarray) -> bytes:
-    """A PNG of ``image`` (H, W) grey or (H, W, 3) RGB uint8, row 0 at the top (8 bits a
-    channel, no filter, deflated)."""
-    image = np.ascontiguousarray(image, dtype=np.uint8)
-    height, width = image.shape[:2]
-    colour = 2 if image.ndim == 3 else 0
-    rows = image.reshape(height, -1)
-    raw = np.concatenate([np.zeros((height, 1), np.uint8), rows], axis=1).tobytes()
-    header = struct.pack(">IIBBBBB", width, height, 8, colour, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", zlib.compress(raw, 6)) + \
-        _chunk(b"IEND", b"")
 
 
 def texture_image(textures: MaterialTextures, kind: str, *, v_up: bool = False) -> np.ndarray:

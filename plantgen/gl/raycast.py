@@ -230,12 +230,7 @@ class Raycaster(OffscreenRenderer):
                 ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
                 ctx.front_face = "ccw"
                 ctx.cull_face = "front"   # back faces: an eye inside a pyramid still sees it
-            if plan is None:
-                render(vaos[0], n)
-                return
-            for vao, copies in zip(vaos, plan, strict=True):
-                draw_copies(program, vao, copies, render)
-            set_uniforms(program, **IDENTITY_PLACEMENT)
+            _draw_rows(program, vaos, plan, render, n)
         return draw, vaos, (n if plan is None else sum(c.rows for c in plan))
 
     def _light_pass(self, frusta, caster, lighting: FrameLighting, settings: RaycastSettings,
@@ -303,13 +298,20 @@ class Raycaster(OffscreenRenderer):
             ctx.enable(ctx.CULL_FACE)
             ctx.front_face = "ccw"
             ctx.cull_face = "front"
-            if plan is None:
-                render(vaos[0], n)
-                return
-            for vao, copies in zip(vaos, plan, strict=True):
-                draw_copies(caster, vao, copies, render)
-            set_uniforms(caster, **IDENTITY_PLACEMENT)
+            _draw_rows(caster, vaos, plan, render, n)
         return [draw], [*vaos, own_buffer]
+
+
+def _draw_rows(program, vaos, plan, render, n: int) -> None:
+    """Draw the rows, the eye's or the light's: all ``n`` from one vertex array (``plan``
+    None), or a placed scene plant by plant and copy by copy (each copy's placement set in
+    ``program``, the identity again after), ``render(vao, count)`` drawing ``count`` rows."""
+    if plan is None:
+        render(vaos[0], n)
+        return
+    for vao, copies in zip(vaos, plan, strict=True):
+        draw_copies(program, vao, copies, render)
+    set_uniforms(program, **IDENTITY_PLACEMENT)
 
 
 _default_raycaster: Raycaster | None = None
