@@ -9,7 +9,7 @@ from _cli import run_cli
 
 from plantgen.scanfiles import read_points
 
-pytest.importorskip("laspy")
+pytest.importorskip("laspy", reason="laspy (plantgen[scan]) is not installed")
 
 
 def test_help_names_the_knobs():

@@ -113,7 +113,7 @@ def test_a_still_scene_writes_no_animation(breeze, tmp_path):
         doc, _ = glb_json(tmp_path / "still.glb")
         assert "animations" not in doc and "skins" not in doc
         assert not any("JOINTS_0" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
-    pytest.importorskip("pxr")
+    pytest.importorskip("pxr", reason="usd-core (plantgen[usd]) is not installed")
     from pxr import Usd
 
     export_model(still, tmp_path / "still.usda")
@@ -253,7 +253,7 @@ def test_usd_skel_skins_the_sway_as_plantgen_poses_it(source, suffix, up, breeze
     span the loop, UsdSkel bakes the skinning (UsdSkel.BakeSkinning) and every point of
     every copy's Mesh and Leaves at three times lies within 1e-3 of the copy's height of
     plantgen's pose (z-up too)."""
-    pytest.importorskip("pxr")
+    pytest.importorskip("pxr", reason="usd-core (plantgen[usd]) is not installed")
     from pxr import Usd, UsdGeom, UsdSkel
 
     path = breeze if source == "breeze" else source

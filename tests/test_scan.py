@@ -29,7 +29,7 @@ from plantgen.geometry.topology import branches
 from plantgen.limits import LimitError, Limits
 from plantgen.pipeline import grow_file, skin_model
 
-laspy = pytest.importorskip("laspy")
+laspy = pytest.importorskip("laspy", reason="laspy (plantgen[scan]) is not installed")
 
 
 def column(x=0.0, z=0.0, h=3.0, r1=0.3, r2=0.2) -> Skeleton:

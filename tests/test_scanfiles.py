@@ -23,7 +23,7 @@ from plantgen.scanfiles import (
     write_points,
 )
 
-laspy = pytest.importorskip("laspy")
+laspy = pytest.importorskip("laspy", reason="laspy (plantgen[scan]) is not installed")
 
 Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 

@@ -15,13 +15,12 @@ import numpy as np
 import pytest
 from _cli import run_cli
 from _node import assert_khronos_valid, khronos_issues, needs_node, three_js_materials
+from PIL import Image
 
 from plantgen.exporters import ExportError
 from plantgen.exporters.textures import texture_image
 from plantgen.geometry.textures import bake_material
 from plantgen.pipeline import export_model
-
-Image = pytest.importorskip("PIL.Image", reason="Pillow reads the PNGs back")
 
 
 def _glb(path: Path) -> tuple[dict, bytes]:
@@ -100,7 +99,8 @@ def test_relief_meshes_get_the_base_colour_only_and_no_textures_means_none(tmp_p
 
 
 def test_obj_mtl_names_its_maps_and_trimesh_reads_them(tmp_path):
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
+
     export_model("well", tmp_path / "well.obj")
     mtl = (tmp_path / "well.mtl").read_text()
     block = mtl.split("newmtl stone")[1].split("newmtl")[0]
@@ -124,7 +124,7 @@ def test_obj_mtl_names_its_maps_and_trimesh_reads_them(tmp_path):
 
 
 def test_meshio_reads_the_textured_obj(tmp_path):
-    meshio = pytest.importorskip("meshio")
+    meshio = pytest.importorskip("meshio", reason="meshio is in the test extra; install '.[test]'")
     summary = export_model("saguaro", tmp_path / "s.obj")
     mesh = meshio.read(tmp_path / "s.obj")
     assert len(mesh.points) == summary["vertices"]
