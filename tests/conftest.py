@@ -48,6 +48,22 @@ def gl_ctx():
 
 
 @pytest.fixture(scope="session")
+def blender():
+    """The path of Blender's executable, for the import tests (its glTF importer is a
+    Blender add-on, run with ``blender --background``); skipped, saying so, where Blender
+    is not installed, and a failure with PLANTGEN_REQUIRE_BLENDER=1 (CI installs it)."""
+    import shutil
+
+    path = shutil.which("blender")
+    if path is None:
+        reason = "Blender is not installed: its glTF importer cannot be tried here"
+        if os.environ.get("PLANTGEN_REQUIRE_BLENDER") == "1":
+            pytest.fail(reason)
+        pytest.skip(reason)
+    return path
+
+
+@pytest.fixture(scope="session")
 def x_display():
     """A virtual X display (Xvfb) for the viewer's window tests; skipped with the reason
     when Xvfb, xdotool or the view extra is missing (a failure with PLANTGEN_REQUIRE_VIEWER=1)."""

@@ -8,7 +8,6 @@ within 1e-3 of the copy's height. A still scene writes no animation."""
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import subprocess
 
 import numpy as np
@@ -341,14 +340,12 @@ print('ARMATURES', len(armatures), 'ACTIONS', len(actions),
 """
 
 
-@pytest.mark.skipif(shutil.which("blender") is None, reason="Blender is not installed: its glTF importer is a "
-                    "Blender add-on, run in `blender --background`")
-def test_blender_imports_the_swaying_cacti(tmp_path):
+def test_blender_imports_the_swaying_cacti(blender, tmp_path):
     """Blender's glTF importer makes armatures of the skins and an action of the sway."""
     export_model("dancing_cacti", tmp_path / "d.glb", level=0)
     script = tmp_path / "import.py"
     script.write_text(BLENDER_IMPORT)
-    done = subprocess.run(["blender", "--background", "--factory-startup", "--python", str(script), "--",
+    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script), "--",
                            str(tmp_path / "d.glb")], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     line = next(x for x in done.stdout.splitlines() if x.startswith("ARMATURES"))

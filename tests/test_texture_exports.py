@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import io
 import json
-import shutil
 import struct
 import subprocess
 from pathlib import Path
@@ -167,23 +166,50 @@ def test_the_command_reports_the_texture_sizes(tmp_path):
     assert code == 0 and "textures of cactus: 256x256 (base colour, normal, height" in out
 
 
-def test_blender_imports_the_textured_glb(tmp_path):
-    blender = shutil.which("blender")
-    if blender is None:
-        pytest.skip("Blender is not installed: its glTF importer cannot be tried here")
-    export_model("saguaro", tmp_path / "s.glb")
+def _blender_result(blender, script_text: str, tmp_path, *args) -> dict:
+    """Run ``script_text`` in ``blender --background`` and return the JSON it printed after
+    ``RESULT``."""
     script = tmp_path / "check.py"
-    script.write_text(
-        "import bpy, json, sys\n"
-        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
-        f"bpy.ops.import_scene.gltf(filepath={str(tmp_path / 's.glb')!r})\n"
-        "out = {m.name: sorted(n.type for n in m.node_tree.nodes) for m in bpy.data.materials if m.use_nodes}\n"
-        "print('RESULT' + json.dumps(out))\n")
-    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script)],
+    script.write_text(script_text)
+    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script), "--", *args],
                           capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
     line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
-    nodes = json.loads(line[len("RESULT"):])["cactus"]
-    assert "NORMAL_MAP" in nodes and nodes.count("TEX_IMAGE") >= 2
+    return json.loads(line[len("RESULT"):])
+
+
+BLENDER_MATERIALS = """
+import bpy, json, sys
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
+out = {}
+for m in bpy.data.materials:
+    if not m.use_nodes:
+        continue
+    links = [(l.from_node.type, l.to_node.type, l.to_socket.name) for l in m.node_tree.links]
+    images = [n.image.size[:] for n in m.node_tree.nodes if n.type == 'TEX_IMAGE' and n.image]
+    out[m.name] = {"links": links, "images": images}
+objects = sorted(o.type for o in bpy.data.objects)
+print('RESULT' + json.dumps({"materials": out, "objects": objects}))
+"""
+
+
+def test_blender_imports_the_textured_glb(blender, tmp_path):
+    """In Blender the baked maps arrive as images linked to the material: the base colour
+    into the shader's Base Color, the normal map through a Normal Map node."""
+    export_model("saguaro", tmp_path / "s.glb")
+    cactus = _blender_result(blender, BLENDER_MATERIALS, tmp_path, str(tmp_path / "s.glb"))["materials"]["cactus"]
+    links = {tuple(x) for x in cactus["links"]}
+    assert ("TEX_IMAGE", "BSDF_PRINCIPLED", "Base Color") in links
+    assert ("TEX_IMAGE", "NORMAL_MAP", "Color") in links and ("NORMAL_MAP", "BSDF_PRINCIPLED", "Normal") in links
+    assert all(w > 1 and h > 1 for w, h in cactus["images"])
+
+
+def test_blender_imports_a_scene_whole(blender, tmp_path):
+    """A scene's glb brings its camera and its sun into Blender beside the plants."""
+    export_model("desert", tmp_path / "d.glb")
+    objects = _blender_result(blender, BLENDER_MATERIALS, tmp_path, str(tmp_path / "d.glb"))["objects"]
+    assert objects.count("CAMERA") == 1 and objects.count("LIGHT") == 1 and objects.count("MESH") >= 2
 
 
 def _leaf_colours(doc: dict, blob: bytes) -> np.ndarray:
