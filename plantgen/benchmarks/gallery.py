@@ -83,6 +83,10 @@ def entries() -> list[Entry]:
     out.append(Entry("rc_gsn_gs_well", (
         "python", "-m", "plantgen.benchmarks.normal_mapped", "well", "{out}/rc_gsn_gs_well.png", "--zoom", "0.6",
         "--aspect-step", "2", "--size", "{width}", "{height}"), ("rc_gsn_gs_well.png",), (400, 400)))
+    # the exported glb rendered by Blender beside RC+R (needs Blender)
+    out += [Entry(f"blender_{m}", ("python", "-m", "plantgen.benchmarks.in_blender", m, f"{{out}}/blender_{m}.png",
+                                   "--size", "{width}", "{height}"), (f"blender_{m}.png",), (512, 384))
+            for m in ("well", "saguaro")]
     out.append(Entry("skeletons", ("python", "-m", "plantgen.benchmarks.draw_skeletons", "{out}/skeletons"),
                      tuple(f"skeletons/{p.stem}.png" for p in shipped_model_paths())))
     out.append(Entry("viewer", (
