@@ -16,7 +16,12 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
 * ``secant``: the relief caster now, the default (``shaders/light_march.glsl``: (u, v)
   interpolated along the ray, one texel fetch a height, regula falsi to half a texel),
   and the same with each accuracy knob (``--shadow-march-density``,
-  ``--shadow-march-precision``) moved, its error beside its time.
+  ``--shadow-march-precision``) moved, its error beside its time;
+* ``GS+R mesh m=5``, ``m=6``: what an engine would do instead, the relief tessellated and
+  displaced (GS+R at level m, :func:`plantgen.geometry.mesh.tessellate`, built once and
+  not timed) and rasterised into the map by plantgen's rasteriser (``raster.glsl``'s
+  SHADOW_PASS): one more way of casting the relief, measured by the same clock and the
+  same reference (its map drawn over the same window: the frusta's box).
 
 Error: the light's rays through ``--rays`` texels picked at random where any caster drew
 (and two texels around) are cast by :func:`plantgen.geometry.reference.intersect_frusta`
@@ -41,9 +46,12 @@ import numpy as np
 
 from .._resources import grammars_dir
 from ..files import read_yaml
+from ..geometry.mesh import tessellate, triangle_count
 from ..geometry.reference import intersect_frusta
 from ..gl.context import renderer_name
+from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
+from ..gl.records import rows_box
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from ..table1.models import BenchModel, load_model
 from .arguments import image_size, report
@@ -51,6 +59,11 @@ from .arguments import image_size, report
 #: The float64 reference's relief samples a row (its map of the relief caster is the truth
 #: the casters are measured against).
 REFERENCE_SAMPLES = 2048
+
+#: The most triangles a mesh caster's mesh may have (a scene of many rows is not drawn so:
+#: each row is 16·4^m triangles at level m; the dancing cacti's 2,151 rows at m = 5 would
+#: be 35 million).
+MESH_CASTER_TRIANGLES = 2_000_000
 
 #: The frame of ``--cpu`` timings: so small that a render's CPU time is its light pass's.
 CPU_FRAME = (16, 12)
@@ -65,6 +78,7 @@ class Caster:
     label: str
     settings: RaycastSettings
     shadows: ShadowSettings
+    mesh_level: int | None = None     # a displaced mesh (GS+R at this level) rasterised instead
 
 
 _MAP = ShadowSettings(cache=False)
@@ -79,6 +93,8 @@ CASTERS = (
     Caster("secant, density 1", _RELIEF, replace(_MAP, march_density=1.0)),
     Caster("secant, precision 0.25", _RELIEF, replace(_MAP, march_precision=0.25)),
     Caster("secant, precision 1", _RELIEF, replace(_MAP, march_precision=1.0)),
+    Caster("GS+R mesh m=5", _RELIEF, _MAP, mesh_level=5),
+    Caster("GS+R mesh m=6", _RELIEF, _MAP, mesh_level=6),
 )
 
 
@@ -95,31 +111,86 @@ def shadowed_scenes() -> list[str]:
     return names
 
 
-def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:
+class _Meshes:
+    """The displaced meshes of the mesh casters, tessellated once per scene and level, and
+    the rasteriser that draws them."""
+
+    def __init__(self, model: BenchModel):
+        self.model, self.raster, self._meshes = model, None, {}
+
+    def render(self, c: Caster, *, surroundings: bool = True, shadows: bool = True):
+        """Rasterise the scene's level-``c.mesh_level`` GS+R mesh with ``c.shadows`` (none
+        without ``shadows``; its ground and leaves with ``surroundings``; the map's window
+        over the frusta's box)."""
+        if self.raster is None:
+            self.raster = RasterRenderer()
+        mesh = self._meshes.setdefault(c.mesh_level, tessellate(self.model.frusta, c.mesh_level, relief=True))
+        m = self.model
+        return self.raster.render(mesh, m.frusta, m.camera, material_names=m.names, light_dir=m.light_dir,
+                                  ground=m.ground if surroundings else None, shadows=c.shadows if shadows else None,
+                                  leaves=m.leaves if surroundings else None, shadow_box=rows_box(m.frusta))
+
+    def fits(self, c: Caster) -> bool:
+        """Whether ``c`` draws here: a ray caster, or a mesh caster whose mesh stays within
+        :data:`MESH_CASTER_TRIANGLES`."""
+        return c.mesh_level is None or self.triangles(c.mesh_level) <= MESH_CASTER_TRIANGLES
+
+    def triangles(self, level: int) -> int:
+        """The level's mesh's triangles (counted, not built)."""
+        return triangle_count(self.model.frusta, level)
+
+    def label(self, c: Caster) -> str:
+        if c.mesh_level is None:
+            return c.label
+        n = self.triangles(c.mesh_level)
+        return f"{c.label} ({n:,} triangles{'' if self.fits(c) else ': too many, not drawn'})"
+
+
+def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False,
+                 meshes: _Meshes | None = None) -> dict:
     """Median shadow-pass ms of each caster in the scene's frame, timed in alternation after
     one warm-up each: the pass's wall ms, or with ``cpu`` the whole render's CPU ms of this
-    process (:data:`CPU_FRAME`)."""
-    def render(c: Caster):
+    process (:data:`CPU_FRAME`). A mesh caster's eye pass transforms every vertex of its
+    mesh however small the frame, so with ``cpu`` its median frame without shadows (timed
+    in the same alternation) is taken off."""
+    meshes = meshes or _Meshes(model)
+    skipped = [c for c in casters if not meshes.fits(c)]
+    casters = [c for c in casters if meshes.fits(c)]
+
+    def render(c: Caster, shadows: bool = True):
         t0 = time.process_time()
-        result = caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, model.ground,
-                               shadows=c.shadows, leaves=model.leaves)
+        if c.mesh_level is not None:
+            result = meshes.render(c, shadows=shadows)
+        else:
+            result = caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir,
+                                   model.ground, shadows=c.shadows, leaves=model.leaves)
         return (time.process_time() - t0) * 1e3 if cpu else result.stats.shadow_ms
-    for c in casters:
-        render(c)
-    samples: dict = {c.label: [] for c in casters}
+    runs = [(c.label, c, True) for c in casters]
+    runs += [(c.label + " (eye)", c, False) for c in casters if cpu and c.mesh_level is not None]
+    for _, c, shadows in runs:
+        render(c, shadows)
+    samples: dict = {label: [] for label, _, _ in runs}
     for _ in range(frames):
-        for c in casters:
-            samples[c.label].append(render(c))
-    return {k: statistics.median(v) for k, v in samples.items()}
+        for label, c, shadows in runs:
+            samples[label].append(render(c, shadows))
+    medians = {k: statistics.median(v) for k, v in samples.items()}
+    return {**{c.label: medians[c.label] - medians.get(c.label + " (eye)", 0.0) for c in casters},
+            **{c.label: float("nan") for c in skipped}}
 
 
-def _maps(caster: Raycaster, model: BenchModel, casters) -> tuple[dict, object]:
+def _maps(caster: Raycaster, model: BenchModel, casters, meshes: _Meshes) -> tuple[dict, object]:
     """Each caster's light depth map of the frusta alone (no ground, no leaves), and the
-    light's window (relative to the eye)."""
+    light's window (relative to the eye; the frusta's box, the mesh casters' too)."""
     maps = {}
     for c in casters:
-        caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, shadows=c.shadows)
-        maps[c.label] = caster.shadow_depths().astype(np.float64)
+        if not meshes.fits(c):
+            continue
+        if c.mesh_level is not None:
+            meshes.render(c, surroundings=False)
+            maps[c.label] = meshes.raster.shadow_depths().astype(np.float64)
+        else:
+            caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, shadows=c.shadows)
+            maps[c.label] = caster.shadow_depths().astype(np.float64)
     return maps, caster.last_light_window
 
 
@@ -163,13 +234,16 @@ def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster:
     """One row per caster: shadow-pass ms (with ``cpu``: CPU ms, :data:`CPU_FRAME`), its
     ratio to the plain pass's and the errors."""
     model = load_model(name, CPU_FRAME if cpu else size)
-    ms = time_casters(caster, model, casters, frames, cpu)
-    maps, window = _maps(caster, model, casters)
+    meshes = _Meshes(model)
+    ms = time_casters(caster, model, casters, frames, cpu, meshes)
+    maps, window = _maps(caster, model, casters, meshes)
     reference = _reference(model, maps, window, rays, samples)
     plain, before = ms[casters[0].label], ms.get("bisect")
-    return [{"scene": model.name, "caster": c.label, "shadow_ms": ms[c.label], "over_plain": ms[c.label] / plain,
+    missing = dict.fromkeys(("coverage", "half_texel", "two_texels", "median_texels"), float("nan"))
+    return [{"scene": model.name, "caster": meshes.label(c),
+             "shadow_ms": ms[c.label], "over_plain": ms[c.label] / plain,
              "over_bisect": ms[c.label] / before if before else float("nan"),
-             **_errors(maps[c.label], reference, window)} for c in casters]
+             **(_errors(maps[c.label], reference, window) if c.label in maps else missing)} for c in casters]
 
 
 def markdown(rows: list[dict], size, frames: int, rays: int, samples: int, cpu: bool = False) -> str:
@@ -183,9 +257,13 @@ def markdown(rows: list[dict], size, frames: int, rays: int, samples: int, cpu: 
              "> ½ and > 2 texels: depth off by more (where both hit); median in texels.", "",
              "| scene | caster | shadow ms | ÷ plain | ÷ bisect | coverage | > ½ texel | > 2 texels | median |",
              "|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['scene']} | {r['caster']} | {r['shadow_ms']:.1f} | {r['over_plain']:.2f}x | "
-              f"{r['over_bisect']:.2f}x | {r['coverage'] * 100:.3f} % | {r['half_texel'] * 100:.3f} % | "
-              f"{r['two_texels'] * 100:.3f} % | {r['median_texels']:.3f} |" for r in rows]
+    def cell(value: float, form: str) -> str:
+        return "—" if np.isnan(value) else form.format(value)
+
+    lines += [f"| {r['scene']} | {r['caster']} | {cell(r['shadow_ms'], '{:.1f}')} | "
+              f"{cell(r['over_plain'], '{:.2f}x')} | {cell(r['over_bisect'], '{:.2f}x')} | "
+              f"{cell(r['coverage'] * 100, '{:.3f} %')} | {cell(r['half_texel'] * 100, '{:.3f} %')} | "
+              f"{cell(r['two_texels'] * 100, '{:.3f} %')} | {cell(r['median_texels'], '{:.3f}')} |" for r in rows]
     return "\n".join(lines) + "\n\n" + summary(rows) + "\n"
 
 
