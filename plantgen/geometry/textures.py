@@ -37,7 +37,7 @@ from .materials import material_palette
 from .vec import any_perpendicular
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
-           "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents",
+           "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "parallax_map",
            "resample_height", "row_aspects", "texture_size", "face_derivatives", "weighted_median"]
 
 #: Largest difference, in units of the 8-bit height, a texture size may leave against the
@@ -256,6 +256,12 @@ def bake_material(name: str, aspects: np.ndarray | None = None, weights: np.ndar
         aspect = weighted_median(aspects, np.ones(len(aspects)) if weights is None else weights)
     return MaterialTextures(name, np.rint(height * 255.0).astype(np.uint8), bake_normal_map(height, shell, aspect),
                             bake_base_colour(source, height), shell, aspect, shell * float(radius), size, base)
+
+
+def parallax_map(baked: MaterialTextures) -> np.ndarray:
+    """(H, W, 4) uint8: the normal map with the relief height w in its alpha, the one texture
+    GS+POM marches and shades with (engines pack a parallax height so)."""
+    return np.concatenate([baked.normal, baked.height[..., None]], axis=2)
 
 
 def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
