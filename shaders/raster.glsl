@@ -159,10 +159,10 @@ vec3 parallax_direction(vec3 to_eye, vec3 dp_dx, vec3 dp_dy) {
     n = dot(n, to_eye) < 0.0 ? -n : n;
     vec3 across_y = cross(dp_dy, n), across_x = cross(n, dp_dx);
     float det = dot(dp_dx, across_y);
-    if (abs(det) < 1e-30) return vec3(0.0, 0.0, 1.0);
+    if (det == 0.0) return vec3(0.0, 0.0, 1.0);
     vec3 grad_u = (across_y * uv_dx.x + across_x * uv_dy.x) / det;
     vec3 grad_v = (across_y * uv_dx.y + across_x * uv_dy.y) / det;
-    float cos_view = max(dot(n, to_eye), 1e-3);
+    float cos_view = max(dot(n, to_eye), TOL_PARALLAX_GRAZING_COS);
     return vec3(-vec2(dot(grad_u, to_eye), dot(grad_v, to_eye)) / cos_view, cos_view);
 }
 

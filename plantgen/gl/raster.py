@@ -43,7 +43,7 @@ from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "normal_map_texture",
-           "normal_map_bytes",
+           "normal_map_bytes", "PARALLAX_SHELL_BYTES",
            "row_data"]
 
 
@@ -433,6 +433,8 @@ def _tangent_buffer(ctx, mesh: TessellatedMesh, program):
 NORMAL_MAP_UNIT = 2
 #: The storage binding of GS+POM's row shells (0 rows, 1 caps' rows, 2 work counts, 3 poses).
 PARALLAX_SHELL_BINDING = 4
+#: GPU bytes of GS+POM's shell thickness of one row (float32).
+PARALLAX_SHELL_BYTES = 4
 
 
 def _normal_layers(names, normal_maps) -> tuple[list, tuple]:
