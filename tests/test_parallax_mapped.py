@@ -9,13 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from test_normal_mapped import LENGTH, RADIUS, _bands, _camera, _frustum
 
 from plantgen.geometry import textures as tx
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import outer_shell_mesh, tessellate
 from plantgen.settings import ParallaxSettings, RaycastSettings
-
-from test_normal_mapped import LENGTH, RADIUS, _bands, _camera, _frustum
 
 LEVEL = 3
 
@@ -43,8 +42,8 @@ class _Renders:
     def gs_n(self, camera):
         return self.raster.render(self.smooth, self.frusta, camera, normal_maps={self.name: self.baked.normal})
 
-    def gs_pom(self, camera, parallax=ParallaxSettings()):
-        return self.raster.render(self.outer, self.frusta, camera, parallax=parallax,
+    def gs_pom(self, camera, parallax=None):
+        return self.raster.render(self.outer, self.frusta, camera, parallax=parallax or ParallaxSettings(),
                                   normal_maps={self.name: tx.parallax_map(self.baked)})
 
     def release(self):

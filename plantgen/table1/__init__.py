@@ -77,5 +77,6 @@ __all__ = ["BenchOptions", "PAPER_TABLE1", "PAPER_MEMORY_RATIO", "TABLE1_MODELS"
            "RELIEF_ERROR", "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",
            "ssim", "require_skimage", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
            "matched_level", "quality_bound", "pareto_front", "eval_camera", "match_notes",
-           "Sweep", "RELIEF_SWEEPS", "relief_configs", "Method", "METHODS", "PARALLAX_SWEEPS", "LevelMatch", "walk_levels",
+           "Sweep", "RELIEF_SWEEPS", "relief_configs", "Method", "METHODS",
+           "PARALLAX_SWEEPS", "LevelMatch", "walk_levels",
            "choose_relief_config", "summarise", "summary_lines", "geometric_mean"]

@@ -230,7 +230,7 @@ def _memory(model: BenchModel, table: _TableChoice, curve) -> dict:
     rc_bytes = rc_buffer_bytes(len(model.frusta))
     map_bytes = int(material_height_maps(model.names)[0].nbytes) if model.relief else 0
     out = {"rc_bytes": rc_bytes, "relief_map_bytes": map_bytes, "rcr_bytes": rc_bytes + map_bytes}
-    for short, against in MATCHED_AGAINST.items():
+    for short in MATCHED_AGAINST:
         out[f"{short}_bytes"] = row(short).get("gpu_bytes")
     for short, against in MATCHED_AGAINST.items():
         mine = out[f"{short}_bytes"]
