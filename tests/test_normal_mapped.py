@@ -1,4 +1,5 @@
-"""GS+N, the relief as a baked normal map on the smooth mesh, against RC+R: on the body of a
+"""GS+N, the relief as a baked normal map on the smooth mesh, against RC+R (GS+POM, the same
+maps marched by parallax occlusion mapping: tests/test_parallax_mapped.py): on the body of a
 relief frustum seen face-on it shades as the ray caster does (float64 normals against the
 reference ray caster, and plantgen's rasteriser against its ray caster); at the
 silhouette it does not (the relief's own edge is RC+R's: a normal map has none)."""
@@ -166,3 +167,17 @@ def test_the_gallery_picture_has_three_panels(gl_ctx):
     image = normal_mapped(frusta, gallery_camera(frusta, 80, 60, zoom=0.6), level=1, aspect_step=2.0)
     assert image.shape == (60, 240, 3)
     assert np.abs(image[:, 80:160].astype(int) - image[:, 160:].astype(int)).mean() > 0.5
+
+
+def test_the_gallery_picture_with_parallax_has_four_panels(gl_ctx):
+    """RC+R | GS+POM | GS+N | GS (``--parallax``): the GS+POM panel differs from GS+N's."""
+    from plantgen.benchmarks.normal_mapped import normal_mapped
+    from plantgen.benchmarks.side_by_side import gallery_camera
+    from plantgen.pipeline import load_skeleton
+    from plantgen.settings import ParallaxSettings
+
+    frusta = skin_skeleton(load_skeleton("well"))
+    image = normal_mapped(frusta, gallery_camera(frusta, 80, 60, zoom=0.6), level=1, aspect_step=2.0,
+                          parallax=ParallaxSettings())
+    assert image.shape == (60, 320, 3)
+    assert np.abs(image[:, 80:160].astype(int) - image[:, 160:240].astype(int)).mean() > 0.5
