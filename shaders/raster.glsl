@@ -33,10 +33,12 @@
 // grazing angles, mixed by the view's cosine as engines do), then pom_refine_steps secant
 // steps between the last layer above the relief and the first below it (1: the classic
 // POM interpolation, no extra sample; 0: steep parallax mapping, the first layer below).
-// The march's frame: per unit of depth the ray moves (u, v) by (∇u·D, ∇v·D)/(N·V), the
-// gradients ∇u, ∇v taken on the facet from screen derivatives (the cotangent frame): the
-// unit vertex tangents cannot carry a segment's own scale of (u, v) to model units (see
-// plantgen.geometry.textures). The fragment is then shaded at the displaced (u, v) with the
+// The march's frame is GS+N's vertex tangent frame (T along +u, B = cross(N, T)·w along -v,
+// N), interpolated, with each vertex's model units per unit of u and of v (uv_scale:
+// plantgen.geometry.textures.mesh_uv_scales), which a unit frame cannot carry (a segment's
+// own aspect): per unit of depth the ray moves (-V·T/|∂P/∂u|, V·B/|∂P/∂v|)/(N·V) in (u, v).
+// (A per-facet frame from screen derivatives jumps at every triangle edge: the march's
+// offset with it, drawing the mesh's edges into the relief.) The fragment is then shaded at the displaced (u, v) with the
 // normal map (in the vertex tangent frame, as GS+N) and the albedo of the height there;
 // out_distance is the distance to the displaced point (what the pixel shows, the bench's
 // geometry); the depth buffer keeps the mesh's depth (gl_FragDepth not written: early depth
@@ -63,6 +65,10 @@ out vec2 v_texcoord;
 #if defined NORMAL_MAP
 in vec4 tangent;                // unit tangent along +u, w: the bitangent's sign (glTF's TANGENT)
 out vec4 v_tangent;
+#endif
+#if defined PARALLAX
+in vec2 uv_scale;               // model units per unit of u and of v here (0: no relief, caps)
+out vec2 v_uv_scale;
 #endif
 
 #if defined SKINNED
@@ -95,6 +101,9 @@ void main() {
     v_texcoord = texcoord;
 #if defined NORMAL_MAP
     v_tangent = tangent;        // (not turned by SKINNED: the normal-mapped path draws still meshes)
+#endif
+#if defined PARALLAX
+    v_uv_scale = uv_scale;
 #endif
     gl_Position = view_projection * vec4(v_position, 1.0);
 }
@@ -138,6 +147,7 @@ vec3 normal_mapped(vec3 n, int material, vec2 uv) {
 #endif
 
 #if defined PARALLAX
+in vec2 v_uv_scale;
 layout(std430, binding = 4) readonly buffer RowShell { float row_shell[]; };  // shell thickness, model units
 uniform int pom_min_layers;
 uniform int pom_max_layers;
@@ -151,19 +161,14 @@ struct ParallaxHit {
     float along;
 };
 
-// The ray's (u, v) per unit of depth below the facet (xy), and the cosine N·V (z), from
-// the facet's cotangent frame: ∇u, ∇v with ∇·dp = d(u, v) for dp in the facet's plane
-// (dp_dx, dp_dy: the screen derivatives of the position, taken in main).
-vec3 parallax_direction(vec3 to_eye, vec3 dp_dx, vec3 dp_dy) {
-    vec3 n = normalize(cross(dp_dx, dp_dy));
-    n = dot(n, to_eye) < 0.0 ? -n : n;
-    vec3 across_y = cross(dp_dy, n), across_x = cross(n, dp_dx);
-    float det = dot(dp_dx, across_y);
-    if (det == 0.0) return vec3(0.0, 0.0, 1.0);
-    vec3 grad_u = (across_y * uv_dx.x + across_x * uv_dy.x) / det;
-    vec3 grad_v = (across_y * uv_dx.y + across_x * uv_dy.y) / det;
+// The ray's (u, v) per unit of depth below the mesh (xy), and the cosine N·V (z), in the
+// interpolated tangent frame around the normal ``n`` (GS+N's: T along +u, B along -v).
+vec3 parallax_direction(vec3 n, vec3 to_eye) {
+    vec3 t = normalize(v_tangent.xyz - n * dot(n, v_tangent.xyz));
+    vec3 b = cross(n, t) * v_tangent.w;
     float cos_view = max(dot(n, to_eye), TOL_PARALLAX_GRAZING_COS);
-    return vec3(-vec2(dot(grad_u, to_eye), dot(grad_v, to_eye)) / cos_view, cos_view);
+    if (v_uv_scale.x <= 0.0 || v_uv_scale.y <= 0.0) return vec3(0.0, 0.0, cos_view);
+    return vec3(vec2(-dot(to_eye, t) / v_uv_scale.x, dot(to_eye, b) / v_uv_scale.y) / cos_view, cos_view);
 }
 
 // How far below the relief surface depth d (a fraction of the shell under the mesh) lies:
@@ -172,8 +177,8 @@ float parallax_gap(vec2 uv, vec2 span, float d, int material) {
     return 1.0 - map_texel(uv + d * span, material).a - d;
 }
 
-ParallaxHit parallax_march(vec3 to_eye, vec3 dp_dx, vec3 dp_dy, float shell, int material) {
-    vec3 dir = parallax_direction(to_eye, dp_dx, dp_dy);
+ParallaxHit parallax_march(vec3 n, vec3 to_eye, float shell, int material) {
+    vec3 dir = parallax_direction(n, to_eye);
     float cos_view = dir.z;
     vec2 span = dir.xy * shell;             // (u, v) the ray crosses from w = 1 down to w = 0
     int layers = int(round(mix(float(pom_max_layers), float(pom_min_layers), cos_view)));
@@ -236,9 +241,6 @@ void main() {
     uv_dx = dFdx(v_texcoord);
     uv_dy = dFdy(v_texcoord);
 #endif
-#if defined PARALLAX
-    vec3 dp_dx = dFdx(v_position), dp_dy = dFdy(v_position);
-#endif
     vec3 normal = normalize(v_normal);
     vec3 to_eye = normalize(-v_position);
     float texel;
@@ -250,7 +252,7 @@ void main() {
 #endif
 #if defined PARALLAX
     if (lateral) {
-        ParallaxHit hit = parallax_march(to_eye, dp_dx, dp_dy, row_shell[row], material);
+        ParallaxHit hit = parallax_march(normal, to_eye, row_shell[row], material);
         normal = normal_mapped(normal, material, hit.uv);
         texel = hit.height;
         along = hit.along;

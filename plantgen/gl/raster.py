@@ -23,7 +23,7 @@ from ..geometry.instances import PlacedMeshes
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
-from ..geometry.textures import mesh_tangents
+from ..geometry.textures import mesh_tangents, mesh_uv_scales
 from ..settings import ParallaxSettings, ShadowSettings
 from .context import gl_context
 from .frame import (
@@ -43,7 +43,7 @@ from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "normal_map_texture",
-           "normal_map_bytes", "PARALLAX_SHELL_BYTES",
+           "normal_map_bytes", "PARALLAX_SHELL_BYTES", "PARALLAX_SCALE_BYTES",
            "row_data"]
 
 
@@ -141,14 +141,17 @@ class RasterRenderer(OffscreenRenderer):
             cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
         tangents = _tangent_buffer(ctx, mesh, program)
-        # GS+POM: each row's shell thickness (model units), 4 B a row
-        shells = ctx.buffer(np.ascontiguousarray(frusta.shell, np.float32).tobytes()) \
-            if "pom_max_layers" in program else None
+        # GS+POM: each row's shell thickness (model units), 4 B a row; each vertex's uv scales, 8 B
+        # (mesh_uv_scales)
+        parallax = "uv_scale" in program
+        shells = ctx.buffer(np.ascontiguousarray(frusta.shell, np.float32).tobytes()) if parallax else None
+        scales = ctx.buffer(mesh_uv_scales(mesh.vertices, mesh.uv, mesh.faces).tobytes()) if parallax else None
         vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")]
                                + ([(bind, "2i", "bind")] if binding is not None else [])
-                               + ([(tangents, "4f", "tangent")] if tangents is not None else []),
+                               + ([(tangents, "4f", "tangent")] if tangents is not None else [])
+                               + ([(scales, "2f", "uv_scale")] if scales is not None else []),
                                index_buffer=ibo, index_element_size=4)
-        extra = tuple(b for b in (tangents, shells) if b is not None)
+        extra = tuple(b for b in (tangents, shells, scales) if b is not None)
         self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind) + extra, vao, origin, shells)
         return vao, origin
 
@@ -435,6 +438,8 @@ NORMAL_MAP_UNIT = 2
 PARALLAX_SHELL_BINDING = 4
 #: GPU bytes of GS+POM's shell thickness of one row (float32).
 PARALLAX_SHELL_BYTES = 4
+#: GPU bytes of GS+POM's uv scales of one vertex (2 float32: |∂P/∂u|, |∂P/∂v|).
+PARALLAX_SCALE_BYTES = 8
 
 
 def _normal_layers(names, normal_maps) -> tuple[list, tuple]:

@@ -42,8 +42,8 @@ For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
    the records; GS: a mesh built once at rest, posed by the vertex shader; the dispatch
    counted in the frame), leaves not relief mapped (their material has no shell);
 7. counts the GPU bytes of each method (memory table; GS+N's and GS+POM's with their
-   tangents and their maps' texture array, mipmaps included, GS+POM's with 4 B a row of
-   shell thickness).
+   tangents and their maps' texture array, mipmaps included, GS+POM's with 8 B a vertex
+   of uv scales and 4 B a row of shell thickness).
 
 The error metric and the quality criterion are documented in :mod:`plantgen.table1.quality`;
 :mod:`plantgen.table1.summary` sums Table 1 up over the models (ratios' geometric means, beside

@@ -75,7 +75,8 @@ METHODS = (
            "the mesh at level m on the relief's outer shell with parallax occlusion mapping (the baked "
            "height marched per pixel in tangent space, then the normal map at the displaced (u, v); the "
            "distance is the displaced point's, the outline the mesh's); its bytes count the tangents, the "
-           "RGBA maps (height in alpha, mipmaps included) and 4 B a row of shell thickness"),
+           "RGBA maps (height in alpha, mipmaps included), 8 B a vertex of uv scales and 4 B a row of shell "
+           "thickness"),
 )
 #: :data:`METHODS` by name (``GS+POM``).
 METHOD_OF = {m.name: m for m in METHODS}

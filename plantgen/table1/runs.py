@@ -20,7 +20,7 @@ from ..geometry.materials import material_height_maps
 from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..gl.context import gl_context, renderer_name
-from ..gl.raster import PARALLAX_SHELL_BYTES, gs_buffer_bytes
+from ..gl.raster import PARALLAX_SCALE_BYTES, PARALLAX_SHELL_BYTES, gs_buffer_bytes
 from ..gl.records import rc_buffer_bytes
 from ..settings import ShadowSettings
 from .configs import (
@@ -107,8 +107,8 @@ class _Meter:
             if cfg.maps is not None:     # GS+N, GS+POM: their tangents and their maps besides
                 row["texture_bytes"] = renderers.texture_bytes(cfg.level, cfg.maps)
                 row["gpu_bytes"] += TANGENT_BYTES * len(mesh.vertices) + row["texture_bytes"]
-            if cfg.parallax is not None:  # GS+POM: the rows' shell thickness
-                row["gpu_bytes"] += PARALLAX_SHELL_BYTES * mesh.n_rows
+            if cfg.parallax is not None:  # GS+POM: the rows' shell thickness, the vertices' uv scales
+                row["gpu_bytes"] += PARALLAX_SHELL_BYTES * mesh.n_rows + PARALLAX_SCALE_BYTES * len(mesh.vertices)
         self.curve.append(row)
         self.results[cfg.key] = res
         renderers.release_raster(cfg.key)
