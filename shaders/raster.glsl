@@ -39,7 +39,8 @@
 // own aspect): per unit of depth the ray moves (-V·T/|∂P/∂u|, V·B/|∂P/∂v|)/(N·V) in (u, v).
 // (A per-facet frame from screen derivatives jumps at every triangle edge: the march's
 // offset with it, drawing the mesh's edges into the relief.) The fragment is then shaded at the displaced (u, v) with the
-// normal map (in the vertex tangent frame, as GS+N) and the albedo of the height there;
+// normal map (in the vertex tangent frame, as GS+N) and the albedo of the height there
+// (the height read at the fragment's own mipmap level, the normal map anisotropically);
 // out_distance is the distance to the displaced point (what the pixel shows, the bench's
 // geometry); the depth buffer keeps the mesh's depth (gl_FragDepth not written: early depth
 // tests stay on, as engines keep them), and shadows are looked up at the mesh's point (the
@@ -171,10 +172,15 @@ vec3 parallax_direction(vec3 n, vec3 to_eye) {
     return vec3(vec2(-dot(to_eye, t) / v_uv_scale.x, dot(to_eye, b) / v_uv_scale.y) / cos_view, cos_view);
 }
 
+// The mipmap level the march reads the height at: the one the texture unit picks for the
+// fragment's own footprint (textureQueryLod, taken in main), read without anisotropic
+// filtering (its scattered taps along a long footprint made the march's depth speckle).
+float march_lod;
+
 // How far below the relief surface depth d (a fraction of the shell under the mesh) lies:
 // > 0 above the relief (the ray still in the air), <= 0 at or below it.
 float parallax_gap(vec2 uv, vec2 span, float d, int material) {
-    return 1.0 - map_texel(uv + d * span, material).a - d;
+    return 1.0 - textureLod(normal_maps, vec3(uv + d * span, float(material)), march_lod).a - d;
 }
 
 ParallaxHit parallax_march(vec3 n, vec3 to_eye, float shell, int material) {
@@ -202,7 +208,7 @@ ParallaxHit parallax_march(vec3 n, vec3 to_eye, float shell, int material) {
     }
     ParallaxHit out_hit;
     out_hit.uv = v_texcoord + hit * span;
-    out_hit.height = map_texel(out_hit.uv, material).a;
+    out_hit.height = textureLod(normal_maps, vec3(out_hit.uv, float(material)), march_lod).a;
     out_hit.along = hit * shell / cos_view;
     return out_hit;
 }
@@ -240,6 +246,9 @@ void main() {
 #if defined NORMAL_MAP
     uv_dx = dFdx(v_texcoord);
     uv_dy = dFdy(v_texcoord);
+#endif
+#if defined PARALLAX
+    march_lod = textureQueryLod(normal_maps, v_texcoord).x;
 #endif
     vec3 normal = normalize(v_normal);
     vec3 to_eye = normalize(-v_position);
