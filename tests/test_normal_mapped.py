@@ -131,7 +131,7 @@ def test_on_the_body_it_shades_like_rc_r_at_the_silhouette_it_does_not(face_on):
 def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, name):
     """plantgen's rasteriser with the baked map (NORMAL_MAP) against its ray caster with
     relief, face-on: on the middle half of the body the colours differ by under 10 grey
-    levels on average (cactus 4.0, stone 7.5: the parallax above), under half what the mesh
+    levels on average (cactus 3.9, stone 8.2: the parallax above), under half what the mesh
     without its map leaves (10.6, 21.3); RC+R covers pixels at the silhouette that GS+N
     does not."""
     from plantgen.gl.raster import RasterRenderer

@@ -471,11 +471,10 @@ def normal_map_texture(ctx, names, normal_maps):
     """RGB8 texture array of the normal maps ((H, W, 3) uint8, glTF convention, by slot
     index or by material name) of the material slots ``names`` (a slot without one: the
     flat (128, 128, 255), and height 255: no relief), every layer at the largest map's
-    size (smaller ones repeated texel by texel), repeating in u and v, trilinear with 16x
-    anisotropic filtering: as an engine samples the exported map (isotropic mipmaps blur a
-    stretched face's map along its short axis: the well's mortar joints). RGBA8 where the
-    maps are (H, W, 4), the alpha the height (GS+POM,
-    :func:`~plantgen.geometry.textures.parallax_map`)."""
+    size (smaller ones repeated texel by texel), repeating in u and v, trilinear: as an
+    engine samples the exported map (without anisotropic filtering: llvmpipe's made GS+POM's
+    gathers 500 times slower and wrong). RGBA8 where the maps are (H, W, 4), the alpha the
+    height (GS+POM, :func:`~plantgen.geometry.textures.parallax_map`)."""
     maps, shape = _normal_layers(names, normal_maps)
     components = _components(maps)
     layers = np.empty((len(names), *shape, components), np.uint8)
@@ -487,7 +486,6 @@ def normal_map_texture(ctx, names, normal_maps):
     tex = ctx.texture_array((shape[1], shape[0], len(names)), components, layers.tobytes(), dtype="f1")
     tex.build_mipmaps()
     tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
-    tex.anisotropy = 16.0
     tex.repeat_x, tex.repeat_y = True, True
     return tex
 
