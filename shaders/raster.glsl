@@ -38,13 +38,14 @@
 // plantgen.geometry.textures.mesh_uv_scales), which a unit frame cannot carry (a segment's
 // own aspect): per unit of depth the ray moves (-V·T/|∂P/∂u|, V·B/|∂P/∂v|)/(N·V) in (u, v).
 // (A per-facet frame from screen derivatives jumps at every triangle edge: the march's
-// offset with it, drawing the mesh's edges into the relief.) The fragment is then shaded at the displaced (u, v) with the
-// normal map (in the vertex tangent frame, as GS+N) and the albedo of the height there
-// (the height read bilinearly at the base level, the normal map trilinear);
-// out_distance is the distance to the displaced point (what the pixel shows, the bench's
-// geometry); the depth buffer keeps the mesh's depth (gl_FragDepth not written: early depth
-// tests stay on, as engines keep them), and shadows are looked up at the mesh's point (the
-// light's map holds the mesh, whose plane is the receiver's).
+// offset with it, drawing the mesh's edges into the relief.) The fragment is then shaded
+// at the displaced (u, v) with the normal map (in the vertex tangent frame, as GS+N) and
+// the albedo of the height there (the height read bilinearly at the base level, the
+// normal map trilinear); out_distance is the distance to the displaced point (what the
+// pixel shows, the bench's geometry); the depth buffer keeps the mesh's depth
+// (gl_FragDepth not written: early depth tests stay on, as engines keep them), and shadows
+// are looked up at the mesh's point (the light's map holds the mesh, whose plane is the
+// receiver's).
 
 #if defined VERTEX_SHADER
 

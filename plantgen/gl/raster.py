@@ -94,7 +94,7 @@ class RasterRenderer(OffscreenRenderer):
 
     def __init__(self, ctx=None):
         super().__init__(ctx)
-        self._uploaded = None  # (mesh id, buffers, vao, origin)
+        self._uploaded = None  # (mesh id, buffers, vao, origin, GS+POM's row shells or None)
         self._placed = None    # (PlacedMeshes, program, [per plant buffers, vao, origin])
         self._normal_tex = None  # (names and maps, texture array) of GS+N and GS+POM
         #: (file, names of the defines switched on) of every program a frame of this renderer used
