@@ -8,27 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_frustum
 
 from plantgen.geometry import relief
 from plantgen.geometry import textures as tx
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import generator_points, tessellate
 from plantgen.geometry.reference import render_reference
-from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
-
-RADIUS, LENGTH = 0.5, 2.0
-
-
-def _frustum(name):
-    skeleton = Skeleton(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, LENGTH, 0.0]]), np.array([RADIUS]),
-                        np.array([RADIUS]), np.array([-1]), np.array([False]), np.zeros(1, int), (name,))
-    return skin_skeleton(skeleton)
-
-
-def _camera(width, height):
-    """Face-on: the eye on the normal through the frustum's middle, far, a narrow view."""
-    return Camera((0.0, LENGTH / 2, 8.0), (0.0, LENGTH / 2, 0.0), (0, 1, 0), 18.0, width, height)
 
 
 def _relief_normals(frusta, name, u, v, radial):
@@ -71,8 +57,8 @@ def _angle(a, b):
 @pytest.fixture(scope="module", params=["cactus", "stone"])
 def face_on(request):
     name = request.param
-    frusta = _frustum(name)
-    camera = _camera(60, 80)
+    frusta = relief_frustum(name)
+    camera = face_on_camera(60, 80)
     rc_r = render_reference(frusta, camera, relief=True)      # RC+R in float64
     smooth = render_reference(frusta, camera)                  # the mesh's surface, exactly
     return name, frusta, camera, rc_r, smooth
@@ -95,13 +81,6 @@ def test_normal_map_gives_the_ray_casters_relief_normal_where_the_mesh_is(face_o
     assert np.median(angle) < 0.3 and angle.mean() < 1.5, (np.median(angle), angle.mean())
 
 
-def _bands(camera, hit):
-    """Each pixel's distance from the frustum's axis on screen, over its half width."""
-    columns = np.where(hit.any(axis=0))[0]
-    centre, half = columns.mean(), (columns.max() - columns.min()) / 2
-    return np.abs(np.arange(camera.width) - centre)[None, :] / half * np.ones((camera.height, 1))
-
-
 def test_on_the_body_it_shades_like_rc_r_at_the_silhouette_it_does_not(face_on):
     """Against RC+R's own hits (on the relief surface, seen through it), the normal-mapped
     smooth surface differs by the parallax a normal map cannot show: on the body's middle
@@ -119,7 +98,7 @@ def test_on_the_body_it_shades_like_rc_r_at_the_silhouette_it_does_not(face_on):
     mapped = _mapped_normals(baked.normal, smooth.u[both], smooth.v[both], smooth.normal[both], points)
     angle = _angle(mapped, exact)
     plain = _angle(smooth.normal[both], exact)
-    off = _bands(camera, both)[both]
+    off = axis_bands(camera, both)[both]
     middle, edge = off < 0.25, off > 0.9
     assert angle[middle].mean() < 6.0, angle[middle].mean()
     assert angle[middle].mean() < 0.4 * plain[middle].mean()
@@ -138,8 +117,8 @@ def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, 
     from plantgen.gl.raycast import Raycaster
     from plantgen.settings import RaycastSettings
 
-    frusta = _frustum(name)
-    camera = _camera(120, 160)
+    frusta = relief_frustum(name)
+    camera = face_on_camera(120, 160)
     rc_r = Raycaster(gl_ctx).render(frusta, camera, RaycastSettings(relief=True), material_names=(name,))
     mesh = tessellate(frusta, 3)
     raster = RasterRenderer(gl_ctx)
@@ -147,7 +126,7 @@ def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, 
     gs = raster.render(mesh, frusta, camera)
     raster.release()
     hit = np.isfinite(rc_r.distance) & np.isfinite(gs_n.distance)
-    body = hit & (_bands(camera, hit) < 0.5)
+    body = hit & (axis_bands(camera, hit) < 0.5)
 
     def mean_difference(image):
         return np.abs(image.color[..., :3].astype(float) - rc_r.color[..., :3].astype(float))[body].mean()

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_frustum
 from click.testing import CliRunner
-from test_normal_mapped import LENGTH, RADIUS, _bands, _camera, _frustum
 
 from plantgen.geometry import textures as tx
 from plantgen.geometry.camera import Camera
@@ -31,7 +31,7 @@ class _Renders:
         from plantgen.gl.raster import RasterRenderer
         from plantgen.gl.raycast import Raycaster
 
-        self.name, self.frusta = name, _frustum(name)
+        self.name, self.frusta = name, relief_frustum(name)
         self.caster, self.raster = Raycaster(ctx), RasterRenderer(ctx)
         self.baked = tx.bake_material(name, np.array([RADIUS / LENGTH]))
         self.smooth, self.outer = tessellate(self.frusta, LEVEL), outer_shell_mesh(self.frusta, LEVEL)
@@ -61,7 +61,7 @@ def renders(request, gl_ctx):
 def _body(camera, *images, within=0.5):
     """Pixels every image covers, within ``within`` of the half width of the axis on screen."""
     hit = np.logical_and.reduce([np.isfinite(i.distance) for i in images])
-    return hit & (_bands(camera, hit) < within)
+    return hit & (axis_bands(camera, hit) < within)
 
 
 def _distance_error(image, reference, where):
@@ -76,7 +76,7 @@ def _colour_difference(image, reference, where):
 def test_the_mesh_sits_on_the_outer_shell():
     """Every lateral vertex of the GS+POM mesh lies at r + shell from the axis: the top of the
     relief, which the march walks down from."""
-    frusta = _frustum("stone")
+    frusta = relief_frustum("stone")
     mesh = outer_shell_mesh(frusta, 2)
     lateral = np.unique(mesh.faces[: mesh.n_rows * 16 * 4 ** 2])
     radial = np.hypot(mesh.vertices[lateral, 0], mesh.vertices[lateral, 2])
@@ -89,7 +89,7 @@ def test_the_uv_scales_are_the_cones_own():
     period's length (the frustum's, v running 0..1); the caps' vertices get 0 (no march)."""
     from plantgen.geometry.textures import mesh_uv_scales
 
-    frusta = _frustum("stone")
+    frusta = relief_frustum("stone")
     mesh = outer_shell_mesh(frusta, LEVEL)
     scales = mesh_uv_scales(mesh.vertices, mesh.uv, mesh.faces)
     lateral = np.zeros(len(mesh.vertices), bool)
@@ -105,7 +105,7 @@ def test_face_on_it_shows_the_relief_where_rc_r_does(renders):
     of it on llvmpipe), where GS+N's smooth mesh is off by most of the shell (0.75, 0.82);
     its colours are closer to RC+R's than GS+N's (cactus 2.1 against 4.2 grey levels, stone
     4.9 against 8.2)."""
-    camera = _camera(120, 160)
+    camera = face_on_camera(120, 160)
     rc_r, gs_n, gs_pom = renders.rc_r(camera), renders.gs_n(camera), renders.gs_pom(camera)
     body = _body(camera, rc_r, gs_n, gs_pom)
     shell = renders.frusta.shell[0]
@@ -128,7 +128,7 @@ def test_the_silhouette_stays_the_meshs(renders):
     only_pom, only_rc = np.count_nonzero(hit_pom & ~hit_rc), np.count_nonzero(hit_rc & ~hit_pom)
     assert only_pom > 3 * max(only_rc, 1), (only_pom, only_rc)
     both = hit_rc & hit_pom
-    bands = _bands(camera, both)
+    bands = axis_bands(camera, both)
     middle, edge = both & (bands < 0.3), both & (bands > 0.9)
     assert _distance_error(gs_pom, rc_r, edge).mean() > 2 * _distance_error(gs_pom, rc_r, middle).mean()
 
@@ -169,7 +169,7 @@ def test_the_variant_is_compiled_only_when_asked_for(gl_ctx):
     from plantgen.gl.raster import RasterRenderer
 
     renders = _Renders(gl_ctx, "cactus")
-    camera = _camera(40, 50)
+    camera = face_on_camera(40, 50)
     plain = RasterRenderer(gl_ctx)
     plain.render(renders.smooth, renders.frusta, camera)
     plain.render(renders.smooth, renders.frusta, camera, normal_maps={"cactus": renders.baked.normal})

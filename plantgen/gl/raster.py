@@ -199,18 +199,11 @@ class RasterRenderer(OffscreenRenderer):
         skinned = isinstance(mesh, SkinnedMesh)
         if skinned and poses is None:
             raise ValueError("a skinned mesh is drawn with its pose buffer (poses=...)")
-        if parallax is not None and normal_maps is None:
-            raise ValueError("parallax occlusion mapping marches the maps' height: give normal_maps=...")
         uploaded, mesh = mesh, (mesh.mesh if skinned else mesh)
         names = tuple(material_names or mesh.material_names)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         shadowed = shadows is not None
-        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
-                   "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned,
-                   "NORMAL_MAP": normal_maps is not None and not skinned,
-                   "PARALLAX": parallax is not None and not skinned}
-        program = build_program(self.ctx, "raster.glsl", defines)
-        self.programs_used.add(("raster.glsl", tuple(sorted(k for k, v in defines.items() if v is True))))
+        program = self._mesh_program(mesh, shadowed, count_work, skinned, normal_maps, parallax)
         t0 = time.perf_counter()
         vao, origin = self.upload(uploaded, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
@@ -241,6 +234,20 @@ class RasterRenderer(OffscreenRenderer):
             level=mesh.level, buffer_bytes=gs_buffer_bytes(uploaded),
             draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work, shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
+
+    def _mesh_program(self, mesh: TessellatedMesh, shadowed: bool, count_work: bool, skinned: bool, normal_maps,
+                      parallax: ParallaxSettings | None):
+        """The raster.glsl variant :meth:`render` draws ``mesh`` with (recorded in
+        :attr:`programs_used`): NORMAL_MAP with ``normal_maps``, PARALLAX with ``parallax``
+        besides (a skinned mesh: neither)."""
+        if parallax is not None and normal_maps is None:
+            raise ValueError("parallax occlusion mapping marches the maps' height: give normal_maps=...")
+        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
+                   "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned,
+                   "NORMAL_MAP": normal_maps is not None and not skinned,
+                   "PARALLAX": parallax is not None and not skinned}
+        self.programs_used.add(("raster.glsl", tuple(sorted(k for k, v in defines.items() if v is True))))
+        return build_program(self.ctx, "raster.glsl", defines)
 
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
                    repeats, tex, mesh: TessellatedMesh, poses=None):
