@@ -311,7 +311,7 @@ def _header_lines(results: dict) -> list[str]:
             "silhouette mismatch against the float64 reference in a "
             f"{o['eval_size'][0]}x{o['eval_size'][1]} window at full angular resolution. "
             f"RC+R config: the fastest RC+R configuration of the curves with err ≤ {relief_error:g} "
-            "('(best)': none reached it, the most accurate is timed). Level m: GS and GS+R go up "
+            "('(best)': none reached it, the most accurate is timed). Level m: the meshes go up "
             f"from m = 0 until err <= target err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, "
             f"{_matched_against_rcr()} vs RC+R at its config) or the next level is over the triangle budget "
             f"({o['max_triangles']:,}, --max-triangles); 'm{UNMATCHED}': not matched, the best "
