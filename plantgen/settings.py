@@ -14,6 +14,8 @@ range, help) from it. A new effect or knob is one field here plus the code that 
 - :class:`ImageSettings`: size, supersampling, background;
 - :class:`MotionSettings`: the time of a still, an animation's frames and rate;
 - :class:`ViewSettings`: the camera file or ``auto``, and the orbit around it;
+- :class:`ParallaxSettings`: GS+POM's parallax occlusion mapping (the rasteriser's march of
+  a baked height map);
 - :class:`LevelSettings`: the levels of detail an export writes (glTF, USD);
 - :class:`KeyframeSettings`: the keyframes of the sway an export writes (glTF, USD);
 - :class:`RenderSettings`: all of them, built from flat keywords by :meth:`RenderSettings.from_options`.
@@ -28,7 +30,7 @@ from .geometry.camera import Orbit
 from .knobs import check_knobs, knob
 
 __all__ = ["EFFECTS", "DEFAULT_SIZE", "LOD_EXPORT_LEVELS",
-           "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings",
+           "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings", "ParallaxSettings",
            "DetailSettings",
            "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "LevelSettings",
            "KeyframeSettings",
@@ -320,6 +322,34 @@ class MeshSettings:
 
     def __post_init__(self):
         check_knobs(self)
+
+
+@dataclass(frozen=True)
+class ParallaxSettings:
+    """GS+POM: parallax occlusion mapping of the mesh on the relief's outer shell
+    (``shaders/raster.glsl``'s PARALLAX). Each fragment walks its view ray down through the
+    shell in ``min_layers`` (face-on) up to ``max_layers`` (grazing) layers of the baked
+    height map, the count mixed by the view's cosine as engines do, then takes
+    ``refine_steps`` secant steps between the last layer above the relief and the first
+    below (1: the classic POM interpolation, no extra sample; 0: steep parallax mapping)."""
+
+    min_layers: int = knob(8, "--pom-min-layers", "GS+POM: height-map layers a face-on ray walks (the fewest).",
+                           kind="int", lo=1, hi=256, metavar="N")
+    max_layers: int = knob(32, "--pom-max-layers", "GS+POM: height-map layers a grazing ray walks (the most; at "
+                           "least --pom-min-layers).", kind="int", lo=1, hi=256, metavar="N")
+    refine_steps: int = knob(1, "--pom-refine-steps", "GS+POM: secant steps after the layers (1: the classic "
+                             "interpolation; 0: steep parallax).", kind="int", lo=0, hi=16, metavar="N")
+
+    def __post_init__(self):
+        check_knobs(self)
+        if self.min_layers > self.max_layers:
+            raise PlantgenError(f"--pom-min-layers ({self.min_layers}) must be at most --pom-max-layers "
+                                f"({self.max_layers})")
+
+    def uniforms(self) -> dict:
+        """The PARALLAX program's uniforms."""
+        return {"pom_min_layers": self.min_layers, "pom_max_layers": self.max_layers,
+                "pom_refine_steps": self.refine_steps}
 
 
 @dataclass(frozen=True)

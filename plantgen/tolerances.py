@@ -208,6 +208,10 @@ class Tolerances:
     """World units (float32, GLSL): floor of the tangent lengths |∂P/∂u| and |∂P/∂v|
     that the relief gradient divides by."""
 
+    parallax_grazing_cos: float = 1e-3
+    """Dimensionless: floor of the view's cosine N·V on a facet in GS+POM's march (GLSL), so
+    a facet seen edge-on marches at most 1/this shell thicknesses along its ray."""
+
     # ------------------------------------------------------------------ framing
     frame_extent: float = 1e-9
     """World units: the smallest extent a camera frames (a model of one point still
@@ -231,7 +235,7 @@ class Tolerances:
 
 #: The fields GLSL programs use, as macros ``TOL_<FIELD>``.
 GLSL_FIELDS = ("facing_min", "generator_rise", "joint_slack", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
-               "recenter_parallel", "shadow_normal", "tangent_floor_f32")
+               "recenter_parallel", "shadow_normal", "tangent_floor_f32", "parallax_grazing_cos")
 
 #: The tolerances of plantgen.
 tol = Tolerances()

@@ -28,6 +28,12 @@ HeightMap height_map(int material) {
     return m;
 }
 
+// The bilinear mix, by the weights w, of a gather's four texels (textureGather's order:
+// (i, j+1), (i+1, j+1), (i+1, j), (i, j)); the raster's PARALLAX reads its maps' height so too.
+float gather_mix(vec4 g, vec2 w) {
+    return mix(mix(g.w, g.z, w.x), mix(g.x, g.y, w.x), w.y);
+}
+
 // Bilinear height at texture coordinates (u, v) of map m.
 float height_in(HeightMap m, vec2 uv) {
     vec2 xy = vec2(fract(uv.x * m.repeat.x), clamp(uv.y * m.repeat.y, 0.0, 1.0)) * m.size - 0.5;
@@ -46,8 +52,7 @@ float height_in(HeightMap m, vec2 uv) {
 #else
     vec4 g = textureGather(height_maps, vec3((cell + 1.0) / m.size, m.layer));
 #endif
-    // gather order: (i, j+1), (i+1, j+1), (i+1, j), (i, j)
-    return mix(mix(g.w, g.z, w.x), mix(g.x, g.y, w.x), w.y);
+    return gather_mix(g, w);
 }
 
 float height_at(int material, vec2 uv) {

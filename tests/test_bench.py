@@ -339,19 +339,19 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     assert [r["model"] for r in rows] == ["saguaro", "well"]
     for r in rows:
         assert r["gl_renderer"] == renderer
-        for key in ("rc_fps", "rcr_fps", "gs_fps", "gsr_fps", "gsn_fps"):
+        for key in ("rc_fps", "rcr_fps", "gs_fps", "gsr_fps", "gsn_fps", "gspom_fps"):
             assert math.isfinite(float(r[key])) and float(r[key]) > 0
     with open(out / "curves.csv") as fh:
         curve = list(csv.DictReader(fh))
     methods = {r["method"] for r in curve}
-    assert methods == {"RC", "RC+R", "GS", "GS+R", "GS+N"}
+    assert methods == {"RC", "RC+R", "GS", "GS+R", "GS+N", "GS+POM"}
     assert any(r["pareto"] == "True" for r in curve)
     assert (out / "images" / "saguaro_reference_relief.png").is_file()
     assert (out / "curves_saguaro.png").is_file()          # matplotlib is in the test extra
     assert (out / "images" / "saguaro_rc_color.png").is_file()
     # the well lists shadows: every method ran the shadow pass and drew the ground
     well = next(m for m in results["models"] if m["model"] == "well")
-    for key in ("rc", "rcr", "gs", "gsr", "gsn"):
+    for key in ("rc", "rcr", "gs", "gsr", "gsn", "gspom"):
         assert well[key]["passes"] == ["shadow", "sky", "ground", "frusta"], (key, well[key])
         assert well[key]["shadow_reused"] > 0, (key, well[key])      # a still scene: its map is kept
     # the ray caster agrees with the float64 reference far better than GS at level 0
@@ -360,28 +360,46 @@ def test_quick_bench_runs_end_to_end(gl_ctx, tmp_path):
     assert sag["rc"]["error"] < 0.01 < gs0["error"]
     for m in results["models"]:
         _check_relief_choice(m, results["options"]["relief_error"])
-        for short in ("gs", "gsr", "gsn"):
+        for short in ("gs", "gsr", "gsn", "gspom"):
             _check_level_walk(m, short, results["options"])
-        _check_gsn(m, curve)
+        _check_mapped(m, curve, "gsn")
+        _check_mapped(m, curve, "gspom")
+        _check_parallax_sweeps(m, results["options"])
     _check_summary(results, (out / "table.md").read_text(), rows)
 
 
-def _check_gsn(m, curve_rows):
-    """GS+N: matched against RC+R's Table 1 configuration like GS+R, in the relief family's
-    curves (and on its Pareto front or not, as any point), and its bytes are its mesh's,
-    its tangents' and its normal maps' (more than GS's mesh at the same level)."""
-    assert m["gsn_match"]["target_key"] == m["rcr_choice"]["key"]
-    assert m["gsn_match"]["target_error"] == pytest.approx(m["rcr_choice"]["error"])
-    rows = [r for r in curve_rows if r["model"] == m["model"] and r["method"] == "GS+N" and r["error"]]
+def _check_mapped(m, curve_rows, short):
+    """GS+N and GS+POM: matched against RC+R's Table 1 configuration like GS+R, in the relief
+    family's curves (and on its Pareto front or not, as any point), and their bytes are
+    their mesh's, their tangents' and their maps' (more than GS's mesh at the same level,
+    with as many triangles)."""
+    spec = table1.METHODS[[mm.short for mm in table1.METHODS].index(short)]
+    assert m[f"{short}_match"]["target_key"] == m["rcr_choice"]["key"]
+    assert m[f"{short}_match"]["target_error"] == pytest.approx(m["rcr_choice"]["error"])
+    rows = [r for r in curve_rows if r["model"] == m["model"] and r["method"] == spec.name and r["error"]]
     assert rows and all(r["pareto"] in ("True", "False") for r in rows)
     assert all(int(r["texture_bytes"]) > 0 for r in rows)
-    memory, key = m["memory"], m["gsn"]["key"]
+    memory, key = m["memory"], m[short]["key"]
     row = next(c for c in m["curve"] if c["key"] == key)
-    assert memory["gsn_bytes"] == row["gpu_bytes"] and memory["normal_map_bytes"] == row["texture_bytes"] > 0
-    gs = next((c for c in m["curve"] if c["key"] == key.replace("gs+n", "gs")), None)
-    if gs is not None:       # the same smooth mesh, with tangents and maps besides
+    assert memory[f"{short}_bytes"] == row["gpu_bytes"] and memory[spec.texture_field] == row["texture_bytes"] > 0
+    gs = next((c for c in m["curve"] if c["key"] == key.replace(spec.name.lower(), "gs")), None)
+    if gs is not None:       # as many triangles, with tangents and maps besides
         assert row["triangles"] == gs["triangles"]
         assert row["gpu_bytes"] - gs["gpu_bytes"] > row["texture_bytes"]
+
+
+def _check_parallax_sweeps(m, options):
+    """GS+POM's knobs were swept at its Table 1 level, one point per value not already
+    measured with the run's knobs, each with the level's triangles and bytes."""
+    level_row = next(c for c in m["curve"] if c["key"] == m["gspom"]["key"])
+    swept = [c for c in m["curve"] if c["method"] == "GS+POM" and c["knob"] not in ("m",)]
+    assert {c["knob"] for c in swept} == {"layers", "refine"}
+    assert [c["value"] for c in swept if c["knob"] == "layers"] == [
+        n for n in options["pom_layers"] if (max(1, n // 4), n) != (options["parallax"]["min_layers"],
+                                                                    options["parallax"]["max_layers"])]
+    for c in swept:
+        assert c["level"] == m["gspom_level"] and c["triangles"] == level_row["triangles"]
+        assert c["gpu_bytes"] == level_row["gpu_bytes"] and "error" in c
 
 
 def _check_relief_choice(m, relief_error):
@@ -404,8 +422,8 @@ def _check_level_walk(m, short, options):
     or, unmatched, up to the one before the first level over the triangle budget, which
     has a 'skipped' row, and Table 1 times the level of least error."""
     match = m[f"{short}_match"]
-    method = {"gs": "GS", "gsr": "GS+R", "gsn": "GS+N"}[short]
-    rows = [c for c in m["curve"] if c["method"] == method]
+    method = table1.configs.TABLE_METHODS[short]
+    rows = [c for c in m["curve"] if c["method"] == method and c["knob"] == "m"]
     built = {c["value"]: c["error"] for c in rows if "error" in c}
     assert sorted(built) == list(range(len(built))) == match["levels_measured"]
     assert [v for v in built.values() if v <= match["bound"]] == ([built[max(built)]] if match["matched"] else [])
@@ -637,6 +655,33 @@ def test_gs_n_is_measured_against_the_relief_reference_on_the_smooth_mesh():
     assert gsn.key == "gs+n:m=2" and not gsn.ray_cast
 
 
+def test_gs_pom_is_declared_once_and_sweeps_its_knobs_at_its_level():
+    """GS+POM's row of METHODS: measured against the relief reference, matched against
+    RC+R, drawn on the outer shell with the parallax maps, in the relief family; its level
+    configuration carries the run's knobs, and its sweeps leave out the run's own."""
+    from plantgen.settings import ParallaxSettings
+    from plantgen.table1.configs import (
+        LEVEL_METHODS,
+        MATCHED_AGAINST,
+        TABLE_METHODS,
+        level_config,
+        parallax_configs,
+    )
+    from plantgen.table1.curves import FAMILIES
+
+    assert TABLE_METHODS["gspom"] == "GS+POM" and MATCHED_AGAINST["gspom"] == "rcr"
+    assert "GS+POM" in LEVEL_METHODS and "GS+POM" in FAMILIES["relief"]
+    cfg = level_config("GS+POM", 2)
+    assert (cfg.relief, cfg.surface, cfg.maps, cfg.key) == (True, "outer", "parallax", "gs+pom:m=2")
+    assert cfg.parallax == ParallaxSettings() and not cfg.displaced and not cfg.normal_mapped
+    assert level_config("GS+N", 2).parallax is None
+    opts = BenchOptions(pom_layers=(4, 32, 64), pom_refine_steps=(0, 1, 4))
+    swept = parallax_configs(opts, "GS+POM", 3)
+    assert [c.key for c in swept] == ["gs+pom:layers=4", "gs+pom:layers=64", "gs+pom:refine=0",
+                                      "gs+pom:refine=4"]
+    assert swept[0].parallax == ParallaxSettings(min_layers=1, max_layers=4) and {c.level for c in swept} == {3}
+
+
 def test_normal_map_bytes_count_every_layer_and_its_mipmaps():
     """RGB8 layers at the largest map's size, each halved down to 1x1: a (4, 8) map over
     two slots is (32 + 8 + 2 + 1) texels x 3 bytes x 2 layers."""
@@ -661,7 +706,7 @@ def test_gs_n_draws_gs_depth_with_other_shading(gl_ctx):
     try:
         gs, _ = renderers.render_config(level_config("GS", 2), model.camera)
         gsn, _ = renderers.render_config(level_config("GS+N", 2), model.camera)
-        assert renderers.texture_bytes(2) > 0 and set(renderers.normal_maps(2)) <= set(model.names)
+        assert renderers.texture_bytes(2, "normal") > 0 and set(renderers.maps(2, "normal")) <= set(model.names)
     finally:
         renderers.release()
     hit = np.isfinite(gs.distance)
@@ -669,6 +714,27 @@ def test_gs_n_draws_gs_depth_with_other_shading(gl_ctx):
     np.testing.assert_allclose(gsn.distance[hit], gs.distance[hit], rtol=1e-5)
     differs = np.any(gs.color[hit][:, :3] != gsn.color[hit][:, :3], axis=-1)
     assert differs.mean() > 0.2, differs.mean()
+
+
+def test_gs_pom_draws_the_relief_between_the_shells(gl_ctx):
+    """At the same level GS+POM's relief (the distance to the displaced point) lies in front
+    of GS's smooth mesh, the inner cone, nearly everywhere both cover (the relief rises from
+    it), and its outline, the outer shell's, holds GS's; its RGBA maps take 4/3 of GS+N's."""
+    from plantgen.table1.configs import level_config
+    from plantgen.table1.models import load_model
+    from plantgen.table1.renderers import Renderers
+
+    model = load_model("saguaro", (160, 120))
+    renderers = Renderers(model, 100_000)
+    try:
+        gs, _ = renderers.render_config(level_config("GS", 2), model.camera)
+        pom, _ = renderers.render_config(level_config("GS+POM", 2), model.camera)
+        assert renderers.texture_bytes(2, "parallax") == renderers.texture_bytes(2, "normal") * 4 // 3
+    finally:
+        renderers.release()
+    hit = np.isfinite(gs.distance)
+    assert hit.sum() > 100 and not np.any(hit & ~np.isfinite(pom.distance))
+    assert np.mean(pom.distance[hit] <= gs.distance[hit] + 1e-4) > 0.95
 
 
 def test_gs_n_draws_under_a_shadow_map_and_on_the_ground(gl_ctx):
@@ -684,7 +750,8 @@ def test_gs_n_draws_under_a_shadow_map_and_on_the_ground(gl_ctx):
     try:
         gs, _ = renderers.render_config(level_config("GS", 1), model.camera, conditions=True)
         gsn, _ = renderers.render_config(level_config("GS+N", 1), model.camera, conditions=True)
+        pom, _ = renderers.render_config(level_config("GS+POM", 1), model.camera, conditions=True)
     finally:
         renderers.release()
-    assert gsn.stats.passes == gs.stats.passes == ["shadow", "sky", "ground", "frusta"]
+    assert gsn.stats.passes == gs.stats.passes == pom.stats.passes == ["shadow", "sky", "ground", "frusta"]
     np.testing.assert_array_equal(np.isfinite(gsn.distance), np.isfinite(gs.distance))

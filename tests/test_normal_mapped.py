@@ -1,4 +1,5 @@
-"""GS+N, the relief as a baked normal map on the smooth mesh, against RC+R: on the body of a
+"""GS+N, the relief as a baked normal map on the smooth mesh, against RC+R (GS+POM, the same
+maps marched by parallax occlusion mapping: tests/test_parallax_mapped.py): on the body of a
 relief frustum seen face-on it shades as the ray caster does (float64 normals against the
 reference ray caster, and plantgen's rasteriser against its ray caster); at the
 silhouette it does not (the relief's own edge is RC+R's: a normal map has none)."""
@@ -7,27 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_frustum
 
 from plantgen.geometry import relief
 from plantgen.geometry import textures as tx
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import generator_points, tessellate
 from plantgen.geometry.reference import render_reference
-from plantgen.geometry.skeleton import Skeleton
 from plantgen.geometry.skin import skin_skeleton
-
-RADIUS, LENGTH = 0.5, 2.0
-
-
-def _frustum(name):
-    skeleton = Skeleton(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, LENGTH, 0.0]]), np.array([RADIUS]),
-                        np.array([RADIUS]), np.array([-1]), np.array([False]), np.zeros(1, int), (name,))
-    return skin_skeleton(skeleton)
-
-
-def _camera(width, height):
-    """Face-on: the eye on the normal through the frustum's middle, far, a narrow view."""
-    return Camera((0.0, LENGTH / 2, 8.0), (0.0, LENGTH / 2, 0.0), (0, 1, 0), 18.0, width, height)
 
 
 def _relief_normals(frusta, name, u, v, radial):
@@ -70,8 +57,8 @@ def _angle(a, b):
 @pytest.fixture(scope="module", params=["cactus", "stone"])
 def face_on(request):
     name = request.param
-    frusta = _frustum(name)
-    camera = _camera(60, 80)
+    frusta = relief_frustum(name)
+    camera = face_on_camera(60, 80)
     rc_r = render_reference(frusta, camera, relief=True)      # RC+R in float64
     smooth = render_reference(frusta, camera)                  # the mesh's surface, exactly
     return name, frusta, camera, rc_r, smooth
@@ -94,13 +81,6 @@ def test_normal_map_gives_the_ray_casters_relief_normal_where_the_mesh_is(face_o
     assert np.median(angle) < 0.3 and angle.mean() < 1.5, (np.median(angle), angle.mean())
 
 
-def _bands(camera, hit):
-    """Each pixel's distance from the frustum's axis on screen, over its half width."""
-    columns = np.where(hit.any(axis=0))[0]
-    centre, half = columns.mean(), (columns.max() - columns.min()) / 2
-    return np.abs(np.arange(camera.width) - centre)[None, :] / half * np.ones((camera.height, 1))
-
-
 def test_on_the_body_it_shades_like_rc_r_at_the_silhouette_it_does_not(face_on):
     """Against RC+R's own hits (on the relief surface, seen through it), the normal-mapped
     smooth surface differs by the parallax a normal map cannot show: on the body's middle
@@ -118,7 +98,7 @@ def test_on_the_body_it_shades_like_rc_r_at_the_silhouette_it_does_not(face_on):
     mapped = _mapped_normals(baked.normal, smooth.u[both], smooth.v[both], smooth.normal[both], points)
     angle = _angle(mapped, exact)
     plain = _angle(smooth.normal[both], exact)
-    off = _bands(camera, both)[both]
+    off = axis_bands(camera, both)[both]
     middle, edge = off < 0.25, off > 0.9
     assert angle[middle].mean() < 6.0, angle[middle].mean()
     assert angle[middle].mean() < 0.4 * plain[middle].mean()
@@ -137,8 +117,8 @@ def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, 
     from plantgen.gl.raycast import Raycaster
     from plantgen.settings import RaycastSettings
 
-    frusta = _frustum(name)
-    camera = _camera(120, 160)
+    frusta = relief_frustum(name)
+    camera = face_on_camera(120, 160)
     rc_r = Raycaster(gl_ctx).render(frusta, camera, RaycastSettings(relief=True), material_names=(name,))
     mesh = tessellate(frusta, 3)
     raster = RasterRenderer(gl_ctx)
@@ -146,7 +126,7 @@ def test_plantgens_rasteriser_draws_gs_n_like_its_ray_caster_draws_rc_r(gl_ctx, 
     gs = raster.render(mesh, frusta, camera)
     raster.release()
     hit = np.isfinite(rc_r.distance) & np.isfinite(gs_n.distance)
-    body = hit & (_bands(camera, hit) < 0.5)
+    body = hit & (axis_bands(camera, hit) < 0.5)
 
     def mean_difference(image):
         return np.abs(image.color[..., :3].astype(float) - rc_r.color[..., :3].astype(float))[body].mean()
@@ -166,3 +146,17 @@ def test_the_gallery_picture_has_three_panels(gl_ctx):
     image = normal_mapped(frusta, gallery_camera(frusta, 80, 60, zoom=0.6), level=1, aspect_step=2.0)
     assert image.shape == (60, 240, 3)
     assert np.abs(image[:, 80:160].astype(int) - image[:, 160:].astype(int)).mean() > 0.5
+
+
+def test_the_gallery_picture_with_parallax_has_four_panels(gl_ctx):
+    """RC+R | GS+POM | GS+N | GS (``--parallax``): the GS+POM panel differs from GS+N's."""
+    from plantgen.benchmarks.normal_mapped import normal_mapped
+    from plantgen.benchmarks.side_by_side import gallery_camera
+    from plantgen.pipeline import load_skeleton
+    from plantgen.settings import ParallaxSettings
+
+    frusta = skin_skeleton(load_skeleton("well"))
+    image = normal_mapped(frusta, gallery_camera(frusta, 80, 60, zoom=0.6), level=1, aspect_step=2.0,
+                          parallax=ParallaxSettings())
+    assert image.shape == (60, 320, 3)
+    assert np.abs(image[:, 80:160].astype(int) - image[:, 160:240].astype(int)).mean() > 0.5

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen.cli.batch import batch
+from plantgen.cli.bench import bench
 from plantgen.cli.export import export
 from plantgen.cli.options import take_settings
 from plantgen.cli.render import render
@@ -25,6 +26,7 @@ from plantgen.settings import (
     KeyframeSettings,
     MeshSettings,
     MotionSettings,
+    ParallaxSettings,
     RaycastSettings,
     RenderSettings,
     ShadowSettings,
@@ -33,9 +35,10 @@ from plantgen.settings import (
     settings_knobs,
 )
 
-COMMANDS = {"render": render, "view": view, "export": export, "batch": batch}
+COMMANDS = {"render": render, "view": view, "export": export, "batch": batch, "bench": bench}
 KNOBS = {k.name: (k, default) for k, default in
-         settings_knobs(RenderSettings) + settings_knobs(MeshSettings) + settings_knobs(KeyframeSettings)}
+         settings_knobs(RenderSettings) + settings_knobs(MeshSettings) + settings_knobs(KeyframeSettings)
+         + settings_knobs(ParallaxSettings)}
 
 
 def params_of(command: click.Command) -> dict[str, click.Parameter]:
@@ -71,6 +74,8 @@ def test_every_commands_knob_options_have_the_settings_default_range_and_help(na
         k, default = KNOBS[pname]
         if name == "batch" and pname != "subdiv":
             continue        # batch's --relief and --size say what its views are (a spec's own defaults)
+        if name == "bench" and not pname.startswith("pom_"):
+            continue        # bench's --size and --frames are its timed frames' (defaults by --quick)
         if name == "export" and pname == "relief":
             assert param.default == MeshSettings().relief      # the mesh's relief, GS+R
             continue
@@ -81,7 +86,7 @@ def test_every_commands_knob_options_have_the_settings_default_range_and_help(na
             assert got == want, (name, pname)
         if k.kind != "bool":
             assert k.option in param.opts, (name, pname)
-    assert checked >= {"render": 20, "view": 17, "export": 3, "batch": 1}[name]
+    assert checked >= {"render": 20, "view": 17, "export": 3, "batch": 1, "bench": 3}[name]
 
 
 def test_render_and_view_declare_their_shared_options_once():

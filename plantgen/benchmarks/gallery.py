@@ -83,6 +83,15 @@ def entries() -> list[Entry]:
     out.append(Entry("rc_gsn_gs_well", (
         "python", "-m", "plantgen.benchmarks.normal_mapped", "well", "{out}/rc_gsn_gs_well.png", "--zoom", "0.6",
         "--aspect-step", "2", "--size", "{width}", "{height}"), ("rc_gsn_gs_well.png",), (400, 400)))
+    # parallax occlusion mapping of the same maps (issue 24, part 5): RC+R | GS+POM | GS+N | GS
+    out.append(Entry("rc_gspom_gsn_gs_saguaro", (
+        "python", "-m", "plantgen.benchmarks.normal_mapped", "saguaro", "{out}/rc_gspom_gsn_gs_saguaro.png",
+        "--zoom", "0.3", "--raise", "0.1", "--parallax", "--size", "{width}", "{height}"),
+        ("rc_gspom_gsn_gs_saguaro.png",), (400, 400)))
+    out.append(Entry("rc_gspom_gsn_gs_well", (
+        "python", "-m", "plantgen.benchmarks.normal_mapped", "well", "{out}/rc_gspom_gsn_gs_well.png", "--zoom",
+        "0.6", "--aspect-step", "2", "--parallax", "--size", "{width}", "{height}"), ("rc_gspom_gsn_gs_well.png",),
+        (400, 400)))
     # the exported glb rendered by Blender beside RC+R (needs Blender)
     out += [Entry(f"blender_{m}", ("python", "-m", "plantgen.benchmarks.in_blender", m, f"{{out}}/blender_{m}.png",
                                    "--size", "{width}", "{height}"), (f"blender_{m}.png",), (512, 384))

@@ -9,8 +9,9 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
+from ..settings import ParallaxSettings
 from ..table1 import RELIEF_ERROR, BenchOptions, check_models, count_steps, require_skimage, run_bench, write_outputs
-from .options import size_opt
+from .options import knob_options, size_opt, take_settings
 
 
 @click.command()
@@ -24,26 +25,28 @@ from .options import size_opt
 @size_opt("--eval-size", what="Evaluation window against the float64 reference, at the timed "
                               "frames' angle per pixel", default="128x96; --quick: 64x48")
 @click.option("--max-triangles", type=click.IntRange(min=1),
-              help="Triangle budget: GS, GS+R and GS+N go up from m = 0 until a level matches the ray "
+              help="Triangle budget: GS, GS+R, GS+N and GS+POM go up from m = 0 until a level matches the ray "
                    "caster's quality or the next level has more triangles than this (not built; "
                    "default 6,000,000; --quick: 500,000).")
 @click.option("--relief-error", type=click.FloatRange(min=0.0),
               help=f"Table 1 times the fastest RC+R configuration of the curves with an error at "
-                   f"most this (default {RELIEF_ERROR:g}), else the most accurate one; GS+R and "
-                   "GS+N are matched against it.")
+                   f"most this (default {RELIEF_ERROR:g}), else the most accurate one; GS+R, "
+                   "GS+N and GS+POM are matched against it.")
+@knob_options(ParallaxSettings)
 @click.option("--quick", is_flag=True, help="A small run (two tiny models, small images): CI drives it.")
 @click.option("--images", is_flag=True, help="Also write the compared images into OUT/images.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("bench-out"), show_default=True,
               help="Directory for table.md, table1.csv, curves.csv, results.json and plots.")
-def bench(models, size, frames, eval_size, max_triangles, relief_error, quick, images, out_dir):
+def bench(models, size, frames, eval_size, max_triangles, relief_error, quick, images, out_dir, **knobs):
     """Reproduce Table 1 (RC, RC+R, GS, GS+R fps, and GS+N: GS's mesh with baked normal
-    maps; RC+R at the fastest configuration within --relief-error, GS levels matched to the
-    ray caster's quality by a computed criterion or stopped by the triangle budget) and
-    measure error against ms per frame for every accuracy knob. Prints the Markdown table;
-    progress goes to stderr."""
+    maps, GS+POM: the mesh on the relief's outer shell with parallax occlusion mapping;
+    RC+R at the fastest configuration within --relief-error, GS levels matched to the ray
+    caster's quality by a computed criterion or stopped by the triangle budget) and measure
+    error against ms per frame for every accuracy knob. Prints the Markdown table; progress
+    goes to stderr."""
 
-    overrides = {}
+    overrides = {"parallax": take_settings(ParallaxSettings, knobs)}
     if models:
         overrides["models"] = tuple(s.strip() for s in models.split(",") if s.strip())
         if not overrides["models"]:

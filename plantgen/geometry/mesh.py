@@ -102,7 +102,7 @@ from .vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_r
 
 __all__ = [
     "TessellatedMesh", "tessellate", "triangle_count", "lateral_triangles_per_row",
-    "slice_triangles", "columns_around", "bands_along", "generator_points",
+    "slice_triangles", "columns_around", "bands_along", "generator_points", "outer_shell_mesh",
 ]
 
 #: A relief height function: (material (k,) int, u (k,) float, v (k,) float) -> w (k,) in [0, 1].
@@ -1090,3 +1090,16 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
             faces = new_index[faces].astype(dtype)
             vertices, normals, uv = vertices[used], normals[used], uv[used]
     return TessellatedMesh(vertices, normals, uv, faces, face_row, frusta.material, names, m, plan.n_caps)
+
+
+def _top_of_shell(material, u, v):
+    """The relief height w = 1 everywhere: the outer shell."""
+    return np.ones(np.shape(u))
+
+
+def outer_shell_mesh(frusta: Frusta, m: int = 1, *, caps: bool | str = "tips") -> TessellatedMesh:
+    """The mesh of GS+POM: :func:`tessellate` at level ``m`` on the relief's outer shell
+    (every vertex at ``r + shell``, the top of the relief, its normal the cone's (8); rows
+    with ``shell = 0`` stay on the base cone), so that what the mesh covers holds the whole
+    relief and the parallax march goes down from it (``shaders/raster.glsl``, PARALLAX)."""
+    return tessellate(frusta, m, relief=True, height=_top_of_shell, caps=caps)

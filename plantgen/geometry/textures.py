@@ -37,7 +37,8 @@ from .materials import material_palette
 from .vec import any_perpendicular
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
-           "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents",
+           "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "mesh_uv_scales",
+           "parallax_map",
            "resample_height", "row_aspects", "texture_size", "face_derivatives", "weighted_median"]
 
 #: Largest difference, in units of the 8-bit height, a texture size may leave against the
@@ -258,6 +259,12 @@ def bake_material(name: str, aspects: np.ndarray | None = None, weights: np.ndar
                             bake_base_colour(source, height), shell, aspect, shell * float(radius), size, base)
 
 
+def parallax_map(baked: MaterialTextures) -> np.ndarray:
+    """(H, W, 4) uint8: the normal map with the relief height w in its alpha, the one texture
+    GS+POM marches and shades with (engines pack a parallax height so)."""
+    return np.concatenate([baked.normal, baked.height[..., None]], axis=2)
+
+
 def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 4) float32 glTF tangents: xyz the unit direction of increasing u (the faces'
     ∂P/∂u summed by area, made ⟂ the vertex normal), w = ±1 so that cross(N, T)·w points
@@ -265,14 +272,11 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     vector ⟂ their normal and w = 1."""
     dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, faces)
     n_vertices = len(vertices)
-    t_sum = np.zeros((n_vertices, 3))
-    b_sum = np.zeros((n_vertices, 3))
     weight = np.where(ok, area, 0.0)[:, None]
     tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
     tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
-    for corner in range(3):
-        np.add.at(t_sum, faces[:, corner], tu * weight)
-        np.add.at(b_sum, faces[:, corner], tv * weight)
+    t_sum = _vertex_sums(faces, tu * weight, n_vertices)
+    b_sum = _vertex_sums(faces, tv * weight, n_vertices)
     n = np.asarray(normals, dtype=np.float64)
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     t = t_sum - np.sum(t_sum * n, axis=1, keepdims=True) * n
@@ -284,3 +288,24 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     t /= length[:, None]
     w = np.where(np.sum(np.cross(n, t) * b_sum, axis=1) > 0, -1.0, 1.0)
     return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
+
+
+def _vertex_sums(faces: np.ndarray, per_face: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(V, k) sums over each vertex's faces of ``per_face`` (F, k)."""
+    out = np.zeros((n_vertices, per_face.shape[1]))
+    for corner in range(3):
+        np.add.at(out, faces[:, corner], per_face)
+    return out
+
+
+def mesh_uv_scales(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 2) float32 model units per unit of u and of v at each vertex: |∂P/∂u| and
+    |∂P/∂v| of its textured faces, weighted by area (0 where none: caps). With the unit
+    tangent frame (:func:`mesh_tangents`) they carry a ray's move in model units to its
+    move in (u, v): GS+POM's march (``raster.glsl``'s PARALLAX), exact per segment, which a
+    unit frame with one height scale per material cannot be (the module docstring)."""
+    dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, faces)
+    weight = np.where(ok, area, 0.0)[:, None]
+    lengths = np.stack([np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)], axis=1)
+    summed = _vertex_sums(faces, np.concatenate([lengths * weight, weight], axis=1), len(vertices))
+    return (summed[:, :2] / np.where(summed[:, 2:] > 0, summed[:, 2:], 1.0)).astype(np.float32)

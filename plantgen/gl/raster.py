@@ -23,8 +23,8 @@ from ..geometry.instances import PlacedMeshes
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.skinned_mesh import SkinnedMesh
 from ..geometry.stage import Ground
-from ..geometry.textures import mesh_tangents
-from ..settings import ShadowSettings
+from ..geometry.textures import mesh_tangents, mesh_uv_scales
+from ..settings import ParallaxSettings, ShadowSettings
 from .context import gl_context
 from .frame import (
     FrameLighting,
@@ -43,7 +43,7 @@ from .result import RasterStats, RenderResult
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["RasterRenderer", "render_mesh", "gs_buffer_bytes", "placed_buffer_bytes", "normal_map_texture",
-           "normal_map_bytes",
+           "normal_map_bytes", "PARALLAX_SHELL_BYTES", "PARALLAX_SCALE_BYTES",
            "row_data"]
 
 
@@ -94,9 +94,11 @@ class RasterRenderer(OffscreenRenderer):
 
     def __init__(self, ctx=None):
         super().__init__(ctx)
-        self._uploaded = None  # (mesh id, buffers, vao, origin)
+        self._uploaded = None  # (mesh id, buffers, vao, origin, GS+POM's row shells or None)
         self._placed = None    # (PlacedMeshes, program, [per plant buffers, vao, origin])
-        self._normal_tex = None  # (names and maps, texture array) of GS+N
+        self._normal_tex = None  # (names and maps, texture array) of GS+N and GS+POM
+        #: (file, names of the defines switched on) of every program a frame of this renderer used
+        self.programs_used: set[tuple] = set()
 
     def release_mesh(self) -> None:
         """Free the uploaded mesh's buffers (the renderer stays usable)."""
@@ -139,19 +141,26 @@ class RasterRenderer(OffscreenRenderer):
             cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
         tangents = _tangent_buffer(ctx, mesh, program)
+        # GS+POM: each row's shell thickness (model units), 4 B a row; each vertex's uv scales, 8 B
+        # (mesh_uv_scales)
+        parallax = "uv_scale" in program
+        shells = ctx.buffer(np.ascontiguousarray(frusta.shell, np.float32).tobytes()) if parallax else None
+        scales = ctx.buffer(mesh_uv_scales(mesh.vertices, mesh.uv, mesh.faces).tobytes()) if parallax else None
         vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")]
                                + ([(bind, "2i", "bind")] if binding is not None else [])
-                               + ([(tangents, "4f", "tangent")] if tangents is not None else []),
+                               + ([(tangents, "4f", "tangent")] if tangents is not None else [])
+                               + ([(scales, "2f", "uv_scale")] if scales is not None else []),
                                index_buffer=ibo, index_element_size=4)
-        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind) + ((tangents,) if tangents else ()), vao,
-                          origin)
+        extra = tuple(b for b in (tangents, shells, scales) if b is not None)
+        self._uploaded = (key, (vbo, ibo, rows, caps_buf, vao, bind) + extra, vao, origin, shells)
         return vao, origin
 
     def render(self, mesh: TessellatedMesh | SkinnedMesh, frusta, camera: Camera, *, material_names=None,
                light_dir=None, ground: Ground | None = None,
                shadows: ShadowSettings | None = None, shadow_box=None,
                count_work: bool = False, background=None, ssaa: int = 1, leaves=None,
-               poses=None, bounds=None, normal_maps=None) -> RenderResult:
+               poses=None, bounds=None, normal_maps=None,
+               parallax: ParallaxSettings | None = None) -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -181,7 +190,11 @@ class RasterRenderer(OffscreenRenderer):
         normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
             normal map} (:func:`~plantgen.geometry.textures.bake_normal_map`, glTF's
             convention) shading the lateral faces of a still mesh as a glTF reader would;
-            None: none
+            None: none. With ``parallax``: (H, W, 4) uint8, the alpha the relief height w
+            (:func:`~plantgen.geometry.textures.parallax_map`)
+        parallax : GS+POM: parallax occlusion mapping of these maps with these knobs
+            (``raster.glsl``'s PARALLAX), on a mesh at the relief's outer shell
+            (:func:`~plantgen.geometry.mesh.outer_shell_mesh`); None: none
         """
         skinned = isinstance(mesh, SkinnedMesh)
         if skinned and poses is None:
@@ -190,10 +203,7 @@ class RasterRenderer(OffscreenRenderer):
         names = tuple(material_names or mesh.material_names)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         shadowed = shadows is not None
-        program = build_program(self.ctx, "raster.glsl",
-                                {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
-                                 "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned,
-                                 "NORMAL_MAP": normal_maps is not None and not skinned})
+        program = self._mesh_program(mesh, shadowed, count_work, skinned, normal_maps, parallax)
         t0 = time.perf_counter()
         vao, origin = self.upload(uploaded, frusta, program)
         upload_ms = (time.perf_counter() - t0) * 1e3
@@ -205,7 +215,7 @@ class RasterRenderer(OffscreenRenderer):
         lighting = self._lighting(names, ground, light_dir, shadows, box, view.eye,
                                   anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
-        draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh)
+        draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh, parallax)
         extras = self._surroundings(ground, leaves, view, lighting)
         light = None
         if shadowed:
@@ -225,6 +235,20 @@ class RasterRenderer(OffscreenRenderer):
             draw_calls=1 + (ground is not None) + (leaf_tris > 0), work=out.work, shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
+    def _mesh_program(self, mesh: TessellatedMesh, shadowed: bool, count_work: bool, skinned: bool, normal_maps,
+                      parallax: ParallaxSettings | None):
+        """The raster.glsl variant :meth:`render` draws ``mesh`` with (recorded in
+        :attr:`programs_used`): NORMAL_MAP with ``normal_maps``, PARALLAX with ``parallax``
+        besides (a skinned mesh: neither)."""
+        if parallax is not None and normal_maps is None:
+            raise ValueError("parallax occlusion mapping marches the maps' height: give normal_maps=...")
+        defines = {"TRIANGLES_PER_ROW": 16 * 4 ** mesh.level, "SHADOWS": shadowed,
+                   "STATS": count_work, "FACE_ROWS": not mesh.uniform_rows, "SKINNED": skinned,
+                   "NORMAL_MAP": normal_maps is not None and not skinned,
+                   "PARALLAX": parallax is not None and not skinned}
+        self.programs_used.add(("raster.glsl", tuple(sorted(k for k, v in defines.items() if v is True))))
+        return build_program(self.ctx, "raster.glsl", defines)
+
     def _mesh_draw(self, program, vao, origin, view: FrameView, lighting: FrameLighting,
                    repeats, tex, mesh: TessellatedMesh, poses=None):
         """Set the mesh program and return the callable that draws the mesh (posed from
@@ -233,7 +257,7 @@ class RasterRenderer(OffscreenRenderer):
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()), n_rows=mesh.n_rows,
                      height_maps=0, texture_repeat=repeats)
-        buffers = self._uploaded[1]
+        buffers, shells = self._uploaded[1], self._uploaded[4]
         buffers[2].bind_to_storage_buffer(0)
         buffers[3].bind_to_storage_buffer(1)
         ctx = self.ctx
@@ -243,17 +267,22 @@ class RasterRenderer(OffscreenRenderer):
             ctx.front_face = "ccw"
             ctx.cull_face = "back"
             tex.use(0)
+            if shells is not None:
+                shells.bind_to_storage_buffer(PARALLAX_SHELL_BINDING)
             if poses is not None:
                 poses.bind_to_storage_buffer(3)
             vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
         return draw
 
-    def _normal_mapped(self, program, names, normal_maps, draw):
+    def _normal_mapped(self, program, names, normal_maps, draw, parallax: ParallaxSettings | None = None):
         """``draw`` with the normal maps' texture array bound (unit :data:`NORMAL_MAP_UNIT`:
         0 holds the height maps, 1 the shadow map), where ``program`` reads one
-        (NORMAL_MAP): built once per list of names and maps."""
+        (NORMAL_MAP; PARALLAX: with ``parallax``'s uniforms): built once per list of names
+        and maps."""
         if "normal_maps" not in program:
             return draw
+        if parallax is not None:
+            set_uniforms(program, **parallax.uniforms())
         key = (tuple(names), tuple(id(normal_maps.get(k, normal_maps.get(n))) for k, n in enumerate(names)))
         if self._normal_tex is None or self._normal_tex[0] != key:
             if self._normal_tex is not None:
@@ -412,6 +441,12 @@ def _tangent_buffer(ctx, mesh: TessellatedMesh, program):
 
 #: The texture unit of GS+N's normal maps (the height maps are on 0, the shadow map on 1).
 NORMAL_MAP_UNIT = 2
+#: The storage binding of GS+POM's row shells (0 rows, 1 caps' rows, 2 work counts, 3 poses).
+PARALLAX_SHELL_BINDING = 4
+#: GPU bytes of GS+POM's shell thickness of one row (float32).
+PARALLAX_SHELL_BYTES = 4
+#: GPU bytes of GS+POM's uv scales of one vertex (2 float32: |∂P/∂u|, |∂P/∂v|).
+PARALLAX_SCALE_BYTES = 8
 
 
 def _normal_layers(names, normal_maps) -> tuple[list, tuple]:
@@ -421,13 +456,19 @@ def _normal_layers(names, normal_maps) -> tuple[list, tuple]:
     return maps, shape
 
 
+def _components(maps) -> int:
+    """Channels of the maps' texture: 3 (RGB normal), 4 where they carry a height (GS+POM)."""
+    return max((m.shape[2] for m in maps if m is not None), default=3)
+
+
 def normal_map_bytes(names, normal_maps) -> int:
     """GPU bytes of :func:`normal_map_texture`'s array for these slots and maps: RGB8
-    layers at the largest map's size, with their mipmap chain."""
-    _, (h, w) = _normal_layers(names, normal_maps)
+    (RGBA8 with a height) layers at the largest map's size, with their mipmap chain."""
+    maps, (h, w) = _normal_layers(names, normal_maps)
+    components = _components(maps)
     total = 0
     while True:
-        total += h * w * 3 * len(names)
+        total += h * w * components * len(names)
         if h == 1 and w == 1:
             return total
         h, w = max(h // 2, 1), max(w // 2, 1)
@@ -436,17 +477,20 @@ def normal_map_bytes(names, normal_maps) -> int:
 def normal_map_texture(ctx, names, normal_maps):
     """RGB8 texture array of the normal maps ((H, W, 3) uint8, glTF convention, by slot
     index or by material name) of the material slots ``names`` (a slot without one: the
-    flat (128, 128, 255)), every
-    layer at the largest map's size (smaller ones repeated texel by texel), repeating in
-    u and v, trilinear: as an engine samples the exported map."""
+    flat (128, 128, 255), and height 255: no relief), every layer at the largest map's
+    size (smaller ones repeated texel by texel), repeating in u and v, trilinear: as an
+    engine samples the exported map (without anisotropic filtering: llvmpipe's made GS+POM's
+    gathers 500 times slower and wrong). RGBA8 where the maps are (H, W, 4), the alpha the
+    height (GS+POM, :func:`~plantgen.geometry.textures.parallax_map`)."""
     maps, shape = _normal_layers(names, normal_maps)
-    layers = np.empty((len(names), *shape, 3), np.uint8)
+    components = _components(maps)
+    layers = np.empty((len(names), *shape, components), np.uint8)
     for k, m in enumerate(maps):
         if m is None:
-            layers[k] = (128, 128, 255)
+            layers[k] = (128, 128, 255, 255)[:components]
         else:
             layers[k] = np.repeat(np.repeat(m, shape[0] // m.shape[0], axis=0), shape[1] // m.shape[1], axis=1)
-    tex = ctx.texture_array((shape[1], shape[0], len(names)), 3, layers.tobytes(), dtype="f1")
+    tex = ctx.texture_array((shape[1], shape[0], len(names)), components, layers.tobytes(), dtype="f1")
     tex.build_mipmaps()
     tex.filter = (ctx.LINEAR_MIPMAP_LINEAR, ctx.LINEAR)
     tex.repeat_x, tex.repeat_y = True, True

@@ -23,22 +23,27 @@ For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
    window for its error, and at the full size for its time;
 5. picks **RC+R's Table 1 configuration** from those curves: the fastest one with error at
    most ``relief_error`` (0.01), else the most accurate (:mod:`plantgen.table1.matching`);
-   then walks **GS, GS+R and GS+N up from m = 0** (measured the same way) until a level
-   meets the quality criterion (:mod:`plantgen.table1.quality`) against RC (GS) and against
-   that RC+R configuration (GS+R, GS+N), or the next level is over the triangle budget
-   (``max_triangles``). GS+N is GS's smooth mesh drawn with the relief baked into normal
-   maps (:func:`plantgen.exporters.textures.bake_textures`, as ``plantgen export`` writes
-   them), measured against the relief reference: the metric sees geometry only, so its
-   error is the smooth mesh's against the relief surface (the map shades, it moves no
-   pixel's depth or silhouette);
-6. times RC, RC+R, and GS, GS+R, GS+N at their levels **in one interleaved run**
+   then walks **GS, GS+R, GS+N and GS+POM up from m = 0** (measured the same way) until a
+   level meets the quality criterion (:mod:`plantgen.table1.quality`) against RC (GS) and
+   against that RC+R configuration (GS+R, GS+N, GS+POM), or the next level is over the
+   triangle budget (``max_triangles``). GS+N is GS's smooth mesh drawn with the relief baked
+   into normal maps (:func:`plantgen.exporters.textures.bake_textures`, as ``plantgen
+   export`` writes them), measured against the relief reference: the metric sees geometry
+   only, so its error is the smooth mesh's against the relief surface (the map shades, it
+   moves no pixel's depth or silhouette). GS+POM is the mesh on the relief's outer shell
+   with parallax occlusion mapping of the same maps' height (``raster.glsl``'s PARALLAX):
+   its distance output is the displaced point's, so the metric sees the relief it marches,
+   and its silhouette is the mesh's. At GS+POM's level its knobs are swept one at a time
+   (:data:`plantgen.table1.configs.PARALLAX_SWEEPS`: layers, secant steps) for the curves;
+6. times RC, RC+R, and GS, GS+R, GS+N, GS+POM at their levels **in one interleaved run**
    (frame by frame in turn, after a warm-up), under the paper's conditions, the same for
    all methods: the shadow map and the ground where the scene asks for them, the
    animated scene posed and skinned on the GPU in every frame (RC: a compute pass writes
    the records; GS: a mesh built once at rest, posed by the vertex shader; the dispatch
    counted in the frame), leaves not relief mapped (their material has no shell);
-7. counts the GPU bytes of each method (memory table; GS+N's with its tangents and its
-   normal maps' texture array, mipmaps included).
+7. counts the GPU bytes of each method (memory table; GS+N's and GS+POM's with their
+   tangents and their maps' texture array, mipmaps included, GS+POM's with 8 B a vertex
+   of uv scales and 4 B a row of shell thickness).
 
 The error metric and the quality criterion are documented in :mod:`plantgen.table1.quality`;
 :mod:`plantgen.table1.summary` sums Table 1 up over the models (ratios' geometric means, beside
@@ -47,7 +52,7 @@ the paper's); :mod:`plantgen.table1.reports` writes the tables, CSV and JSON.
 
 from __future__ import annotations
 
-from .configs import RELIEF_SWEEPS, Sweep, relief_configs
+from .configs import METHODS, PARALLAX_SWEEPS, RELIEF_SWEEPS, Method, Sweep, relief_configs
 from .eval_window import eval_camera
 from .matching import LevelMatch, choose_relief_config, walk_levels
 from .models import check_models
@@ -72,5 +77,6 @@ __all__ = ["BenchOptions", "PAPER_TABLE1", "PAPER_MEMORY_RATIO", "TABLE1_MODELS"
            "RELIEF_ERROR", "run_bench", "bench_model", "count_steps", "check_models", "write_outputs",
            "ssim", "require_skimage", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
            "matched_level", "quality_bound", "pareto_front", "eval_camera", "match_notes",
-           "Sweep", "RELIEF_SWEEPS", "relief_configs", "LevelMatch", "walk_levels",
+           "Sweep", "RELIEF_SWEEPS", "relief_configs", "Method", "METHODS",
+           "PARALLAX_SWEEPS", "LevelMatch", "walk_levels",
            "choose_relief_config", "summarise", "summary_lines", "geometric_mean"]

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from .configs import METHODS
 from .quality import pareto_front
 
 __all__ = ["FAMILIES", "family_points", "family_front"]
 
 #: The two families of the accuracy curves: each is measured against its own reference
-#: (analytic cones, or the relief surface), so each has its own Pareto front.
-FAMILIES = {"plain": ("RC", "GS"), "relief": ("RC+R", "GS+R", "GS+N")}
+#: (analytic cones, or the relief surface), so each has its own Pareto front
+#: (:attr:`~plantgen.table1.configs.Method.family`).
+FAMILIES = {family: tuple(m.name for m in METHODS if m.family == family) for family in ("plain", "relief")}
 
 
 def family_points(model: dict, family: str) -> list[dict]:

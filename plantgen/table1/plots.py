@@ -4,19 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .configs import METHODS
 from .curves import FAMILIES, family_front, family_points
 
 __all__ = ["plot_curves", "ERROR_FLOOR"]
 
 #: Errors below this are drawn at it (log axis; the ray caster's error can be 0).
 ERROR_FLOOR = 1e-6
-#: Colour and marker of each method's series, and of the RC+R sweeps other than "linear"
-#: (:data:`plantgen.table1.configs.RELIEF_SWEEPS`); a knob not listed takes the next of
-#: :data:`_EXTRA_STYLES` in order of appearance.
-_STYLES = {"GS": ("tab:blue", "o"), "GS+R": ("tab:orange", "s"), "RC": ("tab:green", "D"),
-           "RC+R": ("tab:red", "^"), "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*"),
-           "GS+N": ("tab:cyan", "p")}
-_EXTRA_STYLES = (("tab:pink", "P"), ("tab:olive", "X"), ("tab:gray", "h"), ("black", "8"))
+#: Colour and marker of each method's series (:attr:`~plantgen.table1.configs.Method.style`),
+#: and of the RC+R sweeps other than "linear" (:data:`plantgen.table1.configs.RELIEF_SWEEPS`);
+#: a knob not listed takes the next of :data:`_EXTRA_STYLES` in order of appearance.
+_STYLES = {**{m.name: m.style for m in METHODS}, "RC+R binary": ("tab:purple", "v"), "RC+R v": ("tab:brown", "*")}
+_EXTRA_STYLES = (("tab:pink", "P"), ("tab:olive", "X"), ("tab:gray", "h"), ("gold", "d"))
 
 
 def _shown(error: float) -> float:

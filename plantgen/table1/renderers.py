@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exporters.textures import bake_textures
-from ..geometry.mesh import TessellatedMesh, tessellate, triangle_count
+from ..geometry.mesh import TessellatedMesh, outer_shell_mesh, tessellate, triangle_count
+from ..geometry.textures import parallax_map
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer, normal_map_bytes
 from ..gl.raycast import Raycaster
@@ -74,7 +75,8 @@ class _Conditions:
 
 class Renderers:
     """The GL side of one model: one ray caster, one raster renderer per configuration key
-    (so the interleaved run does not re-upload), meshes cached per (level, displaced)."""
+    (so the interleaved run does not re-upload), meshes cached per (level, surface)
+    (:attr:`Config.surface`), baked maps per level."""
 
     def __init__(self, model: BenchModel, max_triangles: int, shadow_box=None):
         self.model = model
@@ -83,51 +85,58 @@ class Renderers:
         self.records = PoseStream(self.raycaster.ctx)     # an animation's records, posed on the GPU
         self.rasters: dict = {}
         self.meshes: dict = {}
-        self.skinned: dict = {}          # an animation's vertex-skinned meshes, per (level, relief)
-        self.baked: dict = {}            # GS+N: {level: {material name: (H, W, 3) uint8 normal map}}
+        self.skinned: dict = {}          # an animation's vertex-skinned meshes, per (level, surface)
+        self.baked: dict = {}            # GS+N, GS+POM: {level: {"textures" | kind: {material name: ...}}}
         self.shadow_box = shadow_box   # (2, 3) one light window for every animation frame
 
-    def mesh(self, level: int, relief: bool, frusta=None) -> TessellatedMesh | None:
-        """The tessellation (cached for the static frusta), or None over the triangle budget."""
+    def mesh(self, level: int, surface: str, frusta=None) -> TessellatedMesh | None:
+        """The tessellation at ``level`` on ``surface`` (:attr:`Config.surface`; cached for
+        the static frusta), or None over the triangle budget."""
         frusta = self.model.frusta if frusta is None else frusta
-        key = (level, relief)
+        key = (level, surface)
         static = frusta is self.model.frusta
         if static and key in self.meshes:
             return self.meshes[key]
         if triangle_count(len(frusta), level, 0) > self.max_triangles:
             return None
-        mesh = tessellate(frusta, level, relief=relief, caps="tips")
+        mesh = _tessellation(frusta, level, surface)
         if static:
             self.meshes[key] = mesh
         return mesh
 
-    def normal_maps(self, level: int) -> dict | None:
-        """GS+N's normal maps of the still mesh at ``level`` (cached): {material name: (H, W, 3)
-        uint8}, each baked as ``plantgen export`` bakes it (at the median aspect of the
-        material's faces); None over the triangle budget."""
+    def maps(self, level: int, kind: str) -> dict | None:
+        """The baked maps of the still smooth mesh at ``level`` (cached), each baked as
+        ``plantgen export`` bakes it (at the median aspect of the material's faces), as
+        :attr:`Method.maps` ``kind`` draws them: {material name: (H, W, 3) uint8 normal
+        map} (``normal``) or (H, W, 4) with the height in the alpha (``parallax``); None
+        over the triangle budget."""
         if level not in self.baked:
-            mesh = self.mesh(level, False)
+            mesh = self.mesh(level, "cone")
             if mesh is None:
                 return None
             baked = bake_textures([mesh])
-            self.baked[level] = {n: baked.get(n).normal for n in mesh.material_names if baked.get(n) is not None}
-        return self.baked[level]
+            self.baked[level] = {"textures": {n: baked.get(n) for n in mesh.material_names
+                                              if baked.get(n) is not None}}
+        cached = self.baked[level]
+        if kind not in cached:      # one array per map: the raster renderer keys its texture by them
+            cached[kind] = {n: _MAP_TEXELS[kind](t) for n, t in cached["textures"].items()}
+        return cached[kind]
 
-    def texture_bytes(self, level: int) -> int:
-        """GPU bytes of GS+N's normal-map texture array at ``level`` (mipmaps included),
-        0 over the budget."""
-        maps = self.normal_maps(level)
+    def texture_bytes(self, level: int, kind: str) -> int:
+        """GPU bytes of the maps' texture array (``kind`` as :meth:`maps`) at ``level``
+        (mipmaps included), 0 over the budget."""
+        maps = self.maps(level, kind)
         return 0 if maps is None else normal_map_bytes(self.model.names, maps)
 
-    def skinned_mesh(self, level: int, relief: bool):
-        """The animation's mesh at rest, bound for vertex skinning (cached), or None over the
-        triangle budget."""
-        key = (level, relief)
+    def skinned_mesh(self, level: int, surface: str):
+        """The animation's mesh at rest on ``surface``, bound for vertex skinning (cached), or
+        None over the triangle budget."""
+        key = (level, surface)
         if key not in self.skinned:
             rest = self.model.animation.rest_frusta()[0]
             if triangle_count(len(rest), level, 0) > self.max_triangles:
                 return None
-            self.skinned[key] = self.model.animation.skinned(tessellate(rest, level, relief=relief, caps="tips"))
+            self.skinned[key] = self.model.animation.skinned(_tessellation(rest, level, surface))
         return self.skinned[key]
 
     def raster(self, key: str) -> RasterRenderer:
@@ -170,28 +179,28 @@ class Renderers:
             t0 = time.perf_counter()
             frusta = m.animation.frusta_at(t)              # pose + re-skin, as RC does
             leaves = m.animation.leaves_at(t) if leaves is not None else None
-            mesh = self.mesh(cfg.level, cfg.displaced, frusta)  # re-tessellate
+            mesh = self.mesh(cfg.level, cfg.surface, frusta)  # re-tessellate
             extra_ms = (time.perf_counter() - t0) * 1e3
         else:
             frusta = m.frusta
-            mesh = self.mesh(cfg.level, cfg.displaced)
+            mesh = self.mesh(cfg.level, cfg.surface)
         if mesh is None:
             return None, float("nan")
         res = self.raster(cfg.key).render(mesh, frusta, camera, material_names=m.names,
                                           light_dir=m.light_dir, ground=frame.ground,
                                           shadows=frame.shadows,
                                           shadow_box=self.shadow_box if frame.animated else None,
-                                          leaves=leaves, normal_maps=self._maps_of(cfg))
+                                          leaves=leaves, normal_maps=self._maps_of(cfg), parallax=cfg.parallax)
         upload_ms = res.stats.upload_ms if frame.animated else 0.0
         return res, res.frame_ms + extra_ms + upload_ms
 
     def _rasterise_skinned(self, cfg: Config, camera, frame: _Conditions, t: float):
-        """An animated frame of GS / GS+R / GS+N: the mesh built once at rest, posed by the
-        vertex shader from the pose buffer the compute program fills at ``t`` (its CPU time
-        and the leaves' counted in the frame; the rasteriser draws a skinned mesh without
-        normal maps, so GS+N is GS there)."""
+        """An animated frame of GS / GS+R / GS+N / GS+POM: the mesh built once at rest, posed
+        by the vertex shader from the pose buffer the compute program fills at ``t`` (its CPU
+        time and the leaves' counted in the frame; the rasteriser draws a skinned mesh
+        without maps, so GS+N is GS there, and GS+POM its outer shell)."""
         m = self.model
-        mesh = self.skinned_mesh(cfg.level, cfg.displaced)
+        mesh = self.skinned_mesh(cfg.level, cfg.surface)
         if mesh is None:
             return None, float("nan")
         poses, update = m.animation.pose_segments(self.records, t, camera.eye)
@@ -212,15 +221,16 @@ class Renderers:
         if cfg.ray_cast:
             return self.raycaster.render(m.frusta, camera, cfg.settings, m.names, m.light_dir,
                                          count_work=True).stats.work
-        mesh = self.mesh(cfg.level, cfg.displaced)
+        mesh = self.mesh(cfg.level, cfg.surface)
         if mesh is None:
             return None
         return self.raster(cfg.key).render(mesh, m.frusta, camera, material_names=m.names, light_dir=m.light_dir,
-                                           count_work=True, normal_maps=self._maps_of(cfg)).stats.work
+                                           count_work=True, normal_maps=self._maps_of(cfg),
+                                           parallax=cfg.parallax).stats.work
 
     def _maps_of(self, cfg: Config) -> dict | None:
-        """The normal maps ``cfg`` draws with (GS+N), else None."""
-        return self.normal_maps(cfg.level) if cfg.normal_mapped else None
+        """The maps ``cfg`` draws with (GS+N, GS+POM), else None."""
+        return None if cfg.maps is None else self.maps(cfg.level, cfg.maps)
 
     def release_raster(self, key: str) -> None:
         """Free the GPU buffers of ``key``'s raster renderer (the mesh stays cached)."""
@@ -229,10 +239,10 @@ class Renderers:
             raster.release()
 
     def keep_meshes(self, keys) -> None:
-        """Drop the cached meshes other than ``keys`` ((level, displaced) pairs), and the
-        normal maps of levels not among them."""
+        """Drop the cached meshes other than ``keys`` ((level, surface) pairs), and the
+        baked maps of levels not among them."""
         self.meshes = {k: v for k, v in self.meshes.items() if k in keys}
-        self.baked = {k: v for k, v in self.baked.items() if (k, False) in keys}
+        self.baked = {k: v for k, v in self.baked.items() if any(level == k for level, _ in keys)}
         self.skinned = {k: v for k, v in self.skinned.items() if k in keys}
 
     def release(self) -> None:
@@ -241,6 +251,18 @@ class Renderers:
             self.release_raster(key)
         self.raycaster.release()
         self.records.release()
+
+
+#: How each kind of :attr:`Method.maps` reads a material's baked textures.
+_MAP_TEXELS = {"normal": lambda baked: baked.normal, "parallax": parallax_map}
+
+
+def _tessellation(frusta, level: int, surface: str) -> TessellatedMesh:
+    """The bench's tessellation of ``frusta`` at ``level`` on ``surface`` (:attr:`Method.mesh`),
+    tips capped."""
+    if surface == "outer":
+        return outer_shell_mesh(frusta, level, caps="tips")
+    return tessellate(frusta, level, relief=surface == "relief", caps="tips")
 
 
 def time_configs(renderers: Renderers, configs, camera, frames: int, *, conditions: bool,

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .configs import MATCHED_AGAINST, RELIEF_SWEEPS, TABLE_METHODS
+from .configs import MAPPED_METHODS, MATCHED_AGAINST, RELIEF_SWEEPS, TABLE_METHODS, Method
 from .curves import FAMILIES, family_front, family_points
 from .paper import PAPER_MEMORY_RATIO, PAPER_TABLE1, PaperRow
 from .plots import plot_curves
-from .summary import rcr_over_gsn, rcr_over_gsr, summarise, summary_lines
+from .summary import rcr_over, rcr_over_gsr, summarise, summary_lines
 
 __all__ = ["markdown_table", "match_notes", "table_rows", "curve_rows", "pareto_summary",
            "winners", "write_outputs", "rcr_over_gsr", "Column", "TABLE1_COLUMNS", "WORK_COLUMNS",
@@ -166,7 +166,8 @@ def _paper_suffixes(p: PaperRow | None) -> dict:
     if p is None:
         return dict.fromkeys(("segments", *TABLE_METHODS), "")
     return {"segments": f" ({p.segments})", "rc": f" ({p.rc_fps})", "rcr": f" ({p.rcr_fps})",
-            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})", "gsn": ""}
+            "gs": f" ({p.gs.fps} / {p.gs.sub})", "gsr": f" ({p.gsr.fps} / {p.gsr.sub})",
+            **dict.fromkeys((m.short for m in MAPPED_METHODS), "")}
 
 
 def _segments_cell(model: dict) -> str:
@@ -203,6 +204,22 @@ def _bytes_cell(short: str) -> Callable[[dict], str]:
 
 
 # ---------------------------------------------------------------------------- tables
+def _mapped_columns(method: Method) -> tuple:
+    """Table 1's columns of a method drawn with baked maps (not in the paper): fps / m,
+    ms, its level walk, error."""
+    short = method.short
+    return (Column(f"{short}_fps", f"{method.name} fps / m", _entry(short, "fps"), cell=_fps_cell(short)),
+            Column(f"{short}_ms", None, _entry(short, "ms")),
+            Column(f"{short}_level", None, _key_or_none(f"{short}_level")),
+            Column(f"{short}_matched", None, _key_or_none(f"{short}_matched")),
+            Column(f"{short}_match", None, _match_text(short)),
+            Column(f"{short}_error", f"{method.name} err", _entry(short, "error"), ".3f"))
+
+
+def _rcr_over(short: str) -> Value:
+    return lambda m, results: rcr_over(m, short)
+
+
 #: Table 1: ``table1.csv``'s fields (``name``) and ``table.md``'s columns (``header``), in order.
 TABLE1_COLUMNS = (
     Column("model", "model", _key("model")),
@@ -228,15 +245,10 @@ TABLE1_COLUMNS = (
     Column("gsr_matched", None, _key("gsr_matched")),
     Column("gsr_match", None, _match_text("gsr")),
     Column("gsr_error", "GS+R err", _entry("gsr", "error"), ".3f"),
-    Column("gsn_fps", "GS+N fps / m", _entry("gsn", "fps"), cell=_fps_cell("gsn")),
-    Column("gsn_ms", None, _entry("gsn", "ms")),
-    Column("gsn_level", None, _key_or_none("gsn_level")),
-    Column("gsn_matched", None, _key_or_none("gsn_matched")),
-    Column("gsn_match", None, _match_text("gsn")),
-    Column("gsn_error", "GS+N err", _entry("gsn", "error"), ".3f"),
+    *(column for method in MAPPED_METHODS for column in _mapped_columns(method)),
     Column("rcr_over_gsr", "RC+R/GS+R ours", lambda m, results: rcr_over_gsr(m), cell=_ratio_cell),
     Column("rcr_over_gsr_matched", None, _ratio_matched),
-    Column("rcr_over_gsn", None, lambda m, results: rcr_over_gsn(m)),
+    *(Column(f"rcr_over_{method.short}", None, _rcr_over(method.short)) for method in MAPPED_METHODS),
     Column("paper_segments", None, _paper("segments")),
     Column("paper_rc_fps", None, _paper("rc_fps")),
     Column("paper_rcr_fps", None, _paper("rcr_fps")),
@@ -249,8 +261,10 @@ TABLE1_COLUMNS = (
     Column("rcr_bytes", None, _memory("rcr_bytes")),
     Column("gs_bytes", None, _memory("gs_bytes")),
     Column("gsr_bytes", None, _memory("gsr_bytes")),
-    Column("gsn_bytes", None, _memory("gsn_bytes")),
-    Column("normal_map_bytes", None, _memory("normal_map_bytes")),
+    *(column for method in MAPPED_METHODS for column in (Column(f"{method.short}_bytes", None,
+                                                                _memory(f"{method.short}_bytes")),
+                                                         Column(method.texture_field, None,
+                                                                _memory(method.texture_field)))),
     Column("shadows", None, _key("shadows")),
     Column("animated", None, _key("animated")),
     Column("gl_renderer", None, lambda m, results: results["machine"]["gl_renderer"]),
@@ -264,7 +278,7 @@ WORK_COLUMNS = (
     Column(None, "RC+R ms · overdraw · samples/px", cell=_work_cell("rcr", samples=True)),
     Column(None, "GS ms · overdraw", cell=_work_cell("gs")),
     Column(None, "GS+R ms · overdraw", cell=_work_cell("gsr")),
-    Column(None, "GS+N ms · overdraw", cell=_work_cell("gsn")),
+    *(Column(None, f"{method.name} ms · overdraw", cell=_work_cell(method.short)) for method in MAPPED_METHODS),
 )
 #: ``table.md``'s memory on the GPU.
 MEMORY_COLUMNS = (
@@ -275,9 +289,10 @@ MEMORY_COLUMNS = (
     Column(None, "GS/RC", _memory("gs_over_rc"), ".1f", "x"),
     Column(None, "GS+R B (m)", cell=_bytes_cell("gsr")),
     Column(None, "GS+R / RC+R", _memory("gsr_over_rcr"), ".1f", "x"),
-    Column(None, "GS+N B (m)", cell=_bytes_cell("gsn")),
-    Column(None, "normal maps B", _memory("normal_map_bytes"), ","),
-    Column(None, "GS+N / RC+R", _memory("gsn_over_rcr"), ".1f", "x"),
+    *(column for method in MAPPED_METHODS for column in (
+        Column(None, f"{method.name} B (m)", cell=_bytes_cell(method.short)),
+        Column(None, f"{method.name} maps B", _memory(method.texture_field), ","),
+        Column(None, f"{method.name} / RC+R", _memory(f"{method.short}_over_rcr"), ".1f", "x"))),
     Column(None, "paper", cell=lambda m: f"{PAPER_MEMORY_RATIO:.0f}x"),
 )
 
@@ -296,9 +311,9 @@ def _header_lines(results: dict) -> list[str]:
             "silhouette mismatch against the float64 reference in a "
             f"{o['eval_size'][0]}x{o['eval_size'][1]} window at full angular resolution. "
             f"RC+R config: the fastest RC+R configuration of the curves with err ≤ {relief_error:g} "
-            "('(best)': none reached it, the most accurate is timed). Level m: GS and GS+R go up "
+            "('(best)': none reached it, the most accurate is timed). Level m: the meshes go up "
             f"from m = 0 until err <= target err·(1 + {o['rel_tol']}) + {o['abs_tol']} (GS vs RC, "
-            "GS+R and GS+N vs RC+R at its config) or the next level is over the triangle budget "
+            f"{_matched_against_rcr()} vs RC+R at its config) or the next level is over the triangle budget "
             f"({o['max_triangles']:,}, --max-triangles); 'm{UNMATCHED}': not matched, the best "
             f"measured level is shown and timed, and the ratio beside it is not at matched quality "
             "(see the notes). RC+R/GS+R: fps ratio of the Table 1 run, where all four methods run "
@@ -308,9 +323,16 @@ def _header_lines(results: dict) -> list[str]:
             "records by a compute pass for RC, a mesh built once and posed by the vertex shader for GS; "
             "a leafy model's leaves, "
             "rasterised the same way by all four; the errors are of the frusta alone, as the float64 "
-            "reference casts no leaves). GS+N (not in the paper): GS's smooth mesh at level m with the relief "
-            "baked into normal maps (as plantgen export writes them), measured against the relief reference; "
-            "its bytes count the tangents and the normal maps (mipmaps included). Paper: 8800 GTX, 2009.", ""]
+            "reference casts no leaves). "
+            + " ".join(f"{m.name} (not in the paper, measured against the relief reference): {m.about}."
+                       for m in MAPPED_METHODS)
+            + " Paper: 8800 GTX, 2009.", ""]
+
+
+def _matched_against_rcr() -> str:
+    """``GS+R, GS+N and GS+POM``: the methods matched against RC+R."""
+    names = [TABLE_METHODS[short] for short, against in MATCHED_AGAINST.items() if against == "rcr"]
+    return ", ".join(names[:-1]) + " and " + names[-1] if len(names) > 1 else "".join(names)
 
 
 def _settings_text(settings: dict | None) -> str:
@@ -344,7 +366,8 @@ def markdown_table(results: dict) -> str:
     lines += ["", *summary_lines(summary)]
     choices = _choice_lines(results)
     if choices:
-        lines += ["", "RC+R's Table 1 configuration (GS+R and GS+N are matched against its error):", "", *choices]
+        lines += ["", f"RC+R's Table 1 configuration ({_matched_against_rcr()} are matched against its error):",
+                  "", *choices]
     lines += ["", "## Why: work per pixel (Table 1 configurations)", "",
               "ms of the Table 1 run · shaded fragments per covered pixel (overdraw) · for RC+R, mean "
               "relief height samples per covered pixel; counted in one render of the bare model at the "

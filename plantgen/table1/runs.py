@@ -20,15 +20,19 @@ from ..geometry.materials import material_height_maps
 from ..geometry.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..gl.context import gl_context, renderer_name
-from ..gl.raster import gs_buffer_bytes
+from ..gl.raster import PARALLAX_SCALE_BYTES, PARALLAX_SHELL_BYTES, gs_buffer_bytes
 from ..gl.records import rc_buffer_bytes
 from ..settings import ShadowSettings
 from .configs import (
     LEVEL_METHODS,
+    MAPPED_METHODS,
     MATCHED_AGAINST,
+    METHODS,
+    PARALLAX_SWEEPS,
     TABLE_METHODS,
     Config,
     level_config,
+    parallax_configs,
     ray_cast_configs,
     relief_configs,
 )
@@ -97,12 +101,14 @@ class _Meter:
         work = renderers.count_work(cfg, model.camera)
         row.update({k: work.as_dict()[k] for k in WORK_FIELDS})
         if cfg.level is not None:
-            mesh = renderers.mesh(cfg.level, cfg.displaced)
+            mesh = renderers.mesh(cfg.level, cfg.surface)
             row["triangles"] = len(mesh.faces)
             row["gpu_bytes"] = int(gs_buffer_bytes(mesh))
-            if cfg.normal_mapped:     # GS+N: its tangents and its normal maps besides
-                row["texture_bytes"] = renderers.texture_bytes(cfg.level)
+            if cfg.maps is not None:     # GS+N, GS+POM: their tangents and their maps besides
+                row["texture_bytes"] = renderers.texture_bytes(cfg.level, cfg.maps)
                 row["gpu_bytes"] += TANGENT_BYTES * len(mesh.vertices) + row["texture_bytes"]
+            if cfg.parallax is not None:  # GS+POM: the rows' shell thickness, the vertices' uv scales
+                row["gpu_bytes"] += PARALLAX_SHELL_BYTES * mesh.n_rows + PARALLAX_SCALE_BYTES * len(mesh.vertices)
         self.curve.append(row)
         self.results[cfg.key] = res
         renderers.release_raster(cfg.key)
@@ -119,10 +125,12 @@ class _Meter:
         return triangle_count(len(self.renderers.model.frusta), level, 0)
 
     def walk(self, method: str, target: dict) -> LevelMatch:
-        """GS or GS+R from m = 0 up until a level matches ``target`` (a curve row) or the
-        next one is over the budget (:func:`~plantgen.table1.matching.walk_levels`)."""
+        """A polygonal method from m = 0 up until a level matches ``target`` (a curve row) or
+        the next one is over the budget (:func:`~plantgen.table1.matching.walk_levels`;
+        GS+POM with the run's knobs)."""
+        parallax = self.opts.parallax
         match = walk_levels(method, target["key"], target["error"],
-                            lambda m: self.measure(level_config(method, m))["error"], self.triangles,
+                            lambda m: self.measure(level_config(method, m, parallax))["error"], self.triangles,
                             self.opts.max_triangles, self.opts.rel_tol, self.opts.abs_tol)
         if match.over_budget is not None:
             self.skip(level_config(method, match.over_budget[0]))
@@ -160,14 +168,15 @@ class _TableChoice:
         return [c for c in self.configs.values() if c is not None]
 
     def mesh_keys(self) -> set:
-        """The (level, displaced) meshes the Table 1 timing draws."""
-        return {(c.level, c.displaced) for c in self.timed if c.level is not None}
+        """The (level, surface) meshes the Table 1 timing draws."""
+        return {(c.level, c.surface) for c in self.timed if c.level is not None}
 
 
 def _choose_table(meter: _Meter, ray_configs, opts: BenchOptions, relief: bool) -> _TableChoice:
     """RC+R's configuration from the curves (:func:`choose_relief_config`), then the quality
-    criterion (:data:`MATCHED_AGAINST`): GS walked up against RC, GS+R and GS+N against
-    that RC+R."""
+    criterion (:data:`MATCHED_AGAINST`): GS walked up against RC, GS+R, GS+N and GS+POM
+    against that RC+R; then GS+POM's knobs swept at its level (:func:`parallax_configs`:
+    the curves' points, Table 1 times the run's knobs)."""
     by_key = {c.key: c for c in ray_configs}
     chosen, choice = {"rc": ray_configs[0], "rcr": None}, None
     if relief:
@@ -179,7 +188,10 @@ def _choose_table(meter: _Meter, ray_configs, opts: BenchOptions, relief: bool) 
         method, target = TABLE_METHODS[short], chosen[against]
         matches[short] = None if target is None else meter.walk(method, meter.measured()[target.key])
         level = None if matches[short] is None else matches[short].level
-        chosen[short] = None if level is None else level_config(method, level)
+        chosen[short] = None if level is None else level_config(method, level, opts.parallax)
+        if level is not None and chosen[short].parallax is not None:
+            for cfg in parallax_configs(opts, method, level):
+                meter.measure(cfg)
     return _TableChoice(chosen, matches, choice)
 
 
@@ -205,37 +217,41 @@ def _time_table(renderers: Renderers, table: _TableChoice, curve, frames: int) -
 
 def _memory(model: BenchModel, table: _TableChoice, curve) -> dict:
     """Bytes on the GPU of each method (height maps counted for the relief methods; GS+N's
-    mesh with its tangents and its normal-map texture array)."""
+    and GS+POM's mesh with its tangents and its maps' texture array): ``rc_bytes``,
+    ``relief_map_bytes``, ``rcr_bytes``, per polygonal method ``<short>_bytes`` and its
+    ratio to the method it is matched against ``<short>_over_<against>``, and each mapped
+    method's :attr:`Method.texture_field`."""
     measured = _measured(curve)
 
-    def gpu_bytes(cfg):
-        return None if cfg is None else measured.get(cfg.key, {}).get("gpu_bytes")
+    def row(short):
+        cfg = table.configs[short]
+        return {} if cfg is None else measured.get(cfg.key, {})
 
     rc_bytes = rc_buffer_bytes(len(model.frusta))
     map_bytes = int(material_height_maps(model.names)[0].nbytes) if model.relief else 0
-    gs_bytes, gsr_bytes = gpu_bytes(table.configs["gs"]), gpu_bytes(table.configs["gsr"])
-    gsn_bytes = gpu_bytes(table.configs["gsn"])
-    gsn = table.configs["gsn"]
-    texture_bytes = None if gsn is None else measured.get(gsn.key, {}).get("texture_bytes")
-    return {"rc_bytes": rc_bytes, "relief_map_bytes": map_bytes, "rcr_bytes": rc_bytes + map_bytes,
-            "gs_bytes": gs_bytes, "gsr_bytes": gsr_bytes, "gsn_bytes": gsn_bytes,
-            "normal_map_bytes": texture_bytes,
-            "gs_over_rc": gs_bytes / rc_bytes if gs_bytes else None,
-            "gsr_over_rcr": gsr_bytes / (rc_bytes + map_bytes) if gsr_bytes else None,
-            "gsn_over_rcr": gsn_bytes / (rc_bytes + map_bytes) if gsn_bytes else None}
+    out = {"rc_bytes": rc_bytes, "relief_map_bytes": map_bytes, "rcr_bytes": rc_bytes + map_bytes}
+    for short in MATCHED_AGAINST:
+        out[f"{short}_bytes"] = row(short).get("gpu_bytes")
+    for short, against in MATCHED_AGAINST.items():
+        mine = out[f"{short}_bytes"]
+        out[f"{short}_over_{against}"] = mine / out[f"{against}_bytes"] if mine else None
+    for method in MAPPED_METHODS:
+        out[method.texture_field] = row(method.short).get("texture_bytes")
+    return out
 
 
 def _notes(model: BenchModel) -> list[str]:
     notes = []
     if model.shadows:
-        notes.append(f"shadow map ({ShadowSettings().resolution}², PCF) and ground for RC, RC+R, "
-                     "GS, GS+R and GS+N alike")
+        notes.append(f"shadow map ({ShadowSettings().resolution}², PCF) and ground for "
+                     f"{', '.join(m.name for m in METHODS)} alike")
     if model.animation is not None:
         notes.append("animated: posed and skinned on the GPU in every frame (RC: a compute pass writes the "
                      "records; GS: the mesh built once at rest, posed by the vertex shader), the dispatch "
                      "counted in the frame")
         if model.relief and model.animation.plan is not None:
-            notes.append("GS+N timed as GS: the rasteriser draws a vertex-skinned mesh without its normal maps")
+            notes.append(f"{' and '.join(m.name for m in MAPPED_METHODS)} timed without their maps (GS+POM: its "
+                         "outer shell): the rasteriser draws a vertex-skinned mesh without maps")
     return notes
 
 
@@ -284,7 +300,8 @@ def bench_model(name: str, opts: BenchOptions, progress=None, images_dir: Path |
         meter = _Meter(renderers, window, references, opts, step)
         for cfg in configs:
             meter.measure(cfg)
-        # 3. RC+R's Table 1 configuration, then GS, GS+R and GS+N walked up to the criterion
+        # 3. RC+R's Table 1 configuration, then GS, GS+R, GS+N and GS+POM walked up to the
+        #    criterion, GS+POM's knobs swept at its level
         table = _choose_table(meter, configs, opts, model.relief)
         renderers.keep_meshes(table.mesh_keys())
         # 4. Table 1 timing: the methods interleaved, under the paper's conditions
@@ -322,12 +339,14 @@ def machine_info() -> dict:
 
 
 def count_steps(opts: BenchOptions) -> int:
-    """Progress steps of a run (an upper bound: reference, configurations, the GS, GS+R and
-    GS+N levels a one-segment model could reach within the budget, table timing)."""
+    """Progress steps of a run (an upper bound: reference, configurations, the GS, GS+R,
+    GS+N and GS+POM levels a one-segment model could reach within the budget, GS+POM's
+    swept knobs, table timing)."""
     levels = 0
     while triangle_count(1, levels, 0) <= opts.max_triangles:
         levels += 1
-    return len(opts.models) * (3 + len(relief_configs(opts)) + len(LEVEL_METHODS) * levels)
+    swept = sum(len(getattr(opts, sweep.values)) for sweep in PARALLAX_SWEEPS)
+    return len(opts.models) * (3 + len(relief_configs(opts)) + len(LEVEL_METHODS) * levels + swept)
 
 
 def run_bench(opts: BenchOptions, progress=None, out_dir: str | Path | None = None) -> dict:

@@ -7,22 +7,22 @@ import math
 
 from .paper import PAPER_TABLE1
 
-__all__ = ["rcr_over_gsr", "rcr_over_gsn", "relief_overhead", "geometric_mean", "summarise", "summary_lines"]
+__all__ = ["rcr_over", "rcr_over_gsr", "relief_overhead", "geometric_mean", "summarise",
+           "summary_lines"]
 
 
-def rcr_over_gsn(m: dict):
-    """RC+R fps over GS+N fps of a model's Table 1 run, None if either did not run."""
-    if m.get("rcr") and m.get("gsn"):
-        return m["rcr"]["fps"] / m["gsn"]["fps"]
+def rcr_over(m: dict, short: str):
+    """RC+R fps over the fps of method ``short`` (``gsr``, ``gsn``, ``gspom``) of a model's
+    Table 1 run, None if either did not run."""
+    if m.get("rcr") and m.get(short):
+        return m["rcr"]["fps"] / m[short]["fps"]
     return None
 
 
 def rcr_over_gsr(m: dict):
     """RC+R fps over GS+R fps of a model's Table 1 run (the ratio column), None if either
     is missing."""
-    if m.get("rcr") and m.get("gsr"):
-        return m["rcr"]["fps"] / m["gsr"]["fps"]
-    return None
+    return rcr_over(m, "gsr")
 
 
 def relief_overhead(m: dict):
