@@ -18,6 +18,7 @@ from _sway import copy_height, placed, posed, texture_swim
 from test_export_scene import glb_json, usd_problems
 from test_leaf_exports import GRAMMAR, LEAF
 
+from plantgen.benchmarks.in_blender import NUMPY_BOOL
 from plantgen.errors import PlantgenError
 from plantgen.exporters.gltf import byte_weights
 from plantgen.exporters.plants import leaf_parts, material_parts
@@ -329,7 +330,7 @@ def test_plantgen_re_skinning_slides_its_texture_frames_a_skin_does_not():
     assert swim > TOLERANCE * copy_height(instance.skeleton)
 
 
-BLENDER_IMPORT = """
+BLENDER_IMPORT = NUMPY_BOOL + """
 import bpy, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=sys.argv[-1])

@@ -16,6 +16,7 @@ from _cli import run_cli
 from _node import assert_khronos_valid, khronos_issues, needs_node, three_js_materials
 from PIL import Image
 
+from plantgen.benchmarks.in_blender import NUMPY_BOOL
 from plantgen.exporters import ExportError
 from plantgen.exporters.textures import texture_image
 from plantgen.geometry.textures import bake_material
@@ -178,7 +179,7 @@ def _blender_result(blender, script_text: str, tmp_path, *args) -> dict:
     return json.loads(line[len("RESULT"):])
 
 
-BLENDER_MATERIALS = """
+BLENDER_MATERIALS = NUMPY_BOOL + """
 import bpy, json, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=sys.argv[-1])

@@ -36,15 +36,20 @@ from ..pipeline import export_model, frame_arguments, prepare_model, stage_model
 from ..settings import RaycastSettings, ShadowSettings
 from .side_by_side import labelled_panels
 
-__all__ = ["BLENDER_SCRIPT", "blender_view", "main"]
+__all__ = ["BLENDER_SCRIPT", "NUMPY_BOOL", "blender_view", "main"]
+
+#: The first lines of a script for Debian 12's Blender 3.4: its glTF importer calls
+#: ``numpy.bool``, which Debian's numpy 1.24 lacks (numpy 2 has it again); restored here,
+#: so that the importer runs whichever numpy Blender's Python finds.
+NUMPY_BOOL = """import numpy
+if not hasattr(numpy, "bool"):
+    numpy.bool = numpy.bool_
+"""
 
 #: Run by ``blender --background --python``: import the glTF, set the camera and the sun,
 #: render with Cycles. Its arguments after ``--``: the JSON of :func:`_view_json`.
-BLENDER_SCRIPT = r"""
+BLENDER_SCRIPT = NUMPY_BOOL + r"""
 import json, math, sys, time
-import numpy
-if not hasattr(numpy, "bool"):          # Debian 12: Blender 3.4's importer and numpy 1.24
-    numpy.bool = numpy.bool_
 import bpy
 from mathutils import Vector
 
