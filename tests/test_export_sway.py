@@ -8,17 +8,16 @@ within 1e-3 of the copy's height. A still scene writes no animation."""
 from __future__ import annotations
 
 import dataclasses
-import subprocess
 
 import numpy as np
 import pytest
+from _blender import blender_line
 from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_meshes, three_js_sway
 from _sway import copy_height, placed, posed, texture_swim
 from test_export_scene import glb_json, usd_problems
 from test_leaf_exports import GRAMMAR, LEAF
 
-from plantgen.benchmarks.in_blender import NUMPY_BOOL
 from plantgen.errors import PlantgenError
 from plantgen.exporters.gltf import byte_weights
 from plantgen.exporters.plants import leaf_parts, material_parts
@@ -330,7 +329,7 @@ def test_plantgen_re_skinning_slides_its_texture_frames_a_skin_does_not():
     assert swim > TOLERANCE * copy_height(instance.skeleton)
 
 
-BLENDER_IMPORT = NUMPY_BOOL + """
+BLENDER_IMPORT = """
 import bpy, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
@@ -344,11 +343,6 @@ print('ARMATURES', len(armatures), 'ACTIONS', len(actions),
 def test_blender_imports_the_swaying_cacti(blender, tmp_path):
     """Blender's glTF importer makes armatures of the skins and an action of the sway."""
     export_model("dancing_cacti", tmp_path / "d.glb", level=0)
-    script = tmp_path / "import.py"
-    script.write_text(BLENDER_IMPORT)
-    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script), "--",
-                           str(tmp_path / "d.glb")], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    line = next(x for x in done.stdout.splitlines() if x.startswith("ARMATURES"))
-    words = line.split()
+    counts = blender_line(blender, BLENDER_IMPORT, tmp_path, "ARMATURES", str(tmp_path / "d.glb"))
+    words = ("ARMATURES" + counts).split()
     assert int(words[1]) >= 1 and int(words[3]) >= 1 and float(words[6]) > float(words[5])   # armatures, a sway

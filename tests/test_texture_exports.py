@@ -7,16 +7,15 @@ from __future__ import annotations
 import io
 import json
 import struct
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _blender import blender_line
 from _cli import run_cli
 from _node import assert_khronos_valid, khronos_issues, needs_node, three_js_materials
 from PIL import Image
 
-from plantgen.benchmarks.in_blender import NUMPY_BOOL
 from plantgen.exporters import ExportError
 from plantgen.exporters.textures import texture_image
 from plantgen.geometry.textures import bake_material
@@ -167,19 +166,7 @@ def test_the_command_reports_the_texture_sizes(tmp_path):
     assert code == 0 and "textures of cactus: 256x256 (base colour, normal, height" in out
 
 
-def _blender_result(blender, script_text: str, tmp_path, *args) -> dict:
-    """Run ``script_text`` in ``blender --background`` and return the JSON it printed after
-    ``RESULT``."""
-    script = tmp_path / "check.py"
-    script.write_text(script_text)
-    done = subprocess.run([blender, "--background", "--factory-startup", "--python", str(script), "--", *args],
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
-    return json.loads(line[len("RESULT"):])
-
-
-BLENDER_MATERIALS = NUMPY_BOOL + """
+BLENDER_MATERIALS = """
 import bpy, json, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=sys.argv[-1])
@@ -195,11 +182,16 @@ print('RESULT' + json.dumps({"materials": out, "objects": objects}))
 """
 
 
+def _blender_scene(blender, tmp_path, name: str) -> dict:
+    """What Blender made of ``tmp_path / name``: its materials' links and images, its objects' types."""
+    return json.loads(blender_line(blender, BLENDER_MATERIALS, tmp_path, "RESULT", str(tmp_path / name)))
+
+
 def test_blender_imports_the_textured_glb(blender, tmp_path):
     """In Blender the baked maps arrive as images linked to the material: the base colour
     into the shader's Base Color, the normal map through a Normal Map node."""
     export_model("saguaro", tmp_path / "s.glb")
-    cactus = _blender_result(blender, BLENDER_MATERIALS, tmp_path, str(tmp_path / "s.glb"))["materials"]["cactus"]
+    cactus = _blender_scene(blender, tmp_path, "s.glb")["materials"]["cactus"]
     links = {tuple(x) for x in cactus["links"]}
     assert ("TEX_IMAGE", "BSDF_PRINCIPLED", "Base Color") in links
     assert ("TEX_IMAGE", "NORMAL_MAP", "Color") in links and ("NORMAL_MAP", "BSDF_PRINCIPLED", "Normal") in links
@@ -209,7 +201,7 @@ def test_blender_imports_the_textured_glb(blender, tmp_path):
 def test_blender_imports_a_scene_whole(blender, tmp_path):
     """A scene's glb brings its camera and its sun into Blender beside the plants."""
     export_model("desert", tmp_path / "d.glb")
-    objects = _blender_result(blender, BLENDER_MATERIALS, tmp_path, str(tmp_path / "d.glb"))["objects"]
+    objects = _blender_scene(blender, tmp_path, "d.glb")["objects"]
     assert objects.count("CAMERA") == 1 and objects.count("LIGHT") == 1 and objects.count("MESH") >= 2
 
 

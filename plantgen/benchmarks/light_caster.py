@@ -116,7 +116,7 @@ class _Meshes:
     the rasteriser that draws them."""
 
     def __init__(self, model: BenchModel):
-        self.model, self.raster, self._meshes = model, None, {}
+        self.model, self.raster, self._meshes, self._counts = model, None, {}, {}
 
     def render(self, c: Caster, *, surroundings: bool = True, shadows: bool = True):
         """Rasterise the scene's level-``c.mesh_level`` GS+R mesh with ``c.shadows`` (none
@@ -136,8 +136,10 @@ class _Meshes:
         return c.mesh_level is None or self.triangles(c.mesh_level) <= MESH_CASTER_TRIANGLES
 
     def triangles(self, level: int) -> int:
-        """The level's mesh's triangles (counted, not built)."""
-        return triangle_count(self.model.frusta, level)
+        """The level's mesh's triangles (counted once, not built)."""
+        if level not in self._counts:
+            self._counts[level] = triangle_count(self.model.frusta, level)
+        return self._counts[level]
 
     def label(self, c: Caster) -> str:
         if c.mesh_level is None:
