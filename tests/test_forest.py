@@ -287,3 +287,33 @@ def test_the_forest_bench_keeps_a_small_forest_within_the_error_goal(tmp_path):
     drawn = [int(r["drawn"].split()[0].replace(",", "")) for r in (full, lod)]
     assert drawn[0] == result["placed"] and drawn[1] < 0.6 * drawn[0]
     assert "| RC+R | 1 |" in markdown(result)
+
+
+def test_the_impostor_table_counts_what_the_caster_draws_and_sizes_hold_each_copy():
+    """rows_by_copy_size on a stand of copies 5 to 900 units off: its rows at each threshold
+    are the rows the ray caster draws; every copy's rows project within its size (the
+    pixels across its ball); a size over every copy holds every copy and row, one under
+    every copy none."""
+    from plantgen.benchmarks.forest import rows_by_copy_size, size_table
+
+    skeleton, frusta = _tree()
+    mats = [_placement((3.0 * k, 0.0, -z), 40.0 * k, 0.6 + 0.2 * k) for k, z in enumerate([5, 30, 120, 400, 900])]
+    placed = PlacedPlants.build([("ternary", frusta, skeleton.parent, mats)])
+    camera = Camera((0.0, 3.0, 10.0), (0.0, 3.0, -100.0), (0, 1, 0), 50.0, 320, 240)
+    thresholds = (0.0, 2.0)
+    table = rows_by_copy_size(placed, camera, None, thresholds, limits=(1, 1e6))
+    caster = Raycaster()
+    for px in thresholds:
+        drawn = caster.render(placed, camera, light_dir=LIGHT, material_names=placed.material_names, lod_pixels=px)
+        assert table["rows"][px] == drawn.stats.segments
+    assert table["copies"] == len(mats)
+    (_, none, rows_none), (_, every, rows_every) = table["under"]
+    assert none == 0 and every == len(mats) and rows_every == table["rows"] and not any(rows_none.values())
+    # each copy's points project inside the size the table gives it (the smallest bounds them all)
+    plant = placed.plants[0]
+    extents = [_pixel_extent(section_points(place_frusta(plant.frusta, m))[0].reshape(1, -1, 3), camera)[0]
+               for m in plant.matrices]
+    assert min(extents) <= table["smallest"] * np.sqrt(2) + 1e-6
+    sizes = rows_by_copy_size(placed, camera, None, (0.0,), limits=sorted(e / np.sqrt(2) for e in extents))["under"]
+    assert all(copies <= k for k, (_, copies, _) in enumerate(sizes))
+    assert "| 1 px | 0 |" in "\n".join(size_table(table))

@@ -14,6 +14,11 @@ for the plants (the distinct plants' records or meshes, the relief maps) against
 merged record set or mesh of every drawn segment would hold; per copy nothing is stored
 (52 bytes of uniforms cross per draw). Full-detail GS frames are drawn once, untimed
 warm-up aside (they take minutes on llvmpipe).
+
+A second table (:func:`rows_by_copy_size`, counted, not timed) says what impostors could
+take off a frame: the visible copies by their size on screen (the pixels across each
+copy's bounding ball) and the share of the rows drawn at each threshold that the copies
+under a size hold.
 """
 
 from __future__ import annotations
@@ -24,11 +29,15 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from ..files import write_atomically
-from ..geometry.instances import PlacedMeshes
+from ..geometry.camera import box_corners
+from ..geometry.instances import PlacedMeshes, PlacedPlants
 from ..geometry.materials import material_height_maps
 from ..gl.context import renderer_name
-from ..gl.instanced import COPY_UNIFORM_BYTES
+from ..gl.frame import frame_view
+from ..gl.instanced import COPY_UNIFORM_BYTES, eye_copy_draws
 from ..gl.raster import RasterRenderer, placed_buffer_bytes
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES
@@ -37,10 +46,41 @@ from ..settings import RaycastSettings, ShadowSettings
 from ..table1.quality import image_error
 from .arguments import image_size
 
-__all__ = ["measure", "markdown", "main", "RENDERERS"]
+__all__ = ["measure", "markdown", "main", "RENDERERS", "COPY_SIZES", "rows_by_copy_size", "size_table"]
 
 #: The renderers measured: label, relief, raster.
 RENDERERS = (("RC", False, False), ("RC+R", True, False), ("GS", False, True), ("GS+R", True, True))
+
+
+#: The on-screen sizes (pixels across a copy's bounding ball) of the impostor table.
+COPY_SIZES = (50, 100, 200, 300, 400, 600)
+
+
+def rows_by_copy_size(placed: PlacedPlants, camera, ground, thresholds, limits=COPY_SIZES) -> dict:
+    """What impostors could take off a frame of ``placed`` seen by ``camera``: the eye's
+    draws at each threshold (pixels; :func:`plantgen.gl.instanced.eye_copy_draws`, as the
+    ray caster makes them), each visible copy's size on screen (the pixels its bounding
+    ball spans at the image's centre, 2·asin(r/d) times the focal length) and, per size
+    in ``limits``, the copies under it and the rows they draw. Returns {"copies": visible
+    copies, "smallest": the smallest size, "rows": {threshold: rows drawn}, "under":
+    [(limit, copies under it, {threshold: rows they draw})]}."""
+    view = frame_view(camera, [box_corners(placed.box)] + ([] if ground is None else [ground.quad()]))
+    focal = camera.height / (2.0 * np.tan(np.radians(camera.fov_y) / 2))
+    rows = {}
+    for px in thresholds:
+        draws = eye_copy_draws(placed, view, px)
+        per_copy = []
+        for plant, d in zip(placed.plants, draws, strict=True):
+            centres, radii = plant.copy_balls()
+            dist = np.linalg.norm(centres[d.copies] - view.eye, axis=1)
+            size = 2.0 * np.arcsin(np.minimum(radii[d.copies] / np.maximum(dist, 1e-12), 1.0)) * focal
+            per_copy.append(np.stack([size, d.counts], axis=1))
+        rows[px] = np.concatenate(per_copy) if per_copy else np.zeros((0, 2))
+    full = rows[thresholds[0]]
+    under = [(limit, int(np.sum(full[:, 0] < limit)),
+              {px: int(t[t[:, 0] < limit, 1].sum()) for px, t in rows.items()}) for limit in limits]
+    return {"copies": len(full), "smallest": float(full[:, 0].min()) if len(full) else float("nan"),
+            "rows": {px: int(t[:, 1].sum()) for px, t in rows.items()}, "under": under}
 
 
 def _frames(draw, frames: int) -> tuple[list, float, object]:
@@ -92,7 +132,9 @@ def measure(scene: str = "forest", size=(1024, 768), thresholds=(0.0, 1.0, 2.0, 
                    "gpu_bytes": gpu + maps.nbytes * (5 if relief else 1)}
             rows.append(row)
             say(_line(row))
-    return {"rows": rows, "renderer": renderer_name(), "size": size, "scene": scene, "prepare_s": prepare_s,
+    by_size = rows_by_copy_size(placed, staging.camera, staging.ground, thresholds)
+    return {"rows": rows, "by_size": by_size, "renderer": renderer_name(), "size": size, "scene": scene,
+            "prepare_s": prepare_s,
             "copies": placed.copies, "plants": len(placed.plants), "unique": placed.unique_rows,
             "placed": len(placed), "gs_level": gs_level,
             "gs_unique_triangles": sum(len(m.faces) for m in meshes.get(False, PlacedMeshes(placed, (), 0)).meshes)}
@@ -125,7 +167,23 @@ def markdown(result: dict) -> str:
     lines += [f"| {r['renderer']} | {r['lod_pixels']:g} | {r['ms']:.0f} | {r['light_ms']:.0f} | "
               f"{r['timed'] or 'once'} | {r['drawn']} | {r['error']:.4f} | {r['gpu_bytes'] / 2**20:.1f} MiB |"
               for r in result["rows"]]
+    if "by_size" in result:
+        lines += ["", *size_table(result["by_size"])]
     return "\n".join(lines) + "\n"
+
+
+def size_table(by_size: dict) -> list[str]:
+    """The lines of the impostor table (:func:`rows_by_copy_size`)."""
+    thresholds = list(by_size["rows"])
+    lines = [f"What impostors could take: the {by_size['copies']:,} visible copies by the pixels across their bounding "
+             f"balls (the smallest {by_size['smallest']:.0f} px), and the share of each threshold's drawn rows that "
+             "the copies under a size draw.", "",
+             "| copies spanning under | copies | " + " | ".join(f"rows at {px:g} px" for px in thresholds) + " |",
+             "| --- | --- | " + " | ".join("---" for _ in thresholds) + " |"]
+    for limit, copies, rows in by_size["under"]:
+        cells = [f"{rows[px]:,} ({rows[px] / max(by_size['rows'][px], 1):.1%})" for px in thresholds]
+        lines.append(f"| {limit} px | {copies:,} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def main(argv=None) -> int:

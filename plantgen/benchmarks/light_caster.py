@@ -17,6 +17,10 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
   interpolated along the ray, one texel fetch a height, regula falsi to half a texel),
   and the same with each accuracy knob (``--shadow-march-density``,
   ``--shadow-march-precision``) moved, its error beside its time;
+* ``secant, 4 samples, no refinement`` and ``secant, 2 samples, 1 step``: the same march
+  cut to what no accurate caster can go below (``--linear-steps`` 4 or 2, the fewest
+  steps as many, ``--binary-steps`` 0 or 1): the floor of a march on this GL, what its
+  set-up and first samples cost, beside the error they leave;
 * ``GS+R mesh m=5``, ``m=6``: what an engine would do instead, the relief tessellated and
   displaced (GS+R at level m, :func:`plantgen.geometry.mesh.tessellate`, built once and
   not timed) and rasterised into the map by plantgen's rasteriser (``raster.glsl``'s
@@ -83,8 +87,8 @@ class Caster:
 
 _MAP = ShadowSettings(cache=False)
 _RELIEF = RaycastSettings(relief=True)
-#: The casters compared: the plain one, the relief caster before and now, and now with
-#: each accuracy knob moved.
+#: The casters compared: the plain one, the relief caster before and now, now with each
+#: accuracy knob moved, and now cut to its floor.
 CASTERS = (
     Caster("plain", RaycastSettings(), _MAP),
     Caster("bisect", _RELIEF, replace(_MAP, march="bisect")),
@@ -93,6 +97,9 @@ CASTERS = (
     Caster("secant, density 1", _RELIEF, replace(_MAP, march_density=1.0)),
     Caster("secant, precision 0.25", _RELIEF, replace(_MAP, march_precision=0.25)),
     Caster("secant, precision 1", _RELIEF, replace(_MAP, march_precision=1.0)),
+    Caster("secant, 4 samples, no refinement", RaycastSettings(relief=True, linear_steps=4, binary_steps=0), _MAP),
+    Caster("secant, 2 samples, 1 step",
+           RaycastSettings(relief=True, linear_steps=2, march_min_steps=2, binary_steps=1), _MAP),
     Caster("GS+R mesh m=5", _RELIEF, _MAP, mesh_level=5),
     Caster("GS+R mesh m=6", _RELIEF, _MAP, mesh_level=6),
 )
