@@ -9,7 +9,8 @@ drawn once to warm up (that draw draws the shadow map: its milliseconds are the 
 column) and ``--frames`` more times with the map kept; the table gives their median, the
 rows (segments) and triangles drawn, and the image error of the frame against the same
 renderer's full-detail frame (the bench's metric, :func:`plantgen.table1.quality.image_error`:
-1 - SSIM of the depth shading + the silhouette mismatch). GPU bytes: what the GPU holds
+1 - SSIM of the depth shading + the silhouette mismatch; both parts are given too).
+GPU bytes: what the GPU holds
 for the plants (the distinct plants' records or meshes, the relief maps) against what a
 merged record set or mesh of every drawn segment would hold; per copy nothing is stored
 (52 bytes of uniforms cross per draw). Full-detail GS frames are drawn once, untimed
@@ -125,10 +126,13 @@ def measure(scene: str = "forest", size=(1024, 768), thresholds=(0.0, 1.0, 2.0, 
                 gpu = placed.unique_rows * RECORD_BYTES
             times, light_ms, result = _frames(draw, n)
             full = result if px == 0 else full
-            error = image_error(result.distance, full.distance, staging.camera, staging.light_dir).total \
-                if full is not None else float("nan")
+            parts = image_error(result.distance, full.distance, staging.camera, staging.light_dir) \
+                if full is not None else None
+            error = parts.total if parts is not None else float("nan")
             row = {"renderer": label, "lod_pixels": px, "ms": statistics.median(times), "light_ms": light_ms,
                    "timed": len(times) if n else 0, "drawn": _drawn(result), "error": error,
+                   "dssim": parts.dssim if parts is not None else float("nan"),
+                   "silhouette": parts.silhouette if parts is not None else float("nan"),
                    "gpu_bytes": gpu + maps.nbytes * (5 if relief else 1)}
             rows.append(row)
             say(_line(row))
@@ -162,10 +166,12 @@ def markdown(result: dict) -> str:
              f"(merged, every placed segment: {placed * RECORD_BYTES / 2**20:.1f} MiB); per copy 0 B stored, "
              f"{COPY_UNIFORM_BYTES} B of uniforms per draw.", "",
              "| renderer | LOD (px) | frame ms (median, map kept) | light pass ms | timed | drawn | error vs full "
-             "| GPU bytes (plants + maps) |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| of it: 1 - SSIM, silhouette | GPU bytes (plants + maps) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     lines += [f"| {r['renderer']} | {r['lod_pixels']:g} | {r['ms']:.0f} | {r['light_ms']:.0f} | "
-              f"{r['timed'] or 'once'} | {r['drawn']} | {r['error']:.4f} | {r['gpu_bytes'] / 2**20:.1f} MiB |"
+              f"{r['timed'] or 'once'} | {r['drawn']} | {r['error']:.4f} | "
+              f"{r.get('dssim', float('nan')):.4f}, {r.get('silhouette', float('nan')):.4f} | "
+              f"{r['gpu_bytes'] / 2**20:.1f} MiB |"
               for r in result["rows"]]
     if "by_size" in result:
         lines += ["", *size_table(result["by_size"])]
