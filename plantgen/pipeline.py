@@ -665,7 +665,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     march, shadows = request.frame(model.effects)
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
             **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
-    raycaster, anim, colors, update_times = Raycaster(), model.anim, [], []
+    raycaster, anim, colors, update_times = Raycaster(limits=limits), model.anim, [], []
     if frames is not None:
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:

@@ -190,8 +190,13 @@ class ShadowSettings:
     """The shadow map's knobs.
 
     resolution : texels per side of the square map
-    caster : ``"relief"`` (the relief surface casts the shadow when relief is on) or
-        ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow pass)
+    caster : ``"relief"`` (the relief surface casts the shadow when relief is on, ray cast
+        and marched), ``"inner"`` (the inner cone casts it: cheaper, no march in the shadow
+        pass) or ``"mesh"`` (what an engine does: the frusta tessellated at ``mesh_level``,
+        displaced by the relief when it is on, built once and rasterised into the map;
+        cheaper than the march on a few large rows, coarser, and its triangles grow as
+        16·4^m a row: ``python -m plantgen.benchmarks.light_caster`` measures both)
+    mesh_level : the mesh caster's subdivision level m (GS+R's)
     march : how the relief caster's light rays find the relief surface: ``"secant"`` (the
         light's own march, ``shaders/light_march.glsl``: only the band the relief occupies,
         (u, v) interpolated along the ray from three angles instead of one per sample,
@@ -215,8 +220,12 @@ class ShadowSettings:
     """
 
     resolution: int = knob(2048, "--shadow-res", "Shadow map texels per side.", kind="int", lo=16, hi=16384)
-    caster: str = knob("relief", "--shadow-caster", "With relief: the relief surface casts the shadow, or the inner "
-                       "cone (cheaper).", kind="choice", choices=("relief", "inner"))
+    caster: str = knob("relief", "--shadow-caster", "What casts the shadow: with relief the relief surface, ray cast "
+                       "(relief), or the inner cone (inner, cheaper); or the frusta tessellated at "
+                       "--shadow-mesh-level and rasterised (mesh: an engine's caster, displaced by the relief).",
+                       kind="choice", choices=("relief", "inner", "mesh"))
+    mesh_level: int = knob(6, "--shadow-mesh-level", "Mesh caster: subdivision level m (16·4^m triangles a frustum).",
+                           kind="int", lo=0, hi=8)
     march: str = knob("secant", "--shadow-march", "Relief caster: the light's march ((u, v) interpolated along each "
                       "ray, regula falsi) or the eye's (an angle per sample, bisection).", kind="choice",
                       choices=("secant", "bisect"))

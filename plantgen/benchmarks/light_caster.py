@@ -21,11 +21,13 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
   cut to what no accurate caster can go below (``--linear-steps`` 4 or 2, the fewest
   steps as many, ``--binary-steps`` 0 or 1): the floor of a march on this GL, what its
   set-up and first samples cost, beside the error they leave;
-* ``GS+R mesh m=5``, ``m=6``: what an engine would do instead, the relief tessellated and
-  displaced (GS+R at level m, :func:`plantgen.geometry.mesh.tessellate`, built once and
-  not timed) and rasterised into the map by plantgen's rasteriser (``raster.glsl``'s
-  SHADOW_PASS): one more way of casting the relief, measured by the same clock and the
-  same reference (its map drawn over the same window: the frusta's box).
+* ``mesh m=3``, ``m=5``, ``m=6``: what an engine would do instead, ``--shadow-caster mesh``:
+  the frusta tessellated and displaced by the relief (GS+R at level m,
+  :func:`plantgen.geometry.mesh.tessellate`, built once and not timed) and rasterised
+  into the same map by the ray caster's light pass (``raster.glsl``'s SHADOW_PASS): one
+  more way of casting the relief, measured by the same clock and the same reference (a
+  scene whose mesh would pass :data:`MESH_CASTER_TRIANGLES` is not drawn, and its row
+  says so).
 
 Error: the light's rays through ``--rays`` texels picked at random where any caster drew
 (and two texels around) are cast by :func:`plantgen.geometry.reference.intersect_frusta`
@@ -50,12 +52,10 @@ import numpy as np
 
 from .._resources import grammars_dir
 from ..files import read_yaml
-from ..geometry.mesh import tessellate, triangle_count
+from ..geometry.mesh import triangle_count
 from ..geometry.reference import intersect_frusta
 from ..gl.context import renderer_name
-from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
-from ..gl.records import rows_box
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings
 from ..table1.models import BenchModel, load_model
 from .arguments import image_size, report
@@ -64,10 +64,10 @@ from .arguments import image_size, report
 #: the casters are measured against).
 REFERENCE_SAMPLES = 2048
 
-#: The most triangles a mesh caster's mesh may have (a scene of many rows is not drawn so:
-#: each row is 16·4^m triangles at level m; the dancing cacti's 2,151 rows at m = 5 would
-#: be 35 million).
-MESH_CASTER_TRIANGLES = 2_000_000
+#: The most triangles a mesh caster's mesh may have here (a scene of many rows is not drawn
+#: so: each row is 16·4^m triangles at level m; the dancing cacti's 2,151 rows at m = 5
+#: would be 35 million).
+MESH_CASTER_TRIANGLES = 3_000_000
 
 #: The frame of ``--cpu`` timings: so small that a render's CPU time is its light pass's.
 CPU_FRAME = (16, 12)
@@ -82,13 +82,17 @@ class Caster:
     label: str
     settings: RaycastSettings
     shadows: ShadowSettings
-    mesh_level: int | None = None     # a displaced mesh (GS+R at this level) rasterised instead
+
+    @property
+    def mesh_level(self) -> int | None:
+        """The mesh caster's level, None for a ray-cast caster."""
+        return self.shadows.mesh_level if self.shadows.caster == "mesh" else None
 
 
 _MAP = ShadowSettings(cache=False)
 _RELIEF = RaycastSettings(relief=True)
 #: The casters compared: the plain one, the relief caster before and now, now with each
-#: accuracy knob moved, and now cut to its floor.
+#: accuracy knob moved, now cut to its floor, and the mesh caster at three levels.
 CASTERS = (
     Caster("plain", RaycastSettings(), _MAP),
     Caster("bisect", _RELIEF, replace(_MAP, march="bisect")),
@@ -100,8 +104,7 @@ CASTERS = (
     Caster("secant, 4 samples, no refinement", RaycastSettings(relief=True, linear_steps=4, binary_steps=0), _MAP),
     Caster("secant, 2 samples, 1 step",
            RaycastSettings(relief=True, linear_steps=2, march_min_steps=2, binary_steps=1), _MAP),
-    Caster("GS+R mesh m=5", _RELIEF, _MAP, mesh_level=5),
-    Caster("GS+R mesh m=6", _RELIEF, _MAP, mesh_level=6),
+    *(Caster(f"mesh m={m}", _RELIEF, replace(_MAP, caster="mesh", mesh_level=m)) for m in (3, 5, 6)),
 )
 
 
@@ -118,86 +121,48 @@ def shadowed_scenes() -> list[str]:
     return names
 
 
-class _Meshes:
-    """The displaced meshes of the mesh casters, tessellated once per scene and level, and
-    the rasteriser that draws them."""
-
-    def __init__(self, model: BenchModel):
-        self.model, self.raster, self._meshes, self._counts = model, None, {}, {}
-
-    def render(self, c: Caster, *, surroundings: bool = True, shadows: bool = True):
-        """Rasterise the scene's level-``c.mesh_level`` GS+R mesh with ``c.shadows`` (none
-        without ``shadows``; its ground and leaves with ``surroundings``; the map's window
-        over the frusta's box)."""
-        if self.raster is None:
-            self.raster = RasterRenderer()
-        mesh = self._meshes.setdefault(c.mesh_level, tessellate(self.model.frusta, c.mesh_level, relief=True))
-        m = self.model
-        return self.raster.render(mesh, m.frusta, m.camera, material_names=m.names, light_dir=m.light_dir,
-                                  ground=m.ground if surroundings else None, shadows=c.shadows if shadows else None,
-                                  leaves=m.leaves if surroundings else None, shadow_box=rows_box(m.frusta))
-
-    def fits(self, c: Caster) -> bool:
-        """Whether ``c`` draws here: a ray caster, or a mesh caster whose mesh stays within
-        :data:`MESH_CASTER_TRIANGLES`."""
-        return c.mesh_level is None or self.triangles(c.mesh_level) <= MESH_CASTER_TRIANGLES
-
-    def triangles(self, level: int) -> int:
-        """The level's mesh's triangles (counted once, not built)."""
-        if level not in self._counts:
-            self._counts[level] = triangle_count(self.model.frusta, level)
-        return self._counts[level]
-
-    def label(self, c: Caster) -> str:
-        if c.mesh_level is None:
-            return c.label
-        n = self.triangles(c.mesh_level)
-        return f"{c.label} ({n:,} triangles{'' if self.fits(c) else ': too many, not drawn'})"
+def _fits(model: BenchModel, c: Caster) -> bool:
+    """Whether ``c`` draws here: a ray caster, or a mesh caster whose mesh stays within
+    :data:`MESH_CASTER_TRIANGLES`."""
+    return c.mesh_level is None or triangle_count(model.frusta, c.mesh_level, caps="tips") <= MESH_CASTER_TRIANGLES
 
 
-def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False,
-                 meshes: _Meshes | None = None) -> dict:
+def _label(model: BenchModel, c: Caster) -> str:
+    """The caster's label; a mesh caster's with its triangles (and whether it was drawn)."""
+    if c.mesh_level is None:
+        return c.label
+    n = triangle_count(model.frusta, c.mesh_level, caps="tips")
+    return f"{c.label} ({n:,} triangles{'' if _fits(model, c) else ': too many, not drawn'})"
+
+
+def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:
     """Median shadow-pass ms of each caster in the scene's frame, timed in alternation after
-    one warm-up each: the pass's wall ms, or with ``cpu`` the whole render's CPU ms of this
-    process (:data:`CPU_FRAME`). A mesh caster's eye pass transforms every vertex of its
-    mesh however small the frame, so with ``cpu`` its median frame without shadows (timed
-    in the same alternation) is taken off."""
-    meshes = meshes or _Meshes(model)
-    skipped = [c for c in casters if not meshes.fits(c)]
-    casters = [c for c in casters if meshes.fits(c)]
+    one warm-up each (which builds a mesh caster's mesh): the pass's wall ms, or with
+    ``cpu`` the whole render's CPU ms of this process (:data:`CPU_FRAME`). A caster whose
+    mesh is over the budget is not drawn (NaN)."""
+    skipped = [c for c in casters if not _fits(model, c)]
+    casters = [c for c in casters if _fits(model, c)]
 
-    def render(c: Caster, shadows: bool = True):
+    def render(c: Caster):
         t0 = time.process_time()
-        if c.mesh_level is not None:
-            result = meshes.render(c, shadows=shadows)
-        else:
-            result = caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir,
-                                   model.ground, shadows=c.shadows, leaves=model.leaves)
+        result = caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir,
+                               model.ground, shadows=c.shadows, leaves=model.leaves)
         return (time.process_time() - t0) * 1e3 if cpu else result.stats.shadow_ms
-    runs = [(c.label, c, True) for c in casters]
-    runs += [(c.label + " (eye)", c, False) for c in casters if cpu and c.mesh_level is not None]
-    for _, c, shadows in runs:
-        render(c, shadows)
-    samples: dict = {label: [] for label, _, _ in runs}
+    for c in casters:
+        render(c)
+    samples: dict = {c.label: [] for c in casters}
     for _ in range(frames):
-        for label, c, shadows in runs:
-            samples[label].append(render(c, shadows))
-    medians = {k: statistics.median(v) for k, v in samples.items()}
-    return {**{c.label: medians[c.label] - medians.get(c.label + " (eye)", 0.0) for c in casters},
-            **{c.label: float("nan") for c in skipped}}
+        for c in casters:
+            samples[c.label].append(render(c))
+    return {**{k: statistics.median(v) for k, v in samples.items()}, **{c.label: float("nan") for c in skipped}}
 
 
-def _maps(caster: Raycaster, model: BenchModel, casters, meshes: _Meshes) -> tuple[dict, object]:
+def _maps(caster: Raycaster, model: BenchModel, casters) -> tuple[dict, object]:
     """Each caster's light depth map of the frusta alone (no ground, no leaves), and the
-    light's window (relative to the eye; the frusta's box, the mesh casters' too)."""
+    light's window (relative to the eye; the frusta's box)."""
     maps = {}
     for c in casters:
-        if not meshes.fits(c):
-            continue
-        if c.mesh_level is not None:
-            meshes.render(c, surroundings=False)
-            maps[c.label] = meshes.raster.shadow_depths().astype(np.float64)
-        else:
+        if _fits(model, c):
             caster.render(model.frusta, model.camera, c.settings, model.names, model.light_dir, shadows=c.shadows)
             maps[c.label] = caster.shadow_depths().astype(np.float64)
     return maps, caster.last_light_window
@@ -243,13 +208,12 @@ def measure_scene(name: str, size, frames: int, rays: int, samples: int, caster:
     """One row per caster: shadow-pass ms (with ``cpu``: CPU ms, :data:`CPU_FRAME`), its
     ratio to the plain pass's and the errors."""
     model = load_model(name, CPU_FRAME if cpu else size)
-    meshes = _Meshes(model)
-    ms = time_casters(caster, model, casters, frames, cpu, meshes)
-    maps, window = _maps(caster, model, casters, meshes)
+    ms = time_casters(caster, model, casters, frames, cpu)
+    maps, window = _maps(caster, model, casters)
     reference = _reference(model, maps, window, rays, samples)
     plain, before = ms[casters[0].label], ms.get("bisect")
     missing = dict.fromkeys(("coverage", "half_texel", "two_texels", "median_texels"), float("nan"))
-    return [{"scene": model.name, "caster": meshes.label(c),
+    return [{"scene": model.name, "caster": _label(model, c),
              "shadow_ms": ms[c.label], "over_plain": ms[c.label] / plain,
              "over_bisect": ms[c.label] / before if before else float("nan"),
              **(_errors(maps[c.label], reference, window) if c.label in maps else missing)} for c in casters]

@@ -31,7 +31,7 @@ from ..settings import ShadowSettings
 from ..tolerances import tol
 from .context import release_framebuffer
 
-__all__ = ["LightWindow", "light_window", "ShadowPass", "light_defines",
+__all__ = ["LightWindow", "light_window", "ShadowPass", "light_defines", "light_program",
            "program_variants", "frame_passes"]
 
 #: Shadow maps a renderer keeps (by what they depend on): two, so a run that alternates
@@ -47,6 +47,15 @@ def light_defines(settings, shadows: ShadowSettings) -> dict:
     return {"SHADOW_PASS": True, "RELIEF": relief, "LIGHT_BISECT": relief and shadows.march == "bisect"}
 
 
+def light_program(settings, shadows: ShadowSettings) -> tuple[str, dict]:
+    """(file, defines) of the frusta's program in the light's pass: the ray caster's
+    (:func:`light_defines`), or with the mesh caster the rasteriser's depth-only pass of
+    the tessellated frusta."""
+    if shadows.caster == "mesh":
+        return "raster.glsl", {"SHADOW_PASS": True, "SKINNED": False}
+    return "raycast.glsl", light_defines(settings, shadows)
+
+
 def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False,
                      leaves: bool = False) -> list:
     """(program file, defines) of every program one frame uses.
@@ -60,7 +69,7 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
     shadowed = shadows is not None
     out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
     if shadowed:
-        out.append(("raycast.glsl", light_defines(settings, shadows)))
+        out.append(light_program(settings, shadows))
         if ground:
             out.append(("ground.glsl", {"SHADOW_PASS": True}))
         if leaves:

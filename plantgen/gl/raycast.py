@@ -27,7 +27,10 @@ from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
 from ..geometry.frusta import ROW_FIELDS, Frusta
 from ..geometry.instances import PlacedPlants
+from ..geometry.mesh import tessellate, triangle_count
 from ..geometry.stage import Ground
+from ..limits import LimitError, Limits, hint
+from ..limits import limits as default_limits
 from ..settings import RaycastSettings, ShadowSettings
 from .context import gl_context
 from .frame import (
@@ -40,9 +43,9 @@ from .frame import (
     check_ssaa,
     frame_view,
 )
-from .instanced import IDENTITY_PLACEMENT, draw_copies, eye_copy_draws, light_copy_draws
+from .instanced import IDENTITY_PLACEMENT, IDENTITY_TURN, draw_copies, eye_copy_draws, light_copy_draws
 from .leaf_layer import leaf_bounds, union_box
-from .passes import frame_passes, light_defines, program_variants
+from .passes import frame_passes, light_defines, light_program, program_variants
 from .records import (
     PYRAMID_CORNERS,
     PYRAMID_TRIANGLES,
@@ -61,6 +64,11 @@ __all__ = ["RaycastSettings", "Raycaster", "render_frusta", "label_image"]
 PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
 
 
+#: Bytes the mesh caster's mesh takes a triangle, host and GPU together (about half a
+#: vertex a triangle: float64 position, normal and uv, the faces, their float32 upload).
+CASTER_MESH_BYTES_PER_TRIANGLE = 96
+
+
 class Raycaster(OffscreenRenderer):
     """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
 
@@ -68,17 +76,52 @@ class Raycaster(OffscreenRenderer):
     the settings do not ask for (no relief march without relief).
     """
 
-    def __init__(self, ctx=None):
+    def __init__(self, ctx=None, limits: Limits | None = None):
         super().__init__(ctx)
+        #: the budgets in force (the mesh caster's mesh counts against ``max_render_bytes``)
+        self.limits = limits if limits is not None else default_limits
         self._template_vbo = self.ctx.buffer(PYRAMID_CORNERS.tobytes())
         self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
         self.programs_used: set[tuple] = set()
         self._placed = None      # (PlacedPlants, [record buffer per plant]): uploaded once
+        self._caster_mesh = None  # (frusta, level, relief, origin, vbo, ibo, indices): the mesh caster's
 
     def release(self) -> None:
-        """Free every GL object of this renderer, a placed scene's records included."""
+        """Free every GL object of this renderer, a placed scene's records and the mesh
+        caster's mesh included."""
         self._release_placed()
+        self._release_caster_mesh()
         super().release()
+
+    def _release_caster_mesh(self) -> None:
+        if self._caster_mesh is not None:
+            for buf in self._caster_mesh[4:6]:
+                buf.release()
+            self._caster_mesh = None
+
+    def caster_mesh(self, frusta: Frusta, level: int, relief: bool):
+        """(origin (3,), vertex buffer, index buffer, indices) of the mesh caster's mesh:
+        ``frusta`` tessellated at ``level`` (displaced by the relief with ``relief``; tip
+        caps, as GS+R renders), positions in float32 relative to the mesh's mean, built and
+        uploaded once per frusta object, level and relief. Refused (one line, a
+        :class:`~plantgen.limits.LimitError`) when its buffers would pass the render's
+        memory limit."""
+        c = self._caster_mesh
+        if c is not None and c[0] is frusta and c[1:3] == (level, relief):
+            return c[3:]
+        triangles = triangle_count(frusta, level, caps="tips")
+        need, allowed = triangles * CASTER_MESH_BYTES_PER_TRIANGLE, self.limits.max_render_bytes
+        if need > allowed:
+            raise LimitError(f"--shadow-caster mesh at level {level}: {triangles:,} triangles need about "
+                             f"{need / 2**20:,.0f} MiB, over the limit of {allowed / 2**20:,.0f} MiB "
+                             f"(lower --shadow-mesh-level; or {hint('render_bytes')})")
+        self._release_caster_mesh()
+        mesh = tessellate(frusta, level, relief=relief, caps="tips")
+        origin = mesh.vertices.mean(axis=0) if len(mesh.vertices) else np.zeros(3)
+        vbo = self.ctx.buffer(np.ascontiguousarray(mesh.vertices - origin, np.float32).tobytes() or b"\0" * 12)
+        ibo = self.ctx.buffer(np.ascontiguousarray(mesh.faces, np.uint32).tobytes() or b"\0" * 4)
+        self._caster_mesh = (frusta, level, relief, origin, vbo, ibo, int(mesh.faces.size))
+        return self._caster_mesh[3:]
 
     def _release_placed(self) -> None:
         if self._placed is not None:
@@ -190,7 +233,7 @@ class Raycaster(OffscreenRenderer):
         shadowed = shadows is not None
         frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
                                                           "STATS": count_work})
-        light = build_program(self.ctx, "raycast.glsl", light_defines(settings, shadows)) if shadowed else None
+        light = build_program(self.ctx, *light_program(settings, shadows)) if shadowed else None
         return {"frame": frame, "light": light, "built": built}
 
     def _instances(self, program, rec_buf, *, indexed: bool = True):
@@ -244,6 +287,9 @@ class Raycaster(OffscreenRenderer):
         the analytic (or relief) hit's depth into the map. A PlacedPlants is drawn copy by
         copy relative to the anchor, ``lod_pixels`` counted in the map's texels (the key
         holds it: the map does not depend on the eye)."""
+        if shadows.caster == "mesh":
+            return self._mesh_light_pass(frusta, caster, lighting, settings, shadows, material_names, record_buffer,
+                                         surroundings)
         defines = light_defines(settings, shadows)
         knobs = (settings.hull_padding, settings.linear_steps, settings.march_min_steps, settings.binary_steps,
                  shadows.march_density, shadows.march_precision) if defines["RELIEF"] else (settings.hull_padding,)
@@ -264,6 +310,38 @@ class Raycaster(OffscreenRenderer):
                 pack_records(frusta, lighting.anchor).tobytes())
             return self._frusta_light_draw(caster, defines, lighting, settings, shadows,
                                            own if own is not None else record_buffer, material_names, n, own)
+        return LightPass(key, draws)
+
+    def _mesh_light_pass(self, frusta, caster, lighting: FrameLighting, settings: RaycastSettings,
+                         shadows: ShadowSettings, material_names: tuple, record_buffer, surroundings) -> LightPass:
+        """The frusta's part of the light's pass with the mesh caster (``--shadow-caster
+        mesh``): the frusta tessellated at ``shadows.mesh_level`` (displaced with relief
+        on), built once (:meth:`caster_mesh`), their front faces rasterised into the map
+        (``raster.glsl``'s SHADOW_PASS, as GS+R's light pass). Still frusta only: a frame
+        posed on the GPU or a scene drawn instanced is refused in one line."""
+        if isinstance(frusta, PlacedPlants) or record_buffer is not None:
+            what = "a scene drawn instanced (lod)" if isinstance(frusta, PlacedPlants) else "a frame posed on the GPU"
+            raise PlantgenError(f"--shadow-caster mesh casts still frusta, not {what}: use --shadow-caster relief")
+        relief = bool(settings.relief)
+        leaves, ground = surroundings
+        key = ShadowKey(("raster.glsl", "mesh", shadows.mesh_level, relief, material_names), (frusta, leaves), ground,
+                        shadows.resolution, lighting.anchor, lighting.caster_window)
+
+        def draws():
+            if not len(frusta):
+                return [], []
+            origin, vbo, ibo, indices = self.caster_mesh(frusta, shadows.mesh_level, relief)
+            set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN,
+                         origin_from_eye=tuple((origin - lighting.anchor).tolist()))
+            vao = self.ctx.vertex_array(caster, [(vbo, "3f", "position")], index_buffer=ibo, index_element_size=4)
+            ctx = self.ctx
+
+            def draw():
+                ctx.enable(ctx.CULL_FACE)
+                ctx.front_face = "ccw"
+                ctx.cull_face = "back"
+                vao.render(mode=ctx.TRIANGLES, vertices=indices)
+            return [draw], [vao]
         return LightPass(key, draws)
 
     def _frusta_light_draw(self, caster, defines: dict, lighting: FrameLighting, settings: RaycastSettings,

@@ -131,7 +131,7 @@ class ViewerSession:
         self.ctx, self.options, self.say, self.warn = ctx, options, say, warn
         self.model = model
         self.renderer = str(ctx.info["GL_RENDERER"])
-        self.raycaster = Raycaster(ctx)
+        self.raycaster = Raycaster(ctx, limits=options.limits)
         self.raster: RasterRenderer | None = None
         self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
         self.level = int(options.level)
