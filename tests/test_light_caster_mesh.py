@@ -72,13 +72,15 @@ def test_the_mesh_casts_where_the_march_casts(gl_ctx):
 
 def test_the_mesh_casters_map_is_kept_and_redrawn_like_the_others(gl_ctx):
     """Its map is reused while only the camera moves, drawn again when the level or the
-    caster changes, and its mesh built once per frusta object and level."""
+    caster changes, and its mesh built once per frusta object and level (two levels in
+    turn keep both meshes)."""
     caster, frusta = Raycaster(gl_ctx), bent_trunk()
     assert not render(caster, frusta, shadows=MESH).stats.shadow_cached
     built = caster.caster_mesh(frusta, MESH.mesh_level, True)
     assert render(caster, frusta, CAMERAS[1], shadows=MESH).stats.shadow_cached
     assert caster.caster_mesh(frusta, MESH.mesh_level, True)[1] is built[1]        # the same buffer
     assert not render(caster, frusta, shadows=replace(MESH, mesh_level=3)).stats.shadow_cached
+    assert caster.caster_mesh(frusta, MESH.mesh_level, True)[1] is built[1]        # levels alternating keep both
     assert not render(caster, frusta, shadows=SHADOWS).stats.shadow_cached          # the march again
     assert ("raster.glsl", ("SHADOW_PASS",)) in caster.programs_used
     caster.release()

@@ -68,6 +68,9 @@ PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
 #: vertex a triangle: float64 position, normal and uv, the faces, their float32 upload).
 CASTER_MESH_BYTES_PER_TRIANGLE = 96
 
+#: Meshes of the mesh caster a ray caster keeps (by frusta, level and relief).
+CASTER_MESHES_KEPT = 3
+
 
 class Raycaster(OffscreenRenderer):
     """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
@@ -84,7 +87,9 @@ class Raycaster(OffscreenRenderer):
         self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
         self.programs_used: set[tuple] = set()
         self._placed = None      # (PlacedPlants, [record buffer per plant]): uploaded once
-        self._caster_mesh = None  # (frusta, level, relief, origin, vbo, ibo, indices): the mesh caster's
+        # the mesh caster's meshes, least recently used first:
+        # (frusta, level, relief, origin, vbo, ibo, indices, bytes counted)
+        self._caster_meshes: list[tuple] = []
 
     def release(self) -> None:
         """Free every GL object of this renderer, a placed scene's records and the mesh
@@ -93,35 +98,39 @@ class Raycaster(OffscreenRenderer):
         self._release_caster_mesh()
         super().release()
 
-    def _release_caster_mesh(self) -> None:
-        if self._caster_mesh is not None:
-            for buf in self._caster_mesh[4:6]:
+    def _release_caster_mesh(self, keep: int = 0) -> None:
+        """Release the mesh caster's meshes but the ``keep`` most recently used."""
+        while len(self._caster_meshes) > keep:
+            for buf in self._caster_meshes.pop(0)[4:6]:
                 buf.release()
-            self._caster_mesh = None
 
     def caster_mesh(self, frusta: Frusta, level: int, relief: bool):
         """(origin (3,), vertex buffer, index buffer, indices) of the mesh caster's mesh:
         ``frusta`` tessellated at ``level`` (displaced by the relief with ``relief``; tip
         caps, as GS+R renders), positions in float32 relative to the mesh's mean, built and
-        uploaded once per frusta object, level and relief. Refused (one line, a
-        :class:`~plantgen.limits.LimitError`) when its buffers would pass the render's
-        memory limit."""
-        c = self._caster_mesh
-        if c is not None and c[0] is frusta and c[1:3] == (level, relief):
-            return c[3:]
+        uploaded once per frusta object, level and relief. The :data:`CASTER_MESHES_KEPT`
+        last used are kept (a bench alternating levels does not rebuild them), within the
+        render's memory limit together; one over it alone is refused (one line, a
+        :class:`~plantgen.limits.LimitError`)."""
+        for i, c in enumerate(self._caster_meshes):
+            if c[0] is frusta and c[1:3] == (level, relief):
+                self._caster_meshes.append(self._caster_meshes.pop(i))
+                return c[3:7]
         triangles = triangle_count(frusta, level, caps="tips")
         need, allowed = triangles * CASTER_MESH_BYTES_PER_TRIANGLE, self.limits.max_render_bytes
         if need > allowed:
             raise LimitError(f"--shadow-caster mesh at level {level}: {triangles:,} triangles need about "
                              f"{need / 2**20:,.0f} MiB, over the limit of {allowed / 2**20:,.0f} MiB "
-                             f"(lower --shadow-mesh-level; or {hint('render_bytes')})")
-        self._release_caster_mesh()
+                             f"({hint('render_bytes')}; or lower --shadow-mesh-level)")
+        self._release_caster_mesh(CASTER_MESHES_KEPT - 1)
+        while self._caster_meshes and need + sum(c[7] for c in self._caster_meshes) > allowed:
+            self._release_caster_mesh(len(self._caster_meshes) - 1)
         mesh = tessellate(frusta, level, relief=relief, caps="tips")
         origin = mesh.vertices.mean(axis=0) if len(mesh.vertices) else np.zeros(3)
         vbo = self.ctx.buffer(np.ascontiguousarray(mesh.vertices - origin, np.float32).tobytes() or b"\0" * 12)
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.faces, np.uint32).tobytes() or b"\0" * 4)
-        self._caster_mesh = (frusta, level, relief, origin, vbo, ibo, int(mesh.faces.size))
-        return self._caster_mesh[3:]
+        self._caster_meshes.append((frusta, level, relief, origin, vbo, ibo, int(mesh.faces.size), need))
+        return self._caster_meshes[-1][3:7]
 
     def _release_placed(self) -> None:
         if self._placed is not None:
