@@ -251,3 +251,28 @@ def test_a_placed_forest_opens_in_every_method(gl_ctx, tmp_path):
             assert np.isfinite(frame.distance).mean() > 0.05, key
     finally:
         s.release()
+
+
+def test_the_mesh_caster_casts_still_frames_and_playing_ones_fall_back_to_the_march_said_once(gl_ctx, tmp_path):
+    """``--shadow-caster mesh`` in the viewer: the paused frame's map is the mesh's; frames
+    posed on the GPU, which it cannot cast, are cast by the relief march, and the viewer
+    says so once instead of failing."""
+    from dataclasses import replace
+
+    from plantgen.settings import RenderSettings, ShadowSettings
+
+    settings = replace(RenderSettings(), shadows=ShadowSettings(caster="mesh", mesh_level=1))
+    lines = []
+    options = ViewOptions(input="dancing_cacti", size=SIZE, watch=False, shots=tmp_path, settings=settings)
+    s = ViewerSession(gl_ctx, options, prepare_model("dancing_cacti"), say=lambda line: None, warn=lines.append)
+    try:
+        s.draw(*SIZE)
+        assert ("raster.glsl", ("SHADOW_PASS",)) in s.raycaster.programs_used and not lines
+        s.toggle_play()
+        assert s.posing_on_gpu()
+        for _ in range(2):
+            s.t += 0.1
+            assert s.draw(*SIZE).color.shape == (SIZE[1], SIZE[0], 3)
+        assert len(lines) == 1 and "relief march" in lines[0]
+    finally:
+        s.release()

@@ -326,10 +326,11 @@ class Raycaster(OffscreenRenderer):
         """The frusta's part of the light's pass with the mesh caster (``--shadow-caster
         mesh``): the frusta tessellated at ``shadows.mesh_level`` (displaced with relief
         on), built once (:meth:`caster_mesh`), their front faces rasterised into the map
-        (``raster.glsl``'s SHADOW_PASS, as GS+R's light pass). Still frusta only: a frame
-        posed on the GPU or a scene drawn instanced is refused in one line."""
+        (``raster.glsl``'s SHADOW_PASS, as GS+R's light pass). Still frusta drawn merged only:
+        an animation's frames (records the caller streams) or a scene drawn instanced are
+        refused in one line (the viewer casts those with the march and says so)."""
         if isinstance(frusta, PlacedPlants) or record_buffer is not None:
-            what = "a scene drawn instanced (lod)" if isinstance(frusta, PlacedPlants) else "a frame posed on the GPU"
+            what = "a scene drawn instanced (lod)" if isinstance(frusta, PlacedPlants) else "an animation's frames"
             raise PlantgenError(f"--shadow-caster mesh casts still frusta, not {what}: use --shadow-caster relief")
         relief = bool(settings.relief)
         leaves, ground = surroundings

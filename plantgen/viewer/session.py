@@ -132,6 +132,7 @@ class ViewerSession:
         self.model = model
         self.renderer = str(ctx.info["GL_RENDERER"])
         self.raycaster = Raycaster(ctx, limits=options.limits)
+        self._mesh_caster_said = False     # the mesh caster's fallback told once
         self.raster: RasterRenderer | None = None
         self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
         self.level = int(options.level)
@@ -278,7 +279,7 @@ class ViewerSession:
             settings, shadow = request.frame(self.effects())
             staging = stage_model(self.model.grown, self.model.anim.rest_frusta()[0], width, height,
                                   camera=self.camera)
-            return self._drawn(self._draw_posed(staging, request, settings, shadow), t0)
+            return self._drawn(self._draw_posed(staging, request, settings, self._merged_caster(shadow)), t0)
         frusta = self.frusta()
         staging = stage_model(self.model.grown, frusta, width, height, camera=self.camera)
         request = self.request()
@@ -291,12 +292,25 @@ class ViewerSession:
         if self.raster is None and not self.method.startswith("RC"):
             self.raster = RasterRenderer(self.ctx)
         if isinstance(frusta, PlacedPlants):   # a forest: instanced, its detail as the knob says
+            args["shadows"] = self._merged_caster(shadow)
             return self._drawn(self._draw_placed(frusta, args, settings, request.lod_pixels(self.effects())), t0)
         if self.method.startswith("RC"):
             result = self.raycaster.render(frusta, settings=settings, **args)
         else:
             result = self.raster.render(self.mesh(frusta), frusta, **args)
         return self._drawn(result, t0)
+
+    def _merged_caster(self, shadow):
+        """The shadow knobs of a frame the mesh caster cannot cast (posed on the GPU, or a
+        scene drawn instanced: ``--shadow-caster mesh`` casts still frusta drawn merged):
+        the march's instead, said once; other knobs as they are."""
+        if shadow is None or shadow.caster != "mesh":
+            return shadow
+        if not self._mesh_caster_said:
+            self.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
+                      "frames cast with the relief march")
+            self._mesh_caster_said = True
+        return replace(shadow, caster="relief")
 
     def _draw_placed(self, placed: PlacedPlants, args: dict, settings, lod_pixels: float):
         """A placed scene's frame: RC and RC+R from its records per plant, GS and GS+R from
