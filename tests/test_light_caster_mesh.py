@@ -101,12 +101,17 @@ def test_the_mesh_caster_refuses_what_it_cannot_cast_in_one_line(gl_ctx):
 
 
 def test_the_knobs_are_on_the_command_line(tmp_path):
-    """``plantgen render`` takes the caster and its level; a bad level is one line and exit 2."""
+    """``plantgen render`` takes the caster and its level; a bad level, and an animation
+    (its frames are streamed, not still), are one line and exit 2, and write nothing."""
     out = tmp_path / "well.png"
     code, _, err = run_cli("render", "well", "--shadow-caster", "mesh", "--shadow-mesh-level", "3",
                            "--size", "96x72", "-o", out)
     assert code == 0 and out.exists(), err
     code, _, err = run_cli("render", "well", "--shadow-mesh-level", "9", "--size", "96x72", "-o", tmp_path / "x.png")
     assert code == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "x.png").exists()
+    code, _, err = run_cli("render", "dancing_cacti", "--frames", "3", "--shadow-caster", "mesh", "--size", "64x48",
+                           "-o", tmp_path / "sway.gif")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "animation" in err
+    assert not (tmp_path / "sway.gif").exists()
     with pytest.raises(PlantgenError):
         ShadowSettings(caster="mesh", mesh_level=-1)
