@@ -21,7 +21,7 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
   cut to what no accurate caster can go below (``--linear-steps`` 4 or 2, the fewest
   steps as many, ``--binary-steps`` 0 or 1): the floor of a march on this GL, what its
   set-up and first samples cost, beside the error they leave;
-* ``mesh m=3``, ``m=5``, ``m=6``: what an engine would do instead, ``--shadow-caster mesh``:
+* ``mesh m=1`` to ``m=6``: what an engine would do instead, ``--shadow-caster mesh``:
   the frusta tessellated and displaced by the relief (GS+R at level m,
   :func:`plantgen.geometry.mesh.tessellate`, built once and not timed) and rasterised
   into the same map by the ray caster's light pass (``raster.glsl``'s SHADOW_PASS): one
@@ -92,7 +92,7 @@ class Caster:
 _MAP = ShadowSettings(cache=False)
 _RELIEF = RaycastSettings(relief=True)
 #: The casters compared: the plain one, the relief caster before and now, now with each
-#: accuracy knob moved, now cut to its floor, and the mesh caster at three levels.
+#: accuracy knob moved, now cut to its floor, and the mesh caster at five levels.
 CASTERS = (
     Caster("plain", RaycastSettings(), _MAP),
     Caster("bisect", _RELIEF, replace(_MAP, march="bisect")),
@@ -104,7 +104,7 @@ CASTERS = (
     Caster("secant, 4 samples, no refinement", RaycastSettings(relief=True, linear_steps=4, binary_steps=0), _MAP),
     Caster("secant, 2 samples, 1 step",
            RaycastSettings(relief=True, linear_steps=2, march_min_steps=2, binary_steps=1), _MAP),
-    *(Caster(f"mesh m={m}", _RELIEF, replace(_MAP, caster="mesh", mesh_level=m)) for m in (3, 5, 6)),
+    *(Caster(f"mesh m={m}", _RELIEF, replace(_MAP, caster="mesh", mesh_level=m)) for m in (1, 2, 3, 5, 6)),
 )
 
 

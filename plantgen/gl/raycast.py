@@ -69,7 +69,7 @@ PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
 CASTER_MESH_BYTES_PER_TRIANGLE = 96
 
 #: Meshes of the mesh caster a ray caster keeps (by frusta, level and relief).
-CASTER_MESHES_KEPT = 3
+CASTER_MESHES_KEPT = 8
 
 
 class Raycaster(OffscreenRenderer):
