@@ -170,11 +170,10 @@ def markdown(result: dict) -> str:
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     lines += [f"| {r['renderer']} | {r['lod_pixels']:g} | {r['ms']:.0f} | {r['light_ms']:.0f} | "
               f"{r['timed'] or 'once'} | {r['drawn']} | {r['error']:.4f} | "
-              f"{r.get('dssim', float('nan')):.4f}, {r.get('silhouette', float('nan')):.4f} | "
+              f"{r['dssim']:.4f}, {r['silhouette']:.4f} | "
               f"{r['gpu_bytes'] / 2**20:.1f} MiB |"
               for r in result["rows"]]
-    if "by_size" in result:
-        lines += ["", *size_table(result["by_size"])]
+    lines += ["", *size_table(result["by_size"])]
     return "\n".join(lines) + "\n"
 
 

@@ -121,18 +121,24 @@ def shadowed_scenes() -> list[str]:
     return names
 
 
+def _triangles(model: BenchModel, c: Caster) -> int | None:
+    """A mesh caster's triangles in ``model`` (counted, not built); None for a ray caster."""
+    return None if c.mesh_level is None else triangle_count(model.frusta, c.mesh_level, caps="tips")
+
+
 def _fits(model: BenchModel, c: Caster) -> bool:
     """Whether ``c`` draws here: a ray caster, or a mesh caster whose mesh stays within
     :data:`MESH_CASTER_TRIANGLES`."""
-    return c.mesh_level is None or triangle_count(model.frusta, c.mesh_level, caps="tips") <= MESH_CASTER_TRIANGLES
+    n = _triangles(model, c)
+    return n is None or n <= MESH_CASTER_TRIANGLES
 
 
 def _label(model: BenchModel, c: Caster) -> str:
     """The caster's label; a mesh caster's with its triangles (and whether it was drawn)."""
-    if c.mesh_level is None:
+    n = _triangles(model, c)
+    if n is None:
         return c.label
-    n = triangle_count(model.frusta, c.mesh_level, caps="tips")
-    return f"{c.label} ({n:,} triangles{'' if _fits(model, c) else ': too many, not drawn'})"
+    return f"{c.label} ({n:,} triangles{'' if n <= MESH_CASTER_TRIANGLES else ': too many, not drawn'})"
 
 
 def time_casters(caster: Raycaster, model: BenchModel, casters, frames: int, cpu: bool = False) -> dict:

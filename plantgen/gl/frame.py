@@ -27,6 +27,7 @@ from ..geometry.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from ..settings import MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
+from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
 from .material_uniforms import HeightTextures, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, light_window
@@ -228,6 +229,26 @@ class OffscreenRenderer:
         self._sky_vao = None
         self.last_light_window = None
         self.last_resolve_ms = 0.0
+
+    def _mesh_light_draw(self, caster, lighting: FrameLighting, origin, attributes, index_buffer, indices: int,
+                         before: Callable[[], None] | None = None):
+        """A mesh's front faces into the light's depth map (``caster``: ``raster.glsl``'s
+        SHADOW_PASS), its positions relative to ``origin`` drawn relative to the light's
+        anchor; ``before`` runs ahead of each draw (a skinned mesh binds its poses):
+        ([draw callable], [vertex array to release after the frame])."""
+        ctx = self.ctx
+        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN,
+                     origin_from_eye=tuple((origin - lighting.anchor).tolist()))
+        vao = ctx.vertex_array(caster, attributes, index_buffer=index_buffer, index_element_size=4)
+
+        def draw():
+            ctx.enable(ctx.CULL_FACE)
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+            if before is not None:
+                before()
+            vao.render(mode=ctx.TRIANGLES, vertices=indices)
+        return [draw], [vao]
 
     def release(self) -> None:
         """Free the framebuffer, the height textures and the shadow map (they are made

@@ -222,7 +222,7 @@ class RasterRenderer(OffscreenRenderer):
             # a skinned mesh is posed by a buffer rewritten every frame: no key, its map drawn each time
             key = None if skinned else ShadowKey(("raster.glsl", mesh.level), (mesh, leaves if extras.after else None),
                                                  ground, shadows.resolution, lighting.anchor, lighting.caster_window)
-            light = LightPass(key, lambda: self._mesh_light_draw(origin, lighting, mesh, poses))
+            light = LightPass(key, lambda: self._mesh_light_pass(origin, lighting, mesh, poses))
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
                                  ssaa=ssaa, count_work=count_work)
         leaf_tris = len(leaves.triangles) if extras.after else 0
@@ -296,29 +296,16 @@ class RasterRenderer(OffscreenRenderer):
             draw()
         return mapped
 
-    def _mesh_light_draw(self, origin, lighting: FrameLighting, mesh: TessellatedMesh, poses=None):
+    def _mesh_light_pass(self, origin, lighting: FrameLighting, mesh: TessellatedMesh, poses=None):
         """The mesh's front faces into the light's depth map, relative to the light's
         anchor (a skinned mesh's: the eye, as its poses are): ([draw callable], [vertex
         array to release after the frame])."""
-        ctx = self.ctx
         skinned = poses is not None
-        caster = build_program(ctx, "raster.glsl", {"SHADOW_PASS": True, "SKINNED": skinned})
-        set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN,
-                     origin_from_eye=tuple((origin - lighting.anchor).tolist()))
+        caster = build_program(self.ctx, "raster.glsl", {"SHADOW_PASS": True, "SKINNED": skinned})
         buffers = self._uploaded[1]
-        attributes = [(buffers[0], "3f 20x", "position")]
-        if skinned:
-            attributes.append((buffers[5], "2i", "bind"))
-        vao = ctx.vertex_array(caster, attributes, index_buffer=buffers[1], index_element_size=4)
-
-        def draw():
-            ctx.enable(ctx.CULL_FACE)
-            ctx.front_face = "ccw"
-            ctx.cull_face = "back"
-            if skinned:
-                poses.bind_to_storage_buffer(3)
-            vao.render(mode=ctx.TRIANGLES, vertices=mesh.faces.size)
-        return [draw], [vao]
+        attributes = [(buffers[0], "3f 20x", "position")] + ([(buffers[5], "2i", "bind")] if skinned else [])
+        return self._mesh_light_draw(caster, lighting, origin, attributes, buffers[1], mesh.faces.size,
+                                     before=(lambda: poses.bind_to_storage_buffer(3)) if skinned else None)
 
 
     # ------------------------------------------------------------------ placed scenes

@@ -43,7 +43,7 @@ from .frame import (
     check_ssaa,
     frame_view,
 )
-from .instanced import IDENTITY_PLACEMENT, IDENTITY_TURN, draw_copies, eye_copy_draws, light_copy_draws
+from .instanced import IDENTITY_PLACEMENT, draw_copies, eye_copy_draws, light_copy_draws
 from .leaf_layer import leaf_bounds, union_box
 from .passes import frame_passes, light_defines, light_program, program_variants
 from .records import (
@@ -341,17 +341,7 @@ class Raycaster(OffscreenRenderer):
             if not len(frusta):
                 return [], []
             origin, vbo, ibo, indices = self.caster_mesh(frusta, shadows.mesh_level, relief)
-            set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()), **IDENTITY_TURN,
-                         origin_from_eye=tuple((origin - lighting.anchor).tolist()))
-            vao = self.ctx.vertex_array(caster, [(vbo, "3f", "position")], index_buffer=ibo, index_element_size=4)
-            ctx = self.ctx
-
-            def draw():
-                ctx.enable(ctx.CULL_FACE)
-                ctx.front_face = "ccw"
-                ctx.cull_face = "back"
-                vao.render(mode=ctx.TRIANGLES, vertices=indices)
-            return [draw], [vao]
+            return self._mesh_light_draw(caster, lighting, origin, [(vbo, "3f", "position")], ibo, indices)
         return LightPass(key, draws)
 
     def _frusta_light_draw(self, caster, defines: dict, lighting: FrameLighting, settings: RaycastSettings,

@@ -303,8 +303,9 @@ class ViewerSession:
     def _merged_caster(self, shadow):
         """The shadow knobs of a frame the mesh caster cannot cast (posed on the GPU, or a
         scene drawn instanced: ``--shadow-caster mesh`` casts still frusta drawn merged):
-        the march's instead, said once; other knobs as they are."""
-        if shadow is None or shadow.caster != "mesh":
+        the march's instead, said once; other knobs as they are. GS and GS+R cast their own
+        meshes whatever the caster, so theirs stay as asked."""
+        if shadow is None or shadow.caster != "mesh" or not self.method.startswith("RC"):
             return shadow
         if not self._mesh_caster_said:
             self.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
