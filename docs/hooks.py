@@ -5,7 +5,8 @@ A page asks for a table with a marker on a line of its own, ``<!-- generated: NA
 hand: the turtle symbols come from ``plantgen.lsystem.symbols``, the settings from their
 knobs (``plantgen.knobs``), the budgets from ``plantgen.limits.Limits``, the export formats
 from ``plantgen.exporters.formats``, the batch manifest's columns from
-``plantgen.batch.schema`` and the viewer's keys from ``plantgen.viewer.keys``. The tests
+``plantgen.batch.schema``, the viewer's keys from ``plantgen.viewer.keys`` and the shipped
+models from the files' own descriptions. The tests
 (``tests/test_docs.py``) render the pages through :func:`expand` too.
 """
 
@@ -147,7 +148,22 @@ def viewer_keys_table() -> str:
     return _table(("keys and mouse", "what they do"), help_lines())
 
 
+def shipped_table() -> str:
+    """The shipped grammars and scenes: name, kind and the file's own description."""
+    import yaml
+
+    from plantgen._resources import grammars_dir
+
+    rows = []
+    for path in sorted(grammars_dir().glob("*.yaml")):
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        kind = "scene" if "instances" in data else "grammar"
+        rows.append((f"`{path.stem}`", kind, data.get("description", "")))
+    return _table(("name", "kind", "description"), rows)
+
+
 TABLES = {
+    "shipped": shipped_table,
     "symbols": symbols_table,
     "settings": settings_tables,
     "settings_summary": settings_summary,
