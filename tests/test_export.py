@@ -94,8 +94,10 @@ def test_the_up_conventions_are_the_documented_ones():
     up = {suffix: fmt.up for suffix, fmt in EXPORT_FORMATS.items()}
     assert up == {".glb": "y", ".gltf": "y", ".obj": "y", ".ply": "z", ".stl": "z", ".usda": "y", ".usdc": "y",
                   ".usd": "y", ".swc": "y", ".qsm.csv": "z", ".qsm.mat": "z"}
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    rows = {cells[1].strip(): cells[3].strip() for line in readme.splitlines()
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "export.md")
+    if not guide.is_file():
+        pytest.skip("needs the source tree's docs/how-to/export.md")
+    rows = {cells[1].strip(): cells[3].strip() for line in guide.read_text(encoding="utf-8").splitlines()
             if line.startswith("| `.") and len(cells := line.split("|")) > 4}
     assert {suffix: rows.get(f"`{suffix}`") for suffix in up} == up
 
