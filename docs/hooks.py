@@ -128,7 +128,7 @@ def export_formats_table() -> str:
     for suffix, fmt in EXPORT_FORMATS.items():
         rows.append((f"`{suffix}`", fmt.kind, fmt.up, "once, instanced" if fmt.instancing else "every copy",
                      "yes" if fmt.animation else "— (at rest)", "yes" if fmt.scene else "—",
-                     "yes" if fmt.textures else "—", f"`{fmt.install}`" if fmt.extra else "—"))
+                     "yes" if fmt.textures else "—", f"the `{fmt.extra}` extra" if fmt.extra else "—"))
     return _table(("suffix", "holds", "up", "a scene's repeated plants", "a scene's sway", "camera, light, ground",
                    "relief maps", "needs"), rows)
 

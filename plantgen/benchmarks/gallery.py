@@ -1,5 +1,5 @@
 """Rebuild every image of the gallery (``gallery/``), each with the command a user would
-type, so an image and its caption in the README never disagree.
+type, so an image and its caption in the documentation never disagree.
 
 Run as ``python -m plantgen.benchmarks.gallery [--out gallery] [--only NAMES] [--size WxH]
 [--list] [--bench]``. Each entry is one command (``plantgen render ...``, ``plantgen view

@@ -1,5 +1,5 @@
 """A scene's sway as an animation other tools play: the joints, skin weights and keys
-that glTF skins and UsdSkel hold (see the README, "Wind in the exports").
+that glTF skins and UsdSkel hold (see the docs, "Export a swaying scene").
 
 The sway (:mod:`plantgen.geometry.motion`) turns every joint of a swaying plant copy
 about one horizontal axis of the scene by an angle that is a closed form in t, and moves

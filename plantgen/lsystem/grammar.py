@@ -1,6 +1,6 @@
 """Grammar files (YAML) to a validated :class:`Grammar`. Parsing only: no derivation here.
 
-The format is documented in the README, section "Grammar format". In short::
+The format is documented in the docs' grammar reference (docs/reference/grammar.md). In short::
 
     name: monopodial
     description: ABOP figure 2.6
