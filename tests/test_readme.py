@@ -1,6 +1,6 @@
 """The README as a newcomer uses it: every command in its shell blocks runs (from an empty
-folder, as the shipped names allow), its Python block runs, it stays short, and its links
-lead to files that exist.
+folder, as the shipped names allow; the first tutorials' commands too), its Python block
+runs, it stays short, and its links lead to files that exist.
 
 ``pip install`` is left out here (CI's fresh environment runs the set-up commands from the
 built wheel, outside the checkout: see .ci/run), and so is ``pytest -q``, which is this
@@ -16,7 +16,7 @@ import subprocess
 import sys
 
 import pytest
-from _docs import README, REPO
+from _docs import DOCS, README, REPO
 
 #: Commands that need an extra, by the subcommand or the output's suffix: (test, the
 #: module it needs, the extra that installs it).
@@ -29,22 +29,27 @@ NEEDS = (
 )
 
 
-def _text() -> str:
-    if not README.is_file():
-        pytest.skip("needs the source tree's README.md")
-    return README.read_text(encoding="utf-8")
+#: Tutorials whose commands are cheap enough to run here too (the others grow a hundred
+#: pines or scan at full density).
+TUTORIALS = ("first-plant.md", "blender.md")
 
 
-def _blocks(language: str) -> list[str]:
-    return re.findall(rf"^```{language}\n(.*?)^```", _text(), re.M | re.S)
+def _text(path=README) -> str:
+    if not path.is_file():
+        pytest.skip(f"needs the source tree's {path.name}")
+    return path.read_text(encoding="utf-8")
 
 
-def readme_commands() -> list[str]:
-    """Each command of the README's ``sh`` blocks, comments dropped, ``a && b`` split."""
-    if not README.is_file():
+def _blocks(language: str, path=README) -> list[str]:
+    return re.findall(rf"^```{language}\n(.*?)^```", _text(path), re.M | re.S)
+
+
+def readme_commands(path=README) -> list[str]:
+    """Each command of a page's ``sh`` blocks, comments dropped, ``a && b`` split."""
+    if not path.is_file():
         return []
     out = []
-    for block in _blocks("sh"):
+    for block in _blocks("sh", path):
         for line in block.splitlines():
             line = line.split("  #")[0].strip()
             out += [part.strip() for part in line.split("&&") if part.strip()]
@@ -78,8 +83,15 @@ def test_the_readme_links_lead_to_files():
             assert (REPO / target).exists(), target
 
 
-@pytest.mark.parametrize("command", [c for c in readme_commands() if c.startswith("plantgen ")])
+def _plantgen_commands() -> list:
+    pages = [README, *(DOCS / "tutorials" / name for name in TUTORIALS)]
+    return [pytest.param(c, id=f"{page.name}: {c}") for page in pages for c in readme_commands(page)
+            if c.startswith("plantgen ")]
+
+
+@pytest.mark.parametrize("command", _plantgen_commands())
 def test_every_readme_command_runs(command, tmp_path):
+    """The README's commands, and those of the tutorials that are cheap to run."""
     args = shlex.split(command)[1:]
     for needs, module, extra in NEEDS:
         if needs(args) and importlib.util.find_spec(module) is None:
