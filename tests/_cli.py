@@ -18,3 +18,22 @@ def run_cli(*args: str) -> tuple[int, str, str]:
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     return code, out.getvalue(), err.getvalue()
+
+
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal (what a command's stderr is in a shell)."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def run_cli_on_terminal(*args: str) -> tuple[int, str, str]:
+    """:func:`run_cli` with stderr a terminal: what progress a user watching sees."""
+    out, err = io.StringIO(), _Terminal()
+    code = 0
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    return code, out.getvalue(), err.getvalue()
