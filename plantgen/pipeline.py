@@ -95,6 +95,7 @@ from .settings import (
 )
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
+           "existing_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "place_scene",
            "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
            "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
@@ -182,6 +183,15 @@ def resolve_input(path: str | Path) -> Path:
     return p
 
 
+def existing_input(path: str | Path) -> Path:
+    """:func:`resolve_input`, refusing in one line a name that is neither a file nor a
+    shipped grammar or scene, with the closest name (:func:`plantgen._resources.missing_hint`)."""
+    resolved = resolve_input(path)
+    if not os.path.lexists(resolved):
+        raise PlantgenError(f"{path}: no such file{missing_hint(path)}")
+    return resolved
+
+
 def load_input(path: str | Path, limits: Limits | None = None):
     """Read an input: returns ("grammar" | "scene", parsed mapping), or ("skeleton", None)
     for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`)."""
@@ -223,9 +233,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     limits = _in_force(limits).raised(modules=max_modules)
     if iterations is not None:
         limits.check("iterations", int(iterations), "--iterations")
-    given, path = path, resolve_input(path)
-    if not os.path.lexists(path):
-        raise PlantgenError(f"{given}: no such file{missing_hint(given)}")
+    path = existing_input(path)
     try:
         result = _grow_path(path, seed, iterations, progress, limits, allow_paths, defines)
     except PlantgenError as exc:     # a shipped grammar is named as commands take it, not by its long path

@@ -35,7 +35,9 @@ class StageBars:
         self.task = None
         self.bars: Progress | None = None
 
-    def __call__(self, stage: str, done: int, total: int | None = None) -> None:
+    def __call__(self, stage: str, done: int, total: int | None = None, detail: str | None = None) -> None:
+        """Stage ``stage`` has done ``done`` of ``total`` steps (None: not known);
+        ``detail`` (optional) says what it is on now."""
         if self.bars is None:
             return
         total = None if total is None else max(int(total), 1)
@@ -45,7 +47,8 @@ class StageBars:
             self.stage = stage
             self.task = self.bars.add_task(LABELS.get(stage, stage), total=total, count="")
         count = f"{int(done):,}/{total:,}" if total is not None else (f"{int(done):,}" if done else "")
-        self.bars.update(self.task, completed=int(done), total=total, count=count)
+        label = LABELS.get(stage, stage) + (f": {detail}" if detail else "")
+        self.bars.update(self.task, completed=int(done), total=total, count=count, description=label)
 
     def __enter__(self) -> StageBars:
         if self.enabled:
