@@ -20,7 +20,8 @@ __all__ = ["LABELS", "StageBars"]
 #: What each stage says.
 LABELS = {"derive": "deriving", "interpret": "drawing the turtle", "grow": "growing the scene's plants",
           "skin": "skinning", "place": "placing the scene", "render": "rendering", "frames": "rendering frames",
-          "tessellate": "tessellating plants", "write": "writing", "scan": "scanning"}
+          "tessellate": "tessellating plants", "write": "writing", "scan": "scanning", "plants": "plants",
+          "bench": "bench"}
 
 
 class StageBars:
@@ -53,7 +54,8 @@ class StageBars:
     def __enter__(self) -> StageBars:
         if self.enabled:
             self.bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
-                                 TimeElapsedColumn(), console=self.console, transient=True)
+                                 TimeElapsedColumn(), console=self.console, transient=True,
+                                 redirect_stdout=False)   # stdout stays the report's; stderr lines print above
             self.bars.start()
         return self
 
