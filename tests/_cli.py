@@ -8,9 +8,10 @@ import io
 from plantgen.cli import main
 
 
-def run_cli(*args: str) -> tuple[int, str, str]:
-    """Return (exit status, stdout, stderr) of ``plantgen ARGS``."""
-    out, err = io.StringIO(), io.StringIO()
+def run_cli(*args: str, stderr: io.StringIO | None = None) -> tuple[int, str, str]:
+    """Return (exit status, stdout, stderr) of ``plantgen ARGS`` (``stderr``: the stream
+    it writes to, a fresh one by default)."""
+    out, err = io.StringIO(), stderr if stderr is not None else io.StringIO()
     code = 0
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -29,11 +30,4 @@ class _Terminal(io.StringIO):
 
 def run_cli_on_terminal(*args: str) -> tuple[int, str, str]:
     """:func:`run_cli` with stderr a terminal: what progress a user watching sees."""
-    out, err = io.StringIO(), _Terminal()
-    code = 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    return code, out.getvalue(), err.getvalue()
+    return run_cli(*args, stderr=_Terminal())
