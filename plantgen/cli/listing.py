@@ -29,7 +29,7 @@ __all__ = ["cache_path", "list_models", "shipped_models"]
 
 def cache_path() -> Path:
     """The file the segment counts are cached in."""
-    root = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache")   # never raises
     return Path(root) / "plantgen" / "list.json"
 
 
