@@ -168,10 +168,20 @@ def test_errors_and_notes_of_shipped_grammars_name_them_short():
 
 
 def test_help_examples_use_shipped_names_not_repository_paths():
-    for command in ([], ["grow"], ["render"], ["export"], ["scan"], ["list"], ["batch"], ["view"]):
+    """Every example's INPUT is a shipped name (so it runs from any folder) or a file the
+    example says is the user's own."""
+    own = {"my_tree.yaml", "my_dataset.yaml"}
+    inputs = []
+    for command in ([], ["grow"], ["render"], ["export"], ["scan"], ["list"], ["batch"], ["view"], ["bench"]):
         code, stdout, _ = run_cli(*command, "--help")
         assert code == 0
         assert "grammars/" not in stdout, (command, stdout)
+        for line in stdout.splitlines():
+            words = line.split()
+            if words[:1] == ["plantgen"] and len(words) > 2 and not words[2].startswith("-"):
+                inputs.append(words[2])
+    assert len(inputs) > 15
+    assert set(inputs) - own <= set(shipped_names()), inputs
     assert "grammars/" not in plantgen.__doc__
 
 

@@ -71,7 +71,7 @@ def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask,
     \b
     Examples:
       plantgen batch pine --seeds 0:1000 --outputs npz,png --out pines/
-      plantgen batch forest.yaml --out forest/ --workers 2
+      plantgen batch my_dataset.yaml --out dataset/ --workers 2   # a spec you wrote
     """
     limits = limits_from(limit_values)
     if seeds is not None:
