@@ -12,8 +12,7 @@ pipe, a CI job) or with ``--quiet``, nothing at all is drawn.
 
 from __future__ import annotations
 
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+import sys
 
 __all__ = ["LABELS", "StageBars"]
 
@@ -27,14 +26,15 @@ LABELS = {"derive": "deriving", "interpret": "drawing the turtle", "grow": "grow
 class StageBars:
     """A ``progress(stage, done, total)`` callable drawing one transient line on stderr
     while a terminal shows it (``enabled=False``, ``--quiet``: nothing). Use it as a
-    context manager, so the line is erased when the work ends or fails."""
+    context manager, so the line is erased when the work ends or fails. rich is imported
+    only where a terminal shows the line (logs and pipes do without its import time)."""
 
-    def __init__(self, *, enabled: bool = True, console: Console | None = None) -> None:
-        self.console = console or Console(stderr=True)
-        self.enabled = enabled and self.console.is_terminal
+    def __init__(self, *, enabled: bool = True) -> None:
+        isatty = getattr(sys.stderr, "isatty", None)
+        self.enabled = bool(enabled and isatty is not None and isatty())
         self.stage: str | None = None
         self.task = None
-        self.bars: Progress | None = None
+        self.bars = None
 
     def __call__(self, stage: str, done: int, total: int | None = None, detail: str | None = None) -> None:
         """Stage ``stage`` has done ``done`` of ``total`` steps (None: not known);
@@ -53,8 +53,15 @@ class StageBars:
 
     def __enter__(self) -> StageBars:
         if self.enabled:
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            console = Console(stderr=True)
+            if not console.is_terminal:       # rich knows better (e.g. TTY_COMPATIBLE=0)
+                self.enabled = False
+                return self
             self.bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
-                                 TimeElapsedColumn(), console=self.console, transient=True,
+                                 TimeElapsedColumn(), console=console, transient=True,
                                  redirect_stdout=False)   # stdout stays the report's; stderr lines print above
             self.bars.start()
         return self

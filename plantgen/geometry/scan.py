@@ -780,7 +780,7 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
     ``scan_rays`` before anything is cast. ``progress``: ``progress("scan", done, total)``
-    after each scanner or flight line."""
+    as the scan begins and after each scanner or flight line."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
     if not len(target):
@@ -789,6 +789,8 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     rays = sum(g.count for g in grids) * settings.sub_rays
     (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
     parts = []
+    if progress is not None:
+        progress("scan", 0, len(grids))
     for k, g in enumerate(grids):
         parts.append(_scan_one(target, g, settings, seed, k, max_pairs))
         if progress is not None:
