@@ -27,14 +27,16 @@ render or an export estimates its memory from the sizes it knows before it alloc
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._resources import grammars_dir
+from ._resources import grammars_dir, missing_hint, short_names
 from .animation import AnimatedScene
 from .errors import PlantgenError
 from .exporters import (
@@ -93,6 +95,7 @@ from .settings import (
 )
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
+           "existing_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "place_scene",
            "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
            "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
@@ -152,13 +155,21 @@ def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limit
     """Derive a parsed grammar, apply its interpretation rules and draw the result, adding
     each stage's seconds to ``timings``."""
     t1 = time.perf_counter()
-    ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work)
+    steps = grammar.iterations if iterations is None else int(iterations)
+    ms = derive(grammar, iterations=iterations, seed=seed, limits=limits, work=work,
+                progress=None if progress is None else lambda step, n: progress("derive", step, steps))
     t2 = time.perf_counter()
+    if progress is not None:
+        progress("interpret", 0, None)
     drawn = apply_interpretation(grammar, ms, seed, limits=limits, work=work)
     drawing = interpret_plant(drawn, grammar.turtle, grammar.materials, path, limits)
     t3 = time.perf_counter()
     for k, v in (("derive", t2 - t1), ("interpret", t3 - t2)):
         timings[k] = timings.get(k, 0.0) + v
+    if ms.fixed_point is not None and iterations is not None:   # said once, where --iterations asked for more
+        note = (f"{path}: note: the derivation reached a fixed point at step {ms.fixed_point} (steps past it "
+                f"change nothing: --iterations {int(iterations)} draws the plant of --iterations {ms.fixed_point})")
+        drawing = dataclasses.replace(drawing, warnings=(*drawing.warnings, note))
     return drawing, len(ms)
 
 
@@ -170,6 +181,15 @@ def resolve_input(path: str | Path) -> Path:
         if shipped.is_file():
             return shipped
     return p
+
+
+def existing_input(path: str | Path) -> Path:
+    """:func:`resolve_input`, refusing in one line a name that is neither a file nor a
+    shipped grammar or scene, with the closest name (:func:`plantgen._resources.missing_hint`)."""
+    resolved = resolve_input(path)
+    if not os.path.lexists(resolved):
+        raise PlantgenError(f"{path}: no such file{missing_hint(path)}")
+    return resolved
 
 
 def load_input(path: str | Path, limits: Limits | None = None):
@@ -205,11 +225,26 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
     of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones.
     ``defines`` ({name: number}) overrides a grammar's defines of those names (as
-    ``--define`` does; a name the grammar does not define is an error)."""
+    ``--define`` does; a name the grammar does not define is an error). ``progress``:
+    ``progress(stage, done, total)`` (stages ``derive``, ``interpret``, ``grow``,
+    ``place``; ``total`` None where not known). A name that is neither a file nor a
+    shipped grammar is one line with the closest shipped name; a shipped grammar's
+    errors and warnings name it as commands take it (``pine``), not by its path."""
     limits = _in_force(limits).raised(modules=max_modules)
     if iterations is not None:
         limits.check("iterations", int(iterations), "--iterations")
-    path = resolve_input(path)
+    path = existing_input(path)
+    try:
+        result = _grow_path(path, seed, iterations, progress, limits, allow_paths, defines)
+    except PlantgenError as exc:     # a shipped grammar is named as commands take it, not by its long path
+        exc.args = (short_names(str(exc)), *exc.args[1:])
+        raise
+    result.warnings = tuple(short_names(w) for w in result.warnings)
+    return result
+
+
+def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines) -> GrowResult:
+    """:func:`grow_file` of a path that exists."""
     kind, data = load_input(path, limits)
     timings: dict = {}
     if kind == "skeleton":
@@ -229,7 +264,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
                           polygons=drawing.polygons, warnings=drawing.warnings,
                           smooth_bends=grammar.turtle.smooth_bends)
 
-    modules = [0]
+    modules, grown = [0], [0]
     warnings: list[str] = []
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
@@ -241,12 +276,17 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
         drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
         modules[0] += n
+        grown[0] += 1
+        if progress is not None:
+            progress("grow", grown[0], None)
         warnings.extend(w for w in drawing.warnings if w not in warnings)
         return drawing             # the skeleton and its leaves: the scene's copies carry both
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths)
     t0 = time.perf_counter()
+    if progress is not None:
+        progress("place", 0, None)
     polygons = scene.polygons()
     timings["place"] = time.perf_counter() - t0
     return GrowResult(None, kind, scene.name, modules[0], timings, scene,
@@ -423,12 +463,16 @@ def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlant
 
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
-                  limits: Limits | None = None, allow_paths=(), smooth_bends=None) -> PreparedModel:
+                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, progress=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
     ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
-    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged."""
-    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
+    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged. ``progress``:
+    :func:`grow_file`'s, then the stage ``skin``."""
+    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths,
+                      progress=progress)
+    if progress is not None:
+        progress("skin", 0, None)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
     if grown.segments == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
@@ -554,9 +598,10 @@ def _check_render_memory(limits: Limits, what: str, width, height, frames, shado
     need = estimate_render_bytes(width, height, frames=frames or 1, shadow_res=shadow_res, segments=segments,
                                  ssaa=ssaa)
     if need > limits.max_render_bytes:
-        raise LimitError(f"{what}: {width}x{height} pixels, {frames or 1} frame(s), {segments:,} segments "
-                         f"need about {need / 2**20:,.0f} MiB, over the limit of "
-                         f"{limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
+        parts = [f"{width}x{height} pixels", *([f"{frames:,} frames"] if frames and frames > 1 else []),
+                 *([f"{segments:,} segments"] if segments else [])]
+        raise LimitError(f"{what}: a render of {', '.join(parts)} needs about {need / 2**20:,.0f} MiB, over the "
+                         f"limit of {limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
                          "the size, the frames, the supersampling or the shadow resolution)")
 
 
@@ -580,7 +625,7 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
             update_times.append(update.total_ms)
             gpu_frames += update.on_gpu
             if progress is not None:
-                progress(i, len(times))
+                progress("frames", i, len(times))
     finally:
         stream.release()
     return colors, frame_times, update_times, result, gpu_frames, ShadowUse.of(stats)
@@ -640,7 +685,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         report quotes their median
     exact_distance : with supersampling, one more draw at one sample a pixel gives the
         distances through the pixel centres (else: the sub-sample nearest each centre)
-    progress : callable(done, total) called after each animation frame
+    progress : ``progress(stage, done, total)``: :func:`prepare_model`'s stages, then
+        ``render`` (a still) or ``frames`` (after each animation frame)
     limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
         render is estimated to take, before any is allocated) and the folders a scene may
         read grammars from
@@ -650,12 +696,13 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     if int(timed_frames) != timed_frames or int(timed_frames) < 0:
         raise PlantgenError("--time-frames must be an integer >= 0")
     image, motion = request.image, request.motion
+    parse_background(image.background)       # a bad colour is one line before any work
     camera = _render_camera(request.view, image.size, limits)
     width, height = (camera.width, camera.height) if camera is not None else (image.size or DEFAULT_SIZE)
     frames, shadow_res = motion.frames, request.shadows.resolution
     _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=image.ssaa)
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
-                          allow_paths=allow_paths, smooth_bends=smooth_bends)
+                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
@@ -675,6 +722,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         distance = result.distance
     else:
         gpu_frames = 0
+        if progress is not None:
+            progress("render", 0, None)
         result, frame_times, distance, shadow_use = _render_still(raycaster, frusta, view, timed_frames,
                                                                   exact_distance)
     return RenderReport(
@@ -748,7 +797,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         a USD ``PointInstancer``; ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
-    progress : ``progress(stage, done, total)``, as plants are tessellated and the file written
+    progress : ``progress(stage, done, total)``: :func:`grow_file`'s stages, ``tessellate``, ``write``
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
@@ -779,7 +828,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     output_path, limits = Path(output_path), _in_force(limits)
     fmt = _export_checks(output_path, up, instancing)
     up, t0 = up or fmt.up, time.perf_counter()
-    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
+    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
     if grown.segments == 0:
         raise ExportError(f"{input_path}: the model has no segments")
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):

@@ -34,7 +34,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @click.command()
 @input_arg
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
-            ".obj its .mtl, a .qsm.csv a .treedata.csv.")
+            ".obj its .mtl, a .qsm.csv a .treedata.csv. Default: INPUT's name with .glb, in the current directory.",
+            required=False)
 @knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
@@ -73,8 +74,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing, unit,
-           qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing,
+           unit, qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -104,6 +105,7 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
 
     \b
     Examples:
+      plantgen export pine                          # writes pine.glb
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
       plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
@@ -114,6 +116,7 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
       plantgen export pine -o pine.swc --up z
     """
+    output = output or Path(input.stem + ".glb")
     with StageBars(enabled=not quiet) as bars:
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,

@@ -23,6 +23,7 @@ from .options import (
     smooth_bends_opt,
     take_settings,
 )
+from .progress import StageBars
 
 
 def _plant_ids(grown) -> tuple[object, object]:
@@ -35,7 +36,8 @@ def _plant_ids(grown) -> tuple[object, object]:
 @click.command()
 @input_arg
 @output_opt("its suffix names the format: .las or .laz (LAS 1.4, point format 6, the labels as extra "
-            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates).")
+            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates). Default: INPUT's "
+            "name with .ply, in the current directory.", required=False)
 @knob_options(ScanSettings)
 @click.option("--scan-seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Seed of the range noise and of the beams' sub-ray turns (the same seed, the same points).")
@@ -46,7 +48,7 @@ def _plant_ids(grown) -> tuple[object, object]:
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
+def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
          quiet, **knobs) -> None:
     """Scan INPUT (a grammar or scene .yaml, a shipped one by name, or a skeleton .npz /
     .swc) with simulated laser scanners and write the points, each labelled with its
@@ -59,18 +61,23 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
 
     \b
     Examples:
+      plantgen scan pine                            # writes pine.ply
       plantgen scan pine -o pine.las --angular-step 0.05 --range-noise 0.002
       plantgen scan broadleaf -o leaf.ply --scan-mode airborne --scan-angle 30
     """
+    output = output or Path(input.stem + ".ply")
     check_point_output(output)
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
-    grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
-    frusta = skin_model(grown, smooth_bends)
-    plant, leaf_plant = _plant_ids(grown)
-    cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
-                       leaf_plant=leaf_plant, limits=limits)
-    write_points(cloud, output, up=up)
+    with StageBars(enabled=not quiet) as bars:
+        grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths, progress=bars)
+        bars("skin", 0, None)
+        frusta = skin_model(grown, smooth_bends)
+        plant, leaf_plant = _plant_ids(grown)
+        cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
+                           leaf_plant=leaf_plant, limits=limits, progress=bars)
+        bars("write", 0, None)
+        write_points(cloud, output, up=up)
     if quiet:
         return
     parts = np.bincount(cloud.part, minlength=len(PART_NAMES))

@@ -773,13 +773,14 @@ def _metadata(settings: ScanSettings, seed: int) -> dict:
 def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: ScanSettings | None = None,
                seed: int = 0, *, frusta: Frusta | None = None, plant=0, leaf_plant=None,
                topology: Branches | None = None, limits: Limits | None = None,
-               max_pairs: int = 1 << 20) -> PointCloud:
+               max_pairs: int = 1 << 20, progress=None) -> PointCloud:
     """A simulated laser scan of a plant (see the module docstring): ``skeleton`` (skinned
     here unless its ``frusta`` are given) and its ``leaves`` (or None), scanned as
     ``settings`` say, noise and beam turns drawn from ``seed``. ``plant`` labels the points
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
-    ``scan_rays`` before anything is cast."""
+    ``scan_rays`` before anything is cast. ``progress``: ``progress("scan", done, total)``
+    as the scan begins and after each scanner or flight line."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
     if not len(target):
@@ -787,7 +788,13 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     grids = beam_grids(target, settings)
     rays = sum(g.count for g in grids) * settings.sub_rays
     (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
-    parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
+    parts = []
+    if progress is not None:
+        progress("scan", 0, len(grids))
+    for k, g in enumerate(grids):
+        parts.append(_scan_one(target, g, settings, seed, k, max_pairs))
+        if progress is not None:
+            progress("scan", k + 1, len(grids))
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),
                       metadata=_metadata(settings, seed))

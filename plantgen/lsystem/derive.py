@@ -63,12 +63,16 @@ class ModuleString:
     sym : (n,) int32, index into ``symbols``
     nparam : (n,) int8, parameter count of each module
     params : (n, P) float64, parameters (columns past ``nparam`` are unused)
+    fixed_point : the step after which the derivation stopped changing the string (the
+        next step rewrote it into itself, drawing no random number), when it ran past it;
+        else None
     """
 
     sym: np.ndarray
     nparam: np.ndarray
     params: np.ndarray
     symbols: tuple[str, ...]
+    fixed_point: int | None = None
 
     def __len__(self) -> int:
         return len(self.sym)
@@ -213,8 +217,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     if len(string[0]) <= CYCLE_WINDOW:
         seen[_fingerprint(string, rng)] = 0
 
-    step = 0
+    step, fixed_point = 0, None
     while step < iterations:
+        before, state = string, rng.bit_generator.state
         neighbours = (_context_neighbours(string[0], grammar.symbols, grammar.ignore)
                       if needs_context else None)
         matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
@@ -226,6 +231,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         step += 1
         if progress is not None:
             progress(step, total)
+        if _unchanged(before, string) and rng.bit_generator.state == state:   # a fixed point: done
+            fixed_point = step - 1
+            break
         if seen is not None and total <= CYCLE_WINDOW:
             key = _fingerprint(string, rng)
             if key in seen:           # the state of step seen[key] again: skip whole periods
@@ -235,7 +243,12 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
             else:
                 seen[key] = step
 
-    return ModuleString(*string, grammar.symbols)
+    return ModuleString(*string, grammar.symbols, fixed_point=fixed_point)
+
+
+def _unchanged(before, after) -> bool:
+    """Whether a step left the string as it was (sym, nparam, params all equal)."""
+    return len(before[0]) == len(after[0]) and all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
 
 
 def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = None, *,
