@@ -173,19 +173,7 @@ layout(location = 1) out float out_distance;   // distance along the ray from th
 #endif
 
 Frustum unpack_frustum() {
-    Frustum f;
-    f.base = f_rec0.xyz; f.h = f_rec0.w;
-    f.axis = f_rec1.xyz; f.r1 = f_rec1.w;
-    f.ref_dir = f_rec2.xyz; f.r2 = f_rec2.w;
-    f.plane_lo = f_rec3; f.plane_hi = f_rec4;
-    f.u_offset = f_rec5.x; f.twist = f_rec5.y; f.shell = f_rec5.z;
-    int tag = int(f_rec5.w + 0.5);
-    f.material = tag & 255;
-    f.open_lo = (tag & 256) != 0;
-    f.open_hi = (tag & 512) != 0;
-    f.v_slot = float((tag >> 10) & 127);
-    f.v_slots = float(((tag >> 17) & 127) + 1);
-    return f;
+    return frustum_from_record(f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5);
 }
 
 // Whether a cutting plane closes the frustum with a visible cap (an open chain end) rather

@@ -70,6 +70,7 @@ from ..errors import PlantgenError
 from ..knobs import check_knobs, knob
 from ..limits import Limits
 from ..limits import limits as default_limits
+from ..tolerances import tol
 from .frusta import Frusta
 from .polygons import Polygons
 from .reference import PairTester, row_boxes
@@ -620,7 +621,7 @@ def _triangle_hits(target: ScanTarget, tri: np.ndarray, origins: np.ndarray, dir
     p = cross(dirs, e2)
     det = dot(e1, p)
     scale = size * np.sqrt(dot(dirs, dirs))
-    ok = np.abs(det) > 1e-12 * scale
+    ok = np.abs(det) > tol.triangle_grazing * scale
     inv = 1.0 / np.where(ok, det, 1.0)
     s = origins - v0
     u = dot(s, p) * inv

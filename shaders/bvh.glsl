@@ -1,0 +1,219 @@
+// Traversal of the bounding volume hierarchy (plantgen.geometry.bvh): the one ray search
+// of every GPU query (render --method rt, scan, plantgen.trace). Included by programs that
+// trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
+//
+// Data (plantgen/gl/trace.py uploads it, std430 SSBOs):
+//   bvh_nodes    2 vec4 per node: (lo.xyz, first), (hi.xyz, count), first and count as int
+//                bits; internal node: count 0, children first and first + 1; leaf: count
+//                primitives at bvh_prims[first...]. Boxes are float32 rounded outward
+//                from the float64 build, relative to their frame's origin.
+//   bvh_prims    primitive ids in leaf order: rows 0..rows-1, then leaf triangles.
+//   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
+//   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
+//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim, row, triangle offsets),
+//                (rows, 0, 0, 0): a plant's nodes' `first` and its primitive ids are its
+//                own; the offsets place them in the shared arrays. The caller skips
+//                an empty hierarchy (no nodes).
+//   With TWO_LEVEL (an instanced scene): a top level over the copies,
+//   bvh_top_nodes (as bvh_nodes), bvh_top_prims (copy ids) and bvh_copies, 4 vec4 a copy:
+//   the world -> plant-frame map as three rows of a 3x4 matrix (rotation^T / scale,
+//   -rotation^T offset / scale, the offset formed in float64 on the CPU relative to the
+//   frame origin), then (plant index as int bits, 0, 0, 0). Without TWO_LEVEL the model
+//   is plant 0 in the frame itself.
+//
+// A ray is o + t*d in the frame (origin relative); t is in units of |d| and keeps its
+// value in a copy's frame (the map is affine). Hits: the cone's skin through cone.glsl's
+// frustum_hit after re-centring (the ray caster's test, bvh_row_hit), the triangles by
+// Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
+// child first (by slab entry), nodes entered at or beyond the best t skipped.
+
+#ifndef BVH_GLSL
+#define BVH_GLSL
+
+#include "cone.glsl"
+
+// Bindings 3..10 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
+#ifndef BVH_STACK
+#define BVH_STACK 64
+#endif
+
+layout(std430, binding = 3) readonly buffer BvhNodes { vec4 bvh_nodes[]; };
+layout(std430, binding = 4) readonly buffer BvhPrims { int bvh_prims[]; };
+layout(std430, binding = 5) readonly buffer BvhRows { vec4 bvh_rows[]; };
+layout(std430, binding = 6) readonly buffer BvhTris { vec4 bvh_tris[]; };
+layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
+#if defined TWO_LEVEL
+layout(std430, binding = 8) readonly buffer BvhTopNodes { vec4 bvh_top_nodes[]; };
+layout(std430, binding = 9) readonly buffer BvhTopPrims { int bvh_top_prims[]; };
+layout(std430, binding = 10) readonly buffer BvhCopies { vec4 bvh_copies[]; };
+#endif
+
+// A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
+// copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face of a row's hit
+// (cone.glsl's FACE_*; FACE_CONE for a triangle).
+struct BvhHit { float t; int prim; int copy; int face; };
+
+BvhHit bvh_no_hit(float t_max) { return BvhHit(t_max, -1, -1, FACE_CONE); }
+
+// Row `row` of plant `plant` as a Frustum (its record's six vec4).
+Frustum bvh_frustum(int plant, int row) {
+    int i = 6 * (bvh_plants[2 * plant].z + row);
+    return frustum_from_record(bvh_rows[i], bvh_rows[i + 1], bvh_rows[i + 2], bvh_rows[i + 3],
+                               bvh_rows[i + 4], bvh_rows[i + 5]);
+}
+
+// The ray caster's row test (raycast.glsl's, without relief): the ray re-centred at its
+// point nearest the axis segment, then cone.glsl's frustum_hit. t > t_min; NO_HIT on a miss.
+float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, out int face) {
+    float t_shift = recenter_shift(f, o, d);
+    float t_hit;
+    if (!frustum_hit(f, o + t_shift * d, d, t_min - t_shift, t_hit, face)) return NO_HIT;
+    return t_shift + t_hit;
+}
+
+// Möller-Trumbore, both faces, as plantgen.geometry.scan._triangle_hits (the grazing
+// guard |det| > TOL_TRIANGLE_GRAZING * |e1||e2||d|), with the ray first moved to the
+// point nearest v0 (float32 keeps the digits of a far eye). t > t_min; NO_HIT on a miss.
+float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, float t_min) {
+    float t_shift = dot(v0 - o, d) / dot(d, d);
+    vec3 s = o + t_shift * d - v0;
+    vec3 p = cross(d, e2);
+    float det = dot(e1, p);
+    if (!(abs(det) > TOL_TRIANGLE_GRAZING * size * length(d))) return NO_HIT;
+    float inv = 1.0 / det;
+    float u = dot(s, p) * inv;
+    vec3 q = cross(s, e1);
+    float v = dot(d, q) * inv;
+    float t = t_shift + dot(e2, q) * inv;
+    return u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min ? t : NO_HIT;
+}
+
+// Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, out int face) {
+    face = FACE_CONE;
+    int rows = bvh_plants[2 * plant + 1].x;
+    if (prim < rows) return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, face);
+    int i = 3 * (bvh_plants[2 * plant].w + prim - rows);
+    vec4 v0 = bvh_tris[i];
+    return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
+}
+
+// The slab test: the parameter interval of the ray inside box [lo, hi] (empty: x > y).
+// inv_d = 1 / d with zero components replaced by a tiny signed value; the far end grows by
+// a few ulps (pbrt's 1 + 2*gamma(3)) so that rounding loses no ray the box holds.
+vec2 bvh_slabs(vec3 lo, vec3 hi, vec3 o, vec3 inv_d) {
+    vec3 t0 = (lo - o) * inv_d, t1 = (hi - o) * inv_d;
+    vec3 near = min(t0, t1), far = max(t0, t1);
+    float t_near = max(max(near.x, near.y), near.z);
+    float t_far = min(min(far.x, far.y), far.z);
+    return vec2(t_near, t_far + 4.0e-7 * abs(t_far));
+}
+
+vec3 bvh_inverse_dir(vec3 d) {
+    vec3 safe = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
+    return 1.0 / safe;
+}
+
+#if defined TWO_LEVEL
+// Copy `copy`'s world -> plant-frame map applied to a point (w = 1) or a direction (w = 0).
+vec3 bvh_to_copy(int copy, vec4 x) {
+    int i = 4 * copy;
+    return vec3(dot(bvh_copies[i], x), dot(bvh_copies[i + 1], x), dot(bvh_copies[i + 2], x));
+}
+
+// Word k (0: lo, first; 1: hi, count) of node i of the top level (top) or the plants'.
+vec4 bvh_node(bool top, int i, int k) { return top ? bvh_top_nodes[2 * i + k] : bvh_nodes[2 * i + k]; }
+#else
+vec4 bvh_node(bool top, int i, int k) { return bvh_nodes[2 * i + k]; }
+#endif
+
+// Stack entries: index * 4 + kind.
+const int BVH_TOP = 0;      // a node of the top level (world ray)
+const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ray)
+const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
+
+// Whether the ray's interval [t_min, best] meets node i's box.
+bool bvh_enter(bool top, int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t_near) {
+    vec2 span = bvh_slabs(bvh_node(top, i, 0).xyz, bvh_node(top, i, 1).xyz, o, inv_d);
+    t_near = span.x;
+    return span.x <= span.y && span.y > t_min && span.x < best_t;
+}
+
+// The search: the closest hit (any_hit false) or any hit (the first found) of the ray
+// o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. One loop
+// walks both levels: a top-level leaf pushes its copies; popping a copy moves the ray into
+// the copy's frame and descends its plant's BLAS (whose nodes are popped before anything
+// pushed earlier, so the copy's ray stays the right one until they are done).
+BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit) {
+    BvhHit best = bvh_no_hit(t_max);
+    int stack[BVH_STACK];
+    int sp = 0;
+#if defined TWO_LEVEL
+    stack[sp++] = 4 * 0 + BVH_TOP;
+#else
+    stack[sp++] = 4 * 0 + BVH_COPY;
+#endif
+    vec3 inv_w = bvh_inverse_dir(d);
+    vec3 oc = o, dc = d, inv_c = inv_w;   // the ray in the current copy's frame
+    int copy = 0, plant = 0;
+    ivec4 offsets = bvh_plants[0];
+    while (sp > 0) {
+        int entry = stack[--sp];
+        int kind = entry & 3, node = entry >> 2;
+        if (kind == BVH_COPY) {
+            copy = node;
+#if defined TWO_LEVEL
+            plant = floatBitsToInt(bvh_copies[4 * copy + 3].x);
+            oc = bvh_to_copy(copy, vec4(o, 1.0));
+            dc = bvh_to_copy(copy, vec4(d, 0.0));
+            inv_c = bvh_inverse_dir(dc);
+#endif
+            offsets = bvh_plants[2 * plant];
+            node = 0;
+            kind = BVH_PLANT;
+        }
+        bool top = kind == BVH_TOP;
+        vec3 ro = top ? o : oc, rd = top ? d : dc, inv = top ? inv_w : inv_c;
+        int base = top ? 0 : offsets.x;
+        float t_near;
+        if (!bvh_enter(top, base + node, ro, inv, t_min, best.t, t_near)) continue;
+        while (true) {
+            int first = floatBitsToInt(bvh_node(top, base + node, 0).w);
+            int count = floatBitsToInt(bvh_node(top, base + node, 1).w);
+            if (count > 0) {
+#if defined TWO_LEVEL
+                if (top) {
+                    for (int k = count - 1; k >= 0; --k)
+                        if (sp < BVH_STACK) stack[sp++] = 4 * bvh_top_prims[first + k] + BVH_COPY;
+                    break;
+                }
+#endif
+                for (int k = 0; k < count; ++k) {
+                    int prim = bvh_prims[offsets.y + first + k];
+                    int face;
+                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, face);
+                    if (t < best.t) {
+                        best = BvhHit(t, prim, copy, face);
+                        if (any_hit) return best;
+                    }
+                }
+                break;
+            }
+            float t_left, t_right;
+            bool left = bvh_enter(top, base + first, ro, inv, t_min, best.t, t_left);
+            bool right = bvh_enter(top, base + first + 1, ro, inv, t_min, best.t, t_right);
+            if (left && right) {
+                bool left_near = t_left <= t_right;
+                if (sp < BVH_STACK) stack[sp++] = 4 * (left_near ? first + 1 : first) + kind;
+                node = left_near ? first : first + 1;
+            } else if (left || right) {
+                node = left ? first : first + 1;
+            } else {
+                break;
+            }
+        }
+    }
+    return best;
+}
+
+#endif
