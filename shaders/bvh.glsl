@@ -22,15 +22,15 @@
 //   is plant 0 in the frame itself.
 //
 // A ray is o + t*d in the frame (origin relative); t is in units of |d| and keeps its
-// value in a copy's frame (the map is affine). Hits: the cone's skin through cone.glsl's
-// frustum_hit after re-centring (the ray caster's test, bvh_row_hit), the triangles by
+// value in a copy's frame (the map is affine). Hits: the rows through row.glsl's row_hit
+// after re-centring (the ray caster's test, with RELIEF its march; bvh_row_hit), the triangles by
 // Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
 // child first (by slab entry), nodes entered at or beyond the best t skipped.
 
 #ifndef BVH_GLSL
 #define BVH_GLSL
 
-#include "cone.glsl"
+#include "row.glsl"
 
 // Bindings 3..10 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
 #ifndef BVH_STACK
@@ -62,12 +62,16 @@ Frustum bvh_frustum(int plant, int row) {
                                bvh_rows[i + 4], bvh_rows[i + 5]);
 }
 
-// The ray caster's row test (raycast.glsl's, without relief): the ray re-centred at its
-// point nearest the axis segment, then cone.glsl's frustum_hit. t > t_min; NO_HIT on a miss.
-float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, out int face) {
+// The ray caster's row test (row.glsl's row_hit: the analytic skin, with RELIEF the relief
+// march) after re-centring the ray at its point nearest the axis segment, as raycast.glsl
+// does. t > t_min; NO_HIT on a miss. `distance`, `footprint_scale`: row_hit's.
+float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float distance, float footprint_scale, out int face) {
     float t_shift = recenter_shift(f, o, d);
     float t_hit;
-    if (!frustum_hit(f, o + t_shift * d, d, t_min - t_shift, t_hit, face)) return NO_HIT;
+    bool cap;
+    int samples;
+    if (!row_hit(f, o + t_shift * d, d, t_min - t_shift, distance + t_shift, footprint_scale, t_hit, face, cap,
+                 samples)) return NO_HIT;
     return t_shift + t_hit;
 }
 
@@ -89,10 +93,11 @@ float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, fl
 }
 
 // Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
-float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, out int face) {
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float distance, float footprint_scale,
+                   out int face) {
     face = FACE_CONE;
     int rows = bvh_plants[2 * plant + 1].x;
-    if (prim < rows) return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, face);
+    if (prim < rows) return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, distance, footprint_scale, face);
     int i = 3 * (bvh_plants[2 * plant].w + prim - rows);
     vec4 v0 = bvh_tris[i];
     return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
@@ -140,11 +145,13 @@ bool bvh_enter(bool top, int i, vec3 o, vec3 inv_d, float t_min, float best_t, o
 }
 
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
-// o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. One loop
+// o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
+// the eye's distance from the ray's point at t = 0 (world units, |d| = 1: the relief
+// march's pixel footprint; 0 for the eye's own rays). One loop
 // walks both levels: a top-level leaf pushes its copies; popping a copy moves the ray into
 // the copy's frame and descends its plant's BLAS (whose nodes are popped before anything
 // pushed earlier, so the copy's ray stays the right one until they are done).
-BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit) {
+BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance) {
     BvhHit best = bvh_no_hit(t_max);
     int stack[BVH_STACK];
     int sp = 0;
@@ -155,6 +162,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit) {
 #endif
     vec3 inv_w = bvh_inverse_dir(d);
     vec3 oc = o, dc = d, inv_c = inv_w;   // the ray in the current copy's frame
+    float scale_c = 1.0;                  // the copy's units per world unit (|dc| / |d|)
     int copy = 0, plant = 0;
     ivec4 offsets = bvh_plants[0];
     while (sp > 0) {
@@ -167,6 +175,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit) {
             oc = bvh_to_copy(copy, vec4(o, 1.0));
             dc = bvh_to_copy(copy, vec4(d, 0.0));
             inv_c = bvh_inverse_dir(dc);
+            scale_c = length(dc) / length(d);
 #endif
             offsets = bvh_plants[2 * plant];
             node = 0;
@@ -191,7 +200,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit) {
                 for (int k = 0; k < count; ++k) {
                     int prim = bvh_prims[offsets.y + first + k];
                     int face;
-                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, face);
+                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, distance, scale_c, face);
                     if (t < best.t) {
                         best = BvhHit(t, prim, copy, face);
                         if (any_hit) return best;
