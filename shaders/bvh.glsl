@@ -49,8 +49,8 @@ layout(std430, binding = 10) readonly buffer BvhCopies { vec4 bvh_copies[]; };
 #endif
 
 // A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
-// copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face of a row's hit
-// (cone.glsl's FACE_*; FACE_CONE for a triangle).
+// copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face: FACE_LO or
+// FACE_HI for a hit on a row's open end (a cap), else FACE_CONE (a triangle too).
 struct BvhHit { float t; int prim; int copy; int face; };
 
 BvhHit bvh_no_hit(float t_max) { return BvhHit(t_max, -1, -1, FACE_CONE); }
@@ -64,14 +64,17 @@ Frustum bvh_frustum(int plant, int row) {
 
 // The ray caster's row test (row.glsl's row_hit: the analytic skin, with RELIEF the relief
 // march) after re-centring the ray at its point nearest the axis segment, as raycast.glsl
-// does. t > t_min; NO_HIT on a miss. `distance`, `footprint_scale`: row_hit's.
-float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float distance, float footprint_scale, out int face) {
+// does. t > t_min (and with RELIEF the march stops at t_max); NO_HIT on a miss; `face` FACE_LO or FACE_HI for a hit on an open end's
+// disc (a cap), else FACE_CONE. `distance`, `footprint_scale`: row_hit's.
+float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance, float footprint_scale,
+                  out int face) {
     float t_shift = recenter_shift(f, o, d);
     float t_hit;
     bool cap;
     int samples;
-    if (!row_hit(f, o + t_shift * d, d, t_min - t_shift, distance + t_shift, footprint_scale, t_hit, face, cap,
-                 samples)) return NO_HIT;
+    if (!row_hit(f, o + t_shift * d, d, t_min - t_shift, t_max - t_shift, distance + t_shift, footprint_scale,
+                 t_hit, face, cap, samples)) return NO_HIT;
+    face = cap ? face : FACE_CONE;
     return t_shift + t_hit;
 }
 
@@ -93,11 +96,13 @@ float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, fl
 }
 
 // Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
-float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float distance, float footprint_scale,
-                   out int face) {
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
+                   float footprint_scale, bool triangles, out int face) {
     face = FACE_CONE;
     int rows = bvh_plants[2 * plant + 1].x;
-    if (prim < rows) return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, distance, footprint_scale, face);
+    if (prim < rows)
+        return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, t_max, distance, footprint_scale, face);
+    if (!triangles) return NO_HIT;
     int i = 3 * (bvh_plants[2 * plant].w + prim - rows);
     vec4 v0 = bvh_tris[i];
     return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
@@ -126,6 +131,14 @@ vec3 bvh_to_copy(int copy, vec4 x) {
     return vec3(dot(bvh_copies[i], x), dot(bvh_copies[i + 1], x), dot(bvh_copies[i + 2], x));
 }
 
+// A normal n in copy `copy`'s frame as a unit world normal (the map's transpose).
+vec3 bvh_normal_from_copy(int copy, vec3 n) {
+    int i = 4 * copy;
+    return normalize(bvh_copies[i].xyz * n.x + bvh_copies[i + 1].xyz * n.y + bvh_copies[i + 2].xyz * n.z);
+}
+
+int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[4 * copy + 3].x); }
+
 // Word k (0: lo, first; 1: hi, count) of node i of the top level (top) or the plants'.
 vec4 bvh_node(bool top, int i, int k) { return top ? bvh_top_nodes[2 * i + k] : bvh_nodes[2 * i + k]; }
 #else
@@ -147,11 +160,12 @@ bool bvh_enter(bool top, int i, vec3 o, vec3 inv_d, float t_min, float best_t, o
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
 // o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
 // the eye's distance from the ray's point at t = 0 (world units, |d| = 1: the relief
-// march's pixel footprint; 0 for the eye's own rays). One loop
+// march's pixel footprint; 0 for the eye's own rays). `triangles`: false skips the leaf
+// triangles (the eye's rays of render --method rt, whose leaves are rasterised as RC's). One loop
 // walks both levels: a top-level leaf pushes its copies; popping a copy moves the ray into
 // the copy's frame and descends its plant's BLAS (whose nodes are popped before anything
 // pushed earlier, so the copy's ray stays the right one until they are done).
-BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance) {
+BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance, bool triangles) {
     BvhHit best = bvh_no_hit(t_max);
     int stack[BVH_STACK];
     int sp = 0;
@@ -171,7 +185,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
         if (kind == BVH_COPY) {
             copy = node;
 #if defined TWO_LEVEL
-            plant = floatBitsToInt(bvh_copies[4 * copy + 3].x);
+            plant = bvh_copy_plant(copy);
             oc = bvh_to_copy(copy, vec4(o, 1.0));
             dc = bvh_to_copy(copy, vec4(d, 0.0));
             inv_c = bvh_inverse_dir(dc);
@@ -200,7 +214,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 for (int k = 0; k < count; ++k) {
                     int prim = bvh_prims[offsets.y + first + k];
                     int face;
-                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, distance, scale_c, face);
+                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
                     if (t < best.t) {
                         best = BvhHit(t, prim, copy, face);
                         if (any_hit) return best;

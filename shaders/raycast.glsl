@@ -141,11 +141,7 @@ uniform vec2 light_depth;      // near, far along light_forward from light_origi
 
 flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 
-uniform vec2 viewport;          // width, height in pixels
-uniform vec3 cam_forward;       // unit
-uniform vec3 cam_right_scaled;  // unit right * tan(fov_x / 2)
-uniform vec3 cam_up_scaled;     // unit up * tan(fov_y / 2)
-uniform vec2 depth_coeffs;      // projection m[2][2], m[2][3]: clip z = A*z_view + B
+#include "eye.glsl"
 #include "row.glsl"
 
 #if defined STATS
@@ -171,18 +167,6 @@ Frustum unpack_frustum() {
 }
 
 
-// Window depth of a hit `distance` along the eye's ray direction d: the depth test against
-// other frusta and ordinary meshes (the projection's z of the view-space depth).
-float eye_depth(float distance, vec3 d) {
-    float z_view = -distance * dot(d, cam_forward);
-    float ndc_z = (depth_coeffs.x * z_view + depth_coeffs.y) / (-z_view);
-    return clamp(0.5 * ndc_z + 0.5, 0.0, 1.0);
-}
-
-vec3 pixel_ray() {
-    vec2 ndc = 2.0 * gl_FragCoord.xy / viewport - 1.0;   // pixel centres; +y is up
-    return normalize(cam_forward + ndc.x * cam_right_scaled + ndc.y * cam_up_scaled);
-}
 
 #if defined RELIEF && defined SHADOW_PASS && !defined LIGHT_BISECT
 #include "light_march.glsl"
@@ -222,7 +206,7 @@ void main() {
     } else
 #endif
     {
-        bool hit = row_hit(f, o, d, t_min, t_shift, 1.0, t_hit, face, cap, samples);
+        bool hit = row_hit(f, o, d, t_min, RAY_T_MAX, t_shift, 1.0, t_hit, face, cap, samples);
         count_samples(samples);
         if (!hit) discard;
     }

@@ -135,19 +135,21 @@ bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_o
 
 // The hit of the ray o + t*d (t > t_min) with row f: cone.glsl's analytic skin, or with
 // RELIEF where the row has a shell the relief surface marched in it. `o` should lie near
-// the row (the caller re-centres it, recenter_shift). The march sizes its samples to the
+// the row (the caller re-centres it, recenter_shift). With RELIEF a shell entered at or
+// beyond t_max is not marched (a hit found nearer; the analytic skin ignores t_max). The march sizes its samples to the
 // eye's pixel footprint (pixel_footprint, whose constant term is 0 for the eye) at the
 // world distance `distance` + t, in the row's units times `footprint_scale` (1; in a
 // scaled copy's frame the row's units per world unit). Returns false for a miss; else
 // t_hit, `face` (FACE_*), `cap` (the hit is on an open end's disc), `samples` (relief).
-bool row_hit(Frustum f, vec3 o, vec3 d, float t_min, float distance, float footprint_scale,
+bool row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance, float footprint_scale,
              out float t_hit, out int face, out bool cap, out int samples) {
     samples = 0;
     cap = false;
 #if defined RELIEF
     if (f.shell > 0.0) {
         float t_enter, t_exit;
-        if (!frustum_interval(f, f.shell, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) return false;
+        if (!frustum_interval(f, f.shell, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face) || t_enter >= t_max)
+            return false;
         float t_end = t_exit;
         float ti_enter, ti_exit; int inner_face;
         bool inner = frustum_interval(f, 0.0, o, d, t_min, RAY_T_MAX, ti_enter, ti_exit, inner_face);

@@ -20,7 +20,7 @@ void main() {
     int i = int(gl_GlobalInvocationID.x);
     if (i >= ray_count) return;
     vec4 a = rays[2 * i], b = rays[2 * i + 1];
-    BvhHit hit = bvh_trace(a.xyz, b.xyz, a.w, b.w, any_hit != 0, 0.0);
+    BvhHit hit = bvh_trace(a.xyz, b.xyz, a.w, b.w, any_hit != 0, 0.0, true);
     hits[i] = vec4(hit.t, intBitsToFloat(hit.prim), intBitsToFloat(hit.copy), intBitsToFloat(hit.face));
 }
 #endif
