@@ -131,7 +131,7 @@ class RayTracer(Raycaster):
         eye = np.asarray(eye, np.float64)
         g = self._gpu
         if g is not None and g[0] is model and g[1] is leaves and np.array_equal(g[2], eye):
-            self.last_upload_ms = 0.0
+            self.last_build_ms = self.last_upload_ms = 0.0
             return g[3]
         plants, top, matrices, copy_plant = self._build(model, leaves)
         t0 = time.perf_counter()
