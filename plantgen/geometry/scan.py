@@ -48,12 +48,13 @@ chunked or binned, nor on the other beams, so a seed gives the same cloud every 
 none), ``segment`` (the skeleton segment; a leaf: the one it hangs from, -1 for none),
 ``leaf`` (the leaf polygon, -1 for wood) and ``scanner``.
 
-**Speed.** The beams a primitive (a frustum row's bounding-pyramid box, a leaf triangle's
-box) can meet form a rectangle of the beam grid (a range of azimuths and elevations from
-the scanner; along-track pulses and across-track angles from a flight line); only those
-(beam, primitive) pairs are tested, ``max_pairs`` at a time. ``precision="float32"``
-tests the frusta in float32 relative to the scanner (the GPU's arithmetic; leaves stay
-float64): ``python -m plantgen.benchmarks.scan`` measures what it saves and costs.
+**Speed.** Every beam (every sub-ray) is traced through the target's bounding volume
+hierarchy (:mod:`plantgen.geometry.bvh`, built once per target), which finds its nearest
+hit among the primitives whose boxes it meets, nearest boxes first; the beams stream in
+chunks (``max_pairs`` sub-rays, at most :data:`SCAN_CHUNK_RAYS`), so memory stays bounded
+whatever their count. ``precision="float32"`` tests the frusta in float32 relative to the
+scanner (the GPU's arithmetic; leaves stay float64): ``python -m plantgen.benchmarks.scan``
+measures what it saves and costs.
 
 Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 """
@@ -80,7 +81,7 @@ from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
            "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_grids", "beam_returns", "cast_first_returns",
-           "scan_plant", "scan_target", "scanner_positions", "target_hits"]
+           "primitive_labels", "scan_plant", "scan_target", "scanner_positions", "target_hits"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -277,6 +278,14 @@ class ScanTarget:
 
     def __len__(self) -> int:
         return len(self.lo)
+
+    @cached_property
+    def bvh(self):
+        """The :class:`~plantgen.geometry.bvh.BVH` over the primitives' boxes (built on
+        first use)."""
+        from .bvh import build_bvh
+
+        return build_bvh(self.lo, self.hi)
 
     def box(self) -> np.ndarray:
         """(2, 3) the box around every primitive (zeros for none)."""
@@ -532,24 +541,6 @@ def _airborne_lines(target: ScanTarget, settings: ScanSettings) -> list[Airborne
     return lines
 
 
-def _line_members(target: ScanTarget, lines: list[AirborneBeams]) -> None:
-    """Set each flight line's ``members``: the primitives its fans can reach (their boxes
-    across the track within the swath's half-width at their depth), so that a line's pairs
-    are made from those alone."""
-    if not lines:
-        return
-    first = lines[0]
-    pad = max(g.pad for g in lines)
-    lo, hi = target.lo - pad, target.hi + pad
-    centre = first.origin - first.line * first.line_spacing * first.across
-    side = (_xz_corners(lo, hi) - centre[[0, 2]]) @ first.across[[0, 2]]
-    reach = np.maximum(centre[1] - lo[:, 1], 0.0) * math.tan(first.b1 * first.step)
-    l_lo = np.floor((side.min(axis=1) - reach) / first.line_spacing) - 1
-    l_hi = np.ceil((side.max(axis=1) + reach) / first.line_spacing) + 1
-    for g in lines:
-        g.members = np.flatnonzero((l_lo <= g.line) & (g.line <= l_hi))
-
-
 def scanner_positions(target: ScanTarget, settings: ScanSettings) -> np.ndarray:
     """(s, 3) where the scanners stand (airborne: each flight line's centre point)."""
     if settings.mode == "airborne":
@@ -567,16 +558,12 @@ def beam_grids(target: ScanTarget, settings: ScanSettings) -> list:
     """The beam grid of every scanner (airborne: of every flight line):
     :class:`TerrestrialBeams` or :class:`AirborneBeams`, whose ``rays(a, b)`` gives any
     beam's origin and direction (beam k is (a0 + k // nb, b0 + k % nb)). With a divergence,
-    each grid's ``pad`` widens the primitives' boxes by the beam's radius at its farthest
-    range, so a sub-ray that hits is never left out of its beam's pairs."""
+    a scanner's ``pad`` widens the box it looks at by the beam's radius at its farthest
+    range, so that a beam whose axis misses the plant but a sub-ray hits is fired."""
     lo, hi = target.box()
     half = math.tan(settings.divergence / 2000.0)
     if settings.mode == "airborne":
-        grids = _airborne_lines(target, settings)
-        for g in grids:
-            g.pad = _reach(g.rays(np.array([g.a0, g.a1]), np.zeros(2))[0], lo, hi) * half * (1 + 1e-9)
-        _line_members(target, grids)
-        return grids
+        return _airborne_lines(target, settings)
     step = math.radians(settings.angular_step)
     grids = []
     for p in _terrestrial_positions(target, settings):
@@ -588,16 +575,6 @@ def beam_grids(target: ScanTarget, settings: ScanSettings) -> list:
 
 
 # ============================================================================ casting
-def _pairs_in(first: np.ndarray, start: int, stop: int, blocks, nb_block):
-    """(primitive, a, b) of the pairs numbered start..stop-1 of the rectangles ``blocks``
-    (a_lo, b_lo per rectangle, ``nb_block`` its height; ``first`` the number of its first pair)."""
-    k = np.arange(start, stop, dtype=np.int64)
-    rect = np.searchsorted(first, k, side="right") - 1
-    local = k - first[rect]
-    a_lo, b_lo = blocks
-    return rect, a_lo[rect] + local // nb_block[rect], b_lo[rect] + local % nb_block[rect]
-
-
 def _sub_rays(directions: np.ndarray, beam_ids: np.ndarray, seed: int, scanner: int, samples: int,
               half_angle: float) -> np.ndarray:
     """(m·s, 3) the s sub-rays of each beam (m,): a Vogel spiral over the cone of
@@ -674,31 +651,31 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
     return t, np.where(np.isfinite(t), prim, -1)
 
 
-def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int):
-    """(sub-ray ids, t, primitive) of every finite hit of the scanner's (sub-ray, primitive) pairs."""
+#: Beams traced at a time (times a diverging beam's sub-rays): what bounds a scan's
+#: working memory whatever its beam count.
+SCAN_CHUNK_RAYS = 1 << 18
+
+
+def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
+                progress=None):
+    """(sub-ray ids, t, primitive) of the first hit of each of the scanner's sub-rays that
+    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time."""
+    from .bvh import trace_bvh
+
     s = settings.sub_rays
-    members = getattr(grid, "members", None)
-    members = np.arange(len(target)) if members is None else members
-    a_lo, a_hi, b_lo, b_hi = grid.blocks(target.lo[members] - grid.pad, target.hi[members] + grid.pad)
-    nb_block = np.maximum(b_hi - b_lo + 1, 0)
-    count = np.maximum(a_hi - a_lo + 1, 0) * nb_block
-    first = np.concatenate([[0], np.cumsum(count)])
-    total = int(first[-1])
-    tester = PairTester(target.frusta, dtype=np.dtype(settings.precision), origin=grid.origin) \
-        if target.rows else None
-    step = max(1, max_pairs // s)
+    hits = target_hits(target, origin=grid.origin, precision=settings.precision)
+    step = max(1, min(max_pairs, SCAN_CHUNK_RAYS) // s)
     found = []
-    for start in range(0, total, step):
-        rect, a, b = _pairs_in(first[:-1], start, min(start + step, total), (a_lo, b_lo), nb_block)
-        beam = (a - grid.a0) * grid.nb + (b - grid.b0)
-        origins, dirs = grid.rays(a, b)
+    for start in range(0, grid.count, step):
+        beam = np.arange(start, min(start + step, grid.count), dtype=np.int64)
+        origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
-        prim = np.repeat(members[rect], s)
-        t, _ = cast_first_returns(target, np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
-                                  tester=tester, primitives=prim)
+        t, prim = trace_bvh(target.bvh, np.repeat(origins, s, axis=0), dirs, hits)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
+        if progress is not None:
+            progress(len(beam))
     if not found:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
     return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
@@ -726,7 +703,8 @@ def _beam_returns(sub, t, prim, samples: int, how: str):
     return beam[starts], mean, prim[closest]
 
 
-def _labels(target: ScanTarget, prim: np.ndarray) -> dict:
+def primitive_labels(target: ScanTarget, prim: np.ndarray) -> dict:
+    """The labels (plant, part, order, segment, leaf: (k,) each) of primitives ``prim`` (k,)."""
     wood = prim < target.rows
     row = np.where(wood, prim, 0)
     tri = np.where(wood, 0, prim - target.rows)
@@ -773,7 +751,7 @@ def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scann
     if settings.range_noise > 0:
         t = t + settings.range_noise * _normal(seed, scanner, beam)
     origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
-    out = _labels(target, prim)
+    out = primitive_labels(target, prim)
     out["xyz"] = origins + t[:, None] * dirs
     out["scanner"] = np.full(len(beam), scanner)
     return out
