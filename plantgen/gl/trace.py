@@ -26,8 +26,8 @@ from ..geometry.instances import similarity_parts
 from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
-__all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "TRACE_CHUNK", "BVH_BINDING", "BVH_STACK",
-           "bvh_buffer_bytes", "COPY_BYTES"]
+__all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
+           "BVH_BINDING", "BVH_STACK", "bvh_buffer_bytes", "COPY_BYTES"]
 
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
@@ -232,3 +232,36 @@ def trace_rays(gpu: GpuBvh, origins, directions, *, any_hit: bool = False, t_min
         ray_buf.release()
         hit_buf.release()
     return t, prim, copy, face
+
+
+_targets: list = []      # [(target, GpuBvh)]: the last targets uploaded (a scan, a trace batch)
+_TARGETS_KEPT = 2
+
+
+def target_bvh(target, ctx=None) -> GpuBvh:
+    """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
+    triangles, its ``bvh``), relative to its root box's centre; the last few targets stay
+    uploaded."""
+    for i, (t, gpu) in enumerate(_targets):
+        if t is target and (ctx is None or gpu.ctx is ctx):
+            _targets.append(_targets.pop(i))
+            return gpu
+    if ctx is None:
+        from .context import gl_context
+        ctx = gl_context()
+    gpu = upload_bvh(ctx, [GpuPlant(target.frusta if target.rows else None, target.triangles, target.bvh)])
+    _targets.append((target, gpu))
+    while len(_targets) > _TARGETS_KEPT:
+        _targets.pop(0)[1].release()
+    return gpu
+
+
+def trace_target(target, origins, directions, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf,
+                 chunk: int = TRACE_CHUNK, progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """The GPU's hit of each ray (m, 3) against a ScanTarget: t (m,) (float32 values; inf:
+    none) and the primitive (m,) (a row, or rows + a leaf triangle; -1), closest or any
+    (:func:`trace_rays`). The float32 search of :func:`plantgen.trace` and the scan, which
+    solve each found primitive again in float64."""
+    t, prim, _, _ = trace_rays(target_bvh(target), origins, directions, any_hit=any_hit, t_min=t_min, t_max=t_max,
+                               chunk=chunk, progress=progress)
+    return t, prim
