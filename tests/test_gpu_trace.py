@@ -244,3 +244,37 @@ def test_plantgen_trace_float32_is_the_float64_reference(gl_ctx, any_hit):
         assert same.mean() >= 0.999
         np.testing.assert_array_equal(gpu.t[same], ref.t[same])
         assert (gpu.part[ref.hit] == 2).any() and (gpu.part[ref.hit] < 2).any()      # leaves and wood
+
+
+def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
+    """--scan-precision float32 with the GPU's search: each beam's primitive found on the
+    GPU, its range solved again in float64: beam for beam the float64 scan's primitive
+    (>= 99.9 %) and there exactly its range; the beams stream in chunks (the finder never
+    sees more than the chunk), and progress counts every beam."""
+    from plantgen.geometry.scan import ScanSettings, beam_returns, scan_plant
+    from plantgen.gl.trace import trace_target
+    from plantgen.pipeline import grow_file, model_leaves, skin_model
+
+    grown = grow_file("broadleaf")
+    leaves, frusta = model_leaves(grown), skin_model(grown)
+    target = scan_target(grown.skeleton, leaves, frusta=frusta)
+    seen = []
+
+    def finder(tg, origins, dirs):
+        seen.append(len(origins))
+        return trace_target(tg, origins, dirs)
+
+    ref = beam_returns(target, ScanSettings(angular_step=0.3))
+    got = beam_returns(target, ScanSettings(angular_step=0.3, precision="float32"), max_pairs=20000, finder=finder)
+    assert max(seen) <= 20000 and len(seen) > 1
+    for a, b in zip(ref, got, strict=True):
+        assert len(a.beam) > 1000
+        common, ia, ib = np.intersect1d(a.beam, b.beam, return_indices=True)
+        assert len(common) >= 0.999 * max(len(a.beam), len(b.beam))
+        same = a.primitive[ia] == b.primitive[ib]
+        assert same.mean() >= 0.999
+        np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
+    done = []
+    cloud = scan_plant(grown.skeleton, leaves, ScanSettings(angular_step=1.0, precision="float32"), frusta=frusta,
+                       finder=finder, progress=lambda d, total: done.append((d, total)))
+    assert len(cloud) > 0 and done[-1][0] == done[-1][1] and all(x[0] <= x[1] for x in done)

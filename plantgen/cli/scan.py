@@ -23,6 +23,24 @@ from .options import (
     smooth_bends_opt,
     take_settings,
 )
+from .progress import StageBars
+
+
+def _gpu_finder(settings: ScanSettings, quiet: bool):
+    """The GPU's search for --scan-precision float32 (None for float64, or without GL: then
+    the frusta are tested in float32 on the CPU, and a line on stderr says so)."""
+    if settings.precision != "float32":
+        return None
+    from ..gl.context import GLContextError, gl_context
+    from ..gl.trace import trace_target
+
+    try:
+        gl_context()
+    except GLContextError as exc:
+        if not quiet:
+            click.echo(f"no GPU traversal ({exc}); float32 on the CPU", err=True)
+        return None
+    return lambda target, origins, dirs: trace_target(target, origins, dirs)
 
 
 def _plant_ids(grown) -> tuple[object, object]:
@@ -68,8 +86,10 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
     frusta = skin_model(grown, smooth_bends)
     plant, leaf_plant = _plant_ids(grown)
-    cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
-                       leaf_plant=leaf_plant, limits=limits)
+    with StageBars(enabled=not quiet) as bars:
+        cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
+                           leaf_plant=leaf_plant, limits=limits, finder=_gpu_finder(settings, quiet),
+                           progress=lambda done, total: bars("scan", done, total))
     write_points(cloud, output, up=up)
     if quiet:
         return

@@ -52,9 +52,12 @@ none), ``segment`` (the skeleton segment; a leaf: the one it hangs from, -1 for 
 hierarchy (:mod:`plantgen.geometry.bvh`, built once per target), which finds its nearest
 hit among the primitives whose boxes it meets, nearest boxes first; the beams stream in
 chunks (``max_pairs`` sub-rays, at most :data:`SCAN_CHUNK_RAYS`), so memory stays bounded
-whatever their count. ``precision="float32"`` tests the frusta in float32 relative to the
-scanner (the GPU's arithmetic; leaves stay float64): ``python -m plantgen.benchmarks.scan``
-measures what it saves and costs.
+whatever their count. ``precision="float32"`` with a ``finder`` (``plantgen scan`` passes
+the GPU's search, :func:`plantgen.gl.trace.trace_target`) finds each beam's primitive in
+float32 and solves its range again in float64 against that primitive (the reference's
+ranges wherever both find the same primitive); without one it tests the frusta in float32
+relative to the scanner on the CPU (leaves stay float64): ``python -m
+plantgen.benchmarks.scan`` measures what each saves and costs.
 
 Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 """
@@ -155,8 +158,10 @@ class ScanSettings:
                                        lo_open=True, metavar="D")
     scan_angle: float = knob(30.0, "--scan-angle", "Airborne: the mirror's sweep, degrees either side of the nadir "
                              "(0: nadir beams only).", lo=0.0, hi=75.0, metavar="DEG")
-    precision: str = knob("float64", "--scan-precision", "float64: the exact reference; float32: the frusta tested "
-                          "in float32 (faster, less exact).", kind="choice", choices=("float64", "float32"))
+    precision: str = knob("float64", "--scan-precision", "float64: the exact reference on the CPU; float32: each "
+                          "beam's primitive found on the GPU in float32, its range then solved in float64 (the "
+                          "reference's ranges; without GL the frusta tested in float32 on the CPU).",
+                          kind="choice", choices=("float64", "float32"))
 
     def __post_init__(self):
         check_knobs(self, ScanError)
@@ -656,14 +661,35 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
 SCAN_CHUNK_RAYS = 1 << 18
 
 
+def _found_again(target: ScanTarget, finder, origins, dirs, hits) -> tuple[np.ndarray, np.ndarray]:
+    """The first hits (t, primitive) of rays whose primitive ``finder(target, origins,
+    dirs) -> (t, primitive)`` finds (the GPU's float32 search), each range solved again in
+    float64 against that primitive; a ray whose primitive the float64 test then misses (a
+    graze decided the other way by rounding) is traced again by the float64 reference."""
+    from .bvh import trace_bvh
+
+    _, prim = finder(target, origins, dirs)
+    prim = np.asarray(prim, np.int64).copy()
+    t = np.full(len(prim), np.inf)
+    found = np.flatnonzero(prim >= 0)
+    t[found], _ = cast_first_returns(target, origins[found], dirs[found], primitives=prim[found])
+    lost = found[~np.isfinite(t[found])]
+    if len(lost):
+        t[lost], prim[lost] = trace_bvh(target.bvh, origins[lost], dirs[lost], hits)
+    return t, np.where(np.isfinite(t), prim, -1)
+
+
 def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
-                progress=None):
+                progress=None, finder=None):
     """(sub-ray ids, t, primitive) of the first hit of each of the scanner's sub-rays that
-    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time."""
+    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time: in float64
+    (or float32 with ``precision``) on the CPU, or with a ``finder`` and precision float32
+    found by it and solved again in float64 (:func:`_found_again`)."""
     from .bvh import trace_bvh
 
     s = settings.sub_rays
-    hits = target_hits(target, origin=grid.origin, precision=settings.precision)
+    gpu = finder is not None and settings.precision == "float32"
+    hits = target_hits(target, origin=grid.origin, precision="float64" if gpu else settings.precision)
     step = max(1, min(max_pairs, SCAN_CHUNK_RAYS) // s)
     found = []
     for start in range(0, grid.count, step):
@@ -671,7 +697,10 @@ def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, sca
         origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
-        t, prim = trace_bvh(target.bvh, np.repeat(origins, s, axis=0), dirs, hits)
+        if gpu:
+            t, prim = _found_again(target, finder, np.repeat(origins, s, axis=0), dirs, hits)
+        else:
+            t, prim = trace_bvh(target.bvh, np.repeat(origins, s, axis=0), dirs, hits)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
         if progress is not None:
@@ -734,19 +763,20 @@ class BeamReturns:
 
 
 def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
-                 max_pairs: int = 1 << 20) -> list[BeamReturns]:
+                 max_pairs: int = 1 << 20, finder=None) -> list[BeamReturns]:
     """Every scanner's :class:`BeamReturns` (what :func:`scan_plant` turns into points;
-    the benchmark compares precisions beam by beam)."""
+    the benchmark compares precisions beam by beam); ``finder``: see :func:`scan_plant`."""
     out = []
     for k, grid in enumerate(beam_grids(target, settings)):
-        sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs)
+        sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs, finder=finder)
         beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
         out.append(BeamReturns(k, beam, t, prim, grid.count))
     return out
 
 
-def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int) -> dict:
-    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs)
+def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
+              progress=None, finder=None) -> dict:
+    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs, progress, finder)
     beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
     if settings.range_noise > 0:
         t = t + settings.range_noise * _normal(seed, scanner, beam)
@@ -767,13 +797,19 @@ def _metadata(settings: ScanSettings, seed: int) -> dict:
 def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: ScanSettings | None = None,
                seed: int = 0, *, frusta: Frusta | None = None, plant=0, leaf_plant=None,
                topology: Branches | None = None, limits: Limits | None = None,
-               max_pairs: int = 1 << 20) -> PointCloud:
+               max_pairs: int = 1 << 20, finder=None, progress=None) -> PointCloud:
     """A simulated laser scan of a plant (see the module docstring): ``skeleton`` (skinned
     here unless its ``frusta`` are given) and its ``leaves`` (or None), scanned as
     ``settings`` say, noise and beam turns drawn from ``seed``. ``plant`` labels the points
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
-    ``scan_rays`` before anything is cast."""
+    ``scan_rays`` before anything is cast.
+
+    ``finder``: with ``settings.precision`` float32, ``finder(target, origins, dirs) ->
+    (t, primitive)`` finds each beam's primitive (the GPU's search,
+    :func:`plantgen.gl.trace.trace_target`; this module draws nothing) and each range is
+    solved again in float64 against it, so ranges are the reference's. ``progress(beams,
+    total)``: called as the beams stream, with the beams done and the total."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
     if not len(target):
@@ -781,7 +817,14 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     grids = beam_grids(target, settings)
     rays = sum(g.count for g in grids) * settings.sub_rays
     (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
-    parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
+    total, done = sum(g.count for g in grids), 0
+
+    def advance(beams):
+        nonlocal done
+        done += beams
+        if progress is not None:
+            progress(done, total)
+    parts = [_scan_one(target, g, settings, seed, k, max_pairs, advance, finder) for k, g in enumerate(grids)]
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),
                       metadata=_metadata(settings, seed))
