@@ -179,47 +179,56 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
     float scale_c = 1.0;                  // the copy's units per world unit (|dc| / |d|)
     int copy = 0, plant = 0;
     ivec4 offsets = bvh_plants[0];
-    while (sp > 0) {
-        int entry = stack[--sp];
-        int kind = entry & 3, node = entry >> 2;
-        if (kind == BVH_COPY) {
-            copy = node;
-#if defined TWO_LEVEL
-            plant = bvh_copy_plant(copy);
-            oc = bvh_to_copy(copy, vec4(o, 1.0));
-            dc = bvh_to_copy(copy, vec4(d, 0.0));
-            inv_c = bvh_inverse_dir(dc);
-            scale_c = length(dc) / length(d);
-#endif
-            offsets = bvh_plants[2 * plant];
-            node = 0;
-            kind = BVH_PLANT;
-        }
-        bool top = kind == BVH_TOP;
-        vec3 ro = top ? o : oc, rd = top ? d : dc, inv = top ? inv_w : inv_c;
-        int base = top ? 0 : offsets.x;
-        float t_near;
-        if (!bvh_enter(top, base + node, ro, inv, t_min, best.t, t_near)) continue;
+    // the node being walked (-1: take the next entry) and its level's ray
+    int node = -1, kind = BVH_PLANT, base = 0;
+    bool top = false;
+    vec3 ro = o, rd = d, inv = inv_w;
+    while (true) {
+        // Walk the nodes (cheap) until a leaf of primitives is reached or nothing is left;
+        // then test that leaf's primitives (dear) outside this loop: on SIMD hardware (a
+        // GPU's warp, llvmpipe's lanes) the primitive test then runs once per leaf for the
+        // lanes together, not masked at every node step (Aila and Laine's while-while).
+        int leaf_first = 0, leaf_count = 0;
         while (true) {
+            if (node < 0) {
+                if (sp == 0) break;
+                int entry = stack[--sp];
+                kind = entry & 3;
+                node = entry >> 2;
+                if (kind == BVH_COPY) {
+                    copy = node;
+#if defined TWO_LEVEL
+                    plant = bvh_copy_plant(copy);
+                    oc = bvh_to_copy(copy, vec4(o, 1.0));
+                    dc = bvh_to_copy(copy, vec4(d, 0.0));
+                    inv_c = bvh_inverse_dir(dc);
+                    scale_c = length(dc) / length(d);
+#endif
+                    offsets = bvh_plants[2 * plant];
+                    node = 0;
+                    kind = BVH_PLANT;
+                }
+                top = kind == BVH_TOP;
+                ro = top ? o : oc;
+                rd = top ? d : dc;
+                inv = top ? inv_w : inv_c;
+                base = top ? 0 : offsets.x;
+                float t_near;
+                if (!bvh_enter(top, base + node, ro, inv, t_min, best.t, t_near)) { node = -1; continue; }
+            }
             int first = floatBitsToInt(bvh_node(top, base + node, 0).w);
             int count = floatBitsToInt(bvh_node(top, base + node, 1).w);
             if (count > 0) {
+                node = -1;
 #if defined TWO_LEVEL
                 if (top) {
                     for (int k = count - 1; k >= 0; --k)
                         if (sp < BVH_STACK) stack[sp++] = 4 * bvh_top_prims[first + k] + BVH_COPY;
-                    break;
+                    continue;
                 }
 #endif
-                for (int k = 0; k < count; ++k) {
-                    int prim = bvh_prims[offsets.y + first + k];
-                    int face;
-                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
-                    if (t < best.t) {
-                        best = BvhHit(t, prim, copy, face);
-                        if (any_hit) return best;
-                    }
-                }
+                leaf_first = first;
+                leaf_count = count;
                 break;
             }
             float t_left, t_right;
@@ -232,7 +241,17 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
             } else if (left || right) {
                 node = left ? first : first + 1;
             } else {
-                break;
+                node = -1;
+            }
+        }
+        if (leaf_count == 0) break;
+        for (int k = 0; k < leaf_count; ++k) {
+            int prim = bvh_prims[offsets.y + leaf_first + k];
+            int face;
+            float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
+            if (t < best.t) {
+                best = BvhHit(t, prim, copy, face);
+                if (any_hit) return best;
             }
         }
     }
