@@ -11,11 +11,13 @@
 //   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
 //   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
 //   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim, row, triangle offsets),
-//                (rows, 0, 0, 0): a plant's nodes' `first` and its primitive ids are its
+//                (rows, the top level's node offset (plant 0's), 0, 0): a plant's nodes'
+//                `first` and its primitive ids are its
 //                own; the offsets place them in the shared arrays. The caller skips
 //                an empty hierarchy (no nodes).
-//   With TWO_LEVEL (an instanced scene): a top level over the copies,
-//   bvh_top_nodes (as bvh_nodes), bvh_top_prims (copy ids) and bvh_copies, 4 vec4 a copy:
+//   With TWO_LEVEL (an instanced scene): a top level over the copies, its nodes after the
+//   plants' in bvh_nodes (one array, one load a word), bvh_top_prims (copy ids) and
+//   bvh_copies, 4 vec4 a copy:
 //   the world -> plant-frame map as three rows of a 3x4 matrix (rotation^T / scale,
 //   -rotation^T offset / scale, the offset formed in float64 on the CPU relative to the
 //   frame origin), then (plant index as int bits, 0, 0, 0). Without TWO_LEVEL the model
@@ -32,7 +34,7 @@
 
 #include "row.glsl"
 
-// Bindings 3..10 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
+// Bindings 3..9 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
 #ifndef BVH_STACK
 #define BVH_STACK 64
 #endif
@@ -43,9 +45,8 @@ layout(std430, binding = 5) readonly buffer BvhRows { vec4 bvh_rows[]; };
 layout(std430, binding = 6) readonly buffer BvhTris { vec4 bvh_tris[]; };
 layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
 #if defined TWO_LEVEL
-layout(std430, binding = 8) readonly buffer BvhTopNodes { vec4 bvh_top_nodes[]; };
-layout(std430, binding = 9) readonly buffer BvhTopPrims { int bvh_top_prims[]; };
-layout(std430, binding = 10) readonly buffer BvhCopies { vec4 bvh_copies[]; };
+layout(std430, binding = 8) readonly buffer BvhTopPrims { int bvh_top_prims[]; };
+layout(std430, binding = 9) readonly buffer BvhCopies { vec4 bvh_copies[]; };
 #endif
 
 // A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
@@ -139,11 +140,10 @@ vec3 bvh_normal_from_copy(int copy, vec3 n) {
 
 int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[4 * copy + 3].x); }
 
-// Word k (0: lo, first; 1: hi, count) of node i of the top level (top) or the plants'.
-vec4 bvh_node(bool top, int i, int k) { return top ? bvh_top_nodes[2 * i + k] : bvh_nodes[2 * i + k]; }
-#else
-vec4 bvh_node(bool top, int i, int k) { return bvh_nodes[2 * i + k]; }
 #endif
+
+// Word k (0: lo, first; 1: hi, count) of node i (the top level's nodes follow the plants').
+vec4 bvh_node(int i, int k) { return bvh_nodes[2 * i + k]; }
 
 // Stack entries: index * 4 + kind.
 const int BVH_TOP = 0;      // a node of the top level (world ray)
@@ -151,8 +151,8 @@ const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ra
 const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
 
 // Whether the ray's interval [t_min, best] meets node i's box.
-bool bvh_enter(bool top, int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t_near) {
-    vec2 span = bvh_slabs(bvh_node(top, i, 0).xyz, bvh_node(top, i, 1).xyz, o, inv_d);
+bool bvh_enter(int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t_near) {
+    vec2 span = bvh_slabs(bvh_node(i, 0).xyz, bvh_node(i, 1).xyz, o, inv_d);
     t_near = span.x;
     return span.x <= span.y && span.y > t_min && span.x < best_t;
 }
@@ -212,12 +212,12 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 ro = top ? o : oc;
                 rd = top ? d : dc;
                 inv = top ? inv_w : inv_c;
-                base = top ? 0 : offsets.x;
+                base = top ? bvh_plants[1].y : offsets.x;
                 float t_near;
-                if (!bvh_enter(top, base + node, ro, inv, t_min, best.t, t_near)) { node = -1; continue; }
+                if (!bvh_enter(base + node, ro, inv, t_min, best.t, t_near)) { node = -1; continue; }
             }
-            int first = floatBitsToInt(bvh_node(top, base + node, 0).w);
-            int count = floatBitsToInt(bvh_node(top, base + node, 1).w);
+            int first = floatBitsToInt(bvh_node(base + node, 0).w);
+            int count = floatBitsToInt(bvh_node(base + node, 1).w);
             if (count > 0) {
                 node = -1;
 #if defined TWO_LEVEL
@@ -232,8 +232,8 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 break;
             }
             float t_left, t_right;
-            bool left = bvh_enter(top, base + first, ro, inv, t_min, best.t, t_left);
-            bool right = bvh_enter(top, base + first + 1, ro, inv, t_min, best.t, t_right);
+            bool left = bvh_enter(base + first, ro, inv, t_min, best.t, t_left);
+            bool right = bvh_enter(base + first + 1, ro, inv, t_min, best.t, t_right);
             if (left && right) {
                 bool left_near = t_left <= t_right;
                 if (sp < BVH_STACK) stack[sp++] = 4 * (left_near ? first + 1 : first) + kind;

@@ -31,7 +31,7 @@ __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "ta
 
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
-#: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (8 in all).
+#: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (7 in all).
 BVH_BINDING = 3
 #: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
 BVH_STACK = 64
@@ -151,6 +151,9 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
         tris.append(_triangle_words(p.triangles, c))
         counts += [p.bvh.nodes, len(p.bvh.prims), p.rows, len(tris[-1])]
+    if two_level:     # the top level's nodes follow the plants' (one node array)
+        offsets[0][5] = counts[0]
+        nodes.append(_node_words(top, origin))
     arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
               np.asarray(offsets, np.int32)]
     copies = 0
@@ -168,7 +171,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         words[:, [0, 1, 2, 4, 5, 6, 8, 9, 10]] = inverse.reshape(copies, 9)
         words[:, [3, 7, 11]] = -np.einsum("kij,kj->ki", inverse, offset)
         words[:, 12] = copy_plant.astype(np.int32).view(np.float32)
-        arrays += [_node_words(top, origin), np.asarray(top.prims, np.int32), words]
+        arrays += [np.asarray(top.prims, np.int32), words]
     gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies)
     for a in arrays:
         data = np.ascontiguousarray(a).tobytes()
