@@ -67,7 +67,9 @@ def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class RayTracer(Raycaster):
     """Renders Frusta or a PlacedPlants by tracing each pixel's ray through a BVH (module
     docstring); the same ``render`` arguments as :class:`Raycaster` but for GPU-posed
-    frames (``record_buffer``), work counts and labels, which stay the ray caster's.
+    frames (``record_buffer``), work counts and labels, which stay the ray caster's. The
+    shadow knobs of the map (resolution, caster, its march) do not apply: a shadow ray
+    meets what the eye's rays meet (with relief, the relief surface).
 
     ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.bvh.build_bvh`);
     ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface.
@@ -155,9 +157,6 @@ class RayTracer(Raycaster):
         if record_buffer is not None or count_work or settings.labels or settings.proxy != "pyramid":
             raise PlantgenError("the ray tracer renders still frusta in colour: GPU-posed frames, work counts, "
                                 "labels and proxies are the ray caster's (--method rc)")
-        if shadows is not None and shadows.caster == "mesh":
-            raise PlantgenError("--shadow-caster mesh draws a shadow map; the ray tracer's shadows are shadow rays "
-                                "(leave --shadow-caster out)")
         gpu = self.gpu_bvh(frusta, leaves, camera.eye)
         tex, repeats = self._heights.get(tuple(material_names))
         self._frame = {"gpu": gpu, "settings": settings, "tex": tex, "repeats": repeats}
