@@ -26,4 +26,28 @@ vec3 pixel_ray() {
     return normalize(cam_forward + ndc.x * cam_right_scaled + ndc.y * cam_up_scaled);
 }
 
+#if !defined SHADOW_PASS
+layout(location = 0) out vec4 out_color;
+layout(location = 1) out float out_distance;   // distance along the ray from the eye
+
+#if !defined LABELS
+// Shade and write the hit at p (eye-relative), `distance` along the eye's ray direction d:
+// its albedo, material, shading normal and (with SHADOWS, shadow.glsl included before) the
+// receiver normal of its shadow test; colour, distance and depth.
+// A surface turned away from the light (shading.glsl's facing normal) gets no direct light
+// whatever its visibility: its shadow test is skipped (a shadow ray saved, the same colour).
+void write_hit(vec3 albedo, int material, vec3 normal, vec3 receiver_normal, vec3 p, vec3 d, float distance) {
+    float visibility = 1.0;
+#if defined SHADOWS
+    vec3 facing = dot(normal, d) > 0.0 ? -normal : normal;
+    if (dot(facing, light_dir) > 0.0) visibility = shadow_visibility(p, receiver_normal);
+#endif
+    vec3 color = shade_surface_visible(albedo, material, normal, -d, 1.0, visibility);
+    out_color = vec4(to_display(color), 1.0);
+    out_distance = distance;
+    gl_FragDepth = eye_depth(distance, d);
+}
+#endif
+#endif
+
 #endif

@@ -157,10 +157,6 @@ void count_fragment() {}
 void count_samples(int n) {}
 #endif
 
-#if !defined SHADOW_PASS
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_distance;   // distance along the ray from the eye
-#endif
 
 Frustum unpack_frustum() {
     return frustum_from_record(f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5);
@@ -224,16 +220,7 @@ void main() {
 
     vec3 normal, receiver_normal, albedo;
     row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
-#if defined SHADOWS
-    float visibility = shadow_visibility(p, receiver_normal);
-#else
-    float visibility = 1.0;
-#endif
-    vec3 color = shade_surface_visible(albedo, f.material, normal, -d, 1.0, visibility);
-    out_color = vec4(to_display(color), 1.0);
-    out_distance = distance;
-
-    gl_FragDepth = eye_depth(distance, d);
+    write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);
 #endif
 }
 

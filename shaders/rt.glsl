@@ -17,14 +17,11 @@ void main() {
 #elif defined FRAGMENT_SHADER
 
 #include "shading.glsl"
-#include "eye.glsl"
 #include "bvh.glsl"
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif
-
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_distance;   // distance along the ray from the eye
+#include "eye.glsl"
 
 void main() {
     vec3 d = pixel_ray();
@@ -47,16 +44,7 @@ void main() {
     normal = bvh_normal_from_copy(hit.copy, normal);
     receiver_normal = bvh_normal_from_copy(hit.copy, receiver_normal);
 #endif
-    float distance = hit.t;
-#if defined SHADOWS
-    float visibility = shadow_visibility(distance * d, receiver_normal);
-#else
-    float visibility = 1.0;
-#endif
-    vec3 color = shade_surface_visible(albedo, f.material, normal, -d, 1.0, visibility);
-    out_color = vec4(to_display(color), 1.0);
-    out_distance = distance;
-    gl_FragDepth = eye_depth(distance, d);
+    write_hit(albedo, f.material, normal, receiver_normal, hit.t * d, d, hit.t);
 }
 
 #endif
