@@ -278,3 +278,49 @@ def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
     cloud = scan_plant(grown.skeleton, leaves, ScanSettings(angular_step=1.0, precision="float32"), frusta=frusta,
                        finder=finder, progress=lambda d, total: done.append((d, total)))
     assert len(cloud) > 0 and done[-1][0] == done[-1][1] and all(x[0] <= x[1] for x in done)
+
+
+def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
+    """The two-level traversal against the float64 two-level reference
+    (plantgen.geometry.bvh.trace_scene) on one plant placed 100,000 times over 3 km, 1e4
+    from the origin: the same (copy, row) for >= 99.9 % of the rays, t within float32
+    rounding; the plant is held once, each copy costs its 64-byte map and its share of the
+    top level."""
+    from plantgen.geometry.bvh import build_scene_bvh, trace_scene
+    from plantgen.geometry.instances import PlacedPlants
+    from plantgen.geometry.scan import target_hits
+    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.gl.trace import COPY_BYTES
+
+    skel = _skeleton(30, seed=4)
+    matrices = _similarities(100_000, seed=13, spread=1500.0)
+    matrices[:, 1, 3] = 0.0
+    matrices[:, :3, 3] += [1e4, 0.0, -1e4]
+    placed = PlacedPlants.build([("p", skin_skeleton(skel), skel.parent, matrices)])
+    scene = build_scene_bvh(placed)
+    hits = [target_hits(scan_target(skel, frusta=placed.plants[0].frusta))]
+    plant = GpuPlant(placed.plants[0].frusta, None, scene.blas[0])
+    gpu = upload_bvh(gl_ctx, [plant], origin=np.array([1e4, 0.0, -1e4]), top=scene.tlas, matrices=scene.matrix,
+                     copy_plant=scene.plant)
+    alone = upload_bvh(gl_ctx, [plant])
+    per_copy = (gpu.nbytes - alone.nbytes) / 100_000
+    assert COPY_BYTES < per_copy <= COPY_BYTES + 48, per_copy        # the map and the top level's share
+    rng = np.random.default_rng(14)
+    lo, hi = placed.box
+    origins = lo + (hi - lo) * rng.random((400, 3))
+    origins[:, 1] = rng.uniform(0, 2, 400)
+    dirs = rng.normal(size=(400, 3)) * [1, 0.1, 1]
+    t, prim, copy, _ = trace_rays(gpu, origins, dirs)
+    ref_t, ref_copy, ref_prim = trace_scene(scene, origins, dirs, hits)
+    rows = len(placed.plants[0].frusta)
+    key = np.where(prim >= 0, copy * rows + prim, -1)
+    ref_key = np.where(ref_prim >= 0, ref_copy * rows + ref_prim, -1)
+    assert (ref_key >= 0).sum() >= 40
+    same = key == ref_key
+    assert same.mean() >= 0.999
+    hit = same & (ref_key >= 0)
+    # float32 rounding of the hit point: of the ray's origin, up to 1,500 units from the
+    # frame's origin here, as much as of the distance travelled
+    scale = np.maximum(ref_t * np.linalg.norm(dirs, axis=1), np.linalg.norm(origins - [1e4, 0.0, -1e4], axis=1))
+    error = np.abs(t[hit] - ref_t[hit]) * np.linalg.norm(dirs[hit], axis=1)
+    assert (error <= T_RELATIVE * scale[hit]).all()
