@@ -39,6 +39,7 @@ Pure numpy, no GL.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -72,6 +73,12 @@ class BVH:
     @property
     def nodes(self) -> int:
         return len(self.first)
+
+    @cached_property
+    def columns(self) -> np.ndarray:
+        """(6, nodes) the node boxes by coordinate (lo x, y, z, hi x, y, z): what the
+        traversal gathers, one row a coordinate."""
+        return np.ascontiguousarray(np.concatenate([self.lo, self.hi], axis=1).T)
 
     @property
     def leaves(self) -> int:
@@ -353,24 +360,40 @@ def _inverse(dirs):
         return 1.0 / dirs
 
 
+def _slab_columns(box, ray):
+    """Entry and exit t (k,) from boxes (6, k) and rays (6, k) (origin, 1 / direction) by
+    coordinate rows: :func:`slab` without reductions over the short axis."""
+    with np.errstate(invalid="ignore"):
+        t1 = (box[:3] - ray[:3]) * ray[3:]
+        t2 = (box[3:] - ray[:3]) * ray[3:]
+    near = np.fmin(t1, t2)
+    far = np.fmax(t1, t2)
+    # fmax / fmin skip a NaN (a ray in a face plane, parallel to it: inside along that axis)
+    return np.fmax(np.fmax(near[0], near[1]), near[2]), np.fmin(np.fmin(far[0], far[1]), far[2])
+
+
 def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray):
     """(ray, leaf, entry t) of every leaf each ray's segment (t_min, t_hi) meets, or None
     where the frontier outgrows :data:`MAX_FRONTIER`."""
+    rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    boxes = bvh.columns
     ray = np.arange(len(O))
     node = np.zeros(len(O), np.int64)
     out = []
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
             return None
-        near, far = slab(bvh.lo[node], bvh.hi[node], O[ray], inv[ray])
+        near, far = _slab_columns(np.take(boxes, node, axis=1), np.take(rays, ray, axis=1))
         near = np.maximum(near, t_min)
         ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
         ray, node, near = ray[ok], node[ok], near[ok]
-        leaf = bvh.count[node] > 0
+        count = bvh.count[node]
+        leaf = count > 0
         out.append((ray[leaf], node[leaf], near[leaf]))
         inner = ~leaf
         ray = np.repeat(ray[inner], 2)
-        node = (bvh.first[node[inner]][:, None] + np.array([0, 1])).reshape(-1)
+        node = np.repeat(bvh.first[node[inner]].astype(np.int64), 2)
+        node[1::2] += 1
     return tuple(np.concatenate(a) for a in zip(*out, strict=True))
 
 
