@@ -46,7 +46,7 @@ import numpy as np
 from ..errors import PlantgenError
 
 __all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "brute_force", "build_bvh", "build_scene_bvh", "copy_boxes",
-           "float32_boxes", "morton_codes", "reduce_closest", "slab", "trace_bvh", "trace_scene"]
+           "float32_boxes", "morton_codes", "reduce_closest", "scene_bvh", "slab", "trace_bvh", "trace_scene"]
 
 #: How :func:`build_bvh` may split nodes.
 BVH_METHODS = ("lbvh", "sah")
@@ -575,15 +575,24 @@ def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: i
     leaf). A copy whose matrix is not finite or scales by 0 is refused."""
     from .reference import row_boxes
 
-    blas, plant, mats, los, his = [], [], [], [], []
-    for k, p in enumerate(placed.plants):
+    blas = []
+    for p in placed.plants:
         lo, hi = row_boxes(p.frusta, shell=shell) if len(p.frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
-        b = build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins)
-        blas.append(b)
-        m = np.asarray(p.matrices, dtype=np.float64).reshape(-1, 4, 4)
+        blas.append(build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins))
+    return scene_bvh(blas, [p.matrices for p in placed.plants], top_leaf_size=top_leaf_size, method=method,
+                     bins=bins)
+
+
+def scene_bvh(blas, matrices, *, top_leaf_size: int = 2, method: str = "lbvh", bins: int = 16) -> SceneBVH:
+    """A :class:`SceneBVH` from a BVH per distinct plant (``blas``) and its copies'
+    placements (``matrices[k]``: (c_k, 4, 4) similarity transforms); copies are numbered
+    plant by plant. A copy whose matrix is not finite or scales by 0 is refused."""
+    plant, mats, los, his = [], [], [], []
+    for k, (b, m) in enumerate(zip(blas, matrices, strict=True)):
+        m = np.asarray(m, dtype=np.float64).reshape(-1, 4, 4)
         mats.append(m)
         plant.append(np.full(len(m), k, np.int32))
-        if len(m) and b.nodes:
+        if len(m) and b.nodes and np.isfinite(m).all():
             c_lo, c_hi = copy_boxes(b.lo[0], b.hi[0], m)
         else:                                           # an empty plant: a point that holds nothing
             c_lo = c_hi = m[:, :3, 3].copy()

@@ -80,7 +80,8 @@ from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
            "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_grids", "beam_returns", "cast_first_returns",
-           "primitive_labels", "scan_plant", "scan_target", "scanner_positions", "target_hits"]
+           "SceneTarget", "primitive_labels", "scan_plant", "scan_points", "scan_scene", "scan_target",
+           "scanner_positions", "scene_target", "target_hits"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -285,6 +286,17 @@ class ScanTarget:
         from .bvh import build_bvh
 
         return build_bvh(self.lo, self.hi)
+
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None):
+        """t (m,) and primitive (m,) of each ray's first hit (inf, -1: none), through the
+        BVH (rows tested in ``precision`` relative to ``origin``)."""
+        from .bvh import trace_bvh
+
+        return trace_bvh(self.bvh, origins, dirs, target_hits(self, origin=origin, precision=precision))
+
+    def primitive_labels(self, prim) -> dict:
+        """:func:`primitive_labels` of primitives ``prim``."""
+        return primitive_labels(self, prim)
 
     def box(self) -> np.ndarray:
         """(2, 3) the box around every primitive (zeros for none)."""
@@ -659,10 +671,7 @@ def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, sca
                 progress=None):
     """(sub-ray ids, t, primitive) of the first hit of each of the scanner's sub-rays that
     hits, traced through the target's BVH ``max_pairs`` sub-rays at a time."""
-    from .bvh import trace_bvh
-
     s = settings.sub_rays
-    hits = target_hits(target, origin=grid.origin, precision=settings.precision)
     step = max(1, min(max_pairs, SCAN_CHUNK_RAYS) // s)
     found = []
     for start in range(0, grid.count, step):
@@ -670,7 +679,8 @@ def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, sca
         origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
-        t, prim = trace_bvh(target.bvh, np.repeat(origins, s, axis=0), dirs, hits)
+        t, prim = target.first_hits(np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
+                                    origin=grid.origin)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
         if progress is not None:
@@ -750,7 +760,7 @@ def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scann
     if settings.range_noise > 0:
         t = t + settings.range_noise * _normal(seed, scanner, beam)
     origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
-    out = primitive_labels(target, prim)
+    out = target.primitive_labels(prim)
     out["xyz"] = origins + t[:, None] * dirs
     out["scanner"] = np.full(len(beam), scanner)
     return out
@@ -775,6 +785,13 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     ``scan_rays`` before anything is cast."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
+    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs)
+
+
+def scan_points(target, settings: ScanSettings, seed: int = 0, *, limits: Limits | None = None,
+                max_pairs: int = 1 << 20) -> PointCloud:
+    """The :class:`PointCloud` of a scan of ``target`` (a :class:`ScanTarget` or a
+    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return."""
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
     grids = beam_grids(target, settings)
@@ -784,3 +801,110 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),
                       metadata=_metadata(settings, seed))
+
+
+# ============================================================================ instanced scenes
+@dataclass(frozen=True, eq=False)
+class SceneTarget:
+    """What a scan of an instanced scene sees without placing every copy: a
+    :class:`ScanTarget` per distinct plant in its own frame (``targets``), the placements
+    of its copies (``matrices[k]``, (c_k, 4, 4)) and, per copy (numbered plant by plant),
+    its scene ``instance``; ``segment_offset`` and ``polygon_offset`` ((instances,)) turn a
+    plant's segment and leaf numbers into the merged scene's. A primitive is
+    ``copy · stride + the plant's primitive``. Traced through a two-level BVH
+    (:func:`~plantgen.geometry.bvh.scene_bvh`): memory is the distinct plants' plus a few
+    hundred bytes a copy, whatever the copies."""
+
+    targets: tuple
+    matrices: tuple
+    instance: np.ndarray
+    segment_offset: np.ndarray
+    polygon_offset: np.ndarray
+    base: np.ndarray
+
+    @cached_property
+    def bvh(self):
+        from .bvh import scene_bvh
+
+        return scene_bvh([t.bvh for t in self.targets], self.matrices)
+
+    @property
+    def stride(self) -> int:
+        return max((len(t) for t in self.targets), default=1) or 1
+
+    def __len__(self) -> int:
+        return sum(len(t) * len(m) for t, m in zip(self.targets, self.matrices, strict=True))
+
+    def box(self) -> np.ndarray:
+        """(2, 3) the box around every copy (zeros for none)."""
+        if not len(self):
+            return np.zeros((2, 3))
+        keep = np.repeat([len(t) > 0 for t in self.targets], [len(m) for m in self.matrices])
+        return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
+
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None):
+        """As :meth:`ScanTarget.first_hits`, each ray moved into the frames of the copies it
+        meets (in float64); primitives as ``copy · stride + primitive``."""
+        from .bvh import trace_scene
+
+        hits = [target_hits(t, precision=precision) for t in self.targets]
+        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits)
+        return t, np.where(copy >= 0, copy * self.stride + prim, -1)
+
+    def primitive_labels(self, key) -> dict:
+        """The labels of primitives ``key`` (``copy · stride + primitive``), numbered as the
+        merged scene numbers its segments and leaves."""
+        key = np.asarray(key, dtype=np.int64)
+        copy, prim = key // self.stride, key % self.stride
+        plant = self.bvh.plant[copy] if len(key) else np.zeros(0, np.int64)
+        out = {name: np.zeros(len(key), np.int64) for name in ("plant", "part", "order", "segment", "leaf")}
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            local = primitive_labels(self.targets[k], prim[sel])
+            inst = self.instance[copy[sel]]
+            out["plant"][sel] = inst
+            out["part"][sel], out["order"][sel] = local["part"], local["order"]
+            out["segment"][sel] = np.where(local["segment"] >= 0, local["segment"] + self.segment_offset[inst], -1)
+            out["leaf"][sel] = np.where(local["leaf"] >= 0, local["leaf"] + self.polygon_offset[inst], -1)
+        return out
+
+
+def scene_target(plants, *, skin=None) -> SceneTarget:
+    """The :class:`SceneTarget` of a scene's distinct plants (``plants``: each with a
+    ``skeleton`` and ``polygons`` (leaves or None) in its own frame, ``matrices`` (k, 4, 4)
+    and ``instances`` (k,), as :meth:`plantgen.scene.Scene.plants` gives them), each
+    skinned once by ``skin`` (a function of a skeleton; default
+    :func:`~plantgen.geometry.skin.skin_skeleton`)."""
+    from .skin import skin_skeleton
+
+    skin = skin or skin_skeleton
+    plants = list(plants)
+    count = 1 + max((int(np.max(p.instances)) for p in plants if len(p.instances)), default=-1)
+    segments, polygons = np.zeros(count, np.int64), np.zeros(count, np.int64)
+    targets, matrices, instance = [], [], []
+    base, first = np.zeros(3), count
+    for p in plants:
+        leaves = p.polygons if p.polygons is not None and len(p.polygons.triangles) else None
+        targets.append(scan_target(p.skeleton, leaves, frusta=skin(p.skeleton)))
+        inst = np.asarray(p.instances, np.int64)
+        matrices.append(np.asarray(p.matrices, np.float64).reshape(-1, 4, 4))
+        instance.append(inst)
+        segments[inst] = len(p.skeleton)
+        polygons[inst] = len(p.polygons) if p.polygons is not None else 0
+        if len(p.skeleton) and len(inst) and inst.min() < first:     # the merged skeleton's first point
+            j = int(np.argmin(inst))
+            first, base = int(inst[j]), matrices[-1][j, :3, :3] @ p.skeleton.start[0] + matrices[-1][j, :3, 3]
+    offset = lambda sizes: np.concatenate([[0], np.cumsum(sizes)[:-1]]) if len(sizes) else sizes  # noqa: E731
+    return SceneTarget(tuple(targets), tuple(matrices), np.concatenate(instance) if instance else
+                       np.zeros(0, np.int64), offset(segments), offset(polygons), base)
+
+
+def scan_scene(plants, settings: ScanSettings | None = None, seed: int = 0, *, skin=None,
+               limits: Limits | None = None, max_pairs: int = 1 << 20) -> PointCloud:
+    """A simulated laser scan of an instanced scene (its distinct ``plants``, as
+    :func:`scene_target` takes them), each plant skinned once and its copies traced
+    through a two-level BVH: the same points, labels numbered as for the merged scene,
+    as :func:`scan_plant` of the merged skeleton gives (ranges to rounding), in the
+    memory of the distinct plants."""
+    settings = settings or ScanSettings()
+    return scan_points(scene_target(plants, skin=skin), settings, seed, limits=limits, max_pairs=max_pairs)
