@@ -287,12 +287,19 @@ class ScanTarget:
 
         return build_bvh(self.lo, self.hi)
 
-    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None):
-        """t (m,) and primitive (m,) of each ray's first hit (inf, -1: none), through the
-        BVH (rows tested in ``precision`` relative to ``origin``)."""
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
+                   t_min: float = 0.0, t_max=np.inf):
+        """t (m,) and primitive (m,) of each ray's first hit in (t_min, t_max) (inf, -1:
+        none; ``any_hit``: any hit), through the BVH (rows tested in ``precision``
+        relative to ``origin``)."""
         from .bvh import trace_bvh
 
-        return trace_bvh(self.bvh, origins, dirs, target_hits(self, origin=origin, precision=precision))
+        hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
+        return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max)
+
+    def hit_distance(self, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
+        """t (k,) of rays (k,) against primitives ``prim`` (k,) in float64 (inf: a miss)."""
+        return target_hits(self, t_min=t_min)(np.asarray(prim, np.int64), origins, dirs)
 
     def primitive_labels(self, prim) -> dict:
         """:func:`primitive_labels` of primitives ``prim``."""
@@ -842,21 +849,36 @@ class SceneTarget:
         keep = np.repeat([len(t) > 0 for t in self.targets], [len(m) for m in self.matrices])
         return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
 
-    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None):
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
+                   t_min: float = 0.0, t_max=np.inf):
         """As :meth:`ScanTarget.first_hits`, each ray moved into the frames of the copies it
         meets (in float64); primitives as ``copy · stride + primitive``."""
         from .bvh import trace_scene
 
-        hits = [target_hits(t, precision=precision) for t in self.targets]
-        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits)
+        hits = [target_hits(t, precision=precision, t_min=t_min) for t in self.targets]
+        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max)
         return t, np.where(copy >= 0, copy * self.stride + prim, -1)
+
+    def split(self, key):
+        """(copy, plant, primitive of the plant) (k,) each of primitives ``key`` (k,)."""
+        key = np.asarray(key, dtype=np.int64)
+        copy = key // self.stride
+        return copy, self.bvh.plant[copy].astype(np.int64), key % self.stride
+
+    def hit_distance(self, key, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
+        """As :meth:`ScanTarget.hit_distance`, in each copy's frame."""
+        copy, plant, prim = self.split(key)
+        t = np.full(len(copy), np.inf)
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            o, d = self.bvh.rays_to_copies(copy[sel], origins[sel], dirs[sel])
+            t[sel] = self.targets[k].hit_distance(prim[sel], o, d, t_min=t_min)
+        return t
 
     def primitive_labels(self, key) -> dict:
         """The labels of primitives ``key`` (``copy · stride + primitive``), numbered as the
         merged scene numbers its segments and leaves."""
-        key = np.asarray(key, dtype=np.int64)
-        copy, prim = key // self.stride, key % self.stride
-        plant = self.bvh.plant[copy] if len(key) else np.zeros(0, np.int64)
+        copy, plant, prim = self.split(key)
         out = {name: np.zeros(len(key), np.int64) for name in ("plant", "part", "order", "segment", "leaf")}
         for k in np.unique(plant):
             sel = np.flatnonzero(plant == k)
