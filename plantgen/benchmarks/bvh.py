@@ -6,9 +6,11 @@ Run: ``python -m plantgen.benchmarks.bvh [MODEL ...] [--random N] [--rays R] [--
 [--copies C] [--out FILE]``. Each model (shipped grammar or scene names; default
 broadleaf, pine_needles and forest) is grown and skinned; its primitives are what a scan
 sees (:func:`~plantgen.geometry.scan.scan_target`: rows, relief shell left out, and leaf
-triangles; a scene merged, every copy placed). ``--random N`` adds N random boxes (0:
+triangles); a scene's are its distinct plants' in two levels, as the scan and
+:func:`plantgen.trace` trace it (:func:`~plantgen.geometry.scan.scene_target`; the
+primitives counted once per distinct plant). ``--random N`` adds N random boxes (0:
 none). Rays start outside the model's box and aim at random points inside it, so most
-cross it. Times are medians of ``--repeats`` runs (SAH on more than a million primitives:
+cross it. Times are medians of ``--repeats`` runs (SAH on more than 200,000 primitives:
 one run). ``--copies C`` also builds a scene's two-level BVH (the plants once, a top level
 over C copies: the scene's copies repeated on a grid) and times the top level alone. The
 machine and its load average are printed with the table: the cores may be shared.
@@ -25,8 +27,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..geometry.bvh import BVH_METHODS, build_bvh, build_scene_bvh, trace_bvh
-from ..geometry.scan import scan_target, target_hits
+from ..geometry.bvh import BVH_METHODS, build_bvh, build_scene_bvh, scene_bvh, trace_bvh, trace_scene
+from ..geometry.scan import scan_target, scene_target, target_hits
 from ..pipeline import grow_file, model_leaves, place_scene, skin_model
 from .arguments import report
 from .scan import machine
@@ -58,23 +60,49 @@ def _rows(name: str, lo, hi, hits, args) -> list[str]:
     O, D = _rays(lo.min(axis=0), hi.max(axis=0), args.rays)
     rows = []
     for method in BVH_METHODS:
-        repeats = 1 if method == "sah" and n > 1_000_000 else args.repeats
+        repeats = 1 if method == "sah" and n > 200_000 else args.repeats
         seconds, bvh = _timed(lambda m=method: build_bvh(lo, hi, method=m), repeats)
         cells = (f"| {name} | {n:,} | {method} | {seconds:.3f} | {n / seconds / 1e6:.2f} | {bvh.nodes:,} | "
                  f"{bvh.depth()} | {bvh.sah_cost():.1f} | {bvh.nbytes / n:.1f} |")
         if hits is None:
             rows.append(cells + " - | - | - |")
             continue
-        closest, (t, _) = _timed(lambda b=bvh: trace_bvh(b, O, D, hits), 1)
-        shadow, _ = _timed(lambda b=bvh: trace_bvh(b, O, D, hits, any_hit=True), 1)
-        rows.append(cells + f" {args.rays / closest:,.0f} | {args.rays / shadow:,.0f} | {np.isfinite(t).mean():.0%} |")
+        rows.append(cells + _trace_cells(lambda any_hit, b=bvh: trace_bvh(b, O, D, hits, any_hit=any_hit), args))
+    return rows
+
+
+def _trace_cells(trace, args) -> str:
+    closest, (t, *_) = _timed(lambda: trace(False), 1)
+    shadow, _ = _timed(lambda: trace(True), 1)
+    return f" {args.rays / closest:,.0f} | {args.rays / shadow:,.0f} | {np.isfinite(t).mean():.0%} |"
+
+
+def _scene_rows(name: str, target, args) -> list[str]:
+    """Two levels: every distinct plant's BVH and the top level over the copies."""
+    lo, hi = target.box()
+    O, D = _rays(lo, hi, args.rays)
+    hits = [target_hits(t) for t in target.targets]
+    n = sum(len(t) for t in target.targets)
+    rows = []
+    for method in BVH_METHODS:
+        def build(m=method):
+            return scene_bvh([build_bvh(t.lo, t.hi, method=m) for t in target.targets], target.matrices, method=m)
+
+        seconds, scene = _timed(build, 1 if method == "sah" else args.repeats)
+        nodes = sum(b.nodes for b in scene.blas) + scene.tlas.nodes
+        depth = max(b.depth() for b in scene.blas) + scene.tlas.depth()
+        cells = (f"| {name} (two levels: {len(target.targets)} plants, {scene.copies:,} copies) | {n:,} | {method} "
+                 f"| {seconds:.3f} | {n / seconds / 1e6:.2f} | {nodes:,} | {depth} | - | {scene.nbytes / n:.1f} |")
+        rows.append(cells + _trace_cells(lambda any_hit, sc=scene: trace_scene(sc, O, D, hits, any_hit=any_hit),
+                                         args))
     return rows
 
 
 def _model(name: str, args) -> tuple[list[str], object]:
     grown = grow_file(name)
-    frusta = skin_model(grown)
-    target = scan_target(grown.skeleton, model_leaves(grown), frusta=frusta)
+    if grown.scene is not None:
+        return _scene_rows(name, scene_target(grown.scene.plants()), args), grown
+    target = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown))
     return _rows(name, target.lo, target.hi, target_hits(target), args), grown
 
 

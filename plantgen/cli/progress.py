@@ -14,7 +14,7 @@ __all__ = ["PROGRESS_AFTER_S", "StageBars"]
 PROGRESS_AFTER_S = 1.0
 
 #: What each stage's bar says.
-LABELS = {"tessellate": "tessellating plants", "write": "writing"}
+LABELS = {"tessellate": "tessellating plants", "write": "writing", "scan": "scanning beams"}
 
 
 class StageBars:

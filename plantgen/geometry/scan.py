@@ -52,7 +52,10 @@ none), ``segment`` (the skeleton segment; a leaf: the one it hangs from, -1 for 
 hierarchy (:mod:`plantgen.geometry.bvh`, built once per target), which finds its nearest
 hit among the primitives whose boxes it meets, nearest boxes first; the beams stream in
 chunks (``max_pairs`` sub-rays, at most :data:`SCAN_CHUNK_RAYS`), so memory stays bounded
-whatever their count. ``precision="float32"`` tests the frusta in float32 relative to the
+whatever their count. A scene (:func:`scan_scene`, :class:`SceneTarget`) is traced in
+two levels, each distinct plant once and the beams moved into each copy's frame in
+float64, so it costs the memory of its distinct plants, not of its copies placed.
+``precision="float32"`` tests the frusta in float32 relative to the
 scanner (the GPU's arithmetic; leaves stay float64): ``python -m plantgen.benchmarks.scan``
 measures what it saves and costs.
 
@@ -761,8 +764,9 @@ def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
     return out
 
 
-def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int) -> dict:
-    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs)
+def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
+              progress=None) -> dict:
+    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs, progress)
     beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
     if settings.range_noise > 0:
         t = t + settings.range_noise * _normal(seed, scanner, beam)
@@ -783,28 +787,36 @@ def _metadata(settings: ScanSettings, seed: int) -> dict:
 def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: ScanSettings | None = None,
                seed: int = 0, *, frusta: Frusta | None = None, plant=0, leaf_plant=None,
                topology: Branches | None = None, limits: Limits | None = None,
-               max_pairs: int = 1 << 20) -> PointCloud:
+               max_pairs: int = 1 << 20, progress=None) -> PointCloud:
     """A simulated laser scan of a plant (see the module docstring): ``skeleton`` (skinned
     here unless its ``frusta`` are given) and its ``leaves`` (or None), scanned as
     ``settings`` say, noise and beam turns drawn from ``seed``. ``plant`` labels the points
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
-    ``scan_rays`` before anything is cast."""
+    ``scan_rays`` before anything is cast; ``progress`` as :func:`scan_points` calls it."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
-    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs)
+    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs, progress=progress)
 
 
 def scan_points(target, settings: ScanSettings, seed: int = 0, *, limits: Limits | None = None,
-                max_pairs: int = 1 << 20) -> PointCloud:
+                max_pairs: int = 1 << 20, progress=None) -> PointCloud:
     """The :class:`PointCloud` of a scan of ``target`` (a :class:`ScanTarget` or a
-    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return."""
+    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return.
+    ``progress("scan", beams done, beams)`` is called after each chunk of beams."""
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
     grids = beam_grids(target, settings)
-    rays = sum(g.count for g in grids) * settings.sub_rays
-    (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
-    parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
+    total = sum(g.count for g in grids)
+    (limits or default_limits).check("scan_rays", total * settings.sub_rays, f"a scan of {len(grids)} scanners")
+    done = [0]
+
+    def step(beams: int) -> None:
+        done[0] += beams
+        if progress is not None:
+            progress("scan", done[0], total)
+
+    parts = [_scan_one(target, g, settings, seed, k, max_pairs, step) for k, g in enumerate(grids)]
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),
                       metadata=_metadata(settings, seed))
@@ -922,11 +934,12 @@ def scene_target(plants, *, skin=None) -> SceneTarget:
 
 
 def scan_scene(plants, settings: ScanSettings | None = None, seed: int = 0, *, skin=None,
-               limits: Limits | None = None, max_pairs: int = 1 << 20) -> PointCloud:
+               limits: Limits | None = None, max_pairs: int = 1 << 20, progress=None) -> PointCloud:
     """A simulated laser scan of an instanced scene (its distinct ``plants``, as
     :func:`scene_target` takes them), each plant skinned once and its copies traced
     through a two-level BVH: the same points, labels numbered as for the merged scene,
     as :func:`scan_plant` of the merged skeleton gives (ranges to rounding), in the
     memory of the distinct plants."""
     settings = settings or ScanSettings()
-    return scan_points(scene_target(plants, skin=skin), settings, seed, limits=limits, max_pairs=max_pairs)
+    return scan_points(scene_target(plants, skin=skin), settings, seed, limits=limits, max_pairs=max_pairs,
+                       progress=progress)
