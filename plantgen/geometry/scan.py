@@ -298,7 +298,15 @@ class ScanTarget:
         from .bvh import trace_bvh
 
         hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
-        return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max)
+        return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
+                         boxes=self.box_columns)
+
+    @cached_property
+    def box_columns(self) -> np.ndarray:
+        """(6, n) the primitives' boxes by coordinate rows (the traversal's cull)."""
+        from .bvh import box_columns
+
+        return box_columns(self.lo, self.hi)
 
     def hit_distance(self, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
         """t (k,) of rays (k,) against primitives ``prim`` (k,) in float64 (inf: a miss)."""
@@ -868,7 +876,8 @@ class SceneTarget:
         from .bvh import trace_scene
 
         hits = [target_hits(t, precision=precision, t_min=t_min) for t in self.targets]
-        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max)
+        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
+                                    plant_boxes=[t.box_columns for t in self.targets])
         return t, np.where(copy >= 0, copy * self.stride + prim, -1)
 
     def split(self, key):
