@@ -301,3 +301,23 @@ def test_degenerate_copies_are_refused():
     placed = PlacedPlants.build([("p", skin_skeleton(skel), skel.parent, m)])
     with pytest.raises(BVHError, match="scales by 0"):
         build_scene_bvh(placed)
+
+
+@pytest.mark.parametrize("size", [2, 16, 64])
+def test_packets_of_rays_from_one_origin_find_the_same_hits(bush, size):
+    """Fans of rays from three scanner positions (one inside the plant's box) walk the
+    upper tree as cones: the hits are those of brute force."""
+    skeleton, leaves, _ = bush
+    target, bvh, hits = target_case(skeleton, leaves)
+    lo, hi = target.box()
+    rng = np.random.default_rng(14)
+    origins = np.array([lo - (hi - lo), (lo + hi) / 2, [hi[0] * 2, lo[1], lo[2]]])
+    O = np.repeat(origins, 70, axis=0)
+    aim = lo + (hi - lo) * rng.random((3, 3))
+    spread = rng.normal(size=(210, 3)) * 0.05 * (hi - lo).max()
+    D = np.repeat(aim, 70, axis=0) + np.cumsum(spread, axis=0) * 0.1 - O          # neighbouring directions
+    t, p = trace_bvh(bvh, O, D, hits, packets=size, boxes=target.box_columns)
+    tb, pb = brute_force(len(target), O, D, hits)
+    assert np.isfinite(tb).sum() > 20
+    np.testing.assert_array_equal(t, tb)
+    np.testing.assert_array_equal(p, pb)

@@ -377,13 +377,70 @@ def _slab_columns(box, ray):
     return np.fmax(np.fmax(near[0], near[1]), near[2]), np.fmin(np.fmin(far[0], far[1]), far[2])
 
 
-def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray):
+#: Rays of one packet at most (:func:`trace_bvh`'s ``packets``).
+PACKET_RAYS = 64
+
+
+def _packets(O, D, size: int):
+    """Runs of at most ``size`` consecutive rays with one origin: (first ray (p,), rays
+    (p,), origin (p, 3), unit axis (p, 3), half-angle (p,)) of the cone around each
+    run's directions."""
+    m = len(O)
+    new = np.ones(m, bool)
+    new[1:] = (O[1:] != O[:-1]).any(axis=1)
+    run = np.cumsum(new) - 1
+    start = np.flatnonzero(new)
+    new |= ((np.arange(m) - start[run]) % size) == 0              # long runs cut into packets
+    first = np.flatnonzero(new)
+    count = np.diff(np.r_[first, m])
+    unit = D / np.sqrt((D * D).sum(axis=1))[:, None]
+    axis = np.add.reduceat(unit, first, axis=0)
+    axis /= np.maximum(np.sqrt((axis * axis).sum(axis=1)), 1e-300)[:, None]
+    packet = np.repeat(np.arange(len(first)), count)
+    cos = np.clip((unit * axis[packet]).sum(axis=1), -1.0, 1.0)
+    half = np.maximum.reduceat(np.arccos(cos), first) * (1 + 1e-9) + 1e-12
+    return first, count, O[first], axis, half
+
+
+def _packet_frontier(bvh: BVH, O, D, size: int):
+    """(ray, node) pairs to start the per-ray walk from: packets of rays with one origin
+    walk the tree together while a node looks larger from the origin than the packet's
+    cone is wide (a node none of the cone meets is dropped for all of them)."""
+    first, count, origin, axis, half = _packets(O, D, size)
+    centre = 0.5 * (bvh.lo + bvh.hi)
+    radius = 0.5 * np.sqrt(((bvh.hi - bvh.lo) ** 2).sum(axis=1)) * (1 + 1e-9) + 1e-300
+    packet = np.arange(len(first))
+    node = np.zeros(len(first), np.int64)
+    done_p, done_n = [], []
+    while packet.size:
+        v = centre[node] - origin[packet]
+        dist = np.sqrt((v * v).sum(axis=1))
+        inside = dist <= radius[node]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            seen = np.arcsin(np.minimum(radius[node] / dist, 1.0))
+            angle = np.arccos(np.clip((v * axis[packet]).sum(axis=1) / dist, -1.0, 1.0))
+        hit = inside | (angle <= half[packet] + seen)
+        packet, node, seen, inside = packet[hit], node[hit], seen[hit], inside[hit]
+        stop = (bvh.count[node] > 0) | (~inside & (seen < half[packet]))        # small: ray by ray
+        done_p.append(packet[stop])
+        done_n.append(node[stop])
+        go = ~stop
+        packet = np.repeat(packet[go], 2)
+        node = np.repeat(bvh.first[node[go]].astype(np.int64), 2)
+        node[1::2] += 1
+    packet, node = np.concatenate(done_p), np.concatenate(done_n)
+    k = count[packet]
+    ray = np.repeat(first[packet] - np.cumsum(k) + k, k) + np.arange(k.sum())
+    return ray, np.repeat(node, k)
+
+
+def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray, start=None):
     """(ray, leaf, entry t) of every leaf each ray's segment (t_min, t_hi) meets, or None
-    where the frontier outgrows :data:`MAX_FRONTIER`."""
+    where the frontier outgrows :data:`MAX_FRONTIER`; from the (ray, node) pairs
+    ``start`` (default: every ray at the root)."""
     rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
     boxes = bvh.columns
-    ray = np.arange(len(O))
-    node = np.zeros(len(O), np.int64)
+    ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
     out = []
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
@@ -399,6 +456,8 @@ def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray):
         ray = np.repeat(ray[inner], 2)
         node = np.repeat(bvh.first[node[inner]].astype(np.int64), 2)
         node[1::2] += 1
+    if not out:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     return tuple(np.concatenate(a) for a in zip(*out, strict=True))
 
 
@@ -439,16 +498,18 @@ def reduce_closest(key, t, *values, best_t, best_values, strict_ties=True):
         bv[r] = v[pick][better]
 
 
-def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: bool, boxes=None):
+def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: bool, boxes=None,
+                 packets: int = 0):
     m = len(O)
     best_t = np.full(m, np.inf)
     best_p = np.full(m, -1, np.int64)
     inv = _inverse(D)
-    pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi)
+    start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
+    pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
     if pairs is None:                                # too wide a frontier: halve the batch
         h = m // 2
-        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes)
-        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes)
+        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets)
+        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets)
         return np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]])
     rays = None if boxes is None else np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
     ray, leaf, near = pairs
@@ -491,7 +552,7 @@ def _t_max(t_max, m: int) -> np.ndarray:
 
 
 def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: float = 0.0,
-              t_max=np.inf, batch: int = TRACE_BATCH, boxes=None) -> tuple[np.ndarray, np.ndarray]:
+              t_max=np.inf, batch: int = TRACE_BATCH, boxes=None, packets: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Float64 closest (or any) hit of rays (``origins``, ``dirs``: (m, 3)) among the
     primitives of ``bvh``: ``hits(prims (k,), origins (k, 3), dirs (k, 3))`` gives the t
     of each (primitive, ray) pair (inf: a miss; hits at t <= ``t_min`` count as misses,
@@ -499,7 +560,9 @@ def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: fl
     primitive (m,) (-1). ``t_max``: one number or (m,). ``boxes``: the primitives' boxes
     by coordinate rows ((6, n): lo x, y, z, hi x, y, z; :func:`box_columns`), where the
     caller has them: a ray then tests only the primitives of a leaf whose own box it meets
-    (the same hits, fewer exact tests)."""
+    (the same hits, fewer exact tests). ``packets``: up to this many consecutive rays with
+    one origin (a scanner's neighbouring beams) walk the upper tree together, as one cone
+    (the same hits, fewer box tests; 0: ray by ray)."""
     O, D = _rays(origins, dirs)
     m = len(O)
     hi = _t_max(t_max, m)
@@ -509,7 +572,7 @@ def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: fl
     for s in range(0, m, max(1, int(batch))):
         e = min(s + batch, m)
         best_t[s:e], best_p[s:e] = _trace_batch(bvh, O[s:e], D[s:e], hits, float(t_min), hi[s:e], any_hit,
-                                                boxes)
+                                                boxes, int(packets))
     return best_t, best_p
 
 

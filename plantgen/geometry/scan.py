@@ -291,15 +291,16 @@ class ScanTarget:
         return build_bvh(self.lo, self.hi)
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
-                   t_min: float = 0.0, t_max=np.inf):
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
         """t (m,) and primitive (m,) of each ray's first hit in (t_min, t_max) (inf, -1:
         none; ``any_hit``: any hit), through the BVH (rows tested in ``precision``
-        relative to ``origin``)."""
+        relative to ``origin``; ``packets`` as :func:`~plantgen.geometry.bvh.trace_bvh`
+        takes it)."""
         from .bvh import trace_bvh
 
         hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
         return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
-                         boxes=self.box_columns)
+                         boxes=self.box_columns, packets=packets)
 
     @cached_property
     def box_columns(self) -> np.ndarray:
@@ -683,6 +684,8 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
 #: Beams traced at a time (times a diverging beam's sub-rays): what bounds a scan's
 #: working memory whatever its beam count.
 SCAN_CHUNK_RAYS = 1 << 18
+#: Neighbouring beams of a scanner (one origin) that walk the BVH's upper levels together.
+PACKET_RAYS = 64
 
 
 def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
@@ -698,7 +701,7 @@ def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, sca
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
         t, prim = target.first_hits(np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
-                                    origin=grid.origin)
+                                    origin=grid.origin, packets=PACKET_RAYS)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
         if progress is not None:
@@ -870,7 +873,7 @@ class SceneTarget:
         return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
-                   t_min: float = 0.0, t_max=np.inf):
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
         """As :meth:`ScanTarget.first_hits`, each ray moved into the frames of the copies it
         meets (in float64); primitives as ``copy · stride + primitive``."""
         from .bvh import trace_scene
