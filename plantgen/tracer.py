@@ -18,9 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PlantgenError
-from .geometry.bvh import trace_bvh
 from .geometry.reference import Hits, PairTester, shade_hits
-from .geometry.scan import PART_NAMES, ScanTarget, primitive_labels, scan_target, target_hits
+from .geometry.scan import PART_NAMES, ScanTarget, SceneTarget, scan_target, scene_target
 from .geometry.skeleton import Skeleton
 from .geometry.vec import cross, dot
 from .limits import Limits
@@ -97,7 +96,7 @@ def _rays(origins, directions, limits: Limits) -> tuple[np.ndarray, np.ndarray, 
 
 def _target(model, limits: Limits, seed=None) -> ScanTarget:
     """The primitives and labels of ``model``."""
-    if isinstance(model, ScanTarget):
+    if isinstance(model, (ScanTarget, SceneTarget)):
         return model
     leaves = None
     if isinstance(model, tuple) and len(model) == 2 and isinstance(model[0], Skeleton):
@@ -111,10 +110,9 @@ def _target(model, limits: Limits, seed=None) -> ScanTarget:
     if not isinstance(model, GrowResult):
         raise TraceError("trace's model must be a grammar or scene (a path or a shipped name), a grown model, a "
                          f"Skeleton or (Skeleton, leaves), or a ScanTarget; got {type(model).__name__}")
-    plant, leaf_plant = (0, None) if model.scene is None else \
-        (model.scene.segment_instance(), model.scene.polygon_instance())
-    return scan_target(model.skeleton, model_leaves(model), frusta=skin_model(model), plant=plant,
-                       leaf_plant=leaf_plant)
+    if model.scene is not None:                          # each distinct plant once: two levels
+        return scene_target(model.scene.plants())
+    return scan_target(model.skeleton, model_leaves(model), frusta=skin_model(model))
 
 
 def _gpu_primitives(target: ScanTarget, O, D, any_hit: bool, t_min: float, t_max: float):
@@ -132,8 +130,17 @@ def _gpu_primitives(target: ScanTarget, O, D, any_hit: bool, t_min: float, t_max
     return find(target, O, D, any_hit=any_hit, t_min=t_min, t_max=t_max)
 
 
-def _normals(target: ScanTarget, prim, O, D, t) -> np.ndarray:
+def _normals(target, prim, O, D, t) -> np.ndarray:
     """Unit normals (k, 3) at hits (k,) of primitive ``prim``, facing against the rays."""
+    if isinstance(target, SceneTarget):                 # in each copy's frame, turned back to the world
+        copy, plant, local = target.split(prim)
+        normal = np.zeros((len(prim), 3))
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            o, d = target.bvh.rays_to_copies(copy[sel], O[sel], D[sel])
+            n = _normals(target.targets[k], local[sel], o, d, t[sel])
+            normal[sel] = np.einsum("kij,kj->ki", target.bvh.matrix[copy[sel], :3, :3], n)
+        return _facing(normal, D)
     normal = np.zeros((len(prim), 3))
     wood = prim < target.rows
     if wood.any():
@@ -146,15 +153,22 @@ def _normals(target: ScanTarget, prim, O, D, t) -> np.ndarray:
     if (~wood).any():
         _, e1, e2, _ = (a[prim[~wood] - target.rows] for a in target.triangle_edges)
         normal[~wood] = cross(e1, e2)
+    return _facing(normal, D)
+
+
+def _facing(normal, D) -> np.ndarray:
+    """Normals made unit and turned to face against the rays D."""
     length = np.sqrt(dot(normal, normal))
     normal = normal / np.where(length > 0, length, 1.0)[:, None]
     return normal * np.where(dot(normal, D) > 0, -1.0, 1.0)[:, None]
 
 
-def trace_target(target: ScanTarget, origins, directions, *, any_hit: bool = False, precision: str = "float64",
-                 t_min: float = 0.0, t_max: float = np.inf, limits: Limits | None = None) -> TraceResult:
-    """:func:`trace` against a :class:`~plantgen.geometry.scan.ScanTarget` already made
-    (its BVH is built on the first call and kept)."""
+def trace_target(target: ScanTarget | SceneTarget, origins, directions, *, any_hit: bool = False,
+                 precision: str = "float64", t_min: float = 0.0, t_max: float = np.inf,
+                 limits: Limits | None = None) -> TraceResult:
+    """:func:`trace` against a :class:`~plantgen.geometry.scan.ScanTarget` or
+    :class:`~plantgen.geometry.scan.SceneTarget` already made (its BVH is built on the
+    first call and kept)."""
     limits = limits or default_limits
     O, D, shape = _rays(origins, directions, limits)
     if precision not in PRECISIONS:
@@ -165,14 +179,13 @@ def trace_target(target: ScanTarget, origins, directions, *, any_hit: bool = Fal
     m = len(O)
     t, prim = np.full(m, np.inf), np.full(m, -1, np.int64)
     if m and len(target):
-        hits = target_hits(target, t_min=t_min)
         if precision == "float64":
-            t, prim = trace_bvh(target.bvh, O, D, hits, any_hit=any_hit, t_min=t_min, t_max=t_max)
+            t, prim = target.first_hits(O, D, any_hit=any_hit, t_min=t_min, t_max=t_max)
         else:
             t, prim = (np.asarray(a) for a in _gpu_primitives(target, O, D, any_hit, t_min, t_max))
             t, prim = t.astype(np.float64).copy(), prim.astype(np.int64).copy()
             found = np.flatnonzero(prim >= 0)
-            exact = hits(prim[found], O[found], D[found])          # the primitive solved again in float64
+            exact = target.hit_distance(prim[found], O[found], D[found], t_min=t_min)   # solved again in float64
             again = np.isfinite(exact) & (exact < t_max)
             t[found[again]] = exact[again]
     hit = prim >= 0
@@ -180,7 +193,7 @@ def trace_target(target: ScanTarget, origins, directions, *, any_hit: bool = Fal
     part = np.full(m, -1, np.int8)
     normal = np.zeros((m, 3))
     if hit.any():
-        labels = primitive_labels(target, prim[hit])
+        labels = target.primitive_labels(prim[hit])
         for k in out:
             out[k][hit] = labels[k]
         part[hit] = labels["part"]
@@ -198,8 +211,12 @@ def trace(model, origins, directions, *, any_hit: bool = False, precision: str =
     ``model``: a grammar or scene (a path, or a shipped name such as ``"pine"``, grown with
     ``seed``), a grown model (:func:`plantgen.pipeline.grow_file`), a
     :class:`~plantgen.Skeleton` or a (Skeleton, leaf Polygons) pair, or a
-    :class:`~plantgen.geometry.scan.ScanTarget` (reuse one to trace many batches: its BVH
-    is built once). ``origins``, ``directions``: arrays of shape (..., 3) (broadcast
+    :class:`~plantgen.geometry.scan.ScanTarget` or
+    :class:`~plantgen.geometry.scan.SceneTarget` (reuse one to trace many batches: its BVH
+    is built once). A scene is traced through two levels: each distinct plant once, the
+    rays moved into each copy's frame in float64; its ``primitive`` is then
+    ``copy · target.stride + the plant's primitive``, its labels those of the merged scene.
+    ``origins``, ``directions``: arrays of shape (..., 3) (broadcast
     together; directions need not be unit, t is in units of their length). Hits count
     where ``t_min < t < t_max``. ``precision``: "float64" (the CPU reference) or
     "float32" (the GPU traversal, each hit's t solved again in float64). Returns a

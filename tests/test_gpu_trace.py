@@ -276,8 +276,28 @@ def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
         np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
     done = []
     cloud = scan_plant(grown.skeleton, leaves, ScanSettings(angular_step=1.0, precision="float32"), frusta=frusta,
-                       finder=finder, progress=lambda d, total: done.append((d, total)))
+                       finder=finder, progress=lambda stage, d, total: done.append((d, total)))
     assert len(cloud) > 0 and done[-1][0] == done[-1][1] and all(x[0] <= x[1] for x in done)
+
+
+def test_a_scenes_scan_on_the_gpu_gives_the_reference_ranges(gl_ctx):
+    """A scene's scan (each distinct plant once, two levels) with the GPU's search: beam
+    for beam the float64 two-level scan's primitive (>= 99.9 %) and there its range."""
+    from plantgen.geometry.scan import ScanSettings, beam_returns, scene_target
+    from plantgen.gl.trace import trace_target
+    from plantgen.pipeline import grow_file
+
+    target = scene_target(grow_file("desert").scene.plants())
+    ref = beam_returns(target, ScanSettings(angular_step=0.25, scanners=2))
+    got = beam_returns(target, ScanSettings(angular_step=0.25, scanners=2, precision="float32"),
+                       finder=lambda tg, o, d: trace_target(tg, o, d))
+    for a, b in zip(ref, got, strict=True):
+        assert len(a.beam) > 1000
+        common, ia, ib = np.intersect1d(a.beam, b.beam, return_indices=True)
+        assert len(common) >= 0.999 * max(len(a.beam), len(b.beam))
+        same = a.primitive[ia] == b.primitive[ib]
+        assert same.mean() >= 0.999
+        np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
 
 
 def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):

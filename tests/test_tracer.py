@@ -124,3 +124,27 @@ def test_float32_hook(monkeypatch):
     assert exact.hit.sum() >= 5
     np.testing.assert_array_equal(got.primitive, exact.primitive)
     np.testing.assert_array_equal(got.t, exact.t)
+
+
+def test_a_scene_is_traced_through_two_levels():
+    """desert by name: its copies' hits carry the merged scene's labels; normals turned
+    into the world face the rays and are unit."""
+    from plantgen.geometry.scan import SceneTarget
+    from plantgen.pipeline import grow_file, model_leaves, skin_model
+
+    two = plantgen.tracer._target("desert", Limits())
+    assert isinstance(two, SceneTarget)
+    grown = grow_file("desert")
+    merged = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown),
+                         plant=grown.scene.segment_instance())
+    O, D = rays_at(merged.box(), 1500, 4)
+    res = plantgen.trace(two, O, D)
+    ref = plantgen.trace(merged, O, D)
+    np.testing.assert_array_equal(res.hit, ref.hit)
+    assert res.hit.sum() > 30
+    same = res.segment == ref.segment
+    assert same.mean() > 0.99 and (res.plant[same] == ref.plant[same]).all()
+    np.testing.assert_allclose(res.t[same & res.hit], ref.t[same & res.hit], rtol=1e-9)
+    np.testing.assert_allclose(res.normal[same], ref.normal[same], atol=1e-9)
+    shadow = plantgen.trace(two, O, D, any_hit=True)
+    np.testing.assert_array_equal(shadow.hit, ref.hit)

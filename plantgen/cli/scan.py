@@ -8,8 +8,8 @@ import click
 import numpy as np
 
 from ..geometry.frames import UP_AXES
-from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant
-from ..pipeline import grow_file, model_leaves, skin_model
+from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
+from ..pipeline import check_finite_frusta, grow_file, model_leaves, skin_model, skinning
 from ..scanfiles import check_point_output, las_scale, write_points
 from .options import (
     allow_path_opt,
@@ -84,12 +84,17 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
-    frusta = skin_model(grown, smooth_bends)
-    plant, leaf_plant = _plant_ids(grown)
+    finder = _gpu_finder(settings, quiet)
     with StageBars(enabled=not quiet) as bars:
-        cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
-                           leaf_plant=leaf_plant, limits=limits, finder=_gpu_finder(settings, quiet),
-                           progress=lambda done, total: bars("scan", done, total))
+        if grown.scene is not None:          # each distinct plant once, its copies traced through two levels
+            skin = skinning(smooth_bends if smooth_bends is not None else grown.smooth_bends)
+            cloud = scan_scene(grown.scene.plants(), settings, scan_seed, limits=limits, progress=bars,
+                               skin=lambda skel: check_finite_frusta(skin(skel), str(input)), finder=finder)
+        else:
+            frusta = skin_model(grown, smooth_bends)
+            plant, leaf_plant = _plant_ids(grown)
+            cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
+                               leaf_plant=leaf_plant, limits=limits, progress=bars, finder=finder)
     write_points(cloud, output, up=up)
     if quiet:
         return

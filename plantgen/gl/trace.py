@@ -243,8 +243,9 @@ _TARGETS_KEPT = 2
 
 def target_bvh(target, ctx=None) -> GpuBvh:
     """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
-    triangles, its ``bvh``), relative to its root box's centre; the last few targets stay
-    uploaded."""
+    triangles, its ``bvh``, relative to its root box's centre) or of a
+    :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
+    over its copies); the last few targets stay uploaded."""
     for i, (t, gpu) in enumerate(_targets):
         if t is target and (ctx is None or gpu.ctx is ctx):
             _targets.append(_targets.pop(i))
@@ -252,7 +253,15 @@ def target_bvh(target, ctx=None) -> GpuBvh:
     if ctx is None:
         from .context import gl_context
         ctx = gl_context()
-    gpu = upload_bvh(ctx, [GpuPlant(target.frusta if target.rows else None, target.triangles, target.bvh)])
+    def plant(t):
+        return GpuPlant(t.frusta if t.rows else None, t.triangles, t.bvh)
+
+    if hasattr(target, "targets"):        # a SceneTarget: two levels
+        scene = target.bvh
+        gpu = upload_bvh(ctx, [plant(t) for t in target.targets], top=scene.tlas, matrices=scene.matrix,
+                         copy_plant=scene.plant)
+    else:
+        gpu = upload_bvh(ctx, [plant(target)])
     _targets.append((target, gpu))
     while len(_targets) > _TARGETS_KEPT:
         _targets.pop(0)[1].release()
@@ -261,10 +270,13 @@ def target_bvh(target, ctx=None) -> GpuBvh:
 
 def trace_target(target, origins, directions, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf,
                  chunk: int = TRACE_CHUNK, progress=None) -> tuple[np.ndarray, np.ndarray]:
-    """The GPU's hit of each ray (m, 3) against a ScanTarget: t (m,) (float32 values; inf:
-    none) and the primitive (m,) (a row, or rows + a leaf triangle; -1), closest or any
+    """The GPU's hit of each ray (m, 3) against a ScanTarget or a SceneTarget: t (m,)
+    (float32 values; inf: none) and the primitive (m,) (-1: none; a row, or rows + a leaf
+    triangle; a scene's as copy · stride + its plant's), closest or any
     (:func:`trace_rays`). The float32 search of :func:`plantgen.trace` and the scan, which
     solve each found primitive again in float64."""
-    t, prim, _, _ = trace_rays(target_bvh(target), origins, directions, any_hit=any_hit, t_min=t_min, t_max=t_max,
-                               chunk=chunk, progress=progress)
+    t, prim, copy, _ = trace_rays(target_bvh(target), origins, directions, any_hit=any_hit, t_min=t_min,
+                                  t_max=t_max, chunk=chunk, progress=progress)
+    if hasattr(target, "targets"):
+        prim = np.where(prim >= 0, copy * target.stride + prim, -1)
     return t, prim
