@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.scan import ScanSettings, beam_returns, scan_target
+from ..geometry.scan import ScanSettings, beam_returns, scan_target, scene_target
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES
@@ -88,20 +88,25 @@ def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say
             "images": (rc_frame.color, rt_frame.color)}
 
 
-def measure_scan(model: str = "pine", step: float = 0.2, say=print) -> dict:
+def measure_scan(model: str = "pine", step: float = 0.2, positions=None, say=print) -> dict:
     """Beams per second of the float64 reference and of the GPU's float32 search (ranges
-    solved again in float64) on ``model`` (four terrestrial scanners at ``step`` degrees),
-    and beam for beam the primitives they agree on."""
+    solved again in float64) on ``model`` (four terrestrial scanners at ``step`` degrees,
+    or scanners at ``positions`` 'x,y,z;...'; a scene in two levels), and beam for beam the
+    primitives they agree on."""
     grown = grow_file(model)
-    target = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown))
-    assert target.bvh.nodes                               # built once, outside the timings
+    if grown.scene is not None:
+        target = scene_target(grown.scene.plants())
+    else:
+        target = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown))
+    assert target.bvh is not None                         # built once, outside the timings
     trace_target(target, target.box()[:1], np.ones((1, 3)))       # the GPU's upload and compile
     out = {}
     for name, precision, finder in (("float64 (CPU)", "float64", None),
                                     ("float32 (GPU) + float64 range", "float32",
                                      lambda tg, o, d: trace_target(tg, o, d))):
+        settings = ScanSettings(angular_step=step, precision=precision, positions=positions)
         t0 = time.perf_counter()
-        returns = beam_returns(target, ScanSettings(angular_step=step, precision=precision), finder=finder)
+        returns = beam_returns(target, settings, finder=finder)
         seconds = time.perf_counter() - t0
         beams = sum(r.beams for r in returns)
         out[name] = {"s": seconds, "beams": beams, "points": sum(len(r.beam) for r in returns), "returns": returns}
@@ -112,14 +117,22 @@ def measure_scan(model: str = "pine", step: float = 0.2, say=print) -> dict:
         _, i, j = np.intersect1d(a.beam, b.beam, return_indices=True)
         same += int((a.primitive[i] == b.primitive[j]).sum())
         total += max(len(a.beam), len(b.beam))
-    return {"model": model, "step": step, "paths": out, "same": same / max(total, 1)}
+    return {"model": model, "step": step, "positions": positions, "paths": out, "same": same / max(total, 1)}
 
 
-def markdown(frames: dict, scan: dict | None) -> str:
-    w, h = frames["size"]
+def markdown(frames: dict | None, scan: dict | None) -> str:
     lines = [f"# RT+R against RC+R, and the scan on the GPU ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC)", "",
-             f"GL renderer: {frames['renderer']}  ", f"Machine: {machine()} (shared by other jobs: under load)", "",
-             f"## {frames['scene']} at {w}x{h}, full detail, relief and shadows "
+             f"GL renderer: {renderer_name()}  ", f"Machine: {machine()} (shared by other jobs: under load)", ""]
+    if frames is not None:
+        lines += _frame_lines(frames)
+    if scan is not None:
+        lines += _scan_lines(scan)
+    return "\n".join(lines)
+
+
+def _frame_lines(frames: dict) -> list:
+    w, h = frames["size"]
+    lines = [f"## {frames['scene']} at {w}x{h}, full detail, relief and shadows "
              f"({frames['segments']:,} segments placed, {frames['copies']:,} copies)", "",
              "| method | frame ms (median) | light ms | BVH build ms | upload ms | GPU MiB |",
              "|---|---:|---:|---:|---:|---:|"]
@@ -127,20 +140,22 @@ def markdown(frames: dict, scan: dict | None) -> str:
         lines.append(f"| {name} | {r['ms']:,.0f} | {r['light_ms']:,.0f} | {r['build_ms']:,.0f} | "
                      f"{r['upload_ms']:,.0f} | {r['gpu_bytes'] / 2**20:,.1f} |")
     rc, rt = frames["rows"]["RC+R"]["ms"], frames["rows"]["RT+R"]["ms"]
-    lines += ["", f"RT+R / RC+R: {rt / rc:.2f} (same run). RT+R against RC+R: {frames['cover_mismatch']:,} of "
-              f"{frames['covered']:,} covered pixels covered by one only; distances agree to 4e-6 on "
-              f"{100 * frames['depth_agree']:.2f} % of the pixels both cover, and within twice the relief march's "
-              f"bracket ({frames['march_precision']:g} pixel footprint: the accuracy it is asked for; RC+R turns "
-              f"each copy's rows into the world, RT+R the ray into the copy, so their samples round apart) on "
-              f"{100 * frames['depth_bracket']:.2f} %.", ""]
-    if scan is not None:
-        lines += [f"## Scan: {scan['model']}, four terrestrial scanners at {scan['step']:g}°", "",
-                  "| path | seconds | beams | beams/s | points |", "|---|---:|---:|---:|---:|"]
-        for name, p in scan["paths"].items():
-            lines.append(f"| {name} | {p['s']:.2f} | {p['beams']:,} | {p['beams'] / p['s']:,.0f} | {p['points']:,} |")
-        lines += ["", f"Beam for beam the GPU path hits the reference's primitive on {100 * scan['same']:.3f} % of "
-                  "the beams either hits (and there its range is the reference's).", ""]
-    return "\n".join(lines)
+    return lines + ["", f"RT+R / RC+R: {rt / rc:.2f} (same run). RT+R against RC+R: {frames['cover_mismatch']:,} of "
+                    f"{frames['covered']:,} covered pixels covered by one only; distances agree to 4e-6 on "
+                    f"{100 * frames['depth_agree']:.2f} % of the pixels both cover, and within twice the relief "
+                    f"march's bracket ({frames['march_precision']:g} pixel footprint: the accuracy it is asked for; "
+                    f"RC+R turns each copy's rows into the world, RT+R the ray into the copy, so their samples round "
+                    f"apart) on {100 * frames['depth_bracket']:.2f} %.", ""]
+
+
+def _scan_lines(scan: dict) -> list:
+    where = f"scanners at {scan['positions']}" if scan["positions"] else "four terrestrial scanners"
+    lines = [f"## Scan: {scan['model']}, {where}, step {scan['step']:g}°", "",
+             "| path | seconds | beams | beams/s | points |", "|---|---:|---:|---:|---:|"]
+    for name, p in scan["paths"].items():
+        lines.append(f"| {name} | {p['s']:.2f} | {p['beams']:,} | {p['beams'] / p['s']:,.0f} | {p['points']:,} |")
+    return lines + ["", f"Beam for beam the GPU path hits the reference's primitive on {100 * scan['same']:.3f} % of "
+                    "the beams either hits (and there its range is the reference's).", ""]
 
 
 def main(argv=None) -> int:
@@ -150,17 +165,19 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=1)
     parser.add_argument("--scan-model", default="pine")
     parser.add_argument("--scan-step", type=float, default=0.2)
+    parser.add_argument("--scanner-positions", default=None, help="'x,y,z;...' (default: four around the model)")
+    parser.add_argument("--no-frames", action="store_true")
     parser.add_argument("--no-scan", action="store_true")
     parser.add_argument("--images", type=Path, help="folder to write both frames into (PNG)")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
-    frames = measure_frames(args.scene, args.size, args.frames)
-    if args.images is not None:
+    frames = None if args.no_frames else measure_frames(args.scene, args.size, args.frames)
+    if args.images is not None and frames is not None:
         from ..images import write_png
         args.images.mkdir(parents=True, exist_ok=True)
         for name, image in zip(("rc_r", "rt_r"), frames["images"], strict=True):
             write_png(args.images / f"{args.scene}_{name}.png", image)
-    scan = None if args.no_scan else measure_scan(args.scan_model, args.scan_step)
+    scan = None if args.no_scan else measure_scan(args.scan_model, args.scan_step, args.scanner_positions)
     return report(markdown(frames, scan), args.out)
 
 
