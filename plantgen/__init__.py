@@ -7,13 +7,15 @@ The public API mirrors the command line::
     image = plantgen.render("pine", azimuth=60, ssaa=2)    # -> plantgen.RenderedImage
     image.save("pine.png")                                 # (in Jupyter: shows itself)
     plantgen.export("pine", "pine.glb", subdiv=2)          # -> summary dict
+    hits = plantgen.trace("pine", origins, directions)     # -> plantgen.TraceResult
 """
 
 from .geometry.skeleton import Skeleton, SkeletonError
 
 __version__ = "0.1.0"
 
-__all__ = ["RenderedImage", "Skeleton", "SkeletonError", "export", "grow", "render", "__version__"]
+__all__ = ["RenderedImage", "Skeleton", "SkeletonError", "TraceResult", "export", "grow", "render", "trace",
+           "__version__"]
 
 
 def grow(path, *, seed=None, iterations=None, max_modules=None, limits=None, allow_paths=()):
@@ -78,6 +80,10 @@ def export(path, output, *, subdiv=1, relief=False, seed=None, limits=None, allo
 
 
 def __getattr__(name):
+    if name in ("trace", "TraceResult"):        # the tracer (and the scan's geometry) on first use
+        from . import tracer
+
+        return getattr(tracer, name)
     if name == "RenderedImage":      # Pillow is imported only when an image is asked for
         from .images import RenderedImage
 

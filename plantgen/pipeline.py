@@ -72,6 +72,7 @@ from .gl.pose import PoseStream
 from .gl.raycast import Raycaster
 from .gl.records import RecordStream
 from .gl.result import RenderResult
+from .gl.rt import RayTracer
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
@@ -707,12 +708,15 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
         raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
+    if request.march.method == "rt" and frames is not None:
+        raise PlantgenError(f"{input_path}: --method rt renders stills (leave out --frames, or use --method rc)")
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
             **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
-    raycaster, anim, colors, update_times = Raycaster(limits=limits), model.anim, [], []
+    tracer = RayTracer if march.method == "rt" else Raycaster
+    raycaster, anim, colors, update_times = tracer(limits=limits), model.anim, [], []
     if frames is not None:
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:

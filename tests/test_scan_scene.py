@@ -1,0 +1,55 @@
+"""Scanning an instanced scene through two levels (plantgen.geometry.scan.SceneTarget):
+the hits, ranges and labels of the merged scene, without placing its copies."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from plantgen.geometry.scan import ScanSettings, scan_points, scan_target, scene_target
+from plantgen.pipeline import grow_file, model_leaves, skin_model
+
+
+@pytest.fixture(scope="module", params=["desert", "oasis"])
+def scene(request):
+    grown = grow_file(request.param)
+    merged = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown),
+                         plant=grown.scene.segment_instance(), leaf_plant=grown.scene.polygon_instance())
+    return grown, merged, scene_target(grown.scene.plants())
+
+
+def test_two_levels_hit_what_the_merged_scene_hits(scene):
+    grown, merged, two = scene
+    assert len(two) == len(merged)
+    assert len(two.targets) == len(grown.scene.plants()) and two.bvh.copies == len(grown.scene.instances)
+    rng = np.random.default_rng(0)
+    lo, hi = merged.box()
+    O = lo + (hi - lo) * rng.random((400, 3))
+    D = lo + (hi - lo) * rng.random((400, 3)) - O
+    t1, p1 = merged.first_hits(O, D)
+    t2, p2 = two.first_hits(O, D)
+    assert np.isfinite(t1).sum() > 50
+    np.testing.assert_array_equal(np.isfinite(t1), np.isfinite(t2))
+    hit = np.isfinite(t1)
+    a, b = merged.primitive_labels(p1[hit]), two.primitive_labels(p2[hit])
+    same = np.ones(hit.sum(), bool)
+    for name in ("plant", "segment", "leaf", "part", "order"):
+        same &= a[name] == b[name]
+    assert same.mean() > 0.99                            # a tie between touching rows may go either way
+    np.testing.assert_allclose(t2[hit][same], t1[hit][same], rtol=1e-9)
+    assert (b["leaf"] >= 0).any() == (a["leaf"] >= 0).any()
+
+
+def test_scan_of_a_scene_matches_the_merged_scan(scene):
+    """The same scanner: points agree in number and labels up to the beam grid's alignment
+    (aimed at the copies' box rather than the placed rows' box)."""
+    grown, merged, two = scene
+    centre = merged.box().mean(axis=0)
+    settings = ScanSettings(angular_step=0.4, positions=((centre[0] + 1.0, centre[1], centre[2] - 2.0),))
+    a, b = scan_points(merged, settings), scan_points(two, settings)
+    assert len(a) > 500
+    assert abs(len(a) - len(b)) <= 0.02 * len(a)
+    for name in ("plant", "part"):
+        ca = np.bincount(getattr(a, name), minlength=8)
+        cb = np.bincount(getattr(b, name), minlength=8)
+        assert np.abs(ca - cb).sum() <= 0.05 * len(a), name
