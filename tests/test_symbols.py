@@ -14,7 +14,14 @@ import pytest
 from plantgen.errors import PlantgenError
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.grammar import TURTLE_ARITY, GrammarError
-from plantgen.lsystem.symbols import DERIVATION_ACTIONS, SYMBOLS, UNSUPPORTED, Action, markdown_table, unsupported_warning
+from plantgen.lsystem.symbols import (
+    DERIVATION_ACTIONS,
+    SYMBOLS,
+    UNSUPPORTED,
+    Action,
+    markdown_table,
+    unsupported_warning,
+)
 from plantgen.lsystem.turtle import HANDLERS, interpret_plant
 
 README = Path(__file__).resolve().parents[1] / "README.md"

@@ -27,8 +27,8 @@ from enum import IntEnum
 
 from ..geometry.surfaces import SURFACES
 
-__all__ = ["ARITY", "DERIVATION_ACTIONS", "QUERY_PREFIX", "SYMBOLS", "UNSUPPORTED", "Action", "Symbol", "by_action", "markdown_table",
-           "unsupported_warning"]
+__all__ = ["ARITY", "DERIVATION_ACTIONS", "QUERY_PREFIX", "SYMBOLS", "UNSUPPORTED", "Action", "Symbol", "by_action",
+           "markdown_table", "unsupported_warning"]
 
 
 class Action(IntEnum):

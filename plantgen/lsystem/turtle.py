@@ -42,8 +42,8 @@ from ..geometry.skeleton import Skeleton
 from ..limits import Limits
 from ..limits import limits as default_limits
 from ..tolerances import tol
-from .strings import ModuleString
 from .grammar import TurtleSettings
+from .strings import ModuleString
 from .symbols import SYMBOLS, UNSUPPORTED, Action, by_action, unsupported_warning
 
 __all__ = ["HANDLERS", "Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "Turtle", "interpret", "interpret_plant"]
