@@ -73,6 +73,7 @@ from .gl.result import RenderResult
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
+from .environment import environment_for
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import Drawing, interpret_plant
@@ -152,7 +153,8 @@ def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limit
     """Derive a parsed grammar, apply its interpretation rules and draw the result, adding
     each stage's seconds to ``timings``."""
     t1 = time.perf_counter()
-    ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work)
+    ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work,
+                environment=environment_for(grammar, seed=seed, limits=limits))
     t2 = time.perf_counter()
     drawn = apply_interpretation(grammar, ms, seed, limits=limits, work=work)
     drawing = interpret_plant(drawn, grammar.turtle, grammar.materials, path, limits)
