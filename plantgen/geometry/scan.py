@@ -79,7 +79,7 @@ from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
            "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_grids", "beam_returns", "cast_first_returns",
-           "scan_plant", "scan_target", "scanner_positions"]
+           "scan_plant", "scan_target", "scanner_positions", "target_hits"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -629,6 +629,21 @@ def _triangle_hits(target: ScanTarget, tri: np.ndarray, origins: np.ndarray, dir
     t = dot(e2, q) * inv
     ok &= (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
     return np.where(ok, t, np.inf)
+
+
+def target_hits(target: ScanTarget, *, t_min: float = 0.0, origin=None, precision: str = "float64"):
+    """The primitive test of ``target`` for :func:`~plantgen.geometry.bvh.trace_bvh`:
+    ``hits(prims (k,), origins (k, 3), dirs (k, 3)) -> t (k,)`` (inf: a miss; only hits
+    beyond ``t_min``): rows by the reference's pair test (in ``precision`` relative to
+    ``origin``), leaf triangles by :func:`_triangle_hits`."""
+    tester = PairTester(target.frusta, dtype=np.dtype(precision), origin=origin, t_min=t_min) \
+        if target.rows else None
+
+    def hits(prim, origins, dirs):
+        t, _ = cast_first_returns(target, origins, dirs, tester=tester, primitives=prim)
+        return np.where(t > t_min, t, np.inf)
+
+    return hits
 
 
 def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "float64",
