@@ -36,6 +36,7 @@ import numpy as np
 
 from ._resources import grammars_dir
 from .animation import AnimatedScene
+from .environment import environment_for
 from .errors import PlantgenError
 from .exporters import (
     DetailLevel,
@@ -73,7 +74,6 @@ from .gl.result import RenderResult
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
-from .environment import environment_for
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.turtle import Drawing, interpret_plant

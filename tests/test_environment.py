@@ -106,6 +106,19 @@ def test_a_mesh_envelope_is_read_only_inside_the_grammars_folder(tmp_path):
             parse_shape({"shape": "mesh", "file": name}, "t", tmp_path / "sub", Limits())
 
 
+@pytest.mark.parametrize("batch", [1, 50, 10_000])
+def test_nearest_within_is_the_brute_force_nearest_site(batch):
+    rng = np.random.default_rng(2)
+    points, sites = rng.random((2000, 3)) * 10, np.round(rng.random((400, 3)) * 10, 1)   # rounded: ties
+    sites[1] = sites[0]                                            # an exact tie: the lower index wins
+    index, dist = nearest_within(points, sites, 0.8, batch)
+    d = np.linalg.norm(points[:, None] - sites[None], axis=2)
+    near = d.min(axis=1) <= 0.8
+    np.testing.assert_array_equal(index[near], d[near].argmin(axis=1))
+    np.testing.assert_allclose(dist[near], d[near].min(axis=1), rtol=1e-12)
+    assert np.all(index[~near] == -1) and np.all(np.isinf(dist[~near]))
+
+
 # ------------------------------------------------------------------ topiary
 def test_topiary_no_shoot_ends_outside_the_shape_by_more_than_an_internode_and_the_shape_is_filled():
     data, path = _shipped("topiary")

@@ -143,7 +143,9 @@ class Environment:
         self.width = sum(p.width for p in parts)
 
     def answer(self, state: QueryState) -> np.ndarray:
-        return np.concatenate([p.answer(state) for p in self.parts], axis=1) if self.parts else np.zeros((len(state), 0))
+        if not self.parts:
+            return np.zeros((len(state), 0))
+        return np.concatenate([p.answer(state) for p in self.parts], axis=1)
 
 
 def environment_for(grammar: Grammar, *, seed: int | None = None, limits: Limits | None = None) -> Environment | None:
