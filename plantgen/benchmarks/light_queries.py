@@ -89,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f"self_organizing after {args.steps} steps: {len(skel):,} segments, {len(state.drawing.polygons):,} "
              f"leaves, {len(state):,} buds; light per step (median of {args.repeats}), error of q against "
              f"{args.reference} directions", "",
-             "| directions | rays | s / step | rays / s | mean error | max error |", "| --- | --- | --- | --- | --- | --- |"]
+             "| directions | rays | s / step | rays / s | mean error | max error |",
+             "| --- | --- | --- | --- | --- | --- |"]
     lines += [f"| {r['directions']} | {r['rays']:,} | {r['seconds']:.3f} | {r['rays_per_s']:,.0f} | "
               f"{r['mean_error']:.4f} | {r['max_error']:.4f} |" for r in rows]
     return report("\n".join(lines), args.out)
