@@ -77,7 +77,7 @@ class Light:
         if d.get("sun") is not None:
             sun = fields.keys(d["sun"], {"direction", "share"}, f"{where}: sun", EnvError)
             travel = fields.unit_vector(sun.get("direction", [0, -1, 0]), "direction", f"{where}: sun", EnvError)
-            self.sun = -np.array(travel)
+            self.sun = -np.array(travel)      # towards the sun; below the horizon the ground hides it
             self.share = fields.number(sun.get("share", 0.5), "share", f"{where}: sun", EnvError, lo=0.0, hi=1.0)
         obstacles = d.get("obstacles") or []
         if not isinstance(obstacles, list) or len(obstacles) > 1000:
@@ -104,7 +104,8 @@ class Light:
         target = scan_target(drawing.skeleton, drawing.polygons) if len(drawing.skeleton) or len(drawing.polygons) \
             else None
         bvh = build_bvh(target.lo, target.hi) if target is not None and len(target) else None
-        hits = target_hits(target) if bvh is not None else None
+        # one frame origin for every batch of rays: the hit test rounds the same, however batched
+        hits = target_hits(target, origin=target.base) if bvh is not None else None
         dirs = self.dirs if self.sun is None else np.concatenate([self.dirs, self.sun[None]])
         weights = np.concatenate([(1.0 - self.share) * self.weights, [self.share]]) if self.sun is not None \
             else self.weights
@@ -125,9 +126,11 @@ class Light:
             for shape in self.obstacles:
                 rest = np.flatnonzero(open_)
                 open_[rest] = ~np.isfinite(shape.ray(origin[rest], direction[rest], tol.max_coordinate))
+            if self.sun is not None and self.sun[1] <= 0:
+                open_.reshape(m, -1)[:, -1] = False
             light = open_.reshape(m, -1) * weights[None]
             out[lo:lo + m, 0] = light.sum(axis=1)
-            toward = light @ dirs
+            toward = (light[:, :, None] * dirs[None]).sum(axis=1)   # row by row: the same for any batch
             norm = np.linalg.norm(toward, axis=1, keepdims=True)
             out[lo:lo + m, 1:4] = np.where(norm > tol.parallel, toward / np.maximum(norm, 1e-300), 0.0)
         out[:, 1:4] = state.local(out[:, 1:4])
@@ -140,32 +143,41 @@ def allocate(state: QueryState, q: np.ndarray, alpha: float, lam: float) -> np.n
     """(k,) the Borchert–Honda vigour of each bud of ``state`` given its light ``q``.
 
     The tree is the drawing's skeleton with the buds as its tips: a bud hangs from its
-    segment (``state.segment``, -1: the base), a main bud continues it and a side bud
+    segment (``state.segment``, -1: none yet), a main bud continues it and a side bud
     (``state.side``) is lateral, as a segment that ``continues`` its parent is main and
     any other child lateral. Light is summed from the tips to the base (segments come
-    after their parents), ``alpha`` times the total enters at the base, and each node
-    shares what reaches it among its children in proportion to ``lam``·Q (main) and
-    ``(1 - lam)``·Q (lateral)."""
+    after their parents); each root segment (a plant of its own: a string may hold many)
+    receives ``alpha`` times the light above it, a bud on no segment ``alpha`` times its
+    own; each node shares what reaches it among its children in proportion to ``lam``·Q
+    (main) and ``(1 - lam)``·Q (lateral)."""
     skel = state.drawing.skeleton
     n = len(skel)
     seg = state.segment if state.segment is not None else np.full(len(q), -1)
     side = state.side if state.side is not None else np.zeros(len(q), bool)
-    node = np.where(seg >= 0, seg, n)                     # node n: the base, before any segment
-    below = np.zeros(n + 1)                               # light gathered above each segment's end
-    np.add.at(below, node, q)
-    parent = np.where(skel.parent >= 0, skel.parent, n) if n else np.zeros(0, np.int64)
+    hung = seg >= 0
+    vigour_bud = np.where(hung, 0.0, alpha * q)
+    if not n:
+        return vigour_bud
+    below = np.zeros(n)                                   # light gathered above each segment's end
+    np.add.at(below, seg[hung], q[hung])
+    parent = skel.parent
     for s in range(n - 1, -1, -1):                        # children come after their parents
-        below[parent[s]] += below[s]
+        if parent[s] >= 0:
+            below[parent[s]] += below[s]
     # each child's weight at its node: lam * Q for the main one, (1 - lam) * Q for a lateral one
-    seg_w = np.where(skel.continues, lam, 1.0 - lam) * below[:n] if n else np.zeros(0)
+    seg_w = np.where(skel.continues, lam, 1.0 - lam) * below
     bud_w = np.where(side, 1.0 - lam, lam) * q
-    total = np.zeros(n + 1)
-    np.add.at(total, parent, seg_w)
-    np.add.at(total, node, bud_w)
-    vigour = np.zeros(n + 1)
-    vigour[n] = alpha * below[n]
+    total = np.zeros(n)
+    np.add.at(total, parent[parent >= 0], seg_w[parent >= 0])
+    np.add.at(total, seg[hung], bud_w[hung])
+    vigour = np.zeros(n)
     for s in range(n):                                    # parents first
         p = parent[s]
-        vigour[s] = vigour[p] * seg_w[s] / total[p] if total[p] > 0 else 0.0
+        if p < 0:
+            vigour[s] = alpha * below[s]
+        elif total[p] > 0:
+            vigour[s] = vigour[p] * seg_w[s] / total[p]
+    at = seg[hung]
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(total[node] > 0, vigour[node] * bud_w / total[node], 0.0)
+        vigour_bud[hung] = np.where(total[at] > 0, vigour[at] * bud_w[hung] / total[at], 0.0)
+    return vigour_bud
