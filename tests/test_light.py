@@ -149,3 +149,57 @@ def test_light_rays_count_against_their_limit():
     light = Light({"directions": 100}, "t", Path("."), Limits(max_light_rays=500), 0)
     with pytest.raises(LimitError, match="light rays: 1,000 over the limit of 500"):
         light.answer(_state(np.zeros((10, 3)), Drawing(Skeleton.empty(), Polygons.empty())))
+
+
+def _stand(positions, iterations=16, seed=5):
+    """The shipped stand's rules with trunks at ``positions`` ((x, z) pairs): the trees,
+    each a list of its segments' (start, end)."""
+    path = grammars_dir() / "stand.yaml"
+    data = copy.deepcopy(read_yaml(path))
+    data.update(iterations=iterations, seed=seed,
+                axiom=" ".join(f"[ &(90) G({-z}) ^(90) +(90) G({-x}) -(90) !(0.008) F(0.6) ?E(1, 0, 0, 0, 0) "
+                               "A(0.008) ]" for x, z in positions))
+    g = parse_grammar(data, str(path))
+    skel = interpret_plant(derive(g, environment=environment_for(g)), g.turtle, g.materials).skeleton
+    root = np.arange(len(skel))
+    for s in range(len(skel)):
+        if skel.parent[s] >= 0:
+            root[s] = root[skel.parent[s]]
+    roots = np.flatnonzero(skel.parent < 0)
+    return [(skel.start[root == r], skel.end[root == r]) for r in roots]
+
+
+def _reach(tree, base, towards):
+    """How far the tree's crown reaches from its trunk ``base`` along ``towards`` (unit, horizontal)."""
+    return float(((tree[1] - base) @ towards).max())
+
+
+def test_a_stand_grows_taller_for_its_width_with_less_overlap_than_the_same_trees_apart():
+    spacing = 1.6
+    grid = [(i * spacing, j * spacing) for i in (-1, 0, 1) for j in (-1, 0, 1)]
+    stand = _stand(grid)
+    apart = [_stand([p], seed=5 + k)[0] for k, p in enumerate(grid)]
+
+    def shape(trees):
+        ratios = []
+        for (start, end), (x, z) in zip(trees, grid, strict=True):
+            width = 2 * np.hypot(end[:, 0] - x, end[:, 2] - z).max()
+            ratios.append(end[:, 1].max() / width)
+        return float(np.mean(ratios))
+
+    def overlap(trees):
+        total = 0.0
+        for a in range(len(grid)):
+            for b in range(a + 1, len(grid)):
+                pa, pb = np.array([grid[a][0], 0, grid[a][1]]), np.array([grid[b][0], 0, grid[b][1]])
+                d = np.linalg.norm(pb - pa)
+                if d > spacing * 1.01:
+                    continue                                          # neighbours side by side only
+                u = (pb - pa) / d
+                total += max(0.0, _reach(trees[a], pa, u) + _reach(trees[b], pb, -u) - d)
+        return total
+
+    print(f"stand of 9: height / crown width {shape(stand):.2f} (apart {shape(apart):.2f}); overlap of "
+          f"neighbours {overlap(stand):.2f} m (apart {overlap(apart):.2f} m)")
+    assert shape(stand) > shape(apart)
+    assert overlap(stand) < overlap(apart)

@@ -36,7 +36,7 @@ DETERMINISTIC = {"well", "abop_monopodial", "abop_sympodial", "abop_ternary", "a
 ALL_MODELS = sorted(set(TABLE1) | EXTRAS)
 #: Grown in an environment (?E): checked here as skeletons, and by what they mean in
 #: tests/test_environment.py and tests/test_light.py.
-ENVIRONMENT = ("topiary", "wall_tree", "wall_garden", "colonised", "self_organizing")
+ENVIRONMENT = ("topiary", "wall_tree", "wall_garden", "colonised", "self_organizing", "stand")
 
 # plausible overall heights in metres (y extent of the segment axes)
 HEIGHTS = {

@@ -56,7 +56,7 @@ class Entry:
 LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles")
 #: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
 #: markers, grown by light.
-ENVIRONMENT_MODELS = ("topiary", "colonised", "self_organizing")
+ENVIRONMENT_MODELS = ("topiary", "colonised", "self_organizing", "stand")
 
 
 def entries() -> list[Entry]:
