@@ -75,6 +75,10 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
         sub-rays of a diverging beam), counted before any is cast
+    max_queries : query and communication modules (``?P``, ``?E``) one derivation answers,
+        summed over its steps (each step that has any walks the turtle over the string)
+    max_markers : attraction points of a grammar's ``markers`` environment
+    max_light_rays : rays the ``light`` environment traces in one derivation step
     """
 
     max_input_bytes: int = 256 << 10
@@ -94,6 +98,9 @@ class Limits:
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30
     max_scan_rays: int = 200_000_000
+    max_queries: int = 20_000_000
+    max_markers: int = 1_000_000
+    max_light_rays: int = 50_000_000
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -38,6 +38,7 @@ import numpy as np
 
 from ._resources import grammars_dir, missing_hint, short_names
 from .animation import AnimatedScene
+from .environment import environment_for
 from .errors import PlantgenError
 from .exporters import (
     DetailLevel,
@@ -158,7 +159,8 @@ def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limit
     t1 = time.perf_counter()
     steps = grammar.iterations if iterations is None else int(iterations)
     ms = derive(grammar, iterations=iterations, seed=seed, limits=limits, work=work,
-                progress=None if progress is None else lambda step, n: progress("derive", step, steps))
+                progress=None if progress is None else lambda step, n: progress("derive", step, steps),
+                environment=environment_for(grammar, seed=seed, limits=limits))
     t2 = time.perf_counter()
     if progress is not None:
         progress("interpret", 0, None)

@@ -15,7 +15,14 @@ from _docs import page, table_after
 from plantgen.errors import PlantgenError
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.grammar import TURTLE_ARITY, GrammarError
-from plantgen.lsystem.symbols import SYMBOLS, UNSUPPORTED, Action, markdown_table, unsupported_warning
+from plantgen.lsystem.symbols import (
+    DERIVATION_ACTIONS,
+    SYMBOLS,
+    UNSUPPORTED,
+    Action,
+    markdown_table,
+    unsupported_warning,
+)
 from plantgen.lsystem.turtle import HANDLERS, interpret_plant
 
 DRAWN = [s for s in SYMBOLS if s.action in HANDLERS]
@@ -35,16 +42,19 @@ def reference_arities() -> dict[str, tuple[int, ...] | None]:
     for line in reference_table()[2:]:
         cells = [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line)[1:-1]]
         forms = re.findall(r"`([^`]+)`", cells[0])
-        chars = {form[0] for form in forms}
+        chars = {re.match(r"\?\w|.", form).group() for form in forms}
         assert len(chars) == 1, f"one symbol per row: {line}"
+        char = chars.pop()
         counts = []
         for form in forms:
-            rest = form[1:]
+            rest = form[len(char):]
+            if rest.endswith(", ...)"):       # as many as the environment answers
+                counts = None
+                continue
             assert rest == "" or re.fullmatch(r"\(\w+(, \w+)*\)", rest), form
             counts.append(len(rest[1:-1].split(",")) if rest else 0)
-        char = chars.pop()
         assert char not in out, f"{char!r} has two rows"
-        out[char] = None if "any parameters" in cells[0] else tuple(counts)
+        out[char] = None if "any parameters" in cells[0] or counts is None else tuple(counts)
     return out
 
 
@@ -55,7 +65,7 @@ def test_the_reference_table_is_the_one_symbols_py_renders():
 def test_the_reference_table_and_the_parser_agree():
     table = reference_arities()
     assert {c: a for c, a in table.items() if a is not None} == TURTLE_ARITY
-    assert {c for c, a in table.items() if a is None} == set(UNSUPPORTED)
+    assert {c for c, a in table.items() if a is None} == set(UNSUPPORTED) | {"?E"}
     assert len(table) == len(SYMBOLS) > 20
 
 
@@ -86,14 +96,15 @@ def test_an_unsupported_symbol_takes_any_count_once_per_grammar(char):
 
 def test_every_action_has_its_symbols_and_every_symbol_an_action():
     """Nothing declared but not drawn (bar the unsupported symbols, which warn, and the
-    cut, which the derivation runs), and no handler that no symbol reaches."""
+    cut and the query and communication modules, which the derivation runs), and no
+    handler that no symbol reaches."""
     for s in SYMBOLS:
         if s.unsupported:
             assert s.action is Action.NONE
         else:
-            assert s.action in HANDLERS or s.action is Action.CUT, s
+            assert s.action in HANDLERS or s.action in DERIVATION_ACTIONS, s
     assert set(HANDLERS) == {s.action for s in DRAWN}
-    assert set(Action) == {*HANDLERS, Action.NONE, Action.CUT}
+    assert set(Action) == {*HANDLERS, Action.NONE, *DERIVATION_ACTIONS}
     assert len({s.char for s in SYMBOLS}) == len(SYMBOLS)
 
 

@@ -54,6 +54,9 @@ class Entry:
 
 #: Shipped grammars with leaves, rendered beside Table 1's models.
 LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles")
+#: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
+#: markers, grown by light.
+ENVIRONMENT_MODELS = ("topiary", "colonised", "self_organizing", "stand")
 
 
 def entries() -> list[Entry]:
@@ -66,6 +69,12 @@ def entries() -> list[Entry]:
                           "--ssaa", "2", "--size", "{size}"), (f"{model}.png",)) for model in LEAFY_MODELS]
     out += [Entry(f"scenes/{scene}", ("plantgen", "render", scene, "-o", f"{{out}}/scenes/{scene}.png", "--ssaa",
                                       "2", "--size", "{size}"), (f"scenes/{scene}.png",)) for scene in SCENES]
+    # the models grown in an environment, and the tree against a wall with its wall
+    out += [Entry(model, ("plantgen", "render", model, "-o", f"{{out}}/{model}.png", "--shadows", "--ssaa", "2",
+                          "--size", "{size}"), (f"{model}.png",)) for model in ENVIRONMENT_MODELS]
+    out.append(Entry("scenes/wall_garden", ("plantgen", "render", "wall_garden", "-o", "{out}/scenes/wall_garden.png",
+                                            "--azimuth", "200", "--elevation", "15", "--ssaa", "2", "--size", "{size}"),
+                     ("scenes/wall_garden.png",)))
     # the forest (issue 25): instanced, its detail at the default --lod-pixels; no supersampling
     # (a frame of 1.3 M drawn rows costs about 8 s on llvmpipe, four times that at --ssaa 2)
     out.append(Entry("scenes/forest", ("plantgen", "render", "forest", "-o", "{out}/scenes/forest.png", "--size",

@@ -28,7 +28,7 @@ times, for drawing only: it returns a new string and the derived one is never ch
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -37,6 +37,8 @@ from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
+from .queries import Queries, uses_queries
+from .strings import ModuleString, module_bytes
 from .symbols import Action, by_action
 
 __all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "apply_interpretation", "cut_branches",
@@ -54,45 +56,6 @@ CUT_SYMBOL = by_action(Action.CUT)
 
 class DerivationLimit(LimitError):
     """The module string would grow past a budget of the limits in force."""
-
-
-@dataclass(frozen=True, eq=False)
-class ModuleString:
-    """A derived string of ``n`` modules.
-
-    sym : (n,) int32, index into ``symbols``
-    nparam : (n,) int8, parameter count of each module
-    params : (n, P) float64, parameters (columns past ``nparam`` are unused)
-    fixed_point : the step after which the derivation stopped changing the string (the
-        next step rewrote it into itself, drawing no random number), when it ran past it;
-        else None
-    """
-
-    sym: np.ndarray
-    nparam: np.ndarray
-    params: np.ndarray
-    symbols: tuple[str, ...]
-    fixed_point: int | None = None
-
-    def __len__(self) -> int:
-        return len(self.sym)
-
-    def to_text(self, limit: int = 10_000, digits: int = 4) -> str:
-        """ABOP text of the first ``limit`` modules, for debugging and tests."""
-        out = []
-        for s, k, row in zip(self.sym[:limit].tolist(), self.nparam[:limit].tolist(),
-                             self.params[:limit].tolist(), strict=True):
-            name = self.symbols[s]
-            if k:
-                out.append(name + "(" + ",".join(f"{x:.{digits}g}" for x in row[:k]) + ")")
-            else:
-                out.append(name)
-        return "".join(out)
-
-
-def module_bytes(width: int) -> int:
-    """Bytes one module of a string takes with ``width`` parameter columns."""
-    return 4 + 1 + 8 * width
 
 
 def _width(grammar: Grammar) -> int:
@@ -180,7 +143,7 @@ def _match_context(idx, pats: tuple[Pattern, ...], neighbour, step_order, sym, n
 
 def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = None,
            max_modules: int | None = None, progress=None, *, limits: Limits | None = None,
-           work: Meter | None = None) -> ModuleString:
+           work: Meter | None = None, environment=None) -> ModuleString:
     """Rewrite the axiom ``iterations`` times (default: the grammar's).
 
     Each step has two phases: :func:`_select_rewrites` finds, rule group by rule group in
@@ -198,6 +161,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     limits : the budgets (default: :data:`plantgen.limits.limits`)
     work : the ``derive_work`` meter to spend (a scene shares one over its derivations);
         default: a fresh one of ``limits``
+    environment : what answers the grammar's ``?E`` modules (:mod:`plantgen.lsystem.queries`);
+        a grammar with query or communication modules is interpreted after the axiom and
+        after each step, and its modules receive the answers before the next step
     """
     limits = (limits or default_limits).raised(modules=max_modules).lowered(modules=grammar.max_modules)
     iterations = grammar.iterations if iterations is None else int(iterations)
@@ -211,6 +177,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     string = _cut(_axiom_string(grammar, rng, codes, width), codes)
     if len(string[0]) > limits.max_modules:
         raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} modules")
+    queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
+    if queries is not None:
+        queries.update(string, 0)
     groups = _rule_groups(grammar.rules)
     needs_context = any(r.left or r.right for r in grammar.rules)
     seen: dict[bytes, int] | None = {}    # fingerprint of a state -> the step it was reached
@@ -229,6 +198,8 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
                    f"{grammar.path}: derivation step {step + 1}")
         string = _cut(_rewrite(grammar, string, matched, out_len, applied, rng, codes, width), codes)
         step += 1
+        if queries is not None:
+            queries.update(string, step)
         if progress is not None:
             progress(step, total)
         if _unchanged(before, string) and rng.bit_generator.state == state:   # a fixed point: done

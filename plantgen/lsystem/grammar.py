@@ -34,7 +34,7 @@ from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
-from .symbols import ARITY, Action, by_action
+from .symbols import ARITY, QUERY_PREFIX, SYMBOLS, Action, by_action
 
 __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
            "TurtleSettings", "load_grammar", "parse_grammar", "parse_modules"]
@@ -43,12 +43,14 @@ __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError"
 TURTLE_ARITY: dict[str, tuple[int, ...]] = ARITY
 #: The symbol that places a predefined surface, whose first argument is the surface's name.
 SURFACE_SYMBOL = by_action(Action.SURFACE)
+#: The query and communication symbols (``?P``, ``?E``): two characters each.
+QUERY_SYMBOLS = frozenset(s.char for s in SYMBOLS if len(s.char) == 2)
 #: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
 MAX_INTERPRETATION_DEPTH = 8
 
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
                 "ignore", "turtle", "materials", "max_modules", "interpretation",
-                "interpretation_depth"}
+                "interpretation_depth", "environment"}
 TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism", "smooth_bends"}
 RULE_KEYS = {"rule", "p"}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
@@ -125,6 +127,8 @@ class Grammar:
     symbols: tuple[str, ...] = field(default=())   # every symbol used, in first-seen order
     interpretation: tuple[Rule, ...] = ()          # rules applied only for drawing
     interpretation_depth: int = 1                  # how many times they are applied
+    environment: object = None                     # the ``environment:`` entry as written (see
+                                                   # plantgen.environment), None without one
 
 
 # ---------------------------------------------------------------------------- modules
@@ -158,6 +162,11 @@ def _scan_modules(text: str, where: str) -> list[tuple[str, list[str] | None]]:
         if ch in "(),":
             raise GrammarError(f"{where}: unexpected {ch!r} at column {i + 1} of {text.strip()!r}")
         j = i + 1
+        if ch == QUERY_PREFIX and j < n and text[j].isalpha():    # a query module: ?P, ?E
+            ch, j = text[i:j + 1], j + 1
+            if ch not in QUERY_SYMBOLS:
+                raise GrammarError(f"{where}: unknown query module {ch!r} at column {i + 1} (known: "
+                                   f"{', '.join(sorted(QUERY_SYMBOLS))})")
         while j < n and text[j].isspace():
             j += 1
         if j < n and text[j] == "(":
@@ -177,7 +186,7 @@ def _scan_modules(text: str, where: str) -> list[tuple[str, list[str] | None]]:
             i = k + 1
         else:
             out.append((ch, None))
-            i += 1
+            i = j if len(ch) == 2 else i + 1
     return out
 
 
@@ -481,7 +490,7 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
     return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
                    axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
                    _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
-                   path, tuple(symbols), interpretation, depth)
+                   path, tuple(symbols), interpretation, depth, data.get("environment"))
 
 
 def _parse_interpretation(data: dict, defines: dict, path: str, limits: Limits) -> tuple[tuple[Rule, ...], int]:
