@@ -27,7 +27,6 @@ from pathlib import Path
 
 from .. import fields
 from ..errors import PlantgenError
-from ..files import read_yaml
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
@@ -508,5 +507,8 @@ def _parse_interpretation(data: dict, defines: dict, path: str, limits: Limits) 
 
 
 def load_grammar(path: str | Path, limits: Limits | None = None) -> Grammar:
-    """Read and validate a grammar file."""
-    return parse_grammar(read_yaml(path, GrammarError, limits), str(path), limits)
+    """Read and validate a grammar file: YAML, or an L-Py file (``.lpy``, translated by
+    :mod:`plantgen.lsystem.lpy`)."""
+    from .lpy import read_grammar_data  # lpy builds on this module
+
+    return parse_grammar(read_grammar_data(path, GrammarError, limits)[0], str(path), limits)
