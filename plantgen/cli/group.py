@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import PlantgenError
 from .batch import batch
 from .bench import bench
+from .convert import convert
 from .export import export
 from .grow import grow
 from .options import debug_opt, debug_requested
@@ -43,6 +44,8 @@ def cli() -> None:
 
 for _command in (grow, export, render, scan, view, bench, batch):
     cli.add_command(debug_opt(_command))
+
+cli.add_command(debug_opt(convert))
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ..errors import PlantgenError
 from ..files import read_input, read_yaml
@@ -1222,6 +1223,17 @@ def read_lpy(path: str | Path, limits: Limits | None = None) -> LpyModel:
     except UnicodeDecodeError as exc:
         raise LpyError(f"{path}: cannot read (not UTF-8 text: byte {exc.start})") from None
     return parse_lpy(text, str(path), limits)
+
+
+def to_yaml(model: LpyModel) -> str:
+    """The grammar mapping as a YAML grammar file, its first lines saying where it came
+    from and which modules were renamed."""
+    head = [f"# Converted from the L-Py model {Path(model.data.get('name', 'model')).name}.lpy by plantgen convert."]
+    if model.names:
+        head.append("# Modules renamed to plantgen's one-character symbols:")
+        head += [f"#   {k} -> {v}" for k, v in model.names.items()]
+    body = yaml.safe_dump(model.data, sort_keys=False, allow_unicode=True, width=10_000, default_flow_style=False)
+    return "\n".join(head) + "\n" + body
 
 
 def read_grammar_data(path: str | Path, error: type[PlantgenError] = PlantgenError,
