@@ -22,7 +22,7 @@ read only for its scalar parameters (defines), the rest ignored with a warning.
 
 Budgets: the file's size (``max_input_bytes``), the work of the translation (AST nodes
 visited, inlined calls and unrolled loop bodies included, against ``max_yaml_nodes``),
-the nesting of inlined calls (``max_yaml_depth``), :data:`MAX_LOOP_ITERATIONS` unrolled
+the nesting of inlined calls (:data:`MAX_CALL_DEPTH`), :data:`MAX_LOOP_ITERATIONS` unrolled
 loop iterations and :data:`~plantgen.lsystem.expr.MAX_EXPR_LENGTH` characters per
 translated expression; then the grammar's own budgets when it is derived.
 """
@@ -45,12 +45,14 @@ from ..limits import limits as default_limits
 from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
 from .symbols import SYMBOLS
 
-__all__ = ["LPY_SUFFIX", "MAX_LOOP_ITERATIONS", "LpyError", "LpyModel", "TURTLE", "parse_lpy", "read_grammar_data",
-           "read_lpy"]
+__all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
+           "read_grammar_data", "read_lpy", "to_yaml"]
 
 LPY_SUFFIX = ".lpy"
 #: Loop iterations (``for ... in range``) one file's rules and functions may unroll, in all.
 MAX_LOOP_ITERATIONS = 10_000
+#: How deep inlined function calls may nest (a recursive function goes no deeper).
+MAX_CALL_DEPTH = 32
 #: Modules one produced L-string may hold after unrolling.
 MAX_SUCCESSOR = 10_000
 
@@ -206,6 +208,7 @@ class _Reader:
         self.iterations = 1
         self.work = 0
         self.depth = 0
+        self.calls = 0
         self.loops = 0
         self.if_ids = 0
         self.tropism: dict[str, object] = {}
@@ -335,7 +338,11 @@ class _Reader:
         if len(text) > MAX_EXPR_LENGTH:
             raise self.refuse(line, f"{what} is longer than {MAX_EXPR_LENGTH} characters")
         try:
-            return ast.parse(text.strip(), mode="eval").body
+            node = ast.parse(text.strip(), mode="eval").body
+            for sub in ast.walk(node):
+                if hasattr(sub, "lineno"):
+                    sub.lineno = line
+            return node
         except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError) as exc:
             raise self.refuse(line, f"{what}: cannot read {text.strip()[:60]!r} ({_why(exc)})") from None
 
@@ -352,7 +359,7 @@ class _Reader:
             tree = ast.parse(source)
         except (SyntaxError, ValueError) as exc:
             line = first_line + (getattr(exc, "lineno", None) or 1) - 1
-            raise self.refuse(line, f"{what}: Python syntax error ({getattr(exc, 'msg', _why(exc))})") from None
+            raise self.refuse(line, f"{what}: Python syntax error ({_why(exc)})") from None
         except (RecursionError, MemoryError, OverflowError) as exc:
             raise self.refuse(first_line, f"{what}: too deeply nested to read ({_why(exc)})") from None
         for node in ast.walk(tree):
@@ -561,8 +568,8 @@ class _Reader:
                 ops.append(sym)
             if len(ops) > 1 and any(v.rand for v in vals[1:-1]):
                 raise self.refuse(line, "a chained comparison around a random draw is not supported")
-            text = " && ".join(f"({_wrap(vals[i].text)} {ops[i]} {_wrap(vals[i + 1].text)})"
-                               for i in range(len(ops)))
+            parts = [f"{_wrap(vals[i].text)} {ops[i]} {_wrap(vals[i + 1].text)}" for i in range(len(ops))]
+            text = parts[0] if len(parts) == 1 else " && ".join(f"({p})" for p in parts)
             return _Val(text, any(v.rand for v in vals))
         if isinstance(node, ast.IfExp):
             c, a, b = (self.expr(n, env, line) for n in (node.test, node.body, node.orelse))
@@ -659,16 +666,16 @@ class _Reader:
         values = [self.expr(a, env, line) for a in args]
         values += [self.expr(d, {}, line) for d in defaults[len(defaults) - (len(formals) - len(args)):]]
         local = {f: _Val(v.text, v.rand) for f, v in zip(formals, values, strict=True)}
-        self.depth += 10
-        if self.depth > 10 * self.limits.max_yaml_depth:
-            raise self.refuse(line, f"calls nested deeper than {self.limits.max_yaml_depth} (a recursive "
-                                    f"function such as {name}() cannot be translated; {hint('yaml_depth')})")
+        self.calls += 1
+        if self.calls > MAX_CALL_DEPTH:
+            raise self.refuse(line, f"function calls nested deeper than {MAX_CALL_DEPTH}: a recursive function "
+                                    f"such as {name}() cannot be translated")
         try:
             if isinstance(fn, ast.Lambda):
                 return self.expr(fn.body, local, line)
             return self._body_value(fn.body, local, name)
         finally:
-            self.depth -= 10
+            self.calls -= 1
 
     def _body_value(self, stmts: list, env: dict, name: str) -> _Val:
         """The value a function body returns: assignments substituted, each ``if``
@@ -993,6 +1000,8 @@ class _Reader:
                                               "depends: plantgen would draw it anew for each")
         for conds, p in emitted:
             text = " && ".join(_wrap(t) if h else f"!{_wrap(t)}" for _, h, t, _, _ in conds)
+            if len(conds) == 1 and conds[0][1]:
+                text = conds[0][2]
             self.rules[section].append((left, pred, right, [text] if text else [], p.modules, p.line, None))
 
     # ------------------------------------------------------------ output
@@ -1155,7 +1164,7 @@ def _construct(node) -> str:
     if isinstance(node, ast.Expr) and isinstance(node.value, ast.Call):
         return f"a call of {_call_name(node.value) or 'a function'}()"
     if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
-        return "an assignment to something other than a name"
+        return "an assignment"
     return names.get(type(node), type(node).__name__)
 
 
