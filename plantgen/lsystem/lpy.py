@@ -51,6 +51,8 @@ __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "Lpy
 LPY_SUFFIX = ".lpy"
 #: Loop iterations (``for ... in range``) one file's rules and functions may unroll, in all.
 MAX_LOOP_ITERATIONS = 10_000
+#: The largest count a loop over a module parameter (``range(n)``) is unrolled for.
+MAX_DYNAMIC_COUNT = 16
 #: How deep inlined function calls may nest (a recursive function goes no deeper).
 MAX_CALL_DEPTH = 32
 #: Modules one produced L-string may hold after unrolling.
@@ -93,7 +95,7 @@ UNDRAWN = {
     "PositionOnGuide": "guide", "LineTo": "line to", "OLineTo": "line to", "LineRel": "relative line",
     "OLineRel": "relative line", "InterpolateColors": "colour interpolation", ",": "previous colour",
     "DecColor": "previous colour", "?R": "right-vector query", "GetRight": "right-vector query",
-    "?F": "frame query", "GetFrame": "frame query", "X": "mouse insertion", "MouseIns": "mouse insertion",
+    "?F": "frame query", "GetFrame": "frame query", "MouseIns": "mouse insertion",
     "TextureScale": "texture", "TextureUScale": "texture", "TextureVScale": "texture", "TextureVCoeff": "texture",
     "TextureTranslation": "texture", "TextureRotation": "texture", "TextureTransformation": "texture",
     "surface": "named surface",
@@ -104,11 +106,11 @@ REFUSED_MODULES = {
     "*": "the any-module pattern '*' is not supported", "=]": "the '=]' pattern is not supported",
     "?I": "lstring iterators (?I) are not supported", "GetIterator": "lstring iterators are not supported",
     "GetModule": "module requests are not supported", "new": "modules created by name (new) are not supported",
-    "newmodule": "modules created by name are not supported", "x": None, "or": "'or' patterns are not supported",
+    "newmodule": "modules created by name are not supported", "or": "'or' patterns are not supported",
     "repexp": "repetition patterns are not supported", "all": "repetition patterns are not supported",
     "any": "the any-module pattern is not supported",
 }
-_NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | {k for k, v in REFUSED_MODULES.items() if v}
+_NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | set(REFUSED_MODULES)
 _SPECIAL = sorted((n for n in _NAMED if not n[0].isalpha() and n[0] != "_" and len(n) > 1), key=len, reverse=True)
 _PLANTGEN_CHARS = {s.char for s in SYMBOLS} | set("(),:<>") | {"#"}
 _HOOKS = {"Start", "End", "StartEach", "EndEach", "StartInterpretation", "EndInterpretation", "PostDraw"}
@@ -209,6 +211,8 @@ class _Reader:
         self.work = 0
         self.depth = 0
         self.calls = 0
+        self.angle = 60.0
+        self.aliases = {"random": "random", "math": "math"}
         self.loops = 0
         self.if_ids = 0
         self.tropism: dict[str, object] = {}
@@ -240,6 +244,8 @@ class _Reader:
         length = None
         decls: list[tuple[str, str, int]] = []
         mode = "python"
+        depths: list[tuple[str, int, str]] = []
+        axiom_block: list[tuple[int, str]] | None = None
         for no, raw in enumerate(self.lines, 1):
             if mode == "tail":
                 tail.append(raw)
@@ -248,6 +254,12 @@ class _Reader:
             line = raw.rstrip()
             code = _strip_comment(line).rstrip()
             starts = code[:1] not in ("", " ", "\t")
+            if mode == "axiom":
+                if not starts:
+                    axiom_block.append((no, line if code.strip() else ""))
+                    python.append("")
+                    continue
+                mode = "python"
             m = _KEYWORD.match(code) if starts else None
             if m and not (m.group("module") is not None and "=" in code.split("(")[0]):
                 python.append("")
@@ -256,6 +268,8 @@ class _Reader:
                     rule_lines = []
                 if m.group("axiom"):
                     axiom = (m.group("axiom_text"), no)
+                    if not axiom[0].strip() and mode == "python":
+                        axiom_block, mode = [], "axiom"      # an axiom written as a block
                 elif m.group("length") is not None:
                     length = (m.group("length"), no)
                 elif m.group("section"):
@@ -264,8 +278,7 @@ class _Reader:
                     mode = "rules"
                 elif m.group("depth") is not None:
                     key = "decomposition" if section == "decomposition" else "interpretation"
-                    self.max_depth[key] = self._int(m.group("depth"), no, "maximum depth", 1,
-                                                    None)
+                    depths.append((m.group("depth"), no, key))
                 elif m.group("group") is not None:
                     group = m.group("group")
                 elif m.group("endgroup"):
@@ -282,6 +295,12 @@ class _Reader:
                 if not code.strip():
                     if rule_lines:
                         rule_lines.append((no, ""))
+                    continue
+                if starts and _ASSIGNMENT.match(code) and "-->" not in code:
+                    python[-1] = raw                       # Python between the rules
+                    if rule_lines:
+                        rules.append((section, group, rule_lines))
+                        rule_lines = []
                     continue
                 if starts:
                     if rule_lines:
@@ -301,9 +320,14 @@ class _Reader:
         self._initialisation(tail, len(self.lines) - len(tail) + 1)
         if length is not None:
             self.iterations = self._int(length[0], length[1], "derivation length", 0, None)
+        for text, no, key in depths:
+            self.max_depth[key] = self._int(text, no, "maximum depth", 1, None)
         if axiom is None:
             raise self.refuse(0, "no 'Axiom:' line, not an L-Py model")
-        self.axiom = self._lstring(axiom[0], axiom[1], {}, pattern=False)
+        if axiom_block is not None and any(t.strip() for _, t in axiom_block):
+            self.axiom = self._axiom_block(axiom_block, axiom[1])
+        else:
+            self.axiom = self._lstring(axiom[0], axiom[1], {}, pattern=False)
         self.decls = decls
         for sec, grp, lines in rules:
             if grp != "0":
@@ -314,6 +338,23 @@ class _Reader:
         if self.rules["decomposition"]:
             raise self.refuse(self.rules["decomposition"][0][2], "decomposition rules are not supported "
                               "(plantgen rewrites in parallel derivation steps only)")
+
+    def _axiom_block(self, lines: list, line: int) -> list:
+        """An axiom written as a Python block (``nproduce`` in loops): the modules of the
+        way through it whose tests, constants all, hold."""
+        for path in self._block(lines, {}):
+            ok = True
+            for _ident, holds, text, rand, at in path.conds:
+                if rand:
+                    raise self.refuse(at, "a random test in the axiom is not supported")
+                try:
+                    value = evaluate(text, self.defines) != 0
+                except ExprError as exc:
+                    raise self.refuse(at, f"axiom: {exc}") from None
+                ok = ok and value == holds
+            if ok:
+                return path.modules or []
+        raise self.refuse(line, "the axiom's block produces nothing")
 
     def _int(self, text: str, line: int, what: str, lo: int, hi: int | None) -> int:
         val = self._constant(text, line, what)
@@ -348,7 +389,7 @@ class _Reader:
 
     def _declare(self, text: str, line: int) -> None:
         for part in _split_top(text, ","):
-            name = re.match(r"\s*([A-Za-z_][A-Za-z_0-9]*)", part)
+            name = re.match(r"\s*([^\s(:]+)", part)
             if not name:
                 raise self.refuse(line, f"module declaration {part.strip()[:40]!r} names no module")
             self.declared.add(name.group(1))
@@ -376,6 +417,10 @@ class _Reader:
         line = stmt.lineno
         if isinstance(stmt, (ast.Import, ast.ImportFrom)):
             names = [stmt.module or ""] if isinstance(stmt, ast.ImportFrom) else [a.name for a in stmt.names]
+            if isinstance(stmt, ast.Import):
+                for a in stmt.names:
+                    if a.asname and a.name in ("random", "math"):
+                        self.aliases[a.asname] = a.name
             for name in names:
                 if _PLANTGL.search(name):
                     raise self.refuse(line, f"import of {name}: PlantGL and OpenAlea are not supported")
@@ -413,10 +458,31 @@ class _Reader:
             if isinstance(call, ast.Call) and _call_name(call) in _SEED_CALLS:
                 self.seed = self._seed(call, line)
                 return
-        if isinstance(stmt, ast.Pass):
+            if isinstance(call, ast.Call) and _call_name(call) == "print":
+                return
+            if isinstance(call, ast.Call) and self._context_call(call, line):
+                return
+        if isinstance(stmt, (ast.Pass, ast.Assert)):
             return
         raise self.refuse(line, f"{_construct(stmt)} at module level is not supported "
                                 "(only constants, functions, imports of random and math, and random.seed)")
+
+    def _context_call(self, call: ast.Call, line: int) -> bool:
+        """``context().turtle.setAngleIncrement(a)`` sets the turtle's angle; another
+        call on the L-Py context is ignored with a warning. False for any other call."""
+        root = call.func
+        while isinstance(root, ast.Attribute):
+            root = root.value
+        if not (isinstance(root, ast.Call) and isinstance(root.func, ast.Name)
+                and root.func.id in ("context", "execContext", "getContext")):
+            return False
+        method = call.func.attr if isinstance(call.func, ast.Attribute) else ""
+        if method == "setAngleIncrement" and len(call.args) == 1:
+            self.angle = self._constant(ast.unparse(call.args[0]), line, "the angle increment")
+        else:
+            self.warnings.append(f"{self.path}: warning: line {line}: {ast.unparse(call.func)[:60]}() is ignored "
+                                 "(plantgen reads only the angle increment from the L-Py context)")
+        return True
 
     def _assign_global(self, target, value, line: int) -> None:
         if isinstance(target, ast.Tuple) and isinstance(value, ast.Tuple) and len(target.elts) == len(value.elts):
@@ -426,10 +492,8 @@ class _Reader:
         if not isinstance(target, ast.Name):
             raise self.refuse(line, f"assignment to {_construct(target)} is not supported")
         name = target.id
-        self.functions.pop(name, None)
-        self.lazy.pop(name, None)
-        self.defines.pop(name, None)
         if isinstance(value, ast.Lambda):
+            self._forget(name)
             self.functions[name] = value
             return
         try:
@@ -437,24 +501,35 @@ class _Reader:
             if val.rand:
                 raise self.refuse(line, f"{name} draws a random number at module level")
             number = evaluate(val.text, self.defines)
+            self._forget(name)
         except LpyError as exc:
+            self._forget(name)
             self.lazy[name] = f"{name} (line {line}) is not a number plantgen can use: " + \
                 str(exc).split(": ", 2)[-1]
             return
         except ExprError as exc:
+            self._forget(name)
             self.lazy[name] = f"{name} (line {line}): {exc}"
             return
         self.defines[_safe(name)] = number
+
+    def _forget(self, name: str) -> None:
+        self.functions.pop(name, None)
+        self.lazy.pop(name, None)
+        self.defines.pop(_safe(name), None)
 
     def _hook(self, fn: ast.FunctionDef) -> None:
         for stmt in fn.body:
             if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
                 continue
-            if isinstance(stmt, ast.Global):
+            if isinstance(stmt, (ast.Global, ast.Assert)):
                 continue
             if (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
                     and _call_name(stmt.value) in _SEED_CALLS):
                 self.seed = self._seed(stmt.value, stmt.lineno)
+                continue
+            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
+                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, stmt.lineno)):
                 continue
             raise self.refuse(stmt.lineno, f"{fn.name}() does more than seed the random generator "
                                            f"({_construct(stmt)}): not supported")
@@ -535,7 +610,7 @@ class _Reader:
             return self._name(node.id, env, line)
         if isinstance(node, ast.Attribute):
             base = node.value.id if isinstance(node.value, ast.Name) else None
-            if base == "math" and node.attr in _MATH_ATTRS:
+            if self.aliases.get(base) == "math" and node.attr in _MATH_ATTRS:
                 return _Val(_MATH_ATTRS[node.attr])
             raise self.refuse(line, f"attribute {ast.unparse(node)[:40]!r} is not supported")
         if isinstance(node, ast.UnaryOp):
@@ -606,6 +681,7 @@ class _Reader:
         if name in self.functions:
             return self._inline(name, node.args, env, line)
         base, _, attr = name.rpartition(".")
+        base = self.aliases.get(base, base)
         if base in ("", "random") and attr in _RANDOM_FUNCS:
             return self._random(attr, node.args, env, line)
         if base in ("", "math") and attr in _MATH_FUNCS:
@@ -714,11 +790,7 @@ class _Reader:
         for name, args in self._scan(text, line):
             self.spend(line)
             if name in REFUSED_MODULES:
-                why = REFUSED_MODULES[name]
-                if why is None:
-                    out.append(_Mod(name, self._args(name, args, line, env, pattern), line))
-                    continue
-                raise self.refuse(line, why)
+                raise self.refuse(line, REFUSED_MODULES[name])
             if name in SILENT:
                 continue
             if name in UNDRAWN:
@@ -742,6 +814,10 @@ class _Reader:
             names = []
             for a in args:
                 a = a.strip()
+                if _NUMBER.fullmatch(a) and hasattr(self, "pattern_conds"):
+                    names.append(f"k{len(self.pattern_conds)}_")       # a value to match: a condition
+                    self.pattern_conds.append(f"{names[-1]} == {float(a)!r}")
+                    continue
                 if not _IDENT.match(a):
                     raise self.refuse(line, f"pattern argument {a[:30]!r} of {name}: only names are supported "
                                             "in a predecessor or context")
@@ -825,19 +901,25 @@ class _Reader:
             if any(t.strip() for _, t in lines[1:]):
                 raise self.refuse(lines[1][0], "an indented block after a '-->' rule")
             body = None
-        elif header.rstrip().endswith(":"):
-            lhs, rhs = header.rstrip()[:-1], None
-            body = lines[1:]
+        elif len(_split_top(header, ":")) > 1:
+            parts = _split_top(header, ":")
+            lhs, rest, rhs = parts[0], ":".join(parts[1:]), None
+            body = ([(no, "    " + rest.strip())] if rest.strip() else []) + lines[1:]
         else:
             raise self.refuse(no, f"not a rule (expected 'predecessor --> successor' or 'predecessor :' and a "
                                   f"block): {header.strip()[:60]!r}")
+        self.pattern_conds: list[str] = []
         left, pred, right = self._predecessor(lhs, no)
         env = {p: _Val(p) for m in (*left, pred, *right) for p in m.args}
+        self.if_ids += 1
+        fixed = [(self.if_ids, True, c, False, no) for c in self.pattern_conds]
         if body is None:
             succ = self._successor(rhs, no, env)
-            self.rules[section].append((left, pred, right, [], succ, no, None))
+            self._emit(section, left, pred, right, [_Path(fixed, succ, no)], no)
             return
         paths = self._block(body, env)
+        for path in paths:
+            path.conds = fixed + path.conds
         self._emit(section, left, pred, right, paths, no)
 
     def _predecessor(self, text: str, line: int):
@@ -938,6 +1020,8 @@ class _Reader:
         if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
                                                        and isinstance(stmt.value, ast.Constant)):
             return env, conds, pending
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) == "print":
+            return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call):
             name = _call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
             raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported")
@@ -960,20 +1044,45 @@ class _Reader:
                     x = evaluate(v.text, self.defines) if not v.rand else None
                 except ExprError:
                     x = None
+                if x is None and len(it.args) == 1 and not v.rand:
+                    out += self._dynamic_for(stmt, v.text, (env, conds, pending), paths)
+                    break
                 if x is None or x != int(x):
-                    raise self.refuse(line, "range() of a module parameter or a random draw: plantgen unrolls "
-                                            "loops of a constant count only")
+                    raise self.refuse(line, "range() of a random draw or of a value that is not whole: plantgen "
+                                            "unrolls loops of a known count only")
                 bounds.append(int(x))
-            count = len(range(*bounds)) if bounds[-1] != 0 or len(bounds) < 3 else 0
-            self.loops += count
-            if self.loops > MAX_LOOP_ITERATIONS:
-                raise LimitError(f"{self.path}: line {line}: loops unroll to over {MAX_LOOP_ITERATIONS:,} "
-                                 "iterations in all")
-            cur = [(env, conds, pending)]
-            for i in range(*bounds):
-                cur = [({**e, stmt.target.id: _Val(str(i))}, c, p) for e, c, p in cur]
-                cur = self._run(stmt.body, cur, paths)
-            out += cur
+            else:
+                count = len(range(*bounds)) if bounds[-1] != 0 or len(bounds) < 3 else 0
+                out += self._unroll(stmt, count, range(*bounds) if count else (), (env, conds, pending), paths)
+        return out
+
+    def _unroll(self, stmt: ast.For, count: int, values, state, paths: list) -> list:
+        self.loops += count
+        if self.loops > MAX_LOOP_ITERATIONS:
+            raise LimitError(f"{self.path}: line {stmt.lineno}: loops unroll to over {MAX_LOOP_ITERATIONS:,} "
+                             "iterations in all")
+        cur = [state]
+        for i in values:
+            cur = [({**e, stmt.target.id: _Val(str(i))}, c, p) for e, c, p in cur]
+            cur = self._run(stmt.body, cur, paths)
+        return cur
+
+    def _dynamic_for(self, stmt: ast.For, count: str, state, paths: list) -> list:
+        """``for i in range(n)`` with ``n`` a module parameter: one way through the rule
+        per count from 0 to :data:`MAX_DYNAMIC_COUNT`, each under the test that ``n``
+        gives that count; a larger count leaves the module unchanged, with a warning."""
+        env, conds, pending = state
+        self.if_ids += 1
+        ident = self.if_ids
+        times = f"max(0, ceil({count}))"
+        out = []
+        for k in range(MAX_DYNAMIC_COUNT + 1):
+            cond = (ident * 1000 + k, True, f"{times} == {k}", False, stmt.lineno)
+            out += self._unroll(stmt, k, range(k), (_copy(env), [*conds, cond], list(pending)), paths)
+        paths.append(_Path([*conds, (ident * 1000 + MAX_DYNAMIC_COUNT + 1, True, f"{times} > {MAX_DYNAMIC_COUNT}",
+                                     False, stmt.lineno)], None, stmt.lineno))
+        self.warnings.append(f"{self.path}: warning: line {stmt.lineno}: range({count[:40]}) is unrolled for counts "
+                             f"up to {MAX_DYNAMIC_COUNT}; a module asking more is left unchanged")
         return out
 
     def _emit(self, section, left, pred, right, paths: list[_Path], line: int) -> None:
@@ -1038,7 +1147,7 @@ class _Reader:
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
-        turtle = {"angle": 60.0}
+        turtle = {"angle": self.angle}
         if self.tropism:
             turtle["tropism"] = {"direction": self.tropism.get("direction", [0.0, -1.0, 0.0]),
                                  "strength": self.tropism.get("strength", 0.0)}
@@ -1109,6 +1218,8 @@ class _Reader:
 
 # ------------------------------------------------------------------ helpers
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
+_NUMBER = re.compile(r"-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_ASSIGNMENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\s*(?:[-+*/]?=)(?!=)")
 _ATOM = re.compile(r"[A-Za-z_][A-Za-z_0-9]*|\d+\.?\d*(?:e[-+]?\d+)?")
 _RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"and", "or", "not"}
 _CANDIDATES = ("ABCDEHIJKMNOPQRSTVWXYZabcdeghijklmnopqrstuvwxyz"
