@@ -121,6 +121,15 @@ def test_a_random_test_with_else_is_one_draw_per_module():
     assert abs(counts["B"] / 4000 - 0.4) < 0.04          # 5 standard deviations
 
 
+def test_a_loop_over_a_module_parameter_is_unrolled_per_count():
+    text = ("Axiom: A(0) A(3) A(20)\nproduction:\nA(n) :\n    for i in range(n):\n        nproduce F(1)\n"
+            "    produce B\nendlsystem\n")
+    model = parse_lpy(text, "r.lpy")
+    ms = derive(parse_grammar(model.data, "r.lpy"))
+    assert ms.to_text() == "BF(1)F(1)F(1)BA(20)"          # counts over 16 leave the module as it is
+    assert any("range(n)" in w for w in model.warnings)
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")
@@ -136,7 +145,7 @@ REFUSALS = [
     ("import os\nAxiom: F\n", ("line 1", "import of os")),
     ("from openalea.plantgl.all import *\nAxiom: F\n", ("line 1", "PlantGL")),
     ("def StartEach():\n    global n\n    n = 1\nAxiom: F\n", ("line 3", "StartEach() does more than seed")),
-    ("def End():\n    print(1)\nAxiom: F\n", ("line 2", "End() does more than seed")),
+    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() does more than seed")),
     ("Axiom: A\nproduction:\nA :\n    f = open('/etc/passwd')\n    produce F\n", ("line 4", "open()", "file access")),
     ("Axiom: A\nproduction:\nA :\n    while True:\n        nproduce F\n    produce A\n", ("line 4", "while loop")),
     ("Axiom: A\nproduction:\nA --> @g(Cylinder(1))\n", ("line 3", "PlantGL")),
@@ -144,8 +153,8 @@ REFUSALS = [
     ("Axiom: A\nproduction:\ndecomposition:\nA --> F F\n", ("decomposition",)),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    r = random()\n    if r < 0.5:\n        produce F(r)\n",
      ("line 6", "'r' holds a random draw")),
-    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(int(x)):\n        nproduce F\n    produce A(x)\n",
-     ("line 4", "range() of a module parameter")),
+    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, 3)):\n        nproduce F\n    produce A(x)\n",
+     ("line 4", "range() of a random draw")),
     ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
     ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),
     ("x = [1, 2]\nAxiom: F(x)\n", ("line 2", "x (line 1)", "a list")),
