@@ -194,6 +194,30 @@ def _strip_comment(line: str) -> str:
     return line
 
 
+@dataclass
+class _Sections:
+    """What splitting a file's lines gathers: the module-level Python (one entry per line,
+    L-Py lines blanked), the tail after ``endlsystem``, the axiom, the rules' lines."""
+
+    python: list = field(default_factory=list)
+    tail: list = field(default_factory=list)
+    mode: str = "python"                 # python, axiom (its block), rules, tail
+    section: str | None = None
+    group: str = "0"
+    rule_lines: list = field(default_factory=list)     # the current rule: (line number, text)
+    rules: list = field(default_factory=list)          # (section, group, lines)
+    axiom: tuple | None = None
+    axiom_block: list | None = None
+    length: tuple | None = None
+    depths: list = field(default_factory=list)
+    decls: list = field(default_factory=list)
+
+    def close_rule(self) -> None:
+        if self.rule_lines:
+            self.rules.append((self.section, self.group, self.rule_lines))
+            self.rule_lines = []
+
+
 class _Reader:
     """One file's translation (see the module's notes)."""
 
@@ -234,111 +258,103 @@ class _Reader:
 
     # ------------------------------------------------------------ sections
     def read(self) -> None:
-        python: list[str] = []
-        tail: list[str] = []
-        section = None
-        group = "0"
-        rule_lines: list[tuple[int, str]] = []   # current rule: (line number, text)
-        rules: list[tuple[str, str, list]] = []  # (section, group, lines)
-        axiom = None
-        length = None
-        decls: list[tuple[str, str, int]] = []
-        mode = "python"
-        depths: list[tuple[str, int, str]] = []
-        axiom_block: list[tuple[int, str]] | None = None
+        st = _Sections()
         for no, raw in enumerate(self.lines, 1):
-            if mode == "tail":
-                tail.append(raw)
-                python.append("")
+            if st.mode == "tail":
+                st.tail.append(raw)
+                st.python.append("")
                 continue
             line = raw.rstrip()
             code = _strip_comment(line).rstrip()
             starts = code[:1] not in ("", " ", "\t")
-            if mode == "axiom":
+            if st.mode == "axiom":
                 if not starts:
-                    axiom_block.append((no, line if code.strip() else ""))
-                    python.append("")
+                    st.axiom_block.append((no, line if code.strip() else ""))
+                    st.python.append("")
                     continue
-                mode = "python"
+                st.mode = "python"
             m = _KEYWORD.match(code) if starts else None
             if m and not (m.group("module") is not None and "=" in code.split("(")[0]):
-                python.append("")
-                if rule_lines:
-                    rules.append((section, group, rule_lines))
-                    rule_lines = []
-                if m.group("axiom"):
-                    axiom = (m.group("axiom_text"), no)
-                    if not axiom[0].strip() and mode == "python":
-                        axiom_block, mode = [], "axiom"      # an axiom written as a block
-                elif m.group("length") is not None:
-                    length = (m.group("length"), no)
-                elif m.group("section"):
-                    name = m.group("section")
-                    section = "interpretation" if name == "homomorphism" else name
-                    mode = "rules"
-                elif m.group("depth") is not None:
-                    key = "decomposition" if section == "decomposition" else "interpretation"
-                    depths.append((m.group("depth"), no, key))
-                elif m.group("group") is not None:
-                    group = m.group("group")
-                elif m.group("endgroup"):
-                    group = "0"
-                elif m.group("end"):
-                    mode = "tail"
-                elif m.group("decl"):
-                    decls.append((m.group("decl"), m.group("decl_text"), no))
-                elif m.group("module") is not None:
-                    self._declare(m.group("module"), no)
-                continue
-            if mode == "rules":
-                python.append("")
-                if not code.strip():
-                    if rule_lines:
-                        rule_lines.append((no, ""))
-                    continue
-                if starts and _ASSIGNMENT.match(code) and "-->" not in code:
-                    python[-1] = raw                       # Python between the rules
-                    if rule_lines:
-                        rules.append((section, group, rule_lines))
-                        rule_lines = []
-                    continue
-                if starts:
-                    if rule_lines:
-                        rules.append((section, group, rule_lines))
-                    rule_lines = [(no, code)]
-                elif rule_lines:
-                    rule_lines.append((no, line))
-                else:
-                    raise self.refuse(no, "an indented line outside any rule")
-                continue
-            if _PRODUCE.search(code):
+                st.python.append("")
+                st.close_rule()
+                self._keyword(m, no, st)
+            elif st.mode == "rules":
+                self._rule_line(no, raw, line, code, starts, st)
+            elif _PRODUCE.search(code):
                 raise self.refuse(no, "produce outside a rule (in a function) is not supported")
-            python.append(raw)
-        if rule_lines:
-            rules.append((section, group, rule_lines))
-        self._module_code("\n".join(python))
-        self._initialisation(tail, len(self.lines) - len(tail) + 1)
-        if length is not None:
-            self.iterations = self._int(length[0], length[1], "derivation length", 0, None)
-        for text, no, key in depths:
-            self.max_depth[key] = self._int(text, no, "maximum depth", 1, None)
-        if axiom is None:
-            raise self.refuse(0, "no 'Axiom:' line, not an L-Py model")
-        if axiom_block is not None and any(t.strip() for _, t in axiom_block):
-            self.axiom = self._axiom_block(axiom_block, axiom[1])
+            else:
+                st.python.append(raw)
+        st.close_rule()
+        self._translate(st)
+
+    def _keyword(self, m: re.Match, no: int, st: _Sections) -> None:
+        """One L-Py line of the L-system part (``Axiom:``, ``production:`` ...)."""
+        if m.group("axiom"):
+            st.axiom = (m.group("axiom_text"), no)
+            if not st.axiom[0].strip() and st.mode == "python":
+                st.axiom_block, st.mode = [], "axiom"      # an axiom written as a block
+        elif m.group("length") is not None:
+            st.length = (m.group("length"), no)
+        elif m.group("section"):
+            name = m.group("section")
+            st.section = "interpretation" if name == "homomorphism" else name
+            st.mode = "rules"
+        elif m.group("depth") is not None:
+            key = "decomposition" if st.section == "decomposition" else "interpretation"
+            st.depths.append((m.group("depth"), no, key))
+        elif m.group("group") is not None:
+            st.group = m.group("group")
+        elif m.group("endgroup"):
+            st.group = "0"
+        elif m.group("end"):
+            st.mode = "tail"
+        elif m.group("decl"):
+            st.decls.append((m.group("decl"), m.group("decl_text"), no))
+        elif m.group("module") is not None:
+            self._declare(m.group("module"), no)
+
+    def _rule_line(self, no: int, raw: str, line: str, code: str, starts: bool, st: _Sections) -> None:
+        """A line of a rule section: a rule's header, a line of its block, or Python."""
+        st.python.append("")
+        if not code.strip():
+            if st.rule_lines:
+                st.rule_lines.append((no, ""))
+        elif starts and _ASSIGNMENT.match(code) and "-->" not in code:
+            st.python[-1] = raw                       # Python between the rules
+            st.close_rule()
+        elif starts:
+            st.close_rule()
+            st.rule_lines = [(no, code)]
+        elif st.rule_lines:
+            st.rule_lines.append((no, line))
         else:
-            self.axiom = self._lstring(axiom[0], axiom[1], {}, pattern=False)
-        self.decls = decls
-        for sec, grp, lines in rules:
+            raise self.refuse(no, "an indented line outside any rule")
+
+    def _translate(self, st: _Sections) -> None:
+        """The sections split: module code first (the names the rules use), then the
+        axiom and the rules."""
+        self._module_code("\n".join(st.python))
+        self._initialisation(st.tail, len(self.lines) - len(st.tail) + 1)
+        if st.length is not None:
+            self.iterations = self._int(st.length[0], st.length[1], "derivation length", 0, None)
+        for text, no, key in st.depths:
+            self.max_depth[key] = self._int(text, no, "maximum depth", 1, None)
+        if st.axiom is None:
+            raise self.refuse(0, "no 'Axiom:' line, not an L-Py model")
+        if st.axiom_block is not None and any(t.strip() for _, t in st.axiom_block):
+            self.axiom = self._axiom_block(st.axiom_block, st.axiom[1])
+        else:
+            self.axiom = self._lstring(st.axiom[0], st.axiom[1], {}, pattern=False)
+        self.decls = st.decls
+        for sec, grp, lines in st.rules:
             if grp != "0":
                 self.warnings.append(f"{self.path}: warning: line {lines[0][0]}: the rules of group {grp} are "
                                      "ignored (plantgen applies group 0 only: useGroup is not supported)")
                 continue
             self._rule(sec, lines)
         if self.rules["decomposition"]:
-            raise self.refuse(self.rules["decomposition"][0][2], "decomposition rules are not supported "
+            raise self.refuse(self.rules["decomposition"][0][5], "decomposition rules are not supported "
                               "(plantgen rewrites in parallel derivation steps only)")
-
     def _axiom_block(self, lines: list, line: int) -> list:
         """An axiom written as a Python block (``nproduce`` in loops): the modules of the
         way through it whose tests, constants all, hold."""
