@@ -1295,10 +1295,13 @@ def _construct(node) -> str:
     return names.get(type(node), type(node).__name__)
 
 
-def _closing(text: str, k: int) -> int:
+def _scan_depth(text: str, start: int = 0):
+    """(index, character, bracket depth after it, whether it lies in a quote) for each
+    character of ``text`` from ``start``."""
     depth, quote = 0, None
-    for j in range(k, len(text)):
+    for j in range(start, len(text)):
         ch = text[j]
+        quoted = quote is not None
         if quote:
             if ch == quote:
                 quote = None
@@ -1308,29 +1311,22 @@ def _closing(text: str, k: int) -> int:
             depth += 1
         elif ch in ")]}":
             depth -= 1
-            if depth == 0:
-                return j
-    return -1
+        yield j, ch, depth, quoted or quote is not None
+
+
+def _closing(text: str, k: int) -> int:
+    """The index of the bracket closing the one at ``k`` (-1: none)."""
+    return next((j for j, ch, depth, quoted in _scan_depth(text, k) if ch in ")]}" and not quoted and depth == 0), -1)
 
 
 def _split_top(text: str, sep: str) -> list[str]:
-    out, depth, cur, quote = [], 0, [], None
-    for ch in text:
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "'\"":
-            quote = ch
-        elif ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            depth -= 1
-        if ch == sep and depth == 0 and not quote:
-            out.append("".join(cur))
-            cur = []
-        else:
-            cur.append(ch)
-    out.append("".join(cur))
+    """``text`` split at each ``sep`` outside brackets and quotes."""
+    out, last = [], 0
+    for j, ch, depth, quoted in _scan_depth(text):
+        if ch == sep and depth == 0 and not quoted:
+            out.append(text[last:j])
+            last = j + 1
+    out.append(text[last:])
     return out
 
 
