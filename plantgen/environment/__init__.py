@@ -42,14 +42,11 @@ from ..limits import limits as default_limits
 from ..lsystem.grammar import Grammar
 from ..lsystem.queries import QueryState
 from ..tolerances import tol
+from .light import Light
 from .nearest import nearest_within
-from .shapes import EnvError, Shape, parse_shape
+from .shapes import EnvError, Shape, batch_size, parse_shape
 
-__all__ = ["Envelope", "Environment", "EnvError", "Markers", "Obstacles", "environment_for"]
-
-#: Modules (or markers) handled at a time, unless a part says ``batch``.
-DEFAULT_BATCH = 4096
-
+__all__ = ["Envelope", "Environment", "EnvError", "Light", "Markers", "Obstacles", "environment_for"]
 
 class Envelope:
     """``envelope``: the signed distance to a shape."""
@@ -58,7 +55,7 @@ class Envelope:
     keys = {"shape", "center", "size", "radii", "radius", "height", "file", "batch"}
 
     def __init__(self, d: dict, where: str, base: Path, limits: Limits, seed: int):
-        self.batch = _batch(d, where)
+        self.batch = batch_size(d, where)
         self.shape = parse_shape({k: v for k, v in d.items() if k != "batch"}, where, base, limits)
 
     def answer(self, state: QueryState) -> np.ndarray:
@@ -73,7 +70,7 @@ class Obstacles:
     keys = {"shapes", "reach", "batch"}
 
     def __init__(self, d: dict, where: str, base: Path, limits: Limits, seed: int):
-        self.batch = _batch(d, where)
+        self.batch = batch_size(d, where)
         shapes = d.get("shapes")
         if not isinstance(shapes, list) or not shapes:
             raise EnvError(f"{where}: shapes must be a non-empty list of shapes")
@@ -104,7 +101,7 @@ class Markers:
     keys = {"shape", "density", "influence", "kill", "batch"}
 
     def __init__(self, d: dict, where: str, base: Path, limits: Limits, seed: int):
-        self.batch = _batch(d, where)
+        self.batch = batch_size(d, where)
         self.shape = parse_shape(d.get("shape"), f"{where}: shape", base, limits)
         density = fields.number(d.get("density", 10.0), "density (markers per unit volume)", where, EnvError,
                                 positive=True)
@@ -132,7 +129,7 @@ class Markers:
         return state.local(world)
 
 
-PARTS = {"envelope": Envelope, "obstacle": Obstacles, "markers": Markers}
+PARTS = {"envelope": Envelope, "obstacle": Obstacles, "markers": Markers, "light": Light}
 
 
 class Environment:
@@ -143,7 +140,9 @@ class Environment:
         self.width = sum(p.width for p in parts)
 
     def answer(self, state: QueryState) -> np.ndarray:
-        return np.concatenate([p.answer(state) for p in self.parts], axis=1) if self.parts else np.zeros((len(state), 0))
+        if not self.parts:
+            return np.zeros((len(state), 0))
+        return np.concatenate([p.answer(state) for p in self.parts], axis=1)
 
 
 def environment_for(grammar: Grammar, *, seed: int | None = None, limits: Limits | None = None) -> Environment | None:
@@ -172,10 +171,6 @@ def environment_for(grammar: Grammar, *, seed: int | None = None, limits: Limits
         settings = fields.keys(settings if settings is not None else {}, cls.keys, f"{at} ({name})", EnvError)
         parts.append(cls(settings, f"{at} ({name})", base, limits, seed))
     return Environment(parts)
-
-
-def _batch(d: dict, where: str) -> int:
-    return fields.integer(d.get("batch", DEFAULT_BATCH), "batch", where, EnvError, lo=1, hi=1 << 24)
 
 
 def _scatter(shape: Shape, count: int, rng: np.random.Generator) -> np.ndarray:

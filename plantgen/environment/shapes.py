@@ -29,7 +29,7 @@ from ..files import read_input
 from ..limits import Limits
 from ..tolerances import tol
 
-__all__ = ["KINDS", "EnvError", "Shape", "inside_folder", "parse_shape"]
+__all__ = ["DEFAULT_BATCH", "KINDS", "EnvError", "batch_size", "Shape", "inside_folder", "parse_shape"]
 
 KINDS = ("box", "ellipsoid", "cylinder", "cone", "mesh")
 #: Bisection steps of the ellipsoid's closest-point equation (each halves the bracket).
@@ -38,6 +38,15 @@ ELLIPSOID_STEPS = 100
 TRACE_STEPS = 256
 #: Triangles of a mesh shape at most (its distance costs points x triangles).
 MAX_MESH_TRIANGLES = 20_000
+
+
+#: Modules (or markers) an environment's part handles at a time, unless it says ``batch``.
+DEFAULT_BATCH = 4096
+
+
+def batch_size(d: dict, where: str) -> int:
+    """A part's ``batch``: how many modules it answers at a time (memory, never the answer)."""
+    return fields.integer(d.get("batch", DEFAULT_BATCH), "batch", where, EnvError, lo=1, hi=1 << 24)
 
 
 class EnvError(PlantgenError):

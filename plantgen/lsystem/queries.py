@@ -46,7 +46,8 @@ COMMUNICATION_SYMBOL: str = next(s.char for s in SYMBOLS if s.action is Action.C
 class QueryState:
     """What the environment sees after one step: the ``k`` communication modules
     (``position``, ``heading``, ``left``, ``up``: (k, 3) world vectors, the turtle's at each
-    module, in string order; ``rows``: their indices in ``string``) and what the whole
+    module, in string order; ``rows``: their indices in ``string``; ``segment``, ``side``:
+    the segment each hangs from and whether it starts a side branch) and what the whole
     string draws (``drawing``: the plant grown so far, its leaves included)."""
 
     step: int
@@ -57,6 +58,8 @@ class QueryState:
     up: np.ndarray
     drawing: Drawing
     string: ModuleString
+    segment: np.ndarray | None = None     # (k,) the segment each hangs from (-1: none)
+    side: np.ndarray | None = None        # (k,) bool: it starts a side branch
 
     def __len__(self) -> int:
         return len(self.rows)
@@ -135,7 +138,9 @@ class Queries:
             at = kinds == self.communication
             if at.any():
                 s = states[at]
-                state = QueryState(step, rows[at], s[:, 0], s[:, 1], s[:, 2], s[:, 3], drawing, ms)
+                links = drawing.query_links[at]
+                state = QueryState(step, rows[at], s[:, 0], s[:, 1], s[:, 2], s[:, 3], drawing, ms, links[:, 0],
+                                   links[:, 1] != 0)
                 answers = np.asarray(self.environment.answer(state), dtype=np.float64)
                 if answers.shape != (len(state), self.environment.width) or not np.isfinite(answers).all():
                     raise PlantgenError(f"{self.grammar.path}: the environment's answer after step {step} is not "

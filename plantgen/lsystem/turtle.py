@@ -65,6 +65,9 @@ class Drawing:
     #: (k, 4, 3): the turtle's position, H, L and U at each query and communication module
     #: (``?P`` ... ``?E``), in string order; None unless asked for (``queries=True``)
     queries: np.ndarray | None = None
+    #: (k, 2) int64: per query module the segment it hangs from (the last drawn on its
+    #: path, -1: none) and 1 if it starts a side branch (after a ``[``, before any ``F``)
+    query_links: np.ndarray | None = None
 
 
 def _rot(a, b, c, s):
@@ -121,8 +124,11 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
     if len(polygons) and not np.all(np.abs(polygons.vertices) <= tol.max_coordinate):
         raise PlantgenError(f"{source}: a polygon vertex is not finite or beyond {tol.max_coordinate:g}: "
                             "an f or G length or the turtle step too large")
-    states = None if recorded is None else np.array(recorded, dtype=np.float64).reshape(-1, 4, 3)
-    return Drawing(skel, polygons, tuple(_warnings(ms, source, stray_dots, builder.degenerate)), states)
+    states = links = None
+    if recorded is not None:
+        states = np.array([r[:4] for r in recorded], dtype=np.float64).reshape(-1, 4, 3)
+        links = np.array([r[4:] for r in recorded], dtype=np.int64).reshape(-1, 2)
+    return Drawing(skel, polygons, tuple(_warnings(ms, source, stray_dots, builder.degenerate)), states, links)
 
 
 def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -> list[str]:
@@ -398,9 +404,10 @@ class Turtle:
 
     def query(self, act, n, arg, arg2):
         """A query or communication module (``?P`` ... ``?E``), in the query pass only:
-        record the position and the frame H, L, U."""
+        record the position, the frame H, L, U, the segment it hangs from and whether it
+        starts a side branch."""
         H, L, U = self.frame
-        self.queries.append((self.pos, H, L, U))
+        self.queries.append((self.pos, H, L, U, self.hang, int(self.side)))
 
 
 #: The handler the turtle runs for each :class:`Action` it draws (the cut runs in the derivation).
