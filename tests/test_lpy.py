@@ -91,6 +91,23 @@ def test_lpy_is_an_input_of_grow_export_load_grammar_and_scenes(tmp_path):
     assert len(scene.scene.skeleton().start) == 2 * len(grow(tmp_path / "m.lpy").start)
 
 
+def test_an_lpy_model_renders(tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "t.png"
+    code, _, err = run_cli("render", DATA / "abop_ternary.lpy", "-o", out, "--size", "64x64")
+    assert code == 0, err
+    pixels = np.asarray(Image.open(out).convert("L"), dtype=float)
+    assert pixels.std() > 5            # the tree, not an empty frame
+
+
+def test_select_and_choose_evaluate_only_the_chosen_value():
+    ctx = EvalContext({"x": np.array([-1.0, 4.0])}, np.random.default_rng(0), 2)
+    assert compile_expr("select(x > 0, sqrt(x), 0)", {"x"})(ctx).tolist() == [0.0, 2.0]
+    assert compile_expr("choose(x, 10, 20, 30)", {"x"})(ctx).tolist() == [10.0, 30.0]   # clamped
+    assert compile_expr("trunc(-1.5) + round(2.5)")(ctx) == 1.0
+
+
 def test_initialisation_scalars_become_defines_and_groups_are_warned_of():
     model = read_lpy(DATA / "groups_init.lpy")
     assert model.data["defines"] == {"len": 0.6, "turn": 35}
