@@ -16,8 +16,11 @@ import numpy as np
 import pytest
 import yaml
 from _cli import run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_hostile import assert_refused, run_cases
 
+from plantgen.errors import PlantgenError
 from plantgen.lsystem.derive import derive
 from plantgen.lsystem.expr import EvalContext, compile_expr
 from plantgen.lsystem.grammar import load_grammar, parse_grammar
@@ -219,3 +222,23 @@ def test_hostile_lpy_files_are_refused_fast_in_bounded_memory(tmp_path):
     for result, (name, (_, words)) in zip(run_cases(tmp_path, cases), HOSTILE.items(), strict=True):
         assert_refused(result, words, outputs=[tmp_path / f"{name}.npz"],
                        seconds=15.0 if name == "modules.lpy" else 2.0)
+
+
+PIECES = list("()[]{}:<>-*/%+&^|!_;,.~@?$#'\"=\n\t AxFf0123456789") + [
+    "-->", "produce ", "nproduce ", "if ", "else:", "for i in range(", "def ", "lambda ", "\n    ", "Axiom:"]
+SOURCES = [p.read_text() for p in sorted(DATA.glob("*.lpy"))]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(source=st.sampled_from(SOURCES), edits=st.lists(
+    st.tuples(st.floats(0, 1), st.sampled_from(["delete", "insert"]), st.sampled_from(PIECES)), min_size=1, max_size=6))
+def test_mutated_lpy_files_translate_or_are_refused_in_one_line(source, edits):
+    text = source
+    for where, op, piece in edits:
+        i = int(where * len(text))
+        text = text[:i] + text[i + 1:] if op == "delete" else text[:i] + piece + text[i:]
+    try:
+        model = parse_lpy(text, "m.lpy")
+        derive(parse_grammar(model.data, "m.lpy"), iterations=3)
+    except PlantgenError as exc:
+        assert "\n" not in str(exc)

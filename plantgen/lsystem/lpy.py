@@ -32,6 +32,7 @@ from __future__ import annotations
 import ast
 import re
 import textwrap
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -395,7 +396,7 @@ class _Reader:
         if len(text) > MAX_EXPR_LENGTH:
             raise self.refuse(line, f"{what} is longer than {MAX_EXPR_LENGTH} characters")
         try:
-            node = ast.parse(text.strip(), mode="eval").body
+            node = _ast_parse(text.strip(), "eval").body
             for sub in ast.walk(node):
                 if hasattr(sub, "lineno"):
                     sub.lineno = line
@@ -413,7 +414,7 @@ class _Reader:
     # ------------------------------------------------------------ module-level Python
     def _parse_block(self, source: str, first_line: int, what: str) -> list[ast.stmt]:
         try:
-            tree = ast.parse(source)
+            tree = _ast_parse(source)
         except (SyntaxError, ValueError) as exc:
             line = first_line + (getattr(exc, "lineno", None) or 1) - 1
             raise self.refuse(line, f"{what}: Python syntax error ({_why(exc)})") from None
@@ -565,7 +566,7 @@ class _Reader:
         if not text.strip():
             return
         try:
-            tree = ast.parse(text)
+            tree = _ast_parse(text)
         except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError):
             self.warnings.append(f"{self.path}: warning: line {first}: the code after endlsystem is not read")
             return
@@ -1031,7 +1032,7 @@ class _Reader:
         if isinstance(stmt, ast.Return):
             if stmt.value is not None:
                 raise self.refuse(line, "return with a value in a rule (use produce)")
-            paths.append(_Path(conds, None, line))
+            paths.append(_Path(conds, pending or None, line))    # what nproduce gave, as L-Py does
             return None
         if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
                                                        and isinstance(stmt.value, ast.Constant)):
@@ -1328,6 +1329,13 @@ def _split_top(text: str, sep: str) -> list[str]:
             last = j + 1
     out.append(text[last:])
     return out
+
+
+def _ast_parse(source: str, mode: str = "exec") -> ast.Module | ast.Expression:
+    """``ast.parse`` without the warnings Python's compiler prints for odd literals."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ast.parse(source, mode=mode)
 
 
 def _why(exc: BaseException) -> str:
