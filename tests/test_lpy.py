@@ -56,7 +56,7 @@ def test_an_lpy_model_grows_the_skeleton_of_its_yaml_twin(stem):
     assert_same_skeleton(grow(DATA / f"{stem}.lpy"), grow(twin(stem)))
 
 
-@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names"])
+@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition"])
 def test_convert_round_trip_grows_the_same_skeleton(tmp_path, stem):
     out = tmp_path / f"{stem}.yaml"
     code, stdout, err = run_cli("convert", DATA / f"{stem}.lpy", "-o", out)
@@ -71,9 +71,9 @@ def test_convert_names_renamed_modules_and_refuses_what_it_cannot_express(tmp_pa
     assert code == 0 and "Apex -> " in stdout
     assert "#   Apex -> " in (tmp_path / "t.yaml").read_text()
     bad = tmp_path / "bad.lpy"
-    bad.write_text("Axiom: A\nproduction:\ndecomposition:\nA --> F F\n")
+    bad.write_text("Axiom: A\nproduction:\nA << B --> F F\n")
     code, _, err = run_cli("convert", bad, "-o", tmp_path / "bad.yaml")
-    assert code == 2 and err.count("\n") == 1 and "decomposition" in err
+    assert code == 2 and err.count("\n") == 1 and "line 3" in err and "'<<'" in err
     assert not (tmp_path / "bad.yaml").exists()
     code, _, err = run_cli("convert", GRAMMARS / "abop_bush.yaml", "-o", tmp_path / "x.yaml")
     assert code == 2 and ".lpy" in err
@@ -170,7 +170,7 @@ REFUSALS = [
     ("Axiom: A\nproduction:\nA :\n    while True:\n        nproduce F\n    produce A\n", ("line 4", "while loop")),
     ("Axiom: A\nproduction:\nA --> @g(Cylinder(1))\n", ("line 3", "PlantGL")),
     ("Axiom: A\nproduction:\nA :\n    if getIterationNb() > 2:\n        produce F\n", ("line 4", "getIterationNb")),
-    ("Axiom: A\nproduction:\ndecomposition:\nA --> F F\n", ("decomposition",)),
+    ("def StartEach():\n    useGroup(1)\nAxiom: F\n", ("line 2", "useGroup")),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    r = random()\n    if r < 0.5:\n        produce F(r)\n",
      ("line 6", "'r' holds a random draw")),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, 3)):\n        nproduce F\n    produce A(x)\n",

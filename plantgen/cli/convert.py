@@ -48,7 +48,8 @@ def convert(input: Path, output: Path | None, limit_values, quiet) -> None:
     for line in model.warnings:
         click.echo(line, err=True)
     if not quiet:
-        click.echo(f"{output}: {len(grammar.rules)} rules, {len(grammar.interpretation)} interpretation rules, "
+        click.echo(f"{output}: {len(grammar.rules)} rules, {len(grammar.decomposition)} decomposition and "
+                   f"{len(grammar.interpretation)} interpretation rules, "
                    f"{grammar.iterations} steps" + (f"; modules renamed: {_renamed(model.names)}"
                                                     if model.names else ""))
 

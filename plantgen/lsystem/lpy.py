@@ -353,9 +353,6 @@ class _Reader:
                                      "ignored (plantgen applies group 0 only: useGroup is not supported)")
                 continue
             self._rule(sec, lines)
-        if self.rules["decomposition"]:
-            raise self.refuse(self.rules["decomposition"][0][5], "decomposition rules are not supported "
-                              "(plantgen rewrites in parallel derivation steps only)")
     def _axiom_block(self, lines: list, line: int) -> list:
         """An axiom written as a Python block (``nproduce`` in loops): the modules of the
         way through it whose tests, constants all, hold."""
@@ -1158,9 +1155,10 @@ class _Reader:
         axiom = self._text(self.axiom)
         data["axiom"] = axiom if axiom.strip() else "[]"
         data["rules"] = [self._rule_text(r) for r in self.rules["production"]]
-        if self.rules["interpretation"]:
-            data["interpretation"] = [self._rule_text(r) for r in self.rules["interpretation"]]
-            data["interpretation_depth"] = self.max_depth["interpretation"]
+        for key in ("decomposition", "interpretation"):
+            if self.rules[key]:
+                data[key] = [self._rule_text(r) for r in self.rules[key]]
+                data[f"{key}_depth"] = self.max_depth[key]
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
