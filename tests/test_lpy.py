@@ -150,6 +150,20 @@ def test_a_loop_over_a_module_parameter_is_unrolled_per_count():
     assert any("range(n)" in w for w in model.warnings)
 
 
+def test_a_turtle_module_carrying_more_parameters_turns_as_its_first_says(tmp_path):
+    """L-Py lets ``-(a, t)`` carry an age t; plantgen's ``-`` takes one angle, so it becomes a
+    module of its own, drawn as ``-(a)`` by an interpretation rule."""
+    path = tmp_path / "c.lpy"
+    path.write_text("Axiom: -(30, 0) F(1) -(10) F(1)\nderivation length: 2\nproduction:\n"
+                    "-(a, t) --> -(a + 10, t + 1)\nendlsystem\n")
+    data = read_lpy(path).data
+    assert data["interpretation"][-1].endswith("-> -(p0)")
+    skel = grow(path)
+    heading = (skel.end - skel.start) / np.linalg.norm(skel.end - skel.start, axis=1)[:, None]
+    angles = np.degrees(np.arccos(np.clip(heading[:, 1], -1, 1)))
+    assert angles == pytest.approx([50.0, 60.0])
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")

@@ -44,7 +44,7 @@ from ..files import read_input, read_yaml
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
-from .symbols import SYMBOLS
+from .symbols import ARITY, SYMBOLS
 
 __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
            "read_grammar_data", "read_lpy", "to_yaml"]
@@ -237,6 +237,7 @@ class _Reader:
         self.depth = 0
         self.calls = 0
         self.angle = 60.0
+        self.carried: dict[str, int] = {}       # turtle modules written with extra parameters: how many
         self.aliases = {"random": "random", "math": "math"}
         self.loops = 0
         self.if_ids = 0
@@ -1134,7 +1135,9 @@ class _Reader:
         for sec in self.rules.values():
             for left, pred, right, _, succ, _, _ in sec:
                 everything += [*left, pred, *right, *succ]
-        user = [m.name for m in everything if m.name not in TURTLE]
+        self.carried = {m.name: max(len(m.args), self.carried.get(m.name, 0)) for m in everything
+                        if m.name in TURTLE and len(m.args) > _turtle_params(TURTLE[m.name])}
+        user = [m.name for m in everything if m.name not in TURTLE or m.name in self.carried]
         singles = {n for n in user if len(n) == 1}
         free = (c for c in _CANDIDATES if c not in singles and c not in _PLANTGEN_CHARS)
         for n in user:
@@ -1159,6 +1162,12 @@ class _Reader:
             if self.rules[key]:
                 data[key] = [self._rule_text(r) for r in self.rules[key]]
                 data[f"{key}_depth"] = self.max_depth[key]
+        for name, n in self.carried.items():   # a turtle module carrying more parameters: drawn as itself
+            sym, keep = TURTLE[name], _turtle_params(TURTLE[name])
+            params = [f"p{i}" for i in range(n)]
+            drawn = (["leaf"] if sym == "~" else []) + params[:keep]
+            data.setdefault("interpretation", []).append(
+                f"{names[name]}({', '.join(params)}) -> {sym}" + (f"({', '.join(drawn)})" if drawn else ""))
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
@@ -1179,6 +1188,7 @@ class _Reader:
         syms = []
         for kind, text, line in self.decls:
             mods = self._lstring(text, line, {}, pattern=True)
+            mods = [m for m in mods if m.name in self.names or m.name in TURTLE]    # unused names match nothing
             if kind == "ignore":
                 syms += [self._symbol(m.name) for m in mods]
             else:
@@ -1190,13 +1200,16 @@ class _Reader:
                 syms += sorted(s for s in used if s not in keep and s not in "[]%" and len(s) == 1)
         return "".join(dict.fromkeys(s for s in syms if len(s) == 1 and s not in "[]"))
 
-    def _symbol(self, name: str) -> str:
+    def _symbol(self, name: str, nargs: int = 0) -> str:
+        """The plantgen symbol of an L-Py module written with ``nargs`` parameters."""
+        if name in self.carried and nargs > _turtle_params(TURTLE[name]):
+            return self.names[name]
         return TURTLE.get(name) or self.names[name]
 
     def _text(self, mods: list[_Mod], pattern: bool = False) -> str:
         out = []
         for m in mods:
-            sym = self._symbol(m.name)
+            sym = self._symbol(m.name, len(m.args))
             args = [a if isinstance(a, str) else a.text for a in m.args]
             if m.name in ("_", "IncWidth") and not args:
                 self.dropped[m.name] = self.dropped.get(m.name, 0) + 1
@@ -1206,7 +1219,7 @@ class _Reader:
                 if len(args) > 1:
                     self.dropped["SetColor"] = self.dropped.get("SetColor", 0) + 1
                     continue
-            if sym == "~":
+            if m.name == "~l" and sym == "~":
                 args = ["leaf", *args[:1]]
             if sym in ("?P", "?H", "?U", "?L") and len(args) == 3:
                 args = [args[1], args[2], args[0]]          # L-Py's (x, y, z) with z up: plantgen's (y, z, x)
@@ -1241,6 +1254,13 @@ _CANDIDATES = ("ABCDEHIJKMNOPQRSTVWXYZabcdeghijklmnopqrstuvwxyz"
                + "".join(chr(c) for c in range(0x391, 0x3AA) if chr(c).isalpha())
                + "".join(chr(c) for c in range(0x3B1, 0x3CA))
                + "".join(chr(c) for c in range(0x410, 0x450)))
+
+
+def _turtle_params(sym: str) -> int:
+    """How many parameters plantgen's turtle symbol ``sym`` takes at most (``~``: after
+    the surface's name)."""
+    arity = ARITY.get(sym)
+    return (max(arity) - (sym == "~")) if arity else 0
 
 
 def _safe(name: str) -> str:
