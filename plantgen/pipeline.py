@@ -57,7 +57,7 @@ from .exporters import (
 )
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
-from .files import read_yaml, write_atomically
+from .files import write_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
@@ -79,6 +79,7 @@ from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
+from .lsystem.lpy import read_grammar_data
 from .lsystem.turtle import Drawing, interpret_plant
 from .scene import Scene, is_scene, parse_scene
 from .settings import (
@@ -195,13 +196,17 @@ def existing_input(path: str | Path) -> Path:
     return resolved
 
 
-def load_input(path: str | Path, limits: Limits | None = None):
+def load_input(path: str | Path, limits: Limits | None = None, warnings: list | None = None):
     """Read an input: returns ("grammar" | "scene", parsed mapping), or ("skeleton", None)
-    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`)."""
+    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`). An L-Py file
+    (``.lpy``) is translated to a grammar mapping; what its reading warns of is added to
+    ``warnings``."""
     path = Path(path)
     if path.suffix.lower() in SKELETON_SUFFIXES:
         return "skeleton", None
-    data = read_yaml(path, GrammarError, _in_force(limits))
+    data, said = read_grammar_data(path, GrammarError, _in_force(limits))
+    if warnings is not None:
+        warnings.extend(said)
     if data is None:
         raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
@@ -248,7 +253,8 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
 
 def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines) -> GrowResult:
     """:func:`grow_file` of a path that exists."""
-    kind, data = load_input(path, limits)
+    said: list[str] = []
+    kind, data = load_input(path, limits, said)
     timings: dict = {}
     if kind == "skeleton":
         t0 = time.perf_counter()
@@ -264,18 +270,20 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
         timings["parse"] = time.perf_counter() - t0
         drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
         return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
-                          polygons=drawing.polygons, warnings=drawing.warnings,
+                          polygons=drawing.polygons, warnings=(*said, *drawing.warnings),
                           smooth_bends=grammar.turtle.smooth_bends)
 
     modules, grown = [0], [0]
-    warnings: list[str] = []
+    warnings: list[str] = said
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
     def grow_one(gpath, s, its):
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
-            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError, limits), key, limits)
+            data, said_here = read_grammar_data(gpath, GrammarError, limits)
+            warnings.extend(w for w in said_here if w not in warnings)
+            grammars[key] = parse_grammar(data, key, limits)
         timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
         drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
         modules[0] += n

@@ -21,6 +21,7 @@ from .._resources import short_names
 from ..errors import PlantgenError
 from .batch import batch
 from .bench import bench
+from .convert import convert
 from .export import export
 from .grow import grow
 from .listing import list_models
@@ -52,6 +53,8 @@ def cli() -> None:
 
 for _command in (list_models, grow, export, render, scan, view, bench, batch):
     cli.add_command(debug_opt(_command))
+
+cli.add_command(debug_opt(convert))
 
 
 def main(argv: list[str] | None = None) -> None:

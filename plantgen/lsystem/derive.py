@@ -20,6 +20,9 @@ period, the remaining steps skipped by their count modulo the period.
 each ``%`` is removed with everything after it up to the ``]`` that closes its branch
 (to the end of the string on the main axis); the ``]`` stays.
 
+:attr:`Grammar.decomposition` rules (L-Py's ``decomposition:``) rewrite the string after each
+derivation step, pass after pass (up to ``decomposition_depth``) until none applies.
+
 :func:`apply_interpretation` applies a grammar's ``interpretation:`` rules (ABOP's
 homomorphism, L-Py's ``interpretation:``) to a derived string ``interpretation_depth``
 times, for drawing only: it returns a new string and the derived one is never changed.
@@ -60,7 +63,7 @@ class DerivationLimit(LimitError):
 
 def _width(grammar: Grammar) -> int:
     n = [len(m.args) for m in grammar.axiom]
-    for r in (*grammar.rules, *grammar.interpretation):
+    for r in (*grammar.rules, *grammar.interpretation, *grammar.decomposition):
         n += [len(m.args) for m in r.successor]
     return max([1, *n])
 
@@ -197,6 +200,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
                    f"{grammar.path}: derivation step {step + 1}")
         string = _cut(_rewrite(grammar, string, matched, out_len, applied, rng, codes, width), codes)
+        if grammar.decomposition:
+            string = _passes(grammar, grammar.decomposition, grammar.decomposition_depth, string, rng, codes,
+                             width, limits, work, f"decomposition after step {step + 1}, pass")
         step += 1
         if queries is not None:
             queries.update(string, step)
@@ -240,20 +246,30 @@ def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = 
     params = np.zeros((len(ms), width))
     params[:, :ms.params.shape[1]] = ms.params
     string = (ms.sym.copy(), ms.nparam.copy(), params)
-    view = replace(grammar, rules=grammar.interpretation)
+    string = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
+                     limits, work, "interpretation pass")
+    return ModuleString(*string, grammar.symbols)
+
+
+def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, codes: dict, width: int,
+            limits: Limits, work: Meter, what: str):
+    """``string`` rewritten by ``rules`` up to ``depth`` times, each pass one parallel
+    step (stopping at the first pass that rewrites nothing): the interpretation passes,
+    and the decomposition after each derivation step."""
+    view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
     needs_context = any(r.left or r.right for r in view.rules)
-    for step in range(grammar.interpretation_depth):
+    for step in range(depth):
         neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
         matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
         if not matched.any():
             break
         total = int(out_len.sum())
-        _check_step(view, limits, step, total, width, "interpretation pass")
+        _check_step(view, limits, step, total, width, what)
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
-                   f"{grammar.path}: interpretation pass {step + 1}")
+                   f"{grammar.path}: {what} {step + 1}")
         string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
-    return ModuleString(*string, grammar.symbols)
+    return string
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:
