@@ -52,6 +52,7 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.cards import LEAF_MODES, card_plant
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
 from .files import read_yaml, write_atomically
@@ -732,7 +733,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None) -> dict:
+                 levels: LevelSettings | None = None, leaves: str = "polygons") -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -758,9 +759,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         plants at rest and says so in ``warnings``
     textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
         colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
-    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`:
-        ``--lod-levels``, else 4 for a scene listing ``lod``; :func:`plant_detail`), their
-        screen coverages for ``detail.lod_pixels``
+    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`: ``--lod-levels``,
+        else 4 for a scene listing ``lod``; :func:`plant_detail`), their coverages for ``detail.lod_pixels``
+    leaves : "polygons", or "cards": glTF writes alpha-cut leaf cards (:func:`~plantgen.exporters.cards.card_plant`)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -777,7 +778,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = _export_checks(output_path, up, instancing)
+    fmt = _export_checks(output_path, up, instancing, leaves)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if grown.segments == 0:
@@ -796,7 +797,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                            _export_detail(grown, fmt, levels, detail, summary))
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
+    plants, baked = _finished(plants, leaves, relief, aspect_step if textures and fmt.textures else False)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
@@ -808,11 +809,15 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str):
+def _export_checks(output_path: Path, up: str | None, instancing: str, leaves: str = "polygons"):
     """The export's format, after every check that needs no work: a known suffix, its
-    extra installed, the up axis, the instancing, the folder there (one line each)."""
+    extra installed, the up axis, the instancing, the leaves (cards: glTF), the folder
+    there (one line each)."""
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
+    if leaves not in LEAF_MODES or (leaves == "cards" and fmt.name not in ("glb", "gltf")):
+        raise ExportError(f"{output_path}: leaves as {leaves!r}: cards are written by glTF (.glb, .gltf) only; "
+                          f"the choices are {', '.join(LEAF_MODES)}")
     if up is not None and up not in UP_AXES:
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
@@ -829,6 +834,14 @@ def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
     if merged or grown.scene is None:
         return [grown.skeleton]
     return [plant.skeleton for plant in grown.scene.plants()]
+
+
+def _finished(plants: list[Plant], leaves: str, relief: bool, aspect_step) -> tuple[list[Plant], object]:
+    """The plants as written: their leaves as cards where ``leaves`` says so, and their
+    textures (:func:`_textured`; ``aspect_step`` False: none)."""
+    if leaves == "cards":
+        plants = [card_plant(p) for p in plants]
+    return (plants, None) if aspect_step is False else _textured(plants, relief, aspect_step)
 
 
 def _textured(plants: list[Plant], relief: bool, aspect_step: float | None) -> tuple[list[Plant], object]:
@@ -1029,7 +1042,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
                         detail: tuple[int, float] = (1, 0.0)) -> tuple[list[Plant], int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
     limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
-    ``skin`` and ``tessellate``), each still plant at ``detail`` = (levels, pixels)
+    ``skin`` and ``tessellate``), each plant at ``detail`` = (levels, pixels)
     (:func:`plant_detail`); also the segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
@@ -1049,8 +1062,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         check_finite_mesh(mesh, fr, input_path)
         sway = PlantSway(sways[0], sways[1], fr.segment) if timeline is not None and sways is not None else None
         leaves = _leaves_of(leaves, mesh, input_path)
-        lod = None if sway is not None and sway.moves else plant_detail(fr, skel.parent, mesh, leaves, *detail,
-                                                                           relief=relief)
+        lod = plant_detail(fr, skel.parent, mesh, leaves, *detail, relief=relief)
         plants.append(Plant(name, skel, mesh, matrices, leaves=leaves, sway=sway, detail=lod))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))

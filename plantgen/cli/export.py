@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..exporters import EXPORT_FORMATS
+from ..exporters.cards import LEAF_MODES
 from ..geometry.frames import UP_AXES
 from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model
@@ -64,6 +65,9 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               callback=finite,
               help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
                    "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
+@click.option("--leaves", "leaf_mode", type=click.Choice(LEAF_MODES), default="polygons", show_default=True,
+              help="glTF: a grammar's leaves as their polygons, or as cards: one alpha-cut quad per leaf "
+                   "polygon over an atlas of the distinct leaf shapes (alphaMode MASK, each leaf's shade kept).")
 @knob_options(KeyframeSettings)
 @knob_options(LevelSettings, DetailSettings, helps={
     "lod_pixels": "glTF, USD levels of detail: their screen coverages let a level go where the segments it drops "
@@ -74,7 +78,7 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @allow_path_opt
 @quiet_opt
 def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing, unit,
-           qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+           qsm_tolerance, leaf_mode, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -120,7 +124,7 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
                             textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
-                            levels=take_settings(LevelSettings, keys))
+                            levels=take_settings(LevelSettings, keys), leaves=leaf_mode)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
