@@ -36,6 +36,7 @@ import numpy as np
 
 from ._resources import grammars_dir
 from .animation import AnimatedScene
+from .assets import AssetSettings, asset_lines, budget_warnings, finished_plants
 from .errors import PlantgenError
 from .exporters import (
     DetailLevel,
@@ -52,7 +53,6 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
-from .exporters.cards import LEAF_MODES, card_plant
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
 from .files import read_yaml, write_atomically
@@ -733,7 +733,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None, leaves: str = "polygons") -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -761,7 +761,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
     levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`: ``--lod-levels``,
         else 4 for a scene listing ``lod``; :func:`plant_detail`), their coverages for ``detail.lod_pixels``
-    leaves : "polygons", or "cards": glTF writes alpha-cut leaf cards (:func:`~plantgen.exporters.cards.card_plant`)
+    asset : leaf cards, impostor, a game asset (:class:`~plantgen.assets.AssetSettings`; None: its defaults)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -778,7 +778,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = _export_checks(output_path, up, instancing, leaves)
+    fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings())
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if grown.segments == 0:
@@ -794,10 +794,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
                                            input_path, output_path, timings, progress, skin, timeline,
-                                           _export_detail(grown, fmt, levels, detail, summary))
+                                           _export_detail(grown, fmt, asset.levels(levels), detail, summary))
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    plants, baked = _finished(plants, leaves, relief, aspect_step if textures and fmt.textures else False)
+    plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
@@ -809,22 +809,20 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str, leaves: str = "polygons"):
-    """The export's format, after every check that needs no work: a known suffix, its
-    extra installed, the up axis, the instancing, the leaves (cards: glTF), the folder
-    there (one line each)."""
+def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings):
+    """The export's format and ``asset``, after every check that needs no work: a known
+    suffix, its extra installed, the up axis, the instancing, what the asset asks (cards
+    and impostors: glTF), the folder there (one line each)."""
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
-    if leaves not in LEAF_MODES or (leaves == "cards" and fmt.name not in ("glb", "gltf")):
-        raise ExportError(f"{output_path}: leaves as {leaves!r}: cards are written by glTF (.glb, .gltf) only; "
-                          f"the choices are {', '.join(LEAF_MODES)}")
+    asset.check(fmt, output_path)
     if up is not None and up not in UP_AXES:
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
     if not output_path.parent.is_dir():
         raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
-    return fmt
+    return fmt, asset
 
 
 def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
@@ -836,11 +834,14 @@ def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
     return [plant.skeleton for plant in grown.scene.plants()]
 
 
-def _finished(plants: list[Plant], leaves: str, relief: bool, aspect_step) -> tuple[list[Plant], object]:
-    """The plants as written: their leaves as cards where ``leaves`` says so, and their
-    textures (:func:`_textured`; ``aspect_step`` False: none)."""
-    if leaves == "cards":
-        plants = [card_plant(p) for p in plants]
+def _finished(plants: list[Plant], asset: AssetSettings, skin, relief: bool, aspect_step, summary: dict,
+              progress=None) -> tuple[list[Plant], object]:
+    """The plants as written (:func:`~plantgen.assets.finished_plants`: an impostor, leaf
+    cards, where ``asset`` asks; a game asset's levels over their budgets are warned of in
+    ``summary``) and their textures (:func:`_textured`; ``aspect_step`` False: none)."""
+    plants = finished_plants(plants, asset, skin, relief, progress)
+    summary["warnings"] = (*summary["warnings"], *budget_warnings(_level_counts(plants), asset))
+    summary["asset_lines"] = asset_lines(plants)
     return (plants, None) if aspect_step is False else _textured(plants, relief, aspect_step)
 
 

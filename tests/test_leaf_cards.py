@@ -14,6 +14,7 @@ from _node import assert_khronos_valid, needs_node, three_js_materials
 from test_export_scene import accessor, glb_json
 from test_leaf_exports import GRAMMAR, LEAF
 
+from plantgen.assets import AssetSettings
 from plantgen.geometry.leaf_cards import leaf_cards
 from plantgen.geometry.polygons import PolygonBuilder
 from plantgen.geometry.surfaces import SURFACES, place
@@ -99,7 +100,8 @@ def exports(tmp_path_factory):
     root = tmp_path_factory.mktemp("cards")
     (root / "leafy.yaml").write_text(GRAMMAR.format(leaf=LEAF))
     polygons = export_model(root / "leafy.yaml", root / "p.glb", level=1, textures=False)
-    cards = export_model(root / "leafy.yaml", root / "c.glb", level=1, textures=False, leaves="cards")
+    cards = export_model(root / "leafy.yaml", root / "c.glb", level=1, textures=False,
+                         asset=AssetSettings(leaves="cards"))
     return root, polygons, cards
 
 
