@@ -46,7 +46,8 @@ so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each
 bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`). Leaves written as
 cards (a plant's ``cards``, :mod:`plantgen.geometry.leaf_cards`) are one quad each, in a
 material ``"<material> (leaf card)"``: double-sided, ``alphaMode: MASK`` (cut-off 0.5), its
-base colour texture the cards' atlas (white, alpha the shape; sampled clamped), each
+base colour texture the cards' atlas (white, alpha the shape; sampled clamped, without
+mipmaps: averaged mipmaps would thin the cut-outs away with distance), each
 vertex's ``COLOR_0`` its leaf's shade as for polygons, TEXCOORD_0 the card's tile.
 
 A scene (``extras``, :class:`~plantgen.exporters.plants.SceneExtras`) adds, at the scene's
@@ -433,9 +434,12 @@ class _Document:
         return len(self.meshes) - 1
 
     def clamped_sampler(self) -> int:
-        """The sampler (trilinear, clamped to the edge) of the atlases; made on first use."""
+        """The sampler of the alpha-cut atlases (leaf cards, impostors): bilinear from the
+        full level, no mipmaps (mipmaps averaged from it thin a cut-out away with distance:
+        a leaf's alpha falls under the cut-off; ``plantgen.benchmarks.engine_assets``
+        measures it), clamped to the edge; made on first use."""
         if not self.card_sampler:
-            self.samplers_tex.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
+            self.samplers_tex.append({"magFilter": LINEAR, "minFilter": LINEAR,
                                       "wrapS": CLAMP_TO_EDGE, "wrapT": CLAMP_TO_EDGE})
             self.card_sampler = len(self.samplers_tex) - 1
         return self.card_sampler
