@@ -17,7 +17,10 @@ bounding radii away framing the bounding sphere).
   impostor's tile size (where an engine switches to the impostor, the plant spans no more
   pixels than a tile); the impostor's image is its nearest view's tile (the view whose
   atlas coordinates are nearest the direction's: what a one-frame impostor shader draws),
-  its depth read back to distances. Its draw cost is two triangles and one atlas sample a
+  its depth read back to distances. Two more columns split the error: the impostor on
+  three of its own views (the bake's own error: 8-bit depth, the tile's texels) and the
+  plant itself rendered from the nearest view against the random view (the floor of any
+  one-view impostor: what N buys). Its draw cost is two triangles and one atlas sample a
   pixel (three with normal and depth), whatever N and the atlas size.
 
 Bytes: the PNG bytes a .glb holds for the maps, and the raw texels a GPU holds (RGBA8
@@ -180,19 +183,25 @@ def impostor_rows(model: str, views: np.ndarray, frames: list[int], sizes: list[
             imp = bake_impostor(frusta, names, leaves, frames=n, size=size, caster=caster)
             bake = time.perf_counter() - t0
             tile = imp.tile
-            errors = []
+            errors, floor = [], []
             grid = view_directions(n).reshape(-1, 3)
             on_grid = grid[np.linspace(0, len(grid) - 1, 3).astype(int)]
-            for d in [*views, *on_grid]:
-                camera = impostor_camera(centre, radius, d, tile)
+
+            def reference(d, tile=tile):
                 key = (tuple(np.round(d, 12)), tile)
                 if key not in references:
-                    references[key] = caster.render(frusta, camera, RaycastSettings(relief=True), names,
-                                                    leaves=leaves).distance
+                    references[key] = caster.render(frusta, impostor_camera(centre, radius, d, tile),
+                                                    RaycastSettings(relief=True), names, leaves=leaves).distance
+                return references[key]
+            for d in [*views, *on_grid]:
+                camera = impostor_camera(centre, radius, d, tile)
                 i, j = np.round(octahedral_uv(d) * (n - 1)).astype(int)
+                if len(floor) < len(views):               # the plant itself from the nearest view: a one-view floor
+                    floor.append(image_error(reference(view_directions(n)[j, i]), reference(d), camera,
+                                             -np.asarray(MODEL_LIGHT.travel)).total)
                 depth = imp.depth[j * tile:(j + 1) * tile, i * tile:(i + 1) * tile].astype(np.float64)
                 s = np.where(depth > 0, (2 * (depth - 1) / 254 - 1) * radius, np.nan)
-                errors.append(image_error(_distances(s, radius), references[key], camera,
+                errors.append(image_error(_distances(s, radius), reference(d), camera,
                                           -np.asarray(MODEL_LIGHT.travel)).total)
             errors, grid_errors = errors[:len(views)], errors[len(views):]
             png = sum(len(png_bytes(m)) for m in (imp.colour, imp.normal, imp.depth))
@@ -200,7 +209,8 @@ def impostor_rows(model: str, views: np.ndarray, frames: list[int], sizes: list[
                                                    -1, 1)))
             rows.append(dict(frames=n, size=size, tile=tile, png=png, raw=imp.bytes, bake=bake,
                              error=float(np.mean(errors)), worst=float(np.max(errors)),
-                             angle=float(np.mean(nearest)), grid=float(np.mean(grid_errors))))
+                             angle=float(np.mean(nearest)), grid=float(np.mean(grid_errors)),
+                             floor=float(np.mean(floor))))
             print(f"N={n} atlas={size}: tile {tile}, error {rows[-1]['error']:.4f} (max {rows[-1]['worst']:.4f}), "
                   f"{png / 1024:.0f} KiB PNG, bake {bake:.1f} s", file=sys.stderr)
     return rows
@@ -220,11 +230,12 @@ def markdown(model: str, cards: list[dict], impostors: list[dict], views: int, s
               "Draw cost: 2 triangles; one colour sample a pixel (plus one normal and one depth sample for lit, "
               "depth-correct impostors), for every N and atlas size.", "",
               "| N×N views | atlas | tile | nearest view (mean °) | PNG bytes | GPU bytes (raw) | bake s | "
-              "image error (mean) | worst view | on its own views |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+              "image error (mean) | worst view | on its own views | the plant from the nearest view |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in impostors:
         lines.append(f"| {r['frames']}×{r['frames']} | {r['size']} | {r['tile']} | {r['angle']:.1f} | {r['png']:,} | "
-                     f"{r['raw']:,} | {r['bake']:.1f} | {r['error']:.4f} | {r['worst']:.4f} | {r['grid']:.4f} |")
+                     f"{r['raw']:,} | {r['bake']:.1f} | {r['error']:.4f} | {r['worst']:.4f} | {r['grid']:.4f} | "
+                     f"{r['floor']:.4f} |")
     return "\n".join(lines) + "\n"
 
 
