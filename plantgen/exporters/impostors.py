@@ -34,10 +34,11 @@ def impostor_part(impostor: Impostor, up: str = "y") -> Part:
 
 def impostor_coverages(coverage, impostor: Impostor, height: int = IMPOSTOR_HEIGHT) -> list[float]:
     """The screen coverages of a plant's levels (``coverage``: its levels of detail's, or
-    None: none) with the impostor after the last: it takes over where the plant spans no
-    more pixels than one of its tiles (capped by the level above's coverage) and gives way
-    to nothing under one pixel."""
-    above = [1.0] if coverage is None else [float(c) for c in coverage]
-    last = min(above[-2] if len(above) > 1 else 1.0, max(above[-1] if coverage is not None else 0.0,
-                                                         impostor.tile / height))
-    return [*above[:-1], last, 1.0 / height] if coverage is not None else [last, 1.0 / height]
+    None: none) with the impostor after the last. With levels, it stands in where the last
+    level would give way to nothing (every level keeps its range); without, where the plant
+    spans no more pixels than one of its tiles. Under one pixel (or half the last level's
+    coverage, where that is lower) it gives way to nothing."""
+    if coverage is None:
+        return [min(1.0, impostor.tile / height), 1.0 / height]
+    above = [float(c) for c in coverage]
+    return [*above, min(1.0 / height, above[-1] / 2)]
