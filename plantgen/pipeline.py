@@ -38,6 +38,7 @@ import numpy as np
 
 from ._resources import grammars_dir, missing_hint, short_names
 from .animation import AnimatedScene
+from .assets import AssetSettings, asset_lines, budget_warnings, finished_plants
 from .environment import environment_for
 from .errors import PlantgenError
 from .exporters import (
@@ -795,7 +796,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None) -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -821,9 +822,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         plants at rest and says so in ``warnings``
     textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
         colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
-    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`:
-        ``--lod-levels``, else 4 for a scene listing ``lod``; :func:`plant_detail`), their
-        screen coverages for ``detail.lod_pixels``
+    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`: ``--lod-levels``,
+        else 4 for a scene listing ``lod``; :func:`plant_detail`), their coverages for ``detail.lod_pixels``
+    asset : leaf cards, impostor, a game asset (:class:`~plantgen.assets.AssetSettings`; None: its defaults)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -840,7 +841,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = _export_checks(output_path, up, instancing)
+    fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings())
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
     if grown.segments == 0:
@@ -856,10 +857,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
                                            input_path, output_path, timings, progress, skin, timeline,
-                                           _export_detail(grown, fmt, levels, detail, summary))
+                                           _export_detail(grown, fmt, asset.levels(levels), detail, summary))
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
+    plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
@@ -871,18 +872,20 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str):
-    """The export's format, after every check that needs no work: a known suffix, its
-    extra installed, the up axis, the instancing, the folder there (one line each)."""
+def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings):
+    """The export's format and ``asset``, after every check that needs no work: a known
+    suffix, its extra installed, the up axis, the instancing, what the asset asks (cards
+    and impostors: glTF), the folder there (one line each)."""
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
+    asset.check(fmt, output_path)
     if up is not None and up not in UP_AXES:
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
     if not output_path.parent.is_dir():
         raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
-    return fmt
+    return fmt, asset
 
 
 def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
@@ -892,6 +895,17 @@ def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
     if merged or grown.scene is None:
         return [grown.skeleton]
     return [plant.skeleton for plant in grown.scene.plants()]
+
+
+def _finished(plants: list[Plant], asset: AssetSettings, skin, relief: bool, aspect_step, summary: dict,
+              progress=None) -> tuple[list[Plant], object]:
+    """The plants as written (:func:`~plantgen.assets.finished_plants`: an impostor, leaf
+    cards, where ``asset`` asks; a game asset's levels over their budgets are warned of in
+    ``summary``) and their textures (:func:`_textured`; ``aspect_step`` False: none)."""
+    plants = finished_plants(plants, asset, skin, relief, progress)
+    summary["warnings"] = (*summary["warnings"], *budget_warnings(_level_counts(plants), asset))
+    summary["asset_lines"] = asset_lines(plants)
+    return (plants, None) if aspect_step is False else _textured(plants, relief, aspect_step)
 
 
 def _textured(plants: list[Plant], relief: bool, aspect_step: float | None) -> tuple[list[Plant], object]:
@@ -1092,7 +1106,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
                         detail: tuple[int, float] = (1, 0.0)) -> tuple[list[Plant], int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
     limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
-    ``skin`` and ``tessellate``), each still plant at ``detail`` = (levels, pixels)
+    ``skin`` and ``tessellate``), each plant at ``detail`` = (levels, pixels)
     (:func:`plant_detail`); also the segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
@@ -1112,8 +1126,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         check_finite_mesh(mesh, fr, input_path)
         sway = PlantSway(sways[0], sways[1], fr.segment) if timeline is not None and sways is not None else None
         leaves = _leaves_of(leaves, mesh, input_path)
-        lod = None if sway is not None and sway.moves else plant_detail(fr, skel.parent, mesh, leaves, *detail,
-                                                                           relief=relief)
+        lod = plant_detail(fr, skel.parent, mesh, leaves, *detail, relief=relief)
         plants.append(Plant(name, skel, mesh, matrices, leaves=leaves, sway=sway, detail=lod))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
