@@ -164,6 +164,21 @@ def test_a_turtle_module_carrying_more_parameters_turns_as_its_first_says(tmp_pa
     assert angles == pytest.approx([50.0, 60.0])
 
 
+def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
+    """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
+    module: the rule becomes three alternatives of probability 1/3, each with n fixed."""
+    text = ("from random import randint, choice\nAxiom: " + " ".join(["A"] * 3000) + "\nderivation length: 1\n"
+            "production:\nA :\n    n = randint(2, 4)\n    for i in range(n):\n        nproduce [ +(360 / n) B ]\n"
+            "    produce C(choice([1, 2]))\nendlsystem\n")
+    data = parse_lpy(text, "s.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([1 / 3] * 3)
+    ms = derive(parse_grammar(data, "s.lpy"))
+    b = int(np.sum(ms.sym == ms.symbols.index("B")))
+    assert b / 3000 == pytest.approx(3.0, abs=0.1)            # the mean of 2, 3 and 4
+    plus = ms.params[ms.sym == ms.symbols.index("+"), 0]
+    assert set(np.round(plus, 6)) == {180.0, 120.0, 90.0}       # each branch turns by 360 / its own n
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")
@@ -187,7 +202,7 @@ REFUSALS = [
     ("def StartEach():\n    useGroup(1)\nAxiom: F\n", ("line 2", "useGroup")),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    r = random()\n    if r < 0.5:\n        produce F(r)\n",
      ("line 6", "'r' holds a random draw")),
-    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, 3)):\n        nproduce F\n    produce A(x)\n",
+    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, x)):\n        nproduce F\n    produce A(x)\n",
      ("line 4", "range() of a random draw")),
     ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
     ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),
