@@ -10,6 +10,7 @@ bounded memory (the hostile runner's subprocess).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,23 @@ def test_select_and_choose_evaluate_only_the_chosen_value():
     assert compile_expr("select(x > 0, sqrt(x), 0)", {"x"})(ctx).tolist() == [0.0, 2.0]
     assert compile_expr("choose(x, 10, 20, 30)", {"x"})(ctx).tolist() == [10.0, 30.0]   # clamped
     assert compile_expr("trunc(-1.5) + round(2.5)")(ctx) == 1.0
+
+
+def test_the_viewer_grows_an_lpy_model_and_watches_its_file(tmp_path):
+    from plantgen.viewer.session import ViewOptions
+    from plantgen.viewer.watch import FileWatcher
+
+    path = tmp_path / "m.lpy"
+    path.write_text((DATA / "block_if.lpy").read_text())
+    model = ViewOptions(input=path, size=(32, 32), watch=True, shots=tmp_path).prepare()
+    assert model.grown.sources == (path,) and len(model.grown.skeleton.start) == 21
+    watcher = FileWatcher(model.grown.sources, settle_s=0.0)
+    assert watcher.poll(0.0) is None
+    path.write_text(path.read_text().replace("derivation length: 6", "derivation length: 3"))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    assert watcher.poll(1.0) is not None or watcher.poll(2.0) is not None
+    assert len(ViewOptions(input=path, size=(32, 32), shots=tmp_path).prepare().grown.skeleton.start) < 21
 
 
 def test_initialisation_scalars_become_defines_and_groups_are_warned_of():
