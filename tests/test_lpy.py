@@ -197,6 +197,15 @@ def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
     assert set(np.round(plus, 6)) == {180.0, 120.0, 90.0}       # each branch turns by 360 / its own n
 
 
+def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    n = randint(1, 2)\n"
+            "    if random() < 0.25:\n        produce B(n)\n    else:\n        produce C(n)\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "t.lpy").data, "t.lpy"))
+    b = ms.sym == ms.symbols.index("B")
+    assert abs(b.mean() - 0.25) < 0.04 and len(ms) == 4000
+    assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")

@@ -1014,9 +1014,9 @@ class _Reader:
             line = stmt.lineno
             nxt = []
             if isinstance(stmt, ast.If):
-                self.if_ids += 1
-                ident = self.if_ids
                 for env, conds, pending in states:
+                    self.if_ids += 1                    # one test per state: a way through the rule
+                    ident = self.if_ids
                     c = self.expr(stmt.test, env, line)
                     yes = self._run(stmt.body, [(_copy(env), [*conds, (ident, True, c.text, c.rand, line)],
                                                  list(pending))], paths)
