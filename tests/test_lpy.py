@@ -206,6 +206,13 @@ def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
     assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
 
 
+def test_python_between_the_rules_is_module_code():
+    text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
+            "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "b.lpy").data, "b.lpy"))
+    assert ms.to_text() == "F(2)F(8)F(14)A(10)"
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")

@@ -212,6 +212,7 @@ class _Sections:
     length: tuple | None = None
     depths: list = field(default_factory=list)
     decls: list = field(default_factory=list)
+    in_def: bool = False                 # in a function defined between the rules
 
     def close_rule(self) -> None:
         if self.rule_lines:
@@ -318,7 +319,14 @@ class _Reader:
     def _rule_line(self, no: int, raw: str, line: str, code: str, starts: bool, st: _Sections) -> None:
         """A line of a rule section: a rule's header, a line of its block, or Python."""
         st.python.append("")
-        if not code.strip():
+        if st.in_def and (not starts or not code.strip()):
+            st.python[-1] = raw                       # the body of a function between the rules
+            return
+        st.in_def = starts and bool(re.match(r"(def|import|from)\s", code))
+        if st.in_def:
+            st.python[-1] = raw
+            st.close_rule()
+        elif not code.strip():
             if st.rule_lines:
                 st.rule_lines.append((no, ""))
         elif starts and _ASSIGNMENT.match(code) and "-->" not in code:
