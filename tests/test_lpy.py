@@ -213,6 +213,19 @@ def test_python_between_the_rules_is_module_code():
     assert ms.to_text() == "F(2)F(8)F(14)A(10)"
 
 
+def test_one_draw_tested_in_an_elif_chain_is_a_stochastic_rule():
+    """``r = random()`` then ``if r < 0.2 ... elif r < 0.7 ... else`` is ABOP's stochastic
+    rule: alternatives of probability 0.2, 0.5 and 0.3."""
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    r = random()\n"
+            "    if r < 0.2:\n        produce B\n    elif 0.7 > r:\n        produce C\n    else:\n        produce D\n"
+            "endlsystem\n")
+    data = parse_lpy(text, "r.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([0.2, 0.5, 0.3])
+    ms = derive(parse_grammar(data, "r.lpy"))
+    share = [np.mean(ms.sym == ms.symbols.index(c)) for c in "BCD"]
+    assert share == pytest.approx([0.2, 0.5, 0.3], abs=0.04)
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")

@@ -151,6 +151,7 @@ class _Val:
     text: str
     rand: bool = False
     used: bool = False
+    span: tuple | None = None      # a local holding random(): the interval its tests leave it in
 
 
 @dataclass
@@ -679,6 +680,9 @@ class _Reader:
     def _name(self, name: str, env: dict, line: int) -> _Val:
         if name in env:
             local = env[name]
+            if local.span is not None and local.span != (0.0, 1.0):
+                raise self.refuse(line, f"{name!r} holds a random draw that a test has narrowed; reading its "
+                                        "value after the test is not supported")
             if local.rand:
                 if local.used:
                     raise self.refuse(line, f"{name!r} holds a random draw and is read twice: plantgen would "
@@ -1025,6 +1029,10 @@ class _Reader:
                 for env, conds, pending in states:
                     self.if_ids += 1                    # one test per state: a way through the rule
                     ident = self.if_ids
+                    split = self._uniform_test(stmt.test, env)
+                    if split is not None:
+                        nxt += self._split(stmt, split, (env, conds, pending), paths)
+                        continue
                     c = self.expr(stmt.test, env, line)
                     yes = self._run(stmt.body, [(_copy(env), [*conds, (ident, True, c.text, c.rand, line)],
                                                  list(pending))], paths)
@@ -1046,6 +1054,45 @@ class _Reader:
                         nxt.append(state)
             states = nxt
         return states
+
+    def _uniform_test(self, test, env: dict):
+        """``r < c`` (or ``<=``, ``>``, ``>=``, either side) with ``r`` a local holding
+        ``random()`` and ``c`` a constant: (r, the interval where the test holds)."""
+        if not (isinstance(test, ast.Compare) and len(test.ops) == 1):
+            return None
+        left, right, op = test.left, test.comparators[0], type(test.ops[0])
+        if isinstance(right, ast.Name) and right.id in env and env[right.id].span is not None:
+            left, right = right, left
+            op = {ast.Lt: ast.Gt, ast.LtE: ast.GtE, ast.Gt: ast.Lt, ast.GtE: ast.LtE}.get(op)
+        if not (isinstance(left, ast.Name) and left.id in env and env[left.id].span is not None) or op not in (
+                ast.Lt, ast.LtE, ast.Gt, ast.GtE):
+            return None
+        try:
+            c = evaluate(self.expr(right, {}, test.lineno).text, self.defines)
+        except (LpyError, ExprError):
+            return None
+        lo, hi = env[left.id].span
+        t = min(max(c, lo), hi)
+        below, above = (lo, t), (t, hi)
+        return left.id, (below, above) if op in (ast.Lt, ast.LtE) else (above, below)
+
+    def _split(self, stmt: ast.If, split, state, paths: list) -> list:
+        """An ``if`` on a uniform draw: its branches become stochastic alternatives, each
+        as likely as the part of the draw's interval it keeps."""
+        name, (yes, no) = split
+        env, conds, pending = state
+        lo, hi = env[name].span
+        out = []
+        for body, (a, b) in ((stmt.body, yes), (stmt.orelse, no)):
+            weight = (b - a) / (hi - lo) if hi > lo else 0.0
+            if weight <= 0:
+                continue
+            self.if_ids += 1
+            branch_env = _copy(env)
+            branch_env[name].span = (a, b)
+            out += self._run(body, [(branch_env, [*conds, (self.if_ids, True, None, weight, stmt.lineno)],
+                                     list(pending))], paths)
+        return out
 
     def _choices(self, stmt) -> tuple[str, list[str]] | None:
         """``NAME = randint(a, b)`` or ``NAME = choice([...])`` with constants: the name
@@ -1094,7 +1141,9 @@ class _Reader:
             return env, conds, mods
         if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
             v = self.expr(stmt.value, env, line)
-            return {**env, stmt.targets[0].id: _Val(v.text, v.rand)}, conds, pending
+            uniform = v.text == "random()"           # a draw its tests split into alternatives
+            return {**env, stmt.targets[0].id: _Val(v.text, v.rand, span=(0.0, 1.0) if uniform else None)}, \
+                conds, pending
         if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
             v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, line)
             return {**env, stmt.target.id: _Val(v.text, v.rand)}, conds, pending
@@ -1377,7 +1426,7 @@ def _wrap(text: str) -> str:
 
 
 def _copy(env: dict) -> dict:
-    return {k: _Val(v.text, v.rand, v.used) for k, v in env.items()}
+    return {k: _Val(v.text, v.rand, v.used, v.span) for k, v in env.items()}
 
 
 def _call_name(call: ast.Call) -> str | None:
