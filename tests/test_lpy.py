@@ -10,6 +10,7 @@ bounded memory (the hostile runner's subprocess).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +112,23 @@ def test_select_and_choose_evaluate_only_the_chosen_value():
     assert compile_expr("trunc(-1.5) + round(2.5)")(ctx) == 1.0
 
 
+def test_the_viewer_grows_an_lpy_model_and_watches_its_file(tmp_path):
+    from plantgen.viewer.session import ViewOptions
+    from plantgen.viewer.watch import FileWatcher
+
+    path = tmp_path / "m.lpy"
+    path.write_text((DATA / "block_if.lpy").read_text())
+    model = ViewOptions(input=path, size=(32, 32), watch=True, shots=tmp_path).prepare()
+    assert model.grown.sources == (path,) and len(model.grown.skeleton.start) == 21
+    watcher = FileWatcher(model.grown.sources, settle_s=0.0)
+    assert watcher.poll(0.0) is None
+    path.write_text(path.read_text().replace("derivation length: 6", "derivation length: 3"))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    assert watcher.poll(1.0) is not None or watcher.poll(2.0) is not None
+    assert len(ViewOptions(input=path, size=(32, 32), shots=tmp_path).prepare().grown.skeleton.start) < 21
+
+
 def test_initialisation_scalars_become_defines_and_groups_are_warned_of():
     model = read_lpy(DATA / "groups_init.lpy")
     assert model.data["defines"] == {"len": 0.6, "turn": 35}
@@ -164,6 +182,50 @@ def test_a_turtle_module_carrying_more_parameters_turns_as_its_first_says(tmp_pa
     assert angles == pytest.approx([50.0, 60.0])
 
 
+def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
+    """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
+    module: the rule becomes three alternatives of probability 1/3, each with n fixed."""
+    text = ("from random import randint, choice\nAxiom: " + " ".join(["A"] * 3000) + "\nderivation length: 1\n"
+            "production:\nA :\n    n = randint(2, 4)\n    for i in range(n):\n        nproduce [ +(360 / n) B ]\n"
+            "    produce C(choice([1, 2]))\nendlsystem\n")
+    data = parse_lpy(text, "s.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([1 / 3] * 3)
+    ms = derive(parse_grammar(data, "s.lpy"))
+    b = int(np.sum(ms.sym == ms.symbols.index("B")))
+    assert b / 3000 == pytest.approx(3.0, abs=0.1)            # the mean of 2, 3 and 4
+    plus = ms.params[ms.sym == ms.symbols.index("+"), 0]
+    assert set(np.round(plus, 6)) == {180.0, 120.0, 90.0}       # each branch turns by 360 / its own n
+
+
+def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    n = randint(1, 2)\n"
+            "    if random() < 0.25:\n        produce B(n)\n    else:\n        produce C(n)\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "t.lpy").data, "t.lpy"))
+    b = ms.sym == ms.symbols.index("B")
+    assert abs(b.mean() - 0.25) < 0.04 and len(ms) == 4000
+    assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
+
+
+def test_python_between_the_rules_is_module_code():
+    text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
+            "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "b.lpy").data, "b.lpy"))
+    assert ms.to_text() == "F(2)F(8)F(14)A(10)"
+
+
+def test_one_draw_tested_in_an_elif_chain_is_a_stochastic_rule():
+    """``r = random()`` then ``if r < 0.2 ... elif r < 0.7 ... else`` is ABOP's stochastic
+    rule: alternatives of probability 0.2, 0.5 and 0.3."""
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    r = random()\n"
+            "    if r < 0.2:\n        produce B\n    elif 0.7 > r:\n        produce C\n    else:\n        produce D\n"
+            "endlsystem\n")
+    data = parse_lpy(text, "r.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([0.2, 0.5, 0.3])
+    ms = derive(parse_grammar(data, "r.lpy"))
+    share = [np.mean(ms.sym == ms.symbols.index(c)) for c in "BCD"]
+    assert share == pytest.approx([0.2, 0.5, 0.3], abs=0.04)
+
+
 def test_functions_are_inlined_into_whitelisted_expressions():
     text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
             "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")
@@ -187,7 +249,7 @@ REFUSALS = [
     ("def StartEach():\n    useGroup(1)\nAxiom: F\n", ("line 2", "useGroup")),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    r = random()\n    if r < 0.5:\n        produce F(r)\n",
      ("line 6", "'r' holds a random draw")),
-    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, 3)):\n        nproduce F\n    produce A(x)\n",
+    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, x)):\n        nproduce F\n    produce A(x)\n",
      ("line 4", "range() of a random draw")),
     ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
     ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),

@@ -151,6 +151,7 @@ class _Val:
     text: str
     rand: bool = False
     used: bool = False
+    span: tuple | None = None      # a local holding random(): the interval its tests leave it in
 
 
 @dataclass
@@ -212,6 +213,7 @@ class _Sections:
     length: tuple | None = None
     depths: list = field(default_factory=list)
     decls: list = field(default_factory=list)
+    in_def: bool = False                 # in a function defined between the rules
 
     def close_rule(self) -> None:
         if self.rule_lines:
@@ -318,7 +320,14 @@ class _Reader:
     def _rule_line(self, no: int, raw: str, line: str, code: str, starts: bool, st: _Sections) -> None:
         """A line of a rule section: a rule's header, a line of its block, or Python."""
         st.python.append("")
-        if not code.strip():
+        if st.in_def and (not starts or not code.strip()):
+            st.python[-1] = raw                       # the body of a function between the rules
+            return
+        st.in_def = starts and bool(re.match(r"(def|import|from)\s", code))
+        if st.in_def:
+            st.python[-1] = raw
+            st.close_rule()
+        elif not code.strip():
             if st.rule_lines:
                 st.rule_lines.append((no, ""))
         elif starts and _ASSIGNMENT.match(code) and "-->" not in code:
@@ -671,6 +680,9 @@ class _Reader:
     def _name(self, name: str, env: dict, line: int) -> _Val:
         if name in env:
             local = env[name]
+            if local.span is not None and local.span != (0.0, 1.0):
+                raise self.refuse(line, f"{name!r} holds a random draw that a test has narrowed; reading its "
+                                        "value after the test is not supported")
             if local.rand:
                 if local.used:
                     raise self.refuse(line, f"{name!r} holds a random draw and is read twice: plantgen would "
@@ -713,6 +725,10 @@ class _Reader:
             if fn == "round" and len(args) != 1:
                 raise self.refuse(line, "round() with digits is not supported")
             return _Val(f"{fn}({', '.join(a.text for a in args)})", rand)
+        if name == "sum" and len(node.args) == 1 and isinstance(node.args[0], (ast.List, ast.Tuple, ast.ListComp,
+                                                                                  ast.GeneratorExp)):
+            terms = self._terms(node.args[0], env, line) or [_Val("0")]
+            return _Val(" + ".join(_wrap(t.text) for t in terms), any(t.rand for t in terms))
         if base == "" and attr in ("float", "bool", "abs") and len(node.args) == 1:
             a = self.expr(node.args[0], env, line)
             return _Val({"float": f"({a.text})", "bool": f"(({a.text}) != 0)", "abs": f"abs({a.text})"}[attr], a.rand)
@@ -723,6 +739,26 @@ class _Reader:
         if name in self.lazy:
             raise self.refuse(line, self.lazy[name])
         raise self.refuse(line, f"call of {name}() is not supported")
+
+    def _terms(self, seq, env: dict, line: int) -> list[_Val]:
+        """The values of a written list, or of ``[e for NAME in range(...)]`` with a
+        constant count (unrolled, as a loop)."""
+        if isinstance(seq, (ast.List, ast.Tuple)):
+            return [self.expr(e, env, line) for e in seq.elts]
+        gen = seq.generators[0]
+        it = gen.iter
+        if (len(seq.generators) != 1 or gen.ifs or not isinstance(gen.target, ast.Name) or not isinstance(it, ast.Call)
+                or _call_name(it) != "range" or not 1 <= len(it.args) <= 3):
+            raise self.refuse(line, "a comprehension other than '[e for NAME in range(...)]' is not supported")
+        try:
+            bounds = [evaluate(self.expr(a, env, line).text, self.defines) for a in it.args]
+        except ExprError:
+            bounds = [0.5]
+        if any(b != int(b) for b in bounds):
+            raise self.refuse(line, "range() in a comprehension must have a constant, whole count")
+        values = range(*map(int, bounds)) if bounds[-1] != 0 or len(bounds) < 3 else range(0)
+        self._count_loops(len(values), line)
+        return [self.expr(seq.elt, {**env, gen.target.id: _Val(str(i))}, line) for i in values]
 
     def _random(self, fn: str, args: list, env: dict, line: int) -> _Val:
         vals = [self.expr(a, env, line) for a in args] if fn != "choice" else []
@@ -990,9 +1026,13 @@ class _Reader:
             line = stmt.lineno
             nxt = []
             if isinstance(stmt, ast.If):
-                self.if_ids += 1
-                ident = self.if_ids
                 for env, conds, pending in states:
+                    self.if_ids += 1                    # one test per state: a way through the rule
+                    ident = self.if_ids
+                    split = self._uniform_test(stmt.test, env)
+                    if split is not None:
+                        nxt += self._split(stmt, split, (env, conds, pending), paths)
+                        continue
                     c = self.expr(stmt.test, env, line)
                     yes = self._run(stmt.body, [(_copy(env), [*conds, (ident, True, c.text, c.rand, line)],
                                                  list(pending))], paths)
@@ -1001,6 +1041,12 @@ class _Reader:
                     nxt += yes + no
             elif isinstance(stmt, ast.For):
                 nxt = self._for(stmt, states, paths)
+            elif (fork := self._choices(stmt)) is not None:
+                name, values = fork
+                self.if_ids += 1
+                choice = (self.if_ids, True, None, 1.0 / len(values), line)
+                nxt = [({**_copy(env), name: _Val(v)}, [*conds, choice], list(pending))
+                       for env, conds, pending in states for v in values]
             else:
                 for env, conds, pending in states:
                     state = self._simple(stmt, env, conds, pending, paths)
@@ -1008,6 +1054,78 @@ class _Reader:
                         nxt.append(state)
             states = nxt
         return states
+
+    def _uniform_test(self, test, env: dict):
+        """``r < c`` (or ``<=``, ``>``, ``>=``, either side) with ``r`` a local holding
+        ``random()`` and ``c`` a constant: (r, the interval where the test holds)."""
+        if not (isinstance(test, ast.Compare) and len(test.ops) == 1):
+            return None
+        left, right, op = test.left, test.comparators[0], type(test.ops[0])
+        if isinstance(right, ast.Name) and right.id in env and env[right.id].span is not None:
+            left, right = right, left
+            op = {ast.Lt: ast.Gt, ast.LtE: ast.GtE, ast.Gt: ast.Lt, ast.GtE: ast.LtE}.get(op)
+        if not (isinstance(left, ast.Name) and left.id in env and env[left.id].span is not None) or op not in (
+                ast.Lt, ast.LtE, ast.Gt, ast.GtE):
+            return None
+        try:
+            c = evaluate(self.expr(right, {}, test.lineno).text, self.defines)
+        except (LpyError, ExprError):
+            return None
+        lo, hi = env[left.id].span
+        t = min(max(c, lo), hi)
+        below, above = (lo, t), (t, hi)
+        return left.id, (below, above) if op in (ast.Lt, ast.LtE) else (above, below)
+
+    def _split(self, stmt: ast.If, split, state, paths: list) -> list:
+        """An ``if`` on a uniform draw: its branches become stochastic alternatives, each
+        as likely as the part of the draw's interval it keeps."""
+        name, (yes, no) = split
+        env, conds, pending = state
+        lo, hi = env[name].span
+        out = []
+        for body, (a, b) in ((stmt.body, yes), (stmt.orelse, no)):
+            weight = (b - a) / (hi - lo) if hi > lo else 0.0
+            if weight <= 0:
+                continue
+            self.if_ids += 1
+            branch_env = _copy(env)
+            branch_env[name].span = (a, b)
+            out += self._run(body, [(branch_env, [*conds, (self.if_ids, True, None, weight, stmt.lineno)],
+                                     list(pending))], paths)
+        return out
+
+    def _choices(self, stmt) -> tuple[str, list[str]] | None:
+        """``NAME = randint(a, b)`` or ``NAME = choice([...])`` with constants: the name
+        and the values it may take, each as likely (the rule becomes stochastic
+        alternatives, one per value); None for any other statement."""
+        if not (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
+                and isinstance(stmt.value, ast.Call)):
+            return None
+        values = self._choice_values(stmt.value)
+        return None if values is None else (stmt.targets[0].id, values)
+
+    def _choice_values(self, call: ast.Call) -> list[str] | None:
+        name = _call_name(call) or ""
+        fn = self.functions.get(name)
+        if isinstance(fn, ast.Lambda) and isinstance(fn.body, ast.Call):   # nb = lambda o: randint(3, 5)
+            return self._choice_values(fn.body)
+        base, _, attr = name.rpartition(".")
+        if self.aliases.get(base, base) not in ("", "random") or attr not in ("randint", "choice") or name in \
+                self.functions or len(call.args) != (2 if attr == "randint" else 1) or call.keywords:
+            return None
+        try:
+            if attr == "randint":
+                lo, hi = (evaluate(self.expr(a, {}, call.lineno).text, self.defines) for a in call.args)
+                if lo != int(lo) or hi != int(hi) or not 1 <= hi - lo + 1 <= 32:
+                    return None
+                return [str(k) for k in range(int(lo), int(hi) + 1)]
+            seq = call.args[0]
+            if not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 32:
+                return None
+            vals = [self.expr(e, {}, call.lineno) for e in seq.elts]
+            return None if any(v.rand for v in vals) else [v.text for v in vals]
+        except (LpyError, ExprError):
+            return None
 
     def _simple(self, stmt, env, conds, pending, paths):
         line = stmt.lineno
@@ -1023,7 +1141,9 @@ class _Reader:
             return env, conds, mods
         if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
             v = self.expr(stmt.value, env, line)
-            return {**env, stmt.targets[0].id: _Val(v.text, v.rand)}, conds, pending
+            uniform = v.text == "random()"           # a draw its tests split into alternatives
+            return {**env, stmt.targets[0].id: _Val(v.text, v.rand, span=(0.0, 1.0) if uniform else None)}, \
+                conds, pending
         if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
             v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, line)
             return {**env, stmt.target.id: _Val(v.text, v.rand)}, conds, pending
@@ -1051,6 +1171,16 @@ class _Reader:
         if any(isinstance(n, (ast.Break, ast.Continue)) for n in ast.walk(stmt)):
             raise self.refuse(line, "break and continue are not supported")
         out = []
+        counts = self._choice_values(it.args[0]) if len(it.args) == 1 and isinstance(it.args[0], ast.Call) else None
+        if counts is not None:                 # range(randint(a, b)): one alternative per count
+            self.if_ids += 1
+            choice = (self.if_ids, True, None, 1.0 / len(counts), line)
+            for env, conds, pending in states:
+                for k in counts:
+                    n = int(float(k))
+                    out += self._unroll(stmt, max(n, 0), range(n), (_copy(env), [*conds, choice], list(pending)),
+                                        paths)
+            return out
         for env, conds, pending in states:
             bounds = []
             for a in it.args:
@@ -1072,15 +1202,18 @@ class _Reader:
         return out
 
     def _unroll(self, stmt: ast.For, count: int, values, state, paths: list) -> list:
-        self.loops += count
-        if self.loops > MAX_LOOP_ITERATIONS:
-            raise LimitError(f"{self.path}: line {stmt.lineno}: loops unroll to over {MAX_LOOP_ITERATIONS:,} "
-                             "iterations in all")
+        self._count_loops(count, stmt.lineno)
         cur = [state]
         for i in values:
             cur = [({**e, stmt.target.id: _Val(str(i))}, c, p) for e, c, p in cur]
             cur = self._run(stmt.body, cur, paths)
         return cur
+
+    def _count_loops(self, count: int, line: int) -> None:
+        self.loops += count
+        if self.loops > MAX_LOOP_ITERATIONS:
+            raise LimitError(f"{self.path}: line {line}: loops unroll to over {MAX_LOOP_ITERATIONS:,} "
+                             "iterations in all")
 
     def _dynamic_for(self, stmt: ast.For, count: str, state, paths: list) -> list:
         """``for i in range(n)`` with ``n`` a module parameter: one way through the rule
@@ -1116,17 +1249,27 @@ class _Reader:
             emitted.append((conds, p))
         seen: dict = {}
         for conds, _ in emitted:
-            for ident, _holds, _text, rand, at in conds:
-                if rand:
+            for ident, _holds, text, rand, at in conds:
+                if rand and text is not None:
                     seen[ident] = seen.get(ident, 0) + 1
                     if seen[ident] > 1:
                         raise self.refuse(at, "a random test on which more than one way through the rule "
                                               "depends: plantgen would draw it anew for each")
+        rules, weights = [], {}
         for conds, p in emitted:
-            text = " && ".join(_wrap(t) if h else f"!{_wrap(t)}" for _, h, t, _, _ in conds)
-            if len(conds) == 1 and conds[0][1]:
-                text = conds[0][2]
-            self.rules[section].append((left, pred, right, [text] if text else [], p.modules, p.line, None))
+            tests = [c for c in conds if c[2] is not None]
+            text = " && ".join(_wrap(t) if h else f"!{_wrap(t)}" for _, h, t, _, _ in tests)
+            if len(tests) == 1 and tests[0][1]:
+                text = tests[0][2]
+            weight = float(np.prod([c[3] for c in conds if c[2] is None]))
+            weights[text] = weights.get(text, 0.0) + weight
+            rules.append((left, pred, right, [text] if text else [], p.modules, p.line,
+                          weight if len(conds) > len(tests) else None))
+        for r in rules:
+            if r[6] is not None and abs(weights[r[3][0] if r[3] else ""] - 1) > 1e-9:
+                raise self.refuse(r[5], "a random choice (randint, choice) in a branch that may leave the module "
+                                        "unchanged: plantgen's stochastic rules always rewrite it")
+        self.rules[section] += rules
 
     # ------------------------------------------------------------ output
     def build(self, stem: str) -> LpyModel:
@@ -1283,7 +1426,7 @@ def _wrap(text: str) -> str:
 
 
 def _copy(env: dict) -> dict:
-    return {k: _Val(v.text, v.rand, v.used) for k, v in env.items()}
+    return {k: _Val(v.text, v.rand, v.used, v.span) for k, v in env.items()}
 
 
 def _call_name(call: ast.Call) -> str | None:
