@@ -54,7 +54,7 @@ __all__ = ["batch"]
 def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask, seed, scheduler, workers,
           allow_paths, limit_values, quiet, **scan_knobs) -> None:
     """Make many plants on Dask: SOURCE is a batch spec (.yaml with 'plants' and
-    'outputs'; see the README) or, with --seeds, one grammar (a path or a shipped name).
+    'outputs'; docs: how-to/batch.md) or, with --seeds, one grammar (a path or a shipped name).
 
     By default a LocalCluster of one single-threaded worker process per CPU runs the
     plants and stops at the end; --scheduler uses an existing cluster (--out must then be

@@ -54,7 +54,7 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
 
     Derives the L-system, walks the turtle, and writes the segment arrays (start, end,
     r_start, r_end, parent, continues, material, material_names) as .npz, or the
-    skeleton as SWC (README: "Skeleton format"). A scene writes all its instances as one
+    skeleton as SWC (docs: reference/formats.md). A scene writes all its instances as one
     skeleton. Prints segments, branch tips, the height and bounding box of the geometry
     (the frusta, radii included where they reach) and the time of each stage.
 

@@ -193,7 +193,7 @@ def _limit_defaults() -> str:
 limit_opt = click.option(
     "--limit", "limit_values", metavar="NAME=N", multiple=True, callback=_parse_limits,
     help="Set a budget for this run, higher or lower (repeatable); a file may lower a budget, "
-         f"never raise it. Names and defaults: {_limit_defaults()} (README: 'Untrusted input').")
+         f"never raise it. Names and defaults: {_limit_defaults()} (docs: how-to/untrusted-input.md).")
 
 
 def limits_from(values: dict) -> Limits:

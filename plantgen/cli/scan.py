@@ -74,7 +74,7 @@ def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth
     Terrestrial scanners stand on a circle around the plant (or at --scanner-positions)
     and fire beams every --angular-step degrees at it; airborne flight lines pass over it.
     Each beam's first return is cast against the exact frusta and the leaves, with
-    Gaussian range noise and beam divergence if asked (README: "Simulated laser scans").
+    Gaussian range noise and beam divergence if asked (docs: how-to/scan.md).
 
     \b
     Examples:
