@@ -53,3 +53,24 @@ def test_scan_of_a_scene_matches_the_merged_scan(scene):
         ca = np.bincount(getattr(a, name), minlength=8)
         cb = np.bincount(getattr(b, name), minlength=8)
         assert np.abs(ca - cb).sum() <= 0.05 * len(a), name
+
+
+def test_a_finder_gives_the_primitives_and_float64_the_ranges(scene):
+    """precision float32 with a finder (the GPU's search; here a stand-in that gives the
+    right primitives with float32 distances): the float64 scan's points exactly."""
+    _, merged, two = scene
+    centre = merged.box().mean(axis=0)
+    positions = ((centre[0] + 1.0, centre[1], centre[2] - 2.0),)
+    exact = scan_points(two, ScanSettings(angular_step=0.8, positions=positions))
+    calls = []
+
+    def finder(target, origins, dirs):
+        calls.append(len(origins))
+        t, prim = target.first_hits(origins, dirs)
+        return t.astype(np.float32), prim
+
+    got = scan_points(two, ScanSettings(angular_step=0.8, positions=positions, precision="float32"), finder=finder)
+    assert calls and len(exact) > 100
+    np.testing.assert_array_equal(got.xyz, exact.xyz)
+    np.testing.assert_array_equal(got.segment, exact.segment)
+    np.testing.assert_array_equal(got.plant, exact.plant)

@@ -70,13 +70,15 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
     with StageBars(enabled=not quiet) as bars:
         if grown.scene is not None:          # each distinct plant once, its copies traced through two levels
             skin = skinning(smooth_bends if smooth_bends is not None else grown.smooth_bends)
-            cloud = scan_scene(grown.scene.plants(), settings, scan_seed, limits=limits, progress=bars,
-                               skin=lambda skel: check_finite_frusta(skin(skel), str(input)))
+            cloud = scan_scene(grown.scene.plants(), settings, scan_seed, limits=limits,
+                               skin=lambda skel: check_finite_frusta(skin(skel), str(input)),
+                               progress=lambda done, total: bars("scan", done, total))
         else:
             frusta = skin_model(grown, smooth_bends)
             plant, leaf_plant = _plant_ids(grown)
             cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
-                               leaf_plant=leaf_plant, limits=limits, progress=bars)
+                               leaf_plant=leaf_plant, limits=limits,
+                               progress=lambda done, total: bars("scan", done, total))
     write_points(cloud, output, up=up)
     if quiet:
         return
