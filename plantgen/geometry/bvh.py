@@ -20,13 +20,14 @@ open node at once, O(n log n), in one of two ways:
   with a larger constant.
 
 Measured (``python -m plantgen.benchmarks.bvh``, ``gallery/bench/llvmpipe/bvh.md``, 2
-shared cores): LBVH builds 1.05-1.13 M primitives a second on the broadleaf (85,030 rows
-and leaf triangles) and the pine's needles (448,530), 2.8 M/s on a million random boxes;
-binned SAH 0.05-0.07 M/s, 15-40 times slower. SAH's trees are better (SAH cost 68 against
-81 on the needles) and trace up to 1.7 times faster there, about as fast on the broadleaf
-and the forest. LBVH is the default: its build meets the goal of a million primitives a
-second and a scan or query pays it once per model; ``method="sah"`` is the knob for a
-model traced with far more rays than it has primitives.
+shared cores, load average 3-4): LBVH builds 1.5-1.7 M primitives a second on the
+broadleaf (85,030 rows and leaf triangles) and the pine's needles (448,530), 1.3 M/s on a
+million random boxes; binned SAH 0.09-0.12 M/s, 13-15 times slower. SAH's trees are
+better (SAH cost 68 against 81 on the needles, 27 against 33 on the broadleaf) and trace
+1.1-1.5 times faster there, as fast on the forest. LBVH is the default: its build meets
+the goal of a million primitives a second, and a scan or a query pays it once per model;
+``method="sah"`` is the knob for a model traced with far more rays than it has
+primitives.
 
 A node box is the union of its primitives' boxes, in float64, exactly (no rounding
 padding: the primitive boxes carry their own). For the GPU, boxes go to float32
