@@ -55,9 +55,12 @@ chunks (``max_pairs`` sub-rays, at most :data:`SCAN_CHUNK_RAYS`), so memory stay
 whatever their count. A scene (:func:`scan_scene`, :class:`SceneTarget`) is traced in
 two levels, each distinct plant once and the beams moved into each copy's frame in
 float64, so it costs the memory of its distinct plants, not of its copies placed.
-``precision="float32"`` tests the frusta in float32 relative to the
-scanner (the GPU's arithmetic; leaves stay float64): ``python -m plantgen.benchmarks.scan``
-measures what it saves and costs.
+``precision="float32"`` with a ``finder`` (``plantgen scan`` passes the GPU's search,
+:func:`plantgen.gl.trace.trace_target`) finds each beam's primitive in float32 and solves
+its range again in float64 against that primitive (the reference's ranges wherever both
+find the same primitive); without one it tests the frusta in float32 relative to the
+scanner on the CPU (leaves stay float64): ``python -m plantgen.benchmarks.scan`` measures
+what each saves and costs.
 
 Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 """
@@ -700,11 +703,12 @@ SCAN_CHUNK_RAYS = 1 << 18
 PACKET_RAYS = 64
 
 
-def _found_again(target: ScanTarget, finder, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
+def _found_again(target, finder, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
     """The first hits (t, primitive) of rays whose primitive ``finder(target, origins,
     dirs) -> (t, primitive)`` finds (the GPU's float32 search), each range solved again in
-    float64 against that primitive; a ray whose primitive the float64 test then misses (a
-    graze decided the other way by rounding) is traced again by the float64 reference."""
+    float64 against that primitive (``target.hit_distance``); a ray whose primitive the
+    float64 test then misses (a graze rounding decided the other way) is traced again by
+    the float64 reference."""
     _, prim = finder(target, origins, dirs)
     prim = np.asarray(prim, np.int64).copy()
     t = np.full(len(prim), np.inf)
@@ -719,11 +723,10 @@ def _found_again(target: ScanTarget, finder, origins, dirs) -> tuple[np.ndarray,
 def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
                 progress=None, finder=None):
     """(sub-ray ids, t, primitive) of the first hit of each of the scanner's sub-rays that
-    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time: in float64
-    (or float32 with ``precision``) on the CPU, or with a ``finder`` and precision float32
-    found by it and solved again in float64 (:func:`_found_again`)."""
+    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time (with a
+    ``finder`` and precision float32: found by it, solved again in float64,
+    :func:`_found_again`)."""
     s = settings.sub_rays
-    gpu = finder is not None and settings.precision == "float32"
     step = max(1, min(max_pairs, SCAN_CHUNK_RAYS) // s)
     found = []
     for start in range(0, grid.count, step):
@@ -731,12 +734,11 @@ def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, sca
         origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
-        origins = np.repeat(origins, s, axis=0)
-        if gpu:
-            t, prim = _found_again(target, finder, origins, dirs)
+        if finder is not None and settings.precision == "float32":
+            t, prim = _found_again(target, finder, np.repeat(origins, s, axis=0), dirs)
         else:
-            t, prim = target.first_hits(origins, dirs, precision=settings.precision, origin=grid.origin,
-                                        packets=PACKET_RAYS)
+            t, prim = target.first_hits(np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
+                                        origin=grid.origin, packets=PACKET_RAYS)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
         if progress is not None:
@@ -801,7 +803,7 @@ class BeamReturns:
 def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
                  max_pairs: int = 1 << 20, finder=None) -> list[BeamReturns]:
     """Every scanner's :class:`BeamReturns` (what :func:`scan_plant` turns into points;
-    the benchmark compares precisions beam by beam); ``finder``: see :func:`scan_plant`."""
+    the benchmark compares precisions beam by beam); ``finder`` as :func:`scan_points`."""
     out = []
     for k, grid in enumerate(beam_grids(target, settings)):
         sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs, finder=finder)
@@ -833,29 +835,28 @@ def _metadata(settings: ScanSettings, seed: int) -> dict:
 def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: ScanSettings | None = None,
                seed: int = 0, *, frusta: Frusta | None = None, plant=0, leaf_plant=None,
                topology: Branches | None = None, limits: Limits | None = None,
-               max_pairs: int = 1 << 20, finder=None, progress=None) -> PointCloud:
+               max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
     """A simulated laser scan of a plant (see the module docstring): ``skeleton`` (skinned
     here unless its ``frusta`` are given) and its ``leaves`` (or None), scanned as
     ``settings`` say, noise and beam turns drawn from ``seed``. ``plant`` labels the points
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
-    ``scan_rays`` before anything is cast.
-
-    ``finder``: with ``settings.precision`` float32, ``finder(target, origins, dirs) ->
-    (t, primitive)`` finds each beam's primitive (the GPU's search,
-    :func:`plantgen.gl.trace.trace_target`; this module draws nothing) and each range is
-    solved again in float64 against it, so ranges are the reference's. ``progress(beams,
-    total)``: called as the beams stream, with the beams done and the total."""
+    ``scan_rays`` before anything is cast; ``progress`` and ``finder`` as
+    :func:`scan_points` takes them."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
-    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs, finder=finder, progress=progress)
+    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs, progress=progress, finder=finder)
 
 
 def scan_points(target, settings: ScanSettings, seed: int = 0, *, limits: Limits | None = None,
-                max_pairs: int = 1 << 20, finder=None, progress=None) -> PointCloud:
+                max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
     """The :class:`PointCloud` of a scan of ``target`` (a :class:`ScanTarget` or a
-    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return
-    (``finder``, ``progress``: see :func:`scan_plant`)."""
+    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return.
+    ``progress("scan", beams done, beams)`` is called after each chunk of beams.
+    ``finder``: with ``settings.precision`` float32, ``finder(target, origins, dirs) ->
+    (t, primitive)`` finds each beam's primitive (the GPU's search,
+    :func:`plantgen.gl.trace.trace_target`; this module draws nothing) and each range is
+    solved again in float64 against it, so ranges are the reference's."""
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
     grids = beam_grids(target, settings)
@@ -866,7 +867,7 @@ def scan_points(target, settings: ScanSettings, seed: int = 0, *, limits: Limits
     def step(beams: int) -> None:
         done[0] += beams
         if progress is not None:
-            progress(done[0], total)
+            progress("scan", done[0], total)
 
     parts = [_scan_one(target, g, settings, seed, k, max_pairs, step, finder) for k, g in enumerate(grids)]
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
@@ -987,14 +988,12 @@ def scene_target(plants, *, skin=None) -> SceneTarget:
 
 
 def scan_scene(plants, settings: ScanSettings | None = None, seed: int = 0, *, skin=None,
-               limits: Limits | None = None, max_pairs: int = 1 << 20, finder=None, progress=None) -> PointCloud:
+               limits: Limits | None = None, max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
     """A simulated laser scan of an instanced scene (its distinct ``plants``, as
     :func:`scene_target` takes them), each plant skinned once and its copies traced
     through a two-level BVH: the same points, labels numbered as for the merged scene,
     as :func:`scan_plant` of the merged skeleton gives (ranges to rounding), in the
-    memory of the distinct plants. ``finder``, ``progress``: as :func:`scan_plant` takes
-    them (a finder gets the :class:`SceneTarget` and gives its primitives as
-    ``copy · stride + primitive``)."""
+    memory of the distinct plants."""
     settings = settings or ScanSettings()
     return scan_points(scene_target(plants, skin=skin), settings, seed, limits=limits, max_pairs=max_pairs,
-                       finder=finder, progress=progress)
+                       progress=progress, finder=finder)
