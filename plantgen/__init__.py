@@ -3,11 +3,11 @@
 The public API mirrors the command line::
 
     import plantgen
-    skel = plantgen.grow("grammars/pine.yaml", seed=3)        # -> plantgen.Skeleton
-    image = plantgen.render("pine", azimuth=60, ssaa=2)       # -> plantgen.RenderedImage
-    image.save("pine.png")                                    # (in Jupyter: shows itself)
-    plantgen.export("pine", "pine.glb", subdiv=2)             # -> summary dict
-    hits = plantgen.trace("pine", origins, directions)        # -> plantgen.TraceResult
+    skel = plantgen.grow("pine", seed=3)   # a shipped name or a file -> plantgen.Skeleton
+    image = plantgen.render("pine", azimuth=60, ssaa=2)    # -> plantgen.RenderedImage
+    image.save("pine.png")                                 # (in Jupyter: shows itself)
+    plantgen.export("pine", "pine.glb", subdiv=2)          # -> summary dict
+    hits = plantgen.trace("pine", origins, directions)     # -> plantgen.TraceResult
 """
 
 from .geometry.skeleton import Skeleton, SkeletonError
@@ -19,7 +19,8 @@ __all__ = ["RenderedImage", "Skeleton", "SkeletonError", "TraceResult", "export"
 
 
 def grow(path, *, seed=None, iterations=None, max_modules=None, limits=None, allow_paths=()):
-    """Grow a grammar or scene file into a Skeleton (see ``plantgen grow --help``);
+    """Grow a grammar or scene file, or a shipped one by name (``"pine"``: ``plantgen list``
+    names them), into a Skeleton (see ``plantgen grow --help``);
     ``limits`` (a :class:`plantgen.limits.Limits`) and ``allow_paths`` as ``--limit`` and
     ``--allow-path``."""
     from .pipeline import grow as _grow

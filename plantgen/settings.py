@@ -406,8 +406,8 @@ class KeyframeSettings:
     sway: bool = knob(True, "--sway", "Write a swaying scene's sway as a looping animation (glTF, USD); "
                       "--no-sway writes its plants at rest, as a still file.", kind="bool")
     rate: float = knob(24.0, "--key-rate", "Keyframes per second of the sway a glTF or USD export writes "
-                       "(interpolated linearly; see the README for the error).", lo=0, lo_open=True, hi=1000,
-                       metavar="HZ")
+                       "(interpolated linearly; the docs' 'Export a swaying scene' gives the error).", lo=0,
+                       lo_open=True, hi=1000, metavar="HZ")
     duration: float | None = knob(None, "--duration", "Seconds of sway a glTF or USD export writes, from t = 0. "
                                   "Default: one period of the scene's sway (the common period of its plants'), "
                                   "so that the animation loops.", lo=0, lo_open=True, hi=3600, metavar="SECONDS")

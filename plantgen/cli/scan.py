@@ -58,7 +58,8 @@ def _plant_ids(grown) -> tuple[object, object]:
 @click.command()
 @input_arg
 @output_opt("its suffix names the format: .las or .laz (LAS 1.4, point format 6, the labels as extra "
-            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates).")
+            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates). Default: INPUT's "
+            "name with .ply, in the current directory.", required=False)
 @knob_options(ScanSettings)
 @click.option("--scan-seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Seed of the range noise and of the beams' sub-ray turns (the same seed, the same points).")
@@ -69,7 +70,7 @@ def _plant_ids(grown) -> tuple[object, object]:
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
+def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
          quiet, **knobs) -> None:
     """Scan INPUT (a grammar or scene .yaml, a shipped one by name, or a skeleton .npz /
     .swc) with simulated laser scanners and write the points, each labelled with its
@@ -82,9 +83,11 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
 
     \b
     Examples:
+      plantgen scan pine                            # writes pine.ply
       plantgen scan pine -o pine.las --angular-step 0.05 --range-noise 0.002
       plantgen scan broadleaf -o leaf.ply --scan-mode airborne --scan-angle 30
     """
+    output = output or Path(input.stem + ".ply")
     check_point_output(output)
     chosen = click.get_current_context().get_parameter_source("scan_precision") is not ParameterSource.DEFAULT
     settings = take_settings(ScanSettings, knobs)
