@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, float32_boxes
 from ..geometry.instances import similarity_parts
+from ..limits import LimitError, hint
 from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
@@ -126,14 +127,16 @@ def _copy_words(matrices, copy_plant, centres, origin) -> np.ndarray:
     return words
 
 
-def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None) -> GpuBvh:
+def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
+               max_bytes: int | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
 
     One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
     the centre of its root box). Two levels: ``top`` a BVH over the copies (copy ids), per
     copy its similarity ``matrices`` (k, 4, 4) from its plant's frame to the world and
     ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
-    relative to it). Raises PlantgenError for a tree deeper than the GPU's stack.
+    relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
+    LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
     """
     two_level = top is not None
     if not two_level and len(plants) != 1:
@@ -169,6 +172,10 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         words = _copy_words(matrices, copy_plant, centres, origin)
         copies = len(words)
         arrays += [np.asarray(top.prims, np.int32), words]
+    need = sum(a.nbytes for a in arrays)
+    if max_bytes is not None and need > max_bytes:
+        raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
+                         f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
     gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies)
     for a in arrays:
         data = np.ascontiguousarray(a).tobytes()
