@@ -49,7 +49,7 @@ def _staged(name: str):
 
 
 @pytest.mark.parametrize("relief", [False, True], ids=["RT", "RT+R"])
-@pytest.mark.parametrize("name", ["pine", "saguaro", "aloe"])
+@pytest.mark.parametrize("name", ["pine", "saguaro", "aloe", "desert"])
 def test_rt_shows_the_ray_casters_surfaces(gl_ctx, name, relief):
     frusta, view = _staged(name)
     settings = RaycastSettings(relief=relief)
