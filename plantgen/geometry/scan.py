@@ -162,8 +162,11 @@ class ScanSettings:
                                        lo_open=True, metavar="D")
     scan_angle: float = knob(30.0, "--scan-angle", "Airborne: the mirror's sweep, degrees either side of the nadir "
                              "(0: nadir beams only).", lo=0.0, hi=75.0, metavar="DEG")
-    precision: str = knob("float64", "--scan-precision", "float64: the exact reference; float32: the frusta tested "
-                          "in float32 (faster, less exact).", kind="choice", choices=("float64", "float32"))
+    precision: str = knob("float64", "--scan-precision", "float64: the exact reference on the CPU; float32: each "
+                          "beam's primitive found on the GPU in float32, its range then solved in float64 (the "
+                          "reference's ranges; without GL the frusta tested in float32 on the CPU). plantgen scan "
+                          "without it: float32 where a GL context exists, else float64.",
+                          kind="choice", choices=("float64", "float32"))
 
     def __post_init__(self):
         check_knobs(self, ScanError)
