@@ -41,7 +41,8 @@ class AssetSettings:
 
     asset: str | None = knob(None, "--asset", "glTF: game writes what an engine takes: 4 levels of detail (swaying "
                              "where the model sways), leaf cards, an octahedral impostor baked by the ray caster as "
-                             "the last level, and textures, each level checked against its triangle budget.",
+                             "the last level, and textures, at m = 0 unless --subdiv is given, each level "
+                             "checked against its triangle budget.",
                              kind="choice", choices=ASSET_PRESETS)
     leaves: str | None = knob(None, "--leaves", "glTF: a grammar's leaves as their polygons, or as cards: one "
                               "alpha-cut quad per leaf polygon over an atlas of the distinct leaf shapes (alphaMode "
@@ -52,7 +53,7 @@ class AssetSettings:
                                  "game.", kind="bool", flag="--impostor/--no-impostor")
     impostor_frames: int = knob(8, "--impostor-frames", "Impostor: N×N views.", kind="int", lo=2, hi=32, metavar="N")
     impostor_size: int = knob(1024, "--impostor-size", "Impostor: the atlas's side in texels (a multiple of N).",
-                              kind="int", lo=64, hi=8192, metavar="TEXELS")
+                              kind="int", lo=64, hi=4096, metavar="TEXELS")
 
     def __post_init__(self):
         check_knobs(self)

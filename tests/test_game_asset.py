@@ -2,8 +2,8 @@
 budgets, leaf cards, and an octahedral impostor baked by the ray caster as the last glTF
 level. The atlas's directions invert exactly; a baked cylinder's tiles hold its exact
 silhouette, depth and normals; the file passes the Khronos validator and three.js loads
-every level, the skin and the impostor card; Blender (in CI) imports the levels with the
-armature and the action."""
+every level, the skin and the impostor card (Blender, in CI, imports the swaying game
+asset: tests/test_sway_levels.py)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import subprocess
 
 import numpy as np
 import pytest
-from _blender import blender_line
 from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, node_modules, three_script
 from test_export_scene import glb_json
@@ -181,22 +180,3 @@ def test_a_swaying_game_asset_skins_every_level_and_stands_its_impostor_where_th
     for node in (n for n in doc["nodes"] if "MSFT_lod" in n.get("extensions", {})):
         card = doc["nodes"][node["extensions"]["MSFT_lod"]["ids"][-1]]
         assert "skin" not in card and card["translation"] == holders[node["name"]]["translation"]
-
-
-BLENDER_GAME = """
-import sys
-import bpy
-bpy.ops.import_scene.gltf(filepath=sys.argv[sys.argv.index("--") + 1])
-arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
-skinned = [o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers)]
-print("GAME", len(arms), len(skinned), len(bpy.data.actions))
-"""
-
-
-def test_blender_imports_the_swaying_game_asset(blender, tmp_path):
-    """Blender's glTF importer makes the armatures, skins the meshes and makes an action."""
-    out = tmp_path / "d.glb"
-    code, _, err = run_cli("export", "dancing_cacti", "-o", out, "--asset", "game", *SMALL, "--no-textures")
-    assert code == 0, err
-    words = blender_line(blender, BLENDER_GAME, tmp_path, "GAME", str(out)).split()
-    assert int(words[0]) >= 1 and int(words[1]) >= 100 and int(words[2]) >= 1

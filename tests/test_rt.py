@@ -49,7 +49,7 @@ def _staged(name: str):
 
 
 @pytest.mark.parametrize("relief", [False, True], ids=["RT", "RT+R"])
-@pytest.mark.parametrize("name", ["pine", "saguaro", "aloe"])
+@pytest.mark.parametrize("name", ["pine", "saguaro", "aloe", "desert"])
 def test_rt_shows_the_ray_casters_surfaces(gl_ctx, name, relief):
     frusta, view = _staged(name)
     settings = RaycastSettings(relief=relief)
@@ -143,3 +143,13 @@ def test_render_method_rt_from_the_command_line(tmp_path):
     code, stdout, stderr = run_cli("render", "dancing_cacti", "-o", gif, "--method", "rt", "--frames", "2")
     assert code == 2 and "stills" in stderr and "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1
     assert not gif.exists()
+
+
+def test_a_bvh_over_the_render_memory_limit_is_refused_in_one_line(gl_ctx):
+    from plantgen.limits import LimitError, Limits
+
+    frusta, view = _staged("pine")
+    tracer = RayTracer(gl_ctx, limits=Limits(max_render_bytes=100_000))
+    with pytest.raises(LimitError, match="render_bytes") as info:
+        tracer.render(frusta, **view)
+    assert "\n" not in str(info.value) and tracer._gpu is None

@@ -53,3 +53,51 @@ def test_scan_of_a_scene_matches_the_merged_scan(scene):
         ca = np.bincount(getattr(a, name), minlength=8)
         cb = np.bincount(getattr(b, name), minlength=8)
         assert np.abs(ca - cb).sum() <= 0.05 * len(a), name
+
+
+def test_a_finder_gives_the_primitives_and_float64_the_ranges(scene):
+    """precision float32 with a finder (the GPU's search; here a stand-in that gives the
+    right primitives with float32 distances): the float64 scan's points exactly."""
+    _, merged, two = scene
+    centre = merged.box().mean(axis=0)
+    positions = ((centre[0] + 1.0, centre[1], centre[2] - 2.0),)
+    exact = scan_points(two, ScanSettings(angular_step=0.8, positions=positions))
+    calls = []
+
+    def finder(target, origins, dirs):
+        calls.append(len(origins))
+        t, prim = target.first_hits(origins, dirs)
+        return t.astype(np.float32), prim
+
+    got = scan_points(two, ScanSettings(angular_step=0.8, positions=positions, precision="float32"), finder=finder)
+    assert calls and len(exact) > 100
+    np.testing.assert_array_equal(got.xyz, exact.xyz)
+    np.testing.assert_array_equal(got.segment, exact.segment)
+    np.testing.assert_array_equal(got.plant, exact.plant)
+
+
+def test_beams_stream_in_bounded_chunks(monkeypatch):
+    """Whatever the beam count, the tracer never gets more than a chunk of rays at once;
+    the points do not depend on the chunking."""
+    from _geometry_helpers import random_tree
+
+    import plantgen.geometry.scan as scan
+
+    target = scan_target(random_tree(60, seed=5))
+    settings = ScanSettings(angular_step=0.5, scanners=2)
+    whole = scan_points(target, settings)
+    sizes = []
+    real = scan.ScanTarget.first_hits
+
+    def spy(self, origins, dirs, **kw):
+        sizes.append(len(origins))
+        return real(self, origins, dirs, **kw)
+
+    monkeypatch.setattr(scan.ScanTarget, "first_hits", spy)
+    small = scan_points(target, settings, max_pairs=1000)
+    assert max(sizes) <= 1000 and len(sizes) > 10
+    np.testing.assert_array_equal(small.xyz, whole.xyz)
+    monkeypatch.setattr(scan, "SCAN_CHUNK_RAYS", 4096)
+    sizes.clear()
+    scan_points(target, settings)
+    assert max(sizes) <= 4096

@@ -21,6 +21,7 @@ from _node import assert_khronos_valid, needs_node, node_modules, three_script
 from scipy.spatial import cKDTree
 from test_export_scene import glb_json, usd_problems
 
+from plantgen.assets import AssetSettings
 from plantgen.pipeline import export_model, grow_file
 from plantgen.settings import LevelSettings
 
@@ -243,8 +244,10 @@ print("LEVELS", len(arms), len(skinned), len(bpy.data.actions))
 
 
 def test_blender_imports_the_levels_with_the_armature_and_the_action(blender, tmp_path):
-    """Blender's glTF importer makes the armatures, skins the meshes and makes an action
-    (its importer reads the scene's level 0; the levels share its armature)."""
-    export_model("dancing_cacti", tmp_path / "d.glb", level=0, levels=LevelSettings(levels=2), textures=False)
+    """Blender's glTF importer makes the armatures, skins the meshes and makes an action of
+    the swaying game asset (levels, impostor; its importer reads the scene's level 0, the
+    levels share its armature)."""
+    export_model("dancing_cacti", tmp_path / "d.glb", level=0, textures=False,
+                 asset=AssetSettings(asset="game", impostor_frames=4, impostor_size=128))
     words = blender_line(blender, BLENDER_LEVELS, tmp_path, "LEVELS", str(tmp_path / "d.glb")).split()
     assert int(words[0]) >= 1 and int(words[1]) >= 100 and int(words[2]) >= 1

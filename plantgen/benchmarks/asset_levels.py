@@ -26,7 +26,7 @@ from ..geometry.stage import MODEL_LIGHT
 from ..gl.impostor import bake_impostor, bounding_sphere, impostor_camera
 from ..pipeline import grow_file, plant_detail
 from ..table1.quality import depth_shading, image_error
-from .engine_assets import LeafRaster, _distances
+from .engine_assets import LeafRaster, impostor_distances
 
 
 def level_images(model: str, size: int, frames: int = 8, atlas: int = 1024):
@@ -49,14 +49,14 @@ def level_images(model: str, size: int, frames: int = 8, atlas: int = 1024):
                               kept.uv.reshape(-1, 2), kept.atlas.image, mipmaps=False)
         s = np.fmax(bark, leaf)                               # the nearer surface (nan: none)
         out.append((f"lod{k}: {len(level.mesh.faces) + len(kept.polygons.triangles):,} triangles",
-                    _distances(s, radius)))
+                    impostor_distances(s, radius)))
     t = imp.tile
     col, row = frames - 1, 0                                  # the view from +z: atlas (1, 0)
     depth = imp.depth[row * t:(row + 1) * t, col * t:(col + 1) * t].astype(np.float64)
     s = np.where(depth > 0, (2 * (depth - 1) / 254 - 1) * radius, np.nan)
     index = np.arange(size) * t // size                      # the tile drawn at the panel's size, nearest texel
     big = s[index][:, index]
-    out.append((f"impostor: 2 triangles, {frames}x{frames} views", _distances(big, radius)))
+    out.append((f"impostor: 2 triangles, {frames}x{frames} views", impostor_distances(big, radius)))
     return out, imp, impostor_camera(centre, radius, d, size)
 
 

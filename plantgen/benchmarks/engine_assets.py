@@ -127,7 +127,7 @@ class LeafRaster:
         return out.astype(np.float64)
 
 
-def _distances(s: np.ndarray, radius: float) -> np.ndarray:
+def impostor_distances(s: np.ndarray, radius: float) -> np.ndarray:
     """Distances along the view of offsets ``s`` (inf where nothing is drawn)."""
     return np.where(np.isfinite(s), DISTANCE_FACTOR * radius - s, np.inf)
 
@@ -143,12 +143,14 @@ def leaf_card_rows(model: str, views: np.ndarray, size: int, tile: int = 64) -> 
     errors: dict = {True: [], False: []}
     for d in views:
         camera = impostor_camera(centre, radius, d, size)
-        ref = _distances(raster.offsets(polygons.vertices, polygons.triangles, centre, radius, d), radius)
+        ref = impostor_distances(raster.offsets(polygons.vertices, polygons.triangles, centre, radius, d), radius)
         for mipmaps in (True, False):
-            got = _distances(raster.offsets(cards.polygons.vertices, cards.polygons.triangles, centre, radius, d,
-                                            cards.uv.reshape(-1, 2), cards.atlas.image, mipmaps), radius)
+            quads = cards.polygons
+            got = impostor_distances(raster.offsets(quads.vertices, quads.triangles, centre, radius, d,
+                                                    cards.uv.reshape(-1, 2), cards.atlas.image, mipmaps), radius)
             errors[mipmaps].append(image_error(got, ref, camera, -np.asarray(MODEL_LIGHT.travel)))
-    # vertex bytes as glTF writes leaves: POSITION, NORMAL, TEXCOORD_0, COLOR_0 (float32) and 16-bit indices
+    # vertex bytes as glTF writes leaves: POSITION, NORMAL, TEXCOORD_0, COLOR_0 (float32), and the indices
+    # (32-bit past 65,536 vertices: the polygons; 16-bit: the cards)
     per_vertex = 4 * (3 + 3 + 2 + 3)
     polygon_bytes = len(polygons.vertices) * per_vertex + polygons.triangles.size * 4
     card_bytes = len(cards.polygons.vertices) * per_vertex + cards.polygons.triangles.size * 2
@@ -201,7 +203,7 @@ def impostor_rows(model: str, views: np.ndarray, frames: list[int], sizes: list[
                                              -np.asarray(MODEL_LIGHT.travel)).total)
                 depth = imp.depth[j * tile:(j + 1) * tile, i * tile:(i + 1) * tile].astype(np.float64)
                 s = np.where(depth > 0, (2 * (depth - 1) / 254 - 1) * radius, np.nan)
-                errors.append(image_error(_distances(s, radius), reference(d), camera,
+                errors.append(image_error(impostor_distances(s, radius), reference(d), camera,
                                           -np.asarray(MODEL_LIGHT.travel)).total)
             errors, grid_errors = errors[:len(views)], errors[len(views):]
             png = sum(len(png_bytes(m)) for m in (imp.colour, imp.normal, imp.depth))
@@ -262,7 +264,7 @@ def main(argv=None) -> int:
     return 0
 
 
-__all__ = ["LeafRaster", "impostor_rows", "leaf_card_rows", "main", "random_directions"]
+__all__ = ["LeafRaster", "impostor_distances", "impostor_rows", "leaf_card_rows", "main", "random_directions"]
 
 if __name__ == "__main__":
     sys.exit(main())

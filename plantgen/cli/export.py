@@ -113,6 +113,7 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
       plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
       plantgen export forest -o forest.glb --subdiv 0       # 4 levels of detail per plant (MSFT_lod)
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
+      plantgen export broadleaf -o tree.glb --asset game    # levels, leaf cards, impostor, textures
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
       plantgen export pine -o pine.swc --up z

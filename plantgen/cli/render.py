@@ -110,16 +110,19 @@ def print_report(report: RenderReport) -> None:
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")
     placed = report.placed
+    traced = report.settings.method == "rt"
     if placed is not None:
         drawn = report.result.stats.segments
+        detail = "traced (every row: a BVH of each plant, one over the copies)" if traced else \
+            f"drawn (level of detail: {report.lod_pixels:g} px)"
         click.echo(f"segments: {report.segments:,} placed ({placed.copies:,} copies of {len(placed.plants)} plants), "
                    f"{placed.unique_rows:,} frusta on the GPU ({placed.unique_rows * RECORD_BYTES / 1024:.1f} KiB), "
-                   f"{drawn:,} drawn (level of detail: {report.lod_pixels:g} px)")
+                   f"{drawn:,} {detail}")
     else:
         click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
                    f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
-    click.echo("effects: " + (", ".join(report.effects) or "none")
-               + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
+    shadows = "shadow rays" if traced else f"shadow map {report.shadows.resolution}²" if report.shadows else ""
+    click.echo("effects: " + (", ".join(report.effects) or "none") + (f" ({shadows})" if report.shadows else ""))
     if report.shadow_use is not None:
         click.echo(shadow_line(report.shadow_use, report.shadows.cache))
     size = f"{cam.width}x{cam.height}"

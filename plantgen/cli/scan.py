@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
 from ..geometry.frames import UP_AXES
 from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
@@ -26,21 +28,24 @@ from .options import (
 from .progress import StageBars
 
 
-def _gpu_finder(settings: ScanSettings, quiet: bool):
-    """The GPU's search for --scan-precision float32 (None for float64, or without GL: then
-    the frusta are tested in float32 on the CPU, and a line on stderr says so)."""
-    if settings.precision != "float32":
-        return None
+def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
+    """(settings, the GPU's search or None): --scan-precision float32 finds each beam's
+    primitive on the GPU, and so does a scan that left --scan-precision out where a GL
+    context exists (float64 ranges either way); float64 asked for, or no GL, gives None
+    (float32 asked for without GL: the frusta tested in float32 on the CPU, and a line on
+    stderr says so)."""
+    if settings.precision == "float64" and chosen:
+        return settings, None
     from ..gl.context import GLContextError, gl_context
     from ..gl.trace import trace_target
 
     try:
         gl_context()
     except GLContextError as exc:
-        if not quiet:
+        if chosen and not quiet:
             click.echo(f"no GPU traversal ({exc}); float32 on the CPU", err=True)
-        return None
-    return lambda target, origins, dirs: trace_target(target, origins, dirs)
+        return settings, None
+    return replace(settings, precision="float32"), lambda target, origins, dirs: trace_target(target, origins, dirs)
 
 
 def _plant_ids(grown) -> tuple[object, object]:
@@ -84,10 +89,11 @@ def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth
     """
     output = output or Path(input.stem + ".ply")
     check_point_output(output)
+    chosen = click.get_current_context().get_parameter_source("scan_precision") is not ParameterSource.DEFAULT
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
-    finder = _gpu_finder(settings, quiet)
+    settings, finder = _gpu_finder(settings, quiet, chosen)
     with StageBars(enabled=not quiet) as bars:
         if grown.scene is not None:          # each distinct plant once, its copies traced through two levels
             skin = skinning(smooth_bends if smooth_bends is not None else grown.smooth_bends)

@@ -20,13 +20,14 @@ open node at once, O(n log n), in one of two ways:
   with a larger constant.
 
 Measured (``python -m plantgen.benchmarks.bvh``, ``gallery/bench/llvmpipe/bvh.md``, 2
-shared cores): LBVH builds 1.05-1.13 M primitives a second on the broadleaf (85,030 rows
-and leaf triangles) and the pine's needles (448,530), 2.8 M/s on a million random boxes;
-binned SAH 0.05-0.07 M/s, 15-40 times slower. SAH's trees are better (SAH cost 68 against
-81 on the needles) and trace up to 1.7 times faster there, about as fast on the broadleaf
-and the forest. LBVH is the default: its build meets the goal of a million primitives a
-second and a scan or query pays it once per model; ``method="sah"`` is the knob for a
-model traced with far more rays than it has primitives.
+shared cores, load average 3-4): LBVH builds 1.5-1.7 M primitives a second on the
+broadleaf (85,030 rows and leaf triangles) and the pine's needles (448,530), 1.3 M/s on a
+million random boxes; binned SAH 0.09-0.12 M/s, 13-15 times slower. SAH's trees are
+better (SAH cost 68 against 81 on the needles, 27 against 33 on the broadleaf) and trace
+1.1-1.5 times faster there, as fast on the forest. LBVH is the default: its build meets
+the goal of a million primitives a second, and a scan or a query pays it once per model;
+``method="sah"`` is the knob for a model traced with far more rays than it has
+primitives.
 
 A node box is the union of its primitives' boxes, in float64, exactly (no rounding
 padding: the primitive boxes carry their own). For the GPU, boxes go to float32
@@ -499,17 +500,21 @@ def reduce_closest(key, t, *values, best_t, best_values, strict_ties=True):
 
 
 def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: bool, boxes=None,
-                 packets: int = 0):
+                 packets: int = 0, roots=None):
     m = len(O)
     best_t = np.full(m, np.inf)
     best_p = np.full(m, -1, np.int64)
     inv = _inverse(D)
-    start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
+    if roots is not None:
+        start = (np.arange(m), np.asarray(roots, np.int64))
+    else:
+        start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
     pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
     if pairs is None:                                # too wide a frontier: halve the batch
         h = m // 2
-        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets)
-        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets)
+        r = (None, None) if roots is None else (roots[:h], roots[h:])
+        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets, r[0])
+        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets, r[1])
         return np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]])
     rays = None if boxes is None else np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
     ray, leaf, near = pairs
@@ -552,7 +557,8 @@ def _t_max(t_max, m: int) -> np.ndarray:
 
 
 def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: float = 0.0,
-              t_max=np.inf, batch: int = TRACE_BATCH, boxes=None, packets: int = 0) -> tuple[np.ndarray, np.ndarray]:
+              t_max=np.inf, batch: int = TRACE_BATCH, boxes=None, packets: int = 0,
+              roots=None) -> tuple[np.ndarray, np.ndarray]:
     """Float64 closest (or any) hit of rays (``origins``, ``dirs``: (m, 3)) among the
     primitives of ``bvh``: ``hits(prims (k,), origins (k, 3), dirs (k, 3))`` gives the t
     of each (primitive, ray) pair (inf: a miss; hits at t <= ``t_min`` count as misses,
@@ -562,17 +568,19 @@ def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: fl
     caller has them: a ray then tests only the primitives of a leaf whose own box it meets
     (the same hits, fewer exact tests). ``packets``: up to this many consecutive rays with
     one origin (a scanner's neighbouring beams) walk the upper tree together, as one cone
-    (the same hits, fewer box tests; 0: ray by ray)."""
+    (the same hits, fewer box tests; 0: ray by ray). ``roots``: (m,) the node each ray
+    starts from (default the root; :attr:`SceneBVH.flat` holds several trees)."""
     O, D = _rays(origins, dirs)
     m = len(O)
     hi = _t_max(t_max, m)
     best_t, best_p = np.full(m, np.inf), np.full(m, -1, np.int64)
     if not bvh.nodes:
         return best_t, best_p
+    roots = None if roots is None else np.broadcast_to(np.asarray(roots, np.int64), (m,))
     for s in range(0, m, max(1, int(batch))):
         e = min(s + batch, m)
         best_t[s:e], best_p[s:e] = _trace_batch(bvh, O[s:e], D[s:e], hits, float(t_min), hi[s:e], any_hit,
-                                                boxes, int(packets))
+                                                boxes, int(packets), None if roots is None else roots[s:e])
     return best_t, best_p
 
 
@@ -630,6 +638,22 @@ class SceneBVH:
     @property
     def nbytes(self) -> int:
         return int(self.copy_bytes() * self.copies) + sum(b.nbytes for b in self.blas)
+
+    @cached_property
+    def flat(self) -> tuple[BVH, np.ndarray, np.ndarray]:
+        """Every plant's BVH in one node array, as the CPU traversal walks them: that
+        :class:`BVH` (plant k's nodes and primitives after those of plants 0..k-1, its
+        primitives numbered on from theirs), each plant's root node (plants,) and first
+        primitive (plants + 1,)."""
+        nodes = np.cumsum([0] + [b.nodes for b in self.blas])
+        prims = np.cumsum([0] + [len(b.prims) for b in self.blas])
+        cat = lambda name: np.concatenate([getattr(b, name) for b in self.blas]) if self.blas else \
+            np.zeros((0, 3) if name in ("lo", "hi") else 0)  # noqa: E731
+        first = np.concatenate([np.where(b.count == 0, b.first + nodes[k], b.first + prims[k])
+                                for k, b in enumerate(self.blas)]) if self.blas else np.zeros(0)
+        prim = np.concatenate([b.prims + prims[k] for k, b in enumerate(self.blas)]) if self.blas else np.zeros(0)
+        flat = BVH(cat("lo"), cat("hi"), first.astype(np.int32), cat("count").astype(np.int32), prim.astype(np.int32))
+        return flat, nodes[:-1].astype(np.int64), prims.astype(np.int64)
 
     def rays_to_copies(self, copy, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
         """Rays (k, 3) moved into the frames of copies ``copy`` (k,), in float64 (t is kept:
@@ -738,10 +762,14 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
     copy = scene.tlas.prims[slot].astype(np.int64)
     near, far = slab(scene.copy_lo[copy], scene.copy_hi[copy], O[ray], inv[ray])
     near = np.maximum(near, t_min)
-    ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+    filled = np.array([b.nodes > 0 for b in scene.blas], bool)
+    ok = (near <= far) & (far > t_min) & (near < t_hi[ray]) & filled[scene.plant[copy]]
     ray, copy, near = ray[ok], copy[ok], near[ok]
     order = np.lexsort((copy, near, ray))
     ray, copy, near = ray[order], copy[order], near[order]
+    flat, roots, prim_first = scene.flat
+    hits = _flat_hits(plant_hits, prim_first)
+    boxes = None if plant_boxes is None else np.concatenate(plant_boxes, axis=1)
     per_round = 1
     while ray.size:
         now = _group_rank(ray) < per_round
@@ -750,13 +778,10 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
         limit = np.minimum(t_hi[r], best_t[r])
         if not any_hit:
             limit = np.nextafter(limit, np.inf)        # a tie at the best t may still win on ids
-        t = np.full(len(r), np.inf)
-        prim = np.full(len(r), -1, np.int64)
-        for k in np.unique(scene.plant[c]):
-            sel = np.flatnonzero(scene.plant[c] == k)
-            t[sel], prim[sel] = trace_bvh(scene.blas[k], o[sel], d[sel], plant_hits[k], any_hit=any_hit,
-                                          t_min=t_min, t_max=limit[sel], batch=batch,
-                                          boxes=None if plant_boxes is None else plant_boxes[k])
+        plant = scene.plant[c]
+        t, prim = trace_bvh(flat, o, d, hits, any_hit=any_hit, t_min=t_min, t_max=limit, batch=batch,
+                            boxes=boxes, roots=roots[plant])
+        prim = np.where(prim >= 0, prim - prim_first[plant], -1)         # the plant's own numbering
         t = np.where(t < t_hi[r], t, np.inf)
         reduce_closest(r, t, c, prim, best_t=best_t, best_values=[best_c, best_p])
         ray, copy, near = ray[~now], copy[~now], near[~now]
@@ -764,3 +789,15 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
         ray, copy, near = ray[keep], copy[keep], near[keep]
         per_round *= 2
     return best_t, best_c, best_p
+
+
+def _flat_hits(plant_hits, prim_first):
+    """The primitive test over :attr:`SceneBVH.flat`'s numbering from each plant's own."""
+    def hits(prim, origins, dirs):
+        plant = np.searchsorted(prim_first, prim, side="right") - 1
+        t = np.full(len(prim), np.inf)
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            t[sel] = plant_hits[k](prim[sel] - prim_first[k], origins[sel], dirs[sel])
+        return t
+    return hits

@@ -68,6 +68,7 @@ Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 from __future__ import annotations
 
 import math
+from copy import copy as shallow_copy
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -161,8 +162,11 @@ class ScanSettings:
                                        lo_open=True, metavar="D")
     scan_angle: float = knob(30.0, "--scan-angle", "Airborne: the mirror's sweep, degrees either side of the nadir "
                              "(0: nadir beams only).", lo=0.0, hi=75.0, metavar="DEG")
-    precision: str = knob("float64", "--scan-precision", "float64: the exact reference; float32: the frusta tested "
-                          "in float32 (faster, less exact).", kind="choice", choices=("float64", "float32"))
+    precision: str = knob("float64", "--scan-precision", "float64: the exact reference on the CPU; float32: each "
+                          "beam's primitive found on the GPU in float32, its range then solved in float64 (the "
+                          "reference's ranges; without GL the frusta tested in float32 on the CPU). plantgen scan "
+                          "without it: float32 where a GL context exists, else float64.",
+                          kind="choice", choices=("float64", "float32"))
 
     def __post_init__(self):
         check_knobs(self, ScanError)
@@ -304,6 +308,12 @@ class ScanTarget:
         hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
         return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
                          boxes=self.box_columns, packets=packets)
+
+    @cached_property
+    def pair_tester(self) -> PairTester:
+        """The rows' float64 :class:`~plantgen.geometry.reference.PairTester` (uploaded on
+        first use and kept: :func:`target_hits` copies it with its ``t_min``)."""
+        return PairTester(self.frusta)
 
     @cached_property
     def box_columns(self) -> np.ndarray:
@@ -647,8 +657,13 @@ def target_hits(target: ScanTarget, *, t_min: float = 0.0, origin=None, precisio
     ``hits(prims (k,), origins (k, 3), dirs (k, 3)) -> t (k,)`` (inf: a miss; only hits
     beyond ``t_min``): rows by the reference's pair test (in ``precision`` relative to
     ``origin``), leaf triangles by :func:`_triangle_hits`."""
-    tester = PairTester(target.frusta, dtype=np.dtype(precision), origin=origin, t_min=t_min) \
-        if target.rows else None
+    if not target.rows:
+        tester = None
+    elif precision == "float64" and origin is None:       # the rows uploaded once per target
+        tester = shallow_copy(target.pair_tester)
+        tester.t_min = float(t_min)
+    else:
+        tester = PairTester(target.frusta, dtype=np.dtype(precision), origin=origin, t_min=t_min)
 
     def hits(prim, origins, dirs):
         t, _ = cast_first_returns(target, origins, dirs, tester=tester, primitives=prim)

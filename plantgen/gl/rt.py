@@ -140,7 +140,8 @@ class RayTracer(Raycaster):
         if g is not None:
             g[3].release()
             self._gpu = None
-        gpu = upload_bvh(self.ctx, plants, eye, top=top, matrices=matrices, copy_plant=copy_plant)
+        gpu = upload_bvh(self.ctx, plants, eye, top=top, matrices=matrices, copy_plant=copy_plant,
+                         max_bytes=self.limits.max_render_bytes)
         self._gpu = (model, leaves, eye.copy(), gpu)
         self.last_upload_ms = (time.perf_counter() - t0) * 1e3
         return gpu

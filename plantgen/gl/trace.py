@@ -23,11 +23,12 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, float32_boxes
 from ..geometry.instances import similarity_parts
+from ..limits import LimitError, hint
 from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
-           "BVH_BINDING", "BVH_STACK", "bvh_buffer_bytes", "COPY_BYTES"]
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES"]
 
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
@@ -107,25 +108,35 @@ def _depth(bvh: BVH) -> int:
     return bvh.depth() if bvh.nodes else 0
 
 
-def bvh_buffer_bytes(plants, copies: int = 0, top_nodes: int = 0) -> int:
-    """GPU bytes of :func:`upload_bvh`'s buffers: per plant 32 a node, 4 a primitive id,
-    96 a row, 48 a triangle, 32 of offsets; per copy :data:`COPY_BYTES` and its top-level
-    share (32 a node, 4 an id)."""
-    total = 0
-    for p in plants:
-        tris = 0 if p.triangles is None else len(p.triangles)
-        total += 32 * p.bvh.nodes + 4 * len(p.bvh.prims) + 4 * RECORD_FLOATS * p.rows + 48 * tris + 32
-    return total + COPY_BYTES * copies + 32 * top_nodes + 4 * copies
+def _copy_words(matrices, copy_plant, centres, origin) -> np.ndarray:
+    """(k, 16) float32 per copy: the map from the world frame (relative to ``origin``) into
+    its plant's frame (relative to the plant's centre), x_plant = turn^T (x - offset) /
+    scale with offset = shift + scale * turn @ centre - origin formed in float64 and
+    rounded once, as three rows of a 3x4 matrix; then the plant index's bits."""
+    matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
+    copy_plant = np.asarray(copy_plant, np.int64)
+    copies = len(matrices)
+    turn, scale, shift = similarity_parts(matrices)
+    centre = np.asarray(centres, np.float64).reshape(-1, 3)[copy_plant] if copies else np.zeros((0, 3))
+    offset = shift + scale[:, None] * np.einsum("kij,kj->ki", turn, centre) - origin
+    inverse = np.transpose(turn, (0, 2, 1)) / scale[:, None, None]
+    words = np.zeros((copies, 16), np.float32)
+    words[:, [0, 1, 2, 4, 5, 6, 8, 9, 10]] = inverse.reshape(copies, 9)
+    words[:, [3, 7, 11]] = -np.einsum("kij,kj->ki", inverse, offset)
+    words[:, 12] = copy_plant.astype(np.int32).view(np.float32)
+    return words
 
 
-def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None) -> GpuBvh:
+def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
+               max_bytes: int | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
 
     One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
     the centre of its root box). Two levels: ``top`` a BVH over the copies (copy ids), per
     copy its similarity ``matrices`` (k, 4, 4) from its plant's frame to the world and
     ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
-    relative to it). Raises PlantgenError for a tree deeper than the GPU's stack.
+    relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
+    LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
     """
     two_level = top is not None
     if not two_level and len(plants) != 1:
@@ -158,20 +169,13 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
               np.asarray(offsets, np.int32)]
     copies = 0
     if two_level:
-        matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
-        copy_plant = np.asarray(copy_plant, np.int64)
-        copies = len(matrices)
-        turn, scale, shift = similarity_parts(matrices)
-        centre = np.asarray(centres, np.float64).reshape(-1, 3)[copy_plant] if copies else np.zeros((0, 3))
-        # plant frame (relative to its centre) <- world frame (relative to origin):
-        # x_plant = turn^T (x - offset) / scale, offset = shift + scale * turn @ centre - origin
-        offset = shift + scale[:, None] * np.einsum("kij,kj->ki", turn, centre) - origin
-        inverse = np.transpose(turn, (0, 2, 1)) / scale[:, None, None]
-        words = np.zeros((copies, 16), np.float32)
-        words[:, [0, 1, 2, 4, 5, 6, 8, 9, 10]] = inverse.reshape(copies, 9)
-        words[:, [3, 7, 11]] = -np.einsum("kij,kj->ki", inverse, offset)
-        words[:, 12] = copy_plant.astype(np.int32).view(np.float32)
+        words = _copy_words(matrices, copy_plant, centres, origin)
+        copies = len(words)
         arrays += [np.asarray(top.prims, np.int32), words]
+    need = sum(a.nbytes for a in arrays)
+    if max_bytes is not None and need > max_bytes:
+        raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
+                         f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
     gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies)
     for a in arrays:
         data = np.ascontiguousarray(a).tobytes()
