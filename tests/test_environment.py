@@ -237,3 +237,18 @@ def test_queries_count_against_their_limit():
     g = parse_grammar({"name": "t", "axiom": "A", "iterations": 20, "rules": ["A -> F ?P(0, 0, 0) A"]}, "t.yaml")
     with pytest.raises(LimitError, match="limit queries"):
         derive(g, limits=Limits(max_queries=50))
+
+
+@pytest.mark.parametrize("environment, extra, match", [
+    ("[{envelope: {shape: mesh, file: ../../etc/passwd}}]", (), "outside the grammar's folder"),
+    ("[{markers: {shape: {shape: box, size: [4, 4, 4]}, density: 10}}]", ("--limit", "markers=100"),
+     "raise it with --limit markers=N"),
+])
+def test_the_command_line_refuses_a_bad_environment_in_one_line(tmp_path, environment, extra, match):
+    from _cli import run_cli
+
+    grammar = tmp_path / "g.yaml"
+    grammar.write_text(f'name: g\naxiom: "F ?E(0, 0, 0)"\niterations: 2\nenvironment: {environment}\n')
+    code, _, err = run_cli("grow", grammar, "-o", tmp_path / "g.npz", *extra)
+    assert code == 2 and match in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "g.npz").exists()

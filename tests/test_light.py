@@ -182,7 +182,7 @@ def test_a_stand_grows_taller_for_its_width_with_less_overlap_than_the_same_tree
 
     def shape(trees):
         ratios = []
-        for (start, end), (x, z) in zip(trees, grid, strict=True):
+        for (_, end), (x, z) in zip(trees, grid, strict=True):
             width = 2 * np.hypot(end[:, 0] - x, end[:, 2] - z).max()
             ratios.append(end[:, 1].max() / width)
         return float(np.mean(ratios))
