@@ -2,8 +2,9 @@
 
 As in *Synthetic topiary* (Prusinkiewicz, James and Měch 1994) and L-Py, after the axiom is
 read and after every derivation step the turtle interprets the string (its ``%`` already
-cut), and each query module receives the turtle's state at its place in the string:
-``?P(x, y, z)`` the position, ``?H`` the heading, ``?U`` the up axis, ``?L`` the left axis.
+cut; the ``interpretation:`` rules, which are for the final drawing, not applied), and
+each query module receives the turtle's state at its place in the string: ``?P(x, y, z)``
+the position, ``?H`` the heading, ``?U`` the up axis, ``?L`` the left axis.
 The next step's rules read those values like any other parameters
 (``?P(x, y, z) : x*x + z*z > r*r -> %``). Communication modules ``?E(...)`` (Měch and
 Prusinkiewicz 1996) are answered in the same pass by an *environment*: any object with a
