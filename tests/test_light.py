@@ -202,8 +202,10 @@ def test_a_stand_grows_taller_for_its_width_with_less_overlap_than_the_same_tree
     grid = [(i * spacing, j * spacing) for i in (-1, 0, 1) for j in (-1, 0, 1)]
     stand = _stand(grid)
     apart = [_stand([p], seed=5 + k)[0] for k, p in enumerate(grid)]
-    print(f"stand of 9: height / crown width {_crown_shape(stand, grid):.2f} "
-          f"(apart {_crown_shape(apart, grid):.2f}); overlap of neighbours {_overlap(stand, grid, spacing):.2f} m (apart {_overlap(apart, grid, spacing):.2f} m)")
+    shape, overlap = (_crown_shape(stand, grid), _crown_shape(apart, grid)), (_overlap(stand, grid, spacing),
+                                                                              _overlap(apart, grid, spacing))
+    print(f"stand of 9: height / crown width {shape[0]:.2f} (apart {shape[1]:.2f}); overlap of neighbours "
+          f"{overlap[0]:.2f} m (apart {overlap[1]:.2f} m)")
     assert _crown_shape(stand, grid) > _crown_shape(apart, grid)
     assert _overlap(stand, grid, spacing) < _overlap(apart, grid, spacing)
 
