@@ -14,6 +14,8 @@ A scene is a YAML mapping with an ``instances`` list::
     ground: {size: 60, height: 0, material: sand}
     camera: auto                          # or {eye, target, up, fov_y}
     light: {direction: [-0.4, -1, -0.3]}  # direction the light travels
+    grow: apart                           # or together: all plants derived in lockstep in one
+                                          # space, each environment seeing the others
     instances:
       - grammar: saguaro                  # shipped name, or a path inside this file's folder
         seed: 3                           # default: scene seed + instance number
