@@ -19,11 +19,15 @@ from dataclasses import dataclass, fields, replace
 
 from .errors import PlantgenError
 
-__all__ = ["CONTEXT_WORK", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK", "hint", "limits"]
+__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK",
+           "hint", "limits"]
 
 #: The largest image side (pixels) plantgen renders: the GL texture size every OpenGL 4.3
 #: driver plantgen has met supports. A hard bound, not a budget: no option raises it.
 MAX_IMAGE_SIDE = 16384
+#: ``--asset game``'s triangle budget per level of detail of one plant (level 0 first; the
+#: impostor's card is two): a warning names a level over it.
+GAME_LEVEL_TRIANGLES = (80_000, 40_000, 20_000, 10_000)
 
 #: The fixed cost of one derivation step, counted in modules (per rule group, plus one):
 #: a step over a tiny string costs about as much as rewriting this many modules, so a

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from plantgen.geometry.bvh import (
     BVH_METHODS,
     BVHError,
+    box_columns,
     brute_force,
     build_bvh,
     build_scene_bvh,
@@ -44,11 +45,15 @@ def random_rays(lo, hi, m, rng, scale=1.5):
     return origins, targets - origins
 
 
-def assert_same(bvh, n, O, D, hits, **kw):
+def assert_same(bvh, n, O, D, hits, boxes=None, **kw):
     t, p = trace_bvh(bvh, O, D, hits, **kw)
     tb, pb = brute_force(n, O, D, hits, **kw)
     np.testing.assert_array_equal(t, tb)
     np.testing.assert_array_equal(p, pb)
+    if boxes is not None:                     # the primitive-box cull changes nothing
+        tc, pc = trace_bvh(bvh, O, D, hits, boxes=boxes, **kw)
+        np.testing.assert_array_equal(tc, tb)
+        np.testing.assert_array_equal(pc, pb)
     a_t, a_p = trace_bvh(bvh, O, D, hits, any_hit=True, **kw)
     np.testing.assert_array_equal(np.isfinite(a_t), np.isfinite(tb))          # any hit: hit or not
     got = np.flatnonzero(np.isfinite(a_t))
@@ -67,7 +72,7 @@ def test_closest_and_any_hit_equal_brute_force_on_random_boxes(n, method, leaf_s
     bvh = build_bvh(lo, hi, method=method, leaf_size=leaf_size, bins=8)
     O, D = random_rays(lo.min(axis=0), hi.max(axis=0), 64, rng)
     t_max = rng.random(64) * 20 if finite_max else np.inf
-    assert_same(bvh, n, O, D, box_hits(lo, hi), t_min=t_min, t_max=t_max)
+    assert_same(bvh, n, O, D, box_hits(lo, hi), box_columns(lo, hi), t_min=t_min, t_max=t_max)
 
 
 def test_coincident_boxes_tie_to_the_smallest_primitive():
@@ -88,6 +93,8 @@ def bush():
 
 
 def target_case(skeleton, leaves=None, shift=(0.0, 0.0, 0.0)):
+    """A scan target, its BVH and its primitive test; assert_same gets its boxes through
+    ``target.box_columns`` where a test passes them."""
     move = np.eye(4)
     move[:3, 3] = shift
     skel = skeleton if not any(shift) else skeleton.transformed(move)
@@ -109,7 +116,7 @@ def test_plant_with_leaves_equals_brute_force(bush, shift):
     assert target.rows and len(target.triangles)
     rng = np.random.default_rng(5)
     O, D = random_rays(*target.box(), 40, rng)
-    t, p = assert_same(bvh, len(target), O, D, hits)
+    t, p = assert_same(bvh, len(target), O, D, hits, target.box_columns)
     assert np.isfinite(t).mean() > 0.2 and (p >= target.rows).any() and ((p >= 0) & (p < target.rows)).any()
 
 
@@ -134,7 +141,7 @@ def test_origins_inside_boxes(bush):
     rows = rng.choice(target.rows, 40, replace=False)
     O = skin.base[rows] + 0.5 * skin.length[rows, None] * skin.axis[rows]          # on each row's axis
     D = rng.normal(size=(40, 3))
-    t, p = assert_same(bvh, len(target), O, D, hits)
+    t, p = assert_same(bvh, len(target), O, D, hits, target.box_columns)
     assert np.isfinite(t).all()                         # from inside a closed row, every ray leaves it
 
 
@@ -146,7 +153,7 @@ def test_grazing_rays_along_and_across_cylinders():
     across = np.stack([x, np.full(4, 0.5), np.full(4, -1.0)], axis=1)              # tangent to the side
     O = np.concatenate([along, across])
     D = np.concatenate([np.tile([0.0, 1.0, 0.0], (4, 1)), np.tile([0.0, 0.0, 1.0], (4, 1))])
-    t, _ = assert_same(bvh, len(target), O, D, hits)
+    t, _ = assert_same(bvh, len(target), O, D, hits, target.box_columns)
     assert np.isfinite(t[[3, 7]]).all()                 # just inside the rim: hit
 
 
@@ -154,7 +161,7 @@ def test_zero_length_and_very_large_rows():
     skel = chain_skeleton(bends_deg=(20.0, 0.0, 10.0), lengths=(1.0, 0.0, 1e3, 1e-3), radii=(0.2, 0.2, 0.2, 20.0, 0.1))
     target, bvh, hits = target_case(skel)
     O, D = random_rays(*target.box(), 80, np.random.default_rng(8), scale=1.2)
-    assert_same(bvh, len(target), O, D, hits)
+    assert_same(bvh, len(target), O, D, hits, target.box_columns)
     small = target.box()[0] + [0.0, 0.5, 0.0]
     O2, D2 = random_rays(small - 2, small + 2, 60, np.random.default_rng(9))      # near the small rows
     assert_same(bvh, len(target), O2, D2, hits)
@@ -294,3 +301,23 @@ def test_degenerate_copies_are_refused():
     placed = PlacedPlants.build([("p", skin_skeleton(skel), skel.parent, m)])
     with pytest.raises(BVHError, match="scales by 0"):
         build_scene_bvh(placed)
+
+
+@pytest.mark.parametrize("size", [2, 16, 64])
+def test_packets_of_rays_from_one_origin_find_the_same_hits(bush, size):
+    """Fans of rays from three scanner positions (one inside the plant's box) walk the
+    upper tree as cones: the hits are those of brute force."""
+    skeleton, leaves, _ = bush
+    target, bvh, hits = target_case(skeleton, leaves)
+    lo, hi = target.box()
+    rng = np.random.default_rng(14)
+    origins = np.array([lo - (hi - lo), (lo + hi) / 2, [hi[0] * 2, lo[1], lo[2]]])
+    O = np.repeat(origins, 70, axis=0)
+    aim = lo + (hi - lo) * rng.random((3, 3))
+    spread = rng.normal(size=(210, 3)) * 0.05 * (hi - lo).max()
+    D = np.repeat(aim, 70, axis=0) + np.cumsum(spread, axis=0) * 0.1 - O          # neighbouring directions
+    t, p = trace_bvh(bvh, O, D, hits, packets=size, boxes=target.box_columns)
+    tb, pb = brute_force(len(target), O, D, hits)
+    assert np.isfinite(tb).sum() > 20
+    np.testing.assert_array_equal(t, tb)
+    np.testing.assert_array_equal(p, pb)

@@ -1,5 +1,5 @@
 """Rebuild every image of the gallery (``gallery/``), each with the command a user would
-type, so an image and its caption in the README never disagree.
+type, so an image and its caption in the documentation never disagree.
 
 Run as ``python -m plantgen.benchmarks.gallery [--out gallery] [--only NAMES] [--size WxH]
 [--list] [--bench]``. Each entry is one command (``plantgen render ...``, ``plantgen view
@@ -107,6 +107,11 @@ def entries() -> list[Entry]:
     out += [Entry(f"blender_{m}", ("python", "-m", "plantgen.benchmarks.in_blender", m, f"{{out}}/blender_{m}.png",
                                    "--size", "{width}", "{height}"), (f"blender_{m}.png",), (512, 384))
             for m in ("well", "saguaro")]
+    # a game asset's levels side by side and its impostor's atlas (plantgen export --asset game)
+    out.append(Entry("engine_assets", (
+        "python", "-m", "plantgen.benchmarks.asset_levels", "broadleaf", "{out}/engine_assets/broadleaf_levels.png",
+        "{out}/engine_assets/broadleaf_impostor_atlas.png", "--size", "{width}", "{height}"),
+        ("engine_assets/broadleaf_levels.png", "engine_assets/broadleaf_impostor_atlas.png"), (1280, 300)))
     out.append(Entry("skeletons", ("python", "-m", "plantgen.benchmarks.draw_skeletons", "{out}/skeletons"),
                      tuple(f"skeletons/{p.stem}.png" for p in shipped_model_paths())))
     out.append(Entry("viewer", (

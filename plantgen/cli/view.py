@@ -9,6 +9,7 @@ import click
 
 from ..geometry.camera import Camera
 from ..knobs import knob_of
+from ..pipeline import existing_input
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings
 from ..viewer import ViewOptions, run_viewer
 from ..viewer.keys import help_lines
@@ -77,6 +78,7 @@ def view(input: Path, method, subdiv, seed, iterations, shots, watch, snapshot, 
       plantgen view my_tree.yaml --method rc+r --ssaa 2 --azimuth 90
       plantgen view dancing_cacti                 # Space plays, , and . scrub
     """
+    existing_input(input)           # a mistyped name is one line before the display is looked for
     settings = take_settings(RenderSettings, knobs)
     camera, size = settings.view.camera, settings.image.size
     if not settings.view.auto and not Path(camera).is_file():

@@ -19,10 +19,15 @@ open node at once, O(n log n), in one of two ways:
   (``np.minimum.at`` into the bins' boxes), so it costs O(n) a level, O(n log n) in all
   with a larger constant.
 
-Measured (``python -m plantgen.benchmarks.bvh``; the table under ``gallery/bench/``):
-LBVH builds several times faster than binned SAH and the trees trace at a similar rate on
-plant rows (long thin boxes along branches, spread evenly), so LBVH is the default and
-SAH stays a knob for the scenes where its tighter upper levels pay.
+Measured (``python -m plantgen.benchmarks.bvh``, ``gallery/bench/llvmpipe/bvh.md``, 2
+shared cores, load average 3-4): LBVH builds 1.5-1.7 M primitives a second on the
+broadleaf (85,030 rows and leaf triangles) and the pine's needles (448,530), 1.3 M/s on a
+million random boxes; binned SAH 0.09-0.12 M/s, 13-15 times slower. SAH's trees are
+better (SAH cost 68 against 81 on the needles, 27 against 33 on the broadleaf) and trace
+1.1-1.5 times faster there, as fast on the forest. LBVH is the default: its build meets
+the goal of a million primitives a second, and a scan or a query pays it once per model;
+``method="sah"`` is the knob for a model traced with far more rays than it has
+primitives.
 
 A node box is the union of its primitives' boxes, in float64, exactly (no rounding
 padding: the primitive boxes carry their own). For the GPU, boxes go to float32
@@ -39,13 +44,15 @@ Pure numpy, no GL.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..errors import PlantgenError
 
-__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "brute_force", "build_bvh", "build_scene_bvh", "copy_boxes",
-           "float32_boxes", "morton_codes", "reduce_closest", "slab", "trace_bvh", "trace_scene"]
+__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "box_columns", "brute_force", "build_bvh", "build_scene_bvh",
+           "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "scene_bvh", "slab", "trace_bvh",
+           "trace_scene"]
 
 #: How :func:`build_bvh` may split nodes.
 BVH_METHODS = ("lbvh", "sah")
@@ -72,6 +79,12 @@ class BVH:
     @property
     def nodes(self) -> int:
         return len(self.first)
+
+    @cached_property
+    def columns(self) -> np.ndarray:
+        """(6, nodes) the node boxes by coordinate (lo x, y, z, hi x, y, z): what the
+        traversal gathers, one row a coordinate."""
+        return box_columns(self.lo, self.hi)
 
     @property
     def leaves(self) -> int:
@@ -353,24 +366,99 @@ def _inverse(dirs):
         return 1.0 / dirs
 
 
-def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray):
+def _slab_columns(box, ray):
+    """Entry and exit t (k,) from boxes (6, k) and rays (6, k) (origin, 1 / direction) by
+    coordinate rows: :func:`slab` without reductions over the short axis."""
+    with np.errstate(invalid="ignore"):
+        t1 = (box[:3] - ray[:3]) * ray[3:]
+        t2 = (box[3:] - ray[:3]) * ray[3:]
+    near = np.fmin(t1, t2)
+    far = np.fmax(t1, t2)
+    # fmax / fmin skip a NaN (a ray in a face plane, parallel to it: inside along that axis)
+    return np.fmax(np.fmax(near[0], near[1]), near[2]), np.fmin(np.fmin(far[0], far[1]), far[2])
+
+
+#: Rays of one packet at most (:func:`trace_bvh`'s ``packets``).
+PACKET_RAYS = 64
+
+
+def _packets(O, D, size: int):
+    """Runs of at most ``size`` consecutive rays with one origin: (first ray (p,), rays
+    (p,), origin (p, 3), unit axis (p, 3), half-angle (p,)) of the cone around each
+    run's directions."""
+    m = len(O)
+    new = np.ones(m, bool)
+    new[1:] = (O[1:] != O[:-1]).any(axis=1)
+    run = np.cumsum(new) - 1
+    start = np.flatnonzero(new)
+    new |= ((np.arange(m) - start[run]) % size) == 0              # long runs cut into packets
+    first = np.flatnonzero(new)
+    count = np.diff(np.r_[first, m])
+    unit = D / np.sqrt((D * D).sum(axis=1))[:, None]
+    axis = np.add.reduceat(unit, first, axis=0)
+    axis /= np.maximum(np.sqrt((axis * axis).sum(axis=1)), 1e-300)[:, None]
+    packet = np.repeat(np.arange(len(first)), count)
+    cos = np.clip((unit * axis[packet]).sum(axis=1), -1.0, 1.0)
+    half = np.maximum.reduceat(np.arccos(cos), first) * (1 + 1e-9) + 1e-12
+    return first, count, O[first], axis, half
+
+
+def _packet_frontier(bvh: BVH, O, D, size: int):
+    """(ray, node) pairs to start the per-ray walk from: packets of rays with one origin
+    walk the tree together while a node looks larger from the origin than the packet's
+    cone is wide (a node none of the cone meets is dropped for all of them)."""
+    first, count, origin, axis, half = _packets(O, D, size)
+    centre = 0.5 * (bvh.lo + bvh.hi)
+    radius = 0.5 * np.sqrt(((bvh.hi - bvh.lo) ** 2).sum(axis=1)) * (1 + 1e-9) + 1e-300
+    packet = np.arange(len(first))
+    node = np.zeros(len(first), np.int64)
+    done_p, done_n = [], []
+    while packet.size:
+        v = centre[node] - origin[packet]
+        dist = np.sqrt((v * v).sum(axis=1))
+        inside = dist <= radius[node]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            seen = np.arcsin(np.minimum(radius[node] / dist, 1.0))
+            angle = np.arccos(np.clip((v * axis[packet]).sum(axis=1) / dist, -1.0, 1.0))
+        hit = inside | (angle <= half[packet] + seen)
+        packet, node, seen, inside = packet[hit], node[hit], seen[hit], inside[hit]
+        stop = (bvh.count[node] > 0) | (~inside & (seen < half[packet]))        # small: ray by ray
+        done_p.append(packet[stop])
+        done_n.append(node[stop])
+        go = ~stop
+        packet = np.repeat(packet[go], 2)
+        node = np.repeat(bvh.first[node[go]].astype(np.int64), 2)
+        node[1::2] += 1
+    packet, node = np.concatenate(done_p), np.concatenate(done_n)
+    k = count[packet]
+    ray = np.repeat(first[packet] - np.cumsum(k) + k, k) + np.arange(k.sum())
+    return ray, np.repeat(node, k)
+
+
+def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray, start=None):
     """(ray, leaf, entry t) of every leaf each ray's segment (t_min, t_hi) meets, or None
-    where the frontier outgrows :data:`MAX_FRONTIER`."""
-    ray = np.arange(len(O))
-    node = np.zeros(len(O), np.int64)
+    where the frontier outgrows :data:`MAX_FRONTIER`; from the (ray, node) pairs
+    ``start`` (default: every ray at the root)."""
+    rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    boxes = bvh.columns
+    ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
     out = []
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
             return None
-        near, far = slab(bvh.lo[node], bvh.hi[node], O[ray], inv[ray])
+        near, far = _slab_columns(np.take(boxes, node, axis=1), np.take(rays, ray, axis=1))
         near = np.maximum(near, t_min)
         ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
         ray, node, near = ray[ok], node[ok], near[ok]
-        leaf = bvh.count[node] > 0
+        count = bvh.count[node]
+        leaf = count > 0
         out.append((ray[leaf], node[leaf], near[leaf]))
         inner = ~leaf
         ray = np.repeat(ray[inner], 2)
-        node = (bvh.first[node[inner]][:, None] + np.array([0, 1])).reshape(-1)
+        node = np.repeat(bvh.first[node[inner]].astype(np.int64), 2)
+        node[1::2] += 1
+    if not out:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     return tuple(np.concatenate(a) for a in zip(*out, strict=True))
 
 
@@ -411,16 +499,24 @@ def reduce_closest(key, t, *values, best_t, best_values, strict_ties=True):
         bv[r] = v[pick][better]
 
 
-def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: bool):
+def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: bool, boxes=None,
+                 packets: int = 0, roots=None):
     m = len(O)
     best_t = np.full(m, np.inf)
     best_p = np.full(m, -1, np.int64)
-    pairs = _leaf_pairs(bvh, O, _inverse(D), t_min, t_hi)
+    inv = _inverse(D)
+    if roots is not None:
+        start = (np.arange(m), np.asarray(roots, np.int64))
+    else:
+        start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
+    pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
     if pairs is None:                                # too wide a frontier: halve the batch
         h = m // 2
-        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit)
-        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit)
+        r = (None, None) if roots is None else (roots[:h], roots[h:])
+        a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets, r[0])
+        b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets, r[1])
         return np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]])
+    rays = None if boxes is None else np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
     ray, leaf, near = pairs
     order = np.lexsort((near, ray))
     ray, leaf, near = ray[order], leaf[order], near[order]
@@ -433,6 +529,11 @@ def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: 
         rr = np.repeat(r, cnt)
         slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
         prim = bvh.prims[slot].astype(np.int64)
+        if boxes is not None:                        # the primitive's own box first: a cheap cull
+            near_p, far_p = _slab_columns(np.take(boxes, prim, axis=1), np.take(rays, rr, axis=1))
+            inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
+                & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
+            rr, prim = rr[inside], prim[inside]
         t = hits(prim, O[rr], D[rr])
         t = np.where((t > t_min) & (t < t_hi[rr]), t, np.inf)
         reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
@@ -456,22 +557,36 @@ def _t_max(t_max, m: int) -> np.ndarray:
 
 
 def trace_bvh(bvh: BVH, origins, dirs, hits, *, any_hit: bool = False, t_min: float = 0.0,
-              t_max=np.inf, batch: int = TRACE_BATCH) -> tuple[np.ndarray, np.ndarray]:
+              t_max=np.inf, batch: int = TRACE_BATCH, boxes=None, packets: int = 0,
+              roots=None) -> tuple[np.ndarray, np.ndarray]:
     """Float64 closest (or any) hit of rays (``origins``, ``dirs``: (m, 3)) among the
     primitives of ``bvh``: ``hits(prims (k,), origins (k, 3), dirs (k, 3))`` gives the t
     of each (primitive, ray) pair (inf: a miss; hits at t <= ``t_min`` count as misses,
     the caller's test applies it). Returns t (m,) (inf: no hit in (t_min, t_max)) and the
-    primitive (m,) (-1). ``t_max``: one number or (m,)."""
+    primitive (m,) (-1). ``t_max``: one number or (m,). ``boxes``: the primitives' boxes
+    by coordinate rows ((6, n): lo x, y, z, hi x, y, z; :func:`box_columns`), where the
+    caller has them: a ray then tests only the primitives of a leaf whose own box it meets
+    (the same hits, fewer exact tests). ``packets``: up to this many consecutive rays with
+    one origin (a scanner's neighbouring beams) walk the upper tree together, as one cone
+    (the same hits, fewer box tests; 0: ray by ray). ``roots``: (m,) the node each ray
+    starts from (default the root; :attr:`SceneBVH.flat` holds several trees)."""
     O, D = _rays(origins, dirs)
     m = len(O)
     hi = _t_max(t_max, m)
     best_t, best_p = np.full(m, np.inf), np.full(m, -1, np.int64)
     if not bvh.nodes:
         return best_t, best_p
+    roots = None if roots is None else np.broadcast_to(np.asarray(roots, np.int64), (m,))
     for s in range(0, m, max(1, int(batch))):
         e = min(s + batch, m)
-        best_t[s:e], best_p[s:e] = _trace_batch(bvh, O[s:e], D[s:e], hits, float(t_min), hi[s:e], any_hit)
+        best_t[s:e], best_p[s:e] = _trace_batch(bvh, O[s:e], D[s:e], hits, float(t_min), hi[s:e], any_hit,
+                                                boxes, int(packets), None if roots is None else roots[s:e])
     return best_t, best_p
+
+
+def box_columns(lo, hi) -> np.ndarray:
+    """(6, n) boxes (``lo``, ``hi``: (n, 3)) by coordinate rows, as :func:`trace_bvh` takes them."""
+    return np.ascontiguousarray(np.concatenate([np.asarray(lo, np.float64), np.asarray(hi, np.float64)], axis=1).T)
 
 
 def brute_force(n: int, origins, dirs, hits, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf):
@@ -524,6 +639,22 @@ class SceneBVH:
     def nbytes(self) -> int:
         return int(self.copy_bytes() * self.copies) + sum(b.nbytes for b in self.blas)
 
+    @cached_property
+    def flat(self) -> tuple[BVH, np.ndarray, np.ndarray]:
+        """Every plant's BVH in one node array, as the CPU traversal walks them: that
+        :class:`BVH` (plant k's nodes and primitives after those of plants 0..k-1, its
+        primitives numbered on from theirs), each plant's root node (plants,) and first
+        primitive (plants + 1,)."""
+        nodes = np.cumsum([0] + [b.nodes for b in self.blas])
+        prims = np.cumsum([0] + [len(b.prims) for b in self.blas])
+        cat = lambda name: np.concatenate([getattr(b, name) for b in self.blas]) if self.blas else \
+            np.zeros((0, 3) if name in ("lo", "hi") else 0)  # noqa: E731
+        first = np.concatenate([np.where(b.count == 0, b.first + nodes[k], b.first + prims[k])
+                                for k, b in enumerate(self.blas)]) if self.blas else np.zeros(0)
+        prim = np.concatenate([b.prims + prims[k] for k, b in enumerate(self.blas)]) if self.blas else np.zeros(0)
+        flat = BVH(cat("lo"), cat("hi"), first.astype(np.int32), cat("count").astype(np.int32), prim.astype(np.int32))
+        return flat, nodes[:-1].astype(np.int64), prims.astype(np.int64)
+
     def rays_to_copies(self, copy, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
         """Rays (k, 3) moved into the frames of copies ``copy`` (k,), in float64 (t is kept:
         a point at t along the world ray is at t along the moved one)."""
@@ -552,15 +683,24 @@ def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: i
     leaf). A copy whose matrix is not finite or scales by 0 is refused."""
     from .reference import row_boxes
 
-    blas, plant, mats, los, his = [], [], [], [], []
-    for k, p in enumerate(placed.plants):
+    blas = []
+    for p in placed.plants:
         lo, hi = row_boxes(p.frusta, shell=shell) if len(p.frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
-        b = build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins)
-        blas.append(b)
-        m = np.asarray(p.matrices, dtype=np.float64).reshape(-1, 4, 4)
+        blas.append(build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins))
+    return scene_bvh(blas, [p.matrices for p in placed.plants], top_leaf_size=top_leaf_size, method=method,
+                     bins=bins)
+
+
+def scene_bvh(blas, matrices, *, top_leaf_size: int = 2, method: str = "lbvh", bins: int = 16) -> SceneBVH:
+    """A :class:`SceneBVH` from a BVH per distinct plant (``blas``) and its copies'
+    placements (``matrices[k]``: (c_k, 4, 4) similarity transforms); copies are numbered
+    plant by plant. A copy whose matrix is not finite or scales by 0 is refused."""
+    plant, mats, los, his = [], [], [], []
+    for k, (b, m) in enumerate(zip(blas, matrices, strict=True)):
+        m = np.asarray(m, dtype=np.float64).reshape(-1, 4, 4)
         mats.append(m)
         plant.append(np.full(len(m), k, np.int32))
-        if len(m) and b.nodes:
+        if len(m) and b.nodes and np.isfinite(m).all():
             c_lo, c_hi = copy_boxes(b.lo[0], b.hi[0], m)
         else:                                           # an empty plant: a point that holds nothing
             c_lo = c_hi = m[:, :3, 3].copy()
@@ -582,13 +722,14 @@ def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: i
 
 
 def trace_scene(scene: SceneBVH, origins, dirs, plant_hits, *, any_hit: bool = False, t_min: float = 0.0,
-                t_max=np.inf, batch: int = TRACE_BATCH) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                t_max=np.inf, batch: int = TRACE_BATCH, plant_boxes=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`trace_bvh` through a :class:`SceneBVH`: ``plant_hits[k]`` is plant k's
     primitive test in its own frame. The copies a ray's segment meets are visited nearest
     first (rounds of 1, 2, 4, ... copies a ray), the ray moved into each one's frame in
     float64 and traced through its plant's BVH up to the closest hit so far. Returns t
     (m,), the copy (m,) and the primitive of its plant (m,) (-1 for a miss); ties go to
-    the smaller copy, then primitive."""
+    the smaller copy, then primitive. ``plant_boxes[k]``: plant k's primitive boxes as
+    :func:`trace_bvh` takes them (or None)."""
     O, D = _rays(origins, dirs)
     m = len(O)
     hi = _t_max(t_max, m)
@@ -598,20 +739,21 @@ def trace_scene(scene: SceneBVH, origins, dirs, plant_hits, *, any_hit: bool = F
     step = max(1, int(batch))
     for s in range(0, m, step):
         e = min(s + step, m)
-        out = _trace_scene_batch(scene, O[s:e], D[s:e], plant_hits, float(t_min), hi[s:e], any_hit, step)
+        out = _trace_scene_batch(scene, O[s:e], D[s:e], plant_hits, float(t_min), hi[s:e], any_hit, step,
+                                 plant_boxes)
         best_t[s:e], best_c[s:e], best_p[s:e] = out
     return best_t, best_c, best_p
 
 
-def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, batch):
+def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, batch, plant_boxes=None):
     m = len(O)
     best_t, best_c, best_p = np.full(m, np.inf), np.full(m, -1, np.int64), np.full(m, -1, np.int64)
     inv = _inverse(D)
     pairs = _leaf_pairs(scene.tlas, O, inv, t_min, t_hi)
     if pairs is None:
         h = m // 2
-        a = _trace_scene_batch(scene, O[:h], D[:h], plant_hits, t_min, t_hi[:h], any_hit, batch)
-        b = _trace_scene_batch(scene, O[h:], D[h:], plant_hits, t_min, t_hi[h:], any_hit, batch)
+        a = _trace_scene_batch(scene, O[:h], D[:h], plant_hits, t_min, t_hi[:h], any_hit, batch, plant_boxes)
+        b = _trace_scene_batch(scene, O[h:], D[h:], plant_hits, t_min, t_hi[h:], any_hit, batch, plant_boxes)
         return tuple(np.concatenate([x, y]) for x, y in zip(a, b, strict=True))
     ray, leaf, _ = pairs
     cnt = scene.tlas.count[leaf].astype(np.int64)
@@ -620,10 +762,14 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
     copy = scene.tlas.prims[slot].astype(np.int64)
     near, far = slab(scene.copy_lo[copy], scene.copy_hi[copy], O[ray], inv[ray])
     near = np.maximum(near, t_min)
-    ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+    filled = np.array([b.nodes > 0 for b in scene.blas], bool)
+    ok = (near <= far) & (far > t_min) & (near < t_hi[ray]) & filled[scene.plant[copy]]
     ray, copy, near = ray[ok], copy[ok], near[ok]
     order = np.lexsort((copy, near, ray))
     ray, copy, near = ray[order], copy[order], near[order]
+    flat, roots, prim_first = scene.flat
+    hits = _flat_hits(plant_hits, prim_first)
+    boxes = None if plant_boxes is None else np.concatenate(plant_boxes, axis=1)
     per_round = 1
     while ray.size:
         now = _group_rank(ray) < per_round
@@ -632,12 +778,10 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
         limit = np.minimum(t_hi[r], best_t[r])
         if not any_hit:
             limit = np.nextafter(limit, np.inf)        # a tie at the best t may still win on ids
-        t = np.full(len(r), np.inf)
-        prim = np.full(len(r), -1, np.int64)
-        for k in np.unique(scene.plant[c]):
-            sel = np.flatnonzero(scene.plant[c] == k)
-            t[sel], prim[sel] = trace_bvh(scene.blas[k], o[sel], d[sel], plant_hits[k], any_hit=any_hit,
-                                          t_min=t_min, t_max=limit[sel], batch=batch)
+        plant = scene.plant[c]
+        t, prim = trace_bvh(flat, o, d, hits, any_hit=any_hit, t_min=t_min, t_max=limit, batch=batch,
+                            boxes=boxes, roots=roots[plant])
+        prim = np.where(prim >= 0, prim - prim_first[plant], -1)         # the plant's own numbering
         t = np.where(t < t_hi[r], t, np.inf)
         reduce_closest(r, t, c, prim, best_t=best_t, best_values=[best_c, best_p])
         ray, copy, near = ray[~now], copy[~now], near[~now]
@@ -645,3 +789,15 @@ def _trace_scene_batch(scene: SceneBVH, O, D, plant_hits, t_min, t_hi, any_hit, 
         ray, copy, near = ray[keep], copy[keep], near[keep]
         per_round *= 2
     return best_t, best_c, best_p
+
+
+def _flat_hits(plant_hits, prim_first):
+    """The primitive test over :attr:`SceneBVH.flat`'s numbering from each plant's own."""
+    def hits(prim, origins, dirs):
+        plant = np.searchsorted(prim_first, prim, side="right") - 1
+        t = np.full(len(prim), np.inf)
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            t[sel] = plant_hits[k](prim[sel] - prim_first[k], origins[sel], dirs[sel])
+        return t
+    return hits

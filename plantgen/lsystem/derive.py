@@ -20,6 +20,9 @@ period, the remaining steps skipped by their count modulo the period.
 each ``%`` is removed with everything after it up to the ``]`` that closes its branch
 (to the end of the string on the main axis); the ``]`` stays.
 
+:attr:`Grammar.decomposition` rules (L-Py's ``decomposition:``) rewrite the string after each
+derivation step, pass after pass (up to ``decomposition_depth``) until none applies.
+
 :func:`apply_interpretation` applies a grammar's ``interpretation:`` rules (ABOP's
 homomorphism, L-Py's ``interpretation:``) to a derived string ``interpretation_depth``
 times, for drawing only: it returns a new string and the derived one is never changed.
@@ -60,7 +63,7 @@ class DerivationLimit(LimitError):
 
 def _width(grammar: Grammar) -> int:
     n = [len(m.args) for m in grammar.axiom]
-    for r in (*grammar.rules, *grammar.interpretation):
+    for r in (*grammar.rules, *grammar.interpretation, *grammar.decomposition):
         n += [len(m.args) for m in r.successor]
     return max([1, *n])
 
@@ -200,14 +203,17 @@ class Derivation:
         self.queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
         self.groups = _rule_groups(grammar.rules)
         self.needs_context = any(r.left or r.right for r in grammar.rules)
+        self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
         self.step, self.total = 0, len(self.string[0])
+        self.before = self.fixed_point = None     # the string and generator state before the last step
 
     def rewrite(self) -> bool:
         """One derivation step (False, and nothing done, once every step is done)."""
         if self.step >= self.iterations:
             return False
         g, string = self.grammar, self.string
+        self.before = (string, self.rng.bit_generator.state)
         neighbours = _context_neighbours(string[0], g.symbols, g.ignore) if self.needs_context else None
         matched, out_len, applied = _select_rewrites(g, self.groups, string, neighbours, self.rng, self.codes)
         total = int(out_len.sum())
@@ -216,6 +222,9 @@ class Derivation:
                         f"{g.path}: derivation step {self.step + 1}")
         self.string = _cut(_rewrite(g, string, matched, out_len, applied, self.rng, self.codes, self.width),
                            self.codes)
+        if g.decomposition:
+            self.string = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng, self.codes,
+                                  self.width, self.limits, self.work, f"decomposition after step {self.step + 1}, pass")
         self.step, self.total = self.step + 1, total
         return True
 
@@ -226,12 +235,17 @@ class Derivation:
 
     def answer(self) -> None:
         """Write the query modules' values and the environment's answers (walking the turtle
-        first unless :meth:`interpret` did), report the step, and skip whole periods of a
-        cycle (a fixed point included) once the state comes back."""
+        first unless :meth:`interpret` did), report the step, stop at a fixed point (the
+        step left the string and the generator as they were), and skip whole periods of a
+        cycle once the state comes back (neither for plants grown together)."""
         if self.queries is not None:
             self.queries.update(self.string, self.step)
         if self.step and self.progress is not None:
             self.progress(self.step, self.total)
+        if (not self.together and self.before is not None and _unchanged(self.before[0], self.string)
+                and self.rng.bit_generator.state == self.before[1]):       # a fixed point: done
+            self.fixed_point, self.iterations = self.step - 1, self.step
+            return
         if self.seen is None or self.total > CYCLE_WINDOW:
             return
         key = _fingerprint(self.string, self.rng)
@@ -243,7 +257,13 @@ class Derivation:
             self.seen[key] = self.step
 
     def result(self) -> ModuleString:
-        return ModuleString(*self.string, self.grammar.symbols)
+        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point)
+
+
+def _unchanged(before, after) -> bool:
+    """Whether a step left the string as it was (sym, nparam, params all equal)."""
+    return len(before[0]) == len(after[0]) and all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+
 
 
 def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = None, *,
@@ -264,20 +284,30 @@ def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = 
     params = np.zeros((len(ms), width))
     params[:, :ms.params.shape[1]] = ms.params
     string = (ms.sym.copy(), ms.nparam.copy(), params)
-    view = replace(grammar, rules=grammar.interpretation)
+    string = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
+                     limits, work, "interpretation pass")
+    return ModuleString(*string, grammar.symbols)
+
+
+def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, codes: dict, width: int,
+            limits: Limits, work: Meter, what: str):
+    """``string`` rewritten by ``rules`` up to ``depth`` times, each pass one parallel
+    step (stopping at the first pass that rewrites nothing): the interpretation passes,
+    and the decomposition after each derivation step."""
+    view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
     needs_context = any(r.left or r.right for r in view.rules)
-    for step in range(grammar.interpretation_depth):
+    for step in range(depth):
         neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
         matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
         if not matched.any():
             break
         total = int(out_len.sum())
-        _check_step(view, limits, step, total, width, "interpretation pass")
+        _check_step(view, limits, step, total, width, what)
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
-                   f"{grammar.path}: interpretation pass {step + 1}")
+                   f"{grammar.path}: {what} {step + 1}")
         string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
-    return ModuleString(*string, grammar.symbols)
+    return string
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:

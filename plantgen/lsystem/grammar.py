@@ -1,6 +1,6 @@
 """Grammar files (YAML) to a validated :class:`Grammar`. Parsing only: no derivation here.
 
-The format is documented in the README, section "Grammar format". In short::
+The format is documented in the docs' grammar reference (docs/reference/grammar.md). In short::
 
     name: monopodial
     description: ABOP figure 2.6
@@ -27,7 +27,6 @@ from pathlib import Path
 
 from .. import fields
 from ..errors import PlantgenError
-from ..files import read_yaml
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
@@ -45,12 +44,14 @@ TURTLE_ARITY: dict[str, tuple[int, ...]] = ARITY
 SURFACE_SYMBOL = by_action(Action.SURFACE)
 #: The query and communication symbols (``?P``, ``?E``): two characters each.
 QUERY_SYMBOLS = frozenset(s.char for s in SYMBOLS if len(s.char) == 2)
+#: Most passes of the ``decomposition:`` rules after a derivation step (``decomposition_depth``).
+MAX_DECOMPOSITION_DEPTH = 10_000
 #: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
 MAX_INTERPRETATION_DEPTH = 8
 
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
                 "ignore", "turtle", "materials", "max_modules", "interpretation",
-                "interpretation_depth", "environment"}
+                "interpretation_depth", "environment", "decomposition", "decomposition_depth"}
 TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism", "smooth_bends"}
 RULE_KEYS = {"rule", "p"}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
@@ -129,6 +130,8 @@ class Grammar:
     interpretation_depth: int = 1                  # how many times they are applied
     environment: object = None                     # the ``environment:`` entry as written (see
                                                    # plantgen.environment), None without one
+    decomposition: tuple[Rule, ...] = ()           # rules applied after each derivation step ...
+    decomposition_depth: int = 1                   # ... up to this many passes
 
 
 # ---------------------------------------------------------------------------- modules
@@ -479,8 +482,9 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
         raise GrammarError(f"{path}: rules must be a list")
     rules = tuple(_parse_rule(i, r, defines, path, limits.max_params) for i, r in enumerate(raw_rules))
     _check_groups(rules, path)
-    interpretation, depth = _parse_interpretation(data, defines, path, limits)
-    symbols = _check_arities(axiom, rules + interpretation, path)
+    interpretation, depth = _parse_passes(data, "interpretation", defines, path, limits, MAX_INTERPRETATION_DEPTH)
+    decomposition, dec_depth = _parse_passes(data, "decomposition", defines, path, limits, MAX_DECOMPOSITION_DEPTH)
+    symbols = _check_arities(axiom, rules + interpretation + decomposition, path)
 
     ignore = data.get("ignore", "")
     if not isinstance(ignore, str):
@@ -490,23 +494,26 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
     return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
                    axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
                    _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
-                   path, tuple(symbols), interpretation, depth, data.get("environment"))
+                   path, tuple(symbols), interpretation, depth, data.get("environment"), decomposition, dec_depth)
 
 
-def _parse_interpretation(data: dict, defines: dict, path: str, limits: Limits) -> tuple[tuple[Rule, ...], int]:
-    """The ``interpretation:`` rules (same notation as ``rules``) and
-    ``interpretation_depth``, the times they are applied (1 to MAX_INTERPRETATION_DEPTH)."""
-    raw = data.get("interpretation") or []
+def _parse_passes(data: dict, key: str, defines: dict, path: str, limits: Limits,
+                  max_depth: int) -> tuple[tuple[Rule, ...], int]:
+    """The ``interpretation:`` or ``decomposition:`` rules (``key``; the notation of
+    ``rules``) and ``KEY_depth``, the most passes of them (1 to ``max_depth``)."""
+    raw = data.get(key) or []
     if not isinstance(raw, list):
-        raise GrammarError(f"{path}: interpretation must be a list of rules like 'L -> {{.-f.+f.}}'")
-    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, "interpretation rule")
+        raise GrammarError(f"{path}: {key} must be a list of rules like 'L -> {{.-f.+f.}}'")
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, f"{key} rule")
                   for i, r in enumerate(raw))
     _check_groups(rules, path)
-    depth = fields.integer(data.get("interpretation_depth", 1), "interpretation_depth", path, GrammarError,
-                           lo=1, hi=MAX_INTERPRETATION_DEPTH)
+    depth = fields.integer(data.get(f"{key}_depth", 1), f"{key}_depth", path, GrammarError, lo=1, hi=max_depth)
     return rules, depth
 
 
 def load_grammar(path: str | Path, limits: Limits | None = None) -> Grammar:
-    """Read and validate a grammar file."""
-    return parse_grammar(read_yaml(path, GrammarError, limits), str(path), limits)
+    """Read and validate a grammar file: YAML, or an L-Py file (``.lpy``, translated by
+    :mod:`plantgen.lsystem.lpy`)."""
+    from .lpy import read_grammar_data  # lpy builds on this module
+
+    return parse_grammar(read_grammar_data(path, GrammarError, limits)[0], str(path), limits)

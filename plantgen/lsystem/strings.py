@@ -16,12 +16,16 @@ class ModuleString:
     sym : (n,) int32, index into ``symbols``
     nparam : (n,) int8, parameter count of each module
     params : (n, P) float64, parameters (columns past ``nparam`` are unused)
+    fixed_point : the step after which the derivation stopped changing the string (the
+        next step rewrote it into itself, drawing no random number), when it ran past it;
+        else None
     """
 
     sym: np.ndarray
     nparam: np.ndarray
     params: np.ndarray
     symbols: tuple[str, ...]
+    fixed_point: int | None = None
 
     def __len__(self) -> int:
         return len(self.sym)

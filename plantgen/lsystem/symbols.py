@@ -16,8 +16,8 @@ As L-Py declares a module with its name, arity, documentation and interpretation
   the same one wherever the grammar writes it.
 
 The parser (:mod:`plantgen.lsystem.grammar`), the derivation's cut, the turtle, its warnings
-and the README's table of turtle symbols (:func:`markdown_table`, which the tests compare
-with the README) all read this table.
+and the grammar reference's table of turtle symbols (:func:`markdown_table`, which the
+documentation's build inserts) all read this table.
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ class Symbol:
 
 _SURFACE_NAMES = ", ".join(f"`{name}`" for name in SURFACES)
 
-#: Every turtle symbol, in the order the README lists them.
+#: Every turtle symbol, in the order the grammar reference lists them.
 SYMBOLS: tuple[Symbol, ...] = (
     Symbol("F", ("l", "w"), Action.DRAW,
            "draw a segment of length l (default `step`) along the heading H; with w it tapers to end radius w, "
@@ -197,7 +197,8 @@ def _cell(text: str) -> str:
 
 
 def markdown_table() -> str:
-    """The README's table of turtle symbols (Markdown, one row per symbol, no final newline)."""
+    """The grammar reference's table of turtle symbols (Markdown, one row per symbol, no final
+    newline)."""
     rows = ["| module | meaning |", "| --- | --- |"]
     for s in SYMBOLS:
         forms = " ".join(f"`{form}`" for form in s.forms()) + (", any parameters" if s.arity is None
