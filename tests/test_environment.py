@@ -101,6 +101,12 @@ def test_a_mesh_envelope_is_read_only_inside_the_grammars_folder(tmp_path):
     shape = parse_shape({"shape": "mesh", "file": "box.obj"}, "t", tmp_path, Limits())
     d = shape.distance(np.array([[0.0, 0, 0], [0.5, 0, 0], [3.0, 0, 0], [2.0, 2.0, 1.0]]))
     np.testing.assert_allclose(d, [-1.0, -0.5, 2.0, np.sqrt(2)], atol=1e-12)
+    # its rays go through the BVH's traversal: the same distances as the box's slabs
+    box = parse_shape({"shape": "box", "size": [2, 2, 2]}, "t", tmp_path, Limits())
+    rng = np.random.default_rng(0)
+    o, v = rng.uniform(-4, 4, (400, 3)), rng.standard_normal((400, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    np.testing.assert_allclose(shape.ray(o, v, 100.0), box.ray(o, v, 100.0), atol=1e-12)
     for name in ("../box.obj", "/etc/passwd"):
         with pytest.raises(EnvError, match="outside the grammar's folder"):
             parse_shape({"shape": "mesh", "file": name}, "t", tmp_path / "sub", Limits())
