@@ -40,6 +40,7 @@ from ._resources import grammars_dir, missing_hint, short_names
 from .animation import AnimatedScene
 from .assets import AssetSettings, asset_lines, budget_warnings, finished_plants
 from .environment import environment_for
+from .environment.together import TogetherPlant, grow_together
 from .errors import PlantgenError
 from .exporters import (
     DetailLevel,
@@ -82,7 +83,7 @@ from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
 from .lsystem.lpy import read_grammar_data
 from .lsystem.turtle import Drawing, interpret_plant
-from .scene import Scene, is_scene, parse_scene
+from .scene import Scene, grows_together, is_scene, parse_scene, resolve_grammar
 from .settings import (
     DEFAULT_SIZE,
     DetailSettings,
@@ -278,7 +279,7 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
     warnings: list[str] = said
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
-    def grow_one(gpath, s, its):
+    def parsed(gpath):
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
@@ -286,7 +287,20 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
             warnings.extend(w for w in said_here if w not in warnings)
             grammars[key] = parse_grammar(data, key, limits)
         timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
-        drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
+        return grammars[key]
+
+    together = (_grow_together(data, path, seed, limits, work, allow_paths, parsed, timings)
+                if grows_together(data, str(path)) else {})
+
+    def grow_one(gpath, s, its):
+        key = str(gpath)
+        grammar = parsed(gpath)
+        if (key, s, its) in together:       # grown with the others: drawn as it is
+            ms = together[(key, s, its)]
+            drawn = apply_interpretation(grammar, ms, s, limits=limits, work=work)
+            drawing, n = interpret_plant(drawn, grammar.turtle, grammar.materials, key, limits), len(ms)
+        else:
+            drawing, n = _grow_grammar(grammar, key, s, its, None, timings, limits, work)
         modules[0] += n
         grown[0] += 1
         if progress is not None:
@@ -303,6 +317,34 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
     timings["place"] = time.perf_counter() - t0
     return GrowResult(None, kind, scene.name, modules[0], timings, scene,
                       sources=(path, *(Path(k) for k in grammars)), polygons=polygons, warnings=tuple(warnings))
+
+
+def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, timings) -> dict:
+    """A ``grow: together`` scene's plants derived in lockstep (:mod:`plantgen.environment.together`):
+    {(grammar path, seed, iterations): derived string}. Where they stand comes from a first
+    reading of the scene that grows nothing; copies that share a grammar, seed and
+    iterations share one plant, grown where the first of them stands."""
+    keys: list[tuple] = []
+
+    def record(gpath, s, its):
+        keys.append((str(gpath), s, its))
+        return Skeleton.empty()
+
+    t0 = time.perf_counter()
+    placed = parse_scene(data, str(path), seed=seed, grow_grammar=record, limits=limits, allow_paths=allow_paths)
+    where = Path(path).parent
+    plants, grown = [], []
+    for inst in placed.instances:
+        if inst.source == "skeleton":
+            continue
+        gpath = str(resolve_grammar(inst.source, where, str(path), allow_paths))
+        key = next((k for k in keys if k[:2] == (gpath, inst.seed) and k not in grown), None)
+        if key is not None:
+            grown.append(key)
+            plants.append(TogetherPlant(parsed(gpath), key[1], key[2], inst.matrix))
+    strings = grow_together(plants, limits=limits, work=work)
+    timings["derive"] = timings.get("derive", 0.0) + time.perf_counter() - t0
+    return dict(zip(grown, strings, strict=True))
 
 
 def _override_defines(data, kind: str, defines: dict, path) -> dict:

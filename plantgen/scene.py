@@ -14,6 +14,8 @@ A scene is a YAML mapping with an ``instances`` list::
     ground: {size: 60, height: 0, material: sand}
     camera: auto                          # or {eye, target, up, fov_y}
     light: {direction: [-0.4, -1, -0.3]}  # direction the light travels
+    grow: apart                           # or together: all plants derived in lockstep in one
+                                          # space, each environment seeing the others
     instances:
       - grammar: saguaro                  # shipped name, or a path inside this file's folder
         seed: 3                           # default: scene seed + instance number
@@ -71,7 +73,10 @@ from .tolerances import tol
 __all__ = ["EFFECTS", "CameraSpec", "Scene", "SceneError", "SceneInstance", "ScenePlant", "is_scene",
            "load_scene", "parse_effect_list", "parse_scene", "resolve_effects", "resolve_grammar", "rotation_matrix"]
 
-SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances"}
+SCENE_KEYS = {"name", "description", "seed", "effects", "ground", "camera", "light", "instances", "grow"}
+#: How a scene's plants grow: each on its own (``apart``, the default), or all in lockstep in
+#: one shared space, each environment seeing the others (``together``).
+GROW_MODES = ("apart", "together")
 INSTANCE_KEYS = {"grammar", "skeleton", "seed", "position", "rotation", "scale", "iterations",
                  "grid", "motion"}
 GROUND_KEYS = {"size", "height", "material"}
@@ -539,6 +544,14 @@ def is_scene(data) -> bool:
     return isinstance(data, dict) and "instances" in data
 
 
+def grows_together(data, path: str = "<scene>") -> bool:
+    """Whether a scene mapping asks its plants to grow together (``grow: together``)."""
+    mode = data.get("grow", "apart") if isinstance(data, dict) else "apart"
+    if mode not in GROW_MODES:
+        raise SceneError(f"{path}: grow must be one of {', '.join(GROW_MODES)}, got {fields.show(mode)}")
+    return mode == "together"
+
+
 def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_grammar=None,
                 limits: Limits | None = None, allow_paths=()) -> Scene:
     """Validate a scene mapping and grow its instances.
@@ -551,6 +564,7 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     """
     limits = limits or default_limits
     _check_keys(data, SCENE_KEYS, path)
+    grows_together(data, path)
     if not isinstance(data.get("instances"), list) or not data["instances"]:
         raise SceneError(f"{path}: instances must be a non-empty list")
     base_seed = fields.integer(data.get("seed", 0), "seed", path, SceneError) if seed is None else int(seed)

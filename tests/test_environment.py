@@ -101,6 +101,12 @@ def test_a_mesh_envelope_is_read_only_inside_the_grammars_folder(tmp_path):
     shape = parse_shape({"shape": "mesh", "file": "box.obj"}, "t", tmp_path, Limits())
     d = shape.distance(np.array([[0.0, 0, 0], [0.5, 0, 0], [3.0, 0, 0], [2.0, 2.0, 1.0]]))
     np.testing.assert_allclose(d, [-1.0, -0.5, 2.0, np.sqrt(2)], atol=1e-12)
+    # its rays go through the BVH's traversal: the same distances as the box's slabs
+    box = parse_shape({"shape": "box", "size": [2, 2, 2]}, "t", tmp_path, Limits())
+    rng = np.random.default_rng(0)
+    o, v = rng.uniform(-4, 4, (400, 3)), rng.standard_normal((400, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    np.testing.assert_allclose(shape.ray(o, v, 100.0), box.ray(o, v, 100.0), atol=1e-12)
     for name in ("../box.obj", "/etc/passwd"):
         with pytest.raises(EnvError, match="outside the grammar's folder"):
             parse_shape({"shape": "mesh", "file": name}, "t", tmp_path / "sub", Limits())
@@ -237,3 +243,18 @@ def test_queries_count_against_their_limit():
     g = parse_grammar({"name": "t", "axiom": "A", "iterations": 20, "rules": ["A -> F ?P(0, 0, 0) A"]}, "t.yaml")
     with pytest.raises(LimitError, match="limit queries"):
         derive(g, limits=Limits(max_queries=50))
+
+
+@pytest.mark.parametrize("environment, extra, match", [
+    ("[{envelope: {shape: mesh, file: ../../etc/passwd}}]", (), "outside the grammar's folder"),
+    ("[{markers: {shape: {shape: box, size: [4, 4, 4]}, density: 10}}]", ("--limit", "markers=100"),
+     "raise it with --limit markers=N"),
+])
+def test_the_command_line_refuses_a_bad_environment_in_one_line(tmp_path, environment, extra, match):
+    from _cli import run_cli
+
+    grammar = tmp_path / "g.yaml"
+    grammar.write_text(f'name: g\naxiom: "F ?E(0, 0, 0)"\niterations: 2\nenvironment: {environment}\n')
+    code, _, err = run_cli("grow", grammar, "-o", tmp_path / "g.npz", *extra)
+    assert code == 2 and match in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "g.npz").exists()

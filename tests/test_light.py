@@ -174,32 +174,57 @@ def _reach(tree, base, towards):
     return float(((tree[1] - base) @ towards).max())
 
 
+def _crown_shape(trees, grid) -> float:
+    """The trees' mean height over crown width (each tree's width: twice its farthest tip
+    from its trunk, horizontally)."""
+    ratios = []
+    for (_, end), (x, z) in zip(trees, grid, strict=True):
+        ratios.append(end[:, 1].max() / (2 * np.hypot(end[:, 0] - x, end[:, 2] - z).max()))
+    return float(np.mean(ratios))
+
+
+def _overlap(trees, grid, spacing) -> float:
+    """How far side-by-side neighbours' crowns reach into each other, summed (m)."""
+    total = 0.0
+    for a in range(len(grid)):
+        for b in range(a + 1, len(grid)):
+            pa, pb = np.array([grid[a][0], 0, grid[a][1]]), np.array([grid[b][0], 0, grid[b][1]])
+            d = np.linalg.norm(pb - pa)
+            if d > spacing * 1.2:
+                continue
+            u = (pb - pa) / d
+            total += max(0.0, _reach(trees[a], pa, u) + _reach(trees[b], pb, -u) - d)
+    return total
+
+
 def test_a_stand_grows_taller_for_its_width_with_less_overlap_than_the_same_trees_apart():
     spacing = 1.6
     grid = [(i * spacing, j * spacing) for i in (-1, 0, 1) for j in (-1, 0, 1)]
     stand = _stand(grid)
     apart = [_stand([p], seed=5 + k)[0] for k, p in enumerate(grid)]
+    shape, overlap = (_crown_shape(stand, grid), _crown_shape(apart, grid)), (_overlap(stand, grid, spacing),
+                                                                              _overlap(apart, grid, spacing))
+    print(f"stand of 9: height / crown width {shape[0]:.2f} (apart {shape[1]:.2f}); overlap of neighbours "
+          f"{overlap[0]:.2f} m (apart {overlap[1]:.2f} m)")
+    assert _crown_shape(stand, grid) > _crown_shape(apart, grid)
+    assert _overlap(stand, grid, spacing) < _overlap(apart, grid, spacing)
 
-    def shape(trees):
-        ratios = []
-        for (start, end), (x, z) in zip(trees, grid, strict=True):
-            width = 2 * np.hypot(end[:, 0] - x, end[:, 2] - z).max()
-            ratios.append(end[:, 1].max() / width)
-        return float(np.mean(ratios))
 
-    def overlap(trees):
-        total = 0.0
-        for a in range(len(grid)):
-            for b in range(a + 1, len(grid)):
-                pa, pb = np.array([grid[a][0], 0, grid[a][1]]), np.array([grid[b][0], 0, grid[b][1]])
-                d = np.linalg.norm(pb - pa)
-                if d > spacing * 1.01:
-                    continue                                          # neighbours side by side only
-                u = (pb - pa) / d
-                total += max(0.0, _reach(trees[a], pa, u) + _reach(trees[b], pb, -u) - d)
-        return total
+def test_a_scene_grown_together_against_the_same_scene_grown_apart(tmp_path):
+    """grow: together: the same nine self_organizing trees (same seeds, same places)."""
+    from plantgen.pipeline import grow_file
 
-    print(f"stand of 9: height / crown width {shape(stand):.2f} (apart {shape(apart):.2f}); overlap of "
-          f"neighbours {overlap(stand):.2f} m (apart {overlap(apart):.2f} m)")
-    assert shape(stand) > shape(apart)
-    assert overlap(stand) < overlap(apart)
+    spacing, grown = 1.6, {}
+    for mode in ("together", "apart"):
+        (tmp_path / f"{mode}.yaml").write_text(
+            f"name: {mode}\nseed: 5\ngrow: {mode}\ninstances:\n  - grammar: self_organizing\n    iterations: 16\n"
+            f"    grid: {{count: [3, 3], spacing: [{spacing}, {spacing}]}}\n")
+        scene = grow_file(tmp_path / f"{mode}.yaml").scene
+        placed = [i.skeleton.transformed(i.matrix) for i in scene.instances]
+        grown[mode] = ([(s.start, s.end) for s in placed], [(i.matrix[0, 3], i.matrix[2, 3]) for i in scene.instances])
+    (together, grid), (apart, _) = grown["together"], grown["apart"]
+    shape = _crown_shape(together, grid), _crown_shape(apart, grid)
+    overlap = _overlap(together, grid, spacing), _overlap(apart, grid, spacing)
+    print(f"grove of 9 (grow: together vs apart): height / crown width {shape[0]:.2f} vs {shape[1]:.2f}; overlap "
+          f"of neighbours {overlap[0]:.2f} m vs {overlap[1]:.2f} m")
+    assert shape[0] > shape[1] and overlap[0] < overlap[1]

@@ -75,6 +75,8 @@ def entries() -> list[Entry]:
     out.append(Entry("scenes/wall_garden", ("plantgen", "render", "wall_garden", "-o", "{out}/scenes/wall_garden.png",
                                             "--azimuth", "200", "--elevation", "15", "--ssaa", "2", "--size", "{size}"),
                      ("scenes/wall_garden.png",)))
+    out.append(Entry("scenes/grove", ("plantgen", "render", "grove", "-o", "{out}/scenes/grove.png", "--elevation",
+                                      "20", "--ssaa", "2", "--size", "{size}"), ("scenes/grove.png",)))
     # the forest (issue 25): instanced, its detail at the default --lod-pixels; no supersampling
     # (a frame of 1.3 M drawn rows costs about 8 s on llvmpipe, four times that at --ssaa 2)
     out.append(Entry("scenes/forest", ("plantgen", "render", "forest", "-o", "{out}/scenes/forest.png", "--size",

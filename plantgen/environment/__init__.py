@@ -25,6 +25,11 @@ list's order, so ``?E`` has as many parameters as the parts answer together::
   module's frame (components along H, L and U, so that ``+(deg(atan2(l, h)))`` turns
   towards it), zero when it has none.
 
+* ``light``: the sky's and the sun's light traced against the plant grown so far, the
+  direction of most light, and with ``allocation`` the Borchert–Honda vigour
+  (:mod:`plantgen.environment.light`). Plants of a scene grown together see each other
+  (:mod:`plantgen.environment.together`).
+
 Every value is typed and ranged; a mesh file is read only inside the grammar's folder.
 The markers count against ``max_markers``. Each part answers the modules ``batch`` at a
 time (a knob of memory, never of the answer).

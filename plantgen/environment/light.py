@@ -37,7 +37,9 @@ import numpy as np
 
 from .. import fields
 from ..geometry.bvh import build_bvh, trace_bvh
+from ..geometry.polygons import Polygons
 from ..geometry.scan import scan_target, target_hits
+from ..geometry.skeleton import Skeleton
 from ..limits import Limits
 from ..lsystem.queries import QueryState
 from ..tolerances import tol
@@ -92,6 +94,10 @@ class Light:
                                fields.number(a.get("lambda", 0.5), "lambda", where, EnvError, lo=0.0, hi=1.0))
         self.width = 4 + (self.allocation is not None)
         self.limits = limits
+        #: plants grown together (:mod:`plantgen.environment.together`): a callable giving the
+        #: others' (Skeleton, Polygons) in this plant's frame, and the frame's rotation (3, 3)
+        #: to the world, whose sky and sun these are
+        self.neighbours, self.rotation = None, None
 
     @property
     def rays_per_query(self) -> int:
@@ -101,12 +107,18 @@ class Light:
         k = len(state)
         self.limits.check("light_rays", k * self.rays_per_query, f"step {state.step}: light rays")
         drawing = state.drawing
-        target = scan_target(drawing.skeleton, drawing.polygons) if len(drawing.skeleton) or len(drawing.polygons) \
-            else None
+        skeleton, polygons = drawing.skeleton, drawing.polygons
+        others = self.neighbours() if self.neighbours is not None else None
+        if others is not None:         # after the plant's own segments: its indices stay as they are
+            skeleton = Skeleton.concatenate([skeleton, others[0]])
+            polygons = Polygons.concatenate([polygons, others[1]], [0, len(drawing.skeleton)])
+        target = scan_target(skeleton, polygons) if len(skeleton) or len(polygons) else None
         bvh = build_bvh(target.lo, target.hi) if target is not None and len(target) else None
         # one frame origin for every batch of rays: the hit test rounds the same, however batched
         hits = target_hits(target, origin=target.base) if bvh is not None else None
         dirs = self.dirs if self.sun is None else np.concatenate([self.dirs, self.sun[None]])
+        if self.rotation is not None:
+            dirs = dirs @ self.rotation                  # the world's sky in the plant's frame
         weights = np.concatenate([(1.0 - self.share) * self.weights, [self.share]]) if self.sun is not None \
             else self.weights
         radius = np.zeros(k)

@@ -13,7 +13,7 @@ the box, cylinder and cone in closed form, the ellipsoid by bisection on Eberly'
 closest-point equation (to ``tol``-level accuracy), the mesh as the distance to its
 nearest triangle, signed by its winding number. :meth:`Shape.ray` is the distance along a
 unit direction to the shape's surface (0 from inside, ``inf`` on a miss): slabs for a box,
-sphere tracing the exact distance for the others.
+the BVH's traversal for a mesh, sphere tracing the exact distance for the others.
 """
 
 from __future__ import annotations
@@ -26,6 +26,10 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input
+from ..geometry.bvh import build_bvh, trace_bvh
+from ..geometry.polygons import Polygons
+from ..geometry.scan import scan_target, target_hits
+from ..geometry.skeleton import Skeleton
 from ..limits import Limits
 from ..tolerances import tol
 
@@ -171,6 +175,8 @@ class Shape:
         an origin inside it), ``inf`` if it is not met within ``reach``."""
         o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        if self.kind == "mesh":
+            return self._mesh_ray(o, d, reach)
         if self.kind == "box":
             lo, hi = self.bounds
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -196,6 +202,23 @@ class Shape:
             t[idx[~done]] += step[~done]
             active[idx[done | (t[idx] > reach)]] = False
         return np.where(hit & (t <= reach), t, np.inf)
+
+
+    def _mesh_ray(self, o, d, reach):
+        """A mesh's ray distance: its triangles traced by the one BVH traversal
+        (:mod:`plantgen.geometry.bvh`), built once; 0 from inside."""
+        if self.__dict__.get("_bvh") is None:
+            tri = self.triangles + self.center
+            n = len(tri)
+            normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+            faces = Polygons(tri.reshape(-1, 3), np.arange(3 * n).reshape(n, 3), np.arange(n), np.zeros(n, np.int32),
+                             normal)
+            target = scan_target(Skeleton.empty(), faces)
+            object.__setattr__(self, "_bvh", (build_bvh(target.lo, target.hi), target_hits(target)))
+        bvh, hits = self.__dict__["_bvh"]
+        t, _ = trace_bvh(bvh, o, d, hits, t_max=reach)
+        return np.where(self.distance(o) < 0, 0.0, t)
 
 
 def _point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:

@@ -44,8 +44,8 @@ from .queries import Queries, uses_queries
 from .strings import ModuleString, module_bytes
 from .symbols import Action, by_action
 
-__all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "apply_interpretation", "cut_branches",
-           "derive", "module_bytes"]
+__all__ = ["DEFAULT_MAX_MODULES", "Derivation", "DerivationLimit", "ModuleString", "apply_interpretation",
+           "cut_branches", "derive", "module_bytes"]
 
 DEFAULT_MAX_MODULES = default_limits.max_modules
 
@@ -168,64 +168,102 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         a grammar with query or communication modules is interpreted after the axiom and
         after each step, and its modules receive the answers before the next step
     """
-    limits = (limits or default_limits).raised(modules=max_modules).lowered(modules=grammar.max_modules)
-    iterations = grammar.iterations if iterations is None else int(iterations)
-    limits.check("iterations", iterations, f"{grammar.path}: iterations")
-    seed = grammar.seed if seed is None else int(seed)
-    work = work or limits.meter("derive_work")
-    rng = np.random.default_rng(seed)
-    codes = {s: i for i, s in enumerate(grammar.symbols)}
-    width = _width(grammar)
+    run = Derivation(grammar, iterations, seed, max_modules, progress, limits=limits, work=work,
+                     environment=environment)
+    run.answer()
+    while run.rewrite():
+        run.answer()
+    return run.result()
 
-    string = _cut(_axiom_string(grammar, rng, codes, width), codes)
-    if len(string[0]) > limits.max_modules:
-        raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} modules")
-    queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
-    if queries is not None:
-        queries.update(string, 0)
-    groups = _rule_groups(grammar.rules)
-    needs_context = any(r.left or r.right for r in grammar.rules)
-    seen: dict[bytes, int] | None = {}    # fingerprint of a state -> the step it was reached
-    if len(string[0]) <= CYCLE_WINDOW:
-        seen[_fingerprint(string, rng)] = 0
 
-    step, fixed_point = 0, None
-    while step < iterations:
-        before, state = string, rng.bit_generator.state
-        neighbours = (_context_neighbours(string[0], grammar.symbols, grammar.ignore)
-                      if needs_context else None)
-        matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
+class Derivation:
+    """One derivation, a step at a time (what :func:`derive` runs): :meth:`rewrite` applies
+    the rules once, :meth:`answer` then gives the query and communication modules their
+    values (and looks for a fixed point or a cycle). Plants that grow together in one
+    environment (:mod:`plantgen.environment.together`) rewrite each in turn, then are
+    answered each in turn; ``together`` turns off the cycle skip (a plant's future then
+    depends on its neighbours too)."""
+
+    def __init__(self, grammar: Grammar, iterations: int | None = None, seed: int | None = None,
+                 max_modules: int | None = None, progress=None, *, limits: Limits | None = None,
+                 work: Meter | None = None, environment=None, together: bool = False):
+        limits = (limits or default_limits).raised(modules=max_modules).lowered(modules=grammar.max_modules)
+        self.iterations = grammar.iterations if iterations is None else int(iterations)
+        limits.check("iterations", self.iterations, f"{grammar.path}: iterations")
+        seed = grammar.seed if seed is None else int(seed)
+        self.grammar, self.limits, self.progress = grammar, limits, progress
+        self.work = work or limits.meter("derive_work")
+        self.rng = np.random.default_rng(seed)
+        self.codes = {s: i for i, s in enumerate(grammar.symbols)}
+        self.width = _width(grammar)
+        self.string = _cut(_axiom_string(grammar, self.rng, self.codes, self.width), self.codes)
+        if len(self.string[0]) > limits.max_modules:
+            raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} "
+                                  "modules")
+        self.queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
+        self.groups = _rule_groups(grammar.rules)
+        self.needs_context = any(r.left or r.right for r in grammar.rules)
+        self.together = together
+        self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
+        self.step, self.total = 0, len(self.string[0])
+        self.before = self.fixed_point = None     # the string and generator state before the last step
+
+    def rewrite(self) -> bool:
+        """One derivation step (False, and nothing done, once every step is done)."""
+        if self.step >= self.iterations:
+            return False
+        g, string = self.grammar, self.string
+        self.before = (string, self.rng.bit_generator.state)
+        neighbours = _context_neighbours(string[0], g.symbols, g.ignore) if self.needs_context else None
+        matched, out_len, applied = _select_rewrites(g, self.groups, string, neighbours, self.rng, self.codes)
         total = int(out_len.sum())
-        _check_step(grammar, limits, step, total, width)
-        work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
-                   f"{grammar.path}: derivation step {step + 1}")
-        string = _cut(_rewrite(grammar, string, matched, out_len, applied, rng, codes, width), codes)
-        if grammar.decomposition:
-            string = _passes(grammar, grammar.decomposition, grammar.decomposition_depth, string, rng, codes,
-                             width, limits, work, f"decomposition after step {step + 1}, pass")
-        step += 1
-        if queries is not None:
-            queries.update(string, step)
-        if progress is not None:
-            progress(step, total)
-        if _unchanged(before, string) and rng.bit_generator.state == state:   # a fixed point: done
-            fixed_point = step - 1
-            break
-        if seen is not None and total <= CYCLE_WINDOW:
-            key = _fingerprint(string, rng)
-            if key in seen:           # the state of step seen[key] again: skip whole periods
-                period = step - seen[key]
-                iterations = step + (iterations - step) % period
-                seen = None
-            else:
-                seen[key] = step
+        _check_step(g, self.limits, self.step, total, self.width)
+        self.work.spend(total * (CONTEXT_WORK if self.needs_context else 1) + STEP_WORK * (len(self.groups) + 1),
+                        f"{g.path}: derivation step {self.step + 1}")
+        self.string = _cut(_rewrite(g, string, matched, out_len, applied, self.rng, self.codes, self.width),
+                           self.codes)
+        if g.decomposition:
+            self.string = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng, self.codes,
+                                  self.width, self.limits, self.work, f"decomposition after step {self.step + 1}, pass")
+        self.step, self.total = self.step + 1, total
+        return True
 
-    return ModuleString(*string, grammar.symbols, fixed_point=fixed_point)
+    def interpret(self) -> None:
+        """Walk the turtle over the string for its query modules (nothing without any)."""
+        if self.queries is not None:
+            self.queries.interpret(self.string, self.step)
+
+    def answer(self) -> None:
+        """Write the query modules' values and the environment's answers (walking the turtle
+        first unless :meth:`interpret` did), report the step, stop at a fixed point (the
+        step left the string and the generator as they were), and skip whole periods of a
+        cycle once the state comes back (neither for plants grown together)."""
+        if self.queries is not None:
+            self.queries.update(self.string, self.step)
+        if self.step and self.progress is not None:
+            self.progress(self.step, self.total)
+        if (not self.together and self.before is not None and _unchanged(self.before[0], self.string)
+                and self.rng.bit_generator.state == self.before[1]):       # a fixed point: done
+            self.fixed_point, self.iterations = self.step - 1, self.step
+            return
+        if self.seen is None or self.total > CYCLE_WINDOW:
+            return
+        key = _fingerprint(self.string, self.rng)
+        if key in self.seen:                  # the state of step seen[key] again: skip whole periods
+            period = self.step - self.seen[key]
+            self.iterations = self.step + (self.iterations - self.step) % period
+            self.seen = None
+        else:
+            self.seen[key] = self.step
+
+    def result(self) -> ModuleString:
+        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point)
 
 
 def _unchanged(before, after) -> bool:
     """Whether a step left the string as it was (sym, nparam, params all equal)."""
     return len(before[0]) == len(after[0]) and all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+
 
 
 def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = None, *,

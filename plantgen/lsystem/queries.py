@@ -2,8 +2,9 @@
 
 As in *Synthetic topiary* (Prusinkiewicz, James and Měch 1994) and L-Py, after the axiom is
 read and after every derivation step the turtle interprets the string (its ``%`` already
-cut), and each query module receives the turtle's state at its place in the string:
-``?P(x, y, z)`` the position, ``?H`` the heading, ``?U`` the up axis, ``?L`` the left axis.
+cut; the ``interpretation:`` rules, which are for the final drawing, not applied), and
+each query module receives the turtle's state at its place in the string: ``?P(x, y, z)``
+the position, ``?H`` the heading, ``?U`` the up axis, ``?L`` the left axis.
 The next step's rules read those values like any other parameters
 (``?P(x, y, z) : x*x + z*z > r*r -> %``). Communication modules ``?E(...)`` (Měch and
 Prusinkiewicz 1996) are answered in the same pass by an *environment*: any object with a
@@ -104,6 +105,7 @@ class Queries:
         self.grammar, self.environment = grammar, environment
         self.meter = limits.meter("queries")
         self.limits = limits
+        self.pending = None          # (string, step, rows, drawing) walked by interpret, not yet written
         codes = {s: i for i, s in enumerate(grammar.symbols)}
         self.query_codes = {codes[s]: k for s, k in QUERY_SYMBOLS.items() if s in codes}
         self.communication = codes.get(COMMUNICATION_SYMBOL)
@@ -118,17 +120,33 @@ class Queries:
                 raise PlantgenError(f"{grammar.path}: {COMMUNICATION_SYMBOL!r} has {arity} parameter(s) but "
                                     f"the environment answers {environment.width}")
 
-    def update(self, string: tuple, step: int) -> None:
-        """Interpret ``string`` (sym, nparam, params) and write, in place, each query
-        module's turtle vector and each ``?E``'s answer into its parameters."""
-        sym, _, params = string
+    def interpret(self, string: tuple, step: int) -> Drawing | None:
+        """Walk the turtle over ``string`` (sym, nparam, params) and keep what it drew and
+        its state at each query module (:attr:`drawing`), for :meth:`update` to write."""
+        sym = string[0]
         rows = np.flatnonzero(np.isin(sym, self.all_codes))
+        self.pending = (string, step, rows, None)
         if not len(rows):
-            return
+            return None
         self.meter.spend(len(rows), f"{self.grammar.path}: query modules after step {step}")
         ms = ModuleString(*string, self.grammar.symbols)
         drawing = interpret_plant(ms, self.grammar.turtle, self.grammar.materials, self.grammar.path, self.limits,
                                   queries=True)
+        self.pending = (string, step, rows, drawing)
+        return drawing
+
+    def update(self, string: tuple, step: int) -> None:
+        """Write, in place, each query module's turtle vector and each ``?E``'s answer into
+        its parameters (walking the turtle over ``string`` first, unless :meth:`interpret`
+        just did)."""
+        if self.pending is None or self.pending[0] is not string or self.pending[1] != step:
+            self.interpret(string, step)
+        string, step, rows, drawing = self.pending
+        self.pending = None
+        if drawing is None:
+            return
+        sym, _, params = string
+        ms = ModuleString(*string, self.grammar.symbols)
         states = drawing.queries
         kinds = sym[rows]
         for code, k in self.query_codes.items():

@@ -1,0 +1,98 @@
+"""Plants that grow together: one derivation step for all, in one shared space.
+
+A scene with ``grow: together`` derives all its plants in lockstep: every plant applies
+its rules once (:meth:`~plantgen.lsystem.derive.Derivation.rewrite`), every plant's string
+is drawn and placed in the world, and only then is every plant's environment asked
+(:meth:`~plantgen.lsystem.derive.Derivation.answer`), so each sees the others as they
+stand after the same step, whatever their order. A ``light`` part traces its sky against
+the other plants too (placed, in its own plant's frame), and takes the sky and the sun as
+the world's, whatever the plant's rotation. Plants without query modules are drawn each
+step all the same, for the others to see.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.polygons import Polygons
+from ..geometry.skeleton import Skeleton
+from ..limits import Limits, Meter
+from ..lsystem.derive import Derivation
+from ..lsystem.grammar import Grammar
+from ..lsystem.strings import ModuleString
+from ..lsystem.turtle import interpret_plant
+from . import environment_for
+from .light import Light
+
+__all__ = ["TogetherPlant", "grow_together"]
+
+
+@dataclass(frozen=True, eq=False)
+class TogetherPlant:
+    """One plant of a stand: its grammar, seed, steps, and where it stands (4 x 4 similarity)."""
+
+    grammar: Grammar
+    seed: int
+    iterations: int | None
+    matrix: np.ndarray
+
+
+class _World:
+    """Every plant's latest drawing, placed in the world."""
+
+    def __init__(self, plants: list[TogetherPlant]):
+        self.plants = plants
+        self.placed: list[tuple[Skeleton, Polygons] | None] = [None] * len(plants)
+
+    def put(self, i: int, skeleton: Skeleton, polygons: Polygons) -> None:
+        m = self.plants[i].matrix
+        self.placed[i] = (skeleton.transformed(m), polygons.transformed(m))
+
+    def others(self, i: int):
+        """The other plants' (Skeleton, Polygons) in plant ``i``'s frame, None for none."""
+        parts = [p for j, p in enumerate(self.placed) if j != i and p is not None]
+        if not parts:
+            return None
+        back = np.linalg.inv(self.plants[i].matrix)
+        skeletons = [s for s, _ in parts]
+        offsets = np.cumsum([0] + [len(s) for s in skeletons])[:-1]
+        return (Skeleton.concatenate(skeletons).transformed(back),
+                Polygons.concatenate([p for _, p in parts], offsets).transformed(back))
+
+
+def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | None = None,
+                  progress=None) -> list[ModuleString]:
+    """Derive ``plants`` in lockstep in one shared space (see the module's notes): their
+    derived strings, in order. ``progress(step, modules)`` after each step, all plants'
+    modules together."""
+    world = _World(plants)
+    runs = []
+    for i, plant in enumerate(plants):
+        env = environment_for(plant.grammar, seed=plant.seed, limits=limits)
+        for part in env.parts if env is not None else ():
+            if isinstance(part, Light):
+                lin = plant.matrix[:3, :3]
+                part.neighbours = lambda i=i: world.others(i)
+                part.rotation = lin / np.cbrt(abs(np.linalg.det(lin)))
+        runs.append(Derivation(plant.grammar, plant.iterations, plant.seed, limits=limits, work=work,
+                               environment=env, together=True))
+    moved = list(range(len(runs)))
+    step = 0
+    while moved:
+        for i in moved:
+            run = runs[i]
+            run.interpret()
+            drawing = run.queries.pending[3] if run.queries is not None else None
+            if drawing is None:
+                drawing = interpret_plant(run.result(), run.grammar.turtle, run.grammar.materials, run.grammar.path,
+                                          limits)
+            world.put(i, drawing.skeleton, drawing.polygons)
+        for i in moved:
+            runs[i].answer()
+        if step and progress is not None:
+            progress(step, sum(len(r.string[0]) for r in runs))
+        moved = [i for i, run in enumerate(runs) if run.rewrite()]
+        step += 1
+    return [run.result() for run in runs]
