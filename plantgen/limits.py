@@ -75,6 +75,9 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
         sub-rays of a diverging beam), counted before any is cast
+    max_scan_tests : ray-primitive tests a laser scan may cast: each (sub-)ray against every
+        primitive whose box its beam can meet (a scanner inside a crown tests each beam
+        against many), counted before any is cast
     """
 
     max_input_bytes: int = 256 << 10
@@ -94,6 +97,7 @@ class Limits:
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30
     max_scan_rays: int = 200_000_000
+    max_scan_tests: int = 200_000_000
 
     def __post_init__(self) -> None:
         for f in fields(self):

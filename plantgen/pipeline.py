@@ -52,9 +52,10 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.formats import check_export_outputs
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
-from .files import read_yaml, write_atomically
+from .files import check_outputs, read_yaml, write_all_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
@@ -508,6 +509,14 @@ class RenderReport:
         return parse_background(self.request.image.background)
 
 
+def check_image_output(output) -> Path:
+    """A still's ``.png`` output, checked before any work (one line)."""
+    output = Path(output)
+    if output.suffix.lower() != ".png":
+        raise PlantgenError(f"{output}: the image output must end in .png")
+    return check_outputs([output])[0]
+
+
 def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, camera_out=None) -> None:
     """Fail before any work on outputs :func:`render_file` cannot write: one line naming
     the file."""
@@ -522,6 +531,7 @@ def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, c
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
         raise PlantgenError(f"{camera_out}: the camera output must end in .json")
+    check_outputs([output, camera_out, depth_out])
 
 
 # Memory a render takes, measured (tracemalloc and the GL targets' sizes) and rounded up:
@@ -690,17 +700,19 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
 
 
 def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:
+    """The image, the camera and the depth, renamed into place together (all or none)."""
     result = report.result
     fps = report.request.motion.fps
-    written = [write_animation(output, report.colors, fps) if report.colors else write_png(output, result.color)]
+    writes = [(output, (lambda p: write_animation(p, report.colors, fps)) if report.colors
+               else (lambda p: write_png(p, result.color)))]
     if camera_out is not None:
-        written.append(write_atomically(camera_out, report.camera.save))
+        writes.append((camera_out, report.camera.save))
     if depth_out is not None:
         def save_depth(p):
             with open(p, "wb") as fh:
                 np.save(fh, report.distance.astype(np.float32))
-        written.append(write_atomically(depth_out, save_depth))
-    return written
+        writes.append((depth_out, save_depth))
+    return write_all_atomically(writes)
 
 
 def render_file(input_path, output, settings: RenderSettings | None = None, *, camera_out=None, depth_out=None,
@@ -777,7 +789,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = _export_checks(output_path, up, instancing)
+    fmt = _export_checks(output_path, up, instancing, unit)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
     if grown.segments == 0:
@@ -808,17 +820,19 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str):
+def _export_checks(output_path: Path, up: str | None, instancing: str, unit: float = 1.0):
     """The export's format, after every check that needs no work: a known suffix, its
-    extra installed, the up axis, the instancing, the folder there (one line each)."""
+    extra installed, the up axis, the instancing, the unit, every output writable (one
+    line each)."""
+    if not 1e-9 <= unit <= 1e9:          # so a cylinder model's volumes (unit³) stay finite
+        raise ExportError(f"the unit must be 1e-09..1e+09 metres, got {unit!r}")
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
     if up is not None and up not in UP_AXES:
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
-    if not output_path.parent.is_dir():
-        raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
+    check_export_outputs(output_path, fmt)
     return fmt
 
 

@@ -57,7 +57,7 @@ import numpy as np
 from . import fields
 from ._resources import grammars_dir
 from .errors import PlantgenError
-from .files import read_yaml
+from .files import read_yaml, real_path
 from .geometry.camera import Camera, CameraError, box_corners
 from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton, SkeletonError
@@ -443,13 +443,13 @@ def resolve_grammar(name: str, base: Path, where: str, allow_paths=(), *, error:
     link pointing out) is refused before it is opened."""
     if not name or "\0" in name:
         raise error(f"{where}: grammar must name a file, got {fields.show(name)}")
-    roots = [base.resolve(), *(Path(p).resolve() for p in allow_paths)]
+    roots = [real_path(base), *(real_path(p) for p in allow_paths)]
     for cand in (base / name, base / f"{name}.yaml"):
-        real = cand.resolve()
+        real = real_path(cand)       # a link loop stays a path that fails to open
         if not any(real.is_relative_to(root) for root in roots):
             raise error(f"{where}: grammar {fields.show(name)} lies outside the {owner}'s folder "
                              f"(only files under it are read; pass --allow-path DIR to allow DIR)")
-        if real.is_file():
+        if real.is_file() or cand.is_symlink():    # a link loop: its read says so in one line
             return real
     if Path(name).name == name and name not in (".", ".."):   # a plain name: a shipped grammar
         for cand in (grammars_dir() / name, grammars_dir() / f"{name}.yaml"):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..files import check_output
 from ..geometry.camera import Camera
 from ..knobs import knob_of
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings
@@ -51,7 +52,7 @@ def _keys_epilog() -> str:
               show_default=True, help="Folder for screenshots (P) and cameras (C).")
 @click.option("--watch/--no-watch", default=True, show_default=True,
               help="Re-grow the plant when the input file or a grammar it includes is saved.")
-@click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path), metavar="FILE.png",
+@click.option("--snapshot", type=click.Path(path_type=Path), metavar="FILE.png",
               help="Draw a few frames, save the window as shown (heads-up line included) and close: "
                    "a screenshot for documentation.")
 @smooth_bends_opt
@@ -91,6 +92,8 @@ def view(input: Path, method, subdiv, seed, iterations, shots, watch, snapshot, 
         raise click.BadParameter(f"{shots}: no such folder", param_hint="--shots")
     if snapshot is not None and snapshot.suffix.lower() != ".png":
         raise click.BadParameter(f"{snapshot}: the snapshot must end in .png", param_hint="--snapshot")
+    if snapshot is not None:
+        check_output(snapshot)
     options = ViewOptions(
         input=input, settings=settings, size=size or DEFAULT_SIZE, seed=seed, iterations=iterations,
         method=next((m for m in METHODS if m.lower() == method.lower()), None) if method else None,

@@ -55,9 +55,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import PlantgenError
+from ..files import check_outputs
 from ..geometry.frames import UP_AXES
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",
+__all__ = ["EXPORT_FORMATS", "check_export_outputs", "companion_paths",
+           "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",
            "estimate_export_bytes", "export_format", "export_file_type"]
 
 #: What a format holds: a mesh (written by a :class:`~plantgen.exporters.plants.MeshWriter`)
@@ -163,9 +165,28 @@ def writable_format(path: str | Path, kind: str) -> Format:
         other = "mesh" if kind == "skeleton" else "skeleton"
         raise ExportError(f"{path}: {fmt.suffix} holds a {other}, not a {kind}")
     check_extra(fmt, path)
-    if not path.parent.is_dir():
-        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    check_export_outputs(path, fmt)
     return fmt
+
+
+def companion_paths(path: str | Path, fmt: Format) -> list[Path]:
+    """The files written beside ``path`` that its name fixes: a .gltf's .bin, an .obj's
+    .mtl, a .qsm.csv's .treedata.csv (texture PNGs are named by material, checked as they
+    are written)."""
+    path = Path(path)
+    if fmt.suffix == ".gltf":
+        return [path.with_suffix(".bin")]
+    if fmt.suffix == ".obj":
+        return [path.with_suffix(".mtl")]
+    if fmt.suffix == ".qsm.csv":
+        return [path.with_name(path.name[: -len(".qsm.csv")] + ".treedata.csv")]
+    return []
+
+
+def check_export_outputs(path: str | Path, fmt: Format) -> list[Path]:
+    """Every file an export to ``path`` writes whose name is known before the work,
+    checked (:func:`plantgen.files.check_output`: one line ``PATH: cannot write (...)``)."""
+    return check_outputs([Path(path), *companion_paths(path, fmt)], ExportError)
 
 
 def estimate_export_bytes(triangles: int, file_type: str) -> int:

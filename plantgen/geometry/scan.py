@@ -68,7 +68,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..knobs import check_knobs, knob
-from ..limits import Limits
+from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 from .frusta import Frusta
 from .polygons import Polygons
@@ -123,8 +123,8 @@ class ScanSettings:
                      "lines over it.", kind="choice", choices=SCAN_MODES)
     angular_step: float = knob(0.05, "--angular-step", "Degrees between neighbouring beams (azimuth and elevation; "
                                "airborne: across the track).", lo=0.001, hi=10.0, metavar="DEG")
-    range_noise: float = knob(0.0, "--range-noise", "Gaussian sigma of each range, model units (0: exact).", lo=0.0,
-                              metavar="SIGMA")
+    range_noise: float = knob(0.0, "--range-noise", "Gaussian sigma of each range, model units (0: exact).",
+                              lo=0.0, hi=1e6, metavar="SIGMA")
     divergence: float = knob(0.0, "--divergence", "Beam divergence, full angle in milliradians (0: ideal rays; "
                              "terrestrial scanners have about 0.3).", lo=0.0, hi=100.0, metavar="MRAD")
     beam_samples: int = knob(8, "--beam-samples", "Sub-rays sampled across a diverging beam.", kind="int", lo=1,
@@ -134,23 +134,23 @@ class ScanSettings:
     scanners: int = knob(4, "--scanners", "Terrestrial scanners evenly on a circle around the plant.", kind="int",
                          lo=1, hi=360, metavar="N")
     distance: float | None = knob(None, "--scan-distance", "Radius of the scanners' circle around the plant's centre "
-                                  "(model units; default: the plant's height plus half its width).", lo=0.0,
-                                  lo_open=True, metavar="D")
+                                  "(model units; default: the plant's height plus half its width).", lo=1e-6,
+                                  hi=1e9, metavar="D")
     scanner_height: float = knob(1.5, "--scanner-height", "Terrestrial scanners' height above the plant's base "
-                                 "(model units).", metavar="H")
+                                 "(model units).", lo=-1e9, hi=1e9, metavar="H")
     azimuth: float = knob(0.0, "--scan-azimuth", "Degrees: the first scanner's direction from the plant (0: +x, "
                           "90: +z); airborne: the flight lines' heading.", metavar="DEG")
     positions: tuple | None = knob(None, "--scanner-positions", "Terrestrial scanners at these points instead of "
                                    "the circle: 'x,y,z;x,y,z' (model units, the plant's frame).", kind="str",
                                    metavar="X,Y,Z;...")
     flight_height: float | None = knob(None, "--flight-height", "Airborne: the lines' height above the plant's base "
-                                       "(default: twice the plant's height).", lo=0.0, lo_open=True, metavar="H")
+                                       "(default: twice the plant's height).", lo=1e-6, hi=1e9, metavar="H")
     line_spacing: float | None = knob(None, "--line-spacing", "Airborne: distance between flight lines (default: "
-                                      "half the swath, or the pulse spacing for nadir lines).", lo=0.0, lo_open=True,
+                                      "half the swath, or the pulse spacing for nadir lines).", lo=1e-9, hi=1e9,
                                       metavar="D")
     pulse_spacing: float | None = knob(None, "--pulse-spacing", "Airborne: distance between scan lines along the "
-                                       "track (default: the beams' spacing at the nadir, on the ground).", lo=0.0,
-                                       lo_open=True, metavar="D")
+                                       "track (default: the beams' spacing at the nadir, on the ground).", lo=1e-9,
+                                       hi=1e9, metavar="D")
     scan_angle: float = knob(30.0, "--scan-angle", "Airborne: the mirror's sweep, degrees either side of the nadir "
                              "(0: nadir beams only).", lo=0.0, hi=75.0, metavar="DEG")
     precision: str = knob("float64", "--scan-precision", "float64: the exact reference; float32: the frusta tested "
@@ -504,7 +504,7 @@ def _terrestrial_positions(target: ScanTarget, settings: ScanSettings) -> np.nda
     return np.stack([centre[0] + radius * np.cos(angle), y, centre[2] + radius * np.sin(angle)], axis=1)
 
 
-def _airborne_lines(target: ScanTarget, settings: ScanSettings) -> list[AirborneBeams]:
+def _airborne_lines(target: ScanTarget, settings: ScanSettings, limits: Limits | None = None) -> list[AirborneBeams]:
     lo, hi = target.box()
     centre = (lo + hi) / 2
     height = max(float(hi[1] - target.base[1]), 0.0)
@@ -519,6 +519,15 @@ def _airborne_lines(target: ScanTarget, settings: ScanSettings) -> list[Airborne
     across = np.array([-heading[2], 0.0, heading[0]])
     corners = _xz_corners(lo[None], hi[None])[0] - centre[[0, 2]]
     along, side = corners @ heading[[0, 2]], corners @ across[[0, 2]]
+    # The beams counted in floats before any line is made: a tiny spacing, flight height
+    # or pulse spacing (a denormal one too) is refused here, not after the lines fill memory.
+    lines_f = (side.max() - side.min() + 2 * half_swath) / spacing + 3
+    rays_f = ((along.max() - along.min()) / pulse + 3) * lines_f * (2 * fan + 1) * settings.sub_rays
+    limit = (limits or default_limits).max_scan_rays
+    if not rays_f <= limit:
+        raise LimitError(f"an airborne scan: about {rays_f:.3g} rays ({lines_f:.3g} flight lines), over the "
+                         f"limit of {limit:,} ({hint('scan_rays')}; or widen the line or pulse spacing, or "
+                         "raise the flight height)")
     a0, a1 = int(math.floor(along.min() / pulse)), int(math.ceil(along.max() / pulse))
     l0 = int(math.floor((side.min() - half_swath) / spacing))
     l1 = int(math.ceil((side.max() + half_swath) / spacing))
@@ -562,7 +571,7 @@ def _reach(origins: np.ndarray, lo, hi) -> float:
     return float(np.sqrt((far ** 2).sum(axis=1)).max())
 
 
-def beam_grids(target: ScanTarget, settings: ScanSettings) -> list:
+def beam_grids(target: ScanTarget, settings: ScanSettings, limits: Limits | None = None) -> list:
     """The beam grid of every scanner (airborne: of every flight line):
     :class:`TerrestrialBeams` or :class:`AirborneBeams`, whose ``rays(a, b)`` gives any
     beam's origin and direction (beam k is (a0 + k // nb, b0 + k % nb)). With a divergence,
@@ -571,7 +580,7 @@ def beam_grids(target: ScanTarget, settings: ScanSettings) -> list:
     lo, hi = target.box()
     half = math.tan(settings.divergence / 2000.0)
     if settings.mode == "airborne":
-        grids = _airborne_lines(target, settings)
+        grids = _airborne_lines(target, settings, limits)
         for g in grids:
             g.pad = _reach(g.rays(np.array([g.a0, g.a1]), np.zeros(2))[0], lo, hi) * half * (1 + 1e-9)
         _line_members(target, grids)
@@ -658,15 +667,28 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
     return t, np.where(np.isfinite(t), prim, -1)
 
 
-def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int):
-    """(sub-ray ids, t, primitive) of every finite hit of the scanner's (sub-ray, primitive) pairs."""
-    s = settings.sub_rays
+def _pair_blocks(target: ScanTarget, grid):
+    """(members, a_lo, b_lo, rectangle heights, first pair of each rectangle and the total
+    last) of a scanner's (beam, primitive) pairs: per primitive its box's rectangle of beams."""
     members = getattr(grid, "members", None)
     members = np.arange(len(target)) if members is None else members
     a_lo, a_hi, b_lo, b_hi = grid.blocks(target.lo[members] - grid.pad, target.hi[members] + grid.pad)
     nb_block = np.maximum(b_hi - b_lo + 1, 0)
     count = np.maximum(a_hi - a_lo + 1, 0) * nb_block
-    first = np.concatenate([[0], np.cumsum(count)])
+    return members, a_lo, b_lo, nb_block, np.concatenate([[0], np.cumsum(count)])
+
+
+def scan_tests(target: ScanTarget, grids, settings: ScanSettings) -> int:
+    """The (sub-ray, primitive) tests a scan with ``grids`` casts: the work the limit
+    ``scan_tests`` bounds (a scanner inside the plant tests every beam against many
+    primitives), counted before any ray is cast."""
+    return sum(int(_pair_blocks(target, g)[-1][-1]) for g in grids) * settings.sub_rays
+
+
+def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int):
+    """(sub-ray ids, t, primitive) of every finite hit of the scanner's (sub-ray, primitive) pairs."""
+    s = settings.sub_rays
+    members, a_lo, b_lo, nb_block, first = _pair_blocks(target, grid)
     total = int(first[-1])
     tester = PairTester(target.frusta, dtype=np.dtype(settings.precision), origin=grid.origin) \
         if target.rows else None
@@ -784,9 +806,12 @@ def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: Sca
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
-    grids = beam_grids(target, settings)
+    limits = limits or default_limits
+    grids = beam_grids(target, settings, limits)
     rays = sum(g.count for g in grids) * settings.sub_rays
-    (limits or default_limits).check("scan_rays", rays, f"a scan of {len(grids)} scanners")
+    limits.check("scan_rays", rays, f"a scan of {len(grids)} scanners")
+    limits.check("scan_tests", scan_tests(target, grids, settings),
+                 f"a scan of {len(grids)} scanners: beam-primitive tests")
     parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),

@@ -76,7 +76,7 @@ CUSTOM_TYPES = tuple(range(5, 20))
 #: Node ids per header line that lists nodes.
 IDS_PER_LINE = 16
 
-_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d+)\s*:\s?(.*)$")
+_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d{1,18})\s*:\s?(.*)$")
 _UP_LINE = re.compile(r"#\s*up\s*:\s*([yz])\b")
 _LIST_LINE = re.compile(r"#\s*plantgen\s+(continues|starts|zero-length)\s*:(.*)$")
 
