@@ -9,7 +9,8 @@ together at the end (all of them, or none).
 Every output is checked by :func:`check_output` before any work (each command calls it
 for every file it will write, and the writers call it again just before they write),
 with one wording, ``PATH: cannot write (REASON)``: the folder must exist, be a folder
-and be writable; the target must not be a folder; and a target that is not a regular
+and be writable; the name must hold no control character (files name each other: an
+OBJ its MTL); the target must not be a folder; and a target that is not a regular
 file (a device such as ``/dev/null``, a FIFO, a socket, a link to one) is refused,
 never renamed over nor written through. A link to a regular file is replaced by the new
 file (the file it pointed to is left as it was).
@@ -196,6 +197,8 @@ def check_output(path: str | Path, error: type[PlantgenError] = PlantgenError) -
     path = Path(path)
     if path.name in ("", ".", ".."):
         _cannot(path, "it is a folder", error)
+    if not path.name.isprintable():      # a line break or an ESC would end up inside the files that name it
+        _cannot(escape_text(str(path)), "its name holds a control character", error)
     folder = path.parent
     try:
         st = os.stat(folder)

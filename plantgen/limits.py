@@ -78,6 +78,8 @@ class Limits:
     max_scan_tests : ray-primitive tests a laser scan may cast: each (sub-)ray against every
         primitive whose box its beam can meet (a scanner inside a crown tests each beam
         against many), counted before any is cast
+    max_scan_bytes : memory a laser scan may take (the skin of every placed segment,
+        estimated before anything is skinned)
     """
 
     max_input_bytes: int = 256 << 10
@@ -98,6 +100,7 @@ class Limits:
     max_render_bytes: int = 2 << 30
     max_scan_rays: int = 200_000_000
     max_scan_tests: int = 200_000_000
+    max_scan_bytes: int = 2 << 30
 
     def __post_init__(self) -> None:
         for f in fields(self):

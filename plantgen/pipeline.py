@@ -424,19 +424,44 @@ def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlant
 
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
-                  limits: Limits | None = None, allow_paths=(), smooth_bends=None) -> PreparedModel:
+                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, budget=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
     ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
-    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged."""
+    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged.
+    ``budget(segments, effects)``, if given, is called with the segments that will be
+    skinned (every placed copy's, or a placed scene's distinct plants') before any is."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
     if grown.segments == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
-    if grown.scene is not None and "lod" in chosen and "animation" not in chosen:
+    placed = grown.scene is not None and "lod" in chosen and "animation" not in chosen
+    if budget is not None:
+        budget(distinct_segments(grown.scene) if placed else grown.segments, tuple(chosen))
+    if placed:
         placed = place_scene(grown.scene, skinning(smooth_bends), str(input_path))
         return PreparedModel(grown, tuple(chosen), None, str(input_path), placed)
     return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
+
+
+#: Memory a laser scan takes per placed segment (its skin, boxes and labels; leaves
+#: included), measured (about 1.3 KB) and rounded up.
+SCAN_BYTES_PER_SEGMENT = 2048
+
+
+def check_scan_memory(grown: GrowResult, limits: Limits | None, source) -> None:
+    """Refuse, before anything is skinned, a scan whose placed segments (every copy of a
+    scene's plants) would take more than ``limits.max_scan_bytes``."""
+    limits = _in_force(limits)
+    need = grown.segments * SCAN_BYTES_PER_SEGMENT
+    if need > limits.max_scan_bytes:
+        raise LimitError(f"{source}: a scan of {grown.segments:,} placed segments needs about {need / 2**20:,.0f} "
+                         f"MiB, over the limit of {limits.max_scan_bytes / 2**20:,.0f} MiB ({hint('scan_bytes')})")
+
+
+def distinct_segments(scene: Scene) -> int:
+    """Segments of a scene's distinct plants, each once (what a placed scene skins)."""
+    return sum(len(skeleton) for skeleton in {id(i.skeleton): i.skeleton for i in scene.instances}.values())
 
 
 def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSettings = ImageSettings()) -> dict:
@@ -664,8 +689,11 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     width, height = (camera.width, camera.height) if camera is not None else (image.size or DEFAULT_SIZE)
     frames, shadow_res = motion.frames, request.shadows.resolution
     _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=image.ssaa)
+    def budget(segments, effects):       # before any segment is skinned or any copy placed
+        _check_render_memory(limits, str(input_path), width, height, frames,
+                             shadow_res if "shadows" in effects else None, segments, image.ssaa)
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
-                          allow_paths=allow_paths, smooth_bends=smooth_bends)
+                          allow_paths=allow_paths, smooth_bends=smooth_bends, budget=budget)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
@@ -792,8 +820,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     fmt = _export_checks(output_path, up, instancing, unit)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
-    if grown.segments == 0:
-        raise ExportError(f"{input_path}: the model has no segments")
+    _export_budget(grown, fmt, instancing, level, limits, input_path, output_path)
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
         skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
@@ -834,6 +861,31 @@ def _export_checks(output_path: Path, up: str | None, instancing: str, unit: flo
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
     check_export_outputs(output_path, fmt)
     return fmt
+
+
+def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: Limits, input_path,
+                   output_path) -> None:
+    """Refuse, before anything is skinned, a model with no segment or a mesh export whose
+    memory is over ``limits.max_export_bytes`` at its least: the segments it skins (every
+    placed copy where the format or ``instancing`` writes each copy, else each distinct
+    plant once), 16·4^m triangles each at the format's bytes; and for a glTF or USD scene
+    framed automatically, the skin of every placed copy its camera is framed on."""
+    if grown.segments == 0:
+        raise ExportError(f"{input_path}: the model has no segments")
+    if fmt.kind != "mesh":
+        return
+    each = instancing == "off" or not fmt.instancing or grown.scene is None
+    skinned = grown.segments if each else distinct_segments(grown.scene)
+    need = estimate_export_bytes(skinned * 16 * 4 ** int(level), fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
+    what = f"{skinned:,} segments{'' if each else ' (each distinct plant once)'} at m = {level}"
+    if fmt.scene and grown.scene is not None and grown.scene.camera is None \
+            and grown.segments * SKIN_BYTES_PER_SEGMENT > need:     # the framed camera skins every copy
+        need = grown.segments * SKIN_BYTES_PER_SEGMENT
+        what = f"framing the scene's camera on its {grown.segments:,} placed segments"
+    if need > limits.max_export_bytes:
+        raise LimitError(f"{output_path}: {what} needs at least {need / 2**20:,.0f} MiB to build and write as "
+                         f"{fmt.name}, over the limit of {limits.max_export_bytes / 2**20:,.0f} MiB (choose a "
+                         f"lower --subdiv, give a scene a camera, or {hint('export_bytes')})")
 
 
 def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:

@@ -565,8 +565,9 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     budget = _Budget(limits)
     instances: list[SceneInstance] = []
     cache: dict[tuple, tuple] = {}
-    for k, inst in enumerate(data["instances"]):
-        placement = _parse_placement(inst, k, path, base_seed, seed, budget)
+    # Every instance (grid copies included) is read and counted before any plant is grown.
+    placements = [_parse_placement(inst, k, path, base_seed, seed, budget) for k, inst in enumerate(data["instances"])]
+    for inst, placement in zip(data["instances"], placements, strict=True):
         instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)
 
     return Scene(name, description, effects, tuple(instances), ground, camera, light, path)

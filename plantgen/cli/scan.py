@@ -9,7 +9,7 @@ import numpy as np
 
 from ..geometry.frames import UP_AXES
 from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant
-from ..pipeline import grow_file, model_leaves, skin_model
+from ..pipeline import check_scan_memory, grow_file, model_leaves, skin_model
 from ..scanfiles import check_point_output, las_scale, write_points
 from .options import (
     allow_path_opt,
@@ -66,6 +66,7 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
+    check_scan_memory(grown, limits, input)
     frusta = skin_model(grown, smooth_bends)
     plant, leaf_plant = _plant_ids(grown)
     cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
