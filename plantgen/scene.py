@@ -469,20 +469,40 @@ def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float, fac
     return m
 
 
-def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Polygons | None = None) -> None:
-    """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
-    finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing)."""
+def _local_extent(skel: Skeleton, polygons: Polygons | None) -> tuple[np.ndarray, float] | None:
+    """A plant's box (its leaves' included) and largest radius in its own frame; None when
+    it has neither segments nor leaves."""
     leaves = polygons is not None and len(polygons.vertices) > 0
     if not len(skel) and not leaves:
-        return
+        return None
     with np.errstate(all="ignore"):
         boxes = [skel.bounds] if len(skel) else []
         if leaves:
             boxes.append(np.stack([polygons.vertices.min(axis=0), polygons.vertices.max(axis=0)]))
         box = np.stack([np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)])
+        radius = max(float(skel.r_start.max()), float(skel.r_end.max())) if len(skel) else 0.0
+    return box, radius
+
+
+def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Polygons | None = None,
+                  extents: dict | None = None) -> None:
+    """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
+    finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing).
+    ``extents`` keeps each plant's :func:`_local_extent`, so copies of one plant cost a
+    box's eight corners each."""
+    key = (id(skel), id(polygons))
+    if extents is None or key not in extents:
+        extent = _local_extent(skel, polygons)
+        if extents is not None:
+            extents[key] = extent
+    else:
+        extent = extents[key]
+    if extent is None:
+        return
+    box, radius = extent
+    with np.errstate(all="ignore"):
         corners = box_corners(box) @ matrix[:3, :3].T + matrix[:3, 3]
-        radius = (max(float(skel.r_start.max()), float(skel.r_end.max())) if len(skel) else 0.0) \
-            * float(np.abs(matrix[:3, :3]).max())
+        radius = radius * float(np.abs(matrix[:3, :3]).max())
         ok = bool(np.all(np.abs(corners) <= _MAX)) and radius <= _MAX
     if not ok:
         raise SceneError(f"{where}: placed, the plant reaches coordinates that are not finite or beyond "
@@ -520,7 +540,7 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
                  allow_paths=()) -> list[SceneInstance]:
     """Every copy of one instance entry, grown (grammars once per seed and iteration count,
     through ``cache``), counted against the scene's segment budget and placed."""
-    out = []
+    out, extents = [], {}
     for offset, yaw, c, factor in placement.copies:
         s = placement.seed + c
         skel, polygons, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits,
@@ -529,7 +549,7 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
             budget.add_segments(len(skel), placement.where)
         budget.add_drawn(len(skel), placement.where)
         matrix = _placement_matrix(placement, offset, yaw, factor)
-        _check_placed(skel, matrix, placement.where, polygons)
+        _check_placed(skel, matrix, placement.where, polygons, extents)
         out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s), polygons))
     return out
 
