@@ -876,7 +876,11 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
         return
     each = instancing == "off" or not fmt.instancing or grown.scene is None
     skinned = grown.segments if each else distinct_segments(grown.scene)
-    need = estimate_export_bytes(skinned * 16 * 4 ** int(level), fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
+    triangles = skinned * 16 * 4 ** int(level)
+    if triangles > limits.max_export_triangles:
+        raise ExportError(f"{input_path}: m = {level} gives at least {triangles:,} triangles, over the export limit "
+                          f"of {limits.max_export_triangles:,}; choose a lower --subdiv ({hint('export_triangles')})")
+    need = estimate_export_bytes(triangles, fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
     what = f"{skinned:,} segments{'' if each else ' (each distinct plant once)'} at m = {level}"
     if fmt.scene and grown.scene is not None and grown.scene.camera is None \
             and grown.segments * SKIN_BYTES_PER_SEGMENT > need:     # the framed camera skins every copy
