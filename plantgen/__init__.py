@@ -3,21 +3,24 @@
 The public API mirrors the command line::
 
     import plantgen
-    skel = plantgen.grow("grammars/pine.yaml", seed=3)        # -> plantgen.Skeleton
-    image = plantgen.render("pine", azimuth=60, ssaa=2)       # -> plantgen.RenderedImage
-    image.save("pine.png")                                    # (in Jupyter: shows itself)
-    plantgen.export("pine", "pine.glb", subdiv=2)             # -> summary dict
+    skel = plantgen.grow("pine", seed=3)   # a shipped name or a file -> plantgen.Skeleton
+    image = plantgen.render("pine", azimuth=60, ssaa=2)    # -> plantgen.RenderedImage
+    image.save("pine.png")                                 # (in Jupyter: shows itself)
+    plantgen.export("pine", "pine.glb", subdiv=2)          # -> summary dict
+    hits = plantgen.trace("pine", origins, directions)     # -> plantgen.TraceResult
 """
 
 from .geometry.skeleton import Skeleton, SkeletonError
 
 __version__ = "0.1.0"
 
-__all__ = ["RenderedImage", "Skeleton", "SkeletonError", "export", "grow", "render", "__version__"]
+__all__ = ["RenderedImage", "Skeleton", "SkeletonError", "TraceResult", "export", "grow", "render", "trace",
+           "__version__"]
 
 
 def grow(path, *, seed=None, iterations=None, max_modules=None, limits=None, allow_paths=()):
-    """Grow a grammar or scene file into a Skeleton (see ``plantgen grow --help``);
+    """Grow a grammar or scene file, or a shipped one by name (``"pine"``: ``plantgen list``
+    names them), into a Skeleton (see ``plantgen grow --help``);
     ``limits`` (a :class:`plantgen.limits.Limits`) and ``allow_paths`` as ``--limit`` and
     ``--allow-path``."""
     from .pipeline import grow as _grow
@@ -79,6 +82,10 @@ def export(path, output, *, subdiv=1, relief=False, seed=None, limits=None, allo
 
 
 def __getattr__(name):
+    if name in ("trace", "TraceResult"):        # the tracer (and the scan's geometry) on first use
+        from . import tracer
+
+        return getattr(tracer, name)
     if name == "RenderedImage":      # Pillow is imported only when an image is asked for
         from .images import RenderedImage
 

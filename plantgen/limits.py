@@ -19,11 +19,15 @@ from dataclasses import dataclass, fields, replace
 
 from .errors import PlantgenError
 
-__all__ = ["CONTEXT_WORK", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK", "hint", "limits"]
+__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK",
+           "hint", "limits"]
 
 #: The largest image side (pixels) plantgen renders: the GL texture size every OpenGL 4.3
 #: driver plantgen has met supports. A hard bound, not a budget: no option raises it.
 MAX_IMAGE_SIDE = 16384
+#: ``--asset game``'s triangle budget per level of detail of one plant (level 0 first; the
+#: impostor's card is two): a warning names a level over it.
+GAME_LEVEL_TRIANGLES = (80_000, 40_000, 20_000, 10_000)
 
 #: The fixed cost of one derivation step, counted in modules (per rule group, plus one):
 #: a step over a tiny string costs about as much as rewriting this many modules, so a
@@ -75,11 +79,12 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
         sub-rays of a diverging beam), counted before any is cast
-    max_scan_tests : ray-primitive tests a laser scan may cast: each (sub-)ray against every
-        primitive whose box its beam can meet (a scanner inside a crown tests each beam
-        against many), counted before any is cast
-    max_scan_bytes : memory a laser scan may take (the skin of every placed segment,
+    max_scan_bytes : memory a laser scan may take (the skin of the segments it skins,
         estimated before anything is skinned)
+    max_queries : query and communication modules (``?P``, ``?E``) one derivation answers,
+        summed over its steps (each step that has any walks the turtle over the string)
+    max_markers : attraction points of a grammar's ``markers`` environment
+    max_light_rays : rays the ``light`` environment traces in one derivation step
     """
 
     max_input_bytes: int = 256 << 10
@@ -99,8 +104,10 @@ class Limits:
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30
     max_scan_rays: int = 200_000_000
-    max_scan_tests: int = 200_000_000
     max_scan_bytes: int = 2 << 30
+    max_queries: int = 20_000_000
+    max_markers: int = 1_000_000
+    max_light_rays: int = 50_000_000
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -27,15 +27,19 @@ render or an export estimates its memory from the sizes it knows before it alloc
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._resources import grammars_dir
+from ._resources import grammars_dir, missing_hint, short_names
 from .animation import AnimatedScene
+from .assets import AssetSettings, asset_lines, budget_warnings, finished_plants
+from .environment import environment_for
 from .errors import PlantgenError
 from .exporters import (
     DetailLevel,
@@ -55,7 +59,7 @@ from .exporters import (
 from .exporters.formats import check_export_outputs
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
-from .files import check_outputs, read_yaml, write_all_atomically
+from .files import check_outputs, write_all_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
@@ -71,11 +75,13 @@ from .gl.pose import PoseStream
 from .gl.raycast import Raycaster
 from .gl.records import RecordStream
 from .gl.result import RenderResult
+from .gl.rt import RayTracer
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.derive import apply_interpretation, derive
 from .lsystem.grammar import GrammarError, parse_grammar
+from .lsystem.lpy import read_grammar_data
 from .lsystem.turtle import Drawing, interpret_plant
 from .scene import Scene, is_scene, parse_scene
 from .settings import (
@@ -94,6 +100,7 @@ from .settings import (
 )
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
+           "existing_input",
            "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "place_scene",
            "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
            "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
@@ -153,13 +160,22 @@ def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limit
     """Derive a parsed grammar, apply its interpretation rules and draw the result, adding
     each stage's seconds to ``timings``."""
     t1 = time.perf_counter()
-    ms = derive(grammar, iterations=iterations, seed=seed, progress=progress, limits=limits, work=work)
+    steps = grammar.iterations if iterations is None else int(iterations)
+    ms = derive(grammar, iterations=iterations, seed=seed, limits=limits, work=work,
+                progress=None if progress is None else lambda step, n: progress("derive", step, steps),
+                environment=environment_for(grammar, seed=seed, limits=limits))
     t2 = time.perf_counter()
+    if progress is not None:
+        progress("interpret", 0, None)
     drawn = apply_interpretation(grammar, ms, seed, limits=limits, work=work)
     drawing = interpret_plant(drawn, grammar.turtle, grammar.materials, path, limits)
     t3 = time.perf_counter()
     for k, v in (("derive", t2 - t1), ("interpret", t3 - t2)):
         timings[k] = timings.get(k, 0.0) + v
+    if ms.fixed_point is not None and iterations is not None:   # said once, where --iterations asked for more
+        note = (f"{path}: note: the derivation reached a fixed point at step {ms.fixed_point} (steps past it "
+                f"change nothing: --iterations {int(iterations)} draws the plant of --iterations {ms.fixed_point})")
+        drawing = dataclasses.replace(drawing, warnings=(*drawing.warnings, note))
     return drawing, len(ms)
 
 
@@ -173,13 +189,26 @@ def resolve_input(path: str | Path) -> Path:
     return p
 
 
-def load_input(path: str | Path, limits: Limits | None = None):
+def existing_input(path: str | Path) -> Path:
+    """:func:`resolve_input`, refusing in one line a name that is neither a file nor a
+    shipped grammar or scene, with the closest name (:func:`plantgen._resources.missing_hint`)."""
+    resolved = resolve_input(path)
+    if not os.path.lexists(resolved):
+        raise PlantgenError(f"{path}: no such file{missing_hint(path)}")
+    return resolved
+
+
+def load_input(path: str | Path, limits: Limits | None = None, warnings: list | None = None):
     """Read an input: returns ("grammar" | "scene", parsed mapping), or ("skeleton", None)
-    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`)."""
+    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`). An L-Py file
+    (``.lpy``) is translated to a grammar mapping; what its reading warns of is added to
+    ``warnings``."""
     path = Path(path)
     if path.suffix.lower() in SKELETON_SUFFIXES:
         return "skeleton", None
-    data = read_yaml(path, GrammarError, _in_force(limits))
+    data, said = read_grammar_data(path, GrammarError, _in_force(limits))
+    if warnings is not None:
+        warnings.extend(said)
     if data is None:
         raise PlantgenError(f"{path}: empty file, not a grammar or scene")
     if is_scene(data):
@@ -206,12 +235,28 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
     of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones.
     ``defines`` ({name: number}) overrides a grammar's defines of those names (as
-    ``--define`` does; a name the grammar does not define is an error)."""
+    ``--define`` does; a name the grammar does not define is an error). ``progress``:
+    ``progress(stage, done, total)`` (stages ``derive``, ``interpret``, ``grow``,
+    ``place``; ``total`` None where not known). A name that is neither a file nor a
+    shipped grammar is one line with the closest shipped name; a shipped grammar's
+    errors and warnings name it as commands take it (``pine``), not by its path."""
     limits = _in_force(limits).raised(modules=max_modules)
     if iterations is not None:
         limits.check("iterations", int(iterations), "--iterations")
-    path = resolve_input(path)
-    kind, data = load_input(path, limits)
+    path = existing_input(path)
+    try:
+        result = _grow_path(path, seed, iterations, progress, limits, allow_paths, defines)
+    except PlantgenError as exc:     # a shipped grammar is named as commands take it, not by its long path
+        exc.args = (short_names(str(exc)), *exc.args[1:])
+        raise
+    result.warnings = tuple(short_names(w) for w in result.warnings)
+    return result
+
+
+def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines) -> GrowResult:
+    """:func:`grow_file` of a path that exists."""
+    said: list[str] = []
+    kind, data = load_input(path, limits, said)
     timings: dict = {}
     if kind == "skeleton":
         t0 = time.perf_counter()
@@ -227,27 +272,34 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
         timings["parse"] = time.perf_counter() - t0
         drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
         return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
-                          polygons=drawing.polygons, warnings=drawing.warnings,
+                          polygons=drawing.polygons, warnings=(*said, *drawing.warnings),
                           smooth_bends=grammar.turtle.smooth_bends)
 
-    modules = [0]
-    warnings: list[str] = []
+    modules, grown = [0], [0]
+    warnings: list[str] = said
     grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
 
     def grow_one(gpath, s, its):
         key = str(gpath)
         t0 = time.perf_counter()
         if key not in grammars:
-            grammars[key] = parse_grammar(read_yaml(gpath, GrammarError, limits), key, limits)
+            data, said_here = read_grammar_data(gpath, GrammarError, limits)
+            warnings.extend(w for w in said_here if w not in warnings)
+            grammars[key] = parse_grammar(data, key, limits)
         timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
         drawing, n = _grow_grammar(grammars[key], key, s, its, None, timings, limits, work)
         modules[0] += n
+        grown[0] += 1
+        if progress is not None:
+            progress("grow", grown[0], None)
         warnings.extend(w for w in drawing.warnings if w not in warnings)
         return drawing             # the skeleton and its leaves: the scene's copies carry both
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths)
     t0 = time.perf_counter()
+    if progress is not None:
+        progress("place", 0, None)
     polygons = scene.polygons()
     timings["place"] = time.perf_counter() - t0
     return GrowResult(None, kind, scene.name, modules[0], timings, scene,
@@ -424,14 +476,19 @@ def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlant
 
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
-                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, budget=None) -> PreparedModel:
+                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, progress=None,
+                  budget=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
     ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
-    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged.
-    ``budget(segments, effects)``, if given, is called with the segments that will be
-    skinned (every placed copy's, or a placed scene's distinct plants') before any is."""
-    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths)
+    scene with the ``lod`` effect is placed (:func:`place_scene`), not merged. ``progress``:
+    :func:`grow_file`'s, then the stage ``skin``. ``budget(segments, effects)``, if given,
+    is called with the segments that will be skinned (every placed copy's, or a placed
+    scene's distinct plants') before any is."""
+    grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths,
+                      progress=progress)
+    if progress is not None:
+        progress("skin", 0, None)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
     if grown.segments == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
@@ -450,12 +507,14 @@ SCAN_BYTES_PER_SEGMENT = 2048
 
 
 def check_scan_memory(grown: GrowResult, limits: Limits | None, source) -> None:
-    """Refuse, before anything is skinned, a scan whose placed segments (every copy of a
-    scene's plants) would take more than ``limits.max_scan_bytes``."""
+    """Refuse, before anything is skinned, a scan whose skinned segments (a scene's
+    distinct plants once: its copies are traced through two levels; else every segment)
+    would take more than ``limits.max_scan_bytes``."""
     limits = _in_force(limits)
-    need = grown.segments * SCAN_BYTES_PER_SEGMENT
+    segments = distinct_segments(grown.scene) if grown.scene is not None else grown.segments
+    need = segments * SCAN_BYTES_PER_SEGMENT
     if need > limits.max_scan_bytes:
-        raise LimitError(f"{source}: a scan of {grown.segments:,} placed segments needs about {need / 2**20:,.0f} "
+        raise LimitError(f"{source}: a scan skinning {segments:,} segments needs about {need / 2**20:,.0f} "
                          f"MiB, over the limit of {limits.max_scan_bytes / 2**20:,.0f} MiB ({hint('scan_bytes')})")
 
 
@@ -589,9 +648,10 @@ def _check_render_memory(limits: Limits, what: str, width, height, frames, shado
     need = estimate_render_bytes(width, height, frames=frames or 1, shadow_res=shadow_res, segments=segments,
                                  ssaa=ssaa)
     if need > limits.max_render_bytes:
-        raise LimitError(f"{what}: {width}x{height} pixels, {frames or 1} frame(s), {segments:,} segments "
-                         f"need about {need / 2**20:,.0f} MiB, over the limit of "
-                         f"{limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
+        parts = [f"{width}x{height} pixels", *([f"{frames:,} frames"] if frames and frames > 1 else []),
+                 *([f"{segments:,} segments"] if segments else [])]
+        raise LimitError(f"{what}: a render of {', '.join(parts)} needs about {need / 2**20:,.0f} MiB, over the "
+                         f"limit of {limits.max_render_bytes / 2**20:,.0f} MiB ({hint('render_bytes')}; or lower "
                          "the size, the frames, the supersampling or the shadow resolution)")
 
 
@@ -615,7 +675,7 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
             update_times.append(update.total_ms)
             gpu_frames += update.on_gpu
             if progress is not None:
-                progress(i, len(times))
+                progress("frames", i, len(times))
     finally:
         stream.release()
     return colors, frame_times, update_times, result, gpu_frames, ShadowUse.of(stats)
@@ -675,7 +735,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         report quotes their median
     exact_distance : with supersampling, one more draw at one sample a pixel gives the
         distances through the pixel centres (else: the sub-sample nearest each centre)
-    progress : callable(done, total) called after each animation frame
+    progress : ``progress(stage, done, total)``: :func:`prepare_model`'s stages, then
+        ``render`` (a still) or ``frames`` (after each animation frame)
     limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
         render is estimated to take, before any is allocated) and the folders a scene may
         read grammars from
@@ -685,6 +746,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     if int(timed_frames) != timed_frames or int(timed_frames) < 0:
         raise PlantgenError("--time-frames must be an integer >= 0")
     image, motion = request.image, request.motion
+    parse_background(image.background)       # a bad colour is one line before any work
     camera = _render_camera(request.view, image.size, limits)
     width, height = (camera.width, camera.height) if camera is not None else (image.size or DEFAULT_SIZE)
     frames, shadow_res = motion.frames, request.shadows.resolution
@@ -693,17 +755,20 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         _check_render_memory(limits, str(input_path), width, height, frames,
                              shadow_res if "shadows" in effects else None, segments, image.ssaa)
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
-                          allow_paths=allow_paths, smooth_bends=smooth_bends, budget=budget)
+                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress, budget=budget)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
         raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
+    if request.march.method == "rt" and frames is not None:
+        raise PlantgenError(f"{input_path}: --method rt renders stills (leave out --frames, or use --method rc)")
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
             **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
-    raycaster, anim, colors, update_times = Raycaster(limits=limits), model.anim, [], []
+    tracer = RayTracer if march.method == "rt" else Raycaster
+    raycaster, anim, colors, update_times = tracer(limits=limits), model.anim, [], []
     if frames is not None:
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:
@@ -713,6 +778,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         distance = result.distance
     else:
         gpu_frames = 0
+        if progress is not None:
+            progress("render", 0, None)
         result, frame_times, distance, shadow_use = _render_still(raycaster, frusta, view, timed_frames,
                                                                   exact_distance)
     return RenderReport(
@@ -772,7 +839,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None) -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -788,7 +855,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         a USD ``PointInstancer``; ``"off"`` every copy's own mesh, as OBJ, PLY and STL
     unit : metres per model unit (USD's ``metersPerUnit``; QSM files are in metres)
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
-    progress : ``progress(stage, done, total)``, as plants are tessellated and the file written
+    progress : ``progress(stage, done, total)``: :func:`grow_file`'s stages, ``tessellate``, ``write``
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
         mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
         segments they add)
@@ -798,9 +865,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
         plants at rest and says so in ``warnings``
     textures, aspect_step : the relief baked into maps for glTF, OBJ, USD (with ``relief``: base
         colour only); with ``aspect_step``, normal maps per aspect bucket (:func:`_textured`)
-    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`:
-        ``--lod-levels``, else 4 for a scene listing ``lod``; :func:`plant_detail`), their
-        screen coverages for ``detail.lod_pixels``
+    levels, detail : the levels of detail glTF and USD write (:meth:`LevelSettings.export_levels`: ``--lod-levels``,
+        else 4 for a scene listing ``lod``; :func:`plant_detail`), their coverages for ``detail.lod_pixels``
+    asset : leaf cards, impostor, a game asset (:class:`~plantgen.assets.AssetSettings`; None: its defaults)
 
     Returns a summary dict: ``format``, ``up``, ``segments``, ``paths`` (every file
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
@@ -817,9 +884,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt = _export_checks(output_path, up, instancing, unit)
+    fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings(), unit)
     up, t0 = up or fmt.up, time.perf_counter()
-    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths)
+    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
     _export_budget(grown, fmt, instancing, level, limits, input_path, output_path)
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
         skeleton.validate()
@@ -832,10 +899,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     skin = skinning(_smoothing(grown, smooth_bends))
     plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
                                            input_path, output_path, timings, progress, skin, timeline,
-                                           _export_detail(grown, fmt, levels, detail, summary))
+                                           _export_detail(grown, fmt, asset.levels(levels), detail, summary))
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path) if fmt.scene else None
-    plants, baked = _textured(plants, relief, aspect_step) if textures and fmt.textures else (plants, None)
+    plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
     timings["write"] = time.perf_counter() - t3
@@ -847,20 +914,21 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str, unit: float = 1.0):
-    """The export's format, after every check that needs no work: a known suffix, its
-    extra installed, the up axis, the instancing, the unit, every output writable (one
-    line each)."""
+def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings, unit: float = 1.0):
+    """The export's format and ``asset``, after every check that needs no work: a known
+    suffix, its extra installed, the up axis, the instancing, what the asset asks (cards
+    and impostors: glTF), the unit, every output writable (one line each)."""
     if not 1e-9 <= unit <= 1e9:          # so a cylinder model's volumes (unit³) stay finite
         raise ExportError(f"the unit must be 1e-09..1e+09 metres, got {unit!r}")
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
+    asset.check(fmt, output_path)
     if up is not None and up not in UP_AXES:
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
     check_export_outputs(output_path, fmt)
-    return fmt
+    return fmt, asset
 
 
 def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: Limits, input_path,
@@ -899,6 +967,17 @@ def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:
     if merged or grown.scene is None:
         return [grown.skeleton]
     return [plant.skeleton for plant in grown.scene.plants()]
+
+
+def _finished(plants: list[Plant], asset: AssetSettings, skin, relief: bool, aspect_step, summary: dict,
+              progress=None) -> tuple[list[Plant], object]:
+    """The plants as written (:func:`~plantgen.assets.finished_plants`: an impostor, leaf
+    cards, where ``asset`` asks; a game asset's levels over their budgets are warned of in
+    ``summary``) and their textures (:func:`_textured`; ``aspect_step`` False: none)."""
+    plants = finished_plants(plants, asset, skin, relief, progress)
+    summary["warnings"] = (*summary["warnings"], *budget_warnings(_level_counts(plants), asset))
+    summary["asset_lines"] = asset_lines(plants)
+    return (plants, None) if aspect_step is False else _textured(plants, relief, aspect_step)
 
 
 def _textured(plants: list[Plant], relief: bool, aspect_step: float | None) -> tuple[list[Plant], object]:
@@ -1099,7 +1178,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
                         detail: tuple[int, float] = (1, 0.0)) -> tuple[list[Plant], int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
     limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
-    ``skin`` and ``tessellate``), each still plant at ``detail`` = (levels, pixels)
+    ``skin`` and ``tessellate``), each plant at ``detail`` = (levels, pixels)
     (:func:`plant_detail`); also the segments smooth bends added."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
@@ -1119,8 +1198,7 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         check_finite_mesh(mesh, fr, input_path)
         sway = PlantSway(sways[0], sways[1], fr.segment) if timeline is not None and sways is not None else None
         leaves = _leaves_of(leaves, mesh, input_path)
-        lod = None if sway is not None and sway.moves else plant_detail(fr, skel.parent, mesh, leaves, *detail,
-                                                                           relief=relief)
+        lod = plant_detail(fr, skel.parent, mesh, leaves, *detail, relief=relief)
         plants.append(Plant(name, skel, mesh, matrices, leaves=leaves, sway=sway, detail=lod))
         if progress is not None:
             progress("tessellate", k + 1, len(parts))

@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from . import fields
-from ._resources import grammars_dir
+from ._resources import grammars_dir, missing_hint
 from .errors import PlantgenError
 from .files import read_yaml, real_path
 from .geometry.camera import Camera, CameraError, box_corners
@@ -456,7 +456,7 @@ def resolve_grammar(name: str, base: Path, where: str, allow_paths=(), *, error:
             if cand.is_file():
                 return cand
     raise error(f"{where}: grammar {fields.show(name)} not found next to the {owner} or among the "
-                     "shipped grammars")
+                f"shipped grammars{missing_hint(name, base)}")
 
 
 def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float, factor: float = 1.0) -> np.ndarray:

@@ -125,9 +125,17 @@ class RaycastSettings:
         slow oracle that shows what a too-tight pyramid would lose (tests)
     height_fetch : ``"gather"`` (one textureGather per bilinear height) or ``"texel"``
         (four texelFetch with the wrap in GLSL): the same heights; the bench's ablation
+    method : ``"rc"`` (the ray caster: one bounding pyramid rasterised per row, the
+        pixel's ray cast against that row; its cost grows with the rows drawn) or ``"rt"``
+        (the ray tracer, :mod:`plantgen.gl.rt`: each pixel's ray traced through a bounding
+        volume hierarchy, about the log of the rows; shadows by shadow rays, no map). The
+        same surfaces either way.
     """
 
     relief: bool = False
+    method: str = knob("rc", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
+                       "(rc), or trace each pixel's ray through a BVH (rt: its cost grows with the log of the rows; "
+                       "shadows by shadow rays). Stills only for rt.", kind="choice", choices=("rc", "rt"))
     march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
                       "--linear-steps for every ray (fixed, the paper's).", kind="choice",
                       choices=("adaptive", "fixed"))
@@ -176,13 +184,15 @@ class RaycastSettings:
                 "height_maps": 0}
 
     def describe(self) -> str:
-        """RC, or RC+R with its march, as reports and the viewer's heads-up line name it."""
+        """RC, or RC+R with its march (RT, RT+R with ``method`` rt), as reports and the
+        viewer's heads-up line name it."""
+        name = self.method.upper()
         if not self.relief:
-            return "RC"
+            return name
         steps = (f"{self.linear_steps} linear + {self.binary_steps} binary steps" if self.march == "fixed" else
                  f"adaptive march, {self.march_density:g} samples per texel, at most {self.linear_steps} linear "
                  f"+ {self.binary_steps} binary steps")
-        return f"RC+R ({steps}, v {'exact' if self.v_exact else 'interpolated'})"
+        return f"{name}+R ({steps}, v {'exact' if self.v_exact else 'interpolated'})"
 
 
 @dataclass(frozen=True)
@@ -396,8 +406,8 @@ class KeyframeSettings:
     sway: bool = knob(True, "--sway", "Write a swaying scene's sway as a looping animation (glTF, USD); "
                       "--no-sway writes its plants at rest, as a still file.", kind="bool")
     rate: float = knob(24.0, "--key-rate", "Keyframes per second of the sway a glTF or USD export writes "
-                       "(interpolated linearly; see the README for the error).", lo=0, lo_open=True, hi=1000,
-                       metavar="HZ")
+                       "(interpolated linearly; the docs' 'Export a swaying scene' gives the error).", lo=0,
+                       lo_open=True, hi=1000, metavar="HZ")
     duration: float | None = knob(None, "--duration", "Seconds of sway a glTF or USD export writes, from t = 0. "
                                   "Default: one period of the scene's sway (the common period of its plants'), "
                                   "so that the animation loops.", lo=0, lo_open=True, hi=3600, metavar="SECONDS")

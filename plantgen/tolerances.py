@@ -181,6 +181,11 @@ class Tolerances:
     """Relative (to D·D): a ray with ``D·D - (D·a)²`` below this runs along the axis;
     it is re-centred on the segment's middle (numpy reference and GLSL)."""
 
+    triangle_grazing: float = 1e-12
+    """Relative (to |e1|·|e2|·|d|): a ray whose Möller-Trumbore determinant is below this
+    lies in a leaf triangle's plane and misses it (the scan's test and the GPU's
+    traversal, shaders/bvh.glsl)."""
+
     box_pad: float = 1e-9
     """Relative (to a box's largest coordinate): the reference's slab-test boxes grow by
     this (and ``box_pad_floor``) so that rounding of the pyramid corners loses no ray."""
@@ -235,7 +240,7 @@ class Tolerances:
 
 #: The fields GLSL programs use, as macros ``TOL_<FIELD>``.
 GLSL_FIELDS = ("facing_min", "generator_rise", "joint_slack", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
-               "recenter_parallel", "shadow_normal", "tangent_floor_f32", "parallax_grazing_cos")
+               "recenter_parallel", "shadow_normal", "triangle_grazing", "tangent_floor_f32", "parallax_grazing_cos")
 
 #: The tolerances of plantgen.
 tol = Tolerances()

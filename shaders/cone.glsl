@@ -39,6 +39,23 @@ struct Frustum {
     float v_slots;  // the texture is looked up at (v_slot + v) / v_slots
 };
 
+// A row's record (plantgen.gl.records.pack_records: six vec4) as a Frustum.
+Frustum frustum_from_record(vec4 r0, vec4 r1, vec4 r2, vec4 r3, vec4 r4, vec4 r5) {
+    Frustum f;
+    f.base = r0.xyz; f.h = r0.w;
+    f.axis = r1.xyz; f.r1 = r1.w;
+    f.ref_dir = r2.xyz; f.r2 = r2.w;
+    f.plane_lo = r3; f.plane_hi = r4;
+    f.u_offset = r5.x; f.twist = r5.y; f.shell = r5.z;
+    int tag = int(r5.w + 0.5);
+    f.material = tag & 255;
+    f.open_lo = (tag & 256) != 0;
+    f.open_hi = (tag & 512) != 0;
+    f.v_slot = float((tag >> 10) & 127);
+    f.v_slots = float(((tag >> 17) & 127) + 1);
+    return f;
+}
+
 // The texture's v of the row's own v (the paper's v where v_slots is 1).
 float texture_v(Frustum f, float v) { return (f.v_slot + v) / f.v_slots; }
 

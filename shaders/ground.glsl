@@ -1,7 +1,8 @@
 // The ground: an ordinary rasterised mesh (a square) drawn into the same depth buffer as
 // the ray-cast frusta, so frusta that reach below it are cut by it and vice versa.
 // Positions are relative to the render origin (the camera eye), like the frusta records.
-// Variants: SHADOWS (sample the shadow map), SHADOW_PASS (depth only, into the light's map).
+// Variants: SHADOWS (sample the shadow map; with SHADOW_RAYS shadow rays through the BVH instead,
+// plantgen.gl.rt), SHADOW_PASS (depth only, into the light's map).
 
 #if defined VERTEX_SHADER
 
@@ -21,6 +22,9 @@ void main() {
 void main() {}
 #else
 #include "shading.glsl"
+#if defined SHADOW_RAYS
+#include "bvh.glsl"
+#endif
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif

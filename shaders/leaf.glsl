@@ -9,7 +9,8 @@
 // is the leaf's normal turned towards the eye (lit on both sides). Leaves carry no relief.
 //
 // Variants: SHADOWS (receive: sample the light's map, shaders/shadow.glsl, with the
-// facet's own plane as the receiver plane); SHADOW_PASS (cast: depth only into the
+// facet's own plane as the receiver plane; with SHADOW_RAYS a shadow ray through the BVH
+// instead, plantgen.gl.rt); SHADOW_PASS (cast: depth only into the
 // light's map, both faces); LABELS (a part mask: the leaf's label in red, unshaded).
 
 #if defined VERTEX_SHADER
@@ -39,6 +40,9 @@ void main() {
 void main() {}
 #else
 #include "shading.glsl"
+#if defined SHADOW_RAYS
+#include "bvh.glsl"
+#endif
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif

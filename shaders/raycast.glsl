@@ -141,18 +141,8 @@ uniform vec2 light_depth;      // near, far along light_forward from light_origi
 
 flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 
-uniform vec2 viewport;          // width, height in pixels
-uniform vec3 cam_forward;       // unit
-uniform vec3 cam_right_scaled;  // unit right * tan(fov_x / 2)
-uniform vec3 cam_up_scaled;     // unit up * tan(fov_y / 2)
-uniform vec2 depth_coeffs;      // projection m[2][2], m[2][3]: clip z = A*z_view + B
-#include "heights.glsl"
-uniform int linear_steps;        // fixed march: the samples; adaptive: their most
-uniform int binary_steps;
-uniform int march_min_steps;     // adaptive march: the fewest samples
-uniform float march_density;     // adaptive march: samples per relief texel crossed
-uniform float march_precision;   // adaptive march: bisect to this many pixel footprints
-uniform vec2 pixel_footprint;    // world size of a pixel at distance s: x*s + y
+#include "eye.glsl"
+#include "row.glsl"
 
 #if defined STATS
 // Work counters of a diagnostic render (plantgen.render.raycast.Raycaster.work): the
@@ -167,158 +157,15 @@ void count_fragment() {}
 void count_samples(int n) {}
 #endif
 
-#if !defined SHADOW_PASS
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out float out_distance;   // distance along the ray from the eye
-#endif
 
 Frustum unpack_frustum() {
-    Frustum f;
-    f.base = f_rec0.xyz; f.h = f_rec0.w;
-    f.axis = f_rec1.xyz; f.r1 = f_rec1.w;
-    f.ref_dir = f_rec2.xyz; f.r2 = f_rec2.w;
-    f.plane_lo = f_rec3; f.plane_hi = f_rec4;
-    f.u_offset = f_rec5.x; f.twist = f_rec5.y; f.shell = f_rec5.z;
-    int tag = int(f_rec5.w + 0.5);
-    f.material = tag & 255;
-    f.open_lo = (tag & 256) != 0;
-    f.open_hi = (tag & 512) != 0;
-    f.v_slot = float((tag >> 10) & 127);
-    f.v_slots = float(((tag >> 17) & 127) + 1);
-    return f;
-}
-
-// Whether a cutting plane closes the frustum with a visible cap (an open chain end) rather
-// than being a joint shared with a continuing neighbour (inside the plant).
-bool face_is_open_cap(Frustum f, int face) {
-    return (face == FACE_LO && f.open_lo) || (face == FACE_HI && f.open_hi);
+    return frustum_from_record(f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5);
 }
 
 
-// Window depth of a hit `distance` along the eye's ray direction d: the depth test against
-// other frusta and ordinary meshes (the projection's z of the view-space depth).
-float eye_depth(float distance, vec3 d) {
-    float z_view = -distance * dot(d, cam_forward);
-    float ndc_z = (depth_coeffs.x * z_view + depth_coeffs.y) / (-z_view);
-    return clamp(0.5 * ndc_z + 0.5, 0.0, 1.0);
-}
 
-vec3 pixel_ray() {
-    vec2 ndc = 2.0 * gl_FragCoord.xy / viewport - 1.0;   // pixel centres; +y is up
-    return normalize(cam_forward + ndc.x * cam_right_scaled + ndc.y * cam_up_scaled);
-}
-
-#if defined RELIEF
-// The ray o + t*d in the frame of frustum f, for the relief march: per sample everything
-// is linear in t but one length and one atan (the paper's remark after (12): the inner and
-// outer radii are linear along the ray, u is the angle in the plane across the axis).
-struct ShellRay {
-    vec2 q0, dq;    // the point's part across the axis, in the (ref_dir, axis x ref_dir)
-                    // frame: q0 + t*dq (its length is the radial distance, its angle u)
-    float y0, dy;   // the axial coordinate y0 + t*dy
-};
-
-ShellRay shell_ray(Frustum f, vec3 o, vec3 d) {
-    vec3 e = o - f.base;
-    vec3 bitangent = cross(f.axis, f.ref_dir);
-    ShellRay r;
-    r.q0 = vec2(dot(e, f.ref_dir), dot(e, bitangent));
-    r.dq = vec2(dot(d, f.ref_dir), dot(d, bitangent));
-    r.y0 = dot(e, f.axis);
-    r.dy = dot(d, f.axis);
-    return r;
-}
-
-// Relief height w of (12) at t: 0 on the inner cone, 1 on the outer one.
-float shell_height_at(Frustum f, ShellRay r, float t) {
-    float radial = length(r.q0 + t * r.dq);
-    return (radial - (f.r1 + frustum_slope(f) * (r.y0 + t * r.dy))) / f.shell;
-}
-
-// (u, v) at t: u from the point's angle (6), v interpolated between entry and exit (the
-// paper's approximation, exact for parallel planes) or, with V_EXACT, v of (7).
-vec2 shell_uv_at(Frustum f, ShellRay r, vec3 o, vec3 d, float t, float v_interp) {
-    vec2 q = r.q0 + t * r.dq;
-#if defined V_EXACT
-    float v = frustum_v(f, o + t * d);
-#else
-    float v = v_interp;
-#endif
-    return vec2(fract(atan(q.y, q.x) / TWO_PI + f.u_offset + v * f.twist), texture_v(f, v));
-}
-
-// The march's samples for the shell interval [t_in, t_end] (plantgen.render.raycast.
-// RaycastSettings): x linear samples, y bisection steps. MARCH_FIXED: linear_steps and
-// binary_steps. Otherwise sized to what the pixel sees: march_density linear samples per
-// relief texel the ray crosses (in u and v), where a texel counts at least one pixel
-// footprint (a far branch's pixel covers many texels and needs few samples, a grazing ray
-// near the eye crosses many), clamped to [march_min_steps, linear_steps]; then bisection
-// until the bracket is shorter than march_precision pixel footprints, at most binary_steps.
-ivec2 march_steps(Frustum f, ShellRay r, HeightMap m, float t_in, float t_end, float v_in,
-                  float v_end, float distance) {
-#if defined MARCH_FIXED
-    return ivec2(max(linear_steps, 1), binary_steps);
-#else
-    vec2 q_in = r.q0 + t_in * r.dq, q_end = r.q0 + t_end * r.dq;
-    float turns = abs(atan(q_in.x * q_end.y - q_in.y * q_end.x, dot(q_in, q_end))) / TWO_PI;
-    float dv = abs(v_end - v_in);                 // the row's own v
-    vec2 texels_per_unit = m.size * m.repeat;    // texels per turn of u, per unit of texture v
-    float texels = (turns + dv * abs(f.twist)) * texels_per_unit.x + dv / f.v_slots * texels_per_unit.y;
-    float radius = max(max(f.r1, f.r2), 1e-30);
-    float texel_world = min(TWO_PI * radius / texels_per_unit.x, f.h * f.v_slots / texels_per_unit.y);
-    float pixel_world = max(pixel_footprint.x * distance + pixel_footprint.y, 1e-30);
-    float footprint = max(pixel_world / max(texel_world, 1e-30), 1.0);
-    float linear = clamp(ceil(march_density * texels / footprint),
-                         float(max(march_min_steps, 1)), float(max(linear_steps, 1)));
-    float bracket = (t_end - t_in) / linear;     // length of the interval bisected
-    float halvings = ceil(log2(max(bracket / (march_precision * pixel_world), 1.0)));
-    return ivec2(int(linear), int(min(halvings, float(binary_steps))));
-#endif
-}
-
-// March the shell from t_in to t_end: linear steps, then a bisection. True on a hit.
-// `distance` is the eye's (or the light's window's) distance to the entry, for the pixel
-// footprint; `samples` counts the height samples taken.
-bool march_relief(Frustum f, vec3 o, vec3 d, float t_in, float t_end, bool end_on_inner,
-                  float distance, out float t_hit, out int samples) {
-    HeightMap m = height_map(f.material);
-    ShellRay r = shell_ray(f, o, d);
-    float v_in = frustum_v(f, o + t_in * d), v_end = frustum_v(f, o + t_end * d);
-    ivec2 plan = march_steps(f, r, m, t_in, t_end, v_in, v_end, distance);
-    int steps = plan.x;
-    // Linear search for the first sample on or under the relief; then, outside the loop (so
-    // that neighbouring rays that stop at different samples share one bisection), bisect
-    // between the last sample above and that one.
-    float t_out = t_in, t_inside = t_in;
-    bool found = false;
-    samples = 0;
-    for (int i = 0; i <= steps; ++i) {
-        float s = float(i) / float(steps);
-        float t = mix(t_in, t_end, s);
-        float ground = height_in(m, shell_uv_at(f, r, o, d, t, mix(v_in, v_end, s)));
-        ++samples;
-        if (shell_height_at(f, r, t) <= ground || (i == steps && end_on_inner)) {
-            t_inside = t;
-            found = true;
-            break;
-        }
-        t_out = t;
-    }
-    if (!found) return false;
-    int halvings = t_inside > t_in ? plan.y : 0;    // a hit at the entry needs no bisection
-    for (int b = 0; b < halvings; ++b) {
-        float t_mid = 0.5 * (t_out + t_inside);
-        float sm = (t_mid - t_in) / max(t_end - t_in, 1e-30);
-        float gm = height_in(m, shell_uv_at(f, r, o, d, t_mid, mix(v_in, v_end, sm)));
-        ++samples;
-        if (shell_height_at(f, r, t_mid) <= gm) t_inside = t_mid; else t_out = t_mid;
-    }
-    t_hit = t_inside;
-    return true;
-}
-#if defined SHADOW_PASS && !defined LIGHT_BISECT
+#if defined RELIEF && defined SHADOW_PASS && !defined LIGHT_BISECT
 #include "light_march.glsl"
-#endif
 #endif
 
 void main() {
@@ -340,32 +187,24 @@ void main() {
     vec3 o = t_shift * d;
 #endif
     float t_min = -t_shift;        // the ray's start (the eye, or the light's near plane)
-    float t_enter, t_exit; int face;
+    int face, samples;
     float t_hit;
-    bool cap = false;
-#if defined RELIEF
+    bool cap;
+#if defined RELIEF && defined SHADOW_PASS && !defined LIGHT_BISECT
     if (f.shell > 0.0) {
-        int samples;
-#if defined SHADOW_PASS && !defined LIGHT_BISECT
+        // the light's map: the relief's secant march along the light (light_march.glsl)
+        float t_enter, t_exit;
         if (!frustum_interval(f, relief_band(f).y, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) discard;
         bool hit = march_light(f, o, d, t_enter, t_exit, face == FACE_CONE, t_hit, samples);
-#else
-        if (!frustum_interval(f, f.shell, o, d, t_min, RAY_T_MAX, t_enter, t_exit, face)) discard;
-        float t_end = t_exit;
-        float ti_enter, ti_exit; int inner_face;
-        bool inner = frustum_interval(f, 0.0, o, d, t_min, RAY_T_MAX, ti_enter, ti_exit, inner_face);
-        bool end_on_inner = inner && inner_face != FACE_NONE && ti_enter <= t_end;
-        if (end_on_inner) t_end = ti_enter;
-        bool hit = march_relief(f, o, d, t_enter, t_end, end_on_inner, t_shift + t_enter, t_hit, samples);
-#endif
         count_samples(samples);
         if (!hit) discard;
         cap = t_hit == t_enter && face_is_open_cap(f, face);
     } else
 #endif
     {
-        if (!frustum_hit(f, o, d, t_min, t_hit, face)) discard;
-        cap = face != FACE_CONE;
+        bool hit = row_hit(f, o, d, t_min, RAY_T_MAX, t_shift, 1.0, t_hit, face, cap, samples);
+        count_samples(samples);
+        if (!hit) discard;
     }
     vec3 p = o + t_hit * d;
     float distance = t_shift + t_hit;
@@ -379,56 +218,9 @@ void main() {
     gl_FragDepth = eye_depth(distance, d);
 #else
 
-    // Shading: u, v and the interpolated normal (6)-(8), texture colour, one light.
-    float v;
-    vec3 normal = frustum_normal(f, p, v);
-    if (cap) normal = face == FACE_LO ? -f.plane_lo.xyz : f.plane_hi.xyz;
-    vec2 uv = frustum_uv_at(f, p, v);
-    HeightMap heights = height_map(f.material);
-    float texel = height_in(heights, uv);
-#if defined RELIEF
-    if (f.shell > 0.0 && !cap) {
-        // Tilt the normal by the height map's gradient in the (u, v) frame.
-        vec2 du = vec2(1.0 / (heights.size.x * heights.repeat.x), 0.0);
-        vec2 dv = vec2(0.0, 1.0 / (heights.size.y * heights.repeat.y));
-        float dh_du = (height_in(heights, uv + du) - height_in(heights, uv - du)) / (2.0 * du.x);
-        float dh_dv = (height_in(heights, uv + dv) - height_in(heights, uv - dv)) / (2.0 * dv.y);
-        float y, radial; vec3 e_r, g; float s_lo, s_hi;
-        frustum_local(f, p, y, radial, e_r);
-        generator_params(f, p, e_r, g, s_lo, s_hi);
-        vec3 tangent_u = cross(f.axis, e_r);
-        float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
-        float len_v = max((s_hi - s_lo) * length(g) * f.v_slots, TOL_TANGENT_FLOOR_F32);  // |dP/dv_tex|
-        normal = normalize(normal - f.shell * (dh_du / len_u * tangent_u
-                                               + dh_dv / len_v * normalize(g)));
-    }
-#endif
-    vec3 albedo = material_albedo(f.material, texel);
-    // the cone's own normal e_r - k*axis: what (8) is bent towards where it turns away from
-    // the eye, and (below) the receiver plane of the shadow test
-    vec3 true_normal = normal;
-    if (!cap) {
-        float y_t, radial_t; vec3 e_r_t;
-        frustum_local(f, p, y_t, radial_t, e_r_t);
-        true_normal = normalize(e_r_t - frustum_slope(f) * f.axis);
-        normal = facing_normal(normal, true_normal, -d);
-    }
-#if defined SHADOWS
-    // the receiver plane of the shadow test is the true tangent plane, not the
-    // interpolated shading normal (8), which leans radially
-    vec3 receiver_normal = true_normal;
-#if defined RELIEF
-    if (f.shell > 0.0 && !cap) receiver_normal = normal;
-#endif
-    float visibility = shadow_visibility(p, receiver_normal);
-#else
-    float visibility = 1.0;
-#endif
-    vec3 color = shade_surface_visible(albedo, f.material, normal, -d, 1.0, visibility);
-    out_color = vec4(to_display(color), 1.0);
-    out_distance = distance;
-
-    gl_FragDepth = eye_depth(distance, d);
+    vec3 normal, receiver_normal, albedo;
+    row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
+    write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);
 #endif
 }
 

@@ -1,5 +1,6 @@
 // Shadow map look-up for one directional light (plantgen.render.passes): included by the
-// programs that receive shadows (the ray caster and the ground) when SHADOWS is defined.
+// programs that receive shadows (the ray caster and the ground) when SHADOWS is defined;
+// with SHADOW_RAYS instead shadow rays through the BVH (no map).
 //
 // The map is an orthographic depth image along the light: texel (i, j) holds the depth,
 // as (z - near) / (far - near), of the first surface met by the light ray through the
@@ -15,6 +16,23 @@
 #ifndef SHADOW_GLSL
 #define SHADOW_GLSL
 
+#if defined SHADOW_RAYS
+// Shadow rays (render --method rt): the light reaches p unless the ray from p towards it
+// (shading.glsl's light_dir) hits something of the BVH (bvh.glsl, any hit): exact, no
+// map. The ray starts `shadow_ray_offset` pixel footprints (pixel_footprint at p's
+// distance from the eye) off the surface, along the receiver's normal on the light's side,
+// so that the receiver's own rounding (and a relief hit's bisection bracket, a fraction of
+// a footprint) does not shadow it. The program includes bvh.glsl before this file (the
+// loader's includes ignore #if, and bvh.glsl's own includes are each taken once).
+uniform float shadow_ray_offset;
+
+float shadow_visibility(vec3 p, vec3 n) {
+    float distance = length(p);
+    float lift = shadow_ray_offset * (pixel_footprint.x * distance + pixel_footprint.y);
+    vec3 o = p + lift * (dot(n, light_dir) >= 0.0 ? n : -n);
+    return bvh_trace(o, light_dir, 0.0, RAY_T_MAX, true, distance, true).prim >= 0 ? 0.0 : 1.0;
+}
+#else
 uniform sampler2D shadow_map;      // depth texture, compare mode off
 uniform vec3 light_origin;         // centre of the light's window, render-origin relative
 uniform vec3 light_right;          // unit, the map's +x
@@ -57,5 +75,7 @@ float shadow_visibility(vec3 p, vec3 n) {
     }
     return lit / 9.0;
 }
+
+#endif
 
 #endif

@@ -1,5 +1,5 @@
 """The batch manifest as typed columns (issue 27): figures a user filters with pyarrow or
-pandas, files and timings as structs, defines as a map, the README's schema table the
+pandas, files and timings as structs, defines as a map, the documented schema table the
 code's, resuming on the typed columns, and a manifest of another format refused."""
 
 from __future__ import annotations
@@ -17,14 +17,13 @@ pa = pytest.importorskip("pyarrow", reason="plantgen[batch] (pyarrow) is not ins
 import pyarrow.compute as pc  # noqa: E402
 import pyarrow.dataset as ds  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
+from _docs import page, table_after  # noqa: E402
 from test_batch import rows_of  # noqa: E402
 
 from plantgen.batch.manifest import MANIFEST_NAME  # noqa: E402
 from plantgen.batch.plant import measure  # noqa: E402
 from plantgen.batch.schema import COLUMNS, FORMAT, arrow_schema  # noqa: E402
 from plantgen.geometry.skeleton import Skeleton  # noqa: E402
-
-README = Path(__file__).resolve().parents[1] / "README.md"
 
 
 @pytest.fixture(scope="module")
@@ -82,15 +81,19 @@ def test_a_row_regrows_identically_alone(saguaros, tmp_path):
     assert {k: row[k] for k in figures} == figures       # the row's figures are the plant's, exactly
 
 
-def test_the_readme_schema_is_the_code_schema():
-    section = README.read_text().split("### Datasets on Dask")[1].split("\n### ")[0]
-    table = section.split("| column | type | unit | meaning |")[1].split("\n\n")[0]
+def test_the_documented_schema_is_the_code_schema():
+    """The file-format reference's table of the manifest's columns (generated from
+    COLUMNS when the site is built) names the columns the Parquet schema has, with their
+    types and units."""
+    text = page("reference/formats.md")
+    table = table_after(text[text.index("## Batch manifest"):], "| column | type | unit | meaning |")
     documented = {}
-    for line in table.splitlines()[2:]:
+    for line in table[2:]:
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         for name in re.findall(r"`([a-z_]+)`", cells[0]):
             documented[name] = (cells[1].strip("`"), cells[2])
     assert documented == {name: (kind, unit) for name, kind, unit, _ in COLUMNS}
+    assert list(documented) == arrow_schema().names
 
 
 def test_a_resume_reads_the_typed_manifest(tmp_path):

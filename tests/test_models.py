@@ -34,6 +34,9 @@ EXTRAS = {"abop_monopodial", "abop_sympodial", "abop_ternary", "cactus", "ocotil
           "abop_bush", "broadleaf", "pine_needles"}   # the last three with leaves
 DETERMINISTIC = {"well", "abop_monopodial", "abop_sympodial", "abop_ternary", "abop_bush"}
 ALL_MODELS = sorted(set(TABLE1) | EXTRAS)
+#: Grown in an environment (?E): checked here as skeletons, and by what they mean in
+#: tests/test_environment.py and tests/test_light.py.
+ENVIRONMENT = ("topiary", "wall_tree", "wall_garden", "colonised", "self_organizing", "stand")
 
 # plausible overall heights in metres (y extent of the segment axes)
 HEIGHTS = {
@@ -62,10 +65,10 @@ def _childless(skel: Skeleton) -> np.ndarray:
 
 def test_every_shipped_model_is_covered():
     shipped = {p.stem for p in Path(grammars_dir()).glob("*.yaml")}
-    assert set(ALL_MODELS) <= shipped
+    assert set(ALL_MODELS) | set(ENVIRONMENT) <= shipped
 
 
-@pytest.mark.parametrize("name", ALL_MODELS)
+@pytest.mark.parametrize("name", [*ALL_MODELS, *ENVIRONMENT])
 def test_model_grows_into_a_sane_skeleton(name):
     res = grown(name)
     skel = res.skeleton
@@ -96,7 +99,7 @@ def test_model_has_a_realistic_height(name):
     assert lo <= _axis_height(grown(name).skeleton) <= hi
 
 
-@pytest.mark.parametrize("name", ALL_MODELS)
+@pytest.mark.parametrize("name", [*ALL_MODELS, *ENVIRONMENT])
 def test_side_branches_are_no_thicker_than_their_parent(name):
     skel = grown(name).skeleton
     side = np.flatnonzero((skel.parent >= 0) & ~skel.continues)

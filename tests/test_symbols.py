@@ -1,65 +1,71 @@
-"""One symbol table (plantgen/lsystem/symbols.py): the README's table of turtle symbols is
-the one it renders and agrees with what the parser accepts, and every symbol it declares
-is acted on (drawn by the turtle, cut by the derivation, or skipped with a warning)."""
+"""One symbol table (plantgen/lsystem/symbols.py): the grammar reference's table of turtle
+symbols is the one it renders (generated when the documentation is built) and agrees with
+what the parser accepts, and every symbol it declares is acted on (drawn by the turtle, cut
+by the derivation, or skipped with a warning)."""
 
 from __future__ import annotations
 
 import dataclasses
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _docs import page, table_after
 
 from plantgen.errors import PlantgenError
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.grammar import TURTLE_ARITY, GrammarError
-from plantgen.lsystem.symbols import SYMBOLS, UNSUPPORTED, Action, markdown_table, unsupported_warning
+from plantgen.lsystem.symbols import (
+    DERIVATION_ACTIONS,
+    SYMBOLS,
+    UNSUPPORTED,
+    Action,
+    markdown_table,
+    unsupported_warning,
+)
 from plantgen.lsystem.turtle import HANDLERS, interpret_plant
 
-README = Path(__file__).resolve().parents[1] / "README.md"
 DRAWN = [s for s in SYMBOLS if s.action in HANDLERS]
 
 
-def readme_table() -> list[str]:
-    """The lines of the README's table of turtle symbols (section "Grammar format")."""
-    if not README.is_file():
-        pytest.skip("needs the source tree's README.md")
-    lines = README.read_text(encoding="utf-8").splitlines()
-    at = next(i for i, line in enumerate(lines) if line.startswith("**Turtle symbols**"))
-    start = next(i for i in range(at, len(lines)) if lines[i].startswith("|"))
-    stop = next(i for i in range(start, len(lines)) if not lines[i].startswith("|"))
-    return lines[start:stop]
+def reference_table() -> list[str]:
+    """The lines of the table of turtle symbols in the grammar reference
+    (docs/reference/grammar.md, section "Turtle symbols"), as the built page shows it."""
+    text = page("reference/grammar.md")
+    return table_after(text[text.index("## Turtle symbols"):], "| module | meaning |")
 
 
-def readme_arities() -> dict[str, tuple[int, ...] | None]:
-    """Each symbol of the README's table with the parameter counts its forms show (``F``,
+def reference_arities() -> dict[str, tuple[int, ...] | None]:
+    """Each symbol of the reference's table with the parameter counts its forms show (``F``,
     ``F(l)``, ``F(l, w)``: 0, 1, 2); None for "any parameters"."""
     out: dict[str, tuple[int, ...] | None] = {}
-    for line in readme_table()[2:]:
+    for line in reference_table()[2:]:
         cells = [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line)[1:-1]]
         forms = re.findall(r"`([^`]+)`", cells[0])
-        chars = {form[0] for form in forms}
+        chars = {re.match(r"\?\w|.", form).group() for form in forms}
         assert len(chars) == 1, f"one symbol per row: {line}"
+        char = chars.pop()
         counts = []
         for form in forms:
-            rest = form[1:]
+            rest = form[len(char):]
+            if rest.endswith(", ...)"):       # as many as the environment answers
+                counts = None
+                continue
             assert rest == "" or re.fullmatch(r"\(\w+(, \w+)*\)", rest), form
             counts.append(len(rest[1:-1].split(",")) if rest else 0)
-        char = chars.pop()
         assert char not in out, f"{char!r} has two rows"
-        out[char] = None if "any parameters" in cells[0] else tuple(counts)
+        out[char] = None if "any parameters" in cells[0] or counts is None else tuple(counts)
     return out
 
 
-def test_the_readme_table_is_the_one_symbols_py_renders():
-    assert "\n".join(readme_table()) == markdown_table()
+def test_the_reference_table_is_the_one_symbols_py_renders():
+    assert "\n".join(reference_table()) == markdown_table()
 
 
-def test_the_readme_table_and_the_parser_agree():
-    table = readme_arities()
+def test_the_reference_table_and_the_parser_agree():
+    table = reference_arities()
     assert {c: a for c, a in table.items() if a is not None} == TURTLE_ARITY
-    assert {c for c, a in table.items() if a is None} == set(UNSUPPORTED)
+    assert {c for c, a in table.items() if a is None} == set(UNSUPPORTED) | {"?E"}
     assert len(table) == len(SYMBOLS) > 20
 
 
@@ -68,8 +74,8 @@ def _parse(axiom: str):
 
 
 @pytest.mark.parametrize("char", sorted(TURTLE_ARITY))
-def test_the_parser_takes_the_parameter_counts_the_readme_shows(char):
-    counts = readme_arities()[char]
+def test_the_parser_takes_the_parameter_counts_the_reference_shows(char):
+    counts = reference_arities()[char]
     for n in range(max(counts) + 2):
         args = ["leaf" if char == "~" and k == 0 else "1" for k in range(n)]
         module = char + (f"({', '.join(args)})" if n else "")
@@ -90,14 +96,15 @@ def test_an_unsupported_symbol_takes_any_count_once_per_grammar(char):
 
 def test_every_action_has_its_symbols_and_every_symbol_an_action():
     """Nothing declared but not drawn (bar the unsupported symbols, which warn, and the
-    cut, which the derivation runs), and no handler that no symbol reaches."""
+    cut and the query and communication modules, which the derivation runs), and no
+    handler that no symbol reaches."""
     for s in SYMBOLS:
         if s.unsupported:
             assert s.action is Action.NONE
         else:
-            assert s.action in HANDLERS or s.action is Action.CUT, s
+            assert s.action in HANDLERS or s.action in DERIVATION_ACTIONS, s
     assert set(HANDLERS) == {s.action for s in DRAWN}
-    assert set(Action) == {*HANDLERS, Action.NONE, Action.CUT}
+    assert set(Action) == {*HANDLERS, Action.NONE, *DERIVATION_ACTIONS}
     assert len({s.char for s in SYMBOLS}) == len(SYMBOLS)
 
 

@@ -36,7 +36,7 @@ def test_every_binding_names_a_control_of_the_session():
     for b in BINDINGS:
         assert callable(getattr(ViewerSession, b.action)), b
     assert binding_for("P", False).action == "screenshot" and binding_for("P", True).action == "window_shot"
-    assert {k for k, _ in help_lines()} >= {"P", "C", "H", "1 2 3 4", "Space"}
+    assert {k for k, _ in help_lines()} >= {"P", "C", "H", "1 2 3 4 5 6", "Space"}
 
 
 def test_the_first_frame_is_plantgen_renders(session):
@@ -104,6 +104,16 @@ def test_gs_levels_stay_within_the_triangle_budget(session):
     assert triangle_count(len(frusta), session.level + 1, caps) > VIEW_MAX_TRIANGLES
     session.key("_4")
     assert session.method == "GS+R"
+
+
+def test_keys_5_and_6_ray_trace_as_render_method_rt(session):
+    session.key("_6")
+    assert session.method == "RT+R" and session.request().march.method == "rt"
+    frame = session.draw(*SIZE)
+    rendered = render_model("saguaro", size=SIZE, method="rt", relief=True).result
+    assert frame.stats.program[0] == "rt.glsl"
+    assert np.array_equal(frame.color, rendered.color)
+    assert any(text.startswith("RT+R") or "RT+R" in text for text, _ in session.hud_lines())
 
 
 def test_a_still_model_does_not_play(session):
@@ -183,13 +193,10 @@ def test_a_failing_reload_hands_back_its_error():
     assert isinstance(done[2], ZeroDivisionError)
 
 
-def test_the_readme_lists_the_keys_the_viewer_binds():
-    from pathlib import Path
+def test_the_viewer_guide_lists_the_keys_the_viewer_binds():
+    from _docs import page
 
-    readme = Path(__file__).resolve().parent.parent / "README.md"
-    if not readme.is_file():
-        pytest.skip("needs the source tree's README.md")
-    rows = [line for line in readme.read_text().splitlines() if line.startswith("| ")]
+    rows = [line for line in page("how-to/view.md").splitlines() if line.startswith("| ")]
     for keys, text in help_lines():
         assert f"| {keys} | {text} |" in rows, (keys, text)
 

@@ -1,5 +1,5 @@
 """The manifest's columns, typed: one home for each column's name, Arrow type, unit and
-meaning (the README's schema table is checked against :data:`COLUMNS`).
+meaning (the documentation's schema table is generated from :data:`COLUMNS`).
 
 A scalar figure is one float64 (or int64) column, in metres, m² and m³ (a model unit is
 taken as a metre: the shipped grammars are drawn in metres); the branch count per order
@@ -47,7 +47,7 @@ METRIC_COLUMNS = {
 }
 
 #: Every column in order: (name, Arrow type name, unit, meaning). Type names are read by
-#: :func:`arrow_type`; the README's table shows the same four fields.
+#: :func:`arrow_type`; the documentation's table shows the same four fields.
 COLUMNS = (
     ("id", "string", "", "the plant's id, unique in the batch (its files' stem)"),
     ("grammar", "string", "", "the grammar as the spec names it"),

@@ -436,6 +436,7 @@ def simple_spec(grammar: str, seeds: str, outputs: list[str], *, seed: int = 0, 
     """The spec of ``plantgen batch GRAMMAR --seeds a:b --outputs npz,png,...`` (the grammar
     a path or a shipped name, as ``plantgen grow`` takes it; ``scan``: the knobs of the
     ``points`` output's scan; its points are PLY)."""
+    from .._resources import missing_hint
     from ..pipeline import resolve_input
 
     unknown = sorted(set(outputs) - set(OUTPUT_KINDS))
@@ -462,7 +463,8 @@ def simple_spec(grammar: str, seeds: str, outputs: list[str], *, seed: int = 0, 
     def resolve(name: str, w: str) -> Path:
         path = resolve_input(name)
         if not path.is_file():
-            raise BatchError(f"grammar {name!r}: no such file and no shipped grammar of that name")
+            raise BatchError(f"grammar {name!r}: no such file and no shipped grammar of that name"
+                             f"{missing_hint(name)}")
         return real_path(path)
 
     groups = _groups([{"grammar": grammar, "seeds": seeds}], seed, resolve, limits or default_limits, "batch")

@@ -1,5 +1,5 @@
 """Rebuild every image of the gallery (``gallery/``), each with the command a user would
-type, so an image and its caption in the README never disagree.
+type, so an image and its caption in the documentation never disagree.
 
 Run as ``python -m plantgen.benchmarks.gallery [--out gallery] [--only NAMES] [--size WxH]
 [--list] [--bench]``. Each entry is one command (``plantgen render ...``, ``plantgen view
@@ -54,6 +54,9 @@ class Entry:
 
 #: Shipped grammars with leaves, rendered beside Table 1's models.
 LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles")
+#: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
+#: markers, grown by light.
+ENVIRONMENT_MODELS = ("topiary", "colonised", "self_organizing", "stand")
 
 
 def entries() -> list[Entry]:
@@ -66,6 +69,12 @@ def entries() -> list[Entry]:
                           "--ssaa", "2", "--size", "{size}"), (f"{model}.png",)) for model in LEAFY_MODELS]
     out += [Entry(f"scenes/{scene}", ("plantgen", "render", scene, "-o", f"{{out}}/scenes/{scene}.png", "--ssaa",
                                       "2", "--size", "{size}"), (f"scenes/{scene}.png",)) for scene in SCENES]
+    # the models grown in an environment, and the tree against a wall with its wall
+    out += [Entry(model, ("plantgen", "render", model, "-o", f"{{out}}/{model}.png", "--shadows", "--ssaa", "2",
+                          "--size", "{size}"), (f"{model}.png",)) for model in ENVIRONMENT_MODELS]
+    out.append(Entry("scenes/wall_garden", ("plantgen", "render", "wall_garden", "-o", "{out}/scenes/wall_garden.png",
+                                            "--azimuth", "200", "--elevation", "15", "--ssaa", "2", "--size", "{size}"),
+                     ("scenes/wall_garden.png",)))
     # the forest (issue 25): instanced, its detail at the default --lod-pixels; no supersampling
     # (a frame of 1.3 M drawn rows costs about 8 s on llvmpipe, four times that at --ssaa 2)
     out.append(Entry("scenes/forest", ("plantgen", "render", "forest", "-o", "{out}/scenes/forest.png", "--size",
@@ -96,6 +105,11 @@ def entries() -> list[Entry]:
     out += [Entry(f"blender_{m}", ("python", "-m", "plantgen.benchmarks.in_blender", m, f"{{out}}/blender_{m}.png",
                                    "--size", "{width}", "{height}"), (f"blender_{m}.png",), (512, 384))
             for m in ("well", "saguaro")]
+    # a game asset's levels side by side and its impostor's atlas (plantgen export --asset game)
+    out.append(Entry("engine_assets", (
+        "python", "-m", "plantgen.benchmarks.asset_levels", "broadleaf", "{out}/engine_assets/broadleaf_levels.png",
+        "{out}/engine_assets/broadleaf_impostor_atlas.png", "--size", "{width}", "{height}"),
+        ("engine_assets/broadleaf_levels.png", "engine_assets/broadleaf_impostor_atlas.png"), (1280, 300)))
     out.append(Entry("skeletons", ("python", "-m", "plantgen.benchmarks.draw_skeletons", "{out}/skeletons"),
                      tuple(f"skeletons/{p.stem}.png" for p in shipped_model_paths())))
     out.append(Entry("viewer", (

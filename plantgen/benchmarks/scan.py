@@ -10,8 +10,8 @@ median and largest |range - reference range| over the beams both hit (model unit
 over the model's size), the beams whose range is off by more than 1e-4 of the size (a
 thin twig missed at its edge, the one behind hit) and the beams only one of them hits
 (silhouette pixels). Both
-bin the (beam, primitive) pairs by the primitives' boxes; ``--brute N`` also times the
-reference without binning (:func:`~plantgen.geometry.reference.intersect_frusta`: every
+trace the beams through the target's BVH; ``--brute N`` also times the
+reference without it (:func:`~plantgen.geometry.reference.intersect_frusta`: every
 beam against every row's box) on N random beams of the first scanner, extrapolated to
 the whole scan: what the binning buys. The machine is printed with the table.
 """

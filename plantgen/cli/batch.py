@@ -17,6 +17,7 @@ from ..geometry.scan import ScanSettings
 from ..knobs import knob_of
 from ..settings import MeshSettings
 from .options import allow_path_opt, knob_option, knob_options, limit_opt, limits_from, quiet_opt, take_settings
+from .progress import StageBars
 
 __all__ = ["batch"]
 
@@ -71,7 +72,7 @@ def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask,
     \b
     Examples:
       plantgen batch pine --seeds 0:1000 --outputs npz,png --out pines/
-      plantgen batch forest.yaml --out forest/ --workers 2
+      plantgen batch my_dataset.yaml --out dataset/ --workers 2   # a spec you wrote
     """
     limits = limits_from(limit_values)
     if seeds is not None:
@@ -89,21 +90,16 @@ def batch(source, out_dir, seeds, outputs, size, azimuths, relief, subdiv, mask,
             click.echo(f"{result.total:,} plants (the manifest lists {result.listed:,})"
                        + (f"; Dask dashboard: {dashboard}" if dashboard else ""), err=True)
 
-    def progress(result):
-        if not quiet:
-            width = 30
-            filled = int(width * result.finished / max(result.total, 1))
-            click.echo(f"\r[{'#' * filled}{'.' * (width - filled)}] {result.finished:,}/{result.total:,} "
-                       f"({result.skipped:,} already done, {result.failed:,} failed) {result.rate:.2f} plants/s",
-                       err=True, nl=False)
+    with _sigterm_as_interrupt(), StageBars(enabled=not quiet) as bars:
+        def progress(result):
+            bars("plants", result.finished, result.total, f"{result.skipped:,} already done, {result.failed:,} "
+                                                          f"failed, {result.rate:.2f} plants/s")
 
-    with _sigterm_as_interrupt():
         result = run_batch(spec, out_dir, scheduler=scheduler, workers=workers, limits=limits, progress=progress,
                            on_start=started)
     if not quiet:
         from ..batch.manifest import figure_quantiles
 
-        click.echo("", err=True)
         for line in summary_lines(result, figure_quantiles(result.manifest.parent)):
             click.echo(line)
     if result.failed:

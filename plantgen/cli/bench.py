@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -11,7 +10,8 @@ import click
 from ..errors import PlantgenError
 from ..settings import ParallaxSettings
 from ..table1 import RELIEF_ERROR, BenchOptions, check_models, count_steps, require_skimage, run_bench, write_outputs
-from .options import knob_options, size_opt, take_settings
+from .options import knob_options, quiet_opt, size_opt, take_settings
+from .progress import StageBars
 
 
 @click.command()
@@ -38,13 +38,15 @@ from .options import knob_options, size_opt, take_settings
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("bench-out"), show_default=True,
               help="Directory for table.md, table1.csv, curves.csv, results.json and plots.")
-def bench(models, size, frames, eval_size, max_triangles, relief_error, quick, images, out_dir, **knobs):
+@quiet_opt
+def bench(models, size, frames, eval_size, max_triangles, relief_error, quick, images, out_dir, quiet, **knobs):
     """Reproduce Table 1 (RC, RC+R, GS, GS+R fps, and GS+N: GS's mesh with baked normal
     maps, GS+POM: the mesh on the relief's outer shell with parallax occlusion mapping;
     RC+R at the fastest configuration within --relief-error, GS levels matched to the ray
     caster's quality by a computed criterion or stopped by the triangle budget) and measure
-    error against ms per frame for every accuracy knob. Prints the Markdown table; progress
-    goes to stderr."""
+    error against ms per frame for every accuracy knob. Prints the Markdown table. On a
+    terminal a line on stderr shows the step it is on; where stderr is a log, one line
+    per step with the seconds since the start (-q: neither)."""
 
     overrides = {"parallax": take_settings(ParallaxSettings, knobs)}
     if models:
@@ -63,18 +65,20 @@ def bench(models, size, frames, eval_size, max_triangles, relief_error, quick, i
     require_skimage()           # so does a missing scikit-image (the error metric's SSIM)
     total = count_steps(opts)
     start = time.perf_counter()
-    with click.progressbar(length=total, label="bench", file=sys.stderr, show_pos=True,
-                           item_show_func=lambda s: s) as bar:
-        log = not sys.stderr.isatty()   # a log file gets one line per step instead
+    with StageBars(enabled=not quiet) as bars:
+        log = not quiet and not bars.enabled     # a log file gets one line per step instead
+        done = [0]
 
         def progress(label):
-            bar.update(1, label)
+            done[0] += 1
+            bars("bench", min(done[0], total), total, label)
             if log:
                 click.echo(f"[{time.perf_counter() - start:6.0f} s] {label}", err=True)
 
         results = run_bench(opts, progress, out_dir)
-        bar.update(total)
     written = write_outputs(results, out_dir)
+    if quiet:
+        return
     click.echo(written["markdown"])
     if written["plots"]:
         click.echo(f"plantgen: {written['plots']}", err=True)

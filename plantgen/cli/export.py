@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..assets import AssetSettings
 from ..exporters import EXPORT_FORMATS
 from ..geometry.frames import UP_AXES
 from ..knobs import knob_of
@@ -34,7 +35,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @click.command()
 @input_arg
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
-            ".obj its .mtl, a .qsm.csv a .treedata.csv.")
+            ".obj its .mtl, a .qsm.csv a .treedata.csv. Default: INPUT's name with .glb, in the current directory.",
+            required=False)
 @knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
@@ -64,7 +66,7 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               callback=finite,
               help="QSM: split each frustum into the fewest cylinders (of its radius at their middle) "
                    "that lose at most this fraction of its volume; 1 writes one cylinder per segment.")
-@knob_options(KeyframeSettings)
+@knob_options(KeyframeSettings, AssetSettings)
 @knob_options(LevelSettings, DetailSettings, helps={
     "lod_pixels": "glTF, USD levels of detail: their screen coverages let a level go where the segments it drops "
                   "span fewer pixels than this (on a 768-pixel-high image)."})
@@ -73,8 +75,8 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing, unit,
-           qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing,
+           unit, qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -104,23 +106,29 @@ def export(input: Path, output: Path, subdiv: int, relief: bool, textures: bool,
 
     \b
     Examples:
+      plantgen export pine                          # writes pine.glb
       plantgen export pine -o pine.glb --subdiv 2 --relief
       plantgen export well -o well.obj              # and well.mtl
       plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
       plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
       plantgen export forest -o forest.glb --subdiv 0       # 4 levels of detail per plant (MSFT_lod)
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
+      plantgen export broadleaf -o tree.glb --asset game    # levels, leaf cards, impostor, textures
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
       plantgen export pine -o pine.swc --up z
     """
+    output = output or Path(input.stem + ".glb")
+    asset = take_settings(AssetSettings, keys)
+    if asset.game and click.get_current_context().get_parameter_source("subdiv").name == "DEFAULT":
+        subdiv = 0                                  # a game asset's levels within their budgets
     with StageBars(enabled=not quiet) as bars:
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
                             textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
-                            levels=take_settings(LevelSettings, keys))
+                            levels=take_settings(LevelSettings, keys), asset=asset)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
@@ -157,6 +165,8 @@ def _mesh_summary(info: dict) -> None:
                    f"({', '.join(kinds[k] for k in baked['kinds'])}"
                    f"{'; normal map at r/L ' + format(baked['aspect'], '.3g') if 'normal' in baked['kinds'] else ''})")
     _levels_summary(info)
+    for line in info.get("asset_lines", ()):
+        click.echo(line)
     sway = info.get("animation")
     if sway:
         click.echo(f"sway: {sway['keys']:,} keys over {sway['duration']:g} s ({sway['rate']:g} a second, "

@@ -17,11 +17,14 @@ import warnings
 import click
 import numpy as np
 
+from .._resources import short_names
 from ..errors import PlantgenError
 from .batch import batch
 from .bench import bench
+from .convert import convert
 from .export import export
 from .grow import grow
+from .listing import list_models
 from .options import debug_opt, debug_requested
 from .render import render
 from .scan import scan
@@ -36,13 +39,22 @@ __all__ = ["cli", "main"]
 def cli() -> None:
     """plantgen: L-system plants skinned with relief-mapped conical frusta.
 
-    Grammars and scenes are YAML files (the shipped ones are in grammars/). Run
-    `plantgen COMMAND --help` for each command's options.
+    Grammars and scenes are YAML files; every command also takes a shipped one by
+    name, from any folder (`plantgen list` names them all). Run `plantgen COMMAND
+    --help` for each command's options.
+
+    \b
+    Examples:
+      plantgen list
+      plantgen render pine                  # writes pine.png
+      plantgen export pine                  # writes pine.glb
     """
 
 
-for _command in (grow, export, render, scan, view, bench, batch):
+for _command in (list_models, grow, export, render, scan, view, bench, batch):
     cli.add_command(debug_opt(_command))
+
+cli.add_command(debug_opt(convert))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -83,4 +95,4 @@ def main(argv: list[str] | None = None) -> None:
 def _one_line(exc: BaseException) -> str:
     """An exception's message on one line (a multi-line message keeps its first line)."""
     lines = str(exc).strip().splitlines()
-    return lines[0][:500] if lines else exc.__class__.__name__
+    return short_names(lines[0])[:500] if lines else exc.__class__.__name__

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import click
@@ -26,9 +25,7 @@ from .options import (
     quiet_opt,
     seed_opt,
 )
-
-#: Seconds between two progress lines of a long derivation.
-PROGRESS_EVERY = 1.0
+from .progress import StageBars
 
 
 @click.command()
@@ -64,25 +61,14 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
 
     \b
     Examples:
-      plantgen grow grammars/pine.yaml -o pine.npz --seed 3 --format swc
+      plantgen grow pine --seed 3 --format swc      # pine.npz and pine.swc
       plantgen grow desert -o desert.swc
     """
     output = output or Path(input.stem + ".npz")
     _check_outputs(output, formats, up)
-    t_start = time.perf_counter()
-    shown = [t_start]
-
-    def progress(step, n):
-        # Only long derivations report progress, at most one line a PROGRESS_EVERY seconds,
-        # so quick ones print a clean summary and a million steps print a few lines.
-        now = time.perf_counter()
-        if now - shown[0] >= PROGRESS_EVERY:
-            shown[0] = now
-            click.echo(f"  derivation step {step:,}: {n:,} modules", err=True)
-
-    result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules,
-                       progress=progress if not quiet else None, limits=limits_from(limit_values),
-                       allow_paths=allow_paths, defines=define_values(defines))
+    with StageBars(enabled=not quiet) as bars:
+        result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules, progress=bars,
+                           limits=limits_from(limit_values), allow_paths=allow_paths, defines=define_values(defines))
     for line in result.warnings:     # never silenced by --quiet: a symbol not drawn is news
         click.echo(line, err=True)
     skel = result.skeleton

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
 from ..errors import PlantgenError
 from ..gl.records import RECORD_BYTES
+from ..images import parse_background
 from ..pipeline import RenderReport, ShadowUse, render_file
 from ..settings import RenderSettings
 from .options import (
@@ -19,15 +19,18 @@ from .options import (
     limit_opt,
     limits_from,
     output_opt,
+    quiet_opt,
     seed_opt,
     smooth_bends_opt,
     take_settings,
 )
+from .progress import StageBars
 
 
 @click.command()
 @input_arg
-@output_opt("the image (.png), or with --frames the animation (.gif or .webp).")
+@output_opt("the image (.png), or with --frames the animation (.gif or .webp). Default: INPUT's name "
+            "with .png (with --frames: .gif), in the current directory.", required=False)
 @knob_options(RenderSettings)
 @click.option("--camera-out", type=click.Path(path_type=Path),
               help="Write the camera used (eye, target, up, fov_y, width, height) as JSON.")
@@ -42,8 +45,9 @@ from .options import (
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
-def render(input: Path, output: Path, camera_out, depth_out, seed, iterations, timed_frames, smooth_bends,
-           limit_values, allow_paths, **knobs) -> None:
+@quiet_opt
+def render(input: Path, output: Path | None, camera_out, depth_out, seed, iterations, timed_frames, smooth_bends,
+           limit_values, allow_paths, quiet, **knobs) -> None:
     """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     into a PNG.
 
@@ -55,40 +59,37 @@ def render(input: Path, output: Path, camera_out, depth_out, seed, iterations, t
     The camera is framed automatically (or is the scene's); --azimuth, --elevation,
     --distance or --zoom and --fov turn it around the model, or --camera takes a camera
     JSON back. A still is drawn once; --time-frames N times N more draws and prints the
-    median. An animation shows a progress bar on stderr.
+    median. On a terminal, a line on stderr shows the stage and its progress.
 
     \b
     Examples:
-      plantgen render grammars/saguaro.yaml -o saguaro.png --relief --size 1024x768 \\
+      plantgen render pine                                  # writes pine.png
+      plantgen render saguaro -o saguaro.png --relief --size 1024x768 \\
           --camera-out cam.json --depth-out depth.npy
       plantgen render pine -o pine.png --azimuth 60 --elevation 20 --zoom 1.5 --ssaa 3
       plantgen render elm -o elm.png --background none          # transparent PNG
-      plantgen render grammars/dancing_cacti.yaml --frames 48 --fps 24 -o dance.gif
+      plantgen render dancing_cacti --frames 48 --fps 24 -o dance.gif
     """
     settings = take_settings(RenderSettings, knobs)
+    try:
+        parse_background(settings.image.background)
+    except PlantgenError as exc:
+        raise click.BadParameter(str(exc).removeprefix("background "), param_hint="'--background'") from None
     view = settings.view
     if not view.auto and not Path(view.camera).exists():
         raise PlantgenError(f"{view.camera}: no such camera file (use 'auto' or a camera JSON)")
     if not view.auto and not view.orbit.empty:
         raise click.UsageError("--azimuth, --elevation, --distance, --zoom and --fov turn the automatic "
                                "camera: leave them out with --camera FILE")
-    bar = None
-
-    def progress(done, total):
-        nonlocal bar
-        if bar is None:
-            bar = click.progressbar(length=total, label="rendering frames", file=sys.stderr)
-            bar.__enter__()
-        bar.update(1)
-        if done == total:
-            bar.__exit__(None, None, None)
-
-    report = render_file(input, output, settings, camera_out=camera_out, depth_out=depth_out, seed=seed,
-                         iterations=iterations, timed_frames=timed_frames, progress=progress,
-                         limits=limits_from(limit_values), allow_paths=allow_paths, smooth_bends=smooth_bends)
+    output = output or Path(input.stem + (".gif" if settings.motion.frames is not None else ".png"))
+    with StageBars(enabled=not quiet) as bars:
+        report = render_file(input, output, settings, camera_out=camera_out, depth_out=depth_out, seed=seed,
+                             iterations=iterations, timed_frames=timed_frames, progress=bars,
+                             limits=limits_from(limit_values), allow_paths=allow_paths, smooth_bends=smooth_bends)
     for line in report.warnings:     # never silenced, as in grow
         click.echo(line, err=True)
-    print_report(report)
+    if not quiet:
+        print_report(report)
 
 
 def shadow_line(use: ShadowUse, cache: bool = True) -> str:
@@ -109,16 +110,19 @@ def print_report(report: RenderReport) -> None:
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")
     placed = report.placed
+    traced = report.settings.method == "rt"
     if placed is not None:
         drawn = report.result.stats.segments
+        detail = "traced (every row: a BVH of each plant, one over the copies)" if traced else \
+            f"drawn (level of detail: {report.lod_pixels:g} px)"
         click.echo(f"segments: {report.segments:,} placed ({placed.copies:,} copies of {len(placed.plants)} plants), "
                    f"{placed.unique_rows:,} frusta on the GPU ({placed.unique_rows * RECORD_BYTES / 1024:.1f} KiB), "
-                   f"{drawn:,} drawn (level of detail: {report.lod_pixels:g} px)")
+                   f"{drawn:,} {detail}")
     else:
         click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
                    f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
-    click.echo("effects: " + (", ".join(report.effects) or "none")
-               + (f" (shadow map {report.shadows.resolution}²)" if report.shadows else ""))
+    shadows = "shadow rays" if traced else f"shadow map {report.shadows.resolution}²" if report.shadows else ""
+    click.echo("effects: " + (", ".join(report.effects) or "none") + (f" ({shadows})" if report.shadows else ""))
     if report.shadow_use is not None:
         click.echo(shadow_line(report.shadow_use, report.shadows.cache))
     size = f"{cam.width}x{cam.height}"

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
 from ..geometry.frames import UP_AXES
-from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant
-from ..pipeline import check_scan_memory, grow_file, model_leaves, skin_model
+from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
+from ..pipeline import check_finite_frusta, check_scan_memory, grow_file, model_leaves, skin_model, skinning
 from ..scanfiles import check_point_output, las_scale, write_points
 from .options import (
     allow_path_opt,
@@ -23,6 +25,27 @@ from .options import (
     smooth_bends_opt,
     take_settings,
 )
+from .progress import StageBars
+
+
+def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
+    """(settings, the GPU's search or None): --scan-precision float32 finds each beam's
+    primitive on the GPU, and so does a scan that left --scan-precision out where a GL
+    context exists (float64 ranges either way); float64 asked for, or no GL, gives None
+    (float32 asked for without GL: the frusta tested in float32 on the CPU, and a line on
+    stderr says so)."""
+    if settings.precision == "float64" and chosen:
+        return settings, None
+    from ..gl.context import GLContextError, gl_context
+    from ..gl.trace import trace_target
+
+    try:
+        gl_context()
+    except GLContextError as exc:
+        if chosen and not quiet:
+            click.echo(f"no GPU traversal ({exc}); float32 on the CPU", err=True)
+        return settings, None
+    return replace(settings, precision="float32"), lambda target, origins, dirs: trace_target(target, origins, dirs)
 
 
 def _plant_ids(grown) -> tuple[object, object]:
@@ -35,7 +58,8 @@ def _plant_ids(grown) -> tuple[object, object]:
 @click.command()
 @input_arg
 @output_opt("its suffix names the format: .las or .laz (LAS 1.4, point format 6, the labels as extra "
-            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates).")
+            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates). Default: INPUT's "
+            "name with .ply, in the current directory.", required=False)
 @knob_options(ScanSettings)
 @click.option("--scan-seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Seed of the range noise and of the beams' sub-ray turns (the same seed, the same points).")
@@ -46,7 +70,7 @@ def _plant_ids(grown) -> tuple[object, object]:
 @limit_opt
 @allow_path_opt
 @quiet_opt
-def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
+def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
          quiet, **knobs) -> None:
     """Scan INPUT (a grammar or scene .yaml, a shipped one by name, or a skeleton .npz /
     .swc) with simulated laser scanners and write the points, each labelled with its
@@ -59,18 +83,28 @@ def scan(input: Path, output: Path, scan_seed: int, up: str, seed, smooth_bends,
 
     \b
     Examples:
+      plantgen scan pine                            # writes pine.ply
       plantgen scan pine -o pine.las --angular-step 0.05 --range-noise 0.002
       plantgen scan broadleaf -o leaf.ply --scan-mode airborne --scan-angle 30
     """
+    output = output or Path(input.stem + ".ply")
     check_point_output(output)
+    chosen = click.get_current_context().get_parameter_source("scan_precision") is not ParameterSource.DEFAULT
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
     check_scan_memory(grown, limits, input)
-    frusta = skin_model(grown, smooth_bends)
-    plant, leaf_plant = _plant_ids(grown)
-    cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
-                       leaf_plant=leaf_plant, limits=limits)
+    settings, finder = _gpu_finder(settings, quiet, chosen)
+    with StageBars(enabled=not quiet) as bars:
+        if grown.scene is not None:          # each distinct plant once, its copies traced through two levels
+            skin = skinning(smooth_bends if smooth_bends is not None else grown.smooth_bends)
+            cloud = scan_scene(grown.scene.plants(), settings, scan_seed, limits=limits, progress=bars,
+                               skin=lambda skel: check_finite_frusta(skin(skel), str(input)), finder=finder)
+        else:
+            frusta = skin_model(grown, smooth_bends)
+            plant, leaf_plant = _plant_ids(grown)
+            cloud = scan_plant(grown.skeleton, model_leaves(grown), settings, scan_seed, frusta=frusta, plant=plant,
+                               leaf_plant=leaf_plant, limits=limits, progress=bars, finder=finder)
     write_points(cloud, output, up=up)
     if quiet:
         return

@@ -10,6 +10,7 @@ import click
 from ..files import check_output
 from ..geometry.camera import Camera
 from ..knobs import knob_of
+from ..pipeline import existing_input
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings
 from ..viewer import ViewOptions, run_viewer
 from ..viewer.keys import help_lines
@@ -36,14 +37,15 @@ def _keys_epilog() -> str:
 
 @click.command(epilog=_keys_epilog())
 @input_arg
-@knob_options(RenderSettings, skip=("frames", "fps"), helps={
+@knob_options(RenderSettings, skip=("frames", "fps", "method"), helps={
     "size": "Window size (WIDTHxHEIGHT pixels; default: the camera file's, else "
             f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}).",
     "time": "Seconds: the pose an animated scene starts at.",
     "ssaa": "Supersampling, N x N rays a pixel (A cycles 1..4 in the window)."})
-@click.option("--method", type=click.Choice([m.lower() for m in METHODS], case_sensitive=False),
+@click.option("--method", "start_method", type=click.Choice([m.lower() for m in METHODS], case_sensitive=False),
               help="Start with RC, RC+R (ray casting, without and with relief), GS or GS+R "
-                   "(tessellated meshes). Default: RC+R when the effects list relief, else RC.")
+                   "(tessellated meshes), RT or RT+R (ray tracing through a BVH). Default: RC+R when the "
+                   "effects list relief, else RC.")
 @knob_option(knob_of(MeshSettings, "level"), MeshSettings().level,
              help="GS subdivision level m at the start (16·4^m triangles per frustum, 8·2^m per cap).")
 @seed_opt
@@ -58,7 +60,7 @@ def _keys_epilog() -> str:
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
-def view(input: Path, method, subdiv, seed, iterations, shots, watch, snapshot, smooth_bends, limit_values,
+def view(input: Path, start_method, subdiv, seed, iterations, shots, watch, snapshot, smooth_bends, limit_values,
          allow_paths, **knobs) -> None:
     """Open INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     in a window and turn it around in real time.
@@ -78,6 +80,7 @@ def view(input: Path, method, subdiv, seed, iterations, shots, watch, snapshot, 
       plantgen view my_tree.yaml --method rc+r --ssaa 2 --azimuth 90
       plantgen view dancing_cacti                 # Space plays, , and . scrub
     """
+    existing_input(input)           # a mistyped name is one line before the display is looked for
     settings = take_settings(RenderSettings, knobs)
     camera, size = settings.view.camera, settings.image.size
     if not settings.view.auto and not Path(camera).is_file():
@@ -96,7 +99,7 @@ def view(input: Path, method, subdiv, seed, iterations, shots, watch, snapshot, 
         check_output(snapshot)
     options = ViewOptions(
         input=input, settings=settings, size=size or DEFAULT_SIZE, seed=seed, iterations=iterations,
-        method=next((m for m in METHODS if m.lower() == method.lower()), None) if method else None,
+        method=next((m for m in METHODS if m.lower() == start_method.lower()), None) if start_method else None,
         level=subdiv, shots=shots, watch=watch, snapshot=snapshot, limits=limits, allow_paths=tuple(allow_paths),
         smooth_bends=smooth_bends)
     how = run_viewer(options, say=click.echo, warn=lambda line: click.echo(line, err=True))

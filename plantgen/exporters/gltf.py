@@ -27,12 +27,14 @@ name and base colour, linear RGB as glTF defines it). Nodes:
   holds a ``LINEAR`` rotation channel per turning joint of every swaying copy, its keys
   at the timeline's times.
 
-A still plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
+A plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
 each of its nodes (a copy's, the instanced node, the plant in place) carries ``MSFT_lod``
 whose ``ids`` name one node per lower level (``"<name> lod<k>"``, that level's mesh, the
 node's placement or instancing attributes), nodes outside the scene's tree, and
 ``extras.MSFT_screencoverage`` (one coverage per level: below ``coverage[k]`` level k + 1
-may be shown; below the last, nothing). ``MSFT_lod`` is in ``extensionsUsed`` only: a
+may be shown; below the last, nothing). A swaying plant's levels are skinned on the same
+joints: each copy's mesh node names its level nodes, each with the copy's one skin, so
+the one ``"sway"`` animation drives every level. ``MSFT_lod`` is in ``extensionsUsed`` only: a
 reader without it shows the full level.
 
 A plant's leaves (a grammar's ``{ . }`` polygons) are primitives of its mesh too, one per
@@ -41,7 +43,12 @@ material, with a material of their own named ``"<material> (leaf)"`` that is
 it (between the material's dark and light colour; with ``colours`` given: that colour,
 no COLOR_0) (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
-bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`).
+bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`). Leaves written as
+cards (a plant's ``cards``, :mod:`plantgen.geometry.leaf_cards`) are one quad each, in a
+material ``"<material> (leaf card)"``: double-sided, ``alphaMode: MASK`` (cut-off 0.5), its
+base colour texture the cards' atlas (white, alpha the shape; sampled clamped, without
+mipmaps: averaged mipmaps would thin the cut-outs away with distance), each
+vertex's ``COLOR_0`` its leaf's shade as for polygons, TEXCOORD_0 the card's tile.
 
 A scene (``extras``, :class:`~plantgen.exporters.plants.SceneExtras`) adds, at the scene's
 root: its ground, a mesh ``"Ground"`` (two triangles facing up, the ground material's
@@ -78,6 +85,7 @@ from ..geometry.frames import similarity_trs, turn_placements
 from ..geometry.textures import mesh_tangents
 from ..images import png_bytes
 from .formats import ExportError
+from .impostors import impostor_coverages, impostor_part
 from .plants import (
     Colours,
     Part,
@@ -94,7 +102,7 @@ from .plants import (
     material_colours,
     material_parts,
 )
-from .sway import JointRig, Timeline, copy_rotations, joint_rig
+from .sway import JointRig, Timeline, copy_rotations, joint_rig, level_rig
 from .textures import Textures, png_writes, texture_files, texture_image
 
 __all__ = ["INSTANCING_EXTENSION", "LIGHTS_EXTENSION", "LOD_EXTENSION", "byte_weights", "gltf_document", "write_gltf"]
@@ -105,7 +113,7 @@ LIGHTS_EXTENSION = "KHR_lights_punctual"
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
-LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT = 9729, 9987, 10497
+LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
 
 
 def generator() -> str:
@@ -260,6 +268,10 @@ class _Document:
         self.used_lod = False
         self.cameras: list[dict] = []
         self.lights: list[dict] = []
+        self.card_materials: dict = {}
+        self.card_textures: dict = {}
+        self.card_sampler = 0
+        self.impostors: set = set()
 
     def node(self, node: dict, root: bool = True) -> int:
         self.nodes.append(node)
@@ -273,14 +285,20 @@ class _Document:
         names = plant.mesh.material_names
         rgb = material_colours(names, self.colours)
         skin = None if rig is None else (rig.vertex_joints, rig.vertex_weights)
+        cards = plant.cards if plant.has_leaves else None
         parts = (material_parts(plant.mesh, self.up, plant.labels, skin)
                  + leaf_parts(plant.leaves, self.up, None if rig is None else rig.leaf_joints,
-                              names if self.colours is None else None))
+                              names if self.colours is None else None,
+                              None if cards is None else cards.uv.reshape(-1, 2)))
         primitives = []
         for part in parts:
             mat_name = leaf_name(names[part.material]) if part.leaf else names[part.material]
             white = part.colours is not None          # COLOR_0 holds each leaf's own colour
-            material = self.material(mat_name, (1.0, 1.0, 1.0) if white else rgb[part.material], part.leaf)
+            colour = (1.0, 1.0, 1.0) if white else rgb[part.material]
+            if part.leaf and cards is not None:
+                material = self.card_material(f"{names[part.material]} (leaf card)", colour, cards.atlas)
+            else:
+                material = self.material(mat_name, colour, part.leaf)
             primitives.append(_primitive(self.buffer, part, material, 0 if rig is None else rig.joints))
             if self.normal_mapped(mat_name, part.leaf):
                 tangents = mesh_tangents(part.vertices, part.normals, part.uv, part.faces)
@@ -296,6 +314,24 @@ class _Document:
             if not leaf and self.textures is not None and self.textures.get(name) is not None:
                 self.textured(self.materials[-1], name)
         return self.material_index[name]
+
+    def card_material(self, name: str, rgb, atlas) -> int:
+        """A double-sided leaf-card material: base colour ``rgb`` times the card ``atlas``
+        (:class:`~plantgen.geometry.leaf_cards.CardAtlas`, clamped at its edges), cut where
+        its alpha is under 0.5 (``alphaMode: MASK``); one per name and atlas."""
+        key = (name, id(atlas))
+        if key not in self.card_materials:
+            if id(atlas) not in self.card_textures:
+                self.images.append({"name": "leaf cards", "mimeType": "image/png",
+                                    "bufferView": self.buffer._view(png_bytes(atlas.image), None)})
+                self.texture_list.append({"sampler": self.clamped_sampler(), "source": len(self.images) - 1})
+                self.card_textures[id(atlas)] = len(self.texture_list) - 1
+            material = _material(name, rgb, True)
+            material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": self.card_textures[id(atlas)]}
+            material.update(alphaMode="MASK", alphaCutoff=0.5)
+            self.materials.append(material)
+            self.card_materials[key] = len(self.materials) - 1
+        return self.card_materials[key]
 
     def normal_mapped(self, name: str, leaf: bool) -> bool:
         """Whether the material ``name`` has a normal map (its primitives need TANGENT)."""
@@ -358,7 +394,7 @@ class _Document:
             self.node({"name": "Sun", **_pose(light_rotation(extras.light, self.up)),
                        "extensions": {LIGHTS_EXTENSION: {"light": len(self.lights) - 1}}})
 
-    def still(self, plant: Plant, mesh: int, instancing: str, lower: list[int] = ()) -> None:
+    def still(self, plant: Plant, mesh: int, instancing: str, lower: list[int] = (), coverage=None) -> None:
         """A plant that does not sway: one node, its copies instanced or one node each;
         with ``lower`` (the meshes of its levels of detail below the full one) each node
         names its levels' nodes in ``MSFT_lod`` (:meth:`levels`)."""
@@ -372,9 +408,43 @@ class _Document:
         for node in nodes:
             self.node(node)
             if lower:
-                self.levels(node, lower, plant.detail.coverage)
+                self.levels(node, lower, coverage)
 
-    def levels(self, node: dict, lower: list[int], coverage) -> None:
+    def impostor_mesh(self, name: str, impostor) -> int:
+        """The impostor's card (:func:`~plantgen.exporters.impostors.impostor_part`): a
+        double-sided material ``"<name> impostor"`` whose base colour is the colour atlas
+        (``alphaMode: MASK``, clamped), its normal and depth atlases and the layout in
+        ``extras.plantgen.impostor``; its mesh's index."""
+        textures = {}
+        for kind, image in (("colour", impostor.colour), ("normal", impostor.normal), ("depth", impostor.depth)):
+            self.images.append({"name": f"{name} impostor {kind}", "mimeType": "image/png",
+                                "bufferView": self.buffer._view(png_bytes(image), None)})
+            self.texture_list.append({"sampler": self.clamped_sampler(), "source": len(self.images) - 1})
+            textures[kind] = len(self.texture_list) - 1
+        material = _material(f"{name} impostor", (1.0, 1.0, 1.0), True)
+        material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": textures["colour"]}
+        material.update(alphaMode="MASK", alphaCutoff=0.5, extras={"plantgen": {"impostor": dict(
+            impostor.layout(), normalTexture=textures["normal"], depthTexture=textures["depth"],
+            renderer=impostor.renderer)}})
+        self.materials.append(material)
+        part = impostor_part(impostor, self.up)
+        self.meshes.append({"name": f"{name} impostor",
+                            "primitives": [_primitive(self.buffer, part, len(self.materials) - 1)]})
+        self.impostors.add(len(self.meshes) - 1)
+        return len(self.meshes) - 1
+
+    def clamped_sampler(self) -> int:
+        """The sampler of the alpha-cut atlases (leaf cards, impostors): bilinear from the
+        full level, no mipmaps (mipmaps averaged from it thin a cut-out away with distance:
+        a leaf's alpha falls under the cut-off; ``plantgen.benchmarks.engine_assets``
+        measures it), clamped to the edge; made on first use."""
+        if not self.card_sampler:
+            self.samplers_tex.append({"magFilter": LINEAR, "minFilter": LINEAR,
+                                      "wrapS": CLAMP_TO_EDGE, "wrapT": CLAMP_TO_EDGE})
+            self.card_sampler = len(self.samplers_tex) - 1
+        return self.card_sampler
+
+    def levels(self, node: dict, lower: list[int], coverage, placement: dict | None = None) -> None:
         """``node`` (the full level) gains ``MSFT_lod``: per lower level a node outside the
         scene's tree (a reader without the extension shows the full level only) with that
         level's mesh and the node's placement; ``extras.MSFT_screencoverage`` the coverage
@@ -382,16 +452,20 @@ class _Document:
         ids = []
         for k, mesh in enumerate(lower, start=1):
             level = {key: value for key, value in node.items() if key not in ("name", "mesh")}
+            if mesh in self.impostors and "skin" in level:     # a card does not sway: the copy's placement
+                level = dict(placement or {})
             ids.append(self.node({"name": f"{node['name']} lod{k}", "mesh": mesh, **level}, root=False))
         node.setdefault("extensions", {})[LOD_EXTENSION] = {"ids": ids}
         node["extras"] = {"MSFT_screencoverage": [float(c) for c in coverage]}
         self.used_lod = True
 
-    def swaying(self, plant: Plant, mesh: int, rig: JointRig) -> None:
+    def swaying(self, plant: Plant, mesh: int, rig: JointRig, lower: list[int] = (), coverage=None) -> None:
         """A swaying plant: per copy, a node placing its joints (one per segment, nested as
         the segments are), a skin over them, the mesh's node with that skin (at the root,
         untransformed: the joints place it) and, where the copy sways, a rotation channel
-        per turning joint."""
+        per turning joint. With ``lower`` (its levels' meshes, skinned on the same joints)
+        the mesh's node names in ``MSFT_lod`` one node per level with the same skin, so
+        the one animation drives every level (:meth:`levels`)."""
         ibm = np.tile(np.eye(4, dtype=np.float32), (rig.joints, 1, 1))
         ibm[:, 3, :3] = -rig.bind                           # column-major: the translation is the 4th column
         inverse_binds = self.buffer.add(ibm.reshape(-1, 16), "MAT4", FLOAT)
@@ -415,7 +489,10 @@ class _Document:
                 self.node(node, root=False)
             self.skins.append({"name": name, "inverseBindMatrices": inverse_binds, "skeleton": skeleton,
                                "joints": list(range(first, first + rig.joints))})
-            self.node({"name": name, "mesh": mesh, "skin": len(self.skins) - 1})
+            node = {"name": name, "mesh": mesh, "skin": len(self.skins) - 1}
+            self.node(node)
+            if lower:
+                self.levels(node, lower, coverage, {} if placements is None else _trs(placements[copy:copy + 1])[0])
             if plant.sway.copy_moves(copy):
                 self.animate(first, copy_rotations(plant.skeleton, plant.sway, copy,
                                                    None if plant.matrices is None else plant.matrices[copy],
@@ -473,12 +550,21 @@ def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None
         sways = animation is not None and plant.sway is not None and plant.sway.moves
         rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, up, plant.name) if sways else None
         mesh = doc.mesh(plant, rig)
+        levels = [] if plant.detail is None else [replace(level_plant(plant, k), name=f"{plant.name} lod{k}")
+                                                  for k in range(1, len(plant.detail.levels))]
         if rig is None:
-            levels = () if plant.detail is None else range(1, len(plant.detail.levels))
-            lower = [doc.mesh(replace(level_plant(plant, k), name=f"{plant.name} lod{k}"), None) for k in levels]
-            doc.still(plant, mesh, instancing, lower)
+            lower = [doc.mesh(level, None) for level in levels]
         else:
-            doc.swaying(plant, mesh, rig)
+            lower = [doc.mesh(level, level_rig(rig, level.skeleton, level.mesh, level.sway, level.leaves, up,
+                                               plant.name)) for level in levels]
+        coverage = None if plant.detail is None else plant.detail.coverage
+        if plant.impostor is not None:
+            lower.append(doc.impostor_mesh(plant.name, plant.impostor))
+            coverage = impostor_coverages(coverage, plant.impostor)
+        if rig is None:
+            doc.still(plant, mesh, instancing, lower, coverage)
+        else:
+            doc.swaying(plant, mesh, rig, lower, coverage)
         if progress is not None:
             progress("write", done + 1, len(plants))
     if extras is not None:

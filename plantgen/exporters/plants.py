@@ -12,6 +12,8 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.frames import up_rotation
+from ..geometry.impostor import Impostor
+from ..geometry.leaf_cards import LeafCards
 from ..geometry.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
@@ -69,7 +71,10 @@ class Plant:
     into ``mesh.material_names`` (None or empty: no leaves; written double-sided).
     ``sway``: how its copies sway (:class:`~plantgen.exporters.sway.PlantSway`), for the
     formats that write an animation; None: the plant stands still. ``detail``: its levels
-    of detail (:class:`PlantDetail`), written by glTF and USD; None: the full mesh only."""
+    of detail (:class:`PlantDetail`), written by glTF and USD; None: the full mesh only.
+    ``cards``: the leaves as cards (:class:`~plantgen.geometry.leaf_cards.LeafCards`, whose
+    quads ``leaves`` then is; :func:`~plantgen.exporters.cards.card_plant`), written by glTF
+    with their atlas; None: the leaves are polygons."""
 
     name: str
     skeleton: Skeleton
@@ -79,6 +84,8 @@ class Plant:
     leaves: Polygons | None = None
     sway: PlantSway | None = None
     detail: PlantDetail | None = None
+    cards: LeafCards | None = None     # ``leaves`` are these cards' quads (glTF: alpha-cut, MASK)
+    impostor: Impostor | None = None   # glTF: the last level of detail (:mod:`plantgen.exporters.impostors`)
 
     @property
     def has_leaves(self) -> bool:
@@ -313,12 +320,14 @@ def leaf_uv(polygons: Polygons) -> np.ndarray:
 
 
 def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | None = None,
-               names=None) -> list[Part]:
+               names=None, uv: np.ndarray | None = None) -> list[Part]:
     """One leaf :class:`Part` per material the polygons use, in material order: each vertex
     (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set.
     ``joints``: (v,) the one joint each leaf vertex follows (a swaying plant's skin);
     ``names``: the material names, to give each vertex its leaf's colour (``colours``: the
-    renderers' shade of that leaf, :func:`~plantgen.geometry.materials.leaf_colours`)."""
+    renderers' shade of that leaf, :func:`~plantgen.geometry.materials.leaf_colours`);
+    ``uv``: (v, 2) the vertices' texture coordinates (a card's in its atlas) in place of
+    :func:`leaf_uv`."""
     if polygons is None or len(polygons.triangles) == 0:
         return []
     rot = up_rotation(up)
@@ -326,7 +335,7 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
     per_vertex = np.zeros_like(polygons.vertices)
     per_vertex[polygons.triangles] = polygons.normal[polygons.polygon][:, None, :]
     normals = (per_vertex @ rot.T).astype(np.float32)
-    uv = leaf_uv(polygons)
+    uv = leaf_uv(polygons) if uv is None else np.asarray(uv, np.float32)
     shade = None
     if names is not None:
         owner = polygons.vertex_polygon
@@ -378,11 +387,15 @@ def leaf_subset(polygons: Polygons, keep) -> Polygons:
 def level_plant(plant: Plant, level: int) -> Plant:
     """``plant`` at its level of detail ``level`` (0: itself): the level's mesh, its rows'
     materials and labels taken from the plant's mesh (so a renaming of the plant's
-    materials holds for every level), and the leaves it keeps; no levels of its own."""
+    materials holds for every level), the leaves it keeps and its sway's rows' segments
+    (so a level's rig follows the same joints: :func:`~plantgen.exporters.sway.level_rigs`);
+    no levels of its own."""
     if level == 0 or plant.detail is None:
         return plant
     lod = plant.detail.levels[level]
     mesh = replace(lod.mesh, material=plant.mesh.material[lod.rows], material_names=plant.mesh.material_names)
     labels = None if plant.labels is None else {k: np.asarray(v)[lod.rows] for k, v in plant.labels.items()}
     leaves = None if not plant.has_leaves or not len(lod.leaves) else leaf_subset(plant.leaves, lod.leaves)
-    return replace(plant, mesh=mesh, labels=labels, leaves=leaves, detail=None)
+    sway = None if plant.sway is None else replace(plant.sway, row_segment=plant.sway.row_segment[lod.rows])
+    cards = None if plant.cards is None or leaves is None else plant.cards.subset(lod.leaves)
+    return replace(plant, mesh=mesh, labels=labels, leaves=leaves, sway=sway, detail=None, cards=cards)

@@ -1,5 +1,5 @@
 """A scene's sway as an animation other tools play: the joints, skin weights and keys
-that glTF skins and UsdSkel hold (see the README, "Wind in the exports").
+that glTF skins and UsdSkel hold (see the docs, "Export a swaying scene").
 
 The sway (:mod:`plantgen.geometry.motion`) turns every joint of a swaying plant copy
 about one horizontal axis of the scene by an angle that is a closed form in t, and moves
@@ -41,7 +41,7 @@ from ..settings import KeyframeSettings
 from .formats import ExportError
 
 __all__ = ["MAX_INFLUENCES", "MAX_JOINTS", "JointRig", "PlantSway", "Timeline", "common_period", "copy_rotations",
-           "joint_offsets", "joint_rig", "sway_timeline", "vertex_influences"]
+           "joint_offsets", "joint_rig", "level_rig", "sway_timeline", "vertex_influences"]
 
 #: Joints a vertex follows at most (glTF's JOINTS_0 holds four).
 MAX_INFLUENCES = 4
@@ -206,6 +206,20 @@ def joint_rig(skeleton: Skeleton, mesh, sway: PlantSway, leaves=None, up: str = 
         bind, offset = np.vstack([bind, np.zeros(3)]), np.vstack([offset, np.zeros(3)])
         parent = np.append(parent, -1)
     return JointRig(parent, bind, offset, joints, weights, leaf_joints, still)
+
+
+def level_rig(rig: JointRig, skeleton: Skeleton, mesh, sway: PlantSway, leaves=None, up: str = "y",
+              source="the plant") -> JointRig:
+    """The rig of one of a swaying plant's levels of detail (its ``mesh``, ``sway`` and
+    ``leaves``: :func:`~plantgen.exporters.plants.level_plant`) on the joints of ``rig``
+    (level 0's): the same skeleton, so one skin and one animation drive every level. A
+    level's vertices follow the segments of their own rows, which are level 0's rows: a
+    ring that level 0 shares with a dropped child follows its own segment alone, where
+    level 0's follows both halfway (:func:`vertex_influences`), so a level's cap strays
+    from level 0's ring by at most the ring's radius times the child joint's angle over 2."""
+    own = joint_rig(skeleton, mesh, sway, leaves, up, source)
+    return JointRig(rig.parent, rig.bind, rig.offset, own.vertex_joints, own.vertex_weights, own.leaf_joints,
+                    rig.still)
 
 
 def copy_rotations(skeleton: Skeleton, sway: PlantSway, copy: int, matrix, times, up: str = "y",

@@ -19,11 +19,13 @@ One plant, written in place::
                             rendered): one curve per branch, widths = diameters (2·radius,
                             as USD defines widths) per point
 
-A still plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
+A plant with levels of detail (:class:`~plantgen.exporters.plants.PlantDetail`):
 its prim holds a variantSet ``lod``, variants ``lod0`` (full, selected) to ``lod<N-1>``,
 each authoring that level's ``Mesh`` and ``Leaves`` (materials and ``Skeleton`` stay
 outside, shared); the screen coverages in its customData ``plantgen:lodScreenCoverage``.
 A copy referencing the plant holds the set too, so its selection switches that copy.
+A swaying plant's levels are bound to its one ``Joints`` (UsdSkel under the variantSet):
+the copy's ``Sway`` drives whichever level is selected.
 
 A scene, ``instancing="nodes"`` (the default): one instanceable Xform per copy with its
 transform, referencing its plant under the abstract ``/<scene>/Prototypes`` (every copy a
@@ -91,7 +93,7 @@ from .plants import (
     turned_mesh,
     unique_name,
 )
-from .sway import JointRig, Timeline, copy_rotations, joint_rig
+from .sway import JointRig, Timeline, copy_rotations, joint_rig, level_rig
 from .textures import Textures, png_writes, texture_files
 
 __all__ = ["joint_names", "skeleton_curves", "write_usd"]
@@ -203,7 +205,7 @@ class _Writer:
         if plant.detail is None:
             self._surfaces(path, plant, materials, leaf_materials, rig)
         else:
-            self._levels(path, plant, materials, leaf_materials)
+            self._levels(path, plant, materials, leaf_materials, rig)
         if len(plant.skeleton):
             curves, segment = self._curves(path.AppendChild("Skeleton"), plant.skeleton)
             if rig is not None:
@@ -234,10 +236,11 @@ class _Writer:
             self._bind(leaves, path.AppendChild("Joints"), np.concatenate([p.joints for p in parts]),
                        np.concatenate([p.weights for p in parts]))
 
-    def _levels(self, path, plant: Plant, materials, leaf_materials) -> None:
+    def _levels(self, path, plant: Plant, materials, leaf_materials, rig: JointRig | None = None) -> None:
         """The plant's levels of detail: a variantSet ``lod`` on its prim, variant ``lodk``
         holding level k's ``Mesh`` and ``Leaves`` (the materials and the skeleton curves
-        outside it, shared), ``lod0`` (full) selected; the screen coverages in the prim's
+        outside it, shared; with a ``rig`` every level bound to the one ``Joints``, its
+        animation shared too), ``lod0`` (full) selected; the screen coverages in the prim's
         customData ``plantgen:lodScreenCoverage``."""
         prim = self.stage.GetPrimAtPath(path)
         variants = prim.GetVariantSets().AddVariantSet("lod")
@@ -245,7 +248,10 @@ class _Writer:
             variants.AddVariant(f"lod{k}")
             variants.SetVariantSelection(f"lod{k}")
             with variants.GetVariantEditContext():
-                self._surfaces(path, level_plant(plant, k), materials, leaf_materials, None)
+                level = level_plant(plant, k)
+                own = None if rig is None else level_rig(rig, level.skeleton, level.mesh, level.sway, level.leaves,
+                                                         self.up, plant.name)
+                self._surfaces(path, level, materials, leaf_materials, own)
         variants.SetVariantSelection("lod0")
         prim.SetCustomDataByKey("plantgen:lodScreenCoverage",
                                 self.Vt.DoubleArray([float(c) for c in plant.detail.coverage]))

@@ -48,12 +48,19 @@ chunked or binned, nor on the other beams, so a seed gives the same cloud every 
 none), ``segment`` (the skeleton segment; a leaf: the one it hangs from, -1 for none),
 ``leaf`` (the leaf polygon, -1 for wood) and ``scanner``.
 
-**Speed.** The beams a primitive (a frustum row's bounding-pyramid box, a leaf triangle's
-box) can meet form a rectangle of the beam grid (a range of azimuths and elevations from
-the scanner; along-track pulses and across-track angles from a flight line); only those
-(beam, primitive) pairs are tested, ``max_pairs`` at a time. ``precision="float32"``
-tests the frusta in float32 relative to the scanner (the GPU's arithmetic; leaves stay
-float64): ``python -m plantgen.benchmarks.scan`` measures what it saves and costs.
+**Speed.** Every beam (every sub-ray) is traced through the target's bounding volume
+hierarchy (:mod:`plantgen.geometry.bvh`, built once per target), which finds its nearest
+hit among the primitives whose boxes it meets, nearest boxes first; the beams stream in
+chunks (``max_pairs`` sub-rays, at most :data:`SCAN_CHUNK_RAYS`), so memory stays bounded
+whatever their count. A scene (:func:`scan_scene`, :class:`SceneTarget`) is traced in
+two levels, each distinct plant once and the beams moved into each copy's frame in
+float64, so it costs the memory of its distinct plants, not of its copies placed.
+``precision="float32"`` with a ``finder`` (``plantgen scan`` passes the GPU's search,
+:func:`plantgen.gl.trace.trace_target`) finds each beam's primitive in float32 and solves
+its range again in float64 against that primitive (the reference's ranges wherever both
+find the same primitive); without one it tests the frusta in float32 relative to the
+scanner on the CPU (leaves stay float64): ``python -m plantgen.benchmarks.scan`` measures
+what each saves and costs.
 
 Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 """
@@ -61,6 +68,7 @@ Pure numpy, no GL, no click. Files: :mod:`plantgen.scanfiles` (LAS, LAZ, PLY).
 from __future__ import annotations
 
 import math
+from copy import copy as shallow_copy
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -79,7 +87,8 @@ from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
            "ScanSettings", "ScanTarget", "TerrestrialBeams", "beam_grids", "beam_returns", "cast_first_returns",
-           "scan_plant", "scan_target", "scanner_positions"]
+           "SceneTarget", "primitive_labels", "scan_plant", "scan_points", "scan_scene", "scan_target",
+           "scanner_positions", "scene_target", "target_hits"]
 
 #: The parts a point may belong to, by the ``part`` label's value.
 PART_NAMES = ("stem", "branch", "leaf")
@@ -153,8 +162,11 @@ class ScanSettings:
                                        hi=1e9, metavar="D")
     scan_angle: float = knob(30.0, "--scan-angle", "Airborne: the mirror's sweep, degrees either side of the nadir "
                              "(0: nadir beams only).", lo=0.0, hi=75.0, metavar="DEG")
-    precision: str = knob("float64", "--scan-precision", "float64: the exact reference; float32: the frusta tested "
-                          "in float32 (faster, less exact).", kind="choice", choices=("float64", "float32"))
+    precision: str = knob("float64", "--scan-precision", "float64: the exact reference on the CPU; float32: each "
+                          "beam's primitive found on the GPU in float32, its range then solved in float64 (the "
+                          "reference's ranges; without GL the frusta tested in float32 on the CPU). plantgen scan "
+                          "without it: float32 where a GL context exists, else float64.",
+                          kind="choice", choices=("float64", "float32"))
 
     def __post_init__(self):
         check_knobs(self, ScanError)
@@ -276,6 +288,47 @@ class ScanTarget:
 
     def __len__(self) -> int:
         return len(self.lo)
+
+    @cached_property
+    def bvh(self):
+        """The :class:`~plantgen.geometry.bvh.BVH` over the primitives' boxes (built on
+        first use)."""
+        from .bvh import build_bvh
+
+        return build_bvh(self.lo, self.hi)
+
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
+        """t (m,) and primitive (m,) of each ray's first hit in (t_min, t_max) (inf, -1:
+        none; ``any_hit``: any hit), through the BVH (rows tested in ``precision``
+        relative to ``origin``; ``packets`` as :func:`~plantgen.geometry.bvh.trace_bvh`
+        takes it)."""
+        from .bvh import trace_bvh
+
+        hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
+        return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
+                         boxes=self.box_columns, packets=packets)
+
+    @cached_property
+    def pair_tester(self) -> PairTester:
+        """The rows' float64 :class:`~plantgen.geometry.reference.PairTester` (uploaded on
+        first use and kept: :func:`target_hits` copies it with its ``t_min``)."""
+        return PairTester(self.frusta)
+
+    @cached_property
+    def box_columns(self) -> np.ndarray:
+        """(6, n) the primitives' boxes by coordinate rows (the traversal's cull)."""
+        from .bvh import box_columns
+
+        return box_columns(self.lo, self.hi)
+
+    def hit_distance(self, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
+        """t (k,) of rays (k,) against primitives ``prim`` (k,) in float64 (inf: a miss)."""
+        return target_hits(self, t_min=t_min)(np.asarray(prim, np.int64), origins, dirs)
+
+    def primitive_labels(self, prim) -> dict:
+        """:func:`primitive_labels` of primitives ``prim``."""
+        return primitive_labels(self, prim)
 
     def box(self) -> np.ndarray:
         """(2, 3) the box around every primitive (zeros for none)."""
@@ -540,24 +593,6 @@ def _airborne_lines(target: ScanTarget, settings: ScanSettings, limits: Limits |
     return lines
 
 
-def _line_members(target: ScanTarget, lines: list[AirborneBeams]) -> None:
-    """Set each flight line's ``members``: the primitives its fans can reach (their boxes
-    across the track within the swath's half-width at their depth), so that a line's pairs
-    are made from those alone."""
-    if not lines:
-        return
-    first = lines[0]
-    pad = max(g.pad for g in lines)
-    lo, hi = target.lo - pad, target.hi + pad
-    centre = first.origin - first.line * first.line_spacing * first.across
-    side = (_xz_corners(lo, hi) - centre[[0, 2]]) @ first.across[[0, 2]]
-    reach = np.maximum(centre[1] - lo[:, 1], 0.0) * math.tan(first.b1 * first.step)
-    l_lo = np.floor((side.min(axis=1) - reach) / first.line_spacing) - 1
-    l_hi = np.ceil((side.max(axis=1) + reach) / first.line_spacing) + 1
-    for g in lines:
-        g.members = np.flatnonzero((l_lo <= g.line) & (g.line <= l_hi))
-
-
 def scanner_positions(target: ScanTarget, settings: ScanSettings) -> np.ndarray:
     """(s, 3) where the scanners stand (airborne: each flight line's centre point)."""
     if settings.mode == "airborne":
@@ -575,16 +610,12 @@ def beam_grids(target: ScanTarget, settings: ScanSettings, limits: Limits | None
     """The beam grid of every scanner (airborne: of every flight line):
     :class:`TerrestrialBeams` or :class:`AirborneBeams`, whose ``rays(a, b)`` gives any
     beam's origin and direction (beam k is (a0 + k // nb, b0 + k % nb)). With a divergence,
-    each grid's ``pad`` widens the primitives' boxes by the beam's radius at its farthest
-    range, so a sub-ray that hits is never left out of its beam's pairs."""
+    a scanner's ``pad`` widens the box it looks at by the beam's radius at its farthest
+    range, so that a beam whose axis misses the plant but a sub-ray hits is fired."""
     lo, hi = target.box()
     half = math.tan(settings.divergence / 2000.0)
     if settings.mode == "airborne":
-        grids = _airborne_lines(target, settings, limits)
-        for g in grids:
-            g.pad = _reach(g.rays(np.array([g.a0, g.a1]), np.zeros(2))[0], lo, hi) * half * (1 + 1e-9)
-        _line_members(target, grids)
-        return grids
+        return _airborne_lines(target, settings, limits)
     step = math.radians(settings.angular_step)
     grids = []
     for p in _terrestrial_positions(target, settings):
@@ -596,16 +627,6 @@ def beam_grids(target: ScanTarget, settings: ScanSettings, limits: Limits | None
 
 
 # ============================================================================ casting
-def _pairs_in(first: np.ndarray, start: int, stop: int, blocks, nb_block):
-    """(primitive, a, b) of the pairs numbered start..stop-1 of the rectangles ``blocks``
-    (a_lo, b_lo per rectangle, ``nb_block`` its height; ``first`` the number of its first pair)."""
-    k = np.arange(start, stop, dtype=np.int64)
-    rect = np.searchsorted(first, k, side="right") - 1
-    local = k - first[rect]
-    a_lo, b_lo = blocks
-    return rect, a_lo[rect] + local // nb_block[rect], b_lo[rect] + local % nb_block[rect]
-
-
 def _sub_rays(directions: np.ndarray, beam_ids: np.ndarray, seed: int, scanner: int, samples: int,
               half_angle: float) -> np.ndarray:
     """(m·s, 3) the s sub-rays of each beam (m,): a Vogel spiral over the cone of
@@ -640,6 +661,26 @@ def _triangle_hits(target: ScanTarget, tri: np.ndarray, origins: np.ndarray, dir
     return np.where(ok, t, np.inf)
 
 
+def target_hits(target: ScanTarget, *, t_min: float = 0.0, origin=None, precision: str = "float64"):
+    """The primitive test of ``target`` for :func:`~plantgen.geometry.bvh.trace_bvh`:
+    ``hits(prims (k,), origins (k, 3), dirs (k, 3)) -> t (k,)`` (inf: a miss; only hits
+    beyond ``t_min``): rows by the reference's pair test (in ``precision`` relative to
+    ``origin``), leaf triangles by :func:`_triangle_hits`."""
+    if not target.rows:
+        tester = None
+    elif precision == "float64" and origin is None:       # the rows uploaded once per target
+        tester = shallow_copy(target.pair_tester)
+        tester.t_min = float(t_min)
+    else:
+        tester = PairTester(target.frusta, dtype=np.dtype(precision), origin=origin, t_min=t_min)
+
+    def hits(prim, origins, dirs):
+        t, _ = cast_first_returns(target, origins, dirs, tester=tester, primitives=prim)
+        return np.where(t > t_min, t, np.inf)
+
+    return hits
+
+
 def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "float64",
                        tester: PairTester | None = None, primitives=None) -> tuple[np.ndarray, np.ndarray]:
     """The first hit of each ray (m,) among ``primitives`` ((m,) the primitive to test
@@ -667,44 +708,53 @@ def cast_first_returns(target: ScanTarget, origins, dirs, *, precision: str = "f
     return t, np.where(np.isfinite(t), prim, -1)
 
 
-def _pair_blocks(target: ScanTarget, grid):
-    """(members, a_lo, b_lo, rectangle heights, first pair of each rectangle and the total
-    last) of a scanner's (beam, primitive) pairs: per primitive its box's rectangle of beams."""
-    members = getattr(grid, "members", None)
-    members = np.arange(len(target)) if members is None else members
-    a_lo, a_hi, b_lo, b_hi = grid.blocks(target.lo[members] - grid.pad, target.hi[members] + grid.pad)
-    nb_block = np.maximum(b_hi - b_lo + 1, 0)
-    count = np.maximum(a_hi - a_lo + 1, 0) * nb_block
-    return members, a_lo, b_lo, nb_block, np.concatenate([[0], np.cumsum(count)])
+#: Beams traced at a time (times a diverging beam's sub-rays): what bounds a scan's
+#: working memory whatever its beam count.
+SCAN_CHUNK_RAYS = 1 << 18
+#: Neighbouring beams of a scanner (one origin) that walk the BVH's upper levels together.
+PACKET_RAYS = 64
 
 
-def scan_tests(target: ScanTarget, grids, settings: ScanSettings) -> int:
-    """The (sub-ray, primitive) tests a scan with ``grids`` casts: the work the limit
-    ``scan_tests`` bounds (a scanner inside the plant tests every beam against many
-    primitives), counted before any ray is cast."""
-    return sum(int(_pair_blocks(target, g)[-1][-1]) for g in grids) * settings.sub_rays
+def _found_again(target, finder, origins, dirs) -> tuple[np.ndarray, np.ndarray]:
+    """The first hits (t, primitive) of rays whose primitive ``finder(target, origins,
+    dirs) -> (t, primitive)`` finds (the GPU's float32 search), each range solved again in
+    float64 against that primitive (``target.hit_distance``); a ray whose primitive the
+    float64 test then misses (a graze rounding decided the other way) is traced again by
+    the float64 reference."""
+    _, prim = finder(target, origins, dirs)
+    prim = np.asarray(prim, np.int64).copy()
+    t = np.full(len(prim), np.inf)
+    found = np.flatnonzero(prim >= 0)
+    t[found] = target.hit_distance(prim[found], origins[found], dirs[found])
+    lost = found[~np.isfinite(t[found])]
+    if len(lost):
+        t[lost], prim[lost] = target.first_hits(origins[lost], dirs[lost])
+    return t, np.where(np.isfinite(t), prim, -1)
 
 
-def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int):
-    """(sub-ray ids, t, primitive) of every finite hit of the scanner's (sub-ray, primitive) pairs."""
+def _candidates(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
+                progress=None, finder=None):
+    """(sub-ray ids, t, primitive) of the first hit of each of the scanner's sub-rays that
+    hits, traced through the target's BVH ``max_pairs`` sub-rays at a time (with a
+    ``finder`` and precision float32: found by it, solved again in float64,
+    :func:`_found_again`)."""
     s = settings.sub_rays
-    members, a_lo, b_lo, nb_block, first = _pair_blocks(target, grid)
-    total = int(first[-1])
-    tester = PairTester(target.frusta, dtype=np.dtype(settings.precision), origin=grid.origin) \
-        if target.rows else None
-    step = max(1, max_pairs // s)
+    step = max(1, min(max_pairs, SCAN_CHUNK_RAYS) // s)
     found = []
-    for start in range(0, total, step):
-        rect, a, b = _pairs_in(first[:-1], start, min(start + step, total), (a_lo, b_lo), nb_block)
-        beam = (a - grid.a0) * grid.nb + (b - grid.b0)
-        origins, dirs = grid.rays(a, b)
+    for start in range(0, grid.count, step):
+        beam = np.arange(start, min(start + step, grid.count), dtype=np.int64)
+        origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
         dirs = _sub_rays(dirs, beam, seed, scanner, s, settings.divergence / 2000.0)
         sub = (beam[:, None] * s + np.arange(s)).reshape(-1)
-        prim = np.repeat(members[rect], s)
-        t, _ = cast_first_returns(target, np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
-                                  tester=tester, primitives=prim)
+        if finder is not None and settings.precision == "float32":
+            t, prim = _found_again(target, finder, np.repeat(origins, s, axis=0), dirs)
+        else:
+            t, prim = target.first_hits(np.repeat(origins, s, axis=0), dirs, precision=settings.precision,
+                                        origin=grid.origin, packets=PACKET_RAYS)
         hit = np.isfinite(t)
         found.append((sub[hit], t[hit], prim[hit]))
+        if progress is not None:
+            progress(len(beam))
     if not found:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
     return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
@@ -732,7 +782,8 @@ def _beam_returns(sub, t, prim, samples: int, how: str):
     return beam[starts], mean, prim[closest]
 
 
-def _labels(target: ScanTarget, prim: np.ndarray) -> dict:
+def primitive_labels(target: ScanTarget, prim: np.ndarray) -> dict:
+    """The labels (plant, part, order, segment, leaf: (k,) each) of primitives ``prim`` (k,)."""
     wood = prim < target.rows
     row = np.where(wood, prim, 0)
     tri = np.where(wood, 0, prim - target.rows)
@@ -762,24 +813,25 @@ class BeamReturns:
 
 
 def beam_returns(target: ScanTarget, settings: ScanSettings, seed: int = 0, *,
-                 max_pairs: int = 1 << 20) -> list[BeamReturns]:
+                 max_pairs: int = 1 << 20, finder=None) -> list[BeamReturns]:
     """Every scanner's :class:`BeamReturns` (what :func:`scan_plant` turns into points;
-    the benchmark compares precisions beam by beam)."""
+    the benchmark compares precisions beam by beam); ``finder`` as :func:`scan_points`."""
     out = []
     for k, grid in enumerate(beam_grids(target, settings)):
-        sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs)
+        sub, t, prim = _candidates(target, grid, settings, seed, k, max_pairs, finder=finder)
         beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
         out.append(BeamReturns(k, beam, t, prim, grid.count))
     return out
 
 
-def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int) -> dict:
-    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs)
+def _scan_one(target: ScanTarget, grid, settings: ScanSettings, seed: int, scanner: int, max_pairs: int,
+              progress=None, finder=None) -> dict:
+    sub, t, prim = _candidates(target, grid, settings, seed, scanner, max_pairs, progress, finder)
     beam, t, prim = _beam_returns(sub, t, prim, settings.sub_rays, settings.beam_return)
     if settings.range_noise > 0:
         t = t + settings.range_noise * _normal(seed, scanner, beam)
     origins, dirs = grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb)
-    out = _labels(target, prim)
+    out = target.primitive_labels(prim)
     out["xyz"] = origins + t[:, None] * dirs
     out["scanner"] = np.full(len(beam), scanner)
     return out
@@ -795,24 +847,165 @@ def _metadata(settings: ScanSettings, seed: int) -> dict:
 def scan_plant(skeleton: Skeleton, leaves: Polygons | None = None, settings: ScanSettings | None = None,
                seed: int = 0, *, frusta: Frusta | None = None, plant=0, leaf_plant=None,
                topology: Branches | None = None, limits: Limits | None = None,
-               max_pairs: int = 1 << 20) -> PointCloud:
+               max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
     """A simulated laser scan of a plant (see the module docstring): ``skeleton`` (skinned
     here unless its ``frusta`` are given) and its ``leaves`` (or None), scanned as
     ``settings`` say, noise and beam turns drawn from ``seed``. ``plant`` labels the points
     (one number, or (n,) per segment: a scene's instances; ``leaf_plant`` (p,) per leaf).
     The beams fired (times the sub-rays of a diverging beam) are counted against the limit
-    ``scan_rays`` before anything is cast."""
+    ``scan_rays`` before anything is cast; ``progress`` and ``finder`` as
+    :func:`scan_points` takes them."""
     settings = settings or ScanSettings()
     target = scan_target(skeleton, leaves, frusta=frusta, plant=plant, leaf_plant=leaf_plant, topology=topology)
+    return scan_points(target, settings, seed, limits=limits, max_pairs=max_pairs, progress=progress, finder=finder)
+
+
+def scan_points(target, settings: ScanSettings, seed: int = 0, *, limits: Limits | None = None,
+                max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
+    """The :class:`PointCloud` of a scan of ``target`` (a :class:`ScanTarget` or a
+    :class:`SceneTarget`): what :func:`scan_plant` and :func:`scan_scene` return.
+    ``progress("scan", beams done, beams)`` is called after each chunk of beams.
+    ``finder``: with ``settings.precision`` float32, ``finder(target, origins, dirs) ->
+    (t, primitive)`` finds each beam's primitive (the GPU's search,
+    :func:`plantgen.gl.trace.trace_target`; this module draws nothing) and each range is
+    solved again in float64 against it, so ranges are the reference's."""
     if not len(target):
         return PointCloud.empty(metadata=_metadata(settings, seed))
-    limits = limits or default_limits
     grids = beam_grids(target, settings, limits)
-    rays = sum(g.count for g in grids) * settings.sub_rays
-    limits.check("scan_rays", rays, f"a scan of {len(grids)} scanners")
-    limits.check("scan_tests", scan_tests(target, grids, settings),
-                 f"a scan of {len(grids)} scanners: beam-primitive tests")
-    parts = [_scan_one(target, g, settings, seed, k, max_pairs) for k, g in enumerate(grids)]
+    total = sum(g.count for g in grids)
+    (limits or default_limits).check("scan_rays", total * settings.sub_rays, f"a scan of {len(grids)} scanners")
+    done = [0]
+
+    def step(beams: int) -> None:
+        done[0] += beams
+        if progress is not None:
+            progress("scan", done[0], total)
+
+    parts = [_scan_one(target, g, settings, seed, k, max_pairs, step, finder) for k, g in enumerate(grids)]
     merged = {name: np.concatenate([p[name] for p in parts]) for name in ("xyz", *LABELS)}
     return PointCloud(**merged, scanners=np.array([g.origin for g in grids]).reshape(-1, 3),
                       metadata=_metadata(settings, seed))
+
+
+# ============================================================================ instanced scenes
+@dataclass(frozen=True, eq=False)
+class SceneTarget:
+    """What a scan of an instanced scene sees without placing every copy: a
+    :class:`ScanTarget` per distinct plant in its own frame (``targets``), the placements
+    of its copies (``matrices[k]``, (c_k, 4, 4)) and, per copy (numbered plant by plant),
+    its scene ``instance``; ``segment_offset`` and ``polygon_offset`` ((instances,)) turn a
+    plant's segment and leaf numbers into the merged scene's. A primitive is
+    ``copy · stride + the plant's primitive``. Traced through a two-level BVH
+    (:func:`~plantgen.geometry.bvh.scene_bvh`): memory is the distinct plants' plus a few
+    hundred bytes a copy, whatever the copies."""
+
+    targets: tuple
+    matrices: tuple
+    instance: np.ndarray
+    segment_offset: np.ndarray
+    polygon_offset: np.ndarray
+    base: np.ndarray
+
+    @cached_property
+    def bvh(self):
+        from .bvh import scene_bvh
+
+        return scene_bvh([t.bvh for t in self.targets], self.matrices)
+
+    @property
+    def stride(self) -> int:
+        return max((len(t) for t in self.targets), default=1) or 1
+
+    def __len__(self) -> int:
+        return sum(len(t) * len(m) for t, m in zip(self.targets, self.matrices, strict=True))
+
+    def box(self) -> np.ndarray:
+        """(2, 3) the box around every copy (zeros for none)."""
+        if not len(self):
+            return np.zeros((2, 3))
+        keep = np.repeat([len(t) > 0 for t in self.targets], [len(m) for m in self.matrices])
+        return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
+
+    def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
+        """As :meth:`ScanTarget.first_hits`, each ray moved into the frames of the copies it
+        meets (in float64); primitives as ``copy · stride + primitive``."""
+        from .bvh import trace_scene
+
+        hits = [target_hits(t, precision=precision, t_min=t_min) for t in self.targets]
+        t, copy, prim = trace_scene(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
+                                    plant_boxes=[t.box_columns for t in self.targets])
+        return t, np.where(copy >= 0, copy * self.stride + prim, -1)
+
+    def split(self, key):
+        """(copy, plant, primitive of the plant) (k,) each of primitives ``key`` (k,)."""
+        key = np.asarray(key, dtype=np.int64)
+        copy = key // self.stride
+        return copy, self.bvh.plant[copy].astype(np.int64), key % self.stride
+
+    def hit_distance(self, key, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
+        """As :meth:`ScanTarget.hit_distance`, in each copy's frame."""
+        copy, plant, prim = self.split(key)
+        t = np.full(len(copy), np.inf)
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            o, d = self.bvh.rays_to_copies(copy[sel], origins[sel], dirs[sel])
+            t[sel] = self.targets[k].hit_distance(prim[sel], o, d, t_min=t_min)
+        return t
+
+    def primitive_labels(self, key) -> dict:
+        """The labels of primitives ``key`` (``copy · stride + primitive``), numbered as the
+        merged scene numbers its segments and leaves."""
+        copy, plant, prim = self.split(key)
+        out = {name: np.zeros(len(key), np.int64) for name in ("plant", "part", "order", "segment", "leaf")}
+        for k in np.unique(plant):
+            sel = np.flatnonzero(plant == k)
+            local = primitive_labels(self.targets[k], prim[sel])
+            inst = self.instance[copy[sel]]
+            out["plant"][sel] = inst
+            out["part"][sel], out["order"][sel] = local["part"], local["order"]
+            out["segment"][sel] = np.where(local["segment"] >= 0, local["segment"] + self.segment_offset[inst], -1)
+            out["leaf"][sel] = np.where(local["leaf"] >= 0, local["leaf"] + self.polygon_offset[inst], -1)
+        return out
+
+
+def scene_target(plants, *, skin=None) -> SceneTarget:
+    """The :class:`SceneTarget` of a scene's distinct plants (``plants``: each with a
+    ``skeleton`` and ``polygons`` (leaves or None) in its own frame, ``matrices`` (k, 4, 4)
+    and ``instances`` (k,), as :meth:`plantgen.scene.Scene.plants` gives them), each
+    skinned once by ``skin`` (a function of a skeleton; default
+    :func:`~plantgen.geometry.skin.skin_skeleton`)."""
+    from .skin import skin_skeleton
+
+    skin = skin or skin_skeleton
+    plants = list(plants)
+    count = 1 + max((int(np.max(p.instances)) for p in plants if len(p.instances)), default=-1)
+    segments, polygons = np.zeros(count, np.int64), np.zeros(count, np.int64)
+    targets, matrices, instance = [], [], []
+    base, first = np.zeros(3), count
+    for p in plants:
+        leaves = p.polygons if p.polygons is not None and len(p.polygons.triangles) else None
+        targets.append(scan_target(p.skeleton, leaves, frusta=skin(p.skeleton)))
+        inst = np.asarray(p.instances, np.int64)
+        matrices.append(np.asarray(p.matrices, np.float64).reshape(-1, 4, 4))
+        instance.append(inst)
+        segments[inst] = len(p.skeleton)
+        polygons[inst] = len(p.polygons) if p.polygons is not None else 0
+        if len(p.skeleton) and len(inst) and inst.min() < first:     # the merged skeleton's first point
+            j = int(np.argmin(inst))
+            first, base = int(inst[j]), matrices[-1][j, :3, :3] @ p.skeleton.start[0] + matrices[-1][j, :3, 3]
+    offset = lambda sizes: np.concatenate([[0], np.cumsum(sizes)[:-1]]) if len(sizes) else sizes  # noqa: E731
+    return SceneTarget(tuple(targets), tuple(matrices), np.concatenate(instance) if instance else
+                       np.zeros(0, np.int64), offset(segments), offset(polygons), base)
+
+
+def scan_scene(plants, settings: ScanSettings | None = None, seed: int = 0, *, skin=None,
+               limits: Limits | None = None, max_pairs: int = 1 << 20, progress=None, finder=None) -> PointCloud:
+    """A simulated laser scan of an instanced scene (its distinct ``plants``, as
+    :func:`scene_target` takes them), each plant skinned once and its copies traced
+    through a two-level BVH: the same points, labels numbered as for the merged scene,
+    as :func:`scan_plant` of the merged skeleton gives (ranges to rounding), in the
+    memory of the distinct plants."""
+    settings = settings or ScanSettings()
+    return scan_points(scene_target(plants, skin=skin), settings, seed, limits=limits, max_pairs=max_pairs,
+                       progress=progress, finder=finder)

@@ -1,4 +1,4 @@
-"""The hard-case suite (README.md, "Accuracy and stability"): each case as data, its checks, its table.
+"""The hard-case suite (docs: "Accuracy and stability"): each case as data, its checks, its table.
 
 A case builds a skeleton, skins it, and casts a fixed set of rays: from an eye at a few
 model sizes towards points sampled on the skin (plus the case's own special rays). For

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -129,6 +129,9 @@ class FrameLighting:
     anchor : (3,) float64 world origin of the light's pass (None without shadows): the
         casters are drawn into the map relative to it, so the map does not depend on the eye
     caster_window : the light's window relative to ``anchor`` (the light pass's)
+    receiver_defines : defines of the receivers' programs besides ``SHADOWS``: with shadow
+        rays instead of a map (``SHADOW_RAYS``, render --method rt, :mod:`plantgen.gl.rt`)
+        those of the BVH they trace; then ``window`` is None and no map is drawn
     """
 
     names: tuple
@@ -137,6 +140,12 @@ class FrameLighting:
     receiver: dict
     anchor: np.ndarray | None = None
     caster_window: LightWindow | None = None
+    receiver_defines: dict = field(default_factory=dict)
+
+    @property
+    def shadowed(self) -> bool:
+        """Whether receivers are shadowed (by the map or by shadow rays)."""
+        return self.window is not None or bool(self.receiver_defines.get("SHADOW_RAYS"))
 
     @property
     def ground_material(self) -> int:
@@ -313,7 +322,7 @@ class OffscreenRenderer:
         """
         ctx = self.ctx
         shadowed = lighting.window is not None
-        program = build_program(ctx, "ground.glsl", {"SHADOWS": shadowed})
+        program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines})
         set_uniforms(program, **lighting.shading, **lighting.receiver,
                      view_projection=mat4(view.view_projection),
                      ground_material=lighting.ground_material, origin_offset=tuple(view.eye))

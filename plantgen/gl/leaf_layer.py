@@ -106,7 +106,9 @@ class LeafLayer:
         ctx = self.ctx
         vbo, ibo, origin = self._upload(polygons, labels)
         shadowed = lighting.window is not None and labels is None
-        program = build_program(ctx, "leaf.glsl", {"SHADOWS": shadowed, "LABELS": labels is not None})
+        receives = lighting.shadowed and labels is None
+        program = build_program(ctx, "leaf.glsl", {"SHADOWS": receives, "LABELS": labels is not None,
+                                                   **(lighting.receiver_defines if receives else {})})
         set_uniforms(program, **({} if labels is not None else {**lighting.shading, **lighting.receiver}),
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()))

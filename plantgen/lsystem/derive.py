@@ -20,6 +20,9 @@ period, the remaining steps skipped by their count modulo the period.
 each ``%`` is removed with everything after it up to the ``]`` that closes its branch
 (to the end of the string on the main axis); the ``]`` stays.
 
+:attr:`Grammar.decomposition` rules (L-Py's ``decomposition:``) rewrite the string after each
+derivation step, pass after pass (up to ``decomposition_depth``) until none applies.
+
 :func:`apply_interpretation` applies a grammar's ``interpretation:`` rules (ABOP's
 homomorphism, L-Py's ``interpretation:``) to a derived string ``interpretation_depth``
 times, for drawing only: it returns a new string and the derived one is never changed.
@@ -28,7 +31,7 @@ times, for drawing only: it returns a new string and the derived one is never ch
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -37,6 +40,8 @@ from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
+from .queries import Queries, uses_queries
+from .strings import ModuleString, module_bytes
 from .symbols import Action, by_action
 
 __all__ = ["DEFAULT_MAX_MODULES", "DerivationLimit", "ModuleString", "apply_interpretation", "cut_branches",
@@ -56,44 +61,9 @@ class DerivationLimit(LimitError):
     """The module string would grow past a budget of the limits in force."""
 
 
-@dataclass(frozen=True, eq=False)
-class ModuleString:
-    """A derived string of ``n`` modules.
-
-    sym : (n,) int32, index into ``symbols``
-    nparam : (n,) int8, parameter count of each module
-    params : (n, P) float64, parameters (columns past ``nparam`` are unused)
-    """
-
-    sym: np.ndarray
-    nparam: np.ndarray
-    params: np.ndarray
-    symbols: tuple[str, ...]
-
-    def __len__(self) -> int:
-        return len(self.sym)
-
-    def to_text(self, limit: int = 10_000, digits: int = 4) -> str:
-        """ABOP text of the first ``limit`` modules, for debugging and tests."""
-        out = []
-        for s, k, row in zip(self.sym[:limit].tolist(), self.nparam[:limit].tolist(),
-                             self.params[:limit].tolist(), strict=True):
-            name = self.symbols[s]
-            if k:
-                out.append(name + "(" + ",".join(f"{x:.{digits}g}" for x in row[:k]) + ")")
-            else:
-                out.append(name)
-        return "".join(out)
-
-
-def module_bytes(width: int) -> int:
-    """Bytes one module of a string takes with ``width`` parameter columns."""
-    return 4 + 1 + 8 * width
-
-
 def _width(grammar: Grammar) -> int:
     n = [len(m.args) for m in grammar.axiom]
-    for r in (*grammar.rules, *grammar.interpretation):
+    for r in (*grammar.rules, *grammar.interpretation, *grammar.decomposition):
         n += [len(m.args) for m in r.successor]
     return max([1, *n])
 
@@ -176,7 +146,7 @@ def _match_context(idx, pats: tuple[Pattern, ...], neighbour, step_order, sym, n
 
 def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = None,
            max_modules: int | None = None, progress=None, *, limits: Limits | None = None,
-           work: Meter | None = None) -> ModuleString:
+           work: Meter | None = None, environment=None) -> ModuleString:
     """Rewrite the axiom ``iterations`` times (default: the grammar's).
 
     Each step has two phases: :func:`_select_rewrites` finds, rule group by rule group in
@@ -194,6 +164,9 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     limits : the budgets (default: :data:`plantgen.limits.limits`)
     work : the ``derive_work`` meter to spend (a scene shares one over its derivations);
         default: a fresh one of ``limits``
+    environment : what answers the grammar's ``?E`` modules (:mod:`plantgen.lsystem.queries`);
+        a grammar with query or communication modules is interpreted after the axiom and
+        after each step, and its modules receive the answers before the next step
     """
     limits = (limits or default_limits).raised(modules=max_modules).lowered(modules=grammar.max_modules)
     iterations = grammar.iterations if iterations is None else int(iterations)
@@ -207,14 +180,18 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
     string = _cut(_axiom_string(grammar, rng, codes, width), codes)
     if len(string[0]) > limits.max_modules:
         raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} modules")
+    queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
+    if queries is not None:
+        queries.update(string, 0)
     groups = _rule_groups(grammar.rules)
     needs_context = any(r.left or r.right for r in grammar.rules)
     seen: dict[bytes, int] | None = {}    # fingerprint of a state -> the step it was reached
     if len(string[0]) <= CYCLE_WINDOW:
         seen[_fingerprint(string, rng)] = 0
 
-    step = 0
+    step, fixed_point = 0, None
     while step < iterations:
+        before, state = string, rng.bit_generator.state
         neighbours = (_context_neighbours(string[0], grammar.symbols, grammar.ignore)
                       if needs_context else None)
         matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
@@ -223,9 +200,17 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
                    f"{grammar.path}: derivation step {step + 1}")
         string = _cut(_rewrite(grammar, string, matched, out_len, applied, rng, codes, width), codes)
+        if grammar.decomposition:
+            string = _passes(grammar, grammar.decomposition, grammar.decomposition_depth, string, rng, codes,
+                             width, limits, work, f"decomposition after step {step + 1}, pass")
         step += 1
+        if queries is not None:
+            queries.update(string, step)
         if progress is not None:
             progress(step, total)
+        if _unchanged(before, string) and rng.bit_generator.state == state:   # a fixed point: done
+            fixed_point = step - 1
+            break
         if seen is not None and total <= CYCLE_WINDOW:
             key = _fingerprint(string, rng)
             if key in seen:           # the state of step seen[key] again: skip whole periods
@@ -235,7 +220,12 @@ def derive(grammar: Grammar, iterations: int | None = None, seed: int | None = N
             else:
                 seen[key] = step
 
-    return ModuleString(*string, grammar.symbols)
+    return ModuleString(*string, grammar.symbols, fixed_point=fixed_point)
+
+
+def _unchanged(before, after) -> bool:
+    """Whether a step left the string as it was (sym, nparam, params all equal)."""
+    return len(before[0]) == len(after[0]) and all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
 
 
 def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = None, *,
@@ -256,20 +246,30 @@ def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = 
     params = np.zeros((len(ms), width))
     params[:, :ms.params.shape[1]] = ms.params
     string = (ms.sym.copy(), ms.nparam.copy(), params)
-    view = replace(grammar, rules=grammar.interpretation)
+    string = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
+                     limits, work, "interpretation pass")
+    return ModuleString(*string, grammar.symbols)
+
+
+def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, codes: dict, width: int,
+            limits: Limits, work: Meter, what: str):
+    """``string`` rewritten by ``rules`` up to ``depth`` times, each pass one parallel
+    step (stopping at the first pass that rewrites nothing): the interpretation passes,
+    and the decomposition after each derivation step."""
+    view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
     needs_context = any(r.left or r.right for r in view.rules)
-    for step in range(grammar.interpretation_depth):
+    for step in range(depth):
         neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
         matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
         if not matched.any():
             break
         total = int(out_len.sum())
-        _check_step(view, limits, step, total, width, "interpretation pass")
+        _check_step(view, limits, step, total, width, what)
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
-                   f"{grammar.path}: interpretation pass {step + 1}")
+                   f"{grammar.path}: {what} {step + 1}")
         string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
-    return ModuleString(*string, grammar.symbols)
+    return string
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:

@@ -20,7 +20,10 @@ Grammar (lowest precedence first)::
     power  := atom (("^" | "**") unary)?          (right-associative)
     atom   := number | name | name "(" [expr ("," expr)*] ")" | "(" expr ")"
 
-Booleans are 1.0 and 0.0. Trigonometric functions take radians; ``rad(x)`` and ``deg(x)``
+Booleans are 1.0 and 0.0. ``select(c, a, b)`` is ``a`` where ``c`` is true, else ``b``
+(both are evaluated, and only the chosen one must be finite); ``choose(i, a, b, ...)`` is
+the option at index ``floor(i)`` (clamped to the options). Trigonometric functions take
+radians; ``rad(x)`` and ``deg(x)``
 convert. Random draws (``random()``, ``uniform(a, b)``, ``normal(mean, sd)``) come from the
 seeded generator of the derivation, one draw per module, in a fixed order.
 """
@@ -61,6 +64,16 @@ def _normal(ctx, mean, sd):
     return mean + sd * ctx.rng.standard_normal(ctx.n)
 
 
+def _select(ctx, cond, a, b):
+    return np.where(np.asarray(cond) != 0, a, b)
+
+
+def _choose(ctx, index, *options):
+    """The option at ``index`` (0-based, clamped to the options), module by module."""
+    at = np.clip(np.asarray(index, dtype=float), 0, len(options) - 1).astype(np.int64)
+    return np.choose(at, np.broadcast_arrays(*options, at)[:-1]) if np.ndim(at) else options[int(at)]
+
+
 # name -> (function(ctx, *args), allowed argument counts)
 FUNCTIONS: dict[str, tuple[Callable, tuple[int, ...]]] = {
     "sin": (_det(np.sin), (1,)),
@@ -82,6 +95,10 @@ FUNCTIONS: dict[str, tuple[Callable, tuple[int, ...]]] = {
     "clamp": (_det(lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi)), (3,)),
     "rad": (_det(np.radians), (1,)),
     "deg": (_det(np.degrees), (1,)),
+    "select": (_select, (3,)),
+    "choose": (_choose, tuple(range(2, 33))),
+    "trunc": (_det(np.trunc), (1,)),
+    "round": (_det(np.round), (1,)),
     "random": (_random, (0,)),
     "uniform": (_uniform, (2,)),
     "normal": (_normal, (2,)),

@@ -1,6 +1,6 @@
 """Grammar files (YAML) to a validated :class:`Grammar`. Parsing only: no derivation here.
 
-The format is documented in the README, section "Grammar format". In short::
+The format is documented in the docs' grammar reference (docs/reference/grammar.md). In short::
 
     name: monopodial
     description: ABOP figure 2.6
@@ -27,14 +27,13 @@ from pathlib import Path
 
 from .. import fields
 from ..errors import PlantgenError
-from ..files import read_yaml
 from ..geometry.materials import MAX_MATERIALS
 from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
 from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
-from .symbols import ARITY, Action, by_action
+from .symbols import ARITY, QUERY_PREFIX, SYMBOLS, Action, by_action
 
 __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
            "TurtleSettings", "load_grammar", "parse_grammar", "parse_modules"]
@@ -43,12 +42,16 @@ __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError"
 TURTLE_ARITY: dict[str, tuple[int, ...]] = ARITY
 #: The symbol that places a predefined surface, whose first argument is the surface's name.
 SURFACE_SYMBOL = by_action(Action.SURFACE)
+#: The query and communication symbols (``?P``, ``?E``): two characters each.
+QUERY_SYMBOLS = frozenset(s.char for s in SYMBOLS if len(s.char) == 2)
+#: Most passes of the ``decomposition:`` rules after a derivation step (``decomposition_depth``).
+MAX_DECOMPOSITION_DEPTH = 10_000
 #: Most times the ``interpretation:`` rules may be applied (``interpretation_depth``).
 MAX_INTERPRETATION_DEPTH = 8
 
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
                 "ignore", "turtle", "materials", "max_modules", "interpretation",
-                "interpretation_depth"}
+                "interpretation_depth", "environment", "decomposition", "decomposition_depth"}
 TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism", "smooth_bends"}
 RULE_KEYS = {"rule", "p"}
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
@@ -125,6 +128,10 @@ class Grammar:
     symbols: tuple[str, ...] = field(default=())   # every symbol used, in first-seen order
     interpretation: tuple[Rule, ...] = ()          # rules applied only for drawing
     interpretation_depth: int = 1                  # how many times they are applied
+    environment: object = None                     # the ``environment:`` entry as written (see
+                                                   # plantgen.environment), None without one
+    decomposition: tuple[Rule, ...] = ()           # rules applied after each derivation step ...
+    decomposition_depth: int = 1                   # ... up to this many passes
 
 
 # ---------------------------------------------------------------------------- modules
@@ -158,6 +165,11 @@ def _scan_modules(text: str, where: str) -> list[tuple[str, list[str] | None]]:
         if ch in "(),":
             raise GrammarError(f"{where}: unexpected {ch!r} at column {i + 1} of {text.strip()!r}")
         j = i + 1
+        if ch == QUERY_PREFIX and j < n and text[j].isalpha():    # a query module: ?P, ?E
+            ch, j = text[i:j + 1], j + 1
+            if ch not in QUERY_SYMBOLS:
+                raise GrammarError(f"{where}: unknown query module {ch!r} at column {i + 1} (known: "
+                                   f"{', '.join(sorted(QUERY_SYMBOLS))})")
         while j < n and text[j].isspace():
             j += 1
         if j < n and text[j] == "(":
@@ -177,7 +189,7 @@ def _scan_modules(text: str, where: str) -> list[tuple[str, list[str] | None]]:
             i = k + 1
         else:
             out.append((ch, None))
-            i += 1
+            i = j if len(ch) == 2 else i + 1
     return out
 
 
@@ -470,8 +482,9 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
         raise GrammarError(f"{path}: rules must be a list")
     rules = tuple(_parse_rule(i, r, defines, path, limits.max_params) for i, r in enumerate(raw_rules))
     _check_groups(rules, path)
-    interpretation, depth = _parse_interpretation(data, defines, path, limits)
-    symbols = _check_arities(axiom, rules + interpretation, path)
+    interpretation, depth = _parse_passes(data, "interpretation", defines, path, limits, MAX_INTERPRETATION_DEPTH)
+    decomposition, dec_depth = _parse_passes(data, "decomposition", defines, path, limits, MAX_DECOMPOSITION_DEPTH)
+    symbols = _check_arities(axiom, rules + interpretation + decomposition, path)
 
     ignore = data.get("ignore", "")
     if not isinstance(ignore, str):
@@ -481,23 +494,26 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
     return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
                    axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
                    _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
-                   path, tuple(symbols), interpretation, depth)
+                   path, tuple(symbols), interpretation, depth, data.get("environment"), decomposition, dec_depth)
 
 
-def _parse_interpretation(data: dict, defines: dict, path: str, limits: Limits) -> tuple[tuple[Rule, ...], int]:
-    """The ``interpretation:`` rules (same notation as ``rules``) and
-    ``interpretation_depth``, the times they are applied (1 to MAX_INTERPRETATION_DEPTH)."""
-    raw = data.get("interpretation") or []
+def _parse_passes(data: dict, key: str, defines: dict, path: str, limits: Limits,
+                  max_depth: int) -> tuple[tuple[Rule, ...], int]:
+    """The ``interpretation:`` or ``decomposition:`` rules (``key``; the notation of
+    ``rules``) and ``KEY_depth``, the most passes of them (1 to ``max_depth``)."""
+    raw = data.get(key) or []
     if not isinstance(raw, list):
-        raise GrammarError(f"{path}: interpretation must be a list of rules like 'L -> {{.-f.+f.}}'")
-    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, "interpretation rule")
+        raise GrammarError(f"{path}: {key} must be a list of rules like 'L -> {{.-f.+f.}}'")
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, f"{key} rule")
                   for i, r in enumerate(raw))
     _check_groups(rules, path)
-    depth = fields.integer(data.get("interpretation_depth", 1), "interpretation_depth", path, GrammarError,
-                           lo=1, hi=MAX_INTERPRETATION_DEPTH)
+    depth = fields.integer(data.get(f"{key}_depth", 1), f"{key}_depth", path, GrammarError, lo=1, hi=max_depth)
     return rules, depth
 
 
 def load_grammar(path: str | Path, limits: Limits | None = None) -> Grammar:
-    """Read and validate a grammar file."""
-    return parse_grammar(read_yaml(path, GrammarError, limits), str(path), limits)
+    """Read and validate a grammar file: YAML, or an L-Py file (``.lpy``, translated by
+    :mod:`plantgen.lsystem.lpy`)."""
+    from .lpy import read_grammar_data  # lpy builds on this module
+
+    return parse_grammar(read_grammar_data(path, GrammarError, limits)[0], str(path), limits)

@@ -16,8 +16,8 @@ As L-Py declares a module with its name, arity, documentation and interpretation
   the same one wherever the grammar writes it.
 
 The parser (:mod:`plantgen.lsystem.grammar`), the derivation's cut, the turtle, its warnings
-and the README's table of turtle symbols (:func:`markdown_table`, which the tests compare
-with the README) all read this table.
+and the grammar reference's table of turtle symbols (:func:`markdown_table`, which the
+documentation's build inserts) all read this table.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from enum import IntEnum
 
 from ..geometry.surfaces import SURFACES
 
-__all__ = ["ARITY", "SYMBOLS", "UNSUPPORTED", "Action", "Symbol", "by_action", "markdown_table",
-           "unsupported_warning"]
+__all__ = ["ARITY", "DERIVATION_ACTIONS", "QUERY_PREFIX", "SYMBOLS", "UNSUPPORTED", "Action", "Symbol", "by_action",
+           "markdown_table", "unsupported_warning"]
 
 
 class Action(IntEnum):
@@ -56,6 +56,19 @@ class Action(IntEnum):
     VERTEX = 19         # .
     SURFACE = 20        # ~
     CUT = 21            # %: run by the derivation, never reaches the turtle
+    QUERY_POSITION = 22  # ?P: written by the derivation's query pass (as are the four below)
+    QUERY_HEADING = 23   # ?H
+    QUERY_UP = 24        # ?U
+    QUERY_LEFT = 25      # ?L
+    COMMUNICATE = 26     # ?E: answered by the environment
+
+
+#: The actions the derivation runs (the cut, the query and communication modules): the
+#: turtle draws nothing for them.
+DERIVATION_ACTIONS = frozenset({Action.CUT, Action.QUERY_POSITION, Action.QUERY_HEADING, Action.QUERY_UP,
+                                Action.QUERY_LEFT, Action.COMMUNICATE})
+#: What a query module's symbol starts with (``?P``): its symbol is this and one letter.
+QUERY_PREFIX = "?"
 
 
 @dataclass(frozen=True)
@@ -68,10 +81,13 @@ class Symbol:
     doc: str
     required: int = 0
     unsupported: str = ""
+    any_count: bool = False     # any parameter count, the same one wherever the grammar writes it
 
     def __post_init__(self):
-        if len(self.char) != 1:
-            raise ValueError(f"a turtle symbol is one character, not {self.char!r}")
+        if len(self.char) != 1 and not (len(self.char) == 2 and self.char[0] == QUERY_PREFIX
+                                        and self.char[1].isalpha()):
+            raise ValueError(f"a turtle symbol is one character (or {QUERY_PREFIX!r} and a letter), "
+                             f"not {self.char!r}")
         if not 0 <= self.required <= len(self.params):
             raise ValueError(f"{self.char!r}: {self.required} required of {len(self.params)} parameters")
         if bool(self.unsupported) != (self.action is Action.NONE):
@@ -84,13 +100,15 @@ class Symbol:
     def arity(self) -> tuple[int, ...] | None:
         """The parameter counts the parser accepts; None (any, as for any other symbol)
         for an unsupported one."""
-        if self.unsupported:
+        if self.unsupported or self.any_count:
             return None
         return tuple(range(self.required, len(self.params) + 1))
 
     def forms(self) -> tuple[str, ...]:
         """How the symbol is written, one form per accepted parameter count: ``F``,
         ``F(l)``, ``F(l, w)``."""
+        if self.any_count:
+            return (f"{self.char}({', '.join(self.params)}, ...)",)
         if self.arity is None:
             return (self.char,)
         return tuple(self.char + (f"({', '.join(self.params[:n])})" if n else "") for n in self.arity)
@@ -98,7 +116,7 @@ class Symbol:
 
 _SURFACE_NAMES = ", ".join(f"`{name}`" for name in SURFACES)
 
-#: Every turtle symbol, in the order the README lists them.
+#: Every turtle symbol, in the order the grammar reference lists them.
 SYMBOLS: tuple[Symbol, ...] = (
     Symbol("F", ("l", "w"), Action.DRAW,
            "draw a segment of length l (default `step`) along the heading H; with w it tapers to end radius w, "
@@ -137,6 +155,18 @@ SYMBOLS: tuple[Symbol, ...] = (
            required=1),
     Symbol("%", (), Action.CUT,
            "cut (in the derivation): remove this module and the rest of its branch, up to its `]`"),
+    Symbol("?P", ("x", "y", "z"), Action.QUERY_POSITION,
+           "query (in the derivation): after each step the turtle's position at this module is written "
+           "into x, y, z, for the next step's rules to test", required=3),
+    Symbol("?H", ("x", "y", "z"), Action.QUERY_HEADING, "query: the turtle's heading H, written as `?P` "
+           "writes the position", required=3),
+    Symbol("?U", ("x", "y", "z"), Action.QUERY_UP, "query: the turtle's up axis U, written as `?P` writes "
+           "the position", required=3),
+    Symbol("?L", ("x", "y", "z"), Action.QUERY_LEFT, "query: the turtle's left axis L, written as `?P` "
+           "writes the position", required=3),
+    Symbol("?E", ("a",), Action.COMMUNICATE,
+           "communication (in the derivation): after each step the grammar's `environment` writes its "
+           "answers at this module into the parameters (see \"Environment\")", any_count=True),
     Symbol("@", (), Action.NONE, "", unsupported="cpfg's spheres and circles"),
     Symbol("#", (), Action.NONE, "", unsupported="cpfg's width increment"),
 )
@@ -167,9 +197,11 @@ def _cell(text: str) -> str:
 
 
 def markdown_table() -> str:
-    """The README's table of turtle symbols (Markdown, one row per symbol, no final newline)."""
+    """The grammar reference's table of turtle symbols (Markdown, one row per symbol, no final
+    newline)."""
     rows = ["| module | meaning |", "| --- | --- |"]
     for s in SYMBOLS:
-        forms = " ".join(f"`{form}`" for form in s.forms()) + (", any parameters" if s.arity is None else "")
+        forms = " ".join(f"`{form}`" for form in s.forms()) + (", any parameters" if s.arity is None
+                                                              and not s.any_count else "")
         rows.append(f"| {_cell(forms)} | {_cell(s.doc)} |")
     return "\n".join(rows)

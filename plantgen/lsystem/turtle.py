@@ -42,8 +42,8 @@ from ..geometry.skeleton import Skeleton
 from ..limits import Limits
 from ..limits import limits as default_limits
 from ..tolerances import tol
-from .derive import ModuleString
 from .grammar import TurtleSettings
+from .strings import ModuleString
 from .symbols import SYMBOLS, UNSUPPORTED, Action, by_action, unsupported_warning
 
 __all__ = ["HANDLERS", "Drawing", "MAX_POLYGON_VERTICES", "UNSUPPORTED", "Turtle", "interpret", "interpret_plant"]
@@ -62,6 +62,12 @@ class Drawing:
     skeleton: Skeleton
     polygons: Polygons
     warnings: tuple[str, ...] = ()
+    #: (k, 4, 3): the turtle's position, H, L and U at each query and communication module
+    #: (``?P`` ... ``?E``), in string order; None unless asked for (``queries=True``)
+    queries: np.ndarray | None = None
+    #: (k, 2) int64: per query module the segment it hangs from (the last drawn on its
+    #: path, -1: none) and 1 if it starts a side branch (after a ``[``, before any ``F``)
+    query_links: np.ndarray | None = None
 
 
 def _rot(a, b, c, s):
@@ -77,7 +83,7 @@ def interpret(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, 
 
 
 def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple[str, ...] = ("bark",),
-                    source: str = "<grammar>", limits: Limits | None = None) -> Drawing:
+                    source: str = "<grammar>", limits: Limits | None = None, *, queries: bool = False) -> Drawing:
     """Walk the turtle over ``ms``: the drawn segments as a Skeleton, the filled polygons,
     and the warnings (one line each, naming ``source``).
 
@@ -86,7 +92,9 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
     columns and the polygons; the columns become the skeleton's arrays, checked finite and
     within ``tol.max_coordinate``. More segments than ``limits.max_segments``, or more
     polygon vertices (``.`` and placed surfaces) than ``limits.max_polygon_vertices``, are
-    refused before the walk.
+    refused before the walk. With ``queries``, the drawing also holds the turtle's state at
+    each query and communication module (:attr:`Drawing.queries`: what the derivation's
+    query pass writes into them).
     """
     limits = limits or default_limits
     drawn = _drawing_modules(ms, settings)
@@ -94,7 +102,10 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
     limits.check("polygon_vertices", _polygon_vertices(ms, source), f"{source}: polygon vertices")
     builder = PolygonBuilder()
     placed: list = []
-    columns, stray_dots = _walk(_turtle_program(ms), settings, materials, source, builder, placed)
+    recorded: list | None = [] if queries else None
+    codes = _QUERY_CODES if queries else _CODES
+    columns, stray_dots = _walk(_turtle_program(ms, codes), settings, materials, source, builder, placed,
+                                recorded)
     starts, ends, r0s, r1s, parents, conts, mats = columns
     n = len(ends)
     skel = Skeleton(
@@ -113,7 +124,11 @@ def interpret_plant(ms: ModuleString, settings: TurtleSettings, materials: tuple
     if len(polygons) and not np.all(np.abs(polygons.vertices) <= tol.max_coordinate):
         raise PlantgenError(f"{source}: a polygon vertex is not finite or beyond {tol.max_coordinate:g}: "
                             "an f or G length or the turtle step too large")
-    return Drawing(skel, polygons, tuple(_warnings(ms, source, stray_dots, builder.degenerate)))
+    states = links = None
+    if recorded is not None:
+        states = np.array([r[:4] for r in recorded], dtype=np.float64).reshape(-1, 4, 3)
+        links = np.array([r[4:] for r in recorded], dtype=np.int64).reshape(-1, 2)
+    return Drawing(skel, polygons, tuple(_warnings(ms, source, stray_dots, builder.degenerate)), states, links)
 
 
 def _warnings(ms: ModuleString, source: str, stray_dots: int, degenerate: int) -> list[str]:
@@ -202,12 +217,14 @@ def _check_extent(skel: Skeleton, ms: ModuleString, drawn: np.ndarray, source: s
                         "the turtle step too large")
 
 
-def _turtle_program(ms: ModuleString):
+def _turtle_program(ms: ModuleString, codes: dict | None = None):
     """The modules the turtle acts on, as an iterator of (action code, parameter count,
     first parameter, second parameter (0.0 where absent)). Other symbols are dropped. The
     tuples are made PROGRAM_CHUNK modules at a time: a string of millions of modules is
-    never held as Python objects all at once."""
-    table = np.array([_CODES.get(s, Action.NONE) for s in ms.symbols] or [Action.NONE], dtype=np.int8)
+    never held as Python objects all at once. ``codes`` (symbol -> action code; default
+    the drawing's) says which symbols the turtle acts on."""
+    codes = _CODES if codes is None else codes
+    table = np.array([codes.get(s, Action.NONE) for s in ms.symbols] or [Action.NONE], dtype=np.int8)
     action = table[ms.sym]
     keep = np.flatnonzero(action != Action.NONE)
 
@@ -238,7 +255,7 @@ class Turtle:
 
     __slots__ = ("step", "width_factor", "default_turn", "tropism", "tropism_strength", "materials", "source",
                  "builder", "placed", "pos", "frame", "width", "material", "last", "hang", "side", "stack",
-                 "polygons", "stray_dots", "segments")
+                 "polygons", "stray_dots", "segments", "queries")
 
     def __init__(self, settings: TurtleSettings, materials: tuple[str, ...], source: str,
                  builder: PolygonBuilder, placed: list):
@@ -254,6 +271,7 @@ class Turtle:
         self.side = False
         self.stack, self.polygons, self.segments = [], [], []
         self.stray_dots = 0
+        self.queries = None
 
     def draw(self, act, n, length, end_radius):
         """``F``: a segment along H (of ``step`` without parameters; none of length 0),
@@ -384,6 +402,14 @@ class Turtle:
             self.placed.append((int(index), self.pos, *self.frame, scale, self.material, self.hang))
 
 
+    def query(self, act, n, arg, arg2):
+        """A query or communication module (``?P`` ... ``?E``), in the query pass only:
+        record the position, the frame H, L, U, the segment it hangs from and whether it
+        starts a side branch."""
+        H, L, U = self.frame
+        self.queries.append((self.pos, H, L, U, self.hang, int(self.side)))
+
+
 #: The handler the turtle runs for each :class:`Action` it draws (the cut runs in the derivation).
 HANDLERS = {
     Action.DRAW: Turtle.draw, Action.MOVE: Turtle.move, Action.MOVE_NO_VERTEX: Turtle.move,
@@ -401,22 +427,30 @@ _MOVE, _TURN_RIGHT, _PITCH_UP, _ROLL_RIGHT, _MATERIAL = (
     int(a) for a in (Action.MOVE, Action.TURN_RIGHT, Action.PITCH_UP, Action.ROLL_RIGHT, Action.MATERIAL))
 #: Each symbol the turtle draws: its action code.
 _CODES = {s.char: int(s.action) for s in SYMBOLS if s.action in HANDLERS}
+#: The actions of the query and communication modules, which the query pass records.
+_QUERY_ACTIONS = (Action.QUERY_POSITION, Action.QUERY_HEADING, Action.QUERY_UP, Action.QUERY_LEFT,
+                  Action.COMMUNICATE)
+_QUERY_CODES = {**_CODES, **{s.char: int(s.action) for s in SYMBOLS if s.action in _QUERY_ACTIONS}}
 
 
 def _walk(program, settings: TurtleSettings, materials: tuple[str, ...], source: str,
-          builder: PolygonBuilder, placed: list):
+          builder: PolygonBuilder, placed: list, recorded: list | None = None):
     """Run a :class:`Turtle` over ``program`` (see :func:`_turtle_program`), handing each
     closed polygon to ``builder`` and appending each surface ``~`` places to ``placed``
     (surface index, position, H, L, U, scale, material, segment hung from).
 
     Returns the segment columns as lists (start and end (x, y, z) tuples, start and end
     radius, parent index (-1 for a root), continues flag, material index) and the number of
-    ``.`` met outside any polygon.
+    ``.`` met outside any polygon. With ``recorded`` (a list), the turtle's state at each
+    query and communication module is appended to it.
     """
     turtle = Turtle(settings, materials, source, builder, placed)
-    handlers = [None] * (max(HANDLERS) + 1)
+    turtle.queries = recorded
+    handlers = [None] * (max(Action) + 1)
     for action, handler in HANDLERS.items():
         handlers[action] = handler
+    for action in _QUERY_ACTIONS:
+        handlers[action] = Turtle.query
     for act, n, arg, arg2 in program:
         handlers[act](turtle, act, n, arg, arg2)
     if turtle.polygons:

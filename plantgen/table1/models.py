@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._resources import closest, shipped_names
 from ..animation import AnimatedScene
 from ..errors import PlantgenError
 from ..geometry.camera import Camera
@@ -55,6 +56,7 @@ def load_model(name: str, size) -> BenchModel:
 def check_models(models) -> None:
     """Raise PlantgenError naming every model that is neither a shipped name nor a file."""
     missing = [str(m) for m in models if not resolve_input(m).is_file()]
+    missing = [m + (f" (did you mean '{near}'?)" if (near := closest(m, shipped_names())) else "") for m in missing]
     if missing:
         raise PlantgenError(f"no such model: {', '.join(missing)} (a shipped grammar/scene name "
                             f"such as {', '.join(TABLE1_MODELS[:3])}, or a path)")

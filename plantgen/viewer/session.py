@@ -29,6 +29,7 @@ from ..geometry.mesh import tessellate, triangle_count
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
+from ..gl.rt import RayTracer
 from ..images import write_png
 from ..knobs import knob_args, knob_of
 from ..limits import Limits
@@ -57,7 +58,7 @@ def stored_triangles(frusta, level: int) -> int:
     return sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in parts)
 
 #: The methods of Table 1, as the keys 1..4 choose them.
-METHODS = ("RC", "RC+R", "GS", "GS+R")
+METHODS = ("RC", "RC+R", "GS", "GS+R", "RT", "RT+R")
 
 #: The most triangles a GS level may have in the viewer (the level is refused above).
 VIEW_MAX_TRIANGLES = 24_000_000
@@ -132,7 +133,9 @@ class ViewerSession:
         self.model = model
         self.renderer = str(ctx.info["GL_RENDERER"])
         self.raycaster = Raycaster(ctx, limits=options.limits)
+        self.tracer: RayTracer | None = None   # RT, RT+R (made when first asked for)
         self._mesh_caster_said = False     # the mesh caster's fallback told once
+        self._rt_playing_said = False      # RT's playing frames drawn by RC, told once
         self.raster: RasterRenderer | None = None
         self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
         self.level = int(options.level)
@@ -219,7 +222,8 @@ class ViewerSession:
         s = self.options.settings
         return replace(s, effects=EffectSettings(effects=s.effects.effects, relief=self.method.endswith("+R"),
                                                  shadows=self.shadows),
-                       march=self.march, image=replace(s.image, ssaa=self.ssaa),
+                       march=replace(self.march, method="rt" if self.method.startswith("RT") else "rc"),
+                       image=replace(s.image, ssaa=self.ssaa),
                        motion=MotionSettings(time=self.t if self.model.animated else None))
 
     def settings(self) -> RaycastSettings:
@@ -246,7 +250,10 @@ class ViewerSession:
         if shadow is not None:
             args["shadow_box"] = self._playing_shadow_box()
         args["leaves"] = anim.leaves_at(self.t)
-        if self.method.startswith("RC"):
+        if not self.method.startswith("GS"):
+            if self.method.startswith("RT") and not self._rt_playing_said:
+                self.warn("RT traces still frames: a playing animation posed on the GPU is drawn by RC")
+                self._rt_playing_said = True
             rows, records, _ = anim.upload(stream, self.t, self.camera.eye)
             return self.raycaster.render(rows, settings=settings, record_buffer=records, **args)
         if self.raster is None:
@@ -289,13 +296,13 @@ class ViewerSession:
             args["shadow_box"] = self._playing_shadow_box()
         if self.model.animated:
             args["leaves"] = self.leaves()     # moved with their branches
-        if self.raster is None and not self.method.startswith("RC"):
+        if self.raster is None and self.method.startswith("GS"):
             self.raster = RasterRenderer(self.ctx)
         if isinstance(frusta, PlacedPlants):   # a forest: instanced, its detail as the knob says
             args["shadows"] = self._merged_caster(shadow)
             return self._drawn(self._draw_placed(frusta, args, settings, request.lod_pixels(self.effects())), t0)
-        if self.method.startswith("RC"):
-            result = self.raycaster.render(frusta, settings=settings, **args)
+        if not self.method.startswith("GS"):
+            result = self.caster().render(frusta, settings=settings, **args)
         else:
             result = self.raster.render(self.mesh(frusta), frusta, **args)
         return self._drawn(result, t0)
@@ -305,7 +312,7 @@ class ViewerSession:
         scene drawn instanced: ``--shadow-caster mesh`` casts still frusta drawn merged):
         the march's instead, said once; other knobs as they are. GS and GS+R cast their own
         meshes whatever the caster, so theirs stay as asked."""
-        if shadow is None or shadow.caster != "mesh" or not self.method.startswith("RC"):
+        if shadow is None or shadow.caster != "mesh" or self.method.startswith("GS"):
             return shadow
         if not self._mesh_caster_said:
             self.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
@@ -314,12 +321,20 @@ class ViewerSession:
         return replace(shadow, caster="relief")
 
     def _draw_placed(self, placed: PlacedPlants, args: dict, settings, lod_pixels: float):
-        """A placed scene's frame: RC and RC+R from its records per plant, GS and GS+R from
-        its meshes per plant."""
-        if self.method.startswith("RC"):
-            return self.raycaster.render(placed, settings=settings, lod_pixels=lod_pixels, **args)
+        """A placed scene's frame: RC and RC+R from its records per plant, RT and RT+R
+        through its two-level BVH, GS and GS+R from its meshes per plant."""
+        if not self.method.startswith("GS"):
+            return self.caster().render(placed, settings=settings, lod_pixels=lod_pixels, **args)
         keep = {k: v for k, v in args.items() if k not in ("material_names", "leaves")}
         return self.raster.render_placed(self.mesh(placed), lod_pixels=lod_pixels, **keep)
+
+    def caster(self):
+        """The ray caster (RC, RC+R) or the ray tracer (RT, RT+R) of the method."""
+        if not self.method.startswith("RT"):
+            return self.raycaster
+        if self.tracer is None:
+            self.tracer = RayTracer(self.ctx, limits=self.options.limits)
+        return self.tracer
 
     def _drawn(self, result, t0: float):
         """Keep ``result`` as the last frame and its times for the heads-up line."""
@@ -573,11 +588,11 @@ class ViewerSession:
     def hud_lines(self) -> list[tuple[str, str]]:
         """(text, kind) lines of the heads-up display; kind is "info", "status" or "error"."""
         s = self.settings()
-        if self.method == "RC":
-            method = "RC"
-        elif self.method == "RC+R":
-            method = (f"RC+R adaptive <= {s.linear_steps} + {s.binary_steps} steps" if s.march == "adaptive"
-                      else f"RC+R fixed {s.linear_steps} + {s.binary_steps} steps")
+        if self.method in ("RC", "RT"):
+            method = self.method
+        elif self.method in ("RC+R", "RT+R"):
+            method = (f"{self.method} adaptive <= {s.linear_steps} + {s.binary_steps} steps" if s.march == "adaptive"
+                      else f"{self.method} fixed {s.linear_steps} + {s.binary_steps} steps")
         else:
             method = f"{self.method} m = {self.level}"
             if self.posing_on_gpu() and self._skinned is not None and self._skinned[0][1] == self.level:
@@ -619,5 +634,7 @@ class ViewerSession:
         """Free the renderers' GL objects."""
         self._release_stream()
         self.raycaster.release()
+        if self.tracer is not None:
+            self.tracer.release()
         if self.raster is not None:
             self.raster.release()

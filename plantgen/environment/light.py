@@ -1,0 +1,183 @@
+"""``light``: the light reaching each ``?E`` from the sky and the sun, traced against the
+plant grown so far (its branches and leaves) and the environment's obstacles.
+
+The sky is ``directions`` directions over the upper hemisphere, one per equal solid angle
+(a Fibonacci lattice: cos θ evenly spaced, the azimuth turned by the golden angle), each
+weighted by the sky's radiance there: ``uniform`` (the same everywhere) or ``overcast``
+(the CIE standard overcast sky, L(θ) ∝ (1 + 2 cos θ) / 3 for the zenith angle θ). The
+weights sum to 1, so an open sky gives 1, and a bud under a disc of half-angle α
+(uniform sky) receives cos α, the sky fraction outside the disc's solid angle
+2π(1 - cos α). The quadrature's error falls as the directions grow: about 1/√N or less
+(the tests state it). A ``sun`` adds its ``share`` of the light from one direction (the
+direction the light travels, as a scene's light): the answer is
+``(1 - share)·sky + share·sun``. The ground (below the horizon) receives no sky ray.
+
+Each ray starts ``offset`` plus one and a half times the radius of the segment the module
+hangs from away from the module, so a bud does not shade itself with its own branch
+(its leaves do shade it). The plant's branches (skinned into frusta) and leaf triangles go
+into one BVH (:mod:`plantgen.geometry.bvh`), and every ray is traced by its float64
+traversal, any hit; the obstacles' shapes by their own ray distance.
+
+The answer, 4 numbers (5 with ``allocation``): the light q, and the unit mean of the open
+directions weighted by their light, in the module's frame (H, L, U; the direction a shoot
+would turn to, zero when nothing is open). With ``allocation: {alpha, lambda}`` the fifth
+is the bud's vigour v by the Borchert–Honda model (Palubicki et al. 2009): the light of
+every bud is summed from the tips down to the base, the base receives ``alpha`` times the
+total, and at every node the resource is shared among the main axis (weight
+``lambda``·q) and each lateral branch (``1 - lambda``·q), up to each bud.
+
+The rays a step traces count against ``max_light_rays``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import fields
+from ..geometry.bvh import build_bvh, trace_bvh
+from ..geometry.scan import scan_target, target_hits
+from ..limits import Limits
+from ..lsystem.queries import QueryState
+from ..tolerances import tol
+from .shapes import EnvError, batch_size, parse_shape
+
+__all__ = ["SKIES", "Light", "allocate", "sky_directions"]
+
+SKIES = ("uniform", "overcast")
+GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+
+
+def sky_directions(n: int, sky: str = "uniform") -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) unit directions towards the upper hemisphere (y up), one per equal solid
+    angle, and (n,) their weights (the sky's radiance there), summing to 1."""
+    i = np.arange(n)
+    cos_t = 1.0 - (i + 0.5) / n
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+    phi = i * GOLDEN_ANGLE
+    dirs = np.stack([sin_t * np.cos(phi), cos_t, sin_t * np.sin(phi)], axis=1)
+    w = np.ones(n) if sky == "uniform" else (1.0 + 2.0 * cos_t) / 3.0
+    return dirs, w / w.sum()
+
+
+class Light:
+    """``light`` (see the module's notes)."""
+
+    keys = {"sky", "directions", "sun", "obstacles", "offset", "batch", "allocation"}
+
+    def __init__(self, d: dict, where: str, base: Path, limits: Limits, seed: int):
+        self.batch = batch_size(d, where)
+        sky = d.get("sky", "uniform")
+        if sky not in SKIES:
+            raise EnvError(f"{where}: sky must be one of {', '.join(SKIES)}, got {fields.show(sky)}")
+        n = fields.integer(d.get("directions", 64), "directions", where, EnvError, lo=1, hi=1 << 20)
+        self.dirs, self.weights = sky_directions(n, sky)
+        self.share, self.sun = 0.0, None
+        if d.get("sun") is not None:
+            sun = fields.keys(d["sun"], {"direction", "share"}, f"{where}: sun", EnvError)
+            travel = fields.unit_vector(sun.get("direction", [0, -1, 0]), "direction", f"{where}: sun", EnvError)
+            self.sun = -np.array(travel)      # towards the sun; below the horizon the ground hides it
+            self.share = fields.number(sun.get("share", 0.5), "share", f"{where}: sun", EnvError, lo=0.0, hi=1.0)
+        obstacles = d.get("obstacles") or []
+        if not isinstance(obstacles, list) or len(obstacles) > 1000:
+            raise EnvError(f"{where}: obstacles must be a list of at most 1,000 shapes")
+        self.obstacles = [parse_shape(s, f"{where}: obstacle {i + 1}", base, limits) for i, s in enumerate(obstacles)]
+        self.offset = fields.number(d.get("offset", 0.01), "offset", where, EnvError, lo=0.0,
+                                    max_abs=tol.max_coordinate)
+        self.allocation = None
+        if d.get("allocation") is not None:
+            a = fields.keys(d["allocation"], {"alpha", "lambda"}, f"{where}: allocation", EnvError)
+            self.allocation = (fields.number(a.get("alpha", 2.0), "alpha", where, EnvError, positive=True),
+                               fields.number(a.get("lambda", 0.5), "lambda", where, EnvError, lo=0.0, hi=1.0))
+        self.width = 4 + (self.allocation is not None)
+        self.limits = limits
+
+    @property
+    def rays_per_query(self) -> int:
+        return len(self.dirs) + (self.sun is not None)
+
+    def answer(self, state: QueryState) -> np.ndarray:
+        k = len(state)
+        self.limits.check("light_rays", k * self.rays_per_query, f"step {state.step}: light rays")
+        drawing = state.drawing
+        target = scan_target(drawing.skeleton, drawing.polygons) if len(drawing.skeleton) or len(drawing.polygons) \
+            else None
+        bvh = build_bvh(target.lo, target.hi) if target is not None and len(target) else None
+        # one frame origin for every batch of rays: the hit test rounds the same, however batched
+        hits = target_hits(target, origin=target.base) if bvh is not None else None
+        dirs = self.dirs if self.sun is None else np.concatenate([self.dirs, self.sun[None]])
+        weights = np.concatenate([(1.0 - self.share) * self.weights, [self.share]]) if self.sun is not None \
+            else self.weights
+        radius = np.zeros(k)
+        if state.segment is not None and len(drawing.skeleton):
+            hung = state.segment >= 0
+            radius[hung] = drawing.skeleton.r_end[state.segment[hung]]
+        out = np.zeros((k, self.width))
+        for lo in range(0, k, self.batch):
+            p, r = state.position[lo:lo + self.batch], radius[lo:lo + self.batch]
+            m = len(p)
+            origin = (p[:, None] + (self.offset + 1.5 * r)[:, None, None] * dirs[None]).reshape(-1, 3)
+            direction = np.broadcast_to(dirs[None], (m, len(dirs), 3)).reshape(-1, 3)
+            open_ = np.ones(len(origin), dtype=bool)
+            if bvh is not None:
+                t, _ = trace_bvh(bvh, origin, direction, hits, any_hit=True)
+                open_ &= ~np.isfinite(t)
+            for shape in self.obstacles:
+                rest = np.flatnonzero(open_)
+                open_[rest] = ~np.isfinite(shape.ray(origin[rest], direction[rest], tol.max_coordinate))
+            if self.sun is not None and self.sun[1] <= 0:
+                open_.reshape(m, -1)[:, -1] = False
+            light = open_.reshape(m, -1) * weights[None]
+            out[lo:lo + m, 0] = light.sum(axis=1)
+            toward = (light[:, :, None] * dirs[None]).sum(axis=1)   # row by row: the same for any batch
+            norm = np.linalg.norm(toward, axis=1, keepdims=True)
+            out[lo:lo + m, 1:4] = np.where(norm > tol.parallel, toward / np.maximum(norm, 1e-300), 0.0)
+        out[:, 1:4] = state.local(out[:, 1:4])
+        if self.allocation is not None:
+            out[:, 4] = allocate(state, out[:, 0], *self.allocation)
+        return out
+
+
+def allocate(state: QueryState, q: np.ndarray, alpha: float, lam: float) -> np.ndarray:
+    """(k,) the Borchert–Honda vigour of each bud of ``state`` given its light ``q``.
+
+    The tree is the drawing's skeleton with the buds as its tips: a bud hangs from its
+    segment (``state.segment``, -1: none yet), a main bud continues it and a side bud
+    (``state.side``) is lateral, as a segment that ``continues`` its parent is main and
+    any other child lateral. Light is summed from the tips to the base (segments come
+    after their parents); each root segment (a plant of its own: a string may hold many)
+    receives ``alpha`` times the light above it, a bud on no segment ``alpha`` times its
+    own; each node shares what reaches it among its children in proportion to ``lam``·Q
+    (main) and ``(1 - lam)``·Q (lateral)."""
+    skel = state.drawing.skeleton
+    n = len(skel)
+    seg = state.segment if state.segment is not None else np.full(len(q), -1)
+    side = state.side if state.side is not None else np.zeros(len(q), bool)
+    hung = seg >= 0
+    vigour_bud = np.where(hung, 0.0, alpha * q)
+    if not n:
+        return vigour_bud
+    below = np.zeros(n)                                   # light gathered above each segment's end
+    np.add.at(below, seg[hung], q[hung])
+    parent = skel.parent
+    for s in range(n - 1, -1, -1):                        # children come after their parents
+        if parent[s] >= 0:
+            below[parent[s]] += below[s]
+    # each child's weight at its node: lam * Q for the main one, (1 - lam) * Q for a lateral one
+    seg_w = np.where(skel.continues, lam, 1.0 - lam) * below
+    bud_w = np.where(side, 1.0 - lam, lam) * q
+    total = np.zeros(n)
+    np.add.at(total, parent[parent >= 0], seg_w[parent >= 0])
+    np.add.at(total, seg[hung], bud_w[hung])
+    vigour = np.zeros(n)
+    for s in range(n):                                    # parents first
+        p = parent[s]
+        if p < 0:
+            vigour[s] = alpha * below[s]
+        elif total[p] > 0:
+            vigour[s] = vigour[p] * seg_w[s] / total[p]
+    at = seg[hung]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vigour_bud[hung] = np.where(total[at] > 0, vigour[at] * bud_w[hung] / total[at], 0.0)
+    return vigour_bud

@@ -1,0 +1,249 @@
+"""Ray tracing through the BVH (``render --method rt``; with relief, RT+R).
+
+The ray caster (:mod:`plantgen.gl.raycast`) rasterises one bounding pyramid per row and
+casts the pixel's ray against that row: its cost grows with the rows drawn. The ray
+tracer draws one full-screen triangle whose fragments trace their pixel's ray through a
+bounding volume hierarchy (:mod:`plantgen.geometry.bvh`, searched by ``shaders/bvh.glsl``,
+uploaded by :mod:`plantgen.gl.trace`): a ray costs about the log of the rows. The row it
+finds is hit and shaded by the ray caster's own code (``shaders/row.glsl``), so the two
+methods show the same surfaces.
+
+Everything else of the frame is the ray caster's: the sky, the ground, the leaves
+(rasterised after the rows, depth-tested against them), read-back, supersampling. With
+shadows, nothing is drawn into a map: every receiver (rows, ground, leaves) asks a shadow
+ray towards the light whether anything of the BVH (rows, with relief their relief
+surface, and the leaves' triangles) lies in its way (``SHADOW_RAYS`` in
+``shaders/shadow.glsl``). The ground casts no shadow here (it lies under everything it
+could shade).
+
+An instanced scene (:class:`~plantgen.geometry.instances.PlacedPlants`) is traced with
+two levels: each distinct plant's BVH once, a top level over the copies; its leaves (world
+polygons) are one more "plant" placed once. The BVH is built once per model (kept while
+the same objects are rendered) and uploaded relative to the eye.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..geometry.bvh import build_bvh, build_scene_bvh, copy_boxes
+from ..geometry.instances import PlacedPlants
+from ..geometry.reference import row_boxes
+from .frame import FrameLighting, FrameView
+from .passes import frame_passes
+from .raycast import Raycaster
+from .shaders import build_program, set_uniforms
+from .trace import GpuPlant, upload_bvh
+
+__all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET"]
+
+#: Pixel footprints a shadow ray starts off its receiver's surface (along the receiver's
+#: normal on the light's side): more than the rounding of a hit and the relief march's
+#: final bracket (``march_precision``, a fraction of a footprint).
+SHADOW_RAY_OFFSET = 1.0
+
+#: The defines of RaycastSettings that the traced rows' programs take.
+_ROW_DEFINES = ("RELIEF", "V_EXACT", "MARCH_FIXED", "HEIGHT_FETCH4")
+
+
+def leaf_triangles(leaves) -> np.ndarray:
+    """(t, 3, 3) float64 world triangles of a Polygons (none: (0, 3, 3))."""
+    if leaves is None or not len(leaves.triangles):
+        return np.zeros((0, 3, 3))
+    return np.asarray(leaves.vertices, np.float64)[np.asarray(leaves.triangles)]
+
+
+def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes of triangles padded for rounding (as the scan's)."""
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    pad = 1e-9 * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True) + 1e-12
+    return lo - pad, hi + pad
+
+
+class RayTracer(Raycaster):
+    """Renders Frusta or a PlacedPlants by tracing each pixel's ray through a BVH (module
+    docstring); the same ``render`` arguments as :class:`Raycaster` but for GPU-posed
+    frames (``record_buffer``), work counts and labels, which stay the ray caster's. The
+    shadow knobs of the map (resolution, caster, its march) do not apply: a shadow ray
+    meets what the eye's rays meet (with relief, the relief surface).
+
+    ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.bvh.build_bvh`);
+    ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface.
+    """
+
+    def __init__(self, ctx=None, limits=None, *, leaf_size: int = 4, method: str = "lbvh",
+                 shadow_ray_offset: float = SHADOW_RAY_OFFSET):
+        super().__init__(ctx, limits)
+        self.leaf_size, self.method = leaf_size, method
+        self.shadow_ray_offset = float(shadow_ray_offset)
+        self._built = None       # (model, leaves, plants, top, matrices, copy_plant)
+        self._gpu = None         # (model, leaves, eye, GpuBvh)
+        self._frame = None       # the frame being rendered: model, leaves, settings
+        #: milliseconds of the last BVH build (0 when kept) and upload
+        self.last_build_ms = 0.0
+        self.last_upload_ms = 0.0
+
+    def release(self) -> None:
+        if self._gpu is not None:
+            self._gpu[3].release()
+            self._gpu = None
+        super().release()
+
+    # ------------------------------------------------------------------ the BVH
+    def _build(self, model, leaves):
+        """The BVH of ``model`` (Frusta or PlacedPlants) and ``leaves`` (world Polygons or
+        None), built once per pair of objects."""
+        if self._built is not None and self._built[0] is model and self._built[1] is leaves:
+            self.last_build_ms = 0.0
+            return self._built[2:]
+        t0 = time.perf_counter()
+        tri = leaf_triangles(leaves)
+        build = {"leaf_size": self.leaf_size, "method": self.method}
+        if isinstance(model, PlacedPlants):
+            scene = build_scene_bvh(model, **build)
+            plants = [GpuPlant(p.frusta, None, b) for p, b in zip(model.plants, scene.blas, strict=True)]
+            top, matrices, copy_plant = scene.tlas, scene.matrix, scene.plant
+            if len(tri):      # the leaves: one more plant, placed once where they are
+                t_lo, t_hi = _triangle_boxes(tri)
+                bvh = build_bvh(t_lo, t_hi, **build)
+                plants.append(GpuPlant(None, tri, bvh))
+                c_lo, c_hi = copy_boxes(bvh.lo[0], bvh.hi[0], np.eye(4)[None])
+                top = build_bvh(np.concatenate([scene.copy_lo, c_lo]), np.concatenate([scene.copy_hi, c_hi]),
+                                leaf_size=2, method=self.method)
+                matrices = np.concatenate([matrices, np.eye(4)[None]])
+                copy_plant = np.r_[copy_plant, len(plants) - 1]
+        else:
+            lo, hi = row_boxes(model, shell=True) if len(model) else (np.zeros((0, 3)), np.zeros((0, 3)))
+            if len(tri):
+                t_lo, t_hi = _triangle_boxes(tri)
+                lo, hi = np.concatenate([lo, t_lo]), np.concatenate([hi, t_hi])
+            plants = [GpuPlant(model if len(model) else None, tri, build_bvh(lo, hi, **build))]
+            top = matrices = copy_plant = None
+        self._built = (model, leaves, plants, top, matrices, copy_plant)
+        self.last_build_ms = (time.perf_counter() - t0) * 1e3
+        return self._built[2:]
+
+    def gpu_bvh(self, model, leaves, eye):
+        """The uploaded BVH of ``model`` and ``leaves`` relative to ``eye`` (kept while all
+        three stay the same)."""
+        eye = np.asarray(eye, np.float64)
+        g = self._gpu
+        if g is not None and g[0] is model and g[1] is leaves and np.array_equal(g[2], eye):
+            self.last_build_ms = self.last_upload_ms = 0.0
+            return g[3]
+        plants, top, matrices, copy_plant = self._build(model, leaves)
+        t0 = time.perf_counter()
+        if g is not None:
+            g[3].release()
+            self._gpu = None
+        gpu = upload_bvh(self.ctx, plants, eye, top=top, matrices=matrices, copy_plant=copy_plant,
+                         max_bytes=self.limits.max_render_bytes)
+        self._gpu = (model, leaves, eye.copy(), gpu)
+        self.last_upload_ms = (time.perf_counter() - t0) * 1e3
+        return gpu
+
+    # ------------------------------------------------------------------ the frame
+    def render(self, frusta, camera, settings=None, material_names=("bark",), light_dir=None, ground=None, *,
+               shadows=None, shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
+               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0):
+        """Trace ``frusta`` (Frusta or PlacedPlants) as seen by ``camera``: the arguments of
+        :meth:`Raycaster.render` (``lod_pixels`` is ignored: every row is traced)."""
+        from ..settings import RaycastSettings
+
+        settings = settings if settings is not None else RaycastSettings()
+        if record_buffer is not None or count_work or settings.labels or settings.proxy != "pyramid":
+            raise PlantgenError("the ray tracer renders still frusta in colour: GPU-posed frames, work counts, "
+                                "labels and proxies are the ray caster's (--method rc)")
+        gpu = self.gpu_bvh(frusta, leaves, camera.eye)
+        tex, repeats = self._heights.get(tuple(material_names))
+        self._frame = {"gpu": gpu, "settings": settings, "tex": tex, "repeats": repeats}
+        try:
+            result = super().render(frusta, camera, settings, material_names, light_dir, ground, shadows=shadows,
+                                    shadow_box=shadow_box, background=background, ssaa=ssaa, leaves=leaves,
+                                    leaf_labels=leaf_labels)
+        finally:
+            self._frame = None
+        stats = replace(result.stats, program=("rt.glsl", self._defines(settings, shadows, gpu)),
+                        passes=frame_passes(False, ground is not None, len(frusta) > 0,
+                                            leaves is not None and len(leaves.triangles) > 0),
+                        upload_bytes=gpu.nbytes if self.last_upload_ms else 0)
+        return replace(result, stats=stats)
+
+    @staticmethod
+    def _defines(settings, shadows, gpu) -> dict:
+        defines = {k: v for k, v in settings.defines().items() if k in _ROW_DEFINES}
+        return {**defines, "TWO_LEVEL": gpu.two_level, "SHADOWS": shadows is not None,
+                "SHADOW_RAYS": shadows is not None}
+
+    def _programs(self, settings, shadows, ground: bool, count_work: bool = False, flat_background: bool = False,
+                  leaves: bool = False) -> dict:
+        frame = self._frame
+        defines = self._defines(settings, shadows, frame["gpu"])
+        receivers = {k: v for k, v in defines.items() if k != "SHADOWS"} if shadows is not None else {}
+        variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
+        if ground:
+            variants.append(("ground.glsl", {"SHADOWS": shadows is not None, **receivers}))
+        variants.append(("rt.glsl", defines))
+        if leaves:
+            variants.append(("leaf.glsl", {"SHADOWS": shadows is not None, "LABELS": False, **receivers}))
+        built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
+        self.programs_used.update(built)
+        for name, d in variants:
+            build_program(self.ctx, name, d)
+        return {"frame": build_program(self.ctx, "rt.glsl", defines), "light": None, "built": built}
+
+    def _lighting(self, material_names, ground, light_dir, shadows, caster_box, eye, anchor=None) -> FrameLighting:
+        base = super()._lighting(material_names, ground, light_dir, None, caster_box, eye, anchor)
+        frame = self._frame
+        if shadows is None or frame is None:
+            return base
+        settings = frame["settings"]
+        defines = self._defines(settings, shadows, frame["gpu"])
+        receiver = {"shadow_ray_offset": self.shadow_ray_offset, "texture_repeat": frame["repeats"],
+                    **self._march(settings)}
+        return replace(base, receiver=receiver,
+                       receiver_defines={k: v for k, v in defines.items() if k != "SHADOWS"})
+
+    @staticmethod
+    def _march(settings) -> dict:
+        return {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
+
+    def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None):
+        if lighting.receiver_defines:
+            lighting = replace(lighting, receiver={**lighting.receiver, "pixel_footprint": view.pixel_footprint()})
+        out = super()._surroundings(ground, leaves, view, lighting, labels=labels)
+        frame = self._frame
+        if frame is not None:
+            out.before.insert(0, self._bind)        # the BVH and heights for every receiver
+        return out
+
+    def _bind(self) -> None:
+        frame = self._frame
+        frame["tex"].use(0)
+        frame["gpu"].bind()
+
+    def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting, settings, rec_buf, repeats, tex,
+                     n: int, lod_pixels: float = 0.0):
+        set_uniforms(program, **{**view.ray_uniforms(), **lighting.shading, **lighting.receiver,
+                                 **self._march(settings), "texture_repeat": repeats,
+                                 "pixel_footprint": view.pixel_footprint(),
+                                 "depth_coeffs": (view.projection[2, 2], view.projection[2, 3])})
+        frame = self._frame
+        if not n or frame["gpu"].empty:
+            return (lambda: None), [], 0
+        ctx = self.ctx
+        vao = ctx.vertex_array(program, [])
+
+        def draw():
+            self._bind()
+            ctx.disable(ctx.CULL_FACE)
+            ctx.enable(ctx.DEPTH_TEST)
+            vao.render(mode=ctx.TRIANGLES, vertices=3)
+        return draw, [vao], n
+
+    def _light_pass(self, *args, **kwargs):
+        return None      # shadow rays: no map

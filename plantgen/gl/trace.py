@@ -1,0 +1,286 @@
+"""Ray queries on the GPU: a BVH (:mod:`plantgen.geometry.bvh`) and its primitives in
+storage buffers, searched by ``shaders/bvh.glsl`` (one compute invocation per ray,
+``shaders/trace.glsl``), closest hit or any hit.
+
+Precision: everything the GPU holds is float32 relative to a frame origin formed in
+float64 here: row records (:func:`plantgen.gl.records.pack_records`), leaf triangles and
+node boxes (rounded outward, :func:`plantgen.geometry.bvh.float32_boxes`, so a float32
+box never loses a ray its float64 box keeps). An instanced scene keeps each distinct
+plant once, relative to its own box centre, and per copy the map from the frame into the
+plant's (its offset formed in float64). The GPU finds the primitive; callers that need
+float64 distances solve that one primitive again on the CPU (:mod:`plantgen.trace`, the
+scan).
+
+Memory stays bounded: rays go up in chunks of ``chunk`` (32 bytes a ray up, 16 back).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..geometry.bvh import BVH, float32_boxes
+from ..geometry.instances import similarity_parts
+from ..limits import LimitError, hint
+from .records import RECORD_FLOATS, pack_records
+from .shaders import build_compute, set_uniforms
+
+__all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES"]
+
+#: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
+TRACE_CHUNK = 1 << 16
+#: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (7 in all).
+BVH_BINDING = 3
+#: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
+BVH_STACK = 64
+#: GPU bytes of one copy's map (and plant index) in an instanced scene.
+COPY_BYTES = 64
+_GROUP = 64   # local_size_x of shaders/trace.glsl
+
+
+@dataclass(frozen=True, eq=False)
+class GpuPlant:
+    """One distinct plant's primitives for :func:`upload_bvh`: ``frusta`` (rows 0..r-1,
+    or None), ``triangles`` ((t, 3, 3) float64 leaf triangles r..r+t-1, or None) and the
+    ``bvh`` over them (primitive ids as above), all in the plant's frame."""
+
+    frusta: object
+    triangles: np.ndarray | None
+    bvh: BVH
+
+    @property
+    def rows(self) -> int:
+        return 0 if self.frusta is None else len(self.frusta)
+
+
+@dataclass(eq=False)
+class GpuBvh:
+    """The uploaded buffers (:func:`upload_bvh`); :meth:`bind` before a dispatch or draw
+    whose program includes ``bvh.glsl`` (with ``TWO_LEVEL`` where :attr:`two_level`)."""
+
+    ctx: object
+    origin: np.ndarray
+    two_level: bool
+    buffers: list = field(default_factory=list)
+    nbytes: int = 0
+    plants: int = 0
+    copies: int = 0
+    empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
+
+    def defines(self) -> dict:
+        return {"TWO_LEVEL": self.two_level}
+
+    def bind(self) -> None:
+        for i, buf in enumerate(self.buffers):
+            buf.bind_to_storage_buffer(BVH_BINDING + i)
+
+    def release(self) -> None:
+        for buf in self.buffers:
+            buf.release()
+        self.buffers = []
+
+
+def _node_words(bvh: BVH, origin) -> np.ndarray:
+    """(nodes, 8) float32: (lo, first bits), (hi, count bits), boxes rounded outward."""
+    lo, hi = float32_boxes(bvh, origin)
+    words = np.empty((bvh.nodes, 8), np.float32)
+    words[:, 0:3], words[:, 4:7] = lo, hi
+    words[:, 3] = np.asarray(bvh.first, np.int32).view(np.float32)
+    words[:, 7] = np.asarray(bvh.count, np.int32).view(np.float32)
+    return words
+
+
+def _triangle_words(triangles, origin) -> np.ndarray:
+    """(t, 12) float32: (v0, |e1||e2|), (e1, 0), (e2, 0), v0 relative to ``origin``."""
+    tri = np.zeros((0, 3, 3)) if triangles is None else np.asarray(triangles, np.float64)
+    words = np.zeros((len(tri), 12), np.float32)
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    words[:, 0:3] = tri[:, 0] - origin
+    words[:, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    words[:, 4:7], words[:, 8:11] = e1, e2
+    return words
+
+
+def _depth(bvh: BVH) -> int:
+    return bvh.depth() if bvh.nodes else 0
+
+
+def _copy_words(matrices, copy_plant, centres, origin) -> np.ndarray:
+    """(k, 16) float32 per copy: the map from the world frame (relative to ``origin``) into
+    its plant's frame (relative to the plant's centre), x_plant = turn^T (x - offset) /
+    scale with offset = shift + scale * turn @ centre - origin formed in float64 and
+    rounded once, as three rows of a 3x4 matrix; then the plant index's bits."""
+    matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
+    copy_plant = np.asarray(copy_plant, np.int64)
+    copies = len(matrices)
+    turn, scale, shift = similarity_parts(matrices)
+    centre = np.asarray(centres, np.float64).reshape(-1, 3)[copy_plant] if copies else np.zeros((0, 3))
+    offset = shift + scale[:, None] * np.einsum("kij,kj->ki", turn, centre) - origin
+    inverse = np.transpose(turn, (0, 2, 1)) / scale[:, None, None]
+    words = np.zeros((copies, 16), np.float32)
+    words[:, [0, 1, 2, 4, 5, 6, 8, 9, 10]] = inverse.reshape(copies, 9)
+    words[:, [3, 7, 11]] = -np.einsum("kij,kj->ki", inverse, offset)
+    words[:, 12] = copy_plant.astype(np.int32).view(np.float32)
+    return words
+
+
+def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
+               max_bytes: int | None = None) -> GpuBvh:
+    """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
+
+    One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
+    the centre of its root box). Two levels: ``top`` a BVH over the copies (copy ids), per
+    copy its similarity ``matrices`` (k, 4, 4) from its plant's frame to the world and
+    ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
+    relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
+    LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
+    """
+    two_level = top is not None
+    if not two_level and len(plants) != 1:
+        raise PlantgenError("upload_bvh: one plant without a top level")
+    stack = max((_depth(p.bvh) for p in plants), default=0)
+    if two_level:
+        stack += _depth(top) + int(np.max(top.count, initial=0))
+    if stack > BVH_STACK:
+        raise PlantgenError(f"BVH too deep for the GPU traversal's stack ({stack} > {BVH_STACK} entries)")
+    if origin is None:
+        root = top if two_level else plants[0].bvh
+        origin = 0.5 * (root.lo[0] + root.hi[0]) if root.nodes else np.zeros(3)
+    origin = np.asarray(origin, np.float64)
+    # each plant's frame: its own root box centre (the world frame's origin with one level)
+    centres = [origin if not two_level else (0.5 * (p.bvh.lo[0] + p.bvh.hi[0]) if p.bvh.nodes else np.zeros(3))
+               for p in plants]
+    nodes, prims, rows, tris, offsets = [], [], [], [], []
+    counts = np.zeros(4, np.int64)
+    for p, c in zip(plants, centres, strict=True):
+        offsets.append([*counts, p.rows, 0, 0, 0])
+        nodes.append(_node_words(p.bvh, c))
+        prims.append(np.asarray(p.bvh.prims, np.int32))
+        rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
+        tris.append(_triangle_words(p.triangles, c))
+        counts += [p.bvh.nodes, len(p.bvh.prims), p.rows, len(tris[-1])]
+    if two_level:     # the top level's nodes follow the plants' (one node array)
+        offsets[0][5] = counts[0]
+        nodes.append(_node_words(top, origin))
+    arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
+              np.asarray(offsets, np.int32)]
+    copies = 0
+    if two_level:
+        words = _copy_words(matrices, copy_plant, centres, origin)
+        copies = len(words)
+        arrays += [np.asarray(top.prims, np.int32), words]
+    need = sum(a.nbytes for a in arrays)
+    if max_bytes is not None and need > max_bytes:
+        raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
+                         f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
+    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies)
+    for a in arrays:
+        data = np.ascontiguousarray(a).tobytes()
+        gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
+        gpu.nbytes += len(data)
+    gpu.empty = not (top.nodes if two_level else plants[0].bvh.nodes)
+    return gpu
+
+
+def trace_rays(gpu: GpuBvh, origins, directions, *, any_hit: bool = False, t_min=0.0, t_max=np.inf,
+               chunk: int = TRACE_CHUNK, progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Trace rays (m, 3) (world float64 origins, directions; t in units of |direction|)
+    through the uploaded BVH: the closest hit with t_min < t < t_max, or with ``any_hit``
+    the first found. Returns t (m,) float64 (float32 values; inf: none), primitive (m,)
+    int64 (plant-local id; -1: none), copy (m,) int64 (0 with one level; -1: none) and the
+    face (m,) (cone.glsl's FACE_*). ``progress(done, total)`` after each chunk."""
+    origins = np.asarray(origins, np.float64).reshape(-1, 3)
+    directions = np.asarray(directions, np.float64).reshape(-1, 3)
+    m = len(origins)
+    t_lo = np.broadcast_to(np.asarray(t_min, np.float64), (m,))
+    t_hi = np.broadcast_to(np.asarray(t_max, np.float64), (m,))
+    t = np.full(m, np.inf)
+    prim = np.full(m, -1, np.int64)
+    copy = np.full(m, -1, np.int64)
+    face = np.zeros(m, np.int64)
+    if m == 0 or gpu.empty:
+        return t, prim, copy, face
+    ctx = gpu.ctx
+    program = build_compute(ctx, "trace.glsl", gpu.defines())
+    chunk = max(int(chunk), _GROUP)
+    size = min(chunk, m)
+    ray_buf = ctx.buffer(reserve=32 * size)
+    hit_buf = ctx.buffer(reserve=16 * size)
+    words = np.empty((size, 8), np.float32)
+    try:
+        gpu.bind()
+        ray_buf.bind_to_storage_buffer(0)
+        hit_buf.bind_to_storage_buffer(1)
+        set_uniforms(program, any_hit=int(bool(any_hit)))
+        for start in range(0, m, chunk):
+            stop = min(start + chunk, m)
+            n = stop - start
+            w = words[:n]
+            w[:, 0:3] = origins[start:stop] - gpu.origin
+            w[:, 3] = t_lo[start:stop]
+            w[:, 4:7] = directions[start:stop]
+            w[:, 7] = np.minimum(t_hi[start:stop], 3.0e38)
+            ray_buf.write(w.tobytes())
+            set_uniforms(program, ray_count=n)
+            program.run(group_x=(n + _GROUP - 1) // _GROUP)
+            out = np.frombuffer(hit_buf.read(size=16 * n), np.float32).reshape(n, 4)
+            ids = out.view(np.int32)
+            p = ids[:, 1].astype(np.int64)
+            prim[start:stop] = p
+            copy[start:stop] = np.where(p >= 0, ids[:, 2], -1)
+            face[start:stop] = ids[:, 3]
+            t[start:stop] = np.where(p >= 0, out[:, 0].astype(np.float64), np.inf)
+            if progress is not None:
+                progress(stop, m)
+    finally:
+        ray_buf.release()
+        hit_buf.release()
+    return t, prim, copy, face
+
+
+_targets: list = []      # [(target, GpuBvh)]: the last targets uploaded (a scan, a trace batch)
+_TARGETS_KEPT = 2
+
+
+def target_bvh(target, ctx=None) -> GpuBvh:
+    """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
+    triangles, its ``bvh``, relative to its root box's centre) or of a
+    :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
+    over its copies); the last few targets stay uploaded."""
+    for i, (t, gpu) in enumerate(_targets):
+        if t is target and (ctx is None or gpu.ctx is ctx):
+            _targets.append(_targets.pop(i))
+            return gpu
+    if ctx is None:
+        from .context import gl_context
+        ctx = gl_context()
+    def plant(t):
+        return GpuPlant(t.frusta if t.rows else None, t.triangles, t.bvh)
+
+    if hasattr(target, "targets"):        # a SceneTarget: two levels
+        scene = target.bvh
+        gpu = upload_bvh(ctx, [plant(t) for t in target.targets], top=scene.tlas, matrices=scene.matrix,
+                         copy_plant=scene.plant)
+    else:
+        gpu = upload_bvh(ctx, [plant(target)])
+    _targets.append((target, gpu))
+    while len(_targets) > _TARGETS_KEPT:
+        _targets.pop(0)[1].release()
+    return gpu
+
+
+def trace_target(target, origins, directions, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf,
+                 chunk: int = TRACE_CHUNK, progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """The GPU's hit of each ray (m, 3) against a ScanTarget or a SceneTarget: t (m,)
+    (float32 values; inf: none) and the primitive (m,) (-1: none; a row, or rows + a leaf
+    triangle; a scene's as copy · stride + its plant's), closest or any
+    (:func:`trace_rays`). The float32 search of :func:`plantgen.trace` and the scan, which
+    solve each found primitive again in float64."""
+    t, prim, copy, _ = trace_rays(target_bvh(target), origins, directions, any_hit=any_hit, t_min=t_min,
+                                  t_max=t_max, chunk=chunk, progress=progress)
+    if hasattr(target, "targets"):
+        prim = np.where(prim >= 0, copy * target.stride + prim, -1)
+    return t, prim

@@ -1,0 +1,1547 @@
+"""L-Py files (``.lpy``) read into plantgen's grammar mapping, never run.
+
+An L-Py file is Python with L-system sections (``Axiom:``, ``derivation length:``,
+``production:``, ``interpretation:``/``homomorphism:``, ``endlsystem`` ...). This module
+splits the sections line by line, parses each piece of Python with :mod:`ast` and
+*translates* it: module-level constants become the grammar's ``defines``, functions are
+inlined into the expressions that call them, and a rule's Python block is walked
+symbolically, each path that ends in ``produce`` becoming one plantgen rule whose
+condition is the path's tests (``if``/``elif``/``else``; ``for ... in range(...)`` with a
+constant count is unrolled; local assignments are substituted). Every expression ends up
+as text in plantgen's whitelist expression language (:mod:`plantgen.lsystem.expr`), which
+is what evaluates it: nothing here calls ``exec`` or ``eval``. The result is the same
+mapping a YAML grammar file gives (:func:`plantgen.lsystem.grammar.parse_grammar` takes
+it; ``plantgen convert`` writes it).
+
+What cannot be translated is refused in one line naming the construct and its line
+(:class:`LpyError`): imports other than ``random`` and ``math``, PlantGL, ``Start``/
+``End``/``StartEach``/``EndEach`` that do more than seed the generator, decomposition
+rules, file access, a random draw that would be tested twice. Drawing modules plantgen
+has no meaning for are dropped with one warning each; the ``INITIALISATION`` section is
+read only for its scalar parameters (defines), the rest ignored with a warning.
+
+Budgets: the file's size (``max_input_bytes``), the work of the translation (AST nodes
+visited, inlined calls and unrolled loop bodies included, against ``max_yaml_nodes``),
+the nesting of inlined calls (:data:`MAX_CALL_DEPTH`), :data:`MAX_LOOP_ITERATIONS` unrolled
+loop iterations and :data:`~plantgen.lsystem.expr.MAX_EXPR_LENGTH` characters per
+translated expression; then the grammar's own budgets when it is derived.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import textwrap
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import PlantgenError
+from ..files import read_input, read_yaml
+from ..limits import LimitError, Limits, hint
+from ..limits import limits as default_limits
+from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
+from .symbols import ARITY, SYMBOLS
+
+__all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
+           "read_grammar_data", "read_lpy", "to_yaml"]
+
+LPY_SUFFIX = ".lpy"
+#: Loop iterations (``for ... in range``) one file's rules and functions may unroll, in all.
+MAX_LOOP_ITERATIONS = 10_000
+#: The largest count a loop over a module parameter (``range(n)``) is unrolled for.
+MAX_DYNAMIC_COUNT = 16
+#: How deep inlined function calls may nest (a recursive function goes no deeper).
+MAX_CALL_DEPTH = 32
+#: Modules one produced L-string may hold after unrolling.
+MAX_SUCCESSOR = 10_000
+
+
+class LpyError(PlantgenError):
+    """An ``.lpy`` file plantgen cannot read; the message names the construct and its line."""
+
+
+# ------------------------------------------------------------------ L-Py's predefined modules
+#: L-Py's turtle modules that plantgen draws, by L-Py name: the plantgen symbol. L-Py names
+#: ``/`` roll left and ``\\`` roll right (ABOP the other way round), so they swap here.
+TURTLE: dict[str, str] = {
+    "F": "F", "f": "f", "+": "+", "Left": "+", "-": "-", "Right": "-", "&": "&", "Down": "&",
+    "^": "^", "Up": "^", "/": "\\", "RollL": "\\", "iRollL": "\\", "\\": "/", "RollR": "/", "iRollR": "/",
+    "|": "|", "TurnAround": "|", "[": "[", "SB": "[", "]": "]", "EB": "]", "{": "{", "BP": "{",
+    "}": "}", "EP": "}", ".": ".", "PP": ".", "%": "%", "Cut": "%", "$": "$", "@v": "$", "RollToVert": "$",
+    "!": "!", "DecWidth": "!", "_": "!", "IncWidth": "!", "SetWidth": "!", ";": ";", "IncColor": ";",
+    "SetColor": ";", "~l": "~",
+    "?P": "?P", "GetPos": "?P", "?H": "?H", "GetHead": "?H", "?U": "?U", "GetUp": "?U", "?L": "?L",
+    "GetLeft": "?L", "?E": "?E",
+}
+#: Modules that need no drawing in plantgen: generalised cylinders (plantgen skins every
+#: axis as one), ``None``.
+SILENT = {"@Gc", "StartGC", "@Ge", "EndGC", "None"}
+#: Tropism modules: the grammar's one tropism (constant arguments only).
+TROPISM = {"@Ts": "strength", "Elasticity": "strength", "@Tp": "direction", "Tropism": "direction"}
+#: L-Py drawing modules plantgen cannot draw: dropped with one warning each.
+UNDRAWN = {
+    "@O": "sphere", "Sphere": "sphere", "@o": "circle", "Circle": "circle", "@M": "move to", "MoveTo": "move to",
+    "MoveRel": "relative move", "@R": "set heading", "SetHead": "set heading", "Pinpoint": "pinpoint",
+    "PinpointRel": "pinpoint", "EulerAngles": "Euler angles", "LeftReflection": "reflection",
+    "UpReflection": "reflection", "HeadingReflection": "reflection", "@2D": "screen projection",
+    "@3D": "screen projection", "StartScreenProjection": "screen projection",
+    "EndScreenProjection": "screen projection", "@Dd": "scale", "DivScale": "scale", "@Di": "scale",
+    "MultScale": "scale", "@D": "scale", "SetScale": "scale", "nF": "n-step path", "@B": "box", "Box": "box",
+    "@b": "quad", "Quad": "quad", "@L": "label", "Label": "label", "Frame": "frame", "SetContour": "contour",
+    "SectionResolution": "section resolution", "SetGuide": "guide", "EndGuide": "guide", "Sweep": "sweep",
+    "PositionOnGuide": "guide", "LineTo": "line to", "OLineTo": "line to", "LineRel": "relative line",
+    "OLineRel": "relative line", "InterpolateColors": "colour interpolation", ",": "previous colour",
+    "DecColor": "previous colour", "?R": "right-vector query", "GetRight": "right-vector query",
+    "?F": "frame query", "GetFrame": "frame query", "MouseIns": "mouse insertion",
+    "TextureScale": "texture", "TextureUScale": "texture", "TextureVScale": "texture", "TextureVCoeff": "texture",
+    "TextureTranslation": "texture", "TextureRotation": "texture", "TextureTransformation": "texture",
+    "surface": "named surface",
+}
+#: L-Py constructs refused wherever they appear, with why.
+REFUSED_MODULES = {
+    "@g": "PlantGL shapes (@g) are not supported", "PglShape": "PlantGL shapes (PglShape) are not supported",
+    "*": "the any-module pattern '*' is not supported", "=]": "the '=]' pattern is not supported",
+    "?I": "lstring iterators (?I) are not supported", "GetIterator": "lstring iterators are not supported",
+    "GetModule": "module requests are not supported", "new": "modules created by name (new) are not supported",
+    "newmodule": "modules created by name are not supported", "or": "'or' patterns are not supported",
+    "repexp": "repetition patterns are not supported", "all": "repetition patterns are not supported",
+    "any": "the any-module pattern is not supported",
+}
+_NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | set(REFUSED_MODULES)
+_SPECIAL = sorted((n for n in _NAMED if not n[0].isalpha() and n[0] != "_" and len(n) > 1), key=len, reverse=True)
+_PLANTGEN_CHARS = {s.char for s in SYMBOLS} | set("(),:<>") | {"#"}
+_HOOKS = {"Start", "End", "StartEach", "EndEach", "StartInterpretation", "EndInterpretation", "PostDraw"}
+_SEED_CALLS = {"seed", "random.seed"}
+_MATH_ATTRS = {"pi": "pi", "e": "e"}
+_MATH_FUNCS = {"sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
+               "atan2": "atan2", "sqrt": "sqrt", "exp": "exp", "log": "log", "fabs": "abs", "abs": "abs",
+               "floor": "floor", "ceil": "ceil", "pow": "pow", "radians": "rad", "degrees": "deg",
+               "min": "min", "max": "max", "round": "round", "trunc": "trunc", "int": "trunc"}
+_RANDOM_FUNCS = {"random", "uniform", "randint", "choice", "gauss", "normalvariate"}
+_PLANTGL = re.compile(r"plantgl|openalea")
+_KEYWORD = re.compile(
+    r"^(?:(?P<axiom>Axiom)\s*:(?P<axiom_text>.*)|derivation\s+length\s*:(?P<length>.*)"
+    r"|(?P<section>production|homomorphism|interpretation|decomposition)\s*:\s*$"
+    r"|maximum\s+depth\s*:(?P<depth>.*)|group\s+(?P<group>\w+)\s*:\s*$|(?P<endgroup>endgroup)\s*$"
+    r"|(?P<end>endlsystem)\s*$|(?P<decl>ignore|consider)\s*:(?P<decl_text>.*)|module\s+(?P<module>.*)"
+    r"|initial_view\s*[=:](?P<view>.*))")
+_PRODUCE = re.compile(r"(?:^|(?<=:))(\s*)(nproduce|produce)\b(.*)$")
+
+
+@dataclass
+class LpyModel:
+    """What an ``.lpy`` file reads to: ``data``, the grammar mapping (as a YAML grammar
+    file holds it); ``warnings``, one line each; ``names``, each L-Py module renamed to a
+    plantgen symbol (its name in L-Py -> its symbol)."""
+
+    data: dict
+    warnings: tuple[str, ...] = ()
+    names: dict = field(default_factory=dict)
+
+
+@dataclass
+class _Val:
+    """A translated expression: plantgen text, whether it draws random numbers, and (a
+    local variable's) whether it was read already."""
+
+    text: str
+    rand: bool = False
+    used: bool = False
+    span: tuple | None = None      # a local holding random(): the interval its tests leave it in
+
+
+@dataclass
+class _Mod:
+    """A module as L-Py writes it: its name and its arguments (translated texts or, in a
+    pattern, names)."""
+
+    name: str
+    args: list
+    line: int
+
+
+@dataclass
+class _Path:
+    """One way through a rule's block: the tests passed ((if id, holds, text, random)) and
+    what it produces (None: the rule does not apply on this path)."""
+
+    conds: list
+    modules: list | None
+    line: int
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+# ------------------------------------------------------------------ file splitting
+def _strip_comment(line: str) -> str:
+    depth, quote = 0, None
+    for i, ch in enumerate(line):
+        if quote:
+            if ch == quote:
+                quote = None
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+        elif ch == "#" and depth <= 0:
+            return line[:i]
+    return line
+
+
+@dataclass
+class _Sections:
+    """What splitting a file's lines gathers: the module-level Python (one entry per line,
+    L-Py lines blanked), the tail after ``endlsystem``, the axiom, the rules' lines."""
+
+    python: list = field(default_factory=list)
+    tail: list = field(default_factory=list)
+    mode: str = "python"                 # python, axiom (its block), rules, tail
+    section: str | None = None
+    group: str = "0"
+    rule_lines: list = field(default_factory=list)     # the current rule: (line number, text)
+    rules: list = field(default_factory=list)          # (section, group, lines)
+    axiom: tuple | None = None
+    axiom_block: list | None = None
+    length: tuple | None = None
+    depths: list = field(default_factory=list)
+    decls: list = field(default_factory=list)
+    in_def: bool = False                 # in a function defined between the rules
+
+    def close_rule(self) -> None:
+        if self.rule_lines:
+            self.rules.append((self.section, self.group, self.rule_lines))
+            self.rule_lines = []
+
+
+class _Reader:
+    """One file's translation (see the module's notes)."""
+
+    def __init__(self, text: str, path: str, limits: Limits):
+        self.path, self.limits = path, limits
+        self.lines = text.splitlines()
+        self.warnings: list[str] = []
+        self.defines: dict[str, float] = {}
+        self.define_text: dict[str, object] = {}    # for the YAML: the value as a number
+        self.functions: dict[str, ast.AST] = {}
+        self.lazy: dict[str, str] = {}              # name -> why it cannot be used
+        self.declared: set[str] = set()
+        self.seed = 0
+        self.iterations = 1
+        self.work = 0
+        self.depth = 0
+        self.calls = 0
+        self.angle = 60.0
+        self.carried: dict[str, int] = {}       # turtle modules written with extra parameters: how many
+        self.aliases = {"random": "random", "math": "math"}
+        self.loops = 0
+        self.if_ids = 0
+        self.tropism: dict[str, object] = {}
+        self.dropped: dict[str, int] = {}
+        self.used_colour = False
+        self.rules: dict[str, list] = {"production": [], "interpretation": [], "decomposition": []}
+        self.max_depth = {"interpretation": 1, "decomposition": 1}
+
+    # ------------------------------------------------------------ errors and budgets
+    def refuse(self, line, what: str) -> LpyError:
+        where = f"{self.path}: line {line}" if line else self.path
+        return LpyError(f"{where}: {_one_line(what)}")
+
+    def spend(self, line) -> None:
+        self.work += 1
+        if self.work > self.limits.max_yaml_nodes:
+            raise LimitError(f"{self.path}: line {line}: translating the file takes over "
+                             f"{self.limits.max_yaml_nodes:,} steps ({hint('yaml_nodes')})")
+
+    # ------------------------------------------------------------ sections
+    def read(self) -> None:
+        st = _Sections()
+        for no, raw in enumerate(self.lines, 1):
+            if st.mode == "tail":
+                st.tail.append(raw)
+                st.python.append("")
+                continue
+            line = raw.rstrip()
+            code = _strip_comment(line).rstrip()
+            starts = code[:1] not in ("", " ", "\t")
+            if st.mode == "axiom":
+                if not starts:
+                    st.axiom_block.append((no, line if code.strip() else ""))
+                    st.python.append("")
+                    continue
+                st.mode = "python"
+            m = _KEYWORD.match(code) if starts else None
+            if m and not (m.group("module") is not None and "=" in code.split("(")[0]):
+                st.python.append("")
+                st.close_rule()
+                self._keyword(m, no, st)
+            elif st.mode == "rules":
+                self._rule_line(no, raw, line, code, starts, st)
+            elif _PRODUCE.search(code):
+                raise self.refuse(no, "produce outside a rule (in a function) is not supported")
+            else:
+                st.python.append(raw)
+        st.close_rule()
+        self._translate(st)
+
+    def _keyword(self, m: re.Match, no: int, st: _Sections) -> None:
+        """One L-Py line of the L-system part (``Axiom:``, ``production:`` ...)."""
+        if m.group("axiom"):
+            st.axiom = (m.group("axiom_text"), no)
+            if not st.axiom[0].strip() and st.mode == "python":
+                st.axiom_block, st.mode = [], "axiom"      # an axiom written as a block
+        elif m.group("length") is not None:
+            st.length = (m.group("length"), no)
+        elif m.group("section"):
+            name = m.group("section")
+            st.section = "interpretation" if name == "homomorphism" else name
+            st.mode = "rules"
+        elif m.group("depth") is not None:
+            key = "decomposition" if st.section == "decomposition" else "interpretation"
+            st.depths.append((m.group("depth"), no, key))
+        elif m.group("group") is not None:
+            st.group = m.group("group")
+        elif m.group("endgroup"):
+            st.group = "0"
+        elif m.group("end"):
+            st.mode = "tail"
+        elif m.group("decl"):
+            st.decls.append((m.group("decl"), m.group("decl_text"), no))
+        elif m.group("module") is not None:
+            self._declare(m.group("module"), no)
+
+    def _rule_line(self, no: int, raw: str, line: str, code: str, starts: bool, st: _Sections) -> None:
+        """A line of a rule section: a rule's header, a line of its block, or Python."""
+        st.python.append("")
+        if st.in_def and (not starts or not code.strip()):
+            st.python[-1] = raw                       # the body of a function between the rules
+            return
+        st.in_def = starts and bool(re.match(r"(def|import|from)\s", code))
+        if st.in_def:
+            st.python[-1] = raw
+            st.close_rule()
+        elif not code.strip():
+            if st.rule_lines:
+                st.rule_lines.append((no, ""))
+        elif starts and _ASSIGNMENT.match(code) and "-->" not in code:
+            st.python[-1] = raw                       # Python between the rules
+            st.close_rule()
+        elif starts:
+            st.close_rule()
+            st.rule_lines = [(no, code)]
+        elif st.rule_lines:
+            st.rule_lines.append((no, line))
+        else:
+            raise self.refuse(no, "an indented line outside any rule")
+
+    def _translate(self, st: _Sections) -> None:
+        """The sections split: module code first (the names the rules use), then the
+        axiom and the rules."""
+        self._module_code("\n".join(st.python))
+        self._initialisation(st.tail, len(self.lines) - len(st.tail) + 1)
+        if st.length is not None:
+            self.iterations = self._int(st.length[0], st.length[1], "derivation length", 0, None)
+        for text, no, key in st.depths:
+            self.max_depth[key] = self._int(text, no, "maximum depth", 1, None)
+        if st.axiom is None:
+            raise self.refuse(0, "no 'Axiom:' line, not an L-Py model")
+        if st.axiom_block is not None and any(t.strip() for _, t in st.axiom_block):
+            self.axiom = self._axiom_block(st.axiom_block, st.axiom[1])
+        else:
+            self.axiom = self._lstring(st.axiom[0], st.axiom[1], {}, pattern=False)
+        self.decls = st.decls
+        for sec, grp, lines in st.rules:
+            if grp != "0":
+                self.warnings.append(f"{self.path}: warning: line {lines[0][0]}: the rules of group {grp} are "
+                                     "ignored (plantgen applies group 0 only: useGroup is not supported)")
+                continue
+            self._rule(sec, lines)
+    def _axiom_block(self, lines: list, line: int) -> list:
+        """An axiom written as a Python block (``nproduce`` in loops): the modules of the
+        way through it whose tests, constants all, hold."""
+        for path in self._block(lines, {}):
+            ok = True
+            for _ident, holds, text, rand, at in path.conds:
+                if rand:
+                    raise self.refuse(at, "a random test in the axiom is not supported")
+                try:
+                    value = evaluate(text, self.defines) != 0
+                except ExprError as exc:
+                    raise self.refuse(at, f"axiom: {exc}") from None
+                ok = ok and value == holds
+            if ok:
+                return path.modules or []
+        raise self.refuse(line, "the axiom's block produces nothing")
+
+    def _int(self, text: str, line: int, what: str, lo: int, hi: int | None) -> int:
+        val = self._constant(text, line, what)
+        if val != int(val) or val < lo or (hi is not None and val > hi):
+            rng = f"{lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise self.refuse(line, f"{what} must be a whole number {rng}, got {val:g}")
+        if what == "derivation length":
+            self.limits.check("iterations", int(val), f"{self.path}: line {line}: derivation length")
+        return int(val)
+
+    def _constant(self, text: str, line: int, what: str) -> float:
+        node = self._parse_expr(text, line, what)
+        val = self.expr(node, {}, line)
+        if val.rand:
+            raise self.refuse(line, f"{what} draws a random number; it must be a constant")
+        try:
+            return evaluate(val.text, self.defines)
+        except ExprError as exc:
+            raise self.refuse(line, f"{what}: {exc}") from None
+
+    def _parse_expr(self, text: str, line: int, what: str) -> ast.expr:
+        if len(text) > MAX_EXPR_LENGTH:
+            raise self.refuse(line, f"{what} is longer than {MAX_EXPR_LENGTH} characters")
+        try:
+            node = _ast_parse(text.strip(), "eval").body
+            for sub in ast.walk(node):
+                if hasattr(sub, "lineno"):
+                    sub.lineno = line
+            return node
+        except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError) as exc:
+            raise self.refuse(line, f"{what}: cannot read {text.strip()[:60]!r} ({_why(exc)})") from None
+
+    def _declare(self, text: str, line: int) -> None:
+        for part in _split_top(text, ","):
+            name = re.match(r"\s*([^\s(:]+)", part)
+            if not name:
+                raise self.refuse(line, f"module declaration {part.strip()[:40]!r} names no module")
+            self.declared.add(name.group(1))
+
+    # ------------------------------------------------------------ module-level Python
+    def _parse_block(self, source: str, first_line: int, what: str) -> list[ast.stmt]:
+        try:
+            tree = _ast_parse(source)
+        except (SyntaxError, ValueError) as exc:
+            line = first_line + (getattr(exc, "lineno", None) or 1) - 1
+            raise self.refuse(line, f"{what}: Python syntax error ({_why(exc)})") from None
+        except (RecursionError, MemoryError, OverflowError) as exc:
+            raise self.refuse(first_line, f"{what}: too deeply nested to read ({_why(exc)})") from None
+        for node in ast.walk(tree):
+            if hasattr(node, "lineno"):
+                node.lineno += first_line - 1
+        return tree.body
+
+    def _module_code(self, source: str) -> None:
+        for stmt in self._parse_block(source, 1, "module-level code"):
+            self.spend(stmt.lineno)
+            self._module_stmt(stmt)
+
+    def _module_stmt(self, stmt: ast.stmt) -> None:
+        line = stmt.lineno
+        if isinstance(stmt, (ast.Import, ast.ImportFrom)):
+            names = [stmt.module or ""] if isinstance(stmt, ast.ImportFrom) else [a.name for a in stmt.names]
+            if isinstance(stmt, ast.Import):
+                for a in stmt.names:
+                    if a.asname and a.name in ("random", "math"):
+                        self.aliases[a.asname] = a.name
+            for name in names:
+                if _PLANTGL.search(name):
+                    raise self.refuse(line, f"import of {name}: PlantGL and OpenAlea are not supported")
+                if name.split(".")[0] not in ("random", "math") or (isinstance(stmt, ast.ImportFrom) and stmt.level):
+                    raise self.refuse(line, f"import of {name}: only random and math may be imported")
+            return
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1:
+            self._assign_global(stmt.targets[0], stmt.value, line)
+            return
+        if isinstance(stmt, ast.AnnAssign) and stmt.value is not None:
+            self._assign_global(stmt.target, stmt.value, line)
+            return
+        if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+            self._assign_global(stmt.target, ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value,
+                                                       lineno=line, col_offset=0), line)
+            return
+        if isinstance(stmt, ast.FunctionDef):
+            if stmt.name in _HOOKS:
+                self._hook(stmt)
+            elif stmt.decorator_list:
+                self.lazy[stmt.name] = f"function {stmt.name} (line {line}) has decorators"
+            else:
+                self.functions[stmt.name] = stmt
+                self.lazy.pop(stmt.name, None)
+            return
+        if isinstance(stmt, ast.Expr):
+            if isinstance(stmt.value, ast.Constant) and isinstance(stmt.value.value, str):
+                return                                   # a docstring
+            call = stmt.value
+            if isinstance(call, ast.Call) and _call_name(call) == "extern":
+                for kw in call.keywords:
+                    if kw.arg:
+                        self._assign_global(ast.Name(kw.arg, ast.Store()), kw.value, line)
+                return
+            if isinstance(call, ast.Call) and _call_name(call) in _SEED_CALLS:
+                self.seed = self._seed(call, line)
+                return
+            if isinstance(call, ast.Call) and _call_name(call) == "print":
+                return
+            if isinstance(call, ast.Call) and self._context_call(call, line):
+                return
+        if isinstance(stmt, (ast.Pass, ast.Assert)):
+            return
+        raise self.refuse(line, f"{_construct(stmt)} at module level is not supported "
+                                "(only constants, functions, imports of random and math, and random.seed)")
+
+    def _context_call(self, call: ast.Call, line: int) -> bool:
+        """``context().turtle.setAngleIncrement(a)`` sets the turtle's angle; another
+        call on the L-Py context is ignored with a warning. False for any other call."""
+        root = call.func
+        while isinstance(root, ast.Attribute):
+            root = root.value
+        if not (isinstance(root, ast.Call) and isinstance(root.func, ast.Name)
+                and root.func.id in ("context", "execContext", "getContext")):
+            return False
+        method = call.func.attr if isinstance(call.func, ast.Attribute) else ""
+        if method == "setAngleIncrement" and len(call.args) == 1:
+            self.angle = self._constant(ast.unparse(call.args[0]), line, "the angle increment")
+        else:
+            self.warnings.append(f"{self.path}: warning: line {line}: {ast.unparse(call.func)[:60]}() is ignored "
+                                 "(plantgen reads only the angle increment from the L-Py context)")
+        return True
+
+    def _assign_global(self, target, value, line: int) -> None:
+        if isinstance(target, ast.Tuple) and isinstance(value, ast.Tuple) and len(target.elts) == len(value.elts):
+            for t, v in zip(target.elts, value.elts, strict=True):
+                self._assign_global(t, v, line)
+            return
+        if not isinstance(target, ast.Name):
+            raise self.refuse(line, f"assignment to {_construct(target)} is not supported")
+        name = target.id
+        if isinstance(value, ast.Lambda):
+            self._forget(name)
+            self.functions[name] = value
+            return
+        try:
+            val = self.expr(value, {}, line)
+            if val.rand:
+                raise self.refuse(line, f"{name} draws a random number at module level")
+            number = evaluate(val.text, self.defines)
+            self._forget(name)
+        except LpyError as exc:
+            self._forget(name)
+            self.lazy[name] = f"{name} (line {line}) is not a number plantgen can use: " + \
+                str(exc).split(": ", 2)[-1]
+            return
+        except ExprError as exc:
+            self._forget(name)
+            self.lazy[name] = f"{name} (line {line}): {exc}"
+            return
+        self.defines[_safe(name)] = number
+
+    def _forget(self, name: str) -> None:
+        self.functions.pop(name, None)
+        self.lazy.pop(name, None)
+        self.defines.pop(_safe(name), None)
+
+    def _hook(self, fn: ast.FunctionDef) -> None:
+        for stmt in fn.body:
+            if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
+                continue
+            if isinstance(stmt, (ast.Global, ast.Assert)):
+                continue
+            if (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
+                    and _call_name(stmt.value) in _SEED_CALLS):
+                self.seed = self._seed(stmt.value, stmt.lineno)
+                continue
+            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
+                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, stmt.lineno)):
+                continue
+            raise self.refuse(stmt.lineno, f"{fn.name}() does more than seed the random generator "
+                                           f"({_construct(stmt)}): not supported")
+
+    def _seed(self, call: ast.Call, line: int) -> int:
+        if len(call.args) != 1 or call.keywords:
+            raise self.refuse(line, "random.seed takes one number here")
+        val = self._constant(ast.unparse(call.args[0]), line, "random.seed's argument")
+        if val != int(val) or not 0 <= val < 2 ** 63:
+            raise self.refuse(line, f"random.seed's argument must be a whole number from 0, got {val:g}")
+        return int(val)
+
+    def _initialisation(self, tail: list[str], first: int) -> None:
+        """``endlsystem``'s tail: the scalars of the INITIALISATION section become
+        defines (where the rules have not defined the name); the rest is ignored."""
+        text = "\n".join(tail)
+        if not text.strip():
+            return
+        try:
+            tree = _ast_parse(text)
+        except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError):
+            self.warnings.append(f"{self.path}: warning: line {first}: the code after endlsystem is not read")
+            return
+        ignored = 0
+        for node in ast.walk(tree):
+            self.spend(first)
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "scalars"
+                                                    for t in node.targets):
+                self._scalars(node.value, first + node.lineno - 1)
+            elif isinstance(node, ast.stmt) and not isinstance(node, (ast.FunctionDef, ast.If)):
+                ignored += 1
+        if ignored:
+            self.warnings.append(f"{self.path}: warning: the INITIALISATION section (line {first}) is read only "
+                                 "for its scalar parameters; materials, curves, functions and options are ignored")
+
+    def _scalars(self, node, line: int) -> None:
+        if not isinstance(node, (ast.List, ast.Tuple)):
+            return
+        for item in node.elts:
+            if (isinstance(item, ast.Tuple) and len(item.elts) >= 3 and isinstance(item.elts[0], ast.Constant)
+                    and isinstance(item.elts[0].value, str) and isinstance(item.elts[2], ast.Constant)
+                    and isinstance(item.elts[2].value, (int, float))):
+                name = item.elts[0].value
+                if _IDENT.match(name) and _safe(name) not in self.defines and name not in self.functions:
+                    value = float(item.elts[2].value)
+                    if np.isfinite(value):
+                        self.defines[_safe(name)] = value
+                        self.lazy.pop(name, None)
+
+    # ------------------------------------------------------------ expressions
+    def expr(self, node, env: dict, line: int) -> _Val:
+        """``node`` (a Python expression) as plantgen expression text."""
+        line = getattr(node, "lineno", line)
+        self.spend(line)
+        self.depth += 1
+        try:
+            if self.depth > 200:
+                raise self.refuse(line, "expression nested too deeply")
+            val = self._expr(node, env, line)
+        finally:
+            self.depth -= 1
+        if len(val.text) > MAX_EXPR_LENGTH:
+            raise self.refuse(line, f"an expression grows past {MAX_EXPR_LENGTH} characters once its "
+                                    "functions and local variables are substituted")
+        return val
+
+    def _expr(self, node, env: dict, line: int) -> _Val:
+        if isinstance(node, ast.Constant):
+            v = node.value
+            if isinstance(v, bool):
+                return _Val("1" if v else "0")
+            if isinstance(v, (int, float)):
+                if not np.isfinite(float(v)) or abs(v) > 1e300:
+                    raise self.refuse(line, "a number literal too large")
+                return _Val(repr(float(v)) if isinstance(v, float) else str(v))
+            raise self.refuse(line, f"a {type(v).__name__} value ({str(v)[:30]!r}) where plantgen needs a number")
+        if isinstance(node, ast.Name):
+            return self._name(node.id, env, line)
+        if isinstance(node, ast.Attribute):
+            base = node.value.id if isinstance(node.value, ast.Name) else None
+            if self.aliases.get(base) == "math" and node.attr in _MATH_ATTRS:
+                return _Val(_MATH_ATTRS[node.attr])
+            raise self.refuse(line, f"attribute {ast.unparse(node)[:40]!r} is not supported")
+        if isinstance(node, ast.UnaryOp):
+            a = self.expr(node.operand, env, line)
+            op = {ast.USub: "-", ast.UAdd: "+", ast.Not: "!"}.get(type(node.op))
+            if op is None:
+                raise self.refuse(line, "the operator ~ is not supported")
+            return _Val(f"{op}{_wrap(a.text)}", a.rand)
+        if isinstance(node, ast.BinOp):
+            a, b = self.expr(node.left, env, line), self.expr(node.right, env, line)
+            if isinstance(node.op, ast.FloorDiv):
+                return _Val(f"floor(({a.text}) / ({b.text}))", a.rand or b.rand)
+            op = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Mod: "%",
+                  ast.Pow: "^"}.get(type(node.op))
+            if op is None:
+                raise self.refuse(line, f"the operator {type(node.op).__name__} is not supported")
+            return _Val(f"{_wrap(a.text)} {op} {_wrap(b.text)}", a.rand or b.rand)
+        if isinstance(node, ast.BoolOp):
+            parts = [self.expr(v, env, line) for v in node.values]
+            op = " && " if isinstance(node.op, ast.And) else " || "
+            return _Val(op.join(_wrap(p.text) for p in parts), any(p.rand for p in parts))
+        if isinstance(node, ast.Compare):
+            vals = [self.expr(v, env, line) for v in (node.left, *node.comparators)]
+            ops = []
+            for op in node.ops:
+                sym = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "==",
+                       ast.NotEq: "!="}.get(type(op))
+                if sym is None:
+                    raise self.refuse(line, f"the comparison {type(op).__name__} is not supported")
+                ops.append(sym)
+            if len(ops) > 1 and any(v.rand for v in vals[1:-1]):
+                raise self.refuse(line, "a chained comparison around a random draw is not supported")
+            parts = [f"{_wrap(vals[i].text)} {ops[i]} {_wrap(vals[i + 1].text)}" for i in range(len(ops))]
+            text = parts[0] if len(parts) == 1 else " && ".join(f"({p})" for p in parts)
+            return _Val(text, any(v.rand for v in vals))
+        if isinstance(node, ast.IfExp):
+            c, a, b = (self.expr(n, env, line) for n in (node.test, node.body, node.orelse))
+            return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
+        if isinstance(node, ast.Call):
+            return self._call(node, env, line)
+        raise self.refuse(line, f"{_construct(node)} is not supported in an expression")
+
+    def _name(self, name: str, env: dict, line: int) -> _Val:
+        if name in env:
+            local = env[name]
+            if local.span is not None and local.span != (0.0, 1.0):
+                raise self.refuse(line, f"{name!r} holds a random draw that a test has narrowed; reading its "
+                                        "value after the test is not supported")
+            if local.rand:
+                if local.used:
+                    raise self.refuse(line, f"{name!r} holds a random draw and is read twice: plantgen would "
+                                            "draw it anew each time; write the draw where it is used once")
+                local.used = True
+            return _Val(_wrap(local.text), local.rand)
+        if _safe(name) in self.defines:
+            return _Val(_safe(name))
+        if name in ("pi", "e"):
+            return _Val(name)
+        if name in ("True", "False"):
+            return _Val("1" if name == "True" else "0")
+        if name in self.lazy:
+            raise self.refuse(line, self.lazy[name])
+        raise self.refuse(line, f"name {name!r} is not defined (or not a number plantgen can use)")
+
+    def _call(self, node: ast.Call, env: dict, line: int) -> _Val:
+        name = _call_name(node)
+        if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
+            raise self.refuse(line, f"keyword or starred arguments in a call to {name or 'a function'}")
+        if name is None:
+            raise self.refuse(line, f"call of {ast.unparse(node.func)[:40]!r} is not supported")
+        if name in self.functions:
+            return self._inline(name, node.args, env, line)
+        base, _, attr = name.rpartition(".")
+        base = self.aliases.get(base, base)
+        if base in ("", "random") and attr in _RANDOM_FUNCS:
+            return self._random(attr, node.args, env, line)
+        if base in ("", "math") and attr in _MATH_FUNCS:
+            args = [self.expr(a, env, line) for a in node.args]
+            fn = _MATH_FUNCS[attr]
+            rand = any(a.rand for a in args)
+            if fn in ("min", "max") and len(args) > 2:
+                text = args[0].text
+                for a in args[1:]:
+                    text = f"{fn}({text}, {a.text})"
+                return _Val(text, rand)
+            if fn == "log" and len(args) == 2:
+                return _Val(f"log({args[0].text}) / log({args[1].text})", rand)
+            if fn == "round" and len(args) != 1:
+                raise self.refuse(line, "round() with digits is not supported")
+            return _Val(f"{fn}({', '.join(a.text for a in args)})", rand)
+        if name == "sum" and len(node.args) == 1 and isinstance(node.args[0], (ast.List, ast.Tuple, ast.ListComp,
+                                                                                  ast.GeneratorExp)):
+            terms = self._terms(node.args[0], env, line) or [_Val("0")]
+            return _Val(" + ".join(_wrap(t.text) for t in terms), any(t.rand for t in terms))
+        if base == "" and attr in ("float", "bool", "abs") and len(node.args) == 1:
+            a = self.expr(node.args[0], env, line)
+            return _Val({"float": f"({a.text})", "bool": f"(({a.text}) != 0)", "abs": f"abs({a.text})"}[attr], a.rand)
+        if _PLANTGL.search(name) or name[:1].isupper():
+            raise self.refuse(line, f"call of {name}(): PlantGL and L-Py objects are not supported")
+        if name in ("open", "exec", "eval", "compile", "__import__", "input", "getattr", "setattr", "globals"):
+            raise self.refuse(line, f"call of {name}(): file access and dynamic code are not supported")
+        if name in self.lazy:
+            raise self.refuse(line, self.lazy[name])
+        raise self.refuse(line, f"call of {name}() is not supported")
+
+    def _terms(self, seq, env: dict, line: int) -> list[_Val]:
+        """The values of a written list, or of ``[e for NAME in range(...)]`` with a
+        constant count (unrolled, as a loop)."""
+        if isinstance(seq, (ast.List, ast.Tuple)):
+            return [self.expr(e, env, line) for e in seq.elts]
+        gen = seq.generators[0]
+        it = gen.iter
+        if (len(seq.generators) != 1 or gen.ifs or not isinstance(gen.target, ast.Name) or not isinstance(it, ast.Call)
+                or _call_name(it) != "range" or not 1 <= len(it.args) <= 3):
+            raise self.refuse(line, "a comprehension other than '[e for NAME in range(...)]' is not supported")
+        try:
+            bounds = [evaluate(self.expr(a, env, line).text, self.defines) for a in it.args]
+        except ExprError:
+            bounds = [0.5]
+        if any(b != int(b) for b in bounds):
+            raise self.refuse(line, "range() in a comprehension must have a constant, whole count")
+        values = range(*map(int, bounds)) if bounds[-1] != 0 or len(bounds) < 3 else range(0)
+        self._count_loops(len(values), line)
+        return [self.expr(seq.elt, {**env, gen.target.id: _Val(str(i))}, line) for i in values]
+
+    def _random(self, fn: str, args: list, env: dict, line: int) -> _Val:
+        vals = [self.expr(a, env, line) for a in args] if fn != "choice" else []
+        need = {"random": 0, "uniform": 2, "randint": 2, "gauss": 2, "normalvariate": 2, "choice": 1}[fn]
+        if len(args) != need:
+            raise self.refuse(line, f"{fn}() takes {need} argument(s) here")
+        if fn == "random":
+            return _Val("random()", True)
+        if fn == "uniform":
+            return _Val(f"uniform({vals[0].text}, {vals[1].text})", True)
+        if fn == "randint":
+            return _Val(f"floor(uniform({vals[0].text}, ({vals[1].text}) + 1))", True)
+        if fn in ("gauss", "normalvariate"):
+            return _Val(f"normal({vals[0].text}, {vals[1].text})", True)
+        seq = args[0]
+        if not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 31:
+            raise self.refuse(line, "choice() takes a written list of 1 to 31 numbers here")
+        opts = [self.expr(e, env, line) for e in seq.elts]
+        if len(opts) == 1:
+            return opts[0]
+        return _Val(f"choose(floor(random() * {len(opts)}), {', '.join(o.text for o in opts)})", True)
+
+    def _inline(self, name: str, args: list, env: dict, line: int) -> _Val:
+        fn = self.functions[name]
+        params = fn.args
+        if params.vararg or params.kwarg or params.kwonlyargs or params.posonlyargs:
+            raise self.refuse(line, f"function {name}: only plain parameters are supported")
+        formals = [a.arg for a in params.args]
+        defaults = params.defaults
+        if not len(formals) - len(defaults) <= len(args) <= len(formals):
+            raise self.refuse(line, f"{name}() takes {len(formals)} argument(s), got {len(args)}")
+        values = [self.expr(a, env, line) for a in args]
+        values += [self.expr(d, {}, line) for d in defaults[len(defaults) - (len(formals) - len(args)):]]
+        local = {f: _Val(v.text, v.rand) for f, v in zip(formals, values, strict=True)}
+        self.calls += 1
+        if self.calls > MAX_CALL_DEPTH:
+            raise self.refuse(line, f"function calls nested deeper than {MAX_CALL_DEPTH}: a recursive function "
+                                    f"such as {name}() cannot be translated")
+        try:
+            if isinstance(fn, ast.Lambda):
+                return self.expr(fn.body, local, line)
+            return self._body_value(fn.body, local, name)
+        finally:
+            self.calls -= 1
+
+    def _body_value(self, stmts: list, env: dict, name: str) -> _Val:
+        """The value a function body returns: assignments substituted, each ``if``
+        a ``select`` between the values its branches (and what follows them) return."""
+        for i, stmt in enumerate(stmts):
+            self.spend(stmt.lineno)
+            if isinstance(stmt, ast.Return):
+                if stmt.value is None:
+                    raise self.refuse(stmt.lineno, f"function {name}() returns no value")
+                return self.expr(stmt.value, env, stmt.lineno)
+            if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+                v = self.expr(stmt.value, env, stmt.lineno)
+                env = {**env, stmt.targets[0].id: _Val(v.text, v.rand)}
+                continue
+            if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+                v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, stmt.lineno)
+                env = {**env, stmt.target.id: _Val(v.text, v.rand)}
+                continue
+            if isinstance(stmt, ast.If):
+                c = self.expr(stmt.test, env, stmt.lineno)
+                rest = stmts[i + 1:]
+                a = self._body_value(stmt.body + rest, _copy(env), name)
+                b = self._body_value(stmt.orelse + rest, _copy(env), name)
+                return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
+            if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
+                                                           and isinstance(stmt.value, ast.Constant)):
+                continue
+            raise self.refuse(stmt.lineno, f"{_construct(stmt)} in function {name}() is not supported "
+                                           "(only assignments, if and return)")
+        raise self.refuse(stmts[-1].lineno if stmts else 0, f"function {name}() may end without returning a value")
+
+    # ------------------------------------------------------------ L-strings
+    def _lstring(self, text: str, line: int, env: dict, pattern: bool) -> list[_Mod]:
+        """An L-string as modules; arguments translated (or, in a pattern, names)."""
+        out = []
+        for name, args in self._scan(text, line):
+            self.spend(line)
+            if name in REFUSED_MODULES:
+                raise self.refuse(line, REFUSED_MODULES[name])
+            if name in SILENT:
+                continue
+            if name in UNDRAWN:
+                self.dropped[name] = self.dropped.get(name, 0) + 1
+                continue
+            if name in TROPISM:
+                self._tropism(name, args, line, pattern)
+                continue
+            if name.startswith("~") and name != "~l":
+                self.dropped[name] = self.dropped.get(name, 0) + 1
+                continue
+            out.append(_Mod(name, self._args(name, args, line, env, pattern), line))
+            if len(out) > MAX_SUCCESSOR:
+                raise self.refuse(line, f"an L-string of more than {MAX_SUCCESSOR:,} modules")
+        return out
+
+    def _args(self, name: str, args, line: int, env: dict, pattern: bool):
+        if args is None:
+            return []
+        if pattern:
+            names = []
+            for a in args:
+                a = a.strip()
+                if _NUMBER.fullmatch(a) and hasattr(self, "pattern_conds"):
+                    names.append(f"k{len(self.pattern_conds)}_")       # a value to match: a condition
+                    self.pattern_conds.append(f"{names[-1]} == {float(a)!r}")
+                    continue
+                if not _IDENT.match(a):
+                    raise self.refuse(line, f"pattern argument {a[:30]!r} of {name}: only names are supported "
+                                            "in a predecessor or context")
+                names.append(_safe(a))
+            return names
+        return [self.expr(self._parse_expr(a, line, f"argument of {name}"), env, line) for a in args]
+
+    def _tropism(self, name: str, args, line: int, pattern: bool) -> None:
+        key = TROPISM[name]
+        if pattern or not args:
+            return
+        try:
+            vals = [float(evaluate(self.expr(self._parse_expr(a, line, name), {}, line).text, self.defines))
+                    for a in args]
+        except (ExprError, LpyError):
+            self.warnings.append(f"{self.path}: warning: line {line}: {name} with arguments that change is not "
+                                 "drawn (plantgen has one tropism per grammar)")
+            return
+        value = vals[0] if key == "strength" else vals
+        if key == "direction":
+            if len(vals) != 3:
+                return
+            value = [vals[1], vals[2], vals[0]]          # L-Py's z up to plantgen's y up
+            if not any(value):
+                return
+        if key in self.tropism and self.tropism[key] != value:
+            self.warnings.append(f"{self.path}: warning: line {line}: {name} set again to another value; plantgen "
+                                 "has one tropism per grammar and keeps the first")
+            return
+        self.tropism[key] = value
+
+    def _scan(self, text: str, line: int):
+        """(name, raw argument texts or None) for each module of an L-string."""
+        i, n = 0, len(text)
+        while i < n:
+            ch = text[i]
+            if ch.isspace():
+                i += 1
+                continue
+            if ch.isalpha() or ch == "_":
+                j = i
+                while j < n and (text[j].isalnum() or text[j] == "_"):
+                    j += 1
+                word = text[i:j]
+                k = j
+                while k < n and text[k] == " ":
+                    k += 1
+                if word in self.declared or word in _NAMED or (k < n and text[k] == "(") or len(word) == 1:
+                    name, i = word, j
+                else:
+                    name = next((word[:m] for m in range(len(word), 1, -1)
+                                 if word[:m] in self.declared or word[:m] in _NAMED), word[0])
+                    i += len(name)
+            else:
+                name = next((s for s in _SPECIAL if text.startswith(s, i)), None)
+                if name is None and ch in "~" and i + 1 < n and text[i + 1].isalpha():
+                    name = text[i:i + 2]
+                if name is None:
+                    name = ch
+                i += len(name)
+                if name in "()," and name != ",":
+                    raise self.refuse(line, f"unexpected {name!r} in L-string {text.strip()[:60]!r}")
+            args = None
+            k = i
+            while k < n and text[k] == " ":
+                k += 1
+            if k < n and text[k] == "(":
+                end = _closing(text, k)
+                if end < 0:
+                    raise self.refuse(line, f"unclosed '(' after {name!r}")
+                inner = text[k + 1:end]
+                args = _split_top(inner, ",") if inner.strip() else []
+                i = end + 1
+            yield name, args
+
+    # ------------------------------------------------------------ rules
+    def _rule(self, section: str, lines: list) -> None:
+        no, header = lines[0]
+        if "-->" in header:
+            lhs, rhs = header.split("-->", 1)
+            if any(t.strip() for _, t in lines[1:]):
+                raise self.refuse(lines[1][0], "an indented block after a '-->' rule")
+            body = None
+        elif len(_split_top(header, ":")) > 1:
+            parts = _split_top(header, ":")
+            lhs, rest, rhs = parts[0], ":".join(parts[1:]), None
+            body = ([(no, "    " + rest.strip())] if rest.strip() else []) + lines[1:]
+        else:
+            raise self.refuse(no, f"not a rule (expected 'predecessor --> successor' or 'predecessor :' and a "
+                                  f"block): {header.strip()[:60]!r}")
+        self.pattern_conds: list[str] = []
+        left, pred, right = self._predecessor(lhs, no)
+        env = {p: _Val(p) for m in (*left, pred, *right) for p in m.args}
+        self.if_ids += 1
+        fixed = [(self.if_ids, True, c, False, no) for c in self.pattern_conds]
+        if body is None:
+            succ = self._successor(rhs, no, env)
+            self._emit(section, left, pred, right, [_Path(fixed, succ, no)], no)
+            return
+        paths = self._block(body, env)
+        for path in paths:
+            path.conds = fixed + path.conds
+        self._emit(section, left, pred, right, paths, no)
+
+    def _predecessor(self, text: str, line: int):
+        if "<<" in text or ">>" in text:
+            raise self.refuse(line, "the extended contexts '<<' and '>>' are not supported")
+        left_src, right_src = "", ""
+        if "<" in text:
+            left_src, text = text.split("<", 1)
+        if ">" in text:
+            text, right_src = text.split(">", 1)
+        pred = self._lstring(text, line, {}, pattern=True)
+        if len(pred) != 1:
+            raise self.refuse(line, f"a predecessor of {len(pred)} modules: plantgen rewrites one module per rule")
+        left = self._lstring(left_src, line, {}, pattern=True)
+        right = self._lstring(right_src, line, {}, pattern=True)
+        if any(m.name in "[]" for m in (*left, *right)):
+            raise self.refuse(line, "brackets in a context are not supported")
+        return left, pred[0], right
+
+    def _successor(self, text: str, line: int, env: dict) -> list[_Mod]:
+        text = text.strip()
+        if text in ("*", ""):
+            return []
+        return self._lstring(text, line, env, pattern=False)
+
+    def _block(self, body: list, env: dict) -> list[_Path]:
+        first = body[0][0] if body else 0
+        texts = [t for _, t in body]
+        source = textwrap.dedent("\n".join(t.expandtabs(4) for t in texts))
+        self.lstrings: list[tuple[str, int]] = []
+        out_lines = []
+        for k, text in enumerate(source.split("\n")):
+            m = _PRODUCE.search(text)
+            if m:
+                self.lstrings.append((_strip_comment(m.group(3)), first + k))
+                fn = "__nproduce__" if m.group(2) == "nproduce" else "__produce__"
+                text = text[:m.start()] + f"{m.group(1)}{fn}({len(self.lstrings) - 1})"
+            out_lines.append(text)
+        stmts = self._parse_block("\n".join(out_lines), first, "rule block")
+        paths: list[_Path] = []
+        live = self._run(stmts, [(env, [], [])], paths)
+        for _env, conds, pending in live:   # the block's end: what nproduce gave, if anything
+            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first))
+        return paths
+
+    def _run(self, stmts: list, states: list, paths: list) -> list:
+        """Run ``stmts`` symbolically from each state (env, conds, pending modules):
+        paths ending in produce go to ``paths``; the states still running come back."""
+        for stmt in stmts:
+            if not states:
+                break
+            self.spend(stmt.lineno)
+            line = stmt.lineno
+            nxt = []
+            if isinstance(stmt, ast.If):
+                for env, conds, pending in states:
+                    self.if_ids += 1                    # one test per state: a way through the rule
+                    ident = self.if_ids
+                    split = self._uniform_test(stmt.test, env)
+                    if split is not None:
+                        nxt += self._split(stmt, split, (env, conds, pending), paths)
+                        continue
+                    c = self.expr(stmt.test, env, line)
+                    yes = self._run(stmt.body, [(_copy(env), [*conds, (ident, True, c.text, c.rand, line)],
+                                                 list(pending))], paths)
+                    no = self._run(stmt.orelse, [(_copy(env), [*conds, (ident, False, c.text, c.rand, line)],
+                                                  list(pending))], paths)
+                    nxt += yes + no
+            elif isinstance(stmt, ast.For):
+                nxt = self._for(stmt, states, paths)
+            elif (fork := self._choices(stmt)) is not None:
+                name, values = fork
+                self.if_ids += 1
+                choice = (self.if_ids, True, None, 1.0 / len(values), line)
+                nxt = [({**_copy(env), name: _Val(v)}, [*conds, choice], list(pending))
+                       for env, conds, pending in states for v in values]
+            else:
+                for env, conds, pending in states:
+                    state = self._simple(stmt, env, conds, pending, paths)
+                    if state is not None:
+                        nxt.append(state)
+            states = nxt
+        return states
+
+    def _uniform_test(self, test, env: dict):
+        """``r < c`` (or ``<=``, ``>``, ``>=``, either side) with ``r`` a local holding
+        ``random()`` and ``c`` a constant: (r, the interval where the test holds)."""
+        if not (isinstance(test, ast.Compare) and len(test.ops) == 1):
+            return None
+        left, right, op = test.left, test.comparators[0], type(test.ops[0])
+        if isinstance(right, ast.Name) and right.id in env and env[right.id].span is not None:
+            left, right = right, left
+            op = {ast.Lt: ast.Gt, ast.LtE: ast.GtE, ast.Gt: ast.Lt, ast.GtE: ast.LtE}.get(op)
+        if not (isinstance(left, ast.Name) and left.id in env and env[left.id].span is not None) or op not in (
+                ast.Lt, ast.LtE, ast.Gt, ast.GtE):
+            return None
+        try:
+            c = evaluate(self.expr(right, {}, test.lineno).text, self.defines)
+        except (LpyError, ExprError):
+            return None
+        lo, hi = env[left.id].span
+        t = min(max(c, lo), hi)
+        below, above = (lo, t), (t, hi)
+        return left.id, (below, above) if op in (ast.Lt, ast.LtE) else (above, below)
+
+    def _split(self, stmt: ast.If, split, state, paths: list) -> list:
+        """An ``if`` on a uniform draw: its branches become stochastic alternatives, each
+        as likely as the part of the draw's interval it keeps."""
+        name, (yes, no) = split
+        env, conds, pending = state
+        lo, hi = env[name].span
+        out = []
+        for body, (a, b) in ((stmt.body, yes), (stmt.orelse, no)):
+            weight = (b - a) / (hi - lo) if hi > lo else 0.0
+            if weight <= 0:
+                continue
+            self.if_ids += 1
+            branch_env = _copy(env)
+            branch_env[name].span = (a, b)
+            out += self._run(body, [(branch_env, [*conds, (self.if_ids, True, None, weight, stmt.lineno)],
+                                     list(pending))], paths)
+        return out
+
+    def _choices(self, stmt) -> tuple[str, list[str]] | None:
+        """``NAME = randint(a, b)`` or ``NAME = choice([...])`` with constants: the name
+        and the values it may take, each as likely (the rule becomes stochastic
+        alternatives, one per value); None for any other statement."""
+        if not (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
+                and isinstance(stmt.value, ast.Call)):
+            return None
+        values = self._choice_values(stmt.value)
+        return None if values is None else (stmt.targets[0].id, values)
+
+    def _choice_values(self, call: ast.Call) -> list[str] | None:
+        name = _call_name(call) or ""
+        fn = self.functions.get(name)
+        if isinstance(fn, ast.Lambda) and isinstance(fn.body, ast.Call):   # nb = lambda o: randint(3, 5)
+            return self._choice_values(fn.body)
+        base, _, attr = name.rpartition(".")
+        if self.aliases.get(base, base) not in ("", "random") or attr not in ("randint", "choice") or name in \
+                self.functions or len(call.args) != (2 if attr == "randint" else 1) or call.keywords:
+            return None
+        try:
+            if attr == "randint":
+                lo, hi = (evaluate(self.expr(a, {}, call.lineno).text, self.defines) for a in call.args)
+                if lo != int(lo) or hi != int(hi) or not 1 <= hi - lo + 1 <= 32:
+                    return None
+                return [str(k) for k in range(int(lo), int(hi) + 1)]
+            seq = call.args[0]
+            if not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 32:
+                return None
+            vals = [self.expr(e, {}, call.lineno) for e in seq.elts]
+            return None if any(v.rand for v in vals) else [v.text for v in vals]
+        except (LpyError, ExprError):
+            return None
+
+    def _simple(self, stmt, env, conds, pending, paths):
+        line = stmt.lineno
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) in (
+                "__produce__", "__nproduce__"):
+            text, at = self.lstrings[stmt.value.args[0].value]
+            mods = pending + self._successor(text, at, env)
+            if len(mods) > MAX_SUCCESSOR:
+                raise self.refuse(line, f"a rule produces more than {MAX_SUCCESSOR:,} modules")
+            if _call_name(stmt.value) == "__produce__":
+                paths.append(_Path(conds, mods, line))
+                return None
+            return env, conds, mods
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+            v = self.expr(stmt.value, env, line)
+            uniform = v.text == "random()"           # a draw its tests split into alternatives
+            return {**env, stmt.targets[0].id: _Val(v.text, v.rand, span=(0.0, 1.0) if uniform else None)}, \
+                conds, pending
+        if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+            v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, line)
+            return {**env, stmt.target.id: _Val(v.text, v.rand)}, conds, pending
+        if isinstance(stmt, ast.Return):
+            if stmt.value is not None:
+                raise self.refuse(line, "return with a value in a rule (use produce)")
+            paths.append(_Path(conds, pending or None, line))    # what nproduce gave, as L-Py does
+            return None
+        if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
+                                                       and isinstance(stmt.value, ast.Constant)):
+            return env, conds, pending
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) == "print":
+            return env, conds, pending
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call):
+            name = _call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
+            raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported")
+        raise self.refuse(line, f"{_construct(stmt)} in a rule is not supported")
+
+    def _for(self, stmt: ast.For, states: list, paths: list) -> list:
+        line = stmt.lineno
+        it = stmt.iter
+        if (stmt.orelse or not isinstance(stmt.target, ast.Name) or not isinstance(it, ast.Call)
+                or _call_name(it) != "range" or not 1 <= len(it.args) <= 3):
+            raise self.refuse(line, "a for loop other than 'for NAME in range(...)' is not supported")
+        if any(isinstance(n, (ast.Break, ast.Continue)) for n in ast.walk(stmt)):
+            raise self.refuse(line, "break and continue are not supported")
+        out = []
+        counts = self._choice_values(it.args[0]) if len(it.args) == 1 and isinstance(it.args[0], ast.Call) else None
+        if counts is not None:                 # range(randint(a, b)): one alternative per count
+            self.if_ids += 1
+            choice = (self.if_ids, True, None, 1.0 / len(counts), line)
+            for env, conds, pending in states:
+                for k in counts:
+                    n = int(float(k))
+                    out += self._unroll(stmt, max(n, 0), range(n), (_copy(env), [*conds, choice], list(pending)),
+                                        paths)
+            return out
+        for env, conds, pending in states:
+            bounds = []
+            for a in it.args:
+                v = self.expr(a, env, line)
+                try:
+                    x = evaluate(v.text, self.defines) if not v.rand else None
+                except ExprError:
+                    x = None
+                if x is None and len(it.args) == 1 and not v.rand:
+                    out += self._dynamic_for(stmt, v.text, (env, conds, pending), paths)
+                    break
+                if x is None or x != int(x):
+                    raise self.refuse(line, "range() of a random draw or of a value that is not whole: plantgen "
+                                            "unrolls loops of a known count only")
+                bounds.append(int(x))
+            else:
+                count = len(range(*bounds)) if bounds[-1] != 0 or len(bounds) < 3 else 0
+                out += self._unroll(stmt, count, range(*bounds) if count else (), (env, conds, pending), paths)
+        return out
+
+    def _unroll(self, stmt: ast.For, count: int, values, state, paths: list) -> list:
+        self._count_loops(count, stmt.lineno)
+        cur = [state]
+        for i in values:
+            cur = [({**e, stmt.target.id: _Val(str(i))}, c, p) for e, c, p in cur]
+            cur = self._run(stmt.body, cur, paths)
+        return cur
+
+    def _count_loops(self, count: int, line: int) -> None:
+        self.loops += count
+        if self.loops > MAX_LOOP_ITERATIONS:
+            raise LimitError(f"{self.path}: line {line}: loops unroll to over {MAX_LOOP_ITERATIONS:,} "
+                             "iterations in all")
+
+    def _dynamic_for(self, stmt: ast.For, count: str, state, paths: list) -> list:
+        """``for i in range(n)`` with ``n`` a module parameter: one way through the rule
+        per count from 0 to :data:`MAX_DYNAMIC_COUNT`, each under the test that ``n``
+        gives that count; a larger count leaves the module unchanged, with a warning."""
+        env, conds, pending = state
+        self.if_ids += 1
+        ident = self.if_ids
+        times = f"max(0, ceil({count}))"
+        out = []
+        for k in range(MAX_DYNAMIC_COUNT + 1):
+            cond = (ident * 1000 + k, True, f"{times} == {k}", False, stmt.lineno)
+            out += self._unroll(stmt, k, range(k), (_copy(env), [*conds, cond], list(pending)), paths)
+        paths.append(_Path([*conds, (ident * 1000 + MAX_DYNAMIC_COUNT + 1, True, f"{times} > {MAX_DYNAMIC_COUNT}",
+                                     False, stmt.lineno)], None, stmt.lineno))
+        self.warnings.append(f"{self.path}: warning: line {stmt.lineno}: range({count[:40]}) is unrolled for counts "
+                             f"up to {MAX_DYNAMIC_COUNT}; a module asking more is left unchanged")
+        return out
+
+    def _emit(self, section, left, pred, right, paths: list[_Path], line: int) -> None:
+        """Plantgen rules from a block's paths, in order: a test whose other branch always
+        produces is left out of the later paths (the earlier rule took those modules)."""
+        leaky = {(c[0], c[1]) for p in paths if p.modules is None for c in p.conds}
+        emitted = []
+        for p in paths:
+            if p.modules is None:
+                continue
+            conds = []
+            for ident, holds, text, rand, at in p.conds:
+                if not holds and (ident, True) not in leaky:
+                    continue           # the modules where it holds were all rewritten already
+                conds.append((ident, holds, text, rand, at))
+            emitted.append((conds, p))
+        seen: dict = {}
+        for conds, _ in emitted:
+            for ident, _holds, text, rand, at in conds:
+                if rand and text is not None:
+                    seen[ident] = seen.get(ident, 0) + 1
+                    if seen[ident] > 1:
+                        raise self.refuse(at, "a random test on which more than one way through the rule "
+                                              "depends: plantgen would draw it anew for each")
+        rules, weights = [], {}
+        for conds, p in emitted:
+            tests = [c for c in conds if c[2] is not None]
+            text = " && ".join(_wrap(t) if h else f"!{_wrap(t)}" for _, h, t, _, _ in tests)
+            if len(tests) == 1 and tests[0][1]:
+                text = tests[0][2]
+            weight = float(np.prod([c[3] for c in conds if c[2] is None]))
+            weights[text] = weights.get(text, 0.0) + weight
+            rules.append((left, pred, right, [text] if text else [], p.modules, p.line,
+                          weight if len(conds) > len(tests) else None))
+        for r in rules:
+            if r[6] is not None and abs(weights[r[3][0] if r[3] else ""] - 1) > 1e-9:
+                raise self.refuse(r[5], "a random choice (randint, choice) in a branch that may leave the module "
+                                        "unchanged: plantgen's stochastic rules always rewrite it")
+        self.rules[section] += rules
+
+    # ------------------------------------------------------------ output
+    def build(self, stem: str) -> LpyModel:
+        names: dict[str, str] = {}
+        everything = list(self.axiom)
+        for sec in self.rules.values():
+            for left, pred, right, _, succ, _, _ in sec:
+                everything += [*left, pred, *right, *succ]
+        self.carried = {m.name: max(len(m.args), self.carried.get(m.name, 0)) for m in everything
+                        if m.name in TURTLE and len(m.args) > _turtle_params(TURTLE[m.name])}
+        user = [m.name for m in everything if m.name not in TURTLE or m.name in self.carried]
+        singles = {n for n in user if len(n) == 1}
+        free = (c for c in _CANDIDATES if c not in singles and c not in _PLANTGEN_CHARS)
+        for n in user:
+            if n in names:
+                continue
+            if len(n) == 1 and n.isalpha() and n not in _PLANTGEN_CHARS:
+                names[n] = n
+            else:
+                names[n] = next(free, None)
+                if names[n] is None:
+                    raise self.refuse(0, "more distinct modules than plantgen has symbols for")
+        self.names = names
+        data: dict = {"name": stem, "description": f"read from the L-Py file {Path(self.path).name}",
+                      "seed": self.seed, "iterations": self.iterations}
+        if self.defines:
+            data["defines"] = {k: (int(v) if float(v).is_integer() and abs(v) < 2 ** 53 else v)
+                               for k, v in self.defines.items()}
+        axiom = self._text(self.axiom)
+        data["axiom"] = axiom if axiom.strip() else "[]"
+        data["rules"] = [self._rule_text(r) for r in self.rules["production"]]
+        for key in ("decomposition", "interpretation"):
+            if self.rules[key]:
+                data[key] = [self._rule_text(r) for r in self.rules[key]]
+                data[f"{key}_depth"] = self.max_depth[key]
+        for name, n in self.carried.items():   # a turtle module carrying more parameters: drawn as itself
+            sym, keep = TURTLE[name], _turtle_params(TURTLE[name])
+            params = [f"p{i}" for i in range(n)]
+            drawn = (["leaf"] if sym == "~" else []) + params[:keep]
+            data.setdefault("interpretation", []).append(
+                f"{names[name]}({', '.join(params)}) -> {sym}" + (f"({', '.join(drawn)})" if drawn else ""))
+        ignore = self._ignore()
+        if ignore:
+            data["ignore"] = ignore
+        turtle = {"angle": self.angle}
+        if self.tropism:
+            turtle["tropism"] = {"direction": self.tropism.get("direction", [0.0, -1.0, 0.0]),
+                                 "strength": self.tropism.get("strength", 0.0)}
+        data["turtle"] = turtle
+        if self.used_colour:
+            data["materials"] = ["bark", "leaf", *(f"colour{i}" for i in range(2, 16))]
+        for name, count in self.dropped.items():
+            what = UNDRAWN.get(name, "surface")
+            self.warnings.append(f"{self.path}: warning: {name!r} ({what}) is not drawn by plantgen; "
+                                 f"{count:,} place(s) in the file dropped")
+        return LpyModel(data, tuple(self.warnings), {k: v for k, v in names.items() if k != v})
+
+    def _ignore(self) -> str:
+        syms = []
+        for kind, text, line in self.decls:
+            mods = self._lstring(text, line, {}, pattern=True)
+            mods = [m for m in mods if m.name in self.names or m.name in TURTLE]    # unused names match nothing
+            if kind == "ignore":
+                syms += [self._symbol(m.name) for m in mods]
+            else:
+                keep = {self._symbol(m.name) for m in mods}
+                used = {self._symbol(m.name) for m in self.axiom}
+                for sec in self.rules.values():
+                    for r in sec:
+                        used |= {self._symbol(m.name) for m in (*r[0], r[1], *r[2], *r[4])}
+                syms += sorted(s for s in used if s not in keep and s not in "[]%" and len(s) == 1)
+        return "".join(dict.fromkeys(s for s in syms if len(s) == 1 and s not in "[]"))
+
+    def _symbol(self, name: str, nargs: int = 0) -> str:
+        """The plantgen symbol of an L-Py module written with ``nargs`` parameters."""
+        if name in self.carried and nargs > _turtle_params(TURTLE[name]):
+            return self.names[name]
+        return TURTLE.get(name) or self.names[name]
+
+    def _text(self, mods: list[_Mod], pattern: bool = False) -> str:
+        out = []
+        for m in mods:
+            sym = self._symbol(m.name, len(m.args))
+            args = [a if isinstance(a, str) else a.text for a in m.args]
+            if m.name in ("_", "IncWidth") and not args:
+                self.dropped[m.name] = self.dropped.get(m.name, 0) + 1
+                continue
+            if sym == ";":
+                self.used_colour = True
+                if len(args) > 1:
+                    self.dropped["SetColor"] = self.dropped.get("SetColor", 0) + 1
+                    continue
+            if m.name == "~l" and sym == "~":
+                args = ["leaf", *args[:1]]
+            if sym in ("?P", "?H", "?U", "?L") and len(args) == 3:
+                args = [args[1], args[2], args[0]]          # L-Py's (x, y, z) with z up: plantgen's (y, z, x)
+            if sym in ("{", "}", "F", "f", "+", "-", "&", "^", "\\", "/", "!") and len(args) > {
+                    "{": 0, "}": 0, "F": 2}.get(sym, 1):
+                args = args[:{"{": 0, "}": 0, "F": 2}.get(sym, 1)]
+            out.append(sym + (f"({', '.join(args)})" if args else ""))
+        return " ".join(out)
+
+    def _rule_text(self, rule) -> object:
+        left, pred, right, cond, succ, line, p = rule
+        lhs = self._text([pred], True)
+        if left:
+            lhs = f"{self._text(left, True)} < {lhs}"
+        if right:
+            lhs = f"{lhs} > {self._text(right, True)}"
+        if cond:
+            lhs = f"{lhs} : {cond[0]}"
+        text = f"{lhs} -> {self._text(succ)}".rstrip()
+        if len(text) > 100_000:
+            raise self.refuse(line, "a rule over 100,000 characters once translated")
+        return text if p is None else {"rule": text, "p": p}
+
+
+# ------------------------------------------------------------------ helpers
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
+_NUMBER = re.compile(r"-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_ASSIGNMENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\s*(?:[-+*/]?=)(?!=)")
+_ATOM = re.compile(r"[A-Za-z_][A-Za-z_0-9]*|\d+\.?\d*(?:e[-+]?\d+)?")
+_RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"and", "or", "not"}
+_CANDIDATES = ("ABCDEHIJKMNOPQRSTVWXYZabcdeghijklmnopqrstuvwxyz"
+               + "".join(chr(c) for c in range(0x391, 0x3AA) if chr(c).isalpha())
+               + "".join(chr(c) for c in range(0x3B1, 0x3CA))
+               + "".join(chr(c) for c in range(0x410, 0x450)))
+
+
+def _turtle_params(sym: str) -> int:
+    """How many parameters plantgen's turtle symbol ``sym`` takes at most (``~``: after
+    the surface's name)."""
+    arity = ARITY.get(sym)
+    return (max(arity) - (sym == "~")) if arity else 0
+
+
+def _safe(name: str) -> str:
+    """A name plantgen's expressions can hold: one that is a function or constant there
+    gets a trailing underscore."""
+    return name + "_" if name in _RESERVED else name
+
+
+def _atomic(text: str) -> bool:
+    """Whether ``text`` needs no parentheses as an operand: a name, a number, a call or
+    a parenthesised whole."""
+    if _ATOM.fullmatch(text):
+        return True
+    m = re.match(r"[A-Za-z_][A-Za-z_0-9]*\(|\(", text)
+    return bool(m) and _closing(text, m.end() - 1) == len(text) - 1
+
+
+def _wrap(text: str) -> str:
+    return text if _atomic(text) else f"({text})"
+
+
+def _copy(env: dict) -> dict:
+    return {k: _Val(v.text, v.rand, v.used, v.span) for k, v in env.items()}
+
+
+def _call_name(call: ast.Call) -> str | None:
+    f = call.func
+    if isinstance(f, ast.Name):
+        return f.id
+    if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name):
+        return f"{f.value.id}.{f.attr}"
+    return None
+
+
+def _construct(node) -> str:
+    """How a message names a Python construct."""
+    names = {ast.While: "a while loop", ast.With: "a with statement", ast.Try: "a try statement",
+             ast.ClassDef: "a class", ast.Global: "a global statement", ast.Lambda: "a lambda",
+             ast.List: "a list", ast.Tuple: "a tuple", ast.Dict: "a dict", ast.Set: "a set",
+             ast.Subscript: "indexing", ast.ListComp: "a comprehension", ast.GeneratorExp: "a generator",
+             ast.DictComp: "a comprehension", ast.SetComp: "a comprehension", ast.JoinedStr: "an f-string",
+             ast.Yield: "yield", ast.Await: "await", ast.Starred: "a starred expression",
+             ast.NamedExpr: "the := operator", ast.Delete: "del", ast.Raise: "raise", ast.Assert: "assert",
+             ast.For: "a for loop", ast.If: "an if statement", ast.FunctionDef: "a function definition",
+             ast.Return: "return", ast.Import: "import", ast.ImportFrom: "import", ast.Nonlocal: "nonlocal",
+             ast.AsyncFunctionDef: "an async function", ast.Match: "a match statement"}
+    if isinstance(node, ast.Expr) and isinstance(node.value, ast.Call):
+        return f"a call of {_call_name(node.value) or 'a function'}()"
+    if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
+        return "an assignment"
+    return names.get(type(node), type(node).__name__)
+
+
+def _scan_depth(text: str, start: int = 0):
+    """(index, character, bracket depth after it, whether it lies in a quote) for each
+    character of ``text`` from ``start``."""
+    depth, quote = 0, None
+    for j in range(start, len(text)):
+        ch = text[j]
+        quoted = quote is not None
+        if quote:
+            if ch == quote:
+                quote = None
+        elif ch in "'\"":
+            quote = ch
+        elif ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        yield j, ch, depth, quoted or quote is not None
+
+
+def _closing(text: str, k: int) -> int:
+    """The index of the bracket closing the one at ``k`` (-1: none)."""
+    return next((j for j, ch, depth, quoted in _scan_depth(text, k) if ch in ")]}" and not quoted and depth == 0), -1)
+
+
+def _split_top(text: str, sep: str) -> list[str]:
+    """``text`` split at each ``sep`` outside brackets and quotes."""
+    out, last = [], 0
+    for j, ch, depth, quoted in _scan_depth(text):
+        if ch == sep and depth == 0 and not quoted:
+            out.append(text[last:j])
+            last = j + 1
+    out.append(text[last:])
+    return out
+
+
+def _ast_parse(source: str, mode: str = "exec") -> ast.Module | ast.Expression:
+    """``ast.parse`` without the warnings Python's compiler prints for odd literals."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ast.parse(source, mode=mode)
+
+
+def _why(exc: BaseException) -> str:
+    return _one_line(getattr(exc, "msg", None) or str(exc) or exc.__class__.__name__)[:100]
+
+
+# ------------------------------------------------------------------ entry points
+def parse_lpy(text: str, path: str = "<lpy>", limits: Limits | None = None) -> LpyModel:
+    """Translate the text of an ``.lpy`` file (see the module's notes)."""
+    limits = limits or default_limits
+    reader = _Reader(text, path, limits)
+    try:
+        reader.read()
+        return reader.build(Path(path).stem)
+    except RecursionError:
+        raise LpyError(f"{path}: nested too deeply to translate") from None
+
+
+def read_lpy(path: str | Path, limits: Limits | None = None) -> LpyModel:
+    """Read and translate an ``.lpy`` file (at most ``max_input_bytes``)."""
+    limits = limits or default_limits
+    data = read_input(path, LpyError, max_bytes=limits.max_input_bytes, limit="input_bytes", what="L-Py")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise LpyError(f"{path}: cannot read (not UTF-8 text: byte {exc.start})") from None
+    return parse_lpy(text, str(path), limits)
+
+
+def to_yaml(model: LpyModel) -> str:
+    """The grammar mapping as a YAML grammar file, its first lines saying where it came
+    from and which modules were renamed."""
+    head = [f"# Converted from the L-Py model {Path(model.data.get('name', 'model')).name}.lpy by plantgen convert."]
+    if model.names:
+        head.append("# Modules renamed to plantgen's one-character symbols:")
+        head += [f"#   {k} -> {v}" for k, v in model.names.items()]
+    body = yaml.safe_dump(model.data, sort_keys=False, allow_unicode=True, width=10_000, default_flow_style=False)
+    return "\n".join(head) + "\n" + body
+
+
+def read_grammar_data(path: str | Path, error: type[PlantgenError] = PlantgenError,
+                      limits: Limits | None = None) -> tuple[object, tuple[str, ...]]:
+    """A grammar file's mapping and the warnings its reading gave: an ``.lpy`` file
+    translated, any other read as YAML (the one place a grammar path is dispatched)."""
+    if Path(path).suffix.lower() == LPY_SUFFIX:
+        model = read_lpy(path, limits)
+        return model.data, model.warnings
+    return read_yaml(path, error, limits), ()

@@ -1,0 +1,261 @@
+// Traversal of the bounding volume hierarchy (plantgen.geometry.bvh): the one ray search
+// of every GPU query (render --method rt, scan, plantgen.trace). Included by programs that
+// trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
+//
+// Data (plantgen/gl/trace.py uploads it, std430 SSBOs):
+//   bvh_nodes    2 vec4 per node: (lo.xyz, first), (hi.xyz, count), first and count as int
+//                bits; internal node: count 0, children first and first + 1; leaf: count
+//                primitives at bvh_prims[first...]. Boxes are float32 rounded outward
+//                from the float64 build, relative to their frame's origin.
+//   bvh_prims    primitive ids in leaf order: rows 0..rows-1, then leaf triangles.
+//   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
+//   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
+//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim, row, triangle offsets),
+//                (rows, the top level's node offset (plant 0's), 0, 0): a plant's nodes'
+//                `first` and its primitive ids are its
+//                own; the offsets place them in the shared arrays. The caller skips
+//                an empty hierarchy (no nodes).
+//   With TWO_LEVEL (an instanced scene): a top level over the copies, its nodes after the
+//   plants' in bvh_nodes (one array, one load a word), bvh_top_prims (copy ids) and
+//   bvh_copies, 4 vec4 a copy:
+//   the world -> plant-frame map as three rows of a 3x4 matrix (rotation^T / scale,
+//   -rotation^T offset / scale, the offset formed in float64 on the CPU relative to the
+//   frame origin), then (plant index as int bits, 0, 0, 0). Without TWO_LEVEL the model
+//   is plant 0 in the frame itself.
+//
+// A ray is o + t*d in the frame (origin relative); t is in units of |d| and keeps its
+// value in a copy's frame (the map is affine). Hits: the rows through row.glsl's row_hit
+// after re-centring (the ray caster's test, with RELIEF its march; bvh_row_hit), the triangles by
+// Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
+// child first (by slab entry), nodes entered at or beyond the best t skipped.
+
+#ifndef BVH_GLSL
+#define BVH_GLSL
+
+#include "row.glsl"
+
+// Bindings 3..9 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
+#ifndef BVH_STACK
+#define BVH_STACK 64
+#endif
+
+layout(std430, binding = 3) readonly buffer BvhNodes { vec4 bvh_nodes[]; };
+layout(std430, binding = 4) readonly buffer BvhPrims { int bvh_prims[]; };
+layout(std430, binding = 5) readonly buffer BvhRows { vec4 bvh_rows[]; };
+layout(std430, binding = 6) readonly buffer BvhTris { vec4 bvh_tris[]; };
+layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
+#if defined TWO_LEVEL
+layout(std430, binding = 8) readonly buffer BvhTopPrims { int bvh_top_prims[]; };
+layout(std430, binding = 9) readonly buffer BvhCopies { vec4 bvh_copies[]; };
+#endif
+
+// A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
+// copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face: FACE_LO or
+// FACE_HI for a hit on a row's open end (a cap), else FACE_CONE (a triangle too).
+struct BvhHit { float t; int prim; int copy; int face; };
+
+BvhHit bvh_no_hit(float t_max) { return BvhHit(t_max, -1, -1, FACE_CONE); }
+
+// Row `row` of plant `plant` as a Frustum (its record's six vec4).
+Frustum bvh_frustum(int plant, int row) {
+    int i = 6 * (bvh_plants[2 * plant].z + row);
+    return frustum_from_record(bvh_rows[i], bvh_rows[i + 1], bvh_rows[i + 2], bvh_rows[i + 3],
+                               bvh_rows[i + 4], bvh_rows[i + 5]);
+}
+
+// The ray caster's row test (row.glsl's row_hit: the analytic skin, with RELIEF the relief
+// march) after re-centring the ray at its point nearest the axis segment, as raycast.glsl
+// does. t > t_min (and with RELIEF the march stops at t_max); NO_HIT on a miss; `face` FACE_LO or FACE_HI for a hit on an open end's
+// disc (a cap), else FACE_CONE. `distance`, `footprint_scale`: row_hit's.
+float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance, float footprint_scale,
+                  out int face) {
+    float t_shift = recenter_shift(f, o, d);
+    float t_hit;
+    bool cap;
+    int samples;
+    if (!row_hit(f, o + t_shift * d, d, t_min - t_shift, t_max - t_shift, distance + t_shift, footprint_scale,
+                 t_hit, face, cap, samples)) return NO_HIT;
+    face = cap ? face : FACE_CONE;
+    return t_shift + t_hit;
+}
+
+// Möller-Trumbore, both faces, as plantgen.geometry.scan._triangle_hits (the grazing
+// guard |det| > TOL_TRIANGLE_GRAZING * |e1||e2||d|), with the ray first moved to the
+// point nearest v0 (float32 keeps the digits of a far eye). t > t_min; NO_HIT on a miss.
+float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, float t_min) {
+    float t_shift = dot(v0 - o, d) / dot(d, d);
+    vec3 s = o + t_shift * d - v0;
+    vec3 p = cross(d, e2);
+    float det = dot(e1, p);
+    if (!(abs(det) > TOL_TRIANGLE_GRAZING * size * length(d))) return NO_HIT;
+    float inv = 1.0 / det;
+    float u = dot(s, p) * inv;
+    vec3 q = cross(s, e1);
+    float v = dot(d, q) * inv;
+    float t = t_shift + dot(e2, q) * inv;
+    return u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min ? t : NO_HIT;
+}
+
+// Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
+                   float footprint_scale, bool triangles, out int face) {
+    face = FACE_CONE;
+    int rows = bvh_plants[2 * plant + 1].x;
+    if (prim < rows)
+        return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, t_max, distance, footprint_scale, face);
+    if (!triangles) return NO_HIT;
+    int i = 3 * (bvh_plants[2 * plant].w + prim - rows);
+    vec4 v0 = bvh_tris[i];
+    return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
+}
+
+// The slab test: the parameter interval of the ray inside box [lo, hi] (empty: x > y).
+// inv_d = 1 / d with zero components replaced by a tiny signed value; the far end grows by
+// a few ulps (pbrt's 1 + 2*gamma(3)) so that rounding loses no ray the box holds.
+vec2 bvh_slabs(vec3 lo, vec3 hi, vec3 o, vec3 inv_d) {
+    vec3 t0 = (lo - o) * inv_d, t1 = (hi - o) * inv_d;
+    vec3 near = min(t0, t1), far = max(t0, t1);
+    float t_near = max(max(near.x, near.y), near.z);
+    float t_far = min(min(far.x, far.y), far.z);
+    return vec2(t_near, t_far + 4.0e-7 * abs(t_far));
+}
+
+vec3 bvh_inverse_dir(vec3 d) {
+    vec3 safe = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
+    return 1.0 / safe;
+}
+
+#if defined TWO_LEVEL
+// Copy `copy`'s world -> plant-frame map applied to a point (w = 1) or a direction (w = 0).
+vec3 bvh_to_copy(int copy, vec4 x) {
+    int i = 4 * copy;
+    return vec3(dot(bvh_copies[i], x), dot(bvh_copies[i + 1], x), dot(bvh_copies[i + 2], x));
+}
+
+// A normal n in copy `copy`'s frame as a unit world normal (the map's transpose).
+vec3 bvh_normal_from_copy(int copy, vec3 n) {
+    int i = 4 * copy;
+    return normalize(bvh_copies[i].xyz * n.x + bvh_copies[i + 1].xyz * n.y + bvh_copies[i + 2].xyz * n.z);
+}
+
+int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[4 * copy + 3].x); }
+
+#endif
+
+// Word k (0: lo, first; 1: hi, count) of node i (the top level's nodes follow the plants').
+vec4 bvh_node(int i, int k) { return bvh_nodes[2 * i + k]; }
+
+// Stack entries: index * 4 + kind.
+const int BVH_TOP = 0;      // a node of the top level (world ray)
+const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ray)
+const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
+
+// Whether the ray's interval [t_min, best] meets node i's box.
+bool bvh_enter(int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t_near) {
+    vec2 span = bvh_slabs(bvh_node(i, 0).xyz, bvh_node(i, 1).xyz, o, inv_d);
+    t_near = span.x;
+    return span.x <= span.y && span.y > t_min && span.x < best_t;
+}
+
+// The search: the closest hit (any_hit false) or any hit (the first found) of the ray
+// o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
+// the eye's distance from the ray's point at t = 0 (world units, |d| = 1: the relief
+// march's pixel footprint; 0 for the eye's own rays). `triangles`: false skips the leaf
+// triangles (the eye's rays of render --method rt, whose leaves are rasterised as RC's). One loop
+// walks both levels: a top-level leaf pushes its copies; popping a copy moves the ray into
+// the copy's frame and descends its plant's BLAS (whose nodes are popped before anything
+// pushed earlier, so the copy's ray stays the right one until they are done).
+BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance, bool triangles) {
+    BvhHit best = bvh_no_hit(t_max);
+    int stack[BVH_STACK];
+    int sp = 0;
+#if defined TWO_LEVEL
+    stack[sp++] = 4 * 0 + BVH_TOP;
+#else
+    stack[sp++] = 4 * 0 + BVH_COPY;
+#endif
+    vec3 inv_w = bvh_inverse_dir(d);
+    vec3 oc = o, dc = d, inv_c = inv_w;   // the ray in the current copy's frame
+    float scale_c = 1.0;                  // the copy's units per world unit (|dc| / |d|)
+    int copy = 0, plant = 0;
+    ivec4 offsets = bvh_plants[0];
+    // the node being walked (-1: take the next entry) and its level's ray
+    int node = -1, kind = BVH_PLANT, base = 0;
+    bool top = false;
+    vec3 ro = o, rd = d, inv = inv_w;
+    while (true) {
+        // Walk the nodes (cheap) until a leaf of primitives is reached or nothing is left;
+        // then test that leaf's primitives (dear) outside this loop: on SIMD hardware (a
+        // GPU's warp, llvmpipe's lanes) the primitive test then runs once per leaf for the
+        // lanes together, not masked at every node step (Aila and Laine's while-while).
+        int leaf_first = 0, leaf_count = 0;
+        while (true) {
+            if (node < 0) {
+                if (sp == 0) break;
+                int entry = stack[--sp];
+                kind = entry & 3;
+                node = entry >> 2;
+                if (kind == BVH_COPY) {
+                    copy = node;
+#if defined TWO_LEVEL
+                    plant = bvh_copy_plant(copy);
+                    oc = bvh_to_copy(copy, vec4(o, 1.0));
+                    dc = bvh_to_copy(copy, vec4(d, 0.0));
+                    inv_c = bvh_inverse_dir(dc);
+                    scale_c = length(dc) / length(d);
+#endif
+                    offsets = bvh_plants[2 * plant];
+                    node = 0;
+                    kind = BVH_PLANT;
+                }
+                top = kind == BVH_TOP;
+                ro = top ? o : oc;
+                rd = top ? d : dc;
+                inv = top ? inv_w : inv_c;
+                base = top ? bvh_plants[1].y : offsets.x;
+                float t_near;
+                if (!bvh_enter(base + node, ro, inv, t_min, best.t, t_near)) { node = -1; continue; }
+            }
+            int first = floatBitsToInt(bvh_node(base + node, 0).w);
+            int count = floatBitsToInt(bvh_node(base + node, 1).w);
+            if (count > 0) {
+                node = -1;
+#if defined TWO_LEVEL
+                if (top) {
+                    for (int k = count - 1; k >= 0; --k)
+                        if (sp < BVH_STACK) stack[sp++] = 4 * bvh_top_prims[first + k] + BVH_COPY;
+                    continue;
+                }
+#endif
+                leaf_first = first;
+                leaf_count = count;
+                break;
+            }
+            float t_left, t_right;
+            bool left = bvh_enter(base + first, ro, inv, t_min, best.t, t_left);
+            bool right = bvh_enter(base + first + 1, ro, inv, t_min, best.t, t_right);
+            if (left && right) {
+                bool left_near = t_left <= t_right;
+                if (sp < BVH_STACK) stack[sp++] = 4 * (left_near ? first + 1 : first) + kind;
+                node = left_near ? first : first + 1;
+            } else if (left || right) {
+                node = left ? first : first + 1;
+            } else {
+                node = -1;
+            }
+        }
+        if (leaf_count == 0) break;
+        for (int k = 0; k < leaf_count; ++k) {
+            int prim = bvh_prims[offsets.y + leaf_first + k];
+            int face;
+            float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
+            if (t < best.t) {
+                best = BvhHit(t, prim, copy, face);
+                if (any_hit) return best;
+            }
+        }
+    }
+    return best;
+}
+
+#endif

@@ -1,0 +1,119 @@
+"""The documentation: its reference tables are generated from the code that holds each
+fact, every page's generated tables expand, and the site builds with warnings as errors
+(a broken link, anchor or API reference fails)."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from dataclasses import MISSING, fields, is_dataclass
+
+import pytest
+from _docs import DOCS, REPO, hooks, page, table_after
+
+from plantgen.knobs import knob_fields
+from plantgen.settings import RenderSettings
+
+GENERATED_ON = {
+    "reference/grammar.md": ["symbols"],
+    "reference/settings.md": ["settings_summary", "settings"],
+    "reference/limits.md": ["limits"],
+    "reference/formats.md": ["export_formats", "manifest"],
+    "reference/models.md": ["shipped"],
+    "how-to/view.md": ["viewer_keys"],
+}
+
+
+def _pages() -> list[str]:
+    if not DOCS.is_dir():
+        pytest.skip("needs the source tree's docs/")
+    return sorted(str(p.relative_to(DOCS)) for p in DOCS.rglob("*.md") if "gallery" not in p.parts)
+
+
+@pytest.mark.parametrize(("name", "tables"), sorted(GENERATED_ON.items()))
+def test_reference_pages_take_their_tables_from_the_code(name, tables):
+    raw = (DOCS / name).read_text(encoding="utf-8") if (DOCS / name).is_file() else pytest.skip(f"no docs/{name}")
+    assert re.findall(r"^<!-- generated: ([a-z_]+) -->$", raw, re.M) == tables
+    text = page(name)
+    assert "<!-- generated:" not in text
+    for table in tables:
+        assert hooks().TABLES[table]() in text
+
+
+def test_every_marker_names_a_table_and_every_page_expands():
+    for name in _pages():
+        text = page(name)          # an unknown marker raises
+        assert "<!-- generated:" not in text, name
+
+
+def test_an_unknown_marker_fails_the_build():
+    with pytest.raises(KeyError, match="unknown generated table 'nope'"):
+        hooks().expand("<!-- generated: nope -->")
+
+
+def _settings_values(cls) -> set[type]:
+    """The settings dataclasses ``cls`` holds, nested ones included."""
+    out = {cls}
+    for f in fields(cls):
+        default = f.default
+        if default is MISSING and f.default_factory is not MISSING:
+            default = f.default_factory()
+        if is_dataclass(default) and not isinstance(default, type):
+            out |= _settings_values(type(default))
+    return out
+
+
+def test_the_settings_reference_lists_every_knob_render_takes():
+    text = page("reference/settings.md")
+    for cls in _settings_values(RenderSettings):
+        for _, knob, _default in knob_fields(cls):
+            assert f"`{knob.flag or knob.option}` | `{knob.name}` |" in text, (cls.__name__, knob.option)
+
+
+def test_the_limits_reference_explains_every_limit():
+    from plantgen.limits import Limits
+
+    rows = table_after(page("reference/limits.md"), "| limit | default | bounds |")[2:]
+    assert [row.split("|")[1].strip().strip("`") for row in rows] == list(Limits.names())
+    assert all(row.split("|")[3].strip() for row in rows), "a limit without its meaning in Limits' docstring"
+
+
+def test_the_api_reference_names_existing_objects():
+    for target in re.findall(r"^::: ([\w.]+)$", page("reference/api.md"), re.M):
+        module, _, name = target.rpartition(".")
+        try:
+            obj = getattr(importlib.import_module(module), name)
+        except ModuleNotFoundError:
+            obj = importlib.import_module(target)
+        assert obj.__doc__, target
+
+
+DOCS_EXTRA = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python", "mkdocs_click")
+
+
+def _has_docs_extra() -> bool:
+    try:
+        return all(importlib.util.find_spec(name) is not None for name in DOCS_EXTRA)
+    except ModuleNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not _has_docs_extra(), reason="the docs extra is not installed (pip install '.[docs]')")
+def test_the_site_builds_strictly(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+                          cwd=REPO, capture_output=True, text=True, timeout=300, env=_env())
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    html = (tmp_path / "site" / "reference" / "grammar" / "index.html").read_text(encoding="utf-8")
+    assert "<table>" in html and "turn left by a degrees" in html
+    cli = (tmp_path / "site" / "reference" / "cli" / "index.html").read_text(encoding="utf-8")
+    assert "--linear-steps" in cli and "plantgen render" in cli
+
+
+def _env() -> dict:
+    env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH", "")]))
+    return env

@@ -1,0 +1,320 @@
+"""L-Py files (.lpy): read by translation into plantgen's grammar, never run.
+
+Each .lpy file of tests/data/lpy (written for these tests from L-Py's documented syntax)
+has a YAML twin of the same name, the grammar a plantgen user writes for the same model;
+the ABOP ones are the shipped grammars. Each grows to the same skeleton as its twin, array
+for array; ``plantgen convert`` writes YAML that grows the same again; what plantgen
+cannot translate is refused in one line naming the construct and its line, fast and in
+bounded memory (the hostile runner's subprocess).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from _cli import run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from test_hostile import assert_refused, run_cases
+
+from plantgen.errors import PlantgenError
+from plantgen.lsystem.derive import derive
+from plantgen.lsystem.expr import EvalContext, compile_expr
+from plantgen.lsystem.grammar import load_grammar, parse_grammar
+from plantgen.lsystem.lpy import MAX_LOOP_ITERATIONS, LpyError, parse_lpy, read_lpy
+from plantgen.pipeline import grow, grow_file
+
+DATA = Path(__file__).with_name("data") / "lpy"
+GRAMMARS = Path(__file__).resolve().parents[1] / "grammars"
+ARRAYS = ("start", "end", "r_start", "r_end", "parent", "continues", "material")
+CONSTRUCTS = sorted(p.stem for p in DATA.glob("*.lpy") if not p.stem.startswith("abop_"))
+ABOP = sorted(p.stem for p in DATA.glob("abop_*.lpy"))
+
+
+def twin(stem: str) -> Path:
+    return GRAMMARS / f"{stem}.yaml" if stem.startswith("abop_") else DATA / f"{stem}.yaml"
+
+
+def assert_same_skeleton(a, b) -> None:
+    assert len(a.start) > 0
+    for name in ARRAYS:
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_every_construct_and_abop_grammar_has_a_twin():
+    assert set(ABOP) == {"abop_bush", "abop_monopodial", "abop_sympodial", "abop_ternary"}
+    assert len(CONSTRUCTS) >= 10
+    for stem in CONSTRUCTS + ABOP:
+        assert twin(stem).is_file(), stem
+
+
+@pytest.mark.parametrize("stem", ABOP + CONSTRUCTS)
+def test_an_lpy_model_grows_the_skeleton_of_its_yaml_twin(stem):
+    assert_same_skeleton(grow(DATA / f"{stem}.lpy"), grow(twin(stem)))
+
+
+@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition"])
+def test_convert_round_trip_grows_the_same_skeleton(tmp_path, stem):
+    out = tmp_path / f"{stem}.yaml"
+    code, stdout, err = run_cli("convert", DATA / f"{stem}.lpy", "-o", out)
+    assert code == 0, err
+    assert out.is_file() and "rules" in stdout
+    assert_same_skeleton(grow(out), grow(DATA / f"{stem}.lpy"))
+    assert parse_grammar(yaml.safe_load(out.read_text()), str(out)).rules
+
+
+def test_convert_names_renamed_modules_and_refuses_what_it_cannot_express(tmp_path):
+    code, stdout, _ = run_cli("convert", DATA / "turtle_names.lpy", "-o", tmp_path / "t.yaml")
+    assert code == 0 and "Apex -> " in stdout
+    assert "#   Apex -> " in (tmp_path / "t.yaml").read_text()
+    bad = tmp_path / "bad.lpy"
+    bad.write_text("Axiom: A\nproduction:\nA << B --> F F\n")
+    code, _, err = run_cli("convert", bad, "-o", tmp_path / "bad.yaml")
+    assert code == 2 and err.count("\n") == 1 and "line 3" in err and "'<<'" in err
+    assert not (tmp_path / "bad.yaml").exists()
+    code, _, err = run_cli("convert", GRAMMARS / "abop_bush.yaml", "-o", tmp_path / "x.yaml")
+    assert code == 2 and ".lpy" in err
+
+
+def test_lpy_is_an_input_of_grow_export_load_grammar_and_scenes(tmp_path):
+    assert grow_file(DATA / "queries.lpy").sources == (DATA / "queries.lpy",)   # what `view` watches
+    code, out, err = run_cli("grow", DATA / "turtle_names.lpy", "-o", tmp_path / "t.npz")
+    assert code == 0 and (tmp_path / "t.npz").is_file()
+    assert err.count("'@O' (sphere) is not drawn") == 1          # the dropped module, warned of once
+    code, _, err = run_cli("export", DATA / "abop_sympodial.lpy", "-o", tmp_path / "t.ply")
+    assert code == 0, err
+    assert load_grammar(DATA / "abop_ternary.lpy").turtle.tropism_strength == pytest.approx(0.22)
+    (tmp_path / "m.lpy").write_text((DATA / "abop_monopodial.lpy").read_text())
+    (tmp_path / "scene.yaml").write_text("name: s\ninstances:\n  - {grammar: m.lpy, position: [0, 0, 0]}\n"
+                                         "  - {grammar: m.lpy, position: [5, 0, 0]}\n")
+    scene = grow_file(tmp_path / "scene.yaml")
+    assert len(scene.scene.skeleton().start) == 2 * len(grow(tmp_path / "m.lpy").start)
+
+
+def test_an_lpy_model_renders(tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "t.png"
+    code, _, err = run_cli("render", DATA / "abop_ternary.lpy", "-o", out, "--size", "64x64")
+    assert code == 0, err
+    pixels = np.asarray(Image.open(out).convert("L"), dtype=float)
+    assert pixels.std() > 5            # the tree, not an empty frame
+
+
+def test_select_and_choose_evaluate_only_the_chosen_value():
+    ctx = EvalContext({"x": np.array([-1.0, 4.0])}, np.random.default_rng(0), 2)
+    assert compile_expr("select(x > 0, sqrt(x), 0)", {"x"})(ctx).tolist() == [0.0, 2.0]
+    assert compile_expr("choose(x, 10, 20, 30)", {"x"})(ctx).tolist() == [10.0, 30.0]   # clamped
+    assert compile_expr("trunc(-1.5) + round(2.5)")(ctx) == 1.0
+
+
+def test_the_viewer_grows_an_lpy_model_and_watches_its_file(tmp_path):
+    from plantgen.viewer.session import ViewOptions
+    from plantgen.viewer.watch import FileWatcher
+
+    path = tmp_path / "m.lpy"
+    path.write_text((DATA / "block_if.lpy").read_text())
+    model = ViewOptions(input=path, size=(32, 32), watch=True, shots=tmp_path).prepare()
+    assert model.grown.sources == (path,) and len(model.grown.skeleton.start) == 21
+    watcher = FileWatcher(model.grown.sources, settle_s=0.0)
+    assert watcher.poll(0.0) is None
+    path.write_text(path.read_text().replace("derivation length: 6", "derivation length: 3"))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    assert watcher.poll(1.0) is not None or watcher.poll(2.0) is not None
+    assert len(ViewOptions(input=path, size=(32, 32), shots=tmp_path).prepare().grown.skeleton.start) < 21
+
+
+def test_initialisation_scalars_become_defines_and_groups_are_warned_of():
+    model = read_lpy(DATA / "groups_init.lpy")
+    assert model.data["defines"] == {"len": 0.6, "turn": 35}
+    assert any("INITIALISATION" in w for w in model.warnings)
+    assert any("group 1" in w for w in model.warnings)
+
+
+def test_query_coordinates_are_l_pys_with_z_up():
+    """?P(x, y, z) in L-Py has z up: its z is plantgen's y, so the apex stops once its
+    internodes reach a height of 3 (plantgen's z stays 0 in this model: read as z, it
+    would never stop)."""
+    skel = grow(DATA / "queries.lpy")
+    long = np.isclose(np.linalg.norm(skel.end - skel.start, axis=1), 1.0)
+    assert 3 <= long.sum() < 10
+    assert skel.end[long, 1].max() >= 3 > skel.start[long, 1].max()
+
+
+def test_a_random_test_with_else_is_one_draw_per_module():
+    """``if random() < 0.4: ... else: ...`` becomes a conditional rule and an unconditional
+    one after it: the else branch draws nothing, so about 40 % of the modules fork."""
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n"
+            "    if random() < 0.4:\n        produce B\n    else:\n        produce C\nendlsystem\n")
+    data = parse_lpy(text, "p.lpy").data
+    assert data["rules"] == ["A : random() < 0.4 -> B", "A -> C"]
+    ms = derive(parse_grammar(data, "p.lpy"))
+    counts = {s: int(np.sum(ms.sym == i)) for i, s in enumerate(ms.symbols)}
+    assert counts.get("A", 0) == 0 and counts["B"] + counts["C"] == 4000
+    assert abs(counts["B"] / 4000 - 0.4) < 0.04          # 5 standard deviations
+
+
+def test_a_loop_over_a_module_parameter_is_unrolled_per_count():
+    text = ("Axiom: A(0) A(3) A(20)\nproduction:\nA(n) :\n    for i in range(n):\n        nproduce F(1)\n"
+            "    produce B\nendlsystem\n")
+    model = parse_lpy(text, "r.lpy")
+    ms = derive(parse_grammar(model.data, "r.lpy"))
+    assert ms.to_text() == "BF(1)F(1)F(1)BA(20)"          # counts over 16 leave the module as it is
+    assert any("range(n)" in w for w in model.warnings)
+
+
+def test_a_turtle_module_carrying_more_parameters_turns_as_its_first_says(tmp_path):
+    """L-Py lets ``-(a, t)`` carry an age t; plantgen's ``-`` takes one angle, so it becomes a
+    module of its own, drawn as ``-(a)`` by an interpretation rule."""
+    path = tmp_path / "c.lpy"
+    path.write_text("Axiom: -(30, 0) F(1) -(10) F(1)\nderivation length: 2\nproduction:\n"
+                    "-(a, t) --> -(a + 10, t + 1)\nendlsystem\n")
+    data = read_lpy(path).data
+    assert data["interpretation"][-1].endswith("-> -(p0)")
+    skel = grow(path)
+    heading = (skel.end - skel.start) / np.linalg.norm(skel.end - skel.start, axis=1)[:, None]
+    angles = np.degrees(np.arccos(np.clip(heading[:, 1], -1, 1)))
+    assert angles == pytest.approx([50.0, 60.0])
+
+
+def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
+    """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
+    module: the rule becomes three alternatives of probability 1/3, each with n fixed."""
+    text = ("from random import randint, choice\nAxiom: " + " ".join(["A"] * 3000) + "\nderivation length: 1\n"
+            "production:\nA :\n    n = randint(2, 4)\n    for i in range(n):\n        nproduce [ +(360 / n) B ]\n"
+            "    produce C(choice([1, 2]))\nendlsystem\n")
+    data = parse_lpy(text, "s.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([1 / 3] * 3)
+    ms = derive(parse_grammar(data, "s.lpy"))
+    b = int(np.sum(ms.sym == ms.symbols.index("B")))
+    assert b / 3000 == pytest.approx(3.0, abs=0.1)            # the mean of 2, 3 and 4
+    plus = ms.params[ms.sym == ms.symbols.index("+"), 0]
+    assert set(np.round(plus, 6)) == {180.0, 120.0, 90.0}       # each branch turns by 360 / its own n
+
+
+def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    n = randint(1, 2)\n"
+            "    if random() < 0.25:\n        produce B(n)\n    else:\n        produce C(n)\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "t.lpy").data, "t.lpy"))
+    b = ms.sym == ms.symbols.index("B")
+    assert abs(b.mean() - 0.25) < 0.04 and len(ms) == 4000
+    assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
+
+
+def test_python_between_the_rules_is_module_code():
+    text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
+            "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")
+    ms = derive(parse_grammar(parse_lpy(text, "b.lpy").data, "b.lpy"))
+    assert ms.to_text() == "F(2)F(8)F(14)A(10)"
+
+
+def test_one_draw_tested_in_an_elif_chain_is_a_stochastic_rule():
+    """``r = random()`` then ``if r < 0.2 ... elif r < 0.7 ... else`` is ABOP's stochastic
+    rule: alternatives of probability 0.2, 0.5 and 0.3."""
+    text = ("Axiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\nA :\n    r = random()\n"
+            "    if r < 0.2:\n        produce B\n    elif 0.7 > r:\n        produce C\n    else:\n        produce D\n"
+            "endlsystem\n")
+    data = parse_lpy(text, "r.lpy").data
+    assert [r["p"] for r in data["rules"]] == pytest.approx([0.2, 0.5, 0.3])
+    ms = derive(parse_grammar(data, "r.lpy"))
+    share = [np.mean(ms.sym == ms.symbols.index(c)) for c in "BCD"]
+    assert share == pytest.approx([0.2, 0.5, 0.3], abs=0.04)
+
+
+def test_functions_are_inlined_into_whitelisted_expressions():
+    text = ("from math import *\nk = 2\ndef f(x):\n    y = x * k\n    if y > 3:\n        return sqrt(y)\n"
+            "    return -y\ng = lambda a, b=1: a + b if a > 0 else b\nAxiom: F(f(1)) F(f(4)) F(g(2)) F(g(-1))\n")
+    axiom = parse_lpy(text, "f.lpy").data["axiom"]
+    values = []
+    for arg in axiom.split("F(")[1:]:
+        expr = compile_expr(arg.rsplit(")", 1)[0], {"k"})
+        values.append(float(expr(EvalContext({"k": 2.0}, np.random.default_rng(0), 1))))
+    assert values == [-2.0, pytest.approx(np.sqrt(8.0)), 3.0, 1.0]
+
+
+REFUSALS = [
+    ("import os\nAxiom: F\n", ("line 1", "import of os")),
+    ("from openalea.plantgl.all import *\nAxiom: F\n", ("line 1", "PlantGL")),
+    ("def StartEach():\n    global n\n    n = 1\nAxiom: F\n", ("line 3", "StartEach() does more than seed")),
+    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() does more than seed")),
+    ("Axiom: A\nproduction:\nA :\n    f = open('/etc/passwd')\n    produce F\n", ("line 4", "open()", "file access")),
+    ("Axiom: A\nproduction:\nA :\n    while True:\n        nproduce F\n    produce A\n", ("line 4", "while loop")),
+    ("Axiom: A\nproduction:\nA --> @g(Cylinder(1))\n", ("line 3", "PlantGL")),
+    ("Axiom: A\nproduction:\nA :\n    if getIterationNb() > 2:\n        produce F\n", ("line 4", "getIterationNb")),
+    ("def StartEach():\n    useGroup(1)\nAxiom: F\n", ("line 2", "useGroup")),
+    ("Axiom: A(1)\nproduction:\nA(x) :\n    r = random()\n    if r < 0.5:\n        produce F(r)\n",
+     ("line 6", "'r' holds a random draw")),
+    ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, x)):\n        nproduce F\n    produce A(x)\n",
+     ("line 4", "range() of a random draw")),
+    ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
+    ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),
+    ("x = [1, 2]\nAxiom: F(x)\n", ("line 2", "x (line 1)", "a list")),
+    ("production:\nA --> F\n", ("no 'Axiom:'",)),
+    ("Axiom: A\nproduction:\nA :\n    if x >\n        produce F\n", ("line 4", "syntax error")),
+]
+
+
+@pytest.mark.parametrize("text, words", REFUSALS)
+def test_what_plantgen_cannot_translate_is_refused_in_one_line_naming_it(tmp_path, text, words):
+    path = tmp_path / "m.lpy"
+    path.write_text(text)
+    with pytest.raises(LpyError) as info:
+        read_lpy(path)
+    assert "\n" not in str(info.value) and str(info.value).startswith(str(path))
+    for word in words:
+        assert word in str(info.value)
+    code, _, err = run_cli("grow", path, "-o", tmp_path / "m.npz")
+    assert code == 2 and err.startswith("plantgen: error: ") and err.count("\n") == 1
+    assert not (tmp_path / "m.npz").exists()
+
+
+HOSTILE = {
+    "loop.lpy": ("Axiom: A\nproduction:\nA :\n    for i in range(10**9):\n        nproduce F\n    produce A\n",
+                 ("line 4", f"{MAX_LOOP_ITERATIONS:,} iterations")),
+    "nested.lpy": ("Axiom: A\nproduction:\nA :\n    for i in range(1000):\n        for j in range(1000):\n"
+                   "            nproduce F\n    produce A\n", ("line 5", "iterations")),
+    "recursion.lpy": ("def f(x):\n    if x <= 0:\n        return 0\n    return f(x - 1) + 1\nAxiom: F(f(10**6))\n",
+                      ("recursive function", "f()")),
+    "doubling.lpy": ("def d(x):\n    return x + x\nAxiom: A(1)\nproduction:\nA(x) --> F(" + "d(" * 30 + "x" + ")" * 30
+                     + ")\n", ("line 2", "2000 characters")),
+    "power.lpy": ("x = 10**10**10\nAxiom: F(x)\n", ("line 1", "x")),
+    "digits.lpy": ("x = " + "9" * 100_000 + "\nAxiom: F(x)\n", ("line 1",)),
+    "sum.lpy": ("x = " + "+".join(["1"] * 60_000) + "\nAxiom: F(x)\n", ("line 1",)),
+    "parens.lpy": ("Axiom: F(" + "(" * 5000 + "1" + ")" * 5000 + ")\n", ("line 1",)),
+    "modules.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nA --> A A\n", ("modules",)),
+}
+
+
+def test_hostile_lpy_files_are_refused_fast_in_bounded_memory(tmp_path):
+    cases = []
+    for name, (text, _) in HOSTILE.items():
+        (tmp_path / name).write_text(text)
+        cases.append(["grow", tmp_path / name, "-o", tmp_path / f"{name}.npz"])
+    for result, (name, (_, words)) in zip(run_cases(tmp_path, cases), HOSTILE.items(), strict=True):
+        assert_refused(result, words, outputs=[tmp_path / f"{name}.npz"],
+                       seconds=15.0 if name == "modules.lpy" else 2.0)
+
+
+PIECES = list("()[]{}:<>-*/%+&^|!_;,.~@?$#'\"=\n\t AxFf0123456789") + [
+    "-->", "produce ", "nproduce ", "if ", "else:", "for i in range(", "def ", "lambda ", "\n    ", "Axiom:"]
+SOURCES = [p.read_text() for p in sorted(DATA.glob("*.lpy"))]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(source=st.sampled_from(SOURCES), edits=st.lists(
+    st.tuples(st.floats(0, 1), st.sampled_from(["delete", "insert"]), st.sampled_from(PIECES)), min_size=1, max_size=6))
+def test_mutated_lpy_files_translate_or_are_refused_in_one_line(source, edits):
+    text = source
+    for where, op, piece in edits:
+        i = int(where * len(text))
+        text = text[:i] + text[i + 1:] if op == "delete" else text[:i] + piece + text[i:]
+    try:
+        model = parse_lpy(text, "m.lpy")
+        derive(parse_grammar(model.data, "m.lpy"), iterations=3)
+    except PlantgenError as exc:
+        assert "\n" not in str(exc)
