@@ -1,4 +1,4 @@
-"""Hostile input for every command (grow, render, export, scan, batch, view) and every
+"""Hostile input for every command (grow, render, export, scan, batch, view, convert) and every
 input kind (grammars, scenes, .npz and .swc skeletons, options at their extremes): one
 test per class of failure, each on inputs designed here.
 
@@ -27,6 +27,9 @@ CHAIN = "name: chain\naxiom: F\niterations: 11\nrules: ['F -> FF']\n"
 # A bush: branches in every direction around its middle, about 800 segments.
 BUSH = ("name: bush\naxiom: F\niterations: 4\nturtle: {angle: 60, step: 1, radius: 0.3}\n"
         "rules: ['F -> F[+F][-F][&F][^F]F']\n")
+
+
+LPY = Path(__file__).with_name("data") / "lpy" / "abop_bush.lpy"
 
 
 def _fifo(path: Path) -> Path:
@@ -64,6 +67,7 @@ def test_no_command_replaces_or_writes_through_a_device_a_fifo_or_a_folder(tmp_p
         ["export", chain, "-o", tmp_path / "e.obj", "--subdiv", "0"],     # its .mtl: below, a FIFO
         ["scan", chain, "-o", tmp_path / "link.ply"],
         ["view", chain, "--snapshot", png_fifo],
+        ["convert", LPY, "-o", _fifo(tmp_path / "pipe.yaml")],
     ]
     _fifo(tmp_path / "e.mtl")
     _fifo(png_fifo.with_suffix(".json"))
@@ -78,7 +82,7 @@ def test_no_command_replaces_or_writes_through_a_device_a_fifo_or_a_folder(tmp_p
         assert_refused(result, "cannot write (")
         assert "regular file" in result["stderr"] or "is a folder" in result["stderr"], result["stderr"]
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*before, "cases.json"])
-    for node in (fifo, png_fifo, tmp_path / "pipe2.ply", tmp_path / "e.mtl"):
+    for node in (fifo, png_fifo, tmp_path / "pipe2.ply", tmp_path / "e.mtl", tmp_path / "pipe.yaml"):
         assert _is_fifo(node)
     for node in devices:
         assert stat.S_ISCHR(os.lstat(node).st_mode)
@@ -94,12 +98,13 @@ def test_one_wording_for_a_missing_or_unwritable_folder_in_every_command(tmp_pat
              ["export", chain, "-o", missing / "x.glb"],
              ["scan", chain, "-o", missing / "x.ply"],
              ["view", chain, "--snapshot", missing / "x.png"],
+             ["convert", LPY, "-o", missing / "x.yaml"],
              ["grow", chain, "-o", tmp_path / "file" / "x.npz"],
              ["export", chain, "-o", tmp_path / "file" / "x.stl"]]
     results = run_cases(tmp_path, cases)
-    for result in results[:6]:
+    for result in results[:7]:
         assert_refused(result, ("cannot write (no such folder", str(tmp_path / "no" / "such")))
-    for result in results[6:]:
+    for result in results[7:]:
         assert_refused(result, ("cannot write (", "is not a folder"))
 
 
