@@ -40,9 +40,8 @@ from .errors import PlantgenError
 from .limits import LimitError, Limits, hint
 from .limits import limits as default_limits
 
-__all__ = ["check_finite", "check_output", "check_outputs", "escape_text", "open_input", "read_input", "read_yaml",
-           "real_path", "unescape_text",
-           "temporary_name", "write_all_atomically", "write_atomically"]
+__all__ = ["check_finite", "check_folder", "check_output", "check_outputs", "escape_text", "open_input", "read_input",
+           "read_yaml", "real_path", "temporary_name", "unescape_text", "write_all_atomically", "write_atomically"]
 
 # The C parser where PyYAML has it (about 4x faster); the document is bounded before it
 # is composed, so its recursive composer never sees a deep nest.
@@ -199,17 +198,7 @@ def check_output(path: str | Path, error: type[PlantgenError] = PlantgenError) -
         _cannot(path, "it is a folder", error)
     if not path.name.isprintable():      # a line break or an ESC would end up inside the files that name it
         _cannot(escape_text(str(path)), "its name holds a control character", error)
-    folder = path.parent
-    try:
-        st = os.stat(folder)
-    except (FileNotFoundError, NotADirectoryError):
-        _cannot(path, f"no such folder '{folder}'", error)
-    except OSError as exc:
-        _cannot(path, f"folder '{folder}': {exc.strerror or exc.__class__.__name__}", error)
-    if not stat.S_ISDIR(st.st_mode):
-        _cannot(path, f"'{folder}' is not a folder", error)
-    if not os.access(folder, os.W_OK | os.X_OK):
-        _cannot(path, f"permission denied in '{folder}'", error)
+    _check_folder(path, path.parent, error)
     for target, what in ((path, "it"), (temporary_name(path), f"its temporary name '{temporary_name(path).name}'")):
         try:
             mode = os.stat(target).st_mode
@@ -231,6 +220,27 @@ def check_finite(path: str | Path, what: str, *arrays, error: type[PlantgenError
     for values in arrays:
         if values is not None and not np.isfinite(np.asarray(values, dtype=np.float64)).all():
             _cannot(path, f"{what} holds a number that is not finite (lower the scale or the noise)", error)
+
+
+def _check_folder(path: Path, folder: Path, error: type[PlantgenError]) -> None:
+    try:
+        st = os.stat(folder)
+    except (FileNotFoundError, NotADirectoryError):
+        _cannot(path, f"no such folder '{folder}'", error)
+    except OSError as exc:
+        _cannot(path, f"folder '{folder}': {exc.strerror or exc.__class__.__name__}", error)
+    if not stat.S_ISDIR(st.st_mode):
+        _cannot(path, f"'{folder}' is not a folder", error)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        _cannot(path, f"permission denied in '{folder}'", error)
+
+
+def check_folder(folder: str | Path, error: type[PlantgenError] = PlantgenError) -> Path:
+    """``folder`` if plantgen can write files into it (there, a folder, writable), in
+    :func:`check_output`'s wording; else one ``error`` line."""
+    folder = Path(folder)
+    _check_folder(folder, folder, error)
+    return folder
 
 
 def check_outputs(paths, error: type[PlantgenError] = PlantgenError) -> list[Path]:

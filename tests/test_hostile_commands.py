@@ -99,12 +99,14 @@ def test_one_wording_for_a_missing_or_unwritable_folder_in_every_command(tmp_pat
              ["scan", chain, "-o", missing / "x.ply"],
              ["view", chain, "--snapshot", missing / "x.png"],
              ["convert", LPY, "-o", missing / "x.yaml"],
+             ["view", chain, "--shots", missing],
              ["grow", chain, "-o", tmp_path / "file" / "x.npz"],
-             ["export", chain, "-o", tmp_path / "file" / "x.stl"]]
+             ["export", chain, "-o", tmp_path / "file" / "x.stl"],
+             ["view", chain, "--shots", tmp_path / "file"]]
     results = run_cases(tmp_path, cases)
-    for result in results[:7]:
+    for result in results[:8]:
         assert_refused(result, ("cannot write (no such folder", str(tmp_path / "no" / "such")))
-    for result in results[7:]:
+    for result in results[8:]:
         assert_refused(result, ("cannot write (", "is not a folder"))
 
 
