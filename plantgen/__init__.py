@@ -48,8 +48,10 @@ def render(path, output=None, settings=None, *, seed=None, iterations=None, smoo
     Jupyter notebook it displays itself. ``output`` (a ``.png`` path) also writes it.
     """
     from .images import RenderedImage
-    from .pipeline import render_model
+    from .pipeline import check_image_output, render_model
 
+    if output is not None:
+        check_image_output(output)          # before any work, as every command
     report = render_model(path, settings, seed=seed, iterations=iterations, smooth_bends=smooth_bends, limits=limits,
                           allow_paths=allow_paths, **options)
     image = RenderedImage(report.result.color, distance=report.distance, camera=report.camera, report=report)

@@ -1,8 +1,19 @@
 """Files in and out, in one place: reading input files and writing outputs atomically.
 
-Every output plantgen writes goes through :func:`write_atomically`: the bytes go to a
-hidden temporary name beside the target, which is renamed onto it only when complete,
-so a failure never leaves a half-written file.
+Every output plantgen writes goes through :func:`write_atomically` (or, for the files of
+one command that belong together, :func:`write_all_atomically`): the bytes go to a hidden
+temporary name beside the target, which is renamed onto it only when complete, so a
+failure never leaves a half-written file, and the outputs of one command are renamed
+together at the end (all of them, or none).
+
+Every output is checked by :func:`check_output` before any work (each command calls it
+for every file it will write, and the writers call it again just before they write),
+with one wording, ``PATH: cannot write (REASON)``: the folder must exist, be a folder
+and be writable; the name must hold no control character (files name each other: an
+OBJ its MTL); the target must not be a folder; and a target that is not a regular
+file (a device such as ``/dev/null``, a FIFO, a socket, a link to one) is refused,
+never renamed over nor written through. A link to a regular file is replaced by the new
+file (the file it pointed to is left as it was).
 
 Every input is untrusted and goes through :func:`open_input`: only a regular file is read
 (never a device, a pipe or a socket: ``/dev/zero`` is refused before a byte is read), and
@@ -22,13 +33,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
+import numpy as np
 import yaml
 
 from .errors import PlantgenError
 from .limits import LimitError, Limits, hint
 from .limits import limits as default_limits
 
-__all__ = ["open_input", "read_input", "read_yaml", "write_atomically", "write_all_atomically", "temporary_name"]
+__all__ = ["check_finite", "check_folder", "check_output", "check_outputs", "escape_text", "open_input", "read_input",
+           "read_yaml", "real_path", "temporary_name", "unescape_text", "write_all_atomically", "write_atomically"]
 
 # The C parser where PyYAML has it (about 4x faster); the document is bounded before it
 # is composed, so its recursive composer never sees a deep nest.
@@ -157,6 +170,12 @@ def _bound_document(events, limits: Limits, path: str, error: type[PlantgenError
             stack[-1][2] = max(stack[-1][2], node[1] + 1)
 
 
+def real_path(path: str | Path) -> Path:
+    """``path`` with every link followed, as :meth:`Path.resolve` but never raising: a link
+    loop (a file linked to itself) stays as it is, and opening it then fails in one line."""
+    return Path(os.path.realpath(path))
+
+
 def temporary_name(path: str | Path) -> Path:
     """The hidden name ``path`` is written under before the rename: ``.NAME.partSUFFIX``
     (the suffix stays last, so writers that pick a format by suffix still can)."""
@@ -164,25 +183,98 @@ def temporary_name(path: str | Path) -> Path:
     return path.with_name(f".{path.name}.part{path.suffix}")
 
 
+def _cannot(path, reason: str, error: type[PlantgenError]):
+    """The one wording of an output plantgen cannot write."""
+    raise error(f"{path}: cannot write ({reason})")
+
+
+def check_output(path: str | Path, error: type[PlantgenError] = PlantgenError) -> Path:
+    """``path`` if plantgen can write it, checked before any work; else one ``error`` line
+    ``PATH: cannot write (REASON)``: no such folder, the folder is not a folder or not
+    writable, the target (or its temporary name) is a folder, or it is not a regular file
+    (a device, a FIFO, a socket: refused, never replaced). Returns ``path`` as a Path."""
+    path = Path(path)
+    if path.name in ("", ".", ".."):
+        _cannot(path, "it is a folder", error)
+    if not path.name.isprintable():      # a line break or an ESC would end up inside the files that name it
+        _cannot(escape_text(str(path)), "its name holds a control character", error)
+    _check_folder(path, path.parent, error)
+    for target, what in ((path, "it"), (temporary_name(path), f"its temporary name '{temporary_name(path).name}'")):
+        try:
+            mode = os.stat(target).st_mode
+        except FileNotFoundError:     # not there (or a dangling link, replaced by the rename)
+            continue
+        except OSError as exc:        # a link loop, a name too long
+            _cannot(path, f"{what}: {exc.strerror or exc.__class__.__name__}", error)
+        if stat.S_ISDIR(mode):
+            _cannot(path, f"{what} is a folder", error)
+        if not stat.S_ISREG(mode):
+            _cannot(path, f"{what} is not a regular file; plantgen never replaces a device, pipe or socket", error)
+    return path
+
+
+def check_finite(path: str | Path, what: str, *arrays, error: type[PlantgenError] = PlantgenError) -> None:
+    """One ``error`` line ``PATH: cannot write (WHAT holds a number that is not finite)``
+    if any of ``arrays`` does: no writer writes NaN or infinity (a depth map's misses,
+    ``inf`` by its contract, are the one exception)."""
+    for values in arrays:
+        if values is not None and not np.isfinite(np.asarray(values, dtype=np.float64)).all():
+            _cannot(path, f"{what} holds a number that is not finite (lower the scale or the noise)", error)
+
+
+def _check_folder(path: Path, folder: Path, error: type[PlantgenError]) -> None:
+    try:
+        st = os.stat(folder)
+    except (FileNotFoundError, NotADirectoryError):
+        _cannot(path, f"no such folder '{folder}'", error)
+    except OSError as exc:
+        _cannot(path, f"folder '{folder}': {exc.strerror or exc.__class__.__name__}", error)
+    if not stat.S_ISDIR(st.st_mode):
+        _cannot(path, f"'{folder}' is not a folder", error)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        _cannot(path, f"permission denied in '{folder}'", error)
+
+
+def check_folder(folder: str | Path, error: type[PlantgenError] = PlantgenError) -> Path:
+    """``folder`` if plantgen can write files into it (there, a folder, writable), in
+    :func:`check_output`'s wording; else one ``error`` line."""
+    folder = Path(folder)
+    _check_folder(folder, folder, error)
+    return folder
+
+
+def check_outputs(paths, error: type[PlantgenError] = PlantgenError) -> list[Path]:
+    """:func:`check_output` for each of ``paths`` (None skipped), and no path named twice."""
+    out: list[Path] = []
+    for path in paths:
+        if path is None:
+            continue
+        path = check_output(path, error)
+        if any(os.path.abspath(path) == os.path.abspath(p) for p in out):
+            _cannot(path, "named twice among the outputs", error)
+        out.append(path)
+    return out
+
+
+def _fresh_temporary(path: Path, error: type[PlantgenError]) -> Path:
+    """The temporary name of ``path``, checked (:func:`check_output`) and cleared of a file
+    or link a failed run left (writing through a stale link would write where it points)."""
+    check_output(path, error)
+    tmp = temporary_name(path)
+    if os.path.lexists(tmp):
+        _discard(tmp)
+    return tmp
+
+
 def write_atomically(path: str | Path, write: Callable[[Path], object],
                      error: type[PlantgenError] = PlantgenError) -> Path:
     """Call ``write(tmp_path)``, then rename the temporary file onto ``path``.
 
-    Nothing half-written survives: on any failure the temporary file is removed; an
-    ``OSError`` becomes one ``error`` line naming ``path``. Returns ``path``.
+    ``path`` is checked first (:func:`check_output`). Nothing half-written survives: on
+    any failure the temporary file is removed; an ``OSError`` becomes one ``error`` line
+    naming ``path``. Returns ``path``.
     """
-    path = Path(path)
-    tmp = temporary_name(path)
-    try:
-        write(tmp)
-        tmp.replace(path)
-    except OSError as exc:
-        _discard(tmp)
-        raise error(f"{path}: cannot write ({exc.strerror or exc})") from None
-    except BaseException:
-        _discard(tmp)
-        raise
-    return path
+    return write_all_atomically([(path, write)], error)[0]
 
 
 def _discard(tmp: Path) -> None:
@@ -195,21 +287,26 @@ def _discard(tmp: Path) -> None:
 def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]]],
                          error: type[PlantgenError] = PlantgenError) -> list[Path]:
     """:func:`write_atomically` for files that belong together (an OBJ and its MTL, a glTF
-    and its ``.bin``): every ``write(tmp_path)`` runs first, then the temporary files are
+    and its ``.bin``, an image and its camera and depth): every target is checked
+    (:func:`check_outputs`), every ``write(tmp_path)`` runs, then the temporary files are
     renamed onto their targets in the given order (put the file that names the others
-    last). On any failure no temporary file is left, and no target is touched unless the
-    failure comes between two renames; then the targets this call created are removed
-    again (an existing file already replaced stays replaced). Returns the paths."""
+    last), each target checked again just before. On any failure no temporary file is
+    left, and no target is touched unless the failure comes between two renames; then the
+    targets this call created are removed again (an existing file already replaced stays
+    replaced). Returns the paths."""
+    check_outputs([path for path, _ in writes], error)
     done: list[tuple[Path, Path]] = []
     created: list[Path] = []
     failing = None
     try:
         for path, write in writes:
             path = failing = Path(path)
-            done.append((path, temporary_name(path)))
+            done.append((path, _fresh_temporary(path, error)))
             write(done[-1][1])
         for path, tmp in done:
-            failing, new = path, not path.exists()
+            failing = path
+            check_output(path, error)
+            new = not os.path.lexists(path)
             tmp.replace(path)
             if new:
                 created.append(path)
@@ -222,3 +319,33 @@ def write_all_atomically(writes: list[tuple[str | Path, Callable[[Path], object]
             _discard(path)
         raise
     return [path for path, _ in done]
+
+
+_ESCAPES = {"\\": "\\\\", "\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def escape_text(text: str, *, ascii_only: bool = False) -> str:
+    """``text`` safe to write into one line of a text file: a backslash, a line break, a
+    tab and every other character that is not printable (ESC, BEL, a line separator)
+    become an escape (``\\n``, ``\\x1b``, ``\\u2028``), and with ``ascii_only`` every
+    character beyond ASCII too. :func:`unescape_text` reads it back."""
+    out = []
+    for ch in str(text):
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ch.isprintable() and (ord(ch) < 128 or not ascii_only):
+            out.append(ch)
+        else:
+            code = ord(ch)
+            out.append(f"\\x{code:02x}" if code < 256 else f"\\u{code:04x}" if code < 65536 else f"\\U{code:08x}")
+    return "".join(out)
+
+
+def unescape_text(text: str) -> str:
+    """The text :func:`escape_text` wrote (text with a malformed escape is kept as it is)."""
+    if "\\" not in text:
+        return text
+    try:
+        return text.encode("ascii", "backslashreplace").decode("unicode_escape")
+    except (UnicodeDecodeError, UnicodeEncodeError):
+        return text

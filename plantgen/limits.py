@@ -79,6 +79,8 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
         sub-rays of a diverging beam), counted before any is cast
+    max_scan_bytes : memory a laser scan may take (the skin of the segments it skins,
+        estimated before anything is skinned)
     max_queries : query and communication modules (``?P``, ``?E``) one derivation answers,
         summed over its steps (each step that has any walks the turtle over the string)
     max_markers : attraction points of a grammar's ``markers`` environment
@@ -102,6 +104,7 @@ class Limits:
     max_export_bytes: int = 2 << 30
     max_render_bytes: int = 2 << 30
     max_scan_rays: int = 200_000_000
+    max_scan_bytes: int = 2 << 30
     max_queries: int = 20_000_000
     max_markers: int = 1_000_000
     max_light_rays: int = 50_000_000

@@ -57,9 +57,10 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
+from .exporters.formats import check_export_outputs
 from .exporters.plants import level_plant
 from .exporters.textures import bake_textures, split_by_aspect
-from .files import write_atomically
+from .files import check_outputs, write_all_atomically
 from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from .geometry.frames import UP_AXES
 from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
@@ -517,12 +518,15 @@ def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlant
 
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
-                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, progress=None) -> PreparedModel:
+                  limits: Limits | None = None, allow_paths=(), smooth_bends=None, progress=None,
+                  budget=None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
     ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
     scene with the ``lod`` effect is placed (:func:`place_scene`), not merged. ``progress``:
-    :func:`grow_file`'s, then the stage ``skin``."""
+    :func:`grow_file`'s, then the stage ``skin``. ``budget(segments, effects)``, if given,
+    is called with the segments that will be skinned (every placed copy's, or a placed
+    scene's distinct plants') before any is."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths,
                       progress=progress)
     if progress is not None:
@@ -530,10 +534,35 @@ def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=Non
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
     if grown.segments == 0:
         raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
-    if grown.scene is not None and "lod" in chosen and "animation" not in chosen:
+    placed = grown.scene is not None and "lod" in chosen and "animation" not in chosen
+    if budget is not None:
+        budget(distinct_segments(grown.scene) if placed else grown.segments, tuple(chosen))
+    if placed:
         placed = place_scene(grown.scene, skinning(smooth_bends), str(input_path))
         return PreparedModel(grown, tuple(chosen), None, str(input_path), placed)
     return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
+
+
+#: Memory a laser scan takes per placed segment (its skin, boxes and labels; leaves
+#: included), measured (about 1.3 KB) and rounded up.
+SCAN_BYTES_PER_SEGMENT = 2048
+
+
+def check_scan_memory(grown: GrowResult, limits: Limits | None, source) -> None:
+    """Refuse, before anything is skinned, a scan whose skinned segments (a scene's
+    distinct plants once: its copies are traced through two levels; else every segment)
+    would take more than ``limits.max_scan_bytes``."""
+    limits = _in_force(limits)
+    segments = distinct_segments(grown.scene) if grown.scene is not None else grown.segments
+    need = segments * SCAN_BYTES_PER_SEGMENT
+    if need > limits.max_scan_bytes:
+        raise LimitError(f"{source}: a scan skinning {segments:,} segments needs about {need / 2**20:,.0f} "
+                         f"MiB, over the limit of {limits.max_scan_bytes / 2**20:,.0f} MiB ({hint('scan_bytes')})")
+
+
+def distinct_segments(scene: Scene) -> int:
+    """Segments of a scene's distinct plants, each once (what a placed scene skins)."""
+    return sum(len(skeleton) for skeleton in {id(i.skeleton): i.skeleton for i in scene.instances}.values())
 
 
 def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSettings = ImageSettings()) -> dict:
@@ -606,6 +635,14 @@ class RenderReport:
         return parse_background(self.request.image.background)
 
 
+def check_image_output(output) -> Path:
+    """A still's ``.png`` output, checked before any work (one line)."""
+    output = Path(output)
+    if output.suffix.lower() != ".png":
+        raise PlantgenError(f"{output}: the image output must end in .png")
+    return check_outputs([output])[0]
+
+
 def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, camera_out=None) -> None:
     """Fail before any work on outputs :func:`render_file` cannot write: one line naming
     the file."""
@@ -620,6 +657,7 @@ def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, c
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
         raise PlantgenError(f"{camera_out}: the camera output must end in .json")
+    check_outputs([output, camera_out, depth_out])
 
 
 # Memory a render takes, measured (tracemalloc and the GL targets' sizes) and rounded up:
@@ -755,8 +793,11 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     width, height = (camera.width, camera.height) if camera is not None else (image.size or DEFAULT_SIZE)
     frames, shadow_res = motion.frames, request.shadows.resolution
     _check_render_memory(limits, str(input_path), width, height, frames, shadow_res, ssaa=image.ssaa)
+    def budget(segments, effects):       # before any segment is skinned or any copy placed
+        _check_render_memory(limits, str(input_path), width, height, frames,
+                             shadow_res if "shadows" in effects else None, segments, image.ssaa)
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
-                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress)
+                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress, budget=budget)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
@@ -796,17 +837,19 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
 
 
 def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_out) -> list:
+    """The image, the camera and the depth, renamed into place together (all or none)."""
     result = report.result
     fps = report.request.motion.fps
-    written = [write_animation(output, report.colors, fps) if report.colors else write_png(output, result.color)]
+    writes = [(output, (lambda p: write_animation(p, report.colors, fps)) if report.colors
+               else (lambda p: write_png(p, result.color)))]
     if camera_out is not None:
-        written.append(write_atomically(camera_out, report.camera.save))
+        writes.append((camera_out, report.camera.save))
     if depth_out is not None:
         def save_depth(p):
             with open(p, "wb") as fh:
                 np.save(fh, report.distance.astype(np.float32))
-        written.append(write_atomically(depth_out, save_depth))
-    return written
+        writes.append((depth_out, save_depth))
+    return write_all_atomically(writes)
 
 
 def render_file(input_path, output, settings: RenderSettings | None = None, *, camera_out=None, depth_out=None,
@@ -883,11 +926,10 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
     output_path, limits = Path(output_path), _in_force(limits)
-    fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings())
+    fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings(), unit)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
-    if grown.segments == 0:
-        raise ExportError(f"{input_path}: the model has no segments")
+    _export_budget(grown, fmt, instancing, level, limits, input_path, output_path)
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
         skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
@@ -914,10 +956,12 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     return summary
 
 
-def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings):
+def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings, unit: float = 1.0):
     """The export's format and ``asset``, after every check that needs no work: a known
     suffix, its extra installed, the up axis, the instancing, what the asset asks (cards
-    and impostors: glTF), the folder there (one line each)."""
+    and impostors: glTF), the unit, every output writable (one line each)."""
+    if not 1e-9 <= unit <= 1e9:          # so a cylinder model's volumes (unit³) stay finite
+        raise ExportError(f"the unit must be 1e-09..1e+09 metres, got {unit!r}")
     fmt = export_format(output_path)
     check_extra(fmt, output_path)
     asset.check(fmt, output_path)
@@ -925,9 +969,37 @@ def _export_checks(output_path: Path, up: str | None, instancing: str, asset: As
         raise ExportError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
     if instancing not in INSTANCING:
         raise ExportError(f"instancing must be one of {', '.join(INSTANCING)}, got {instancing!r}")
-    if not output_path.parent.is_dir():
-        raise ExportError(f"{output_path}: directory {output_path.parent} does not exist")
+    check_export_outputs(output_path, fmt)
     return fmt, asset
+
+
+def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: Limits, input_path,
+                   output_path) -> None:
+    """Refuse, before anything is skinned, a model with no segment or a mesh export whose
+    memory is over ``limits.max_export_bytes`` at its least: the segments it skins (every
+    placed copy where the format or ``instancing`` writes each copy, else each distinct
+    plant once), 16·4^m triangles each at the format's bytes; and for a glTF or USD scene
+    framed automatically, the skin of every placed copy its camera is framed on."""
+    if grown.segments == 0:
+        raise ExportError(f"{input_path}: the model has no segments")
+    if fmt.kind != "mesh":
+        return
+    each = instancing == "off" or not fmt.instancing or grown.scene is None
+    skinned = grown.segments if each else distinct_segments(grown.scene)
+    triangles = skinned * 16 * 4 ** int(level)
+    if triangles > limits.max_export_triangles:
+        raise ExportError(f"{input_path}: m = {level} gives at least {triangles:,} triangles, over the export limit "
+                          f"of {limits.max_export_triangles:,}; choose a lower --subdiv ({hint('export_triangles')})")
+    need = estimate_export_bytes(triangles, fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
+    what = f"{skinned:,} segments{'' if each else ' (each distinct plant once)'} at m = {level}"
+    if fmt.scene and grown.scene is not None and grown.scene.camera is None \
+            and grown.segments * SKIN_BYTES_PER_SEGMENT > need:     # the framed camera skins every copy
+        need = grown.segments * SKIN_BYTES_PER_SEGMENT
+        what = f"framing the scene's camera on its {grown.segments:,} placed segments"
+    if need > limits.max_export_bytes:
+        raise LimitError(f"{output_path}: {what} needs at least {need / 2**20:,.0f} MiB to build and write as "
+                         f"{fmt.name}, over the limit of {limits.max_export_bytes / 2**20:,.0f} MiB (choose a "
+                         f"lower --subdiv, give a scene a camera, or {hint('export_bytes')})")
 
 
 def _distinct_skeletons(grown: GrowResult, merged: bool) -> list[Skeleton]:

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PlantgenError
-from .files import write_atomically
+from .files import check_finite, check_output, write_atomically
 from .geometry.frames import UP_AXES, up_rotation
 from .geometry.scan import LABELS, PART_NAMES, PointCloud
 
@@ -82,9 +82,10 @@ def point_format(path) -> str:
     return suffix[1:]
 
 
-def check_point_output(path) -> str:
+def check_point_output(path, *, place: bool = True) -> str:
     """The format of ``path``, checked before any work: a known suffix, laspy installed for
-    LAS and a LAZ backend for LAZ, the folder there (one line for each refusal)."""
+    LAS and a LAZ backend for LAZ, and (``place``) the path writable
+    (:func:`plantgen.files.check_output`); one line for each refusal."""
     fmt = point_format(path)
     if fmt in ("las", "laz") and importlib.util.find_spec("laspy") is None:
         raise PointFileError(f"{path}: writing .{fmt} needs the optional package 'laspy': {INSTALL}")
@@ -93,9 +94,8 @@ def check_point_output(path) -> str:
 
         if not laspy.LazBackend.detect_available():
             raise PointFileError(f"{path}: writing .laz needs a LAZ backend for laspy (lazrs): {INSTALL}")
-    folder = Path(path).parent
-    if not folder.is_dir():
-        raise PointFileError(f"{path}: cannot write (no such folder {str(folder) or '.'!r})")
+    if place:
+        check_output(path, PointFileError)
     return fmt
 
 
@@ -175,6 +175,7 @@ def write_points(cloud: PointCloud, path, *, up: str = "z") -> Path:
     or an unwritable place. Returns the path."""
     path = Path(path)
     fmt = check_point_output(path)
+    check_finite(path, "a point", cloud.xyz, cloud.scanners, error=PointFileError)
     if fmt == "ply":
         data = _ply_bytes(cloud, up)
         return write_atomically(path, lambda tmp: Path(tmp).write_bytes(data), PointFileError)

@@ -59,7 +59,7 @@ import numpy as np
 from . import fields
 from ._resources import grammars_dir, missing_hint
 from .errors import PlantgenError
-from .files import read_yaml
+from .files import read_yaml, real_path
 from .geometry.camera import Camera, CameraError, box_corners
 from .geometry.polygons import Polygons
 from .geometry.skeleton import Skeleton, SkeletonError
@@ -448,13 +448,13 @@ def resolve_grammar(name: str, base: Path, where: str, allow_paths=(), *, error:
     link pointing out) is refused before it is opened."""
     if not name or "\0" in name:
         raise error(f"{where}: grammar must name a file, got {fields.show(name)}")
-    roots = [base.resolve(), *(Path(p).resolve() for p in allow_paths)]
+    roots = [real_path(base), *(real_path(p) for p in allow_paths)]
     for cand in (base / name, base / f"{name}.yaml"):
-        real = cand.resolve()
+        real = real_path(cand)       # a link loop stays a path that fails to open
         if not any(real.is_relative_to(root) for root in roots):
             raise error(f"{where}: grammar {fields.show(name)} lies outside the {owner}'s folder "
                              f"(only files under it are read; pass --allow-path DIR to allow DIR)")
-        if real.is_file():
+        if real.is_file() or cand.is_symlink():    # a link loop: its read says so in one line
             return real
     if Path(name).name == name and name not in (".", ".."):   # a plain name: a shipped grammar
         for cand in (grammars_dir() / name, grammars_dir() / f"{name}.yaml"):
@@ -474,20 +474,40 @@ def _placement_matrix(placement: _Placement, offset: np.ndarray, yaw: float, fac
     return m
 
 
-def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Polygons | None = None) -> None:
-    """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
-    finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing)."""
+def _local_extent(skel: Skeleton, polygons: Polygons | None) -> tuple[np.ndarray, float] | None:
+    """A plant's box (its leaves' included) and largest radius in its own frame; None when
+    it has neither segments nor leaves."""
     leaves = polygons is not None and len(polygons.vertices) > 0
     if not len(skel) and not leaves:
-        return
+        return None
     with np.errstate(all="ignore"):
         boxes = [skel.bounds] if len(skel) else []
         if leaves:
             boxes.append(np.stack([polygons.vertices.min(axis=0), polygons.vertices.max(axis=0)]))
         box = np.stack([np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)])
+        radius = max(float(skel.r_start.max()), float(skel.r_end.max())) if len(skel) else 0.0
+    return box, radius
+
+
+def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Polygons | None = None,
+                  extents: dict | None = None) -> None:
+    """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
+    finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing).
+    ``extents`` keeps each plant's :func:`_local_extent`, so copies of one plant cost a
+    box's eight corners each."""
+    key = (id(skel), id(polygons))
+    if extents is None or key not in extents:
+        extent = _local_extent(skel, polygons)
+        if extents is not None:
+            extents[key] = extent
+    else:
+        extent = extents[key]
+    if extent is None:
+        return
+    box, radius = extent
+    with np.errstate(all="ignore"):
         corners = box_corners(box) @ matrix[:3, :3].T + matrix[:3, 3]
-        radius = (max(float(skel.r_start.max()), float(skel.r_end.max())) if len(skel) else 0.0) \
-            * float(np.abs(matrix[:3, :3]).max())
+        radius = radius * float(np.abs(matrix[:3, :3]).max())
         ok = bool(np.all(np.abs(corners) <= _MAX)) and radius <= _MAX
     if not ok:
         raise SceneError(f"{where}: placed, the plant reaches coordinates that are not finite or beyond "
@@ -525,7 +545,7 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
                  allow_paths=()) -> list[SceneInstance]:
     """Every copy of one instance entry, grown (grammars once per seed and iteration count,
     through ``cache``), counted against the scene's segment budget and placed."""
-    out = []
+    out, extents = [], {}
     for offset, yaw, c, factor in placement.copies:
         s = placement.seed + c
         skel, polygons, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits,
@@ -534,7 +554,7 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
             budget.add_segments(len(skel), placement.where)
         budget.add_drawn(len(skel), placement.where)
         matrix = _placement_matrix(placement, offset, yaw, factor)
-        _check_placed(skel, matrix, placement.where, polygons)
+        _check_placed(skel, matrix, placement.where, polygons, extents)
         out.append(SceneInstance(source, s, matrix, skel, _copy_sway(placement.sway, s), polygons))
     return out
 
@@ -579,8 +599,9 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     budget = _Budget(limits)
     instances: list[SceneInstance] = []
     cache: dict[tuple, tuple] = {}
-    for k, inst in enumerate(data["instances"]):
-        placement = _parse_placement(inst, k, path, base_seed, seed, budget)
+    # Every instance (grid copies included) is read and counted before any plant is grown.
+    placements = [_parse_placement(inst, k, path, base_seed, seed, budget) for k, inst in enumerate(data["instances"])]
+    for inst, placement in zip(data["instances"], placements, strict=True):
         instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)
 
     return Scene(name, description, effects, tuple(instances), ground, camera, light, path)

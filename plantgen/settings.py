@@ -300,7 +300,7 @@ class MotionSettings:
                               "first frame's time.", lo=0, metavar="T")
     frames: int | None = knob(None, "--frames", "Write an animation of this many frames (-o .gif or .webp).",
                               kind="int", lo=1, hi=100_000)
-    fps: float = knob(12.0, "--fps", "Frames per second of the animation.", lo=0, lo_open=True)
+    fps: float = knob(12.0, "--fps", "Frames per second of the animation (0.01..1000).", lo=0.01, hi=1000)
     pose: str = knob("gpu", "--pose", "Where an animation's moving segments are posed and skinned each frame: a "
                      "compute shader writing the ray caster's records, or the vertex shader skinning a mesh built once "
                      "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu).",

@@ -119,6 +119,10 @@ def _probe(scheduler: str) -> None:
                          f"{': ' + text[0][:200] if text else ''})") from None
 
 
+#: The most worker processes a local cluster starts (each is a Python process of its own).
+MAX_WORKERS = 256
+
+
 def dask_client(scheduler: str | None, workers: int | None):
     """(client, cluster or None): a client of the cluster at ``scheduler``, or of a new
     ``LocalCluster`` of ``workers`` single-threaded processes (default: the CPU count)."""
@@ -143,18 +147,18 @@ def check_out_folder(folder: Path) -> None:
     p = folder
     while not p.exists():
         if p.is_symlink():
-            raise BatchError(f"--out {folder}: {p} is a link to nothing")
+            raise BatchError(f"{folder}: cannot write ('{p}' is a link to nothing)")
         p = p.parent
     if not p.is_dir():
-        raise BatchError(f"--out {folder}: {p} is not a folder")
+        raise BatchError(f"{folder}: cannot write ('{p}' is not a folder)")
     try:
         read_only = bool(os.statvfs(p).f_flag & os.ST_RDONLY)
     except OSError:
         read_only = False
     if read_only:
-        raise BatchError(f"--out {folder}: cannot write (read-only file system)")
+        raise BatchError(f"{folder}: cannot write (read-only file system)")
     if not os.access(p, os.W_OK | os.X_OK):
-        raise BatchError(f"--out {folder}: cannot write (permission denied)")
+        raise BatchError(f"{folder}: cannot write (permission denied in '{p}')")
 
 
 def make_folders(folder: Path, spec: BatchSpec) -> None:
@@ -207,6 +211,8 @@ def run_batch(spec: BatchSpec, folder: str | Path, *, scheduler: str | None = No
     ``scheduler`` / ``workers``."""
     start = time.perf_counter()
     folder = Path(folder).absolute()
+    if workers is not None and not 1 <= int(workers) <= MAX_WORKERS:
+        raise BatchError(f"--workers must be 1..{MAX_WORKERS} worker processes, got {workers}")
     _require_dask()
     check_out_folder(folder)
     manifest = Manifest(folder)                 # one of another format: refused here

@@ -47,7 +47,7 @@ import numpy as np
 
 from .. import fields
 from ..errors import PlantgenError
-from ..files import read_input, read_yaml
+from ..files import read_input, read_yaml, real_path
 from ..geometry.scan import ScanSettings
 from ..knobs import knob_of
 from ..limits import Limits
@@ -74,7 +74,7 @@ MAX_GRID_VALUES = 10_000
 #: Rows of random sweep draws made at a time (the draws do not depend on it).
 DRAW_CHUNK = 4096
 
-_RANGE = re.compile(r"\s*(\d+)\s*:\s*(\d+)\s*")
+_RANGE = re.compile(r"\s*(\d{1,18})\s*:\s*(\d{1,18})\s*")   # bounded: no 5,000-digit int() is ever tried
 
 
 class BatchError(PlantgenError):
@@ -336,7 +336,7 @@ def _point_fields(raw, where: str) -> dict:
     if fmt not in POINT_FORMATS:
         raise BatchError(f"{where}: format must be one of {', '.join(POINT_FORMATS)}, got {fields.show(fmt)}")
     try:
-        check_point_output(Path(f"points.{fmt}"))       # laspy (and lazrs) for LAS and LAZ, before any work
+        check_point_output(Path(f"points.{fmt}"), place=False)     # laspy (and lazrs) for LAS and LAZ, before any work
         settings = ScanSettings(**{k: v for k, v in raw.items() if k != "format"})
     except (PlantgenError, TypeError, ValueError) as exc:
         raise BatchError(f"{where}: {str(exc).splitlines()[0]}") from None
@@ -346,7 +346,7 @@ def _point_fields(raw, where: str) -> dict:
 def _view_fields(png: dict, where: str) -> dict:
     kw: dict = {}
     if "size" in png:
-        m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(png["size"]))
+        m = re.fullmatch(r"\s*(\d{1,18})\s*[xX]\s*(\d{1,18})\s*", str(png["size"]))
         if not m or not (0 < int(m.group(1)) <= MAX_VIEW_SIDE and 0 < int(m.group(2)) <= MAX_VIEW_SIDE):
             raise BatchError(f"{where}: size must be WIDTHxHEIGHT with sides 1..{MAX_VIEW_SIDE}, "
                              f"got {fields.show(png['size'])}")
@@ -419,8 +419,8 @@ def parse_spec(path: str | Path, limits: Limits | None = None, allow_paths=()) -
     where = str(path)
     data = fields.keys(data, {"seed", "plants", "outputs"}, where, BatchError)
     seed = fields.integer(data.get("seed", 0), "seed", where, BatchError, lo=0, hi=2**63 - 1)
-    folder = path.resolve().parent
-    allowed = tuple(str(Path(p).resolve()) for p in allow_paths)
+    folder = real_path(path).parent
+    allowed = tuple(str(real_path(p)) for p in allow_paths)
 
     def resolve(name: str, w: str) -> Path:
         return resolve_grammar(name, folder, w, allowed, error=BatchError, owner="spec")
@@ -465,7 +465,7 @@ def simple_spec(grammar: str, seeds: str, outputs: list[str], *, seed: int = 0, 
         if not path.is_file():
             raise BatchError(f"grammar {name!r}: no such file and no shipped grammar of that name"
                              f"{missing_hint(name)}")
-        return path.resolve()
+        return real_path(path)
 
     groups = _groups([{"grammar": grammar, "seeds": seeds}], seed, resolve, limits or default_limits, "batch")
     return BatchSpec(seed, groups, out, Path.cwd())

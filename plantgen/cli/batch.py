@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from ..batch import BatchError, parse_spec, run_batch, simple_spec, summary_lines
+from ..batch.engine import MAX_WORKERS
 from ..batch.spec import MASK_KINDS, MAX_VIEW_SIDE
 from ..geometry.scan import ScanSettings
 from ..knobs import knob_of
@@ -45,7 +46,7 @@ __all__ = ["batch"]
               help="Without a spec: the batch seed.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
+@click.option("--workers", type=click.IntRange(1, MAX_WORKERS), default=None,
               help="Worker processes of the local cluster (default: one per CPU).")
 @knob_options(ScanSettings)
 @allow_path_opt

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
-from ..files import write_atomically
+from ..files import check_output, write_atomically
 from ..lsystem.grammar import parse_grammar
 from ..lsystem.lpy import LPY_SUFFIX, read_lpy, to_yaml
 from .options import input_arg, limit_opt, limits_from, output_opt, quiet_opt
@@ -40,6 +40,7 @@ def convert(input: Path, output: Path | None, limit_values, quiet) -> None:
     output = output or Path(input.stem + ".yaml")
     if output.suffix.lower() not in (".yaml", ".yml"):
         raise PlantgenError(f"{output}: the output is a YAML grammar: give it the suffix .yaml")
+    check_output(output)          # before any work, as every command
     limits = limits_from(limit_values)
     model = read_lpy(input, limits)
     grammar = parse_grammar(model.data, str(input), limits)   # the YAML must be a grammar plantgen reads

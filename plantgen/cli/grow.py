@@ -8,6 +8,7 @@ import click
 import numpy as np
 
 from ..errors import PlantgenError
+from ..files import check_outputs, write_all_atomically
 from ..geometry.frames import UP_AXES
 from ..geometry.swc import write_swc
 from ..lsystem.derive import DEFAULT_MAX_MODULES
@@ -100,18 +101,15 @@ def _check_outputs(output: Path, formats, up: str) -> None:
         raise PlantgenError(f"{output}: the skeleton output must end in .npz or .swc")
     if up != "y" and "swc" not in (kind, *formats):
         raise PlantgenError("--up z applies to SWC output; the .npz skeleton is always y-up")
+    check_outputs(_output_paths(output, formats))
+
+
+def _output_paths(output: Path, formats) -> list[Path]:
+    kind = output.suffix.lower().lstrip(".")
+    return [output] + [output.with_suffix(f".{f}") for f in dict.fromkeys(formats) if f != kind]
 
 
 def _write_outputs(skel, output: Path, formats, up: str) -> list[Path]:
     """Write the skeleton as ``output`` (.npz or .swc) and as each of ``formats`` beside it."""
-    kind = output.suffix.lower().lstrip(".")
-    paths = [output] + [output.with_suffix(f".{f}") for f in dict.fromkeys(formats) if f != kind]
-    try:
-        for path in paths:
-            if path.suffix.lower() == ".swc":
-                write_swc(skel, path, up=up)
-            else:
-                skel.save(path)
-    except OSError as exc:
-        raise PlantgenError(f"{output}: cannot write ({exc.strerror or exc})") from None
-    return paths
+    return write_all_atomically([(path, (lambda tmp: write_swc(skel, tmp, up=up)) if path.suffix.lower() == ".swc"
+                                  else skel.save) for path in _output_paths(output, formats)])

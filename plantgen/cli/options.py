@@ -16,6 +16,7 @@ from pathlib import Path
 import click
 
 from ..errors import PlantgenError
+from ..fields import show
 from ..geometry.camera import Orbit
 from ..knobs import Knob
 from ..limits import MAX_IMAGE_SIDE, Limits
@@ -29,7 +30,7 @@ __all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "define
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
 
-_SIZE = re.compile(r"\s*(\d+)\s*[xX]\s*(\d+)\s*")
+_SIZE = re.compile(r"\s*(\d{1,18})\s*[xX]\s*(\d{1,18})\s*")   # bounded digits: int() never sees 5,000
 
 
 def parse_size(ctx, param, value):
@@ -39,7 +40,7 @@ def parse_size(ctx, param, value):
         return None
     m = _SIZE.fullmatch(value)
     if not m or not (0 < int(m.group(1)) <= MAX_SIDE and 0 < int(m.group(2)) <= MAX_SIDE):
-        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT with sides 1..{MAX_SIDE}, e.g. 1024x768")
+        raise click.BadParameter(f"{show(value)} is not WIDTHxHEIGHT with sides 1..{MAX_SIDE}, e.g. 1024x768")
     return int(m.group(1)), int(m.group(2))
 
 
@@ -87,7 +88,7 @@ smooth_bends_opt = click.option(
 
 def output_opt(what: str, *, required: bool = True):
     """``-o/--output FILE``; ``what`` says what is written and how the suffix is read."""
-    return click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+    return click.option("-o", "--output", type=click.Path(path_type=Path),   # checked by plantgen.files.check_output
                         required=required, help=f"File to write: {what}")
 
 

@@ -32,9 +32,9 @@ from .progress import StageBars
 @output_opt("the image (.png), or with --frames the animation (.gif or .webp). Default: INPUT's name "
             "with .png (with --frames: .gif), in the current directory.", required=False)
 @knob_options(RenderSettings)
-@click.option("--camera-out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--camera-out", type=click.Path(path_type=Path),
               help="Write the camera used (eye, target, up, fov_y, width, height) as JSON.")
-@click.option("--depth-out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--depth-out", type=click.Path(path_type=Path),
               help="Write float32 (height, width) distances along each pixel's ray from the "
                    "eye (.npy), inf for a miss; rays go through pixel centres of --camera-out.")
 @seed_opt

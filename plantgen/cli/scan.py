@@ -11,7 +11,7 @@ from click.core import ParameterSource
 
 from ..geometry.frames import UP_AXES
 from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
-from ..pipeline import check_finite_frusta, grow_file, model_leaves, skin_model, skinning
+from ..pipeline import check_finite_frusta, check_scan_memory, grow_file, model_leaves, skin_model, skinning
 from ..scanfiles import check_point_output, las_scale, write_points
 from .options import (
     allow_path_opt,
@@ -93,6 +93,7 @@ def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
     grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
+    check_scan_memory(grown, limits, input)
     settings, finder = _gpu_finder(settings, quiet, chosen)
     with StageBars(enabled=not quiet) as bars:
         if grown.scene is not None:          # each distinct plant once, its copies traced through two levels

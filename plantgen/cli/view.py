@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..files import check_folder, check_output
 from ..geometry.camera import Camera
 from ..knobs import knob_of
 from ..pipeline import existing_input
@@ -49,11 +50,11 @@ def _keys_epilog() -> str:
              help="GS subdivision level m at the start (16·4^m triangles per frustum, 8·2^m per cap).")
 @seed_opt
 @iterations_opt
-@click.option("--shots", type=click.Path(file_okay=False, path_type=Path), default=Path("."),
+@click.option("--shots", type=click.Path(path_type=Path), default=Path("."),
               show_default=True, help="Folder for screenshots (P) and cameras (C).")
 @click.option("--watch/--no-watch", default=True, show_default=True,
               help="Re-grow the plant when the input file or a grammar it includes is saved.")
-@click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path), metavar="FILE.png",
+@click.option("--snapshot", type=click.Path(path_type=Path), metavar="FILE.png",
               help="Draw a few frames, save the window as shown (heads-up line included) and close: "
                    "a screenshot for documentation.")
 @smooth_bends_opt
@@ -88,12 +89,11 @@ def view(input: Path, start_method, subdiv, seed, iterations, shots, watch, snap
     if size is None and not settings.view.auto:
         saved = Camera.load(camera, limits)
         size = (saved.width, saved.height)
-    if shots.exists() and not shots.is_dir():
-        raise click.BadParameter(f"{shots} is not a folder", param_hint="--shots")
-    if not shots.exists():
-        raise click.BadParameter(f"{shots}: no such folder", param_hint="--shots")
+    check_folder(shots)          # where screenshots go: there, a folder, writable
     if snapshot is not None and snapshot.suffix.lower() != ".png":
         raise click.BadParameter(f"{snapshot}: the snapshot must end in .png", param_hint="--snapshot")
+    if snapshot is not None:
+        check_output(snapshot)
     options = ViewOptions(
         input=input, settings=settings, size=size or DEFAULT_SIZE, seed=seed, iterations=iterations,
         method=next((m for m in METHODS if m.lower() == start_method.lower()), None) if start_method else None,

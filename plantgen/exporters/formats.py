@@ -55,9 +55,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import PlantgenError
+from ..files import check_outputs
 from ..geometry.frames import UP_AXES
 
-__all__ = ["EXPORT_FORMATS", "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",
+__all__ = ["EXPORT_FORMATS", "check_export_outputs", "companion_paths",
+           "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",
            "estimate_export_bytes", "export_format", "export_file_type"]
 
 #: What a format holds: a mesh (written by a :class:`~plantgen.exporters.plants.MeshWriter`)
@@ -109,20 +111,22 @@ class Format:
 
 #: Peak bytes per triangle of tessellating and writing (the process's peak resident size
 #: over the tessellation and the write, coconut at m = 2, 1.08 M triangles: glb 170, gltf
-#: 173, obj 151, ply 186, stl 412, usda 175, usdc 117), rounded up generously.
+#: 173, obj 151, ply 186, stl 412, usda 175, usdc 117; the whole process's peak resident
+#: size, baseline included, pine at m = 2, 5.17 M triangles with its baked textures: glb
+#: 348, obj 348, ply 225), rounded up.
 EXPORT_FORMATS = {f.suffix: f for f in (
-    Format("glb", ".glb", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True, scene=True,
+    Format("glb", ".glb", "mesh", "y", True, 350, "plantgen.exporters.gltf:write_gltf", animation=True, scene=True,
            textures=True),
-    Format("gltf", ".gltf", "mesh", "y", True, 250, "plantgen.exporters.gltf:write_gltf", animation=True,
+    Format("gltf", ".gltf", "mesh", "y", True, 350, "plantgen.exporters.gltf:write_gltf", animation=True,
            scene=True, textures=True),
-    Format("obj", ".obj", "mesh", "y", False, 250, "plantgen.exporters.obj:write_obj_plant", textures=True),
+    Format("obj", ".obj", "mesh", "y", False, 350, "plantgen.exporters.obj:write_obj_plant", textures=True),
     Format("ply", ".ply", "mesh", "z", False, 400, "plantgen.exporters.meshes:write_ply"),
     Format("stl", ".stl", "mesh", "z", False, 650, "plantgen.exporters.meshes:write_stl"),
-    Format("usda", ".usda", "mesh", "y", True, 300, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+    Format("usda", ".usda", "mesh", "y", True, 400, "plantgen.exporters.usd:write_usd", "pxr", "usd",
            animation=True, scene=True, textures=True),
-    Format("usdc", ".usdc", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+    Format("usdc", ".usdc", "mesh", "y", True, 350, "plantgen.exporters.usd:write_usd", "pxr", "usd",
            animation=True, scene=True, textures=True),
-    Format("usd", ".usd", "mesh", "y", True, 250, "plantgen.exporters.usd:write_usd", "pxr", "usd",
+    Format("usd", ".usd", "mesh", "y", True, 350, "plantgen.exporters.usd:write_usd", "pxr", "usd",
            animation=True, scene=True, textures=True),
     Format("swc", ".swc", "skeleton", "y", False, 0, "plantgen.exporters.skeletons:write_swc_skeleton"),
     Format("qsm.csv", ".qsm.csv", "skeleton", "z", False, 0, "plantgen.exporters.qsm:write_qsm"),
@@ -163,9 +167,28 @@ def writable_format(path: str | Path, kind: str) -> Format:
         other = "mesh" if kind == "skeleton" else "skeleton"
         raise ExportError(f"{path}: {fmt.suffix} holds a {other}, not a {kind}")
     check_extra(fmt, path)
-    if not path.parent.is_dir():
-        raise ExportError(f"{path}: directory {path.parent} does not exist")
+    check_export_outputs(path, fmt)
     return fmt
+
+
+def companion_paths(path: str | Path, fmt: Format) -> list[Path]:
+    """The files written beside ``path`` that its name fixes: a .gltf's .bin, an .obj's
+    .mtl, a .qsm.csv's .treedata.csv (texture PNGs are named by material, checked as they
+    are written)."""
+    path = Path(path)
+    if fmt.suffix == ".gltf":
+        return [path.with_suffix(".bin")]
+    if fmt.suffix == ".obj":
+        return [path.with_suffix(".mtl")]
+    if fmt.suffix == ".qsm.csv":
+        return [path.with_name(path.name[: -len(".qsm.csv")] + ".treedata.csv")]
+    return []
+
+
+def check_export_outputs(path: str | Path, fmt: Format) -> list[Path]:
+    """Every file an export to ``path`` writes whose name is known before the work,
+    checked (:func:`plantgen.files.check_output`: one line ``PATH: cannot write (...)``)."""
+    return check_outputs([Path(path), *companion_paths(path, fmt)], ExportError)
 
 
 def estimate_export_bytes(triangles: int, file_type: str) -> int:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import write_atomically
+from ..files import check_finite, write_atomically
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
 from ..geometry.skeleton import Skeleton
@@ -104,6 +104,9 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
     fmt = writable_format(path, "mesh")
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
+    for p in plants:        # no writer writes NaN or infinity
+        check_finite(path, "a vertex", None if p.mesh is None else p.mesh.vertices * unit, p.matrices,
+                     None if p.leaves is None else p.leaves.vertices * unit, error=ExportError)
     writer: MeshWriter = fmt.load_writer()
     plants = [merged_materials(p) for p in plants]      # one material of each name
     return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,

@@ -5,7 +5,8 @@ The OBJ holds every vertex once with its texture coordinate and normal (``v``, `
 after the material and a ``usemtl`` of it (``f a/a/a b/b/b c/c/c``, counter-clockwise seen
 from outside). The MTL holds one material per plantgen material: ``Kd`` its colour
 (linear RGB, the glTF base colour), no specular, opaque. Names keep plantgen's material
-names, with white space turned to ``_`` (OBJ and MTL end a name at white space).
+names, with white space and control characters turned to ``_`` (OBJ and MTL end a name at
+white space).
 
 Leaves (a grammar's ``{ . }`` polygons, ``leaves``) follow: their vertices and normals
 (the polygon's) and texture coordinates (across each leaf's plane) after the frusta's,
@@ -55,10 +56,12 @@ ROWS = 1 << 16
 
 
 def obj_names(names) -> list[str]:
-    """Material names as OBJ/MTL can hold them: white space -> ``_``, made unique."""
+    """Material names as OBJ/MTL can hold them: white space and control characters ->
+    ``_``, made unique."""
     out: list[str] = []
     for name in names:
-        out.append(unique_name(re.sub(r"\s+", "_", name.strip()) or "material", out))
+        printable = "".join(c if c.isprintable() else " " for c in name)     # no ESC, BEL, line breaks
+        out.append(unique_name(re.sub(r"\s+", "_", printable.strip()) or "material", out))
     return out
 
 
@@ -158,7 +161,7 @@ def write_obj(mesh: TessellatedMesh, path: str | Path, *, up: str = "y", colours
         done = [0]
         with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
             fh.write(f"# {generator()}: {n_faces:,} triangles, {n_vertices:,} vertices, {up}-up\n"
-                     f"mtllib {mtl_path.name}\no {path.stem}\n")
+                     f"mtllib {mtl_path.name}\no {obj_names([path.stem])[0]}\n")
             _rows(fh, "v", "%.9g %.9g %.9g", vertices, progress, done, total)
             _rows(fh, "vt", "%.7g %.7g", mesh.uv.astype(np.float64), progress, done, total)
             _rows(fh, "vn", "%.7g %.7g %.7g", normals.astype(np.float64), progress, done, total)

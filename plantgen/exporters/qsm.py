@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import write_all_atomically, write_atomically
+from ..files import check_finite, write_all_atomically, write_atomically
 from ..geometry.frames import up_rotation
 from ..geometry.skeleton import Skeleton
 from ..geometry.topology import Branches, branches
@@ -249,6 +249,8 @@ def write_qsm(skeleton: Skeleton, path: str | Path, *, up: str = "z", unit: floa
     rot = up_rotation(up)
     figures = treedata(model, metrics, skeleton, unit, rot)
     columns = _cylinder_columns(model, unit, rot)
+    check_finite(path, "a cylinder", *columns.values(), error=ExportError)
+    check_finite(path, "a tree figure", *(v for v, _ in figures.values() if v is not None), error=ExportError)
     if path.name.lower().endswith(".mat"):
         paths = [_write_mat(path, columns, figures, model, topology, unit, metrics, up, name)]
     else:

@@ -77,6 +77,10 @@ def bucket_name(name: str, aspect: float) -> str:
     return f"{name} (r/L {aspect:.3g})"
 
 
+#: The most normal maps ``--aspect-step`` may split one material into.
+MAX_ASPECT_BUCKETS = 16
+
+
 def split_by_aspect(plants, step: float) -> tuple[list, dict]:
     """``plants`` with each relief material's rows split by their aspect ρ/L (radius over
     texture period) into buckets ``step`` apart in ratio around the material's median over
@@ -99,6 +103,15 @@ def split_by_aspect(plants, step: float) -> tuple[list, dict]:
                 gathered.setdefault(name, []).append((r[0][use], r[1][use]))
     median = {name: weighted_median(np.concatenate([a for a, _ in c]), np.concatenate([w for _, w in c]))
               for name, c in gathered.items()}
+    for name, c in gathered.items():     # the maps counted before any is baked
+        aspect = np.concatenate([a for a, _ in c])
+        k = np.rint(np.log(aspect / median[name]) / np.log(step))
+        buckets = len(np.unique(k[np.isfinite(k)]))
+        if buckets > MAX_ASPECT_BUCKETS:
+            from .formats import ExportError
+
+            raise ExportError(f"--aspect-step {step!r} splits material {name!r} into {buckets:,} normal maps, "
+                              f"over {MAX_ASPECT_BUCKETS} (give a larger step, e.g. 2)")
     bases: dict[str, str] = {}
     out = []
     for plant, r in zip(plants, rows, strict=True):

@@ -183,6 +183,10 @@ class Camera:
 
 
 # ---------------------------------------------------------------------- framing
+#: Frustum rows :func:`auto_camera` samples at a time (bounds its memory, not its result).
+FRAME_CHUNK = 1 << 15
+
+
 def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: float = 40.0,
                 direction=AUTO_DIRECTION, fill: float = 0.9, points=None) -> Camera:
     """A camera looking from ``direction`` at the model, as close as it can be while every
@@ -210,21 +214,34 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
     right, up, fwd = probe.basis()
     tan_y = np.tan(np.radians(fov_y) / 2) * fill
     tan_x = tan_y * width / height
-    # the solid frustum is the convex hull of its two plane sections: sample them
-    centres, radius = section_points(frusta)
-    centres = np.concatenate([centres.reshape(-1, 3), points])
-    radius = np.concatenate([radius.reshape(-1), np.zeros(len(points))]) + tol.frame_extent
+    # the solid frustum is the convex hull of its two plane sections: sample them, a chunk
+    # of rows at a time (all at once, the samples and their temporaries take about 6 KB a
+    # segment: 6 GB for a million); every pass reduces over the chunks exactly
+    def balls():
+        for start in range(0, len(frusta.base), FRAME_CHUNK):
+            centres, radius = section_points(frusta.subset(np.arange(start, min(start + FRAME_CHUNK,
+                                                                                len(frusta.base)))))
+            yield centres.reshape(-1, 3), radius.reshape(-1) + tol.frame_extent
+        if len(points):
+            yield points, np.zeros(len(points)) + tol.frame_extent
+
+    def distance(target) -> float:
+        return max(_framing_distance(rel @ right, rel @ up, rel @ fwd, radius, tan_x, tan_y)
+                   for rel, radius in ((c - target, r) for c, r in balls()))
+
     target = 0.5 * (box[0] + box[1])
     for _ in range(2):   # solve the distance, re-centre on the projected extent, solve again
-        rel = centres - target
-        a, b, z = rel @ right, rel @ up, rel @ fwd
-        dist = _framing_distance(a, b, z, radius, tan_x, tan_y)
-        depth = dist + z
-        x_lo, x_hi = np.min((a - radius) / depth), np.max((a + radius) / depth)
-        y_lo, y_hi = np.min((b - radius) / depth), np.max((b + radius) / depth)
+        dist = distance(target)
+        x_lo = y_lo = np.inf
+        x_hi = y_hi = -np.inf
+        for centres, radius in balls():
+            rel = centres - target
+            a, b, z = rel @ right, rel @ up, rel @ fwd
+            depth = dist + z
+            x_lo, x_hi = min(x_lo, np.min((a - radius) / depth)), max(x_hi, np.max((a + radius) / depth))
+            y_lo, y_hi = min(y_lo, np.min((b - radius) / depth)), max(y_hi, np.max((b + radius) / depth))
         target = target + dist * (0.5 * (x_lo + x_hi) * right + 0.5 * (y_lo + y_hi) * up)
-    rel = centres - target
-    dist = _framing_distance(rel @ right, rel @ up, rel @ fwd, radius, tan_x, tan_y)
+    dist = distance(target)
     eye = target - fwd * dist
     return Camera(tuple(eye.tolist()), tuple(target.tolist()), (0.0, 1.0, 0.0), fov_y, width, height)
 

@@ -36,6 +36,10 @@ from ..files import open_input, write_atomically
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 
+#: The most material names a skeleton file (.npz, .swc) may hold: a grammar has at most
+#: 16, a scene's merged skeleton the distinct ones of its plants.
+MAX_MATERIAL_NAMES = 256
+
 __all__ = ["Skeleton", "SkeletonError"]
 
 #: The arrays of the ``.npz`` format: (dtype kinds accepted, columns or None for (n,)).
@@ -245,7 +249,11 @@ class Skeleton:
             except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, NotImplementedError) as exc:
                 raise SkeletonError(f"{path}: not a plantgen skeleton (corrupt .npz: "
                                     f"{str(exc).splitlines()[0][:80] or exc.__class__.__name__})") from None
-        names = tuple(str(x) for x in arrays.pop("material_names", ("bark",)))
+        raw_names = arrays.pop("material_names", ("bark",))
+        if len(raw_names) > MAX_MATERIAL_NAMES:
+            raise SkeletonError(f"{path}: {len(raw_names):,} material names, over the {MAX_MATERIAL_NAMES} a "
+                                "skeleton file may hold")
+        names = tuple(str(x) for x in raw_names)
         try:
             skel = cls(**arrays, material_names=names)
             skel.validate()

@@ -21,7 +21,9 @@ tube between the two points with the two radii.
 - **Types.** A node's type is the material of the segment it ends (a start node, of the
   segment it starts): the first material is 3 ("dendrite", the type neuron tools expect
   of a branching tree), the next ones 5, 6, ..., 19 (SWC's custom types; plantgen has at
-  most 16 materials). The header names them (``# material 3: bark``). MorphIO refuses a
+  most 16 materials). The header names them (``# material 3: bark``; a backslash, a line
+  break, any other control character and any character beyond ASCII is escaped, ``\\n``,
+  ``\\x1b``, ``\\xe9``, and read back as it was). MorphIO refuses a
   type change between two nodes without a fork in between (unless opened with
   ``morphio.Option.unifurcated_section_change``): a grammar that changes material in
   mid-axis (``F ;(1) F``) gives such a file; plantgen's shipped models change material at
@@ -57,12 +59,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import read_input, write_atomically
-from ..limits import Limits
+from ..files import escape_text, read_input, unescape_text, write_atomically
+from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
 from .frames import up_rotation
-from .skeleton import Skeleton, SkeletonError
+from .skeleton import MAX_MATERIAL_NAMES, Skeleton, SkeletonError
 from .topology import carried_on
 
 __all__ = ["SOMA", "read_swc", "swc_lines", "swc_type_codes", "write_swc"]
@@ -76,7 +78,7 @@ CUSTOM_TYPES = tuple(range(5, 20))
 #: Node ids per header line that lists nodes.
 IDS_PER_LINE = 16
 
-_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d+)\s*:\s?(.*)$")
+_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d{1,18})\s*:\s?(.*)$")
 _UP_LINE = re.compile(r"#\s*up\s*:\s*([yz])\b")
 _LIST_LINE = re.compile(r"#\s*plantgen\s+(continues|starts|zero-length)\s*:(.*)$")
 
@@ -136,8 +138,8 @@ def swc_lines(skeleton: Skeleton, up: str = "y") -> list[str]:
     header = ["# plantgen skeleton as SWC: id type x y z radius parent, one node a line",
               f"# up: {up}", "# units: model units (not micrometres); radius is a radius",
               "# node 1 (type 1, soma) marks the base of the first root; every root starts at a child of it",
-              *(f"# material {c}: {name}" for c, name in zip(swc_type_codes(skeleton.material_names),
-                                                               skeleton.material_names, strict=True)),
+              *(f"# material {c}: {escape_text(name, ascii_only=True)}"
+                for c, name in zip(swc_type_codes(skeleton.material_names), skeleton.material_names, strict=True)),
               *_listing("continues", continuing), *_listing("starts", off), *_listing("zero-length", zero)]
     return header + nodes
 
@@ -161,7 +163,7 @@ def read_swc(path: str | Path, limits: Limits | None = None) -> Skeleton:
         text = data.decode("ascii")
     except UnicodeDecodeError as exc:
         raise SkeletonError(f"{path}: not an SWC file (a non-ASCII byte at offset {exc.start})") from None
-    header = _Header()
+    header = _Header(2 * limits.max_segments + 1)
     nodes = _parse_nodes(text, path, limits, header)
     if not nodes:
         raise SkeletonError(f"{path}: an SWC file without nodes")
@@ -182,7 +184,8 @@ def read_swc(path: str | Path, limits: Limits | None = None) -> Skeleton:
 class _Header:
     """What a file's comment lines say: up axis, material names by type, listed nodes."""
 
-    def __init__(self) -> None:
+    def __init__(self, most_listed: int = 2 * default_limits.max_segments + 1) -> None:
+        self.most_listed, self.listed = most_listed, 0
         self.up = "y"
         self.names: dict[int, str] = {}
         self.lists: dict[str, set[int]] = {"continues": set(), "starts": set(), "zero-length": set()}
@@ -191,19 +194,43 @@ class _Header:
         if m := _UP_LINE.match(comment):
             self.up = m.group(1)
         elif m := _MATERIAL_LINE.match(comment):
-            self.names[int(m.group(1))] = m.group(2).strip()[:100] or f"swc{m.group(1)}"
+            if int(m.group(1)) not in self.names and len(self.names) >= MAX_MATERIAL_NAMES:
+                raise SkeletonError(f"{where}: over {MAX_MATERIAL_NAMES} material names in the header")
+            self.names[int(m.group(1))] = unescape_text(m.group(2).strip())[:100] or f"swc{m.group(1)}"
         elif m := _LIST_LINE.match(comment):
+            values = m.group(2).split()
+            self.listed += len(values)
+            if self.listed > self.most_listed:
+                raise SkeletonError(f"{where}: the header lists over {self.most_listed:,} node ids, more "
+                                    "than the file's nodes")
             try:
-                self.lists[m.group(1)].update(int(v) for v in m.group(2).split())
+                self.lists[m.group(1)].update(int(v) for v in values)
             except ValueError:
                 raise SkeletonError(f"{where}: a 'plantgen {m.group(1)}' line lists node ids (integers)") from None
 
 
+def _bounded_lines(text: str, path, limits: Limits) -> list[str]:
+    """The file's lines, after the checks that bound the parse, before it: at most
+    ``max_segments + 1`` node lines, and at most as many comment marks as plantgen's own
+    header could hold (one node id of every segment listed, 16 a line, and the rest)."""
+    most_marks = limits.max_segments // 4 + 10_000
+    marks = text.count("#")
+    if marks > most_marks:
+        raise LimitError(f"{path}: {marks:,} comment marks ('#'), over the {most_marks:,} an SWC file of at most "
+                         f"{limits.max_segments:,} segments holds ({hint('segments')})")
+    lines = text.splitlines()
+    nodes = sum(1 for line in lines if line.strip() and not line.lstrip().startswith("#"))
+    limits.check("segments", nodes - 1, f"{path}: SWC segments (nodes but the first)")
+    return lines
+
+
 def _parse_nodes(text: str, path, limits: Limits, header: _Header) -> list[tuple]:
     """[(id, type, x, y, z, radius, parent row or -1)] in file order, ids checked."""
+    lines = _bounded_lines(text, path, limits)
     rows: dict[int, int] = {}     # id -> row
     nodes = []
-    for number, line in enumerate(text.splitlines(), 1):
+    kinds: set[int] = set()
+    for number, line in enumerate(lines, 1):
         line, _, comment = line.partition("#")
         line = line.strip()
         where = f"{path}: line {number}"
@@ -228,6 +255,10 @@ def _parse_nodes(text: str, path, limits: Limits, header: _Header) -> list[tuple
             raise SkeletonError(f"{where}: node id {node_id} is not positive or is used twice")
         if parent != -1 and parent not in rows:
             raise SkeletonError(f"{where}: parent {parent} is not a node listed before this one")
+        if kind not in kinds:
+            kinds.add(kind)
+            if len(kinds - {SOMA}) > MAX_MATERIAL_NAMES:
+                raise SkeletonError(f"{where}: over {MAX_MATERIAL_NAMES} node types (each a material)")
         rows[node_id] = len(nodes)
         nodes.append((node_id, kind, x, y, z, r, rows[parent] if parent != -1 else -1))
         limits.check("segments", len(nodes) - 1, f"{path}: SWC segments")
