@@ -41,7 +41,8 @@ from .limits import LimitError, Limits, hint
 from .limits import limits as default_limits
 
 __all__ = ["check_finite", "check_folder", "check_output", "check_outputs", "escape_text", "open_input", "read_input",
-           "read_yaml", "real_path", "temporary_name", "unescape_text", "write_all_atomically", "write_atomically"]
+           "read_text", "read_yaml", "real_path", "temporary_name", "unescape_text", "write_all_atomically",
+           "write_atomically"]
 
 # The C parser where PyYAML has it (about 4x faster); the document is bounded before it
 # is composed, so its recursive composer never sees a deep nest.
@@ -96,6 +97,16 @@ def read_input(path: str | Path, error: type[PlantgenError] = PlantgenError, *, 
     return data
 
 
+def read_text(path: str | Path, error: type[PlantgenError], limits: Limits, what: str) -> str:
+    """The UTF-8 text of the regular file ``path``, at most ``limits.max_input_bytes``
+    (:func:`read_input`); bytes that are not UTF-8 are one ``error`` line."""
+    data = read_input(path, error, max_bytes=limits.max_input_bytes, limit="input_bytes", what=what)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: cannot read (not UTF-8 text: byte {exc.start})") from None
+
+
 def read_yaml(path: str | Path, error: type[PlantgenError] = PlantgenError, limits: Limits | None = None):
     """Read a YAML file, turning every failure into one ``error`` line naming the file
     (and the line, for a syntax error or a document over its bounds).
@@ -103,11 +114,7 @@ def read_yaml(path: str | Path, error: type[PlantgenError] = PlantgenError, limi
     The bounds (``limits``: ``max_input_bytes``, ``max_yaml_depth``, ``max_yaml_nodes``)
     are checked on the parser's events, before a node is composed or a value built."""
     limits = limits or default_limits
-    data = read_input(path, error, max_bytes=limits.max_input_bytes, limit="input_bytes", what="YAML")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise error(f"{path}: cannot read (not UTF-8 text: byte {exc.start})") from None
+    text = read_text(path, error, limits, "YAML")
     try:
         _bound_document(yaml.parse(text, Loader=_LOADER), limits, str(path), error)
         return yaml.load(text, Loader=_LOADER)

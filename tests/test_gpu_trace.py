@@ -74,6 +74,18 @@ def _compare(t, prim, ref_t, ref_prim, *, min_same=0.999, t_relative=T_RELATIVE)
     assert np.isinf(t[prim < 0]).all()
 
 
+def _assert_same_beams(ref, got):
+    """Scanner by scanner: the same beams return (>= 99.9 %), >= 99.9 % of them from the
+    same primitive, and there with the reference's range exactly."""
+    for a, b in zip(ref, got, strict=True):
+        assert len(a.beam) > 1000
+        common, ia, ib = np.intersect1d(a.beam, b.beam, return_indices=True)
+        assert len(common) >= 0.999 * max(len(a.beam), len(b.beam))
+        same = a.primitive[ia] == b.primitive[ib]
+        assert same.mean() >= 0.999
+        np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
+
+
 @pytest.mark.parametrize("shift", [(0.0, 0.0, 0.0), (1e4, -1e4, 5e3)], ids=["origin", "far"])
 @pytest.mark.parametrize("method", ["lbvh", "sah"])
 def test_closest_hit_matches_the_float64_reference(gl_ctx, shift, method):
@@ -267,13 +279,7 @@ def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
     ref = beam_returns(target, ScanSettings(angular_step=0.3))
     got = beam_returns(target, ScanSettings(angular_step=0.3, precision="float32"), max_pairs=20000, finder=finder)
     assert max(seen) <= 20000 and len(seen) > 1
-    for a, b in zip(ref, got, strict=True):
-        assert len(a.beam) > 1000
-        common, ia, ib = np.intersect1d(a.beam, b.beam, return_indices=True)
-        assert len(common) >= 0.999 * max(len(a.beam), len(b.beam))
-        same = a.primitive[ia] == b.primitive[ib]
-        assert same.mean() >= 0.999
-        np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
+    _assert_same_beams(ref, got)
     done = []
     cloud = scan_plant(grown.skeleton, leaves, ScanSettings(angular_step=1.0, precision="float32"), frusta=frusta,
                        finder=finder, progress=lambda stage, d, total: done.append((d, total)))
@@ -291,13 +297,7 @@ def test_a_scenes_scan_on_the_gpu_gives_the_reference_ranges(gl_ctx):
     ref = beam_returns(target, ScanSettings(angular_step=0.25, scanners=2))
     got = beam_returns(target, ScanSettings(angular_step=0.25, scanners=2, precision="float32"),
                        finder=lambda tg, o, d: trace_target(tg, o, d))
-    for a, b in zip(ref, got, strict=True):
-        assert len(a.beam) > 1000
-        common, ia, ib = np.intersect1d(a.beam, b.beam, return_indices=True)
-        assert len(common) >= 0.999 * max(len(a.beam), len(b.beam))
-        same = a.primitive[ia] == b.primitive[ib]
-        assert same.mean() >= 0.999
-        np.testing.assert_array_equal(a.range[ia][same], b.range[ib][same])
+    _assert_same_beams(ref, got)
 
 
 def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):

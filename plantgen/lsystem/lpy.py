@@ -40,7 +40,7 @@ import numpy as np
 import yaml
 
 from ..errors import PlantgenError
-from ..files import read_input, read_yaml
+from ..files import read_text, read_yaml
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
@@ -1518,12 +1518,7 @@ def parse_lpy(text: str, path: str = "<lpy>", limits: Limits | None = None) -> L
 def read_lpy(path: str | Path, limits: Limits | None = None) -> LpyModel:
     """Read and translate an ``.lpy`` file (at most ``max_input_bytes``)."""
     limits = limits or default_limits
-    data = read_input(path, LpyError, max_bytes=limits.max_input_bytes, limit="input_bytes", what="L-Py")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise LpyError(f"{path}: cannot read (not UTF-8 text: byte {exc.start})") from None
-    return parse_lpy(text, str(path), limits)
+    return parse_lpy(read_text(path, LpyError, limits, "L-Py"), str(path), limits)
 
 
 def to_yaml(model: LpyModel) -> str:
