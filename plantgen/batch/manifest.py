@@ -216,11 +216,8 @@ class Manifest:
         self._buffer = []
         table = pa.concat_tables(self._tables).combine_chunks()
 
-        def write(tmp: Path) -> None:
-            self.path.mkdir(exist_ok=True)
-            pq.write_table(table, tmp)
-
-        write_atomically(self.path / f"part-{self.part:06d}.parquet", write)
+        self.path.mkdir(exist_ok=True)           # the parts' folder first: outputs are checked before they are written
+        write_atomically(self.path / f"part-{self.part:06d}.parquet", lambda tmp: pq.write_table(table, tmp))
         if len(table) >= PART_ROWS:
             self.part += 1
             self._tables = []
