@@ -250,7 +250,9 @@ def write_qsm(skeleton: Skeleton, path: str | Path, *, up: str = "z", unit: floa
     figures = treedata(model, metrics, skeleton, unit, rot)
     columns = _cylinder_columns(model, unit, rot)
     check_finite(path, "a cylinder", *columns.values(), error=ExportError)
-    check_finite(path, "a tree figure", *(v for v, _ in figures.values() if v is not None), error=ExportError)
+    # a figure a tree does not have (None, NaN: written blank) is fine; an infinite one is not
+    values = (np.asarray(v, dtype=np.float64) for v, _ in figures.values() if v is not None)
+    check_finite(path, "a tree figure", *(v[~np.isnan(v)] for v in values), error=ExportError)
     if path.name.lower().endswith(".mat"):
         paths = [_write_mat(path, columns, figures, model, topology, unit, metrics, up, name)]
     else:
