@@ -134,6 +134,7 @@ class GrowResult:
                                       # None for a skeleton file
     warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
     smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
+    iterations: int | None = None    # a grammar's derivation steps (its own, or as asked); None otherwise
 
     def __post_init__(self):
         if self.skeleton is None and self.scene is not None:
@@ -274,7 +275,8 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
         drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
         return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
                           polygons=drawing.polygons, warnings=(*said, *drawing.warnings),
-                          smooth_bends=grammar.turtle.smooth_bends)
+                          smooth_bends=grammar.turtle.smooth_bends,
+                          iterations=grammar.iterations if iterations is None else int(iterations))
 
     modules, grown = [0], [0]
     warnings: list[str] = said

@@ -17,7 +17,7 @@ from plantgen.geometry.camera import auto_camera, orbit_angles
 from plantgen.geometry.mesh import triangle_count
 from plantgen.pipeline import prepare_model, render_model
 from plantgen.settings import MAX_SUBDIV
-from plantgen.viewer.keys import BINDINGS, binding_for, help_lines
+from plantgen.viewer.keys import BINDINGS, GROW_STEP_S, binding_for, help_lines
 from plantgen.viewer.session import VIEW_MAX_TRIANGLES, ViewerSession, ViewOptions
 from plantgen.viewer.watch import BackgroundJob, FileWatcher
 
@@ -283,3 +283,124 @@ def test_the_mesh_caster_casts_still_frames_and_playing_ones_fall_back_to_the_ma
         assert len(lines) == 1 and "relief march" in lines[0]
     finally:
         s.release()
+
+
+# ---------------------------------------------------------------------- growth step by step
+SPROUT = """name: sprout
+seed: 1
+iterations: 4
+defines: {a: 25}
+axiom: "!(0.12) F(1) A"
+rules:
+  - "A -> F(0.5) [+(a) ! F(0.6) A] [-(a) ! F(0.6) A] /(90) A"
+"""
+
+
+def _sprout_session(gl_ctx, tmp_path, text=SPROUT, **options):
+    path = tmp_path / "sprout.yaml"
+    path.write_text(text)
+    opts = ViewOptions(input=path, size=SIZE, watch=False, shots=tmp_path, **options)
+    said = []
+    s = ViewerSession(gl_ctx, opts, opts.prepare(), say=said.append, warn=said.append)
+    return s, path, said
+
+
+def _until_grown(s, seconds: float = 20.0, dt: float = 0.01) -> None:
+    """Tick the session until its reload thread is idle and its result taken in."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        s.tick(dt)
+        if not s.reloader.busy:
+            s.tick(dt)            # a result handed back after the last look
+            return
+        time.sleep(0.01)
+    raise AssertionError("the growth step did not finish")
+
+
+def test_growth_steps_back_and_forward_as_iterations_grow_it(gl_ctx, tmp_path):
+    s, path, _ = _sprout_session(gl_ctx, tmp_path)
+    try:
+        assert (s.step, s.steps_end, s.step_target) == (4, 4, None)
+        assert not any(text.startswith("growth:") for text, _ in s.hud_lines())
+        segments = {k: prepare_model(path, iterations=k).grown.segments for k in range(5)}
+        assert all(segments[k] < segments[k + 1] for k in range(4))      # it grows every step
+        for k in (3, 2, 1, 0):
+            s.key("N", shift=True)
+            _until_grown(s)
+            assert (s.step, s.model.grown.segments) == (k, segments[k])
+        s.key("N", shift=True)                          # below the axiom: nothing to grow
+        assert (s.step, s.step_target, s.reloader.busy) == (0, 0, False) and "axiom" in s.status
+        s.key("N")
+        s.key("N")                                      # asked before the first is in: the newest wins
+        _until_grown(s)
+        assert (s.step, s.model.grown.segments) == (2, segments[2])
+        assert any(text == "growth: step 2 of 4, paused (N, Shift+N, G)" for text, _ in s.hud_lines())
+        # the frame is plantgen render's at --iterations 2, and C's command says so
+        frame = s.draw(*SIZE)
+        args = shlex.split(s.render_command(s.save_camera()))
+        assert args[args.index("--iterations") + 1] == "2"
+        assert run_cli(*args[1:])[0] == 0
+        assert np.array_equal(np.asarray(Image.open(args[args.index("-o") + 1])), frame.color)
+        for _ in range(3):
+            s.key("N")
+            _until_grown(s)
+        assert s.step == 4 and "last" in s.status         # stops at the grammar's iterations
+    finally:
+        s.release()
+
+
+def test_growth_plays_from_the_axiom_to_the_grammars_iterations_and_stops(gl_ctx, tmp_path):
+    s, _, _ = _sprout_session(gl_ctx, tmp_path, iterations=3)     # --iterations sets the last step
+    try:
+        assert s.steps_end == 3
+        s.key("G")
+        assert s.growing and s.step_target == 0
+        seen = [s.step]
+        deadline = time.monotonic() + 60
+        while s.growing and time.monotonic() < deadline:
+            s.tick(GROW_STEP_S / 2)     # the clock of the window's loop, two ticks a step
+            if s.step != seen[-1]:
+                seen.append(s.step)
+            time.sleep(0.01)
+        assert seen == [3, 0, 1, 2, 3] and not s.growing and s.status == "grown: step 3 of 3"
+        s.key("N", shift=True)
+        s.key("G")                      # from the step shown, not the axiom; G again stops
+        assert s.growing and s.step_target == 2
+        s.key("G")
+        assert not s.growing and "stopped" in s.status
+        _until_grown(s)
+        assert s.step == 2
+    finally:
+        s.release()
+
+
+def test_a_step_that_draws_nothing_keeps_the_last_plant_with_one_line(gl_ctx, tmp_path):
+    s, _, said = _sprout_session(gl_ctx, tmp_path, SPROUT.replace('"!(0.12) F(1) A"', "A"), iterations=1)
+    try:
+        s.key("N", shift=True)          # the axiom "A" draws no segment
+        _until_grown(s)
+        assert s.step == 1 and s.step_target == 1
+        assert s.error.startswith("step 0: ") and "nothing to render" in s.error
+        assert sum("nothing to render" in line for line in said) == 1
+    finally:
+        s.release()
+
+
+def test_a_scene_or_a_skeleton_says_once_that_steps_need_a_grammar(gl_ctx, tmp_path):
+    (tmp_path / "sprout.yaml").write_text(SPROUT)
+    scene = tmp_path / "garden.yaml"
+    scene.write_text("name: garden\ninstances:\n  - grammar: sprout.yaml\n    position: [0, 0, 0]\n")
+    skeleton = tmp_path / "sprout.npz"
+    prepare_model(tmp_path / "sprout.yaml").grown.skeleton.save(skeleton)
+    for path, kind in ((scene, "scene"), (skeleton, "skeleton")):
+        options = ViewOptions(input=path, size=SIZE, watch=False, shots=tmp_path)
+        said = []
+        s = ViewerSession(gl_ctx, options, options.prepare(), say=said.append, warn=said.append)
+        try:
+            model = s.model
+            for key, shift in (("N", False), ("N", True), ("G", False), ("N", False)):
+                s.key(key, shift)
+            assert s.model is model and s.step is None and not s.growing and not s.reloader.busy
+            assert said == [f"growth steps need a grammar (this is a {kind})"] and s.status == said[0]
+        finally:
+            s.release()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Binding", "BINDINGS", "MOUSE_HELP", "binding_for", "help_lines"]
+__all__ = ["Binding", "BINDINGS", "GROW_STEP_S", "MOUSE_HELP", "binding_for", "help_lines"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,10 @@ def _b(keys, action, label, text, *args, shift=None) -> Binding:
 #: Degrees a key turns the view; the fraction of the view a key pans; the zoom factor of
 #: a key or a wheel notch; the seconds a scrub key steps.
 KEY_TURN, KEY_PAN, KEY_ZOOM, KEY_SCRUB, KEY_SCRUB_LONG = 5.0, 0.05, 1.1, 0.1, 1.0
+
+#: Seconds between the steps of a playing growth (at least: a step waits for the last one
+#: to be grown and drawn).
+GROW_STEP_S = 0.5
 
 BINDINGS = (
     _b("LEFT", "orbit", "Left/Right", "turn around the model", -KEY_TURN, 0.0, shift=False),
@@ -66,6 +70,9 @@ BINDINGS = (
     _b("COMMA", "scrub", "", "", -KEY_SCRUB, shift=False),
     _b("PERIOD", "scrub", "", "", KEY_SCRUB_LONG, shift=True),
     _b("COMMA", "scrub", "", "", -KEY_SCRUB_LONG, shift=True),
+    _b("N", "grow_step", "N / Shift+N", "a grammar's growth: one derivation step forward / back", 1, shift=False),
+    _b("N", "grow_step", "", "", -1, shift=True),
+    _b("G", "toggle_growth", "G", f"play a grammar's growth from its axiom, a step each {GROW_STEP_S:g} s / stop"),
     _b("P", "screenshot", "P", "save the frame as PNG (as plantgen render draws it)", shift=False),
     _b("P", "window_shot", "Shift+P", "save the window as shown, heads-up line included", shift=True),
     _b("C", "save_camera", "C", "save the camera as JSON for plantgen render --camera"),

@@ -1,5 +1,6 @@
 """What the viewer shows and how it changes, apart from any window: the model, the camera,
-the method and its knobs, the time of an animated scene, live reload, and the frames,
+the method and its knobs, the time of an animated scene, a grammar's growth step by step,
+live reload, and the frames,
 drawn by the same :class:`~plantgen.gl.raycast.Raycaster` (RC, RC+R) and
 :class:`~plantgen.gl.raster.RasterRenderer` (GS, GS+R) as ``plantgen render``, with the
 same arguments (:func:`plantgen.pipeline.frame_arguments`), so a saved camera reproduces a
@@ -45,7 +46,7 @@ from ..settings import (
     RenderSettings,
     ViewSettings,
 )
-from .keys import binding_for
+from .keys import GROW_STEP_S, binding_for
 from .watch import BackgroundJob, FileWatcher
 
 __all__ = ["METHODS", "ViewOptions", "ViewerSession", "FrameStats", "one_line", "stored_triangles"]
@@ -101,9 +102,11 @@ class ViewOptions:
     allow_paths: tuple = ()
     smooth_bends: float | None = None
 
-    def prepare(self) -> PreparedModel:
-        """Grow the input with these options (the first model, and each reload)."""
-        return prepare_model(self.input, effects=self.settings.effects, seed=self.seed, iterations=self.iterations,
+    def prepare(self, iterations: int | None = None) -> PreparedModel:
+        """Grow the input with these options (the first model, and each reload); a grammar
+        ``iterations`` steps deep when given (a growth step), else as the options say."""
+        iterations = self.iterations if iterations is None else iterations
+        return prepare_model(self.input, effects=self.settings.effects, seed=self.seed, iterations=iterations,
                              limits=self.limits, allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
 
 
@@ -157,16 +160,22 @@ class ViewerSession:
         self._shadow_box = None
         self._saved_ns = None                  # a reload's save time, until its frame is shown
         self._reload_timings: dict = {}
+        self.step_target: int | None = None   # the growth step N, Shift+N and G asked for (None: none)
+        self.steps_end = model.grown.iterations   # a grammar's last step (its iterations); None otherwise
+        self.growing = False                   # G: the growth plays, a step each GROW_STEP_S
+        self._grow_clock = 0.0                 # seconds since the last step was taken in
+        self._steps_need_said = False          # "steps need a grammar" printed once
         self.camera = self._initial_camera(*options.size)
         self.watcher = FileWatcher(model.grown.sources if options.watch else (), options.poll_s)
         self.reloader = BackgroundJob(self._grow)
 
     # ------------------------------------------------------------------ the model
-    def _grow(self, t: float, saved_ns: int):
-        """The reload's work (background thread): grow, skin at ``t``; returns (model, frusta,
-        seconds of each stage)."""
+    def _grow(self, t: float, saved_ns: int | None, step: int | None = None):
+        """The reload's work (background thread): grow (a grammar ``step`` derivation steps
+        deep when given), skin at ``t``; returns (model, frusta, seconds of each stage).
+        ``saved_ns`` is the save's time for a reload, None for a growth step."""
         t0 = time.perf_counter()
-        model = self.options.prepare()
+        model = self.options.prepare(step)
         frusta = model.frusta_at(t)
         total = time.perf_counter() - t0
         grow = sum(model.grown.timings.values())      # read, parse, derive, interpret (place)
@@ -375,28 +384,46 @@ class ViewerSession:
         if self.options.watch:
             change = self.watcher.poll(now)
             if change is not None:
-                self.reloader.start(self.t, change.saved_ns)
+                self.reloader.start(self.t, change.saved_ns, self.step_target)   # at the step shown
                 self.status = "reloading ..."
         done = self.reloader.result()
         if done is not None:
             self._take_reload(*done)
+        if self.growing:
+            self._grow_clock += dt
+            if self._grow_clock >= GROW_STEP_S and not self.reloader.busy:
+                if self.step_target >= self.steps_end:
+                    self.growing = False
+                    self.status = f"grown: step {self.step} of {self.steps_end}"
+                else:
+                    self._ask_step(self.step_target + 1)
         return self.dirty
 
     def _take_reload(self, args, value, exc) -> None:
-        t, saved_ns = args
+        t, saved_ns, step = args
         if exc is not None:
-            self.error = one_line(exc)
+            self.error = one_line(exc) if saved_ns is not None else f"step {step}: {one_line(exc)}"
             self.status = ""
             self.warn(f"plantgen view: error: {self.error} (keeping the last good model)")
+            if saved_ns is None and not self.growing:     # a step that cannot be drawn: stay at the one shown
+                self.step_target = self.step
             return
         model, frusta, timings = value
         self.model, self.error = model, None
         self._frusta, self._frusta_key = frusta, (model, t if model.animated else 0.0)
         self._mesh_key = None
         self.watcher.watch(model.grown.sources)
-        waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
-        self._reload_timings = {"detect": waited, **timings}
-        self._saved_ns = saved_ns
+        self._grow_clock = 0.0
+        if model.grown.iterations is None:              # no longer a grammar
+            self.step_target, self.steps_end, self.growing = None, None, False
+        elif step is None:
+            self.steps_end = model.grown.iterations
+        if saved_ns is None:
+            self.status = f"step {self.step} of {self.steps_end}: {model.grown.segments:,} segments"
+        else:
+            waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
+            self._reload_timings = {"detect": waited, **timings}
+            self._saved_ns = saved_ns
         self.dirty = True
 
     # ------------------------------------------------------------------ the controls
@@ -503,6 +530,63 @@ class ViewerSession:
         self.t = max(0.0, self.t + dt)
         self.dirty = True
 
+    # ------------------------------------------------------------------ growth step by step
+    @property
+    def step(self) -> int | None:
+        """The derivation step of the grammar shown (its iterations); None for a scene or
+        a skeleton file."""
+        return self.model.grown.iterations
+
+    def _steps_allowed(self) -> bool:
+        """Whether the model grows step by step (a grammar); else says so (on stdout once)."""
+        if self.step is not None:
+            return True
+        self.status = f"growth steps need a grammar (this is a {self.model.grown.kind})"
+        if not self._steps_need_said:
+            self.say(self.status)
+            self._steps_need_said = True
+        return False
+
+    def _ask_step(self, step: int) -> None:
+        """Grow the grammar ``step`` derivation steps deep with the same seed (on the reload
+        thread; a newer step asked meanwhile supersedes it)."""
+        self.step_target = step
+        self.reloader.start(self.t, None, step)
+        self.status = f"growing step {step} ..."
+
+    def grow_step(self, delta: int) -> None:
+        """N, Shift+N: the growth one derivation step forward or back (from the step last
+        asked for), between the axiom (0) and the grammar's iterations; stops playing."""
+        if not self._steps_allowed():
+            return
+        self.growing = False
+        current = self.step if self.step_target is None else self.step_target
+        step = min(max(current + delta, 0), self.steps_end)
+        if step == current:
+            self.step_target = current
+            self.status = (f"step {step} is the grammar's last (its iterations)" if delta > 0
+                           else "step 0 is the axiom")
+            return
+        self._ask_step(step)
+
+    def toggle_growth(self) -> None:
+        """G: play the growth, a step each :data:`GROW_STEP_S` seconds (or as fast as a
+        step grows), up to the grammar's iterations; from the axiom when there already;
+        G again stops it."""
+        if not self._steps_allowed():
+            return
+        if self.growing:
+            self.growing = False
+            self.status = f"growth stopped at step {self.step}"
+            return
+        self.growing, self._grow_clock = True, 0.0
+        current = self.step if self.step_target is None else self.step_target
+        if current >= self.steps_end:
+            self._ask_step(0)
+        else:
+            self.step_target = current
+            self.status = "growing ..."
+
     def toggle_help(self) -> None:
         self.show_help = not self.show_help
 
@@ -576,7 +660,8 @@ class ViewerSession:
         request = replace(self.request(), view=ViewSettings(camera=str(camera_path)),
                           image=replace(self.request().image, size=None))
         args = ["plantgen", "render", str(o.input), "-o", str(out), *knob_args(request)]
-        for flag, value in (("--seed", o.seed), ("--iterations", o.iterations), ("--smooth-bends", o.smooth_bends)):
+        iterations = o.iterations if self.step_target is None else self.step
+        for flag, value in (("--seed", o.seed), ("--iterations", iterations), ("--smooth-bends", o.smooth_bends)):
             if value is not None:
                 args += [flag, str(value)]
         text = shlex.join(args)
@@ -614,6 +699,9 @@ class ViewerSession:
                  (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
         if self.model.animated:
             lines.append((f"t = {self.t:.2f} s {'playing' if self.playing else 'paused'} (Space, , .)", "info"))
+        if self.step_target is not None:
+            lines.append((f"growth: step {self.step} of {self.steps_end}, {'playing' if self.growing else 'paused'}"
+                          " (N, Shift+N, G)", "info"))
         if self.error:
             lines.append((self.error, "error"))
         elif self.status:
