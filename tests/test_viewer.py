@@ -160,6 +160,27 @@ def test_live_reload_swaps_the_plant_and_a_broken_edit_keeps_it(x_display, tmp_p
         viewer.stop()
 
 
+def test_a_grammar_grows_step_by_step_in_the_window(x_display, tmp_path):
+    grammar = tmp_path / "sprout.yaml"
+    grammar.write_text(SPROUT)
+    viewer = start(x_display, tmp_path, grammar, title="sprout")
+    try:
+        viewer.keys("shift+n")
+        viewer.wait_for(r"^sprout: step 3 of 4: ")
+        viewer.keys("p", "c")
+        shot = saved(viewer)
+        _, command = camera_and_command(viewer)
+        args = shlex.split(command)
+        assert args[args.index("--iterations") + 1] == "3"
+        assert np.array_equal(png(shot), render_command(command))     # the plant of --iterations 3
+        viewer.keys("g")                                               # plays on to the last step
+        viewer.wait_for(r"^sprout: step 4 of 4: ")
+        viewer.keys("q")
+        assert viewer.finish() == 0
+    finally:
+        viewer.stop()
+
+
 def test_a_scene_reloads_when_a_grammar_it_includes_is_saved(x_display, tmp_path):
     (tmp_path / "sprout.yaml").write_text(SPROUT)
     scene = tmp_path / "garden.yaml"

@@ -318,16 +318,18 @@ def _until_grown(s, seconds: float = 20.0, dt: float = 0.01) -> None:
 
 
 def test_growth_steps_back_and_forward_as_iterations_grow_it(gl_ctx, tmp_path):
-    s, path, _ = _sprout_session(gl_ctx, tmp_path)
+    s, path, said = _sprout_session(gl_ctx, tmp_path)
     try:
         assert (s.step, s.steps_end, s.step_target) == (4, 4, None)
         assert not any(text.startswith("growth:") for text, _ in s.hud_lines())
         segments = {k: prepare_model(path, iterations=k).grown.segments for k in range(5)}
         assert all(segments[k] < segments[k + 1] for k in range(4))      # it grows every step
+        said.clear()
         for k in (3, 2, 1, 0):
             s.key("N", shift=True)
             _until_grown(s)
             assert (s.step, s.model.grown.segments) == (k, segments[k])
+            assert said[-1] == f"sprout: step {k} of 4: {segments[k]:,} segments"
         s.key("N", shift=True)                          # below the axiom: nothing to grow
         assert (s.step, s.step_target, s.reloader.busy) == (0, 0, False) and "axiom" in s.status
         s.key("N")

@@ -420,6 +420,7 @@ class ViewerSession:
             self.steps_end = model.grown.iterations
         if saved_ns is None:
             self.status = f"step {self.step} of {self.steps_end}: {model.grown.segments:,} segments"
+            self.say(f"{model.grown.name}: {self.status}")
         else:
             waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
             self._reload_timings = {"detect": waited, **timings}
