@@ -133,10 +133,15 @@ def test_orbit_methods_and_screenshots_match_plantgen_render(x_display, tmp_path
         viewer.stop()
 
 
-def test_live_reload_swaps_the_plant_and_a_broken_edit_keeps_it(x_display, tmp_path):
+def start_sprout(display, tmp_path):
+    """The viewer on :data:`SPROUT`, written to ``sprout.yaml``; returns (its path, the viewer)."""
     grammar = tmp_path / "sprout.yaml"
     grammar.write_text(SPROUT)
-    viewer = start(x_display, tmp_path, grammar, title="sprout")
+    return grammar, start(display, tmp_path, grammar, title="sprout")
+
+
+def test_live_reload_swaps_the_plant_and_a_broken_edit_keeps_it(x_display, tmp_path):
+    grammar, viewer = start_sprout(x_display, tmp_path)
     try:
         viewer.keys("c")
         camera, command = camera_and_command(viewer)
@@ -161,9 +166,7 @@ def test_live_reload_swaps_the_plant_and_a_broken_edit_keeps_it(x_display, tmp_p
 
 
 def test_a_grammar_grows_step_by_step_in_the_window(x_display, tmp_path):
-    grammar = tmp_path / "sprout.yaml"
-    grammar.write_text(SPROUT)
-    viewer = start(x_display, tmp_path, grammar, title="sprout")
+    grammar, viewer = start_sprout(x_display, tmp_path)
     try:
         viewer.keys("shift+n")
         viewer.wait_for(r"^sprout: step 3 of 4: ")
@@ -173,6 +176,11 @@ def test_a_grammar_grows_step_by_step_in_the_window(x_display, tmp_path):
         args = shlex.split(command)
         assert args[args.index("--iterations") + 1] == "3"
         assert np.array_equal(png(shot), render_command(command))     # the plant of --iterations 3
+        grammar.write_text(SPROUT.replace("a: 25", "a: 60"))          # a save regrows the step shown
+        viewer.wait_for(r"^reloaded .*sprout\.yaml")
+        viewer.keys("p")
+        edited = png(saved(viewer))
+        assert np.array_equal(edited, render_command(command)) and not np.array_equal(edited, png(shot))
         viewer.keys("g")                                               # plays on to the last step
         viewer.wait_for(r"^sprout: step 4 of 4: ")
         viewer.keys("q")
