@@ -72,7 +72,8 @@ BINDINGS = (
     _b("COMMA", "scrub", "", "", -KEY_SCRUB_LONG, shift=True),
     _b("N", "grow_step", "N / Shift+N", "a grammar's growth: one derivation step forward / back", 1, shift=False),
     _b("N", "grow_step", "", "", -1, shift=True),
-    _b("G", "toggle_growth", "G", f"play a grammar's growth from its axiom, a step each {GROW_STEP_S:g} s / stop"),
+    _b("G", "toggle_growth", "G", f"play / stop a grammar's growth, a step each {GROW_STEP_S:g} s (from the axiom "
+       "when grown)"),
     _b("P", "screenshot", "P", "save the frame as PNG (as plantgen render draws it)", shift=False),
     _b("P", "window_shot", "Shift+P", "save the window as shown, heads-up line included", shift=True),
     _b("C", "save_camera", "C", "save the camera as JSON for plantgen render --camera"),
