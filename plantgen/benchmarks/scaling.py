@@ -122,7 +122,7 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
                "rt_ms": rt_ms, "gpu_bytes": gpu_bytes,
                "copy_bytes": (gpu_bytes - base_bytes) / max(placed.copies - len(once.plants), 1),
                "rc_ms": float("nan")}
-        if placed.copies <= rc_max:
+        if n <= rc_max:                       # N as asked (the tiles may hold a few more)
             row["rc_ms"], rc_frame = _frames(lambda p=placed, a=args: rc.render(p, settings=settings,
                                                                                 lod_pixels=lod_pixels, **a), frames)
             _write(images, f"rc_{placed.copies}.png", rc_frame)
