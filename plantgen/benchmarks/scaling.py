@@ -3,14 +3,17 @@ memory grow with the copies, for RT (ray traced through the two-level BVH, every
 beside RC at a level of detail (a pyramid per drawn row).
 
 Run: ``python -m plantgen.benchmarks.scaling [--scene forest] [--copies 1000,10000,100000]
-[--size 512x384] [--frames 3] [--lod 2] [--rc-max 100000] [--out scaling.md]``.
+[--size 512x384] [--frames 3] [--lod 2] [--rc-max 100000] [--view scene|overview]
+[--images DIR] [--out scaling.md]``.
 
 Every forest is made of the same distinct plants as ``--scene`` (grown and skinned once):
 its copies' placements are tiled (:func:`tile_placed`), the scene's whole grid shifted by
 its extent across the view and away from the camera, the nearest tiles first, until there
 are about N copies (each plant's grid cut in the same proportion: the copies counted are
-the table's). The scene's camera and light are kept; the ground is widened under every
-tile. Leaves (world polygons, not instanced) are left out, and so are relief and shadows:
+the table's). The scene's light is kept, and its camera (``--view scene``: at eye height
+inside the forest, so the tiles added lie mostly hidden behind the first) or each forest
+framed whole from above (``--view overview``: every copy in view); the ground is widened
+under every tile. Leaves (world polygons, not instanced) are left out, and so are relief and shadows:
 the table measures the rows' cost as the copies grow.
 
 For each N: *scene BVH s* builds the two levels (a BVH per distinct plant and the top level
@@ -35,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.bvh import build_bvh, build_scene_bvh
+from ..geometry.camera import Camera
 from ..geometry.instances import PlacedPlants
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
@@ -44,7 +48,13 @@ from ..settings import RaycastSettings
 from .arguments import image_size, report
 from .scan import machine
 
-__all__ = ["tile_placed", "measure", "markdown", "main"]
+__all__ = ["tile_placed", "measure", "markdown", "main", "VIEWS", "OVERVIEW"]
+
+#: The cameras of ``--view``: the scene's own (at eye height inside the forest: the tiles
+#: added lie behind the first, mostly hidden) or each forest framed whole from above.
+VIEWS = ("scene", "overview")
+#: The overview camera's direction (from the forest's centre towards the eye).
+OVERVIEW = (0.35, 1.2, 1.0)
 
 
 def tile_placed(placed: PlacedPlants, copies: int, toward=(0.0, 0.0, -1.0)) -> PlacedPlants:
@@ -89,9 +99,13 @@ def _timed(fn):
 
 
 def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 384), frames: int = 3,
-            lod_pixels: float = 2.0, rc_max: int = 100_000, say=print, images: Path | None = None) -> dict:
+            lod_pixels: float = 2.0, rc_max: int = 100_000, say=print, images: Path | None = None,
+            view: str = "scene") -> dict:
     """The table's rows (module docstring), one per N in ``counts``; with ``images``, each
-    frame is written there (PNG)."""
+    frame is written there (PNG). ``view``: "scene" (the scene's camera, every N) or
+    "overview" (each forest framed whole from above, :data:`OVERVIEW`)."""
+    if view not in VIEWS:
+        raise SystemExit(f"--view: one of {', '.join(VIEWS)}, not {view!r}")
     model = prepare_model(scene)
     base = model.placed
     if base is None:
@@ -103,6 +117,8 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
 
     def arguments(placed):
         args = {**frame_arguments(placed, staging, None), "leaves": None}
+        if view == "overview":
+            args["camera"] = Camera.auto(placed.box, *size, direction=OVERVIEW)
         if args["ground"] is not None:
             lo, hi = placed.box
             reach = float(np.abs(np.concatenate([lo, hi])[[0, 2, 3, 5]]).max())
@@ -117,7 +133,7 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
         top_s, _ = _timed(lambda b=bvh: build_bvh(b.copy_lo, b.copy_hi, leaf_size=2))
         args = arguments(placed)
         rt_ms, rt_frame = _frames(lambda p=placed, a=args: rt.render(p, settings=settings, **a), frames)
-        gpu_bytes = rt.gpu_bvh(placed, None, staging.camera.eye).nbytes
+        gpu_bytes = rt.gpu_bvh(placed, None, args["camera"].eye).nbytes
         row = {"n": n, "copies": placed.copies, "segments": len(placed), "scene_s": scene_s, "top_s": top_s,
                "rt_ms": rt_ms, "gpu_bytes": gpu_bytes,
                "copy_bytes": (gpu_bytes - base_bytes) / max(placed.copies - len(once.plants), 1),
@@ -125,12 +141,12 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
         if n <= rc_max:                       # N as asked (the tiles may hold a few more)
             row["rc_ms"], rc_frame = _frames(lambda p=placed, a=args: rc.render(p, settings=settings,
                                                                                 lod_pixels=lod_pixels, **a), frames)
-            _write(images, f"rc_{placed.copies}.png", rc_frame)
-        _write(images, f"rt_{placed.copies}.png", rt_frame)
+            _write(images, f"rc_{placed.copies}_{view}.png", rc_frame)
+        _write(images, f"rt_{placed.copies}_{view}.png", rt_frame)
         rows.append(row)
         say(f"N = {placed.copies:,}: RT {rt_ms:,.0f} ms, RC {row['rc_ms']:,.0f} ms, scene BVH {scene_s:.2f} s, "
             f"top level {top_s:.3f} s, GPU {gpu_bytes / 2**20:,.1f} MiB ({row['copy_bytes']:.1f} B/copy)")
-    return {"scene": scene, "size": size, "frames": frames, "lod_pixels": lod_pixels, "rc_max": rc_max,
+    return {"scene": scene, "view": view, "size": size, "frames": frames, "lod_pixels": lod_pixels, "rc_max": rc_max,
             "plants": len(base.plants), "unique_rows": base.unique_rows, "base_bytes": base_bytes, "rows": rows,
             "renderer": renderer_name(), "machine": machine(), "date": f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC"}
 
@@ -146,13 +162,19 @@ def _growth(rows, key) -> list[str]:
     return out
 
 
+_VIEW_TEXT = {"scene": "the scene's camera at eye height inside the forest, for every N (the tiles added lie "
+                       "behind the scene's own, mostly hidden by it)",
+              "overview": f"each forest framed whole from above (direction {OVERVIEW}): every copy in view"}
+
+
 def markdown(result: dict) -> str:
     w, h = result["size"]
     rows = result["rows"]
-    lines = [f"# Scaling: `{result['scene']}`'s plants from {rows[0]['copies']:,} to {rows[-1]['copies']:,} copies",
+    lines = [f"### `{result['scene']}`'s plants from {rows[0]['copies']:,} to {rows[-1]['copies']:,} copies, "
+             f"{result['view']} view",
              "", "| | |", "| --- | --- |",
              f"| GL renderer | {result['renderer']} |", f"| machine | {result['machine']} |",
-             f"| date | {result['date']} |",
+             f"| date | {result['date']} |", f"| view | {_VIEW_TEXT[result['view']]} |",
              f"| frames | {w}x{h}, relief, shadows and leaves off; a warm-up and {result['frames']} timed, the median; "
              f"RT every row, RC at {result['lod_pixels']:g} px detail (up to {result['rc_max']:,} copies) |",
              f"| distinct plants | {result['plants']} grown plants, {result['unique_rows']:,} rows; their BVH on the "
@@ -183,11 +205,14 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=3, help="timed frames per method and N (median)")
     parser.add_argument("--lod", type=float, default=2.0, help="RC's detail in pixels (default 2)")
     parser.add_argument("--rc-max", type=int, default=100_000, help="RC only up to this many copies")
+    parser.add_argument("--view", default="scene", choices=VIEWS,
+                        help="scene: the scene's camera for every N; overview: each forest framed whole from above")
     parser.add_argument("--images", type=Path, help="folder to write every frame into (PNG)")
     parser.add_argument("--out", type=Path)
     a = parser.parse_args(argv)
     counts = [int(x) for x in a.copies.split(",") if x.strip()]
-    return report(markdown(measure(a.scene, counts, a.size, a.frames, a.lod, a.rc_max, images=a.images)), a.out)
+    result = measure(a.scene, counts, a.size, a.frames, a.lod, a.rc_max, images=a.images, view=a.view)
+    return report(markdown(result), a.out)
 
 
 if __name__ == "__main__":
