@@ -38,10 +38,13 @@ __all__ = ["PlacedPlants", "PlantCopies", "PlacedMesh", "PlacedMeshes", "place_f
 
 def similarity_parts(matrices) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(k, 4, 4) similarity transforms as (rotation (k, 3, 3), scale (k,), translation (k, 3)),
-    float64: ``M x = scale · rotation · x + translation``."""
+    float64: ``M x = scale · rotation · x + translation``. A copy that scales by 0 has no
+    rotation (NaN, without a floating-point warning): its users refuse it in one line."""
     m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
     scale = np.cbrt(np.abs(np.linalg.det(m[:, :3, :3])))
-    return m[:, :3, :3] / scale[:, None, None], scale, m[:, :3, 3].copy()
+    turn = np.divide(m[:, :3, :3], scale[:, None, None], out=np.full((len(m), 3, 3), np.nan),
+                     where=scale[:, None, None] > 0)
+    return turn, scale, m[:, :3, 3].copy()
 
 
 def place_frusta(frusta: Frusta, matrix) -> Frusta:
