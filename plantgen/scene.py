@@ -493,20 +493,22 @@ def _check_placed(skel: Skeleton, matrix: np.ndarray, where: str, polygons: Poly
                   extents: dict | None = None) -> None:
     """Refuse a copy whose placed coordinates (its leaves' too) or radii would not be
     finite or would lie beyond ``tol.max_coordinate`` (a huge position, scale or grid spacing).
-    ``extents`` keeps each plant's :func:`_local_extent`, so copies of one plant cost a
-    box's eight corners each."""
+    ``extents`` keeps each plant's box corners and radius (:func:`_local_extent`), so a copy
+    of a plant seen before costs eight corners moved."""
     key = (id(skel), id(polygons))
     if extents is None or key not in extents:
         extent = _local_extent(skel, polygons)
+        if extent is not None:
+            extent = (box_corners(extent[0]), extent[1])
         if extents is not None:
             extents[key] = extent
     else:
         extent = extents[key]
     if extent is None:
         return
-    box, radius = extent
+    corners, radius = extent
     with np.errstate(all="ignore"):
-        corners = box_corners(box) @ matrix[:3, :3].T + matrix[:3, 3]
+        corners = corners @ matrix[:3, :3].T + matrix[:3, 3]
         radius = radius * float(np.abs(matrix[:3, :3]).max())
         ok = bool(np.all(np.abs(corners) <= _MAX)) and radius <= _MAX
     if not ok:
@@ -522,14 +524,13 @@ def _grown_parts(grown) -> tuple[Skeleton, Polygons | None]:
     return grown.skeleton, grown.polygons
 
 
-def _copy_skeleton(inst, placement: _Placement, seed: int, base: Path, grow_grammar, cache: dict,
-                   limits: Limits, allow_paths) -> tuple[Skeleton, Polygons | None, str]:
+def _copy_skeleton(inst, placement: _Placement, seed: int, grammar: tuple[str, Path] | None, grow_grammar,
+                   cache: dict, limits: Limits) -> tuple[Skeleton, Polygons | None, str]:
     """The skeleton and leaf polygons (None for none) of one copy, in its own frame, and
-    its source name."""
-    if "skeleton" in inst:
+    its source name; ``grammar``: the entry's (name, resolved path), None for a skeleton."""
+    if grammar is None:
         return _explicit_skeleton(inst["skeleton"], f"{placement.where}: skeleton", limits), None, "skeleton"
-    name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
-    gpath = resolve_grammar(name, base, placement.where, allow_paths)
+    name, gpath = grammar
     key = (str(gpath), seed, placement.iterations)
     if key not in cache:
         try:
@@ -545,11 +546,13 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
                  allow_paths=()) -> list[SceneInstance]:
     """Every copy of one instance entry, grown (grammars once per seed and iteration count,
     through ``cache``), counted against the scene's segment budget and placed."""
-    out, extents = [], {}
+    out, extents, grammar = [], {}, None
+    if "skeleton" not in inst:                   # one entry names one grammar: resolved once for all its copies
+        name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
+        grammar = name, resolve_grammar(name, base, placement.where, allow_paths)
     for offset, yaw, c, factor in placement.copies:
         s = placement.seed + c
-        skel, polygons, source = _copy_skeleton(inst, placement, s, base, grow_grammar, cache, budget.limits,
-                                                allow_paths)
+        skel, polygons, source = _copy_skeleton(inst, placement, s, grammar, grow_grammar, cache, budget.limits)
         if "skeleton" in inst:
             budget.add_segments(len(skel), placement.where)
         budget.add_drawn(len(skel), placement.where)
