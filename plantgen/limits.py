@@ -19,8 +19,8 @@ from dataclasses import dataclass, fields, replace
 
 from .errors import PlantgenError
 
-__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "STEP_WORK",
-           "hint", "limits"]
+__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "SEQUENTIAL_WORK",
+           "STEP_WORK", "hint", "limits"]
 
 #: The largest image side (pixels) plantgen renders: the GL texture size every OpenGL 4.3
 #: driver plantgen has met supports. A hard bound, not a budget: no option raises it.
@@ -38,6 +38,11 @@ STEP_WORK = 200
 #: finding each module's context neighbours walks the string in Python, about three
 #: times the vectorised rewriting's cost, so such a step counts its modules four times.
 CONTEXT_WORK = 4
+
+#: How much a step of a grammar with a new left context (``<<``) costs per module: such a
+#: step is sequential, a module at a time in Python, tens of times slower than a
+#: vectorised one.
+SEQUENTIAL_WORK = 100
 
 
 class LimitError(PlantgenError):

@@ -98,6 +98,68 @@ def test_context_ignore_list_and_brackets():
     assert text(g) == "a[b]c"
 
 
+@pytest.mark.parametrize("axiom, rule, ignore, expected", [
+    ("a[b]c", "a > [b]c -> x", "", "x[b]c"),
+    ("a[b][c]d", "a > [b][c]d -> x", "", "x[b][c]d"),
+    ("a[be]c", "a > [b]c -> x", "", "x[be]c"),             # ']' skips the rest of the branch
+    ("a[b[e]f]c", "a > [b]c -> x", "", "x[b[e]f]c"),       # ... nested branches included
+    ("a[be]c", "a > [b -> x", "", "x[be]c"),               # a branch that begins with b
+    ("a[+b]+c", "a > [b]c -> x", "+", "x[+b]+c"),          # ignored modules are skipped
+    ("a[+b]c", "a > [b]c -> x", "", "a[+b]c"),             # ... only those
+    ("a[e][b]c", "a > [b]c -> x", "", "a[e][b]c"),         # '[' meets the first branch only
+    ("a[b]e[c]d", "a > [b]e d -> x", "", "x[b]e[c]d"),     # an unnamed branch is skipped
+    ("a[b]", "a > [b]c -> x", "", "a[b]"),
+    ("[a]b", "a > ]b -> x", "", "[x]b"),                   # ']' steps out of the branch
+    ("[ae]b", "a > ]b -> x", "", "[xe]b"),
+])
+def test_brackets_in_a_right_context(axiom, rule, ignore, expected):
+    # hand-derived from L-Py's matching of a right context along the branching structure
+    assert text(grammar(axiom=axiom, rules=[rule], ignore=ignore)) == expected
+
+
+def test_bracketed_right_context_binds_parameters():
+    g = grammar(axiom="I(1)[I(2)]I(3)", rules=["I(p) > [I(k)] I(q) -> I(p + k * 10 + q * 100)"])
+    assert text(g) == "I(321)[I(2)]I(3)"
+
+
+@pytest.mark.parametrize("axiom, rules, expected", [
+    ("F(1)+F(2)F(3)+F(4)", ["F(x) + F(y) -> G(x + y)"], "G(3)G(7)"),
+    ("aaa", ["a a -> b"], "ba"),                              # matches taken from the left
+    ("aaaa", ["a a -> b"], "bb"),
+    ("ab", ["b -> c", "a b -> d"], "ac"),                     # an earlier rule took b
+    ("ab", ["a b -> d", "b -> c"], "d"),
+    ("xaby", ["x < a b > y -> c"], "xcy"),                    # contexts around the whole run
+    ("a[e]b", ["a b -> c"], "c"),                             # a branch inside the run goes too
+    ("a+b", ["a b -> c"], "a+b"),
+    ("F(1)F(5)", ["F(x) F(y) : y > x -> F(y) F(x)"], "F(5)F(1)"),
+])
+def test_predecessor_of_several_modules(axiom, rules, expected):
+    assert text(grammar(axiom=axiom, rules=rules)) == expected
+
+
+def test_predecessor_of_several_modules_skips_ignored_ones():
+    assert text(grammar(axiom="a+b", rules=["a b -> c"], ignore="+")) == "c"
+
+
+def test_new_left_context_reads_the_string_being_written():
+    # a sequential step: each K sees the two K written just before it (Fibonacci in one step)
+    g = grammar(axiom="K(1)K(1)K(1)K(1)K(1)K(1)", rules=["K(x) K(y) << K(z) : z == 1 -> K(x + y)"])
+    assert text(g) == "K(1)K(1)K(2)K(3)K(5)K(8)"
+    # against the old string (parallel), every K sees K(1)K(1)
+    g = grammar(axiom="K(1)K(1)K(1)K(1)", rules=["K(x) K(y) < K(z) : z == 1 -> K(x + y)"])
+    assert text(g) == "K(1)K(1)K(2)K(2)"
+
+
+def test_new_left_context_follows_the_branching_structure():
+    # a branch sees the module it grows from in the new string; an ignored module is skipped
+    g = grammar(axiom="A[B]+B", ignore="+", rules=["A -> C", "C << B -> D"])
+    assert text(g) == "C[D]+D"
+    g = grammar(axiom="A[B]B", rules=["A -> C", "B << B -> D"])
+    assert text(g) == "C[B]B"
+    g = grammar(axiom="BBB", rules=["B << B -> D(1)", "D(x) << B -> D(x + 1)"], iterations=1)
+    assert text(g) == "BD(1)D(2)"
+
+
 def test_context_parameters_are_visible():
     g = grammar(axiom="A(2)B(3)C(5)", rules=["A(x) < B(y) > C(z) -> B(x * 100 + y * 10 + z)"])
     assert text(g) == "A(2)B(235)C(5)"
@@ -292,7 +354,8 @@ def test_grammar_max_modules_key_is_used():
     (dict(axiom="A(q)"), "undefined name 'q'"),
     (dict(axiom="A", rules=[{"rule": "A -> B", "p": 0.5}, {"rule": "A -> C", "p": 0.4}]), "add up to 0.9"),
     (dict(axiom="A", rules=["A -> B", "A -> C"]), "repeats the predecessor"),
-    (dict(axiom="A", rules=["A B -> C"]), "exactly one module"),
+    (dict(axiom="A", rules=["A >> B -> C"]), "new right context"),
+        (dict(axiom="A", rules=["[B] < A -> C"]), "right context only"),
     (dict(axiom="A", colour="red"), "unknown key"),
     (dict(axiom="A", turtle={"size": 1}), "unknown key"),
     (dict(rules=[]), "no 'axiom'"),

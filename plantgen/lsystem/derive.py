@@ -36,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..limits import CONTEXT_WORK, STEP_WORK, LimitError, Limits, Meter, hint
+from ..limits import CONTEXT_WORK, SEQUENTIAL_WORK, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
@@ -85,16 +85,19 @@ def _instantiate(templates: tuple[ModuleTemplate, ...], env: dict, rng, n: int, 
 
 
 def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: frozenset[str]):
-    """For each module, the index of its left and right context neighbour (or -1).
+    """What context matching needs of a string: each module's left context neighbour (or
+    -1), and the jumps :func:`_walk` takes rightwards.
 
     ABOP semantics: ignored symbols are skipped; looking left, a whole bracketed branch
     ``[...]`` is skipped and an opening ``[`` is stepped over to the module the branch
-    grows from; looking right, a branch ``[...]`` is skipped and a ``]`` ends the context.
+    grows from. The jumps, arrays of n + 1 (position n: the end of the string): ``vis``,
+    the first position from each on that is not an ignored module; ``skip``, the same
+    skipping whole branches too; ``outer``, the ``]`` that closes the branch a position is
+    in (a ``[`` being outside its own branch; n on the main axis).
     """
     n = len(ms_sym)
     seq = [symbols[s] for s in ms_sym.tolist()]
     left = np.full(n, -1, dtype=np.int64)
-    right = np.full(n, -1, dtype=np.int64)
     # Left: walk forward keeping, per bracket depth, the last visible module.
     stack = [-1]
     for i, ch in enumerate(seq):
@@ -107,20 +110,56 @@ def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: fr
             left[i] = stack[-1]
             if ch not in ignore:
                 stack[-1] = i
-    # Right: walk backward keeping, per depth, the next visible module of the same branch.
-    stack = [-1]
+    # Right: walk backward keeping the ] of each open branch.
+    vis, skip, outer = (np.full(n + 1, n, dtype=np.int64) for _ in range(3))
+    closes: list[int] = []
     for i in range(n - 1, -1, -1):
         ch = seq[i]
         if ch == "]":
-            stack.append(-1)
-        elif ch == "[":
-            if len(stack) > 1:
-                stack.pop()
+            closes.append(i)
+            vis[i] = skip[i] = outer[i] = i
+            continue
+        if ch == "[":
+            close = closes.pop() if closes else n
+            vis[i], skip[i] = i, skip[min(close + 1, n)]
+        elif ch in ignore:
+            vis[i], skip[i] = vis[i + 1], skip[i + 1]
         else:
-            right[i] = stack[-1]
-            if ch not in ignore:
-                stack[-1] = i
-    return left, right
+            vis[i] = skip[i] = i
+        outer[i] = closes[-1] if closes else n
+    return left, (vis, skip, outer)
+
+
+def _walk(pats: tuple[Pattern, ...], start: np.ndarray, jumps, sym, nparam, codes: dict):
+    """Match ``pats`` rightwards from positions ``start``, as L-Py matches a right context
+    (vectorised over the starts): ignored modules are skipped; a module pattern skips whole
+    branches ``[...]`` and fails at a ``]`` (the end of its branch); a ``[`` must meet a
+    ``[``; a ``]`` skips the rest of the branch the walk is in and steps out of it.
+
+    Returns the starts that match, per module pattern the position it matched (by pattern
+    index), and the position after the last one matched.
+    """
+    vis, skip, outer = jumps
+    n = len(sym)
+    sym = np.append(sym, -1)
+    nparam = np.append(nparam, -1)
+    ok = np.ones(len(start), dtype=bool)
+    rows = {}
+    p = np.minimum(start, n)
+    for k, pat in enumerate(pats):
+        if pat.symbol == "[":
+            p = vis[p]
+            ok &= sym[p] == codes.get("[", -2)
+        elif pat.symbol == "]":
+            p = vis[p]
+            p = np.where(sym[p] == codes.get("]", -2), p, outer[p])
+            ok &= p < n
+        else:
+            p = skip[p]
+            ok &= (sym[p] == codes.get(pat.symbol, -2)) & (nparam[p] == len(pat.params))
+            rows[k] = np.where(ok, p, 0)
+        p = np.minimum(p + 1, n)
+    return ok, rows, p
 
 
 def _match_context(idx, pats: tuple[Pattern, ...], neighbour, step_order, sym, nparam, codes):
@@ -202,7 +241,6 @@ class Derivation:
                                   "modules")
         self.queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
         self.groups = _rule_groups(grammar.rules)
-        self.needs_context = any(r.left or r.right for r in grammar.rules)
         self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
         self.step, self.total = 0, len(self.string[0])
@@ -214,14 +252,8 @@ class Derivation:
             return False
         g, string = self.grammar, self.string
         self.before = (string, self.rng.bit_generator.state)
-        neighbours = _context_neighbours(string[0], g.symbols, g.ignore) if self.needs_context else None
-        matched, out_len, applied = _select_rewrites(g, self.groups, string, neighbours, self.rng, self.codes)
-        total = int(out_len.sum())
-        _check_step(g, self.limits, self.step, total, self.width)
-        self.work.spend(total * (CONTEXT_WORK if self.needs_context else 1) + STEP_WORK * (len(self.groups) + 1),
-                        f"{g.path}: derivation step {self.step + 1}")
-        self.string = _cut(_rewrite(g, string, matched, out_len, applied, self.rng, self.codes, self.width),
-                           self.codes)
+        self.string, total, _ = _step(g, self.groups, string, self.rng, self.codes, self.width, self.limits,
+                                      self.work, self.step, "derivation step")
         if g.decomposition:
             self.string = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng, self.codes,
                                   self.width, self.limits, self.work, f"decomposition after step {self.step + 1}, pass")
@@ -296,18 +328,102 @@ def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, 
     and the decomposition after each derivation step."""
     view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
-    needs_context = any(r.left or r.right for r in view.rules)
     for step in range(depth):
-        neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
-        matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
-        if not matched.any():
+        string, _, rewritten = _step(view, groups, string, rng, codes, width, limits, work, step, what, idle=False)
+        if not rewritten:
             break
-        total = int(out_len.sum())
-        _check_step(view, limits, step, total, width, what)
-        work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
-                   f"{grammar.path}: {what} {step + 1}")
-        string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
     return string
+
+
+def _step(grammar: Grammar, groups: list[list[Rule]], string, rng, codes: dict, width: int, limits: Limits,
+          work: Meter, step: int, what: str, idle: bool = True):
+    """One rewriting step of ``grammar``'s rules (``groups``): the new string (``%`` cuts
+    applied), its length before the cuts, and whether any rule applied (without ``idle``,
+    a step where none applies is not done, and costs nothing). In parallel, as
+    :func:`_select_rewrites` and :func:`_rewrite` do; or, for rules with a new left context
+    (``<<``), sequentially from left to right (:func:`_sequential`)."""
+    rules = [r for alts in groups for r in alts]
+    contexts = any(r.left or r.right or r.more or r.new_left for r in rules)
+    neighbours = _context_neighbours(string[0], grammar.symbols, grammar.ignore) if contexts else None
+    where = f"{grammar.path}: {what} {step + 1}"
+    if any(r.new_left for r in rules):
+        work.spend(len(string[0]) * SEQUENTIAL_WORK + STEP_WORK * (len(groups) + 1), where)
+        new, rewritten = _sequential(grammar, groups, string, neighbours, rng, codes, width,
+                                     lambda total: _check_step(grammar, limits, step, total, width, what))
+        total = len(new[0])
+    else:
+        matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
+        total, rewritten = int(out_len.sum()), bool(matched.any())
+        if not (rewritten or idle):
+            return string, total, False
+        _check_step(grammar, limits, step, total, width, what)
+        work.spend(total * (CONTEXT_WORK if contexts else 1) + STEP_WORK * (len(groups) + 1), where)
+        new = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
+    return _cut(new, codes), total, rewritten
+
+
+def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng, codes: dict, width: int,
+                check):
+    """A sequential step, as L-Py rewrites with new contexts: module by module from left to
+    right, each rewritten by the first rule group that matches it, a new left context
+    (``<<``) matched in the string written so far; ``check(total)`` refuses a string grown
+    too long before it is written. Returns the new string and whether any rule applied."""
+    sym, nparam, params = string
+    n = len(sym)
+    firsts = {codes[alts[0].pred.symbol] for alts in groups}
+    size = max(16, n)
+    out = [np.empty(size, dtype=np.int32), np.empty(size, dtype=np.int8), np.zeros((size, width))]
+    chain = np.empty(size + 1, dtype=np.int64)   # each new module's left context neighbour, then a spare
+    stack = [-1]                   # per bracket depth, the last visible new module
+    symbols, ignore = grammar.symbols, grammar.ignore
+    none = np.zeros(n, dtype=bool)
+    count, rewritten = 0, False
+
+    def append(s_, k_, p_) -> None:
+        nonlocal out, chain, count
+        if count + 1 >= len(chain):
+            out = [np.concatenate([a, np.zeros_like(a)]) for a in out]
+            chain = np.concatenate([chain, np.empty_like(chain)])
+        ch = symbols[s_]
+        chain[count] = -1
+        if ch == "[":
+            stack.append(stack[-1])
+        elif ch == "]":
+            if len(stack) > 1:
+                stack.pop()
+        else:
+            chain[count] = stack[-1]
+            if ch not in ignore:
+                stack[-1] = count
+        out[0][count], out[1][count], out[2][count] = s_, k_, p_
+        count += 1
+
+    i = 0
+    while i < n:
+        found = None
+        if int(sym[i]) in firsts:
+            chain[count] = stack[-1]              # the spare: the next module's neighbour
+            new = (chain[:count], chain[:count + 1], *(a[:count + 1] for a in out))   # (+ 1: never empty)
+            for alts in groups:
+                found = _match_group(grammar, alts[0], string, none, neighbours, rng, codes, np.array([i]), new)
+                if found is not None:
+                    break
+        if found is None:
+            append(sym[i], nparam[i], params[i])
+            i += 1
+            continue
+        idx, env, end = found
+        for _, rule, sub_env in _choose_alternatives(alts, idx, env, rng):
+            check(count + len(rule.successor) + n - i)
+            try:
+                s_, k_, p_ = _instantiate(rule.successor, sub_env, rng, 1, codes, width)
+            except ExprError as exc:
+                raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
+            for j in range(len(rule.successor)):
+                append(s_[j], k_[j], p_[j, 0])
+        rewritten = True
+        i = int(end[0])
+    return (out[0][:count].copy(), out[1][:count].copy(), out[2][:count].copy()), rewritten
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:
@@ -394,14 +510,16 @@ def _rule_groups(rules: tuple[Rule, ...]) -> list[list[Rule]]:
 
 def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng,
                      codes: dict):
-    """Which rule rewrites which module in this step (the first matching group wins).
+    """Which rule rewrites which module in this step (the first matching group wins; the
+    matches of a predecessor of several modules taken from left to right, none overlapping).
 
     Returns
     -------
     matched : (n,) bool, modules some rule rewrites
-    out_len : (n,) int64, length of each module's replacement (1 when untouched)
+    out_len : (n,) int64, length of each module's replacement (1 when untouched, 0 for the
+        second and later modules of a predecessor of several)
     applied : list of (modules (k,) int, rule, env): each rule with the modules it rewrites
-        and its parameter values there
+        (the first of each predecessor) and its parameter values there
     """
     sym = string[0]
     n = len(sym)
@@ -412,49 +530,92 @@ def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbo
         found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes)
         if found is None:
             continue
-        idx, env = found
-        matched[idx] = True
+        idx, env, end = found
+        covered = _ranges(idx, end)
+        matched[covered] = True
+        out_len[covered] = 0
         for sub, rule, sub_env in _choose_alternatives(alts, idx, env, rng):
             out_len[sub] = len(rule.successor)
             applied.append((sub, rule, sub_env))
     return matched, out_len, applied
 
 
+def _ranges(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The positions of the runs ``start[k] <= i < end[k]``, concatenated."""
+    lengths = end - start
+    if lengths.size and lengths.max() == 1:
+        return start
+    first = np.cumsum(lengths) - lengths
+    return np.repeat(start - first, lengths) + np.arange(int(lengths.sum()))
+
+
 def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neighbours, rng,
-                 codes: dict):
+                 codes: dict, candidates: np.ndarray | None = None, new=None):
     """The modules not yet matched that ``rule``'s predecessor, context and condition match,
-    with the environment its expressions see there: ((k,) int, env), or None for none."""
+    with the environment its expressions see there and where each match ends: ((k,) int,
+    env, (k,) int), or None for none. ``candidates`` limits the search to those positions;
+    ``new`` is (left neighbours, the next module's, sym, nparam, params) of the string being
+    written, for a new left context (``<<``, a sequential step)."""
     sym, nparam, params = string
     code = codes[rule.pred.symbol]
-    idx = np.flatnonzero((sym == code) & (nparam == len(rule.pred.params)) & ~matched)
+    if candidates is None:
+        idx = np.flatnonzero((sym == code) & (nparam == len(rule.pred.params)) & ~matched)
+    else:
+        idx = candidates[(sym[candidates] == code) & (nparam[candidates] == len(rule.pred.params))]
     if idx.size == 0:
         return None
-    env = dict(grammar.defines)
-    if rule.left or rule.right:
-        left_nb, right_nb = neighbours
+    end = idx + 1
+    bound = [(rule.pred, idx, params)]
+    if rule.more or rule.left or rule.right or rule.new_left:
+        left_nb, jumps = neighbours
+        keep, more_rows, end = _walk(rule.more, idx + 1, jumps, sym, nparam, codes)
+        if rule.more:
+            taken = np.concatenate([[0], np.cumsum(matched)])
+            keep &= taken[end] == taken[idx]          # none of the run rewritten already
         keep_l, left_ctx = _match_context(idx, rule.left, left_nb, reversed, sym, nparam, codes)
-        keep_r, right_ctx = _match_context(idx, rule.right, right_nb, iter, sym, nparam, codes)
-        keep = keep_l & keep_r
-        idx = idx[keep]
+        keep_r, right_ctx, _ = _walk(rule.right, end, jumps, sym, nparam, codes)
+        keep &= keep_l & keep_r
+        new_ctx = {}
+        if rule.new_left:                      # one candidate: the module the sequential step is at
+            chain, neighbour, new_sym, new_nparam, new_params = new
+            keep_n, new_ctx = _match_context(np.array([len(chain)]), rule.new_left, neighbour, reversed,
+                                             new_sym, new_nparam, codes)
+            keep &= keep_n
+        idx, end = idx[keep], end[keep]
         if idx.size == 0:
             return None
-        for ctx_pats, ctx_map in ((rule.left, left_ctx), (rule.right, right_ctx)):
-            for k, pat in enumerate(ctx_pats):
-                rows = ctx_map[k][keep]
-                for c, name in enumerate(pat.params):
-                    env[name] = params[rows, c]
-    for c, name in enumerate(rule.pred.params):
-        env[name] = params[idx, c]
+        bound = [(rule.pred, idx, params)]
+        for pats, rows_of, values in ((rule.more, more_rows, params), (rule.left, left_ctx, params),
+                                      (rule.right, right_ctx, params), (rule.new_left, new_ctx, new and new[4])):
+            bound += [(pats[k], rows[keep], values) for k, rows in rows_of.items()]
+    env = dict(grammar.defines)
+    for pat, rows, values in bound:
+        for c, name in enumerate(pat.params):
+            env[name] = values[rows, c]
     if rule.condition is not None:
         try:
             ok = np.broadcast_to(rule.condition(EvalContext(env, rng, idx.size)), idx.shape) != 0
         except ExprError as exc:
             raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
-        idx = idx[ok]
+        idx, end = idx[ok], end[ok]
         env = _rows(env, ok)
         if idx.size == 0:
             return None
-    return idx, env
+    if rule.more and idx.size > 1 and (end[:-1] > idx[1:]).any():
+        ok = _leftmost(idx, end)
+        idx, end, env = idx[ok], end[ok], _rows(env, ok)
+    return idx, env, end
+
+
+def _leftmost(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Which of the runs ``[start, end)`` (sorted by start) a left-to-right scan takes: each
+    run that begins after the last one taken ends."""
+    keep = np.zeros(len(start), dtype=bool)
+    free = -1
+    for k, (a, b) in enumerate(zip(start.tolist(), end.tolist(), strict=True)):
+        if a >= free:
+            keep[k], free = True, b
+    return keep
 
 
 def _choose_alternatives(alts: list[Rule], idx: np.ndarray, env: dict, rng):

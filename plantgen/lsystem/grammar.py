@@ -90,11 +90,24 @@ class Rule:
     successor: tuple[ModuleTemplate, ...]
     p: float | None                 # probability within its stochastic group
     section: str = "rule"           # "rule", or "interpretation rule" (drawing only)
+    more: tuple[Pattern, ...] = ()  # the modules after ``pred`` in a predecessor of several
+    new_left: tuple[Pattern, ...] = ()   # the new left context (``<<``), matched in the string
+                                         # being written (a sequential, left-to-right step)
 
     @property
     def group_key(self) -> tuple:
         cond = self.condition.source if self.condition else ""
-        return (self.pred, self.left, self.right, cond)
+        return (self.pred, self.more, self.left, self.new_left, self.right, cond)
+
+    @property
+    def patterns(self) -> tuple[Pattern, ...]:
+        """Every module the rule's left-hand side names, contexts included, in string order."""
+        return (*self.left, *self.new_left, self.pred, *self.more, *self.right)
+
+    @property
+    def predecessor(self) -> tuple[Pattern, ...]:
+        """The strict predecessor: the modules the successor replaces."""
+        return (self.pred, *self.more)
 
     def where(self) -> str:
         return f"{self.section} {self.index + 1} ({self.source.strip()!r})"
@@ -298,8 +311,20 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
         lhs, cond_src = lhs.split(":", 1)
         if not cond_src.strip():
             raise GrammarError(f"{where}: empty condition after ':'")
-    left_src, right_src = "", ""
-    if "<" in lhs:
+    if ">>" in lhs:
+        raise GrammarError(f"{where}: the new right context '>>' (a right-to-left step) is not supported")
+    left_src, new_left_src, right_src = "", "", ""
+    if "<<" in lhs:
+        new_left_src, lhs = lhs.split("<<", 1)
+        if not new_left_src.strip():
+            raise GrammarError(f"{where}: empty new left context before '<<'")
+        if "<" in new_left_src:
+            left_src, new_left_src = new_left_src.split("<", 1)
+            if not new_left_src.strip():
+                raise GrammarError(f"{where}: empty new left context before '<<'")
+        if "<" in lhs:
+            raise GrammarError(f"{where}: a left context '<' goes before the new left context '<<'")
+    elif "<" in lhs:
         left_src, lhs = lhs.split("<", 1)
         if not left_src.strip():
             raise GrammarError(f"{where}: empty left context before '<'")
@@ -307,19 +332,20 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
         lhs, right_src = lhs.split(">", 1)
         if not right_src.strip():
             raise GrammarError(f"{where}: empty right context after '>'")
-    if "<" in lhs or ">" in lhs:
+    if "<" in lhs or ">" in lhs or ">" in right_src:
         raise GrammarError(f"{where}: at most one '<' and one '>' in a predecessor")
-    pred = _parse_patterns(lhs, where, max_params)
-    if len(pred) != 1:
-        raise GrammarError(f"{where}: the predecessor must be exactly one module, got {len(pred)}")
-    pred = pred[0]
-    if pred.symbol in "[]":
+    preds = _parse_patterns(lhs, where, max_params)
+    if not preds:
+        raise GrammarError(f"{where}: no predecessor module")
+    if any(pat.symbol in "[]" for pat in preds):
         raise GrammarError(f"{where}: brackets cannot be rewritten")
+    pred, more = preds[0], preds[1:]
     left = _parse_patterns(left_src, where, max_params)
+    new_left = _parse_patterns(new_left_src, where, max_params)
     right = _parse_patterns(right_src, where, max_params)
-    if any(pat.symbol in "[]" for pat in (*left, *right)):
-        raise GrammarError(f"{where}: brackets are not supported in a context")
-    formals = [n for pat in (*left, pred, *right) for n in pat.params]
+    if any(pat.symbol in "[]" for pat in (*left, *new_left)):
+        raise GrammarError(f"{where}: brackets are supported in a right context only")
+    formals = [n for pat in (*left, *new_left, *preds, *right) for n in pat.params]
     dup = {n for n in formals if formals.count(n) > 1}
     if dup:
         raise GrammarError(f"{where}: formal parameter(s) {sorted(dup)} used twice")
@@ -331,7 +357,7 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
         except ExprError as exc:
             raise GrammarError(f"{where}: {exc}") from None
     successor = parse_modules(rhs, names, where, max_params)
-    return Rule(index, source, pred, left, right, condition, successor, p, section)
+    return Rule(index, source, pred, left, right, condition, successor, p, section, more, new_left)
 
 
 # ---------------------------------------------------------------------------- file
@@ -383,8 +409,9 @@ def _check_arities(axiom, rules, path: str) -> list[str]:
         visit(m.symbol, len(m.args), f"{path}: axiom")
     for r in rules:
         where = f"{path}: {r.where()}"
-        for pat in (*r.left, r.pred, *r.right):
-            visit(pat.symbol, len(pat.params), where)
+        for pat in r.patterns:
+            if pat.symbol not in "[]":
+                visit(pat.symbol, len(pat.params), where)
         for m in r.successor:
             visit(m.symbol, len(m.args), where)
     return symbols
