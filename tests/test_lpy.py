@@ -72,9 +72,9 @@ def test_convert_names_renamed_modules_and_refuses_what_it_cannot_express(tmp_pa
     assert code == 0 and "Apex -> " in stdout
     assert "#   Apex -> " in (tmp_path / "t.yaml").read_text()
     bad = tmp_path / "bad.lpy"
-    bad.write_text("Axiom: A\nproduction:\nA << B --> F F\n")
+    bad.write_text("Axiom: A\nproduction:\nA >> B --> F F\n")
     code, _, err = run_cli("convert", bad, "-o", tmp_path / "bad.yaml")
-    assert code == 2 and err.count("\n") == 1 and "line 3" in err and "'<<'" in err
+    assert code == 2 and err.count("\n") == 1 and "line 3" in err and "'>>'" in err
     assert not (tmp_path / "bad.yaml").exists()
     code, _, err = run_cli("convert", GRAMMARS / "abop_bush.yaml", "-o", tmp_path / "x.yaml")
     assert code == 2 and ".lpy" in err
@@ -251,8 +251,10 @@ REFUSALS = [
      ("line 6", "'r' holds a random draw")),
     ("Axiom: A(1)\nproduction:\nA(x) :\n    for i in range(randint(1, x)):\n        nproduce F\n    produce A(x)\n",
      ("line 4", "range() of a random draw")),
-    ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
-    ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),
+    ("Axiom: A\nproduction:\nA >> B --> F\n", ("line 3", "'>>'")),
+    ("Axiom: A\nproduction:\n[B] < A --> F\n", ("line 3", "brackets in a predecessor or a left context")),
+    ("Axiom: A\nproduction:\nA [B] --> F\n", ("line 3", "brackets in a predecessor")),
+    ("x = [1, 2]\nAxiom: A\nproduction:\nA --> F(x[random()])\n", ("line 4", "indexed by a random draw")),
     ("x = [1, 2]\nAxiom: F(x)\n", ("line 2", "x (line 1)", "a list")),
     ("production:\nA --> F\n", ("no 'Axiom:'",)),
     ("Axiom: A\nproduction:\nA :\n    if x >\n        produce F\n", ("line 4", "syntax error")),

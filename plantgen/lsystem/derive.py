@@ -381,7 +381,7 @@ def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, 
 
     def append(s_, k_, p_) -> None:
         nonlocal out, chain, count
-        if count + 1 >= len(chain):
+        if count == len(out[0]):
             out = [np.concatenate([a, np.zeros_like(a)]) for a in out]
             chain = np.concatenate([chain, np.empty_like(chain)])
         ch = symbols[s_]

@@ -56,6 +56,8 @@ MAX_LOOP_ITERATIONS = 10_000
 MAX_DYNAMIC_COUNT = 16
 #: How deep inlined function calls may nest (a recursive function goes no deeper).
 MAX_CALL_DEPTH = 32
+#: The most numbers a module-level list may hold to be indexed in an expression.
+MAX_TABLE = 64
 #: Modules one produced L-string may hold after unrolling.
 MAX_SUCCESSOR = 10_000
 
@@ -232,6 +234,7 @@ class _Reader:
         self.define_text: dict[str, object] = {}    # for the YAML: the value as a number
         self.functions: dict[str, ast.AST] = {}
         self.lazy: dict[str, str] = {}              # name -> why it cannot be used
+        self.tables: dict[str, list[str]] = {}      # a module-level list of numbers -> their texts
         self.declared: set[str] = set()
         self.seed = 0
         self.iterations = 1
@@ -520,6 +523,19 @@ class _Reader:
             self._forget(name)
             self.functions[name] = value
             return
+        if isinstance(value, (ast.List, ast.Tuple)) and 1 <= len(value.elts) <= MAX_TABLE:
+            try:
+                texts = [self.expr(v, {}, line) for v in value.elts]
+                numbers = [evaluate(t.text, self.defines) for t in texts if not t.rand]
+            except (LpyError, ExprError):
+                numbers = []
+            self._forget(name)
+            if len(numbers) == len(value.elts):
+                self.tables[name] = [repr(float(v)) for v in numbers]
+                self.lazy[name] = f"{name} (line {line}) is a list: plantgen reads it only indexed ({name}[i])"
+            else:
+                self.lazy[name] = f"{name} (line {line}) is a list plantgen can index only when it holds numbers"
+            return
         try:
             val = self.expr(value, {}, line)
             if val.rand:
@@ -539,6 +555,7 @@ class _Reader:
 
     def _forget(self, name: str) -> None:
         self.functions.pop(name, None)
+        self.tables.pop(name, None)
         self.lazy.pop(name, None)
         self.defines.pop(_safe(name), None)
 
@@ -675,7 +692,24 @@ class _Reader:
             return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
         if isinstance(node, ast.Call):
             return self._call(node, env, line)
+        if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id not in env
+                and node.value.id in self.tables):
+            return self._index(self.tables[node.value.id], node.slice, env, line)
         raise self.refuse(line, f"{_construct(node)} is not supported in an expression")
+
+    def _index(self, values: list[str], index, env: dict, line: int) -> _Val:
+        """A module-level list of numbers indexed by an expression: nested ``select`` on the
+        index (Python's negative indices too; one past either end reads the last value)."""
+        if isinstance(index, ast.Slice):
+            raise self.refuse(line, "a slice is not supported in an expression")
+        i = self.expr(index, env, line)
+        if i.rand:
+            raise self.refuse(line, "a list indexed by a random draw is not supported")
+        at = _wrap(i.text)
+        text = values[-1]
+        for k in range(len(values) - 2, -1, -1):
+            text = f"select({at} == {k} || {at} == {k - len(values)}, {values[k]}, {text})"
+        return _Val(text)
 
     def _name(self, name: str, env: dict, line: int) -> _Val:
         if name in env:
@@ -961,7 +995,7 @@ class _Reader:
                                   f"block): {header.strip()[:60]!r}")
         self.pattern_conds: list[str] = []
         left, pred, right = self._predecessor(lhs, no)
-        env = {p: _Val(p) for m in (*left, pred, *right) for p in m.args}
+        env = {p: _Val(p) for m in (*left[0], *left[1], *pred, *right) for p in m.args}
         self.if_ids += 1
         fixed = [(self.if_ids, True, c, False, no) for c in self.pattern_conds]
         if body is None:
@@ -974,21 +1008,26 @@ class _Reader:
         self._emit(section, left, pred, right, paths, no)
 
     def _predecessor(self, text: str, line: int):
-        if "<<" in text or ">>" in text:
-            raise self.refuse(line, "the extended contexts '<<' and '>>' are not supported")
-        left_src, right_src = "", ""
-        if "<" in text:
+        """The left context (old and new, ``<`` and ``<<``, each a list of modules), the
+        strict predecessor's modules and the right context of a rule's left-hand side."""
+        if ">>" in text:
+            raise self.refuse(line, "the new right context '>>' (a right-to-left step) is not supported")
+        left_src, new_src, right_src = "", "", ""
+        if "<<" in text:
+            new_src, text = text.split("<<", 1)
+            if "<" in new_src:
+                left_src, new_src = new_src.split("<", 1)
+        elif "<" in text:
             left_src, text = text.split("<", 1)
         if ">" in text:
             text, right_src = text.split(">", 1)
         pred = self._lstring(text, line, {}, pattern=True)
-        if len(pred) != 1:
-            raise self.refuse(line, f"a predecessor of {len(pred)} modules: plantgen rewrites one module per rule")
-        left = self._lstring(left_src, line, {}, pattern=True)
-        right = self._lstring(right_src, line, {}, pattern=True)
-        if any(m.name in "[]" for m in (*left, *right)):
-            raise self.refuse(line, "brackets in a context are not supported")
-        return left, pred[0], right
+        if not pred:
+            raise self.refuse(line, "a rule without a predecessor module")
+        left, new_left, right = (self._lstring(src, line, {}, pattern=True) for src in (left_src, new_src, right_src))
+        if any(m.name in "[]" for m in (*left, *new_left, *pred)):
+            raise self.refuse(line, "brackets in a predecessor or a left context are not supported")
+        return (left, new_left), pred, right
 
     def _successor(self, text: str, line: int, env: dict) -> list[_Mod]:
         text = text.strip()
@@ -1276,8 +1315,8 @@ class _Reader:
         names: dict[str, str] = {}
         everything = list(self.axiom)
         for sec in self.rules.values():
-            for left, pred, right, _, succ, _, _ in sec:
-                everything += [*left, pred, *right, *succ]
+            for (left, new_left), pred, right, _, succ, _, _ in sec:
+                everything += [*left, *new_left, *pred, *right, *succ]
         self.carried = {m.name: max(len(m.args), self.carried.get(m.name, 0)) for m in everything
                         if m.name in TURTLE and len(m.args) > _turtle_params(TURTLE[m.name])}
         user = [m.name for m in everything if m.name not in TURTLE or m.name in self.carried]
@@ -1339,7 +1378,7 @@ class _Reader:
                 used = {self._symbol(m.name) for m in self.axiom}
                 for sec in self.rules.values():
                     for r in sec:
-                        used |= {self._symbol(m.name) for m in (*r[0], r[1], *r[2], *r[4])}
+                        used |= {self._symbol(m.name) for m in (*r[0][0], *r[0][1], *r[1], *r[2], *r[4])}
                 syms += sorted(s for s in used if s not in keep and s not in "[]%" and len(s) == 1)
         return "".join(dict.fromkeys(s for s in syms if len(s) == 1 and s not in "[]"))
 
@@ -1373,8 +1412,10 @@ class _Reader:
         return " ".join(out)
 
     def _rule_text(self, rule) -> object:
-        left, pred, right, cond, succ, line, p = rule
-        lhs = self._text([pred], True)
+        (left, new_left), pred, right, cond, succ, line, p = rule
+        lhs = self._text(pred, True)
+        if new_left:
+            lhs = f"{self._text(new_left, True)} << {lhs}"
         if left:
             lhs = f"{self._text(left, True)} < {lhs}"
         if right:
