@@ -57,7 +57,8 @@ def test_an_lpy_model_grows_the_skeleton_of_its_yaml_twin(stem):
     assert_same_skeleton(grow(DATA / f"{stem}.lpy"), grow(twin(stem)))
 
 
-@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition"])
+@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition",
+                                  "branch_context", "new_context", "several_modules"])
 def test_convert_round_trip_grows_the_same_skeleton(tmp_path, stem):
     out = tmp_path / f"{stem}.yaml"
     code, stdout, err = run_cli("convert", DATA / f"{stem}.lpy", "-o", out)
@@ -289,6 +290,8 @@ HOSTILE = {
     "sum.lpy": ("x = " + "+".join(["1"] * 60_000) + "\nAxiom: F(x)\n", ("line 1",)),
     "parens.lpy": ("Axiom: F(" + "(" * 5000 + "1" + ")" * 5000 + ")\n", ("line 1",)),
     "modules.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nA --> A A\n", ("modules",)),
+    "sequential.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nB(x) B(y) << B(z) :\n    if z > 10:\n"
+                       "        produce B(x + y)\nA --> A A B(1)\n", ("derive_work",)),
 }
 
 
@@ -299,7 +302,7 @@ def test_hostile_lpy_files_are_refused_fast_in_bounded_memory(tmp_path):
         cases.append(["grow", tmp_path / name, "-o", tmp_path / f"{name}.npz"])
     for result, (name, (_, words)) in zip(run_cases(tmp_path, cases), HOSTILE.items(), strict=True):
         assert_refused(result, words, outputs=[tmp_path / f"{name}.npz"],
-                       seconds=15.0 if name == "modules.lpy" else 2.0)
+                       seconds=15.0 if name in ("modules.lpy", "sequential.lpy") else 2.0)
 
 
 PIECES = list("()[]{}:<>-*/%+&^|!_;,.~@?$#'\"=\n\t AxFf0123456789") + [

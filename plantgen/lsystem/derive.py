@@ -347,7 +347,8 @@ def _step(grammar: Grammar, groups: list[list[Rule]], string, rng, codes: dict, 
     neighbours = _context_neighbours(string[0], grammar.symbols, grammar.ignore) if contexts else None
     where = f"{grammar.path}: {what} {step + 1}"
     if any(r.new_left for r in rules):
-        work.spend(len(string[0]) * SEQUENTIAL_WORK + STEP_WORK * (len(groups) + 1), where)
+        tries = sum(int(np.count_nonzero(string[0] == codes[alts[0].pred.symbol])) for alts in groups)
+        work.spend((len(string[0]) + tries) * SEQUENTIAL_WORK + STEP_WORK * (len(groups) + 1), where)
         new, rewritten = _sequential(grammar, groups, string, neighbours, rng, codes, width,
                                      lambda total: _check_step(grammar, limits, step, total, width, what))
         total = len(new[0])
@@ -371,59 +372,87 @@ def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, 
     sym, nparam, params = string
     n = len(sym)
     firsts = {codes[alts[0].pred.symbol] for alts in groups}
-    size = max(16, n)
-    out = [np.empty(size, dtype=np.int32), np.empty(size, dtype=np.int8), np.zeros((size, width))]
-    chain = np.empty(size + 1, dtype=np.int64)   # each new module's left context neighbour, then a spare
+    reach = max(len(r.new_left) for alts in groups for r in alts)
+    out_sym: list[int] = []
+    out_np: list[int] = []
+    out_par: list[np.ndarray] = []
+    chain: list[int] = []          # each new module's left context neighbour (or -1)
     stack = [-1]                   # per bracket depth, the last visible new module
     symbols, ignore = grammar.symbols, grammar.ignore
     none = np.zeros(n, dtype=bool)
-    count, rewritten = 0, False
+    rewritten = False
 
-    def append(s_, k_, p_) -> None:
-        nonlocal out, chain, count
-        if count == len(out[0]):
-            out = [np.concatenate([a, np.zeros_like(a)]) for a in out]
-            chain = np.concatenate([chain, np.empty_like(chain)])
+    def append(s_: int, k_: int, p_: np.ndarray) -> None:
         ch = symbols[s_]
-        chain[count] = -1
+        nb = -1
         if ch == "[":
             stack.append(stack[-1])
         elif ch == "]":
             if len(stack) > 1:
                 stack.pop()
         else:
-            chain[count] = stack[-1]
+            nb = stack[-1]
             if ch not in ignore:
-                stack[-1] = count
-        out[0][count], out[1][count], out[2][count] = s_, k_, p_
-        count += 1
+                stack[-1] = len(out_sym)
+        chain.append(nb)
+        out_sym.append(s_)
+        out_np.append(k_)
+        out_par.append(p_)
 
+    sym_l, nparam_l = sym.tolist(), nparam.tolist()
     i = 0
     while i < n:
         found = None
-        if int(sym[i]) in firsts:
-            chain[count] = stack[-1]              # the spare: the next module's neighbour
-            new = (chain[:count], chain[:count + 1], *(a[:count + 1] for a in out))   # (+ 1: never empty)
-            for alts in groups:
-                found = _match_group(grammar, alts[0], string, none, neighbours, rng, codes, np.array([i]), new)
-                if found is not None:
-                    break
+        if sym_l[i] in firsts:
+            found, alts = _first_group(grammar, groups, string, none, neighbours, rng, codes, i,
+                                       _new_context(stack[-1], chain, out_sym, out_np, out_par, reach, width))
         if found is None:
-            append(sym[i], nparam[i], params[i])
+            append(sym_l[i], nparam_l[i], params[i])
             i += 1
             continue
         idx, env, end = found
         for _, rule, sub_env in _choose_alternatives(alts, idx, env, rng):
-            check(count + len(rule.successor) + n - i)
+            check(len(out_sym) + len(rule.successor) + n - i)
             try:
                 s_, k_, p_ = _instantiate(rule.successor, sub_env, rng, 1, codes, width)
             except ExprError as exc:
                 raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
-            for j in range(len(rule.successor)):
-                append(s_[j], k_[j], p_[j, 0])
+            for j, (sj, kj) in enumerate(zip(s_.tolist(), k_.tolist(), strict=True)):
+                append(sj, kj, p_[j, 0])
         rewritten = True
         i = int(end[0])
-    return (out[0][:count].copy(), out[1][:count].copy(), out[2][:count].copy()), rewritten
+    new_par = np.array(out_par).reshape(-1, width) if out_par else np.zeros((0, width))
+    return (np.array(out_sym, dtype=np.int32), np.array(out_np, dtype=np.int8), new_par), rewritten
+
+
+def _first_group(grammar: Grammar, groups: list[list[Rule]], string, none, neighbours, rng, codes: dict, i: int,
+                 new):
+    """The first rule group that matches at position ``i`` of a sequential step, with its
+    match (as :func:`_match_group` gives it): (match, group), or (None, None)."""
+    at = np.array([i])
+    for alts in groups:
+        found = _match_group(grammar, alts[0], string, none, neighbours, rng, codes, at, new)
+        if found is not None:
+            return found, alts
+    return None, None
+
+
+def _new_context(top: int, chain: list[int], out_sym: list[int], out_np: list[int], out_par: list, reach: int,
+                 width: int):
+    """The new string's modules a new left context can reach from the next module (its
+    ``reach`` nearest left neighbours, nearest first), as ``_match_group`` takes them: (a
+    placeholder of the next module's index, the neighbour chain with the next module's at
+    the end, sym, nparam, params)."""
+    at = []
+    while top >= 0 and len(at) < reach:
+        at.append(top)
+        top = chain[top]
+    k = len(at)
+    neighbour = np.array([*range(1, k), -1, 0] if k else [-1], dtype=np.int64)
+    sym = np.array([out_sym[p] for p in at] or [-1], dtype=np.int32)
+    nparam = np.array([out_np[p] for p in at] or [-1], dtype=np.int8)
+    params = np.array([out_par[p] for p in at]).reshape(-1, width) if at else np.zeros((1, width))
+    return neighbour[:k], neighbour, sym, nparam, params
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:
