@@ -158,6 +158,9 @@ def test_new_left_context_follows_the_branching_structure():
     assert text(g) == "C[B]B"
     g = grammar(axiom="BBB", rules=["B << B -> D(1)", "D(x) << B -> D(x + 1)"], iterations=1)
     assert text(g) == "BD(1)D(2)"
+    # '<' still reads the string before the step, '<<' the one being written (L-Py's order)
+    assert text(grammar(axiom="XBC", rules=["B -> A", "B < A << C -> D"])) == "XAD"
+    assert text(grammar(axiom="XBC", rules=["B -> A", "A < A << C -> D"])) == "XAC"
 
 
 def test_context_parameters_are_visible():
@@ -356,6 +359,8 @@ def test_grammar_max_modules_key_is_used():
     (dict(axiom="A", rules=["A -> B", "A -> C"]), "repeats the predecessor"),
     (dict(axiom="A", rules=["A >> B -> C"]), "new right context"),
         (dict(axiom="A", rules=["[B] < A -> C"]), "right context only"),
+        (dict(axiom="A", rules=["A > [(x) B -> C"]), "takes no parameters"),
+        (dict(axiom="A", rules=["A < << B -> C"]), "empty new left context"),
     (dict(axiom="A", colour="red"), "unknown key"),
     (dict(axiom="A", turtle={"size": 1}), "unknown key"),
     (dict(rules=[]), "no 'axiom'"),

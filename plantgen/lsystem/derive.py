@@ -101,15 +101,7 @@ def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: fr
     # Left: walk forward keeping, per bracket depth, the last visible module.
     stack = [-1]
     for i, ch in enumerate(seq):
-        if ch == "[":
-            stack.append(stack[-1])
-        elif ch == "]":
-            if len(stack) > 1:
-                stack.pop()
-        else:
-            left[i] = stack[-1]
-            if ch not in ignore:
-                stack[-1] = i
+        left[i] = _left_of(stack, ch, i, ignore)
     # Right: walk backward keeping the ] of each open branch.
     vis, skip, outer = (np.full(n + 1, n, dtype=np.int64) for _ in range(3))
     closes: list[int] = []
@@ -128,6 +120,23 @@ def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: fr
             vis[i] = skip[i] = i
         outer[i] = closes[-1] if closes else n
     return left, (vis, skip, outer)
+
+
+def _left_of(stack: list[int], ch: str, i: int, ignore: frozenset[str]) -> int:
+    """The left context neighbour of module ``i`` (symbol ``ch``) of a string read from the
+    left, -1 for none or a bracket; ``stack`` holds, per bracket depth, the last visible
+    module before it, and is updated past it."""
+    if ch == "[":
+        stack.append(stack[-1])
+    elif ch == "]":
+        if len(stack) > 1:
+            stack.pop()
+    else:
+        left = stack[-1]
+        if ch not in ignore:
+            stack[-1] = i
+        return left
+    return -1
 
 
 def _walk(pats: tuple[Pattern, ...], start: np.ndarray, jumps, sym, nparam, codes: dict):
@@ -383,18 +392,7 @@ def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, 
     rewritten = False
 
     def append(s_: int, k_: int, p_: np.ndarray) -> None:
-        ch = symbols[s_]
-        nb = -1
-        if ch == "[":
-            stack.append(stack[-1])
-        elif ch == "]":
-            if len(stack) > 1:
-                stack.pop()
-        else:
-            nb = stack[-1]
-            if ch not in ignore:
-                stack[-1] = len(out_sym)
-        chain.append(nb)
+        chain.append(_left_of(stack, symbols[s_], len(out_sym), ignore))
         out_sym.append(s_)
         out_np.append(k_)
         out_par.append(p_)

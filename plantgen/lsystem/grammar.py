@@ -279,6 +279,18 @@ def _parse_patterns(text: str, where: str, max_params: int | None = None) -> tup
 
 
 # ---------------------------------------------------------------------------- rules
+def _cut_context(text: str, sep: str, where: str, what: str, after: bool = False) -> tuple[str, str]:
+    """``text`` split at its first ``sep`` into (context, the rest): the context before it
+    (after it with ``after``); ("", text) without one."""
+    if sep not in text:
+        return "", text
+    head, tail = text.split(sep, 1)
+    context, rest = (tail, head) if after else (head, tail)
+    if not context.strip():
+        raise GrammarError(f"{where}: empty {what} {'after' if after else 'before'} {sep!r}")
+    return context, rest
+
+
 def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | None = None,
                 section: str = "rule") -> Rule:
     where = f"{path}: {section} {index + 1}"
@@ -313,25 +325,14 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
             raise GrammarError(f"{where}: empty condition after ':'")
     if ">>" in lhs:
         raise GrammarError(f"{where}: the new right context '>>' (a right-to-left step) is not supported")
-    left_src, new_left_src, right_src = "", "", ""
-    if "<<" in lhs:
-        new_left_src, lhs = lhs.split("<<", 1)
+    new_left_src, lhs = _cut_context(lhs, "<<", where, "new left context")
+    if new_left_src:                                      # left < new_left << pred
+        left_src, new_left_src = _cut_context(new_left_src, "<", where, "left context")
         if not new_left_src.strip():
             raise GrammarError(f"{where}: empty new left context before '<<'")
-        if "<" in new_left_src:
-            left_src, new_left_src = new_left_src.split("<", 1)
-            if not new_left_src.strip():
-                raise GrammarError(f"{where}: empty new left context before '<<'")
-        if "<" in lhs:
-            raise GrammarError(f"{where}: a left context '<' goes before the new left context '<<'")
-    elif "<" in lhs:
-        left_src, lhs = lhs.split("<", 1)
-        if not left_src.strip():
-            raise GrammarError(f"{where}: empty left context before '<'")
-    if ">" in lhs:
-        lhs, right_src = lhs.split(">", 1)
-        if not right_src.strip():
-            raise GrammarError(f"{where}: empty right context after '>'")
+    else:
+        left_src, lhs = _cut_context(lhs, "<", where, "left context")
+    right_src, lhs = _cut_context(lhs, ">", where, "right context", after=True)
     if "<" in lhs or ">" in lhs or ">" in right_src:
         raise GrammarError(f"{where}: at most one '<' and one '>' in a predecessor")
     preds = _parse_patterns(lhs, where, max_params)
@@ -345,6 +346,8 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
     right = _parse_patterns(right_src, where, max_params)
     if any(pat.symbol in "[]" for pat in (*left, *new_left)):
         raise GrammarError(f"{where}: brackets are supported in a right context only")
+    if any(pat.symbol in "[]" and pat.params for pat in right):
+        raise GrammarError(f"{where}: a bracket takes no parameters")
     formals = [n for pat in (*left, *new_left, *preds, *right) for n in pat.params]
     dup = {n for n in formals if formals.count(n) > 1}
     if dup:
