@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen.lsystem import DEFAULT_MAX_MODULES, DerivationLimit, derive, interpret, parse_grammar
+from plantgen.lsystem.derive import _context_neighbours
 from plantgen.lsystem.grammar import GrammarError
 
 
@@ -161,6 +162,37 @@ def test_new_left_context_follows_the_branching_structure():
     # '<' still reads the string before the step, '<<' the one being written (L-Py's order)
     assert text(grammar(axiom="XBC", rules=["B -> A", "B < A << C -> D"])) == "XAD"
     assert text(grammar(axiom="XBC", rules=["B -> A", "A < A << C -> D"])) == "XAC"
+
+
+def _left_by_walking(seq: str, i: int, ignore: str) -> int:
+    """ABOP's left context neighbour of seq[i], by walking back: ignored modules and whole
+    branches are skipped, an opening bracket is stepped over to the module it grows from."""
+    p = i - 1
+    while p >= 0:
+        if seq[p] == "]":
+            depth = 1
+            while depth:
+                p -= 1
+                depth += (seq[p] == "]") - (seq[p] == "[")
+        elif seq[p] != "[" and seq[p] not in ignore:
+            return p
+        p -= 1
+    return -1
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.sampled_from("AB+[]"), max_size=40), st.sampled_from(["", "+", "+B"]))
+def test_left_context_neighbours_follow_the_branching_structure(chars, ignore):
+    seq, depth = [], 0
+    for c in chars:
+        if c != "]" or depth:
+            depth += (c == "[") - (c == "]")
+            seq.append(c)
+    seq = "".join(seq) + "]" * depth
+    symbols = ("A", "B", "+", "[", "]")
+    left, _ = _context_neighbours(np.array([symbols.index(c) for c in seq], dtype=np.int32), symbols,
+                                  frozenset(ignore))
+    assert list(left) == [-1 if c in "[]" else _left_by_walking(seq, i, ignore) for i, c in enumerate(seq)]
 
 
 def test_context_parameters_are_visible():

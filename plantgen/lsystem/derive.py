@@ -96,30 +96,55 @@ def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: fr
     in (a ``[`` being outside its own branch; n on the main axis).
     """
     n = len(ms_sym)
-    seq = [symbols[s] for s in ms_sym.tolist()]
-    left = np.full(n, -1, dtype=np.int64)
-    # Left: walk forward keeping, per bracket depth, the last visible module.
-    stack = [-1]
-    for i, ch in enumerate(seq):
-        left[i] = _left_of(stack, ch, i, ignore)
-    # Right: walk backward keeping the ] of each open branch.
-    vis, skip, outer = (np.full(n + 1, n, dtype=np.int64) for _ in range(3))
-    closes: list[int] = []
-    for i in range(n - 1, -1, -1):
-        ch = seq[i]
-        if ch == "]":
-            closes.append(i)
-            vis[i] = skip[i] = outer[i] = i
-            continue
-        if ch == "[":
-            close = closes.pop() if closes else n
-            vis[i], skip[i] = i, skip[min(close + 1, n)]
-        elif ch in ignore:
-            vis[i], skip[i] = vis[i + 1], skip[i + 1]
-        else:
-            vis[i] = skip[i] = i
-        outer[i] = closes[-1] if closes else n
+    codes = {c: i for i, c in enumerate(symbols)}
+    opens, closes, depth = _depths(ms_sym, codes)
+    ignored = np.isin(ms_sym, [codes[c] for c in ignore if c in codes]) & ~opens & ~closes
+    visible = ~ignored & ~opens & ~closes
+    at = np.arange(n)
+    # Left: the last visible module before each in its own branch, else that of the [ the
+    # branch opens with (pointer jumping up the nesting).
+    opener = np.where(depth > 0, _last_before(depth + 1, opens, depth), -1)      # the [ a branch opens with
+    target = _last_before(opener + 1, visible, opener + 1)
+    ptr = np.where((target < 0) & (opener >= 0), opener, -1)
+    while (ptr >= 0).any():
+        go = np.flatnonzero(ptr >= 0)
+        target[go], ptr[go] = target[ptr[go]], ptr[ptr[go]]
+    left = np.where(opens | closes, -1, target)
+    # Right: the first position from each on, at its own bracket depth, of a kind.
+    vis = np.append(np.minimum.accumulate(np.where(ignored, n, at)[::-1])[::-1], n)
+    skip = np.append(_next_at_depth(depth, ~ignored & ~opens), n)
+    outer = np.append(_next_at_depth(depth, closes), n)
     return left, (vis, skip, outer)
+
+
+def _depths(sym: np.ndarray, codes: dict):
+    """Where a string has ``[`` and ``]`` (two (n,) bool arrays), and the bracket depth
+    before each module (a ``]`` is inside the branch it closes)."""
+    opens = sym == codes.get("[", -2)
+    closes = sym == codes.get("]", -2)
+    return opens, closes, np.cumsum(opens.astype(np.int64) - closes) - opens + closes
+
+
+def _last_before(group: np.ndarray, kind: np.ndarray, want: np.ndarray) -> np.ndarray:
+    """For each position i, the last position p < i where ``kind`` holds and
+    ``group[p] == want[i]``; -1 for none (``group`` and ``want`` at least 0)."""
+    n = len(group)
+    where = np.flatnonzero(kind)
+    keys = np.sort(group[where] * (n + 1) + where)
+    k = np.searchsorted(keys, want * (n + 1) + np.arange(n)) - 1
+    hit = keys[np.maximum(k, 0)] if keys.size else np.zeros(n, dtype=np.int64)
+    return np.where((k >= 0) & (hit // (n + 1) == want), hit % (n + 1), -1)
+
+
+def _next_at_depth(depth: np.ndarray, kind: np.ndarray, at: np.ndarray | None = None) -> np.ndarray:
+    """For each position ``at`` (default: all), the first position from it on whose
+    bracket depth is its own and where ``kind`` holds; n (the string's length) for none."""
+    n = len(depth)
+    at = np.arange(n) if at is None else at
+    where = np.flatnonzero(kind)
+    keys = np.append(np.sort(depth[where] * (n + 1) + where), np.iinfo(np.int64).max)
+    hit = keys[np.searchsorted(keys, depth[at] * (n + 1) + at)]
+    return np.where(hit // (n + 1) == depth[at], hit % (n + 1), n)
 
 
 def _left_of(stack: list[int], ch: str, i: int, ignore: frozenset[str]) -> int:
@@ -471,15 +496,8 @@ def _cut(string, codes: dict):
     if at.size == 0:
         return string
     n = len(sym)
-    opens = (sym == codes["["]).astype(np.int64) if "[" in codes else np.zeros(n, np.int64)
-    closes = (sym == codes["]"]).astype(np.int64) if "]" in codes else np.zeros(n, np.int64)
-    depth_before = np.cumsum(opens - closes) - opens + closes     # depth before each module
-    close_at = np.flatnonzero(closes)
-    keys = np.sort(depth_before[close_at] * (n + 1) + close_at)   # (depth, position) pairs
-    keys = np.append(keys, np.iinfo(np.int64).max)                # sentinel: no ] left
-    hit = keys[np.searchsorted(keys, depth_before[at] * (n + 1) + at)]
-    same_depth = hit // (n + 1) == depth_before[at]
-    end = np.where(same_depth, hit % (n + 1), n)
+    _, closes, depth = _depths(sym, codes)
+    end = _next_at_depth(depth, closes, at)
     mark = np.zeros(n + 1, dtype=np.int64)
     np.add.at(mark, at, 1)
     np.add.at(mark, end, -1)
