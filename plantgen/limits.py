@@ -35,8 +35,8 @@ GAME_LEVEL_TRIANGLES = (80_000, 40_000, 20_000, 10_000)
 STEP_WORK = 200
 
 #: How much more than rewriting a step of a context-sensitive grammar costs per module:
-#: finding each module's context neighbours walks the string in Python, about three
-#: times the vectorised rewriting's cost, so such a step counts its modules four times.
+#: finding each module's context neighbours sorts and searches the string's bracket
+#: depths, a few times the rewriting's cost, so such a step counts its modules four times.
 CONTEXT_WORK = 4
 
 #: How much a step of a grammar with a new left context (``<<``) costs per module, and
