@@ -36,7 +36,10 @@ relative to a float64 frame origin rounded outward (:func:`float32_boxes`).
 **Two levels** (:func:`build_scene_bvh`): one BVH per distinct plant in its own frame (a
 BLAS), and a top-level BVH (TLAS) over the placed copies: a copy's box is the world box
 of its plant's root box under the copy's similarity matrix. Per copy: the plant index,
-the matrix and its inverse (float64).
+the matrix and its inverse (float64). The top level holds :data:`TOP_LEAF_SIZE` copies a
+leaf by default: 0.7 nodes a copy (LBVH), 23 of the 32-byte nodes' bytes, where two copies
+a leaf take 1.3 nodes (41 bytes), so that a copy costs the GPU (its 32-byte map included,
+:mod:`plantgen.gl.trace`) under 64 bytes.
 
 Pure numpy, no GL.
 """
@@ -50,12 +53,14 @@ import numpy as np
 
 from ..errors import PlantgenError
 
-__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "box_columns", "brute_force", "build_bvh", "build_scene_bvh",
-           "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "scene_bvh", "slab", "trace_bvh",
-           "trace_scene"]
+__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "TOP_LEAF_SIZE", "box_columns", "brute_force", "build_bvh",
+           "build_scene_bvh", "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "scene_bvh", "slab",
+           "trace_bvh", "trace_scene"]
 
 #: How :func:`build_bvh` may split nodes.
 BVH_METHODS = ("lbvh", "sah")
+#: Copies a leaf of a scene's top level (:func:`build_scene_bvh`'s default ``top_leaf_size``).
+TOP_LEAF_SIZE = 4
 
 
 class BVHError(PlantgenError, ValueError):
@@ -676,7 +681,7 @@ def copy_boxes(lo, hi, matrices) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16,
-                    top_leaf_size: int = 2, shell: bool = True) -> SceneBVH:
+                    top_leaf_size: int = TOP_LEAF_SIZE, shell: bool = True) -> SceneBVH:
     """The two-level BVH of ``placed`` (a :class:`~plantgen.geometry.instances.PlacedPlants`):
     a BLAS per distinct plant over its rows' boxes (relief shell included where ``shell``),
     built once whatever its copies; a TLAS over the copies (``top_leaf_size`` copies a
@@ -691,7 +696,7 @@ def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: i
                      bins=bins)
 
 
-def scene_bvh(blas, matrices, *, top_leaf_size: int = 2, method: str = "lbvh", bins: int = 16) -> SceneBVH:
+def scene_bvh(blas, matrices, *, top_leaf_size: int = TOP_LEAF_SIZE, method: str = "lbvh", bins: int = 16) -> SceneBVH:
     """A :class:`SceneBVH` from a BVH per distinct plant (``blas``) and its copies'
     placements (``matrices[k]``: (c_k, 4, 4) similarity transforms); copies are numbered
     plant by plant. A copy whose matrix is not finite or scales by 0 is refused."""

@@ -30,7 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import build_bvh, build_scene_bvh, copy_boxes
+from ..geometry.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh, copy_boxes
 from ..geometry.instances import PlacedPlants
 from ..geometry.reference import row_boxes
 from .frame import FrameLighting, FrameView
@@ -113,7 +113,7 @@ class RayTracer(Raycaster):
                 plants.append(GpuPlant(None, tri, bvh))
                 c_lo, c_hi = copy_boxes(bvh.lo[0], bvh.hi[0], np.eye(4)[None])
                 top = build_bvh(np.concatenate([scene.copy_lo, c_lo]), np.concatenate([scene.copy_hi, c_hi]),
-                                leaf_size=2, method=self.method)
+                                leaf_size=TOP_LEAF_SIZE, method=self.method)
                 matrices = np.concatenate([matrices, np.eye(4)[None]])
                 copy_plant = np.r_[copy_plant, len(plants) - 1]
         else:
@@ -176,7 +176,7 @@ class RayTracer(Raycaster):
     @staticmethod
     def _defines(settings, shadows, gpu) -> dict:
         defines = {k: v for k, v in settings.defines().items() if k in _ROW_DEFINES}
-        return {**defines, "TWO_LEVEL": gpu.two_level, "SHADOWS": shadows is not None,
+        return {**defines, **gpu.defines(), "SHADOWS": shadows is not None,
                 "SHADOW_RAYS": shadows is not None}
 
     def _programs(self, settings, shadows, ground: bool, count_work: bool = False, flat_background: bool = False,
