@@ -115,6 +115,9 @@ _NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | set(REFUSED_MODULE
 _SPECIAL = sorted((n for n in _NAMED if not n[0].isalpha() and n[0] != "_" and len(n) > 1), key=len, reverse=True)
 _PLANTGEN_CHARS = {s.char for s in SYMBOLS} | set("(),:<>") | {"#"}
 _HOOKS = {"Start", "End", "StartEach", "EndEach", "StartInterpretation", "EndInterpretation", "PostDraw"}
+#: The hooks that may set globals: plantgen's grammar hook each becomes.
+_STATE_HOOKS = {"Start": "start", "StartEach": "start_each", "EndEach": "end_each", "End": "end"}
+_GLOBAL_DECL = re.compile(r"^\s+global\s+([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)*)")
 _SEED_CALLS = {"seed", "random.seed"}
 _MATH_ATTRS = {"pi": "pi", "e": "e"}
 _MATH_FUNCS = {"sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
@@ -152,6 +155,7 @@ class _Val:
     rand: bool = False
     used: bool = False
     span: tuple | None = None      # a local holding random(): the interval its tests leave it in
+    error: str | None = None       # a global's new value plantgen cannot translate: why (refused if read)
 
 
 @dataclass
@@ -172,6 +176,7 @@ class _Path:
     conds: list
     modules: list | None
     line: int
+    effects: tuple = ()            # ((global, _Val)): what the way through sets
 
 
 def _one_line(text: str) -> str:
@@ -247,6 +252,11 @@ class _Reader:
         self.dropped: dict[str, int] = {}
         self.used_colour = False
         self.rules: dict[str, list] = {"production": [], "interpretation": [], "decomposition": []}
+        self.mutable: set[str] = set()              # globals a hook or a rule sets
+        self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
+        self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
+        self.hook_defs: list[ast.FunctionDef] = []
+        self.axiom_effects: tuple = ()
         self.max_depth = {"interpretation": 1, "decomposition": 1}
 
     # ------------------------------------------------------------ errors and budgets
@@ -289,7 +299,17 @@ class _Reader:
             else:
                 st.python.append(raw)
         st.close_rule()
+        self._find_globals(st)
         self._translate(st)
+
+    def _find_globals(self, st: _Sections) -> None:
+        """The names a ``global`` statement declares in a block (a hook's, a rule's, a
+        function's) that an indented line assigns: the model's globals, which change."""
+        code = [_strip_comment(t) for t in self.lines[:len(self.lines) - len(st.tail)]]
+        declared = {n.strip() for t in code for m in [_GLOBAL_DECL.match(t)] if m for n in m.group(1).split(",")}
+        for name in declared:
+            if any(re.match(rf"\s+{name}\s*(?:[-+*/%]|\*\*|//)?=(?!=)", t) for t in code):
+                self.mutable.add(name)
 
     def _keyword(self, m: re.Match, no: int, st: _Sections) -> None:
         """One L-Py line of the L-system part (``Axiom:``, ``production:`` ...)."""
@@ -346,6 +366,13 @@ class _Reader:
         axiom and the rules."""
         self._module_code("\n".join(st.python))
         self._initialisation(st.tail, len(self.lines) - len(st.tail) + 1)
+        for name in sorted(self.mutable):
+            if _safe(name) in self.defines:
+                self.globals[_safe(name)] = self.defines.pop(_safe(name))
+            elif name not in self.lazy and name not in self.functions:
+                self.globals[_safe(name)] = 0.0          # first set by Start: 0 for the axiom
+        for fn in self.hook_defs:
+            self._hook(fn)
         if st.length is not None:
             self.iterations = self._int(st.length[0], st.length[1], "derivation length", 0, None)
         for text, no, key in st.depths:
@@ -377,6 +404,7 @@ class _Reader:
                     raise self.refuse(at, f"axiom: {exc}") from None
                 ok = ok and value == holds
             if ok:
+                self.axiom_effects = tuple((k, v, line) for k, v in path.effects)
                 return path.modules or []
         raise self.refuse(line, "the axiom's block produces nothing")
 
@@ -463,7 +491,7 @@ class _Reader:
             return
         if isinstance(stmt, ast.FunctionDef):
             if stmt.name in _HOOKS:
-                self._hook(stmt)
+                self.hook_defs.append(stmt)
             elif stmt.decorator_list:
                 self.lazy[stmt.name] = f"function {stmt.name} (line {line}) has decorators"
             else:
@@ -543,6 +571,9 @@ class _Reader:
         self.defines.pop(_safe(name), None)
 
     def _hook(self, fn: ast.FunctionDef) -> None:
+        if fn.name in _STATE_HOOKS:
+            self._state_hook(fn)
+            return
         for stmt in fn.body:
             if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
                 continue
@@ -557,6 +588,86 @@ class _Reader:
                 continue
             raise self.refuse(stmt.lineno, f"{fn.name}() does more than seed the random generator "
                                            f"({_construct(stmt)}): not supported")
+
+    def _state_hook(self, fn: ast.FunctionDef) -> None:
+        """``Start``/``StartEach``/``EndEach``/``End``: the globals they set (each as an
+        expression over the globals before the hook ran), seeds, and nothing else."""
+        a = fn.args
+        if a.vararg or a.kwarg or a.kwonlyargs or a.posonlyargs or fn.decorator_list:
+            raise self.refuse(fn.lineno, f"{fn.name}() with starred parameters or decorators is not supported")
+        unread = [p.arg for p in a.args]         # the L-string (and scene) L-Py passes: never read here
+        for stmt in ast.walk(fn):
+            if isinstance(stmt, ast.Name) and stmt.id in unread and isinstance(stmt.ctx, ast.Load) and not any(
+                    isinstance(c, ast.Call) and _call_name(c) == "print" and stmt in ast.walk(c)
+                    for c in ast.walk(fn)):
+                raise self.refuse(stmt.lineno, f"{fn.name}() reads the L-string ({stmt.id}): not supported")
+        env = self._hook_run(fn.body, {}, fn.name)
+        sets = dict(_effects(env))
+        if sets:
+            self.hooks[_STATE_HOOKS[fn.name]] = sets
+
+    def _hook_run(self, stmts: list, env: dict, name: str) -> dict:
+        for stmt in stmts:
+            self.spend(stmt.lineno)
+            line = stmt.lineno
+            if isinstance(stmt, (ast.Pass, ast.Assert)) or (isinstance(stmt, ast.Expr)
+                                                           and isinstance(stmt.value, ast.Constant)):
+                continue
+            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) in _SEED_CALLS:
+                self.seed = self._seed(stmt.value, line)
+                continue
+            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
+                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, line)):
+                continue
+            if isinstance(stmt, ast.Return) and stmt.value is None and stmt is stmts[-1]:
+                continue
+            if isinstance(stmt, ast.If):
+                c = self.expr(stmt.test, env, line)
+                if c.rand:
+                    raise self.refuse(line, f"a random test in {name}() is not supported")
+                yes = self._hook_run(stmt.body, _copy(env), name)
+                no = self._hook_run(stmt.orelse, _copy(env), name)
+                env = _merge(c.text, env, yes, no)
+                continue
+            state = self._assign(stmt, env)
+            if state is None:
+                raise self.refuse(line, f"{name}() does more than set globals and seed the random generator "
+                                        f"({_construct(stmt)}): not supported")
+            env = state
+        return env
+
+    def _assign(self, stmt, env: dict) -> dict | None:
+        """``global``, or an assignment to a local or a declared global: the new env
+        (a global's new value is kept under ``set NAME`` too); None for another statement."""
+        if isinstance(stmt, ast.Global):
+            names = [n for n in stmt.names if n in self.mutable]     # the others are only read
+            for n in names:
+                if _safe(n) not in self.globals:
+                    raise self.refuse(stmt.lineno, f"global {n} is set, but " + self.lazy.get(
+                        n, f"{n} is a function") + ": plantgen's globals are numbers")
+            return {**env, **{f"global {n}": _Val("") for n in names}}
+        if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+            value, name = ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), stmt.target.id
+        elif isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+            value, name = stmt.value, stmt.targets[0].id
+        else:
+            return None
+        if f"global {name}" not in env:
+            v = self.expr(value, env, stmt.lineno)
+            return {**env, name: _Val(v.text, v.rand)}
+        probe = _copy(env)       # what it reads of a random local is not spent (the global may be dropped)
+        own = probe.get(name)
+        if own is not None:
+            own.used = False     # its value so far: the new one replaces it
+        try:
+            v = self.expr(value, probe, stmt.lineno)
+        except LpyError as exc:
+            why = str(exc).split(": ", 1)[-1]
+            return {**env, name: _Val("", error=why), f"set {_safe(name)}": _Val("", error=why)}
+        shared = any(probe[k].used and not env[k].used for k in env if env[k].rand and k != name)
+        if own is not None and probe[name].used:
+            shared = shared or env.get(f"set {_safe(name)}", own).used
+        return {**env, name: _Val(v.text, v.rand, used=v.rand), f"set {_safe(name)}": _Val(v.text, v.rand, shared)}
 
     def _seed(self, call: ast.Call, line: int) -> int:
         if len(call.args) != 1 or call.keywords:
@@ -680,6 +791,8 @@ class _Reader:
     def _name(self, name: str, env: dict, line: int) -> _Val:
         if name in env:
             local = env[name]
+            if local.error:
+                raise self.refuse(line, local.error)
             if local.span is not None and local.span != (0.0, 1.0):
                 raise self.refuse(line, f"{name!r} holds a random draw that a test has narrowed; reading its "
                                         "value after the test is not supported")
@@ -689,7 +802,7 @@ class _Reader:
                                             "draw it anew each time; write the draw where it is used once")
                 local.used = True
             return _Val(_wrap(local.text), local.rand)
-        if _safe(name) in self.defines:
+        if _safe(name) in self.defines or _safe(name) in self.globals:
             return _Val(_safe(name))
         if name in ("pi", "e"):
             return _Val(name)
@@ -813,6 +926,13 @@ class _Reader:
                 if stmt.value is None:
                     raise self.refuse(stmt.lineno, f"function {name}() returns no value")
                 return self.expr(stmt.value, env, stmt.lineno)
+            if isinstance(stmt, ast.Global):
+                env = {**env, **{f"global {n}": _Val("") for n in stmt.names}}
+                continue
+            targets = stmt.targets if isinstance(stmt, ast.Assign) else [getattr(stmt, "target", None)]
+            if any(isinstance(t, ast.Name) and f"global {t.id}" in env for t in targets):
+                raise self.refuse(stmt.lineno, f"function {name}() sets a global: plantgen inlines functions "
+                                               "into expressions, which cannot set anything")
             if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
                 v = self.expr(stmt.value, env, stmt.lineno)
                 env = {**env, stmt.targets[0].id: _Val(v.text, v.rand)}
@@ -827,8 +947,7 @@ class _Reader:
                 a = self._body_value(stmt.body + rest, _copy(env), name)
                 b = self._body_value(stmt.orelse + rest, _copy(env), name)
                 return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
-            if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
-                                                           and isinstance(stmt.value, ast.Constant)):
+            if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
                 continue
             raise self.refuse(stmt.lineno, f"{_construct(stmt)} in function {name}() is not supported "
                                            "(only assignments, if and return)")
@@ -1012,8 +1131,9 @@ class _Reader:
         stmts = self._parse_block("\n".join(out_lines), first, "rule block")
         paths: list[_Path] = []
         live = self._run(stmts, [(env, [], [])], paths)
-        for _env, conds, pending in live:   # the block's end: what nproduce gave, if anything
-            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first))
+        for env_, conds, pending in live:   # the block's end: what nproduce gave, if anything
+            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first,
+                               _effects(env_)))
         return paths
 
     def _run(self, stmts: list, states: list, paths: list) -> list:
@@ -1136,9 +1256,13 @@ class _Reader:
             if len(mods) > MAX_SUCCESSOR:
                 raise self.refuse(line, f"a rule produces more than {MAX_SUCCESSOR:,} modules")
             if _call_name(stmt.value) == "__produce__":
-                paths.append(_Path(conds, mods, line))
+                paths.append(_Path(conds, mods, line, _effects(env)))
                 return None
             return env, conds, mods
+        if isinstance(stmt, ast.Global) or (isinstance(stmt, (ast.Assign, ast.AugAssign)) and any(
+                isinstance(t, ast.Name) and f"global {t.id}" in env
+                for t in (stmt.targets if isinstance(stmt, ast.Assign) else [stmt.target]))):
+            return self._assign(stmt, env), conds, pending
         if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
             v = self.expr(stmt.value, env, line)
             uniform = v.text == "random()"           # a draw its tests split into alternatives
@@ -1150,10 +1274,9 @@ class _Reader:
         if isinstance(stmt, ast.Return):
             if stmt.value is not None:
                 raise self.refuse(line, "return with a value in a rule (use produce)")
-            paths.append(_Path(conds, pending or None, line))    # what nproduce gave, as L-Py does
+            paths.append(_Path(conds, pending or None, line, _effects(env)))    # what nproduce gave, as L-Py does
             return None
-        if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
-                                                       and isinstance(stmt.value, ast.Constant)):
+        if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
             return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) == "print":
             return env, conds, pending
@@ -1240,6 +1363,9 @@ class _Reader:
         emitted = []
         for p in paths:
             if p.modules is None:
+                if p.effects:
+                    raise self.refuse(p.line, "a way through the rule that sets a global but produces nothing "
+                                              "(the module left unchanged): not supported")
                 continue
             conds = []
             for ident, holds, text, rand, at in p.conds:
@@ -1264,7 +1390,7 @@ class _Reader:
             weight = float(np.prod([c[3] for c in conds if c[2] is None]))
             weights[text] = weights.get(text, 0.0) + weight
             rules.append((left, pred, right, [text] if text else [], p.modules, p.line,
-                          weight if len(conds) > len(tests) else None))
+                          weight if len(conds) > len(tests) else None, p.effects))
         for r in rules:
             if r[6] is not None and abs(weights[r[3][0] if r[3] else ""] - 1) > 1e-9:
                 raise self.refuse(r[5], "a random choice (randint, choice) in a branch that may leave the module "
@@ -1272,11 +1398,51 @@ class _Reader:
         self.rules[section] += rules
 
     # ------------------------------------------------------------ output
+    def _prune_globals(self) -> None:
+        """Keep the globals something drawn reads (a condition, a module's argument, a
+        kept global's new value); the others, and what sets them, are dropped (a label's
+        text, a counter printed). Refuse what a kept one needs that plantgen lacks."""
+        if not self.globals:
+            return
+        def names(text: str) -> set:
+            return set(_ATOM.findall(text)) & set(self.globals)
+        read: set = set()
+        for m in self.axiom:
+            read |= {n for a in m.args for n in names(a.text)}
+        sets = [(k, v, 0, key) for key, hook in self.hooks.items() for k, v in hook.items()]
+        for sec, rules in self.rules.items():
+            for _left, _pred, _right, cond, succ, line, _p, effects in rules:
+                read |= {n for c in cond for n in names(c)}
+                read |= {n for m in succ for a in m.args for n in names(a.text)}
+                sets += [(k, v, line, sec) for k, v in effects]
+        sets += [(k, v, line, "axiom") for k, v, line in self.axiom_effects]
+        live, grown = set(read), True
+        while grown:
+            new = {n for k, v, _, _ in sets if k in live for n in names(v.text)}
+            grown = not new <= live
+            live |= new
+        for k, v, line, where in sets:
+            if k not in live:
+                continue
+            if v.error:
+                raise self.refuse(line, v.error)
+            if where == "axiom":
+                raise self.refuse(line, f"the axiom's block sets the global {k}, which the rules read: not supported")
+            if where == "interpretation":
+                raise self.refuse(line, f"an interpretation rule sets the global {k}: not supported")
+            if v.used:
+                raise self.refuse(line, f"the global {k} is set from a random draw held in a local variable"
+                                        + ("" if line else f" (in {where})") + ": not supported")
+        self.globals = {k: v for k, v in self.globals.items() if k in live}
+        self.hooks = {key: kept for key, hook in self.hooks.items()
+                      if (kept := {k: v for k, v in hook.items() if k in live})}
+
     def build(self, stem: str) -> LpyModel:
+        self._prune_globals()
         names: dict[str, str] = {}
         everything = list(self.axiom)
         for sec in self.rules.values():
-            for left, pred, right, _, succ, _, _ in sec:
+            for left, pred, right, _, succ, *_ in sec:
                 everything += [*left, pred, *right, *succ]
         self.carried = {m.name: max(len(m.args), self.carried.get(m.name, 0)) for m in everything
                         if m.name in TURTLE and len(m.args) > _turtle_params(TURTLE[m.name])}
@@ -1298,6 +1464,11 @@ class _Reader:
         if self.defines:
             data["defines"] = {k: (int(v) if float(v).is_integer() and abs(v) < 2 ** 53 else v)
                                for k, v in self.defines.items()}
+        if self.globals:
+            data["globals"] = {k: (int(v) if float(v).is_integer() and abs(v) < 2 ** 53 else v)
+                               for k, v in self.globals.items()}
+        if self.hooks:
+            data["hooks"] = {key: {k: v.text for k, v in hook.items()} for key, hook in self.hooks.items()}
         axiom = self._text(self.axiom)
         data["axiom"] = axiom if axiom.strip() else "[]"
         data["rules"] = [self._rule_text(r) for r in self.rules["production"]]
@@ -1373,7 +1544,7 @@ class _Reader:
         return " ".join(out)
 
     def _rule_text(self, rule) -> object:
-        left, pred, right, cond, succ, line, p = rule
+        left, pred, right, cond, succ, line, p, effects = rule
         lhs = self._text([pred], True)
         if left:
             lhs = f"{self._text(left, True)} < {lhs}"
@@ -1384,7 +1555,10 @@ class _Reader:
         text = f"{lhs} -> {self._text(succ)}".rstrip()
         if len(text) > 100_000:
             raise self.refuse(line, "a rule over 100,000 characters once translated")
-        return text if p is None else {"rule": text, "p": p}
+        live = {k: v.text for k, v in effects if k in self.globals}
+        if not live:
+            return text if p is None else {"rule": text, "p": p}
+        return {"rule": text, **({} if p is None else {"p": p}), "set": live}
 
 
 # ------------------------------------------------------------------ helpers
@@ -1423,6 +1597,31 @@ def _atomic(text: str) -> bool:
 
 def _wrap(text: str) -> str:
     return text if _atomic(text) else f"({text})"
+
+
+def _effects(env: dict) -> tuple:
+    """The globals a block has set so far: ((plantgen name, _Val))."""
+    return tuple((k[4:], v) for k, v in env.items() if k.startswith("set "))
+
+
+def _merge(test: str, env: dict, yes: dict, no: dict) -> dict:
+    """The env after ``if test`` whose branches left ``yes`` and ``no``: each global set
+    in either a ``select`` between the two (a local set in one branch only is dropped)."""
+    out = dict(env)
+    for key in dict.fromkeys([*yes, *no]):
+        if key.startswith("global "):
+            out[key] = _Val("")
+            continue
+        before = env.get(key)
+        if key.startswith("set "):
+            before = before or _Val(key[4:])
+        a, b = yes.get(key, before), no.get(key, before)
+        if a is None or b is None:
+            out.pop(key, None)
+            continue
+        out[key] = a if a.text == b.text else _Val(f"select({test}, {a.text}, {b.text})", a.rand or b.rand,
+                                                  a.used or b.used)
+    return out
 
 
 def _copy(env: dict) -> dict:
