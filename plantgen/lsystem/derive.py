@@ -62,6 +62,9 @@ DEFAULT_MAX_MODULES = default_limits.max_modules
 #: or a cycle (hashing costs about as much as copying the string; longer strings that stop
 #: growing are bounded by the work budget instead).
 CYCLE_WINDOW = 65_536
+#: The work a cut of a step at a module that sets globals costs per rule group, besides
+#: the modules after it (the rules match the rest of the string again: Python per group).
+SETTER_WORK = 2_000
 #: The symbol that cuts a branch (``%``).
 CUT_SYMBOL = by_action(Action.CUT)
 
@@ -618,7 +621,8 @@ def _stateful_step(grammar: Grammar, groups, string, neighbours, rng, codes: dic
             sub, rule, env = next(a for a in keep_applied if a[1].effects and a[0][0] == stop)
             row = _rows(env, sub == stop)
             state = {**state, **_setting(grammar, rule.effects, row, rng, rule.where())}
-            work.spend(n - stop - 1, f"{grammar.path}: {what}: a rule setting globals")
+            work.spend(n - stop - 1 + SETTER_WORK * (len(groups) + 1),
+                       f"{grammar.path}: {what}: a rule setting globals (each such module matches the rest again)")
         pos = stop + 1
     total = int(out_len.sum())
     return _assemble(string, matched_all, out_len, pieces, width), total, state, bool(matched_all.any())

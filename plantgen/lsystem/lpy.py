@@ -473,6 +473,10 @@ class _Reader:
                 for a in stmt.names:
                     if a.asname and a.name in ("random", "math"):
                         self.aliases[a.asname] = a.name
+            if all(n == "time" for n in names) and not (isinstance(stmt, ast.ImportFrom) and stmt.level):
+                self.warnings.append(f"{self.path}: warning: line {line}: import of time is ignored (plantgen runs "
+                                     "no clock: a model that draws with a time it reads is refused where it does)")
+                return
             for name in names:
                 if _PLANTGL.search(name):
                     raise self.refuse(line, f"import of {name}: PlantGL and OpenAlea are not supported")
@@ -1425,7 +1429,7 @@ class _Reader:
             if k not in live:
                 continue
             if v.error:
-                raise self.refuse(line, v.error)
+                raise self.refuse(0, v.error)           # the message names its line
             if where == "axiom":
                 raise self.refuse(line, f"the axiom's block sets the global {k}, which the rules read: not supported")
             if where == "interpretation":
