@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from test_hostile import assert_refused, run_cases
 
 from plantgen.errors import PlantgenError
-from plantgen.lsystem.derive import derive
+from plantgen.lsystem.derive import apply_interpretation, derive
 from plantgen.lsystem.expr import EvalContext, compile_expr
 from plantgen.lsystem.grammar import load_grammar, parse_grammar
 from plantgen.lsystem.lpy import MAX_LOOP_ITERATIONS, LpyError, parse_lpy, read_lpy
@@ -57,7 +57,7 @@ def test_an_lpy_model_grows_the_skeleton_of_its_yaml_twin(stem):
     assert_same_skeleton(grow(DATA / f"{stem}.lpy"), grow(twin(stem)))
 
 
-@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition"])
+@pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition", "globals"])
 def test_convert_round_trip_grows_the_same_skeleton(tmp_path, stem):
     out = tmp_path / f"{stem}.yaml"
     code, stdout, err = run_cli("convert", DATA / f"{stem}.lpy", "-o", out)
@@ -237,11 +237,65 @@ def test_functions_are_inlined_into_whitelisted_expressions():
     assert values == [-2.0, pytest.approx(np.sqrt(8.0)), 3.0, 1.0]
 
 
+def test_globals_follow_l_pys_hooks_and_its_module_after_module_rules():
+    """globals.lpy by hand: P sets ``turned`` in step 3, so the G after it (to its right)
+    turns in that step and the G's before it one step later; StartEach counts the steps
+    (``F(step)``), EndEach halves ``length`` from step 3 on, End sets ``size`` from the
+    count, and the interpretation draws ``E`` with it."""
+    grammar = load_grammar(DATA / "globals.lpy")
+    names = {s: read_lpy(DATA / "globals.lpy").names.get(s, s) for s in "EGP"}
+    g = names["G"]
+    three = derive(grammar, iterations=3)
+    assert three.to_text() == f"E{g}F(1)[{g}]F(1)[{g}]+F(3)"
+    assert three.globals == {"length": 0.5, "size": 30.0, "step": 3.0, "turned": 1.0}
+    five = derive(grammar)
+    assert five.to_text() == "E+F(4)F(1)[+F(4)]F(1)[+F(4)]+F(3)"      # the string stops changing; the hooks don't
+    assert five.globals["size"] == 50.0 and five.globals["length"] == 0.125
+    drawn = apply_interpretation(grammar, five)
+    assert drawn.to_text().startswith("F(50)+F(4)")
+    assert derive(grammar).to_text() == five.to_text()                # deterministic
+    assert "print" not in str(read_lpy(DATA / "globals.lpy").data)    # print() is a no-op
+
+
+def test_a_global_only_a_dropped_module_reads_is_dropped_with_what_sets_it():
+    """A global read only where plantgen draws nothing (a label) and set from a random
+    local is dropped: the local's draw is then used once, where the module is produced."""
+    text = ("from random import uniform\nimport time\ntotal = 0\nclock = 0\ndef Start():\n    global total, clock\n"
+            "    total = 0\n    clock = time.time()\nAxiom: A\nderivation length: 2\nproduction:\nA :\n"
+            "    global total\n    x = uniform(1, 2)\n    total += x\n    produce F(x) A\n"
+            "interpretation:\nA --> @L(str(total))\nendlsystem\n")
+    model = parse_lpy(text, "d.lpy")
+    assert "globals" not in model.data and "hooks" not in model.data
+    assert any("import of time is ignored" in w for w in model.warnings)
+    ms = derive(parse_grammar(model.data, "d.lpy"))
+    assert [m[:2] for m in ms.to_text().split(")")[:2]] == ["F(", "F("]
+
+
+def test_a_yaml_grammar_with_globals_is_validated_in_one_line(tmp_path):
+    base = {"axiom": "A", "rules": ["A -> B"], "globals": {"c": 0}}
+    for extra, words in [({"hooks": {"start_each": {"d": 1}}}, "'d' is not one of the grammar's globals"),
+                         ({"hooks": {"later": {"c": 1}}}, "later"),
+                         ({"rules": [{"rule": "A -> B", "set": {"c": "c +"}}]}, "set: c"),
+                         ({"defines": {"c": 1}}, "is a define too"),
+                         ({"interpretation": [{"rule": "A -> F", "set": {"c": 1}}]}, "cannot set globals")]:
+        with pytest.raises(PlantgenError, match=words):
+            parse_grammar({**base, **extra}, "g.yaml")
+
+
 REFUSALS = [
     ("import os\nAxiom: F\n", ("line 1", "import of os")),
     ("from openalea.plantgl.all import *\nAxiom: F\n", ("line 1", "PlantGL")),
-    ("def StartEach():\n    global n\n    n = 1\nAxiom: F\n", ("line 3", "StartEach() does more than seed")),
-    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() does more than seed")),
+    ("n = 0\ndef StartEach():\n    global n\n    n = open('f')\nAxiom: F(n)\n", ("line 4", "open()", "file access")),
+    ("def StartEach():\n    for i in range(3):\n        pass\nAxiom: F\n", ("line 2", "StartEach() does more than set")),
+    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() reads the L-string")),
+    ("m = 0\nAxiom: A\nproduction:\nA :\n    global m\n    if m < 1:\n        m = 1\n    else:\n        produce F(m)\n",
+     ("line 6", "sets a global but produces nothing")),
+    ("m = 0\ndef f(x):\n    global m\n    m = x\n    return x\nAxiom: A\nproduction:\nA --> F(f(1))\n",
+     ("line 4", "function f() sets a global")),
+    ("m = 0\nAxiom: A\nproduction:\nA :\n    global m\n    r = random()\n    m = r\n    produce F(r) B(m)\n",
+     ("line", "random draw")),
+    ("m = [1]\nAxiom: A\nproduction:\nA :\n    global m\n    m = 2\n    produce F(m)\n",
+     ("line 5", "global m is set", "a list")),
     ("Axiom: A\nproduction:\nA :\n    f = open('/etc/passwd')\n    produce F\n", ("line 4", "open()", "file access")),
     ("Axiom: A\nproduction:\nA :\n    while True:\n        nproduce F\n    produce A\n", ("line 4", "while loop")),
     ("Axiom: A\nproduction:\nA --> @g(Cylinder(1))\n", ("line 3", "PlantGL")),
@@ -287,6 +341,8 @@ HOSTILE = {
     "sum.lpy": ("x = " + "+".join(["1"] * 60_000) + "\nAxiom: F(x)\n", ("line 1",)),
     "parens.lpy": ("Axiom: F(" + "(" * 5000 + "1" + ")" * 5000 + ")\n", ("line 1",)),
     "modules.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nA --> A A\n", ("modules",)),
+    "setters.lpy": ("c = 0\nAxiom: " + "A " * 9_000 + "\nderivation length: 5\nproduction:\nA :\n    global c\n"
+                    "    c = c + 1\n    produce A\nB --> F(c)\n", ("derive_work", "setting globals")),
 }
 
 
