@@ -271,6 +271,11 @@ def test_a_global_only_a_dropped_module_reads_is_dropped_with_what_sets_it():
     assert [m[:2] for m in ms.to_text().split(")")[:2]] == ["F(", "F("]
 
 
+def test_a_function_that_produces_is_run_in_the_rule_that_calls_it():
+    ms = derive(load_grammar(DATA / "produce_function.lpy"))
+    assert ms.to_text() == "F(1)F(1)[+F(1)]F(2)F(2)[+F(1)]F(3)F(3)B"      # by hand: produce ends the rule
+
+
 def test_a_yaml_grammar_with_globals_is_validated_in_one_line(tmp_path):
     base = {"axiom": "A", "rules": ["A -> B"], "globals": {"c": 0}}
     for extra, words in [({"hooks": {"start_each": {"d": 1}}}, "'d' is not one of the grammar's globals"),
@@ -286,7 +291,8 @@ REFUSALS = [
     ("import os\nAxiom: F\n", ("line 1", "import of os")),
     ("from openalea.plantgl.all import *\nAxiom: F\n", ("line 1", "PlantGL")),
     ("n = 0\ndef StartEach():\n    global n\n    n = open('f')\nAxiom: F(n)\n", ("line 4", "open()", "file access")),
-    ("def StartEach():\n    for i in range(3):\n        pass\nAxiom: F\n", ("line 2", "StartEach() does more than set")),
+    ("def StartEach():\n    for i in range(3):\n        pass\nAxiom: F\n", ("line 2", "StartEach() does more")),
+    ("m = 0\ndef PostDraw():\n    global m\n    m = 1\nAxiom: F(m)\n", ("line 2", "PostDraw() sets globals")),
     ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() reads the L-string")),
     ("m = 0\nAxiom: A\nproduction:\nA :\n    global m\n    if m < 1:\n        m = 1\n    else:\n        produce F(m)\n",
      ("line 6", "sets a global but produces nothing")),
@@ -308,6 +314,12 @@ REFUSALS = [
     ("Axiom: A\nproduction:\nA << B --> F\n", ("line 3", "'<<'")),
     ("Axiom: A\nproduction:\nA B --> F\n", ("line 3", "predecessor of 2 modules")),
     ("x = [1, 2]\nAxiom: F(x)\n", ("line 2", "x (line 1)", "a list")),
+    ("def StartInterpretation():\n    nproduce -(90)\nAxiom: F\n", ("line 2", "StartInterpretation() produces")),
+    ("def g(x):\n    if x > 1:\n        return\n    produce F\nAxiom: A(1)\nproduction:\nA(x) :\n    g(x)\n",
+     ("line 1", "g() returns from inside a block")),
+    ("def g(x):\n    nproduce F\nAxiom: A(1)\nproduction:\nA(x) :\n    g(x, 2)\n    produce A\n",
+     ("line 1", "g() takes 1 plain parameters")),
+    ("produce F\nAxiom: A\n", ("line 1", "produce outside a rule and outside a function")),
     ("production:\nA --> F\n", ("no 'Axiom:'",)),
     ("Axiom: A\nproduction:\nA :\n    if x >\n        produce F\n", ("line 4", "syntax error")),
 ]
@@ -337,6 +349,8 @@ HOSTILE = {
     "doubling.lpy": ("def d(x):\n    return x + x\nAxiom: A(1)\nproduction:\nA(x) --> F(" + "d(" * 30 + "x" + ")" * 30
                      + ")\n", ("line 2", "2000 characters")),
     "power.lpy": ("x = 10**10**10\nAxiom: F(x)\n", ("line 1", "x")),
+    "producer.lpy": ("def g(x):\n    nproduce F\n    g(x)\nAxiom: A\nproduction:\nA :\n    g(1)\n    produce A\n",
+                     ("line 1", "recursive function", "g()")),
     "digits.lpy": ("x = " + "9" * 100_000 + "\nAxiom: F(x)\n", ("line 1",)),
     "sum.lpy": ("x = " + "+".join(["1"] * 60_000) + "\nAxiom: F(x)\n", ("line 1",)),
     "parens.lpy": ("Axiom: F(" + "(" * 5000 + "1" + ")" * 5000 + ")\n", ("line 1",)),

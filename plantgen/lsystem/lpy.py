@@ -256,6 +256,9 @@ class _Reader:
         self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
         self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
         self.hook_defs: list[ast.FunctionDef] = []
+        self.producers: dict[str, tuple] = {}       # functions that produce: (def line, their lines)
+        self.producer_code: dict[str, tuple] = {}
+        self.lstrings: list[tuple[str, int]] = []   # produce's L-strings, by placeholder
         self.axiom_effects: tuple = ()
         self.max_depth = {"interpretation": 1, "decomposition": 1}
 
@@ -294,13 +297,80 @@ class _Reader:
                 self._keyword(m, no, st)
             elif st.mode == "rules":
                 self._rule_line(no, raw, line, code, starts, st)
-            elif _PRODUCE.search(code):
-                raise self.refuse(no, "produce outside a rule (in a function) is not supported")
             else:
                 st.python.append(raw)
         st.close_rule()
+        self._find_producers(st)
         self._find_globals(st)
         self._translate(st)
+
+    def _find_producers(self, st: _Sections) -> None:
+        """Module-level functions whose body produces modules: kept aside (their lines
+        blanked from the module code) to be inlined where a rule calls them as a statement.
+        ``produce`` anywhere else outside a rule is refused, naming where it is."""
+        lines, current = st.python, None          # current: (name, index of its def line, hook?)
+        found: list = []
+        for i, text in enumerate([*lines, "end"]):
+            code = _strip_comment(text).rstrip()
+            if code[:1] not in ("", " ", "\t"):             # a line at column 0 ends any def
+                current = None
+                m = re.match(r"def\s+([A-Za-z_]\w*)\s*\(", code)
+                if m:
+                    current = (m.group(1), i)
+            if not _PRODUCE.search(code):
+                continue
+            if current is None:
+                raise self.refuse(i + 1, "produce outside a rule and outside a function is not supported")
+            if current[0] in _HOOKS:
+                raise self.refuse(i + 1, f"{current[0]}() produces modules: plantgen's grammar has no place for "
+                                         "modules added when a step or the drawing starts or ends")
+            if current not in found:
+                found.append(current)
+        for name, start in found:
+            end = start + 1
+            while end < len(lines) and _strip_comment(lines[end]).rstrip()[:1] in ("", " ", "\t"):
+                end += 1
+            self.producers[name] = (start + 1, lines[start:end])
+            for k in range(start, end):
+                lines[k] = ""
+
+    def _producer(self, name: str, args: list, state, paths: list) -> list:
+        """A function that produces modules, called as a statement in a rule: its body
+        run in place (its parameters bound to the arguments), as if written in the rule;
+        its ``produce`` ends the rule, as in L-Py. The states still running come back."""
+        env, conds, pending = state
+        line, text = self.producers[name]
+        if name not in self.producer_code:
+            tree = self._parse_block(_strip_comment(text[0]).rstrip() + " pass", line, f"function {name}")
+            fn = tree[0]
+            body = self._placeholders([(line + k + 1, t) for k, t in enumerate(text[1:])], f"function {name}")
+            if body and isinstance(body[-1], ast.Return) and body[-1].value is None:
+                body = body[:-1]
+            if any(isinstance(n, ast.Return) for b in body for n in ast.walk(b)):
+                raise self.refuse(line, f"function {name}() returns from inside a block; plantgen inlines a "
+                                        "function that produces modules only where it ends at its last line")
+            self.producer_code[name] = (fn, body)
+        fn, body = self.producer_code[name]
+        params = fn.args
+        if params.vararg or params.kwarg or params.kwonlyargs or params.posonlyargs or params.defaults \
+                or len(params.args) != len(args):
+            raise self.refuse(line, f"function {name}() takes {len(params.args)} plain parameters; the rule passes "
+                                    f"{len(args)}")
+        local = {a.arg: _Val(v.text, v.rand) for a, v in zip(params.args, [self.expr(x, env, line) for x in args],
+                                                                strict=True)}
+        self.calls += 1
+        if self.calls > MAX_CALL_DEPTH:
+            raise self.refuse(line, f"function calls nested deeper than {MAX_CALL_DEPTH}: a recursive function "
+                                    f"such as {name}() cannot be translated")
+        try:
+            out = self._run(body, [(local, conds, pending)], paths)
+        finally:
+            self.calls -= 1
+        back = []
+        for fenv, c, p in out:               # the globals it set, seen by the rest of the rule
+            sets = {k: v for k, v in fenv.items() if k.startswith("set ")}
+            back.append(({**env, **sets, **{k[4:]: fenv[k[4:]] for k in sets if k[4:] in fenv}}, c, p))
+        return back
 
     def _find_globals(self, st: _Sections) -> None:
         """The names a ``global`` statement declares in a block (a hook's, a rule's, a
@@ -461,6 +531,10 @@ class _Reader:
         return tree.body
 
     def _module_code(self, source: str) -> None:
+        for no, text in enumerate(source.split("\n"), 1):      # named before any syntax error after them
+            m = re.match(r"\s*(?:from\s+([\w.]+)\s+import|import\s+([\w.]+))", text)
+            if m and _PLANTGL.search(m.group(1) or m.group(2)):
+                raise self.refuse(no, f"import of {m.group(1) or m.group(2)}: PlantGL and OpenAlea are not supported")
         for stmt in self._parse_block(source, 1, "module-level code"):
             self.spend(stmt.lineno)
             self._module_stmt(stmt)
@@ -578,20 +652,9 @@ class _Reader:
         if fn.name in _STATE_HOOKS:
             self._state_hook(fn)
             return
-        for stmt in fn.body:
-            if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
-                continue
-            if isinstance(stmt, (ast.Global, ast.Assert)):
-                continue
-            if (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
-                    and _call_name(stmt.value) in _SEED_CALLS):
-                self.seed = self._seed(stmt.value, stmt.lineno)
-                continue
-            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
-                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, stmt.lineno)):
-                continue
-            raise self.refuse(stmt.lineno, f"{fn.name}() does more than seed the random generator "
-                                           f"({_construct(stmt)}): not supported")
+        env = self._hook_run(fn.body, {}, fn.name)
+        if _effects(env):
+            raise self.refuse(fn.lineno, f"{fn.name}() sets globals: only Start, StartEach, EndEach and End may")
 
     def _state_hook(self, fn: ast.FunctionDef) -> None:
         """``Start``/``StartEach``/``EndEach``/``End``: the globals they set (each as an
@@ -617,11 +680,11 @@ class _Reader:
             if isinstance(stmt, (ast.Pass, ast.Assert)) or (isinstance(stmt, ast.Expr)
                                                            and isinstance(stmt.value, ast.Constant)):
                 continue
-            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) in _SEED_CALLS:
-                self.seed = self._seed(stmt.value, line)
+            call = stmt.value if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) else None
+            if call is not None and _call_name(call) in _SEED_CALLS:
+                self.seed = self._seed(call, line)
                 continue
-            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
-                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, line)):
+            if call is not None and (_call_name(call) == "print" or self._context_call(call, line)):
                 continue
             if isinstance(stmt, ast.Return) and stmt.value is None and stmt is stmts[-1]:
                 continue
@@ -1119,11 +1182,11 @@ class _Reader:
             return []
         return self._lstring(text, line, env, pattern=False)
 
-    def _block(self, body: list, env: dict) -> list[_Path]:
+    def _placeholders(self, body: list, what: str) -> list:
+        """A block's lines parsed, each ``produce L-string`` a placeholder call."""
         first = body[0][0] if body else 0
         texts = [t for _, t in body]
         source = textwrap.dedent("\n".join(t.expandtabs(4) for t in texts))
-        self.lstrings: list[tuple[str, int]] = []
         out_lines = []
         for k, text in enumerate(source.split("\n")):
             m = _PRODUCE.search(text)
@@ -1132,7 +1195,11 @@ class _Reader:
                 fn = "__nproduce__" if m.group(2) == "nproduce" else "__produce__"
                 text = text[:m.start()] + f"{m.group(1)}{fn}({len(self.lstrings) - 1})"
             out_lines.append(text)
-        stmts = self._parse_block("\n".join(out_lines), first, "rule block")
+        return self._parse_block("\n".join(out_lines), first, what)
+
+    def _block(self, body: list, env: dict) -> list[_Path]:
+        first = body[0][0] if body else 0
+        stmts = self._placeholders(body, "rule block")
         paths: list[_Path] = []
         live = self._run(stmts, [(env, [], [])], paths)
         for env_, conds, pending in live:   # the block's end: what nproduce gave, if anything
@@ -1171,6 +1238,13 @@ class _Reader:
                 choice = (self.if_ids, True, None, 1.0 / len(values), line)
                 nxt = [({**_copy(env), name: _Val(v)}, [*conds, choice], list(pending))
                        for env, conds, pending in states for v in values]
+            elif (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
+                  and _call_name(stmt.value) in self.producers):
+                call = stmt.value
+                if call.keywords or any(isinstance(a, ast.Starred) for a in call.args):
+                    raise self.refuse(line, f"keyword or starred arguments in a call to {_call_name(call)}")
+                for state in states:
+                    nxt += self._producer(_call_name(call), call.args, state, paths)
             else:
                 for env, conds, pending in states:
                     state = self._simple(stmt, env, conds, pending, paths)
@@ -1286,7 +1360,8 @@ class _Reader:
             return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call):
             name = _call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
-            raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported")
+            raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported (only a "
+                                    "module-level function that produces modules is inlined there)")
         raise self.refuse(line, f"{_construct(stmt)} in a rule is not supported")
 
     def _for(self, stmt: ast.For, states: list, paths: list) -> list:
