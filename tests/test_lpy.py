@@ -206,6 +206,30 @@ def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
     assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
 
 
+def test_a_random_count_from_a_conditional_lambda_forks_per_value():
+    """``nb = lambda o: randint(2, 4) if o > 2 else randint(4 - o, 5 - o)`` then
+    ``for i in range(nb(o))``: the test picks the draw; a draw whose bounds change with
+    ``o`` (a width of 1 whatever ``o``) is enumerated per lower bound. Each module gets
+    one of its own counts, each about as often."""
+    text = ("import random as rd\nnb = lambda o: rd.randint(2, 4) if o > 2 else rd.randint(4 - o, 5 - o)\n"
+            "Axiom: " + " ".join(["A(3)", "A(1)"] * 1500) + "\nderivation length: 1\nproduction:\nA(o) :\n"
+            "    n = nb(o)\n    for i in range(n):\n        nproduce B(o)\n    produce C\nendlsystem\n")
+    model = parse_lpy(text, "n.lpy")
+    ms = derive(parse_grammar(model.data, "n.lpy"))
+    counts = {3: [], 1: []}
+    run, last = 0, None
+    for s, row in zip(ms.sym.tolist(), ms.params.tolist(), strict=True):
+        if ms.symbols[s] == "B":
+            run, last = run + 1, row[0]
+        else:
+            counts[int(last)].append(run)
+            run = 0
+    assert len(counts[3]) == len(counts[1]) == 1500
+    for o, values in ((3, [2, 3, 4]), (1, [3, 4])):
+        share = [counts[o].count(v) / 1500 for v in values]
+        assert sum(share) == 1.0 and share == pytest.approx([1 / len(values)] * len(values), abs=0.05)
+
+
 def test_python_between_the_rules_is_module_code():
     text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
             "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")

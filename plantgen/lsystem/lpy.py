@@ -256,6 +256,7 @@ class _Reader:
         self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
         self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
         self.hook_defs: list[ast.FunctionDef] = []
+        self.later: list[tuple[str, str]] = []      # the rules after the one translated: (section, header)
         self.producers: dict[str, tuple] = {}       # functions that produce: (def line, their lines)
         self.producer_code: dict[str, tuple] = {}
         self.lstrings: list[tuple[str, int]] = []   # produce's L-strings, by placeholder
@@ -454,7 +455,8 @@ class _Reader:
         else:
             self.axiom = self._lstring(st.axiom[0], st.axiom[1], {}, pattern=False)
         self.decls = st.decls
-        for sec, grp, lines in st.rules:
+        for i, (sec, grp, lines) in enumerate(st.rules):
+            self.later = [(s, ls[0][1]) for s, g, ls in st.rules[i + 1:] if g == "0"]
             if grp != "0":
                 self.warnings.append(f"{self.path}: warning: line {lines[0][0]}: the rules of group {grp} are "
                                      "ignored (plantgen applies group 0 only: useGroup is not supported)")
@@ -1232,12 +1234,19 @@ class _Reader:
                     nxt += yes + no
             elif isinstance(stmt, ast.For):
                 nxt = self._for(stmt, states, paths)
-            elif (fork := self._choices(stmt)) is not None:
-                name, values = fork
-                self.if_ids += 1
-                choice = (self.if_ids, True, None, 1.0 / len(values), line)
-                nxt = [({**_copy(env), name: _Val(v)}, [*conds, choice], list(pending))
-                       for env, conds, pending in states for v in values]
+            elif (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
+                  and isinstance(stmt.value, (ast.Call, ast.IfExp))):
+                name = stmt.targets[0].id
+                for env, conds, pending in states:
+                    alts = None if f"global {name}" in env else self._alternatives(stmt.value, env, line)
+                    if alts is None or all(w == 1.0 for _, _, w in alts):
+                        state = self._simple(stmt, env, conds, pending, paths)
+                        nxt += [state] if state is not None else []
+                        continue
+                    self.if_ids += 1
+                    for extra, text, w in alts:        # one stochastic alternative per value
+                        nxt.append(({**_copy(env), name: _Val(text)}, [*conds, *extra, (self.if_ids, True, None, w,
+                                                                                           line)], list(pending)))
             elif (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
                   and _call_name(stmt.value) in self.producers):
                 call = stmt.value
@@ -1292,15 +1301,93 @@ class _Reader:
                                      list(pending))], paths)
         return out
 
-    def _choices(self, stmt) -> tuple[str, list[str]] | None:
-        """``NAME = randint(a, b)`` or ``NAME = choice([...])`` with constants: the name
-        and the values it may take, each as likely (the rule becomes stochastic
-        alternatives, one per value); None for any other statement."""
-        if not (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
-                and isinstance(stmt.value, ast.Call)):
+    def _alternatives(self, node, env: dict, line: int) -> list | None:
+        """The values ``node`` may take, for a rule to fork on: ``randint(a, b)`` (bounds
+        that differ by a constant, at most 32 values) or ``choice([...])``, each value as
+        likely; a conditional expression over them (its test, not random, a condition of
+        each alternative); a lambda returning one. [(tests, value text, probability)], or
+        None when ``node`` draws no such choice (or plantgen cannot enumerate it)."""
+        try:
+            return self._enumerate(node, env, line)
+        except (LpyError, ExprError):
             return None
-        values = self._choice_values(stmt.value)
-        return None if values is None else (stmt.targets[0].id, values)
+
+    def _enumerate(self, node, env: dict, line: int) -> list | None:
+        if isinstance(node, ast.IfExp):
+            c = self.expr(node.test, env, line)
+            yes, no = self._enumerate(node.body, env, line), self._enumerate(node.orelse, env, line)
+            if c.rand or yes is None or no is None:
+                return None
+            self.if_ids += 1
+            return ([([(self.if_ids, True, c.text, False, line), *t], v, w) for t, v, w in yes]
+                    + [([(self.if_ids, False, c.text, False, line), *t], v, w) for t, v, w in no])
+        name = _call_name(node) if isinstance(node, ast.Call) else None
+        fn = self.functions.get(name or "")
+        if isinstance(fn, ast.Lambda) and not node.keywords and len(node.args) == len(fn.args.args) and not (
+                fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs or fn.args.posonlyargs):
+            values = [self.expr(a, env, line) for a in node.args]
+            if any(v.rand for v in values):
+                return None
+            self.calls += 1
+            try:
+                if self.calls > MAX_CALL_DEPTH:
+                    return None
+                return self._enumerate(fn.body, {p.arg: v for p, v in zip(fn.args.args, values, strict=True)}, line)
+            finally:
+                self.calls -= 1
+        base, _, attr = (name or "").rpartition(".")
+        if name is None or name in self.functions or self.aliases.get(base, base) not in ("", "random") \
+                or attr not in ("randint", "choice") or node.keywords:
+            v = self.expr(node, env, line)           # a plain value: one alternative, certain
+            return None if v.rand else [([], v.text, 1.0)]
+        if attr == "randint" and len(node.args) == 2:
+            width = self._width(*node.args, env, line)
+            lo = self.expr(node.args[0], env, line)
+            if width is None or not 0 <= width <= 31 or lo.rand:
+                return None
+            try:
+                first = evaluate(lo.text, self.defines)
+            except ExprError:                         # a lower bound that changes: one test per value
+                return self._enumerate_bound(lo.text, width, line)
+            if first != int(first):
+                return None
+            return [([], str(int(first) + k), 1.0 / (width + 1)) for k in range(width + 1)]
+        seq = node.args[0] if len(node.args) == 1 else None
+        if attr != "choice" or not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 32:
+            return None
+        vals = [self.expr(e, env, line) for e in seq.elts]
+        return None if any(v.rand for v in vals) else [([], v.text, 1.0 / len(vals)) for v in vals]
+
+    def _enumerate_bound(self, lo: str, width: int, line: int) -> list:
+        """``randint(lo, lo + width)`` with ``lo`` a module's value: for each whole ``lo``
+        from 0 to :data:`MAX_DYNAMIC_COUNT`, the test ``lo == m`` and the values ``m`` to
+        ``m + width``, each as likely (so a loop over the draw unrolls); a module whose
+        ``lo`` is another value is left unchanged, with a warning."""
+        self.if_ids += 1
+        ident = self.if_ids
+        self.warnings.append(f"{self.path}: warning: line {line}: randint({lo[:40]}, ...) is enumerated for a lower "
+                             f"bound from 0 to {MAX_DYNAMIC_COUNT}; a module asking another is left unchanged")
+        return [([(ident * 1000 + m, True, f"{_wrap(lo)} == {m}", False, line)], str(m + k), 1.0 / (width + 1))
+                for m in range(MAX_DYNAMIC_COUNT + 1) for k in range(width + 1)]
+
+    def _width(self, lo, hi, env: dict, line: int) -> int | None:
+        """``hi - lo`` where it is a whole constant: computed, or read from the two
+        expressions' shapes (``5 - x`` and ``4 - x`` differ by 1 whatever ``x``)."""
+        try:
+            a, b = (evaluate(self.expr(n, env, line).text, self.defines) for n in (lo, hi))
+            return int(b - a) if b - a == int(b - a) else None
+        except (LpyError, ExprError):
+            pass
+        if ast.dump(lo) == ast.dump(hi):
+            return 0
+        if isinstance(lo, ast.BinOp) and isinstance(hi, ast.BinOp) and type(lo.op) is type(hi.op) and isinstance(
+                lo.op, (ast.Add, ast.Sub)):
+            if ast.dump(lo.right) == ast.dump(hi.right):
+                return self._width(lo.left, hi.left, env, line)
+            if ast.dump(lo.left) == ast.dump(hi.left):
+                inner = self._width(lo.right, hi.right, env, line)
+                return None if inner is None else (inner if isinstance(lo.op, ast.Add) else -inner)
+        return None
 
     def _choice_values(self, call: ast.Call) -> list[str] | None:
         name = _call_name(call) or ""
@@ -1435,9 +1522,20 @@ class _Reader:
                              f"up to {MAX_DYNAMIC_COUNT}; a module asking more is left unchanged")
         return out
 
+    def _taken_later(self, section: str, name: str) -> bool:
+        """Whether a later rule of ``section`` may rewrite a module ``name`` (its name is
+        written before its ``-->`` or ``:``)."""
+        word = re.compile(rf"(?<![\w@~?]){re.escape(name)}(?!\w)")
+        return any(s == section and word.search(re.split(r"-->|:", h, maxsplit=1)[0]) for s, h in self.later)
+
     def _emit(self, section, left, pred, right, paths: list[_Path], line: int) -> None:
         """Plantgen rules from a block's paths, in order: a test whose other branch always
         produces is left out of the later paths (the earlier rule took those modules)."""
+        if any(p.modules is None and any(c[2] is None for c in p.conds) for p in paths) and not self._taken_later(
+                section, pred.name):
+            for p in paths:      # a random alternative that leaves the module unchanged: no later rule
+                if p.modules is None and any(c[2] is None for c in p.conds) and not p.effects:
+                    p.modules = [_Mod(pred.name, [_Val(a) for a in pred.args], p.line)]   # rewrites it to itself
         leaky = {(c[0], c[1]) for p in paths if p.modules is None for c in p.conds}
         emitted = []
         for p in paths:
