@@ -230,6 +230,25 @@ def test_a_random_count_from_a_conditional_lambda_forks_per_value():
         assert sum(share) == 1.0 and share == pytest.approx([1 / len(values)] * len(values), abs=0.05)
 
 
+def test_a_random_alternative_that_produces_nothing_keeps_the_module_unless_a_later_rule_may_take_it():
+    rule = "A :\n    n = randint(0, 1)\n    for i in range(n):\n        nproduce F\n"
+    text = "from random import randint\nAxiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\n"
+    ms = derive(parse_grammar(parse_lpy(text + rule, "k.lpy").data, "k.lpy"))
+    kept = np.mean(ms.sym == ms.symbols.index("A"))
+    assert len(ms) == 4000 and abs(kept - 0.5) < 0.04          # L-Py leaves the module as it is: no rule applied
+    with pytest.raises(LpyError, match="may leave the module unchanged"):
+        parse_lpy(text + rule + "A --> B\n", "k.lpy")           # there, the next rule would rewrite it
+
+
+def test_a_numpy_vector_is_read_only_as_a_tropism_direction():
+    text = "import numpy as np\nv = np.array([0, 1, 2])\nAxiom: F @Tp(v) @Ts(0.2) F\n"
+    assert parse_lpy(text, "v.lpy").data["turtle"]["tropism"] == {"direction": [1.0, 2.0, 0.0], "strength": 0.2}
+    with pytest.raises(LpyError, match="line 5: v .line 2. is a vector"):
+        parse_lpy(text + "production:\nF --> F(v)\n", "v.lpy")
+    with pytest.raises(LpyError, match="np.zeros"):
+        parse_lpy("import numpy as np\nAxiom: F(np.zeros(3))\n", "v.lpy")
+
+
 def test_python_between_the_rules_is_module_code():
     text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
             "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")

@@ -256,6 +256,7 @@ class _Reader:
         self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
         self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
         self.hook_defs: list[ast.FunctionDef] = []
+        self.vectors: dict[str, list] = {}          # numpy.array constants: only a tropism's direction
         self.later: list[tuple[str, str]] = []      # the rules after the one translated: (section, header)
         self.producers: dict[str, tuple] = {}       # functions that produce: (def line, their lines)
         self.producer_code: dict[str, tuple] = {}
@@ -549,6 +550,9 @@ class _Reader:
                 for a in stmt.names:
                     if a.asname and a.name in ("random", "math"):
                         self.aliases[a.asname] = a.name
+            if isinstance(stmt, ast.Import) and all(a.name == "numpy" for a in stmt.names):
+                self.aliases.update({a.asname or a.name: "numpy" for a in stmt.names})   # for numpy.array only
+                return
             if all(n == "time" for n in names) and not (isinstance(stmt, ast.ImportFrom) and stmt.level):
                 self.warnings.append(f"{self.path}: warning: line {line}: import of time is ignored (plantgen runs "
                                      "no clock: a model that draws with a time it reads is refused where it does)")
@@ -628,6 +632,13 @@ class _Reader:
             self._forget(name)
             self.functions[name] = value
             return
+        vector = self._vector(value)
+        if vector is not None:
+            self._forget(name)
+            self.vectors[name] = vector
+            self.lazy[name] = (f"{name} (line {line}) is a vector (numpy.array): plantgen reads one only as "
+                               "@Tp's direction")
+            return
         try:
             val = self.expr(value, {}, line)
             if val.rand:
@@ -645,7 +656,20 @@ class _Reader:
             return
         self.defines[_safe(name)] = number
 
+    def _vector(self, value) -> list | None:
+        """``numpy.array([x, y, z])`` of constants: its numbers (None for anything else)."""
+        name = _call_name(value) if isinstance(value, ast.Call) else None
+        base, _, attr = (name or "").rpartition(".")
+        if self.aliases.get(base) != "numpy" or attr != "array" or len(value.args) != 1 or value.keywords \
+                or not isinstance(value.args[0], (ast.List, ast.Tuple)) or len(value.args[0].elts) != 3:
+            return None
+        try:
+            return [self._constant(ast.unparse(e), value.lineno, "a vector's coordinate") for e in value.args[0].elts]
+        except LpyError:
+            return None
+
     def _forget(self, name: str) -> None:
+        self.vectors.pop(name, None)
         self.functions.pop(name, None)
         self.lazy.pop(name, None)
         self.defines.pop(_safe(name), None)
@@ -1069,8 +1093,9 @@ class _Reader:
         if pattern or not args:
             return
         try:
-            vals = [float(evaluate(self.expr(self._parse_expr(a, line, name), {}, line).text, self.defines))
-                    for a in args]
+            vals = self.vectors.get(args[0].strip()) if len(args) == 1 else None
+            vals = vals or [float(evaluate(self.expr(self._parse_expr(a, line, name), {}, line).text, self.defines))
+                            for a in args]
         except (ExprError, LpyError):
             self.warnings.append(f"{self.path}: warning: line {line}: {name} with arguments that change is not "
                                  "drawn (plantgen has one tropism per grammar)")
