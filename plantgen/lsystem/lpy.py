@@ -13,10 +13,15 @@ is what evaluates it: nothing here calls ``exec`` or ``eval``. The result is the
 mapping a YAML grammar file gives (:func:`plantgen.lsystem.grammar.parse_grammar` takes
 it; ``plantgen convert`` writes it).
 
+``Start``/``StartEach``/``EndEach``/``End`` and ``global`` assignments in rules become
+the grammar's ``globals``, ``hooks`` and a rule's ``set`` (a global nothing drawn reads is
+dropped with what sets it); a module-level function whose body produces is run in place
+where a rule calls it as a statement.
+
 What cannot be translated is refused in one line naming the construct and its line
-(:class:`LpyError`): imports other than ``random`` and ``math``, PlantGL, ``Start``/
-``End``/``StartEach``/``EndEach`` that do more than seed the generator, decomposition
-rules, file access, a random draw that would be tested twice. Drawing modules plantgen
+(:class:`LpyError`): imports other than ``random`` and ``math`` (``time`` is ignored,
+``numpy`` only gives a tropism vector), PlantGL, hooks that produce or read the L-string,
+file access, a random draw that would be tested twice. Drawing modules plantgen
 has no meaning for are dropped with one warning each; the ``INITIALISATION`` section is
 read only for its scalar parameters (defines), the rest ignored with a warning.
 
