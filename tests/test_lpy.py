@@ -392,6 +392,9 @@ HOSTILE = {
     "doubling.lpy": ("def d(x):\n    return x + x\nAxiom: A(1)\nproduction:\nA(x) --> F(" + "d(" * 30 + "x" + ")" * 30
                      + ")\n", ("line 2", "2000 characters")),
     "power.lpy": ("x = 10**10**10\nAxiom: F(x)\n", ("line 1", "x")),
+    "globals.lpy": ("def Start():\n    global " + ", ".join(f"g{i}" for i in range(15_000)) + "\n"
+                    + "".join(f"    g{i} = 1\n" for i in range(3_000)) + "Axiom: F\n",
+                    ("3,000 globals", "limit of 64")),
     "producer.lpy": ("def g(x):\n    nproduce F\n    g(x)\nAxiom: A\nproduction:\nA :\n    g(1)\n    produce A\n",
                      ("line 1", "recursive function", "g()")),
     "digits.lpy": ("x = " + "9" * 100_000 + "\nAxiom: F(x)\n", ("line 1",)),

@@ -32,7 +32,7 @@ from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
-from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
+from .expr import FUNCTIONS, MAX_GLOBALS, Expr, ExprError, compile_expr, evaluate
 from .symbols import ARITY, QUERY_PREFIX, SYMBOLS, Action, by_action
 
 __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
@@ -57,8 +57,7 @@ RULE_KEYS = {"rule", "p", "set"}
 #: When a grammar's ``hooks`` run: once before the first step, before and after each
 #: step, once after the last (L-Py's ``Start``, ``StartEach``, ``EndEach``, ``End``).
 HOOKS = ("start", "start_each", "end_each", "end")
-#: The most global variables a grammar may hold.
-MAX_GLOBALS = 64
+
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
 _ARROW = re.compile(r"->|→")
 _PROB_PREFIX = re.compile(r"\s*\(\s*([0-9]*\.?[0-9]+(?:[eE][-+]?\d+)?)\s*\)")

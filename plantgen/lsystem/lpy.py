@@ -48,7 +48,7 @@ from ..errors import PlantgenError
 from ..files import read_text, read_yaml
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
+from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, MAX_GLOBALS, ExprError, evaluate
 from .symbols import ARITY, SYMBOLS
 
 __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
@@ -384,9 +384,12 @@ class _Reader:
         function's) that an indented line assigns: the model's globals, which change."""
         code = [_strip_comment(t) for t in self.lines[:len(self.lines) - len(st.tail)]]
         declared = {n.strip() for t in code for m in [_GLOBAL_DECL.match(t)] if m for n in m.group(1).split(",")}
-        for name in declared:
-            if any(re.match(rf"\s+{name}\s*(?:[-+*/%]|\*\*|//)?=(?!=)", t) for t in code):
-                self.mutable.add(name)
+        assigned = {m.group(1) for t in code for m in [re.match(r"\s+([A-Za-z_]\w*)\s*(?:[-+*/%]|\*\*|//)?=(?!=)", t)]
+                    if m}
+        self.mutable = declared & assigned
+        if len(self.mutable) > MAX_GLOBALS:
+            raise self.refuse(0, f"{len(self.mutable):,} globals set by hooks and rules, over the limit of "
+                                 f"{MAX_GLOBALS}")
 
     def _keyword(self, m: re.Match, no: int, st: _Sections) -> None:
         """One L-Py line of the L-system part (``Axiom:``, ``production:`` ...)."""
@@ -753,7 +756,8 @@ class _Reader:
         if f"global {name}" not in env:
             v = self.expr(value, env, stmt.lineno)
             return {**env, name: _Val(v.text, v.rand)}
-        probe = _copy(env)       # what it reads of a random local is not spent (the global may be dropped)
+        probe = {k: (_Val(v.text, v.rand, v.used, v.span, v.error) if v.rand or k == name else v)
+                 for k, v in env.items()}     # what it reads of a random local is not spent (it may be dropped)
         own = probe.get(name)
         if own is not None:
             own.used = False     # its value so far: the new one replaces it
@@ -1832,7 +1836,7 @@ def _merge(test: str, env: dict, yes: dict, no: dict) -> dict:
 
 
 def _copy(env: dict) -> dict:
-    return {k: _Val(v.text, v.rand, v.used, v.span) for k, v in env.items()}
+    return {k: _Val(v.text, v.rand, v.used, v.span, v.error) for k, v in env.items()}
 
 
 def _call_name(call: ast.Call) -> str | None:
