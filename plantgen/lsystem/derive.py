@@ -12,7 +12,16 @@ result would exceed ``max_modules`` modules or ``max_derive_bytes`` bytes stops 
 plus ``STEP_WORK`` per rule group), so a derivation that does not grow still ends. A
 grammar's ``max_modules`` may lower the limit, never raise it.
 
-A derivation whose state (the string and the random generator's state) comes back stops
+A grammar's ``globals`` are variables its expressions read and its rules and ``hooks``
+set (L-Py's module globals). The ``start`` hook runs once before the first step (after
+the axiom is read), ``start_each`` and ``end_each`` before and after each step (the
+decomposition included), ``end`` once after the last. A rule's ``set`` runs where it
+applies, module after module in string order: a step that holds such a rule is cut at
+each module that sets a globals, so the modules after it see the new values (L-Py's
+sequential semantics); each cut re-matches the rest of the string, spending its modules
+again from the work budget. Interpretation rules read the values the derivation ended with.
+
+A derivation whose state (the string, the globals and the random generator's state) comes back stops
 early: a fixed point (``F -> F``) at once, a cycle (``A -> B``, ``B -> A``) after one
 period, the remaining steps skipped by their count modulo the period.
 
@@ -53,6 +62,9 @@ DEFAULT_MAX_MODULES = default_limits.max_modules
 #: or a cycle (hashing costs about as much as copying the string; longer strings that stop
 #: growing are bounded by the work budget instead).
 CYCLE_WINDOW = 65_536
+#: The work a cut of a step at a module that sets globals costs per rule group, besides
+#: the modules after it (the rules match the rest of the string again: Python per group).
+SETTER_WORK = 2_000
 #: The symbol that cuts a branch (``%``).
 CUT_SYMBOL = by_action(Action.CUT)
 
@@ -196,7 +208,8 @@ class Derivation:
         self.rng = np.random.default_rng(seed)
         self.codes = {s: i for i, s in enumerate(grammar.symbols)}
         self.width = _width(grammar)
-        self.string = _cut(_axiom_string(grammar, self.rng, self.codes, self.width), self.codes)
+        self.state = dict(grammar.globals)
+        self.string = _cut(_axiom_string(grammar, self.rng, self.codes, self.width, self.state), self.codes)
         if len(self.string[0]) > limits.max_modules:
             raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} "
                                   "modules")
@@ -206,25 +219,42 @@ class Derivation:
         self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
         self.step, self.total = 0, len(self.string[0])
-        self.before = self.fixed_point = None     # the string and generator state before the last step
+        self.before = self.fixed_point = None     # the string, generator state and globals before the last step
+        self.ended = False
+        self.state = run_hook(grammar, "start", self.state, self.rng)
 
     def rewrite(self) -> bool:
         """One derivation step (False, and nothing done, once every step is done)."""
         if self.step >= self.iterations:
+            if not self.ended:             # once, after the last step
+                self.ended = True
+                self.state = run_hook(self.grammar, "end", self.state, self.rng)
             return False
         g, string = self.grammar, self.string
-        self.before = (string, self.rng.bit_generator.state)
+        self.before = (string, self.rng.bit_generator.state, dict(self.state))
+        self.state = run_hook(g, "start_each", self.state, self.rng)
         neighbours = _context_neighbours(string[0], g.symbols, g.ignore) if self.needs_context else None
-        matched, out_len, applied = _select_rewrites(g, self.groups, string, neighbours, self.rng, self.codes)
-        total = int(out_len.sum())
-        _check_step(g, self.limits, self.step, total, self.width)
-        self.work.spend(total * (CONTEXT_WORK if self.needs_context else 1) + STEP_WORK * (len(self.groups) + 1),
-                        f"{g.path}: derivation step {self.step + 1}")
-        self.string = _cut(_rewrite(g, string, matched, out_len, applied, self.rng, self.codes, self.width),
-                           self.codes)
+        what = f"derivation step {self.step + 1}"
+        if _sets_globals(g.rules):
+            self.work.spend(len(string[0]) * (CONTEXT_WORK if self.needs_context else 1)
+                            + STEP_WORK * (len(self.groups) + 1), f"{g.path}: {what}")
+            new, total, self.state, _ = _stateful_step(
+                g, self.groups, string, neighbours, self.rng, self.codes, self.width, self.state,
+                lambda t: _check_step(g, self.limits, self.step, t, self.width), self.work, what)
+        else:
+            matched, out_len, applied = _select_rewrites(g, self.groups, string, neighbours, self.rng, self.codes,
+                                                         self.state)
+            total = int(out_len.sum())
+            _check_step(g, self.limits, self.step, total, self.width)
+            self.work.spend(total * (CONTEXT_WORK if self.needs_context else 1) + STEP_WORK * (len(self.groups) + 1),
+                            f"{g.path}: {what}")
+            new = _rewrite(g, string, matched, out_len, applied, self.rng, self.codes, self.width)
+        self.string = _cut(new, self.codes)
         if g.decomposition:
-            self.string = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng, self.codes,
-                                  self.width, self.limits, self.work, f"decomposition after step {self.step + 1}, pass")
+            self.string, self.state = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng,
+                                              self.codes, self.width, self.limits, self.work,
+                                              f"decomposition after step {self.step + 1}, pass", self.state)
+        self.state = run_hook(g, "end_each", self.state, self.rng)
         self.step, self.total = self.step + 1, total
         return True
 
@@ -243,12 +273,12 @@ class Derivation:
         if self.step and self.progress is not None:
             self.progress(self.step, self.total)
         if (not self.together and self.before is not None and _unchanged(self.before[0], self.string)
-                and self.rng.bit_generator.state == self.before[1]):       # a fixed point: done
+                and self.rng.bit_generator.state == self.before[1] and self.state == self.before[2]):   # a fixed point
             self.fixed_point, self.iterations = self.step - 1, self.step
             return
         if self.seen is None or self.total > CYCLE_WINDOW:
             return
-        key = _fingerprint(self.string, self.rng)
+        key = _fingerprint(self.string, self.rng, self.state)
         if key in self.seen:                  # the state of step seen[key] again: skip whole periods
             period = self.step - self.seen[key]
             self.iterations = self.step + (self.iterations - self.step) % period
@@ -257,7 +287,8 @@ class Derivation:
             self.seen[key] = self.step
 
     def result(self) -> ModuleString:
-        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point)
+        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point,
+                            globals=dict(self.state) if self.state else None)
 
 
 def _unchanged(before, after) -> bool:
@@ -284,22 +315,34 @@ def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = 
     params = np.zeros((len(ms), width))
     params[:, :ms.params.shape[1]] = ms.params
     string = (ms.sym.copy(), ms.nparam.copy(), params)
-    string = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
-                     limits, work, "interpretation pass")
+    state = ms.globals if ms.globals is not None else dict(grammar.globals)
+    string, _ = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
+                        limits, work, "interpretation pass", state)
     return ModuleString(*string, grammar.symbols)
 
 
 def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, codes: dict, width: int,
-            limits: Limits, work: Meter, what: str):
+            limits: Limits, work: Meter, what: str, state: dict):
     """``string`` rewritten by ``rules`` up to ``depth`` times, each pass one parallel
     step (stopping at the first pass that rewrites nothing): the interpretation passes,
-    and the decomposition after each derivation step."""
+    and the decomposition after each derivation step. Returns it and the globals (which
+    rules with ``set`` change)."""
     view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
     needs_context = any(r.left or r.right for r in view.rules)
     for step in range(depth):
         neighbours = (_context_neighbours(string[0], view.symbols, view.ignore) if needs_context else None)
-        matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes)
+        if _sets_globals(rules):
+            work.spend(len(string[0]) * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
+                       f"{grammar.path}: {what} {step + 1}")
+            new, _, state, any_matched = _stateful_step(
+                view, groups, string, neighbours, rng, codes, width, state,
+                lambda t, step=step: _check_step(view, limits, step, t, width, what), work, f"{what} {step + 1}")
+            if not any_matched:
+                break
+            string = _cut(new, codes)
+            continue
+        matched, out_len, applied = _select_rewrites(view, groups, string, neighbours, rng, codes, state)
         if not matched.any():
             break
         total = int(out_len.sum())
@@ -307,7 +350,7 @@ def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, 
         work.spend(total * (CONTEXT_WORK if needs_context else 1) + STEP_WORK * (len(groups) + 1),
                    f"{grammar.path}: {what} {step + 1}")
         string = _cut(_rewrite(view, string, matched, out_len, applied, rng, codes, width), codes)
-    return string
+    return string, state
 
 
 def cut_branches(ms: ModuleString) -> ModuleString:
@@ -359,20 +402,21 @@ def _check_step(grammar: Grammar, limits: Limits, step: int, total: int, width: 
             f"({hint('derive_bytes')})")
 
 
-def _fingerprint(string, rng) -> bytes:
-    """A digest of the derivation's state: the module string and the generator's state
-    (a step is a function of these two alone)."""
+def _fingerprint(string, rng, state: dict) -> bytes:
+    """A digest of the derivation's state: the module string, the generator's state and
+    the globals (a step is a function of these alone)."""
     h = hashlib.blake2b(digest_size=16)
     for array in string:
         h.update(np.ascontiguousarray(array).tobytes())
     h.update(repr(rng.bit_generator.state).encode())
+    h.update(repr(sorted(state.items())).encode())
     return h.digest()
 
 
-def _axiom_string(grammar: Grammar, rng, codes: dict, width: int):
+def _axiom_string(grammar: Grammar, rng, codes: dict, width: int, state: dict):
     """The axiom as a module string: (sym (n,) int32, nparam (n,) int8, params (n, width))."""
     try:
-        sym, nparam, params = _instantiate(grammar.axiom, dict(grammar.defines), rng, 1, codes, width)
+        sym, nparam, params = _instantiate(grammar.axiom, {**grammar.defines, **state}, rng, 1, codes, width)
     except ExprError as exc:
         raise PlantgenError(f"{grammar.path}: axiom: {exc}") from None
     return sym, nparam, params[:, 0, :]
@@ -393,7 +437,7 @@ def _rule_groups(rules: tuple[Rule, ...]) -> list[list[Rule]]:
 
 
 def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng,
-                     codes: dict):
+                     codes: dict, state: dict | None = None, done: np.ndarray | None = None):
     """Which rule rewrites which module in this step (the first matching group wins).
 
     Returns
@@ -402,14 +446,16 @@ def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbo
     out_len : (n,) int64, length of each module's replacement (1 when untouched)
     applied : list of (modules (k,) int, rule, env): each rule with the modules it rewrites
         and its parameter values there
+
+    ``state``: the globals' values; ``done``: modules already rewritten (or kept) this step.
     """
     sym = string[0]
     n = len(sym)
-    matched = np.zeros(n, dtype=bool)
+    matched = np.zeros(n, dtype=bool) if done is None else done.copy()
     out_len = np.ones(n, dtype=np.int64)
     applied: list[tuple[np.ndarray, Rule, dict]] = []
     for alts in groups:
-        found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes)
+        found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes, state or {})
         if found is None:
             continue
         idx, env = found
@@ -421,7 +467,7 @@ def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbo
 
 
 def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neighbours, rng,
-                 codes: dict):
+                 codes: dict, state: dict):
     """The modules not yet matched that ``rule``'s predecessor, context and condition match,
     with the environment its expressions see there: ((k,) int, env), or None for none."""
     sym, nparam, params = string
@@ -429,7 +475,7 @@ def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neig
     idx = np.flatnonzero((sym == code) & (nparam == len(rule.pred.params)) & ~matched)
     if idx.size == 0:
         return None
-    env = dict(grammar.defines)
+    env = {**grammar.defines, **state}
     if rule.left or rule.right:
         left_nb, right_nb = neighbours
         keep_l, left_ctx = _match_context(idx, rule.left, left_nb, reversed, sym, nparam, codes)
@@ -483,6 +529,24 @@ def _rewrite(grammar: Grammar, string, matched: np.ndarray, out_len: np.ndarray,
              codes: dict, width: int):
     """The next module string: untouched modules copied, each rewritten module replaced by
     its rule's successor, evaluated in ``applied`` order (rules in file order)."""
+    return _assemble(string, matched, out_len, _successors(grammar, applied, rng, codes, width), width)
+
+
+def _successors(grammar: Grammar, applied, rng, codes: dict, width: int) -> list:
+    """Each applied rule's successor evaluated where it applies: [(modules, sym, nparam, params)]."""
+    pieces = []
+    for sub, rule, sub_env in applied:
+        if not rule.successor:
+            continue
+        try:
+            pieces.append((sub, *_instantiate(rule.successor, sub_env, rng, sub.size, codes, width)))
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
+    return pieces
+
+
+def _assemble(string, matched: np.ndarray, out_len: np.ndarray, pieces: list, width: int):
+    """The new string from the old one, the rewritten modules and their successors."""
     sym, nparam, params = string
     total = int(out_len.sum())
     offsets = np.cumsum(out_len) - out_len
@@ -493,15 +557,72 @@ def _rewrite(grammar: Grammar, string, matched: np.ndarray, out_len: np.ndarray,
     new_sym[offsets[keep]] = sym[keep]
     new_np[offsets[keep]] = nparam[keep]
     new_par[offsets[keep]] = params[keep]
-    for sub, rule, sub_env in applied:
-        if not rule.successor:
-            continue
-        try:
-            s, k, p = _instantiate(rule.successor, sub_env, rng, sub.size, codes, width)
-        except ExprError as exc:
-            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
-        pos = offsets[sub][None, :] + np.arange(len(rule.successor))[:, None]  # (L, k)
+    for sub, s, k, p in pieces:
+        pos = offsets[sub][None, :] + np.arange(len(s))[:, None]  # (L, k)
         new_sym[pos] = s[:, None]
         new_np[pos] = k[:, None]
         new_par[pos] = p
     return new_sym, new_np, new_par
+
+
+def _setting(grammar: Grammar, effects, env: dict, rng, what: str) -> dict:
+    """The globals ``effects`` set, each computed from ``env`` (one module's, or the
+    globals' and defines' for a hook) before any is set."""
+    out = {}
+    for name, expr in effects:
+        try:
+            out[name] = float(np.asarray(expr(EvalContext(env, rng, 1))).reshape(-1)[0])
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {what}: setting {name}: {exc}") from None
+    return out
+
+
+def run_hook(grammar: Grammar, key: str, state: dict, rng) -> dict:
+    """The globals after the grammar's hook ``key`` (``state`` itself without one)."""
+    effects = grammar.hooks.get(key)
+    if not effects:
+        return state
+    return {**state, **_setting(grammar, effects, {**grammar.defines, **state}, rng, f"hooks: {key}")}
+
+
+def _sets_globals(rules) -> bool:
+    return any(r.effects for r in rules)
+
+
+def _stateful_step(grammar: Grammar, groups, string, neighbours, rng, codes: dict, width: int, state: dict,
+                   check, work: Meter, what: str):
+    """One parallel step whose rules set globals, cut at each module that sets some: the
+    modules up to it are rewritten with the globals as they are, then its rule's ``set``
+    runs and the rest is matched again. Returns (the new string, its length, the globals,
+    whether any module was rewritten)."""
+    n = len(string[0])
+    done = np.zeros(n, dtype=bool)
+    matched_all = np.zeros(n, dtype=bool)
+    out_len = np.ones(n, dtype=np.int64)
+    pieces: list = []
+    pos = 0
+    while pos < n:
+        done[:pos] = True
+        matched, lens, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes, state, done)
+        setters = [int(sub.min()) for sub, rule, _ in applied if rule.effects and sub.size]
+        stop = min(setters) if setters else n - 1
+        keep_applied = []
+        for sub, rule, env in applied:
+            sel = sub <= stop
+            if sel.any():
+                keep_applied.append((sub[sel], rule, _rows(env, sel)))
+        new = matched & ~done
+        new[stop + 1:] = False
+        matched_all |= new
+        out_len[new] = lens[new]
+        check(int(out_len[:stop + 1].sum()) + (n - stop - 1))
+        pieces += _successors(grammar, keep_applied, rng, codes, width)
+        if setters:
+            sub, rule, env = next(a for a in keep_applied if a[1].effects and a[0][0] == stop)
+            row = _rows(env, sub == stop)
+            state = {**state, **_setting(grammar, rule.effects, row, rng, rule.where())}
+            work.spend(n - stop - 1 + SETTER_WORK * (len(groups) + 1),
+                       f"{grammar.path}: {what}: a rule setting globals (each such module matches the rest again)")
+        pos = stop + 1
+    total = int(out_len.sum())
+    return _assemble(string, matched_all, out_len, pieces, width), total, state, bool(matched_all.any())
