@@ -174,6 +174,14 @@ class AnimatedScene:
         """Every row at time ``t`` (seconds): static rows first, then the moving ones."""
         return self._frame(t)[0]
 
+    def posed(self, t: float) -> tuple[Frusta, FrameUpdate]:
+        """Every row at time ``t``, posed and skinned on the CPU (what a renderer that needs
+        the rows themselves takes, the ray tracer's BVH refit), and the frame's
+        :class:`FrameUpdate` (kept in :attr:`updates`)."""
+        frusta, _, update = self._frame(t)
+        self.updates.append(update)
+        return frusta, update
+
     def _frame(self, t: float):
         t0 = time.perf_counter()
         if self._plan is not None:

@@ -702,15 +702,23 @@ def _check_render_memory(limits: Limits, what: str, width, height, frames, shado
 def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict, progress, on_gpu: bool = True):
     """Render the animation at ``times`` after one warm-up frame (it pays for the driver's
     shader compilation), posed on the GPU (``on_gpu``: :class:`PoseStream`) or on the CPU.
+    A :class:`RayTracer` takes each frame's rows posed on the CPU and refits its BVH to
+    them (the refit and upload count as the frame's update).
     Returns (colours, frame ms, update ms, last result, frames posed on the GPU, ShadowUse)."""
-    stream = PoseStream(raycaster.ctx) if on_gpu else RecordStream(raycaster.ctx)
+    traced = isinstance(raycaster, RayTracer)
+    stream = None if traced else PoseStream(raycaster.ctx) if on_gpu else RecordStream(raycaster.ctx)
     camera = view["camera"]
     colors, frame_times, update_times, gpu_frames = [], [], [], 0
     result, stats = None, []          # the last frame, and every frame's stats (the shadow map's use)
     try:
         for i, t in enumerate([times[0], *times]):
-            fr, buf, update = anim.upload(stream, t, camera.eye)
-            result = raycaster.render(fr, record_buffer=buf, **{**view, "leaves": anim.leaves_at(t)})
+            if traced:
+                fr, update = anim.posed(t)
+                result = raycaster.render(fr, **{**view, "leaves": anim.leaves_at(t)})
+                update.upload_ms = raycaster.last_build_ms + raycaster.last_upload_ms
+            else:
+                fr, buf, update = anim.upload(stream, t, camera.eye)
+                result = raycaster.render(fr, record_buffer=buf, **{**view, "leaves": anim.leaves_at(t)})
             stats.append(result.stats)
             if i == 0:
                 continue
@@ -721,7 +729,8 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
             if progress is not None:
                 progress("frames", i, len(times))
     finally:
-        stream.release()
+        if stream is not None:
+            stream.release()
     return colors, frame_times, update_times, result, gpu_frames, ShadowUse.of(stats)
 
 
@@ -804,15 +813,15 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:
         raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
-    if request.march.method == "rt" and frames is not None:
-        raise PlantgenError(f"{input_path}: --method rt renders stills (leave out --frames, or use --method rc)")
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
             **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
-    tracer = RayTracer if march.method == "rt" else Raycaster
-    raycaster, anim, colors, update_times = tracer(limits=limits), model.anim, [], []
+    # an animation's frames refit the tracer's BVH to the posed rows (plantgen.gl.rt)
+    raycaster = RayTracer(limits=limits, refit=frames is not None) if march.method == "rt" \
+        else Raycaster(limits=limits)
+    anim, colors, update_times = model.anim, [], []
     if frames is not None:
         times = motion.start + np.arange(int(frames)) / float(motion.fps)
         if shadows is not None and anim.animated and len(times) > 1:

@@ -135,7 +135,8 @@ class RaycastSettings:
     relief: bool = False
     method: str = knob("rc", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
                        "(rc), or trace each pixel's ray through a BVH (rt: its cost grows with the log of the rows; "
-                       "shadows by shadow rays). Stills only for rt.", kind="choice", choices=("rc", "rt"))
+                       "shadows by shadow rays; an animation's frames posed on the CPU, the BVH refitted to them).",
+                       kind="choice", choices=("rc", "rt"))
     march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
                       "--linear-steps for every ray (fixed, the paper's).", kind="choice",
                       choices=("adaptive", "fixed"))
@@ -303,7 +304,8 @@ class MotionSettings:
     fps: float = knob(12.0, "--fps", "Frames per second of the animation (0.01..1000).", lo=0.01, hi=1000)
     pose: str = knob("gpu", "--pose", "Where an animation's moving segments are posed and skinned each frame: a "
                      "compute shader writing the ray caster's records, or the vertex shader skinning a mesh built once "
-                     "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu).",
+                     "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu). "
+                     "--method rt poses on the CPU.",
                      kind="choice", choices=("gpu", "cpu"))
 
     def __post_init__(self):

@@ -217,6 +217,13 @@ class Tolerances:
     """Dimensionless: floor of the view's cosine N·V on a facet in GS+POM's march (GLSL), so
     a facet seen edge-on marches at most 1/this shell thicknesses along its ray."""
 
+    similarity: float = 1e-9
+    """Dimensionless: how far a copy's turn (its placement's linear part over its uniform
+    scale) may be from a rotation (largest entry of ``turnᵀ·turn - I``) for the GPU to
+    keep it as a quaternion (:mod:`plantgen.gl.trace`); far below float32's rounding, so the
+    quaternion loses nothing the 3x4 map would keep. A copy further from it (one that
+    scales unevenly or shears) makes the scene keep full maps."""
+
     # ------------------------------------------------------------------ framing
     frame_extent: float = 1e-9
     """World units: the smallest extent a camera frames (a model of one point still

@@ -16,12 +16,16 @@
 //                own; the offsets place them in the shared arrays. The caller skips
 //                an empty hierarchy (no nodes).
 //   With TWO_LEVEL (an instanced scene): a top level over the copies, its nodes after the
-//   plants' in bvh_nodes (one array, one load a word), bvh_top_prims (copy ids) and
-//   bvh_copies, 4 vec4 a copy:
-//   the world -> plant-frame map as three rows of a 3x4 matrix (rotation^T / scale,
-//   -rotation^T offset / scale, the offset formed in float64 on the CPU relative to the
-//   frame origin), then (plant index as int bits, 0, 0, 0). Without TWO_LEVEL the model
-//   is plant 0 in the frame itself.
+//   plants' in bvh_nodes (one array, one load a word), and bvh_copies, the copies in the
+//   top level's leaf order (a top-level leaf's `first` is the slot of its first copy), the
+//   world -> plant-frame map x -> rotation^T (x - offset) / scale of each (the offset formed
+//   in float64 on the CPU relative to the frame origin) and its plant:
+//     2 vec4 a copy: (u.xyzw), (offset.xyz, plant index as int bits), u = conj(q) /
+//     sqrt(scale) for the rotation's unit quaternion q: u v conj(u) = rotation^T v / scale.
+//     With BVH_AFFINE_COPIES (a copy that mirrors, scales unevenly or shears), 4 vec4 a
+//     copy: three rows of the 3x4 map (the linear part's inverse, -inverse offset), then
+//     (plant index as int bits, 0, 0, 0).
+//   Without TWO_LEVEL the model is plant 0 in the frame itself.
 //
 // A ray is o + t*d in the frame (origin relative); t is in units of |d| and keeps its
 // value in a copy's frame (the map is affine). Hits: the rows through row.glsl's row_hit
@@ -34,7 +38,7 @@
 
 #include "row.glsl"
 
-// Bindings 3..9 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
+// Bindings 3..8 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
 #ifndef BVH_STACK
 #define BVH_STACK 64
 #endif
@@ -45,8 +49,7 @@ layout(std430, binding = 5) readonly buffer BvhRows { vec4 bvh_rows[]; };
 layout(std430, binding = 6) readonly buffer BvhTris { vec4 bvh_tris[]; };
 layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
 #if defined TWO_LEVEL
-layout(std430, binding = 8) readonly buffer BvhTopPrims { int bvh_top_prims[]; };
-layout(std430, binding = 9) readonly buffer BvhCopies { vec4 bvh_copies[]; };
+layout(std430, binding = 8) readonly buffer BvhCopies { vec4 bvh_copies[]; };
 #endif
 
 // A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
@@ -125,7 +128,7 @@ vec3 bvh_inverse_dir(vec3 d) {
     return 1.0 / safe;
 }
 
-#if defined TWO_LEVEL
+#if defined TWO_LEVEL && defined BVH_AFFINE_COPIES
 // Copy `copy`'s world -> plant-frame map applied to a point (w = 1) or a direction (w = 0).
 vec3 bvh_to_copy(int copy, vec4 x) {
     int i = 4 * copy;
@@ -139,6 +142,25 @@ vec3 bvh_normal_from_copy(int copy, vec3 n) {
 }
 
 int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[4 * copy + 3].x); }
+
+#elif defined TWO_LEVEL
+// v turned and scaled by the quaternion u (not unit): u v conj(u) = |u|^2 R(u / |u|) v.
+vec3 bvh_quat_turn(vec4 u, vec3 v) {
+    return (u.w * u.w - dot(u.xyz, u.xyz)) * v + 2.0 * dot(u.xyz, v) * u.xyz + 2.0 * u.w * cross(u.xyz, v);
+}
+
+// Copy `copy`'s world -> plant-frame map applied to a point (w = 1) or a direction (w = 0).
+vec3 bvh_to_copy(int copy, vec4 x) {
+    return bvh_quat_turn(bvh_copies[2 * copy], x.xyz - x.w * bvh_copies[2 * copy + 1].xyz);
+}
+
+// A normal n in copy `copy`'s frame as a unit world normal (turned by the rotation itself).
+vec3 bvh_normal_from_copy(int copy, vec3 n) {
+    vec4 u = bvh_copies[2 * copy];
+    return normalize(bvh_quat_turn(vec4(-u.xyz, u.w), n));
+}
+
+int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[2 * copy + 1].w); }
 
 #endif
 
@@ -223,7 +245,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
 #if defined TWO_LEVEL
                 if (top) {
                     for (int k = count - 1; k >= 0; --k)
-                        if (sp < BVH_STACK) stack[sp++] = 4 * bvh_top_prims[first + k] + BVH_COPY;
+                        if (sp < BVH_STACK) stack[sp++] = 4 * (first + k) + BVH_COPY;
                     continue;
                 }
 #endif

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.bvh import BVH_METHODS, BVHError, build_bvh, float32_boxes, morton_codes
+from plantgen.geometry.bvh import BVH_METHODS, BVHError, build_bvh, float32_boxes, morton_codes, refit_bvh
 
 
 def check_invariants(bvh, lo, hi, leaf_size):
@@ -62,6 +62,30 @@ def boxes(draw):
 def test_invariants_hold_on_random_boxes(box, method, leaf_size, bins):
     lo, hi = box
     check_invariants(build_bvh(lo, hi, method=method, leaf_size=leaf_size, bins=bins), lo, hi, leaf_size)
+
+
+@settings(max_examples=40, deadline=None)
+@given(boxes(), st.sampled_from(BVH_METHODS), st.integers(1, 6), st.integers(0, 2**32 - 1))
+def test_a_refit_bounds_the_moved_boxes(box, method, leaf_size, seed):
+    """A refit (an animation's frame) keeps the tree and bounds the primitives where they
+    moved: every invariant of a build holds for the moved boxes; refitting the boxes the
+    tree was built from gives the build's boxes exactly."""
+    lo, hi = box
+    bvh = build_bvh(lo, hi, method=method, leaf_size=leaf_size)
+    same = refit_bvh(bvh, lo, hi)
+    assert np.array_equal(same.lo, bvh.lo) and np.array_equal(same.hi, bvh.hi)
+    rng = np.random.default_rng(seed)
+    move = rng.normal(scale=10.0, size=lo.shape) * (rng.random((len(lo), 1)) < 0.7)     # some stay put
+    grow = rng.random(lo.shape)
+    moved = refit_bvh(bvh, lo + move - grow, hi + move + grow)
+    assert moved.first is bvh.first and moved.prims is bvh.prims
+    check_invariants(moved, lo + move - grow, hi + move + grow, leaf_size)
+
+
+def test_a_refit_of_other_primitives_is_refused():
+    bvh = build_bvh(np.zeros((3, 3)), np.ones((3, 3)))
+    with pytest.raises(BVHError, match="3"):
+        refit_bvh(bvh, np.zeros((4, 3)), np.ones((4, 3)))
 
 
 @pytest.mark.parametrize("method", BVH_METHODS)

@@ -74,6 +74,15 @@ def _compare(t, prim, ref_t, ref_prim, *, min_same=0.999, t_relative=T_RELATIVE)
     assert np.isinf(t[prim < 0]).all()
 
 
+def _assert_t_rounding(t, ref_t, origins, dirs, frame_origin):
+    """t against the reference's within float32 rounding of the hit point: of the ray's
+    origin relative to the GPU's frame origin as much as of the distance travelled."""
+    norm = np.linalg.norm(dirs, axis=1)
+    scale = np.maximum(ref_t * norm, np.linalg.norm(origins - frame_origin, axis=1))
+    error = np.abs(t - ref_t) * norm
+    assert (error <= T_RELATIVE * scale).all(), (error / scale).max()
+
+
 def _assert_same_beams(ref, got):
     """Scanner by scanner: the same beams return (>= 99.9 %), >= 99.9 % of them from the
     same primitive, and there with the reference's range exactly."""
@@ -211,6 +220,80 @@ def test_two_levels_match_the_merged_reference(gl_ctx, offset):
     assert ((any_prim >= 0) == (prim >= 0)).mean() >= 0.999
 
 
+def _quat_turn(u, v):
+    """shaders/bvh.glsl's bvh_quat_turn in float64: u v conj(u) for (k, 4) u, (k, 3) v."""
+    w, x = u[:, 3:], u[:, :3]
+    return (w * w - (x * x).sum(1, keepdims=True)) * v + 2 * (x * v).sum(1, keepdims=True) * x \
+        + 2 * w * np.cross(x, v)
+
+
+def test_a_copys_32_byte_map_is_its_inverse_placement():
+    """The quaternion map of a similarity copy (applied as the shader does, here in
+    float64) takes a world point to the plant frame as the float64 inverse does, to
+    float32 rounding; its plant index survives the packing; turned back it gives the
+    world normal."""
+    from plantgen.gl.trace import copy_words
+
+    matrices = _similarities(50, seed=21, spread=1e4)
+    centres = np.random.default_rng(22).normal(size=(3, 3))
+    plant = np.arange(50) % 3
+    origin = np.array([100.0, -50.0, 20.0])
+    words, affine = copy_words(matrices, plant, centres, origin)
+    assert not affine and words.shape == (50, 8) and words.dtype == np.float32
+    np.testing.assert_array_equal(words[:, 7].view(np.int32), plant)
+    u, offset = words[:, :4].astype(np.float64), words[:, 4:7].astype(np.float64)
+    x = np.random.default_rng(23).normal(scale=5.0, size=(50, 3)) + matrices[:, :3, 3]
+    got = _quat_turn(u, x - origin - offset)
+    want = np.einsum("kij,kj->ki", np.linalg.inv(matrices)[:, :3, :3], x - matrices[:, :3, 3]) - centres[plant]
+    size = np.linalg.norm(x - origin, axis=1) / np.cbrt(np.linalg.det(matrices[:, :3, :3]))
+    assert (np.linalg.norm(got - want, axis=1) <= 1e-6 * size).all()
+    n = np.random.default_rng(24).normal(size=(50, 3))
+    back = _quat_turn(u * [-1, -1, -1, 1], n)
+    world = np.einsum("kij,kj->ki", matrices[:, :3, :3], n)
+    np.testing.assert_allclose(back / np.linalg.norm(back, axis=1, keepdims=True),
+                               world / np.linalg.norm(world, axis=1, keepdims=True), atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["mirror", "uneven"])
+def test_copies_that_are_not_similarities_keep_full_maps(gl_ctx, kind):
+    """A scene with one copy mirrored or scaled unevenly (possible through the API only)
+    keeps the 64-byte 3x4 maps for all its copies, and still traces as the float64
+    two-level reference does, copy for copy and row for row; without it, 32 bytes."""
+    from plantgen.geometry.bvh import scene_bvh, trace_scene
+    from plantgen.geometry.scan import target_hits
+    from plantgen.gl.trace import AFFINE_COPY_BYTES, COPY_BYTES
+
+    plant = _target(50, seed=31, leaves=0)
+    blas = build_bvh(plant.lo, plant.hi)
+    matrices = _similarities(16, seed=32, spread=8.0)
+    odd = np.diag([-1.0, 1.0, 1.0, 1.0]) if kind == "mirror" else np.diag([1.0, 2.5, 0.6, 1.0])
+    bent = matrices.copy()
+    bent[5] = bent[5] @ odd
+    uploads = {}
+    for name, m in (("similar", matrices), (kind, bent)):
+        scene = scene_bvh([blas], [m])
+        gpu = upload_bvh(gl_ctx, [GpuPlant(plant.frusta, None, blas)], top=scene.tlas, matrices=scene.matrix,
+                         copy_plant=scene.plant)
+        uploads[name] = (scene, gpu)
+    assert not uploads["similar"][1].affine and uploads[kind][1].affine
+    assert uploads[kind][1].nbytes - uploads["similar"][1].nbytes == 16 * (AFFINE_COPY_BYTES - COPY_BYTES)
+    scene, gpu = uploads[kind]
+    origins, dirs = _random_rays(scene.copy_lo, scene.copy_hi, 2000, seed=33)
+    centres = 0.5 * (plant.lo + plant.hi) @ bent[5, :3, :3].T + bent[5, :3, 3]       # the odd copy's rows
+    o5, d5 = _random_rays(centres, centres, 500, seed=34)
+    origins, dirs = np.concatenate([origins, o5]), np.concatenate([dirs, d5])
+    t, prim, copy, _ = trace_rays(gpu, origins, dirs)
+    ref_t, ref_copy, ref_prim = trace_scene(scene, origins, dirs, [target_hits(plant)])
+    rows = len(plant.frusta)
+    key = np.where(prim >= 0, copy * rows + prim, -1)
+    ref_key = np.where(ref_prim >= 0, ref_copy * rows + ref_prim, -1)
+    same = key == ref_key
+    assert same.mean() >= 0.999
+    hit = same & (ref_key >= 0)
+    assert hit.sum() > 0.1 * len(t) and (hit & (ref_copy == 5)).sum() >= 100   # the odd copy is hit, alike
+    _assert_t_rounding(t[hit], ref_t[hit], origins[hit], dirs[hit], gpu.origin)
+
+
 def test_an_empty_model_hits_nothing(gl_ctx):
     empty = build_bvh(np.zeros((0, 3)), np.zeros((0, 3)))
     gpu = upload_bvh(gl_ctx, [GpuPlant(None, None, empty)])
@@ -304,8 +387,8 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
     """The two-level traversal against the float64 two-level reference
     (plantgen.geometry.bvh.trace_scene) on one plant placed 100,000 times over 3 km, 1e4
     from the origin: the same (copy, row) for >= 99.9 % of the rays, t within float32
-    rounding; the plant is held once, each copy costs its 64-byte map and its share of the
-    top level."""
+    rounding; the plant is held once, each copy costs its 32-byte map and its share of the
+    top level, under 64 bytes in all."""
     from plantgen.geometry.bvh import build_scene_bvh, trace_scene
     from plantgen.geometry.instances import PlacedPlants
     from plantgen.geometry.scan import target_hits
@@ -324,7 +407,8 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
                      copy_plant=scene.plant)
     alone = upload_bvh(gl_ctx, [plant])
     per_copy = (gpu.nbytes - alone.nbytes) / 100_000
-    assert COPY_BYTES < per_copy <= COPY_BYTES + 48, per_copy        # the map and the top level's share
+    assert not gpu.affine
+    assert COPY_BYTES < per_copy <= 64, per_copy        # the map and the top level's share
     rng = np.random.default_rng(14)
     lo, hi = placed.box
     origins = lo + (hi - lo) * rng.random((400, 3))
@@ -339,8 +423,5 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
     same = key == ref_key
     assert same.mean() >= 0.999
     hit = same & (ref_key >= 0)
-    # float32 rounding of the hit point: of the ray's origin, up to 1,500 units from the
-    # frame's origin here, as much as of the distance travelled
-    scale = np.maximum(ref_t * np.linalg.norm(dirs, axis=1), np.linalg.norm(origins - [1e4, 0.0, -1e4], axis=1))
-    error = np.abs(t[hit] - ref_t[hit]) * np.linalg.norm(dirs[hit], axis=1)
-    assert (error <= T_RELATIVE * scale[hit]).all()
+    # the ray's origins lie up to 1,500 units from the frame's origin here
+    _assert_t_rounding(t[hit], ref_t[hit], origins[hit], dirs[hit], [1e4, 0.0, -1e4])

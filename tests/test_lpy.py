@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from test_hostile import assert_refused, run_cases
 
 from plantgen.errors import PlantgenError
-from plantgen.lsystem.derive import derive
+from plantgen.lsystem.derive import apply_interpretation, derive
 from plantgen.lsystem.expr import EvalContext, compile_expr
 from plantgen.lsystem.grammar import load_grammar, parse_grammar
 from plantgen.lsystem.lpy import MAX_LOOP_ITERATIONS, LpyError, parse_lpy, read_lpy
@@ -58,7 +58,7 @@ def test_an_lpy_model_grows_the_skeleton_of_its_yaml_twin(stem):
 
 
 @pytest.mark.parametrize("stem", ["abop_bush", "stochastic", "queries", "turtle_names", "decomposition",
-                                  "branch_context", "new_context", "several_modules"])
+                                  "branch_context", "new_context", "several_modules", "globals"])
 def test_convert_round_trip_grows_the_same_skeleton(tmp_path, stem):
     out = tmp_path / f"{stem}.yaml"
     code, stdout, err = run_cli("convert", DATA / f"{stem}.lpy", "-o", out)
@@ -207,6 +207,49 @@ def test_a_random_test_after_a_random_choice_is_drawn_once_per_module():
     assert abs(np.mean(ms.params[b, 0] == 1) - 0.5) < 0.08
 
 
+def test_a_random_count_from_a_conditional_lambda_forks_per_value():
+    """``nb = lambda o: randint(2, 4) if o > 2 else randint(4 - o, 5 - o)`` then
+    ``for i in range(nb(o))``: the test picks the draw; a draw whose bounds change with
+    ``o`` (a width of 1 whatever ``o``) is enumerated per lower bound. Each module gets
+    one of its own counts, each about as often."""
+    text = ("import random as rd\nnb = lambda o: rd.randint(2, 4) if o > 2 else rd.randint(4 - o, 5 - o)\n"
+            "Axiom: " + " ".join(["A(3)", "A(1)"] * 1500) + "\nderivation length: 1\nproduction:\nA(o) :\n"
+            "    n = nb(o)\n    for i in range(n):\n        nproduce B(o)\n    produce C\nendlsystem\n")
+    model = parse_lpy(text, "n.lpy")
+    ms = derive(parse_grammar(model.data, "n.lpy"))
+    counts = {3: [], 1: []}
+    run, last = 0, None
+    for s, row in zip(ms.sym.tolist(), ms.params.tolist(), strict=True):
+        if ms.symbols[s] == "B":
+            run, last = run + 1, row[0]
+        else:
+            counts[int(last)].append(run)
+            run = 0
+    assert len(counts[3]) == len(counts[1]) == 1500
+    for o, values in ((3, [2, 3, 4]), (1, [3, 4])):
+        share = [counts[o].count(v) / 1500 for v in values]
+        assert sum(share) == 1.0 and share == pytest.approx([1 / len(values)] * len(values), abs=0.05)
+
+
+def test_a_random_alternative_that_produces_nothing_keeps_the_module_unless_a_later_rule_may_take_it():
+    rule = "A :\n    n = randint(0, 1)\n    for i in range(n):\n        nproduce F\n"
+    text = "from random import randint\nAxiom: " + " ".join(["A"] * 4000) + "\nderivation length: 1\nproduction:\n"
+    ms = derive(parse_grammar(parse_lpy(text + rule, "k.lpy").data, "k.lpy"))
+    kept = np.mean(ms.sym == ms.symbols.index("A"))
+    assert len(ms) == 4000 and abs(kept - 0.5) < 0.04          # L-Py leaves the module as it is: no rule applied
+    with pytest.raises(LpyError, match="may leave the module unchanged"):
+        parse_lpy(text + rule + "A --> B\n", "k.lpy")           # there, the next rule would rewrite it
+
+
+def test_a_numpy_vector_is_read_only_as_a_tropism_direction():
+    text = "import numpy as np\nv = np.array([0, 1, 2])\nAxiom: F @Tp(v) @Ts(0.2) F\n"
+    assert parse_lpy(text, "v.lpy").data["turtle"]["tropism"] == {"direction": [1.0, 2.0, 0.0], "strength": 0.2}
+    with pytest.raises(LpyError, match="line 5: v .line 2. is a vector"):
+        parse_lpy(text + "production:\nF --> F(v)\n", "v.lpy")
+    with pytest.raises(LpyError, match="np.zeros"):
+        parse_lpy("import numpy as np\nAxiom: F(np.zeros(3))\n", "v.lpy")
+
+
 def test_python_between_the_rules_is_module_code():
     text = ("Axiom: A(1)\nderivation length: 3\nproduction:\n\ndef grow(x):\n    return x * 2\n\nk = 3\n"
             "A(x) --> F(grow(x)) A(x + k)\n\nendlsystem\n")
@@ -238,11 +281,86 @@ def test_functions_are_inlined_into_whitelisted_expressions():
     assert values == [-2.0, pytest.approx(np.sqrt(8.0)), 3.0, 1.0]
 
 
+def test_globals_follow_l_pys_hooks_and_its_module_after_module_rules():
+    """globals.lpy by hand: P sets ``turned`` in step 3, so the G after it (to its right)
+    turns in that step and the G's before it one step later; StartEach counts the steps
+    (``F(step)``), EndEach halves ``length`` from step 3 on, End sets ``size`` from the
+    count, and the interpretation draws ``E`` with it."""
+    grammar = load_grammar(DATA / "globals.lpy")
+    names = {s: read_lpy(DATA / "globals.lpy").names.get(s, s) for s in "EGP"}
+    g = names["G"]
+    three = derive(grammar, iterations=3)
+    assert three.to_text() == f"E{g}F(1)[{g}]F(1)[{g}]+F(3)"
+    assert three.globals == {"length": 0.5, "size": 30.0, "step": 3.0, "turned": 1.0}
+    five = derive(grammar)
+    assert five.to_text() == "E+F(4)F(1)[+F(4)]F(1)[+F(4)]+F(3)"      # the string stops changing; the hooks don't
+    assert five.globals["size"] == 50.0 and five.globals["length"] == 0.125
+    drawn = apply_interpretation(grammar, five)
+    assert drawn.to_text().startswith("F(50)+F(4)")
+    assert derive(grammar).to_text() == five.to_text()                # deterministic
+    assert "print" not in str(read_lpy(DATA / "globals.lpy").data)    # print() is a no-op
+
+
+def test_a_global_only_a_dropped_module_reads_is_dropped_with_what_sets_it():
+    """A global read only where plantgen draws nothing (a label) and set from a random
+    local is dropped: the local's draw is then used once, where the module is produced."""
+    text = ("from random import uniform\nimport time\ntotal = 0\nclock = 0\ndef Start():\n    global total, clock\n"
+            "    total = 0\n    clock = time.time()\nAxiom: A\nderivation length: 2\nproduction:\nA :\n"
+            "    global total\n    x = uniform(1, 2)\n    total += x\n    produce F(x) A\n"
+            "interpretation:\nA --> @L(str(total))\nendlsystem\n")
+    model = parse_lpy(text, "d.lpy")
+    assert "globals" not in model.data and "hooks" not in model.data
+    assert any("import of time is ignored" in w for w in model.warnings)
+    ms = derive(parse_grammar(model.data, "d.lpy"))
+    assert [m[:2] for m in ms.to_text().split(")")[:2]] == ["F(", "F("]
+
+
+def test_a_function_that_produces_is_run_in_the_rule_that_calls_it():
+    ms = derive(load_grammar(DATA / "produce_function.lpy"))
+    assert ms.to_text() == "F(1)F(1)[+F(1)]F(2)F(2)[+F(1)]F(3)F(3)B"      # by hand: produce ends the rule
+
+
+def test_globals_with_a_new_left_context_and_a_predecessor_of_several_modules():
+    """L-Py's global in a '<<' rule (a sequential step: each set runs where its module is
+    rewritten) and in a rule of several modules (the run rewritten, then its set runs)."""
+    source = ("n = 0\nAxiom: A A A\nderivation length: 1\nproduction:\nB(x) << A :\n    global n\n"
+              "    n = n + 1\n    produce B(x + n)\nA :\n    global n\n    n = n + 10\n    produce B(n)\n")
+    model = parse_lpy(source, "seq.lpy")
+    assert [r["rule"] for r in model.data["rules"]] == ["B(x) << A -> B(x + (n + 1))", "A -> B((n + 10))"]
+    ms = derive(parse_grammar(model.data, "seq.yaml"))
+    assert ms.to_text() == "B(10)B(21)B(33)" and ms.globals == {"n": 12.0}
+    source = ("n = 0\nAxiom: A B A B C\nderivation length: 1\nproduction:\nA B :\n    global n\n"
+              "    n = n + 1\n    produce F(n)\nC --> F(n * 10)\n")
+    ms = derive(parse_grammar(parse_lpy(source, "run.lpy").data, "run.yaml"))
+    assert ms.to_text() == "F(1)F(2)F(20)" and ms.globals == {"n": 2.0}
+
+
+def test_a_yaml_grammar_with_globals_is_validated_in_one_line(tmp_path):
+    base = {"axiom": "A", "rules": ["A -> B"], "globals": {"c": 0}}
+    for extra, words in [({"hooks": {"start_each": {"d": 1}}}, "'d' is not one of the grammar's globals"),
+                         ({"hooks": {"later": {"c": 1}}}, "later"),
+                         ({"rules": [{"rule": "A -> B", "set": {"c": "c +"}}]}, "set: c"),
+                         ({"defines": {"c": 1}}, "is a define too"),
+                         ({"interpretation": [{"rule": "A -> F", "set": {"c": 1}}]}, "cannot set globals")]:
+        with pytest.raises(PlantgenError, match=words):
+            parse_grammar({**base, **extra}, "g.yaml")
+
+
 REFUSALS = [
     ("import os\nAxiom: F\n", ("line 1", "import of os")),
     ("from openalea.plantgl.all import *\nAxiom: F\n", ("line 1", "PlantGL")),
-    ("def StartEach():\n    global n\n    n = 1\nAxiom: F\n", ("line 3", "StartEach() does more than seed")),
-    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() does more than seed")),
+    ("n = 0\ndef StartEach():\n    global n\n    n = open('f')\nAxiom: F(n)\n", ("line 4", "open()", "file access")),
+    ("def StartEach():\n    for i in range(3):\n        pass\nAxiom: F\n", ("line 2", "StartEach() does more")),
+    ("m = 0\ndef PostDraw():\n    global m\n    m = 1\nAxiom: F(m)\n", ("line 2", "PostDraw() sets globals")),
+    ("def End(lstring):\n    print(1)\n    return lstring\nAxiom: F\n", ("line 3", "End() reads the L-string")),
+    ("m = 0\nAxiom: A\nproduction:\nA :\n    global m\n    if m < 1:\n        m = 1\n    else:\n        produce F(m)\n",
+     ("line 6", "sets a global but produces nothing")),
+    ("m = 0\ndef f(x):\n    global m\n    m = x\n    return x\nAxiom: A\nproduction:\nA --> F(f(1))\n",
+     ("line 4", "function f() sets a global")),
+    ("m = 0\nAxiom: A\nproduction:\nA :\n    global m\n    r = random()\n    m = r\n    produce F(r) B(m)\n",
+     ("line", "random draw")),
+    ("m = [1]\nAxiom: A\nproduction:\nA :\n    global m\n    m = 2\n    produce F(m)\n",
+     ("line 5", "global m is set", "a list")),
     ("Axiom: A\nproduction:\nA :\n    f = open('/etc/passwd')\n    produce F\n", ("line 4", "open()", "file access")),
     ("Axiom: A\nproduction:\nA :\n    while True:\n        nproduce F\n    produce A\n", ("line 4", "while loop")),
     ("Axiom: A\nproduction:\nA --> @g(Cylinder(1))\n", ("line 3", "PlantGL")),
@@ -257,6 +375,12 @@ REFUSALS = [
     ("Axiom: A\nproduction:\nA [B] --> F\n", ("line 3", "brackets in a predecessor")),
     ("x = [1, 2]\nAxiom: A\nproduction:\nA --> F(x[random()])\n", ("line 4", "indexed by a random draw")),
     ("x = [1, 2]\nAxiom: F(x)\n", ("line 2", "x (line 1)", "a list")),
+    ("def StartInterpretation():\n    nproduce -(90)\nAxiom: F\n", ("line 2", "StartInterpretation() produces")),
+    ("def g(x):\n    if x > 1:\n        return\n    produce F\nAxiom: A(1)\nproduction:\nA(x) :\n    g(x)\n",
+     ("line 1", "g() returns from inside a block")),
+    ("def g(x):\n    nproduce F\nAxiom: A(1)\nproduction:\nA(x) :\n    g(x, 2)\n    produce A\n",
+     ("line 1", "g() takes 1 plain parameters")),
+    ("produce F\nAxiom: A\n", ("line 1", "produce outside a rule and outside a function")),
     ("production:\nA --> F\n", ("no 'Axiom:'",)),
     ("Axiom: A\nproduction:\nA :\n    if x >\n        produce F\n", ("line 4", "syntax error")),
 ]
@@ -286,12 +410,19 @@ HOSTILE = {
     "doubling.lpy": ("def d(x):\n    return x + x\nAxiom: A(1)\nproduction:\nA(x) --> F(" + "d(" * 30 + "x" + ")" * 30
                      + ")\n", ("line 2", "2000 characters")),
     "power.lpy": ("x = 10**10**10\nAxiom: F(x)\n", ("line 1", "x")),
+    "globals.lpy": ("def Start():\n    global " + ", ".join(f"g{i}" for i in range(15_000)) + "\n"
+                    + "".join(f"    g{i} = 1\n" for i in range(3_000)) + "Axiom: F\n",
+                    ("3,000 globals", "limit of 64")),
+    "producer.lpy": ("def g(x):\n    nproduce F\n    g(x)\nAxiom: A\nproduction:\nA :\n    g(1)\n    produce A\n",
+                     ("line 1", "recursive function", "g()")),
     "digits.lpy": ("x = " + "9" * 100_000 + "\nAxiom: F(x)\n", ("line 1",)),
     "sum.lpy": ("x = " + "+".join(["1"] * 60_000) + "\nAxiom: F(x)\n", ("line 1",)),
     "parens.lpy": ("Axiom: F(" + "(" * 5000 + "1" + ")" * 5000 + ")\n", ("line 1",)),
     "modules.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nA --> A A\n", ("modules",)),
     "sequential.lpy": ("Axiom: A\nderivation length: 60\nproduction:\nB(x) B(y) << B(z) :\n    if z > 10:\n"
                        "        produce B(x + y)\nA --> A A B(1)\n", ("derive_work",)),
+    "setters.lpy": ("c = 0\nAxiom: " + "A " * 9_000 + "\nderivation length: 5\nproduction:\nA :\n    global c\n"
+                    "    c = c + 1\n    produce A\nB --> F(c)\n", ("derive_work", "setting globals")),
 }
 
 

@@ -164,6 +164,31 @@ def test_new_left_context_follows_the_branching_structure():
     assert text(grammar(axiom="XBC", rules=["B -> A", "A < A << C -> D"])) == "XAC"
 
 
+def test_globals_set_in_a_sequential_step_are_read_by_the_modules_after():
+    # a '<<' step is sequential already: each rule's set runs right after its module is
+    # rewritten, so the next module reads the new value as well as the new string
+    g = grammar(axiom="AAA", globals={"n": 0}, rules=[
+        {"rule": "B(x) << A -> B(x + n)", "set": {"n": "n + 1"}},
+        {"rule": "A -> B(n)", "set": {"n": "n + 10"}}])
+    ms = derive(g)
+    assert ms.to_text() == "B(0)B(10)B(21)" and ms.globals == {"n": 12.0}
+    # the same rules without '<<' (a step cut at each setter) give the same values
+    g = grammar(axiom="AAA", globals={"n": 0}, rules=[{"rule": "A -> B(n)", "set": {"n": "n + 1"}}])
+    assert text(g) == "B(0)B(1)B(2)"
+
+
+def test_a_predecessor_of_several_modules_that_sets_globals():
+    # the whole run is rewritten before its set runs; the modules after it read the new value
+    g = grammar(axiom="ABABC", globals={"n": 0}, rules=[
+        {"rule": "A B -> F(n)", "set": {"n": "n + 1"}}, "C -> F(n * 10)"])
+    ms = derive(g)
+    assert ms.to_text() == "F(0)F(1)F(20)" and ms.globals == {"n": 2.0}
+    # an erased module after a setter's run is matched again with the new value
+    g = grammar(axiom="ABAA", globals={"n": 0}, rules=[
+        {"rule": "A B -> F(n)", "set": {"n": "n + 1"}}, "A : n > 0 ->"])
+    assert text(g) == "F(0)"
+
+
 def _left_by_walking(seq: str, i: int, ignore: str) -> int:
     """ABOP's left context neighbour of seq[i], by walking back: ignored modules and whole
     branches are skipped, an opening bracket is stepped over to the module it grows from."""

@@ -54,6 +54,7 @@ def test_table_rows_are_whole(scene, tmp_path, gl_ctx):
     for r in rows:
         assert r["rt_ms"] > 0 and r["scene_s"] > 0 and r["top_s"] > 0
         assert 16 <= r["copy_bytes"] <= 256                    # a map, an index, a share of the top level
+        assert r["of_budget"] == r["gpu_bytes"] / (1.2 * result["data_bytes"] + 64 * r["copies"])
         assert r["gpu_bytes"] > result["base_bytes"]
     assert rows[0]["rc_ms"] > 0 and np.isnan(rows[1]["rc_ms"])                 # RC stops at rc_max
     assert rows[1]["segments"] == 10 * rows[0]["segments"]                     # ten whole tiles

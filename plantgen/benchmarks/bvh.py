@@ -27,7 +27,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..geometry.bvh import BVH_METHODS, build_bvh, build_scene_bvh, scene_bvh, trace_bvh, trace_scene
+from ..geometry.bvh import BVH_METHODS, TOP_LEAF_SIZE, build_bvh, build_scene_bvh, scene_bvh, trace_bvh, trace_scene
 from ..geometry.scan import scan_target, scene_target, target_hits
 from ..pipeline import grow_file, model_leaves, place_scene, skin_model
 from .arguments import report
@@ -123,7 +123,7 @@ def _copies(grown, copies: int, args) -> list[str]:
         plants.append(SimpleNamespace(name=p.name, frusta=p.frusta, matrices=m[:keep]))
     big = SimpleNamespace(plants=plants)
     seconds, scene = _timed(lambda: build_scene_bvh(big), 1)
-    top, _ = _timed(lambda: build_bvh(scene.copy_lo, scene.copy_hi, leaf_size=2), args.repeats)
+    top, _ = _timed(lambda: build_bvh(scene.copy_lo, scene.copy_hi, leaf_size=TOP_LEAF_SIZE), args.repeats)
     rows_ = sum(len(p.frusta) for p in big.plants)
     return [f"| {grown.name} × {scene.copies:,} copies | {len(big.plants)} plants, {rows_:,} rows | "
             f"{seconds:.2f} | {top:.3f} | {scene.tlas.nodes:,} | {scene.tlas.depth()} | "

@@ -20,9 +20,11 @@ For each N: *scene BVH s* builds the two levels (a BVH per distinct plant and th
 over the copies, :func:`~plantgen.geometry.bvh.build_scene_bvh`), *top level s* the top
 level alone; *GPU MiB* is what the ray tracer uploads (nodes, primitives, records, copies);
 *B/copy* what a copy adds to it: (bytes - the bytes of the same plants placed once each) /
-(copies - plants). Frames: a warm-up (the driver compiles; RT builds and uploads its BVH)
-and ``--frames`` timed ones, their median. RC runs at ``--lod`` pixels up to ``--rc-max``
-copies. The growth columns divide a frame time by the previous N's (the same run).
+(copies - plants); *of budget* the GPU bytes over the memory goal's budget, 1.2 times the
+distinct plants' data (their row records, what RC uploads for them) plus 64 bytes a copy.
+Frames: a warm-up (the driver compiles; RT builds and uploads its BVH) and ``--frames``
+timed ones, their median. RC runs at ``--lod`` pixels up to ``--rc-max`` copies. The
+growth columns divide a frame time by the previous N's (the same run).
 """
 
 from __future__ import annotations
@@ -37,24 +39,27 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.bvh import build_bvh, build_scene_bvh
+from ..geometry.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh
 from ..geometry.camera import Camera
 from ..geometry.instances import PlacedPlants
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
+from ..gl.records import RECORD_BYTES
 from ..gl.rt import RayTracer
 from ..pipeline import frame_arguments, prepare_model, stage_model
 from ..settings import RaycastSettings
 from .arguments import image_size, report
 from .scan import machine
 
-__all__ = ["tile_placed", "measure", "markdown", "main", "VIEWS", "OVERVIEW"]
+__all__ = ["tile_placed", "measure", "markdown", "main", "VIEWS", "OVERVIEW", "BUDGET_DATA", "BUDGET_COPY"]
 
 #: The cameras of ``--view``: the scene's own (at eye height inside the forest: the tiles
 #: added lie behind the first, mostly hidden) or each forest framed whole from above.
 VIEWS = ("scene", "overview")
 #: The overview camera's direction (from the forest's centre towards the eye).
 OVERVIEW = (0.35, 1.2, 1.0)
+#: The memory goal: GPU bytes <= BUDGET_DATA x the distinct plants' row records + BUDGET_COPY a copy.
+BUDGET_DATA, BUDGET_COPY = 1.2, 64
 
 
 def tile_placed(placed: PlacedPlants, copies: int, toward=(0.0, 0.0, -1.0)) -> PlacedPlants:
@@ -126,17 +131,19 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
         return args
 
     base_bytes = rt.gpu_bvh(once, None, staging.camera.eye).nbytes
+    data_bytes = base.unique_rows * RECORD_BYTES
     rows = []
     for n in counts:
         placed = tile_placed(base, n)
         scene_s, bvh = _timed(lambda p=placed: build_scene_bvh(p))
-        top_s, _ = _timed(lambda b=bvh: build_bvh(b.copy_lo, b.copy_hi, leaf_size=2))
+        top_s, _ = _timed(lambda b=bvh: build_bvh(b.copy_lo, b.copy_hi, leaf_size=TOP_LEAF_SIZE))
         args = arguments(placed)
         rt_ms, rt_frame = _frames(lambda p=placed, a=args: rt.render(p, settings=settings, **a), frames)
         gpu_bytes = rt.gpu_bvh(placed, None, args["camera"].eye).nbytes
         row = {"n": n, "copies": placed.copies, "segments": len(placed), "scene_s": scene_s, "top_s": top_s,
                "rt_ms": rt_ms, "gpu_bytes": gpu_bytes,
                "copy_bytes": (gpu_bytes - base_bytes) / max(placed.copies - len(once.plants), 1),
+               "of_budget": gpu_bytes / (BUDGET_DATA * data_bytes + BUDGET_COPY * placed.copies),
                "rc_ms": float("nan")}
         if n <= rc_max:                       # N as asked (the tiles may hold a few more)
             row["rc_ms"], rc_frame = _frames(lambda p=placed, a=args: rc.render(p, settings=settings,
@@ -147,7 +154,8 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
         say(f"N = {placed.copies:,}: RT {rt_ms:,.0f} ms, RC {row['rc_ms']:,.0f} ms, scene BVH {scene_s:.2f} s, "
             f"top level {top_s:.3f} s, GPU {gpu_bytes / 2**20:,.1f} MiB ({row['copy_bytes']:.1f} B/copy)")
     return {"scene": scene, "view": view, "size": size, "frames": frames, "lod_pixels": lod_pixels, "rc_max": rc_max,
-            "plants": len(base.plants), "unique_rows": base.unique_rows, "base_bytes": base_bytes, "rows": rows,
+            "plants": len(base.plants), "unique_rows": base.unique_rows, "base_bytes": base_bytes,
+            "data_bytes": data_bytes, "rows": rows,
             "renderer": renderer_name(), "machine": machine(), "date": f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC"}
 
 
@@ -177,22 +185,25 @@ def markdown(result: dict) -> str:
              f"| date | {result['date']} |", f"| view | {_VIEW_TEXT[result['view']]} |",
              f"| frames | {w}x{h}, relief, shadows and leaves off; a warm-up and {result['frames']} timed, the median; "
              f"RT every row, RC at {result['lod_pixels']:g} px detail (up to {result['rc_max']:,} copies) |",
-             f"| distinct plants | {result['plants']} grown plants, {result['unique_rows']:,} rows; their BVH on the "
-             f"GPU (each placed once): {result['base_bytes'] / 2**20:,.2f} MiB |", "",
+             f"| distinct plants | {result['plants']} grown plants, {result['unique_rows']:,} rows, their row records "
+             f"{result['data_bytes'] / 2**20:,.2f} MiB; their BVH on the GPU (each placed once: nodes, ids, records): "
+             f"{result['base_bytes'] / 2**20:,.2f} MiB, {result['base_bytes'] / result['data_bytes']:.2f}x the "
+             "records |", "",
              "| copies | segments placed | RT ms | RT growth per 10x | RC ms | RC growth per 10x | scene BVH s | "
-             "top level s | GPU MiB (RT) | B/copy (GPU) |",
-             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+             "top level s | GPU MiB (RT) | B/copy (GPU) | of budget |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     rt_growth, rc_growth = _growth(rows, "rt_ms"), _growth(rows, "rc_ms")
     for r, g1, g2 in zip(rows, rt_growth, rc_growth, strict=True):
         rc = f"{r['rc_ms']:,.0f}" if np.isfinite(r["rc_ms"]) else "not run"
         lines.append(f"| {r['copies']:,} | {r['segments']:,} | {r['rt_ms']:,.0f} | {g1} | {rc} | {g2} | "
                      f"{r['scene_s']:.2f} | {r['top_s']:.3f} | {r['gpu_bytes'] / 2**20:,.2f} | "
-                     f"{r['copy_bytes']:.1f} |")
+                     f"{r['copy_bytes']:.1f} | {r['of_budget']:.2f} |")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     lines += ["", "Growth per 10x: a frame time over the previous row's, raised to 1 / log10 of the copies' ratio "
               "(a tenfold step). B/copy: (GPU bytes - the distinct plants' bytes) / (copies - plants): the "
-              f"copy's map and plant index, its share of the top level's nodes and ids. Load average after the run: "
-              f"{load:.2f}.", ""]
+              "copy's map and plant index, its share of the top level's nodes. Of budget: GPU bytes / "
+              f"({BUDGET_DATA:g} x the plants' row records + {BUDGET_COPY} B a copy), the memory goal met at <= 1. "
+              f"Load average after the run: {load:.2f}.", ""]
     return "\n".join(lines)
 
 

@@ -134,7 +134,8 @@ def print_report(report: RenderReport) -> None:
         where = (f"on the GPU in {report.gpu_frames} of {report.frames} frames" if report.gpu_frames
                  else "on the CPU")
         click.echo(f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
-                   f"{report.update_ms:.2f} ms update (pose, skin, upload: {where}) at {size}, {mode}")
+                   f"{report.update_ms:.2f} ms update (pose, skin, {'BVH refit, ' if traced else ''}upload: {where}) "
+                   f"at {size}, {mode}")
     elif report.timed:
         click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
                    f"(median of {report.timed} frames after a warm-up)")

@@ -36,7 +36,10 @@ relative to a float64 frame origin rounded outward (:func:`float32_boxes`).
 **Two levels** (:func:`build_scene_bvh`): one BVH per distinct plant in its own frame (a
 BLAS), and a top-level BVH (TLAS) over the placed copies: a copy's box is the world box
 of its plant's root box under the copy's similarity matrix. Per copy: the plant index,
-the matrix and its inverse (float64).
+the matrix and its inverse (float64). The top level holds :data:`TOP_LEAF_SIZE` copies a
+leaf by default: 0.7 nodes a copy (LBVH), 23 of the 32-byte nodes' bytes, where two copies
+a leaf take 1.3 nodes (41 bytes), so that a copy costs the GPU (its 32-byte map included,
+:mod:`plantgen.gl.trace`) under 64 bytes.
 
 Pure numpy, no GL.
 """
@@ -50,12 +53,14 @@ import numpy as np
 
 from ..errors import PlantgenError
 
-__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "box_columns", "brute_force", "build_bvh", "build_scene_bvh",
-           "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "scene_bvh", "slab", "trace_bvh",
-           "trace_scene"]
+__all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "TOP_LEAF_SIZE", "box_columns", "brute_force", "build_bvh",
+           "build_scene_bvh", "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "refit_bvh", "scene_bvh",
+           "slab", "trace_bvh", "trace_scene"]
 
 #: How :func:`build_bvh` may split nodes.
 BVH_METHODS = ("lbvh", "sah")
+#: Copies a leaf of a scene's top level (:func:`build_scene_bvh`'s default ``top_leaf_size``).
+TOP_LEAF_SIZE = 4
 
 
 class BVHError(PlantgenError, ValueError):
@@ -97,14 +102,16 @@ class BVH:
 
     def depth(self) -> int:
         """The levels of the tree (0: empty, 1: a single leaf)."""
-        if not self.nodes:
-            return 0
-        level, depth = np.array([0]), 0
+        return len(self.levels())
+
+    def levels(self) -> list[np.ndarray]:
+        """The nodes of each level of the tree, the root's first (none: empty)."""
+        levels, level = [], np.array([0]) if self.nodes else np.zeros(0, np.int64)
         while level.size:
-            depth += 1
+            levels.append(level)
             inner = level[self.count[level] == 0]
             level = np.concatenate([self.first[inner], self.first[inner] + 1])
-        return depth
+        return levels
 
     def sah_cost(self, traverse: float = 1.0, intersect: float = 1.0) -> float:
         """The tree's surface-area cost relative to its root box: ``traverse`` per internal
@@ -116,6 +123,31 @@ class BVH:
         root = area[0] if area[0] > 0 else 1.0
         inner = self.count == 0
         return float((traverse * area[inner].sum() + intersect * (area * self.count)[~inner].sum()) / root)
+
+
+def refit_bvh(bvh: BVH, lo, hi) -> BVH:
+    """``bvh`` over its primitives moved to boxes ``lo``, ``hi`` ((n, 3) float64, the same
+    n primitives): the same tree (nodes, leaves, primitive order), each leaf's box the union
+    of its primitives' and each internal node's the union of its children's, bottom up a
+    level at a time; O(n), no sort. The boxes are exact whatever the motion; the tree's
+    quality (its SAH cost) drifts as the primitives move from where it was built, which a
+    sway (every primitive near its rest place) hardly changes, and a rebuild resets."""
+    lo, hi = _check_boxes(lo, hi)
+    if len(lo) != len(bvh.prims):
+        raise BVHError(f"refit_bvh: {len(lo)} primitive boxes for a BVH over {len(bvh.prims)}")
+    new_lo, new_hi = np.empty_like(bvh.lo), np.empty_like(bvh.hi)
+    leaf = np.flatnonzero(bvh.count > 0)
+    if leaf.size:           # the leaves' ranges of `prims` partition it: reduce over them in order
+        leaf = leaf[np.argsort(bvh.first[leaf], kind="stable")]
+        start = bvh.first[leaf].astype(np.int64)
+        new_lo[leaf] = np.minimum.reduceat(lo[bvh.prims], start, axis=0)
+        new_hi[leaf] = np.maximum.reduceat(hi[bvh.prims], start, axis=0)
+    for level in reversed(bvh.levels()):
+        inner = level[bvh.count[level] == 0]
+        left = bvh.first[inner]
+        new_lo[inner] = np.minimum(new_lo[left], new_lo[left + 1])
+        new_hi[inner] = np.maximum(new_hi[left], new_hi[left + 1])
+    return BVH(new_lo, new_hi, bvh.first, bvh.count, bvh.prims)
 
 
 def box_area(lo, hi) -> np.ndarray:
@@ -676,7 +708,7 @@ def copy_boxes(lo, hi, matrices) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16,
-                    top_leaf_size: int = 2, shell: bool = True) -> SceneBVH:
+                    top_leaf_size: int = TOP_LEAF_SIZE, shell: bool = True) -> SceneBVH:
     """The two-level BVH of ``placed`` (a :class:`~plantgen.geometry.instances.PlacedPlants`):
     a BLAS per distinct plant over its rows' boxes (relief shell included where ``shell``),
     built once whatever its copies; a TLAS over the copies (``top_leaf_size`` copies a
@@ -691,7 +723,7 @@ def build_scene_bvh(placed, *, leaf_size: int = 4, method: str = "lbvh", bins: i
                      bins=bins)
 
 
-def scene_bvh(blas, matrices, *, top_leaf_size: int = 2, method: str = "lbvh", bins: int = 16) -> SceneBVH:
+def scene_bvh(blas, matrices, *, top_leaf_size: int = TOP_LEAF_SIZE, method: str = "lbvh", bins: int = 16) -> SceneBVH:
     """A :class:`SceneBVH` from a BVH per distinct plant (``blas``) and its copies'
     placements (``matrices[k]``: (c_k, 4, 4) similarity transforms); copies are numbered
     plant by plant. A copy whose matrix is not finite or scales by 0 is refused."""

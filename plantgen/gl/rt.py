@@ -20,6 +20,15 @@ An instanced scene (:class:`~plantgen.geometry.instances.PlacedPlants`) is trace
 two levels: each distinct plant's BVH once, a top level over the copies; its leaves (world
 polygons) are one more "plant" placed once. The BVH is built once per model (kept while
 the same objects are rendered) and uploaded relative to the eye.
+
+Animation (``refit``): a frame's rows (posed and skinned on the CPU) replace the last
+frame's; where they are as many (rows and leaf triangles), the BVH is not rebuilt but
+refitted (:func:`~plantgen.geometry.bvh.refit_bvh`: the same tree, every box recomputed
+from the posed rows' boxes bottom up, in numpy) and uploaded again with the rows. The
+refit is done on the CPU, not on the GPU from the records a pose program writes
+(:mod:`plantgen.gl.pose`): a row's box (relief shell and oblique ends,
+:func:`~plantgen.geometry.reference.row_boxes`) rounded outward has no GLSL twin yet, and
+the frame's float64 rows are what a refit from the float64 boxes needs to lose no ray.
 """
 
 from __future__ import annotations
@@ -30,7 +39,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import build_bvh, build_scene_bvh, copy_boxes
+from ..geometry.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh, copy_boxes, refit_bvh
 from ..geometry.instances import PlacedPlants
 from ..geometry.reference import row_boxes
 from .frame import FrameLighting, FrameView
@@ -72,13 +81,16 @@ class RayTracer(Raycaster):
     meets what the eye's rays meet (with relief, the relief surface).
 
     ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.bvh.build_bvh`);
-    ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface.
+    ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface; ``refit``:
+    rows (Frusta) as many as the last ones drawn refit their BVH instead of building
+    another (an animation's frames, module docstring).
     """
 
     def __init__(self, ctx=None, limits=None, *, leaf_size: int = 4, method: str = "lbvh",
-                 shadow_ray_offset: float = SHADOW_RAY_OFFSET):
+                 shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False):
         super().__init__(ctx, limits)
-        self.leaf_size, self.method = leaf_size, method
+        self.leaf_size, self.method, self.refit = leaf_size, method, bool(refit)
+        self.refits = 0          # BVHs refitted (not built) so far
         self.shadow_ray_offset = float(shadow_ray_offset)
         self._built = None       # (model, leaves, plants, top, matrices, copy_plant)
         self._gpu = None         # (model, leaves, eye, GpuBvh)
@@ -113,7 +125,7 @@ class RayTracer(Raycaster):
                 plants.append(GpuPlant(None, tri, bvh))
                 c_lo, c_hi = copy_boxes(bvh.lo[0], bvh.hi[0], np.eye(4)[None])
                 top = build_bvh(np.concatenate([scene.copy_lo, c_lo]), np.concatenate([scene.copy_hi, c_hi]),
-                                leaf_size=2, method=self.method)
+                                leaf_size=TOP_LEAF_SIZE, method=self.method)
                 matrices = np.concatenate([matrices, np.eye(4)[None]])
                 copy_plant = np.r_[copy_plant, len(plants) - 1]
         else:
@@ -121,7 +133,13 @@ class RayTracer(Raycaster):
             if len(tri):
                 t_lo, t_hi = _triangle_boxes(tri)
                 lo, hi = np.concatenate([lo, t_lo]), np.concatenate([hi, t_hi])
-            plants = [GpuPlant(model if len(model) else None, tri, build_bvh(lo, hi, **build))]
+            last = self._built[2][0] if self._built is not None and self._built[3] is None else None
+            if self.refit and last is not None and last.rows == len(model) and len(last.bvh.prims) == len(lo):
+                bvh = refit_bvh(last.bvh, lo, hi)        # an animation's next frame: the same rows moved
+                self.refits += 1
+            else:
+                bvh = build_bvh(lo, hi, **build)
+            plants = [GpuPlant(model if len(model) else None, tri, bvh)]
             top = matrices = copy_plant = None
         self._built = (model, leaves, plants, top, matrices, copy_plant)
         self.last_build_ms = (time.perf_counter() - t0) * 1e3
@@ -176,7 +194,7 @@ class RayTracer(Raycaster):
     @staticmethod
     def _defines(settings, shadows, gpu) -> dict:
         defines = {k: v for k, v in settings.defines().items() if k in _ROW_DEFINES}
-        return {**defines, "TWO_LEVEL": gpu.two_level, "SHADOWS": shadows is not None,
+        return {**defines, **gpu.defines(), "SHADOWS": shadows is not None,
                 "SHADOW_RAYS": shadows is not None}
 
     def _programs(self, settings, shadows, ground: bool, count_work: bool = False, flat_background: bool = False,

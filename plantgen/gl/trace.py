@@ -11,6 +11,17 @@ plant's (its offset formed in float64). The GPU finds the primitive; callers tha
 float64 distances solve that one primitive again on the CPU (:mod:`plantgen.trace`, the
 scan).
 
+A copy costs :data:`COPY_BYTES` (32) for its map and plant index: the map x -> (x - offset)
+as the quaternion u = conj(q) / sqrt(scale) turns it, u·v·conj(u) = turnᵀ·v / scale for
+its rotation q and uniform scale (a quaternion times a real turns and scales at once),
+where every copy of the scene is a similarity that keeps handedness (the scene format's:
+a positive scale and a rotation). A scene with a copy that mirrors, scales unevenly or
+shears (possible only through the API, :class:`~plantgen.geometry.instances.PlacedPlants`
+built by hand) keeps the full 3x4 map instead, :data:`AFFINE_COPY_BYTES` a copy (the
+shader's ``BVH_AFFINE_COPIES``), exact for any invertible map. The copies go up in the
+top level's leaf order, so a top-level leaf's ``first`` is its first copy's slot and no
+table of copy ids is needed on the GPU (:attr:`GpuBvh.copy_ids` maps the slots back).
+
 Memory stays bounded: rays go up in chunks of ``chunk`` (32 bytes a ray up, 16 back).
 """
 
@@ -22,22 +33,27 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, float32_boxes
+from ..geometry.frames import similarity_trs
 from ..geometry.instances import similarity_parts
 from ..limits import LimitError, hint
+from ..tolerances import tol
 from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
-           "BVH_BINDING", "BVH_STACK", "COPY_BYTES"]
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words"]
 
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
-#: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (7 in all).
+#: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
 BVH_BINDING = 3
 #: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
 BVH_STACK = 64
-#: GPU bytes of one copy's map (and plant index) in an instanced scene.
-COPY_BYTES = 64
+#: GPU bytes of one copy's map and plant index in an instanced scene whose copies are all
+#: similarities that keep handedness (a scaled quaternion, the offset, the plant).
+COPY_BYTES = 32
+#: The same for a scene with a copy that mirrors, scales unevenly or shears (a 3x4 map).
+AFFINE_COPY_BYTES = 64
 _GROUP = 64   # local_size_x of shaders/trace.glsl
 
 
@@ -69,9 +85,11 @@ class GpuBvh:
     plants: int = 0
     copies: int = 0
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
+    affine: bool = False     # the copies' maps are full 3x4 maps (not every copy a similarity)
+    copy_ids: np.ndarray | None = None   # (copies,) int64: the copy held in each GPU slot
 
     def defines(self) -> dict:
-        return {"TWO_LEVEL": self.two_level}
+        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine}
 
     def bind(self) -> None:
         for i, buf in enumerate(self.buffers):
@@ -108,23 +126,56 @@ def _depth(bvh: BVH) -> int:
     return bvh.depth() if bvh.nodes else 0
 
 
-def _copy_words(matrices, copy_plant, centres, origin) -> np.ndarray:
-    """(k, 16) float32 per copy: the map from the world frame (relative to ``origin``) into
-    its plant's frame (relative to the plant's centre), x_plant = turn^T (x - offset) /
-    scale with offset = shift + scale * turn @ centre - origin formed in float64 and
-    rounded once, as three rows of a 3x4 matrix; then the plant index's bits."""
+def _is_similarity(matrices) -> bool:
+    """Whether every (k, 4, 4) matrix is a similarity that keeps handedness: a positive
+    determinant and a turn (linear part over the uniform scale) within ``tol.similarity``
+    of a rotation."""
+    lin = matrices[:, :3, :3]
+    det = np.linalg.det(lin)
+    if not np.all(det > 0):
+        return False
+    turn = lin / np.cbrt(det)[:, None, None]
+    gap = np.einsum("kji,kjl->kil", turn, turn) - np.eye(3)
+    return bool(np.abs(gap).max(initial=0.0) <= tol.similarity)
+
+
+def copy_words(matrices, copy_plant, centres, origin, *, affine: bool | None = None) -> tuple[np.ndarray, bool]:
+    """Per copy, its map from the world frame (relative to ``origin`` (3,)) into its
+    plant's frame (relative to the plant's centre, ``centres`` (plants, 3)): x_plant =
+    turnᵀ·(x - offset) / scale, offset = shift + scale·turn·centre - origin formed in
+    float64 and rounded once; and its plant (``copy_plant`` (k,)). Returns the words and
+    whether they are full maps: (k, 8) float32 (u = conj(q) / sqrt(scale) as x, y, z, w;
+    offset, the plant index's bits) where every copy is a similarity that keeps
+    handedness (:data:`COPY_BYTES`), else (k, 16) (three rows of the 3x4 map
+    turnᵀ / scale | -turnᵀ·offset / scale, then the plant's bits;
+    :data:`AFFINE_COPY_BYTES`), or as ``affine`` asks (True: full maps always)."""
     matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
     copy_plant = np.asarray(copy_plant, np.int64)
     copies = len(matrices)
+    if affine is None:
+        affine = not _is_similarity(matrices)
+    elif not affine and not _is_similarity(matrices):
+        raise PlantgenError("copy_words: a copy that mirrors, scales unevenly or shears needs full maps")
     turn, scale, shift = similarity_parts(matrices)
     centre = np.asarray(centres, np.float64).reshape(-1, 3)[copy_plant] if copies else np.zeros((0, 3))
-    offset = shift + scale[:, None] * np.einsum("kij,kj->ki", turn, centre) - origin
-    inverse = np.transpose(turn, (0, 2, 1)) / scale[:, None, None]
+    plant_bits = copy_plant.astype(np.int32).view(np.float32)
+    if not affine:
+        offset = shift + scale[:, None] * np.einsum("kij,kj->ki", turn, centre) - origin
+        _, q, _ = similarity_trs(matrices)
+        words = np.empty((copies, 8), np.float32)
+        words[:, 0:3] = -q[:, :3] / np.sqrt(scale)[:, None]
+        words[:, 3] = q[:, 3] / np.sqrt(scale)
+        words[:, 4:7] = offset
+        words[:, 7] = plant_bits
+        return words, False
+    lin = matrices[:, :3, :3]            # any invertible map: its own inverse, not turn's
+    inverse = np.linalg.inv(lin) if copies else np.zeros((0, 3, 3))
+    offset = matrices[:, :3, 3] + np.einsum("kij,kj->ki", lin, centre) - origin
     words = np.zeros((copies, 16), np.float32)
     words[:, [0, 1, 2, 4, 5, 6, 8, 9, 10]] = inverse.reshape(copies, 9)
     words[:, [3, 7, 11]] = -np.einsum("kij,kj->ki", inverse, offset)
-    words[:, 12] = copy_plant.astype(np.int32).view(np.float32)
-    return words
+    words[:, 12] = plant_bits
+    return words, True
 
 
 def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
@@ -167,16 +218,18 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         nodes.append(_node_words(top, origin))
     arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
               np.asarray(offsets, np.int32)]
-    copies = 0
-    if two_level:
-        words = _copy_words(matrices, copy_plant, centres, origin)
+    copies, affine, copy_ids = 0, False, None
+    if two_level:     # the copies in the top level's leaf order: a leaf's `first` is its first copy's slot
+        copy_ids = np.asarray(top.prims, np.int64)
+        matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
+        words, affine = copy_words(matrices[copy_ids], np.asarray(copy_plant)[copy_ids], centres, origin)
         copies = len(words)
-        arrays += [np.asarray(top.prims, np.int32), words]
+        arrays.append(words)
     need = sum(a.nbytes for a in arrays)
     if max_bytes is not None and need > max_bytes:
         raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
                          f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
-    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies)
+    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids)
     for a in arrays:
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
@@ -230,7 +283,9 @@ def trace_rays(gpu: GpuBvh, origins, directions, *, any_hit: bool = False, t_min
             ids = out.view(np.int32)
             p = ids[:, 1].astype(np.int64)
             prim[start:stop] = p
-            copy[start:stop] = np.where(p >= 0, ids[:, 2], -1)
+            slot = np.where(p >= 0, ids[:, 2], 0)
+            c = gpu.copy_ids[slot] if gpu.two_level else slot
+            copy[start:stop] = np.where(p >= 0, c, -1)
             face[start:stop] = ids[:, 3]
             t[start:stop] = np.where(p >= 0, out[:, 0].astype(np.float64), np.inf)
             if progress is not None:

@@ -12,7 +12,18 @@ result would exceed ``max_modules`` modules or ``max_derive_bytes`` bytes stops 
 plus ``STEP_WORK`` per rule group), so a derivation that does not grow still ends. A
 grammar's ``max_modules`` may lower the limit, never raise it.
 
-A derivation whose state (the string and the random generator's state) comes back stops
+A grammar's ``globals`` are variables its expressions read and its rules and ``hooks``
+set (L-Py's module globals). The ``start`` hook runs once before the first step (after
+the axiom is read), ``start_each`` and ``end_each`` before and after each step (the
+decomposition included), ``end`` once after the last. A rule's ``set`` runs where it
+applies, module after module in string order: a step that holds such a rule is cut at
+each module that sets a global (after the whole run of a predecessor of several
+modules), so the modules after it see the new values (L-Py's sequential semantics); each
+cut re-matches the rest of the string, spending its modules again from the work budget.
+A step with a new left context (``<<``) is sequential already: each ``set`` runs right
+after its module is rewritten. Interpretation rules read the values the derivation ended with.
+
+A derivation whose state (the string, the globals and the random generator's state) comes back stops
 early: a fixed point (``F -> F``) at once, a cycle (``A -> B``, ``B -> A``) after one
 period, the remaining steps skipped by their count modulo the period.
 
@@ -53,6 +64,9 @@ DEFAULT_MAX_MODULES = default_limits.max_modules
 #: or a cycle (hashing costs about as much as copying the string; longer strings that stop
 #: growing are bounded by the work budget instead).
 CYCLE_WINDOW = 65_536
+#: The work a cut of a step at a module that sets globals costs per rule group, besides
+#: the modules after it (the rules match the rest of the string again: Python per group).
+SETTER_WORK = 2_000
 #: The symbol that cuts a branch (``%``).
 CUT_SYMBOL = by_action(Action.CUT)
 
@@ -269,7 +283,8 @@ class Derivation:
         self.rng = np.random.default_rng(seed)
         self.codes = {s: i for i, s in enumerate(grammar.symbols)}
         self.width = _width(grammar)
-        self.string = _cut(_axiom_string(grammar, self.rng, self.codes, self.width), self.codes)
+        self.state = dict(grammar.globals)
+        self.string = _cut(_axiom_string(grammar, self.rng, self.codes, self.width, self.state), self.codes)
         if len(self.string[0]) > limits.max_modules:
             raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} "
                                   "modules")
@@ -278,19 +293,27 @@ class Derivation:
         self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
         self.step, self.total = 0, len(self.string[0])
-        self.before = self.fixed_point = None     # the string and generator state before the last step
+        self.before = self.fixed_point = None     # the string, generator state and globals before the last step
+        self.ended = False
+        self.state = run_hook(grammar, "start", self.state, self.rng)
 
     def rewrite(self) -> bool:
         """One derivation step (False, and nothing done, once every step is done)."""
         if self.step >= self.iterations:
+            if not self.ended:             # once, after the last step
+                self.ended = True
+                self.state = run_hook(self.grammar, "end", self.state, self.rng)
             return False
         g, string = self.grammar, self.string
-        self.before = (string, self.rng.bit_generator.state)
-        self.string, total, _ = _step(g, self.groups, string, self.rng, self.codes, self.width, self.limits,
-                                      self.work, self.step, "derivation step")
+        self.before = (string, self.rng.bit_generator.state, dict(self.state))
+        self.state = run_hook(g, "start_each", self.state, self.rng)
+        self.string, total, _, self.state = _step(g, self.groups, string, self.rng, self.codes, self.width,
+                                                  self.limits, self.work, self.step, "derivation step", self.state)
         if g.decomposition:
-            self.string = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng, self.codes,
-                                  self.width, self.limits, self.work, f"decomposition after step {self.step + 1}, pass")
+            self.string, self.state = _passes(g, g.decomposition, g.decomposition_depth, self.string, self.rng,
+                                              self.codes, self.width, self.limits, self.work,
+                                              f"decomposition after step {self.step + 1}, pass", self.state)
+        self.state = run_hook(g, "end_each", self.state, self.rng)
         self.step, self.total = self.step + 1, total
         return True
 
@@ -309,12 +332,12 @@ class Derivation:
         if self.step and self.progress is not None:
             self.progress(self.step, self.total)
         if (not self.together and self.before is not None and _unchanged(self.before[0], self.string)
-                and self.rng.bit_generator.state == self.before[1]):       # a fixed point: done
+                and self.rng.bit_generator.state == self.before[1] and self.state == self.before[2]):   # a fixed point
             self.fixed_point, self.iterations = self.step - 1, self.step
             return
         if self.seen is None or self.total > CYCLE_WINDOW:
             return
-        key = _fingerprint(self.string, self.rng)
+        key = _fingerprint(self.string, self.rng, self.state)
         if key in self.seen:                  # the state of step seen[key] again: skip whole periods
             period = self.step - self.seen[key]
             self.iterations = self.step + (self.iterations - self.step) % period
@@ -323,7 +346,8 @@ class Derivation:
             self.seen[key] = self.step
 
     def result(self) -> ModuleString:
-        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point)
+        return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point,
+                            globals=dict(self.state) if self.state else None)
 
 
 def _unchanged(before, after) -> bool:
@@ -350,59 +374,75 @@ def apply_interpretation(grammar: Grammar, ms: ModuleString, seed: int | None = 
     params = np.zeros((len(ms), width))
     params[:, :ms.params.shape[1]] = ms.params
     string = (ms.sym.copy(), ms.nparam.copy(), params)
-    string = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
-                     limits, work, "interpretation pass")
+    state = ms.globals if ms.globals is not None else dict(grammar.globals)
+    string, _ = _passes(grammar, grammar.interpretation, grammar.interpretation_depth, string, rng, codes, width,
+                        limits, work, "interpretation pass", state)
     return ModuleString(*string, grammar.symbols)
 
 
 def _passes(grammar: Grammar, rules: tuple[Rule, ...], depth: int, string, rng, codes: dict, width: int,
-            limits: Limits, work: Meter, what: str):
+            limits: Limits, work: Meter, what: str, state: dict):
     """``string`` rewritten by ``rules`` up to ``depth`` times, each pass one parallel
     step (stopping at the first pass that rewrites nothing): the interpretation passes,
-    and the decomposition after each derivation step."""
+    and the decomposition after each derivation step. Returns it and the globals (which
+    rules with ``set`` change)."""
     view = replace(grammar, rules=rules)
     groups = _rule_groups(view.rules)
     for step in range(depth):
-        string, _, rewritten = _step(view, groups, string, rng, codes, width, limits, work, step, what, idle=False)
+        string, _, rewritten, state = _step(view, groups, string, rng, codes, width, limits, work, step, what,
+                                            state, idle=False)
         if not rewritten:
             break
-    return string
+    return string, state
 
 
 def _step(grammar: Grammar, groups: list[list[Rule]], string, rng, codes: dict, width: int, limits: Limits,
-          work: Meter, step: int, what: str, idle: bool = True):
-    """One rewriting step of ``grammar``'s rules (``groups``): the new string (``%`` cuts
-    applied), its length before the cuts, and whether any rule applied (without ``idle``,
-    a step where none applies is not done, and costs nothing). In parallel, as
-    :func:`_select_rewrites` and :func:`_rewrite` do; or, for rules with a new left context
-    (``<<``), sequentially from left to right (:func:`_sequential`)."""
+          work: Meter, step: int, what: str, state: dict, idle: bool = True):
+    """One rewriting step of ``grammar``'s rules (``groups``) with the globals ``state``:
+    the new string (``%`` cuts applied), its length before the cuts, whether any rule
+    applied (without ``idle``, a step where none applies leaves the string as it was) and
+    the globals after it. In parallel, as :func:`_select_rewrites` and :func:`_rewrite` do;
+    cut at each module that sets globals when a rule sets some (:func:`_stateful_step`);
+    or, for rules with a new left context (``<<``), sequentially from left to right
+    (:func:`_sequential`, which runs each ``set`` where it applies)."""
     rules = [r for alts in groups for r in alts]
     contexts = any(r.left or r.right or r.more or r.new_left for r in rules)
     neighbours = _context_neighbours(string[0], grammar.symbols, grammar.ignore) if contexts else None
     where = f"{grammar.path}: {what} {step + 1}"
+
+    def check(total: int) -> None:
+        _check_step(grammar, limits, step, total, width, what)
+
     if any(r.new_left for r in rules):
         tries = sum(int(np.count_nonzero(string[0] == codes[alts[0].pred.symbol])) for alts in groups)
         work.spend((len(string[0]) + tries) * SEQUENTIAL_WORK + STEP_WORK * (len(groups) + 1), where)
-        new, rewritten = _sequential(grammar, groups, string, neighbours, rng, codes, width,
-                                     lambda total: _check_step(grammar, limits, step, total, width, what))
+        new, rewritten, state = _sequential(grammar, groups, string, neighbours, rng, codes, width, check, state)
         total = len(new[0])
+    elif _sets_globals(rules):
+        work.spend(len(string[0]) * (CONTEXT_WORK if contexts else 1) + STEP_WORK * (len(groups) + 1), where)
+        new, total, state, rewritten = _stateful_step(grammar, groups, string, neighbours, rng, codes, width, state,
+                                                      check, work, where)
     else:
-        matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes)
+        matched, out_len, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes, state)
         total, rewritten = int(out_len.sum()), bool(matched.any())
         if not (rewritten or idle):
-            return string, total, False
-        _check_step(grammar, limits, step, total, width, what)
+            return string, total, False, state
+        check(total)
         work.spend(total * (CONTEXT_WORK if contexts else 1) + STEP_WORK * (len(groups) + 1), where)
         new = _rewrite(grammar, string, matched, out_len, applied, rng, codes, width)
-    return _cut(new, codes), total, rewritten
+    if not (rewritten or idle):
+        return string, total, False, state
+    return _cut(new, codes), total, rewritten, state
 
 
 def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng, codes: dict, width: int,
-                check):
+                check, state: dict):
     """A sequential step, as L-Py rewrites with new contexts: module by module from left to
     right, each rewritten by the first rule group that matches it, a new left context
-    (``<<``) matched in the string written so far; ``check(total)`` refuses a string grown
-    too long before it is written. Returns the new string and whether any rule applied."""
+    (``<<``) matched in the string written so far, a rule's ``set`` run where it applies
+    (after its successor is written, as in a step cut at each module that sets globals);
+    ``check(total)`` refuses a string grown too long before it is written. Returns the new
+    string, whether any rule applied and the globals."""
     sym, nparam, params = string
     n = len(sym)
     firsts = {codes[alts[0].pred.symbol] for alts in groups}
@@ -428,7 +468,8 @@ def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, 
         found = None
         if sym_l[i] in firsts:
             found, alts = _first_group(grammar, groups, string, none, neighbours, rng, codes, i,
-                                       _new_context(stack[-1], chain, out_sym, out_np, out_par, reach, width))
+                                       _new_context(stack[-1], chain, out_sym, out_np, out_par, reach, width),
+                                       state)
         if found is None:
             append(sym_l[i], nparam_l[i], params[i])
             i += 1
@@ -442,19 +483,21 @@ def _sequential(grammar: Grammar, groups: list[list[Rule]], string, neighbours, 
                 raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
             for j, (sj, kj) in enumerate(zip(s_.tolist(), k_.tolist(), strict=True)):
                 append(sj, kj, p_[j, 0])
+            if rule.effects:              # its set runs here: the modules after it see the new values
+                state = {**state, **_setting(grammar, rule.effects, sub_env, rng, rule.where())}
         rewritten = True
         i = int(end[0])
     new_par = np.array(out_par).reshape(-1, width) if out_par else np.zeros((0, width))
-    return (np.array(out_sym, dtype=np.int32), np.array(out_np, dtype=np.int8), new_par), rewritten
+    return (np.array(out_sym, dtype=np.int32), np.array(out_np, dtype=np.int8), new_par), rewritten, state
 
 
 def _first_group(grammar: Grammar, groups: list[list[Rule]], string, none, neighbours, rng, codes: dict, i: int,
-                 new):
+                 new, state: dict):
     """The first rule group that matches at position ``i`` of a sequential step, with its
     match (as :func:`_match_group` gives it): (match, group), or (None, None)."""
     at = np.array([i])
     for alts in groups:
-        found = _match_group(grammar, alts[0], string, none, neighbours, rng, codes, at, new)
+        found = _match_group(grammar, alts[0], string, none, neighbours, rng, codes, state, at, new)
         if found is not None:
             return found, alts
     return None, None
@@ -520,20 +563,21 @@ def _check_step(grammar: Grammar, limits: Limits, step: int, total: int, width: 
             f"({hint('derive_bytes')})")
 
 
-def _fingerprint(string, rng) -> bytes:
-    """A digest of the derivation's state: the module string and the generator's state
-    (a step is a function of these two alone)."""
+def _fingerprint(string, rng, state: dict) -> bytes:
+    """A digest of the derivation's state: the module string, the generator's state and
+    the globals (a step is a function of these alone)."""
     h = hashlib.blake2b(digest_size=16)
     for array in string:
         h.update(np.ascontiguousarray(array).tobytes())
     h.update(repr(rng.bit_generator.state).encode())
+    h.update(repr(sorted(state.items())).encode())
     return h.digest()
 
 
-def _axiom_string(grammar: Grammar, rng, codes: dict, width: int):
+def _axiom_string(grammar: Grammar, rng, codes: dict, width: int, state: dict):
     """The axiom as a module string: (sym (n,) int32, nparam (n,) int8, params (n, width))."""
     try:
-        sym, nparam, params = _instantiate(grammar.axiom, dict(grammar.defines), rng, 1, codes, width)
+        sym, nparam, params = _instantiate(grammar.axiom, {**grammar.defines, **state}, rng, 1, codes, width)
     except ExprError as exc:
         raise PlantgenError(f"{grammar.path}: axiom: {exc}") from None
     return sym, nparam, params[:, 0, :]
@@ -554,7 +598,7 @@ def _rule_groups(rules: tuple[Rule, ...]) -> list[list[Rule]]:
 
 
 def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbours, rng,
-                     codes: dict):
+                     codes: dict, state: dict | None = None, done: np.ndarray | None = None):
     """Which rule rewrites which module in this step (the first matching group wins; the
     matches of a predecessor of several modules taken from left to right, none overlapping).
 
@@ -565,14 +609,16 @@ def _select_rewrites(grammar: Grammar, groups: list[list[Rule]], string, neighbo
         second and later modules of a predecessor of several)
     applied : list of (modules (k,) int, rule, env): each rule with the modules it rewrites
         (the first of each predecessor) and its parameter values there
+
+    ``state``: the globals' values; ``done``: modules already rewritten (or kept) this step.
     """
     sym = string[0]
     n = len(sym)
-    matched = np.zeros(n, dtype=bool)
+    matched = np.zeros(n, dtype=bool) if done is None else done.copy()
     out_len = np.ones(n, dtype=np.int64)
     applied: list[tuple[np.ndarray, Rule, dict]] = []
     for alts in groups:
-        found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes)
+        found = _match_group(grammar, alts[0], string, matched, neighbours, rng, codes, state or {})
         if found is None:
             continue
         idx, env, end = found
@@ -595,9 +641,10 @@ def _ranges(start: np.ndarray, end: np.ndarray) -> np.ndarray:
 
 
 def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neighbours, rng,
-                 codes: dict, candidates: np.ndarray | None = None, new=None):
+                 codes: dict, state: dict, candidates: np.ndarray | None = None, new=None):
     """The modules not yet matched that ``rule``'s predecessor, context and condition match,
-    with the environment its expressions see there and where each match ends: ((k,) int,
+    with the environment its expressions see there (the globals' values ``state`` besides
+    the defines and the modules' parameters) and where each match ends: ((k,) int,
     env, (k,) int), or None for none. ``candidates`` limits the search to those positions;
     ``new`` is (left neighbours, the next module's, sym, nparam, params) of the string being
     written, for a new left context (``<<``, a sequential step)."""
@@ -633,7 +680,7 @@ def _match_group(grammar: Grammar, rule: Rule, string, matched: np.ndarray, neig
         for pats, rows_of, values in ((rule.more, more_rows, params), (rule.left, left_ctx, params),
                                       (rule.right, right_ctx, params), (rule.new_left, new_ctx, new and new[4])):
             bound += [(pats[k], rows[keep], values) for k, rows in rows_of.items()]
-    env = dict(grammar.defines)
+    env = {**grammar.defines, **state}
     for pat, rows, values in bound:
         for c, name in enumerate(pat.params):
             env[name] = values[rows, c]
@@ -689,6 +736,24 @@ def _rewrite(grammar: Grammar, string, matched: np.ndarray, out_len: np.ndarray,
              codes: dict, width: int):
     """The next module string: untouched modules copied, each rewritten module replaced by
     its rule's successor, evaluated in ``applied`` order (rules in file order)."""
+    return _assemble(string, matched, out_len, _successors(grammar, applied, rng, codes, width), width)
+
+
+def _successors(grammar: Grammar, applied, rng, codes: dict, width: int) -> list:
+    """Each applied rule's successor evaluated where it applies: [(modules, sym, nparam, params)]."""
+    pieces = []
+    for sub, rule, sub_env in applied:
+        if not rule.successor:
+            continue
+        try:
+            pieces.append((sub, *_instantiate(rule.successor, sub_env, rng, sub.size, codes, width)))
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
+    return pieces
+
+
+def _assemble(string, matched: np.ndarray, out_len: np.ndarray, pieces: list, width: int):
+    """The new string from the old one, the rewritten modules and their successors."""
     sym, nparam, params = string
     total = int(out_len.sum())
     offsets = np.cumsum(out_len) - out_len
@@ -699,15 +764,80 @@ def _rewrite(grammar: Grammar, string, matched: np.ndarray, out_len: np.ndarray,
     new_sym[offsets[keep]] = sym[keep]
     new_np[offsets[keep]] = nparam[keep]
     new_par[offsets[keep]] = params[keep]
-    for sub, rule, sub_env in applied:
-        if not rule.successor:
-            continue
-        try:
-            s, k, p = _instantiate(rule.successor, sub_env, rng, sub.size, codes, width)
-        except ExprError as exc:
-            raise PlantgenError(f"{grammar.path}: {rule.where()}: {exc}") from None
-        pos = offsets[sub][None, :] + np.arange(len(rule.successor))[:, None]  # (L, k)
+    for sub, s, k, p in pieces:
+        pos = offsets[sub][None, :] + np.arange(len(s))[:, None]  # (L, k)
         new_sym[pos] = s[:, None]
         new_np[pos] = k[:, None]
         new_par[pos] = p
     return new_sym, new_np, new_par
+
+
+def _setting(grammar: Grammar, effects, env: dict, rng, what: str) -> dict:
+    """The globals ``effects`` set, each computed from ``env`` (one module's, or the
+    globals' and defines' for a hook) before any is set."""
+    out = {}
+    for name, expr in effects:
+        try:
+            out[name] = float(np.asarray(expr(EvalContext(env, rng, 1))).reshape(-1)[0])
+        except ExprError as exc:
+            raise PlantgenError(f"{grammar.path}: {what}: setting {name}: {exc}") from None
+    return out
+
+
+def run_hook(grammar: Grammar, key: str, state: dict, rng) -> dict:
+    """The globals after the grammar's hook ``key`` (``state`` itself without one)."""
+    effects = grammar.hooks.get(key)
+    if not effects:
+        return state
+    return {**state, **_setting(grammar, effects, {**grammar.defines, **state}, rng, f"hooks: {key}")}
+
+
+def _sets_globals(rules) -> bool:
+    return any(r.effects for r in rules)
+
+
+def _stateful_step(grammar: Grammar, groups, string, neighbours, rng, codes: dict, width: int, state: dict,
+                   check, work: Meter, where: str):
+    """One parallel step whose rules set globals, cut at each module that sets some: the
+    modules up to it (the whole run of a predecessor of several modules that sets them)
+    are rewritten with the globals as they are, then its rule's ``set`` runs and the rest
+    is matched again. Returns (the new string, its length, the globals, whether any
+    module was rewritten); ``where`` names the step in messages."""
+    n = len(string[0])
+    done = np.zeros(n, dtype=bool)
+    matched_all = np.zeros(n, dtype=bool)
+    out_len = np.ones(n, dtype=np.int64)
+    pieces: list = []
+    pos = 0
+    while pos < n:
+        done[:pos] = True
+        matched, lens, applied = _select_rewrites(grammar, groups, string, neighbours, rng, codes, state, done)
+        setters = [int(sub.min()) for sub, rule, _ in applied if rule.effects and sub.size]
+        upto = n
+        if setters:
+            stop = min(setters)
+            starts = np.zeros(n, dtype=bool)
+            for sub, _, _ in applied:
+                starts[sub] = True
+            follows = matched[stop + 1:] & ~starts[stop + 1:]     # the rest of the setter's run
+            upto = stop + 1 + (int(np.argmin(follows)) if not follows.all() else follows.size)
+        keep_applied = []
+        for sub, rule, env in applied:
+            sel = sub < upto
+            if sel.any():
+                keep_applied.append((sub[sel], rule, _rows(env, sel)))
+        new = matched & ~done
+        new[upto:] = False
+        matched_all |= new
+        out_len[new] = lens[new]
+        check(int(out_len[:upto].sum()) + (n - upto))
+        pieces += _successors(grammar, keep_applied, rng, codes, width)
+        if setters:
+            sub, rule, env = next(a for a in keep_applied if a[1].effects and a[0][0] == stop)
+            row = _rows(env, sub == stop)
+            state = {**state, **_setting(grammar, rule.effects, row, rng, rule.where())}
+            work.spend(n - upto + SETTER_WORK * (len(groups) + 1),
+                       f"{where}: a rule setting globals (each such module matches the rest again)")
+        pos = upto
+    total = int(out_len.sum())
+    return _assemble(string, matched_all, out_len, pieces, width), total, state, bool(matched_all.any())

@@ -38,10 +38,12 @@ import numpy as np
 
 from ..errors import PlantgenError
 
-__all__ = ["FUNCTIONS", "MAX_DEPTH", "MAX_EXPR_LENGTH", "Expr", "ExprError", "compile_expr"]
+__all__ = ["FUNCTIONS", "MAX_DEPTH", "MAX_EXPR_LENGTH", "MAX_GLOBALS", "Expr", "ExprError", "compile_expr"]
 
 MAX_EXPR_LENGTH = 2000
 MAX_DEPTH = 64
+#: The most global variables (a grammar's ``globals``) expressions may read besides the defines.
+MAX_GLOBALS = 64
 
 
 class ExprError(PlantgenError):

@@ -32,7 +32,7 @@ from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol
-from .expr import FUNCTIONS, Expr, ExprError, compile_expr, evaluate
+from .expr import FUNCTIONS, MAX_GLOBALS, Expr, ExprError, compile_expr, evaluate
 from .symbols import ARITY, QUERY_PREFIX, SYMBOLS, Action, by_action
 
 __all__ = ["MAX_INTERPRETATION_DEPTH", "TURTLE_ARITY", "Grammar", "GrammarError", "ModuleTemplate", "Pattern", "Rule",
@@ -51,9 +51,13 @@ MAX_INTERPRETATION_DEPTH = 8
 
 GRAMMAR_KEYS = {"name", "description", "seed", "iterations", "defines", "axiom", "rules",
                 "ignore", "turtle", "materials", "max_modules", "interpretation",
-                "interpretation_depth", "environment", "decomposition", "decomposition_depth"}
+                "interpretation_depth", "environment", "decomposition", "decomposition_depth", "globals", "hooks"}
 TURTLE_KEYS = {"step", "angle", "radius", "width_factor", "tropism", "smooth_bends"}
-RULE_KEYS = {"rule", "p"}
+RULE_KEYS = {"rule", "p", "set"}
+#: When a grammar's ``hooks`` run: once before the first step, before and after each
+#: step, once after the last (L-Py's ``Start``, ``StartEach``, ``EndEach``, ``End``).
+HOOKS = ("start", "start_each", "end_each", "end")
+
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
 _ARROW = re.compile(r"->|→")
 _PROB_PREFIX = re.compile(r"\s*\(\s*([0-9]*\.?[0-9]+(?:[eE][-+]?\d+)?)\s*\)")
@@ -93,6 +97,7 @@ class Rule:
     more: tuple[Pattern, ...] = ()  # the modules after ``pred`` in a predecessor of several
     new_left: tuple[Pattern, ...] = ()   # the new left context (``<<``), matched in the string
                                          # being written (a sequential, left-to-right step)
+    effects: tuple[tuple[str, Expr], ...] = ()   # the globals the rule sets where it applies
 
     @property
     def group_key(self) -> tuple:
@@ -145,6 +150,8 @@ class Grammar:
                                                    # plantgen.environment), None without one
     decomposition: tuple[Rule, ...] = ()           # rules applied after each derivation step ...
     decomposition_depth: int = 1                   # ... up to this many passes
+    globals: dict[str, float] = field(default_factory=dict)   # global variables: their first values
+    hooks: dict[str, tuple[tuple[str, Expr], ...]] = field(default_factory=dict)   # HOOKS: what they set
 
 
 # ---------------------------------------------------------------------------- modules
@@ -292,15 +299,16 @@ def _cut_context(text: str, sep: str, where: str, what: str, after: bool = False
 
 
 def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | None = None,
-                section: str = "rule") -> Rule:
+                section: str = "rule", globals_: dict | None = None) -> Rule:
     where = f"{path}: {section} {index + 1}"
-    p = None
+    p, sets = None, None
     if isinstance(entry, dict):
         fields.keys(entry, RULE_KEYS, where, GrammarError)
         if "rule" not in entry:
             raise GrammarError(f"{where}: a rule mapping needs a 'rule' string")
         if "p" in entry:
             p = fields.number(entry["p"], "probability p", where, GrammarError, hi=1.0, positive=True)
+        sets = entry.get("set")
         entry = entry["rule"]
     if not isinstance(entry, str):
         raise GrammarError(f"{where}: a rule must be a string like 'A -> F[+A]A', got {fields.show(entry)}")
@@ -352,7 +360,7 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
     dup = {n for n in formals if formals.count(n) > 1}
     if dup:
         raise GrammarError(f"{where}: formal parameter(s) {sorted(dup)} used twice")
-    names = set(defines) | set(formals)
+    names = set(defines) | set(globals_ or {}) | set(formals)
     condition = None
     if cond_src is not None:
         try:
@@ -360,7 +368,53 @@ def _parse_rule(index: int, entry, defines: dict, path: str, max_params: int | N
         except ExprError as exc:
             raise GrammarError(f"{where}: {exc}") from None
     successor = parse_modules(rhs, names, where, max_params)
-    return Rule(index, source, pred, left, right, condition, successor, p, section, more, new_left)
+    effects = ()
+    if sets is not None:
+        if section == "interpretation rule":
+            raise GrammarError(f"{where}: an interpretation rule cannot set globals (it only draws)")
+        effects = _assignments(sets, globals_ or {}, names, f"{where}: set")
+    return Rule(index, source, pred, left, right, condition, successor, p, section, more, new_left, effects)
+
+
+def _assignments(raw, globals_: dict, names, where: str) -> tuple[tuple[str, Expr], ...]:
+    """A ``set`` or hook mapping, global name -> expression, compiled (each value is
+    computed from the values before any is set)."""
+    if not isinstance(raw, dict):
+        raise GrammarError(f"{where}: expected a mapping of global names to expressions, like {{n: n + 1}}")
+    out = []
+    for name, value in raw.items():
+        if name not in globals_:
+            raise GrammarError(f"{where}: {fields.show(name)} is not one of the grammar's globals")
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise GrammarError(f"{where}: {name}: expected a number or an expression, got {fields.show(value)}")
+        try:
+            out.append((name, compile_expr(str(value), names)))
+        except ExprError as exc:
+            raise GrammarError(f"{where}: {name}: {exc}") from None
+    return tuple(out)
+
+
+def _parse_globals(data: dict, defines: dict, path: str) -> tuple[dict, dict]:
+    """``globals`` (name -> first value) and ``hooks`` (HOOKS -> {global: expression})."""
+    raw = data.get("globals") or {}
+    if not isinstance(raw, dict):
+        raise GrammarError(f"{path}: globals must be a mapping of names to numbers")
+    if len(raw) > MAX_GLOBALS:
+        raise GrammarError(f"{path}: globals: {len(raw)} names, over the limit of {MAX_GLOBALS}")
+    values: dict[str, float] = {}
+    for key, value in raw.items():
+        name = fields.text(key, "a global's name", f"{path}: globals", GrammarError, max_len=100)
+        if not _IDENT.match(name) or name in FUNCTIONS or name in defines:
+            raise GrammarError(f"{path}: globals: {name!r} is not a usable name (or is a define too)")
+        values[name] = fields.number(value, "value", f"{path}: globals: {name}", GrammarError)
+    hooks_raw = data.get("hooks") or {}
+    if not isinstance(hooks_raw, dict):
+        raise GrammarError(f"{path}: hooks must be a mapping of {', '.join(HOOKS)} to assignments")
+    fields.keys(hooks_raw, set(HOOKS), f"{path}: hooks", GrammarError)
+    names = set(defines) | set(values)
+    hooks = {key: _assignments(hooks_raw[key], values, names, f"{path}: hooks: {key}")
+             for key in HOOKS if hooks_raw.get(key)}
+    return values, hooks
 
 
 # ---------------------------------------------------------------------------- file
@@ -501,19 +555,23 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
         raise GrammarError(f"{path}: not a grammar (no 'axiom')")
     header = _parse_header(data, path, limits)
     defines = _parse_defines(data.get("defines"), path)
+    globals_, hooks = _parse_globals(data, defines, path)
 
     axiom_src = data["axiom"]
     if not isinstance(axiom_src, str) or not axiom_src.strip():
         raise GrammarError(f"{path}: axiom must be a non-empty string")
-    axiom = parse_modules(axiom_src, defines, f"{path}: axiom", limits.max_params)
+    axiom = parse_modules(axiom_src, set(defines) | set(globals_), f"{path}: axiom", limits.max_params)
 
     raw_rules = data.get("rules") or []
     if not isinstance(raw_rules, list):
         raise GrammarError(f"{path}: rules must be a list")
-    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params) for i, r in enumerate(raw_rules))
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, globals_=globals_)
+                  for i, r in enumerate(raw_rules))
     _check_groups(rules, path)
-    interpretation, depth = _parse_passes(data, "interpretation", defines, path, limits, MAX_INTERPRETATION_DEPTH)
-    decomposition, dec_depth = _parse_passes(data, "decomposition", defines, path, limits, MAX_DECOMPOSITION_DEPTH)
+    interpretation, depth = _parse_passes(data, "interpretation", defines, path, limits, MAX_INTERPRETATION_DEPTH,
+                                          globals_)
+    decomposition, dec_depth = _parse_passes(data, "decomposition", defines, path, limits, MAX_DECOMPOSITION_DEPTH,
+                                             globals_)
     symbols = _check_arities(axiom, rules + interpretation + decomposition, path)
 
     ignore = data.get("ignore", "")
@@ -524,17 +582,18 @@ def parse_grammar(data, path: str = "<grammar>", limits: Limits | None = None) -
     return Grammar(header["name"], header["description"], header["seed"], header["iterations"], defines,
                    axiom, rules, ignore, _parse_turtle(data.get("turtle"), path),
                    _parse_materials(data.get("materials", ["bark"]), path), header["max_modules"],
-                   path, tuple(symbols), interpretation, depth, data.get("environment"), decomposition, dec_depth)
+                   path, tuple(symbols), interpretation, depth, data.get("environment"), decomposition, dec_depth,
+                   globals_, hooks)
 
 
 def _parse_passes(data: dict, key: str, defines: dict, path: str, limits: Limits,
-                  max_depth: int) -> tuple[tuple[Rule, ...], int]:
+                  max_depth: int, globals_: dict) -> tuple[tuple[Rule, ...], int]:
     """The ``interpretation:`` or ``decomposition:`` rules (``key``; the notation of
     ``rules``) and ``KEY_depth``, the most passes of them (1 to ``max_depth``)."""
     raw = data.get(key) or []
     if not isinstance(raw, list):
         raise GrammarError(f"{path}: {key} must be a list of rules like 'L -> {{.-f.+f.}}'")
-    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, f"{key} rule")
+    rules = tuple(_parse_rule(i, r, defines, path, limits.max_params, f"{key} rule", globals_)
                   for i, r in enumerate(raw))
     _check_groups(rules, path)
     depth = fields.integer(data.get(f"{key}_depth", 1), f"{key}_depth", path, GrammarError, lo=1, hi=max_depth)

@@ -13,10 +13,15 @@ is what evaluates it: nothing here calls ``exec`` or ``eval``. The result is the
 mapping a YAML grammar file gives (:func:`plantgen.lsystem.grammar.parse_grammar` takes
 it; ``plantgen convert`` writes it).
 
+``Start``/``StartEach``/``EndEach``/``End`` and ``global`` assignments in rules become
+the grammar's ``globals``, ``hooks`` and a rule's ``set`` (a global nothing drawn reads is
+dropped with what sets it); a module-level function whose body produces is run in place
+where a rule calls it as a statement.
+
 What cannot be translated is refused in one line naming the construct and its line
-(:class:`LpyError`): imports other than ``random`` and ``math``, PlantGL, ``Start``/
-``End``/``StartEach``/``EndEach`` that do more than seed the generator, decomposition
-rules, file access, a random draw that would be tested twice. Drawing modules plantgen
+(:class:`LpyError`): imports other than ``random`` and ``math`` (``time`` is ignored,
+``numpy`` only gives a tropism vector), PlantGL, hooks that produce or read the L-string,
+file access, a random draw that would be tested twice. Drawing modules plantgen
 has no meaning for are dropped with one warning each; the ``INITIALISATION`` section is
 read only for its scalar parameters (defines), the rest ignored with a warning.
 
@@ -43,7 +48,7 @@ from ..errors import PlantgenError
 from ..files import read_text, read_yaml
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, ExprError, evaluate
+from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, MAX_GLOBALS, ExprError, evaluate
 from .symbols import ARITY, SYMBOLS
 
 __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
@@ -117,6 +122,9 @@ _NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | set(REFUSED_MODULE
 _SPECIAL = sorted((n for n in _NAMED if not n[0].isalpha() and n[0] != "_" and len(n) > 1), key=len, reverse=True)
 _PLANTGEN_CHARS = {s.char for s in SYMBOLS} | set("(),:<>") | {"#"}
 _HOOKS = {"Start", "End", "StartEach", "EndEach", "StartInterpretation", "EndInterpretation", "PostDraw"}
+#: The hooks that may set globals: plantgen's grammar hook each becomes.
+_STATE_HOOKS = {"Start": "start", "StartEach": "start_each", "EndEach": "end_each", "End": "end"}
+_GLOBAL_DECL = re.compile(r"^\s+global\s+([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)*)")
 _SEED_CALLS = {"seed", "random.seed"}
 _MATH_ATTRS = {"pi": "pi", "e": "e"}
 _MATH_FUNCS = {"sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
@@ -154,6 +162,7 @@ class _Val:
     rand: bool = False
     used: bool = False
     span: tuple | None = None      # a local holding random(): the interval its tests leave it in
+    error: str | None = None       # a global's new value plantgen cannot translate: why (refused if read)
 
 
 @dataclass
@@ -174,6 +183,7 @@ class _Path:
     conds: list
     modules: list | None
     line: int
+    effects: tuple = ()            # ((global, _Val)): what the way through sets
 
 
 def _one_line(text: str) -> str:
@@ -250,6 +260,16 @@ class _Reader:
         self.dropped: dict[str, int] = {}
         self.used_colour = False
         self.rules: dict[str, list] = {"production": [], "interpretation": [], "decomposition": []}
+        self.mutable: set[str] = set()              # globals a hook or a rule sets
+        self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
+        self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
+        self.hook_defs: list[ast.FunctionDef] = []
+        self.vectors: dict[str, list] = {}          # numpy.array constants: only a tropism's direction
+        self.later: list[tuple[str, str]] = []      # the rules after the one translated: (section, header)
+        self.producers: dict[str, tuple] = {}       # functions that produce: (def line, their lines)
+        self.producer_code: dict[str, tuple] = {}
+        self.lstrings: list[tuple[str, int]] = []   # produce's L-strings, by placeholder
+        self.axiom_effects: tuple = ()
         self.max_depth = {"interpretation": 1, "decomposition": 1}
 
     # ------------------------------------------------------------ errors and budgets
@@ -287,12 +307,92 @@ class _Reader:
                 self._keyword(m, no, st)
             elif st.mode == "rules":
                 self._rule_line(no, raw, line, code, starts, st)
-            elif _PRODUCE.search(code):
-                raise self.refuse(no, "produce outside a rule (in a function) is not supported")
             else:
                 st.python.append(raw)
         st.close_rule()
+        self._find_producers(st)
+        self._find_globals(st)
         self._translate(st)
+
+    def _find_producers(self, st: _Sections) -> None:
+        """Module-level functions whose body produces modules: kept aside (their lines
+        blanked from the module code) to be inlined where a rule calls them as a statement.
+        ``produce`` anywhere else outside a rule is refused, naming where it is."""
+        lines, current = st.python, None          # current: (name, index of its def line, hook?)
+        found: list = []
+        for i, text in enumerate([*lines, "end"]):
+            code = _strip_comment(text).rstrip()
+            if code[:1] not in ("", " ", "\t"):             # a line at column 0 ends any def
+                current = None
+                m = re.match(r"def\s+([A-Za-z_]\w*)\s*\(", code)
+                if m:
+                    current = (m.group(1), i)
+            if not _PRODUCE.search(code):
+                continue
+            if current is None:
+                raise self.refuse(i + 1, "produce outside a rule and outside a function is not supported")
+            if current[0] in _HOOKS:
+                raise self.refuse(i + 1, f"{current[0]}() produces modules: plantgen's grammar has no place for "
+                                         "modules added when a step or the drawing starts or ends")
+            if current not in found:
+                found.append(current)
+        for name, start in found:
+            end = start + 1
+            while end < len(lines) and _strip_comment(lines[end]).rstrip()[:1] in ("", " ", "\t"):
+                end += 1
+            self.producers[name] = (start + 1, lines[start:end])
+            for k in range(start, end):
+                lines[k] = ""
+
+    def _producer(self, name: str, args: list, state, paths: list) -> list:
+        """A function that produces modules, called as a statement in a rule: its body
+        run in place (its parameters bound to the arguments), as if written in the rule;
+        its ``produce`` ends the rule, as in L-Py. The states still running come back."""
+        env, conds, pending = state
+        line, text = self.producers[name]
+        if name not in self.producer_code:
+            tree = self._parse_block(_strip_comment(text[0]).rstrip() + " pass", line, f"function {name}")
+            fn = tree[0]
+            body = self._placeholders([(line + k + 1, t) for k, t in enumerate(text[1:])], f"function {name}")
+            if body and isinstance(body[-1], ast.Return) and body[-1].value is None:
+                body = body[:-1]
+            if any(isinstance(n, ast.Return) for b in body for n in ast.walk(b)):
+                raise self.refuse(line, f"function {name}() returns from inside a block; plantgen inlines a "
+                                        "function that produces modules only where it ends at its last line")
+            self.producer_code[name] = (fn, body)
+        fn, body = self.producer_code[name]
+        params = fn.args
+        if params.vararg or params.kwarg or params.kwonlyargs or params.posonlyargs or params.defaults \
+                or len(params.args) != len(args):
+            raise self.refuse(line, f"function {name}() takes {len(params.args)} plain parameters; the rule passes "
+                                    f"{len(args)}")
+        local = {a.arg: _Val(v.text, v.rand) for a, v in zip(params.args, [self.expr(x, env, line) for x in args],
+                                                                strict=True)}
+        self.calls += 1
+        if self.calls > MAX_CALL_DEPTH:
+            raise self.refuse(line, f"function calls nested deeper than {MAX_CALL_DEPTH}: a recursive function "
+                                    f"such as {name}() cannot be translated")
+        try:
+            out = self._run(body, [(local, conds, pending)], paths)
+        finally:
+            self.calls -= 1
+        back = []
+        for fenv, c, p in out:               # the globals it set, seen by the rest of the rule
+            sets = {k: v for k, v in fenv.items() if k.startswith("set ")}
+            back.append(({**env, **sets, **{k[4:]: fenv[k[4:]] for k in sets if k[4:] in fenv}}, c, p))
+        return back
+
+    def _find_globals(self, st: _Sections) -> None:
+        """The names a ``global`` statement declares in a block (a hook's, a rule's, a
+        function's) that an indented line assigns: the model's globals, which change."""
+        code = [_strip_comment(t) for t in self.lines[:len(self.lines) - len(st.tail)]]
+        declared = {n.strip() for t in code for m in [_GLOBAL_DECL.match(t)] if m for n in m.group(1).split(",")}
+        assigned = {m.group(1) for t in code for m in [re.match(r"\s+([A-Za-z_]\w*)\s*(?:[-+*/%]|\*\*|//)?=(?!=)", t)]
+                    if m}
+        self.mutable = declared & assigned
+        if len(self.mutable) > MAX_GLOBALS:
+            raise self.refuse(0, f"{len(self.mutable):,} globals set by hooks and rules, over the limit of "
+                                 f"{MAX_GLOBALS}")
 
     def _keyword(self, m: re.Match, no: int, st: _Sections) -> None:
         """One L-Py line of the L-system part (``Axiom:``, ``production:`` ...)."""
@@ -349,6 +449,13 @@ class _Reader:
         axiom and the rules."""
         self._module_code("\n".join(st.python))
         self._initialisation(st.tail, len(self.lines) - len(st.tail) + 1)
+        for name in sorted(self.mutable):
+            if _safe(name) in self.defines:
+                self.globals[_safe(name)] = self.defines.pop(_safe(name))
+            elif name not in self.lazy and name not in self.functions:
+                self.globals[_safe(name)] = 0.0          # first set by Start: 0 for the axiom
+        for fn in self.hook_defs:
+            self._hook(fn)
         if st.length is not None:
             self.iterations = self._int(st.length[0], st.length[1], "derivation length", 0, None)
         for text, no, key in st.depths:
@@ -360,7 +467,8 @@ class _Reader:
         else:
             self.axiom = self._lstring(st.axiom[0], st.axiom[1], {}, pattern=False)
         self.decls = st.decls
-        for sec, grp, lines in st.rules:
+        for i, (sec, grp, lines) in enumerate(st.rules):
+            self.later = [(s, ls[0][1]) for s, g, ls in st.rules[i + 1:] if g == "0"]
             if grp != "0":
                 self.warnings.append(f"{self.path}: warning: line {lines[0][0]}: the rules of group {grp} are "
                                      "ignored (plantgen applies group 0 only: useGroup is not supported)")
@@ -380,6 +488,7 @@ class _Reader:
                     raise self.refuse(at, f"axiom: {exc}") from None
                 ok = ok and value == holds
             if ok:
+                self.axiom_effects = tuple((k, v, line) for k, v in path.effects)
                 return path.modules or []
         raise self.refuse(line, "the axiom's block produces nothing")
 
@@ -436,6 +545,10 @@ class _Reader:
         return tree.body
 
     def _module_code(self, source: str) -> None:
+        for no, text in enumerate(source.split("\n"), 1):      # named before any syntax error after them
+            m = re.match(r"\s*(?:from\s+([\w.]+)\s+import|import\s+([\w.]+))", text)
+            if m and _PLANTGL.search(m.group(1) or m.group(2)):
+                raise self.refuse(no, f"import of {m.group(1) or m.group(2)}: PlantGL and OpenAlea are not supported")
         for stmt in self._parse_block(source, 1, "module-level code"):
             self.spend(stmt.lineno)
             self._module_stmt(stmt)
@@ -448,6 +561,13 @@ class _Reader:
                 for a in stmt.names:
                     if a.asname and a.name in ("random", "math"):
                         self.aliases[a.asname] = a.name
+            if isinstance(stmt, ast.Import) and all(a.name == "numpy" for a in stmt.names):
+                self.aliases.update({a.asname or a.name: "numpy" for a in stmt.names})   # for numpy.array only
+                return
+            if all(n == "time" for n in names) and not (isinstance(stmt, ast.ImportFrom) and stmt.level):
+                self.warnings.append(f"{self.path}: warning: line {line}: import of time is ignored (plantgen runs "
+                                     "no clock: a model that draws with a time it reads is refused where it does)")
+                return
             for name in names:
                 if _PLANTGL.search(name):
                     raise self.refuse(line, f"import of {name}: PlantGL and OpenAlea are not supported")
@@ -466,7 +586,7 @@ class _Reader:
             return
         if isinstance(stmt, ast.FunctionDef):
             if stmt.name in _HOOKS:
-                self._hook(stmt)
+                self.hook_defs.append(stmt)
             elif stmt.decorator_list:
                 self.lazy[stmt.name] = f"function {stmt.name} (line {line}) has decorators"
             else:
@@ -523,6 +643,13 @@ class _Reader:
             self._forget(name)
             self.functions[name] = value
             return
+        vector = self._vector(value)
+        if vector is not None:
+            self._forget(name)
+            self.vectors[name] = vector
+            self.lazy[name] = (f"{name} (line {line}) is a vector (numpy.array): plantgen reads one only as "
+                               "@Tp's direction")
+            return
         if isinstance(value, (ast.List, ast.Tuple)) and 1 <= len(value.elts) <= MAX_TABLE:
             try:
                 texts = [self.expr(v, {}, line) for v in value.elts]
@@ -553,27 +680,113 @@ class _Reader:
             return
         self.defines[_safe(name)] = number
 
+    def _vector(self, value) -> list | None:
+        """``numpy.array([x, y, z])`` of constants: its numbers (None for anything else)."""
+        name = _call_name(value) if isinstance(value, ast.Call) else None
+        base, _, attr = (name or "").rpartition(".")
+        if self.aliases.get(base) != "numpy" or attr != "array" or len(value.args) != 1 or value.keywords \
+                or not isinstance(value.args[0], (ast.List, ast.Tuple)) or len(value.args[0].elts) != 3:
+            return None
+        try:
+            return [self._constant(ast.unparse(e), value.lineno, "a vector's coordinate") for e in value.args[0].elts]
+        except LpyError:
+            return None
+
     def _forget(self, name: str) -> None:
+        self.vectors.pop(name, None)
         self.functions.pop(name, None)
         self.tables.pop(name, None)
         self.lazy.pop(name, None)
         self.defines.pop(_safe(name), None)
 
     def _hook(self, fn: ast.FunctionDef) -> None:
-        for stmt in fn.body:
-            if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
+        if fn.name in _STATE_HOOKS:
+            self._state_hook(fn)
+            return
+        env = self._hook_run(fn.body, {}, fn.name)
+        if _effects(env):
+            raise self.refuse(fn.lineno, f"{fn.name}() sets globals: only Start, StartEach, EndEach and End may")
+
+    def _state_hook(self, fn: ast.FunctionDef) -> None:
+        """``Start``/``StartEach``/``EndEach``/``End``: the globals they set (each as an
+        expression over the globals before the hook ran), seeds, and nothing else."""
+        a = fn.args
+        if a.vararg or a.kwarg or a.kwonlyargs or a.posonlyargs or fn.decorator_list:
+            raise self.refuse(fn.lineno, f"{fn.name}() with starred parameters or decorators is not supported")
+        unread = [p.arg for p in a.args]         # the L-string (and scene) L-Py passes: never read here
+        for stmt in ast.walk(fn):
+            if isinstance(stmt, ast.Name) and stmt.id in unread and isinstance(stmt.ctx, ast.Load) and not any(
+                    isinstance(c, ast.Call) and _call_name(c) == "print" and stmt in ast.walk(c)
+                    for c in ast.walk(fn)):
+                raise self.refuse(stmt.lineno, f"{fn.name}() reads the L-string ({stmt.id}): not supported")
+        env = self._hook_run(fn.body, {}, fn.name)
+        sets = dict(_effects(env))
+        if sets:
+            self.hooks[_STATE_HOOKS[fn.name]] = sets
+
+    def _hook_run(self, stmts: list, env: dict, name: str) -> dict:
+        for stmt in stmts:
+            self.spend(stmt.lineno)
+            line = stmt.lineno
+            if isinstance(stmt, (ast.Pass, ast.Assert)) or (isinstance(stmt, ast.Expr)
+                                                           and isinstance(stmt.value, ast.Constant)):
                 continue
-            if isinstance(stmt, (ast.Global, ast.Assert)):
+            call = stmt.value if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) else None
+            if call is not None and _call_name(call) in _SEED_CALLS:
+                self.seed = self._seed(call, line)
                 continue
-            if (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
-                    and _call_name(stmt.value) in _SEED_CALLS):
-                self.seed = self._seed(stmt.value, stmt.lineno)
+            if call is not None and (_call_name(call) == "print" or self._context_call(call, line)):
                 continue
-            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and (
-                    _call_name(stmt.value) == "print" or self._context_call(stmt.value, stmt.lineno)):
+            if isinstance(stmt, ast.Return) and stmt.value is None and stmt is stmts[-1]:
                 continue
-            raise self.refuse(stmt.lineno, f"{fn.name}() does more than seed the random generator "
-                                           f"({_construct(stmt)}): not supported")
+            if isinstance(stmt, ast.If):
+                c = self.expr(stmt.test, env, line)
+                if c.rand:
+                    raise self.refuse(line, f"a random test in {name}() is not supported")
+                yes = self._hook_run(stmt.body, _copy(env), name)
+                no = self._hook_run(stmt.orelse, _copy(env), name)
+                env = _merge(c.text, env, yes, no)
+                continue
+            state = self._assign(stmt, env)
+            if state is None:
+                raise self.refuse(line, f"{name}() does more than set globals and seed the random generator "
+                                        f"({_construct(stmt)}): not supported")
+            env = state
+        return env
+
+    def _assign(self, stmt, env: dict) -> dict | None:
+        """``global``, or an assignment to a local or a declared global: the new env
+        (a global's new value is kept under ``set NAME`` too); None for another statement."""
+        if isinstance(stmt, ast.Global):
+            names = [n for n in stmt.names if n in self.mutable]     # the others are only read
+            for n in names:
+                if _safe(n) not in self.globals:
+                    raise self.refuse(stmt.lineno, f"global {n} is set, but " + self.lazy.get(
+                        n, f"{n} is a function") + ": plantgen's globals are numbers")
+            return {**env, **{f"global {n}": _Val("") for n in names}}
+        if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+            value, name = ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), stmt.target.id
+        elif isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+            value, name = stmt.value, stmt.targets[0].id
+        else:
+            return None
+        if f"global {name}" not in env:
+            v = self.expr(value, env, stmt.lineno)
+            return {**env, name: _Val(v.text, v.rand)}
+        probe = {k: (_Val(v.text, v.rand, v.used, v.span, v.error) if v.rand or k == name else v)
+                 for k, v in env.items()}     # what it reads of a random local is not spent (it may be dropped)
+        own = probe.get(name)
+        if own is not None:
+            own.used = False     # its value so far: the new one replaces it
+        try:
+            v = self.expr(value, probe, stmt.lineno)
+        except LpyError as exc:
+            why = str(exc).split(": ", 1)[-1]
+            return {**env, name: _Val("", error=why), f"set {_safe(name)}": _Val("", error=why)}
+        shared = any(probe[k].used and not env[k].used for k in env if env[k].rand and k != name)
+        if own is not None and probe[name].used:
+            shared = shared or env.get(f"set {_safe(name)}", own).used
+        return {**env, name: _Val(v.text, v.rand, used=v.rand), f"set {_safe(name)}": _Val(v.text, v.rand, shared)}
 
     def _seed(self, call: ast.Call, line: int) -> int:
         if len(call.args) != 1 or call.keywords:
@@ -714,6 +927,8 @@ class _Reader:
     def _name(self, name: str, env: dict, line: int) -> _Val:
         if name in env:
             local = env[name]
+            if local.error:
+                raise self.refuse(line, local.error)
             if local.span is not None and local.span != (0.0, 1.0):
                 raise self.refuse(line, f"{name!r} holds a random draw that a test has narrowed; reading its "
                                         "value after the test is not supported")
@@ -723,7 +938,7 @@ class _Reader:
                                             "draw it anew each time; write the draw where it is used once")
                 local.used = True
             return _Val(_wrap(local.text), local.rand)
-        if _safe(name) in self.defines:
+        if _safe(name) in self.defines or _safe(name) in self.globals:
             return _Val(_safe(name))
         if name in ("pi", "e"):
             return _Val(name)
@@ -847,6 +1062,13 @@ class _Reader:
                 if stmt.value is None:
                     raise self.refuse(stmt.lineno, f"function {name}() returns no value")
                 return self.expr(stmt.value, env, stmt.lineno)
+            if isinstance(stmt, ast.Global):
+                env = {**env, **{f"global {n}": _Val("") for n in stmt.names}}
+                continue
+            targets = stmt.targets if isinstance(stmt, ast.Assign) else [getattr(stmt, "target", None)]
+            if any(isinstance(t, ast.Name) and f"global {t.id}" in env for t in targets):
+                raise self.refuse(stmt.lineno, f"function {name}() sets a global: plantgen inlines functions "
+                                               "into expressions, which cannot set anything")
             if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
                 v = self.expr(stmt.value, env, stmt.lineno)
                 env = {**env, stmt.targets[0].id: _Val(v.text, v.rand)}
@@ -861,8 +1083,7 @@ class _Reader:
                 a = self._body_value(stmt.body + rest, _copy(env), name)
                 b = self._body_value(stmt.orelse + rest, _copy(env), name)
                 return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
-            if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
-                                                           and isinstance(stmt.value, ast.Constant)):
+            if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
                 continue
             raise self.refuse(stmt.lineno, f"{_construct(stmt)} in function {name}() is not supported "
                                            "(only assignments, if and return)")
@@ -915,8 +1136,9 @@ class _Reader:
         if pattern or not args:
             return
         try:
-            vals = [float(evaluate(self.expr(self._parse_expr(a, line, name), {}, line).text, self.defines))
-                    for a in args]
+            vals = self.vectors.get(args[0].strip()) if len(args) == 1 else None
+            vals = vals or [float(evaluate(self.expr(self._parse_expr(a, line, name), {}, line).text, self.defines))
+                            for a in args]
         except (ExprError, LpyError):
             self.warnings.append(f"{self.path}: warning: line {line}: {name} with arguments that change is not "
                                  "drawn (plantgen has one tropism per grammar)")
@@ -1035,11 +1257,11 @@ class _Reader:
             return []
         return self._lstring(text, line, env, pattern=False)
 
-    def _block(self, body: list, env: dict) -> list[_Path]:
+    def _placeholders(self, body: list, what: str) -> list:
+        """A block's lines parsed, each ``produce L-string`` a placeholder call."""
         first = body[0][0] if body else 0
         texts = [t for _, t in body]
         source = textwrap.dedent("\n".join(t.expandtabs(4) for t in texts))
-        self.lstrings: list[tuple[str, int]] = []
         out_lines = []
         for k, text in enumerate(source.split("\n")):
             m = _PRODUCE.search(text)
@@ -1048,11 +1270,16 @@ class _Reader:
                 fn = "__nproduce__" if m.group(2) == "nproduce" else "__produce__"
                 text = text[:m.start()] + f"{m.group(1)}{fn}({len(self.lstrings) - 1})"
             out_lines.append(text)
-        stmts = self._parse_block("\n".join(out_lines), first, "rule block")
+        return self._parse_block("\n".join(out_lines), first, what)
+
+    def _block(self, body: list, env: dict) -> list[_Path]:
+        first = body[0][0] if body else 0
+        stmts = self._placeholders(body, "rule block")
         paths: list[_Path] = []
         live = self._run(stmts, [(env, [], [])], paths)
-        for _env, conds, pending in live:   # the block's end: what nproduce gave, if anything
-            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first))
+        for env_, conds, pending in live:   # the block's end: what nproduce gave, if anything
+            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first,
+                               _effects(env_)))
         return paths
 
     def _run(self, stmts: list, states: list, paths: list) -> list:
@@ -1080,12 +1307,26 @@ class _Reader:
                     nxt += yes + no
             elif isinstance(stmt, ast.For):
                 nxt = self._for(stmt, states, paths)
-            elif (fork := self._choices(stmt)) is not None:
-                name, values = fork
-                self.if_ids += 1
-                choice = (self.if_ids, True, None, 1.0 / len(values), line)
-                nxt = [({**_copy(env), name: _Val(v)}, [*conds, choice], list(pending))
-                       for env, conds, pending in states for v in values]
+            elif (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
+                  and isinstance(stmt.value, (ast.Call, ast.IfExp))):
+                name = stmt.targets[0].id
+                for env, conds, pending in states:
+                    alts = None if f"global {name}" in env else self._alternatives(stmt.value, env, line)
+                    if alts is None or all(w == 1.0 for _, _, w in alts):
+                        state = self._simple(stmt, env, conds, pending, paths)
+                        nxt += [state] if state is not None else []
+                        continue
+                    self.if_ids += 1
+                    for extra, text, w in alts:        # one stochastic alternative per value
+                        nxt.append(({**_copy(env), name: _Val(text)}, [*conds, *extra, (self.if_ids, True, None, w,
+                                                                                           line)], list(pending)))
+            elif (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
+                  and _call_name(stmt.value) in self.producers):
+                call = stmt.value
+                if call.keywords or any(isinstance(a, ast.Starred) for a in call.args):
+                    raise self.refuse(line, f"keyword or starred arguments in a call to {_call_name(call)}")
+                for state in states:
+                    nxt += self._producer(_call_name(call), call.args, state, paths)
             else:
                 for env, conds, pending in states:
                     state = self._simple(stmt, env, conds, pending, paths)
@@ -1133,15 +1374,93 @@ class _Reader:
                                      list(pending))], paths)
         return out
 
-    def _choices(self, stmt) -> tuple[str, list[str]] | None:
-        """``NAME = randint(a, b)`` or ``NAME = choice([...])`` with constants: the name
-        and the values it may take, each as likely (the rule becomes stochastic
-        alternatives, one per value); None for any other statement."""
-        if not (isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name)
-                and isinstance(stmt.value, ast.Call)):
+    def _alternatives(self, node, env: dict, line: int) -> list | None:
+        """The values ``node`` may take, for a rule to fork on: ``randint(a, b)`` (bounds
+        that differ by a constant, at most 32 values) or ``choice([...])``, each value as
+        likely; a conditional expression over them (its test, not random, a condition of
+        each alternative); a lambda returning one. [(tests, value text, probability)], or
+        None when ``node`` draws no such choice (or plantgen cannot enumerate it)."""
+        try:
+            return self._enumerate(node, env, line)
+        except (LpyError, ExprError):
             return None
-        values = self._choice_values(stmt.value)
-        return None if values is None else (stmt.targets[0].id, values)
+
+    def _enumerate(self, node, env: dict, line: int) -> list | None:
+        if isinstance(node, ast.IfExp):
+            c = self.expr(node.test, env, line)
+            yes, no = self._enumerate(node.body, env, line), self._enumerate(node.orelse, env, line)
+            if c.rand or yes is None or no is None:
+                return None
+            self.if_ids += 1
+            return ([([(self.if_ids, True, c.text, False, line), *t], v, w) for t, v, w in yes]
+                    + [([(self.if_ids, False, c.text, False, line), *t], v, w) for t, v, w in no])
+        name = _call_name(node) if isinstance(node, ast.Call) else None
+        fn = self.functions.get(name or "")
+        if isinstance(fn, ast.Lambda) and not node.keywords and len(node.args) == len(fn.args.args) and not (
+                fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs or fn.args.posonlyargs):
+            values = [self.expr(a, env, line) for a in node.args]
+            if any(v.rand for v in values):
+                return None
+            self.calls += 1
+            try:
+                if self.calls > MAX_CALL_DEPTH:
+                    return None
+                return self._enumerate(fn.body, {p.arg: v for p, v in zip(fn.args.args, values, strict=True)}, line)
+            finally:
+                self.calls -= 1
+        base, _, attr = (name or "").rpartition(".")
+        if name is None or name in self.functions or self.aliases.get(base, base) not in ("", "random") \
+                or attr not in ("randint", "choice") or node.keywords:
+            v = self.expr(node, env, line)           # a plain value: one alternative, certain
+            return None if v.rand else [([], v.text, 1.0)]
+        if attr == "randint" and len(node.args) == 2:
+            width = self._width(*node.args, env, line)
+            lo = self.expr(node.args[0], env, line)
+            if width is None or not 0 <= width <= 31 or lo.rand:
+                return None
+            try:
+                first = evaluate(lo.text, self.defines)
+            except ExprError:                         # a lower bound that changes: one test per value
+                return self._enumerate_bound(lo.text, width, line)
+            if first != int(first):
+                return None
+            return [([], str(int(first) + k), 1.0 / (width + 1)) for k in range(width + 1)]
+        seq = node.args[0] if len(node.args) == 1 else None
+        if attr != "choice" or not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 32:
+            return None
+        vals = [self.expr(e, env, line) for e in seq.elts]
+        return None if any(v.rand for v in vals) else [([], v.text, 1.0 / len(vals)) for v in vals]
+
+    def _enumerate_bound(self, lo: str, width: int, line: int) -> list:
+        """``randint(lo, lo + width)`` with ``lo`` a module's value: for each whole ``lo``
+        from 0 to :data:`MAX_DYNAMIC_COUNT`, the test ``lo == m`` and the values ``m`` to
+        ``m + width``, each as likely (so a loop over the draw unrolls); a module whose
+        ``lo`` is another value is left unchanged, with a warning."""
+        self.if_ids += 1
+        ident = self.if_ids
+        self.warnings.append(f"{self.path}: warning: line {line}: randint({lo[:40]}, ...) is enumerated for a lower "
+                             f"bound from 0 to {MAX_DYNAMIC_COUNT}; a module asking another is left unchanged")
+        return [([(ident * 1000 + m, True, f"{_wrap(lo)} == {m}", False, line)], str(m + k), 1.0 / (width + 1))
+                for m in range(MAX_DYNAMIC_COUNT + 1) for k in range(width + 1)]
+
+    def _width(self, lo, hi, env: dict, line: int) -> int | None:
+        """``hi - lo`` where it is a whole constant: computed, or read from the two
+        expressions' shapes (``5 - x`` and ``4 - x`` differ by 1 whatever ``x``)."""
+        try:
+            a, b = (evaluate(self.expr(n, env, line).text, self.defines) for n in (lo, hi))
+            return int(b - a) if b - a == int(b - a) else None
+        except (LpyError, ExprError):
+            pass
+        if ast.dump(lo) == ast.dump(hi):
+            return 0
+        if isinstance(lo, ast.BinOp) and isinstance(hi, ast.BinOp) and type(lo.op) is type(hi.op) and isinstance(
+                lo.op, (ast.Add, ast.Sub)):
+            if ast.dump(lo.right) == ast.dump(hi.right):
+                return self._width(lo.left, hi.left, env, line)
+            if ast.dump(lo.left) == ast.dump(hi.left):
+                inner = self._width(lo.right, hi.right, env, line)
+                return None if inner is None else (inner if isinstance(lo.op, ast.Add) else -inner)
+        return None
 
     def _choice_values(self, call: ast.Call) -> list[str] | None:
         name = _call_name(call) or ""
@@ -1175,9 +1494,13 @@ class _Reader:
             if len(mods) > MAX_SUCCESSOR:
                 raise self.refuse(line, f"a rule produces more than {MAX_SUCCESSOR:,} modules")
             if _call_name(stmt.value) == "__produce__":
-                paths.append(_Path(conds, mods, line))
+                paths.append(_Path(conds, mods, line, _effects(env)))
                 return None
             return env, conds, mods
+        if isinstance(stmt, ast.Global) or (isinstance(stmt, (ast.Assign, ast.AugAssign)) and any(
+                isinstance(t, ast.Name) and f"global {t.id}" in env
+                for t in (stmt.targets if isinstance(stmt, ast.Assign) else [stmt.target]))):
+            return self._assign(stmt, env), conds, pending
         if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
             v = self.expr(stmt.value, env, line)
             uniform = v.text == "random()"           # a draw its tests split into alternatives
@@ -1189,16 +1512,16 @@ class _Reader:
         if isinstance(stmt, ast.Return):
             if stmt.value is not None:
                 raise self.refuse(line, "return with a value in a rule (use produce)")
-            paths.append(_Path(conds, pending or None, line))    # what nproduce gave, as L-Py does
+            paths.append(_Path(conds, pending or None, line, _effects(env)))    # what nproduce gave, as L-Py does
             return None
-        if isinstance(stmt, (ast.Pass, ast.Global)) or (isinstance(stmt, ast.Expr)
-                                                       and isinstance(stmt.value, ast.Constant)):
+        if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
             return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) == "print":
             return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call):
             name = _call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
-            raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported")
+            raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported (only a "
+                                    "module-level function that produces modules is inlined there)")
         raise self.refuse(line, f"{_construct(stmt)} in a rule is not supported")
 
     def _for(self, stmt: ast.For, states: list, paths: list) -> list:
@@ -1272,13 +1595,27 @@ class _Reader:
                              f"up to {MAX_DYNAMIC_COUNT}; a module asking more is left unchanged")
         return out
 
+    def _taken_later(self, section: str, name: str) -> bool:
+        """Whether a later rule of ``section`` may rewrite a module ``name`` (its name is
+        written before its ``-->`` or ``:``)."""
+        word = re.compile(rf"(?<![\w@~?]){re.escape(name)}(?!\w)")
+        return any(s == section and word.search(re.split(r"-->|:", h, maxsplit=1)[0]) for s, h in self.later)
+
     def _emit(self, section, left, pred, right, paths: list[_Path], line: int) -> None:
         """Plantgen rules from a block's paths, in order: a test whose other branch always
         produces is left out of the later paths (the earlier rule took those modules)."""
+        if any(p.modules is None and any(c[2] is None for c in p.conds) for p in paths) and not any(
+                self._taken_later(section, m.name) for m in pred):
+            for p in paths:      # a random alternative that leaves the modules unchanged: no later rule
+                if p.modules is None and any(c[2] is None for c in p.conds) and not p.effects:
+                    p.modules = [_Mod(m.name, [_Val(a) for a in m.args], p.line) for m in pred]   # to themselves
         leaky = {(c[0], c[1]) for p in paths if p.modules is None for c in p.conds}
         emitted = []
         for p in paths:
             if p.modules is None:
+                if p.effects:
+                    raise self.refuse(p.line, "a way through the rule that sets a global but produces nothing "
+                                              "(the module left unchanged): not supported")
                 continue
             conds = []
             for ident, holds, text, rand, at in p.conds:
@@ -1303,7 +1640,7 @@ class _Reader:
             weight = float(np.prod([c[3] for c in conds if c[2] is None]))
             weights[text] = weights.get(text, 0.0) + weight
             rules.append((left, pred, right, [text] if text else [], p.modules, p.line,
-                          weight if len(conds) > len(tests) else None))
+                          weight if len(conds) > len(tests) else None, p.effects))
         for r in rules:
             if r[6] is not None and abs(weights[r[3][0] if r[3] else ""] - 1) > 1e-9:
                 raise self.refuse(r[5], "a random choice (randint, choice) in a branch that may leave the module "
@@ -1311,11 +1648,51 @@ class _Reader:
         self.rules[section] += rules
 
     # ------------------------------------------------------------ output
+    def _prune_globals(self) -> None:
+        """Keep the globals something drawn reads (a condition, a module's argument, a
+        kept global's new value); the others, and what sets them, are dropped (a label's
+        text, a counter printed). Refuse what a kept one needs that plantgen lacks."""
+        if not self.globals:
+            return
+        def names(text: str) -> set:
+            return set(_ATOM.findall(text)) & set(self.globals)
+        read: set = set()
+        for m in self.axiom:
+            read |= {n for a in m.args for n in names(a.text)}
+        sets = [(k, v, 0, key) for key, hook in self.hooks.items() for k, v in hook.items()]
+        for sec, rules in self.rules.items():
+            for _left, _pred, _right, cond, succ, line, _p, effects in rules:
+                read |= {n for c in cond for n in names(c)}
+                read |= {n for m in succ for a in m.args for n in names(a.text)}
+                sets += [(k, v, line, sec) for k, v in effects]
+        sets += [(k, v, line, "axiom") for k, v, line in self.axiom_effects]
+        live, grown = set(read), True
+        while grown:
+            new = {n for k, v, _, _ in sets if k in live for n in names(v.text)}
+            grown = not new <= live
+            live |= new
+        for k, v, line, where in sets:
+            if k not in live:
+                continue
+            if v.error:
+                raise self.refuse(0, v.error)           # the message names its line
+            if where == "axiom":
+                raise self.refuse(line, f"the axiom's block sets the global {k}, which the rules read: not supported")
+            if where == "interpretation":
+                raise self.refuse(line, f"an interpretation rule sets the global {k}: not supported")
+            if v.used:
+                raise self.refuse(line, f"the global {k} is set from a random draw held in a local variable"
+                                        + ("" if line else f" (in {where})") + ": not supported")
+        self.globals = {k: v for k, v in self.globals.items() if k in live}
+        self.hooks = {key: kept for key, hook in self.hooks.items()
+                      if (kept := {k: v for k, v in hook.items() if k in live})}
+
     def build(self, stem: str) -> LpyModel:
+        self._prune_globals()
         names: dict[str, str] = {}
         everything = list(self.axiom)
         for sec in self.rules.values():
-            for (left, new_left), pred, right, _, succ, _, _ in sec:
+            for (left, new_left), pred, right, _, succ, *_ in sec:
                 everything += [*left, *new_left, *pred, *right, *succ]
         self.carried = {m.name: max(len(m.args), self.carried.get(m.name, 0)) for m in everything
                         if m.name in TURTLE and len(m.args) > _turtle_params(TURTLE[m.name])}
@@ -1337,6 +1714,11 @@ class _Reader:
         if self.defines:
             data["defines"] = {k: (int(v) if float(v).is_integer() and abs(v) < 2 ** 53 else v)
                                for k, v in self.defines.items()}
+        if self.globals:
+            data["globals"] = {k: (int(v) if float(v).is_integer() and abs(v) < 2 ** 53 else v)
+                               for k, v in self.globals.items()}
+        if self.hooks:
+            data["hooks"] = {key: {k: v.text for k, v in hook.items()} for key, hook in self.hooks.items()}
         axiom = self._text(self.axiom)
         data["axiom"] = axiom if axiom.strip() else "[]"
         data["rules"] = [self._rule_text(r) for r in self.rules["production"]]
@@ -1412,7 +1794,7 @@ class _Reader:
         return " ".join(out)
 
     def _rule_text(self, rule) -> object:
-        (left, new_left), pred, right, cond, succ, line, p = rule
+        (left, new_left), pred, right, cond, succ, line, p, effects = rule
         lhs = self._text(pred, True)
         if new_left:
             lhs = f"{self._text(new_left, True)} << {lhs}"
@@ -1425,7 +1807,10 @@ class _Reader:
         text = f"{lhs} -> {self._text(succ)}".rstrip()
         if len(text) > 100_000:
             raise self.refuse(line, "a rule over 100,000 characters once translated")
-        return text if p is None else {"rule": text, "p": p}
+        live = {k: v.text for k, v in effects if k in self.globals}
+        if not live:
+            return text if p is None else {"rule": text, "p": p}
+        return {"rule": text, **({} if p is None else {"p": p}), "set": live}
 
 
 # ------------------------------------------------------------------ helpers
@@ -1466,8 +1851,33 @@ def _wrap(text: str) -> str:
     return text if _atomic(text) else f"({text})"
 
 
+def _effects(env: dict) -> tuple:
+    """The globals a block has set so far: ((plantgen name, _Val))."""
+    return tuple((k[4:], v) for k, v in env.items() if k.startswith("set "))
+
+
+def _merge(test: str, env: dict, yes: dict, no: dict) -> dict:
+    """The env after ``if test`` whose branches left ``yes`` and ``no``: each global set
+    in either a ``select`` between the two (a local set in one branch only is dropped)."""
+    out = dict(env)
+    for key in dict.fromkeys([*yes, *no]):
+        if key.startswith("global "):
+            out[key] = _Val("")
+            continue
+        before = env.get(key)
+        if key.startswith("set "):
+            before = before or _Val(key[4:])
+        a, b = yes.get(key, before), no.get(key, before)
+        if a is None or b is None:
+            out.pop(key, None)
+            continue
+        out[key] = a if a.text == b.text else _Val(f"select({test}, {a.text}, {b.text})", a.rand or b.rand,
+                                                  a.used or b.used)
+    return out
+
+
 def _copy(env: dict) -> dict:
-    return {k: _Val(v.text, v.rand, v.used, v.span) for k, v in env.items()}
+    return {k: _Val(v.text, v.rand, v.used, v.span, v.error) for k, v in env.items()}
 
 
 def _call_name(call: ast.Call) -> str | None:

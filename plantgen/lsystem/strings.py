@@ -19,6 +19,7 @@ class ModuleString:
     fixed_point : the step after which the derivation stopped changing the string (the
         next step rewrote it into itself, drawing no random number), when it ran past it;
         else None
+    globals : the grammar's global variables as the derivation left them (None: it has none)
     """
 
     sym: np.ndarray
@@ -26,6 +27,7 @@ class ModuleString:
     params: np.ndarray
     symbols: tuple[str, ...]
     fixed_point: int | None = None
+    globals: dict | None = None
 
     def __len__(self) -> int:
         return len(self.sym)
