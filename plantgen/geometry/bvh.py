@@ -509,14 +509,19 @@ def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: 
         start = (np.arange(m), np.asarray(roots, np.int64))
     else:
         start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
-    pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
+    rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    if any_hit:
+        pairs = _any_hit_walk(bvh, O, D, rays, hits, t_min, t_hi, start, boxes, best_t, best_p)
+    else:
+        pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
     if pairs is None:                                # too wide a frontier: halve the batch
         h = m // 2
         r = (None, None) if roots is None else (roots[:h], roots[h:])
         a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets, r[0])
         b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets, r[1])
         return np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]])
-    rays = None if boxes is None else np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    if any_hit:
+        return best_t, best_p
     ray, leaf, near = pairs
     order = np.lexsort((near, ray))
     ray, leaf, near = ray[order], leaf[order], near[order]
@@ -524,24 +529,61 @@ def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: 
     while ray.size:
         rank = _group_rank(ray)
         now = rank < per_round
-        r, lf = ray[now], leaf[now]
-        cnt = bvh.count[lf].astype(np.int64)
-        rr = np.repeat(r, cnt)
-        slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
-        prim = bvh.prims[slot].astype(np.int64)
-        if boxes is not None:                        # the primitive's own box first: a cheap cull
-            near_p, far_p = _slab_columns(np.take(boxes, prim, axis=1), np.take(rays, rr, axis=1))
-            inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
-                & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
-            rr, prim = rr[inside], prim[inside]
-        t = hits(prim, O[rr], D[rr])
-        t = np.where((t > t_min) & (t < t_hi[rr]), t, np.inf)
-        reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
+        _test_leaves(bvh, ray[now], leaf[now], O, D, rays, hits, t_min, t_hi, boxes, best_t, best_p)
         ray, leaf, near = ray[~now], leaf[~now], near[~now]
-        keep = ~np.isfinite(best_t[ray]) if any_hit else near <= best_t[ray]
+        keep = near <= best_t[ray]
         ray, leaf, near = ray[keep], leaf[keep], near[keep]
         per_round *= 2
     return best_t, best_p
+
+
+def _test_leaves(bvh: BVH, r, lf, O, D, rays, hits, t_min: float, t_hi, boxes, best_t, best_p):
+    """Test the primitives of leaves ``lf`` against rays ``r`` ((k,) pairs) and fold their
+    hits into ``best_t``, ``best_p`` (the primitive's own box first where ``boxes``)."""
+    cnt = bvh.count[lf].astype(np.int64)
+    rr = np.repeat(r, cnt)
+    slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
+    prim = bvh.prims[slot].astype(np.int64)
+    if boxes is not None:                        # the primitive's own box first: a cheap cull
+        near_p, far_p = _slab_columns(np.take(boxes, prim, axis=1), np.take(rays, rr, axis=1))
+        inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
+            & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
+        rr, prim = rr[inside], prim[inside]
+    t = hits(prim, O[rr], D[rr])
+    t = np.where((t > t_min) & (t < t_hi[rr]), t, np.inf)
+    reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
+
+
+def _meets(columns, node, ray, rays, t_min: float, t_hi):
+    """(k,) entry t and whether each ray's segment (t_min, t_hi) meets each node's box."""
+    near, far = _slab_columns(np.take(columns, node, axis=1), np.take(rays, ray, axis=1))
+    near = np.maximum(near, t_min)
+    return near, (near <= far) & (far > t_min) & (near < t_hi[ray])
+
+
+def _any_hit_walk(bvh: BVH, O, D, rays, hits, t_min: float, t_hi: np.ndarray, start, boxes, best_t, best_p):
+    """Any hit: :func:`_leaf_pairs`'s walk, each level's leaves tested as soon as they are
+    reached and a ray that has hit dropped from the walk (a shadow ray in a crown stops at
+    its first leaf, however much lies beyond). Fills ``best_t``, ``best_p``; returns None
+    where the frontier outgrows :data:`MAX_FRONTIER` (else True)."""
+    columns = bvh.columns
+    ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
+    while ray.size:
+        if ray.size > MAX_FRONTIER and len(O) > 1:
+            return None
+        near, far = _slab_columns(np.take(columns, node, axis=1), np.take(rays, ray, axis=1))
+        near = np.maximum(near, t_min)
+        ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+        ray, node = ray[ok], node[ok]
+        leaf = bvh.count[node] > 0
+        go = ~leaf
+        if leaf.any():
+            _test_leaves(bvh, ray[leaf], node[leaf], O, D, rays, hits, t_min, t_hi, boxes, best_t, best_p)
+            go &= ~np.isfinite(best_t[ray])
+        ray = np.repeat(ray[go], 2)
+        node = np.repeat(bvh.first[node[go]].astype(np.int64), 2)
+        node[1::2] += 1
+    return True
 
 
 def _rays(origins, dirs) -> tuple[np.ndarray, np.ndarray]:
