@@ -378,6 +378,42 @@ def _slab_columns(box, ray):
     return np.fmax(np.fmax(near[0], near[1]), near[2]), np.fmin(np.fmin(far[0], far[1]), far[2])
 
 
+def _slab_taken(boxes, index, rays, ray):
+    """:func:`_slab_columns` of boxes ``index`` (k,) of ``boxes`` (6, n) and rays ``ray``
+    (k,) of ``rays`` (6, m): the same numbers, its arithmetic done in place in the gathered
+    arrays (a wide frontier's temporaries cost more than their arithmetic)."""
+    b = np.take(boxes, index, axis=1)
+    r = np.take(rays, ray, axis=1)
+    o, inv = r[:3], r[3:]
+    with np.errstate(invalid="ignore"):
+        for half in (b[:3], b[3:]):
+            np.subtract(half, o, out=half)
+            np.multiply(half, inv, out=half)
+    near = np.fmin(b[:3], b[3:], out=o)
+    far = np.fmax(b[:3], b[3:], out=b[:3])
+    # fmax / fmin skip a NaN (a ray in a face plane, parallel to it: inside along that axis)
+    np.fmax(near[0], near[1], out=near[0])
+    np.fmin(far[0], far[1], out=far[0])
+    return np.fmax(near[0], near[2], out=near[0]), np.fmin(far[0], far[2], out=far[0])
+
+
+def _meets(boxes, node, rays, ray, t_min: float, t_hi):
+    """Entry t (k,) of rays ``ray`` into boxes ``node`` (as :func:`_slab_taken` takes them)
+    and whether each ray's segment (t_min, t_hi) meets its box (``t_hi``: (m,), or None
+    where every ray is unbounded)."""
+    near, far = _slab_taken(boxes, node, rays, ray)
+    np.maximum(near, t_min, out=near)
+    ok = near <= far
+    ok &= far > t_min
+    ok &= near < (np.inf if t_hi is None else t_hi[ray])
+    return near, ok
+
+
+def _bound(t_hi: np.ndarray):
+    """``t_hi``, or None where every ray is unbounded (no per-pair gather of infinities)."""
+    return None if np.isposinf(t_hi).all() else t_hi
+
+
 #: Rays of one packet at most (:func:`trace_bvh`'s ``packets``).
 PACKET_RAYS = 64
 
@@ -440,15 +476,13 @@ def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray, start=None):
     where the frontier outgrows :data:`MAX_FRONTIER`; from the (ray, node) pairs
     ``start`` (default: every ray at the root)."""
     rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
-    boxes = bvh.columns
+    boxes, hi = bvh.columns, _bound(t_hi)
     ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
     out = []
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
             return None
-        near, far = _slab_columns(np.take(boxes, node, axis=1), np.take(rays, ray, axis=1))
-        near = np.maximum(near, t_min)
-        ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+        near, ok = _meets(boxes, node, rays, ray, t_min, hi)
         ray, node, near = ray[ok], node[ok], near[ok]
         count = bvh.count[node]
         leaf = count > 0
@@ -545,7 +579,7 @@ def _test_leaves(bvh: BVH, r, lf, O, D, rays, hits, t_min: float, t_hi, boxes, b
     slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
     prim = bvh.prims[slot].astype(np.int64)
     if boxes is not None:                        # the primitive's own box first: a cheap cull
-        near_p, far_p = _slab_columns(np.take(boxes, prim, axis=1), np.take(rays, rr, axis=1))
+        near_p, far_p = _slab_taken(boxes, prim, rays, rr)
         inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
             & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
         rr, prim = rr[inside], prim[inside]
@@ -554,26 +588,17 @@ def _test_leaves(bvh: BVH, r, lf, O, D, rays, hits, t_min: float, t_hi, boxes, b
     reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
 
 
-def _meets(columns, node, ray, rays, t_min: float, t_hi):
-    """(k,) entry t and whether each ray's segment (t_min, t_hi) meets each node's box."""
-    near, far = _slab_columns(np.take(columns, node, axis=1), np.take(rays, ray, axis=1))
-    near = np.maximum(near, t_min)
-    return near, (near <= far) & (far > t_min) & (near < t_hi[ray])
-
-
 def _any_hit_walk(bvh: BVH, O, D, rays, hits, t_min: float, t_hi: np.ndarray, start, boxes, best_t, best_p):
     """Any hit: :func:`_leaf_pairs`'s walk, each level's leaves tested as soon as they are
     reached and a ray that has hit dropped from the walk (a shadow ray in a crown stops at
     its first leaf, however much lies beyond). Fills ``best_t``, ``best_p``; returns None
     where the frontier outgrows :data:`MAX_FRONTIER` (else True)."""
-    columns = bvh.columns
+    columns, hi = bvh.columns, _bound(t_hi)
     ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
             return None
-        near, far = _slab_columns(np.take(columns, node, axis=1), np.take(rays, ray, axis=1))
-        near = np.maximum(near, t_min)
-        ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+        _, ok = _meets(columns, node, rays, ray, t_min, hi)
         ray, node = ray[ok], node[ok]
         leaf = bvh.count[node] > 0
         go = ~leaf
