@@ -336,11 +336,17 @@ def float32_boxes(bvh: BVH, origin=None) -> tuple[np.ndarray, np.ndarray]:
 # ============================================================================ float64 traversal
 # The reference traversal. A batch of rays walks the tree breadth first, one level of
 # (ray, node) pairs at a time (a slab test per pair, inner nodes replaced by their two
-# children); the leaves a ray meets are then tested nearest first, by their boxes' entry
-# distance, in rounds of 1, 2, 4, ... leaves a ray: after each round a ray drops the
-# leaves that its closest hit so far lies before (closest hit), or stops (any hit). The
-# result is the stack traversal's: the smallest t in (t_min, t_max), ties to the smaller
-# primitive id.
+# children). Closest hit: the leaves a ray meets are then tested nearest first, by their
+# boxes' entry distance, in rounds of 1, 2, 4, ... leaves a ray; after each round a ray
+# drops the leaves that its closest hit so far lies before. The result is the stack
+# traversal's: the smallest t in (t_min, t_max), ties to the smaller primitive id. Any
+# hit (shadow rays): each level's leaves are tested as the walk reaches them, and a ray
+# that has hit leaves the walk, so it never descends through what lies beyond its first
+# blocker's level (hit or not, the answer is the closest hit's; which hit, not). On the
+# light of the self-organizing tree's 34th step (144,403 rays, 212,475 primitives) it
+# tests 31 M boxes where the rounds tested 39 M, and sorts no leaf pairs; a depth-first
+# walk (each ray its own stack, the nearer child first) tests 18 M but costs more in
+# numpy, one round per node a ray visits, than it saves.
 
 #: Rays traversed together (the breadth-first frontier grows with them).
 TRACE_BATCH = 1 << 13
