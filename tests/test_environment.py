@@ -154,8 +154,13 @@ def _crown(skel):
     return centroid, radius
 
 
-def test_a_tree_against_a_wall_never_crosses_it_and_grows_away_from_it():
+@pytest.mark.parametrize("seed", [None, 2, 3, 4, 5, 6], ids=lambda s: f"seed {s or 'shipped'}")
+def test_a_tree_against_a_wall_never_crosses_it_and_grows_away_from_it(seed):
+    """The shipped seed and five others (39 of the seeds 1-40 meet the quarter radius; the
+    docs state it): the wall's response does not hang on one seed."""
     data, path = _shipped("wall_tree")
+    if seed is not None:
+        data["seed"] = seed
     g, skel = _grow(data, path)
     wall = environment_for(g).parts[0].shapes[0]
     length = np.linalg.norm(skel.end - skel.start, axis=1)
@@ -168,8 +173,8 @@ def test_a_tree_against_a_wall_never_crosses_it_and_grows_away_from_it():
     (c_wall, _), (c_open, radius) = _crown(skel), _crown(open_skel)
     toward = np.array([1.0, 0.0, 0.0])                             # from the trunk towards the wall
     shift = (c_open - c_wall) @ toward
-    print(f"wall: {len(skel)} segments (open: {len(open_skel)}), crown centroid {shift:.2f} m further from the "
-          f"wall, crown radius {radius:.2f} m (quarter {radius / 4:.2f})")
+    print(f"wall, seed {data['seed']}: {len(skel)} segments (open: {len(open_skel)}), crown centroid {shift:.2f} m "
+          f"further from the wall, crown radius {radius:.2f} m (quarter {radius / 4:.2f})")
     assert shift >= radius / 4
 
 

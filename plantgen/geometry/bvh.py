@@ -368,11 +368,17 @@ def float32_boxes(bvh: BVH, origin=None) -> tuple[np.ndarray, np.ndarray]:
 # ============================================================================ float64 traversal
 # The reference traversal. A batch of rays walks the tree breadth first, one level of
 # (ray, node) pairs at a time (a slab test per pair, inner nodes replaced by their two
-# children); the leaves a ray meets are then tested nearest first, by their boxes' entry
-# distance, in rounds of 1, 2, 4, ... leaves a ray: after each round a ray drops the
-# leaves that its closest hit so far lies before (closest hit), or stops (any hit). The
-# result is the stack traversal's: the smallest t in (t_min, t_max), ties to the smaller
-# primitive id.
+# children). Closest hit: the leaves a ray meets are then tested nearest first, by their
+# boxes' entry distance, in rounds of 1, 2, 4, ... leaves a ray; after each round a ray
+# drops the leaves that its closest hit so far lies before. The result is the stack
+# traversal's: the smallest t in (t_min, t_max), ties to the smaller primitive id. Any
+# hit (shadow rays): each level's leaves are tested as the walk reaches them, and a ray
+# that has hit leaves the walk, no deeper than the level where it first hit (hit or
+# not, the answer is the closest hit's; which hit, not). On the
+# self-organizing tree's light after 33 steps (144,403 rays, 212,475 primitives) it
+# tests 31 M boxes where the rounds tested 39 M, and sorts no leaf pairs; a depth-first
+# walk (each ray its own stack, the nearer child first) tests 18 M but costs more in
+# numpy, one round per node a ray visits, than it saves.
 
 #: Rays traversed together (the breadth-first frontier grows with them).
 TRACE_BATCH = 1 << 13
@@ -408,6 +414,42 @@ def _slab_columns(box, ray):
     far = np.fmax(t1, t2)
     # fmax / fmin skip a NaN (a ray in a face plane, parallel to it: inside along that axis)
     return np.fmax(np.fmax(near[0], near[1]), near[2]), np.fmin(np.fmin(far[0], far[1]), far[2])
+
+
+def _slab_taken(boxes, index, rays, ray):
+    """:func:`_slab_columns` of boxes ``index`` (k,) of ``boxes`` (6, n) and rays ``ray``
+    (k,) of ``rays`` (6, m): the same numbers, its arithmetic done in place in the gathered
+    arrays (a wide frontier's temporaries cost more than their arithmetic)."""
+    b = np.take(boxes, index, axis=1)
+    r = np.take(rays, ray, axis=1)
+    o, inv = r[:3], r[3:]
+    with np.errstate(invalid="ignore"):
+        for half in (b[:3], b[3:]):
+            np.subtract(half, o, out=half)
+            np.multiply(half, inv, out=half)
+    near = np.fmin(b[:3], b[3:], out=o)
+    far = np.fmax(b[:3], b[3:], out=b[:3])
+    # fmax / fmin skip a NaN (a ray in a face plane, parallel to it: inside along that axis)
+    np.fmax(near[0], near[1], out=near[0])
+    np.fmin(far[0], far[1], out=far[0])
+    return np.fmax(near[0], near[2], out=near[0]), np.fmin(far[0], far[2], out=far[0])
+
+
+def _meets(boxes, node, rays, ray, t_min: float, t_hi):
+    """Entry t (k,) of rays ``ray`` into boxes ``node`` (as :func:`_slab_taken` takes them)
+    and whether each ray's segment (t_min, t_hi) meets its box (``t_hi``: (m,), or None
+    where every ray is unbounded)."""
+    near, far = _slab_taken(boxes, node, rays, ray)
+    np.maximum(near, t_min, out=near)
+    ok = near <= far
+    ok &= far > t_min
+    ok &= near < (np.inf if t_hi is None else t_hi[ray])
+    return near, ok
+
+
+def _bound(t_hi: np.ndarray):
+    """``t_hi``, or None where every ray is unbounded (no per-pair gather of infinities)."""
+    return None if np.isposinf(t_hi).all() else t_hi
 
 
 #: Rays of one packet at most (:func:`trace_bvh`'s ``packets``).
@@ -472,15 +514,13 @@ def _leaf_pairs(bvh: BVH, O, inv, t_min: float, t_hi: np.ndarray, start=None):
     where the frontier outgrows :data:`MAX_FRONTIER`; from the (ray, node) pairs
     ``start`` (default: every ray at the root)."""
     rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
-    boxes = bvh.columns
+    boxes, hi = bvh.columns, _bound(t_hi)
     ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
     out = []
     while ray.size:
         if ray.size > MAX_FRONTIER and len(O) > 1:
             return None
-        near, far = _slab_columns(np.take(boxes, node, axis=1), np.take(rays, ray, axis=1))
-        near = np.maximum(near, t_min)
-        ok = (near <= far) & (far > t_min) & (near < t_hi[ray])
+        near, ok = _meets(boxes, node, rays, ray, t_min, hi)
         ray, node, near = ray[ok], node[ok], near[ok]
         count = bvh.count[node]
         leaf = count > 0
@@ -541,14 +581,19 @@ def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: 
         start = (np.arange(m), np.asarray(roots, np.int64))
     else:
         start = _packet_frontier(bvh, O, D, packets) if packets > 1 else None
-    pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
+    rays = np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    if any_hit:
+        pairs = _any_hit_walk(bvh, O, D, rays, hits, t_min, t_hi, start, boxes, best_t, best_p)
+    else:
+        pairs = _leaf_pairs(bvh, O, inv, t_min, t_hi, start)
     if pairs is None:                                # too wide a frontier: halve the batch
         h = m // 2
         r = (None, None) if roots is None else (roots[:h], roots[h:])
         a = _trace_batch(bvh, O[:h], D[:h], hits, t_min, t_hi[:h], any_hit, boxes, packets, r[0])
         b = _trace_batch(bvh, O[h:], D[h:], hits, t_min, t_hi[h:], any_hit, boxes, packets, r[1])
         return np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]])
-    rays = None if boxes is None else np.ascontiguousarray(np.concatenate([O, inv], axis=1).T)
+    if any_hit:
+        return best_t, best_p
     ray, leaf, near = pairs
     order = np.lexsort((near, ray))
     ray, leaf, near = ray[order], leaf[order], near[order]
@@ -556,24 +601,52 @@ def _trace_batch(bvh: BVH, O, D, hits, t_min: float, t_hi: np.ndarray, any_hit: 
     while ray.size:
         rank = _group_rank(ray)
         now = rank < per_round
-        r, lf = ray[now], leaf[now]
-        cnt = bvh.count[lf].astype(np.int64)
-        rr = np.repeat(r, cnt)
-        slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
-        prim = bvh.prims[slot].astype(np.int64)
-        if boxes is not None:                        # the primitive's own box first: a cheap cull
-            near_p, far_p = _slab_columns(np.take(boxes, prim, axis=1), np.take(rays, rr, axis=1))
-            inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
-                & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
-            rr, prim = rr[inside], prim[inside]
-        t = hits(prim, O[rr], D[rr])
-        t = np.where((t > t_min) & (t < t_hi[rr]), t, np.inf)
-        reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
+        _test_leaves(bvh, ray[now], leaf[now], O, D, rays, hits, t_min, t_hi, boxes, best_t, best_p)
         ray, leaf, near = ray[~now], leaf[~now], near[~now]
-        keep = ~np.isfinite(best_t[ray]) if any_hit else near <= best_t[ray]
+        keep = near <= best_t[ray]
         ray, leaf, near = ray[keep], leaf[keep], near[keep]
         per_round *= 2
     return best_t, best_p
+
+
+def _test_leaves(bvh: BVH, r, lf, O, D, rays, hits, t_min: float, t_hi, boxes, best_t, best_p):
+    """Test the primitives of leaves ``lf`` against rays ``r`` ((k,) pairs) and fold their
+    hits into ``best_t``, ``best_p`` (the primitive's own box first where ``boxes``)."""
+    cnt = bvh.count[lf].astype(np.int64)
+    rr = np.repeat(r, cnt)
+    slot = np.repeat(bvh.first[lf].astype(np.int64) - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())
+    prim = bvh.prims[slot].astype(np.int64)
+    if boxes is not None:                        # the primitive's own box first: a cheap cull
+        near_p, far_p = _slab_taken(boxes, prim, rays, rr)
+        inside = (np.maximum(near_p, t_min) <= far_p) & (far_p > t_min) \
+            & (near_p <= np.minimum(t_hi[rr], best_t[rr]))
+        rr, prim = rr[inside], prim[inside]
+    t = hits(prim, O[rr], D[rr])
+    t = np.where((t > t_min) & (t < t_hi[rr]), t, np.inf)
+    reduce_closest(rr, t, prim, best_t=best_t, best_values=[best_p])
+
+
+def _any_hit_walk(bvh: BVH, O, D, rays, hits, t_min: float, t_hi: np.ndarray, start, boxes, best_t, best_p):
+    """Any hit: :func:`_leaf_pairs`'s walk, each level's leaves tested as soon as they are
+    reached and a ray that has hit dropped from the walk (a shadow ray in a crown stops at
+    its first leaf, however much lies beyond). Fills ``best_t``, ``best_p``; returns None
+    where the frontier outgrows :data:`MAX_FRONTIER` (else True)."""
+    columns, hi = bvh.columns, _bound(t_hi)
+    ray, node = start if start is not None else (np.arange(len(O)), np.zeros(len(O), np.int64))
+    while ray.size:
+        if ray.size > MAX_FRONTIER and len(O) > 1:
+            return None
+        _, ok = _meets(columns, node, rays, ray, t_min, hi)
+        ray, node = ray[ok], node[ok]
+        leaf = bvh.count[node] > 0
+        go = ~leaf
+        if leaf.any():
+            _test_leaves(bvh, ray[leaf], node[leaf], O, D, rays, hits, t_min, t_hi, boxes, best_t, best_p)
+            go &= ~np.isfinite(best_t[ray])
+        ray = np.repeat(ray[go], 2)
+        node = np.repeat(bvh.first[node[go]].astype(np.int64), 2)
+        node[1::2] += 1
+    return True
 
 
 def _rays(origins, dirs) -> tuple[np.ndarray, np.ndarray]:
