@@ -28,7 +28,8 @@
 // after re-centring (the ray caster's test, with RELIEF its march; bvh_row_hit), the triangles by
 // Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
 // child first (by slab entry), nodes entered at or beyond the best t skipped.
-// BVH_COUNT: bvh_visits counts the nodes a trace walks (the bench's work per ray).
+// BVH_COUNT: bvh_visits and bvh_tests count the nodes a trace walks and the primitives it
+// tests (the bench's work per ray).
 
 #ifndef BVH_GLSL
 #define BVH_GLSL
@@ -175,6 +176,7 @@ const int BVH_NONE = BVH_EMPTY;   // no node being walked: take the next entry
 
 #if defined BVH_COUNT
 int bvh_visits = 0;         // wide nodes walked by the last bvh_trace (trace.glsl's BVH_COUNT)
+int bvh_tests = 0;          // primitives it tested
 #endif
 
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
@@ -207,6 +209,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
     vec3 ro = o, inv = inv_w;             // its level's ray
 #if defined BVH_COUNT
     bvh_visits = 0;
+    bvh_tests = 0;
 #endif
     while (true) {
         // Walk the nodes (cheap) until a leaf of primitives is reached or nothing is left;
@@ -279,6 +282,9 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
         }
         if (leaf_count == 0) break;
         vec3 rd = kind == BVH_TOP ? d : dc;
+#if defined BVH_COUNT
+        bvh_tests += leaf_count;
+#endif
         for (int k = 0; k < leaf_count; ++k) {
             int prim = bvh_prims[offsets.y + leaf_first + k];
             int face;
