@@ -37,20 +37,14 @@ from .frame import FrameLighting, FrameView
 from .passes import frame_passes
 from .raycast import Raycaster
 from .shaders import build_program, set_uniforms
-from .trace import GpuPlant, upload_bvh
+from .trace import GPU_LEAF_SIZE, GpuPlant, upload_bvh
 
-__all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET", "RT_LEAF_SIZE"]
+__all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET"]
 
 #: Pixel footprints a shadow ray starts off its receiver's surface (along the receiver's
 #: normal on the light's side): more than the rounding of a hit and the relief march's
 #: final bracket (``march_precision``, a fraction of a footprint).
 SHADOW_RAY_OFFSET = 1.0
-
-#: Primitives a leaf of the ray tracer's BVH holds at most: 2 tests about half the
-#: primitives of 4 a ray (the forest's eye rays: 5.5 against 12.1) for 13 % more GPU memory;
-#: eye and shadow rays 1.1-1.3x faster on llvmpipe, 1 no faster than 2
-#: (docs/benchmarks/rt.md).
-RT_LEAF_SIZE = 2
 
 #: The defines of RaycastSettings that the traced rows' programs take.
 _ROW_DEFINES = ("RELIEF", "V_EXACT", "MARCH_FIXED", "HEIGHT_FETCH4")
@@ -81,7 +75,7 @@ class RayTracer(Raycaster):
     ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface.
     """
 
-    def __init__(self, ctx=None, limits=None, *, leaf_size: int = RT_LEAF_SIZE, method: str = "lbvh",
+    def __init__(self, ctx=None, limits=None, *, leaf_size: int = GPU_LEAF_SIZE, method: str = "lbvh",
                  shadow_ray_offset: float = SHADOW_RAY_OFFSET):
         super().__init__(ctx, limits)
         self.leaf_size, self.method = leaf_size, method

@@ -21,15 +21,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import BVH, float32_boxes
+from ..geometry.bvh import BVH, build_bvh, float32_boxes
 from ..geometry.instances import similarity_parts
 from ..limits import LimitError, hint
 from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
-           "BVH_BINDING", "BVH_STACK", "COPY_BYTES"]
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "GPU_LEAF_SIZE"]
 
+#: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
+#: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
+#: primitives of 4 a ray (the forest's eye rays: 5.5 against 12.1) for 13 % more GPU memory,
+#: eye and shadow rays 1.1-1.3x faster on llvmpipe; 1 is no faster than 2
+#: (docs/benchmarks/rt.md).
+GPU_LEAF_SIZE = 2
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (7 in all).
@@ -313,7 +319,8 @@ _TARGETS_KEPT = 2
 
 def target_bvh(target, ctx=None) -> GpuBvh:
     """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
-    triangles, its ``bvh``, relative to its root box's centre) or of a
+    triangles, a BVH over its boxes with leaves of GPU_LEAF_SIZE, relative to its root
+    box's centre) or of a
     :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
     over its copies); the last few targets stay uploaded."""
     for i, (t, gpu) in enumerate(_targets):
@@ -323,8 +330,8 @@ def target_bvh(target, ctx=None) -> GpuBvh:
     if ctx is None:
         from .context import gl_context
         ctx = gl_context()
-    def plant(t):
-        return GpuPlant(t.frusta if t.rows else None, t.triangles, t.bvh)
+    def plant(t):        # its own tree with the GPU's leaves (the copies' boxes stay: the same root)
+        return GpuPlant(t.frusta if t.rows else None, t.triangles, build_bvh(t.lo, t.hi, leaf_size=GPU_LEAF_SIZE))
 
     if hasattr(target, "targets"):        # a SceneTarget: two levels
         scene = target.bvh
