@@ -3,10 +3,10 @@
 // trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
 //
 // Data (plantgen/gl/trace.py uploads it, std430 SSBOs):
-//   bvh_nodes    2 vec4 per node: (lo.xyz, first), (hi.xyz, count), first and count as int
-//                bits; internal node: count 0, children first and first + 1; leaf: count
-//                primitives at bvh_prims[first...]. Boxes are float32 rounded outward
-//                from the float64 build, relative to their frame's origin.
+//   bvh_nodes    the binary BVH collapsed 4-wide (below, bvh_children): per node its four
+//                children's boxes and references; a leaf reference gives count primitives
+//                at bvh_prims[offset...]. Boxes are float32 rounded outward from the
+//                float64 build, relative to their frame's origin.
 //   bvh_prims    primitive ids in leaf order: rows 0..rows-1, then leaf triangles.
 //   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
 //   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
@@ -32,6 +32,8 @@
 // after re-centring (the ray caster's test, with RELIEF its march; bvh_row_hit), the triangles by
 // Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
 // child first (by slab entry), nodes entered at or beyond the best t skipped.
+// BVH_COUNT: bvh_visits and bvh_tests count the nodes a trace walks and the primitives it
+// tests (the bench's work per ray).
 
 #ifndef BVH_GLSL
 #define BVH_GLSL
@@ -112,17 +114,6 @@ float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max
     return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
 }
 
-// The slab test: the parameter interval of the ray inside box [lo, hi] (empty: x > y).
-// inv_d = 1 / d with zero components replaced by a tiny signed value; the far end grows by
-// a few ulps (pbrt's 1 + 2*gamma(3)) so that rounding loses no ray the box holds.
-vec2 bvh_slabs(vec3 lo, vec3 hi, vec3 o, vec3 inv_d) {
-    vec3 t0 = (lo - o) * inv_d, t1 = (hi - o) * inv_d;
-    vec3 near = min(t0, t1), far = max(t0, t1);
-    float t_near = max(max(near.x, near.y), near.z);
-    float t_far = min(min(far.x, far.y), far.z);
-    return vec2(t_near, t_far + 4.0e-7 * abs(t_far));
-}
-
 vec3 bvh_inverse_dir(vec3 d) {
     vec3 safe = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
     return 1.0 / safe;
@@ -164,20 +155,51 @@ int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[2 * copy + 1].w)
 
 #endif
 
-// Word k (0: lo, first; 1: hi, count) of node i (the top level's nodes follow the plants').
-vec4 bvh_node(int i, int k) { return bvh_nodes[2 * i + k]; }
+// Node layout (plantgen.gl.trace._node_words): the binary tree collapsed 4-wide, NODE_VEC4
+// vec4 a node: its four children's boxes by coordinate (lo.x of the four, lo.y, lo.z, hi.x,
+// hi.y, hi.z), then their references as int bits: a node (>= 0, in its level's part of
+// bvh_nodes), a leaf -1 - (offset << BVH_LEAF_BITS | count), or BVH_EMPTY (an unused slot).
+// A node's own box is its parent's business: a walk tests four boxes a node, in vec4 lanes.
+const int BVH_NODE_VEC4 = 7;
+const int BVH_LEAF_BITS = 8;
+const int BVH_EMPTY = -1;
+const float BVH_MISS = 3.0e38;   // the entry t of a child the ray misses
 
-// Stack entries: index * 4 + kind.
+// The entry t of the ray into each of wide node w's four children (BVH_MISS where it
+// misses the box, enters at or beyond best_t, leaves before t_min, or the slot is unused),
+// and their references.
+vec4 bvh_children(int w, vec3 o, vec3 inv_d, float t_min, float best_t, out ivec4 ref) {
+    int i = BVH_NODE_VEC4 * w;
+    vec4 ax = (bvh_nodes[i] - o.x) * inv_d.x, bx = (bvh_nodes[i + 3] - o.x) * inv_d.x;
+    vec4 ay = (bvh_nodes[i + 1] - o.y) * inv_d.y, by = (bvh_nodes[i + 4] - o.y) * inv_d.y;
+    vec4 az = (bvh_nodes[i + 2] - o.z) * inv_d.z, bz = (bvh_nodes[i + 5] - o.z) * inv_d.z;
+    ref = floatBitsToInt(bvh_nodes[i + 6]);
+    vec4 near = max(max(min(ax, bx), min(ay, by)), min(az, bz));
+    vec4 far = min(min(max(ax, bx), max(ay, by)), max(az, bz));
+    far += 4.0e-7 * abs(far);        // pbrt's 1 + 2*gamma(3): rounding loses no ray the box holds
+    vec4 miss = vec4(greaterThan(near, far)) + vec4(lessThanEqual(far, vec4(t_min)))
+              + vec4(greaterThanEqual(near, vec4(best_t))) + vec4(equal(ref, ivec4(BVH_EMPTY)));
+    return mix(near, vec4(BVH_MISS), greaterThan(miss, vec4(0.0)));
+}
+
+// Orders two children by entry t (nearest first).
+void bvh_order(inout float ta, inout float tb, inout int ra, inout int rb) {
+    bool swap = tb < ta;
+    float t = ta; int r = ra;
+    ta = swap ? tb : ta; tb = swap ? t : tb;
+    ra = swap ? rb : ra; rb = swap ? r : rb;
+}
+
+// Stack entries: reference * 4 + kind.
 const int BVH_TOP = 0;      // a node of the top level (world ray)
 const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ray)
 const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
+const int BVH_NONE = BVH_EMPTY;   // no node being walked: take the next entry
 
-// Whether the ray's interval [t_min, best] meets node i's box.
-bool bvh_enter(int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t_near) {
-    vec2 span = bvh_slabs(bvh_node(i, 0).xyz, bvh_node(i, 1).xyz, o, inv_d);
-    t_near = span.x;
-    return span.x <= span.y && span.y > t_min && span.x < best_t;
-}
+#if defined BVH_COUNT
+int bvh_visits = 0;         // wide nodes walked by the last bvh_trace (trace.glsl's BVH_COUNT)
+int bvh_tests = 0;          // primitives it tested
+#endif
 
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
 // o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
@@ -186,25 +208,31 @@ bool bvh_enter(int i, vec3 o, vec3 inv_d, float t_min, float best_t, out float t
 // triangles (the eye's rays of render --method rt, whose leaves are rasterised as RC's). One loop
 // walks both levels: a top-level leaf pushes its copies; popping a copy moves the ray into
 // the copy's frame and descends its plant's BLAS (whose nodes are popped before anything
-// pushed earlier, so the copy's ray stays the right one until they are done).
+// pushed earlier, so the copy's ray stays the right one until they are done). A node's
+// hit children are ordered by entry t; the nearest is walked, the others pushed with their
+// entry t, so that an entry popped at or beyond the best t is dropped without a load.
 BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance, bool triangles) {
     BvhHit best = bvh_no_hit(t_max);
     int stack[BVH_STACK];
+    float stack_t[BVH_STACK];
     int sp = 0;
-#if defined TWO_LEVEL
-    stack[sp++] = 4 * 0 + BVH_TOP;
-#else
-    stack[sp++] = 4 * 0 + BVH_COPY;
-#endif
     vec3 inv_w = bvh_inverse_dir(d);
     vec3 oc = o, dc = d, inv_c = inv_w;   // the ray in the current copy's frame
     float scale_c = 1.0;                  // the copy's units per world unit (|dc| / |d|)
     int copy = 0, plant = 0;
     ivec4 offsets = bvh_plants[0];
-    // the node being walked (-1: take the next entry) and its level's ray
-    int node = -1, kind = BVH_PLANT, base = 0;
-    bool top = false;
-    vec3 ro = o, rd = d, inv = inv_w;
+#if defined TWO_LEVEL
+    int kind = BVH_TOP, base = bvh_plants[1].y;   // the walk starts at the top level's root
+#else
+    int kind = BVH_PLANT, base = offsets.x;
+#endif
+    int node = 0;                         // the reference being walked (BVH_NONE: pop)
+    float t_node = t_min;                 // its entry t
+    vec3 ro = o, inv = inv_w;             // its level's ray
+#if defined BVH_COUNT
+    bvh_visits = 0;
+    bvh_tests = 0;
+#endif
     while (true) {
         // Walk the nodes (cheap) until a leaf of primitives is reached or nothing is left;
         // then test that leaf's primitives (dear) outside this loop: on SIMD hardware (a
@@ -212,9 +240,12 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
         // lanes together, not masked at every node step (Aila and Laine's while-while).
         int leaf_first = 0, leaf_count = 0;
         while (true) {
-            if (node < 0) {
+            if (node == BVH_NONE) {
                 if (sp == 0) break;
-                int entry = stack[--sp];
+                --sp;
+                if (stack_t[sp] >= best.t) continue;
+                int entry = stack[sp];
+                t_node = stack_t[sp];
                 kind = entry & 3;
                 node = entry >> 2;
                 if (kind == BVH_COPY) {
@@ -230,22 +261,23 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                     node = 0;
                     kind = BVH_PLANT;
                 }
-                top = kind == BVH_TOP;
+                bool top = kind == BVH_TOP;
                 ro = top ? o : oc;
-                rd = top ? d : dc;
                 inv = top ? inv_w : inv_c;
                 base = top ? bvh_plants[1].y : offsets.x;
-                float t_near;
-                if (!bvh_enter(base + node, ro, inv, t_min, best.t, t_near)) { node = -1; continue; }
             }
-            int first = floatBitsToInt(bvh_node(base + node, 0).w);
-            int count = floatBitsToInt(bvh_node(base + node, 1).w);
-            if (count > 0) {
-                node = -1;
+            if (node < 0) {              // a leaf
+                int code = -1 - node;
+                int first = code >> BVH_LEAF_BITS, count = code & ((1 << BVH_LEAF_BITS) - 1);
+                node = BVH_NONE;
 #if defined TWO_LEVEL
-                if (top) {
-                    for (int k = count - 1; k >= 0; --k)
-                        if (sp < BVH_STACK) stack[sp++] = 4 * (first + k) + BVH_COPY;
+                if (kind == BVH_TOP) {
+                    for (int k = count - 1; k >= 0; --k) {
+                        if (sp < BVH_STACK) {
+                            stack[sp] = 4 * (first + k) + BVH_COPY;
+                            stack_t[sp++] = t_node;
+                        }
+                    }
                     continue;
                 }
 #endif
@@ -253,20 +285,28 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 leaf_count = count;
                 break;
             }
-            float t_left, t_right;
-            bool left = bvh_enter(base + first, ro, inv, t_min, best.t, t_left);
-            bool right = bvh_enter(base + first + 1, ro, inv, t_min, best.t, t_right);
-            if (left && right) {
-                bool left_near = t_left <= t_right;
-                if (sp < BVH_STACK) stack[sp++] = 4 * (left_near ? first + 1 : first) + kind;
-                node = left_near ? first : first + 1;
-            } else if (left || right) {
-                node = left ? first : first + 1;
-            } else {
-                node = -1;
-            }
+#if defined BVH_COUNT
+            ++bvh_visits;
+#endif
+            ivec4 ref;
+            vec4 t = bvh_children(base + node, ro, inv, t_min, best.t, ref);
+            // a sorting network: nearest first
+            bvh_order(t.x, t.y, ref.x, ref.y);
+            bvh_order(t.z, t.w, ref.z, ref.w);
+            bvh_order(t.x, t.z, ref.x, ref.z);
+            bvh_order(t.y, t.w, ref.y, ref.w);
+            bvh_order(t.y, t.z, ref.y, ref.z);
+            if (t.w < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.w + kind; stack_t[sp++] = t.w; }
+            if (t.z < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.z + kind; stack_t[sp++] = t.z; }
+            if (t.y < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.y + kind; stack_t[sp++] = t.y; }
+            node = t.x < BVH_MISS ? ref.x : BVH_NONE;
+            t_node = t.x;
         }
         if (leaf_count == 0) break;
+        vec3 rd = kind == BVH_TOP ? d : dc;
+#if defined BVH_COUNT
+        bvh_tests += leaf_count;
+#endif
         for (int k = 0; k < leaf_count; ++k) {
             int prim = bvh_prims[offsets.y + leaf_first + k];
             int face;

@@ -3,7 +3,8 @@
 //
 // In (binding 0): per ray two vec4, (origin relative to the frame origin, t_min),
 // (direction, t_max). Out (binding 1): per ray (t, primitive, copy, face), the last three
-// as int bits; t_max and primitive -1 where nothing is hit.
+// as int bits; t_max and primitive -1 where nothing is hit. BVH_COUNT: the nodes walked
+// + 65536 * the primitives tested instead of the face.
 
 #if defined COMPUTE_SHADER
 layout(local_size_x = 64) in;
@@ -21,6 +22,9 @@ void main() {
     if (i >= ray_count) return;
     vec4 a = rays[2 * i], b = rays[2 * i + 1];
     BvhHit hit = bvh_trace(a.xyz, b.xyz, a.w, b.w, any_hit != 0, 0.0, true);
+#if defined BVH_COUNT
+    hit.face = bvh_visits + (bvh_tests << 16);   // the bench's counts instead of the face
+#endif
     hits[i] = vec4(hit.t, intBitsToFloat(hit.prim), intBitsToFloat(hit.copy), intBitsToFloat(hit.face));
 }
 #endif

@@ -425,3 +425,39 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
     hit = same & (ref_key >= 0)
     # the ray's origins lie up to 1,500 units from the frame's origin here
     _assert_t_rounding(t[hit], ref_t[hit], origins[hit], dirs[hit], [1e4, 0.0, -1e4])
+
+
+@pytest.mark.parametrize("n", [1, 5, 300, 2000])
+def test_wide_nodes_hold_every_primitive_once(n):
+    """The GPU's layout: the binary tree collapsed 4-wide keeps every primitive in exactly
+    one leaf slot, enters each wide node from one parent, gives each slot its binary node's
+    float32 box, and packs each leaf's offset and count into its reference; the stack a
+    walk needs is what the bound says."""
+    from plantgen.geometry.bvh import float32_boxes
+    from plantgen.gl.trace import LEAF_COUNT_BITS, NODE_VEC4, _node_words, _stack_need, wide_nodes
+
+    rng = np.random.default_rng(n)
+    lo = rng.uniform(-5, 5, (n, 3))
+    bvh = build_bvh(lo, lo + rng.uniform(0, 0.5, (n, 3)))
+    slots, wide = wide_nodes(bvh)
+    used = slots >= 0
+    leaf = used & (wide < 0)
+    prims = np.concatenate([bvh.prims[bvh.first[b]:bvh.first[b] + bvh.count[b]] for b in slots[leaf]])
+    assert np.sort(prims).tolist() == list(range(n))
+    assert sorted(wide[wide >= 0].tolist()) == list(range(1, len(slots)))
+    assert ((wide >= 0) == (used & (bvh.count[np.maximum(slots, 0)] == 0))).all()
+    words = _node_words(bvh, np.zeros(3), slots, wide).reshape(-1, NODE_VEC4, 4)
+    f_lo, f_hi = float32_boxes(bvh)
+    s = np.maximum(slots, 0)
+    assert (np.moveaxis(words[:, 0:3], 1, 2)[used] == f_lo[s][used]).all()
+    assert (np.moveaxis(words[:, 3:6], 1, 2)[used] == f_hi[s][used]).all()
+    refs = words[:, 6].view(np.int32)
+    codes = -1 - refs[leaf]
+    assert ((codes >> LEAF_COUNT_BITS) == bvh.first[slots[leaf]]).all()
+    assert ((codes & ((1 << LEAF_COUNT_BITS) - 1)) == bvh.count[slots[leaf]]).all()
+    assert (refs[~used] == -1).all()
+    # the bound: the largest sum over a root-to-leaf path of (children - 1)
+    def need(w):
+        kids = wide[w][wide[w] >= 0]
+        return used[w].sum() - 1 + max((need(k) for k in kids), default=0)
+    assert _stack_need(bvh, slots, wide) == (need(0) if len(slots) else 0)

@@ -4,7 +4,8 @@ one run; and a scan's beams per second, the float64 CPU reference beside the GPU
 search with its ranges solved again in float64.
 
 Run: ``python -m plantgen.benchmarks.rt [--scene forest] [--size 1024x768] [--frames 1]
-[--scan-model pine] [--scan-step 0.2] [--out rt.md]``.
+[--scan-model pine] [--scan-step 0.2] [--out rt.md]``; ``--work`` instead measures the
+traversal alone (below).
 
 Frames: each renderer draws once to warm up (the driver compiles its programs; RC+R's
 warm-up draws the shadow map, its milliseconds are the *light* column) and ``--frames``
@@ -18,6 +19,13 @@ differs where shadows do (rays against the map). The scan table: beams per secon
 each path, points, and beam for beam the share of the reference's primitives the GPU
 path finds (its ranges are then the reference's, solved in float64). The GL renderer and
 the machine (with its load: this machine is shared) are printed with the tables.
+
+``--work``: the work a ray costs, RT alone on ``--scene``: the eye's rays (every pixel,
+rows and leaves, closest hit; through ``shaders/trace.glsl``) and the shadow rays of those
+that hit (any hit), each with the nodes a ray walks and the primitives it tests (the
+traversal's ``BVH_COUNT``), wall and CPU milliseconds (the process's CPU time, llvmpipe's
+threads included: what another job's load changes least), and RT's frames without relief
+and shadows and RT+R with shadow rays. Compare designs by running it on each.
 """
 
 from __future__ import annotations
@@ -35,13 +43,14 @@ from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES
 from ..gl.rt import RayTracer
-from ..gl.trace import trace_target
+from ..gl.shaders import build_compute, set_uniforms
+from ..gl.trace import trace_rays, trace_target
 from ..pipeline import frame_arguments, grow_file, model_leaves, prepare_model, skin_model, stage_model
 from ..settings import RaycastSettings, ShadowSettings
 from .arguments import image_size, report
 from .scan import machine
 
-__all__ = ["measure_frames", "measure_scan", "markdown", "main"]
+__all__ = ["measure_frames", "measure_scan", "measure_work", "work_markdown", "markdown", "main"]
 
 
 def _timed(draw, frames: int):
@@ -86,6 +95,85 @@ def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say
             "covered": int(a.sum()), "cover_mismatch": int((a != b).sum()), "depth_agree": float(close.mean()),
             "depth_bracket": float((close | bracket).mean()), "march_precision": settings.march_precision,
             "images": (rc_frame.color, rt_frame.color)}
+
+
+def _work_counts(gpu, origins, directions, any_hit: bool, t_min: float) -> tuple[float, float]:
+    """Mean nodes walked and primitives tested a ray (the traversal's BVH_COUNT variant)."""
+    ctx = gpu.ctx
+    program = build_compute(ctx, "trace.glsl", {**gpu.defines(), "BVH_COUNT": True})
+    n = len(origins)
+    words = np.zeros((n, 8), np.float32)
+    words[:, 0:3], words[:, 3] = origins - gpu.origin, t_min
+    words[:, 4:7], words[:, 7] = directions, 3.0e38
+    rays, hits = ctx.buffer(words.tobytes()), ctx.buffer(reserve=16 * n)
+    try:
+        gpu.bind()
+        rays.bind_to_storage_buffer(0)
+        hits.bind_to_storage_buffer(1)
+        set_uniforms(program, any_hit=int(any_hit), ray_count=n)
+        program.run(group_x=(n + 63) // 64)
+        counts = np.frombuffer(hits.read(), np.int32).reshape(n, 4)[:, 3]
+    finally:
+        rays.release()
+        hits.release()
+    return float((counts & 0xFFFF).mean()), float((counts >> 16).mean())
+
+
+def _cpu_timed(run, frames: int) -> tuple[float, float, object]:
+    """A warm-up and ``frames`` timed runs: median wall ms, median CPU ms, the last result."""
+    run()
+    wall, cpu = [], []
+    for _ in range(frames):
+        c, t = time.process_time(), time.perf_counter()
+        result = run()
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return 1e3 * statistics.median(wall), 1e3 * statistics.median(cpu), result
+
+
+def measure_work(scene: str = "forest", size=(512, 384), frames: int = 3, say=print) -> dict:
+    """The traversal's work and time on ``scene`` (module docstring, ``--work``)."""
+    model = prepare_model(scene)
+    placed = model.placed if model.placed is not None else model.frusta_at(0)
+    staging = stage_model(model.grown, placed, *size)
+    args = frame_arguments(placed, staging, ShadowSettings())
+    rt = RayTracer()
+    camera = staging.camera
+    gpu = rt.gpu_bvh(placed, args["leaves"], camera.eye)
+    o, d = (a.reshape(-1, 3) for a in camera.rays())
+    rows = {}
+    wall, cpu, (t, prim, _, _) = _cpu_timed(lambda: trace_rays(gpu, o, d), frames)
+    rows["eye rays"] = {"rays": len(o), "wall": wall, "cpu": cpu, "work": _work_counts(gpu, o, d, False, 0.0)}
+    hit = prim >= 0
+    light = np.asarray(args["light_dir"], np.float64)
+    so = o[hit] + t[hit, None] * d[hit]
+    sd = np.broadcast_to(light / np.linalg.norm(light), so.shape)
+    wall, cpu, _ = _cpu_timed(lambda: trace_rays(gpu, so, sd, any_hit=True, t_min=1e-4), frames)
+    rows["shadow rays"] = {"rays": len(so), "wall": wall, "cpu": cpu,
+                           "work": _work_counts(gpu, so, sd, True, 1e-4)}
+    quiet = {**args, "shadows": None}
+    for name, settings, kw in (("RT frame", RaycastSettings(relief=False), quiet),
+                               ("RT+R frame, shadow rays", RaycastSettings(relief=True), args)):
+        wall, cpu, _ = _cpu_timed(lambda s=settings, k=kw: rt.render(placed, settings=s, **k), frames)
+        rows[name] = {"rays": None, "wall": wall, "cpu": cpu, "work": None}
+    for name, r in rows.items():
+        say(f"{name}: {r['wall']:.0f} ms ({r['cpu']:.0f} ms CPU)")
+    return {"scene": scene, "size": size, "frames": frames, "rows": rows, "renderer": renderer_name(),
+            "leaf_size": rt.leaf_size, "gpu_bytes": gpu.nbytes}
+
+
+def work_markdown(work: dict) -> str:
+    w, h = work["size"]
+    lines = [f"# The traversal's work: {work['scene']} at {w}x{h} ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC)", "",
+             f"GL renderer: {work['renderer']}  ", f"Machine: {machine()} (shared by other jobs: under load)  ",
+             f"BVH leaves of at most {work['leaf_size']} primitives, {work['gpu_bytes'] / 2**20:.1f} MiB on the GPU; "
+             f"medians of {work['frames']} runs", "",
+             "| what | rays | ms | CPU ms | nodes a ray | primitives a ray |", "|---|---:|---:|---:|---:|---:|"]
+    for name, r in work["rows"].items():
+        rays = f"{r['rays']:,}" if r["rays"] is not None else ""
+        nodes, prims = (f"{x:.1f}" for x in r["work"]) if r["work"] is not None else ("", "")
+        lines.append(f"| {name} | {rays} | {r['wall']:,.0f} | {r['cpu']:,.0f} | {nodes} | {prims} |")
+    return "\n".join(lines + [""])
 
 
 def measure_scan(model: str = "pine", step: float = 0.2, positions=None, say=print) -> dict:
@@ -168,9 +256,12 @@ def main(argv=None) -> int:
     parser.add_argument("--scanner-positions", default=None, help="'x,y,z;...' (default: four around the model)")
     parser.add_argument("--no-frames", action="store_true")
     parser.add_argument("--no-scan", action="store_true")
+    parser.add_argument("--work", action="store_true", help="the traversal's work a ray and its time alone")
     parser.add_argument("--images", type=Path, help="folder to write both frames into (PNG)")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
+    if args.work:
+        return report(work_markdown(measure_work(args.scene, args.size, max(args.frames, 1))), args.out)
     frames = None if args.no_frames else measure_frames(args.scene, args.size, args.frames)
     if args.images is not None and frames is not None:
         from ..images import write_png

@@ -46,7 +46,7 @@ from .frame import FrameLighting, FrameView
 from .passes import frame_passes
 from .raycast import Raycaster
 from .shaders import build_program, set_uniforms
-from .trace import GpuPlant, upload_bvh
+from .trace import GPU_LEAF_SIZE, GpuPlant, upload_bvh
 
 __all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET"]
 
@@ -86,7 +86,7 @@ class RayTracer(Raycaster):
     another (an animation's frames, module docstring).
     """
 
-    def __init__(self, ctx=None, limits=None, *, leaf_size: int = 4, method: str = "lbvh",
+    def __init__(self, ctx=None, limits=None, *, leaf_size: int = GPU_LEAF_SIZE, method: str = "lbvh",
                  shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False):
         super().__init__(ctx, limits)
         self.leaf_size, self.method, self.refit = leaf_size, method, bool(refit)

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import BVH, float32_boxes
+from ..geometry.bvh import BVH, build_bvh, float32_boxes
 from ..geometry.frames import similarity_trs
 from ..geometry.instances import similarity_parts
 from ..limits import LimitError, hint
@@ -41,8 +41,14 @@ from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
-           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words"]
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE"]
 
+#: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
+#: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
+#: primitives of 4 a ray (the forest's eye rays: 5.5 against 12.1) for 13 % more GPU memory,
+#: eye and shadow rays 1.1-1.3x faster on llvmpipe; 1 is no faster than 2
+#: (docs/benchmarks/rt.md).
+GPU_LEAF_SIZE = 2
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
@@ -101,14 +107,82 @@ class GpuBvh:
         self.buffers = []
 
 
-def _node_words(bvh: BVH, origin) -> np.ndarray:
-    """(nodes, 8) float32: (lo, first bits), (hi, count bits), boxes rounded outward."""
+#: Words (vec4) of one node on the GPU: four child boxes by coordinate, their references.
+NODE_VEC4 = 7
+#: A leaf reference packs its primitive offset above these bits and its count in them.
+LEAF_COUNT_BITS = 8
+_EMPTY = -1          # the reference of an unused child slot
+
+
+def wide_nodes(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
+    """The binary BVH collapsed into a 4-wide one, as the GPU walks it: per wide node its
+    (up to) four children, the binary node's grandchildren (a child that is a leaf stays
+    itself). Returns ``slots`` (w, 4) int64, the binary node in each slot (-1: unused), and
+    ``wide`` (w, 4) int64, the wide node an internal slot becomes (-1 for a leaf or an unused
+    slot). Wide node 0 is the root; a tree whose root is a leaf gets one wide node holding it.
+    Nodes are numbered level by level (every two binary levels one), vectorised."""
+    first, count = np.asarray(bvh.first, np.int64), np.asarray(bvh.count, np.int64)
+    if not bvh.nodes:
+        return np.zeros((0, 4), np.int64), np.zeros((0, 4), np.int64)
+    if count[0] > 0:
+        return np.array([[0, -1, -1, -1]]), np.full((1, 4), -1)
+    slots, wide = [], []
+    frontier, total = np.array([0]), 1
+    while frontier.size:
+        pair = np.stack([first[frontier], first[frontier] + 1], axis=1).reshape(-1)
+        inner = count[pair] == 0
+        grand = np.where(inner[:, None], np.stack([first[pair], first[pair] + 1], axis=1),
+                         np.stack([pair, np.full_like(pair, -1)], axis=1))
+        level = grand.reshape(-1, 4)
+        level = np.take_along_axis(level, np.argsort(level < 0, axis=1, kind="stable"), axis=1)  # unused last
+        internal = (level >= 0) & (count[np.maximum(level, 0)] == 0)
+        ids = np.full(level.shape, -1)
+        ids[internal] = total + np.arange(internal.sum())
+        total += int(internal.sum())
+        slots.append(level)
+        wide.append(ids)
+        frontier = level[internal]
+    return np.concatenate(slots), np.concatenate(wide)
+
+
+def _stack_need(bvh: BVH, slots: np.ndarray, wide: np.ndarray, leaf_push: bool = False) -> int:
+    """Traversal stack entries a ray may hold inside this tree: along a path, a wide node
+    pushes all its hit children but the one it walks into; with ``leaf_push`` (the top
+    level) a leaf pushes its copies."""
+    if not len(slots):
+        return 0
+    leaf = (slots >= 0) & (wide < 0)
+    below = np.where(leaf, np.asarray(bvh.count)[np.maximum(slots, 0)] if leaf_push else 0, 0).astype(np.int64)
+    levels, a, b = [], 0, 1             # wide nodes are numbered level by level
+    while a < b:
+        levels.append((a, b))
+        a, b = b, max(b, int(wide[a:b].max()) + 1)
+    need = np.zeros(len(slots) + 1, np.int64)         # need[-1]: 0, for a slot with no wide node
+    for a, b in reversed(levels):
+        deepest = np.maximum(below[a:b], need[wide[a:b]]).max(axis=1)
+        need[a:b] = (slots[a:b] >= 0).sum(axis=1) - 1 + deepest
+    return int(need[0])
+
+
+def _node_words(bvh: BVH, origin, slots: np.ndarray, wide: np.ndarray) -> np.ndarray:
+    """(w, 28) float32, NODE_VEC4 vec4 a wide node: its children's boxes by coordinate (lo x,
+    lo y, lo z, hi x, hi y, hi z of the four slots; float32 rounded outward relative to
+    ``origin``), then the four references as int bits: a wide node's index, a leaf's
+    -1 - (offset << LEAF_COUNT_BITS | count), -1 for an unused slot."""
     lo, hi = float32_boxes(bvh, origin)
-    words = np.empty((bvh.nodes, 8), np.float32)
-    words[:, 0:3], words[:, 4:7] = lo, hi
-    words[:, 3] = np.asarray(bvh.first, np.int32).view(np.float32)
-    words[:, 7] = np.asarray(bvh.count, np.int32).view(np.float32)
-    return words
+    used = slots >= 0
+    s = np.maximum(slots, 0)
+    words = np.zeros((len(slots), NODE_VEC4, 4), np.float32)
+    for axis in range(3):
+        words[:, axis] = np.where(used, lo[s, axis], 0.0)
+        words[:, 3 + axis] = np.where(used, hi[s, axis], 0.0)
+    first, count = np.asarray(bvh.first, np.int64)[s], np.asarray(bvh.count, np.int64)[s]
+    if bvh.nodes and (count.max() >= 1 << LEAF_COUNT_BITS or first.max() >= 1 << (31 - LEAF_COUNT_BITS)):
+        raise PlantgenError(f"BVH leaves too large for the GPU's node references (at most "
+                            f"{(1 << LEAF_COUNT_BITS) - 1} primitives a leaf, {1 << (31 - LEAF_COUNT_BITS):,} in all)")
+    ref = np.where(wide >= 0, wide, -1 - ((first << LEAF_COUNT_BITS) | count))
+    words[:, 6] = np.where(used, ref, _EMPTY).astype(np.int32).view(np.float32)
+    return words.reshape(len(slots), 4 * NODE_VEC4)
 
 
 def _triangle_words(triangles, origin) -> np.ndarray:
@@ -120,10 +194,6 @@ def _triangle_words(triangles, origin) -> np.ndarray:
     words[:, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
     words[:, 4:7], words[:, 8:11] = e1, e2
     return words
-
-
-def _depth(bvh: BVH) -> int:
-    return bvh.depth() if bvh.nodes else 0
 
 
 def _is_similarity(matrices) -> bool:
@@ -192,9 +262,11 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     two_level = top is not None
     if not two_level and len(plants) != 1:
         raise PlantgenError("upload_bvh: one plant without a top level")
-    stack = max((_depth(p.bvh) for p in plants), default=0)
+    trees = [(p.bvh, *wide_nodes(p.bvh)) for p in plants]
+    stack = max((_stack_need(*t) for t in trees), default=0)
     if two_level:
-        stack += _depth(top) + int(np.max(top.count, initial=0))
+        top_tree = (top, *wide_nodes(top))
+        stack += _stack_need(*top_tree, leaf_push=True)
     if stack > BVH_STACK:
         raise PlantgenError(f"BVH too deep for the GPU traversal's stack ({stack} > {BVH_STACK} entries)")
     if origin is None:
@@ -206,16 +278,16 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
                for p in plants]
     nodes, prims, rows, tris, offsets = [], [], [], [], []
     counts = np.zeros(4, np.int64)
-    for p, c in zip(plants, centres, strict=True):
+    for p, c, tree in zip(plants, centres, trees, strict=True):
         offsets.append([*counts, p.rows, 0, 0, 0])
-        nodes.append(_node_words(p.bvh, c))
+        nodes.append(_node_words(p.bvh, c, *tree[1:]))
         prims.append(np.asarray(p.bvh.prims, np.int32))
         rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
         tris.append(_triangle_words(p.triangles, c))
-        counts += [p.bvh.nodes, len(p.bvh.prims), p.rows, len(tris[-1])]
+        counts += [len(nodes[-1]), len(p.bvh.prims), p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
-        nodes.append(_node_words(top, origin))
+        nodes.append(_node_words(top, origin, *top_tree[1:]))
     arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
               np.asarray(offsets, np.int32)]
     copies, affine, copy_ids = 0, False, None
@@ -302,7 +374,8 @@ _TARGETS_KEPT = 2
 
 def target_bvh(target, ctx=None) -> GpuBvh:
     """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
-    triangles, its ``bvh``, relative to its root box's centre) or of a
+    triangles, a BVH over its boxes with leaves of GPU_LEAF_SIZE, relative to its root
+    box's centre) or of a
     :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
     over its copies); the last few targets stay uploaded."""
     for i, (t, gpu) in enumerate(_targets):
@@ -312,8 +385,8 @@ def target_bvh(target, ctx=None) -> GpuBvh:
     if ctx is None:
         from .context import gl_context
         ctx = gl_context()
-    def plant(t):
-        return GpuPlant(t.frusta if t.rows else None, t.triangles, t.bvh)
+    def plant(t):        # its own tree with the GPU's leaves (the copies' boxes stay: the same root)
+        return GpuPlant(t.frusta if t.rows else None, t.triangles, build_bvh(t.lo, t.hi, leaf_size=GPU_LEAF_SIZE))
 
     if hasattr(target, "targets"):        # a SceneTarget: two levels
         scene = target.bvh
