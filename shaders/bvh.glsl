@@ -42,7 +42,7 @@
 
 // Bindings 3..8 (plantgen.gl.trace.BVH_BINDING; literals: GLSL 4.30 takes no expression).
 #ifndef BVH_STACK
-#define BVH_STACK 64
+#define BVH_STACK 96
 #endif
 
 layout(std430, binding = 3) readonly buffer BvhNodes { vec4 bvh_nodes[]; };

@@ -54,7 +54,7 @@ TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
 BVH_BINDING = 3
 #: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
-BVH_STACK = 64
+BVH_STACK = 96
 #: GPU bytes of one copy's map and plant index in an instanced scene whose copies are all
 #: similarities that keep handedness (a scaled quaternion, the offset, the plant).
 COPY_BYTES = 32
