@@ -434,7 +434,7 @@ def test_wide_nodes_hold_every_primitive_once(n):
     float32 box, and packs each leaf's offset and count into its reference; the stack a
     walk needs is what the bound says."""
     from plantgen.geometry.bvh import float32_boxes
-    from plantgen.gl.trace import LEAF_COUNT_BITS, NODE_VEC4, _node_words, _stack_need, wide_nodes
+    from plantgen.gl.trace import LEAF_COUNT_BITS, NODE_VEC4, node_words, stack_need, wide_nodes
 
     rng = np.random.default_rng(n)
     lo = rng.uniform(-5, 5, (n, 3))
@@ -446,7 +446,7 @@ def test_wide_nodes_hold_every_primitive_once(n):
     assert np.sort(prims).tolist() == list(range(n))
     assert sorted(wide[wide >= 0].tolist()) == list(range(1, len(slots)))
     assert ((wide >= 0) == (used & (bvh.count[np.maximum(slots, 0)] == 0))).all()
-    words = _node_words(bvh, np.zeros(3), slots, wide).reshape(-1, NODE_VEC4, 4)
+    words = node_words(bvh, np.zeros(3), slots, wide).reshape(-1, NODE_VEC4, 4)
     f_lo, f_hi = float32_boxes(bvh)
     s = np.maximum(slots, 0)
     assert (np.moveaxis(words[:, 0:3], 1, 2)[used] == f_lo[s][used]).all()
@@ -460,4 +460,4 @@ def test_wide_nodes_hold_every_primitive_once(n):
     def need(w):
         kids = wide[w][wide[w] >= 0]
         return used[w].sum() - 1 + max((need(k) for k in kids), default=0)
-    assert _stack_need(bvh, slots, wide) == (need(0) if len(slots) else 0)
+    assert stack_need(bvh, slots, wide) == (need(0) if len(slots) else 0)

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen.lsystem import DEFAULT_MAX_MODULES, DerivationLimit, derive, interpret, parse_grammar
-from plantgen.lsystem.derive import _context_neighbours
+from plantgen.lsystem.derive import context_neighbours
 from plantgen.lsystem.grammar import GrammarError
 
 
@@ -215,7 +215,7 @@ def test_left_context_neighbours_follow_the_branching_structure(chars, ignore):
             seq.append(c)
     seq = "".join(seq) + "]" * depth
     symbols = ("A", "B", "+", "[", "]")
-    left, _ = _context_neighbours(np.array([symbols.index(c) for c in seq], dtype=np.int32), symbols,
+    left, _ = context_neighbours(np.array([symbols.index(c) for c in seq], dtype=np.int32), symbols,
                                   frozenset(ignore))
     assert list(left) == [-1 if c in "[]" else _left_by_walking(seq, i, ignore) for i, c in enumerate(seq)]
 

@@ -41,7 +41,8 @@ from .records import RECORD_FLOATS, pack_records
 from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
-           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE"]
+           "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
+           "node_words", "stack_need", "wide_nodes"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
 #: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
@@ -145,7 +146,7 @@ def wide_nodes(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(slots), np.concatenate(wide)
 
 
-def _stack_need(bvh: BVH, slots: np.ndarray, wide: np.ndarray, leaf_push: bool = False) -> int:
+def stack_need(bvh: BVH, slots: np.ndarray, wide: np.ndarray, leaf_push: bool = False) -> int:
     """Traversal stack entries a ray may hold inside this tree: along a path, a wide node
     pushes all its hit children but the one it walks into; with ``leaf_push`` (the top
     level) a leaf pushes its copies."""
@@ -164,7 +165,7 @@ def _stack_need(bvh: BVH, slots: np.ndarray, wide: np.ndarray, leaf_push: bool =
     return int(need[0])
 
 
-def _node_words(bvh: BVH, origin, slots: np.ndarray, wide: np.ndarray) -> np.ndarray:
+def node_words(bvh: BVH, origin, slots: np.ndarray, wide: np.ndarray) -> np.ndarray:
     """(w, 28) float32, NODE_VEC4 vec4 a wide node: its children's boxes by coordinate (lo x,
     lo y, lo z, hi x, hi y, hi z of the four slots; float32 rounded outward relative to
     ``origin``), then the four references as int bits: a wide node's index, a leaf's
@@ -263,10 +264,10 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     if not two_level and len(plants) != 1:
         raise PlantgenError("upload_bvh: one plant without a top level")
     trees = [(p.bvh, *wide_nodes(p.bvh)) for p in plants]
-    stack = max((_stack_need(*t) for t in trees), default=0)
+    stack = max((stack_need(*t) for t in trees), default=0)
     if two_level:
         top_tree = (top, *wide_nodes(top))
-        stack += _stack_need(*top_tree, leaf_push=True)
+        stack += stack_need(*top_tree, leaf_push=True)
     if stack > BVH_STACK:
         raise PlantgenError(f"BVH too deep for the GPU traversal's stack ({stack} > {BVH_STACK} entries)")
     if origin is None:
@@ -280,14 +281,14 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     counts = np.zeros(4, np.int64)
     for p, c, tree in zip(plants, centres, trees, strict=True):
         offsets.append([*counts, p.rows, 0, 0, 0])
-        nodes.append(_node_words(p.bvh, c, *tree[1:]))
+        nodes.append(node_words(p.bvh, c, *tree[1:]))
         prims.append(np.asarray(p.bvh.prims, np.int32))
         rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
         tris.append(_triangle_words(p.triangles, c))
         counts += [len(nodes[-1]), len(p.bvh.prims), p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
-        nodes.append(_node_words(top, origin, *top_tree[1:]))
+        nodes.append(node_words(top, origin, *top_tree[1:]))
     arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
               np.asarray(offsets, np.int32)]
     copies, affine, copy_ids = 0, False, None

@@ -56,7 +56,7 @@ from .strings import ModuleString, module_bytes
 from .symbols import Action, by_action
 
 __all__ = ["DEFAULT_MAX_MODULES", "Derivation", "DerivationLimit", "ModuleString", "apply_interpretation",
-           "cut_branches", "derive", "module_bytes"]
+           "context_neighbours", "cut_branches", "derive", "module_bytes"]
 
 DEFAULT_MAX_MODULES = default_limits.max_modules
 
@@ -98,7 +98,7 @@ def _instantiate(templates: tuple[ModuleTemplate, ...], env: dict, rng, n: int, 
     return sym, nparam, params
 
 
-def _context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: frozenset[str]):
+def context_neighbours(ms_sym: np.ndarray, symbols: tuple[str, ...], ignore: frozenset[str]):
     """What context matching needs of a string: each module's left context neighbour (or
     -1), and the jumps :func:`_walk` takes rightwards.
 
@@ -407,7 +407,7 @@ def _step(grammar: Grammar, groups: list[list[Rule]], string, rng, codes: dict, 
     (:func:`_sequential`, which runs each ``set`` where it applies)."""
     rules = [r for alts in groups for r in alts]
     contexts = any(r.left or r.right or r.more or r.new_left for r in rules)
-    neighbours = _context_neighbours(string[0], grammar.symbols, grammar.ignore) if contexts else None
+    neighbours = context_neighbours(string[0], grammar.symbols, grammar.ignore) if contexts else None
     where = f"{grammar.path}: {what} {step + 1}"
 
     def check(total: int) -> None:
