@@ -183,6 +183,20 @@ def test_a_turtle_module_carrying_more_parameters_turns_as_its_first_says(tmp_pa
     assert angles == pytest.approx([50.0, 60.0])
 
 
+def test_an_n_step_path_draws_its_whole_length_and_grows_as_a_module(tmp_path):
+    """``nF(length, dx)`` draws a straight path of ``length`` (one segment: its steps differ
+    from it only under a guide); a rule may rewrite it like any module."""
+    path = tmp_path / "n.lpy"
+    path.write_text("Axiom: nF(3, 0.5) +(90) nF(2, 0.25)\nderivation length: 1\nproduction:\n"
+                    "nF(l, d) : if l < 2.5: produce nF(l * 2, d)\nendlsystem\n")
+    skel = grow(path)
+    length = np.linalg.norm(skel.end - skel.start, axis=1)
+    assert length == pytest.approx([3.0, 4.0], abs=1e-12)
+    assert np.dot(skel.end[0] - skel.start[0], skel.end[1] - skel.start[1]) == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(skel.start[1], skel.end[0], atol=1e-12)
+    assert not any("nF" in w for w in read_lpy(path).warnings)
+
+
 def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
     """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
     module: the rule becomes three alternatives of probability 1/3, each with n fixed."""

@@ -108,6 +108,11 @@ UNDRAWN = {
     "TextureTranslation": "texture", "TextureRotation": "texture", "TextureTransformation": "texture",
     "surface": "named surface",
 }
+#: L-Py drawing modules plantgen draws through an interpretation rule of its own: per
+#: module, its least parameters and the plantgen string its parameters p0, p1, ... give.
+#: ``nF(length, dx)``: a path of ``length`` in steps of ``dx``, drawn as one segment of the
+#: whole length (the steps differ from it only under a guide, which plantgen does not draw).
+DRAWN_AS = {"nF": (2, "F(p0)")}
 #: L-Py constructs refused wherever they appear, with why.
 REFUSED_MODULES = {
     "@g": "PlantGL shapes (@g) are not supported", "PglShape": "PlantGL shapes (PglShape) are not supported",
@@ -1099,7 +1104,8 @@ class _Reader:
                 raise self.refuse(line, REFUSED_MODULES[name])
             if name in SILENT:
                 continue
-            if name in UNDRAWN:
+            if name in UNDRAWN and not (name in DRAWN_AS and args is not None
+                                        and len(args) >= DRAWN_AS[name][0]):
                 self.dropped[name] = self.dropped.get(name, 0) + 1
                 continue
             if name in TROPISM:
@@ -1732,6 +1738,14 @@ class _Reader:
             drawn = (["leaf"] if sym == "~" else []) + params[:keep]
             data.setdefault("interpretation", []).append(
                 f"{names[name]}({', '.join(params)}) -> {sym}" + (f"({', '.join(drawn)})" if drawn else ""))
+        drawn_as = {}
+        for m in everything:
+            if m.name in DRAWN_AS:
+                drawn_as.setdefault(m.name, set()).add(len(m.args))
+        for name, counts in drawn_as.items():   # an L-Py drawing module plantgen draws its own way
+            for n in sorted(counts):
+                params = ", ".join(f"p{i}" for i in range(n))
+                data.setdefault("interpretation", []).append(f"{names[name]}({params}) -> {DRAWN_AS[name][1]}")
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
