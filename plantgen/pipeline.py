@@ -430,7 +430,7 @@ def check_finite_frusta(frusta: Frusta, source) -> Frusta:
         for name in ROW_FIELDS:
             values = getattr(frusta, name)
             if values.dtype.kind == "f":
-                bad |= ~np.isfinite(values).reshape(len(frusta), -1).all(axis=1)
+                bad |= ~np.isfinite(values).reshape(len(frusta), -1).all(axis=1) if len(frusta) else bad
     if bad.any():
         row = int(np.argmax(bad))
         raise PlantgenError(f"{source}: the skin of segment {int(frusta.segment[row])} is not finite "
@@ -534,8 +534,8 @@ def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=Non
     if progress is not None:
         progress("skin", 0, None)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
-    if grown.segments == 0:
-        raise PlantgenError(f"{input_path}: nothing to render (the skeleton has no segments)")
+    if grown.segments == 0 and model_leaves(grown) is None:
+        raise PlantgenError(f"{input_path}: nothing to render (no segments and no polygons)")
     placed = grown.scene is not None and "lod" in chosen and "animation" not in chosen
     if budget is not None:
         budget(distinct_segments(grown.scene) if placed else grown.segments, tuple(chosen))
@@ -992,7 +992,9 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
     plant once), 16·4^m triangles each at the format's bytes; and for a glTF or USD scene
     framed automatically, the skin of every placed copy its camera is framed on."""
     if grown.segments == 0:
-        raise ExportError(f"{input_path}: the model has no segments")
+        raise ExportError(f"{input_path}: the model has no segments" + (
+            " (its polygons alone are not exported; plantgen render and scan draw them)"
+            if model_leaves(grown) is not None else ""))
     if fmt.kind != "mesh":
         return
     each = instancing == "off" or not fmt.instancing or grown.scene is None

@@ -106,6 +106,28 @@ def test_an_lpy_model_renders(tmp_path):
     assert pixels.std() > 5            # the tree, not an empty frame
 
 
+@pytest.mark.parametrize("method", ["rc", "rt"])
+def test_a_model_of_polygons_alone_grows_renders_and_is_refused_by_export_in_one_line(tmp_path, method):
+    """A turtle drawing that fills a square and draws no segment: grow writes its (empty)
+    skeleton and says the polygons are not in it, render draws the square, export (a mesh
+    of the skin) says in one line why it has nothing to write."""
+    from PIL import Image
+
+    path = tmp_path / "square.lpy"
+    path.write_text("Axiom: {.f(1)+(90).f(1)+(90).f(1)+(90).f(1).}\nderivation length: 0\nproduction:\nendlsystem\n")
+    code, out, err = run_cli("grow", path, "-o", tmp_path / "square.npz")
+    assert code == 0, err
+    assert "0 segments" in out and "1 leaf polygons" in out and "not written" in err
+    png = tmp_path / "square.png"
+    code, _, err = run_cli("render", path, "-o", png, "--size", "64x64", "--method", method)
+    assert code == 0, err
+    pixels = np.asarray(Image.open(png).convert("L"), dtype=float)
+    assert pixels.std() > 5            # the square, not an empty frame
+    code, _, err = run_cli("export", path, "-o", tmp_path / "square.glb")
+    assert code == 2 and "polygons alone" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "square.glb").exists()
+
+
 def test_select_and_choose_evaluate_only_the_chosen_value():
     ctx = EvalContext({"x": np.array([-1.0, 4.0])}, np.random.default_rng(0), 2)
     assert compile_expr("select(x > 0, sqrt(x), 0)", {"x"})(ctx).tolist() == [0.0, 2.0]
