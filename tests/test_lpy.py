@@ -219,6 +219,57 @@ def test_an_n_step_path_draws_its_whole_length_and_grows_as_a_module(tmp_path):
     assert not any("nF" in w for w in read_lpy(path).warnings)
 
 
+def _rotated(v, axis, degrees):
+    """``v`` turned right-handedly about the unit ``axis`` (Rodrigues)."""
+    a = np.radians(degrees)
+    return v * np.cos(a) + np.cross(axis, v) * np.sin(a) + axis * np.dot(axis, v) * (1 - np.cos(a))
+
+
+def test_a_frame_draws_the_turtles_three_axes_and_leaves_it_unchanged(tmp_path):
+    """``Frame(size)`` draws H, L and U from the turtle, each one segment of ``size``
+    (``Frame`` alone: size 1); the turtle goes on as before it."""
+    H, L, U = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    H, L = _rotated(H, U, 30), _rotated(L, U, 30)          # + turns H towards L about U
+    H, U = _rotated(H, L, 20), _rotated(U, L, 20)          # & pitches H down about L
+    L, U = _rotated(L, H, 15), _rotated(U, H, 15)          # L-Py's / rolls L towards U about H
+    for size, text in ((2.0, "Frame(2)"), (1.0, "Frame")):
+        path = tmp_path / "frame.lpy"
+        path.write_text(f"Axiom: F(1) +(30) &(20) /(15) {text} F(1)\nderivation length: 0\nendlsystem\n")
+        skel = grow(path)
+        assert len(skel.start) == 5
+        assert np.allclose(skel.start[1:4], [0.0, 1.0, 0.0], atol=1e-12)
+        for i, axis in zip((1, 2, 3), (H, L, U), strict=True):
+            assert np.allclose(skel.end[i] - skel.start[i], size * axis, atol=1e-9)
+        assert skel.r_start[1:4] == pytest.approx([size / 20] * 3)
+        assert np.allclose(skel.start[4], skel.end[0], atol=1e-12)
+        assert np.allclose(skel.end[4] - skel.start[4], H, atol=1e-9)
+        assert skel.r_start[4] == pytest.approx(skel.r_end[0])
+        assert not any("Frame" in w for w in read_lpy(path).warnings)
+
+
+def test_a_sphere_is_a_chain_of_frusta_on_it_and_leaves_the_turtle_unchanged(tmp_path):
+    """``@O(r)`` draws a chain of frusta along H about the turtle, 2r long, its rims on the
+    sphere (radius 0 at both poles); the turtle goes on from the centre."""
+    r = 0.5
+    path = tmp_path / "sphere.lpy"
+    path.write_text(f"Axiom: F(1) +(40) @O({r}) F(1)\nderivation length: 0\nendlsystem\n")
+    skel = grow(path)
+    centre, H = np.array([0.0, 1.0, 0.0]), np.array([-np.sin(np.radians(40)), np.cos(np.radians(40)), 0.0])
+    chain = slice(1, len(skel.start) - 1)
+    start, end = skel.start[chain], skel.end[chain]
+    assert len(start) >= 4
+    assert np.allclose(start[0], centre - r * H, atol=1e-12) and np.allclose(end[-1], centre + r * H, atol=1e-12)
+    assert np.allclose(start[1:], end[:-1], atol=1e-12)
+    for points, radii in ((start, skel.r_start[chain]), (end, skel.r_end[chain])):
+        z = (points - centre) @ H
+        assert np.all(np.linalg.norm(points - centre, axis=1) <= r + 1e-9)
+        assert np.allclose(z ** 2 + radii ** 2, r ** 2, atol=1e-9)      # each rim lies on the sphere
+    assert skel.r_start[chain][0] == 0.0 and skel.r_end[chain][-1] == pytest.approx(0.0, abs=1e-12)
+    assert skel.r_end[chain].max() == pytest.approx(r, rel=0.03)
+    assert np.allclose(skel.start[-1], centre, atol=1e-12) and np.allclose(skel.end[-1] - centre, H, atol=1e-9)
+    assert not any("@O" in w for w in read_lpy(path).warnings)
+
+
 def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
     """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
     module: the rule becomes three alternatives of probability 1/3, each with n fixed."""

@@ -112,7 +112,29 @@ UNDRAWN = {
 #: module, its least parameters and the plantgen string its parameters p0, p1, ... give.
 #: ``nF(length, dx)``: a path of ``length`` in steps of ``dx``, drawn as one segment of the
 #: whole length (the steps differ from it only under a guide, which plantgen does not draw).
-DRAWN_AS = {"nF": (2, "F(p0)")}
+#: ``Frame(size)`` (L-Py's default size 1): three axes of length ``size`` and radius
+#: ``size/20`` along H, L and U, each in a branch. ``@O(r)`` (``Sphere``): a chain of
+#: :data:`SPHERE_SEGMENTS` frusta along H from ``-r`` to ``r`` about the turtle, their end
+#: radii ``sqrt(r² - z²)`` (on the sphere, 0 at both poles), in a branch.
+DRAWN_AS = {"nF": (2, lambda n: "F(p0)"),
+            "Frame": (1, lambda n: _frame("p0")),
+            "@O": (1, lambda n: _sphere("p0")), "Sphere": (1, lambda n: _sphere("p0"))}
+#: L-Py's arguments for a drawing module written without any.
+DEFAULT_ARGS = {"Frame": ["1"]}
+#: Frusta approximating one sphere ``@O(r)``.
+SPHERE_SEGMENTS = 6
+
+
+def _frame(size: str) -> str:
+    axis = f"!(({size}) / 20) F({size})"
+    return f"[{axis}][+(90) {axis}][^(90) {axis}]"
+
+
+def _sphere(r: str) -> str:
+    k = SPHERE_SEGMENTS
+    steps = " ".join(f"F(2 * ({r}) / {k}, ({r}) * {float(np.sqrt(max(0.0, 1 - (-1 + 2 * (i + 1) / k) ** 2)))!r})"
+                     for i in range(k))
+    return f"[f(-({r})) !(0) {steps}]"
 #: L-Py constructs refused wherever they appear, with why.
 REFUSED_MODULES = {
     "@g": "PlantGL shapes (@g) are not supported", "PglShape": "PlantGL shapes (PglShape) are not supported",
@@ -1104,8 +1126,9 @@ class _Reader:
                 raise self.refuse(line, REFUSED_MODULES[name])
             if name in SILENT:
                 continue
-            if name in UNDRAWN and not (name in DRAWN_AS and args is not None
-                                        and len(args) >= DRAWN_AS[name][0]):
+            if not args and not pattern and name in DEFAULT_ARGS:
+                args = DEFAULT_ARGS[name]
+            if name in UNDRAWN and not (name in DRAWN_AS and len(args or ()) >= DRAWN_AS[name][0]):
                 self.dropped[name] = self.dropped.get(name, 0) + 1
                 continue
             if name in TROPISM:
@@ -1745,7 +1768,8 @@ class _Reader:
         for name, counts in drawn_as.items():   # an L-Py drawing module plantgen draws its own way
             for n in sorted(counts):
                 params = ", ".join(f"p{i}" for i in range(n))
-                data.setdefault("interpretation", []).append(f"{names[name]}({params}) -> {DRAWN_AS[name][1]}")
+                data.setdefault("interpretation", []).append(
+                    f"{names[name]}({params}) -> {DRAWN_AS[name][1](n)}")
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
