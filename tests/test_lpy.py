@@ -270,6 +270,18 @@ def test_a_sphere_is_a_chain_of_frusta_on_it_and_leaves_the_turtle_unchanged(tmp
     assert not any("@O" in w for w in read_lpy(path).warnings)
 
 
+def test_a_frame_and_a_sphere_produced_by_an_interpretation_rule_are_drawn(tmp_path):
+    """An interpretation rule producing ``Frame`` and ``@O`` draws them too: the reader's own
+    rules for them run one pass after the file's."""
+    path = tmp_path / "interp.lpy"
+    path.write_text("module A\nAxiom: F(1) A\nderivation length: 1\nproduction:\ninterpretation:\n"
+                    "A --> Frame(2) @O(0.5)\nendlsystem\n")
+    skel = grow(path)
+    assert len(skel.start) > 1 + 3 + 3
+    assert np.linalg.norm(skel.end - skel.start, axis=1)[1:4] == pytest.approx([2.0] * 3)
+    assert skel.r_end.max() == pytest.approx(0.5)
+
+
 def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
     """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
     module: the rule becomes three alternatives of probability 1/3, each with n fixed."""

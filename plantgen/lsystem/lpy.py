@@ -1765,6 +1765,8 @@ class _Reader:
         for m in everything:
             if m.name in DRAWN_AS:
                 drawn_as.setdefault(m.name, set()).add(len(m.args))
+        if drawn_as and "interpretation_depth" in data:    # the file's interpretation rules may produce one
+            data["interpretation_depth"] += 1
         for name, counts in drawn_as.items():   # an L-Py drawing module plantgen draws its own way
             for n in sorted(counts):
                 params = ", ".join(f"p{i}" for i in range(n))
