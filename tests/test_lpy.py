@@ -282,6 +282,20 @@ def test_a_frame_and_a_sphere_produced_by_an_interpretation_rule_are_drawn(tmp_p
     assert skel.r_end.max() == pytest.approx(0.5)
 
 
+def test_undeclared_letters_before_a_rule_heads_parameters_are_modules_of_one_letter(tmp_path):
+    """L-Py reads undeclared names at their minimal length: ``IB(x)``, where ``B(x)`` heads a
+    rule and ``IB`` none, is the internode I then B(x); a declared name stays whole."""
+    path = tmp_path / "ib.lpy"
+    path.write_text("Axiom: B(2)\nderivation length: 2\nproduction:\nB(x) --> IB(x - 1)\n"
+                    "homomorphism:\nI --> F(1)\nendlsystem\n")
+    assert len(grow(path).start) == 2                   # two steps: two internodes drawn
+    declared = tmp_path / "declared.lpy"
+    declared.write_text("module IB\nAxiom: B(2)\nderivation length: 2\nproduction:\nB(x) --> IB(x - 1)\n"
+                        "homomorphism:\nI --> F(1)\nIB(x) --> F(3)\nendlsystem\n")
+    skel = grow(declared)
+    assert np.linalg.norm(skel.end - skel.start, axis=1) == pytest.approx([3.0])
+
+
 def test_randint_and_choice_in_a_rule_are_stochastic_alternatives():
     """``n = randint(2, 4)`` read twice (the loop's count and an angle) is one draw per
     module: the rule becomes three alternatives of probability 1/3, each with n fixed."""

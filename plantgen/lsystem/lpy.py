@@ -273,6 +273,10 @@ class _Reader:
         self.lazy: dict[str, str] = {}              # name -> why it cannot be used
         self.tables: dict[str, list[str]] = {}      # a module-level list of numbers -> their texts
         self.declared: set[str] = set()
+        # names that start a line as a rule's head would (name then '(', '-->' or ':'): an
+        # undeclared word before '(' whose last letter is one of them and that is not one
+        # itself is read as letters, L-Py's modules of minimal length ('IB(x)': I, B(x))
+        self.heads = {m.group(1) for m in re.finditer(r"^[ \t]*([A-Za-z_]\w*)[ \t]*(?:\(|-->|:)", text, re.M)}
         self.seed = 0
         self.iterations = 1
         self.work = 0
@@ -1201,7 +1205,11 @@ class _Reader:
                 k = j
                 while k < n and text[k] == " ":
                     k += 1
-                if word in self.declared or word in _NAMED or (k < n and text[k] == "(") or len(word) == 1:
+                letters = (k < n and text[k] == "(" and len(word) > 1 and word not in self.heads
+                           and word[-1] in self.heads and word not in self.declared and word not in _NAMED)
+                if letters:
+                    name, i = word[0], i + 1
+                elif word in self.declared or word in _NAMED or (k < n and text[k] == "(") or len(word) == 1:
                     name, i = word, j
                 else:
                     name = next((word[:m] for m in range(len(word), 1, -1)
