@@ -13,7 +13,7 @@ from ..geometry.frames import UP_AXES
 from ..geometry.swc import write_swc
 from ..lsystem.derive import DEFAULT_MAX_MODULES
 from ..metrics import geometry_bounds
-from ..pipeline import grow_file
+from ..pipeline import grow_file, model_leaves
 from .options import (
     allow_path_opt,
     define_values,
@@ -72,7 +72,7 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
     for line in result.warnings:     # never silenced by --quiet: a symbol not drawn is news
         click.echo(line, err=True)
     skel = result.skeleton
-    if len(skel) == 0 and (result.polygons is None or len(result.polygons) == 0):
+    if len(skel) == 0 and model_leaves(result) is None:
         raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")
     written = _write_outputs(skel, output, formats, up)
     leaves = result.polygons

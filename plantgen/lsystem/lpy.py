@@ -108,17 +108,6 @@ UNDRAWN = {
     "TextureTranslation": "texture", "TextureRotation": "texture", "TextureTransformation": "texture",
     "surface": "named surface",
 }
-#: L-Py drawing modules plantgen draws through an interpretation rule of its own: per
-#: module, its least parameters and the plantgen string its parameters p0, p1, ... give.
-#: ``nF(length, dx)``: a path of ``length`` in steps of ``dx``, drawn as one segment of the
-#: whole length (the steps differ from it only under a guide, which plantgen does not draw).
-#: ``Frame(size)`` (L-Py's default size 1): three axes of length ``size`` and radius
-#: ``size/20`` along H, L and U, each in a branch. ``@O(r)`` (``Sphere``): a chain of
-#: :data:`SPHERE_SEGMENTS` frusta along H from ``-r`` to ``r`` about the turtle, their end
-#: radii ``sqrt(r² - z²)`` (on the sphere, 0 at both poles), in a branch.
-DRAWN_AS = {"nF": (2, lambda n: "F(p0)"),
-            "Frame": (1, lambda n: _frame("p0")),
-            "@O": (1, lambda n: _sphere("p0")), "Sphere": (1, lambda n: _sphere("p0"))}
 #: L-Py's arguments for a drawing module written without any.
 DEFAULT_ARGS = {"Frame": ["1"]}
 #: Frusta approximating one sphere ``@O(r)``.
@@ -135,6 +124,18 @@ def _sphere(r: str) -> str:
     steps = " ".join(f"F(2 * ({r}) / {k}, ({r}) * {float(np.sqrt(max(0.0, 1 - (-1 + 2 * (i + 1) / k) ** 2)))!r})"
                      for i in range(k))
     return f"[f(-({r})) !(0) {steps}]"
+
+
+#: L-Py drawing modules plantgen draws through an interpretation rule of its own: per
+#: module, its least parameters and the plantgen string its parameters p0, p1, ... give.
+#: ``nF(length, dx)``: a path of ``length`` in steps of ``dx``, drawn as one segment of the
+#: whole length (the steps differ from it only under a guide, which plantgen does not draw).
+#: ``Frame(size)`` (L-Py's default size 1): three axes of length ``size`` and radius
+#: ``size/20`` along H, L and U, each in a branch. ``@O(r)`` (``Sphere``): a chain of
+#: :data:`SPHERE_SEGMENTS` frusta along H from ``-r`` to ``r`` about the turtle, their end
+#: radii ``sqrt(r² - z²)`` (on the sphere, 0 at both poles), in a branch.
+DRAWN_AS = {"nF": (2, "F(p0)"), "Frame": (1, _frame("p0")), "@O": (1, _sphere("p0")),
+            "Sphere": (1, _sphere("p0"))}
 #: L-Py constructs refused wherever they appear, with why.
 REFUSED_MODULES = {
     "@g": "PlantGL shapes (@g) are not supported", "PglShape": "PlantGL shapes (PglShape) are not supported",
@@ -1779,7 +1780,7 @@ class _Reader:
             for n in sorted(counts):
                 params = ", ".join(f"p{i}" for i in range(n))
                 data.setdefault("interpretation", []).append(
-                    f"{names[name]}({params}) -> {DRAWN_AS[name][1](n)}")
+                    f"{names[name]}({params}) -> {DRAWN_AS[name][1]}")
         ignore = self._ignore()
         if ignore:
             data["ignore"] = ignore
