@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, build_bvh, float32_boxes
 from ..geometry.frames import similarity_trs
+from ..geometry.frusta import plane_height
 from ..geometry.instances import similarity_parts
 from ..limits import LimitError, hint
 from ..tolerances import tol
@@ -42,7 +43,8 @@ from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
            "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
-           "node_words", "stack_need", "wide_nodes"]
+           "node_words", "stack_need", "wide_nodes", "row_bounds", "ROW_BOUND", "ROW_BOUND_BINDING",
+           "ROW_BOUND_BYTES"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
 #: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
@@ -54,6 +56,14 @@ GPU_LEAF_SIZE = 2
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
 BVH_BINDING = 3
+#: Whether the traversal tests a row's cheap bound before its row test (``BVH_ROW_BOUND``
+#: in ``shaders/bvh.glsl``: the distance of the ray's line from the row's axis segment
+#: against :func:`row_bounds`); a switch for measuring (docs/benchmarks/rt.md), on.
+ROW_BOUND = True
+#: SSBO binding of the rows' bounds (:func:`row_bounds`) in ``shaders/bvh.glsl``.
+ROW_BOUND_BINDING = 9
+#: GPU bytes of one row's bound (beside its 96-byte record).
+ROW_BOUND_BYTES = 4
 #: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
 BVH_STACK = 96
 #: GPU bytes of one copy's map and plant index in an instanced scene whose copies are all
@@ -94,18 +104,24 @@ class GpuBvh:
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
     affine: bool = False     # the copies' maps are full 3x4 maps (not every copy a similarity)
     copy_ids: np.ndarray | None = None   # (copies,) int64: the copy held in each GPU slot
+    bounds: object = None    # the rows' bounds (row_bounds), bound to ROW_BOUND_BINDING
+    row_bound: bool | None = None        # test them (BVH_ROW_BOUND); None: ROW_BOUND
 
     def defines(self) -> dict:
-        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine}
+        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine,
+                "BVH_ROW_BOUND": ROW_BOUND if self.row_bound is None else self.row_bound}
 
     def bind(self) -> None:
         for i, buf in enumerate(self.buffers):
             buf.bind_to_storage_buffer(BVH_BINDING + i)
+        if self.bounds is not None:
+            self.bounds.bind_to_storage_buffer(ROW_BOUND_BINDING)
 
     def release(self) -> None:
-        for buf in self.buffers:
-            buf.release()
-        self.buffers = []
+        for buf in [*self.buffers, self.bounds]:
+            if buf is not None:
+                buf.release()
+        self.buffers, self.bounds = [], None
 
 
 #: Words (vec4) of one node on the GPU: four child boxes by coordinate, their references.
@@ -184,6 +200,71 @@ def node_words(bvh: BVH, origin, slots: np.ndarray, wide: np.ndarray) -> np.ndar
     ref = np.where(wide >= 0, wide, -1 - ((first << LEAF_COUNT_BITS) | count))
     words[:, 6] = np.where(used, ref, _EMPTY).astype(np.int32).view(np.float32)
     return words.reshape(len(slots), 4 * NODE_VEC4)
+
+
+#: Plane rises (n·axis + k·n·e, the generator's approach to a cutting plane) below this
+#: leave a row unbounded for the cheap reject (its bound infinite: never rejected): its
+#: oblique end reaches far along the axis, and float32 rounding of so flat a crossing could
+#: move it further than the bound's margin.
+_BOUND_RISE = 1e-3
+#: The bound's relative widening: float32 rounding of the record against the float64 row
+#: (the shader adds 1e-5 of the row's length for its own rounding).
+_BOUND_WIDEN = 1e-3
+
+
+def row_bounds(frusta, origin) -> np.ndarray:
+    """(n,) float32 per row: the largest distance from its axis segment {C1 + s·axis,
+    0 <= s <= h} of any point of the solid row (the cone grown by its relief shell, between
+    its cutting planes moved out by the GPU's joint slack, relative to ``origin`` as
+    :func:`~plantgen.gl.records.pack_records` packs it), widened by ``_BOUND_WIDEN`` and
+    rounded up; inf where no finite bound holds (a zero-length row, a plane nearly along a
+    generator). A ray whose line passes farther than this from the segment misses the row
+    (``bvh_row_near`` in ``shaders/bvh.glsl``).
+
+    The solid is convex: its extreme points lie where the cone meets a plane, or at the apex
+    of a cone closing to a point inside it. A generator of direction e meets a plane at the
+    height y(x) = (gap - r1·x) / (n·a + k·x) of x = n·e (:func:`plantgen.geometry.frusta.
+    plane_height`), monotone in x, so over every generator the heights lie between its
+    values at x = ±|n_perp|. A point at height y lies at most g(y) = hypot(max(-y, y - h, 0),
+    max(r1 + shell + k·y, 0)) from the segment, convex in y: its largest value over the
+    extreme points' heights is at the lowest or highest of them.
+    """
+    n = len(frusta.base)
+    if n == 0:
+        return np.zeros(0, np.float32)
+    h = np.asarray(frusta.length, np.float64)
+    base_rel = np.asarray(frusta.base, np.float64) - np.asarray(origin, np.float64)
+    slack = tol.joint_slack * 2.0 ** -24 * (np.linalg.norm(base_rel.astype(np.float32), axis=1) + h)
+    r = np.asarray(frusta.r1, np.float64) + frusta.shell
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = (frusta.r2 - frusta.r1) / h
+        ys, ok = [], np.isfinite(k) & (h > 0)
+        inside = np.ones(n, bool)
+        apex = -r / k
+        for plane, sign in ((frusta.plane_lo, -1.0), (frusta.plane_hi, 1.0)):
+            normal = plane[:, :3]
+            gap = plane[:, 3] - np.einsum("ij,ij->i", normal, frusta.base) + sign * slack   # moved out
+            n_axis = np.einsum("ij,ij->i", normal, frusta.axis)
+            n_perp = np.sqrt(np.maximum(1.0 - n_axis ** 2, 0.0))
+            rises = []
+            for x in (-n_perp, n_perp):
+                y, rise = plane_height(gap, n_axis, x, r, k)
+                ys.append(y)
+                rises.append(rise)
+            ok &= (np.abs(rises[0]) > _BOUND_RISE) & (np.abs(rises[1]) > _BOUND_RISE) & (rises[0] * rises[1] > 0)
+            side = n_axis * apex - gap              # the apex's side of the moved plane
+            inside &= np.isfinite(apex) & (sign * side <= 0)
+        y_lo, y_hi = np.minimum.reduce(ys), np.maximum.reduce(ys)
+        y_lo = np.where(inside, np.minimum(y_lo, apex), y_lo)
+        y_hi = np.where(inside, np.maximum(y_hi, apex), y_hi)
+
+        def reach(y):
+            return np.hypot(np.maximum(np.maximum(-y, y - h), 0.0), np.maximum(r + k * y, 0.0))
+
+        bound = np.maximum(reach(y_lo), reach(y_hi)) * (1.0 + _BOUND_WIDEN)
+    bound = np.where(ok & np.isfinite(bound), bound, np.inf)
+    out = bound.astype(np.float32)
+    return np.where(out < bound, np.nextafter(out, np.float32(np.inf)), out).astype(np.float32)
 
 
 def _triangle_words(triangles, origin) -> np.ndarray:
@@ -277,7 +358,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     # each plant's frame: its own root box centre (the world frame's origin with one level)
     centres = [origin if not two_level else (0.5 * (p.bvh.lo[0] + p.bvh.hi[0]) if p.bvh.nodes else np.zeros(3))
                for p in plants]
-    nodes, prims, rows, tris, offsets = [], [], [], [], []
+    nodes, prims, rows, tris, offsets, bounds = [], [], [], [], [], []
     counts = np.zeros(4, np.int64)
     for p, c, tree in zip(plants, centres, trees, strict=True):
         offsets.append([*counts, p.rows, 0, 0, 0])
@@ -285,6 +366,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         prims.append(np.asarray(p.bvh.prims, np.int32))
         rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
         tris.append(_triangle_words(p.triangles, c))
+        bounds.append(row_bounds(p.frusta, c) if p.rows else np.zeros(0, np.float32))
         counts += [len(nodes[-1]), len(p.bvh.prims), p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
@@ -298,7 +380,8 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         words, affine = copy_words(matrices[copy_ids], np.asarray(copy_plant)[copy_ids], centres, origin)
         copies = len(words)
         arrays.append(words)
-    need = sum(a.nbytes for a in arrays)
+    bound_words = np.concatenate(bounds)
+    need = sum(a.nbytes for a in arrays) + bound_words.nbytes
     if max_bytes is not None and need > max_bytes:
         raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
                          f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
@@ -307,6 +390,8 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
         gpu.nbytes += len(data)
+    gpu.bounds = ctx.buffer(bound_words.tobytes() or b"\0" * 16)
+    gpu.nbytes += bound_words.nbytes
     gpu.empty = not (top.nodes if two_level else plants[0].bvh.nodes)
     return gpu
 
