@@ -145,10 +145,18 @@ bool bvh_row_near(vec4 r0, vec4 r1, float bound, vec3 o, vec3 d, out float t_shi
 }
 #endif
 
+#if defined BVH_PRIMS_TWICE
+uniform float bvh_bench_zero;    // 0: the bench's second test of each primitive is the first's
+#define bvh_prim_hit bvh_prim_hit_once
+#endif
+
 // Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
 float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
                    float footprint_scale, bool triangles, out int face) {
     face = FACE_CONE;
+#if defined BVH_NO_PRIMS
+    return NO_HIT;       // the bench's node steps alone (nothing is hit, so more nodes are walked)
+#endif
     int rows = bvh_plants[2 * plant + 1].x;
     if (prim < rows) {
 #if defined BVH_COUNT
@@ -158,13 +166,16 @@ float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max
         int row = bvh_plants[2 * plant].z + prim;
         vec4 r0 = bvh_rows[6 * row], r1 = bvh_rows[6 * row + 1];
         float t_shift;
-        if (!bvh_row_near(r0, r1, bvh_bounds[row], o, d, t_shift)) return NO_HIT;
+        bool near = bvh_row_near(r0, r1, bvh_bounds[row], o, d, t_shift);
+        float t = NO_HIT;
+        if (near) {
 #if defined BVH_COUNT
-        ++bvh_bound_pass;
+            ++bvh_bound_pass;
 #endif
-        Frustum f = frustum_from_record(r0, r1, bvh_rows[6 * row + 2], bvh_rows[6 * row + 3],
-                                        bvh_rows[6 * row + 4], bvh_rows[6 * row + 5]);
-        float t = bvh_row_hit_at(f, t_shift, o, d, t_min, t_max, distance, footprint_scale, face);
+            Frustum f = frustum_from_record(r0, r1, bvh_rows[6 * row + 2], bvh_rows[6 * row + 3],
+                                            bvh_rows[6 * row + 4], bvh_rows[6 * row + 5]);
+            t = bvh_row_hit_at(f, t_shift, o, d, t_min, t_max, distance, footprint_scale, face);
+        }
 #else
 #if defined BVH_COUNT
         ++bvh_bound_pass;
@@ -181,6 +192,19 @@ float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max
     vec4 v0 = bvh_tris[i];
     return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
 }
+
+#if defined BVH_PRIMS_TWICE
+#undef bvh_prim_hit
+// The bench's measure of what the primitive tests cost: each primitive tested twice.
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
+                   float footprint_scale, bool triangles, out int face) {
+    int face2;
+    float a = bvh_prim_hit_once(plant, prim, o, d, t_min, t_max, distance, footprint_scale, triangles, face);
+    float b = bvh_prim_hit_once(plant, prim, o + bvh_bench_zero * d, d, t_min, t_max, distance, footprint_scale,
+                                triangles, face2);
+    return min(a, b);
+}
+#endif
 
 vec3 bvh_inverse_dir(vec3 d) {
     vec3 safe = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));

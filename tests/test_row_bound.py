@@ -133,7 +133,8 @@ def _hard_rays(f: Frusta, m: int, seed: int):
 def test_the_gpu_finds_the_same_hits_with_the_reject_as_without(gl_ctx, offset):
     f = _rows((offset, offset, -offset))
     lo, hi = row_boxes(f, shell=True)
-    gpu = upload_bvh(gl_ctx, [GpuPlant(f, None, build_bvh(lo, hi, leaf_size=2))], origin=f.base[0] + 0.3)
+    gpu = upload_bvh(gl_ctx, [GpuPlant(f, None, build_bvh(lo, hi, leaf_size=2))], origin=f.base[0] + 0.3,
+                     row_bound=True)
     o, d = _hard_rays(f, 30000, seed=int(offset) + 5)
     try:
         out = {}
@@ -149,15 +150,20 @@ def test_the_gpu_finds_the_same_hits_with_the_reject_as_without(gl_ctx, offset):
     np.testing.assert_array_equal(t1, t0)
 
 
-def test_the_bound_is_on_by_default_and_counted_in_the_gpus_bytes(gl_ctx):
+def test_the_bound_is_off_by_default_and_its_bytes_are_counted_where_on(gl_ctx):
     f = _rows()
     lo, hi = row_boxes(f, shell=True)
-    gpu = upload_bvh(gl_ctx, [GpuPlant(f, None, build_bvh(lo, hi))])
+    plain = upload_bvh(gl_ctx, [GpuPlant(f, None, build_bvh(lo, hi))])
+    bounded = upload_bvh(gl_ctx, [GpuPlant(f, None, build_bvh(lo, hi))], row_bound=True)
     try:
-        assert gpu.defines()["BVH_ROW_BOUND"] is trace.ROW_BOUND is True
-        assert gpu.bounds is not None and gpu.bounds.size == trace.ROW_BOUND_BYTES * len(f)
+        assert trace.ROW_BOUND is False and plain.bounds is None
+        assert not plain.defines()["BVH_ROW_BOUND"] and bounded.defines()["BVH_ROW_BOUND"]
+        assert bounded.nbytes - plain.nbytes == bounded.bounds.size == trace.ROW_BOUND_BYTES * len(f)
+        plain.row_bound = True            # nothing to test without the bounds uploaded
+        assert not plain.defines()["BVH_ROW_BOUND"]
     finally:
-        gpu.release()
+        plain.release()
+        bounded.release()
 
 
 @pytest.mark.parametrize("chain", range(4))
@@ -171,6 +177,7 @@ def test_rt_with_relief_draws_the_same_frame_with_the_reject_as_without(gl_ctx, 
     for on in (False, True):
         monkeypatch.setattr(trace, "ROW_BOUND", on)
         frames[on] = RayTracer(gl_ctx).render(f, camera, settings=RaycastSettings(relief=True))
+    assert ("rt.glsl", ("BVH_ROW_BOUND", "RELIEF")) in frames[True].stats.programs
     assert np.isfinite(frames[True].distance).sum() > 500
     np.testing.assert_array_equal(frames[True].distance, frames[False].distance)
     np.testing.assert_array_equal(frames[True].color, frames[False].color)

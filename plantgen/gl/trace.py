@@ -58,8 +58,12 @@ TRACE_CHUNK = 1 << 16
 BVH_BINDING = 3
 #: Whether the traversal tests a row's cheap bound before its row test (``BVH_ROW_BOUND``
 #: in ``shaders/bvh.glsl``: the distance of the ray's line from the row's axis segment
-#: against :func:`row_bounds`); a switch for measuring (docs/benchmarks/rt.md), on.
-ROW_BOUND = True
+#: against :func:`row_bounds`, :data:`ROW_BOUND_BYTES` more a row on the GPU). Off: it drops
+#: 90 % of the rows an eye ray tests, but llvmpipe runs a shader's branches on all of a
+#: vector's lanes, so the row test still runs and the bound only adds work (0.8-1.0x on the
+#: forest's frames, docs/benchmarks/rt.md); a GPU, whose warps skip a branch none of their
+#: lanes take, may gain: measure it there (``python -m plantgen.benchmarks.row_bound``).
+ROW_BOUND = False
 #: SSBO binding of the rows' bounds (:func:`row_bounds`) in ``shaders/bvh.glsl``.
 ROW_BOUND_BINDING = 9
 #: GPU bytes of one row's bound (beside its 96-byte record).
@@ -104,12 +108,13 @@ class GpuBvh:
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
     affine: bool = False     # the copies' maps are full 3x4 maps (not every copy a similarity)
     copy_ids: np.ndarray | None = None   # (copies,) int64: the copy held in each GPU slot
-    bounds: object = None    # the rows' bounds (row_bounds), bound to ROW_BOUND_BINDING
-    row_bound: bool | None = None        # test them (BVH_ROW_BOUND); None: ROW_BOUND
+    bounds: object = None    # the rows' bounds (row_bounds; uploaded with the row bound on)
+    row_bound: bool | None = None        # test them (BVH_ROW_BOUND, where uploaded); None: ROW_BOUND
 
     def defines(self) -> dict:
+        on = ROW_BOUND if self.row_bound is None else self.row_bound
         return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine,
-                "BVH_ROW_BOUND": ROW_BOUND if self.row_bound is None else self.row_bound}
+                "BVH_ROW_BOUND": bool(on) and self.bounds is not None}
 
     def bind(self) -> None:
         for i, buf in enumerate(self.buffers):
@@ -331,7 +336,7 @@ def copy_words(matrices, copy_plant, centres, origin, *, affine: bool | None = N
 
 
 def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
-               max_bytes: int | None = None) -> GpuBvh:
+               max_bytes: int | None = None, row_bound: bool | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
 
     One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
@@ -340,7 +345,9 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
     relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
     LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
+    ``row_bound`` (None: :data:`ROW_BOUND`): upload the rows' bounds for the cheap reject.
     """
+    with_bounds = ROW_BOUND if row_bound is None else bool(row_bound)
     two_level = top is not None
     if not two_level and len(plants) != 1:
         raise PlantgenError("upload_bvh: one plant without a top level")
@@ -366,7 +373,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         prims.append(np.asarray(p.bvh.prims, np.int32))
         rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
         tris.append(_triangle_words(p.triangles, c))
-        bounds.append(row_bounds(p.frusta, c) if p.rows else np.zeros(0, np.float32))
+        bounds.append(row_bounds(p.frusta, c) if p.rows and with_bounds else np.zeros(0, np.float32))
         counts += [len(nodes[-1]), len(p.bvh.prims), p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
@@ -390,8 +397,10 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
         gpu.nbytes += len(data)
-    gpu.bounds = ctx.buffer(bound_words.tobytes() or b"\0" * 16)
-    gpu.nbytes += bound_words.nbytes
+    gpu.row_bound = row_bound
+    if with_bounds:
+        gpu.bounds = ctx.buffer(bound_words.tobytes() or b"\0" * 16)
+        gpu.nbytes += bound_words.nbytes
     gpu.empty = not (top.nodes if two_level else plants[0].bvh.nodes)
     return gpu
 
