@@ -37,7 +37,9 @@
 // child first (by slab entry), nodes entered at or beyond the best t skipped.
 // BVH_COUNT: bvh_visits and bvh_tests count the nodes a trace walks and the primitives it
 // tests (the bench's work per ray); bvh_row_tests, bvh_bound_pass and bvh_row_hits the rows
-// among those, the rows that passed the cheap reject and the rows whose test hit.
+// among those, the rows that passed the cheap reject and the rows whose test hit. The
+// bench's variants: BVH_NO_PRIMS (no primitive tested: the node steps alone) and
+// BVH_PRIMS_TWICE (each tested twice: what the tests cost).
 
 #ifndef BVH_GLSL
 #define BVH_GLSL
@@ -129,7 +131,8 @@ float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, fl
 // point to the segment is the one the row test re-centres the ray at (recenter_shift, whose
 // shift is returned), so a ray the test could hit is never rejected. Where the ray runs
 // parallel to the axis (recenter_shift's fallback, the segment's middle) the bound grows by
-// how far that middle may be from the nearest point.
+// how far that middle may be from the nearest point. Off by default
+// (plantgen.gl.trace.ROW_BOUND): llvmpipe runs the row test behind it on all lanes anyway.
 bool bvh_row_near(vec4 r0, vec4 r1, float bound, vec3 o, vec3 d, out float t_shift) {
     vec3 base = r0.xyz, axis = r1.xyz;
     float h = r0.w;
@@ -287,7 +290,6 @@ const int BVH_TOP = 0;      // a node of the top level (world ray)
 const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ray)
 const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
 const int BVH_NONE = BVH_EMPTY;   // no node being walked: take the next entry
-
 
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
 // o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
