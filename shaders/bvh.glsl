@@ -231,6 +231,9 @@ ivec2 bvh_leaf(int node) {
 }
 
 #if defined BVH_PACKET
+#ifndef BVH_PACKET_MIN
+#define BVH_PACKET_MIN 0
+#endif
 // The packet walk (BVH_PACKET; the same search, the same hits): the lanes of a subgroup
 // (GL_ARB_shader_ballot: llvmpipe's 8 lanes of a vector, a GPU's warp) walk ONE node
 // stream together, so that the loop is uniform and runs once per node of the union of
@@ -265,6 +268,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
     float stack_t[BVH_STACK];             // this lane's entry t of each
     int sp = 0;
     bool done = false;                    // this lane's any hit is found
+    bool packet = true;                   // walking in the packet (else each lane its own)
     vec3 inv_w = bvh_inverse_dir(d);
     vec3 oc = o, dc = d, inv_c = inv_w;
     float scale_c = 1.0;
@@ -287,11 +291,15 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
             if (sp == 0) break;
             --sp;
             t_node = stack_t[sp];
-            if (!anyInvocationARB(t_node < best.t && !done)) continue;
+            bool live = t_node < best.t && !done;
+            if (packet ? !anyInvocationARB(live) : !live) continue;
             int entry = stack[sp];
             kind = entry & 3;
             node = entry >> 2;
             if (kind == BVH_COPY) {
+#if defined BVH_PACKET_TOP
+                packet = false;
+#endif
                 copy = node;
                 plant = bvh_enter_copy(copy, o, d, oc, dc, inv_c, scale_c);
                 offsets = bvh_plants[2 * plant];
@@ -334,7 +342,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                     }
                 }
             }
-            if (any_hit && allInvocationsARB(done)) break;
+            if (any_hit && (packet ? allInvocationsARB(done) : done)) break;
             continue;
         }
 #if defined BVH_COUNT
@@ -344,11 +352,18 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
         vec4 t = bvh_children(base + node, ro, inv, t_min, best.t, ref);
         t = alive ? t : vec4(BVH_MISS);
         bvec4 enters = lessThan(t, vec4(BVH_MISS));
-        bvec4 walk = bvec4(anyInvocationARB(enters.x), anyInvocationARB(enters.y), anyInvocationARB(enters.z),
-                           anyInvocationARB(enters.w));
-        // the key: the entry t of the first lane that enters a child (BVH_MISS: no lane does)
-        vec4 key = readInvocationARB(t, uint(bvh_first_lane(any(enters))));
-        key = mix(vec4(BVH_MISS), min(key, vec4(1.0e38)), walk);
+        vec4 key = t;
+        if (packet) {
+            bvec4 walk = bvec4(anyInvocationARB(enters.x), anyInvocationARB(enters.y), anyInvocationARB(enters.z),
+                               anyInvocationARB(enters.w));
+            // the key: the entry t of the first lane that enters a child (BVH_MISS: no lane does)
+            key = readInvocationARB(t, uint(bvh_first_lane(any(enters))));
+            key = mix(vec4(BVH_MISS), min(key, vec4(1.0e38)), walk);
+#if BVH_PACKET_MIN > 0
+            uvec2 lanes = unpackUint2x32(ballotARB(alive));
+            packet = bitCount(lanes.x) + bitCount(lanes.y) >= BVH_PACKET_MIN;
+#endif
+        }
         bvh_order_packet(key.x, key.y, t.x, t.y, ref.x, ref.y);
         bvh_order_packet(key.z, key.w, t.z, t.w, ref.z, ref.w);
         bvh_order_packet(key.x, key.z, t.x, t.z, ref.x, ref.z);
