@@ -35,15 +35,6 @@
 // BVH_COUNT: bvh_visits and bvh_tests count the nodes a trace walks and the primitives it
 // tests (the bench's work per ray).
 
-// BVH_PACKET: the packet variant of the walk (bvh_trace below; plantgen.gl.trace chooses
-// it where the context offers these extensions): the lanes of a subgroup walk one node
-// stream together.
-#if defined BVH_PACKET
-#extension GL_ARB_shader_ballot : require
-#extension GL_ARB_shader_group_vote : require
-#extension GL_ARB_gpu_shader_int64 : require
-#endif
-
 #ifndef BVH_GLSL
 #define BVH_GLSL
 
@@ -210,175 +201,6 @@ int bvh_visits = 0;         // wide nodes walked by the last bvh_trace (trace.gl
 int bvh_tests = 0;          // primitives it tested
 #endif
 
-// Copy `copy`'s plant and the ray o + t*d in its frame (and 1 / its direction, and the
-// copy's units per world unit); without TWO_LEVEL plant 0 and the ray itself.
-int bvh_enter_copy(int copy, vec3 o, vec3 d, inout vec3 oc, inout vec3 dc, inout vec3 inv_c, inout float scale_c) {
-#if defined TWO_LEVEL
-    oc = bvh_to_copy(copy, vec4(o, 1.0));
-    dc = bvh_to_copy(copy, vec4(d, 0.0));
-    inv_c = bvh_inverse_dir(dc);
-    scale_c = length(dc) / length(d);
-    return bvh_copy_plant(copy);
-#else
-    return 0;
-#endif
-}
-
-// A leaf reference's first primitive (or copy) and count.
-ivec2 bvh_leaf(int node) {
-    int code = -1 - node;
-    return ivec2(code >> BVH_LEAF_BITS, code & ((1 << BVH_LEAF_BITS) - 1));
-}
-
-#if defined BVH_PACKET
-#ifndef BVH_PACKET_MIN
-#define BVH_PACKET_MIN 0
-#endif
-// The packet walk (BVH_PACKET; the same search, the same hits): the lanes of a subgroup
-// (GL_ARB_shader_ballot: llvmpipe's 8 lanes of a vector, a GPU's warp) walk ONE node
-// stream together, so that the loop is uniform and runs once per node of the union of
-// the lanes' walks, not as long as the slowest lane's, and a node's words are the same
-// address in every lane. The node stack (references) is the same in every lane; each lane
-// keeps its own entry t beside it (BVH_MISS: its ray misses that entry or has stopped).
-// A child is walked when any lane's ray enters it within that lane's best t; the order
-// (nearest first) is that of the first lane whose ray enters one of the node's children.
-// A copy is entered when any lane's ray enters its box, each lane mapping its own ray into
-// the copy's frame; a leaf's primitives are tested in the lanes whose ray reached it.
-// Lanes whose ray is done (an any hit found) walk on with the others, masked.
-
-// The first lane for which `b` holds (the subgroup has at most 64 lanes).
-int bvh_first_lane(bool b) {
-    uvec2 mask = unpackUint2x32(ballotARB(b));
-    return mask.x != 0u ? findLSB(mask.x) : 32 + findLSB(mask.y);
-}
-
-// Orders two children by the packet's key k (the same in every lane), carrying each
-// lane's own entry t and the references along.
-void bvh_order_packet(inout float ka, inout float kb, inout float ta, inout float tb, inout int ra, inout int rb) {
-    bool swap = kb < ka;
-    float k = ka, t = ta; int r = ra;
-    ka = swap ? kb : ka; kb = swap ? k : kb;
-    ta = swap ? tb : ta; tb = swap ? t : tb;
-    ra = swap ? rb : ra; rb = swap ? r : rb;
-}
-
-BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float distance, bool triangles) {
-    BvhHit best = bvh_no_hit(t_max);
-    int stack[BVH_STACK];                 // the same in every lane
-    float stack_t[BVH_STACK];             // this lane's entry t of each
-    int sp = 0;
-    bool done = false;                    // this lane's any hit is found
-    bool packet = true;                   // walking in the packet (else each lane its own)
-    vec3 inv_w = bvh_inverse_dir(d);
-    vec3 oc = o, dc = d, inv_c = inv_w;
-    float scale_c = 1.0;
-    int copy = 0, plant = 0;
-    ivec4 offsets = bvh_plants[0];
-#if defined TWO_LEVEL
-    int kind = BVH_TOP, base = bvh_plants[1].y;
-#else
-    int kind = BVH_PLANT, base = offsets.x;
-#endif
-    int node = 0;
-    float t_node = t_min;
-    vec3 ro = o, inv = inv_w;
-#if defined BVH_COUNT
-    bvh_visits = 0;
-    bvh_tests = 0;
-#endif
-    while (true) {
-        if (node == BVH_NONE) {
-            if (sp == 0) break;
-            --sp;
-            t_node = stack_t[sp];
-            bool live = t_node < best.t && !done;
-            if (packet ? !anyInvocationARB(live) : !live) continue;
-            int entry = stack[sp];
-            kind = entry & 3;
-            node = entry >> 2;
-            if (kind == BVH_COPY) {
-#if defined BVH_PACKET_TOP
-                packet = false;
-#endif
-                copy = node;
-                plant = bvh_enter_copy(copy, o, d, oc, dc, inv_c, scale_c);
-                offsets = bvh_plants[2 * plant];
-                node = 0;
-                kind = BVH_PLANT;
-            }
-            bool top = kind == BVH_TOP;
-            ro = top ? o : oc;
-            inv = top ? inv_w : inv_c;
-            base = top ? bvh_plants[1].y : offsets.x;
-        }
-        bool alive = t_node < best.t && !done;
-        if (node < 0) {                  // a leaf
-            ivec2 leaf = bvh_leaf(node);
-            node = BVH_NONE;
-#if defined TWO_LEVEL
-            if (kind == BVH_TOP) {
-                for (int k = leaf.y - 1; k >= 0; --k) {
-                    if (sp < BVH_STACK) {
-                        stack[sp] = 4 * (leaf.x + k) + BVH_COPY;
-                        stack_t[sp++] = alive ? t_node : BVH_MISS;
-                    }
-                }
-                continue;
-            }
-#endif
-            vec3 rd = kind == BVH_TOP ? d : dc;
-            for (int k = 0; k < leaf.y; ++k) {
-                int prim = bvh_prims[offsets.y + leaf.x + k];
-                if (alive) {
-#if defined BVH_COUNT
-                    ++bvh_tests;
-#endif
-                    int face;
-                    float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
-                    if (t < best.t) {
-                        best = BvhHit(t, prim, copy, face);
-                        done = any_hit;
-                        alive = !done;
-                    }
-                }
-            }
-            if (any_hit && (packet ? allInvocationsARB(done) : done)) break;
-            continue;
-        }
-#if defined BVH_COUNT
-        ++bvh_visits;
-#endif
-        ivec4 ref;
-        vec4 t = bvh_children(base + node, ro, inv, t_min, best.t, ref);
-        t = alive ? t : vec4(BVH_MISS);
-        bvec4 enters = lessThan(t, vec4(BVH_MISS));
-        vec4 key = t;
-        if (packet) {
-            bvec4 walk = bvec4(anyInvocationARB(enters.x), anyInvocationARB(enters.y), anyInvocationARB(enters.z),
-                               anyInvocationARB(enters.w));
-            // the key: the entry t of the first lane that enters a child (BVH_MISS: no lane does)
-            key = readInvocationARB(t, uint(bvh_first_lane(any(enters))));
-            key = mix(vec4(BVH_MISS), min(key, vec4(1.0e38)), walk);
-#if BVH_PACKET_MIN > 0
-            uvec2 lanes = unpackUint2x32(ballotARB(alive));
-            packet = bitCount(lanes.x) + bitCount(lanes.y) >= BVH_PACKET_MIN;
-#endif
-        }
-        bvh_order_packet(key.x, key.y, t.x, t.y, ref.x, ref.y);
-        bvh_order_packet(key.z, key.w, t.z, t.w, ref.z, ref.w);
-        bvh_order_packet(key.x, key.z, t.x, t.z, ref.x, ref.z);
-        bvh_order_packet(key.y, key.w, t.y, t.w, ref.y, ref.w);
-        bvh_order_packet(key.y, key.z, t.y, t.z, ref.y, ref.z);
-        if (key.w < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.w + kind; stack_t[sp++] = t.w; }
-        if (key.z < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.z + kind; stack_t[sp++] = t.z; }
-        if (key.y < BVH_MISS && sp < BVH_STACK) { stack[sp] = 4 * ref.y + kind; stack_t[sp++] = t.y; }
-        node = key.x < BVH_MISS ? ref.x : BVH_NONE;
-        t_node = t.x;
-    }
-    return best;
-}
-
-#else
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
 // o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
 // the eye's distance from the ray's point at t = 0 (world units, |d| = 1: the relief
@@ -428,7 +250,13 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 node = entry >> 2;
                 if (kind == BVH_COPY) {
                     copy = node;
-                    plant = bvh_enter_copy(copy, o, d, oc, dc, inv_c, scale_c);
+#if defined TWO_LEVEL
+                    plant = bvh_copy_plant(copy);
+                    oc = bvh_to_copy(copy, vec4(o, 1.0));
+                    dc = bvh_to_copy(copy, vec4(d, 0.0));
+                    inv_c = bvh_inverse_dir(dc);
+                    scale_c = length(dc) / length(d);
+#endif
                     offsets = bvh_plants[2 * plant];
                     node = 0;
                     kind = BVH_PLANT;
@@ -439,8 +267,8 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
                 base = top ? bvh_plants[1].y : offsets.x;
             }
             if (node < 0) {              // a leaf
-                ivec2 leaf = bvh_leaf(node);
-                int first = leaf.x, count = leaf.y;
+                int code = -1 - node;
+                int first = code >> BVH_LEAF_BITS, count = code & ((1 << BVH_LEAF_BITS) - 1);
                 node = BVH_NONE;
 #if defined TWO_LEVEL
                 if (kind == BVH_TOP) {
@@ -491,7 +319,5 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
     }
     return best;
 }
-
-#endif  // BVH_PACKET
 
 #endif

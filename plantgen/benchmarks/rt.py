@@ -60,9 +60,8 @@ def _timed(draw, frames: int):
     return statistics.median(r.frame_ms for r in results), first, results[-1]
 
 
-def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say=print, traversal=None) -> dict:
-    """RC+R and RT+R with shadows at full detail on ``scene``, in this order, in one run
-    (``traversal``: RT's walk, :func:`plantgen.gl.trace.packet_traversal`)."""
+def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say=print) -> dict:
+    """RC+R and RT+R with shadows at full detail on ``scene``, in this order, in one run."""
     model = prepare_model(scene)
     placed = model.placed if model.placed is not None else model.frusta_at(0)
     staging = stage_model(model.grown, placed, *size)
@@ -74,7 +73,7 @@ def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say
     rows["RC+R"] = {"ms": ms, "light_ms": first.stats.shadow_ms, "build_ms": 0.0, "upload_ms": 0.0,
                     "gpu_bytes": getattr(placed, "unique_rows", len(placed)) * RECORD_BYTES}
     say(f"RC+R: {ms:.0f} ms (light {first.stats.shadow_ms:.0f} ms)")
-    rt = RayTracer(traversal=traversal)
+    rt = RayTracer()
     t0 = time.perf_counter()
     rt.gpu_bvh(placed, args["leaves"], staging.camera.eye)
     build_ms, upload_ms = rt.last_build_ms, rt.last_upload_ms
@@ -120,100 +119,64 @@ def _work_counts(gpu, origins, directions, any_hit: bool, t_min: float) -> tuple
     return float((counts & 0xFFFF).mean()), float((counts >> 16).mean())
 
 
-def _interleaved(runs: dict, frames: int) -> dict:
-    """``runs`` name -> callable: a warm-up of each, then ``frames`` rounds that run each
-    once in turn (A/B interleaved, so that the machine's load falls on all alike). Per name
-    the median wall ms, median CPU ms and the last result."""
-    last = {name: run() for name, run in runs.items()}
-    wall = {name: [] for name in runs}
-    cpu = {name: [] for name in runs}
+def _cpu_timed(run, frames: int) -> tuple[float, float, object]:
+    """A warm-up and ``frames`` timed runs: median wall ms, median CPU ms, the last result."""
+    run()
+    wall, cpu = [], []
     for _ in range(frames):
-        for name, run in runs.items():
-            c, t = time.process_time(), time.perf_counter()
-            last[name] = run()
-            wall[name].append(time.perf_counter() - t)
-            cpu[name].append(time.process_time() - c)
-    return {name: (1e3 * statistics.median(wall[name]), 1e3 * statistics.median(cpu[name]), last[name])
-            for name in runs}
+        c, t = time.process_time(), time.perf_counter()
+        result = run()
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return 1e3 * statistics.median(wall), 1e3 * statistics.median(cpu), result
 
 
-def measure_work(scene: str = "forest", size=(512, 384), frames: int = 3, say=print,
-                 traversals=("auto",), what=("eye", "shadow", "rt", "rtr")) -> dict:
-    """The traversal's work and time on ``scene`` (module docstring, ``--work``), for each
-    of ``traversals`` (:data:`plantgen.gl.trace.TRAVERSALS`; several: interleaved in one
-    run); ``what``: the rows to measure (eye rays, shadow rays, RT frame, RT+R frame)."""
+def measure_work(scene: str = "forest", size=(512, 384), frames: int = 3, say=print) -> dict:
+    """The traversal's work and time on ``scene`` (module docstring, ``--work``)."""
     model = prepare_model(scene)
     placed = model.placed if model.placed is not None else model.frusta_at(0)
     staging = stage_model(model.grown, placed, *size)
     args = frame_arguments(placed, staging, ShadowSettings())
+    rt = RayTracer()
     camera = staging.camera
-    tracers = {v: RayTracer(traversal=v) for v in traversals}
-    gpus = {v: rt.gpu_bvh(placed, args["leaves"], camera.eye) for v, rt in tracers.items()}
-    first = gpus[traversals[0]]
+    gpu = rt.gpu_bvh(placed, args["leaves"], camera.eye)
     o, d = (a.reshape(-1, 3) for a in camera.rays())
-    t, prim, _, _ = trace_rays(first, o, d)
+    rows = {}
+    wall, cpu, (t, prim, _, _) = _cpu_timed(lambda: trace_rays(gpu, o, d), frames)
+    rows["eye rays"] = {"rays": len(o), "wall": wall, "cpu": cpu, "work": _work_counts(gpu, o, d, False, 0.0)}
     hit = prim >= 0
     light = np.asarray(args["light_dir"], np.float64)
     so = o[hit] + t[hit, None] * d[hit]
     sd = np.broadcast_to(light / np.linalg.norm(light), so.shape)
+    wall, cpu, _ = _cpu_timed(lambda: trace_rays(gpu, so, sd, any_hit=True, t_min=1e-4), frames)
+    rows["shadow rays"] = {"rays": len(so), "wall": wall, "cpu": cpu,
+                           "work": _work_counts(gpu, so, sd, True, 1e-4)}
     quiet = {**args, "shadows": None}
-    rays = {"eye": ("eye rays", o, d, False, 0.0), "shadow": ("shadow rays", so, sd, True, 1e-4)}
-    frames_of = {"rt": ("RT frame", RaycastSettings(relief=False), quiet),
-                 "rtr": ("RT+R frame, shadow rays", RaycastSettings(relief=True), args)}
-    rows = {}
-    for key in what:
-        if key in rays:
-            name, ro, rd, any_hit, t_min = rays[key]
-            runs = {v: (lambda g=g, ro=ro, rd=rd, a=any_hit, tm=t_min: trace_rays(g, ro, rd, any_hit=a, t_min=tm))
-                    for v, g in gpus.items()}
-            work = {v: _work_counts(g, ro, rd, any_hit, t_min) for v, g in gpus.items()}
-            count = len(ro)
-        else:
-            name, settings, kw = frames_of[key]
-            runs = {v: (lambda rt=rt, s=settings, k=kw: rt.render(placed, settings=s, **k))
-                    for v, rt in tracers.items()}
-            work, count = None, None
-        timed = _interleaved(runs, frames)
-        rows[name] = {"rays": count, "work": work, "wall": {v: r[0] for v, r in timed.items()},
-                      "cpu": {v: r[1] for v, r in timed.items()}}
-        say(f"{name}: " + "; ".join(f"{v}: {r[0]:.0f} ms ({r[1]:.0f} ms CPU)" for v, r in timed.items()))
+    for name, settings, kw in (("RT frame", RaycastSettings(relief=False), quiet),
+                               ("RT+R frame, shadow rays", RaycastSettings(relief=True), args)):
+        wall, cpu, _ = _cpu_timed(lambda s=settings, k=kw: rt.render(placed, settings=s, **k), frames)
+        rows[name] = {"rays": None, "wall": wall, "cpu": cpu, "work": None}
+    for name, r in rows.items():
+        say(f"{name}: {r['wall']:.0f} ms ({r['cpu']:.0f} ms CPU)")
     return {"scene": scene, "size": size, "frames": frames, "rows": rows, "renderer": renderer_name(),
-            "leaf_size": tracers[traversals[0]].leaf_size, "gpu_bytes": first.nbytes,
-            "traversals": {v: "packet" if g.packet else "ray" for v, g in gpus.items()},
-            "load": _load()}
-
-
-def _load() -> str:
-    try:
-        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
-    except OSError:
-        return "unknown"
+            "leaf_size": rt.leaf_size, "gpu_bytes": gpu.nbytes}
 
 
 def work_markdown(work: dict) -> str:
     w, h = work["size"]
-    names = list(work["traversals"])
-    walks = ", ".join(f"{v}: {walk}" for v, walk in work["traversals"].items())
     lines = [f"# The traversal's work: {work['scene']} at {w}x{h} ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC)", "",
              f"GL renderer: {work['renderer']}  ", f"Machine: {machine()} (shared by other jobs: under load)  ",
-             f"Load average (1, 5, 15 min) at the end: {work['load']}  ",
              f"BVH leaves of at most {work['leaf_size']} primitives, {work['gpu_bytes'] / 2**20:.1f} MiB on the GPU; "
-             f"medians of {work['frames']} runs" + (", the traversals interleaved" if len(names) > 1 else "") +
-             f"; traversal {walks}", ""]
-    ratio = len(names) > 1
-    lines += ["| what | traversal | rays | ms | CPU ms | nodes a ray | primitives a ray |"
-              + (f" CPU ratio {names[0]} / this |" if ratio else ""),
-              "|---|---|---:|---:|---:|---:|---:|" + ("---:|" if ratio else "")]
+             f"medians of {work['frames']} runs", "",
+             "| what | rays | ms | CPU ms | nodes a ray | primitives a ray |", "|---|---:|---:|---:|---:|---:|"]
     for name, r in work["rows"].items():
         rays = f"{r['rays']:,}" if r["rays"] is not None else ""
-        for v in names:
-            nodes, prims = (f"{x:.1f}" for x in r["work"][v]) if r["work"] is not None else ("", "")
-            line = f"| {name} | {v} | {rays} | {r['wall'][v]:,.0f} | {r['cpu'][v]:,.0f} | {nodes} | {prims} |"
-            lines.append(line + (f" {r['cpu'][names[0]] / r['cpu'][v]:.2f} |" if ratio else ""))
+        nodes, prims = (f"{x:.1f}" for x in r["work"]) if r["work"] is not None else ("", "")
+        lines.append(f"| {name} | {rays} | {r['wall']:,.0f} | {r['cpu']:,.0f} | {nodes} | {prims} |")
     return "\n".join(lines + [""])
 
 
-def measure_scan(model: str = "pine", step: float = 0.2, positions=None, say=print, traversal=None) -> dict:
+def measure_scan(model: str = "pine", step: float = 0.2, positions=None, say=print) -> dict:
     """Beams per second of the float64 reference and of the GPU's float32 search (ranges
     solved again in float64) on ``model`` (four terrestrial scanners at ``step`` degrees,
     or scanners at ``positions`` 'x,y,z;...'; a scene in two levels), and beam for beam the
@@ -224,11 +187,11 @@ def measure_scan(model: str = "pine", step: float = 0.2, positions=None, say=pri
     else:
         target = scan_target(grown.skeleton, model_leaves(grown), frusta=skin_model(grown))
     assert target.bvh is not None                         # built once, outside the timings
-    trace_target(target, target.box()[:1], np.ones((1, 3)), traversal=traversal)   # the GPU's upload and compile
+    trace_target(target, target.box()[:1], np.ones((1, 3)))       # the GPU's upload and compile
     out = {}
     for name, precision, finder in (("float64 (CPU)", "float64", None),
                                     ("float32 (GPU) + float64 range", "float32",
-                                     lambda tg, o, d: trace_target(tg, o, d, traversal=traversal))):
+                                     lambda tg, o, d: trace_target(tg, o, d))):
         settings = ScanSettings(angular_step=step, precision=precision, positions=positions)
         t0 = time.perf_counter()
         returns = beam_returns(target, settings, finder=finder)
@@ -294,26 +257,18 @@ def main(argv=None) -> int:
     parser.add_argument("--no-frames", action="store_true")
     parser.add_argument("--no-scan", action="store_true")
     parser.add_argument("--work", action="store_true", help="the traversal's work a ray and its time alone")
-    parser.add_argument("--traversal", default="auto",
-                        help="the BVH walk: auto, packet or ray; with --work several, comma-separated "
-                             "(e.g. ray,packet), are measured interleaved in one run")
-    parser.add_argument("--work-rows", default="eye,shadow,rt,rtr",
-                        help="with --work, what to measure: eye (rays), shadow (rays), rt (frame), rtr (RT+R frame)")
     parser.add_argument("--images", type=Path, help="folder to write both frames into (PNG)")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
     if args.work:
-        return report(work_markdown(measure_work(args.scene, args.size, max(args.frames, 1),
-                                                 traversals=tuple(args.traversal.split(",")),
-                                                 what=tuple(args.work_rows.split(",")))), args.out)
-    frames = None if args.no_frames else measure_frames(args.scene, args.size, args.frames, traversal=args.traversal)
+        return report(work_markdown(measure_work(args.scene, args.size, max(args.frames, 1))), args.out)
+    frames = None if args.no_frames else measure_frames(args.scene, args.size, args.frames)
     if args.images is not None and frames is not None:
         from ..images import write_png
         args.images.mkdir(parents=True, exist_ok=True)
         for name, image in zip(("rc_r", "rt_r"), frames["images"], strict=True):
             write_png(args.images / f"{args.scene}_{name}.png", image)
-    scan = None if args.no_scan else measure_scan(args.scan_model, args.scan_step, args.scanner_positions,
-                                                  traversal=args.traversal)
+    scan = None if args.no_scan else measure_scan(args.scan_model, args.scan_step, args.scanner_positions)
     return report(markdown(frames, scan), args.out)
 
 

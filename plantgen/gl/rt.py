@@ -83,14 +83,12 @@ class RayTracer(Raycaster):
     ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.bvh.build_bvh`);
     ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface; ``refit``:
     rows (Frusta) as many as the last ones drawn refit their BVH instead of building
-    another (an animation's frames, module docstring); ``traversal``: the walk's variant
-    (:func:`plantgen.gl.trace.packet_traversal`: "auto", "packet" or "ray").
+    another (an animation's frames, module docstring).
     """
 
     def __init__(self, ctx=None, limits=None, *, leaf_size: int = GPU_LEAF_SIZE, method: str = "lbvh",
-                 shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False, traversal: str | None = None):
+                 shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False):
         super().__init__(ctx, limits)
-        self.traversal = traversal
         self.leaf_size, self.method, self.refit = leaf_size, method, bool(refit)
         self.refits = 0          # BVHs refitted (not built) so far
         self.shadow_ray_offset = float(shadow_ray_offset)
@@ -161,7 +159,7 @@ class RayTracer(Raycaster):
             g[3].release()
             self._gpu = None
         gpu = upload_bvh(self.ctx, plants, eye, top=top, matrices=matrices, copy_plant=copy_plant,
-                         max_bytes=self.limits.max_render_bytes, traversal=self.traversal)
+                         max_bytes=self.limits.max_render_bytes)
         self._gpu = (model, leaves, eye.copy(), gpu)
         self.last_upload_ms = (time.perf_counter() - t0) * 1e3
         return gpu

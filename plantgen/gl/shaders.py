@@ -13,9 +13,6 @@ macro, the tolerances (``plantgen.tolerances.tol.glsl_defines()``: ``TOL_*`` mac
 caller's ``defines`` (variants such as ``RELIEF``, ``V_EXACT``, ``SHADOWS``),
 then the file with every ``#include "other.glsl"`` replaced by that file's text (looked up
 in :func:`plantgen._resources.shaders_dir`, each file included at most once per stage).
-``#extension`` lines go up to just after the defines, where GLSL wants them (before any
-code), each with the ``#if``/``#endif`` lines around it where a file guards a block of
-nothing but ``#extension`` lines (an extension only some variants use).
 ``#line`` directives keep compiler messages pointing at the right file and line; the
 file numbers are listed in the error text. Every program also gets the defines of
 :func:`shared_defines`: the material slot count and the named tolerances of
@@ -80,23 +77,6 @@ def _define_lines(defines: Mapping[str, object] | None) -> list[str]:
     return lines
 
 
-def _extension_blocks(lines: list[str]) -> set[int]:
-    """Indices of the lines to hoist: every ``#extension`` line, and the ``#if``/``#endif``
-    pair around a block of nothing but ``#extension`` lines."""
-    ext = {i for i, line in enumerate(lines) if line.lstrip().startswith("#extension")}
-    out = set(ext)
-    for i in sorted(ext):
-        if i - 1 in out:
-            continue
-        j = i
-        while j in ext:
-            j += 1
-        if (i > 0 and lines[i - 1].lstrip().startswith("#if") and j < len(lines)
-                and lines[j].lstrip().startswith("#endif")):
-            out |= {i - 1, j}
-    return out
-
-
 def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = None,
                   directory: Path | None = None) -> str:
     """The complete GLSL text of one stage of program file ``name``.
@@ -118,10 +98,8 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
     if clash:
         raise ShaderError(f"defines {clash} are set by plantgen for every program")
     out = [GLSL_VERSION, f"#define {stage}", *_define_lines(shared), *_define_lines(defines)]
-    head = len(out)          # where the #extension lines go
 
     def expand(fname: str, chain: tuple[str, ...]) -> None:
-        nonlocal head
         if fname in chain:
             raise ShaderError(f"shader include cycle: {' -> '.join(chain + (fname,))}")
         if fname in files:  # included once per stage, like #pragma once
@@ -129,15 +107,9 @@ def shader_source(name: str, stage: str, defines: Mapping[str, object] | None = 
         files.append(fname)
         number = len(files) - 1
         out.append(f"#line 1 {number}")
-        lines = _read(fname, directory).splitlines()
-        hoisted = _extension_blocks(lines)
-        for lineno, line in enumerate(lines, start=1):
+        for lineno, line in enumerate(_read(fname, directory).splitlines(), start=1):
             m = _INCLUDE.match(line)
-            if lineno - 1 in hoisted:
-                out.insert(head, line)
-                head += 1
-                out.append("")
-            elif m:
+            if m:
                 expand(m.group(1), chain + (fname,))
                 out.append(f"#line {lineno + 1} {number}")
             elif line.lstrip().startswith("#version"):

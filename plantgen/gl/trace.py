@@ -22,12 +22,6 @@ shader's ``BVH_AFFINE_COPIES``), exact for any invertible map. The copies go up 
 top level's leaf order, so a top-level leaf's ``first`` is its first copy's slot and no
 table of copy ids is needed on the GPU (:attr:`GpuBvh.copy_ids` maps the slots back).
 
-The walk comes in two variants of the one program (``shaders/bvh.glsl``), chosen once per
-upload from the context's extensions, or forced by ``traversal`` (:data:`TRAVERSALS`):
-``"ray"``, one ray per invocation walking its own nodes, and ``"packet"``
-(``BVH_PACKET``), the lanes of a subgroup walking one node stream together, which needs
-:data:`PACKET_EXTENSIONS`. ``"auto"`` takes the packet walk where they are offered.
-
 Memory stays bounded: rays go up in chunks of ``chunk`` (32 bytes a ray up, 16 back).
 """
 
@@ -48,7 +42,7 @@ from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
            "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
-           "node_words", "stack_need", "wide_nodes", "TRAVERSALS", "PACKET_EXTENSIONS", "packet_traversal"]
+           "node_words", "stack_need", "wide_nodes"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
 #: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
@@ -68,29 +62,6 @@ COPY_BYTES = 32
 #: The same for a scene with a copy that mirrors, scales unevenly or shears (a 3x4 map).
 AFFINE_COPY_BYTES = 64
 _GROUP = 64   # local_size_x of shaders/trace.glsl
-#: The traversal's variants (a knob of every upload): "auto" (the packet walk where the
-#: context has :data:`PACKET_EXTENSIONS`, else one ray an invocation), "packet", "ray".
-TRAVERSALS = ("auto", "packet", "ray")
-#: What the packet walk needs of the GL context (subgroup ballot and votes; a ballot is a
-#: 64-bit word).
-PACKET_EXTENSIONS = ("GL_ARB_shader_ballot", "GL_ARB_shader_group_vote", "GL_ARB_gpu_shader_int64")
-#: The traversal a caller that names none gets.
-DEFAULT_TRAVERSAL = "auto"
-
-
-def packet_traversal(ctx, traversal: str | None = None) -> bool:
-    """Whether uploads to ``ctx`` walk in packets: ``traversal`` one of :data:`TRAVERSALS`
-    (None: :data:`DEFAULT_TRAVERSAL`). ``"packet"`` on a context without
-    :data:`PACKET_EXTENSIONS` raises PlantgenError."""
-    traversal = DEFAULT_TRAVERSAL if traversal is None else traversal
-    if traversal not in TRAVERSALS:
-        raise PlantgenError(f"traversal must be one of {', '.join(TRAVERSALS)}, not {traversal!r}")
-    if traversal == "ray":
-        return False
-    missing = [e for e in PACKET_EXTENSIONS if e not in ctx.extensions]
-    if traversal == "packet" and missing:
-        raise PlantgenError(f"traversal='packet' needs {', '.join(missing)}, which this GL context lacks")
-    return not missing
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,11 +94,9 @@ class GpuBvh:
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
     affine: bool = False     # the copies' maps are full 3x4 maps (not every copy a similarity)
     copy_ids: np.ndarray | None = None   # (copies,) int64: the copy held in each GPU slot
-    packet: bool = False     # walked in packets (BVH_PACKET; packet_traversal)
 
     def defines(self) -> dict:
-        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine,
-                "BVH_PACKET": self.packet}
+        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine}
 
     def bind(self) -> None:
         for i, buf in enumerate(self.buffers):
@@ -281,7 +250,7 @@ def copy_words(matrices, copy_plant, centres, origin, *, affine: bool | None = N
 
 
 def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
-               max_bytes: int | None = None, traversal: str | None = None) -> GpuBvh:
+               max_bytes: int | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
 
     One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
@@ -290,9 +259,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
     relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
     LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
-    ``traversal``: the walk's variant (:func:`packet_traversal`).
     """
-    packet = packet_traversal(ctx, traversal)
     two_level = top is not None
     if not two_level and len(plants) != 1:
         raise PlantgenError("upload_bvh: one plant without a top level")
@@ -335,8 +302,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     if max_bytes is not None and need > max_bytes:
         raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
                          f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
-    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids,
-                 packet=packet)
+    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids)
     for a in arrays:
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
@@ -407,30 +373,28 @@ _targets: list = []      # [(target, GpuBvh)]: the last targets uploaded (a scan
 _TARGETS_KEPT = 2
 
 
-def target_bvh(target, ctx=None, traversal: str | None = None) -> GpuBvh:
+def target_bvh(target, ctx=None) -> GpuBvh:
     """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
     triangles, a BVH over its boxes with leaves of GPU_LEAF_SIZE, relative to its root
     box's centre) or of a
     :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
-    over its copies); the last few targets stay uploaded. ``traversal``: the walk's
-    variant (:func:`packet_traversal`)."""
+    over its copies); the last few targets stay uploaded."""
+    for i, (t, gpu) in enumerate(_targets):
+        if t is target and (ctx is None or gpu.ctx is ctx):
+            _targets.append(_targets.pop(i))
+            return gpu
     if ctx is None:
         from .context import gl_context
         ctx = gl_context()
-    packet = packet_traversal(ctx, traversal)
-    for i, (t, gpu) in enumerate(_targets):
-        if t is target and gpu.ctx is ctx and gpu.packet == packet:
-            _targets.append(_targets.pop(i))
-            return gpu
     def plant(t):        # its own tree with the GPU's leaves (the copies' boxes stay: the same root)
         return GpuPlant(t.frusta if t.rows else None, t.triangles, build_bvh(t.lo, t.hi, leaf_size=GPU_LEAF_SIZE))
 
     if hasattr(target, "targets"):        # a SceneTarget: two levels
         scene = target.bvh
         gpu = upload_bvh(ctx, [plant(t) for t in target.targets], top=scene.tlas, matrices=scene.matrix,
-                         copy_plant=scene.plant, traversal=traversal)
+                         copy_plant=scene.plant)
     else:
-        gpu = upload_bvh(ctx, [plant(target)], traversal=traversal)
+        gpu = upload_bvh(ctx, [plant(target)])
     _targets.append((target, gpu))
     while len(_targets) > _TARGETS_KEPT:
         _targets.pop(0)[1].release()
@@ -438,15 +402,14 @@ def target_bvh(target, ctx=None, traversal: str | None = None) -> GpuBvh:
 
 
 def trace_target(target, origins, directions, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf,
-                 chunk: int = TRACE_CHUNK, progress=None,
-                 traversal: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 chunk: int = TRACE_CHUNK, progress=None) -> tuple[np.ndarray, np.ndarray]:
     """The GPU's hit of each ray (m, 3) against a ScanTarget or a SceneTarget: t (m,)
     (float32 values; inf: none) and the primitive (m,) (-1: none; a row, or rows + a leaf
     triangle; a scene's as copy · stride + its plant's), closest or any
     (:func:`trace_rays`). The float32 search of :func:`plantgen.trace` and the scan, which
-    solve each found primitive again in float64. ``traversal``: :func:`packet_traversal`."""
-    t, prim, copy, _ = trace_rays(target_bvh(target, traversal=traversal), origins, directions, any_hit=any_hit,
-                                  t_min=t_min, t_max=t_max, chunk=chunk, progress=progress)
+    solve each found primitive again in float64."""
+    t, prim, copy, _ = trace_rays(target_bvh(target), origins, directions, any_hit=any_hit, t_min=t_min,
+                                  t_max=t_max, chunk=chunk, progress=progress)
     if hasattr(target, "targets"):
         prim = np.where(prim >= 0, copy * target.stride + prim, -1)
     return t, prim
