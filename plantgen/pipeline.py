@@ -31,7 +31,7 @@ import dataclasses
 import functools
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +76,7 @@ from .gl.pose import PoseStream
 from .gl.raycast import Raycaster
 from .gl.records import RecordStream
 from .gl.result import RenderResult
-from .gl.rt import RayTracer
+from .gl.rt import RayTracer, choose_method
 from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from .limits import limits as default_limits
@@ -816,8 +816,14 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
+    lod_pixels = request.lod_pixels(model.effects)
+    placed = model.placed
+    march = replace(march, method=choose_method(
+        march.method, placed_rows=len(frusta), distinct_rows=placed.unique_rows if placed is not None else len(frusta),
+        pixels=width * height * image.ssaa ** 2, lod_pixels=lod_pixels if placed is not None else 0.0,
+        animated=frames is not None, labels=march.labels))
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
-            **({"lod_pixels": request.lod_pixels(model.effects)} if model.placed is not None else {})}
+            **({"lod_pixels": lod_pixels} if placed is not None else {})}
     # an animation's frames refit the tracer's BVH to the posed rows (plantgen.gl.rt)
     raycaster = RayTracer(limits=limits, refit=frames is not None) if march.method == "rt" \
         else Raycaster(limits=limits)

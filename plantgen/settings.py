@@ -129,14 +129,19 @@ class RaycastSettings:
         pixel's ray cast against that row; its cost grows with the rows drawn) or ``"rt"``
         (the ray tracer, :mod:`plantgen.gl.rt`: each pixel's ray traced through a bounding
         volume hierarchy, about the log of the rows; shadows by shadow rays, no map). The
-        same surfaces either way.
+        same surfaces either way ``"auto"`` (the default) chooses per input
+        (:func:`plantgen.pipeline.choose_method`): rt for an instanced scene drawn at full
+        detail whose placed rows are many for the pixels and for its distinct plants, rc
+        otherwise, from what the benchmarks measure.
     """
 
     relief: bool = False
-    method: str = knob("rc", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
+    method: str = knob("auto", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
                        "(rc), or trace each pixel's ray through a BVH (rt: its cost grows with the log of the rows; "
-                       "shadows by shadow rays; an animation's frames posed on the CPU, the BVH refitted to them).",
-                       kind="choice", choices=("rc", "rt"))
+                       "shadows by shadow rays; an animation's frames posed on the CPU, the BVH refitted to them); "
+                       "auto: rt for an instanced scene at full detail (--lod-pixels 0) with many rows a pixel, "
+                       "else rc (the faster, as measured).",
+                       kind="choice", choices=("auto", "rc", "rt"))
     march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
                       "--linear-steps for every ray (fixed, the paper's).", kind="choice",
                       choices=("adaptive", "fixed"))

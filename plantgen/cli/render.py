@@ -106,7 +106,7 @@ def shadow_line(use: ShadowUse, cache: bool = True) -> str:
 
 def print_report(report: RenderReport) -> None:
     """The render's report on stdout: GL renderer, segments, effects, frame time, files."""
-    mode = report.settings.describe()
+    mode = report.settings.describe() + (" (--method auto)" if report.request.march.method == "auto" else "")
     cam = report.camera
     click.echo(f"GL renderer: {report.renderer}")
     placed = report.placed

@@ -48,12 +48,41 @@ from .raycast import Raycaster
 from .shaders import build_program, set_uniforms
 from .trace import GPU_LEAF_SIZE, GpuPlant, upload_bvh
 
-__all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET"]
+__all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET", "choose_method", "RT_ROWS_PER_PIXEL",
+           "RT_PLACED_PER_DISTINCT"]
 
 #: Pixel footprints a shadow ray starts off its receiver's surface (along the receiver's
 #: normal on the light's side): more than the rounding of a hit and the relief march's
 #: final bracket (``march_precision``, a fraction of a footprint).
 SHADOW_RAY_OFFSET = 1.0
+
+#: ``method="auto"``: placed rows a traced ray (pixel times supersamples) from which RT's
+#: frame beats RC's. RC pays about 1.5 µs of llvmpipe a placed row, RT a walk a pixel:
+#: measured (llvmpipe, 2 cores, 512x384 and 1024x768) RC and RT even at 0.086 rows a pixel
+#: (the pine), RT 2.2-3.1x faster at 0.45 (the forest's 19-copy cut at full detail), RC
+#: 3-15x faster at 0.002-0.03 (single plants). docs/benchmarks/rt.md, "Which method".
+RT_ROWS_PER_PIXEL = 0.15
+#: ``method="auto"``: placed rows a distinct row (the BVH's build, 2-2.5 µs a distinct row,
+#: is paid before the first frame; RC's frame costs about 1.5 µs a placed row): below it a
+#: single frame is faster with RC whatever its pixels.
+RT_PLACED_PER_DISTINCT = 2.0
+
+
+def choose_method(method: str, *, placed_rows: int, distinct_rows: int, pixels: int, lod_pixels: float = 0.0,
+                  animated: bool = False, labels: bool = False) -> str:
+    """The method a frame is drawn with: ``method`` itself unless it is ``"auto"``. Auto
+    takes the ray tracer ("rt") for a still, in colour, of an instanced scene drawn at full
+    detail (``lod_pixels`` 0; a level of detail is RC's, cheaper at the error it states)
+    whose ``placed_rows`` are at least :data:`RT_ROWS_PER_PIXEL` a traced ray (``pixels``)
+    and :data:`RT_PLACED_PER_DISTINCT` times its ``distinct_rows`` (what the BVH is built
+    over); else the ray caster ("rc"), which is faster there (the measurements above)."""
+    if method != "auto":
+        return method
+    if animated or labels or lod_pixels > 0 or distinct_rows <= 0:
+        return "rc"
+    many = placed_rows >= RT_ROWS_PER_PIXEL * pixels and placed_rows >= RT_PLACED_PER_DISTINCT * distinct_rows
+    return "rt" if many else "rc"
+
 
 #: The defines of RaycastSettings that the traced rows' programs take.
 _ROW_DEFINES = ("RELIEF", "V_EXACT", "MARCH_FIXED", "HEIGHT_FETCH4")
