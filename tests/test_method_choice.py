@@ -78,3 +78,14 @@ def test_render_chooses_per_input_and_says_so(tmp_path):
     code, cast, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--lod-pixels", "0", "--method", "rc")
     assert code == 0, stderr
     assert "RC" in cast and "--method auto" not in cast
+
+
+def test_the_method_bench_times_both_methods_and_checks_auto():
+    from plantgen.benchmarks.method_choice import markdown, measure
+
+    result = measure(models=("saguaro",), copies=(), sizes=((64, 48),), frames=1, say=lambda *_: None)
+    (row,) = result["rows"]
+    assert row["placed"] == row["distinct"] > 0 and row["rc_ms"] > 0 and row["rt_ms"] > 0 and row["build_ms"] > 0
+    assert row["auto"] == "rc"                       # a plant placed once: never worth a BVH for one still
+    text = markdown(result)
+    assert "| saguaro | 64x48 |" in text and result["renderer"] in text
