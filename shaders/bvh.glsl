@@ -3,14 +3,19 @@
 // trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
 //
 // Data (plantgen/gl/trace.py uploads it, std430 SSBOs):
-//   bvh_nodes    the binary BVH collapsed 4-wide (below, bvh_children): per node its four
-//                children's boxes and references; a leaf reference gives count primitives
-//                at bvh_prims[offset...]. Boxes are float32 rounded outward from the
-//                float64 build, relative to their frame's origin.
-//   bvh_prims    primitive ids in leaf order: rows 0..rows-1, then leaf triangles.
+//   bvh_nodes    the binary BVH collapsed 4-wide (below, bvh_node): per node its four
+//                children's boxes on an 8-bit grid of the node's own and where their
+//                references start; a leaf reference gives count primitives at positions
+//                offset... of its plant's GPU order (plantgen.gl.trace.leaf_order: a node's
+//                leaves one after another). Decoded boxes hold the float32 boxes rounded
+//                outward from the float64 build, relative to their frame's origin.
+//   bvh_prims    for a plant of rows and triangles, its primitive ids in that order (rows
+//                0..rows-1, then leaf triangles); a plant of one kind has none, its rows'
+//                or triangles' data going up in that order (bvh_leaf_prim).
 //   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
 //   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
-//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim, row, triangle offsets),
+//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim (-1: no id table), row,
+//                triangle offsets),
 //                (rows, the top level's node offset (plant 0's), 0, 0): a plant's nodes'
 //                `first` and its primitive ids are its
 //                own; the offsets place them in the shared arrays. The caller skips
@@ -54,7 +59,8 @@ layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
 layout(std430, binding = 8) readonly buffer BvhCopies { vec4 bvh_copies[]; };
 #endif
 
-// A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
+// A hit: t along the ray, the primitive (its data's slot in its plant: row, or rows +
+// triangle; plantgen.gl.trace.trace_rays maps it to the plant's own id), the
 // copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face: FACE_LO or
 // FACE_HI for a hit on a row's open end (a cap), else FACE_CONE (a triangle too).
 struct BvhHit { float t; int prim; int copy; int face; };

@@ -43,7 +43,7 @@ from .shaders import build_compute, set_uniforms
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
            "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
            "node_words", "stack_need", "wide_nodes", "leaf_order", "quantise_boxes", "decode_nodes",
-           "NODE_VEC4", "MAX_LEAF_PRIMS"]
+           "NODE_VEC4", "MAX_LEAF_PRIMS", "BUFFER_NAMES"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
 #: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
@@ -51,6 +51,9 @@ __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "ta
 #: eye and shadow rays 1.1-1.3x faster on llvmpipe; 1 is no faster than 2
 #: (docs/benchmarks/rt.md).
 GPU_LEAF_SIZE = 2
+#: The BVH's storage buffers in binding order (from :data:`BVH_BINDING`; the copies' with
+#: two levels only): :attr:`GpuBvh.parts` gives their bytes.
+BUFFER_NAMES = ("nodes", "primitive ids", "row records", "triangles", "plants", "copies")
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
@@ -90,6 +93,7 @@ class GpuBvh:
     two_level: bool
     buffers: list = field(default_factory=list)
     nbytes: int = 0
+    parts: dict = field(default_factory=dict)   # bytes of each buffer as uploaded, by name (BUFFER_NAMES)
     plants: int = 0
     copies: int = 0
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
@@ -435,9 +439,10 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids,
                  slot_plant=slot_plant, prim_ids=np.concatenate(ids).astype(np.int64),
                  prim_starts=np.cumsum([0] + [len(i) for i in ids[:-1]]).astype(np.int64))
-    for a in arrays:
+    for name, a in zip(BUFFER_NAMES, arrays, strict=False):
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
+        gpu.parts[name] = len(data)
         gpu.nbytes += len(data)
     gpu.empty = not (top.nodes if two_level else plants[0].bvh.nodes)
     return gpu
