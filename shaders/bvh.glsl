@@ -14,6 +14,9 @@
 //                or triangles' data going up in that order (bvh_leaf_prim).
 //   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
 //   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
+//   bvh_bounds   with BVH_ROW_BOUND, one float per row (its plant's row offset, as
+//                bvh_rows, in the same order): the reach of the cheap reject before the
+//                row test (bvh_row_near, plantgen.gl.trace.row_bounds), binding 9.
 //   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim (-1: no id table), row,
 //                triangle offsets),
 //                (rows, the top level's node offset (plant 0's), 0, 0): a plant's nodes'
@@ -38,7 +41,10 @@
 // Möller-Trumbore with the scan's grazing guard (bvh_triangle_hit). Stack-based, near
 // child first (by slab entry), nodes entered at or beyond the best t skipped.
 // BVH_COUNT: bvh_visits and bvh_tests count the nodes a trace walks and the primitives it
-// tests (the bench's work per ray).
+// tests (the bench's work per ray); bvh_row_tests, bvh_bound_pass and bvh_row_hits the rows
+// among those, the rows that passed the cheap reject and the rows whose test hit. The
+// bench's variants: BVH_NO_PRIMS (no primitive tested: the node steps alone) and
+// BVH_PRIMS_TWICE (each tested twice: what the tests cost).
 
 #ifndef BVH_GLSL
 #define BVH_GLSL
@@ -57,6 +63,17 @@ layout(std430, binding = 6) readonly buffer BvhTris { vec4 bvh_tris[]; };
 layout(std430, binding = 7) readonly buffer BvhPlants { ivec4 bvh_plants[]; };
 #if defined TWO_LEVEL
 layout(std430, binding = 8) readonly buffer BvhCopies { vec4 bvh_copies[]; };
+#endif
+#if defined BVH_ROW_BOUND
+layout(std430, binding = 9) readonly buffer BvhBounds { float bvh_bounds[]; };
+#endif
+
+#if defined BVH_COUNT
+int bvh_visits = 0;         // wide nodes walked by the last bvh_trace (trace.glsl's BVH_COUNT)
+int bvh_tests = 0;          // primitives it tested
+int bvh_row_tests = 0;      // rows of those (the rest are leaf triangles)
+int bvh_bound_pass = 0;     // rows that passed the cheap reject (BVH_ROW_BOUND; else every row)
+int bvh_row_hits = 0;       // rows of those whose full test hit (at any t in the ray's interval)
 #endif
 
 // A hit: t along the ray, the primitive (its data's slot in its plant: row, or rows +
@@ -78,9 +95,8 @@ Frustum bvh_frustum(int plant, int row) {
 // march) after re-centring the ray at its point nearest the axis segment, as raycast.glsl
 // does. t > t_min (and with RELIEF the march stops at t_max); NO_HIT on a miss; `face` FACE_LO or FACE_HI for a hit on an open end's
 // disc (a cap), else FACE_CONE. `distance`, `footprint_scale`: row_hit's.
-float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance, float footprint_scale,
-                  out int face) {
-    float t_shift = recenter_shift(f, o, d);
+float bvh_row_hit_at(Frustum f, float t_shift, vec3 o, vec3 d, float t_min, float t_max, float distance,
+                     float footprint_scale, out int face) {
     float t_hit;
     bool cap;
     int samples;
@@ -88,6 +104,11 @@ float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float dis
                  t_hit, face, cap, samples)) return NO_HIT;
     face = cap ? face : FACE_CONE;
     return t_shift + t_hit;
+}
+
+float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance, float footprint_scale,
+                  out int face) {
+    return bvh_row_hit_at(f, recenter_shift(f, o, d), o, d, t_min, t_max, distance, footprint_scale, face);
 }
 
 // Möller-Trumbore, both faces, as plantgen.geometry.scan._triangle_hits (the grazing
@@ -107,18 +128,92 @@ float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, fl
     return u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min ? t : NO_HIT;
 }
 
+#if defined BVH_ROW_BOUND
+// The cheap reject before a row's test (BVH_ROW_BOUND): whether the ray's line passes
+// within bvh_bounds[row] of the row's axis segment {base + s*axis, 0 <= s <= h}, from the
+// record's first two vec4 alone. The bound (plantgen.gl.trace.row_bounds) is the largest
+// distance from that segment of any point of the solid row (its relief shell and oblique
+// ends included, their joint slack too), widened for float32 rounding; the line's nearest
+// point to the segment is the one the row test re-centres the ray at (recenter_shift, whose
+// shift is returned), so a ray the test could hit is never rejected. Where the ray runs
+// parallel to the axis (recenter_shift's fallback, the segment's middle) the bound grows by
+// how far that middle may be from the nearest point. Off by default
+// (plantgen.gl.trace.ROW_BOUND): llvmpipe runs the row test behind it on all lanes anyway.
+bool bvh_row_near(vec4 r0, vec4 r1, float bound, vec3 o, vec3 d, out float t_shift) {
+    vec3 base = r0.xyz, axis = r1.xyz;
+    float h = r0.w;
+    vec3 E = o - base;
+    float b = dot(d, axis), de = dot(d, E), e = dot(axis, E), dd = dot(d, d);
+    float den = dd - b * b;
+    bool parallel = !(den > TOL_RECENTER_PARALLEL * dd);
+    float s = parallel ? 0.5 * h : clamp(e + b * (b * e - de) / den, 0.0, h);
+    t_shift = (s * b - de) / dd;
+    vec3 w = (o + t_shift * d) - base - s * axis;
+    float reach = bound + h * (parallel ? 0.5 * sqrt(TOL_RECENTER_PARALLEL) + 1.0e-5 : 1.0e-5);
+    return dot(w, w) <= reach * reach;
+}
+#endif
+
+#if defined BVH_PRIMS_TWICE
+uniform float bvh_bench_zero;    // 0: the bench's second test of each primitive is the first's
+#define bvh_prim_hit bvh_prim_hit_once
+#endif
+
 // Primitive `prim` of plant `plant` against the ray: t (NO_HIT for a miss) and the face.
 float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
                    float footprint_scale, bool triangles, out int face) {
     face = FACE_CONE;
+#if defined BVH_NO_PRIMS
+    return NO_HIT;       // the bench's node steps alone (nothing is hit, so more nodes are walked)
+#endif
     int rows = bvh_plants[2 * plant + 1].x;
-    if (prim < rows)
-        return bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, t_max, distance, footprint_scale, face);
+    if (prim < rows) {
+#if defined BVH_COUNT
+        ++bvh_row_tests;
+#endif
+#if defined BVH_ROW_BOUND
+        int row = bvh_plants[2 * plant].z + prim;
+        vec4 r0 = bvh_rows[6 * row], r1 = bvh_rows[6 * row + 1];
+        float t_shift;
+        bool near = bvh_row_near(r0, r1, bvh_bounds[row], o, d, t_shift);
+        float t = NO_HIT;
+        if (near) {
+#if defined BVH_COUNT
+            ++bvh_bound_pass;
+#endif
+            Frustum f = frustum_from_record(r0, r1, bvh_rows[6 * row + 2], bvh_rows[6 * row + 3],
+                                            bvh_rows[6 * row + 4], bvh_rows[6 * row + 5]);
+            t = bvh_row_hit_at(f, t_shift, o, d, t_min, t_max, distance, footprint_scale, face);
+        }
+#else
+#if defined BVH_COUNT
+        ++bvh_bound_pass;
+#endif
+        float t = bvh_row_hit(bvh_frustum(plant, prim), o, d, t_min, t_max, distance, footprint_scale, face);
+#endif
+#if defined BVH_COUNT
+        if (t < NO_HIT) ++bvh_row_hits;
+#endif
+        return t;
+    }
     if (!triangles) return NO_HIT;
     int i = 3 * (bvh_plants[2 * plant].w + prim - rows);
     vec4 v0 = bvh_tris[i];
     return bvh_triangle_hit(v0.xyz, bvh_tris[i + 1].xyz, bvh_tris[i + 2].xyz, v0.w, o, d, t_min);
 }
+
+#if defined BVH_PRIMS_TWICE
+#undef bvh_prim_hit
+// The bench's measure of what the primitive tests cost: each primitive tested twice.
+float bvh_prim_hit(int plant, int prim, vec3 o, vec3 d, float t_min, float t_max, float distance,
+                   float footprint_scale, bool triangles, out int face) {
+    int face2;
+    float a = bvh_prim_hit_once(plant, prim, o, d, t_min, t_max, distance, footprint_scale, triangles, face);
+    float b = bvh_prim_hit_once(plant, prim, o + bvh_bench_zero * d, d, t_min, t_max, distance, footprint_scale,
+                                triangles, face2);
+    return min(a, b);
+}
+#endif
 
 vec3 bvh_inverse_dir(vec3 d) {
     vec3 safe = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
@@ -249,11 +344,6 @@ const int BVH_PLANT = 1;    // a node of the current copy's plant (the copy's ra
 const int BVH_COPY = 2;     // a copy not entered yet (its plant's root)
 const int BVH_NONE = BVH_EMPTY;   // no node being walked: take the next entry
 
-#if defined BVH_COUNT
-int bvh_visits = 0;         // wide nodes walked by the last bvh_trace (trace.glsl's BVH_COUNT)
-int bvh_tests = 0;          // primitives it tested
-#endif
-
 // The search: the closest hit (any_hit false) or any hit (the first found) of the ray
 // o + t*d with t_min < t < t_max; t = t_max and prim = -1 where there is none. `distance`:
 // the eye's distance from the ray's point at t = 0 (world units, |d| = 1: the relief
@@ -285,6 +375,9 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
 #if defined BVH_COUNT
     bvh_visits = 0;
     bvh_tests = 0;
+    bvh_row_tests = 0;
+    bvh_bound_pass = 0;
+    bvh_row_hits = 0;
 #endif
     while (true) {
         // Walk the nodes (cheap) until a leaf of primitives is reached or nothing is left;

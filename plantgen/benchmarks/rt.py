@@ -23,14 +23,21 @@ the machine (with its load: this machine is shared) are printed with the tables.
 ``--work``: the work a ray costs, RT alone on ``--scene``: the eye's rays (every pixel,
 rows and leaves, closest hit; through ``shaders/trace.glsl``) and the shadow rays of those
 that hit (any hit), each with the nodes a ray walks and the primitives it tests (the
-traversal's ``BVH_COUNT``), wall and CPU milliseconds (the process's CPU time, llvmpipe's
-threads included: what another job's load changes least), and RT's frames without relief
-and shadows and RT+R with shadow rays. Compare designs by running it on each.
+traversal's ``BVH_COUNT``: also the rows among the primitives, those that passed the
+rows' cheap reject and those whose test hit), wall and CPU milliseconds (the process's CPU
+time, llvmpipe's threads included: what another job's load changes least), and RT's frames
+without relief and shadows, RT+R without shadows and RT+R with shadow rays. Where the time
+goes: the eye's rays again with the primitive tests skipped (``BVH_NO_PRIMS``: the node
+steps alone; nothing is hit, so the rays walk more nodes) and with every primitive tested
+twice (``BVH_PRIMS_TWICE``: the difference is what the tests cost); the frames' differences
+give the relief march and the shadow rays. ``--ab`` runs every row without and with the
+rows' cheap reject (``BVH_ROW_BOUND``), interleaved. Compare designs by running it on each.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 from datetime import UTC, datetime
@@ -39,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.scan import ScanSettings, beam_returns, scan_target, scene_target
+from ..gl import trace
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES
@@ -97,10 +105,11 @@ def measure_frames(scene: str = "forest", size=(1024, 768), frames: int = 1, say
             "images": (rc_frame.color, rt_frame.color)}
 
 
-def _work_counts(gpu, origins, directions, any_hit: bool, t_min: float) -> tuple[float, float]:
-    """Mean nodes walked and primitives tested a ray (the traversal's BVH_COUNT variant)."""
+def _dispatch(gpu, origins, directions, any_hit: bool, t_min: float, defines=None) -> np.ndarray:
+    """One dispatch of ``shaders/trace.glsl`` over the rays with extra ``defines`` (the
+    bench's variants): its (n, 4) int32 words (with BVH_COUNT the traversal's counts)."""
     ctx = gpu.ctx
-    program = build_compute(ctx, "trace.glsl", {**gpu.defines(), "BVH_COUNT": True})
+    program = build_compute(ctx, "trace.glsl", {**gpu.defines(), **(defines or {})})
     n = len(origins)
     words = np.zeros((n, 8), np.float32)
     words[:, 0:3], words[:, 3] = origins - gpu.origin, t_min
@@ -112,67 +121,96 @@ def _work_counts(gpu, origins, directions, any_hit: bool, t_min: float) -> tuple
         hits.bind_to_storage_buffer(1)
         set_uniforms(program, any_hit=int(any_hit), ray_count=n)
         program.run(group_x=(n + 63) // 64)
-        counts = np.frombuffer(hits.read(), np.int32).reshape(n, 4)[:, 3]
+        return np.frombuffer(hits.read(), np.int32).reshape(n, 4)
     finally:
         rays.release()
         hits.release()
-    return float((counts & 0xFFFF).mean()), float((counts >> 16).mean())
 
 
-def _cpu_timed(run, frames: int) -> tuple[float, float, object]:
-    """A warm-up and ``frames`` timed runs: median wall ms, median CPU ms, the last result."""
-    run()
-    wall, cpu = [], []
-    for _ in range(frames):
-        c, t = time.process_time(), time.perf_counter()
-        result = run()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return 1e3 * statistics.median(wall), 1e3 * statistics.median(cpu), result
+def _work_counts(gpu, origins, directions, any_hit: bool, t_min: float, defines=None) -> dict:
+    """Mean nodes walked, primitives tested, rows tested, rows that passed the cheap reject
+    and rows whose test hit, a ray (the traversal's BVH_COUNT variant)."""
+    words = _dispatch(gpu, origins, directions, any_hit, t_min, {**(defines or {}), "BVH_COUNT": True})
+    steps, rows = words[:, 3], words[:, 2]
+    return {"nodes": float((steps & 0xFFFF).mean()), "prims": float((steps >> 16).mean()),
+            "rows": float(words[:, 1].mean()), "passed": float((rows >> 16).mean()),
+            "hits": float((rows & 0xFFFF).mean())}
 
 
-def measure_work(scene: str = "forest", size=(512, 384), frames: int = 3, say=print) -> dict:
-    """The traversal's work and time on ``scene`` (module docstring, ``--work``)."""
+def measure_work(scene: str = "forest", size=(512, 384), frames: int = 3, say=print, ab: bool = False) -> dict:
+    """The traversal's work and time on ``scene`` (module docstring, ``--work``); with
+    ``ab`` each row twice, without and with the rows' cheap reject (``BVH_ROW_BOUND``),
+    interleaved run by run."""
     model = prepare_model(scene)
     placed = model.placed if model.placed is not None else model.frusta_at(0)
     staging = stage_model(model.grown, placed, *size)
     args = frame_arguments(placed, staging, ShadowSettings())
     rt = RayTracer()
     camera = staging.camera
-    gpu = rt.gpu_bvh(placed, args["leaves"], camera.eye)
+    saved, trace.ROW_BOUND = trace.ROW_BOUND, trace.ROW_BOUND or ab      # with --ab: the bounds uploaded
+    try:
+        gpu = rt.gpu_bvh(placed, args["leaves"], camera.eye)
+    finally:
+        trace.ROW_BOUND = saved
     o, d = (a.reshape(-1, 3) for a in camera.rays())
-    rows = {}
-    wall, cpu, (t, prim, _, _) = _cpu_timed(lambda: trace_rays(gpu, o, d), frames)
-    rows["eye rays"] = {"rays": len(o), "wall": wall, "cpu": cpu, "work": _work_counts(gpu, o, d, False, 0.0)}
+    t, prim, _, _ = trace_rays(gpu, o, d)
     hit = prim >= 0
     light = np.asarray(args["light_dir"], np.float64)
     so = o[hit] + t[hit, None] * d[hit]
     sd = np.broadcast_to(light / np.linalg.norm(light), so.shape)
-    wall, cpu, _ = _cpu_timed(lambda: trace_rays(gpu, so, sd, any_hit=True, t_min=1e-4), frames)
-    rows["shadow rays"] = {"rays": len(so), "wall": wall, "cpu": cpu,
-                           "work": _work_counts(gpu, so, sd, True, 1e-4)}
     quiet = {**args, "shadows": None}
-    for name, settings, kw in (("RT frame", RaycastSettings(relief=False), quiet),
-                               ("RT+R frame, shadow rays", RaycastSettings(relief=True), args)):
-        wall, cpu, _ = _cpu_timed(lambda s=settings, k=kw: rt.render(placed, settings=s, **k), frames)
-        rows[name] = {"rays": None, "wall": wall, "cpu": cpu, "work": None}
-    for name, r in rows.items():
-        say(f"{name}: {r['wall']:.0f} ms ({r['cpu']:.0f} ms CPU)")
+    twice = {"BVH_PRIMS_TWICE": True}
+    runs = {
+        "eye rays": (len(o), lambda: trace_rays(gpu, o, d), (o, d, False, 0.0, None)),
+        "eye rays, node steps only": (len(o), lambda: _dispatch(gpu, o, d, False, 0.0, {"BVH_NO_PRIMS": True}),
+                                      (o, d, False, 0.0, {"BVH_NO_PRIMS": True})),
+        "eye rays, each primitive tested twice": (len(o), lambda: _dispatch(gpu, o, d, False, 0.0, twice),
+                                                  (o, d, False, 0.0, twice)),
+        "shadow rays": (len(so), lambda: trace_rays(gpu, so, sd, any_hit=True, t_min=1e-4), (so, sd, True, 1e-4, None)),
+        "RT frame": (None, lambda: rt.render(placed, settings=RaycastSettings(relief=False), **quiet), None),
+        "RT+R frame": (None, lambda: rt.render(placed, settings=RaycastSettings(relief=True), **quiet), None),
+        "RT+R frame, shadow rays": (None, lambda: rt.render(placed, settings=RaycastSettings(relief=True), **args),
+                                    None),
+    }
+    variants = {"no reject": False, "reject": True} if ab else {"": None}
+    times = {(v, name): ([], []) for v in variants for name in runs}
+    for rep in range(frames + 1):            # the first: a warm-up (programs compiled)
+        for name, (_, run, _) in runs.items():
+            for v, on in variants.items():
+                gpu.row_bound = on
+                c, t0 = time.process_time(), time.perf_counter()
+                run()
+                if rep:
+                    times[v, name][0].append(time.perf_counter() - t0)
+                    times[v, name][1].append(time.process_time() - c)
+    rows = {}
+    for (v, name), (wall, cpu) in times.items():
+        rays, _, count = runs[name]
+        gpu.row_bound = variants[v]
+        work = _work_counts(gpu, *count) if count is not None else None
+        label = f"{name} ({v})" if v else name
+        rows[label] = {"rays": rays, "wall": 1e3 * statistics.median(wall), "cpu": 1e3 * statistics.median(cpu),
+                       "work": work}
+        say(f"{label}: {rows[label]['wall']:.0f} ms ({rows[label]['cpu']:.0f} ms CPU)")
+    gpu.row_bound = None
     return {"scene": scene, "size": size, "frames": frames, "rows": rows, "renderer": renderer_name(),
-            "leaf_size": rt.leaf_size, "gpu_bytes": gpu.nbytes}
+            "leaf_size": rt.leaf_size, "gpu_bytes": gpu.nbytes, "load": os.getloadavg()}
 
 
 def work_markdown(work: dict) -> str:
     w, h = work["size"]
     lines = [f"# The traversal's work: {work['scene']} at {w}x{h} ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC)", "",
              f"GL renderer: {work['renderer']}  ", f"Machine: {machine()} (shared by other jobs: under load)  ",
+             "Load average at the end: " + ", ".join(f"{x:.2f}" for x in work["load"]) + "  ",
              f"BVH leaves of at most {work['leaf_size']} primitives, {work['gpu_bytes'] / 2**20:.1f} MiB on the GPU; "
              f"medians of {work['frames']} runs", "",
-             "| what | rays | ms | CPU ms | nodes a ray | primitives a ray |", "|---|---:|---:|---:|---:|---:|"]
+             "| what | rays | ms | CPU ms | nodes a ray | primitives a ray | rows tested | rows past the reject "
+             "| rows hit |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in work["rows"].items():
         rays = f"{r['rays']:,}" if r["rays"] is not None else ""
-        nodes, prims = (f"{x:.1f}" for x in r["work"]) if r["work"] is not None else ("", "")
-        lines.append(f"| {name} | {rays} | {r['wall']:,.0f} | {r['cpu']:,.0f} | {nodes} | {prims} |")
+        keys = ("nodes", "prims", "rows", "passed", "hits")
+        counts = [f"{r['work'][k]:.2f}" for k in keys] if r["work"] else [""] * len(keys)
+        lines.append(f"| {name} | {rays} | {r['wall']:,.0f} | {r['cpu']:,.0f} | " + " | ".join(counts) + " |")
     return "\n".join(lines + [""])
 
 
@@ -257,11 +295,13 @@ def main(argv=None) -> int:
     parser.add_argument("--no-frames", action="store_true")
     parser.add_argument("--no-scan", action="store_true")
     parser.add_argument("--work", action="store_true", help="the traversal's work a ray and its time alone")
+    parser.add_argument("--ab", action="store_true",
+                        help="with --work: each row without and with the rows' cheap reject, interleaved")
     parser.add_argument("--images", type=Path, help="folder to write both frames into (PNG)")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
     if args.work:
-        return report(work_markdown(measure_work(args.scene, args.size, max(args.frames, 1))), args.out)
+        return report(work_markdown(measure_work(args.scene, args.size, max(args.frames, 1), ab=args.ab)), args.out)
     frames = None if args.no_frames else measure_frames(args.scene, args.size, args.frames)
     if args.images is not None and frames is not None:
         from ..images import write_png

@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, build_bvh, float32_boxes
 from ..geometry.frames import similarity_trs
+from ..geometry.frusta import plane_height
 from ..geometry.instances import similarity_parts
 from ..limits import LimitError, hint
 from ..tolerances import tol
@@ -43,7 +44,8 @@ from .shaders import build_compute, set_uniforms
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
            "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
            "node_words", "stack_need", "wide_nodes", "leaf_order", "quantise_boxes", "decode_nodes",
-           "NODE_VEC4", "MAX_LEAF_PRIMS", "BUFFER_NAMES"]
+           "NODE_VEC4", "MAX_LEAF_PRIMS", "BUFFER_NAMES", "row_bounds", "ROW_BOUND", "ROW_BOUND_BINDING",
+           "ROW_BOUND_BYTES"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
 #: a scan or a trace uploads; the float64 reference keeps its own): 2 tests about half the
@@ -58,6 +60,18 @@ BUFFER_NAMES = ("nodes", "primitive ids", "row records", "triangles", "plants", 
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
 BVH_BINDING = 3
+#: Whether the traversal tests a row's cheap bound before its row test (``BVH_ROW_BOUND``
+#: in ``shaders/bvh.glsl``: the distance of the ray's line from the row's axis segment
+#: against :func:`row_bounds`, :data:`ROW_BOUND_BYTES` more a row on the GPU). Off: it drops
+#: 90 % of the rows an eye ray tests, but llvmpipe runs a shader's branches on all of a
+#: vector's lanes, so the row test still runs and the bound only adds work (0.8-1.0x on the
+#: forest's frames, docs/benchmarks/rt.md); a GPU, whose warps skip a branch none of their
+#: lanes take, may gain: measure it there (``python -m plantgen.benchmarks.row_bound``).
+ROW_BOUND = False
+#: SSBO binding of the rows' bounds (:func:`row_bounds`) in ``shaders/bvh.glsl``.
+ROW_BOUND_BINDING = 9
+#: GPU bytes of one row's bound (beside its 96-byte record).
+ROW_BOUND_BYTES = 4
 #: The traversal stack's entries in ``shaders/bvh.glsl``; a deeper tree is refused.
 BVH_STACK = 96
 #: GPU bytes of one copy's map and plant index in an instanced scene whose copies are all
@@ -108,17 +122,25 @@ class GpuBvh:
         name: a position in the plant's data as uploaded) of the given plants."""
         return self.prim_ids[self.prim_starts[plant] + slot]
 
+    bounds: object = None    # the rows' bounds (row_bounds; uploaded with the row bound on)
+    row_bound: bool | None = None        # test them (BVH_ROW_BOUND, where uploaded); None: ROW_BOUND
+
     def defines(self) -> dict:
-        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine}
+        on = ROW_BOUND if self.row_bound is None else self.row_bound
+        return {"TWO_LEVEL": self.two_level, "BVH_AFFINE_COPIES": self.two_level and self.affine,
+                "BVH_ROW_BOUND": bool(on) and self.bounds is not None}
 
     def bind(self) -> None:
         for i, buf in enumerate(self.buffers):
             buf.bind_to_storage_buffer(BVH_BINDING + i)
+        if self.bounds is not None:
+            self.bounds.bind_to_storage_buffer(ROW_BOUND_BINDING)
 
     def release(self) -> None:
-        for buf in self.buffers:
-            buf.release()
-        self.buffers = []
+        for buf in [*self.buffers, self.bounds]:
+            if buf is not None:
+                buf.release()
+        self.buffers, self.bounds = [], None
 
 
 #: Words (vec4) of one node on the GPU (48 bytes): the node's grid (its origin and a
@@ -310,6 +332,71 @@ def decode_nodes(words: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return lo.astype(np.float32), hi.astype(np.float32), ref.astype(np.int32)
 
 
+#: Plane rises (n·axis + k·n·e, the generator's approach to a cutting plane) below this
+#: leave a row unbounded for the cheap reject (its bound infinite: never rejected): its
+#: oblique end reaches far along the axis, and float32 rounding of so flat a crossing could
+#: move it further than the bound's margin.
+_BOUND_RISE = 1e-3
+#: The bound's relative widening: float32 rounding of the record against the float64 row
+#: (the shader adds 1e-5 of the row's length for its own rounding).
+_BOUND_WIDEN = 1e-3
+
+
+def row_bounds(frusta, origin) -> np.ndarray:
+    """(n,) float32 per row: the largest distance from its axis segment {C1 + s·axis,
+    0 <= s <= h} of any point of the solid row (the cone grown by its relief shell, between
+    its cutting planes moved out by the GPU's joint slack, relative to ``origin`` as
+    :func:`~plantgen.gl.records.pack_records` packs it), widened by ``_BOUND_WIDEN`` and
+    rounded up; inf where no finite bound holds (a zero-length row, a plane nearly along a
+    generator). A ray whose line passes farther than this from the segment misses the row
+    (``bvh_row_near`` in ``shaders/bvh.glsl``).
+
+    The solid is convex: its extreme points lie where the cone meets a plane, or at the apex
+    of a cone closing to a point inside it. A generator of direction e meets a plane at the
+    height y(x) = (gap - r1·x) / (n·a + k·x) of x = n·e (:func:`plantgen.geometry.frusta.
+    plane_height`), monotone in x, so over every generator the heights lie between its
+    values at x = ±|n_perp|. A point at height y lies at most g(y) = hypot(max(-y, y - h, 0),
+    max(r1 + shell + k·y, 0)) from the segment, convex in y: its largest value over the
+    extreme points' heights is at the lowest or highest of them.
+    """
+    n = len(frusta.base)
+    if n == 0:
+        return np.zeros(0, np.float32)
+    h = np.asarray(frusta.length, np.float64)
+    base_rel = np.asarray(frusta.base, np.float64) - np.asarray(origin, np.float64)
+    slack = tol.joint_slack * 2.0 ** -24 * (np.linalg.norm(base_rel.astype(np.float32), axis=1) + h)
+    r = np.asarray(frusta.r1, np.float64) + frusta.shell
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = (frusta.r2 - frusta.r1) / h
+        ys, ok = [], np.isfinite(k) & (h > 0)
+        inside = np.ones(n, bool)
+        apex = -r / k
+        for plane, sign in ((frusta.plane_lo, -1.0), (frusta.plane_hi, 1.0)):
+            normal = plane[:, :3]
+            gap = plane[:, 3] - np.einsum("ij,ij->i", normal, frusta.base) + sign * slack   # moved out
+            n_axis = np.einsum("ij,ij->i", normal, frusta.axis)
+            n_perp = np.sqrt(np.maximum(1.0 - n_axis ** 2, 0.0))
+            rises = []
+            for x in (-n_perp, n_perp):
+                y, rise = plane_height(gap, n_axis, x, r, k)
+                ys.append(y)
+                rises.append(rise)
+            ok &= (np.abs(rises[0]) > _BOUND_RISE) & (np.abs(rises[1]) > _BOUND_RISE) & (rises[0] * rises[1] > 0)
+            side = n_axis * apex - gap              # the apex's side of the moved plane
+            inside &= np.isfinite(apex) & (sign * side <= 0)
+        y_lo, y_hi = np.minimum.reduce(ys), np.maximum.reduce(ys)
+        y_lo = np.where(inside, np.minimum(y_lo, apex), y_lo)
+        y_hi = np.where(inside, np.maximum(y_hi, apex), y_hi)
+
+        def reach(y):
+            return np.hypot(np.maximum(np.maximum(-y, y - h), 0.0), np.maximum(r + k * y, 0.0))
+
+        bound = np.maximum(reach(y_lo), reach(y_hi)) * (1.0 + _BOUND_WIDEN)
+    bound = np.where(ok & np.isfinite(bound), bound, np.inf)
+    out = bound.astype(np.float32)
+    return np.where(out < bound, np.nextafter(out, np.float32(np.inf)), out).astype(np.float32)
+
+
 def _triangle_words(triangles, origin) -> np.ndarray:
     """(t, 12) float32: (v0, |e1||e2|), (e1, 0), (e2, 0), v0 relative to ``origin``."""
     tri = np.zeros((0, 3, 3)) if triangles is None else np.asarray(triangles, np.float64)
@@ -374,7 +461,7 @@ def copy_words(matrices, copy_plant, centres, origin, *, affine: bool | None = N
 
 
 def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
-               max_bytes: int | None = None) -> GpuBvh:
+               max_bytes: int | None = None, row_bound: bool | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
 
     One level (``top`` None): one plant, in the frame of ``origin`` ((3,) float64; default
@@ -383,7 +470,9 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     ``copy_plant`` (k,) its plant; ``origin`` the world frame's origin (rays are given
     relative to it). Raises PlantgenError for a tree deeper than the GPU's stack, and a
     LimitError (one line) when the buffers would pass ``max_bytes`` (nothing uploaded).
+    ``row_bound`` (None: :data:`ROW_BOUND`): upload the rows' bounds for the cheap reject.
     """
+    with_bounds = ROW_BOUND if row_bound is None else bool(row_bound)
     two_level = top is not None
     if not two_level and len(plants) != 1:
         raise PlantgenError("upload_bvh: one plant without a top level")
@@ -401,7 +490,7 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     # each plant's frame: its own root box centre (the world frame's origin with one level)
     centres = [origin if not two_level else (0.5 * (p.bvh.lo[0] + p.bvh.hi[0]) if p.bvh.nodes else np.zeros(3))
                for p in plants]
-    nodes, prims, rows, tris, offsets, ids = [], [], [], [], [], []
+    nodes, prims, rows, tris, offsets, ids, bounds = [], [], [], [], [], [], []
     counts = np.zeros(4, np.int64)
     for p, c, tree in zip(plants, centres, trees, strict=True):
         order = leaf_order(*tree)     # the primitives in the GPU's order
@@ -410,14 +499,19 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         nodes.append(node_words(p.bvh, c, *tree[1:]))
         rec = pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32)
         tri = _triangle_words(p.triangles, c)
+        bound = row_bounds(p.frusta, c) if p.rows and with_bounds else np.zeros(0, np.float32)
         if mixed:         # rows and triangles: a table of ids in the GPU's order, the data in id order
             prims.append(order.astype(np.int32))
             ids.append(np.arange(len(order)))
         else:             # one kind: the data itself in the GPU's order (no table)
-            rec, tri = (rec[order], tri) if p.rows else (rec, tri[order] if len(order) else tri)
+            if p.rows:
+                rec, bound = rec[order], bound[order] if len(bound) else bound
+            elif len(order):
+                tri = tri[order]
             ids.append(order)
         rows.append(rec)
         tris.append(tri)
+        bounds.append(bound)
         counts += [len(nodes[-1]), len(prims[-1]) if mixed else 0, p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
@@ -432,7 +526,8 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         words, affine = copy_words(matrices[copy_ids], slot_plant, centres, origin)
         copies = len(words)
         arrays.append(words)
-    need = sum(a.nbytes for a in arrays)
+    bound_words = np.concatenate(bounds)
+    need = sum(a.nbytes for a in arrays) + bound_words.nbytes
     if max_bytes is not None and need > max_bytes:
         raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
                          f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
@@ -444,6 +539,10 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
         gpu.parts[name] = len(data)
         gpu.nbytes += len(data)
+    gpu.row_bound = row_bound
+    if with_bounds:
+        gpu.bounds = ctx.buffer(bound_words.tobytes() or b"\0" * 16)
+        gpu.nbytes += bound_words.nbytes
     gpu.empty = not (top.nodes if two_level else plants[0].bvh.nodes)
     return gpu
 
