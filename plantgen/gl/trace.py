@@ -5,7 +5,11 @@ storage buffers, searched by ``shaders/bvh.glsl`` (one compute invocation per ra
 Precision: everything the GPU holds is float32 relative to a frame origin formed in
 float64 here: row records (:func:`plantgen.gl.records.pack_records`), leaf triangles and
 node boxes (rounded outward, :func:`plantgen.geometry.bvh.float32_boxes`, so a float32
-box never loses a ray its float64 box keeps). An instanced scene keeps each distinct
+box never loses a ray its float64 box keeps, then put on each node's 8-bit grid rounded
+outward again, :func:`node_words`: 48 bytes a 4-wide node). A plant of one kind (rows or
+leaf triangles) uploads its data in the GPU's leaf order (:func:`leaf_order`), with no
+table of primitive ids; the hits name those slots and :func:`trace_rays` maps them back
+to the plant's ids (:meth:`GpuBvh.primitive_ids`). An instanced scene keeps each distinct
 plant once, relative to its own box centre, and per copy the map from the frame into the
 plant's (its offset formed in float64). The GPU finds the primitive; callers that need
 float64 distances solve that one primitive again on the CPU (:mod:`plantgen.trace`, the
