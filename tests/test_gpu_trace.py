@@ -536,3 +536,62 @@ def test_triangles_of_every_scale_far_from_the_origin(gl_ctx):
     t, prim, _, _ = trace_rays(gpu, origins, dirs)
     assert (prim == ref_prim).mean() >= 0.999
     assert (ref_prim >= 0).sum() >= 100
+
+
+_NODE_DUMP = """
+#if defined COMPUTE_SHADER
+layout(local_size_x = 64) in;
+#include "bvh.glsl"
+layout(std430, binding = 0) writeonly buffer Dump { vec4 dump[]; };
+uniform int node_count;
+void main() {
+    int w = int(gl_GlobalInvocationID.x);
+    if (w >= node_count) return;
+    ivec4 ref;
+    bvh_node(w, dump[7 * w], dump[7 * w + 1], dump[7 * w + 2], dump[7 * w + 3], dump[7 * w + 4], dump[7 * w + 5],
+             ref);
+    dump[7 * w + 6] = intBitsToFloat(ref);
+}
+#endif
+"""
+
+
+def test_the_shader_decodes_nodes_as_the_cpu_does(gl_ctx, tmp_path):
+    """bvh.glsl's bvh_node, run on the GPU over nodes of every scale (tiny, huge, 1e4 units
+    from the origin, zero-size), gives bit for bit the boxes and references that
+    plantgen.gl.trace.decode_nodes gives (which the property test above proves
+    conservative): origin + bytes · step is exact in float32, whatever the compiler fuses."""
+    import shutil
+
+    from plantgen._resources import shaders_dir
+    from plantgen.gl.shaders import build_compute, set_uniforms
+    from plantgen.gl.trace import BVH_BINDING, decode_nodes, node_words, wide_nodes
+
+    rng = np.random.default_rng(11)
+    words = []
+    for far, spread, size in [(0.0, 5.0, 0.5), (1e4, 30.0, 1e-3), (-2.5e7, 1e3, 1e5), (0.0, 1e-30, 0.0),
+                              (3.0, 1e30, 1e29), (1e4, 0.0, 0.0)]:
+        lo = far + rng.uniform(-spread, spread, (300, 3))
+        hi = lo + rng.uniform(0.0, size, (300, 3))
+        bvh = build_bvh(lo, hi, leaf_size=2)
+        words.append(node_words(bvh, np.array([far * 0.999, 0.0, 0.0]), *wide_nodes(bvh)))
+    words = np.concatenate(words)
+    folder = tmp_path / "shaders"
+    shutil.copytree(shaders_dir(), folder)
+    (folder / "node_dump.glsl").write_text(_NODE_DUMP)
+    program = build_compute(gl_ctx, "node_dump.glsl", directory=folder)
+    nodes = gl_ctx.buffer(words.tobytes())
+    out = gl_ctx.buffer(reserve=len(words) * 7 * 16)
+    try:
+        nodes.bind_to_storage_buffer(BVH_BINDING)
+        out.bind_to_storage_buffer(0)
+        set_uniforms(program, node_count=len(words))
+        program.run(group_x=(len(words) + 63) // 64)
+        dump = np.frombuffer(out.read(), np.float32).reshape(-1, 7, 4)
+    finally:
+        nodes.release()
+        out.release()
+    lo, hi, ref = decode_nodes(words)
+    np.testing.assert_array_equal(np.moveaxis(dump[:, 0:3], 1, 2), lo)
+    np.testing.assert_array_equal(np.moveaxis(dump[:, 3:6], 1, 2), hi)
+    np.testing.assert_array_equal(dump[:, 6].view(np.int32), ref)
