@@ -3,17 +3,22 @@
 // trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
 //
 // Data (plantgen/gl/trace.py uploads it, std430 SSBOs):
-//   bvh_nodes    the binary BVH collapsed 4-wide (below, bvh_children): per node its four
-//                children's boxes and references; a leaf reference gives count primitives
-//                at bvh_prims[offset...]. Boxes are float32 rounded outward from the
-//                float64 build, relative to their frame's origin.
-//   bvh_prims    primitive ids in leaf order: rows 0..rows-1, then leaf triangles.
+//   bvh_nodes    the binary BVH collapsed 4-wide (below, bvh_node): per node its four
+//                children's boxes on an 8-bit grid of the node's own and where their
+//                references start; a leaf reference gives count primitives at positions
+//                offset... of its plant's GPU order (plantgen.gl.trace.leaf_order: a node's
+//                leaves one after another). Decoded boxes hold the float32 boxes rounded
+//                outward from the float64 build, relative to their frame's origin.
+//   bvh_prims    for a plant of rows and triangles, its primitive ids in that order (rows
+//                0..rows-1, then leaf triangles); a plant of one kind has none, its rows'
+//                or triangles' data going up in that order (bvh_leaf_prim).
 //   bvh_rows     one row record per row (6 vec4, plantgen.gl.records.pack_records).
 //   bvh_tris     3 vec4 per leaf triangle: (v0, |e1|*|e2|), (e1, 0), (e2, 0).
 //   bvh_bounds   with BVH_ROW_BOUND, one float per row (its plant's row offset, as
-//                bvh_rows): the reach of the cheap reject before the row test
-//                (bvh_row_near, plantgen.gl.trace.row_bounds), binding 9.
-//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim, row, triangle offsets),
+//                bvh_rows, in the same order): the reach of the cheap reject before the
+//                row test (bvh_row_near, plantgen.gl.trace.row_bounds), binding 9.
+//   bvh_plants   2 ivec4 per distinct plant (a BLAS): (node, prim (-1: no id table), row,
+//                triangle offsets),
 //                (rows, the top level's node offset (plant 0's), 0, 0): a plant's nodes'
 //                `first` and its primitive ids are its
 //                own; the offsets place them in the shared arrays. The caller skips
@@ -71,7 +76,8 @@ int bvh_bound_pass = 0;     // rows that passed the cheap reject (BVH_ROW_BOUND;
 int bvh_row_hits = 0;       // rows of those whose full test hit (at any t in the ray's interval)
 #endif
 
-// A hit: t along the ray, the primitive (plant-local id: row, or rows + triangle), the
+// A hit: t along the ray, the primitive (its data's slot in its plant: row, or rows +
+// triangle; plantgen.gl.trace.trace_rays maps it to the plant's own id), the
 // copy (0 without TWO_LEVEL; -1 with the primitive on a miss), the face: FACE_LO or
 // FACE_HI for a hit on a row's open end (a cap), else FACE_CONE (a triangle too).
 struct BvhHit { float t; int prim; int copy; int face; };
@@ -250,31 +256,78 @@ int bvh_copy_plant(int copy) { return floatBitsToInt(bvh_copies[2 * copy + 1].w)
 
 #endif
 
-// Node layout (plantgen.gl.trace._node_words): the binary tree collapsed 4-wide, NODE_VEC4
-// vec4 a node: its four children's boxes by coordinate (lo.x of the four, lo.y, lo.z, hi.x,
-// hi.y, hi.z), then their references as int bits: a node (>= 0, in its level's part of
-// bvh_nodes), a leaf -1 - (offset << BVH_LEAF_BITS | count), or BVH_EMPTY (an unused slot).
+// Node layout (plantgen.gl.trace.node_words): the binary tree collapsed 4-wide, BVH_NODE_VEC4
+// vec4 (48 bytes) a node, its four children on an 8-bit grid of the node's own:
+//   [0] the grid's origin xyz (float32), w: the first internal child's node (24 bits; the
+//       node's internal children are consecutive nodes) | the x step's exponent bits << 24
+//   [1] the children's bounds in steps, a byte a child (child j in bits 8j): lo.x, lo.y,
+//       lo.z, hi.x; [2].xy: hi.y, hi.z
+//   [2].z the leaf children's first primitive position (24 bits; their primitives follow one
+//       another in slot order) | the y step's exponent bits << 24
+//   [2].w each child's 6-bit code (bits 6j: 0 unused, BVH_INTERNAL a node, else a leaf of
+//       that many primitives) | the z step's exponent bits << 24
+// A step is a power of two (its float32 bits are the exponent's << 23) and the origin a
+// whole number of steps under 2^23 of them, so origin + steps * step is exact in float32:
+// the decoded box holds the child's float32 box (lo rounded down, hi up, on the CPU).
 // A node's own box is its parent's business: a walk tests four boxes a node, in vec4 lanes.
-const int BVH_NODE_VEC4 = 7;
-const int BVH_LEAF_BITS = 8;
+const int BVH_NODE_VEC4 = 3;
+const int BVH_LEAF_BITS = 6;
+const uint BVH_INTERNAL = 63u;
 const int BVH_EMPTY = -1;
 const float BVH_MISS = 3.0e38;   // the entry t of a child the ray misses
+
+// The four bytes of w as a vec4 (byte j in component j).
+vec4 bvh_bytes(uint w) { return vec4((uvec4(w) >> uvec4(0u, 8u, 16u, 24u)) & 0xFFu); }
+
+// Wide node w (its index in bvh_nodes) decoded: its four children's boxes by coordinate
+// (lo.x of the four, lo.y, ...) and their references as the walk holds them: a node
+// (>= 0, in its level's part of bvh_nodes), a leaf -1 - (offset << BVH_LEAF_BITS | count),
+// or BVH_EMPTY (an unused slot). The one place that reads the node layout.
+void bvh_node(int w, out vec4 lo_x, out vec4 lo_y, out vec4 lo_z, out vec4 hi_x, out vec4 hi_y, out vec4 hi_z,
+              out ivec4 ref) {
+    int i = BVH_NODE_VEC4 * w;
+    vec4 n0 = bvh_nodes[i], n1 = bvh_nodes[i + 1], n2 = bvh_nodes[i + 2];
+    uvec4 b1 = floatBitsToUint(n1), b2 = floatBitsToUint(n2);
+    uvec3 head = uvec3(floatBitsToUint(n0.w), b2.zw);
+    vec3 step = uintBitsToFloat((head >> 24u) << 23u);
+    lo_x = n0.x + bvh_bytes(b1.x) * step.x;
+    lo_y = n0.y + bvh_bytes(b1.y) * step.y;
+    lo_z = n0.z + bvh_bytes(b1.z) * step.z;
+    hi_x = n0.x + bvh_bytes(b1.w) * step.x;
+    hi_y = n0.y + bvh_bytes(b2.x) * step.y;
+    hi_z = n0.z + bvh_bytes(b2.y) * step.z;
+    ivec4 code = ivec4((uvec4(head.z) >> uvec4(0u, 6u, 12u, 18u)) & 63u);
+    ivec4 inner = ivec4(equal(code, ivec4(BVH_INTERNAL)));
+    ivec4 count = code * (1 - inner);
+    ivec3 base = ivec3(head & 0xFFFFFFu);
+    ivec4 node = base.x + ivec4(0, inner.x, inner.x + inner.y, inner.x + inner.y + inner.z);
+    ivec4 offset = base.y + ivec4(0, count.x, count.x + count.y, count.x + count.y + count.z);
+    ivec4 leaf = ivec4(greaterThan(code, ivec4(0))) - inner;       // 1 for a leaf
+    ref = inner * node + leaf * (-1 - ((offset << BVH_LEAF_BITS) | count)) + (1 - inner - leaf) * BVH_EMPTY;
+}
 
 // The entry t of the ray into each of wide node w's four children (BVH_MISS where it
 // misses the box, enters at or beyond best_t, leaves before t_min, or the slot is unused),
 // and their references.
 vec4 bvh_children(int w, vec3 o, vec3 inv_d, float t_min, float best_t, out ivec4 ref) {
-    int i = BVH_NODE_VEC4 * w;
-    vec4 ax = (bvh_nodes[i] - o.x) * inv_d.x, bx = (bvh_nodes[i + 3] - o.x) * inv_d.x;
-    vec4 ay = (bvh_nodes[i + 1] - o.y) * inv_d.y, by = (bvh_nodes[i + 4] - o.y) * inv_d.y;
-    vec4 az = (bvh_nodes[i + 2] - o.z) * inv_d.z, bz = (bvh_nodes[i + 5] - o.z) * inv_d.z;
-    ref = floatBitsToInt(bvh_nodes[i + 6]);
+    vec4 lo_x, lo_y, lo_z, hi_x, hi_y, hi_z;
+    bvh_node(w, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, ref);
+    vec4 ax = (lo_x - o.x) * inv_d.x, bx = (hi_x - o.x) * inv_d.x;
+    vec4 ay = (lo_y - o.y) * inv_d.y, by = (hi_y - o.y) * inv_d.y;
+    vec4 az = (lo_z - o.z) * inv_d.z, bz = (hi_z - o.z) * inv_d.z;
     vec4 near = max(max(min(ax, bx), min(ay, by)), min(az, bz));
     vec4 far = min(min(max(ax, bx), max(ay, by)), max(az, bz));
     far += 4.0e-7 * abs(far);        // pbrt's 1 + 2*gamma(3): rounding loses no ray the box holds
     vec4 miss = vec4(greaterThan(near, far)) + vec4(lessThanEqual(far, vec4(t_min)))
               + vec4(greaterThanEqual(near, vec4(best_t))) + vec4(equal(ref, ivec4(BVH_EMPTY)));
     return mix(near, vec4(BVH_MISS), greaterThan(miss, vec4(0.0)));
+}
+
+// The primitive at position i of a plant's GPU order (a leaf's offset + k), as its data's
+// slot: through the plant's id table where it has one (offsets.y >= 0: rows and
+// triangles together), else the position itself (its data went up in that order).
+int bvh_leaf_prim(ivec4 offsets, int i) {
+    return offsets.y >= 0 ? bvh_prims[offsets.y + i] : i;
 }
 
 // Orders two children by entry t (nearest first).
@@ -401,7 +454,7 @@ BvhHit bvh_trace(vec3 o, vec3 d, float t_min, float t_max, bool any_hit, float d
         bvh_tests += leaf_count;
 #endif
         for (int k = 0; k < leaf_count; ++k) {
-            int prim = bvh_prims[offsets.y + leaf_first + k];
+            int prim = bvh_leaf_prim(offsets, leaf_first + k);
             int face;
             float t = bvh_prim_hit(plant, prim, ro, rd, t_min, best.t, distance, scale_c, triangles, face);
             if (t < best.t) {

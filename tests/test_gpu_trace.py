@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from _geometry_helpers import random_tree
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plantgen.errors import PlantgenError
 from plantgen.geometry.bvh import BVH, build_bvh
@@ -19,7 +21,7 @@ from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.instances import place_frusta
 from plantgen.geometry.reference import row_boxes
 from plantgen.geometry.scan import ScanTarget, cast_first_returns, scan_target
-from plantgen.gl.trace import BVH_STACK, GpuPlant, trace_rays, upload_bvh
+from plantgen.gl.trace import BVH_STACK, LEAF_COUNT_BITS, GpuPlant, trace_rays, upload_bvh
 
 #: float32 rounding of a hit's distance: the cone's quadratic in float32 after
 #: re-centring loses a few ulps more where the ray is oblique (measured: ~1e-6 at worst).
@@ -430,15 +432,16 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
 @pytest.mark.parametrize("n", [1, 5, 300, 2000])
 def test_wide_nodes_hold_every_primitive_once(n):
     """The GPU's layout: the binary tree collapsed 4-wide keeps every primitive in exactly
-    one leaf slot, enters each wide node from one parent, gives each slot its binary node's
-    float32 box, and packs each leaf's offset and count into its reference; the stack a
-    walk needs is what the bound says."""
+    one leaf slot, enters each wide node from one parent (a node's internal children
+    consecutive), gives each slot a box holding its binary node's float32 box, and its
+    reference the leaf's primitives in the GPU's order; the stack a walk needs is what the
+    bound says."""
     from plantgen.geometry.bvh import float32_boxes
-    from plantgen.gl.trace import LEAF_COUNT_BITS, NODE_VEC4, node_words, stack_need, wide_nodes
+    from plantgen.gl.trace import decode_nodes, leaf_order, node_words, stack_need, wide_nodes
 
     rng = np.random.default_rng(n)
     lo = rng.uniform(-5, 5, (n, 3))
-    bvh = build_bvh(lo, lo + rng.uniform(0, 0.5, (n, 3)))
+    bvh = build_bvh(lo, lo + rng.uniform(0, 0.5, (n, 3)), leaf_size=2)
     slots, wide = wide_nodes(bvh)
     used = slots >= 0
     leaf = used & (wide < 0)
@@ -446,18 +449,149 @@ def test_wide_nodes_hold_every_primitive_once(n):
     assert np.sort(prims).tolist() == list(range(n))
     assert sorted(wide[wide >= 0].tolist()) == list(range(1, len(slots)))
     assert ((wide >= 0) == (used & (bvh.count[np.maximum(slots, 0)] == 0))).all()
-    words = node_words(bvh, np.zeros(3), slots, wide).reshape(-1, NODE_VEC4, 4)
+    order = leaf_order(bvh, slots, wide)
+    assert np.sort(order).tolist() == list(range(n))
+    d_lo, d_hi, refs = decode_nodes(node_words(bvh, np.zeros(3), slots, wide))
     f_lo, f_hi = float32_boxes(bvh)
     s = np.maximum(slots, 0)
-    assert (np.moveaxis(words[:, 0:3], 1, 2)[used] == f_lo[s][used]).all()
-    assert (np.moveaxis(words[:, 3:6], 1, 2)[used] == f_hi[s][used]).all()
-    refs = words[:, 6].view(np.int32)
+    assert (d_lo[used] <= f_lo[s][used]).all() and (d_hi[used] >= f_hi[s][used]).all()     # conservative
+    assert (refs[wide >= 0] == wide[wide >= 0]).all()
     codes = -1 - refs[leaf]
-    assert ((codes >> LEAF_COUNT_BITS) == bvh.first[slots[leaf]]).all()
-    assert ((codes & ((1 << LEAF_COUNT_BITS) - 1)) == bvh.count[slots[leaf]]).all()
+    first, count = codes >> LEAF_COUNT_BITS, codes & ((1 << LEAF_COUNT_BITS) - 1)
+    assert (count == bvh.count[slots[leaf]]).all()
+    for b, f, c in zip(slots[leaf], first, count, strict=True):      # the same primitives, in the GPU's order
+        assert sorted(order[f:f + c]) == sorted(bvh.prims[bvh.first[b]:bvh.first[b] + c])
     assert (refs[~used] == -1).all()
     # the bound: the largest sum over a root-to-leaf path of (children - 1)
     def need(w):
         kids = wide[w][wide[w] >= 0]
         return used[w].sum() - 1 + max((need(k) for k in kids), default=0)
     assert stack_need(bvh, slots, wide) == (need(0) if len(slots) else 0)
+
+
+_SCALES = st.sampled_from([0.0, 1e-30, 1e-7, 1e-3, 1.0, 50.0, 1e6, 1e30])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), _SCALES, _SCALES, st.sampled_from([0.0, 1.0, -3.7e3, 1e4, -2.5e7]),
+       st.booleans(), st.integers(0, 2 ** 31 - 1))
+def test_quantised_child_boxes_hold_their_float64_boxes(n, spread, size, far, equal, seed):
+    """Every child box decoded from the GPU's 8-bit grid holds its float64 box (relative
+    to the frame's origin) whatever the scale: zero-size boxes, huge ones, boxes far from
+    the origin in float32, a child equal to its parent; the grid's steps are powers of two
+    and a decoded bound is exact in float32."""
+    from plantgen.gl.trace import decode_nodes, node_words, wide_nodes
+
+    rng = np.random.default_rng(seed)
+    lo = far + rng.uniform(-spread, spread, (n, 3))
+    hi = lo + rng.uniform(0.0, size, (n, 3))
+    if equal:            # a box as large as all the others together: a child equal to its parent
+        lo[0], hi[0] = lo.min(axis=0), hi.max(axis=0)
+    bvh = build_bvh(lo, hi, leaf_size=2)
+    slots, wide = wide_nodes(bvh)
+    origin = np.array([far * 0.999, 0.0, -far]) if far else np.zeros(3)
+    d_lo, d_hi, refs = decode_nodes(node_words(bvh, origin, slots, wide))
+    used = slots >= 0
+    s = np.maximum(slots, 0)
+    assert (d_lo[used].astype(np.float64) <= (bvh.lo - origin)[s][used]).all()
+    assert (d_hi[used].astype(np.float64) >= (bvh.hi - origin)[s][used]).all()
+    assert np.isfinite(d_lo).all() and np.isfinite(d_hi).all()
+    # tight: a decoded box is at most a 254th of its node's extent (or float32's own
+    # resolution there) larger on each side
+    box_lo = np.where(used[..., None], d_lo, np.inf).min(axis=1, keepdims=True)
+    box_hi = np.where(used[..., None], d_hi, -np.inf).max(axis=1, keepdims=True)
+    slack = (box_hi - box_lo) / 127.0 + 2.0 ** -20 * np.maximum(np.abs(box_lo), np.abs(box_hi)) + 1e-37
+    assert ((bvh.lo - origin)[s][used] - d_lo[used] <= slack.repeat(4, axis=1)[used]).all()
+    assert (d_hi[used] - (bvh.hi - origin)[s][used] <= slack.repeat(4, axis=1)[used]).all()
+    assert (refs[~used] == -1).all()
+
+
+def test_boxes_beyond_float32_are_refused():
+    from plantgen.gl.trace import node_words, wide_nodes
+
+    lo = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    bvh = build_bvh(lo, lo + np.array([[1e39, 1.0, 1.0], [1.0, 1.0, 1.0]]))
+    with pytest.raises(PlantgenError, match="float32"), np.errstate(over="ignore"):
+        node_words(bvh, np.zeros(3), *wide_nodes(bvh))
+
+
+def test_triangles_of_every_scale_far_from_the_origin(gl_ctx):
+    """Leaf triangles from a millionth of a unit to a hundred thousand units, 1e4 units
+    from the origin, some of zero size: the GPU's closest hits (through the quantised
+    boxes) are brute force's in float64."""
+    rng = np.random.default_rng(5)
+    k = 400
+    centre = np.array([1e4, -2e3, 1e4]) + rng.uniform(-50, 50, (k, 3))
+    size = 10.0 ** rng.uniform(-6, 5, k)
+    size[:20] = 0.0
+    tri = centre[:, None, :] + size[:, None, None] * rng.normal(size=(k, 3, 3))
+    pad = 1e-9 * np.abs(tri).max(axis=(1, 2))[:, None] + 1e-12
+    lo, hi = tri.min(1) - pad, tri.max(1) + pad
+    target = ScanTarget(Frusta.empty(), tri, np.arange(k), lo, hi, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                        np.full(k, -1, np.int64), np.zeros(k, np.int64), None)
+    origins, dirs = _random_rays(lo[20:200], hi[20:200], 3000, seed=6, margin=20.0)
+    origins += np.array([1e4, -2e3, 1e4]) - origins.mean(axis=0)
+    ref_t, ref_prim = cast_first_returns(target, origins, dirs)
+    gpu = upload_bvh(gl_ctx, [GpuPlant(None, tri, build_bvh(lo, hi, leaf_size=2))])
+    t, prim, _, _ = trace_rays(gpu, origins, dirs)
+    assert (prim == ref_prim).mean() >= 0.999
+    assert (ref_prim >= 0).sum() >= 100
+
+
+_NODE_DUMP = """
+#if defined COMPUTE_SHADER
+layout(local_size_x = 64) in;
+#include "bvh.glsl"
+layout(std430, binding = 0) writeonly buffer Dump { vec4 dump[]; };
+uniform int node_count;
+void main() {
+    int w = int(gl_GlobalInvocationID.x);
+    if (w >= node_count) return;
+    ivec4 ref;
+    bvh_node(w, dump[7 * w], dump[7 * w + 1], dump[7 * w + 2], dump[7 * w + 3], dump[7 * w + 4], dump[7 * w + 5],
+             ref);
+    dump[7 * w + 6] = intBitsToFloat(ref);
+}
+#endif
+"""
+
+
+def test_the_shader_decodes_nodes_as_the_cpu_does(gl_ctx, tmp_path):
+    """bvh.glsl's bvh_node, run on the GPU over nodes of every scale (tiny, huge, 1e4 units
+    from the origin, zero-size), gives bit for bit the boxes and references that
+    plantgen.gl.trace.decode_nodes gives (which the property test above proves
+    conservative): origin + bytes · step is exact in float32, whatever the compiler fuses."""
+    import shutil
+
+    from plantgen._resources import shaders_dir
+    from plantgen.gl.shaders import build_compute, set_uniforms
+    from plantgen.gl.trace import BVH_BINDING, decode_nodes, node_words, wide_nodes
+
+    rng = np.random.default_rng(11)
+    words = []
+    for far, spread, size in [(0.0, 5.0, 0.5), (1e4, 30.0, 1e-3), (-2.5e7, 1e3, 1e5), (0.0, 1e-30, 0.0),
+                              (3.0, 1e30, 1e29), (1e4, 0.0, 0.0)]:
+        lo = far + rng.uniform(-spread, spread, (300, 3))
+        hi = lo + rng.uniform(0.0, size, (300, 3))
+        bvh = build_bvh(lo, hi, leaf_size=2)
+        words.append(node_words(bvh, np.array([far * 0.999, 0.0, 0.0]), *wide_nodes(bvh)))
+    words = np.concatenate(words)
+    folder = tmp_path / "shaders"
+    shutil.copytree(shaders_dir(), folder)
+    (folder / "node_dump.glsl").write_text(_NODE_DUMP)
+    program = build_compute(gl_ctx, "node_dump.glsl", directory=folder)
+    nodes = gl_ctx.buffer(words.tobytes())
+    out = gl_ctx.buffer(reserve=len(words) * 7 * 16)
+    try:
+        nodes.bind_to_storage_buffer(BVH_BINDING)
+        out.bind_to_storage_buffer(0)
+        set_uniforms(program, node_count=len(words))
+        program.run(group_x=(len(words) + 63) // 64)
+        dump = np.frombuffer(out.read(), np.float32).reshape(-1, 7, 4)
+    finally:
+        nodes.release()
+        out.release()
+    lo, hi, ref = decode_nodes(words)
+    np.testing.assert_array_equal(np.moveaxis(dump[:, 0:3], 1, 2), lo)
+    np.testing.assert_array_equal(np.moveaxis(dump[:, 3:6], 1, 2), hi)
+    np.testing.assert_array_equal(dump[:, 6].view(np.int32), ref)

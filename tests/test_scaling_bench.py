@@ -4,10 +4,15 @@ positive, copies and segments counted right, GPU memory growing by a bounded amo
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from plantgen.benchmarks.scaling import markdown, measure, tile_placed
+from plantgen.benchmarks.scaling import BUDGET_DATA, markdown, measure, tile_placed
+from plantgen.geometry.instances import PlacedPlants
+from plantgen.gl.records import RECORD_BYTES
+from plantgen.gl.rt import RayTracer
 from plantgen.pipeline import prepare_model
 
 SCENE = """\
@@ -60,6 +65,18 @@ def test_table_rows_are_whole(scene, tmp_path, gl_ctx):
     assert rows[1]["segments"] == 10 * rows[0]["segments"]                     # ten whole tiles
     assert rows[1]["gpu_bytes"] - rows[0]["gpu_bytes"] <= 256 * 90
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rc_10_scene.png", "rt_100_scene.png", "rt_10_scene.png"]
+    # the distinct plants' GPU data is what their upload's buffers hold: their row records as
+    # RC's, and within the memory goal's 1.2 times them with the BVH's nodes beside
+    parts = result["base_parts"]
+    base = prepare_model(scene).placed
+    once = PlacedPlants(tuple(replace(p, matrices=p.matrices[:1]) for p in base.plants), base.material_names)
+    gpu = RayTracer(gl_ctx).gpu_bvh(once, None, np.zeros(3))
+    assert [b.size for b in gpu.buffers] == [max(n, 16) for n in parts.values()]   # an empty buffer holds 16 B
+    assert result["base_bytes"] == sum(parts.values()) == gpu.nbytes
+    assert parts["row records"] == result["data_bytes"] == base.unique_rows * RECORD_BYTES
+    assert parts["primitive ids"] == 0                       # rows only: records in the GPU's order
+    assert result["base_bytes"] <= BUDGET_DATA * result["data_bytes"]
     text = markdown(result)
+    assert f"{result['base_bytes'] / result['data_bytes']:.2f}x the records" in text
     assert result["renderer"] in text and "the scene's camera" in text
     assert text.count("\n| 10 |") == 1 and "| 100 |" in text and "not run" in text

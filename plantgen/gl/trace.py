@@ -5,7 +5,11 @@ storage buffers, searched by ``shaders/bvh.glsl`` (one compute invocation per ra
 Precision: everything the GPU holds is float32 relative to a frame origin formed in
 float64 here: row records (:func:`plantgen.gl.records.pack_records`), leaf triangles and
 node boxes (rounded outward, :func:`plantgen.geometry.bvh.float32_boxes`, so a float32
-box never loses a ray its float64 box keeps). An instanced scene keeps each distinct
+box never loses a ray its float64 box keeps, then put on each node's 8-bit grid rounded
+outward again, :func:`node_words`: 48 bytes a 4-wide node). A plant of one kind (rows or
+leaf triangles) uploads its data in the GPU's leaf order (:func:`leaf_order`), with no
+table of primitive ids; the hits name those slots and :func:`trace_rays` maps them back
+to the plant's ids (:meth:`GpuBvh.primitive_ids`). An instanced scene keeps each distinct
 plant once, relative to its own box centre, and per copy the map from the frame into the
 plant's (its offset formed in float64). The GPU finds the primitive; callers that need
 float64 distances solve that one primitive again on the CPU (:mod:`plantgen.trace`, the
@@ -43,7 +47,8 @@ from .shaders import build_compute, set_uniforms
 
 __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "target_bvh", "TRACE_CHUNK",
            "BVH_BINDING", "BVH_STACK", "COPY_BYTES", "AFFINE_COPY_BYTES", "copy_words", "GPU_LEAF_SIZE",
-           "node_words", "stack_need", "wide_nodes", "row_bounds", "ROW_BOUND", "ROW_BOUND_BINDING",
+           "node_words", "stack_need", "wide_nodes", "leaf_order", "quantise_boxes", "decode_nodes",
+           "NODE_VEC4", "MAX_LEAF_PRIMS", "BUFFER_NAMES", "row_bounds", "ROW_BOUND", "ROW_BOUND_BINDING",
            "ROW_BOUND_BYTES"]
 
 #: Primitives a leaf of a BVH built for the GPU holds at most (the ray tracer's, and the one
@@ -52,6 +57,9 @@ __all__ = ["GpuBvh", "GpuPlant", "upload_bvh", "trace_rays", "trace_target", "ta
 #: eye and shadow rays 1.1-1.3x faster on llvmpipe; 1 is no faster than 2
 #: (docs/benchmarks/rt.md).
 GPU_LEAF_SIZE = 2
+#: The BVH's storage buffers in binding order (from :data:`BVH_BINDING`; the copies' with
+#: two levels only): :attr:`GpuBvh.parts` gives their bytes.
+BUFFER_NAMES = ("nodes", "primitive ids", "row records", "triangles", "plants", "copies")
 #: Rays per dispatch of :func:`trace_rays` (a knob: memory against dispatch overhead).
 TRACE_CHUNK = 1 << 16
 #: First SSBO binding of the BVH's buffers in ``shaders/bvh.glsl`` (6 in all).
@@ -103,11 +111,21 @@ class GpuBvh:
     two_level: bool
     buffers: list = field(default_factory=list)
     nbytes: int = 0
+    parts: dict = field(default_factory=dict)   # bytes of each buffer as uploaded, by name (BUFFER_NAMES)
     plants: int = 0
     copies: int = 0
     empty: bool = False      # no primitive: nothing to trace (the buffers hold a dummy word)
     affine: bool = False     # the copies' maps are full 3x4 maps (not every copy a similarity)
     copy_ids: np.ndarray | None = None   # (copies,) int64: the copy held in each GPU slot
+    slot_plant: np.ndarray | None = None  # (copies,) int64: the plant of each GPU slot's copy
+    prim_ids: np.ndarray | None = None   # the plant-local primitive of each plant's GPU slots, plant after plant
+    prim_starts: np.ndarray | None = None   # (plants,) int64: where each plant's slots start in prim_ids
+
+    def primitive_ids(self, slot, plant) -> np.ndarray:
+        """The plant-local primitive ids of GPU primitive slots (what the shaders' hits
+        name: a position in the plant's data as uploaded) of the given plants."""
+        return self.prim_ids[self.prim_starts[plant] + slot]
+
     bounds: object = None    # the rows' bounds (row_bounds; uploaded with the row bound on)
     row_bound: bool | None = None        # test them (BVH_ROW_BOUND, where uploaded); None: ROW_BOUND
 
@@ -129,10 +147,20 @@ class GpuBvh:
         self.buffers, self.bounds = [], None
 
 
-#: Words (vec4) of one node on the GPU: four child boxes by coordinate, their references.
-NODE_VEC4 = 7
-#: A leaf reference packs its primitive offset above these bits and its count in them.
-LEAF_COUNT_BITS = 8
+#: Words (vec4) of one node on the GPU (48 bytes): the node's grid (its origin and a
+#: power-of-two step per axis), its four children's boxes on it (a byte a bound), where
+#: their references start and what each child is (:func:`node_words`).
+NODE_VEC4 = 3
+#: A leaf reference (the traversal's) packs its primitive offset above these bits and its
+#: count in them.
+LEAF_COUNT_BITS = 6
+#: Primitives a leaf of a GPU tree may hold (a child's 6-bit code: 0 unused, 63 a node).
+MAX_LEAF_PRIMS = 62
+_INTERNAL = 63       # a child's code: a wide node
+_BASE_BITS = 24      # a node's first child node and first primitive: 24-bit fields
+_MAX_OFFSET = 1 << 23   # a leaf's offset: the traversal's stack holds 4 * its reference
+_EXP_BIAS = 127      # a step 2^e is stored as its float32 exponent bits (e + 127)
+_EXP_MAX = 119       # 255 steps of 2^119 stay finite in float32
 _EMPTY = -1          # the reference of an unused child slot
 
 
@@ -142,7 +170,8 @@ def wide_nodes(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
     itself). Returns ``slots`` (w, 4) int64, the binary node in each slot (-1: unused), and
     ``wide`` (w, 4) int64, the wide node an internal slot becomes (-1 for a leaf or an unused
     slot). Wide node 0 is the root; a tree whose root is a leaf gets one wide node holding it.
-    Nodes are numbered level by level (every two binary levels one), vectorised."""
+    Nodes are numbered level by level (every two binary levels one), vectorised, so that a
+    wide node's internal children are consecutive wide nodes."""
     first, count = np.asarray(bvh.first, np.int64), np.asarray(bvh.count, np.int64)
     if not bvh.nodes:
         return np.zeros((0, 4), np.int64), np.zeros((0, 4), np.int64)
@@ -186,25 +215,125 @@ def stack_need(bvh: BVH, slots: np.ndarray, wide: np.ndarray, leaf_push: bool = 
     return int(need[0])
 
 
+def leaf_order(bvh: BVH, slots: np.ndarray, wide: np.ndarray) -> np.ndarray:
+    """(n,) int64 the primitive ids in the GPU's order: wide node by wide node, its leaf
+    children's primitives in slot order, so that a node's leaves are consecutive (a node
+    keeps one offset for them, :func:`node_words`). The GPU's primitive data goes up in
+    this order: position k of a leaf holds primitive ``leaf_order(...)[k]``."""
+    leaf = (slots >= 0) & (wide < 0)
+    s = slots[leaf]                                   # row-major: node by node, slot by slot
+    first, count = np.asarray(bvh.first, np.int64)[s], np.asarray(bvh.count, np.int64)[s]
+    start = np.repeat(first - (np.cumsum(count) - count), count)
+    return np.asarray(bvh.prims, np.int64)[start + np.arange(int(count.sum()))]
+
+
+def _exponents(lo, hi) -> np.ndarray:
+    """(w, 3) int64 the smallest power-of-two step 2^e per node and axis (float64 node
+    boxes ``lo``, ``hi`` (w, 3), float32 values) on which the node's box fits 254 steps
+    and its origin, a whole number of steps, stays under 2^23 steps (so that origin +
+    steps·2^e is exact in float32), at least 2^-126."""
+    extent = hi - lo
+    e_ext = np.where(extent > 0, np.frexp(extent / 254.0)[1], -126)
+    mag = np.maximum(np.abs(lo), np.abs(hi))
+    e_mag = np.where(mag > 0, np.frexp(mag)[1] - 23, -126)
+    return np.maximum(np.maximum(e_ext, e_mag), -126).astype(np.int64)
+
+
+def quantise_boxes(c_lo, c_hi, used) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each wide node's four child boxes (``c_lo``, ``c_hi`` (w, 4, 3) float64 holding
+    float32 values, ``used`` (w, 4)) on an 8-bit grid of the node's own: returns the grid's
+    origin (w, 3) (float32 values, a whole number of steps), its exponent e (w, 3) (a step
+    2^e per axis) and the children's bounds in steps, ``q_lo``, ``q_hi`` (w, 4, 3) uint8:
+    lo rounded down and hi up, so that origin + q·2^e (exact in float32) holds each child
+    box. Unused slots get 0. Raises PlantgenError for boxes beyond float32's range."""
+    w = len(c_lo)
+    inf = np.inf
+    n_lo = np.where(used[..., None], c_lo, inf).min(axis=1) if w else np.zeros((0, 3))
+    n_hi = np.where(used[..., None], c_hi, -inf).max(axis=1) if w else np.zeros((0, 3))
+    if not (np.isfinite(n_lo).all() and np.isfinite(n_hi).all()):
+        raise PlantgenError("BVH boxes beyond float32's range for the GPU's nodes")
+    e = _exponents(n_lo, n_hi)
+    for _ in range(4):                 # a node whose hi needs 256 steps takes the next step
+        step = np.ldexp(1.0, e)
+        origin = np.floor(n_lo / step) * step
+        sc = step[:, None, :]
+        q_lo = np.floor((c_lo - origin[:, None]) / sc)
+        q_lo -= origin[:, None] + q_lo * sc > c_lo                 # rounding: never above lo
+        q_hi = np.ceil((c_hi - origin[:, None]) / sc)
+        q_hi += origin[:, None] + q_hi * sc < c_hi                 # never below hi
+        q_lo = np.where(used[..., None], np.maximum(q_lo, 0), 0)
+        q_hi = np.where(used[..., None], q_hi, 0)
+        over = (q_hi > 255).any(axis=1)
+        if not over.any():
+            break
+        e = e + over
+    if (e > _EXP_MAX).any() or (q_hi > 255).any():
+        raise PlantgenError("BVH boxes too large for the GPU's nodes (beyond 1e38)")
+    return origin, e, q_lo.astype(np.uint8), q_hi.astype(np.uint8)
+
+
 def node_words(bvh: BVH, origin, slots: np.ndarray, wide: np.ndarray) -> np.ndarray:
-    """(w, 28) float32, NODE_VEC4 vec4 a wide node: its children's boxes by coordinate (lo x,
-    lo y, lo z, hi x, hi y, hi z of the four slots; float32 rounded outward relative to
-    ``origin``), then the four references as int bits: a wide node's index, a leaf's
-    -1 - (offset << LEAF_COUNT_BITS | count), -1 for an unused slot."""
+    """(w, 12) float32, NODE_VEC4 vec4 a wide node (48 bytes), as uint32 bits:
+
+    - 0-2: the node's grid origin (float32, relative to ``origin``);
+    - 3: its first internal child's wide node (24 bits; the others follow it) | (e_x + 127) << 24;
+    - 4-9: the four children's bounds in steps of the grid, a byte a child (child j in bits
+      8j): lo x, lo y, lo z, hi x, hi y, hi z; the box decoded, origin + steps·2^e, holds the
+      child's float32 box rounded outward from its float64 one (:func:`quantise_boxes`);
+    - 10: its leaf children's first primitive position (24 bits; :func:`leaf_order`, the
+      leaves' primitives follow one another in slot order) | (e_y + 127) << 24;
+    - 11: each child's 6-bit code (child j in bits 6j: 0 unused, 63 a wide node, else a
+      leaf of that many primitives) | (e_z + 127) << 24.
+    """
     lo, hi = float32_boxes(bvh, origin)
     used = slots >= 0
     s = np.maximum(slots, 0)
-    words = np.zeros((len(slots), NODE_VEC4, 4), np.float32)
+    w = len(slots)
+    count = np.asarray(bvh.count, np.int64)[s]
+    internal = wide >= 0
+    leaf = used & ~internal
+    if w and count[leaf].max(initial=0) > MAX_LEAF_PRIMS:
+        raise PlantgenError(f"BVH leaves too large for the GPU's nodes (at most {MAX_LEAF_PRIMS} primitives a leaf)")
+    code = np.where(internal, _INTERNAL, np.where(leaf, count, 0)).astype(np.uint64)
+    leaf_count = np.where(leaf, count, 0)
+    prim_base = np.cumsum(leaf_count.sum(axis=1)) - leaf_count.sum(axis=1)
+    node_base = np.where(internal, wide, np.iinfo(np.int64).max).min(axis=1, initial=np.iinfo(np.int64).max)
+    node_base = np.where(internal.any(axis=1), node_base, 0)
+    if w and (leaf_count.sum() >= _MAX_OFFSET or node_base.max() >= 1 << _BASE_BITS):
+        raise PlantgenError(f"BVH too large for the GPU's node references (at most {_MAX_OFFSET:,} primitives "
+                            f"and {1 << _BASE_BITS:,} nodes a tree)")
+    grid, e, q_lo, q_hi = quantise_boxes(lo[s].astype(np.float64), hi[s].astype(np.float64), used)
+    exp_bits = (e + _EXP_BIAS).astype(np.uint64) << np.uint64(24)
+    words = np.zeros((w, 12), np.uint32)
+    words[:, 0:3] = grid.astype(np.float32).view(np.uint32)
+    shifts = (8 * np.arange(4)).astype(np.uint64)
     for axis in range(3):
-        words[:, axis] = np.where(used, lo[s, axis], 0.0)
-        words[:, 3 + axis] = np.where(used, hi[s, axis], 0.0)
-    first, count = np.asarray(bvh.first, np.int64)[s], np.asarray(bvh.count, np.int64)[s]
-    if bvh.nodes and (count.max() >= 1 << LEAF_COUNT_BITS or first.max() >= 1 << (31 - LEAF_COUNT_BITS)):
-        raise PlantgenError(f"BVH leaves too large for the GPU's node references (at most "
-                            f"{(1 << LEAF_COUNT_BITS) - 1} primitives a leaf, {1 << (31 - LEAF_COUNT_BITS):,} in all)")
-    ref = np.where(wide >= 0, wide, -1 - ((first << LEAF_COUNT_BITS) | count))
-    words[:, 6] = np.where(used, ref, _EMPTY).astype(np.int32).view(np.float32)
-    return words.reshape(len(slots), 4 * NODE_VEC4)
+        words[:, 4 + axis] = (q_lo[:, :, axis].astype(np.uint64) << shifts).sum(axis=1)
+        words[:, 7 + axis] = (q_hi[:, :, axis].astype(np.uint64) << shifts).sum(axis=1)
+    words[:, 3] = node_base.astype(np.uint64) | exp_bits[:, 0]
+    words[:, 10] = prim_base.astype(np.uint64) | exp_bits[:, 1]
+    words[:, 11] = (code << (6 * np.arange(4)).astype(np.uint64)).sum(axis=1) | exp_bits[:, 2]
+    return words.view(np.float32)
+
+
+def decode_nodes(words: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What ``shaders/bvh.glsl``'s ``bvh_node`` decodes from :func:`node_words`' words (w,
+    12): the children's boxes ``lo``, ``hi`` (w, 4, 3) float32 and their references (w, 4)
+    int32 as the traversal holds them (a wide node's index, a leaf's
+    -1 - (offset << LEAF_COUNT_BITS | count), -1 unused). The tests' mirror of the shader."""
+    u = np.asarray(words, np.float32).reshape(-1, 12).view(np.uint32).astype(np.int64)
+    grid = u[:, 0:3].astype(np.uint32).view(np.float32)
+    step = np.stack([((u[:, k] >> 24) << 23).astype(np.uint32).view(np.float32) for k in (3, 10, 11)], axis=1)
+    q = np.stack([(u[:, 4:10] >> (8 * j)) & 0xFF for j in range(4)], axis=1).astype(np.float32)    # (w, 4, 6)
+    lo = grid[:, None, :] + q[:, :, 0:3] * step[:, None, :]
+    hi = grid[:, None, :] + q[:, :, 3:6] * step[:, None, :]
+    code = np.stack([(u[:, 11] >> (6 * j)) & 63 for j in range(4)], axis=1)
+    internal = code == _INTERNAL
+    leaf_count = np.where(internal, 0, code)
+    node = (u[:, 3] & 0xFFFFFF)[:, None] + np.cumsum(internal, axis=1) - internal
+    offset = (u[:, 10] & 0xFFFFFF)[:, None] + np.cumsum(leaf_count, axis=1) - leaf_count
+    ref = np.where(internal, node, np.where(code > 0, -1 - ((offset << LEAF_COUNT_BITS) | code), _EMPTY))
+    return lo.astype(np.float32), hi.astype(np.float32), ref.astype(np.int32)
 
 
 #: Plane rises (n·axis + k·n·e, the generator's approach to a cutting plane) below this
@@ -365,26 +494,40 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     # each plant's frame: its own root box centre (the world frame's origin with one level)
     centres = [origin if not two_level else (0.5 * (p.bvh.lo[0] + p.bvh.hi[0]) if p.bvh.nodes else np.zeros(3))
                for p in plants]
-    nodes, prims, rows, tris, offsets, bounds = [], [], [], [], [], []
+    nodes, prims, rows, tris, offsets, ids, bounds = [], [], [], [], [], [], []
     counts = np.zeros(4, np.int64)
     for p, c, tree in zip(plants, centres, trees, strict=True):
-        offsets.append([*counts, p.rows, 0, 0, 0])
+        order = leaf_order(*tree)     # the primitives in the GPU's order
+        mixed = p.rows > 0 and p.triangles is not None and len(p.triangles) > 0
+        offsets.append([counts[0], counts[1] if mixed else -1, counts[2], counts[3], p.rows, 0, 0, 0])
         nodes.append(node_words(p.bvh, c, *tree[1:]))
-        prims.append(np.asarray(p.bvh.prims, np.int32))
-        rows.append(pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32))
-        tris.append(_triangle_words(p.triangles, c))
-        bounds.append(row_bounds(p.frusta, c) if p.rows and with_bounds else np.zeros(0, np.float32))
-        counts += [len(nodes[-1]), len(p.bvh.prims), p.rows, len(tris[-1])]
+        rec = pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32)
+        tri = _triangle_words(p.triangles, c)
+        bound = row_bounds(p.frusta, c) if p.rows and with_bounds else np.zeros(0, np.float32)
+        if mixed:         # rows and triangles: a table of ids in the GPU's order, the data in id order
+            prims.append(order.astype(np.int32))
+            ids.append(np.arange(len(order)))
+        else:             # one kind: the data itself in the GPU's order (no table)
+            if p.rows:
+                rec, bound = rec[order], bound[order] if len(bound) else bound
+            elif len(order):
+                tri = tri[order]
+            ids.append(order)
+        rows.append(rec)
+        tris.append(tri)
+        bounds.append(bound)
+        counts += [len(nodes[-1]), len(prims[-1]) if mixed else 0, p.rows, len(tris[-1])]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
         nodes.append(node_words(top, origin, *top_tree[1:]))
-    arrays = [np.concatenate(nodes), np.concatenate(prims), np.concatenate(rows), np.concatenate(tris),
-              np.asarray(offsets, np.int32)]
-    copies, affine, copy_ids = 0, False, None
-    if two_level:     # the copies in the top level's leaf order: a leaf's `first` is its first copy's slot
-        copy_ids = np.asarray(top.prims, np.int64)
+    arrays = [np.concatenate(nodes), np.concatenate(prims) if prims else np.zeros(0, np.int32), np.concatenate(rows),
+              np.concatenate(tris), np.asarray(offsets, np.int32)]
+    copies, affine, copy_ids, slot_plant = 0, False, None, None
+    if two_level:     # the copies in the top level's GPU order: a leaf's offset is its first copy's slot
+        copy_ids = leaf_order(*top_tree)
         matrices = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
-        words, affine = copy_words(matrices[copy_ids], np.asarray(copy_plant)[copy_ids], centres, origin)
+        slot_plant = np.asarray(copy_plant, np.int64)[copy_ids]
+        words, affine = copy_words(matrices[copy_ids], slot_plant, centres, origin)
         copies = len(words)
         arrays.append(words)
     bound_words = np.concatenate(bounds)
@@ -392,10 +535,13 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     if max_bytes is not None and need > max_bytes:
         raise LimitError(f"the BVH of {len(plants):,} plants and {copies:,} copies needs {need / 2**20:,.0f} MiB on "
                          f"the GPU, over the limit of {max_bytes / 2**20:,.0f} MiB ({hint('render_bytes')})")
-    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids)
-    for a in arrays:
+    gpu = GpuBvh(ctx, origin, two_level, plants=len(plants), copies=copies, affine=affine, copy_ids=copy_ids,
+                 slot_plant=slot_plant, prim_ids=np.concatenate(ids).astype(np.int64),
+                 prim_starts=np.cumsum([0] + [len(i) for i in ids[:-1]]).astype(np.int64))
+    for name, a in zip(BUFFER_NAMES, arrays, strict=False):
         data = np.ascontiguousarray(a).tobytes()
         gpu.buffers.append(ctx.buffer(data or b"\0" * 16))
+        gpu.parts[name] = len(data)
         gpu.nbytes += len(data)
     gpu.row_bound = row_bound
     if with_bounds:
@@ -449,8 +595,9 @@ def trace_rays(gpu: GpuBvh, origins, directions, *, any_hit: bool = False, t_min
             out = np.frombuffer(hit_buf.read(size=16 * n), np.float32).reshape(n, 4)
             ids = out.view(np.int32)
             p = ids[:, 1].astype(np.int64)
-            prim[start:stop] = p
             slot = np.where(p >= 0, ids[:, 2], 0)
+            plant = gpu.slot_plant[slot] if gpu.two_level else np.zeros_like(slot)
+            prim[start:stop] = np.where(p >= 0, gpu.primitive_ids(np.maximum(p, 0), plant), -1)
             c = gpu.copy_ids[slot] if gpu.two_level else slot
             copy[start:stop] = np.where(p >= 0, c, -1)
             face[start:stop] = ids[:, 3]
