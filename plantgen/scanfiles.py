@@ -125,20 +125,35 @@ def _metadata(cloud: PointCloud, up: str, scanners: np.ndarray) -> dict:
 def _write_las(cloud: PointCloud, path: Path, fmt: str, up: str) -> None:
     import laspy
 
-    xyz, scanners = _turned(cloud, up)
+    if up not in UP_AXES:
+        raise PointFileError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
+    rot = up_rotation(up)
+    scanners = cloud.scanners @ rot.T
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.add_extra_dims([laspy.ExtraBytesParams(name=FILE_LABELS[k][0], type=dtype, description=FILE_LABELS[k][1])
                            for k, dtype in LABELS.items()])
-    lo, hi = (xyz.min(axis=0), xyz.max(axis=0)) if len(xyz) else (np.zeros(3), np.zeros(3))
+    n = len(cloud)
+
+    def axis(i: int) -> np.ndarray:      # one turned coordinate of every point (not all three at once)
+        return cloud.xyz @ rot[i]
+
+    lo, hi = np.zeros(3), np.zeros(3)
+    for i in range(3):
+        if n:
+            c = axis(i)
+            lo[i], hi[i] = c.min(), c.max()
     scale, offset = las_scale(lo, hi)
     header.scales, header.offsets = np.full(3, scale), offset
     header.generating_software = "plantgen"
     header.system_identifier = "plantgen simulated laser scan"
     las = laspy.LasData(header)
-    counts = np.round((xyz - offset) / scale).astype(np.int64)
-    las.X, las.Y, las.Z = (counts[:, i].astype(np.int32) for i in range(3))
-    las.return_number = np.ones(len(xyz), np.uint8)
-    las.number_of_returns = np.ones(len(xyz), np.uint8)
+    for name, i in (("X", 0), ("Y", 1), ("Z", 2)):
+        c = axis(i)
+        c -= offset[i]
+        c /= scale
+        setattr(las, name, np.round(c, out=c).astype(np.int32))
+    las.return_number = np.ones(n, np.uint8)
+    las.number_of_returns = np.ones(n, np.uint8)
     las.point_source_id = cloud.scanner
     for name, values in cloud.labels().items():
         las[FILE_LABELS[name][0]] = values

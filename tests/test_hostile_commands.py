@@ -223,7 +223,7 @@ def test_what_would_hang_is_bounded(tmp_path):
     assert_refused(results[4], ("--workers", "1<=x<=256"))
     assert not (tmp_path / "out").exists()
     assert_refused(results[5], ("--scan-distance", "not in the range"))
-    assert_refused(results[6], ("beams may return as many points", "limit scan_bytes"), outputs=[tmp_path / "s.ply"])
+    assert_refused(results[6], ("would return about", "limit scan_bytes"), outputs=[tmp_path / "s.ply"])
 
 
 # ---------------------------------------------------------------------- 4. one line, exit 2

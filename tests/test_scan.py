@@ -20,6 +20,7 @@ from plantgen.geometry.scan import (
     beam_returns,
     cast_first_returns,
     scan_plant,
+    scan_points,
     scan_target,
     scanner_positions,
 )
@@ -306,3 +307,65 @@ def test_binning_loses_no_beam(settings):
 def test_plant_labels_of_the_wrong_length_are_one_line():
     with pytest.raises(ScanError, match="one per segment"):
         scan_plant(two_columns([-2.0, 2.0], [0.0, 0.0]), None, ScanSettings(), plant=[1, 2, 3])
+
+
+# ---------------------------------------------------------------------- the scan's memory
+def _crown_scan(step: float):
+    """A scanner inside a random tree's crown, at ``step`` degrees."""
+    from _geometry_helpers import random_tree
+
+    target = scan_target(random_tree(200, seed=5))
+    lo, hi = target.box()
+    return target, ScanSettings(angular_step=step, positions=(tuple((np.asarray(lo) + np.asarray(hi)) / 2),))
+
+
+def test_a_scans_memory_grows_with_the_points_it_keeps_not_its_beams(monkeypatch):
+    """Four times the beams: the peak grows by at most POINT_BYTES a point more returned
+    (the beams are traced a chunk at a time; what stays is the points)."""
+    import tracemalloc
+
+    import plantgen.geometry.scan as scan
+
+    monkeypatch.setattr(scan, "SCAN_CHUNK_RAYS", 1 << 12)
+    target, settings = _crown_scan(2.0)
+    scan_points(target, settings)                   # the target's BVH built outside the measure
+    runs = []
+    tracemalloc.start()
+    try:
+        for step in (0.5, 0.25):
+            settings = ScanSettings(angular_step=step, positions=settings.positions)
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            cloud = scan_points(target, settings)
+            runs.append((len(cloud), tracemalloc.get_traced_memory()[1] - base))
+            del cloud
+    finally:
+        tracemalloc.stop()
+    (few, peak_few), (many, peak_many) = runs
+    assert many > 3 * few > 0
+    assert peak_many - peak_few <= scan.POINT_BYTES * (many - few)
+
+
+def test_the_scan_budget_is_estimated_before_and_counted_while_it_runs(monkeypatch):
+    import plantgen.geometry.scan as scan
+
+    target, settings = _crown_scan(0.5)
+    grids = scan.beam_grids(target, settings)
+    beams = sum(g.count for g in grids)
+    points = len(scan_points(target, settings))
+    expected = scan.expected_points(target, grids)
+    share = points / beams
+    assert abs(expected - points) <= 4 * np.sqrt(share * (1 - share) / scan.RETURN_SAMPLE) * beams + 1
+    # a budget under the estimate: refused before the beams are traced
+    traced = []
+    real = scan.ScanTarget.first_hits
+    monkeypatch.setattr(scan.ScanTarget, "first_hits", lambda self, o, d, **kw: traced.append(len(o)) or
+                        real(self, o, d, **kw))
+    with pytest.raises(LimitError, match="would return about.*scan_bytes"):
+        scan_points(target, settings, limits=Limits(max_scan_bytes=int(0.5 * scan.POINT_BYTES * points)))
+    assert sum(traced) <= scan.RETURN_SAMPLE
+    # an estimate that misses: the points are counted as they come, and the scan stops
+    monkeypatch.setattr(scan, "expected_points", lambda *a, **k: 0.0)
+    with pytest.raises(LimitError, match="already returned.*scan_bytes"):
+        scan_points(target, settings, limits=Limits(max_scan_bytes=int(0.5 * scan.POINT_BYTES * points)))
+    assert len(scan_points(target, settings, limits=Limits(max_scan_bytes=2 * scan.POINT_BYTES * points))) == points
