@@ -86,8 +86,9 @@ class Limits:
         skinned frusta, estimated before anything is allocated)
     max_scan_rays : rays a simulated laser scan may fire (every scanner's beams, times the
         sub-rays of a diverging beam), counted before any is cast
-    max_scan_bytes : memory a laser scan may take (the skin of the segments it skins,
-        estimated before anything is skinned)
+    max_scan_bytes : memory a laser scan may take: the skin of the segments it skins
+        (estimated before anything is skinned), and the points it returns (estimated
+        from a sample of its beams before any is traced, then counted as they are kept)
     max_queries : query and communication modules (``?P``, ``?E``) one derivation answers,
         summed over its steps (each step that has any walks the turtle over the string)
     max_markers : attraction points of a grammar's ``markers`` environment

@@ -821,7 +821,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     march = replace(march, method=choose_method(
         march.method, placed_rows=len(frusta), distinct_rows=placed.unique_rows if placed is not None else len(frusta),
         pixels=width * height * image.ssaa ** 2, lod_pixels=lod_pixels if placed is not None else 0.0,
-        animated=frames is not None, labels=march.labels))
+        animated=frames is not None, labels=march.labels, draws=1 + int(timed_frames) if timed_frames else 1))
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
             **({"lod_pixels": lod_pixels} if placed is not None else {})}
     # an animation's frames refit the tracer's BVH to the posed rows (plantgen.gl.rt)

@@ -32,6 +32,10 @@ def test_auto_casts_where_a_level_of_detail_an_animation_or_labels_are_asked_for
 def test_auto_casts_a_plant_placed_once_and_a_scene_with_few_rows_a_pixel():
     # every row distinct (a merged plant): the BVH's build costs more than RC's frame
     assert choose_method("auto", placed_rows=500_000, distinct_rows=500_000, pixels=1000) == "rc"
+    # a few copies of each plant: RC for one still, RT once the build serves enough frames
+    few = {"placed_rows": 400_000, "distinct_rows": 100_000, "pixels": 1000}
+    assert choose_method("auto", **few) == "rc"
+    assert choose_method("auto", **few, draws=int(RT_PLACED_PER_DISTINCT)) == "rt"
     # many copies, but few rows for the pixels
     pixels = 4096 * 4096
     rows = math.ceil(RT_ROWS_PER_PIXEL * pixels)
@@ -42,16 +46,19 @@ def test_auto_casts_a_plant_placed_once_and_a_scene_with_few_rows_a_pixel():
 
 @settings(max_examples=200, deadline=None)
 @given(placed=st.integers(1, 10**9), distinct=st.integers(1, 10**7), pixels=st.integers(1, 10**8),
-       more=st.integers(0, 10**9), wider=st.integers(0, 10**8))
-def test_auto_is_monotone_in_rows_and_pixels(placed, distinct, pixels, more, wider):
-    """More placed rows never turn RT back to RC; more pixels never turn RC into RT."""
-    before = choose_method("auto", placed_rows=placed, distinct_rows=distinct, pixels=pixels)
+       more=st.integers(0, 10**9), wider=st.integers(0, 10**8), draws=st.integers(1, 100))
+def test_auto_is_monotone_in_rows_pixels_and_draws(placed, distinct, pixels, more, wider, draws):
+    """More placed rows or more draws never turn RT back to RC; more pixels never turn RC
+    into RT."""
+    case = {"distinct_rows": distinct, "draws": draws}
+    before = choose_method("auto", placed_rows=placed, pixels=pixels, **case)
     if before == "rt":
-        assert choose_method("auto", placed_rows=placed + more, distinct_rows=distinct, pixels=pixels) == "rt"
+        assert choose_method("auto", placed_rows=placed + more, pixels=pixels, **case) == "rt"
+        assert choose_method("auto", placed_rows=placed, pixels=pixels, distinct_rows=distinct,
+                             draws=draws + 1) == "rt"
+        assert placed * draws >= RT_PLACED_PER_DISTINCT * distinct and placed >= RT_ROWS_PER_PIXEL * pixels
     else:
-        assert choose_method("auto", placed_rows=placed, distinct_rows=distinct, pixels=pixels + wider) == "rc"
-    if before == "rt":
-        assert placed >= RT_PLACED_PER_DISTINCT * distinct and placed >= RT_ROWS_PER_PIXEL * pixels
+        assert choose_method("auto", placed_rows=placed, pixels=pixels + wider, **case) == "rc"
 
 
 GROVE = ("effects: [shadows, lod]\nground: {size: 60, material: grass}\n"
@@ -62,14 +69,16 @@ GROVE = ("effects: [shadows, lod]\nground: {size: 60, material: grass}\n"
 
 
 def test_render_chooses_per_input_and_says_so(tmp_path):
-    """The grove (22 copies of 3 plants) at full detail is traced; with its level of
-    detail, or with --method rc, it is cast; the report names the method used."""
+    """The grove (22 copies of 3 plants) at full detail, timed over 8 frames, is traced;
+    with its level of detail, or with --method rc, it is cast; the report names the
+    method used."""
     from _cli import run_cli
 
     scene = tmp_path / "grove.yaml"
     scene.write_text(GROVE)
     out = tmp_path / "grove.png"
-    code, full, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--lod-pixels", "0")
+    code, full, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--lod-pixels", "0",
+                                 "--time-frames", "8")
     assert code == 0, stderr
     assert "RT (--method auto)" in full and "shadow rays" in full
     code, lod, stderr = run_cli("render", scene, "-o", out, "--size", "64x48")

@@ -57,30 +57,34 @@ __all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET", "choose_method", 
 SHADOW_RAY_OFFSET = 1.0
 
 #: ``method="auto"``: placed rows a traced ray (pixel times supersamples) from which RT's
-#: frame beats RC's. RC pays about 1.5 µs of llvmpipe a placed row, RT a walk a pixel:
-#: measured (llvmpipe, 2 cores, 512x384 and 1024x768) RC and RT even at 0.086 rows a pixel
-#: (the pine), RT 2.2-3.1x faster at 0.45 (the forest's 19-copy cut at full detail), RC
-#: 3-15x faster at 0.002-0.03 (single plants). docs/benchmarks/rt.md, "Which method".
+#: frame beats RC's. RC pays about 1.2 µs of llvmpipe a placed row, RT a walk a pixel:
+#: measured (llvmpipe, 2 cores, 512x384 and 1024x768) RC and RT even at 0.086 and 0.111
+#: rows a pixel (the pine; the forest cut to 19 copies), RT 2.3-3.1x faster at 0.40-0.45,
+#: RC 2-11x faster at 0.002-0.03 (single plants). docs/benchmarks/rt.md, "Which method".
 RT_ROWS_PER_PIXEL = 0.15
-#: ``method="auto"``: placed rows a distinct row (the BVH's build, 2-2.5 µs a distinct row,
-#: is paid before the first frame; RC's frame costs about 1.5 µs a placed row): below it a
-#: single frame is faster with RC whatever its pixels.
-RT_PLACED_PER_DISTINCT = 2.0
+#: ``method="auto"``: placed rows a distinct row, times the draws, from which RT's BVH
+#: build (360-690 ms over the forest's 82,499 distinct rows, paid before the first frame)
+#: is repaid by RC's rows (about 1.2 µs a placed row a frame): measured, a still of the
+#: forest cut to 48 copies (3.8 placed rows a distinct one) is faster with RC, of 136
+#: copies (9.6) with RT at 512x384 (docs/benchmarks/rt.md, "Which method").
+RT_PLACED_PER_DISTINCT = 8.0
 
 
 def choose_method(method: str, *, placed_rows: int, distinct_rows: int, pixels: int, lod_pixels: float = 0.0,
-                  animated: bool = False, labels: bool = False) -> str:
+                  animated: bool = False, labels: bool = False, draws: int = 1) -> str:
     """The method a frame is drawn with: ``method`` itself unless it is ``"auto"``. Auto
     takes the ray tracer ("rt") for a still, in colour, of an instanced scene drawn at full
     detail (``lod_pixels`` 0; a level of detail is RC's, cheaper at the error it states)
     whose ``placed_rows`` are at least :data:`RT_ROWS_PER_PIXEL` a traced ray (``pixels``)
-    and :data:`RT_PLACED_PER_DISTINCT` times its ``distinct_rows`` (what the BVH is built
+    and, times the ``draws`` the BVH serves (a warm-up and the timed frames), at least
+    :data:`RT_PLACED_PER_DISTINCT` times its ``distinct_rows`` (what the BVH is built
     over); else the ray caster ("rc"), which is faster there (the measurements above)."""
     if method != "auto":
         return method
     if animated or labels or lod_pixels > 0 or distinct_rows <= 0:
         return "rc"
-    many = placed_rows >= RT_ROWS_PER_PIXEL * pixels and placed_rows >= RT_PLACED_PER_DISTINCT * distinct_rows
+    many = (placed_rows >= RT_ROWS_PER_PIXEL * pixels
+            and placed_rows * max(int(draws), 1) >= RT_PLACED_PER_DISTINCT * distinct_rows)
     return "rt" if many else "rc"
 
 
