@@ -770,6 +770,17 @@ def _render_camera(view: ViewSettings, size, limits: Limits) -> Camera | None:
     return camera
 
 
+def _method_for(march: RaycastSettings, model: PreparedModel, frusta, pixels: int, lod_pixels: float,
+                animated: bool, draws: int) -> RaycastSettings:
+    """``march`` with its method chosen (:func:`~plantgen.gl.rt.choose_method`: ``auto``
+    becomes rc or rt for this model, its rays and its draws)."""
+    placed = model.placed
+    return replace(march, method=choose_method(
+        march.method, placed_rows=len(frusta), distinct_rows=placed.unique_rows if placed is not None else len(frusta),
+        pixels=pixels, lod_pixels=lod_pixels if placed is not None else 0.0, animated=animated, labels=march.labels,
+        draws=draws))
+
+
 def render_model(input_path, settings: RenderSettings | None = None, *, seed=None, iterations=None,
                  timed_frames: int = 0, exact_distance: bool = False, progress=None, limits: Limits | None = None,
                  allow_paths=(), smooth_bends=None, **options) -> RenderReport:
@@ -817,13 +828,10 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
     march, shadows = request.frame(model.effects)
     lod_pixels = request.lod_pixels(model.effects)
-    placed = model.placed
-    march = replace(march, method=choose_method(
-        march.method, placed_rows=len(frusta), distinct_rows=placed.unique_rows if placed is not None else len(frusta),
-        pixels=width * height * image.ssaa ** 2, lod_pixels=lod_pixels if placed is not None else 0.0,
-        animated=frames is not None, labels=march.labels, draws=1 + int(timed_frames) if timed_frames else 1))
+    march = _method_for(march, model, frusta, width * height * image.ssaa ** 2, lod_pixels, frames is not None,
+                        1 + int(timed_frames))
     view = {**frame_arguments(frusta, staging, shadows, image), "settings": march,
-            **({"lod_pixels": lod_pixels} if placed is not None else {})}
+            **({"lod_pixels": lod_pixels} if model.placed is not None else {})}
     # an animation's frames refit the tracer's BVH to the posed rows (plantgen.gl.rt)
     raycaster = RayTracer(limits=limits, refit=frames is not None) if march.method == "rt" \
         else Raycaster(limits=limits)

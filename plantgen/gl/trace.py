@@ -464,6 +464,26 @@ def copy_words(matrices, copy_plant, centres, origin, *, affine: bool | None = N
     return words, True
 
 
+def _plant_words(p: GpuPlant, centre, tree, with_bounds: bool) -> tuple:
+    """One plant's GPU words in its frame (``centre``): its nodes, its primitive id table
+    (None for a plant of one kind, whose data goes up in the GPU's leaf order instead),
+    its row records, triangles and rows' bounds, and the plant's primitive held in each
+    GPU slot."""
+    order = leaf_order(*tree)     # the primitives in the GPU's order
+    mixed = p.rows > 0 and p.triangles is not None and len(p.triangles) > 0
+    node = node_words(p.bvh, centre, *tree[1:])
+    rec = pack_records(p.frusta, centre) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32)
+    tri = _triangle_words(p.triangles, centre)
+    bound = row_bounds(p.frusta, centre) if p.rows and with_bounds else np.zeros(0, np.float32)
+    if mixed:         # rows and triangles: a table of ids in the GPU's order, the data in id order
+        return node, order.astype(np.int32), rec, tri, bound, np.arange(len(order))
+    if p.rows:        # one kind: the data itself in the GPU's order (no table)
+        rec, bound = rec[order], bound[order] if len(bound) else bound
+    elif len(order):
+        tri = tri[order]
+    return node, None, rec, tri, bound, order
+
+
 def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=None, copy_plant=None,
                max_bytes: int | None = None, row_bound: bool | None = None) -> GpuBvh:
     """Upload ``plants`` (a list of :class:`GpuPlant`) to storage buffers.
@@ -497,26 +517,13 @@ def upload_bvh(ctx, plants, origin=None, *, top: BVH | None = None, matrices=Non
     nodes, prims, rows, tris, offsets, ids, bounds = [], [], [], [], [], [], []
     counts = np.zeros(4, np.int64)
     for p, c, tree in zip(plants, centres, trees, strict=True):
-        order = leaf_order(*tree)     # the primitives in the GPU's order
-        mixed = p.rows > 0 and p.triangles is not None and len(p.triangles) > 0
-        offsets.append([counts[0], counts[1] if mixed else -1, counts[2], counts[3], p.rows, 0, 0, 0])
-        nodes.append(node_words(p.bvh, c, *tree[1:]))
-        rec = pack_records(p.frusta, c) if p.rows else np.zeros((0, RECORD_FLOATS), np.float32)
-        tri = _triangle_words(p.triangles, c)
-        bound = row_bounds(p.frusta, c) if p.rows and with_bounds else np.zeros(0, np.float32)
-        if mixed:         # rows and triangles: a table of ids in the GPU's order, the data in id order
-            prims.append(order.astype(np.int32))
-            ids.append(np.arange(len(order)))
-        else:             # one kind: the data itself in the GPU's order (no table)
-            if p.rows:
-                rec, bound = rec[order], bound[order] if len(bound) else bound
-            elif len(order):
-                tri = tri[order]
-            ids.append(order)
-        rows.append(rec)
-        tris.append(tri)
-        bounds.append(bound)
-        counts += [len(nodes[-1]), len(prims[-1]) if mixed else 0, p.rows, len(tris[-1])]
+        node, prim, rec, tri, bound, held = _plant_words(p, c, tree, with_bounds)
+        offsets.append([counts[0], counts[1] if prim is not None else -1, counts[2], counts[3], p.rows, 0, 0, 0])
+        if prim is not None:
+            prims.append(prim)
+        for out, a in ((nodes, node), (rows, rec), (tris, tri), (bounds, bound), (ids, held)):
+            out.append(a)
+        counts += [len(node), 0 if prim is None else len(prim), p.rows, len(tri)]
     if two_level:     # the top level's nodes follow the plants' (one node array)
         offsets[0][5] = counts[0]
         nodes.append(node_words(top, origin, *top_tree[1:]))
