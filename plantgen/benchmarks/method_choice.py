@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -30,20 +29,10 @@ from ..gl.rt import RT_PLACED_PER_DISTINCT, RT_ROWS_PER_PIXEL, RayTracer, choose
 from ..pipeline import frame_arguments, prepare_model, render_model, stage_model
 from ..settings import RaycastSettings
 from .arguments import image_size, report
-from .scaling import tile_placed
+from .scaling import median_frame, tile_placed
 from .scan import machine
 
 __all__ = ["measure", "markdown", "main"]
-
-
-def _median_ms(draw, frames: int) -> float:
-    draw()                                        # warm-up
-    times = []
-    for _ in range(frames):
-        t0 = time.perf_counter()
-        draw()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def _plant_row(name: str, size, frames: int) -> dict:
@@ -77,10 +66,12 @@ def _forest_rows(copies, sizes, frames: int, scene: str = "forest") -> list[dict
             t0 = time.perf_counter()
             rt.render(placed, settings=settings, **args)          # builds and uploads the BVH
             build_ms = 1e3 * (time.perf_counter() - t0)
+
+            def timed(r, p=placed, a=args):
+                return median_frame(lambda: r.render(p, settings=settings, **a), frames)[0]
+
             out.append({"input": f"{scene} cut to {placed.copies:,} copies", "size": size, "placed": len(placed),
-                        "distinct": placed.unique_rows,
-                        "rt_ms": _median_ms(lambda p=placed, a=args, r=rt: r.render(p, settings=settings, **a), frames),
-                        "rc_ms": _median_ms(lambda p=placed, a=args, r=rc: r.render(p, settings=settings, **a), frames),
+                        "distinct": placed.unique_rows, "rt_ms": timed(rt), "rc_ms": timed(rc),
                         "build_ms": build_ms})
     return out
 

@@ -51,7 +51,8 @@ from ..settings import RaycastSettings
 from .arguments import image_size, report
 from .scan import machine
 
-__all__ = ["tile_placed", "measure", "markdown", "main", "VIEWS", "OVERVIEW", "BUDGET_DATA", "BUDGET_COPY"]
+__all__ = ["tile_placed", "median_frame", "measure", "markdown", "main", "VIEWS", "OVERVIEW", "BUDGET_DATA",
+           "BUDGET_COPY"]
 
 #: The cameras of ``--view``: the scene's own (at eye height inside the forest: the tiles
 #: added lie behind the first, mostly hidden) or each forest framed whole from above.
@@ -83,7 +84,7 @@ def tile_placed(placed: PlacedPlants, copies: int, toward=(0.0, 0.0, -1.0)) -> P
     return PlacedPlants(tuple(out), placed.material_names)
 
 
-def _frames(draw, frames: int) -> tuple[float, object]:
+def median_frame(draw, frames: int) -> tuple[float, object]:
     """A warm-up draw and ``frames`` timed ones: (their median frame ms, the last frame)."""
     results = [draw()]
     results += [draw() for _ in range(frames)]
@@ -139,7 +140,7 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
         scene_s, bvh = _timed(lambda p=placed: build_scene_bvh(p))
         top_s, _ = _timed(lambda b=bvh: build_bvh(b.copy_lo, b.copy_hi, leaf_size=TOP_LEAF_SIZE))
         args = arguments(placed)
-        rt_ms, rt_frame = _frames(lambda p=placed, a=args: rt.render(p, settings=settings, **a), frames)
+        rt_ms, rt_frame = median_frame(lambda p=placed, a=args: rt.render(p, settings=settings, **a), frames)
         gpu_bytes = rt.gpu_bvh(placed, None, args["camera"].eye).nbytes
         row = {"n": n, "copies": placed.copies, "segments": len(placed), "scene_s": scene_s, "top_s": top_s,
                "rt_ms": rt_ms, "gpu_bytes": gpu_bytes,
@@ -147,7 +148,7 @@ def measure(scene: str = "forest", counts=(1_000, 10_000, 100_000), size=(512, 3
                "of_budget": gpu_bytes / (BUDGET_DATA * data_bytes + BUDGET_COPY * placed.copies),
                "rc_ms": float("nan")}
         if n <= rc_max:                       # N as asked (the tiles may hold a few more)
-            row["rc_ms"], rc_frame = _frames(lambda p=placed, a=args: rc.render(p, settings=settings,
+            row["rc_ms"], rc_frame = median_frame(lambda p=placed, a=args: rc.render(p, settings=settings,
                                                                                 lod_pixels=lod_pixels, **a), frames)
             _write(images, f"rc_{placed.copies}_{view}.png", rc_frame)
         _write(images, f"rt_{placed.copies}_{view}.png", rt_frame)

@@ -121,13 +121,13 @@ class GpuBvh:
     prim_ids: np.ndarray | None = None   # the plant-local primitive of each plant's GPU slots, plant after plant
     prim_starts: np.ndarray | None = None   # (plants,) int64: where each plant's slots start in prim_ids
 
+    bounds: object = None    # the rows' bounds (row_bounds; uploaded with the row bound on)
+    row_bound: bool | None = None        # test them (BVH_ROW_BOUND, where uploaded); None: ROW_BOUND
+
     def primitive_ids(self, slot, plant) -> np.ndarray:
         """The plant-local primitive ids of GPU primitive slots (what the shaders' hits
         name: a position in the plant's data as uploaded) of the given plants."""
         return self.prim_ids[self.prim_starts[plant] + slot]
-
-    bounds: object = None    # the rows' bounds (row_bounds; uploaded with the row bound on)
-    row_bound: bool | None = None        # test them (BVH_ROW_BOUND, where uploaded); None: ROW_BOUND
 
     def defines(self) -> dict:
         on = ROW_BOUND if self.row_bound is None else self.row_bound
