@@ -16,111 +16,45 @@ import math
 import shlex
 import statistics
 import time
-from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import PlantgenError
 from ..files import write_atomically
-from ..geometry.camera import MAX_ELEVATION, Camera, Orbit, orbit_angles, orbit_view
-from ..geometry.instances import PlacedMeshes, PlacedPlants
-from ..geometry.mesh import tessellate, triangle_count
+from ..geometry.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
+from ..geometry.instances import PlacedPlants
+from ..geometry.mesh import tessellate
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
-from ..gl.raycast import Raycaster
 from ..gl.rt import RayTracer
 from ..images import write_png
 from ..knobs import knob_args, knob_of
-from ..limits import Limits
-from ..pipeline import PreparedModel, frame_arguments, prepare_model, stage_model
+from ..pipeline import frame_arguments, stage_model
 from ..settings import (
-    DEFAULT_SIZE,
     MAX_SSAA,
     MAX_SUBDIV,
-    EffectSettings,
-    MeshSettings,
-    MotionSettings,
     RaycastSettings,
-    RenderSettings,
     ViewSettings,
 )
 from .keys import GROW_STEP_S, binding_for
-from .watch import BackgroundJob, FileWatcher
+from .options import (
+    DRAG_TURN,
+    METHODS,
+    VIEW_MAX_TRIANGLES,
+    FrameStats,
+    ViewOptions,
+    one_line,
+    stored_triangles,
+)
+from .state import ViewerState
 
-__all__ = ["METHODS", "ViewOptions", "ViewerSession", "FrameStats", "one_line", "stored_triangles"]
-
-
-def stored_triangles(frusta, level: int) -> int:
-    """Triangles the GS mesh of ``frusta`` holds at ``level``: a placed scene's distinct
-    plants once each (its copies share them)."""
-    parts = [p.frusta for p in frusta.plants] if isinstance(frusta, PlacedPlants) else [frusta]
-    return sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in parts)
-
-#: The methods of Table 1, as the keys 1..4 choose them.
-METHODS = ("RC", "RC+R", "GS", "GS+R", "RT", "RT+R")
-
-#: The most triangles a GS level may have in the viewer (the level is refused above).
-VIEW_MAX_TRIANGLES = 24_000_000
-
-#: Degrees the view turns per pixel of a left drag.
-DRAG_TURN = 0.4
-
-#: How many frames the heads-up line's medians look back.
-HUD_FRAMES = 30
+__all__ = ["METHODS", "VIEW_MAX_TRIANGLES", "ViewOptions", "ViewerSession", "FrameStats", "one_line",
+           "stored_triangles"]
 
 
-
-def one_line(exc: BaseException) -> str:
-    """An exception as the viewer shows it: a PlantgenError's message, else its class and
-    message, on one line."""
-    text = " ".join(str(exc).split()) or exc.__class__.__name__
-    if not isinstance(exc, PlantgenError):
-        text = f"unexpected failure: {exc.__class__.__name__}: {text}"
-    return text[:300]
-
-
-@dataclass
-class ViewOptions:
-    """How ``plantgen view`` was asked to start (its options; see ``plantgen view --help``):
-    the render settings whole (:class:`~plantgen.settings.RenderSettings`), the window's
-    ``size``, and what only the viewer has (the method, the GS level, shots, watching)."""
-
-    input: Path
-    settings: RenderSettings = RenderSettings()
-    size: tuple = DEFAULT_SIZE
-    seed: int | None = None
-    iterations: int | None = None
-    method: str | None = None
-    level: int = MeshSettings().level
-    shots: Path = Path(".")
-    watch: bool = True
-    poll_s: float = 0.025
-    snapshot: Path | None = None
-    limits: Limits | None = None
-    allow_paths: tuple = ()
-    smooth_bends: float | None = None
-
-    def prepare(self, iterations: int | None = None) -> PreparedModel:
-        """Grow the input with these options (the first model, and each reload); a grammar
-        ``iterations`` steps deep when given (a growth step), else as the options say."""
-        iterations = self.iterations if iterations is None else iterations
-        return prepare_model(self.input, effects=self.settings.effects, seed=self.seed, iterations=iterations,
-                             limits=self.limits, allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
-
-
-@dataclass
-class FrameStats:
-    """One drawn frame: the renderer's frame ms (draw to finish) and the wall ms of the
-    whole frame (skin or pose, draw, read-back), when it was drawn."""
-
-    frame_ms: float
-    wall_ms: float
-    at: float
-
-
-class ViewerSession:
+class ViewerSession(ViewerState):
     """The viewer's state and its frames (see the module's docstring).
 
     Parameters
@@ -131,138 +65,24 @@ class ViewerSession:
     say, warn : callables printing one line on stdout / stderr
     """
 
-    def __init__(self, ctx, options: ViewOptions, model: PreparedModel, *, say=print, warn=print):
-        self.ctx, self.options, self.say, self.warn = ctx, options, say, warn
-        self.model = model
-        self.renderer = str(ctx.info["GL_RENDERER"])
-        self.raycaster = Raycaster(ctx, limits=options.limits)
-        self.tracer: RayTracer | None = None   # RT, RT+R (made when first asked for)
-        self._mesh_caster_said = False     # the mesh caster's fallback told once
-        self._rt_playing_said = False      # RT's playing frames drawn by RC, told once
-        self.raster: RasterRenderer | None = None
-        self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
-        self.level = int(options.level)
-        self.march = options.settings.march          # the knobs the keys change (relief: by the method)
-        self.shadows = "shadows" in model.effects
-        self.ssaa = options.settings.image.ssaa
-        self.t = options.settings.motion.start
-        self.playing = False
-        self.show_help = False
-        self.closing = False                   # Q or Esc: the window's loop ends
-        self.want_window_shot = False          # Shift+P: the window saves itself after its next draw
-        self.status, self.error = "", None
-        self.frames: deque[FrameStats] = deque(maxlen=HUD_FRAMES)
-        self.last = None                       # the last RenderResult
-        self.dirty = True
-        self._frusta_key = self._frusta = self._leaves = None
-        self._mesh_key = self._mesh = None
-        self._stream = self._skinned = None    # a playing animation's GPU pose, its skinned mesh
-        self._shadow_box = None
-        self._saved_ns = None                  # a reload's save time, until its frame is shown
-        self._reload_timings: dict = {}
-        self.step_target: int | None = None   # the growth step N, Shift+N and G asked for (None: none)
-        self.steps_end = model.grown.iterations   # a grammar's last step (its iterations); None otherwise
-        self.growing = False                   # G: the growth plays, a step each GROW_STEP_S
-        self._grow_clock = 0.0                 # seconds since the last step was taken in
-        self._steps_need_said = False          # "steps need a grammar" printed once
-        self.camera = self._initial_camera(*options.size)
-        self.watcher = FileWatcher(model.grown.sources if options.watch else (), options.poll_s)
-        self.reloader = BackgroundJob(self._grow)
-
-    # ------------------------------------------------------------------ the model
-    def _grow(self, t: float, saved_ns: int | None, step: int | None = None):
-        """The reload's work (background thread): grow (a grammar ``step`` derivation steps
-        deep when given), skin at ``t``; returns (model, frusta, seconds of each stage).
-        ``saved_ns`` is the save's time for a reload, None for a growth step."""
-        t0 = time.perf_counter()
-        model = self.options.prepare(step)
-        frusta = model.frusta_at(t)
-        total = time.perf_counter() - t0
-        grow = sum(model.grown.timings.values())      # read, parse, derive, interpret (place)
-        return model, frusta, {"grow": grow, "skin": max(total - grow, 0.0)}
-
-    def _initial_camera(self, width: int, height: int) -> Camera:
-        o = self.options
-        frusta = self.frusta()
-        view = o.settings.view
-        base = None if view.auto else Camera.load(view.camera, o.limits)
-        if base is not None:
-            base = Camera(base.eye, base.target, base.up, base.fov_y, width, height)
-        return stage_model(self.model.grown, frusta, width, height, camera=base, orbit=view.orbit).camera
-
-    def frusta(self):
-        """The model's rows at the current time (skinned once for a still model)."""
-        t = self.t if self.model.animated else 0.0
-        key = self._frusta_key
-        if key is None or key[0] is not self.model or key[1] != t:     # the objects, not their ids
-            self._frusta, self._frusta_key = self.model.frusta_at(t), (self.model, t)
-            self._leaves = self.model.anim.leaves_at(t) if self.model.animated else None
-        return self._frusta
-
-    def leaves(self):
-        """An animated model's leaves at the current time, posed once per time (the same
-        object while the time holds, so the shadow map drawn with them is reused); None for
-        a still model (its leaves come with the staging)."""
-        self.frusta()
-        return self._leaves
-
-    def mesh(self, frusta):
-        """The GS / GS+R tessellation of ``frusta`` at the current level (cached)."""
-        relief = self.method == "GS+R"
-        key = self._mesh_key
-        if key is None or key[0] is not frusta or key[1:] != (self.level, relief):
-            self._mesh = None
-            self._mesh = (PlacedMeshes.tessellate(frusta, self.level, relief) if isinstance(frusta, PlacedPlants)
-                          else tessellate(frusta, self.level, relief=relief))
-            self._mesh_key = (frusta, self.level, relief)
-        return self._mesh
-
     # ------------------------------------------------------------------ the frame
-    def effects(self) -> tuple:
-        """The effects of the frame: the model's, with relief and shadows as the viewer
-        has them now."""
-        keep = [e for e in self.model.effects if e not in ("relief", "shadows")]
-        return tuple(keep + (["relief"] if self.method.endswith("+R") else [])
-                     + (["shadows"] if self.shadows else []))
-
-    def request(self) -> RenderSettings:
-        """What the frame asks for now: the options' settings with the keys' changes (the
-        method's relief, shadows, the march, supersampling, the time)."""
-        s = self.options.settings
-        return replace(s, effects=EffectSettings(effects=s.effects.effects, relief=self.method.endswith("+R"),
-                                                 shadows=self.shadows),
-                       march=replace(self.march, method="rt" if self.method.startswith("RT") else "rc"),
-                       image=replace(s.image, ssaa=self.ssaa),
-                       motion=MotionSettings(time=self.t if self.model.animated else None))
-
-    def settings(self) -> RaycastSettings:
-        return self.request().frame(self.effects())[0]
-
-    def posing_on_gpu(self) -> bool:
-        """Whether this frame is posed on the GPU: an animation playing, ``--pose gpu``, and
-        a plan the GPU can pose (a paused frame is skinned on the CPU, as ``plantgen
-        render --time`` draws it)."""
-        anim = self.model.anim
-        return (self.playing and anim.animated and anim.plan is not None
-                and self.options.settings.motion.pose == "gpu")
-
     def _draw_posed(self, staging, request, settings, shadow):
         """A playing frame posed on the GPU: RC and RC+R draw the records the compute
         program writes; GS and GS+R the mesh built once at rest, posed by the vertex shader."""
         anim = self.model.anim
-        if self._stream is None or self._stream[0] is not self.model:
+        if self.stream is None or self.stream[0] is not self.model:
             self._release_stream()
-            self._stream = (self.model, PoseStream(self.ctx))
-        stream = self._stream[1]
+            self.stream = (self.model, PoseStream(self.ctx))
+        stream = self.stream[1]
         rest = anim.rest_frusta()[0]
         args = frame_arguments(rest, staging, shadow, request.image)
         if shadow is not None:
             args["shadow_box"] = self._playing_shadow_box()
         args["leaves"] = anim.leaves_at(self.t)
         if not self.method.startswith("GS"):
-            if self.method.startswith("RT") and not self._rt_playing_said:
+            if self.method.startswith("RT") and not self.rt_playing_said:
                 self.warn("RT traces still frames: a playing animation posed on the GPU is drawn by RC")
-                self._rt_playing_said = True
+                self.rt_playing_said = True
             rows, records, _ = anim.upload(stream, self.t, self.camera.eye)
             return self.raycaster.render(rows, settings=settings, record_buffer=records, **args)
         if self.raster is None:
@@ -274,15 +94,15 @@ class ViewerSession:
         """The playing animation's GS / GS+R mesh at rest, bound for vertex skinning (cached)."""
         relief = self.method == "GS+R"
         key = (self.model, self.level, relief)
-        if self._skinned is None or self._skinned[0] != key:
-            self._skinned = None
-            self._skinned = (key, self.model.anim.skinned(tessellate(rest, self.level, relief=relief)))
-        return self._skinned[1]
+        if self.skinned is None or self.skinned[0] != key:
+            self.skinned = None
+            self.skinned = (key, self.model.anim.skinned(tessellate(rest, self.level, relief=relief)))
+        return self.skinned[1]
 
     def _release_stream(self) -> None:
-        if self._stream is not None:
-            self._stream[1].release()
-            self._stream = None
+        if self.stream is not None:
+            self.stream[1].release()
+            self.stream = None
 
     def draw(self, width: int, height: int):
         """Render the current frame at ``width`` x ``height`` (the window's pixels);
@@ -323,10 +143,10 @@ class ViewerSession:
         meshes whatever the caster, so theirs stay as asked."""
         if shadow is None or shadow.caster != "mesh" or self.method.startswith("GS"):
             return shadow
-        if not self._mesh_caster_said:
+        if not self.mesh_caster_said:
             self.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
                       "frames cast with the relief march")
-            self._mesh_caster_said = True
+            self.mesh_caster_said = True
         return replace(shadow, caster="relief")
 
     def _draw_placed(self, placed: PlacedPlants, args: dict, settings, lod_pixels: float):
@@ -354,24 +174,24 @@ class ViewerSession:
 
     def _playing_shadow_box(self):
         """One light window for the whole animation while it plays (shadows do not shimmer)."""
-        if self._shadow_box is None or self._shadow_box[0] is not self.model:
+        if self.shadow_box is None or self.shadow_box[0] is not self.model:
             times = np.linspace(0.0, 10.0, 16, endpoint=False)
-            self._shadow_box = (self.model, self.model.anim.bounds(times))
-        return self._shadow_box[1]
+            self.shadow_box = (self.model, self.model.anim.bounds(times))
+        return self.shadow_box[1]
 
     def presented(self) -> dict | None:
         """The window calls this after a frame is on screen: a reload's time from the save
         to this frame is printed here, and returned ({"total": s, "detect": s, "grow": s,
         "skin": s, "draw": s}; None when no reload waited for this frame)."""
-        if self._saved_ns is None:
+        if self.saved_ns is None:
             return None
-        total = (time.time_ns() - self._saved_ns) / 1e9
-        timings = {**self._reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
+        total = (time.time_ns() - self.saved_ns) / 1e9
+        timings = {**self.reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
         parts = ", ".join(f"{k} {v:.2f}" for k, v in timings.items())
         self.say(f"reloaded {self.model.source}: {self.model.grown.segments:,} segments, "
                  f"{total:.2f} s from save to frame ({parts} s)")
         self.status = f"reloaded: {total:.2f} s from save to frame"
-        self._saved_ns = None
+        self.saved_ns = None
         return {"total": total, **timings}
 
     # ------------------------------------------------------------------ time passes
@@ -390,8 +210,8 @@ class ViewerSession:
         if done is not None:
             self._take_reload(*done)
         if self.growing:
-            self._grow_clock += dt
-            if self._grow_clock >= GROW_STEP_S and not self.reloader.busy:
+            self.grow_clock += dt
+            if self.grow_clock >= GROW_STEP_S and not self.reloader.busy:
                 if self.step_target >= self.steps_end:
                     self.growing = False
                     self.status = f"grown: step {self.step} of {self.steps_end}"
@@ -410,10 +230,10 @@ class ViewerSession:
             return
         model, frusta, timings = value
         self.model, self.error = model, None
-        self._frusta, self._frusta_key = frusta, (model, t if model.animated else 0.0)
-        self._mesh_key = None
+        self.frusta_cache, self.frusta_key = frusta, (model, t if model.animated else 0.0)
+        self.mesh_key = None
         self.watcher.watch(model.grown.sources)
-        self._grow_clock = 0.0
+        self.grow_clock = 0.0
         if model.grown.iterations is None:              # no longer a grammar
             self.step_target, self.steps_end, self.growing = None, None, False
         elif step is None:
@@ -423,8 +243,8 @@ class ViewerSession:
             self.say(f"{model.grown.name}: {self.status}")
         else:
             waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
-            self._reload_timings = {"detect": waited, **timings}
-            self._saved_ns = saved_ns
+            self.reload_timings = {"detect": waited, **timings}
+            self.saved_ns = saved_ns
         self.dirty = True
 
     # ------------------------------------------------------------------ the controls
@@ -532,21 +352,16 @@ class ViewerSession:
         self.dirty = True
 
     # ------------------------------------------------------------------ growth step by step
-    @property
-    def step(self) -> int | None:
-        """The derivation step of the grammar shown (its iterations); None for a scene or
-        a skeleton file."""
-        return self.model.grown.iterations
-
     def _steps_allowed(self) -> bool:
         """Whether the model grows step by step (a grammar); else says so (on stdout once)."""
         if self.step is not None:
             return True
         self.status = f"growth steps need a grammar (this is a {self.model.grown.kind})"
-        if not self._steps_need_said:
+        if not self.steps_need_said:
             self.say(self.status)
-            self._steps_need_said = True
+            self.steps_need_said = True
         return False
+
 
     def _ask_step(self, step: int) -> None:
         """Grow the grammar ``step`` derivation steps deep with the same seed (on the reload
@@ -580,7 +395,7 @@ class ViewerSession:
             self.growing = False
             self.status = f"growth stopped at step {self.step}"
             return
-        self.growing, self._grow_clock = True, 0.0
+        self.growing, self.grow_clock = True, 0.0
         current = self.step if self.step_target is None else self.step_target
         if current >= self.steps_end:
             self._ask_step(0)
@@ -681,10 +496,10 @@ class ViewerSession:
                       else f"{self.method} fixed {s.linear_steps} + {s.binary_steps} steps")
         else:
             method = f"{self.method} m = {self.level}"
-            if self.posing_on_gpu() and self._skinned is not None and self._skinned[0][1] == self.level:
-                method += f", {len(self._skinned[1].mesh.faces):,} triangles, skinned on the GPU"
-            elif self._mesh is not None and self._mesh_key is not None and self._mesh_key[1] == self.level:
-                method += f", {len(self._mesh.faces):,} triangles"
+            if self.posing_on_gpu() and self.skinned is not None and self.skinned[0][1] == self.level:
+                method += f", {len(self.skinned[1].mesh.faces):,} triangles, skinned on the GPU"
+            elif self.mesh_cache is not None and self.mesh_key is not None and self.mesh_key[1] == self.level:
+                method += f", {len(self.mesh_cache.faces):,} triangles"
         frames = list(self.frames)
         timing = "-"
         if frames:
