@@ -24,20 +24,16 @@ import numpy as np
 from ..errors import PlantgenError
 from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
-from ..geometry.instances import PlacedPlants
-from ..geometry.mesh import tessellate
-from ..gl.pose import PoseStream
-from ..gl.raster import RasterRenderer
-from ..gl.rt import RayTracer
 from ..images import write_png
 from ..knobs import knob_args, knob_of
-from ..pipeline import frame_arguments, stage_model
+from ..pipeline import stage_model
 from ..settings import (
     MAX_SSAA,
     MAX_SUBDIV,
     RaycastSettings,
     ViewSettings,
 )
+from . import frame
 from .keys import GROW_STEP_S, binding_for
 from .options import (
     DRAG_TURN,
@@ -65,119 +61,12 @@ class ViewerSession(ViewerState):
     say, warn : callables printing one line on stdout / stderr
     """
 
-    # ------------------------------------------------------------------ the frame
-    def _draw_posed(self, staging, request, settings, shadow):
-        """A playing frame posed on the GPU: RC and RC+R draw the records the compute
-        program writes; GS and GS+R the mesh built once at rest, posed by the vertex shader."""
-        anim = self.model.anim
-        if self.stream is None or self.stream[0] is not self.model:
-            self._release_stream()
-            self.stream = (self.model, PoseStream(self.ctx))
-        stream = self.stream[1]
-        rest = anim.rest_frusta()[0]
-        args = frame_arguments(rest, staging, shadow, request.image)
-        if shadow is not None:
-            args["shadow_box"] = self._playing_shadow_box()
-        args["leaves"] = anim.leaves_at(self.t)
-        if not self.method.startswith("GS"):
-            if self.method.startswith("RT") and not self.rt_playing_said:
-                self.warn("RT traces still frames: a playing animation posed on the GPU is drawn by RC")
-                self.rt_playing_said = True
-            rows, records, _ = anim.upload(stream, self.t, self.camera.eye)
-            return self.raycaster.render(rows, settings=settings, record_buffer=records, **args)
-        if self.raster is None:
-            self.raster = RasterRenderer(self.ctx)
-        poses, _ = anim.pose_segments(stream, self.t, self.camera.eye)
-        return self.raster.render(self.skinned_mesh(rest), rest, poses=poses, bounds=anim.motion_box(), **args)
-
-    def skinned_mesh(self, rest):
-        """The playing animation's GS / GS+R mesh at rest, bound for vertex skinning (cached)."""
-        relief = self.method == "GS+R"
-        key = (self.model, self.level, relief)
-        if self.skinned is None or self.skinned[0] != key:
-            self.skinned = None
-            self.skinned = (key, self.model.anim.skinned(tessellate(rest, self.level, relief=relief)))
-        return self.skinned[1]
-
-    def _release_stream(self) -> None:
-        if self.stream is not None:
-            self.stream[1].release()
-            self.stream = None
-
-    def draw(self, width: int, height: int):
-        """Render the current frame at ``width`` x ``height`` (the window's pixels);
-        returns the :class:`~plantgen.gl.result.RenderResult`."""
-        if (width, height) != (self.camera.width, self.camera.height):
-            self.camera = replace(self.camera, width=int(width), height=int(height))
-        t0 = time.perf_counter()
-        if self.posing_on_gpu():
-            request = self.request()
-            settings, shadow = request.frame(self.effects())
-            staging = stage_model(self.model.grown, self.model.anim.rest_frusta()[0], width, height,
-                                  camera=self.camera)
-            return self._drawn(self._draw_posed(staging, request, settings, self._merged_caster(shadow)), t0)
-        frusta = self.frusta()
-        staging = stage_model(self.model.grown, frusta, width, height, camera=self.camera)
-        request = self.request()
-        settings, shadow = request.frame(self.effects())
-        args = frame_arguments(frusta, staging, shadow, request.image)
-        if shadow is not None and self.playing and self.model.animated:
-            args["shadow_box"] = self._playing_shadow_box()
-        if self.model.animated:
-            args["leaves"] = self.leaves()     # moved with their branches
-        if self.raster is None and self.method.startswith("GS"):
-            self.raster = RasterRenderer(self.ctx)
-        if isinstance(frusta, PlacedPlants):   # a forest: instanced, its detail as the knob says
-            args["shadows"] = self._merged_caster(shadow)
-            return self._drawn(self._draw_placed(frusta, args, settings, request.lod_pixels(self.effects())), t0)
-        if not self.method.startswith("GS"):
-            result = self.caster().render(frusta, settings=settings, **args)
-        else:
-            result = self.raster.render(self.mesh(frusta), frusta, **args)
-        return self._drawn(result, t0)
-
-    def _merged_caster(self, shadow):
-        """The shadow knobs of a frame the mesh caster cannot cast (posed on the GPU, or a
-        scene drawn instanced: ``--shadow-caster mesh`` casts still frusta drawn merged):
-        the march's instead, said once; other knobs as they are. GS and GS+R cast their own
-        meshes whatever the caster, so theirs stay as asked."""
-        if shadow is None or shadow.caster != "mesh" or self.method.startswith("GS"):
-            return shadow
-        if not self.mesh_caster_said:
-            self.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
-                      "frames cast with the relief march")
-            self.mesh_caster_said = True
-        return replace(shadow, caster="relief")
-
-    def _draw_placed(self, placed: PlacedPlants, args: dict, settings, lod_pixels: float):
-        """A placed scene's frame: RC and RC+R from its records per plant, RT and RT+R
-        through its two-level BVH, GS and GS+R from its meshes per plant."""
-        if not self.method.startswith("GS"):
-            return self.caster().render(placed, settings=settings, lod_pixels=lod_pixels, **args)
-        keep = {k: v for k, v in args.items() if k not in ("material_names", "leaves")}
-        return self.raster.render_placed(self.mesh(placed), lod_pixels=lod_pixels, **keep)
-
-    def caster(self):
-        """The ray caster (RC, RC+R) or the ray tracer (RT, RT+R) of the method."""
-        if not self.method.startswith("RT"):
-            return self.raycaster
-        if self.tracer is None:
-            self.tracer = RayTracer(self.ctx, limits=self.options.limits)
-        return self.tracer
-
-    def _drawn(self, result, t0: float):
-        """Keep ``result`` as the last frame and its times for the heads-up line."""
-        self.last = result
-        self.frames.append(FrameStats(result.frame_ms, (time.perf_counter() - t0) * 1e3, time.monotonic()))
-        self.dirty = False
-        return result
-
-    def _playing_shadow_box(self):
-        """One light window for the whole animation while it plays (shadows do not shimmer)."""
-        if self.shadow_box is None or self.shadow_box[0] is not self.model:
-            times = np.linspace(0.0, 10.0, 16, endpoint=False)
-            self.shadow_box = (self.model, self.model.anim.bounds(times))
-        return self.shadow_box[1]
+    # ------------------------------------------------------------------ the frame (frame.py)
+    draw = frame.draw
+    caster = frame.caster
+    skinned_mesh = frame.skinned_mesh
+    current = frame.current
+    release = frame.release
 
     def presented(self) -> dict | None:
         """The window calls this after a frame is on screen: a reload's time from the save
@@ -419,13 +308,6 @@ class ViewerSession(ViewerState):
                 return path
         raise PlantgenError(f"{folder}: no free name for {stem}-NNN{suffix}")
 
-    def current(self):
-        """The frame of the current state: the last one, drawn again first if anything
-        changed since (a key pressed in the same moment as P or C counts)."""
-        if self.dirty or self.last is None:
-            self.draw(self.camera.width, self.camera.height)
-        return self.last
-
     def screenshot(self) -> Path | None:
         """Write the current frame as drawn (no heads-up line) as a PNG."""
         self.current()
@@ -534,11 +416,3 @@ class ViewerSession(ViewerState):
             return "on"
         return "on (map reused)" if stats.shadow_cached else f"on (map drawn, {stats.shadow_ms:.0f} ms)"
 
-    def release(self) -> None:
-        """Free the renderers' GL objects."""
-        self._release_stream()
-        self.raycaster.release()
-        if self.tracer is not None:
-            self.tracer.release()
-        if self.raster is not None:
-            self.raster.release()
