@@ -33,8 +33,8 @@ from ..settings import (
     RaycastSettings,
     ViewSettings,
 )
-from . import frame
-from .keys import GROW_STEP_S, binding_for
+from . import frame, growth
+from .keys import binding_for
 from .options import (
     DRAG_TURN,
     METHODS,
@@ -98,14 +98,7 @@ class ViewerSession(ViewerState):
         done = self.reloader.result()
         if done is not None:
             self._take_reload(*done)
-        if self.growing:
-            self.grow_clock += dt
-            if self.grow_clock >= GROW_STEP_S and not self.reloader.busy:
-                if self.step_target >= self.steps_end:
-                    self.growing = False
-                    self.status = f"grown: step {self.step} of {self.steps_end}"
-                else:
-                    self._ask_step(self.step_target + 1)
+        growth.advance(self, dt)
         return self.dirty
 
     def _take_reload(self, args, value, exc) -> None:
@@ -240,57 +233,9 @@ class ViewerSession(ViewerState):
         self.t = max(0.0, self.t + dt)
         self.dirty = True
 
-    # ------------------------------------------------------------------ growth step by step
-    def _steps_allowed(self) -> bool:
-        """Whether the model grows step by step (a grammar); else says so (on stdout once)."""
-        if self.step is not None:
-            return True
-        self.status = f"growth steps need a grammar (this is a {self.model.grown.kind})"
-        if not self.steps_need_said:
-            self.say(self.status)
-            self.steps_need_said = True
-        return False
-
-
-    def _ask_step(self, step: int) -> None:
-        """Grow the grammar ``step`` derivation steps deep with the same seed (on the reload
-        thread; a newer step asked meanwhile supersedes it)."""
-        self.step_target = step
-        self.reloader.start(self.t, None, step)
-        self.status = f"growing step {step} ..."
-
-    def grow_step(self, delta: int) -> None:
-        """N, Shift+N: the growth one derivation step forward or back (from the step last
-        asked for), between the axiom (0) and the grammar's iterations; stops playing."""
-        if not self._steps_allowed():
-            return
-        self.growing = False
-        current = self.step if self.step_target is None else self.step_target
-        step = min(max(current + delta, 0), self.steps_end)
-        if step == current:
-            self.step_target = current
-            self.status = (f"step {step} is the grammar's last (its iterations)" if delta > 0
-                           else "step 0 is the axiom")
-            return
-        self._ask_step(step)
-
-    def toggle_growth(self) -> None:
-        """G: play the growth, a step each :data:`GROW_STEP_S` seconds (or as fast as a
-        step grows), up to the grammar's iterations; from the axiom when there already;
-        G again stops it."""
-        if not self._steps_allowed():
-            return
-        if self.growing:
-            self.growing = False
-            self.status = f"growth stopped at step {self.step}"
-            return
-        self.growing, self.grow_clock = True, 0.0
-        current = self.step if self.step_target is None else self.step_target
-        if current >= self.steps_end:
-            self._ask_step(0)
-        else:
-            self.step_target = current
-            self.status = "growing ..."
+    # ------------------------------------------------------------------ growth step by step (growth.py)
+    grow_step = growth.grow_step
+    toggle_growth = growth.toggle_growth
 
     def toggle_help(self) -> None:
         self.show_help = not self.show_help
