@@ -1,9 +1,11 @@
 """What the viewer starts from and counts with: the options of ``plantgen view``
 (:class:`ViewOptions`), the methods the keys choose, the viewer's limits, a drawn frame's
-times (:class:`FrameStats`), and an error as one line; no GL and no state."""
+times (:class:`FrameStats`), an error as one line, and the reload's work
+(:func:`grow_model`); no GL and no state."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,7 +17,7 @@ from ..pipeline import PreparedModel, prepare_model
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings
 
 __all__ = ["METHODS", "VIEW_MAX_TRIANGLES", "DRAG_TURN", "HUD_FRAMES", "ViewOptions", "FrameStats", "one_line",
-           "stored_triangles"]
+           "stored_triangles", "grow_model"]
 
 
 def stored_triangles(frusta, level: int) -> int:
@@ -84,3 +86,15 @@ class FrameStats:
     frame_ms: float
     wall_ms: float
     at: float
+
+
+def grow_model(options: ViewOptions, t: float, saved_ns: int | None, step: int | None = None):
+    """The reload's work (background thread): grow (a grammar ``step`` derivation steps
+    deep when given), skin at ``t``; returns (model, frusta, seconds of each stage).
+    ``saved_ns`` is the save's time for a reload, None for a growth step."""
+    t0 = time.perf_counter()
+    model = options.prepare(step)
+    frusta = model.frusta_at(t)
+    total = time.perf_counter() - t0
+    grow = sum(model.grown.timings.values())      # read, parse, derive, interpret (place)
+    return model, frusta, {"grow": grow, "skin": max(total - grow, 0.0)}

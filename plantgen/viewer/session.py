@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 import shlex
 import statistics
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,7 +32,7 @@ from ..settings import (
     RaycastSettings,
     ViewSettings,
 )
-from . import frame, growth
+from . import frame, growth, reload
 from .keys import binding_for
 from .options import (
     DRAG_TURN,
@@ -68,66 +67,9 @@ class ViewerSession(ViewerState):
     current = frame.current
     release = frame.release
 
-    def presented(self) -> dict | None:
-        """The window calls this after a frame is on screen: a reload's time from the save
-        to this frame is printed here, and returned ({"total": s, "detect": s, "grow": s,
-        "skin": s, "draw": s}; None when no reload waited for this frame)."""
-        if self.saved_ns is None:
-            return None
-        total = (time.time_ns() - self.saved_ns) / 1e9
-        timings = {**self.reload_timings, "draw": self.frames[-1].wall_ms / 1e3 if self.frames else 0.0}
-        parts = ", ".join(f"{k} {v:.2f}" for k, v in timings.items())
-        self.say(f"reloaded {self.model.source}: {self.model.grown.segments:,} segments, "
-                 f"{total:.2f} s from save to frame ({parts} s)")
-        self.status = f"reloaded: {total:.2f} s from save to frame"
-        self.saved_ns = None
-        return {"total": total, **timings}
-
-    # ------------------------------------------------------------------ time passes
-    def tick(self, dt: float, now: float | None = None) -> bool:
-        """Advance the clock by ``dt`` seconds: play an animation, poll the watched files
-        and take a finished reload in. Returns True when the frame must be drawn again."""
-        if self.playing and self.model.animated:
-            self.t += dt
-            self.dirty = True
-        if self.options.watch:
-            change = self.watcher.poll(now)
-            if change is not None:
-                self.reloader.start(self.t, change.saved_ns, self.step_target)   # at the step shown
-                self.status = "reloading ..."
-        done = self.reloader.result()
-        if done is not None:
-            self._take_reload(*done)
-        growth.advance(self, dt)
-        return self.dirty
-
-    def _take_reload(self, args, value, exc) -> None:
-        t, saved_ns, step = args
-        if exc is not None:
-            self.error = one_line(exc) if saved_ns is not None else f"step {step}: {one_line(exc)}"
-            self.status = ""
-            self.warn(f"plantgen view: error: {self.error} (keeping the last good model)")
-            if saved_ns is None and not self.growing:     # a step that cannot be drawn: stay at the one shown
-                self.step_target = self.step
-            return
-        model, frusta, timings = value
-        self.model, self.error = model, None
-        self.frusta_cache, self.frusta_key = frusta, (model, t if model.animated else 0.0)
-        self.mesh_key = None
-        self.watcher.watch(model.grown.sources)
-        self.grow_clock = 0.0
-        if model.grown.iterations is None:              # no longer a grammar
-            self.step_target, self.steps_end, self.growing = None, None, False
-        elif step is None:
-            self.steps_end = model.grown.iterations
-        if saved_ns is None:
-            self.status = f"step {self.step} of {self.steps_end}: {model.grown.segments:,} segments"
-            self.say(f"{model.grown.name}: {self.status}")
-        else:
-            waited = max(0.0, (time.time_ns() - saved_ns) / 1e9 - timings["grow"] - timings["skin"])
-            self.reload_timings = {"detect": waited, **timings}
-            self.saved_ns = saved_ns
-        self.dirty = True
+    # ------------------------------------------------------------------ time passes (reload.py)
+    tick = reload.tick
+    presented = reload.presented
 
     # ------------------------------------------------------------------ the controls
     def key(self, name: str, shift: bool = False) -> bool:

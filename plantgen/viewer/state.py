@@ -23,8 +23,7 @@ from ..gl.raycast import Raycaster
 from ..gl.rt import RayTracer
 from ..pipeline import PreparedModel, stage_model
 from ..settings import EffectSettings, MotionSettings, RaycastSettings, RenderSettings
-from .options import HUD_FRAMES, FrameStats, ViewOptions
-from .reload import grow_model
+from .options import HUD_FRAMES, FrameStats, ViewOptions, grow_model
 from .watch import BackgroundJob, FileWatcher
 
 __all__ = ["ViewerState"]
