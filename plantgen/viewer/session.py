@@ -13,26 +13,20 @@ events and presents its frames; the tests drive it headless too.
 from __future__ import annotations
 
 import math
-import shlex
 import statistics
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import PlantgenError
-from ..files import write_atomically
 from ..geometry.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
-from ..images import write_png
-from ..knobs import knob_args, knob_of
+from ..knobs import knob_of
 from ..pipeline import stage_model
 from ..settings import (
     MAX_SSAA,
     MAX_SUBDIV,
     RaycastSettings,
-    ViewSettings,
 )
-from . import frame, growth, reload
+from . import frame, growth, reload, shots
 from .keys import binding_for
 from .options import (
     DRAG_TURN,
@@ -185,74 +179,11 @@ class ViewerSession(ViewerState):
     def quit(self) -> None:
         self.closing = True
 
-    # ------------------------------------------------------------------ saving
-    def _next_name(self, suffix: str) -> Path:
-        folder = Path(self.options.shots)
-        stem = self.model.grown.name or Path(self.model.source).stem
-        for i in range(1, 100000):
-            path = folder / f"{stem}-{i:03d}{suffix}"
-            if not path.exists() and not path.with_suffix(".png").exists() and not path.with_suffix(".json").exists():
-                return path
-        raise PlantgenError(f"{folder}: no free name for {stem}-NNN{suffix}")
-
-    def screenshot(self) -> Path | None:
-        """Write the current frame as drawn (no heads-up line) as a PNG."""
-        self.current()
-        try:
-            path = write_png(self._next_name(".png"), self.last.color)
-        except PlantgenError as exc:
-            return self._failed(exc)
-        self.say(f"saved screenshot {path} ({self.last.camera.width}x{self.last.camera.height})")
-        self.status = f"saved {path.name}"
-        return path
-
-    def window_shot(self, pixels: np.ndarray | None = None) -> Path | None:
-        """Write ``pixels`` (the window as shown; the window passes them) as a PNG."""
-        if pixels is None:
-            self.want_window_shot = True
-            return None
-        self.want_window_shot = False
-        try:
-            path = write_png(self._next_name(".png"), pixels)
-        except PlantgenError as exc:
-            return self._failed(exc)
-        self.say(f"saved window {path}")
-        self.status = f"saved {path.name}"
-        return path
-
-    def save_camera(self) -> Path | None:
-        """Write the camera of the last frame as JSON and print the ``plantgen render``
-        command that draws the same frame."""
-        camera = self.current().camera
-        try:
-            path = write_atomically(self._next_name(".json"), camera.save)
-        except PlantgenError as exc:
-            return self._failed(exc)
-        self.say(f"saved camera {path}; the same frame: {self.render_command(path)}")
-        self.status = f"saved {path.name}"
-        return path
-
-    def _failed(self, exc) -> None:
-        self.error = one_line(exc)
-        self.warn(f"plantgen view: error: {self.error}")
-
-    def render_command(self, camera_path: Path) -> str:
-        """The ``plantgen render`` command line that draws the current frame from
-        ``camera_path`` (pixel for pixel for RC and RC+R): the options of the settings
-        that differ from their defaults (:func:`plantgen.knobs.knob_args`)."""
-        o = self.options
-        out = Path(camera_path).with_suffix(".render.png")
-        request = replace(self.request(), view=ViewSettings(camera=str(camera_path)),
-                          image=replace(self.request().image, size=None))
-        args = ["plantgen", "render", str(o.input), "-o", str(out), *knob_args(request)]
-        iterations = o.iterations if self.step_target is None else self.step
-        for flag, value in (("--seed", o.seed), ("--iterations", iterations), ("--smooth-bends", o.smooth_bends)):
-            if value is not None:
-                args += [flag, str(value)]
-        text = shlex.join(args)
-        if self.method.startswith("GS"):
-            text += f"   (ray cast; the viewer drew {self.method} m = {self.level} with the raster renderer)"
-        return text
+    # ------------------------------------------------------------------ saving (shots.py)
+    screenshot = shots.screenshot
+    window_shot = shots.window_shot
+    save_camera = shots.save_camera
+    render_command = shots.render_command
 
     # ------------------------------------------------------------------ the heads-up line
     def hud_lines(self) -> list[tuple[str, str]]:
