@@ -12,24 +12,10 @@ events and presents its frames; the tests drive it headless too.
 
 from __future__ import annotations
 
-import math
 import statistics
-from dataclasses import replace
 
-import numpy as np
-
-from ..geometry.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
-from ..knobs import knob_of
-from ..pipeline import stage_model
-from ..settings import (
-    MAX_SSAA,
-    MAX_SUBDIV,
-    RaycastSettings,
-)
-from . import frame, growth, reload, shots
-from .keys import binding_for
+from . import frame, growth, handlers, reload, shots
 from .options import (
-    DRAG_TURN,
     METHODS,
     VIEW_MAX_TRIANGLES,
     FrameStats,
@@ -65,119 +51,30 @@ class ViewerSession(ViewerState):
     tick = reload.tick
     presented = reload.presented
 
-    # ------------------------------------------------------------------ the controls
-    def key(self, name: str, shift: bool = False) -> bool:
-        """Handle key ``name`` (a pyglet key name); returns False for a key with no binding."""
-        binding = binding_for(name, shift)
-        if binding is None:
-            return False
-        getattr(self, binding.action)(*binding.args)
-        return True
-
-    def orbit(self, d_azimuth: float, d_elevation: float) -> None:
-        """Turn the view around its target by degrees."""
-        az, el, _ = orbit_angles(self.camera)
-        el = float(np.clip(el + d_elevation, -MAX_ELEVATION, MAX_ELEVATION))
-        self.camera = orbit_view(self.camera, Orbit(azimuth=(az + d_azimuth + 180.0) % 360.0 - 180.0, elevation=el))
-        self.dirty = True
-
-    def drag(self, dx: float, dy: float, pan: bool = False) -> None:
-        """A mouse drag of (dx, dy) window pixels (y down): turn, or with ``pan`` move."""
-        if pan:
-            self.pan(dx, dy)
-        else:
-            self.orbit(-DRAG_TURN * dx, DRAG_TURN * dy)
-
-    def pan(self, dx: float, dy: float) -> None:
-        """Move eye and target across the view by (dx, dy) pixels (the target follows the
-        cursor)."""
-        right, up, _ = self.camera.basis()
-        dist = float(np.linalg.norm(np.subtract(self.camera.eye, self.camera.target)))
-        per_pixel = 2.0 * dist * math.tan(math.radians(self.camera.fov_y) / 2) / self.camera.height
-        shift = (-dx * right + dy * up) * per_pixel
-        self.camera = replace(self.camera, eye=tuple((np.asarray(self.camera.eye) + shift).tolist()),
-                              target=tuple((np.asarray(self.camera.target) + shift).tolist()))
-        self.dirty = True
-
-    def pan_view(self, fx: float, fy: float) -> None:
-        """Move the view right and up by fractions of its height (keys; a drag moves the
-        model with the cursor instead)."""
-        self.pan(-fx * self.camera.height, fy * self.camera.height)
-
-    def zoom(self, factor: float) -> None:
-        """Move the eye ``factor`` times closer to the target."""
-        self.camera = orbit_view(self.camera, Orbit(zoom=factor))
-        self.dirty = True
-
-    def scroll(self, notches: float) -> None:
-        self.zoom(1.1 ** notches)
-
-    def reset_view(self) -> None:
-        self.camera = stage_model(self.model.grown, self.frusta(), self.camera.width, self.camera.height).camera
-        self.dirty = True
-
-    def set_method(self, method: str) -> None:
-        self.method = method
-        if method.startswith("GS"):
-            self.change_level(0)
-        self.dirty = True
-
-    def change_level(self, delta: int) -> None:
-        level = int(np.clip(self.level + delta, 0, MAX_SUBDIV))
-        frusta = self.frusta()
-        n = stored_triangles(frusta, level)
-        while n > VIEW_MAX_TRIANGLES and level > 0:
-            self.status = f"m = {level} would make {n:,} triangles, over the viewer's {VIEW_MAX_TRIANGLES:,}"
-            level -= 1
-            n = stored_triangles(frusta, level)
-        self.level = level
-        self.dirty = True
-
-    def scale_linear_steps(self, factor: float) -> None:
-        steps = knob_of(RaycastSettings, "linear_steps").clamp(int(round(self.march.linear_steps * factor)))
-        self.march = replace(self.march, linear_steps=steps)
-        self.dirty = True
-
-    def change_binary_steps(self, delta: int) -> None:
-        steps = knob_of(RaycastSettings, "binary_steps").clamp(self.march.binary_steps + delta)
-        self.march = replace(self.march, binary_steps=steps)
-        self.dirty = True
-
-    def toggle_march(self) -> None:
-        self.march = replace(self.march, march="fixed" if self.march.march == "adaptive" else "adaptive")
-        self.dirty = True
-
-    def toggle_shadows(self) -> None:
-        self.shadows = not self.shadows
-        self.dirty = True
-
-    def cycle_ssaa(self) -> None:
-        self.ssaa = self.ssaa % min(4, MAX_SSAA) + 1
-        self.dirty = True
-
-    def toggle_play(self) -> None:
-        if not self.model.animated:
-            self.status = "nothing moves in this model (a scene with motion plays)"
-            return
-        self.playing = not self.playing
-        self.dirty = True
-
-    def scrub(self, dt: float) -> None:
-        if not self.model.animated:
-            self.status = "nothing moves in this model (a scene with motion plays)"
-            return
-        self.t = max(0.0, self.t + dt)
-        self.dirty = True
+    # ------------------------------------------------------------------ the controls (handlers.py)
+    key = handlers.key
+    orbit = handlers.orbit
+    drag = handlers.drag
+    pan = handlers.pan_by
+    pan_view = handlers.pan_view
+    zoom = handlers.zoom
+    scroll = handlers.scroll
+    reset_view = handlers.reset_view
+    set_method = handlers.set_method
+    change_level = handlers.change_level
+    scale_linear_steps = handlers.scale_linear_steps
+    change_binary_steps = handlers.change_binary_steps
+    toggle_march = handlers.toggle_march
+    toggle_shadows = handlers.toggle_shadows
+    cycle_ssaa = handlers.cycle_ssaa
+    toggle_play = handlers.toggle_play
+    scrub = handlers.scrub
+    toggle_help = handlers.toggle_help
+    quit = handlers.quit
 
     # ------------------------------------------------------------------ growth step by step (growth.py)
     grow_step = growth.grow_step
     toggle_growth = growth.toggle_growth
-
-    def toggle_help(self) -> None:
-        self.show_help = not self.show_help
-
-    def quit(self) -> None:
-        self.closing = True
 
     # ------------------------------------------------------------------ saving (shots.py)
     screenshot = shots.screenshot
