@@ -12,9 +12,7 @@ events and presents its frames; the tests drive it headless too.
 
 from __future__ import annotations
 
-import statistics
-
-from . import frame, growth, handlers, reload, shots
+from . import frame, growth, handlers, hud, reload, shots
 from .options import (
     METHODS,
     VIEW_MAX_TRIANGLES,
@@ -82,52 +80,5 @@ class ViewerSession(ViewerState):
     save_camera = shots.save_camera
     render_command = shots.render_command
 
-    # ------------------------------------------------------------------ the heads-up line
-    def hud_lines(self) -> list[tuple[str, str]]:
-        """(text, kind) lines of the heads-up display; kind is "info", "status" or "error"."""
-        s = self.settings()
-        if self.method in ("RC", "RT"):
-            method = self.method
-        elif self.method in ("RC+R", "RT+R"):
-            method = (f"{self.method} adaptive <= {s.linear_steps} + {s.binary_steps} steps" if s.march == "adaptive"
-                      else f"{self.method} fixed {s.linear_steps} + {s.binary_steps} steps")
-        else:
-            method = f"{self.method} m = {self.level}"
-            if self.posing_on_gpu() and self.skinned is not None and self.skinned[0][1] == self.level:
-                method += f", {len(self.skinned[1].mesh.faces):,} triangles, skinned on the GPU"
-            elif self.mesh_cache is not None and self.mesh_key is not None and self.mesh_key[1] == self.level:
-                method += f", {len(self.mesh_cache.faces):,} triangles"
-        frames = list(self.frames)
-        timing = "-"
-        if frames:
-            frame_ms = statistics.median(f.frame_ms for f in frames)
-            wall_ms = statistics.median(f.wall_ms for f in frames)
-            timing = f"{frame_ms:.1f} ms frame, {1000.0 / max(wall_ms, 1e-3):.1f} fps (median of {len(frames)})"
-        cam = self.camera
-        leaves = self.model.grown.polygons
-        count = 0 if leaves is None else len(leaves)
-        leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
-        lines = [(f"{self.model.grown.name}: {self.model.grown.segments:,} segments{leafy} | {method} | shadows "
-                  f"{self._shadow_text()} | ssaa {self.ssaa}", "info"),
-                 (f"{timing} | {cam.width}x{cam.height} | {self.renderer} | H: keys", "info")]
-        if self.model.animated:
-            lines.append((f"t = {self.t:.2f} s {'playing' if self.playing else 'paused'} (Space, , .)", "info"))
-        if self.step_target is not None:
-            lines.append((f"growth: step {self.step} of {self.steps_end}, {'playing' if self.growing else 'paused'}"
-                          " (N, Shift+N, G)", "info"))
-        if self.error:
-            lines.append((self.error, "error"))
-        elif self.status:
-            lines.append((self.status, "status"))
-        return lines
-
-    def _shadow_text(self) -> str:
-        """``off``, or ``on`` and how the last frame had its map: drawn (in how many ms) or
-        reused (a camera move does not draw it again)."""
-        if not self.shadows:
-            return "off"
-        stats = self.last.stats if self.last is not None else None
-        if stats is None or "shadow" not in stats.passes:
-            return "on"
-        return "on (map reused)" if stats.shadow_cached else f"on (map drawn, {stats.shadow_ms:.0f} ms)"
-
+    # ------------------------------------------------------------------ the heads-up line (hud.py)
+    hud_lines = hud.hud_lines
