@@ -1,19 +1,23 @@
 """What the viewer shows and how it changes, apart from any window: the model, the camera,
 the method and its knobs, the time of an animated scene, a grammar's growth step by step,
-live reload, and the frames,
-drawn by the same :class:`~plantgen.gl.raycast.Raycaster` (RC, RC+R) and
-:class:`~plantgen.gl.raster.RasterRenderer` (GS, GS+R) as ``plantgen render``, with the
-same arguments (:func:`plantgen.pipeline.frame_arguments`), so a saved camera reproduces a
-frame pixel for pixel.
+live reload, and the frames, drawn by the same renderers as ``plantgen render`` with the
+same arguments, so a saved camera reproduces a frame pixel for pixel.
 
 A :class:`ViewerSession` needs only a moderngl context: the window (``window.py``) feeds it
-events and presents its frames; the tests drive it headless too.
+events and presents its frames; the tests drive it headless too. It is the state
+(:class:`~plantgen.viewer.state.ViewerState`) with the functions over it bound as its
+methods: the frames (``frame.py``), time passing and live reload (``reload.py``), the keys
+and the mouse (``handlers.py``), the growth (``growth.py``), saving (``shots.py``) and the
+heads-up lines (``hud.py``). What ``plantgen view`` starts from (:class:`ViewOptions`, the
+methods, the limits) is in ``options.py``, and importable from here as before.
 """
 
 from __future__ import annotations
 
 from . import frame, growth, handlers, hud, reload, shots
 from .options import (
+    DRAG_TURN,
+    HUD_FRAMES,
     METHODS,
     VIEW_MAX_TRIANGLES,
     FrameStats,
@@ -23,18 +27,21 @@ from .options import (
 )
 from .state import ViewerState
 
-__all__ = ["METHODS", "VIEW_MAX_TRIANGLES", "ViewOptions", "ViewerSession", "FrameStats", "one_line",
-           "stored_triangles"]
+__all__ = ["METHODS", "VIEW_MAX_TRIANGLES", "DRAG_TURN", "HUD_FRAMES", "ViewOptions", "ViewerSession",
+           "ViewerState", "FrameStats", "one_line", "stored_triangles"]
 
 
 class ViewerSession(ViewerState):
-    """The viewer's state and its frames (see the module's docstring).
+    """The viewer's state and its frames (see the module's docstring): a
+    :class:`~plantgen.viewer.state.ViewerState`, built with the same parameters, whose
+    methods below are the functions of the modules named beside them (``session.orbit(...)``
+    is ``handlers.orbit(session, ...)``).
 
     Parameters
     ----------
     ctx : the moderngl context to draw with (the window's)
     options : :class:`ViewOptions`
-    model : the first model, grown by the caller (:func:`prepare_model`)
+    model : the first model, grown by the caller (:func:`~plantgen.pipeline.prepare_model`)
     say, warn : callables printing one line on stdout / stderr
     """
 

@@ -45,33 +45,33 @@ class ViewerState:
         self.model = model
         self.renderer = str(ctx.info["GL_RENDERER"])
         self.raycaster = Raycaster(ctx, limits=options.limits)
-        self.tracer: RayTracer | None = None   # RT, RT+R (made when first asked for)
-        self.mesh_caster_said = False     # the mesh caster's fallback told once
-        self.rt_playing_said = False      # RT's playing frames drawn by RC, told once
+        self.tracer: RayTracer | None = None  # RT, RT+R (made when first asked for)
+        self.mesh_caster_said = False         # the mesh caster's fallback told once
+        self.rt_playing_said = False          # RT's playing frames drawn by RC, told once
         self.raster: RasterRenderer | None = None
         self.method = options.method or ("RC+R" if "relief" in model.effects else "RC")
         self.level = int(options.level)
-        self.march = options.settings.march          # the knobs the keys change (relief: by the method)
+        self.march = options.settings.march   # the knobs the keys change (relief: by the method)
         self.shadows = "shadows" in model.effects
         self.ssaa = options.settings.image.ssaa
         self.t = options.settings.motion.start
         self.playing = False
         self.show_help = False
-        self.closing = False                   # Q or Esc: the window's loop ends
-        self.want_window_shot = False          # Shift+P: the window saves itself after its next draw
+        self.closing = False                  # Q or Esc: the window's loop ends
+        self.want_window_shot = False         # Shift+P: the window saves itself after its next draw
         self.status, self.error = "", None
         self.frames: deque[FrameStats] = deque(maxlen=HUD_FRAMES)
-        self.last = None                       # the last RenderResult
+        self.last = None                      # the last RenderResult
         self.dirty = True
-        self.frusta_key = self.frusta_cache = self.leaves_cache = None
-        self.mesh_key = self.mesh_cache = None
-        self.stream = self.skinned = None    # a playing animation's GPU pose, its skinned mesh
-        self.shadow_box = None
+        self.frusta_key = self.frusta_cache = self.leaves_cache = None   # frusta() and leaves() at a time
+        self.mesh_key = self.mesh_cache = None  # mesh() at a level
+        self.stream = self.skinned = None     # a playing animation's GPU pose, its skinned mesh
+        self.shadow_box = None                # a playing animation's light window
         self.saved_ns = None                  # a reload's save time, until its frame is shown
-        self.reload_timings: dict = {}
+        self.reload_timings: dict = {}        # a reload's stages (s), told with its frame
         self.step_target: int | None = None   # the growth step N, Shift+N and G asked for (None: none)
         self.steps_end = model.grown.iterations   # a grammar's last step (its iterations); None otherwise
-        self.growing = False                   # G: the growth plays, a step each GROW_STEP_S
+        self.growing = False                  # G: the growth plays, a step each GROW_STEP_S
         self.grow_clock = 0.0                 # seconds since the last step was taken in
         self.steps_need_said = False          # "steps need a grammar" printed once
         self.camera = self._initial_camera(*options.size)
@@ -110,7 +110,7 @@ class ViewerState:
         if key is None or key[0] is not frusta or key[1:] != (self.level, relief):
             self.mesh_cache = None
             self.mesh_cache = (PlacedMeshes.tessellate(frusta, self.level, relief) if isinstance(frusta, PlacedPlants)
-                          else tessellate(frusta, self.level, relief=relief))
+                               else tessellate(frusta, self.level, relief=relief))
             self.mesh_key = (frusta, self.level, relief)
         return self.mesh_cache
 
