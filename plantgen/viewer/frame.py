@@ -91,7 +91,7 @@ def _merged_caster(state: ViewerState, shadow):
         return shadow
     if not state.mesh_caster_said:
         state.warn("--shadow-caster mesh casts still frusta drawn merged: this model's playing or instanced "
-                  "frames cast with the relief march")
+                   "frames cast with the relief march")
         state.mesh_caster_said = True
     return replace(shadow, caster="relief")
 
