@@ -17,6 +17,7 @@ from plantgen.geometry.camera import auto_camera, orbit_angles
 from plantgen.geometry.mesh import triangle_count
 from plantgen.pipeline import prepare_model, render_model
 from plantgen.settings import MAX_SUBDIV
+from plantgen.viewer.handlers import ACTIONS
 from plantgen.viewer.keys import BINDINGS, GROW_STEP_S, binding_for, help_lines
 from plantgen.viewer.session import VIEW_MAX_TRIANGLES, ViewerSession, ViewOptions
 from plantgen.viewer.watch import BackgroundJob, FileWatcher
@@ -35,6 +36,7 @@ def session(gl_ctx, tmp_path):
 def test_every_binding_names_a_control_of_the_session():
     for b in BINDINGS:
         assert callable(getattr(ViewerSession, b.action)), b
+        assert ACTIONS[b.action] is getattr(ViewerSession, b.action), b     # the session's method is the handler
     assert binding_for("P", False).action == "screenshot" and binding_for("P", True).action == "window_shot"
     assert {k for k, _ in help_lines()} >= {"P", "C", "H", "1 2 3 4 5 6", "Space"}
 

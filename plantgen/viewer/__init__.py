@@ -1,9 +1,13 @@
 """``plantgen view``: a window to turn a plant around in, switch methods and knobs, play an
 animated scene, and watch the plant regrow when its grammar is saved.
 
-- :mod:`.session`: what is shown and how it changes (camera, method, knobs, time, live
-  reload) and the frames, drawn by plantgen's own Raycaster and RasterRenderer; needs only
-  a moderngl context.
+- :mod:`.session`: :class:`ViewerSession`, what is shown and how it changes (camera,
+  method, knobs, time, live reload) and the frames, drawn by plantgen's own Raycaster and
+  RasterRenderer; needs only a moderngl context. It is the state (:mod:`.state`) with the
+  functions over it bound as methods: :mod:`.frame` (the frames), :mod:`.reload` (time
+  passing, live reload), :mod:`.handlers` (the keys and the mouse), :mod:`.growth` (a
+  grammar's growth step by step), :mod:`.shots` (P, Shift+P, C); :mod:`.options`: the
+  options, the methods, the limits.
 - :mod:`.window`: the window (moderngl-window, pyglet backend), the event loop, the
   heads-up line; the only module that imports the ``[view]`` extra.
 - :mod:`.keys`: the key bindings, one table; :mod:`.watch`: file polling and the reload

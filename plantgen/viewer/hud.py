@@ -1,14 +1,19 @@
-"""The heads-up text: lines drawn by Pillow into an RGBA image over a dark, half-transparent
-panel, which the window lays over the frame."""
+"""The heads-up text: what it says of a :class:`~plantgen.viewer.state.ViewerState`
+(:func:`hud_lines`: the model, the method and its knobs, the frame times, the time, the
+growth step, the last status or error), and those lines drawn by Pillow into an RGBA image
+over a dark, half-transparent panel, which the window lays over the frame."""
 
 from __future__ import annotations
+
+import statistics
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from .keys import help_lines
+from .state import ViewerState
 
-__all__ = ["text_panel", "help_panel", "FONT_SIZE"]
+__all__ = ["hud_lines", "text_panel", "help_panel", "FONT_SIZE"]
 
 #: Pixel height of the heads-up font.
 FONT_SIZE = 14
@@ -68,3 +73,53 @@ def help_panel(max_width: int, max_height: int | None = None) -> np.ndarray:
         draw.text((x, y), keys, font=font, fill=COLOURS["key"])
         draw.text((x + key_w, y), text, font=font, fill=COLOURS["info"])
     return np.asarray(image)
+
+
+def hud_lines(state: ViewerState) -> list[tuple[str, str]]:
+    """(text, kind) lines of the heads-up display; kind is "info", "status" or "error"."""
+    s = state.settings()
+    if state.method in ("RC", "RT"):
+        method = state.method
+    elif state.method in ("RC+R", "RT+R"):
+        method = (f"{state.method} adaptive <= {s.linear_steps} + {s.binary_steps} steps" if s.march == "adaptive"
+                  else f"{state.method} fixed {s.linear_steps} + {s.binary_steps} steps")
+    else:
+        method = f"{state.method} m = {state.level}"
+        if state.posing_on_gpu() and state.skinned is not None and state.skinned[0][1] == state.level:
+            method += f", {len(state.skinned[1].mesh.faces):,} triangles, skinned on the GPU"
+        elif state.mesh_cache is not None and state.mesh_key is not None and state.mesh_key[1] == state.level:
+            method += f", {len(state.mesh_cache.faces):,} triangles"
+    frames = list(state.frames)
+    timing = "-"
+    if frames:
+        frame_ms = statistics.median(f.frame_ms for f in frames)
+        wall_ms = statistics.median(f.wall_ms for f in frames)
+        timing = f"{frame_ms:.1f} ms frame, {1000.0 / max(wall_ms, 1e-3):.1f} fps (median of {len(frames)})"
+    cam = state.camera
+    leaves = state.model.grown.polygons
+    count = 0 if leaves is None else len(leaves)
+    leafy = f", {count:,} {'leaf' if count == 1 else 'leaves'}" if count else ""
+    lines = [(f"{state.model.grown.name}: {state.model.grown.segments:,} segments{leafy} | {method} | shadows "
+              f"{_shadow_text(state)} | ssaa {state.ssaa}", "info"),
+             (f"{timing} | {cam.width}x{cam.height} | {state.renderer} | H: keys", "info")]
+    if state.model.animated:
+        lines.append((f"t = {state.t:.2f} s {'playing' if state.playing else 'paused'} (Space, , .)", "info"))
+    if state.step_target is not None:
+        lines.append((f"growth: step {state.step} of {state.steps_end}, {'playing' if state.growing else 'paused'}"
+                      " (N, Shift+N, G)", "info"))
+    if state.error:
+        lines.append((state.error, "error"))
+    elif state.status:
+        lines.append((state.status, "status"))
+    return lines
+
+
+def _shadow_text(state: ViewerState) -> str:
+    """``off``, or ``on`` and how the last frame had its map: drawn (in how many ms) or
+    reused (a camera move does not draw it again)."""
+    if not state.shadows:
+        return "off"
+    stats = state.last.stats if state.last is not None else None
+    if stats is None or "shadow" not in stats.passes:
+        return "on"
+    return "on (map reused)" if stats.shadow_cached else f"on (map drawn, {stats.shadow_ms:.0f} ms)"

@@ -15,8 +15,9 @@ __all__ = ["Binding", "BINDINGS", "GROW_STEP_S", "MOUSE_HELP", "binding_for", "h
 
 @dataclass(frozen=True)
 class Binding:
-    """``keys`` (names) with ``shift`` call the session's ``action(*args)``; ``label``
-    is how the help writes the keys, ``text`` what they do."""
+    """``keys`` (names) with ``shift`` call the handler named ``action`` with the state and
+    ``args`` (:data:`plantgen.viewer.handlers.ACTIONS`); ``label`` is how the help writes
+    the keys, ``text`` what they do."""
 
     keys: tuple
     shift: bool | None
