@@ -37,38 +37,51 @@ from __future__ import annotations
 import ast
 import re
 import textwrap
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from ..errors import PlantgenError
-from ..files import read_text, read_yaml
-from ..limits import LimitError, Limits, hint
-from ..limits import limits as default_limits
-from .expr import CONSTANTS, FUNCTIONS, MAX_EXPR_LENGTH, MAX_GLOBALS, ExprError, evaluate
-from .symbols import ARITY, SYMBOLS
+from ...errors import PlantgenError
+from ...files import read_text, read_yaml
+from ...limits import LimitError, Limits, hint
+from ...limits import limits as default_limits
+from ..expr import MAX_EXPR_LENGTH, MAX_GLOBALS, ExprError, evaluate
+from ..symbols import ARITY, SYMBOLS
+from .common import (
+    ATOM,
+    HOOKS,
+    IDENT,
+    MAX_CALL_DEPTH,
+    MAX_DYNAMIC_COUNT,
+    MAX_LOOP_ITERATIONS,
+    MAX_SUCCESSOR,
+    MAX_TABLE,
+    SEED_CALLS,
+    LpyError,
+    LpyModel,
+    Mod,
+    Val,
+    Way,
+    ast_parse,
+    call_name,
+    closing,
+    construct,
+    copy_env,
+    env_effects,
+    merge,
+    one_line,
+    reason,
+    safe,
+    split_top,
+    wrap,
+)
 
 __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
            "read_grammar_data", "read_lpy", "to_yaml"]
 
 LPY_SUFFIX = ".lpy"
-#: Loop iterations (``for ... in range``) one file's rules and functions may unroll, in all.
-MAX_LOOP_ITERATIONS = 10_000
-#: The largest count a loop over a module parameter (``range(n)``) is unrolled for.
-MAX_DYNAMIC_COUNT = 16
-#: How deep inlined function calls may nest (a recursive function goes no deeper).
-MAX_CALL_DEPTH = 32
-#: The most numbers a module-level list may hold to be indexed in an expression.
-MAX_TABLE = 64
-#: Modules one produced L-string may hold after unrolling.
-MAX_SUCCESSOR = 10_000
-
-
-class LpyError(PlantgenError):
-    """An ``.lpy`` file plantgen cannot read; the message names the construct and its line."""
 
 
 # ------------------------------------------------------------------ L-Py's predefined modules
@@ -149,11 +162,9 @@ REFUSED_MODULES = {
 _NAMED = set(TURTLE) | SILENT | set(TROPISM) | set(UNDRAWN) | set(REFUSED_MODULES)
 _SPECIAL = sorted((n for n in _NAMED if not n[0].isalpha() and n[0] != "_" and len(n) > 1), key=len, reverse=True)
 _PLANTGEN_CHARS = {s.char for s in SYMBOLS} | set("(),:<>") | {"#"}
-_HOOKS = {"Start", "End", "StartEach", "EndEach", "StartInterpretation", "EndInterpretation", "PostDraw"}
 #: The hooks that may set globals: plantgen's grammar hook each becomes.
 _STATE_HOOKS = {"Start": "start", "StartEach": "start_each", "EndEach": "end_each", "End": "end"}
 _GLOBAL_DECL = re.compile(r"^\s+global\s+([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)*)")
-_SEED_CALLS = {"seed", "random.seed"}
 _MATH_ATTRS = {"pi": "pi", "e": "e"}
 _MATH_FUNCS = {"sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
                "atan2": "atan2", "sqrt": "sqrt", "exp": "exp", "log": "log", "fabs": "abs", "abs": "abs",
@@ -168,54 +179,6 @@ _KEYWORD = re.compile(
     r"|(?P<end>endlsystem)\s*$|(?P<decl>ignore|consider)\s*:(?P<decl_text>.*)|module\s+(?P<module>.*)"
     r"|initial_view\s*[=:](?P<view>.*))")
 _PRODUCE = re.compile(r"(?:^|(?<=:))(\s*)(nproduce|produce)\b(.*)$")
-
-
-@dataclass
-class LpyModel:
-    """What an ``.lpy`` file reads to: ``data``, the grammar mapping (as a YAML grammar
-    file holds it); ``warnings``, one line each; ``names``, each L-Py module renamed to a
-    plantgen symbol (its name in L-Py -> its symbol)."""
-
-    data: dict
-    warnings: tuple[str, ...] = ()
-    names: dict = field(default_factory=dict)
-
-
-@dataclass
-class _Val:
-    """A translated expression: plantgen text, whether it draws random numbers, and (a
-    local variable's) whether it was read already."""
-
-    text: str
-    rand: bool = False
-    used: bool = False
-    span: tuple | None = None      # a local holding random(): the interval its tests leave it in
-    error: str | None = None       # a global's new value plantgen cannot translate: why (refused if read)
-
-
-@dataclass
-class _Mod:
-    """A module as L-Py writes it: its name and its arguments (translated texts or, in a
-    pattern, names)."""
-
-    name: str
-    args: list
-    line: int
-
-
-@dataclass
-class _Path:
-    """One way through a rule's block: the tests passed ((if id, holds, text, random)) and
-    what it produces (None: the rule does not apply on this path)."""
-
-    conds: list
-    modules: list | None
-    line: int
-    effects: tuple = ()            # ((global, _Val)): what the way through sets
-
-
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
 
 
 # ------------------------------------------------------------------ file splitting
@@ -294,7 +257,7 @@ class _Reader:
         self.rules: dict[str, list] = {"production": [], "interpretation": [], "decomposition": []}
         self.mutable: set[str] = set()              # globals a hook or a rule sets
         self.globals: dict[str, float] = {}         # those, by plantgen name: their first values
-        self.hooks: dict[str, dict] = {}            # Start ... -> {global: _Val}
+        self.hooks: dict[str, dict] = {}            # Start ... -> {global: Val}
         self.hook_defs: list[ast.FunctionDef] = []
         self.vectors: dict[str, list] = {}          # numpy.array constants: only a tropism's direction
         self.later: list[tuple[str, str]] = []      # the rules after the one translated: (section, header)
@@ -307,7 +270,7 @@ class _Reader:
     # ------------------------------------------------------------ errors and budgets
     def refuse(self, line, what: str) -> LpyError:
         where = f"{self.path}: line {line}" if line else self.path
-        return LpyError(f"{where}: {_one_line(what)}")
+        return LpyError(f"{where}: {one_line(what)}")
 
     def spend(self, line) -> None:
         self.work += 1
@@ -363,7 +326,7 @@ class _Reader:
                 continue
             if current is None:
                 raise self.refuse(i + 1, "produce outside a rule and outside a function is not supported")
-            if current[0] in _HOOKS:
+            if current[0] in HOOKS:
                 raise self.refuse(i + 1, f"{current[0]}() produces modules: plantgen's grammar has no place for "
                                          "modules added when a step or the drawing starts or ends")
             if current not in found:
@@ -398,7 +361,7 @@ class _Reader:
                 or len(params.args) != len(args):
             raise self.refuse(line, f"function {name}() takes {len(params.args)} plain parameters; the rule passes "
                                     f"{len(args)}")
-        local = {a.arg: _Val(v.text, v.rand) for a, v in zip(params.args, [self.expr(x, env, line) for x in args],
+        local = {a.arg: Val(v.text, v.rand) for a, v in zip(params.args, [self.expr(x, env, line) for x in args],
                                                                 strict=True)}
         self.calls += 1
         if self.calls > MAX_CALL_DEPTH:
@@ -482,10 +445,10 @@ class _Reader:
         self._module_code("\n".join(st.python))
         self._initialisation(st.tail, len(self.lines) - len(st.tail) + 1)
         for name in sorted(self.mutable):
-            if _safe(name) in self.defines:
-                self.globals[_safe(name)] = self.defines.pop(_safe(name))
+            if safe(name) in self.defines:
+                self.globals[safe(name)] = self.defines.pop(safe(name))
             elif name not in self.lazy and name not in self.functions:
-                self.globals[_safe(name)] = 0.0          # first set by Start: 0 for the axiom
+                self.globals[safe(name)] = 0.0          # first set by Start: 0 for the axiom
         for fn in self.hook_defs:
             self._hook(fn)
         if st.length is not None:
@@ -547,16 +510,16 @@ class _Reader:
         if len(text) > MAX_EXPR_LENGTH:
             raise self.refuse(line, f"{what} is longer than {MAX_EXPR_LENGTH} characters")
         try:
-            node = _ast_parse(text.strip(), "eval").body
+            node = ast_parse(text.strip(), "eval").body
             for sub in ast.walk(node):
                 if hasattr(sub, "lineno"):
                     sub.lineno = line
             return node
         except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError) as exc:
-            raise self.refuse(line, f"{what}: cannot read {text.strip()[:60]!r} ({_why(exc)})") from None
+            raise self.refuse(line, f"{what}: cannot read {text.strip()[:60]!r} ({reason(exc)})") from None
 
     def _declare(self, text: str, line: int) -> None:
-        for part in _split_top(text, ","):
+        for part in split_top(text, ","):
             name = re.match(r"\s*([^\s(:]+)", part)
             if not name:
                 raise self.refuse(line, f"module declaration {part.strip()[:40]!r} names no module")
@@ -565,12 +528,12 @@ class _Reader:
     # ------------------------------------------------------------ module-level Python
     def _parse_block(self, source: str, first_line: int, what: str) -> list[ast.stmt]:
         try:
-            tree = _ast_parse(source)
+            tree = ast_parse(source)
         except (SyntaxError, ValueError) as exc:
             line = first_line + (getattr(exc, "lineno", None) or 1) - 1
-            raise self.refuse(line, f"{what}: Python syntax error ({_why(exc)})") from None
+            raise self.refuse(line, f"{what}: Python syntax error ({reason(exc)})") from None
         except (RecursionError, MemoryError, OverflowError) as exc:
-            raise self.refuse(first_line, f"{what}: too deeply nested to read ({_why(exc)})") from None
+            raise self.refuse(first_line, f"{what}: too deeply nested to read ({reason(exc)})") from None
         for node in ast.walk(tree):
             if hasattr(node, "lineno"):
                 node.lineno += first_line - 1
@@ -617,7 +580,7 @@ class _Reader:
                                                        lineno=line, col_offset=0), line)
             return
         if isinstance(stmt, ast.FunctionDef):
-            if stmt.name in _HOOKS:
+            if stmt.name in HOOKS:
                 self.hook_defs.append(stmt)
             elif stmt.decorator_list:
                 self.lazy[stmt.name] = f"function {stmt.name} (line {line}) has decorators"
@@ -629,21 +592,21 @@ class _Reader:
             if isinstance(stmt.value, ast.Constant) and isinstance(stmt.value.value, str):
                 return                                   # a docstring
             call = stmt.value
-            if isinstance(call, ast.Call) and _call_name(call) == "extern":
+            if isinstance(call, ast.Call) and call_name(call) == "extern":
                 for kw in call.keywords:
                     if kw.arg:
                         self._assign_global(ast.Name(kw.arg, ast.Store()), kw.value, line)
                 return
-            if isinstance(call, ast.Call) and _call_name(call) in _SEED_CALLS:
+            if isinstance(call, ast.Call) and call_name(call) in SEED_CALLS:
                 self.seed = self._seed(call, line)
                 return
-            if isinstance(call, ast.Call) and _call_name(call) == "print":
+            if isinstance(call, ast.Call) and call_name(call) == "print":
                 return
             if isinstance(call, ast.Call) and self._context_call(call, line):
                 return
         if isinstance(stmt, (ast.Pass, ast.Assert)):
             return
-        raise self.refuse(line, f"{_construct(stmt)} at module level is not supported "
+        raise self.refuse(line, f"{construct(stmt)} at module level is not supported "
                                 "(only constants, functions, imports of random and math, and random.seed)")
 
     def _context_call(self, call: ast.Call, line: int) -> bool:
@@ -669,7 +632,7 @@ class _Reader:
                 self._assign_global(t, v, line)
             return
         if not isinstance(target, ast.Name):
-            raise self.refuse(line, f"assignment to {_construct(target)} is not supported")
+            raise self.refuse(line, f"assignment to {construct(target)} is not supported")
         name = target.id
         if isinstance(value, ast.Lambda):
             self._forget(name)
@@ -710,11 +673,11 @@ class _Reader:
             self._forget(name)
             self.lazy[name] = f"{name} (line {line}): {exc}"
             return
-        self.defines[_safe(name)] = number
+        self.defines[safe(name)] = number
 
     def _vector(self, value) -> list | None:
         """``numpy.array([x, y, z])`` of constants: its numbers (None for anything else)."""
-        name = _call_name(value) if isinstance(value, ast.Call) else None
+        name = call_name(value) if isinstance(value, ast.Call) else None
         base, _, attr = (name or "").rpartition(".")
         if self.aliases.get(base) != "numpy" or attr != "array" or len(value.args) != 1 or value.keywords \
                 or not isinstance(value.args[0], (ast.List, ast.Tuple)) or len(value.args[0].elts) != 3:
@@ -729,14 +692,14 @@ class _Reader:
         self.functions.pop(name, None)
         self.tables.pop(name, None)
         self.lazy.pop(name, None)
-        self.defines.pop(_safe(name), None)
+        self.defines.pop(safe(name), None)
 
     def _hook(self, fn: ast.FunctionDef) -> None:
         if fn.name in _STATE_HOOKS:
             self._state_hook(fn)
             return
         env = self._hook_run(fn.body, {}, fn.name)
-        if _effects(env):
+        if env_effects(env):
             raise self.refuse(fn.lineno, f"{fn.name}() sets globals: only Start, StartEach, EndEach and End may")
 
     def _state_hook(self, fn: ast.FunctionDef) -> None:
@@ -748,11 +711,11 @@ class _Reader:
         unread = [p.arg for p in a.args]         # the L-string (and scene) L-Py passes: never read here
         for stmt in ast.walk(fn):
             if isinstance(stmt, ast.Name) and stmt.id in unread and isinstance(stmt.ctx, ast.Load) and not any(
-                    isinstance(c, ast.Call) and _call_name(c) == "print" and stmt in ast.walk(c)
+                    isinstance(c, ast.Call) and call_name(c) == "print" and stmt in ast.walk(c)
                     for c in ast.walk(fn)):
                 raise self.refuse(stmt.lineno, f"{fn.name}() reads the L-string ({stmt.id}): not supported")
         env = self._hook_run(fn.body, {}, fn.name)
-        sets = dict(_effects(env))
+        sets = dict(env_effects(env))
         if sets:
             self.hooks[_STATE_HOOKS[fn.name]] = sets
 
@@ -764,10 +727,10 @@ class _Reader:
                                                            and isinstance(stmt.value, ast.Constant)):
                 continue
             call = stmt.value if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) else None
-            if call is not None and _call_name(call) in _SEED_CALLS:
+            if call is not None and call_name(call) in SEED_CALLS:
                 self.seed = self._seed(call, line)
                 continue
-            if call is not None and (_call_name(call) == "print" or self._context_call(call, line)):
+            if call is not None and (call_name(call) == "print" or self._context_call(call, line)):
                 continue
             if isinstance(stmt, ast.Return) and stmt.value is None and stmt is stmts[-1]:
                 continue
@@ -775,14 +738,14 @@ class _Reader:
                 c = self.expr(stmt.test, env, line)
                 if c.rand:
                     raise self.refuse(line, f"a random test in {name}() is not supported")
-                yes = self._hook_run(stmt.body, _copy(env), name)
-                no = self._hook_run(stmt.orelse, _copy(env), name)
-                env = _merge(c.text, env, yes, no)
+                yes = self._hook_run(stmt.body, copy_env(env), name)
+                no = self._hook_run(stmt.orelse, copy_env(env), name)
+                env = merge(c.text, env, yes, no)
                 continue
             state = self._assign(stmt, env)
             if state is None:
                 raise self.refuse(line, f"{name}() does more than set globals and seed the random generator "
-                                        f"({_construct(stmt)}): not supported")
+                                        f"({construct(stmt)}): not supported")
             env = state
         return env
 
@@ -792,10 +755,10 @@ class _Reader:
         if isinstance(stmt, ast.Global):
             names = [n for n in stmt.names if n in self.mutable]     # the others are only read
             for n in names:
-                if _safe(n) not in self.globals:
+                if safe(n) not in self.globals:
                     raise self.refuse(stmt.lineno, f"global {n} is set, but " + self.lazy.get(
                         n, f"{n} is a function") + ": plantgen's globals are numbers")
-            return {**env, **{f"global {n}": _Val("") for n in names}}
+            return {**env, **{f"global {n}": Val("") for n in names}}
         if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
             value, name = ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), stmt.target.id
         elif isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
@@ -804,8 +767,8 @@ class _Reader:
             return None
         if f"global {name}" not in env:
             v = self.expr(value, env, stmt.lineno)
-            return {**env, name: _Val(v.text, v.rand)}
-        probe = {k: (_Val(v.text, v.rand, v.used, v.span, v.error) if v.rand or k == name else v)
+            return {**env, name: Val(v.text, v.rand)}
+        probe = {k: (Val(v.text, v.rand, v.used, v.span, v.error) if v.rand or k == name else v)
                  for k, v in env.items()}     # what it reads of a random local is not spent (it may be dropped)
         own = probe.get(name)
         if own is not None:
@@ -814,11 +777,11 @@ class _Reader:
             v = self.expr(value, probe, stmt.lineno)
         except LpyError as exc:
             why = str(exc).split(": ", 1)[-1]
-            return {**env, name: _Val("", error=why), f"set {_safe(name)}": _Val("", error=why)}
+            return {**env, name: Val("", error=why), f"set {safe(name)}": Val("", error=why)}
         shared = any(probe[k].used and not env[k].used for k in env if env[k].rand and k != name)
         if own is not None and probe[name].used:
-            shared = shared or env.get(f"set {_safe(name)}", own).used
-        return {**env, name: _Val(v.text, v.rand, used=v.rand), f"set {_safe(name)}": _Val(v.text, v.rand, shared)}
+            shared = shared or env.get(f"set {safe(name)}", own).used
+        return {**env, name: Val(v.text, v.rand, used=v.rand), f"set {safe(name)}": Val(v.text, v.rand, shared)}
 
     def _seed(self, call: ast.Call, line: int) -> int:
         if len(call.args) != 1 or call.keywords:
@@ -835,7 +798,7 @@ class _Reader:
         if not text.strip():
             return
         try:
-            tree = _ast_parse(text)
+            tree = ast_parse(text)
         except (SyntaxError, ValueError, RecursionError, MemoryError, OverflowError):
             self.warnings.append(f"{self.path}: warning: line {first}: the code after endlsystem is not read")
             return
@@ -859,14 +822,14 @@ class _Reader:
                     and isinstance(item.elts[0].value, str) and isinstance(item.elts[2], ast.Constant)
                     and isinstance(item.elts[2].value, (int, float))):
                 name = item.elts[0].value
-                if _IDENT.match(name) and _safe(name) not in self.defines and name not in self.functions:
+                if IDENT.match(name) and safe(name) not in self.defines and name not in self.functions:
                     value = float(item.elts[2].value)
                     if np.isfinite(value):
-                        self.defines[_safe(name)] = value
+                        self.defines[safe(name)] = value
                         self.lazy.pop(name, None)
 
     # ------------------------------------------------------------ expressions
-    def expr(self, node, env: dict, line: int) -> _Val:
+    def expr(self, node, env: dict, line: int) -> Val:
         """``node`` (a Python expression) as plantgen expression text."""
         line = getattr(node, "lineno", line)
         self.spend(line)
@@ -882,42 +845,42 @@ class _Reader:
                                     "functions and local variables are substituted")
         return val
 
-    def _expr(self, node, env: dict, line: int) -> _Val:
+    def _expr(self, node, env: dict, line: int) -> Val:
         if isinstance(node, ast.Constant):
             v = node.value
             if isinstance(v, bool):
-                return _Val("1" if v else "0")
+                return Val("1" if v else "0")
             if isinstance(v, (int, float)):
                 if not np.isfinite(float(v)) or abs(v) > 1e300:
                     raise self.refuse(line, "a number literal too large")
-                return _Val(repr(float(v)) if isinstance(v, float) else str(v))
+                return Val(repr(float(v)) if isinstance(v, float) else str(v))
             raise self.refuse(line, f"a {type(v).__name__} value ({str(v)[:30]!r}) where plantgen needs a number")
         if isinstance(node, ast.Name):
             return self._name(node.id, env, line)
         if isinstance(node, ast.Attribute):
             base = node.value.id if isinstance(node.value, ast.Name) else None
             if self.aliases.get(base) == "math" and node.attr in _MATH_ATTRS:
-                return _Val(_MATH_ATTRS[node.attr])
+                return Val(_MATH_ATTRS[node.attr])
             raise self.refuse(line, f"attribute {ast.unparse(node)[:40]!r} is not supported")
         if isinstance(node, ast.UnaryOp):
             a = self.expr(node.operand, env, line)
             op = {ast.USub: "-", ast.UAdd: "+", ast.Not: "!"}.get(type(node.op))
             if op is None:
                 raise self.refuse(line, "the operator ~ is not supported")
-            return _Val(f"{op}{_wrap(a.text)}", a.rand)
+            return Val(f"{op}{wrap(a.text)}", a.rand)
         if isinstance(node, ast.BinOp):
             a, b = self.expr(node.left, env, line), self.expr(node.right, env, line)
             if isinstance(node.op, ast.FloorDiv):
-                return _Val(f"floor(({a.text}) / ({b.text}))", a.rand or b.rand)
+                return Val(f"floor(({a.text}) / ({b.text}))", a.rand or b.rand)
             op = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Mod: "%",
                   ast.Pow: "^"}.get(type(node.op))
             if op is None:
                 raise self.refuse(line, f"the operator {type(node.op).__name__} is not supported")
-            return _Val(f"{_wrap(a.text)} {op} {_wrap(b.text)}", a.rand or b.rand)
+            return Val(f"{wrap(a.text)} {op} {wrap(b.text)}", a.rand or b.rand)
         if isinstance(node, ast.BoolOp):
             parts = [self.expr(v, env, line) for v in node.values]
             op = " && " if isinstance(node.op, ast.And) else " || "
-            return _Val(op.join(_wrap(p.text) for p in parts), any(p.rand for p in parts))
+            return Val(op.join(wrap(p.text) for p in parts), any(p.rand for p in parts))
         if isinstance(node, ast.Compare):
             vals = [self.expr(v, env, line) for v in (node.left, *node.comparators)]
             ops = []
@@ -929,20 +892,20 @@ class _Reader:
                 ops.append(sym)
             if len(ops) > 1 and any(v.rand for v in vals[1:-1]):
                 raise self.refuse(line, "a chained comparison around a random draw is not supported")
-            parts = [f"{_wrap(vals[i].text)} {ops[i]} {_wrap(vals[i + 1].text)}" for i in range(len(ops))]
+            parts = [f"{wrap(vals[i].text)} {ops[i]} {wrap(vals[i + 1].text)}" for i in range(len(ops))]
             text = parts[0] if len(parts) == 1 else " && ".join(f"({p})" for p in parts)
-            return _Val(text, any(v.rand for v in vals))
+            return Val(text, any(v.rand for v in vals))
         if isinstance(node, ast.IfExp):
             c, a, b = (self.expr(n, env, line) for n in (node.test, node.body, node.orelse))
-            return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
+            return Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
         if isinstance(node, ast.Call):
             return self._call(node, env, line)
         if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id not in env
                 and node.value.id in self.tables):
             return self._index(self.tables[node.value.id], node.slice, env, line)
-        raise self.refuse(line, f"{_construct(node)} is not supported in an expression")
+        raise self.refuse(line, f"{construct(node)} is not supported in an expression")
 
-    def _index(self, values: list[str], index, env: dict, line: int) -> _Val:
+    def _index(self, values: list[str], index, env: dict, line: int) -> Val:
         """A module-level list of numbers indexed by an expression: nested ``select`` on the
         index (Python's negative indices too; one past either end reads the last value)."""
         if isinstance(index, ast.Slice):
@@ -950,13 +913,13 @@ class _Reader:
         i = self.expr(index, env, line)
         if i.rand:
             raise self.refuse(line, "a list indexed by a random draw is not supported")
-        at = _wrap(i.text)
+        at = wrap(i.text)
         text = values[-1]
         for k in range(len(values) - 2, -1, -1):
             text = f"select({at} == {k} || {at} == {k - len(values)}, {values[k]}, {text})"
-        return _Val(text)
+        return Val(text)
 
-    def _name(self, name: str, env: dict, line: int) -> _Val:
+    def _name(self, name: str, env: dict, line: int) -> Val:
         if name in env:
             local = env[name]
             if local.error:
@@ -969,19 +932,19 @@ class _Reader:
                     raise self.refuse(line, f"{name!r} holds a random draw and is read twice: plantgen would "
                                             "draw it anew each time; write the draw where it is used once")
                 local.used = True
-            return _Val(_wrap(local.text), local.rand)
-        if _safe(name) in self.defines or _safe(name) in self.globals:
-            return _Val(_safe(name))
+            return Val(wrap(local.text), local.rand)
+        if safe(name) in self.defines or safe(name) in self.globals:
+            return Val(safe(name))
         if name in ("pi", "e"):
-            return _Val(name)
+            return Val(name)
         if name in ("True", "False"):
-            return _Val("1" if name == "True" else "0")
+            return Val("1" if name == "True" else "0")
         if name in self.lazy:
             raise self.refuse(line, self.lazy[name])
         raise self.refuse(line, f"name {name!r} is not defined (or not a number plantgen can use)")
 
-    def _call(self, node: ast.Call, env: dict, line: int) -> _Val:
-        name = _call_name(node)
+    def _call(self, node: ast.Call, env: dict, line: int) -> Val:
+        name = call_name(node)
         if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
             raise self.refuse(line, f"keyword or starred arguments in a call to {name or 'a function'}")
         if name is None:
@@ -1000,19 +963,19 @@ class _Reader:
                 text = args[0].text
                 for a in args[1:]:
                     text = f"{fn}({text}, {a.text})"
-                return _Val(text, rand)
+                return Val(text, rand)
             if fn == "log" and len(args) == 2:
-                return _Val(f"log({args[0].text}) / log({args[1].text})", rand)
+                return Val(f"log({args[0].text}) / log({args[1].text})", rand)
             if fn == "round" and len(args) != 1:
                 raise self.refuse(line, "round() with digits is not supported")
-            return _Val(f"{fn}({', '.join(a.text for a in args)})", rand)
+            return Val(f"{fn}({', '.join(a.text for a in args)})", rand)
         if name == "sum" and len(node.args) == 1 and isinstance(node.args[0], (ast.List, ast.Tuple, ast.ListComp,
                                                                                   ast.GeneratorExp)):
-            terms = self._terms(node.args[0], env, line) or [_Val("0")]
-            return _Val(" + ".join(_wrap(t.text) for t in terms), any(t.rand for t in terms))
+            terms = self._terms(node.args[0], env, line) or [Val("0")]
+            return Val(" + ".join(wrap(t.text) for t in terms), any(t.rand for t in terms))
         if base == "" and attr in ("float", "bool", "abs") and len(node.args) == 1:
             a = self.expr(node.args[0], env, line)
-            return _Val({"float": f"({a.text})", "bool": f"(({a.text}) != 0)", "abs": f"abs({a.text})"}[attr], a.rand)
+            return Val({"float": f"({a.text})", "bool": f"(({a.text}) != 0)", "abs": f"abs({a.text})"}[attr], a.rand)
         if _PLANTGL.search(name) or name[:1].isupper():
             raise self.refuse(line, f"call of {name}(): PlantGL and L-Py objects are not supported")
         if name in ("open", "exec", "eval", "compile", "__import__", "input", "getattr", "setattr", "globals"):
@@ -1021,7 +984,7 @@ class _Reader:
             raise self.refuse(line, self.lazy[name])
         raise self.refuse(line, f"call of {name}() is not supported")
 
-    def _terms(self, seq, env: dict, line: int) -> list[_Val]:
+    def _terms(self, seq, env: dict, line: int) -> list[Val]:
         """The values of a written list, or of ``[e for NAME in range(...)]`` with a
         constant count (unrolled, as a loop)."""
         if isinstance(seq, (ast.List, ast.Tuple)):
@@ -1029,7 +992,7 @@ class _Reader:
         gen = seq.generators[0]
         it = gen.iter
         if (len(seq.generators) != 1 or gen.ifs or not isinstance(gen.target, ast.Name) or not isinstance(it, ast.Call)
-                or _call_name(it) != "range" or not 1 <= len(it.args) <= 3):
+                or call_name(it) != "range" or not 1 <= len(it.args) <= 3):
             raise self.refuse(line, "a comprehension other than '[e for NAME in range(...)]' is not supported")
         try:
             bounds = [evaluate(self.expr(a, env, line).text, self.defines) for a in it.args]
@@ -1039,30 +1002,30 @@ class _Reader:
             raise self.refuse(line, "range() in a comprehension must have a constant, whole count")
         values = range(*map(int, bounds)) if bounds[-1] != 0 or len(bounds) < 3 else range(0)
         self._count_loops(len(values), line)
-        return [self.expr(seq.elt, {**env, gen.target.id: _Val(str(i))}, line) for i in values]
+        return [self.expr(seq.elt, {**env, gen.target.id: Val(str(i))}, line) for i in values]
 
-    def _random(self, fn: str, args: list, env: dict, line: int) -> _Val:
+    def _random(self, fn: str, args: list, env: dict, line: int) -> Val:
         vals = [self.expr(a, env, line) for a in args] if fn != "choice" else []
         need = {"random": 0, "uniform": 2, "randint": 2, "gauss": 2, "normalvariate": 2, "choice": 1}[fn]
         if len(args) != need:
             raise self.refuse(line, f"{fn}() takes {need} argument(s) here")
         if fn == "random":
-            return _Val("random()", True)
+            return Val("random()", True)
         if fn == "uniform":
-            return _Val(f"uniform({vals[0].text}, {vals[1].text})", True)
+            return Val(f"uniform({vals[0].text}, {vals[1].text})", True)
         if fn == "randint":
-            return _Val(f"floor(uniform({vals[0].text}, ({vals[1].text}) + 1))", True)
+            return Val(f"floor(uniform({vals[0].text}, ({vals[1].text}) + 1))", True)
         if fn in ("gauss", "normalvariate"):
-            return _Val(f"normal({vals[0].text}, {vals[1].text})", True)
+            return Val(f"normal({vals[0].text}, {vals[1].text})", True)
         seq = args[0]
         if not isinstance(seq, (ast.List, ast.Tuple)) or not 1 <= len(seq.elts) <= 31:
             raise self.refuse(line, "choice() takes a written list of 1 to 31 numbers here")
         opts = [self.expr(e, env, line) for e in seq.elts]
         if len(opts) == 1:
             return opts[0]
-        return _Val(f"choose(floor(random() * {len(opts)}), {', '.join(o.text for o in opts)})", True)
+        return Val(f"choose(floor(random() * {len(opts)}), {', '.join(o.text for o in opts)})", True)
 
-    def _inline(self, name: str, args: list, env: dict, line: int) -> _Val:
+    def _inline(self, name: str, args: list, env: dict, line: int) -> Val:
         fn = self.functions[name]
         params = fn.args
         if params.vararg or params.kwarg or params.kwonlyargs or params.posonlyargs:
@@ -1073,7 +1036,7 @@ class _Reader:
             raise self.refuse(line, f"{name}() takes {len(formals)} argument(s), got {len(args)}")
         values = [self.expr(a, env, line) for a in args]
         values += [self.expr(d, {}, line) for d in defaults[len(defaults) - (len(formals) - len(args)):]]
-        local = {f: _Val(v.text, v.rand) for f, v in zip(formals, values, strict=True)}
+        local = {f: Val(v.text, v.rand) for f, v in zip(formals, values, strict=True)}
         self.calls += 1
         if self.calls > MAX_CALL_DEPTH:
             raise self.refuse(line, f"function calls nested deeper than {MAX_CALL_DEPTH}: a recursive function "
@@ -1085,7 +1048,7 @@ class _Reader:
         finally:
             self.calls -= 1
 
-    def _body_value(self, stmts: list, env: dict, name: str) -> _Val:
+    def _body_value(self, stmts: list, env: dict, name: str) -> Val:
         """The value a function body returns: assignments substituted, each ``if``
         a ``select`` between the values its branches (and what follows them) return."""
         for i, stmt in enumerate(stmts):
@@ -1095,7 +1058,7 @@ class _Reader:
                     raise self.refuse(stmt.lineno, f"function {name}() returns no value")
                 return self.expr(stmt.value, env, stmt.lineno)
             if isinstance(stmt, ast.Global):
-                env = {**env, **{f"global {n}": _Val("") for n in stmt.names}}
+                env = {**env, **{f"global {n}": Val("") for n in stmt.names}}
                 continue
             targets = stmt.targets if isinstance(stmt, ast.Assign) else [getattr(stmt, "target", None)]
             if any(isinstance(t, ast.Name) and f"global {t.id}" in env for t in targets):
@@ -1103,26 +1066,26 @@ class _Reader:
                                                "into expressions, which cannot set anything")
             if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
                 v = self.expr(stmt.value, env, stmt.lineno)
-                env = {**env, stmt.targets[0].id: _Val(v.text, v.rand)}
+                env = {**env, stmt.targets[0].id: Val(v.text, v.rand)}
                 continue
             if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
                 v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, stmt.lineno)
-                env = {**env, stmt.target.id: _Val(v.text, v.rand)}
+                env = {**env, stmt.target.id: Val(v.text, v.rand)}
                 continue
             if isinstance(stmt, ast.If):
                 c = self.expr(stmt.test, env, stmt.lineno)
                 rest = stmts[i + 1:]
-                a = self._body_value(stmt.body + rest, _copy(env), name)
-                b = self._body_value(stmt.orelse + rest, _copy(env), name)
-                return _Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
+                a = self._body_value(stmt.body + rest, copy_env(env), name)
+                b = self._body_value(stmt.orelse + rest, copy_env(env), name)
+                return Val(f"select({c.text}, {a.text}, {b.text})", c.rand or a.rand or b.rand)
             if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
                 continue
-            raise self.refuse(stmt.lineno, f"{_construct(stmt)} in function {name}() is not supported "
+            raise self.refuse(stmt.lineno, f"{construct(stmt)} in function {name}() is not supported "
                                            "(only assignments, if and return)")
         raise self.refuse(stmts[-1].lineno if stmts else 0, f"function {name}() may end without returning a value")
 
     # ------------------------------------------------------------ L-strings
-    def _lstring(self, text: str, line: int, env: dict, pattern: bool) -> list[_Mod]:
+    def _lstring(self, text: str, line: int, env: dict, pattern: bool) -> list[Mod]:
         """An L-string as modules; arguments translated (or, in a pattern, names)."""
         out = []
         for name, args in self._scan(text, line):
@@ -1142,7 +1105,7 @@ class _Reader:
             if name.startswith("~") and name != "~l":
                 self.dropped[name] = self.dropped.get(name, 0) + 1
                 continue
-            out.append(_Mod(name, self._args(name, args, line, env, pattern), line))
+            out.append(Mod(name, self._args(name, args, line, env, pattern), line))
             if len(out) > MAX_SUCCESSOR:
                 raise self.refuse(line, f"an L-string of more than {MAX_SUCCESSOR:,} modules")
         return out
@@ -1158,10 +1121,10 @@ class _Reader:
                     names.append(f"k{len(self.pattern_conds)}_")       # a value to match: a condition
                     self.pattern_conds.append(f"{names[-1]} == {float(a)!r}")
                     continue
-                if not _IDENT.match(a):
+                if not IDENT.match(a):
                     raise self.refuse(line, f"pattern argument {a[:30]!r} of {name}: only names are supported "
                                             "in a predecessor or context")
-                names.append(_safe(a))
+                names.append(safe(a))
             return names
         return [self.expr(self._parse_expr(a, line, f"argument of {name}"), env, line) for a in args]
 
@@ -1230,11 +1193,11 @@ class _Reader:
             while k < n and text[k] == " ":
                 k += 1
             if k < n and text[k] == "(":
-                end = _closing(text, k)
+                end = closing(text, k)
                 if end < 0:
                     raise self.refuse(line, f"unclosed '(' after {name!r}")
                 inner = text[k + 1:end]
-                args = _split_top(inner, ",") if inner.strip() else []
+                args = split_top(inner, ",") if inner.strip() else []
                 i = end + 1
             yield name, args
 
@@ -1246,8 +1209,8 @@ class _Reader:
             if any(t.strip() for _, t in lines[1:]):
                 raise self.refuse(lines[1][0], "an indented block after a '-->' rule")
             body = None
-        elif len(_split_top(header, ":")) > 1:
-            parts = _split_top(header, ":")
+        elif len(split_top(header, ":")) > 1:
+            parts = split_top(header, ":")
             lhs, rest, rhs = parts[0], ":".join(parts[1:]), None
             body = ([(no, "    " + rest.strip())] if rest.strip() else []) + lines[1:]
         else:
@@ -1255,12 +1218,12 @@ class _Reader:
                                   f"block): {header.strip()[:60]!r}")
         self.pattern_conds: list[str] = []
         left, pred, right = self._predecessor(lhs, no)
-        env = {p: _Val(p) for m in (*left[0], *left[1], *pred, *right) for p in m.args}
+        env = {p: Val(p) for m in (*left[0], *left[1], *pred, *right) for p in m.args}
         self.if_ids += 1
         fixed = [(self.if_ids, True, c, False, no) for c in self.pattern_conds]
         if body is None:
             succ = self._successor(rhs, no, env)
-            self._emit(section, left, pred, right, [_Path(fixed, succ, no)], no)
+            self._emit(section, left, pred, right, [Way(fixed, succ, no)], no)
             return
         paths = self._block(body, env)
         for path in paths:
@@ -1289,7 +1252,7 @@ class _Reader:
             raise self.refuse(line, "brackets in a predecessor or a left context are not supported")
         return (left, new_left), pred, right
 
-    def _successor(self, text: str, line: int, env: dict) -> list[_Mod]:
+    def _successor(self, text: str, line: int, env: dict) -> list[Mod]:
         text = text.strip()
         if text in ("*", ""):
             return []
@@ -1310,14 +1273,14 @@ class _Reader:
             out_lines.append(text)
         return self._parse_block("\n".join(out_lines), first, what)
 
-    def _block(self, body: list, env: dict) -> list[_Path]:
+    def _block(self, body: list, env: dict) -> list[Way]:
         first = body[0][0] if body else 0
         stmts = self._placeholders(body, "rule block")
-        paths: list[_Path] = []
+        paths: list[Way] = []
         live = self._run(stmts, [(env, [], [])], paths)
         for env_, conds, pending in live:   # the block's end: what nproduce gave, if anything
-            paths.append(_Path(conds, pending if pending else None, stmts[-1].lineno if stmts else first,
-                               _effects(env_)))
+            paths.append(Way(conds, pending if pending else None, stmts[-1].lineno if stmts else first,
+                               env_effects(env_)))
         return paths
 
     def _run(self, stmts: list, states: list, paths: list) -> list:
@@ -1338,9 +1301,9 @@ class _Reader:
                         nxt += self._split(stmt, split, (env, conds, pending), paths)
                         continue
                     c = self.expr(stmt.test, env, line)
-                    yes = self._run(stmt.body, [(_copy(env), [*conds, (ident, True, c.text, c.rand, line)],
+                    yes = self._run(stmt.body, [(copy_env(env), [*conds, (ident, True, c.text, c.rand, line)],
                                                  list(pending))], paths)
-                    no = self._run(stmt.orelse, [(_copy(env), [*conds, (ident, False, c.text, c.rand, line)],
+                    no = self._run(stmt.orelse, [(copy_env(env), [*conds, (ident, False, c.text, c.rand, line)],
                                                   list(pending))], paths)
                     nxt += yes + no
             elif isinstance(stmt, ast.For):
@@ -1356,15 +1319,15 @@ class _Reader:
                         continue
                     self.if_ids += 1
                     for extra, text, w in alts:        # one stochastic alternative per value
-                        nxt.append(({**_copy(env), name: _Val(text)}, [*conds, *extra, (self.if_ids, True, None, w,
+                        nxt.append(({**copy_env(env), name: Val(text)}, [*conds, *extra, (self.if_ids, True, None, w,
                                                                                            line)], list(pending)))
             elif (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call)
-                  and _call_name(stmt.value) in self.producers):
+                  and call_name(stmt.value) in self.producers):
                 call = stmt.value
                 if call.keywords or any(isinstance(a, ast.Starred) for a in call.args):
-                    raise self.refuse(line, f"keyword or starred arguments in a call to {_call_name(call)}")
+                    raise self.refuse(line, f"keyword or starred arguments in a call to {call_name(call)}")
                 for state in states:
-                    nxt += self._producer(_call_name(call), call.args, state, paths)
+                    nxt += self._producer(call_name(call), call.args, state, paths)
             else:
                 for env, conds, pending in states:
                     state = self._simple(stmt, env, conds, pending, paths)
@@ -1406,7 +1369,7 @@ class _Reader:
             if weight <= 0:
                 continue
             self.if_ids += 1
-            branch_env = _copy(env)
+            branch_env = copy_env(env)
             branch_env[name].span = (a, b)
             out += self._run(body, [(branch_env, [*conds, (self.if_ids, True, None, weight, stmt.lineno)],
                                      list(pending))], paths)
@@ -1432,7 +1395,7 @@ class _Reader:
             self.if_ids += 1
             return ([([(self.if_ids, True, c.text, False, line), *t], v, w) for t, v, w in yes]
                     + [([(self.if_ids, False, c.text, False, line), *t], v, w) for t, v, w in no])
-        name = _call_name(node) if isinstance(node, ast.Call) else None
+        name = call_name(node) if isinstance(node, ast.Call) else None
         fn = self.functions.get(name or "")
         if isinstance(fn, ast.Lambda) and not node.keywords and len(node.args) == len(fn.args.args) and not (
                 fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs or fn.args.posonlyargs):
@@ -1478,7 +1441,7 @@ class _Reader:
         ident = self.if_ids
         self.warnings.append(f"{self.path}: warning: line {line}: randint({lo[:40]}, ...) is enumerated for a lower "
                              f"bound from 0 to {MAX_DYNAMIC_COUNT}; a module asking another is left unchanged")
-        return [([(ident * 1000 + m, True, f"{_wrap(lo)} == {m}", False, line)], str(m + k), 1.0 / (width + 1))
+        return [([(ident * 1000 + m, True, f"{wrap(lo)} == {m}", False, line)], str(m + k), 1.0 / (width + 1))
                 for m in range(MAX_DYNAMIC_COUNT + 1) for k in range(width + 1)]
 
     def _width(self, lo, hi, env: dict, line: int) -> int | None:
@@ -1501,7 +1464,7 @@ class _Reader:
         return None
 
     def _choice_values(self, call: ast.Call) -> list[str] | None:
-        name = _call_name(call) or ""
+        name = call_name(call) or ""
         fn = self.functions.get(name)
         if isinstance(fn, ast.Lambda) and isinstance(fn.body, ast.Call):   # nb = lambda o: randint(3, 5)
             return self._choice_values(fn.body)
@@ -1525,14 +1488,14 @@ class _Reader:
 
     def _simple(self, stmt, env, conds, pending, paths):
         line = stmt.lineno
-        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) in (
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and call_name(stmt.value) in (
                 "__produce__", "__nproduce__"):
             text, at = self.lstrings[stmt.value.args[0].value]
             mods = pending + self._successor(text, at, env)
             if len(mods) > MAX_SUCCESSOR:
                 raise self.refuse(line, f"a rule produces more than {MAX_SUCCESSOR:,} modules")
-            if _call_name(stmt.value) == "__produce__":
-                paths.append(_Path(conds, mods, line, _effects(env)))
+            if call_name(stmt.value) == "__produce__":
+                paths.append(Way(conds, mods, line, env_effects(env)))
                 return None
             return env, conds, mods
         if isinstance(stmt, ast.Global) or (isinstance(stmt, (ast.Assign, ast.AugAssign)) and any(
@@ -1542,31 +1505,31 @@ class _Reader:
         if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
             v = self.expr(stmt.value, env, line)
             uniform = v.text == "random()"           # a draw its tests split into alternatives
-            return {**env, stmt.targets[0].id: _Val(v.text, v.rand, span=(0.0, 1.0) if uniform else None)}, \
+            return {**env, stmt.targets[0].id: Val(v.text, v.rand, span=(0.0, 1.0) if uniform else None)}, \
                 conds, pending
         if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
             v = self.expr(ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, stmt.value), env, line)
-            return {**env, stmt.target.id: _Val(v.text, v.rand)}, conds, pending
+            return {**env, stmt.target.id: Val(v.text, v.rand)}, conds, pending
         if isinstance(stmt, ast.Return):
             if stmt.value is not None:
                 raise self.refuse(line, "return with a value in a rule (use produce)")
-            paths.append(_Path(conds, pending or None, line, _effects(env)))    # what nproduce gave, as L-Py does
+            paths.append(Way(conds, pending or None, line, env_effects(env)))    # what nproduce gave, as L-Py does
             return None
         if isinstance(stmt, ast.Pass) or (isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant)):
             return env, conds, pending
-        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and _call_name(stmt.value) == "print":
+        if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call) and call_name(stmt.value) == "print":
             return env, conds, pending
         if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Call):
-            name = _call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
+            name = call_name(stmt.value) or ast.unparse(stmt.value.func)[:40]
             raise self.refuse(line, f"call of {name}() as a statement in a rule is not supported (only a "
                                     "module-level function that produces modules is inlined there)")
-        raise self.refuse(line, f"{_construct(stmt)} in a rule is not supported")
+        raise self.refuse(line, f"{construct(stmt)} in a rule is not supported")
 
     def _for(self, stmt: ast.For, states: list, paths: list) -> list:
         line = stmt.lineno
         it = stmt.iter
         if (stmt.orelse or not isinstance(stmt.target, ast.Name) or not isinstance(it, ast.Call)
-                or _call_name(it) != "range" or not 1 <= len(it.args) <= 3):
+                or call_name(it) != "range" or not 1 <= len(it.args) <= 3):
             raise self.refuse(line, "a for loop other than 'for NAME in range(...)' is not supported")
         if any(isinstance(n, (ast.Break, ast.Continue)) for n in ast.walk(stmt)):
             raise self.refuse(line, "break and continue are not supported")
@@ -1578,7 +1541,7 @@ class _Reader:
             for env, conds, pending in states:
                 for k in counts:
                     n = int(float(k))
-                    out += self._unroll(stmt, max(n, 0), range(n), (_copy(env), [*conds, choice], list(pending)),
+                    out += self._unroll(stmt, max(n, 0), range(n), (copy_env(env), [*conds, choice], list(pending)),
                                         paths)
             return out
         for env, conds, pending in states:
@@ -1605,7 +1568,7 @@ class _Reader:
         self._count_loops(count, stmt.lineno)
         cur = [state]
         for i in values:
-            cur = [({**e, stmt.target.id: _Val(str(i))}, c, p) for e, c, p in cur]
+            cur = [({**e, stmt.target.id: Val(str(i))}, c, p) for e, c, p in cur]
             cur = self._run(stmt.body, cur, paths)
         return cur
 
@@ -1626,8 +1589,8 @@ class _Reader:
         out = []
         for k in range(MAX_DYNAMIC_COUNT + 1):
             cond = (ident * 1000 + k, True, f"{times} == {k}", False, stmt.lineno)
-            out += self._unroll(stmt, k, range(k), (_copy(env), [*conds, cond], list(pending)), paths)
-        paths.append(_Path([*conds, (ident * 1000 + MAX_DYNAMIC_COUNT + 1, True, f"{times} > {MAX_DYNAMIC_COUNT}",
+            out += self._unroll(stmt, k, range(k), (copy_env(env), [*conds, cond], list(pending)), paths)
+        paths.append(Way([*conds, (ident * 1000 + MAX_DYNAMIC_COUNT + 1, True, f"{times} > {MAX_DYNAMIC_COUNT}",
                                      False, stmt.lineno)], None, stmt.lineno))
         self.warnings.append(f"{self.path}: warning: line {stmt.lineno}: range({count[:40]}) is unrolled for counts "
                              f"up to {MAX_DYNAMIC_COUNT}; a module asking more is left unchanged")
@@ -1639,14 +1602,14 @@ class _Reader:
         word = re.compile(rf"(?<![\w@~?]){re.escape(name)}(?!\w)")
         return any(s == section and word.search(re.split(r"-->|:", h, maxsplit=1)[0]) for s, h in self.later)
 
-    def _emit(self, section, left, pred, right, paths: list[_Path], line: int) -> None:
+    def _emit(self, section, left, pred, right, paths: list[Way], line: int) -> None:
         """Plantgen rules from a block's paths, in order: a test whose other branch always
         produces is left out of the later paths (the earlier rule took those modules)."""
         if any(p.modules is None and any(c[2] is None for c in p.conds) for p in paths) and not any(
                 self._taken_later(section, m.name) for m in pred):
             for p in paths:      # a random alternative that leaves the modules unchanged: no later rule
                 if p.modules is None and any(c[2] is None for c in p.conds) and not p.effects:
-                    p.modules = [_Mod(m.name, [_Val(a) for a in m.args], p.line) for m in pred]   # to themselves
+                    p.modules = [Mod(m.name, [Val(a) for a in m.args], p.line) for m in pred]   # to themselves
         leaky = {(c[0], c[1]) for p in paths if p.modules is None for c in p.conds}
         emitted = []
         for p in paths:
@@ -1672,7 +1635,7 @@ class _Reader:
         rules, weights = [], {}
         for conds, p in emitted:
             tests = [c for c in conds if c[2] is not None]
-            text = " && ".join(_wrap(t) if h else f"!{_wrap(t)}" for _, h, t, _, _ in tests)
+            text = " && ".join(wrap(t) if h else f"!{wrap(t)}" for _, h, t, _, _ in tests)
             if len(tests) == 1 and tests[0][1]:
                 text = tests[0][2]
             weight = float(np.prod([c[3] for c in conds if c[2] is None]))
@@ -1693,7 +1656,7 @@ class _Reader:
         if not self.globals:
             return
         def names(text: str) -> set:
-            return set(_ATOM.findall(text)) & set(self.globals)
+            return set(ATOM.findall(text)) & set(self.globals)
         read: set = set()
         for m in self.axiom:
             read |= {n for a in m.args for n in names(a.text)}
@@ -1819,7 +1782,7 @@ class _Reader:
             return self.names[name]
         return TURTLE.get(name) or self.names[name]
 
-    def _text(self, mods: list[_Mod], pattern: bool = False) -> str:
+    def _text(self, mods: list[Mod], pattern: bool = False) -> str:
         out = []
         for m in mods:
             sym = self._symbol(m.name, len(m.args))
@@ -1862,12 +1825,8 @@ class _Reader:
         return {"rule": text, **({} if p is None else {"p": p}), "set": live}
 
 
-# ------------------------------------------------------------------ helpers
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\Z")
 _NUMBER = re.compile(r"-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 _ASSIGNMENT = re.compile(r"[A-Za-z_][A-Za-z_0-9]*\s*(?:[-+*/]?=)(?!=)")
-_ATOM = re.compile(r"[A-Za-z_][A-Za-z_0-9]*|\d+\.?\d*(?:e[-+]?\d+)?")
-_RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"and", "or", "not"}
 _CANDIDATES = ("ABCDEHIJKMNOPQRSTVWXYZabcdeghijklmnopqrstuvwxyz"
                + "".join(chr(c) for c in range(0x391, 0x3AA) if chr(c).isalpha())
                + "".join(chr(c) for c in range(0x3B1, 0x3CA))
@@ -1879,128 +1838,6 @@ def _turtle_params(sym: str) -> int:
     the surface's name)."""
     arity = ARITY.get(sym)
     return (max(arity) - (sym == "~")) if arity else 0
-
-
-def _safe(name: str) -> str:
-    """A name plantgen's expressions can hold: one that is a function or constant there
-    gets a trailing underscore."""
-    return name + "_" if name in _RESERVED else name
-
-
-def _atomic(text: str) -> bool:
-    """Whether ``text`` needs no parentheses as an operand: a name, a number, a call or
-    a parenthesised whole."""
-    if _ATOM.fullmatch(text):
-        return True
-    m = re.match(r"[A-Za-z_][A-Za-z_0-9]*\(|\(", text)
-    return bool(m) and _closing(text, m.end() - 1) == len(text) - 1
-
-
-def _wrap(text: str) -> str:
-    return text if _atomic(text) else f"({text})"
-
-
-def _effects(env: dict) -> tuple:
-    """The globals a block has set so far: ((plantgen name, _Val))."""
-    return tuple((k[4:], v) for k, v in env.items() if k.startswith("set "))
-
-
-def _merge(test: str, env: dict, yes: dict, no: dict) -> dict:
-    """The env after ``if test`` whose branches left ``yes`` and ``no``: each global set
-    in either a ``select`` between the two (a local set in one branch only is dropped)."""
-    out = dict(env)
-    for key in dict.fromkeys([*yes, *no]):
-        if key.startswith("global "):
-            out[key] = _Val("")
-            continue
-        before = env.get(key)
-        if key.startswith("set "):
-            before = before or _Val(key[4:])
-        a, b = yes.get(key, before), no.get(key, before)
-        if a is None or b is None:
-            out.pop(key, None)
-            continue
-        out[key] = a if a.text == b.text else _Val(f"select({test}, {a.text}, {b.text})", a.rand or b.rand,
-                                                  a.used or b.used)
-    return out
-
-
-def _copy(env: dict) -> dict:
-    return {k: _Val(v.text, v.rand, v.used, v.span, v.error) for k, v in env.items()}
-
-
-def _call_name(call: ast.Call) -> str | None:
-    f = call.func
-    if isinstance(f, ast.Name):
-        return f.id
-    if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name):
-        return f"{f.value.id}.{f.attr}"
-    return None
-
-
-def _construct(node) -> str:
-    """How a message names a Python construct."""
-    names = {ast.While: "a while loop", ast.With: "a with statement", ast.Try: "a try statement",
-             ast.ClassDef: "a class", ast.Global: "a global statement", ast.Lambda: "a lambda",
-             ast.List: "a list", ast.Tuple: "a tuple", ast.Dict: "a dict", ast.Set: "a set",
-             ast.Subscript: "indexing", ast.ListComp: "a comprehension", ast.GeneratorExp: "a generator",
-             ast.DictComp: "a comprehension", ast.SetComp: "a comprehension", ast.JoinedStr: "an f-string",
-             ast.Yield: "yield", ast.Await: "await", ast.Starred: "a starred expression",
-             ast.NamedExpr: "the := operator", ast.Delete: "del", ast.Raise: "raise", ast.Assert: "assert",
-             ast.For: "a for loop", ast.If: "an if statement", ast.FunctionDef: "a function definition",
-             ast.Return: "return", ast.Import: "import", ast.ImportFrom: "import", ast.Nonlocal: "nonlocal",
-             ast.AsyncFunctionDef: "an async function", ast.Match: "a match statement"}
-    if isinstance(node, ast.Expr) and isinstance(node.value, ast.Call):
-        return f"a call of {_call_name(node.value) or 'a function'}()"
-    if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
-        return "an assignment"
-    return names.get(type(node), type(node).__name__)
-
-
-def _scan_depth(text: str, start: int = 0):
-    """(index, character, bracket depth after it, whether it lies in a quote) for each
-    character of ``text`` from ``start``."""
-    depth, quote = 0, None
-    for j in range(start, len(text)):
-        ch = text[j]
-        quoted = quote is not None
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "'\"":
-            quote = ch
-        elif ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            depth -= 1
-        yield j, ch, depth, quoted or quote is not None
-
-
-def _closing(text: str, k: int) -> int:
-    """The index of the bracket closing the one at ``k`` (-1: none)."""
-    return next((j for j, ch, depth, quoted in _scan_depth(text, k) if ch in ")]}" and not quoted and depth == 0), -1)
-
-
-def _split_top(text: str, sep: str) -> list[str]:
-    """``text`` split at each ``sep`` outside brackets and quotes."""
-    out, last = [], 0
-    for j, ch, depth, quoted in _scan_depth(text):
-        if ch == sep and depth == 0 and not quoted:
-            out.append(text[last:j])
-            last = j + 1
-    out.append(text[last:])
-    return out
-
-
-def _ast_parse(source: str, mode: str = "exec") -> ast.Module | ast.Expression:
-    """``ast.parse`` without the warnings Python's compiler prints for odd literals."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return ast.parse(source, mode=mode)
-
-
-def _why(exc: BaseException) -> str:
-    return _one_line(getattr(exc, "msg", None) or str(exc) or exc.__class__.__name__)[:100]
 
 
 # ------------------------------------------------------------------ entry points
