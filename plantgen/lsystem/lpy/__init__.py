@@ -1,7 +1,7 @@
 """L-Py files (``.lpy``) read into plantgen's grammar mapping, never run.
 
 An L-Py file is Python with L-system sections (``Axiom:``, ``derivation length:``,
-``production:``, ``interpretation:``/``homomorphism:``, ``endlsystem`` ...). This module
+``production:``, ``interpretation:``/``homomorphism:``, ``endlsystem`` ...). This package
 splits the sections line by line, parses each piece of Python with :mod:`ast` and
 *translates* it: module-level constants become the grammar's ``defines``, functions are
 inlined into the expressions that call them, and a rule's Python block is walked
@@ -30,6 +30,14 @@ visited, inlined calls and unrolled loop bodies included, against ``max_yaml_nod
 the nesting of inlined calls (:data:`MAX_CALL_DEPTH`), :data:`MAX_LOOP_ITERATIONS` unrolled
 loop iterations and :data:`~plantgen.lsystem.expr.MAX_EXPR_LENGTH` characters per
 translated expression; then the grammar's own budgets when it is derived.
+
+The package, by responsibility: :mod:`.sections` (the file split into its sections),
+:mod:`.translate` (statements and expressions translated), :mod:`.inline` (functions
+inlined, a rule's block walked, loops unrolled), :mod:`.rules` (globals, hooks, rules and
+the grammar mapping), :mod:`.drawn` (the drawn-as table: L-Py's modules as plantgen's),
+:mod:`.common` (the error, the budgets, the values and helpers they share) and
+:mod:`.reader` (:class:`~.reader.Reader`, one file's translation: the state the parts
+share, its methods theirs). This module holds the entry points.
 """
 
 from __future__ import annotations
@@ -54,7 +62,7 @@ LPY_SUFFIX = ".lpy"
 
 # ------------------------------------------------------------------ entry points
 def parse_lpy(text: str, path: str = "<lpy>", limits: Limits | None = None) -> LpyModel:
-    """Translate the text of an ``.lpy`` file (see the module's notes)."""
+    """Translate the text of an ``.lpy`` file (see the package's notes)."""
     limits = limits or default_limits
     reader = Reader(text, path, limits)
     try:
