@@ -50,12 +50,15 @@ from ...errors import PlantgenError
 from ...files import read_text, read_yaml
 from ...limits import Limits
 from ...limits import limits as default_limits
-from .common import MAX_CALL_DEPTH, MAX_LOOP_ITERATIONS, LpyError, LpyModel
-from .drawn import TURTLE
+from .common import MAX_CALL_DEPTH, MAX_DYNAMIC_COUNT, MAX_LOOP_ITERATIONS, MAX_SUCCESSOR, MAX_TABLE, LpyError, LpyModel
+from .drawn import DEFAULT_ARGS, DRAWN_AS, REFUSED_MODULES, SILENT, SPHERE_SEGMENTS, TROPISM, TURTLE, UNDRAWN
 from .reader import Reader
 
 __all__ = ["LPY_SUFFIX", "MAX_CALL_DEPTH", "MAX_LOOP_ITERATIONS", "TURTLE", "LpyError", "LpyModel", "parse_lpy",
-           "read_grammar_data", "read_lpy", "to_yaml"]
+           "read_grammar_data", "read_lpy", "to_yaml",
+           # the other public names lpy.py had, importable from here as before the split
+           "DEFAULT_ARGS", "DRAWN_AS", "MAX_DYNAMIC_COUNT", "MAX_SUCCESSOR", "MAX_TABLE", "REFUSED_MODULES", "SILENT",
+           "SPHERE_SEGMENTS", "TROPISM", "UNDRAWN"]
 
 LPY_SUFFIX = ".lpy"
 

@@ -247,7 +247,6 @@ class GlobalsReader:
                         self.defines[safe(name)] = value
                         self.lazy.pop(name, None)
 
-    # ------------------------------------------------------------ output
     def _prune_globals(self) -> None:
         """Keep the globals something drawn reads (a condition, a module's argument, a
         kept global's new value); the others, and what sets them, are dropped (a label's
@@ -400,6 +399,7 @@ class RuleBuilder:
                                         "unchanged: plantgen's stochastic rules always rewrite it")
         self.rules[section] += rules
 
+    # ------------------------------------------------------------ output
     def build(self, stem: str) -> LpyModel:
         self._prune_globals()
         names: dict[str, str] = {}
