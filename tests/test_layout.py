@@ -125,3 +125,56 @@ def test_the_layer_contracts_hold():
         config = Path(__file__).resolve().parents[1] / "pyproject.toml"
     assert config.is_file()
     assert lint_imports(config_filename=str(config), no_cache=True) == 0
+
+
+MAX_CLASS_LINES = 400
+MAX_MODULE_LINES = 900
+#: Modules and classes over the limits below that are being split on other branches right
+#: now (pipeline.py, geometry's mesh, scan and bvh, the viewer's ViewerSession): an
+#: allow-list only for the time those branches take to merge. The lead empties it when
+#: merging them; nothing is to be added to it (lsystem/lpy/ is not on it: it was split).
+OVERSIZED = {
+    "pipeline.py",                          # 1,296 lines
+    "geometry/mesh.py",                     # 1,105 lines
+    "geometry/scan.py",                     # 1,075 lines
+    "geometry/bvh.py",                      # 908 lines
+    "viewer/session.py:ViewerSession",      # a class of 607 lines
+}
+
+
+def _oversized(relative: str, source: str) -> list[tuple[str, int]]:
+    """The module (``relative``) if it has over MAX_MODULE_LINES lines, and each class in
+    it (``relative:Name``) over MAX_CLASS_LINES, counted from its ``class`` line to its end."""
+    out = []
+    lines = len(source.splitlines())
+    if lines > MAX_MODULE_LINES:
+        out.append((relative, lines))
+    out += [(f"{relative}:{node.name}", node.end_lineno - node.lineno + 1) for node in ast.walk(ast.parse(source))
+            if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 > MAX_CLASS_LINES]
+    return out
+
+
+def _all_oversized() -> dict[str, int]:
+    return dict(hit for relative in MODULES for hit in _oversized(relative, (PACKAGE / relative).read_text()))
+
+
+def test_modules_and_classes_stay_small():
+    """No module over MAX_MODULE_LINES lines and no class over MAX_CLASS_LINES anywhere in
+    plantgen, but the known offenders of OVERSIZED."""
+    found = {k: v for k, v in _all_oversized().items() if k not in OVERSIZED}
+    assert not found, f"over {MAX_MODULE_LINES} lines a module or {MAX_CLASS_LINES} a class: {found}"
+
+
+def test_the_oversized_list_is_not_stale():
+    """Each entry of OVERSIZED is still over its limit: once split, it leaves the list."""
+    assert OVERSIZED - set(_all_oversized()) == set()
+
+
+def test_the_size_check_sees_long_code():
+    """The size check would pass vacuously if it counted nothing: it finds a long class and
+    a long module, not a short one, and reads the lpy package."""
+    long_class = "class A:\n" + "    x = 1\n" * MAX_CLASS_LINES
+    assert _oversized("a.py", long_class) == [("a.py:A", MAX_CLASS_LINES + 1)]
+    assert _oversized("b.py", "x = 1\n" * (MAX_MODULE_LINES + 1)) == [("b.py", MAX_MODULE_LINES + 1)]
+    assert _oversized("c.py", "class C:\n    x = 1\n" + "y = 2\n" * 50) == []
+    assert {"lsystem/lpy/__init__.py", "lsystem/lpy/reader.py", "lsystem/lpy/translate.py"} <= set(MODULES)
