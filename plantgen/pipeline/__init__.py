@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._resources import grammars_dir, missing_hint, short_names
-from .animation import AnimatedScene
-from .assets import AssetSettings, asset_lines, budget_warnings, finished_plants
-from .environment import environment_for
-from .environment.together import TogetherPlant, grow_together
-from .errors import PlantgenError
-from .exporters import (
+from .._resources import grammars_dir, missing_hint, short_names
+from ..animation import AnimatedScene
+from ..assets import AssetSettings, asset_lines, budget_warnings, finished_plants
+from ..environment import environment_for
+from ..environment.together import TogetherPlant, grow_together
+from ..errors import PlantgenError
+from ..exporters import (
     DetailLevel,
     ExportError,
     Plant,
@@ -57,35 +57,35 @@ from .exporters import (
     write_plants,
     write_skeleton,
 )
-from .exporters.formats import check_export_outputs
-from .exporters.plants import level_plant
-from .exporters.textures import bake_textures, split_by_aspect
-from .files import check_outputs, write_all_atomically
-from .geometry.camera import Camera, Orbit, auto_camera, orbit_view
-from .geometry.frames import UP_AXES
-from .geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
-from .geometry.instances import PlacedPlants, detail_levels, detail_order, screen_coverage
-from .geometry.mesh import tessellate, triangle_count
-from .geometry.polygons import Polygons
-from .geometry.skeleton import Skeleton
-from .geometry.skin import skin_skeleton
-from .geometry.stage import MODEL_LIGHT, Ground
-from .geometry.swc import read_swc
-from .gl.context import renderer_name
-from .gl.pose import PoseStream
-from .gl.raycast import Raycaster
-from .gl.records import RecordStream
-from .gl.result import RenderResult
-from .gl.rt import RayTracer, choose_method
-from .images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
-from .limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
-from .limits import limits as default_limits
-from .lsystem.derive import apply_interpretation, derive
-from .lsystem.grammar import GrammarError, parse_grammar
-from .lsystem.lpy import read_grammar_data
-from .lsystem.turtle import Drawing, interpret_plant
-from .scene import Scene, grows_together, is_scene, parse_scene, resolve_grammar
-from .settings import (
+from ..exporters.formats import check_export_outputs
+from ..exporters.plants import level_plant
+from ..exporters.textures import bake_textures, split_by_aspect
+from ..files import check_outputs, write_all_atomically
+from ..geometry.camera import Camera, Orbit, auto_camera, orbit_view
+from ..geometry.frames import UP_AXES
+from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
+from ..geometry.instances import PlacedPlants, detail_levels, detail_order, screen_coverage
+from ..geometry.mesh import tessellate, triangle_count
+from ..geometry.polygons import Polygons
+from ..geometry.skeleton import Skeleton
+from ..geometry.skin import skin_skeleton
+from ..geometry.stage import MODEL_LIGHT, Ground
+from ..geometry.swc import read_swc
+from ..gl.context import renderer_name
+from ..gl.pose import PoseStream
+from ..gl.raycast import Raycaster
+from ..gl.records import RecordStream
+from ..gl.result import RenderResult
+from ..gl.rt import RayTracer, choose_method
+from ..images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
+from ..limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
+from ..limits import limits as default_limits
+from ..lsystem.derive import apply_interpretation, derive
+from ..lsystem.grammar import GrammarError, parse_grammar
+from ..lsystem.lpy import read_grammar_data
+from ..lsystem.turtle import Drawing, interpret_plant
+from ..scene import Scene, grows_together, is_scene, parse_scene, resolve_grammar
+from ..settings import (
     DEFAULT_SIZE,
     DetailSettings,
     EffectSettings,
