@@ -63,7 +63,7 @@ from ..exporters.textures import bake_textures, split_by_aspect
 from ..files import check_outputs, write_all_atomically
 from ..geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from ..geometry.frames import UP_AXES
-from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds
+from ..geometry.frusta import Frusta, frusta_bounds
 from ..geometry.instances import PlacedPlants, detail_levels, detail_order, screen_coverage
 from ..geometry.mesh import tessellate, triangle_count
 from ..geometry.polygons import Polygons
@@ -79,7 +79,6 @@ from ..gl.result import RenderResult
 from ..gl.rt import RayTracer, choose_method
 from ..images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
 from ..limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
-from ..limits import limits as default_limits
 from ..lsystem.derive import apply_interpretation, derive
 from ..lsystem.grammar import GrammarError, parse_grammar
 from ..lsystem.lpy import read_grammar_data
@@ -99,6 +98,7 @@ from ..settings import (
     ViewSettings,
     option_names,
 )
+from .checks import SKIN_BYTES_PER_SEGMENT, check_finite_frusta, check_finite_mesh, distinct_segments, in_force
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "existing_input",
@@ -110,11 +110,6 @@ __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "re
 
 #: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
 SKELETON_SUFFIXES = (".npz", ".swc")
-
-
-def _in_force(given: Limits | None) -> Limits:
-    """The limits a call runs under: the caller's, else the defaults."""
-    return given if given is not None else default_limits
 
 
 @dataclass
@@ -208,7 +203,7 @@ def load_input(path: str | Path, limits: Limits | None = None, warnings: list | 
     path = Path(path)
     if path.suffix.lower() in SKELETON_SUFFIXES:
         return "skeleton", None
-    data, said = read_grammar_data(path, GrammarError, _in_force(limits))
+    data, said = read_grammar_data(path, GrammarError, in_force(limits))
     if warnings is not None:
         warnings.extend(said)
     if data is None:
@@ -225,8 +220,8 @@ def read_skeleton(path: str | Path, limits: Limits | None = None) -> Skeleton:
     for anything wrong with it)."""
     path = Path(path)
     if path.suffix.lower() == ".swc":
-        return read_swc(path, _in_force(limits))
-    return Skeleton.load(path, _in_force(limits))
+        return read_swc(path, in_force(limits))
+    return Skeleton.load(path, in_force(limits))
 
 
 def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
@@ -242,7 +237,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     ``place``; ``total`` None where not known). A name that is neither a file nor a
     shipped grammar is one line with the closest shipped name; a shipped grammar's
     errors and warnings name it as commands take it (``pine``), not by its path."""
-    limits = _in_force(limits).raised(modules=max_modules)
+    limits = in_force(limits).raised(modules=max_modules)
     if iterations is not None:
         limits.check("iterations", int(iterations), "--iterations")
     path = existing_input(path)
@@ -422,34 +417,6 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     return Staging(camera, tuple(scene.light.towards()), scene.ground, leaves)
 
 
-def check_finite_frusta(frusta: Frusta, source) -> Frusta:
-    """``frusta`` if every row is finite; else one line naming the first segment whose skin
-    is not (so no inf or NaN reaches a renderer or a file)."""
-    with np.errstate(invalid="ignore"):
-        bad = np.zeros(len(frusta), dtype=bool)
-        for name in ROW_FIELDS:
-            values = getattr(frusta, name)
-            if values.dtype.kind == "f":
-                bad |= ~np.isfinite(values).reshape(len(frusta), -1).all(axis=1) if len(frusta) else bad
-    if bad.any():
-        row = int(np.argmax(bad))
-        raise PlantgenError(f"{source}: the skin of segment {int(frusta.segment[row])} is not finite "
-                            f"(frustum row {row}): the segment is degenerate")
-    return frusta
-
-
-def check_finite_mesh(mesh, frusta: Frusta, source) -> None:
-    """One line naming the first segment whose tessellation holds a non-finite vertex,
-    normal or texture coordinate."""
-    bad = ~(np.isfinite(mesh.vertices).all(axis=1) & np.isfinite(mesh.normals).all(axis=1)
-            & np.isfinite(mesh.uv).all(axis=1))
-    if bad.any():
-        face = int(np.argmax(bad[mesh.faces].any(axis=1)))
-        row = int(mesh.face_row[face])
-        raise PlantgenError(f"{source}: the mesh of segment {int(frusta.segment[row])} is not finite "
-                            f"(frustum row {row}): the segment is degenerate")
-
-
 def skinning(smooth_bends: float | None = None):
     """The skinning function the commands use: :func:`skin_skeleton`, with bends past
     ``smooth_bends`` degrees smoothed into arcs when given (``--smooth-bends``)."""
@@ -554,17 +521,12 @@ def check_scan_memory(grown: GrowResult, limits: Limits | None, source) -> None:
     """Refuse, before anything is skinned, a scan whose skinned segments (a scene's
     distinct plants once: its copies are traced through two levels; else every segment)
     would take more than ``limits.max_scan_bytes``."""
-    limits = _in_force(limits)
+    limits = in_force(limits)
     segments = distinct_segments(grown.scene) if grown.scene is not None else grown.segments
     need = segments * SCAN_BYTES_PER_SEGMENT
     if need > limits.max_scan_bytes:
         raise LimitError(f"{source}: a scan skinning {segments:,} segments needs about {need / 2**20:,.0f} "
                          f"MiB, over the limit of {limits.max_scan_bytes / 2**20:,.0f} MiB ({hint('scan_bytes')})")
-
-
-def distinct_segments(scene: Scene) -> int:
-    """Segments of a scene's distinct plants, each once (what a placed scene skins)."""
-    return sum(len(skeleton) for skeleton in {id(i.skeleton): i.skeleton for i in scene.instances}.values())
 
 
 def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSettings = ImageSettings()) -> dict:
@@ -666,9 +628,6 @@ def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, c
 RENDER_BYTES_PER_PIXEL = 64      # colour, depth and distance targets, read-backs, the result's arrays
 FRAME_BYTES_PER_PIXEL = 8        # one kept animation frame (RGB) and its share of the encoding
 SHADOW_BYTES_PER_TEXEL = 8       # the shadow map's depth target and its read of it
-SKIN_BYTES_PER_SEGMENT = 1024    # skinning (about 570 bytes a segment at its peak), records, knuckles
-
-
 def estimate_render_bytes(width: int, height: int, *, frames: int = 1, shadow_res: int | None = None,
                           segments: int = 0, ssaa: int = 1) -> int:
     """Bytes a render of ``width`` x ``height`` pixels takes (GPU and host together):
@@ -806,7 +765,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         read grammars from
     smooth_bends : None, or bends past this many degrees become arcs (:func:`skinning`)
     """
-    limits, request = _in_force(limits), request_settings(settings, options)
+    limits, request = in_force(limits), request_settings(settings, options)
     if int(timed_frames) != timed_frames or int(timed_frames) < 0:
         raise PlantgenError("--time-frames must be an integer >= 0")
     image, motion = request.image, request.motion
@@ -950,7 +909,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
-    output_path, limits = Path(output_path), _in_force(limits)
+    output_path, limits = Path(output_path), in_force(limits)
     fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings(), unit)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
@@ -1225,7 +1184,7 @@ def check_export_size(frusta: list[Frusta], leaves: list, segments: int, level: 
     each written once) builds, refused before anything is built (one line naming ``source``
     or ``output``) over ``limits.max_export_triangles``, or over ``limits.max_export_bytes``
     to build and write as ``fmt_name`` with the skin of ``segments`` skeleton segments."""
-    limits = _in_force(limits)
+    limits = in_force(limits)
     estimate = sum(triangle_count(len(f), level, int(f.open_lo.sum() + f.open_hi.sum())) for f in frusta)
     estimate += sum(len(p.triangles) for p in leaves if p is not None)
     if estimate > limits.max_export_triangles:
@@ -1285,7 +1244,7 @@ def check_sway_size(plants, timeline: Timeline, limits: Limits | None, output) -
     """The bytes writing a sway takes: ``plants`` [(segments, copies)] each a joint a
     segment for every copy, ``timeline.keys`` keys each; one line naming ``output`` over
     ``limits.max_export_bytes``."""
-    limits = _in_force(limits)
+    limits = in_force(limits)
     joints = sum(segments * copies for segments, copies in plants)
     need = joints * (SWAY_BYTES_PER_JOINT + timeline.keys * SWAY_BYTES_PER_KEY)
     if need > limits.max_export_bytes:
