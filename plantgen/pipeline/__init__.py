@@ -99,6 +99,7 @@ from .growing import (
     read_skeleton,
     resolve_input,
 )
+from .scan import SCAN_BYTES_PER_SEGMENT, check_scan_memory
 
 __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
            "existing_input",
@@ -106,7 +107,7 @@ __all__ = ["GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "re
            "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
            "check_finite_frusta", "check_finite_mesh", "skin_model", "check_render_outputs",
            "estimate_render_bytes", "render_model", "render_file", "export_model", "INSTANCING", "check_export_size",
-           "scene_extras", "check_sway_size"]
+           "scene_extras", "check_sway_size", "check_scan_memory", "SCAN_BYTES_PER_SEGMENT"]
 
 # ---------------------------------------------------------------------- model -> renderer
 @dataclass(frozen=True)
@@ -246,23 +247,6 @@ def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=Non
         placed = place_scene(grown.scene, skinning(smooth_bends), str(input_path))
         return PreparedModel(grown, tuple(chosen), None, str(input_path), placed)
     return PreparedModel(grown, tuple(chosen), animate_model(grown, chosen, smooth_bends), str(input_path))
-
-
-#: Memory a laser scan takes per placed segment (its skin, boxes and labels; leaves
-#: included), measured (about 1.3 KB) and rounded up.
-SCAN_BYTES_PER_SEGMENT = 2048
-
-
-def check_scan_memory(grown: GrowResult, limits: Limits | None, source) -> None:
-    """Refuse, before anything is skinned, a scan whose skinned segments (a scene's
-    distinct plants once: its copies are traced through two levels; else every segment)
-    would take more than ``limits.max_scan_bytes``."""
-    limits = in_force(limits)
-    segments = distinct_segments(grown.scene) if grown.scene is not None else grown.segments
-    need = segments * SCAN_BYTES_PER_SEGMENT
-    if need > limits.max_scan_bytes:
-        raise LimitError(f"{source}: a scan skinning {segments:,} segments needs about {need / 2**20:,.0f} "
-                         f"MiB, over the limit of {limits.max_scan_bytes / 2**20:,.0f} MiB ({hint('scan_bytes')})")
 
 
 def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSettings = ImageSettings()) -> dict:
