@@ -130,7 +130,7 @@ class RaycastSettings:
         (the ray tracer, :mod:`plantgen.gl.rt`: each pixel's ray traced through a bounding
         volume hierarchy, about the log of the rows; shadows by shadow rays, no map). The
         same surfaces either way ``"auto"`` (the default) chooses per input
-        (:func:`plantgen.pipeline.choose_method`): rt for an instanced scene drawn at full
+        (:func:`plantgen.gl.rt.choose_method`): rt for an instanced scene drawn at full
         detail whose placed rows are many for the pixels and for its distinct plants, rc
         otherwise, from what the benchmarks measure.
     """

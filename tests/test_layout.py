@@ -49,7 +49,7 @@ def test_no_private_name_is_imported_across_modules():
 def test_the_checks_see_the_code():
     """The rules above would pass vacuously on an empty tree: make sure they read code."""
     assert len(MODULES) >= 80
-    assert {"pipeline.py", "scene.py", "geometry/skin.py", "lsystem/turtle.py", "gl/raycast.py",
+    assert {"pipeline/render.py", "scene.py", "geometry/skin.py", "lsystem/turtle.py", "gl/raycast.py",
             "cli/render.py", "exporters/gltf.py"} <= set(MODULES)
     sizes = [sum(1 for _ in _functions(ast.parse((PACKAGE / r).read_text()))) for r in MODULES]
     assert sum(sizes) > 500
@@ -130,11 +130,10 @@ def test_the_layer_contracts_hold():
 MAX_CLASS_LINES = 400
 MAX_MODULE_LINES = 900
 #: Modules and classes over the limits below that are being split on other branches right
-#: now (pipeline.py, geometry's mesh, scan and bvh, the viewer's ViewerSession): an
+#: now (geometry's mesh, scan and bvh, the viewer's ViewerSession): an
 #: allow-list only for the time those branches take to merge. The lead empties it when
 #: merging them; nothing is to be added to it (lsystem/lpy/ is not on it: it was split).
 OVERSIZED = {
-    "pipeline.py",                          # 1,296 lines
     "geometry/mesh.py",                     # 1,105 lines
     "geometry/scan.py",                     # 1,075 lines
     "geometry/bvh.py",                      # 908 lines

@@ -1,0 +1,295 @@
+"""``plantgen grow`` and what every other command starts with: an input (a grammar, a
+scene, a skeleton ``.npz`` / ``.swc``, or a shipped name) read and grown into a
+:class:`GrowResult`, with the time of each stage.
+
+:func:`grow_file` grows a grammar (derive, interpret, draw), a scene (each grammar it
+places read and parsed once, each plant grown, ``grow: together`` plants derived in
+lockstep) or loads a skeleton; :func:`grow` and :func:`load_skeleton` keep its skeleton.
+One input's derivations share one ``derive_work`` meter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .._resources import grammars_dir, missing_hint, short_names
+from ..environment import environment_for
+from ..environment.together import TogetherPlant, grow_together
+from ..errors import PlantgenError
+from ..geometry.polygons import Polygons
+from ..geometry.skeleton import Skeleton
+from ..geometry.swc import read_swc
+from ..limits import Limits
+from ..lsystem.derive import apply_interpretation, derive
+from ..lsystem.grammar import GrammarError, parse_grammar
+from ..lsystem.lpy import read_grammar_data
+from ..lsystem.turtle import Drawing, interpret_plant
+from ..scene import Scene, grows_together, is_scene, parse_scene, resolve_grammar
+from .checks import in_force
+
+#: Skeleton files by suffix; anything else is read as YAML (a grammar or a scene).
+SKELETON_SUFFIXES = (".npz", ".swc")
+
+
+@dataclass
+class GrowResult:
+    """A grown skeleton with what it took: module count and seconds per stage. A scene's
+    merged skeleton (every copy placed) is built on first use: an instanced render of a
+    forest never builds it."""
+
+    skeleton: Skeleton | None
+    kind: str                        # "grammar", "scene" or "skeleton"
+    name: str
+    modules: int = 0
+    timings: dict = field(default_factory=dict)   # stage -> seconds
+    scene: Scene | None = None
+    sources: tuple = ()              # every file read: the input, and a scene's grammars
+    polygons: Polygons | None = None  # the filled polygons (leaves) of a grammar or a scene, in place;
+                                      # None for a skeleton file
+    warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
+    smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
+    iterations: int | None = None    # a grammar's derivation steps (its own, or as asked); None otherwise
+
+    def __post_init__(self):
+        if self.skeleton is None and self.scene is not None:
+            del self.skeleton            # a scene's: placed on first use (__getattr__)
+
+    def __getattr__(self, name):
+        scene = self.__dict__.get("scene")
+        if name != "skeleton" or scene is None:
+            raise AttributeError(name)
+        t0 = time.perf_counter()
+        self.skeleton = scene.skeleton()
+        self.timings["place"] = self.timings.get("place", 0.0) + time.perf_counter() - t0
+        return self.skeleton
+
+    @property
+    def segments(self) -> int:
+        """Segments placed (a scene's every copy), without building a scene's skeleton."""
+        if "skeleton" not in self.__dict__ and self.scene is not None:
+            return sum(len(i.skeleton) for i in self.scene.instances)
+        return len(self.skeleton)
+
+
+def _grow_grammar(grammar, path: str, seed, iterations, progress, timings, limits: Limits,
+                  work) -> tuple[Drawing, int]:
+    """Derive a parsed grammar, apply its interpretation rules and draw the result, adding
+    each stage's seconds to ``timings``."""
+    t1 = time.perf_counter()
+    steps = grammar.iterations if iterations is None else int(iterations)
+    ms = derive(grammar, iterations=iterations, seed=seed, limits=limits, work=work,
+                progress=None if progress is None else lambda step, n: progress("derive", step, steps),
+                environment=environment_for(grammar, seed=seed, limits=limits))
+    t2 = time.perf_counter()
+    if progress is not None:
+        progress("interpret", 0, None)
+    drawn = apply_interpretation(grammar, ms, seed, limits=limits, work=work)
+    drawing = interpret_plant(drawn, grammar.turtle, grammar.materials, path, limits)
+    t3 = time.perf_counter()
+    for k, v in (("derive", t2 - t1), ("interpret", t3 - t2)):
+        timings[k] = timings.get(k, 0.0) + v
+    if ms.fixed_point is not None and iterations is not None:   # said once, where --iterations asked for more
+        note = (f"{path}: note: the derivation reached a fixed point at step {ms.fixed_point} (steps past it "
+                f"change nothing: --iterations {int(iterations)} draws the plant of --iterations {ms.fixed_point})")
+        drawing = dataclasses.replace(drawing, warnings=(*drawing.warnings, note))
+    return drawing, len(ms)
+
+
+def resolve_input(path: str | Path) -> Path:
+    """A path as given, or the name of a shipped grammar or scene (``pine``, ``desert``)."""
+    p = Path(path)
+    if not p.exists() and not p.suffix and p.name == str(path):
+        shipped = grammars_dir() / f"{p.name}.yaml"
+        if shipped.is_file():
+            return shipped
+    return p
+
+
+def existing_input(path: str | Path) -> Path:
+    """:func:`resolve_input`, refusing in one line a name that is neither a file nor a
+    shipped grammar or scene, with the closest name (:func:`plantgen._resources.missing_hint`)."""
+    resolved = resolve_input(path)
+    if not os.path.lexists(resolved):
+        raise PlantgenError(f"{path}: no such file{missing_hint(path)}")
+    return resolved
+
+
+def load_input(path: str | Path, limits: Limits | None = None, warnings: list | None = None):
+    """Read an input: returns ("grammar" | "scene", parsed mapping), or ("skeleton", None)
+    for a skeleton file (``.npz``, ``.swc``: see :func:`read_skeleton`). An L-Py file
+    (``.lpy``) is translated to a grammar mapping; what its reading warns of is added to
+    ``warnings``."""
+    path = Path(path)
+    if path.suffix.lower() in SKELETON_SUFFIXES:
+        return "skeleton", None
+    data, said = read_grammar_data(path, GrammarError, in_force(limits))
+    if warnings is not None:
+        warnings.extend(said)
+    if data is None:
+        raise PlantgenError(f"{path}: empty file, not a grammar or scene")
+    if is_scene(data):
+        return "scene", data
+    if isinstance(data, dict) and "axiom" in data:
+        return "grammar", data
+    raise PlantgenError(f"{path}: not a grammar or scene (a grammar has 'axiom', a scene 'instances')")
+
+
+def read_skeleton(path: str | Path, limits: Limits | None = None) -> Skeleton:
+    """A skeleton file, ``.npz`` or ``.swc``, read and validated (one line naming the file
+    for anything wrong with it)."""
+    path = Path(path)
+    if path.suffix.lower() == ".swc":
+        return read_swc(path, in_force(limits))
+    return Skeleton.load(path, in_force(limits))
+
+
+def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
+              max_modules: int | None = None, progress=None, limits: Limits | None = None,
+              allow_paths=(), defines=None) -> GrowResult:
+    """Grow a grammar or scene, or load a skeleton ``.npz`` / ``.swc``; time every stage.
+
+    ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
+    of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones.
+    ``defines`` ({name: number}) overrides a grammar's defines of those names (as
+    ``--define`` does; a name the grammar does not define is an error). ``progress``:
+    ``progress(stage, done, total)`` (stages ``derive``, ``interpret``, ``grow``,
+    ``place``; ``total`` None where not known). A name that is neither a file nor a
+    shipped grammar is one line with the closest shipped name; a shipped grammar's
+    errors and warnings name it as commands take it (``pine``), not by its path."""
+    limits = in_force(limits).raised(modules=max_modules)
+    if iterations is not None:
+        limits.check("iterations", int(iterations), "--iterations")
+    path = existing_input(path)
+    try:
+        result = _grow_path(path, seed, iterations, progress, limits, allow_paths, defines)
+    except PlantgenError as exc:     # a shipped grammar is named as commands take it, not by its long path
+        exc.args = (short_names(str(exc)), *exc.args[1:])
+        raise
+    result.warnings = tuple(short_names(w) for w in result.warnings)
+    return result
+
+
+def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines) -> GrowResult:
+    """:func:`grow_file` of a path that exists."""
+    said: list[str] = []
+    kind, data = load_input(path, limits, said)
+    timings: dict = {}
+    if kind == "skeleton":
+        t0 = time.perf_counter()
+        skel = read_skeleton(path, limits)
+        timings["load"] = time.perf_counter() - t0
+        return GrowResult(skel, kind, path.stem, 0, timings, sources=(path,))
+    work = limits.meter("derive_work")    # one budget for every derivation of this input
+    if defines:
+        data = _override_defines(data, kind, dict(defines), path)
+    if kind == "grammar":
+        t0 = time.perf_counter()
+        grammar = parse_grammar(data, str(path), limits)
+        timings["parse"] = time.perf_counter() - t0
+        drawing, n = _grow_grammar(grammar, str(path), seed, iterations, progress, timings, limits, work)
+        return GrowResult(drawing.skeleton, kind, grammar.name, n, timings, sources=(path,),
+                          polygons=drawing.polygons, warnings=(*said, *drawing.warnings),
+                          smooth_bends=grammar.turtle.smooth_bends,
+                          iterations=grammar.iterations if iterations is None else int(iterations))
+
+    modules, grown = [0], [0]
+    warnings: list[str] = said
+    grammars: dict[str, object] = {}   # each grammar file is read and parsed once per scene
+
+    def parsed(gpath):
+        key = str(gpath)
+        t0 = time.perf_counter()
+        if key not in grammars:
+            data, said_here = read_grammar_data(gpath, GrammarError, limits)
+            warnings.extend(w for w in said_here if w not in warnings)
+            grammars[key] = parse_grammar(data, key, limits)
+        timings["parse"] = timings.get("parse", 0.0) + time.perf_counter() - t0
+        return grammars[key]
+
+    together = (_grow_together(data, path, seed, limits, work, allow_paths, parsed, timings)
+                if grows_together(data, str(path)) else {})
+
+    def grow_one(gpath, s, its):
+        key = str(gpath)
+        grammar = parsed(gpath)
+        if (key, s, its) in together:       # grown with the others: drawn as it is
+            ms = together[(key, s, its)]
+            drawn = apply_interpretation(grammar, ms, s, limits=limits, work=work)
+            drawing, n = interpret_plant(drawn, grammar.turtle, grammar.materials, key, limits), len(ms)
+        else:
+            drawing, n = _grow_grammar(grammar, key, s, its, None, timings, limits, work)
+        modules[0] += n
+        grown[0] += 1
+        if progress is not None:
+            progress("grow", grown[0], None)
+        warnings.extend(w for w in drawing.warnings if w not in warnings)
+        return drawing             # the skeleton and its leaves: the scene's copies carry both
+
+    scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
+                        allow_paths=allow_paths)
+    t0 = time.perf_counter()
+    if progress is not None:
+        progress("place", 0, None)
+    polygons = scene.polygons()
+    timings["place"] = time.perf_counter() - t0
+    return GrowResult(None, kind, scene.name, modules[0], timings, scene,
+                      sources=(path, *(Path(k) for k in grammars)), polygons=polygons, warnings=tuple(warnings))
+
+
+def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, timings) -> dict:
+    """A ``grow: together`` scene's plants derived in lockstep (:mod:`plantgen.environment.together`):
+    {(grammar path, seed, iterations): derived string}. Where they stand comes from a first
+    reading of the scene that grows nothing; copies that share a grammar, seed and
+    iterations share one plant, grown where the first of them stands."""
+    keys: list[tuple] = []
+
+    def record(gpath, s, its):
+        keys.append((str(gpath), s, its))
+        return Skeleton.empty()
+
+    t0 = time.perf_counter()
+    placed = parse_scene(data, str(path), seed=seed, grow_grammar=record, limits=limits, allow_paths=allow_paths)
+    where = Path(path).parent
+    plants, grown = [], []
+    for inst in placed.instances:
+        if inst.source == "skeleton":
+            continue
+        gpath = str(resolve_grammar(inst.source, where, str(path), allow_paths))
+        key = next((k for k in keys if k[:2] == (gpath, inst.seed) and k not in grown), None)
+        if key is not None:
+            grown.append(key)
+            plants.append(TogetherPlant(parsed(gpath), key[1], key[2], inst.matrix))
+    strings = grow_together(plants, limits=limits, work=work)
+    timings["derive"] = timings.get("derive", 0.0) + time.perf_counter() - t0
+    return dict(zip(grown, strings, strict=True))
+
+
+def _override_defines(data, kind: str, defines: dict, path) -> dict:
+    """A grammar's mapping with ``defines`` replacing the values of its defines of those names."""
+    if kind != "grammar":
+        raise PlantgenError(f"{path}: defines can be set for a grammar, not a {kind}")
+    own = data.get("defines")
+    own = dict(own) if isinstance(own, dict) else {}
+    unknown = sorted(set(defines) - set(own))
+    if unknown:
+        raise PlantgenError(f"{path}: the grammar has no define {', '.join(unknown)} "
+                            f"(it defines: {', '.join(sorted(map(str, own))) or 'none'})")
+    own.update(defines)
+    return {**data, "defines": own}
+
+
+def grow(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
+         max_modules: int | None = None, limits: Limits | None = None, allow_paths=()) -> Skeleton:
+    """Grow a grammar or a scene file into a Skeleton (the twin of ``plantgen grow``)."""
+    return grow_file(path, seed=seed, iterations=iterations, max_modules=max_modules, limits=limits,
+                     allow_paths=allow_paths).skeleton
+
+
+def load_skeleton(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
+                  limits: Limits | None = None, allow_paths=()) -> Skeleton:
+    """Any input kind (grammar, scene, ``.npz``, ``.swc``) to a Skeleton."""
+    return grow_file(path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths).skeleton
