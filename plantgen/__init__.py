@@ -10,7 +10,7 @@ The public API mirrors the command line::
     hits = plantgen.trace("pine", origins, directions)     # -> plantgen.TraceResult
 """
 
-from .geometry.skeleton import Skeleton, SkeletonError
+from .geometry.skeletons.skeleton import Skeleton, SkeletonError
 
 __version__ = "0.1.0"
 

@@ -2,7 +2,7 @@
 
 Per frame (§4: "the splitting planes between segments have to be recomputed in each time
 step"): the moving instances' skeleton is posed at time t
-(:func:`plantgen.geometry.motion.pose`) and skinned again (:func:`skin_skeleton`,
+(:func:`plantgen.geometry.skeletons.motion.pose`) and skinned again (:func:`skin_skeleton`,
 vectorised over every segment: cutting planes and texture offsets); the static instances
 are skinned once. A scene without motion is skinned once, whatever the frame count.
 Leaves (the grammar's polygons) move rigidly with the segment each hangs from: turned by
@@ -12,7 +12,7 @@ that segment's total turn about its instance's axis, about the segment's start
 The GPU side is a record sink (:class:`plantgen.gl.records.RecordStream`): it packs
 and uploads the static rows once and the moving rows every frame. A sink that poses on
 the GPU (:class:`plantgen.gl.pose.PoseStream`, ``poses_on_gpu``) is handed the plan of
-the moving rows instead (:class:`~plantgen.geometry.sway_skin.SwaySkin`, rest data
+the moving rows instead (:class:`~plantgen.geometry.skeletons.sway_skin.SwaySkin`, rest data
 uploaded once) and writes their records itself from t: the CPU's work per frame is a
 few bytes and a dispatch. A frame where a joint may turn sharp (knuckle fans: more rows,
 :meth:`SwaySkin.may_be_sharp`) is skinned on the CPU and written as before. The
@@ -30,14 +30,14 @@ from typing import Protocol
 
 import numpy as np
 
-from .geometry.frusta import Frusta, frusta_bounds
 from .geometry.mesh import TessellatedMesh
-from .geometry.motion import pose, sway_rig, turn_at, turn_coefficients
 from .geometry.polygons import Polygons
-from .geometry.skeleton import Skeleton
-from .geometry.skin import skin_skeleton
+from .geometry.skeletons.frusta import Frusta, frusta_bounds
+from .geometry.skeletons.motion import pose, sway_rig, turn_at, turn_coefficients
+from .geometry.skeletons.skeleton import Skeleton
+from .geometry.skeletons.skin import skin_skeleton
+from .geometry.skeletons.sway_skin import SwaySkin
 from .geometry.skinned_mesh import SkinnedMesh, bind_vertices
-from .geometry.sway_skin import SwaySkin
 from .geometry.vec import rotate
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink", "PoseSink"]

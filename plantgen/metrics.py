@@ -17,7 +17,7 @@ plantgen's: y up, model units.
   forester's tree height is measured from the ground at the stem. (Until this was
   written down it was the box's extent along y, which counted it.)
 - **volume**: the sum of the frusta, πh/3·(r1² + r1·r2 + r2²); trunk and branch volumes
-  split it by branch (:mod:`plantgen.geometry.topology`: the trunk is branch 0, the
+  split it by branch (:mod:`plantgen.geometry.skeletons.topology`: the trunk is branch 0, the
   chain of segment 0). Lengths likewise.
 - **DBH**: the trunk's diameter at breast height, 1.3 m along the trunk's axis from its
   base (forestry's rule for a leaning stem, and TreeQSM's: the trunk cylinders' lengths
@@ -50,8 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry.skeleton import Skeleton
-from .geometry.topology import Branches, branches
+from .geometry.skeletons.skeleton import Skeleton
+from .geometry.skeletons.topology import Branches, branches
 from .geometry.vec import unit
 
 __all__ = ["BREAST_HEIGHT_M", "CrownProjection", "TreeMetrics", "crown_projection", "end_discs", "may_reach_hull",

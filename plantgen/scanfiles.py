@@ -46,8 +46,8 @@ import numpy as np
 
 from .errors import PlantgenError
 from .files import check_finite, check_output, write_atomically
-from .geometry.frames import UP_AXES, up_rotation
 from .geometry.scan import LABELS, PART_NAMES, PointCloud
+from .geometry.skeletons.frames import UP_AXES, up_rotation
 
 __all__ = ["FILE_LABELS", "POINT_SUFFIXES", "PointFileError", "check_point_output", "las_scale", "point_format",
            "read_points", "write_points"]

@@ -62,7 +62,7 @@ from .errors import PlantgenError
 from .files import read_yaml, real_path
 from .geometry.camera import Camera, CameraError, box_corners
 from .geometry.polygons import Polygons
-from .geometry.skeleton import Skeleton, SkeletonError
+from .geometry.skeletons.skeleton import Skeleton, SkeletonError
 from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
 from .limits import Limits
 from .limits import limits as default_limits

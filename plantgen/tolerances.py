@@ -71,7 +71,7 @@ class Tolerances:
 
     section_reach_cos: float = 0.05
     """Dimensionless: floor of ``cos θ - |k|·sin θ`` (θ a plane's tilt, k the slope) in
-    :func:`plantgen.geometry.frusta.frusta_bounds`: an elliptical cut reaches at most
+    :func:`plantgen.geometry.skeletons.frusta.frusta_bounds`: an elliptical cut reaches at most
     1/0.05 = 20 radii from where its plane crosses the axis."""
 
     pyramid_grazing: float = 0.05
@@ -104,7 +104,7 @@ class Tolerances:
 
     seam_radius_change: float = 0.25
     """Relative (to the skeleton's radius): closing a seam moves a continuing child's base
-    radius by about r·(k_c² - k_p²)/2 (``plantgen.geometry.skin.seam_radii``); a joint that
+    radius by about r·(k_c² - k_p²)/2 (``plantgen.geometry.skeletons.skin.seam_radii``); a joint that
     would move it by more than this (a short child tapering steeply next to its radius,
     whose generators must then touch a sphere nearly as large as the child) becomes a
     knuckle instead, which is closed at any taper."""
@@ -123,7 +123,7 @@ class Tolerances:
     """Dimensionless: where the interpolated normal (8) makes a cosine below this with the
     direction to the eye on a surface that faces the eye (the inside of a bend seen from
     outside), it is bent towards the true normal instead of being negated
-    (``plantgen.geometry.frusta.facing_normals``, GLSL ``facing_normal``): its cosine
+    (``plantgen.geometry.skeletons.frusta.facing_normals``, GLSL ``facing_normal``): its cosine
     before normalising comes back to this, so after normalising it stays positive."""
 
     fan_length: float = 1e-9

@@ -20,7 +20,7 @@ import numpy as np
 from .errors import PlantgenError
 from .geometry.reference import Hits, PairTester, shade_hits
 from .geometry.scan import PART_NAMES, ScanTarget, SceneTarget, scan_target, scene_target
-from .geometry.skeleton import Skeleton
+from .geometry.skeletons.skeleton import Skeleton
 from .geometry.vec import cross, dot
 from .limits import Limits
 from .limits import limits as default_limits

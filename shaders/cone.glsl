@@ -60,7 +60,7 @@ Frustum frustum_from_record(vec4 r0, vec4 r1, vec4 r2, vec4 r3, vec4 r4, vec4 r5
 float texture_v(Frustum f, float v) { return (f.v_slot + v) / f.v_slots; }
 
 // k = (r2 - r1)/h, the slope of a cone with radii r1, r2 an axis length h apart
-// (plantgen.geometry.frusta.cone_slope).
+// (plantgen.geometry.skeletons.frusta.cone_slope).
 float cone_slope(float r1, float r2, float h) { return (r2 - r1) / h; }
 
 float frustum_slope(Frustum f) { return cone_slope(f.r1, f.r2, f.h); }
@@ -75,7 +75,7 @@ float joint_slack(Frustum f, bool open_end) {
 
 // Axial height y where the generator C1 + y*axis + (r1 + k*y)*e of a cone meets the plane
 // n.x = d, with gap = d - n.C1, n_axis = n.axis, n_radial = n.e: the GLSL twin of
-// plantgen.geometry.frusta.plane_height, y = (gap - r1*n_radial) / (n_axis + k*n_radial).
+// plantgen.geometry.skeletons.frusta.plane_height, y = (gap - r1*n_radial) / (n_axis + k*n_radial).
 // `rise` is the denominator, the generator's approach to the plane (0: parallel to it).
 // With min_rise > 0 the divisor keeps rise's sign but at least min_rise in size (a finite
 // height for a generator parallel to the plane).

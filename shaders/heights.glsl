@@ -1,5 +1,5 @@
 // Relief height maps shared by every program that samples them (ray caster, raster).
-// Needs MAX_MATERIALS. Bilinear height in [0, 1] as plantgen.geometry.relief.sample_height
+// Needs MAX_MATERIALS. Bilinear height in [0, 1] as plantgen.geometry.skeletons.relief.sample_height
 // computes it: u repeats, v clamps, texel centres at (i + 0.5) / size.
 //
 // One texture instruction per sample: textureGather returns the 2x2 texels around the

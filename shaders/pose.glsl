@@ -1,5 +1,5 @@
 // The sway's pose and skin on the GPU (compute): paper §4's "could be moved to the vertex
-// shader", the twin of plantgen.geometry.sway_skin.SwaySkin (pose, then skin) for the
+// shader", the twin of plantgen.geometry.skeletons.sway_skin.SwaySkin (pose, then skin) for the
 // moving rows of an animation, written straight into the ray caster's record buffer.
 //
 // Every joint of a tree turns about the tree's axis k, so segment i points along its rest

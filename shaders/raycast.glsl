@@ -49,7 +49,7 @@ float edge_cut(vec4 plane, vec3 base, vec3 axis, vec3 q, float r1, float k, out 
 
 // Lowest (highest) axial height of the section of the cone r1 + k*y by `plane` over all
 // generators: the extremes sit where n.e_r = -+|n_perp| (the GLSL twin of
-// plantgen.geometry.frusta._axial_extent).
+// plantgen.geometry.skeletons.frusta._axial_extent).
 vec2 plane_axial_range(vec4 plane, vec3 base, vec3 axis, float r1, float k) {
     float na = dot(plane.xyz, axis);
     float n_perp = sqrt(max(1.0 - na * na, 0.0));
@@ -60,7 +60,7 @@ vec2 plane_axial_range(vec4 plane, vec3 base, vec3 axis, float r1, float k) {
     return vec2(min(y_minus, y_plus), max(y_minus, y_plus));
 }
 
-// The bounding pyramid of §2.6, as plantgen.geometry.frusta.bounding_pyramids builds it:
+// The bounding pyramid of §2.6, as plantgen.geometry.skeletons.frusta.bounding_pyramids builds it:
 // the square pyramid around the cone r1 + k*y (here grown by the shell and a padding),
 // its four edge lines cut by the two planes, each edge keeping the lower and the higher
 // of its two cuts (so rows whose planes cross inside stay covered). If any edge meets a

@@ -31,7 +31,7 @@ vec3 material_albedo(int material, float texel) {
 }
 
 // The shading normal that never turns its back on the eye (the numpy twin:
-// plantgen.geometry.frusta.facing_normals). n: the interpolated normal (8); n_true: the
+// plantgen.geometry.skeletons.frusta.facing_normals). n: the interpolated normal (8); n_true: the
 // surface's own; to_eye: unit. Seen from behind (inside a tube) both are negated first;
 // then where n's cosine with the eye is below TOL_FACING_MIN it is bent towards n_true by
 // the least amount that brings it back: continuous, never negated.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 
 
 def chain_skeleton(bends_deg=(), lengths=1.0, radii=0.1, *, start=(0.0, 0.0, 0.0),

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 
 RADIUS, LENGTH = 0.5, 2.0
 

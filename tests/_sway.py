@@ -2,7 +2,7 @@
 plant: the reference the exported animations (glTF skins in three.js, UsdSkel in
 usd-core) are compared with.
 
-The pose is :func:`plantgen.geometry.motion.pose` of the copy (its sway in the plant's
+The pose is :func:`plantgen.geometry.skeletons.motion.pose` of the copy (its sway in the plant's
 own frame: the scene's axis turned back by the copy's rotation), skinned again (the
 joints' cutting planes and seam radii of the new pose) and tessellated at the export's
 level. One thing is carried over from the rest instead of being worked out again: each
@@ -20,10 +20,10 @@ import dataclasses
 import numpy as np
 
 from plantgen.geometry.mesh import TessellatedMesh, tessellate
-from plantgen.geometry.motion import pose, sway_rig, turn_at, turn_coefficients
 from plantgen.geometry.polygons import Polygons
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.motion import pose, sway_rig, turn_at, turn_coefficients
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.vec import rotate
 
 

@@ -23,7 +23,7 @@ from dask.distributed import Client, LocalCluster  # noqa: E402
 
 from plantgen.batch import parse_spec, plant_seed, run_batch  # noqa: E402
 from plantgen.batch.manifest import read_manifest  # noqa: E402
-from plantgen.geometry.skeleton import Skeleton  # noqa: E402
+from plantgen.geometry.skeletons.skeleton import Skeleton  # noqa: E402
 
 TWIG = """\
 name: twig
@@ -177,7 +177,7 @@ def test_the_glb_labels_every_vertex_with_its_branch_order(tmp_path):
 
     from plantgen.batch.plant import make_plant
     from plantgen.batch.spec import simple_spec
-    from plantgen.geometry.topology import branches
+    from plantgen.geometry.skeletons.topology import branches
 
     (tmp_path / "twig.yaml").write_text(TWIG)
     (tmp_path / "glb").mkdir()
@@ -253,7 +253,7 @@ def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
     of ``plantgen export`` at the same level; the grammar without smooth bends gives
     another skin, another picture and another triangle count."""
     from plantgen.batch.plant import view_camera
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
     from plantgen.pipeline import grow_file, model_leaves, resolve_input, skin_model
 
     data = yaml.safe_load(resolve_input("saguaro").read_text())

@@ -23,7 +23,7 @@ from test_batch import rows_of  # noqa: E402
 from plantgen.batch.manifest import MANIFEST_NAME  # noqa: E402
 from plantgen.batch.plant import measure  # noqa: E402
 from plantgen.batch.schema import COLUMNS, FORMAT, arrow_schema  # noqa: E402
-from plantgen.geometry.skeleton import Skeleton  # noqa: E402
+from plantgen.geometry.skeletons.skeleton import Skeleton  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from _cli import run_cli
 from plantgen import table1
 from plantgen.errors import PlantgenError
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.table1 import (
     PAPER_TABLE1,
     RELIEF_ERROR,
@@ -481,7 +481,7 @@ def test_quality_criterion_picks_a_higher_level_for_a_finer_relief_map(gl_ctx, t
     """Same column, relief of 2 ribs vs 14 ribs around: GS+R needs more columns (a higher
     m) to match the ray caster's error on the fine map; the ray caster's own error stays
     small on both."""
-    from plantgen.geometry import relief
+    from plantgen.geometry.skeletons import relief
 
     monkeypatch.setitem(relief._GENERATORS, "ripple_coarse", _ripples(2))
     monkeypatch.setitem(relief._GENERATORS, "ripple_fine", _ripples(14))

@@ -24,7 +24,7 @@ from plantgen.geometry.bvh import (
 )
 from plantgen.geometry.instances import PlacedPlants
 from plantgen.geometry.scan import scan_target, target_hits
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import grow_file, model_leaves
 
 
@@ -262,7 +262,7 @@ def test_two_levels_match_the_merged_plants():
 
 
 def _merged_skeleton(placed):
-    from plantgen.geometry.skeleton import Skeleton
+    from plantgen.geometry.skeletons.skeleton import Skeleton
     f = placed.merged()
     n = len(f)
     return Skeleton(f.base, f.base + f.axis * f.length[:, None], f.r1, f.r2, np.full(n, -1), np.zeros(n, bool),

@@ -19,7 +19,7 @@ from plantgen.benchmarks.draw_skeletons import (
     panel_projection,
 )
 from plantgen.geometry.polygons import Polygons, triangulate
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import grow_file
 
 TWIG = Path(__file__).parent / "data" / "leafy_twig.yaml"

@@ -24,9 +24,9 @@ import plantgen
 from plantgen.exporters import EXPORT_FORMATS, ExportError, Format, Plant, export_mesh, write_plants, write_skeleton
 from plantgen.exporters.formats import FORMAT_KINDS
 from plantgen.exporters.plants import MeshWriter, SkeletonWriter
-from plantgen.geometry.frames import up_rotation
 from plantgen.geometry.mesh import tessellate
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.frames import up_rotation
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import export_model, grow_file
 
 MESH_SUFFIXES = [".glb", ".gltf", ".obj", ".ply", ".stl"]
@@ -289,7 +289,7 @@ def test_plantgen_gltf_passes_the_khronos_gltf_validator(tmp_path, case):
         # A skinned chain with a knuckle and bark relief.
         from _geometry_helpers import chain_skeleton
 
-        from plantgen.geometry.skin import skin_skeleton
+        from plantgen.geometry.skeletons.skin import skin_skeleton
 
         frusta = skin_skeleton(chain_skeleton((30, 150), radii=(0.2, 0.15, 0.12, 0.1)))
         mesh = tessellate(frusta, 2, relief=True)
@@ -302,7 +302,7 @@ def test_plantgen_gltf_passes_the_khronos_gltf_validator(tmp_path, case):
 
 # ---------------------------------------------------------------------------- the command
 def y_skeleton():
-    from plantgen.geometry.skeleton import Skeleton
+    from plantgen.geometry.skeletons.skeleton import Skeleton
 
     start = np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 1, 0]], float)
     end = np.array([[0, 1, 0], [0, 2, 0], [0.2, 3, 0], [0.8, 1.6, 0]], float)
@@ -317,7 +317,7 @@ def test_the_export_command_writes_the_counted_triangles(tmp_path, suffix):
     out = tmp_path / f"y{suffix}"
     code, stdout, stderr = run_cli("export", skel_path, "-o", out, "--subdiv", "2")
     assert code == 0, stderr
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
 
     frusta = skin_skeleton(y_skeleton())
     expected = len(tessellate(frusta, 2).faces)
@@ -358,7 +358,7 @@ def test_a_missing_extra_is_one_line_naming_the_install_command(tmp_path, monkey
 
 
 def test_default_gltf_colours_are_the_renderers_palette(tmp_path):
-    from plantgen.geometry.materials import material_palette
+    from plantgen.geometry.skeletons.materials import material_palette
 
     mesh = two_material_model(0)
     scene = trimesh.load(export_mesh(mesh, tmp_path / "plant.glb"))

@@ -14,10 +14,10 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_meshes
 
 from plantgen.exporters import export_mesh
-from plantgen.geometry.frames import turn_placements
 from plantgen.geometry.mesh import tessellate
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frames import turn_placements
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import export_model, grow_file
 
 ORCHARD = """\
@@ -297,7 +297,7 @@ def test_usd_skeleton_curves_carry_diameters(tmp_path):
     """The skeleton is a BasisCurves guide: one curve per branch, widths = 2·radius."""
     from pxr import Usd, UsdGeom
 
-    from plantgen.geometry.topology import branches
+    from plantgen.geometry.skeletons.topology import branches
 
     skel = grow_file("saguaro").skeleton
     export_model("saguaro", tmp_path / "s.usda", level=0)

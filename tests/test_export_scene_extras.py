@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from _node import assert_khronos_valid, needs_node, three_js_scene
 
-from plantgen.geometry.frames import up_rotation
+from plantgen.geometry.skeletons.frames import up_rotation
 from plantgen.pipeline import export_model, grow_file, scene_extras, skin_model, stage_model
 from plantgen.settings import DEFAULT_SIZE
 

@@ -22,10 +22,10 @@ from plantgen.errors import PlantgenError
 from plantgen.exporters.gltf import byte_weights
 from plantgen.exporters.plants import leaf_parts, material_parts
 from plantgen.exporters.sway import common_period, sway_timeline, vertex_influences
-from plantgen.geometry.frames import up_rotation
 from plantgen.geometry.mesh import tessellate
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frames import up_rotation
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Sway
 from plantgen.pipeline import export_model, grow_file
 from plantgen.settings import KeyframeSettings

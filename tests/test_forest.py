@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import section_points
 from plantgen.geometry.instances import PlacedPlants, detail_order, place_frusta, similarity_parts
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frusta import section_points
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.gl.frame import frame_view
 from plantgen.gl.instanced import eye_copy_draws

@@ -8,7 +8,8 @@ import pytest
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
 
 from plantgen.geometry.camera import auto_camera, box_corners, depth_range
-from plantgen.geometry.frusta import (
+from plantgen.geometry.reference import inside_frusta
+from plantgen.geometry.skeletons.frusta import (
     PYRAMID_TRIANGLES,
     Frusta,
     bounding_pyramids,
@@ -21,9 +22,8 @@ from plantgen.geometry.frusta import (
     surface_uv,
     true_normals,
 )
-from plantgen.geometry.reference import inside_frusta
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stability import surface_samples
 
 
@@ -233,7 +233,7 @@ def test_bounding_pyramids_stay_tight():
 def test_radius_steps_are_modelled_not_fitted():
     start = np.array([[0, 0, 0], [0, 1, 0.0]])
     end = np.array([[0, 1, 0], [0.3, 2, 0.0]])
-    from plantgen.geometry.skeleton import Skeleton
+    from plantgen.geometry.skeletons.skeleton import Skeleton
 
     sk = Skeleton(start, end, [0.5, 0.2], [0.5, 0.15], [-1, 0], [False, True], [0, 0])
     f = skin_skeleton(sk, seam_fit=True)
@@ -327,7 +327,7 @@ def test_auto_camera_frames_every_frustum_inside_the_viewport(direction):
 
 def test_texture_slots_are_checked_where_frusta_are_made():
     # (slot, slots) must name a slot that exists and fit the record's 7-bit fields
-    from plantgen.geometry.frusta import MAX_V_SLOTS
+    from plantgen.geometry.skeletons.frusta import MAX_V_SLOTS
 
     f = skin_skeleton(Skeleton(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.array([0.1]), np.array([0.1]),
                                np.array([-1]), np.array([False]), np.zeros(1, int), ("bark",)))

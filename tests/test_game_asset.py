@@ -17,10 +17,10 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, node_modules, three_script
 from test_export_scene import glb_json
 
-from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.impostor import frame_basis, octahedral_direction, octahedral_uv, view_directions
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frusta import Frusta
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.limits import GAME_LEVEL_TRIANGLES
 
 SMALL = ("--impostor-frames", "4", "--impostor-size", "128")

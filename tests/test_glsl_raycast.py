@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from plantgen.geometry.camera import Camera, auto_camera
-from plantgen.geometry.frusta import Frusta, frusta_bounds
-from plantgen.geometry.materials import MAX_MATERIALS
+from plantgen.geometry.skeletons.frusta import Frusta, frusta_bounds
+from plantgen.geometry.skeletons.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
 from plantgen.gl import material_uniforms as render_materials
 from plantgen.gl.raycast import Raycaster
@@ -28,7 +28,7 @@ FIELDS = ("base", "axis", "length", "r1", "r2", "plane_lo", "plane_hi", "ref_dir
 
 # ---------------------------------------------------------------------------- builders
 def frusta_chain(points, radii, *, shell=0.0, tilt_ends=(None, None)):
-    """Frusta rows (the contract of plantgen.geometry.frusta) along one continuing chain.
+    """Frusta rows (the contract of plantgen.geometry.skeletons.frusta) along one continuing chain.
 
     Joints are cut by the bisector plane of the two axes (the paper's plane (5) when both
     radii at the joint agree); the chain's ends are cut square unless ``tilt_ends`` gives
@@ -423,7 +423,7 @@ def test_only_what_the_settings_ask_for_is_compiled_and_run(gl_ctx):
 def skinned_cases():
     from _geometry_helpers import chain_skeleton, random_tree, y_junction
 
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
 
     cases = {f"bend_{b:g}": chain_skeleton([b, b / 2], lengths=1.0, radii=[0.2, 0.18, 0.15, 0.1])
              for b in (0.0, 1e-8 * 180 / np.pi, 45.0, 90.0, 135.0, 179.0)}
@@ -517,7 +517,7 @@ def test_agrees_with_the_float64_reference(gl_ctx, caster, skinned, name):
 def relief_cases():
     from _geometry_helpers import chain_skeleton, y_junction
 
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
 
     return {"bark_chain": skin_skeleton(chain_skeleton([30.0, 40.0], radii=[0.3, 0.25, 0.2, 0.15])),
             "y_junction": skin_skeleton(y_junction(40.0))}

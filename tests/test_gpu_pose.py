@@ -36,9 +36,9 @@ from test_sway_skin import small_scene
 from plantgen.animation import AnimatedScene
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import tessellate
-from plantgen.geometry.motion import pose, sway_rig
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.motion import pose, sway_rig
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.skinned_mesh import skin_positions
 from plantgen.geometry.stage import Sway
 from plantgen.geometry.vec import ancestor_count
@@ -413,7 +413,7 @@ def test_leaves_sway_with_a_frame_posed_on_the_gpu(gl_ctx, tmp_path):
 def test_the_motion_box_holds_every_frame():
     """The box frames posed on the GPU are drawn with (their depth range, light window)
     holds every frame the CPU skins, at times between the box's samples too."""
-    from plantgen.geometry.frusta import frusta_bounds
+    from plantgen.geometry.skeletons.frusta import frusta_bounds
 
     skeleton, motions = bending_joint()
     for anim in (hard_plants(), AnimatedScene(skeleton, np.zeros(2, int), motions)):

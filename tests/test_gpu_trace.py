@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 
 from plantgen.errors import PlantgenError
 from plantgen.geometry.bvh import BVH, build_bvh
-from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.instances import place_frusta
 from plantgen.geometry.reference import row_boxes
 from plantgen.geometry.scan import ScanTarget, cast_first_returns, scan_target
+from plantgen.geometry.skeletons.frusta import Frusta
 from plantgen.gl.trace import BVH_STACK, LEAF_COUNT_BITS, GpuPlant, trace_rays, upload_bvh
 
 #: float32 rounding of a hit's distance: the cone's quadratic in float32 after
@@ -394,7 +394,7 @@ def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
     from plantgen.geometry.bvh import build_scene_bvh, trace_scene
     from plantgen.geometry.instances import PlacedPlants
     from plantgen.geometry.scan import target_hits
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
     from plantgen.gl.trace import COPY_BYTES
 
     skel = _skeleton(30, seed=4)

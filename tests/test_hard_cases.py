@@ -8,7 +8,7 @@ import pytest
 from _geometry_helpers import chain_skeleton, y_junction
 
 from plantgen.geometry.reference import intersect_frusta
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stability import HARD_CASES, evaluate_case, medial_axis_rays, model_size
 
 

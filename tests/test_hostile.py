@@ -27,8 +27,8 @@ from _cli import run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.swc import write_swc
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.swc import write_swc
 from plantgen.lsystem.grammar import parse_grammar
 from plantgen.pipeline import grow
 
@@ -279,7 +279,7 @@ def test_skins_and_meshes_are_checked_finite_before_they_are_drawn_or_written():
     from types import SimpleNamespace
 
     from plantgen.errors import PlantgenError
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
     from plantgen.pipeline import check_finite_frusta, check_finite_mesh
 
     frusta = skin_skeleton(grow("saguaro"))

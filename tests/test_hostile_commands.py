@@ -19,8 +19,8 @@ import pytest
 from _cli import run_cli
 from test_hostile import assert_refused, run_cases, write
 
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.swc import read_swc
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.swc import read_swc
 
 # A small grammar: a chain of 2,048 segments (11 doublings), cheap to grow.
 CHAIN = "name: chain\naxiom: F\niterations: 11\nrules: ['F -> FF']\n"

@@ -17,9 +17,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import cone_slope, seam_gap
 from plantgen.geometry.reference import intersect_frusta, render_reference
-from plantgen.geometry.skin import skin_skeleton, sphere_base_radius
+from plantgen.geometry.skeletons.frusta import cone_slope, seam_gap
+from plantgen.geometry.skeletons.skin import skin_skeleton, sphere_base_radius
 from plantgen.geometry.stability import medial_axis_rays
 
 # The issue's held-out chains: (bends in degrees, joint radii root first), lengths 1.
@@ -155,7 +155,7 @@ def test_interpolated_normals_turn_away_on_bends_and_shading_normals_do_not():
     """(8) faces away from the eye on the inside of a bend seen from outside (hundreds of
     pixels here); the reference's shading normals never do, are (8) itself wherever (8)
     faces the eye by more than ``tol.facing_min``, and stay continuous."""
-    from plantgen.geometry.frusta import facing_normals, surface_normals
+    from plantgen.geometry.skeletons.frusta import facing_normals, surface_normals
     from plantgen.tolerances import tol
 
     frusta = skin_skeleton(BENT_ARM)
@@ -188,8 +188,8 @@ def test_no_lit_pixel_is_darker_than_its_ambient_term(gl_ctx):
     sees (off silhouettes)
     is at least the ambient term of the reference's shading normal (darkest
     albedo of the material, sky light 0.5 + 0.5·n_y); negating (8) left black slivers."""
-    from plantgen.geometry.materials import material_palette
     from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.skeletons.materials import material_palette
     from plantgen.gl.material_uniforms import AMBIENT_COLOR
     from plantgen.gl.raster import RasterRenderer
     from plantgen.gl.raycast import Raycaster

@@ -15,8 +15,8 @@ import pytest
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import tessellate
 from plantgen.geometry.polygons import Polygons
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.gl.raster import RasterRenderer
 from plantgen.gl.raycast import Raycaster

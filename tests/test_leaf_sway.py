@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from plantgen.animation import AnimatedScene
-from plantgen.geometry.motion import pose, sway_rig
+from plantgen.geometry.skeletons.motion import pose, sway_rig
 from plantgen.lsystem.turtle import interpret_plant
 from plantgen.pipeline import grow_file, prepare_model
 

@@ -8,7 +8,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from plantgen.geometry.frusta import ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals, surface_uv
 from plantgen.geometry.mesh import (
     bands_along,
     columns_around,
@@ -16,7 +15,8 @@ from plantgen.geometry.mesh import (
     tessellate,
     triangle_count,
 )
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frusta import ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals, surface_uv
+from plantgen.geometry.skeletons.skin import skin_skeleton
 
 
 # ---------------------------------------------------------------------------- builders
@@ -87,7 +87,7 @@ def cone_residual(frusta, rows, points, offset=0.0):
 
 
 def reference_uv(frusta, rows, points):
-    """(6)-(7) of the docstring of plantgen.geometry.frusta, for checking the vertices."""
+    """(6)-(7) of the docstring of plantgen.geometry.skeletons.frusta, for checking the vertices."""
     a, ref, c1 = frusta.axis[rows], frusta.ref_dir[rows], frusta.base[rows]
     b = np.cross(a, ref)
     rel = points - c1
@@ -359,7 +359,7 @@ def test_chains_are_found_from_shared_planes_when_parent_row_is_absent():
 
 
 def test_default_relief_heights_are_the_relief_modules_maps():
-    from plantgen.geometry import relief
+    from plantgen.geometry.skeletons import relief
 
     frusta = skinned_models()["bent chain"]
     flat = tessellate(frusta, 2)

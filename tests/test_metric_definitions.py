@@ -14,7 +14,7 @@ from _geometry_helpers import chain_skeleton
 from scipy.spatial import ConvexHull
 
 from plantgen.exporters.qsm import cylinder_model
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.metrics import tree_metrics
 from plantgen.pipeline import grow_file
 

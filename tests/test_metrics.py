@@ -1,4 +1,4 @@
-"""Tree-level figures (plantgen.metrics) and branch structure (plantgen.geometry.topology)
+"""Tree-level figures (plantgen.metrics) and branch structure (plantgen.geometry.skeletons.topology)
 on shapes with known answers: cylinders, cones, leaning trunks, crowns of known area."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.topology import branches
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.topology import branches
 from plantgen.metrics import crown_projection, geometry_bounds, segment_volumes, tree_metrics
 from plantgen.pipeline import grow_file
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from plantgen._resources import grammars_dir
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.lsystem.derive import derive
 from plantgen.lsystem.grammar import load_grammar
 from plantgen.lsystem.turtle import interpret

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from plantgen.geometry.motion import pose, sway_rig
+from plantgen.geometry.skeletons.motion import pose, sway_rig
 from plantgen.geometry.stage import Sway
 from plantgen.lsystem import derive, interpret, parse_grammar
 
@@ -12,7 +12,7 @@ def two_plants():
     g = parse_grammar({"axiom": "!(0.2) A", "iterations": 4, "turtle": {"angle": 30},
                        "rules": ["A -> F [+A] [-A] /(90) F A"]}, "t.yaml")
     one = interpret(derive(g), g.turtle, g.materials)
-    from plantgen.geometry.skeleton import Skeleton
+    from plantgen.geometry.skeletons.skeleton import Skeleton
     m = np.eye(4)
     m[0, 3] = 10
     skel = Skeleton.concatenate([one, one.transformed(m)])

@@ -12,7 +12,7 @@ from _cli import run_cli
 from scipy.io import loadmat
 
 from plantgen.exporters.qsm import CYLINDER_COLUMNS, cylinder_model, pieces_for, write_qsm
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.metrics import segment_volumes
 from plantgen.pipeline import export_model, grow_file
 

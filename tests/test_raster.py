@@ -7,8 +7,8 @@ import pytest
 from test_mesh import BENT, chain_frusta, concat_frusta
 
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import frusta_bounds
 from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.skeletons.frusta import frusta_bounds
 from plantgen.gl.raster import RasterRenderer, gs_buffer_bytes
 from plantgen.gl.raycast import Raycaster
 from plantgen.gl.records import rc_buffer_bytes
@@ -122,7 +122,7 @@ def test_gs_plus_r_converges_to_the_relief_ray_caster(gl_ctx):
 # passes as RC: the mesh and the ground write the light's depth map, both sample it.
 from test_shadows import GROUND, column, light_towards, top_down_camera  # noqa: E402
 
-from plantgen.geometry.skin import skin_skeleton  # noqa: E402
+from plantgen.geometry.skeletons.skin import skin_skeleton  # noqa: E402
 from plantgen.gl.passes import ShadowSettings  # noqa: E402
 
 

@@ -11,9 +11,7 @@ from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry import relief
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import Frusta, surface_uv, true_normals
 from plantgen.geometry.instances import row_spheres
 from plantgen.geometry.reference import (
     difference_of_products,
@@ -24,7 +22,9 @@ from plantgen.geometry.reference import (
     shade_hits,
     solve_quadratic,
 )
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons import relief
+from plantgen.geometry.skeletons.frusta import Frusta, surface_uv, true_normals
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stability import hit_residuals, medial_axis_rays, surface_samples
 
 

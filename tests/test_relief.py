@@ -4,7 +4,7 @@ CLAMP_TO_EDGE (v) with texel centres at (i + 0.5)/W, as the GLSL sampler must be
 import numpy as np
 import pytest
 
-from plantgen.geometry import relief
+from plantgen.geometry.skeletons import relief
 
 
 @pytest.mark.parametrize("name", relief.MATERIALS)

@@ -11,9 +11,9 @@ import pytest
 from test_glsl_raycast import HARD_CASES, TEX_H, TEX_W, frusta_chain, look_at, relief_cases, silhouette_edges
 
 from plantgen.geometry.camera import auto_camera
-from plantgen.geometry.frusta import Frusta
-from plantgen.geometry.materials import MAX_MATERIALS
 from plantgen.geometry.reference import render_reference
+from plantgen.geometry.skeletons.frusta import Frusta
+from plantgen.geometry.skeletons.materials import MAX_MATERIALS
 from plantgen.gl import material_uniforms as render_materials
 from plantgen.gl.raycast import Raycaster
 from plantgen.settings import RaycastSettings
@@ -178,7 +178,7 @@ def test_a_smoothed_bend_marches_the_texture_slots_the_reference_does(gl_ctx, mo
     # and must hit the surface the float64 reference hits
     from _geometry_helpers import chain_skeleton
 
-    from plantgen.geometry.skin import skin_skeleton
+    from plantgen.geometry.skeletons.skin import skin_skeleton
 
     table = np.zeros((TEX_H, TEX_W), np.uint8)
     table[::8, :] = 255

@@ -10,7 +10,7 @@ from _cli import run_cli
 from PIL import Image
 
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
 
 SIZE = "96x72"
 

@@ -15,8 +15,8 @@ from PIL import Image
 
 import plantgen
 from plantgen.geometry.camera import Camera, auto_camera, orbit_angles, orbit_direction
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import load_skeleton
 
 SIZE = "96x72"

@@ -15,9 +15,9 @@ from _geometry_helpers import chain_skeleton
 
 from plantgen.geometry.bvh import build_bvh
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import Frusta
 from plantgen.geometry.reference import row_boxes
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frusta import Frusta
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl import trace
 from plantgen.gl.rt import RayTracer
 from plantgen.gl.trace import GpuPlant, row_bounds, trace_rays, upload_bvh

@@ -16,7 +16,7 @@ from _cli import run_cli
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.instances import PlacedPlants
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.gl.raycast import Raycaster
 from plantgen.gl.rt import RayTracer

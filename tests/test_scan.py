@@ -24,9 +24,9 @@ from plantgen.geometry.scan import (
     scan_target,
     scanner_positions,
 )
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
-from plantgen.geometry.topology import branches
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
+from plantgen.geometry.skeletons.topology import branches
 from plantgen.limits import LimitError, Limits
 from plantgen.pipeline import grow_file, skin_model
 

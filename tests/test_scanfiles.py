@@ -11,8 +11,8 @@ import pytest
 from _scan_helpers import labelled_residuals
 
 from plantgen.geometry.scan import LABELS, ScanSettings, scan_plant
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import grow_file, skin_model
 from plantgen.scanfiles import (
     FILE_LABELS,

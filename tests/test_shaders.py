@@ -133,7 +133,7 @@ def test_a_misspelt_uniform_fails_loudly_and_an_inactive_one_is_passed_over(gl_c
 
 def test_every_program_gets_the_shared_defines():
     """MAX_MATERIALS and the tolerances reach GLSL from their one Python home."""
-    from plantgen.geometry.materials import MAX_MATERIALS
+    from plantgen.geometry.skeletons.materials import MAX_MATERIALS
     from plantgen.gl.shaders import shared_defines
 
     src = shader_source("raycast.glsl", "FRAGMENT_SHADER")

@@ -13,8 +13,8 @@ from test_shadows import GROUND, light_towards
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.mesh import tessellate
 from plantgen.geometry.polygons import Polygons
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl.frame import ShadowKey
 from plantgen.gl.passes import LightWindow
 from plantgen.gl.raster import RasterRenderer

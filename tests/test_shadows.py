@@ -9,8 +9,8 @@ import pytest
 
 from plantgen.geometry.camera import Camera
 from plantgen.geometry.reference import intersect_frusta
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.gl.raycast import Raycaster
 from plantgen.settings import RaycastSettings, ShadowSettings
@@ -194,7 +194,7 @@ def test_one_corner_texel_holds_the_four_heights_a_gather_returns():
     """The light's march fetches a bilinear cell's four heights in one texel
     (material_uniforms.corner_maps): interpolating them as shaders/heights.glsl does gives
     the reference's bilinear height (u repeats, v clamps), at the map's edges too."""
-    from plantgen.geometry.relief import height_map, sample_height
+    from plantgen.geometry.skeletons.relief import height_map, sample_height
     from plantgen.gl.material_uniforms import corner_maps
 
     maps = np.stack([height_map("bark", (16, 24)), height_map("stone", (16, 24))])

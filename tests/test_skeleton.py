@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from plantgen.geometry.skeleton import Skeleton, SkeletonError
+from plantgen.geometry.skeletons.skeleton import Skeleton, SkeletonError
 from plantgen.scene import rotation_matrix
 
 

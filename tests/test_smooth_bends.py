@@ -15,11 +15,11 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from plantgen.benchmarks.skinning import torus_bend_error
-from plantgen.geometry.frusta import seam_gap
 from plantgen.geometry.reference import intersect_frusta
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
-from plantgen.geometry.smooth import DEFAULT_RADIUS_FACTOR, MIN_ARC_RATIO, smooth_bends
+from plantgen.geometry.skeletons.frusta import seam_gap
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
+from plantgen.geometry.skeletons.smooth import DEFAULT_RADIUS_FACTOR, MIN_ARC_RATIO, smooth_bends
 from plantgen.geometry.stability import chain, medial_axis_rays
 
 
@@ -262,7 +262,7 @@ def test_the_grammars_turtle_key_smooths_as_the_option_does(tmp_path):
 
 def _rim_texture_v(f, row, top: bool):
     """The texture v (surface_uv) of points on ``row``'s rim at its upper (``top``) or lower plane."""
-    from plantgen.geometry.frusta import surface_uv
+    from plantgen.geometry.skeletons.frusta import surface_uv
 
     phi = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
     e1 = f.ref_dir[row]
@@ -297,8 +297,8 @@ def test_an_arc_spans_one_texture_period_and_v_runs_on(lengths):
 def test_texture_slots_reach_the_mesh_and_the_raster_renderers_rows():
     # GS: the mesh's texture v, less its row's chain offset (what raster.glsl subtracts),
     # is the texture v the ray caster and the reference take (surface_uv)
-    from plantgen.geometry.frusta import surface_uv
     from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.skeletons.frusta import surface_uv
     from plantgen.gl.raster import row_data
 
     f = skin_skeleton(chain([80.0], lengths=1.0, radii=0.1), smooth_bends=10.0)

@@ -1,4 +1,4 @@
-"""The per-frame skinning of swaying skeletons (plantgen.geometry.sway_skin) equals the
+"""The per-frame skinning of swaying skeletons (plantgen.geometry.skeletons.sway_skin) equals the
 general path, skin_skeleton(pose(...)), at every frame: same rows, same planes, frames
 and u offsets to float64 round-off; sharp frames are handed back to the general path."""
 
@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from plantgen.animation import AnimatedScene
-from plantgen.geometry.frusta import ROW_FIELDS
-from plantgen.geometry.motion import pose, sway_rig
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons.frusta import ROW_FIELDS
+from plantgen.geometry.skeletons.motion import pose, sway_rig
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
+from plantgen.geometry.skeletons.sway_skin import PathSum, SwaySkin
 from plantgen.geometry.stage import Sway
-from plantgen.geometry.sway_skin import PathSum, SwaySkin
 from plantgen.pipeline import grow_file
 
 TIMES = (0.0, 0.37, 1.1, 2.9, 1e3)
@@ -158,7 +158,7 @@ def test_per_frame_frusta_are_what_the_checked_constructor_builds(cacti):
     """Frusta.from_rows skips the checks: the fast path's rows must already have the
     contract's dtypes, shapes and layout, and open ends as the constructor derives them;
     the records packed into a reused buffer equal freshly packed ones."""
-    from plantgen.geometry.frusta import Frusta
+    from plantgen.geometry.skeletons.frusta import Frusta
     from plantgen.gl.records import pack_records
 
     skeleton, rig = cacti

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from _cli import run_cli
 
-from plantgen.geometry.skeleton import Skeleton, SkeletonError
-from plantgen.geometry.swc import read_swc, swc_lines, write_swc
+from plantgen.geometry.skeletons.skeleton import Skeleton, SkeletonError
+from plantgen.geometry.skeletons.swc import read_swc, swc_lines, write_swc
 from plantgen.metrics import segment_lengths
 from plantgen.pipeline import grow_file
 

@@ -218,7 +218,7 @@ def _leaf_colours(doc: dict, blob: bytes) -> np.ndarray:
 def test_bush_materials_are_one_per_name_and_leaves_keep_their_shades(tmp_path):
     """abop_bush's colour table names bark twice and leaf 13 times (' steps through it):
     one material of each name, and each leaf its own shade (glTF: COLOR_0)."""
-    from plantgen.geometry.materials import material_palette
+    from plantgen.geometry.skeletons.materials import material_palette
 
     export_model("abop_bush", tmp_path / "bush.glb", level=0)
     doc, blob = _glb(tmp_path / "bush.glb")

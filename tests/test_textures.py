@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from plantgen.exporters.textures import bake_textures, texture_image
-from plantgen.geometry import relief
 from plantgen.geometry import textures as tx
-from plantgen.geometry.materials import material_palette
 from plantgen.geometry.mesh import columns_around, generator_points, tessellate
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import skin_skeleton
+from plantgen.geometry.skeletons import relief
+from plantgen.geometry.skeletons.materials import material_palette
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.images import png_bytes
 
 

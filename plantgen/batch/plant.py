@@ -24,8 +24,8 @@ from ..files import write_atomically
 from ..geometry.camera import Camera, auto_camera
 from ..geometry.mesh import tessellate
 from ..geometry.scan import scan_plant
-from ..geometry.swc import write_swc
-from ..geometry.topology import branches
+from ..geometry.skeletons.swc import write_swc
+from ..geometry.skeletons.topology import branches
 from ..gl.raycast import Raycaster, RaycastSettings, label_image
 from ..images import write_png
 from ..limits import Limits

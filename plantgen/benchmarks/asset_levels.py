@@ -21,7 +21,7 @@ from PIL import Image, ImageDraw
 
 from ..geometry.leaf_cards import leaf_cards
 from ..geometry.mesh import tessellate
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.impostor import bake_impostor, bounding_sphere, impostor_camera
 from ..pipeline import grow_file, plant_detail

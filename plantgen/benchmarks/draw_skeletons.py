@@ -27,9 +27,9 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from .._resources import shipped_grammar
-from ..geometry.materials import PALETTE, material_colour
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.materials import PALETTE, material_colour
+from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.stage import Ground
 from ..pipeline import grow_file
 from .arguments import shipped_model_paths
@@ -118,7 +118,7 @@ def panel_projection(points: np.ndarray, panel_px: int, panel: int):
 
 def leaf_colour(name: str) -> tuple[int, int, int]:
     """The fill of leaves of material ``name``: the drawing's colour for it, else the
-    renderers' (sRGB of :func:`~plantgen.geometry.materials.material_colour`) where their
+    renderers' (sRGB of :func:`~plantgen.geometry.skeletons.materials.material_colour`) where their
     palette knows the name, else :data:`LEAF_GREEN`."""
     if name in MATERIAL_COLOURS:
         return MATERIAL_COLOURS[name]

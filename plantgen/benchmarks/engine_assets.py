@@ -41,7 +41,7 @@ import numpy as np
 from ..files import write_atomically
 from ..geometry.impostor import frame_basis, octahedral_uv, view_directions
 from ..geometry.leaf_cards import leaf_cards
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.context import gl_context, renderer_name
 from ..gl.impostor import DISTANCE_FACTOR, bake_impostor, bounding_sphere, impostor_camera

@@ -35,7 +35,7 @@ import numpy as np
 from ..files import write_atomically
 from ..geometry.camera import box_corners
 from ..geometry.instances import PlacedMeshes, PlacedPlants
-from ..geometry.materials import material_height_maps
+from ..geometry.skeletons.materials import material_height_maps
 from ..gl.context import renderer_name
 from ..gl.frame import frame_view
 from ..gl.instanced import COPY_UNIFORM_BYTES, eye_copy_draws

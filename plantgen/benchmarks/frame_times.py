@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from ..geometry.camera import auto_camera
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES, rc_buffer_bytes

@@ -16,7 +16,7 @@ import statistics
 import sys
 
 from ..geometry.mesh import tessellate
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import renderer_name
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster

@@ -22,7 +22,7 @@ from PIL import Image
 from ..exporters import Plant
 from ..exporters.textures import bake_textures, split_by_aspect
 from ..geometry.mesh import outer_shell_mesh, tessellate
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.textures import parallax_map
 from ..gl.context import gl_context
 from ..gl.raster import RasterRenderer

@@ -14,9 +14,9 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..geometry.camera import Camera
-from ..geometry.frusta import frusta_bounds
 from ..geometry.mesh import tessellate
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.frusta import frusta_bounds
+from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import gl_context
 from ..gl.raster import RasterRenderer, gs_buffer_bytes
 from ..gl.raycast import Raycaster
@@ -35,7 +35,7 @@ def side_by_side(frusta, camera: Camera, *, gs_level: int = 2, gsr_level: int = 
                  material_names=("bark",), linear_steps: int = 64, binary_steps: int = 8) -> np.ndarray:
     """RC+R | GS | GS+R images of one model and camera, labelled, as one (h, 3w, 3) uint8 image.
 
-    GS+R takes its heights from :mod:`plantgen.geometry.relief`, the maps the ray caster samples.
+    GS+R takes its heights from :mod:`plantgen.geometry.skeletons.relief`, the maps the ray caster samples.
     """
     ctx = gl_context()
     rc = Raycaster(ctx).render(frusta, camera, RaycastSettings(relief=True, linear_steps=linear_steps,

@@ -4,7 +4,7 @@ Run: ``python -m plantgen.benchmarks.skinning [--segments N] [--repeats R]``.
 The model is a synthetic tree: continuing chains of 17 segments bending up to 30°, each
 chain starting as a side branch of an earlier segment, radii tapering along chains. Both
 joint constructions are timed, interleaved: closed seams (the default: the children's
-radii fitted, :func:`plantgen.geometry.skin.seam_radii`) and the paper's planes, with the
+radii fitted, :func:`plantgen.geometry.skeletons.skin.seam_radii`) and the paper's planes, with the
 cost of closing the seams as their ratio. It also prints the skin report and the mean
 bounding-pyramid / frustum volume ratio.
 
@@ -23,11 +23,11 @@ import time
 
 import numpy as np
 
-from ..geometry.frusta import pyramid_volume_ratio
 from ..geometry.reference import intersect_frusta
-from ..geometry.skeleton import Skeleton
-from ..geometry.skin import skin_skeleton
-from ..geometry.smooth import DEFAULT_RADIUS_FACTOR, smooth_bends
+from ..geometry.skeletons.frusta import pyramid_volume_ratio
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.skin import skin_skeleton
+from ..geometry.skeletons.smooth import DEFAULT_RADIUS_FACTOR, smooth_bends
 from ..geometry.stability import chain, medial_axis_rays
 from ..pipeline import load_skeleton
 

@@ -8,7 +8,7 @@ of a GS draw beside the ray caster's records for the same rows (§4's memory cla
 
 The model is the shipped pine grammar (the paper's pine has 16,997 segments), or with
 ``--synthetic`` (or where no pine ships) a tree of ``--segments`` bent chains of 17
-tapering segments; either is skinned by ``plantgen.geometry.skin.skin_skeleton``.
+tapering segments; either is skinned by ``plantgen.geometry.skeletons.skin.skin_skeleton``.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import numpy as np
 
 from .._resources import shipped_grammar
 from ..geometry.mesh import tessellate
-from ..geometry.skeleton import Skeleton
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.raster import gs_buffer_bytes
 from ..gl.records import rc_buffer_bytes
 from ..pipeline import load_skeleton

@@ -17,9 +17,9 @@ import sys
 
 import numpy as np
 
-from ..geometry import relief
 from ..geometry.mesh import tessellate
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons import relief
+from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.textures import aspect_error, mesh_aspects, weighted_median
 from ..pipeline import grow_file
 

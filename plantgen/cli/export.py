@@ -9,7 +9,7 @@ import click
 
 from ..assets import AssetSettings
 from ..exporters import EXPORT_FORMATS
-from ..geometry.frames import UP_AXES
+from ..geometry.skeletons.frames import UP_AXES
 from ..knobs import knob_of
 from ..pipeline import INSTANCING, export_model
 from ..settings import DetailSettings, KeyframeSettings, LevelSettings, MeshSettings

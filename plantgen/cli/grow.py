@@ -9,8 +9,8 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..files import check_outputs, write_all_atomically
-from ..geometry.frames import UP_AXES
-from ..geometry.swc import write_swc
+from ..geometry.skeletons.frames import UP_AXES
+from ..geometry.skeletons.swc import write_swc
 from ..lsystem.derive import DEFAULT_MAX_MODULES
 from ..metrics import geometry_bounds
 from ..pipeline import grow_file, model_leaves

@@ -39,7 +39,7 @@ from .. import fields
 from ..geometry.bvh import build_bvh, trace_bvh
 from ..geometry.polygons import Polygons
 from ..geometry.scan import scan_target, target_hits
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..lsystem.queries import QueryState
 from ..tolerances import tol

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits, Meter
 from ..lsystem.derive import Derivation
 from ..lsystem.grammar import Grammar

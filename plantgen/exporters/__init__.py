@@ -12,7 +12,7 @@ models (QSM), each in the form the tools that read it expect.
   skins, UsdSkel): :class:`PlantSway`, :func:`sway_timeline`;
 - :mod:`~plantgen.exporters.gltf`, :mod:`~plantgen.exporters.obj`, :mod:`~plantgen.exporters.usd`,
   :mod:`~plantgen.exporters.qsm`: the writers, each named by its format's row. SWC is
-  :func:`plantgen.geometry.swc.write_swc`.
+  :func:`plantgen.geometry.skeletons.swc.write_swc`.
 
 Every writer writes under temporary names and renames, so a failure leaves nothing
 half-written.

@@ -11,12 +11,12 @@ suffix         kind      up    instancing  animation  writer
 ``.usda``      mesh      y     yes         yes        USD text (usd-core: ``plantgen[usd]``)
 ``.usdc``      mesh      y     yes         yes        USD crate (binary)
 ``.usd``       mesh      y     yes         yes        USD, crate encoding
-``.swc``       skeleton  y     --          no         SWC nodes (:mod:`plantgen.geometry.swc`)
+``.swc``       skeleton  y     --          no         SWC nodes (:mod:`plantgen.geometry.skeletons.swc`)
 ``.qsm.csv``   skeleton  z     --          no         TreeQSM cylinders + ``.treedata.csv`` beside it
 ``.qsm.mat``   skeleton  z     --          no         TreeQSM's MATLAB struct (scipy: ``plantgen[qsm]``)
 =============  ========  ====  ==========  =========  ======================================
 
-**Animation.** A scene that lists ``animation`` and sways (:mod:`plantgen.geometry.motion`)
+**Animation.** A scene that lists ``animation`` and sways (:mod:`plantgen.geometry.skeletons.motion`)
 is written with its sway by the formats that hold animation: glTF as skins (a joint per
 segment) with a rotation channel per joint, USD as UsdSkel skeletons with a
 SkelAnimation per copy (:mod:`plantgen.exporters.sway`); the others write the plants at
@@ -56,7 +56,7 @@ from pathlib import Path
 
 from ..errors import PlantgenError
 from ..files import check_outputs
-from ..geometry.frames import UP_AXES
+from ..geometry.skeletons.frames import UP_AXES
 
 __all__ = ["EXPORT_FORMATS", "check_export_outputs", "companion_paths",
            "ExportError", "FORMAT_KINDS", "Format", "UP_AXES", "check_extra",

@@ -65,7 +65,7 @@ A plant's per-row ``labels`` ({"_BRANCH_ORDER": ...}: ``plantgen batch`` labels 
 mesh with its branch order) become application-specific vertex attributes of those
 names (FLOAT scalars; glTF reserves names starting with ``_`` for this).
 
-``up="z"`` turns the model (see :mod:`plantgen.geometry.frames`); glTF's convention is y.
+``up="z"`` turns the model (see :mod:`plantgen.geometry.skeletons.frames`); glTF's convention is y.
 The file passes the Khronos glTF validator with no error and no warning (tested).
 """
 
@@ -81,7 +81,7 @@ from urllib.parse import quote
 import numpy as np
 
 from ..files import write_all_atomically, write_atomically
-from ..geometry.frames import similarity_trs, turn_placements
+from ..geometry.skeletons.frames import similarity_trs, turn_placements
 from ..geometry.textures import mesh_tangents
 from ..images import png_bytes
 from .formats import ExportError

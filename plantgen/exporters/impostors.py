@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.frames import up_rotation
 from ..geometry.impostor import Impostor, octahedral_uv
+from ..geometry.skeletons.frames import up_rotation
 from .plants import Part
 
 __all__ = ["IMPOSTOR_HEIGHT", "impostor_coverages", "impostor_part"]

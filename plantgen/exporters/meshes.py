@@ -22,7 +22,7 @@ import numpy as np
 from ..files import check_finite, write_atomically
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.skeleton import Skeleton
 from .formats import ExportError, writable_format
 from .plants import (
     Colours,
@@ -126,7 +126,7 @@ def export_mesh(mesh: TessellatedMesh, path: str | os.PathLike, colours: Colours
     path : target file; written under a temporary name beside it, then renamed (a
         ``.gltf``'s ``.bin`` and an ``.obj``'s ``.mtl`` are written beside it too)
     colours : material name -> linear RGB in [0, 1], or one colour per material index;
-        default :func:`plantgen.geometry.materials.material_colour`
+        default :func:`plantgen.geometry.skeletons.materials.material_colour`
     up : ``"y"`` or ``"z"``; default the format's convention (:mod:`plantgen.exporters.formats`)
     name : the model's name in the file (default: the file's stem)
     labels : {name: (rows,) values} per mesh row, written by glTF as vertex attributes of

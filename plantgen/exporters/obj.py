@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_all_atomically
-from ..geometry.materials import material_palette
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
+from ..geometry.skeletons.materials import material_palette
 from .formats import ExportError
 from .gltf import generator
 from .plants import (

@@ -11,13 +11,13 @@ from typing import Protocol
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.frames import up_rotation
 from ..geometry.impostor import Impostor
 from ..geometry.leaf_cards import LeafCards
-from ..geometry.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.mesh import TessellatedMesh
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.frames import up_rotation
+from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
+from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.stage import Ground, Light
 from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
@@ -325,7 +325,7 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
     (a polygon's own) takes its polygon's unit normal and :func:`leaf_uv`; ``leaf`` is set.
     ``joints``: (v,) the one joint each leaf vertex follows (a swaying plant's skin);
     ``names``: the material names, to give each vertex its leaf's colour (``colours``: the
-    renderers' shade of that leaf, :func:`~plantgen.geometry.materials.leaf_colours`);
+    renderers' shade of that leaf, :func:`~plantgen.geometry.skeletons.materials.leaf_colours`);
     ``uv``: (v, 2) the vertices' texture coordinates (a card's in its atlas) in place of
     :func:`leaf_uv`."""
     if polygons is None or len(polygons.triangles) == 0:

@@ -6,7 +6,7 @@ direction), ``length`` and ``radius``, with the tree's structure: ``parent`` (th
 it grows from), ``extension`` (the cylinder that carries its branch on), ``branch``,
 ``BranchOrder`` (0 the trunk) and ``PositionInBranch``. As in TreeQSM, cylinder and
 branch numbers start at 1 and 0 means none; branch 1 is the trunk (the chain of the first
-segment, :mod:`plantgen.geometry.topology`).
+segment, :mod:`plantgen.geometry.skeletons.topology`).
 
 **Frusta to cylinders.** A segment is a conical frustum (radii r1, r2, length h). It is
 split into k equal cylinders, each with the frustum's radius at its middle (the mean of
@@ -48,9 +48,9 @@ from pathlib import Path
 import numpy as np
 
 from ..files import check_finite, write_all_atomically, write_atomically
-from ..geometry.frames import up_rotation
-from ..geometry.skeleton import Skeleton
-from ..geometry.topology import Branches, branches
+from ..geometry.skeletons.frames import up_rotation
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.topology import Branches, branches
 from ..metrics import TreeMetrics, segment_lengths, segment_volumes, tree_metrics
 from .formats import ExportError
 from .gltf import generator

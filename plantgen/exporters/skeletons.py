@@ -3,7 +3,7 @@
 The format follows the file suffix (:mod:`plantgen.exporters.formats`), and its row names its
 writer, called the same way for every skeleton format
 (:class:`~plantgen.exporters.plants.SkeletonWriter`): :func:`write_swc_skeleton` (SWC,
-:mod:`plantgen.geometry.swc`) and :func:`plantgen.exporters.qsm.write_qsm` (``.qsm.csv``,
+:mod:`plantgen.geometry.skeletons.swc`) and :func:`plantgen.exporters.qsm.write_qsm` (``.qsm.csv``,
 ``.qsm.mat``).
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..geometry.skeleton import Skeleton
-from ..geometry.swc import write_swc
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.swc import write_swc
 from .formats import writable_format
 from .plants import SkeletonWriter
 
@@ -21,7 +21,7 @@ __all__ = ["write_skeleton", "write_swc_skeleton"]
 
 def write_swc_skeleton(skeleton: Skeleton, path: str | Path, *, up: str = "y", unit: float = 1.0,
                        tolerance: float = 1e-3, name: str = "plant") -> dict:
-    """:func:`~plantgen.geometry.swc.write_swc` as a
+    """:func:`~plantgen.geometry.skeletons.swc.write_swc` as a
     :class:`~plantgen.exporters.plants.SkeletonWriter`: SWC keeps model units and names no
     model, so ``unit``, ``tolerance`` and ``name`` are not written. Returns ``{"paths": [path]}``."""
     return {"paths": [write_swc(skeleton, path, up=up)]}

@@ -1,7 +1,7 @@
 """A scene's sway as an animation other tools play: the joints, skin weights and keys
 that glTF skins and UsdSkel hold (see the docs, "Export a swaying scene").
 
-The sway (:mod:`plantgen.geometry.motion`) turns every joint of a swaying plant copy
+The sway (:mod:`plantgen.geometry.skeletons.motion`) turns every joint of a swaying plant copy
 about one horizontal axis of the scene by an angle that is a closed form in t, and moves
 each segment rigidly: turned by the sum of the angles on its path, about its start, which
 stays on its parent's end. That is a skeleton animation, written as one:
@@ -11,8 +11,8 @@ stays on its parent's end. That is a skeleton animation, written as one:
   inverse bind matrix is the translation by minus its start;
 - **keys**: each joint turns about the copy's axis in the plant's own frame (the scene's
   axis turned back by the copy's rotation), by its own angle θ_i(t)
-  (:func:`~plantgen.geometry.motion.joint_angles`), at the times of a :class:`Timeline`;
-  nested joints compose the turns, as :func:`~plantgen.geometry.motion.pose` sums them;
+  (:func:`~plantgen.geometry.skeletons.motion.joint_angles`), at the times of a :class:`Timeline`;
+  nested joints compose the turns, as :func:`~plantgen.geometry.skeletons.motion.pose` sums them;
 - **weights** (:func:`vertex_influences`): a vertex on the faces of one segment follows
   its joint (weight 1: the segment is rigid); a vertex shared by the faces of several (the
   ring on a joint's cutting plane, which a segment shares with the one continuing it)
@@ -22,7 +22,7 @@ stays on its parent's end. That is a skeleton animation, written as one:
   leaf that hangs from none follows an extra joint that never moves.
 
 Everything here is in a file's frame: ``up`` turns positions and axes
-(:func:`~plantgen.geometry.frames.up_rotation`).
+(:func:`~plantgen.geometry.skeletons.frames.up_rotation`).
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..geometry.frames import up_rotation
-from ..geometry.motion import joint_angles, sway_rig
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.frames import up_rotation
+from ..geometry.skeletons.motion import joint_angles, sway_rig
+from ..geometry.skeletons.skeleton import Skeleton
 from ..knobs import knob_of
 from ..settings import KeyframeSettings
 from .formats import ExportError

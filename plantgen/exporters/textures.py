@@ -88,7 +88,7 @@ def split_by_aspect(plants, step: float) -> tuple[list, dict]:
     to a material :func:`bucket_name` of their bucket's aspect (appended to the mesh's
     names, so the leaves' indices stand), each with its own normal map. Returns the plants
     and {bucket name: material} (``bases`` of :func:`bake_textures`)."""
-    from ..geometry.relief import default_shell
+    from ..geometry.skeletons.relief import default_shell
     from ..geometry.textures import row_aspects
 
     rows = [None if p.mesh is None else row_aspects(p.mesh) for p in plants]

@@ -60,7 +60,7 @@ distance); ``Sun``, a ``DistantLight`` shining along the scene light's direction
 turn with the model (``up``).
 
 Stage metadata: ``upAxis`` (Y, or Z with ``up="z"``: the model is turned, see
-:mod:`plantgen.geometry.frames`), ``metersPerUnit`` (``unit``: the length of a model unit
+:mod:`plantgen.geometry.skeletons.frames`), ``metersPerUnit`` (``unit``: the length of a model unit
 in metres, default 1) and ``defaultPrim``. usd-core's compliance checker
 (``UsdUtils.ComplianceChecker``, what ``usdchecker`` runs) and its validators pass on
 every file (tested).
@@ -73,9 +73,9 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_all_atomically
-from ..geometry.frames import similarity_trs, turn_placements, up_rotation
-from ..geometry.skeleton import Skeleton
-from ..geometry.topology import branches
+from ..geometry.skeletons.frames import similarity_trs, turn_placements, up_rotation
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.topology import branches
 from .formats import ExportError
 from .gltf import generator
 from .plants import (

@@ -21,7 +21,7 @@ from ..knobs import knob
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
 from ..tolerances import tol
-from .frusta import Frusta, frusta_bounds, section_points
+from .skeletons.frusta import Frusta, frusta_bounds, section_points
 
 __all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "box_corners", "depth_range", "orbit_angles",
            "orbit_direction", "orbit_view", "AUTO_DIRECTION"]

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from .mesh import tessellate
+from .skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from .vec import reduce_to_root
 
 __all__ = ["PlacedPlants", "PlantCopies", "PlacedMesh", "PlacedMeshes", "place_frusta", "row_spheres",
@@ -67,7 +67,7 @@ def place_frusta(frusta: Frusta, matrix) -> Frusta:
 def row_spheres(frusta: Frusta) -> tuple[np.ndarray, np.ndarray]:
     """(centres (n, 3), radii (n,)): a ball around each row, relief shell and oblique
     end sections included (the smallest ball around the two end balls of
-    :func:`plantgen.geometry.frusta.frusta_bounds`)."""
+    :func:`plantgen.geometry.skeletons.frusta.frusta_bounds`)."""
     (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta)
     half = 0.5 * np.linalg.norm(c_hi - c_lo, axis=1)
     radius = np.maximum(half + np.maximum(r_lo, r_hi), np.maximum(r_lo, r_hi))

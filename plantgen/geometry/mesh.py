@@ -40,7 +40,7 @@ whose plane would not cut a cone in an ellipse or whose segments' planes would c
 Skinning gives the parent segment P and the child C planes ⟂ their axes through the
 joint J and fills the bend with fan slices around the hinge line (through J, ⟂ the medial
 plane): *outer* slices continue the chain and sweep the outer side, *inner* slices cover
-the inner side (see :mod:`plantgen.geometry.skin`). Their union is what the ray caster
+the inner side (see :mod:`plantgen.geometry.skeletons.skin`). Their union is what the ray caster
 draws; the mesh is its boundary:
 
 - *outer side*: each outer slice is a cylinder strip between two planes through the
@@ -96,8 +96,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tolerances import tol
-from . import relief as relief_maps
-from .frusta import Frusta, plane_height
+from .skeletons import relief as relief_maps
+from .skeletons.frusta import Frusta, plane_height
 from .vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_root, unit
 
 __all__ = [
@@ -339,7 +339,7 @@ def triangle_count(rows, m: int, n_caps: int | None = None, *, caps: bool | str 
     fewer: ``(8·2^m - 2)·2^m`` an outer slice, none an inner slice, plus a bridge band
     where P's and C's cuts differ).
 
-    ``rows`` a :class:`~plantgen.geometry.frusta.Frusta`: exactly
+    ``rows`` a :class:`~plantgen.geometry.skeletons.frusta.Frusta`: exactly
     ``len(tessellate(rows, m, caps=caps).faces)`` (``n_caps`` is not used: ends closing
     to a point and inner knuckle slices get no cap).
     """
@@ -350,7 +350,7 @@ def triangle_count(rows, m: int, n_caps: int | None = None, *, caps: bool | str 
 
 
 def _default_height(material_names) -> HeightFunction:
-    """Heights from :mod:`plantgen.geometry.relief`: the maps, repeats and bilinear sampler
+    """Heights from :mod:`plantgen.geometry.skeletons.relief`: the maps, repeats and bilinear sampler
     that the ray caster and the reference use."""
     maps, repeats = relief_maps.height_maps(material_names)
 
@@ -1029,13 +1029,13 @@ def tessellate(frusta: Frusta, m: int = 1, *, relief: bool = False, height: Heig
 
     Parameters
     ----------
-    frusta : a Frusta (see :mod:`plantgen.geometry.frusta`) with ``n`` rows
+    frusta : a Frusta (see :mod:`plantgen.geometry.skeletons.frusta`) with ``n`` rows
     m : subdivision level, 0..8; ``16·4^m`` lateral triangles per row (knuckle fan rows:
         see the module docstring and :func:`triangle_count`)
     relief : displace vertices by ``w·shell`` onto the relief shell (rows with
         ``shell = 0`` stay on the base cone)
     height : ``height(material, u, v) -> w`` in [0, 1] for (k,) arrays; default: the
-        height maps of :mod:`plantgen.geometry.relief`, sampled as the ray caster samples
+        height maps of :mod:`plantgen.geometry.skeletons.relief`, sampled as the ray caster samples
     caps : True: close every open chain end (roots, side branch starts, tips) with a flat
         cap, so each chain is a closed solid (export); ``"tips"``: cap only the upper
         ends (side branch bases sit inside their parent, unseen: the rendering choice);

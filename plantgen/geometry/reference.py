@@ -2,7 +2,7 @@
 
 Layout (as pbrt splits shapes): :func:`intersect_frusta` only finds hits (t, row, point);
 :func:`shade_hits` turns hits into (u, v) and normals with the helpers of
-:mod:`plantgen.geometry.frusta`. :func:`render_reference` does both for a Camera, binning
+:mod:`plantgen.geometry.skeletons.frusta`. :func:`render_reference` does both for a Camera, binning
 the bounding pyramids in screen tiles so that only nearby rows are tested per pixel.
 
 One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
@@ -42,9 +42,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tolerances import tol
-from . import relief as relief_module
 from .camera import Camera
-from .frusta import Frusta, bounding_pyramids, facing_normals, shade_rows_uv_normals, surface_uv, true_normals
+from .skeletons import relief as relief_module
+from .skeletons.frusta import Frusta, bounding_pyramids, facing_normals, shade_rows_uv_normals, surface_uv, true_normals
 from .vec import dot
 
 __all__ = ["Hits", "ReferenceImage", "PairTester", "intersect_frusta", "shade_hits", "render_reference",
@@ -463,7 +463,7 @@ def intersect_frusta(frusta: Frusta, origins, dirs, *, relief=None, dtype=np.flo
     origins, dirs : (..., 3) float64 ray origins (world units) and directions (any length;
         t is in units of |dir|)
     relief : None/False (analytic cones), True (the material height maps of
-        :mod:`plantgen.geometry.relief`), a dict material name -> (H, W) uint8 map, or a
+        :mod:`plantgen.geometry.skeletons.relief`), a dict material name -> (H, W) uint8 map, or a
         function height(rows, u, v) -> [0, 1]; applies to rows with ``shell > 0``
     dtype : float64 (reference) or float32 (emulates the GPU; relief stays float64)
     recenter : move the ray origin next to the segment before solving
@@ -523,7 +523,7 @@ def shade_hits(frusta: Frusta, hits: Hits, *, interpolated: bool = True, to_eye=
     (equation (8) if ``interpolated``, else the true cone normal; the plane's outward
     normal on caps; 0 for misses). With ``to_eye`` ((..., 3) unit directions from the hits
     to the eye) the lateral normals are the ones shading uses: (8) bent so that it faces
-    the eye (:func:`~plantgen.geometry.frusta.facing_normals`), as the GLSL caster does."""
+    the eye (:func:`~plantgen.geometry.skeletons.frusta.facing_normals`), as the GLSL caster does."""
     shape = hits.t.shape
     hit = hits.hit.ravel()
     rows = hits.row.ravel()[hit]

@@ -43,7 +43,7 @@ chunked or binned, nor on the other beams, so a seed gives the same cloud every 
 
 **Labels** of each point: ``plant`` (the ``plant`` given per segment, or one number),
 ``part`` (:data:`PART_NAMES`: ``stem`` for a segment of branch order 0 of
-:mod:`plantgen.geometry.topology`, ``branch`` above, ``leaf`` for a leaf triangle),
+:mod:`plantgen.geometry.skeletons.topology`, ``branch`` above, ``leaf`` for a leaf triangle),
 ``order`` (the branch order; a leaf: the order of the segment it hangs from, -1 for
 none), ``segment`` (the skeleton segment; a leaf: the one it hangs from, -1 for none),
 ``leaf`` (the leaf polygon, -1 for wood) and ``scanner``.
@@ -78,11 +78,11 @@ from ..errors import PlantgenError
 from ..knobs import check_knobs, knob
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from .frusta import Frusta
 from .polygons import Polygons
 from .reference import PairTester, row_boxes
-from .skeleton import Skeleton
-from .topology import Branches, branches
+from .skeletons.frusta import Frusta
+from .skeletons.skeleton import Skeleton
+from .skeletons.topology import Branches, branches
 from .vec import cross, dot, unit
 
 __all__ = ["LABELS", "PART_NAMES", "SCAN_MODES", "AirborneBeams", "BeamReturns", "PointCloud", "ScanError",
@@ -349,7 +349,7 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
     """What a scan of ``skeleton`` (skinned here unless ``frusta`` are given) and its
     ``leaves`` sees. ``plant``: one number for every point, or (n,) per segment (a scene's
     instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant)."""
-    from .skin import skin_skeleton  # skinning is the heavy import; a given frusta skips it
+    from .skeletons.skin import skin_skeleton  # skinning is the heavy import; a given frusta skips it
 
     frusta = skin_skeleton(skeleton) if frusta is None else frusta
     topology = topology or branches(skeleton)
@@ -1038,8 +1038,8 @@ def scene_target(plants, *, skin=None) -> SceneTarget:
     ``skeleton`` and ``polygons`` (leaves or None) in its own frame, ``matrices`` (k, 4, 4)
     and ``instances`` (k,), as :meth:`plantgen.scene.Scene.plants` gives them), each
     skinned once by ``skin`` (a function of a skeleton; default
-    :func:`~plantgen.geometry.skin.skin_skeleton`)."""
-    from .skin import skin_skeleton
+    :func:`~plantgen.geometry.skeletons.skin.skin_skeleton`)."""
+    from .skeletons.skin import skin_skeleton
 
     skin = skin or skin_skeleton
     plants = list(plants)

@@ -5,7 +5,7 @@ character, instead of re-tessellating the posed frusta in numpy every frame.
 Every vertex is bound to the segments whose faces use it (the rows' ``segment``; a
 knuckle's slices count as their child segment). A vertex of one segment turns rigidly
 with it: about the segment's start, by its total turn T (the sway turns each segment
-about its tree's axis k, :mod:`plantgen.geometry.motion`), and moves with the start. A
+about its tree's axis k, :mod:`plantgen.geometry.skeletons.motion`), and moves with the start. A
 vertex two segments share (the ring of a continuing joint: tessellation gives parent and
 child one ring) turns about the joint point, the child's start, by the mean of their two
 turns, so the ring stays one ring and the mesh stays closed in every pose: the shader

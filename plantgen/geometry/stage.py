@@ -52,7 +52,7 @@ SCENE_LIGHT = Light((-0.4, -1.0, -0.3))
 
 @dataclass(frozen=True)
 class Sway:
-    """Sway of one plant instance (see :mod:`plantgen.geometry.motion`): the bend at the
+    """Sway of one plant instance (see :mod:`plantgen.geometry.skeletons.motion`): the bend at the
     tip in ``amplitude`` degrees, ``frequency`` in Hz, ``phase`` in radians."""
 
     amplitude: float = 0.0

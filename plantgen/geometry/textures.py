@@ -1,9 +1,9 @@
 """Relief baked into textures: what an exported mesh needs to look like RC+R (pure numpy).
 
-For every material with relief (shell fraction > 0, :func:`plantgen.geometry.relief.default_shell`)
+For every material with relief (shell fraction > 0, :func:`plantgen.geometry.skeletons.relief.default_shell`)
 :func:`bake_material` makes three maps over the ray caster's texture square (u around the
 axis, v along the segment's texture period; rows are v, row 0 at v = 0, as
-:mod:`~plantgen.geometry.relief` lays out a height map):
+:mod:`~plantgen.geometry.skeletons.relief` lays out a height map):
 
 - ``height`` (H, W) uint8: the relief height w in [0, 1] (0 the inner cone, 1 the outer
   shell), the renderers' map resampled to the texture size (:func:`texture_size`);
@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import relief
-from .materials import material_palette
+from .skeletons import relief
+from .skeletons.materials import material_palette
 from .vec import any_perpendicular
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
@@ -88,7 +88,7 @@ def resample_height(hmap: np.ndarray, shape) -> np.ndarray:
 
 def _read_back(small: np.ndarray, native) -> np.ndarray:
     """(H, W) bilinear samples of ``small`` (h, w) at the texel centres of a ``native``
-    (H, W) map (repeat in u, clamp in v: :func:`plantgen.geometry.relief.sample_height`)."""
+    (H, W) map (repeat in u, clamp in v: :func:`plantgen.geometry.skeletons.relief.sample_height`)."""
     big_h, big_w = native
     v, u = np.meshgrid((np.arange(big_h) + 0.5) / big_h, (np.arange(big_w) + 0.5) / big_w, indexing="ij")
     return relief.sample_height(np.asarray(small) * 255.0, u, v)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.camera import Camera, depth_range
-from ..geometry.materials import MAX_MATERIALS
+from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from ..settings import MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer

@@ -13,9 +13,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from ..geometry.impostor import Impostor, frame_basis, view_directions
-from ..geometry.materials import leaf_colours, leaf_tones, material_colour
+from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
+from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.textures import linear_to_srgb
 from ..settings import RaycastSettings
 from .context import gl_context, renderer_name

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.materials import leaf_tones
 from ..geometry.polygons import Polygons
+from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
 from .shaders import build_program, mat4, set_uniforms
 

@@ -1,7 +1,7 @@
 """What every program shades with: the light, ambient and sky constants, the material
 palette as uniforms, and the relief height maps as one texture array per material list.
 
-The palette and the height maps themselves are data of :mod:`plantgen.geometry.materials`
+The palette and the height maps themselves are data of :mod:`plantgen.geometry.skeletons.materials`
 (shared with the mesh exporter); this module turns them into GL uniforms and textures.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.materials import MAX_MATERIALS, material_height_maps, material_palette
+from ..geometry.skeletons.materials import MAX_MATERIALS, material_height_maps, material_palette
 
 __all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms",
            "HeightTextures", "corner_maps"]

@@ -1,6 +1,6 @@
 """An animation's moving rows posed and skinned on the GPU (paper §4: "could be moved to
 the vertex shader"): one compute program (``shaders/pose.glsl``) turns a
-:class:`~plantgen.geometry.sway_skin.SwaySkin` plan's rest data, uploaded once, into
+:class:`~plantgen.geometry.skeletons.sway_skin.SwaySkin` plan's rest data, uploaded once, into
 the ray caster's 96-byte records at time t, straight into the record buffer the frame
 draws; per frame the CPU writes the wave's phase per frequency (4 bytes each) and
 dispatches. The same program without records writes each segment's posed start and
@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from ..geometry.sway_skin import BEND_LIMIT_COS, SwaySkin
+from ..geometry.skeletons.sway_skin import BEND_LIMIT_COS, SwaySkin
 from ..geometry.vec import ancestor_count, cross
 from ..tolerances import tol
 from .records import RecordStream, StreamedRows, record_tags

@@ -1,6 +1,6 @@
 """The GLSL ray caster for conical frusta (RC) and relief-mapped frusta (RC+R).
 
-Data path: :class:`plantgen.geometry.frusta.Frusta` (float64, world coordinates) ->
+Data path: :class:`plantgen.geometry.skeletons.frusta.Frusta` (float64, world coordinates) ->
 :func:`plantgen.gl.records.pack_records` (one 96-byte float32 record per segment,
 positions relative to the camera eye so float32 keeps its digits far from the world
 origin) -> one instanced draw of the 12-triangle bounding pyramid (built in the vertex
@@ -25,9 +25,9 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
-from ..geometry.frusta import ROW_FIELDS, Frusta
 from ..geometry.instances import PlacedPlants
 from ..geometry.mesh import tessellate, triangle_count
+from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits

@@ -13,10 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.frusta import PYRAMID_CORNERS as _CORNERS_F64
-from ..geometry.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
-from ..geometry.frusta import frusta_bounds
 from ..geometry.instances import PlacedPlants
+from ..geometry.skeletons.frusta import PYRAMID_CORNERS as _CORNERS_F64
+from ..geometry.skeletons.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
+from ..geometry.skeletons.frusta import frusta_bounds
 
 __all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "pack_records", "record_tags", "rc_buffer_bytes", "RecordStream", "StreamedRows", "rows_box",
@@ -31,7 +31,7 @@ RECORD_LAYOUT = "4f 4f 4f 4f 4f 4f/i"
 RECORD_ATTRIBUTES = ("rec0", "rec1", "rec2", "rec3", "rec4", "rec5")
 
 #: The bounding pyramid's template as uploaded: corner i is (sx, sz, end); 12 triangles
-#: wound counter-clockwise seen from outside (plantgen.geometry.frusta's, in GL types).
+#: wound counter-clockwise seen from outside (plantgen.geometry.skeletons.frusta's, in GL types).
 PYRAMID_CORNERS = _CORNERS_F64.astype(np.float32)
 PYRAMID_TRIANGLES = _TRIANGLES_I64.astype(np.int32)
 
@@ -41,7 +41,7 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
 
     Parameters
     ----------
-    frusta : Frusta (see plantgen.geometry.frusta), n rows, float64, world units
+    frusta : Frusta (see plantgen.geometry.skeletons.frusta), n rows, float64, world units
     origin : (3,) float64, the render origin (the camera eye); positions and plane offsets
         are made relative to it in float64 before the cast to float32
     out : optional (n, 24) float32 C-contiguous array to write the records into (a buffer

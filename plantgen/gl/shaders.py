@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .._resources import shaders_dir
-from ..geometry.materials import MAX_MATERIALS
+from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..tolerances import tol
 
 __all__ = ["ShaderError", "shader_source", "build_program", "build_compute", "program_stages", "GLSL_VERSION",

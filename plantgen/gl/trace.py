@@ -37,9 +37,9 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..geometry.bvh import BVH, build_bvh, float32_boxes
-from ..geometry.frames import similarity_trs
-from ..geometry.frusta import plane_height
 from ..geometry.instances import similarity_parts
+from ..geometry.skeletons.frames import similarity_trs
+from ..geometry.skeletons.frusta import plane_height
 from ..limits import LimitError, hint
 from ..tolerances import tol
 from .records import RECORD_FLOATS, pack_records
@@ -357,7 +357,7 @@ def row_bounds(frusta, origin) -> np.ndarray:
 
     The solid is convex: its extreme points lie where the cone meets a plane, or at the apex
     of a cone closing to a point inside it. A generator of direction e meets a plane at the
-    height y(x) = (gap - r1·x) / (n·a + k·x) of x = n·e (:func:`plantgen.geometry.frusta.
+    height y(x) = (gap - r1·x) / (n·a + k·x) of x = n·e (:func:`plantgen.geometry.skeletons.frusta.
     plane_height`), monotone in x, so over every generator the heights lie between its
     values at x = ±|n_perp|. A point at height y lies at most g(y) = hypot(max(-y, y - h, 0),
     max(r1 + shell + k·y, 0)) from the segment, convex in y: its largest value over the

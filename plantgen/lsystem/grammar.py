@@ -27,7 +27,7 @@ from pathlib import Path
 
 from .. import fields
 from ..errors import PlantgenError
-from ..geometry.materials import MAX_MATERIALS
+from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry import surfaces
 from ..geometry.polygons import PolygonBuilder, Polygons
-from ..geometry.skeleton import Skeleton
+from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..limits import limits as default_limits
 from ..tolerances import tol

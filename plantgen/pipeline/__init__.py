@@ -19,7 +19,7 @@ those below it):
 - :mod:`~plantgen.pipeline.scan` (``plantgen scan``): its budget, :func:`check_scan_memory`;
 - :mod:`~plantgen.pipeline.growing` (``plantgen grow``, and where every command starts):
   :func:`grow_file` / :func:`grow`: a grammar, scene or skeleton ``.npz`` / ``.swc`` to
-  a :class:`~plantgen.geometry.skeleton.Skeleton`, with the time of each stage;
+  a :class:`~plantgen.geometry.skeletons.skeleton.Skeleton`, with the time of each stage;
 - :mod:`~plantgen.pipeline.checks`: the limits in force, the finite checks of a skin and
   of a mesh, the memory of a skinned segment.
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.frusta import ROW_FIELDS, Frusta
+from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..limits import Limits
 from ..limits import limits as default_limits
 from ..scene import Scene

@@ -37,13 +37,13 @@ from ..exporters import (
 from ..exporters.formats import check_export_outputs
 from ..exporters.plants import level_plant
 from ..exporters.textures import bake_textures, split_by_aspect
-from ..geometry.frames import UP_AXES
-from ..geometry.frusta import Frusta, frusta_bounds
 from ..geometry.instances import detail_levels, detail_order, screen_coverage
 from ..geometry.mesh import tessellate, triangle_count
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.frames import UP_AXES
+from ..geometry.skeletons.frusta import Frusta, frusta_bounds
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.skin import skin_skeleton
 from ..limits import LimitError, Limits, hint
 from ..settings import DEFAULT_SIZE, DetailSettings, KeyframeSettings, LevelSettings
 from .checks import SKIN_BYTES_PER_SEGMENT, check_finite_frusta, check_finite_mesh, distinct_segments, in_force

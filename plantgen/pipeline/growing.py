@@ -21,8 +21,8 @@ from ..environment import environment_for
 from ..environment.together import TogetherPlant, grow_together
 from ..errors import PlantgenError
 from ..geometry.polygons import Polygons
-from ..geometry.skeleton import Skeleton
-from ..geometry.swc import read_swc
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.swc import read_swc
 from ..limits import Limits
 from ..lsystem.derive import apply_interpretation, derive
 from ..lsystem.grammar import GrammarError, parse_grammar

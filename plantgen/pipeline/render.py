@@ -28,10 +28,10 @@ from ..animation import AnimatedScene
 from ..errors import PlantgenError
 from ..files import check_outputs, write_all_atomically
 from ..geometry.camera import Camera, Orbit, auto_camera, orbit_view
-from ..geometry.frusta import Frusta
 from ..geometry.instances import PlacedPlants
 from ..geometry.polygons import Polygons
-from ..geometry.skin import skin_skeleton
+from ..geometry.skeletons.frusta import Frusta
+from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT, Ground
 from ..gl.context import renderer_name
 from ..gl.pose import PoseStream

@@ -1,4 +1,4 @@
-"""Skinning: a skeleton's segments become the rows of :class:`~plantgen.geometry.frusta.Frusta`
+"""Skinning: a skeleton's segments become the rows of :class:`~plantgen.geometry.skeletons.frusta.Frusta`
 (Bhagvat et al. 2009, §2), vectorised over all segments.
 
 :func:`skin_skeleton` runs the phases in order, each a function below:
@@ -20,7 +20,7 @@
    (:func:`_reference_directions`) and u offsets (:func:`_u_offsets`, §2.3).
 
 With ``smooth_bends=ANGLE``, :func:`skin_skeleton` first refines the skeleton
-(:func:`plantgen.geometry.smooth.smooth_bends`: joints bent past ANGLE become arcs of short
+(:func:`plantgen.geometry.skeletons.smooth.smooth_bends`: joints bent past ANGLE become arcs of short
 continuing segments tangent to both segments), skins the result as above and maps the
 rows' ``segment`` back to the original segments.
 
@@ -48,13 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tolerances import tol
-from . import relief
-from .frusta import Frusta, SkinReport, cone_slope, minor_semi_axis, plane_height
-from .skeleton import Skeleton
-from .smooth import DEFAULT_STEP_DEG
-from .smooth import smooth_bends as smooth_bends_of
-from .vec import (
+from ...tolerances import tol
+from ..vec import (
     any_perpendicular,
     cross,
     dot,
@@ -65,6 +60,11 @@ from .vec import (
     tree_roots,
     unit,
 )
+from . import relief
+from .frusta import Frusta, SkinReport, cone_slope, minor_semi_axis, plane_height
+from .skeleton import Skeleton
+from .smooth import DEFAULT_STEP_DEG
+from .smooth import smooth_bends as smooth_bends_of
 
 __all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled",
            "seam_radii", "sphere_base_radius"]
@@ -76,7 +76,7 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
 
     smooth_bends : None (the default: the skeleton as it is), or an angle in degrees:
         continuing joints bent by more than it are replaced by arcs of short segments
-        tangent to both segments before skinning (:func:`plantgen.geometry.smooth.smooth_bends`),
+        tangent to both segments before skinning (:func:`plantgen.geometry.skeletons.smooth.smooth_bends`),
         each arc chord bending at most ``smooth_step_deg``. The frusta's ``segment`` still
         names the original skeleton's segments (an arc's rows: the joint's child), an arc's
         rows share one period of the texture's v (``v_part``), and the report counts the
@@ -105,7 +105,7 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     ----------
     skeleton : Skeleton with n segments (world units, y up)
     shell : dict material name -> relief shell thickness, or None for
-        :data:`plantgen.geometry.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
+        :data:`plantgen.geometry.skeletons.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
         segment's mean radius (r_start + r_end)/2; a value v < 0 means an absolute
         thickness of -v world units. Names missing from a given dict get 0 (no relief).
     seam_fit : close every continuing joint's seam exactly (the default): each continuing
@@ -128,7 +128,7 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
 
     Returns
     -------
-    Frusta, with ``report`` a :class:`~plantgen.geometry.frusta.SkinReport`.
+    Frusta, with ``report`` a :class:`~plantgen.geometry.skeletons.frusta.SkinReport`.
     """
     n = len(skeleton)
     report = SkinReport(n_segments=n)

@@ -21,7 +21,7 @@ all zero). Any other name gets the bark map and bark's shell thickness (document
 fallback: unknown materials look like bark rather than vanish).
 
 Shell thickness (:data:`DEFAULT_SHELL`) is a fraction of each segment's mean radius, the
-convention of :func:`plantgen.geometry.skin.skin_skeleton`'s ``shell`` argument.
+convention of :func:`plantgen.geometry.skeletons.skin.skin_skeleton`'s ``shell`` argument.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..tolerances import tol
+from ...tolerances import tol
 
 __all__ = ["MATERIALS", "DEFAULT_SHELL", "REPEATS", "height_map", "height_maps",
            "sample_height", "default_shell"]

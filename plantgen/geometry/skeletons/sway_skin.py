@@ -1,5 +1,5 @@
-"""Per-frame skinning of a swaying skeleton: :func:`~plantgen.geometry.skin.skin_skeleton`
-of :func:`~plantgen.geometry.motion.pose`, with everything that does not change between
+"""Per-frame skinning of a swaying skeleton: :func:`~plantgen.geometry.skeletons.skin.skin_skeleton`
+of :func:`~plantgen.geometry.skeletons.motion.pose`, with everything that does not change between
 frames worked out once.
 
 A swaying skeleton keeps its topology: which segment continues which, the side branches,
@@ -35,12 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tolerances import tol
+from ...tolerances import tol
+from ..vec import any_perpendicular, cross, reduce_to_root, tree_roots
 from .frusta import Frusta
 from .motion import SwayRig
 from .skeleton import Skeleton
 from .skin import continuing_children, crossing_rows_sampled, material_shell, seam_radii
-from .vec import any_perpendicular, cross, reduce_to_root, tree_roots
 
 __all__ = ["SwaySkin", "SwayPose", "PathSum", "BEND_LIMIT_COS", "SHARP_SAMPLES"]
 
@@ -159,7 +159,7 @@ class SwaySkin:
         self.inv_length = np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
 
     def pose(self, t: float) -> SwayPose:
-        """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.motion.pose`."""
+        """The skeleton at time ``t`` (seconds), as :func:`plantgen.geometry.skeletons.motion.pose`."""
         return self.pose_at_phase(self.omega * t + self.phase, t)
 
     def pose_at_phase(self, x: np.ndarray, t: float = 0.0) -> SwayPose:

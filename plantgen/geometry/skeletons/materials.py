@@ -2,7 +2,7 @@
 material slots a model may use. Pure data and numpy (no GL), so the renderers
 (``plantgen.render``) and the mesh exporter (``plantgen.export``) share one palette.
 
-The relief height maps of each material are in :mod:`plantgen.geometry.relief`.
+The relief height maps of each material are in :mod:`plantgen.geometry.skeletons.relief`.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..tolerances import tol
+from ...tolerances import tol
 
 __all__ = ["UP_AXES", "similarity_trs", "turn_placements", "up_rotation"]
 

@@ -36,7 +36,7 @@ a continuing row shares its plane) and ``report`` (a :class:`SkinReport`). A joi
 two radii differ in the skeleton (a modelled radius step) shares its plane but leaves
 ``parent_row`` at -1, so both ends are capped and the annulus between the radii is
 closed. Rows are ordered parent first (``parent_row[i] < i``). Skinning
-(:mod:`plantgen.geometry.skin`) builds frusta from a skeleton, sharp bends included.
+(:mod:`plantgen.geometry.skeletons.skin`) builds frusta from a skeleton, sharp bends included.
 
 u and v of a surface point P (equations (6)–(7)), with frame b = axis × ref_dir::
 
@@ -64,8 +64,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..tolerances import tol
-from .vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
+from ...tolerances import tol
+from ..vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
 
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
@@ -274,7 +274,7 @@ class Frusta:
         """Frusta from ``rows`` (every name of ROW_FIELDS) already of the contract's dtypes
         and shapes and C-contiguous, with ``parent_row`` and the ``open_lo``, ``open_hi``
         the constructor derives from it: no checks, no copies, no report. For producers
-        that build the same kind of rows every frame (plantgen.geometry.sway_skin; its
+        that build the same kind of rows every frame (plantgen.geometry.skeletons.sway_skin; its
         tests compare them with the checked constructor's); anything else uses ``Frusta(...)``."""
         self = object.__new__(cls)
         for f in ROW_FIELDS:

@@ -38,11 +38,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..tolerances import tol
+from ...tolerances import tol
+from ..vec import dot, norm, unit
 from .frusta import MAX_V_SLOTS
 from .skeleton import Skeleton
 from .topology import carried_on
-from .vec import dot, norm, unit
 
 __all__ = ["SmoothResult", "smooth_bends", "DEFAULT_STEP_DEG", "DEFAULT_RADIUS_FACTOR"]
 
