@@ -30,14 +30,14 @@ from typing import Protocol
 
 import numpy as np
 
-from .geometry.mesh import TessellatedMesh
-from .geometry.polygons import Polygons
+from .geometry.meshes.mesh import TessellatedMesh
+from .geometry.meshes.polygons import Polygons
+from .geometry.meshes.skinned_mesh import SkinnedMesh, bind_vertices
 from .geometry.skeletons.frusta import Frusta, frusta_bounds
 from .geometry.skeletons.motion import pose, sway_rig, turn_at, turn_coefficients
 from .geometry.skeletons.skeleton import Skeleton
 from .geometry.skeletons.skin import skin_skeleton
 from .geometry.skeletons.sway_skin import SwaySkin
-from .geometry.skinned_mesh import SkinnedMesh, bind_vertices
 from .geometry.vec import rotate
 
 __all__ = ["AnimatedScene", "FrameUpdate", "RecordSink", "PoseSink"]
@@ -298,7 +298,7 @@ class AnimatedScene:
 
     def skinned(self, mesh: TessellatedMesh) -> SkinnedMesh:
         """``mesh`` (tessellated from :meth:`rest_frusta`) with each vertex bound to the
-        segments that move it (:func:`plantgen.geometry.skinned_mesh.bind_vertices`)."""
+        segments that move it (:func:`plantgen.geometry.meshes.skinned_mesh.bind_vertices`)."""
         return bind_vertices(mesh, self.rest_frusta()[1], self._moving_skeleton.start)
 
     def pose_segments(self, sink: PoseSink, t: float, origin):

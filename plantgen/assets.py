@@ -33,7 +33,7 @@ class AssetSettings:
 
     asset : None, or ``"game"``: levels of detail (:data:`GAME_LEVELS` unless asked),
         leaf cards, an impostor, textures, and the triangle budgets checked
-    leaves : ``"polygons"``, or ``"cards"`` (:mod:`plantgen.geometry.leaf_cards`); None:
+    leaves : ``"polygons"``, or ``"cards"`` (:mod:`plantgen.geometry.meshes.leaf_cards`); None:
         cards for a game asset, else polygons
     impostor : bake an octahedral impostor as the last level (None: for a game asset)
     impostor_frames, impostor_size : its N×N views and its atlas's side in texels

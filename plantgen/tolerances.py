@@ -155,7 +155,7 @@ class Tolerances:
     # ------------------------------------------------------------------ tessellation
     seam_snap: float = 1e-4
     """Relative (to the larger joint radius): two knuckle cut curves (or hinge points) of
-    the mesh (``plantgen.geometry.mesh``) closer than this are one (C's vertices take P's
+    the mesh (``plantgen.geometry.meshes.mesh``) closer than this are one (C's vertices take P's
     positions); farther apart, a bridge joins them. A bridge narrower than this would be
     slivers (a nearly cylindrical P, tapering by 4e-5 of its radius, gave zero-area faces
     that welding folds); the snap moves C's cut by at most this, a tenth of the chord error
@@ -170,7 +170,7 @@ class Tolerances:
     """Relative (to the square of an outline's extent, the extent floored at this many world
     units): a leaf outline's Newell vector (twice its area) below this has no normal (the
     least-squares plane's stands in), and an ear-clipping corner turning less (twice its
-    triangle's area) is collinear and dropped (``plantgen.geometry.polygons``)."""
+    triangle's area) is collinear and dropped (``plantgen.geometry.meshes.polygons``)."""
 
     outline_duplicate: float = 1e-9
     """Relative (to an outline's extent, floored as for ``polygon_area``): consecutive

@@ -1,4 +1,4 @@
-// Leaves: the grammar's filled polygons (plantgen.geometry.polygons), rasterised into the
+// Leaves: the grammar's filled polygons (plantgen.geometry.meshes.polygons), rasterised into the
 // same frame and depth buffer as the frusta. The ray-cast frusta write gl_FragDepth from
 // the same projection, so a leaf in front of a frustum hides it and one behind is hidden,
 // as the ground is (shaders/ground.glsl). Used by both renderers (RC and GS).

@@ -6,7 +6,7 @@
 // interpolated), the same colour and distance outputs. Only the geometry differs.
 //
 // GS+R meshes come displaced onto the relief shell, with vertex normals tilted by the
-// height map's gradient as RC+R tilts its normals (plantgen.geometry.mesh.tessellate).
+// height map's gradient as RC+R tilts its normals (plantgen.geometry.meshes.mesh.tessellate).
 //
 // Per-row data (chain position, material) sits in a storage buffer indexed by the
 // primitive: lateral triangles come row by row, TRIANGLES_PER_ROW each, caps after them.
@@ -18,14 +18,14 @@
 // mesh's front faces as the light sees them, as the ray caster writes its nearest hit);
 // SKINNED (a swaying scene's mesh, built once at rest, posed here: each vertex turns about
 // its pivot segment's posed start by the mean turn of its two segments, read from the
-// pose buffer that shaders/pose.glsl writes; plantgen.geometry.skinned_mesh); NORMAL_MAP (GS+N:
-// the relief as a baked tangent-space normal map, plantgen.geometry.textures, read as glTF
+// pose buffer that shaders/pose.glsl writes; plantgen.geometry.meshes.skinned_mesh); NORMAL_MAP (GS+N:
+// the relief as a baked tangent-space normal map, plantgen.geometry.meshes.textures, read as glTF
 // readers read one: T the vertex tangent, B = cross(N, T)·w, n = T·x + B·y + N·z; caps,
 // which the ray caster leaves unrelieved, keep their normal); PARALLAX (GS+POM, with NORMAL_MAP:
 // parallax occlusion mapping, the maps' alpha the baked relief height w; see below).
 //
 // GS+POM. The mesh sits on the relief's outer shell (r + shell: w = 1 everywhere,
-// plantgen.geometry.mesh.tessellate with relief and a height of 1), the top of the
+// plantgen.geometry.meshes.mesh.tessellate with relief and a height of 1), the top of the
 // relief, so that what the mesh covers holds the whole relief. Each fragment walks its
 // view ray down into the shell in tangent space: depth d in [0, 1] below the mesh (a
 // fraction of the row's shell thickness, model units, RowShell) meets the relief where
@@ -35,7 +35,7 @@
 // POM interpolation, no extra sample; 0: steep parallax mapping, the first layer below).
 // The march's frame is GS+N's vertex tangent frame (T along +u, B = cross(N, T)·w along -v,
 // N), interpolated, with each vertex's model units per unit of u and of v (uv_scale:
-// plantgen.geometry.textures.mesh_uv_scales), which a unit frame cannot carry (a segment's
+// plantgen.geometry.meshes.textures.mesh_uv_scales), which a unit frame cannot carry (a segment's
 // own aspect): per unit of depth the ray moves (-V·T/|∂P/∂u|, V·B/|∂P/∂v|)/(N·V) in (u, v).
 // (A per-facet frame from screen derivatives jumps at every triangle edge: the march's
 // offset with it, drawing the mesh's edges into the relief.) The fragment is then shaded

@@ -19,8 +19,8 @@ import dataclasses
 
 import numpy as np
 
-from plantgen.geometry.mesh import TessellatedMesh, tessellate
-from plantgen.geometry.polygons import Polygons
+from plantgen.geometry.meshes.mesh import TessellatedMesh, tessellate
+from plantgen.geometry.meshes.polygons import Polygons
 from plantgen.geometry.skeletons.motion import pose, sway_rig, turn_at, turn_coefficients
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton

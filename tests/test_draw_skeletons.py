@@ -18,7 +18,7 @@ from plantgen.benchmarks.draw_skeletons import (
     main,
     panel_projection,
 )
-from plantgen.geometry.polygons import Polygons, triangulate
+from plantgen.geometry.meshes.polygons import Polygons, triangulate
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import grow_file
 

@@ -24,7 +24,7 @@ import plantgen
 from plantgen.exporters import EXPORT_FORMATS, ExportError, Format, Plant, export_mesh, write_plants, write_skeleton
 from plantgen.exporters.formats import FORMAT_KINDS
 from plantgen.exporters.plants import MeshWriter, SkeletonWriter
-from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.skeletons.frames import up_rotation
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import export_model, grow_file

@@ -14,7 +14,7 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_meshes
 
 from plantgen.exporters import export_mesh
-from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.skeletons.frames import turn_placements
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton

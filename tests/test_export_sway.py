@@ -22,7 +22,7 @@ from plantgen.errors import PlantgenError
 from plantgen.exporters.gltf import byte_weights
 from plantgen.exporters.plants import leaf_parts, material_parts
 from plantgen.exporters.sway import common_period, sway_timeline, vertex_influences
-from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.skeletons.frames import up_rotation
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton

@@ -185,7 +185,7 @@ def test_instanced_raster_draws_the_merged_mesh(relief):
     """GS (and GS+R): each plant's mesh once, a copy per draw, gives the image of the
     copies' meshes placed on the CPU and merged (the same tessellation, moved in float64)."""
     from plantgen.geometry.instances import PlacedMeshes
-    from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.meshes.mesh import tessellate
     from plantgen.gl.raster import RasterRenderer
 
     placed, camera, ground = _grove((1e4, 0.0, 0.0))

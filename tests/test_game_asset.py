@@ -17,7 +17,7 @@ from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, node_modules, three_script
 from test_export_scene import glb_json
 
-from plantgen.geometry.impostor import frame_basis, octahedral_direction, octahedral_uv, view_directions
+from plantgen.geometry.meshes.impostor import frame_basis, octahedral_direction, octahedral_uv, view_directions
 from plantgen.geometry.skeletons.frusta import Frusta
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton

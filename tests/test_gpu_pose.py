@@ -35,11 +35,11 @@ from test_sway_skin import small_scene
 
 from plantgen.animation import AnimatedScene
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.meshes.mesh import tessellate
+from plantgen.geometry.meshes.skinned_mesh import skin_positions
 from plantgen.geometry.skeletons.motion import pose, sway_rig
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
-from plantgen.geometry.skinned_mesh import skin_positions
 from plantgen.geometry.stage import Sway
 from plantgen.geometry.vec import ancestor_count
 from plantgen.gl.pose import PoseStream, tree_groups

@@ -188,7 +188,7 @@ def test_no_lit_pixel_is_darker_than_its_ambient_term(gl_ctx):
     sees (off silhouettes)
     is at least the ambient term of the reference's shading normal (darkest
     albedo of the material, sky light 0.5 + 0.5·n_y); negating (8) left black slivers."""
-    from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.meshes.mesh import tessellate
     from plantgen.geometry.skeletons.materials import material_palette
     from plantgen.gl.material_uniforms import AMBIENT_COLOR
     from plantgen.gl.raster import RasterRenderer
@@ -279,7 +279,7 @@ def test_knuckle_meshes_rasterise_with_their_rows_materials(gl_ctx):
     covers what the float64 reference covers, and its pixels show the material of the
     segment the reference hits there (two materials far apart in colour; where the facets
     and the cones part at an edge, a pixel may show the other)."""
-    from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.meshes.mesh import tessellate
     from plantgen.gl.raster import RasterRenderer
 
     skeleton = chain_skeleton([150.0], 1.0, 0.15, material_names=("bark", "cactus"))

@@ -134,7 +134,7 @@ MAX_MODULE_LINES = 900
 #: allow-list only for the time those branches take to merge. The lead empties it when
 #: merging them; nothing is to be added to it (lsystem/lpy/ is not on it: it was split).
 OVERSIZED = {
-    "geometry/mesh.py",                     # 1,105 lines
+    "geometry/meshes/mesh.py",                     # 1,105 lines
     "geometry/scan.py",                     # 1,075 lines
     "geometry/bvh.py",                      # 908 lines
 }

@@ -15,9 +15,9 @@ from test_export_scene import accessor, glb_json
 from test_leaf_exports import GRAMMAR, LEAF
 
 from plantgen.assets import AssetSettings
-from plantgen.geometry.leaf_cards import leaf_cards
-from plantgen.geometry.polygons import PolygonBuilder
-from plantgen.geometry.surfaces import SURFACES, place
+from plantgen.geometry.meshes.leaf_cards import leaf_cards
+from plantgen.geometry.meshes.polygons import PolygonBuilder
+from plantgen.geometry.meshes.surfaces import SURFACES, place
 from plantgen.pipeline import export_model, grow_file
 
 

@@ -19,7 +19,7 @@ from test_export_scene import usd_problems
 
 from plantgen.exporters import export_mesh
 from plantgen.exporters.plants import leaf_uv
-from plantgen.geometry.mesh import tessellate
+from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import export_model, grow_file
 

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen._resources import grammars_dir
-from plantgen.geometry.polygons import triangulate
+from plantgen.geometry.meshes.polygons import triangulate
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.derive import apply_interpretation, cut_branches
 from plantgen.lsystem.grammar import GrammarError

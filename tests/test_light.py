@@ -15,7 +15,7 @@ from plantgen._resources import grammars_dir
 from plantgen.environment import environment_for
 from plantgen.environment.light import Light, allocate, sky_directions
 from plantgen.files import read_yaml
-from plantgen.geometry.polygons import PolygonBuilder, Polygons
+from plantgen.geometry.meshes.polygons import PolygonBuilder, Polygons
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.limits import LimitError, Limits
 from plantgen.lsystem import derive, parse_grammar

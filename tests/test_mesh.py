@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from plantgen.geometry.mesh import (
+from plantgen.geometry.meshes.mesh import (
     bands_along,
     columns_around,
     lateral_triangles_per_row,

@@ -12,7 +12,7 @@ from _geometry_helpers import chain_skeleton
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.mesh import columns_around, slice_triangles, tessellate, triangle_count
+from plantgen.geometry.meshes.mesh import columns_around, slice_triangles, tessellate, triangle_count
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 
@@ -187,7 +187,7 @@ def test_random_chains_with_knuckles_are_closed(data):
     """Bends 0–179°, radii 1e-3..1 of the shortest segment, tapers up to 10:1 a segment,
     2 to 4 segments in turning planes, m = 0..2, with and without relief and twist. Self-overlap is
     allowed here (a chain may cross itself; a knuckle too tight for its segments, see
-    plantgen.geometry.mesh), holes and zero-area faces are not."""
+    plantgen.geometry.meshes.mesh), holes and zero-area faces are not."""
     n = data.draw(st.integers(2, 4), label="segments")
     bends = data.draw(st.lists(st.floats(0.0, 179.0), min_size=n - 1, max_size=n - 1), label="bends")
     sharp = data.draw(st.integers(0, n - 2), label="sharp joint")

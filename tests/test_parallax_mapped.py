@@ -11,9 +11,9 @@ import pytest
 from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_frustum
 from click.testing import CliRunner
 
-from plantgen.geometry import textures as tx
 from plantgen.geometry.camera import Camera
-from plantgen.geometry.mesh import outer_shell_mesh, tessellate
+from plantgen.geometry.meshes import textures as tx
+from plantgen.geometry.meshes.mesh import outer_shell_mesh, tessellate
 from plantgen.settings import ParallaxSettings, RaycastSettings
 
 LEVEL = 3
@@ -87,7 +87,7 @@ def test_the_uv_scales_are_the_cones_own():
     """The march's model units per unit of (u, v) at each lateral vertex of the outer-shell
     mesh: around, the polygon's perimeter (2π(r + shell) to 0.05 %), along, the texture
     period's length (the frustum's, v running 0..1); the caps' vertices get 0 (no march)."""
-    from plantgen.geometry.textures import mesh_uv_scales
+    from plantgen.geometry.meshes.textures import mesh_uv_scales
 
     frusta = relief_frustum("stone")
     mesh = outer_shell_mesh(frusta, LEVEL)

@@ -16,7 +16,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from test_export_scene import usd_problems
 
-from plantgen.geometry.polygons import Polygons
+from plantgen.geometry.meshes.polygons import Polygons
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import export_model, grow_file
 from plantgen.scene import Scene, SceneInstance

@@ -297,7 +297,7 @@ def test_an_arc_spans_one_texture_period_and_v_runs_on(lengths):
 def test_texture_slots_reach_the_mesh_and_the_raster_renderers_rows():
     # GS: the mesh's texture v, less its row's chain offset (what raster.glsl subtracts),
     # is the texture v the ray caster and the reference take (surface_uv)
-    from plantgen.geometry.mesh import tessellate
+    from plantgen.geometry.meshes.mesh import tessellate
     from plantgen.geometry.skeletons.frusta import surface_uv
     from plantgen.gl.raster import row_data
 

@@ -12,8 +12,8 @@ from scipy.spatial import cKDTree
 from test_leaf_exports import gltf_json
 
 from plantgen._resources import grammars_dir
+from plantgen.geometry.meshes.surfaces import SURFACES, place, surface
 from plantgen.geometry.skeletons.materials import material_colour
-from plantgen.geometry.surfaces import SURFACES, place, surface
 from plantgen.limits import LimitError, Limits
 from plantgen.lsystem import derive, parse_grammar
 from plantgen.lsystem.derive import apply_interpretation

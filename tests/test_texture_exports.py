@@ -18,7 +18,7 @@ from PIL import Image
 
 from plantgen.exporters import ExportError
 from plantgen.exporters.textures import texture_image
-from plantgen.geometry.textures import bake_material
+from plantgen.geometry.meshes.textures import bake_material
 from plantgen.pipeline import export_model
 
 

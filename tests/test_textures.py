@@ -1,6 +1,6 @@
-"""The relief baked into textures (plantgen.geometry.textures): sizes from the map's own
+"""The relief baked into textures (plantgen.geometry.meshes.textures): sizes from the map's own
 detail, the normal map against the ray caster's shading of relief (its numpy twin,
-plantgen.geometry.mesh.generator_points with relief_slope), the base colour against the
+plantgen.geometry.meshes.mesh.generator_points with relief_slope), the base colour against the
 palette, tangents against the frustum's own frame, and the PNG writer against Pillow."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from plantgen.exporters.textures import bake_textures, texture_image
-from plantgen.geometry import textures as tx
-from plantgen.geometry.mesh import columns_around, generator_points, tessellate
+from plantgen.geometry.meshes import textures as tx
+from plantgen.geometry.meshes.mesh import columns_around, generator_points, tessellate
 from plantgen.geometry.skeletons import relief
 from plantgen.geometry.skeletons.materials import material_palette
 from plantgen.geometry.skeletons.skeleton import Skeleton

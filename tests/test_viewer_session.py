@@ -14,7 +14,7 @@ from _cli import run_cli
 from PIL import Image
 
 from plantgen.geometry.camera import auto_camera, orbit_angles
-from plantgen.geometry.mesh import triangle_count
+from plantgen.geometry.meshes.mesh import triangle_count
 from plantgen.pipeline import prepare_model, render_model
 from plantgen.settings import MAX_SUBDIV
 from plantgen.viewer.handlers import ACTIONS

@@ -22,7 +22,7 @@ from ..errors import PlantgenError
 from ..exporters import export_mesh
 from ..files import write_atomically
 from ..geometry.camera import Camera, auto_camera
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..geometry.scan import scan_plant
 from ..geometry.skeletons.swc import write_swc
 from ..geometry.skeletons.topology import branches

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from ..geometry.leaf_cards import leaf_cards
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.leaf_cards import leaf_cards
+from ..geometry.meshes.mesh import tessellate
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.impostor import bake_impostor, bounding_sphere, impostor_camera

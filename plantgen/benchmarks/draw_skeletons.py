@@ -27,7 +27,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from .._resources import shipped_grammar
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import PALETTE, material_colour
 from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.stage import Ground

@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..animation import AnimatedScene
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..gl.context import gl_context, renderer_name
 from ..gl.pose import ROWS_PER_GROUP, PoseStream, tree_groups
 from ..gl.raster import RasterRenderer

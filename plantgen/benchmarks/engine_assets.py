@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_atomically
-from ..geometry.impostor import frame_basis, octahedral_uv, view_directions
-from ..geometry.leaf_cards import leaf_cards
+from ..geometry.meshes.impostor import frame_basis, octahedral_uv, view_directions
+from ..geometry.meshes.leaf_cards import leaf_cards
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.context import gl_context, renderer_name

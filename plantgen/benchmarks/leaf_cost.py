@@ -15,7 +15,7 @@ import argparse
 import statistics
 import sys
 
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import renderer_name
 from ..gl.raster import RasterRenderer

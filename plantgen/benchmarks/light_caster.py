@@ -23,7 +23,7 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
   set-up and first samples cost, beside the error they leave;
 * ``mesh m=1`` to ``m=6``: what an engine would do instead, ``--shadow-caster mesh``:
   the frusta tessellated and displaced by the relief (GS+R at level m,
-  :func:`plantgen.geometry.mesh.tessellate`, built once and not timed) and rasterised
+  :func:`plantgen.geometry.meshes.mesh.tessellate`, built once and not timed) and rasterised
   into the same map by the ray caster's light pass (``raster.glsl``'s SHADOW_PASS): one
   more way of casting the relief, measured by the same clock and the same reference (a
   scene whose mesh would pass :data:`MESH_CASTER_TRIANGLES` is not drawn, and its row
@@ -52,7 +52,7 @@ import numpy as np
 
 from .._resources import grammars_dir
 from ..files import read_yaml
-from ..geometry.mesh import triangle_count
+from ..geometry.meshes.mesh import triangle_count
 from ..geometry.reference import intersect_frusta
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster

@@ -21,9 +21,9 @@ from PIL import Image
 
 from ..exporters import Plant
 from ..exporters.textures import bake_textures, split_by_aspect
-from ..geometry.mesh import outer_shell_mesh, tessellate
+from ..geometry.meshes.mesh import outer_shell_mesh, tessellate
+from ..geometry.meshes.textures import parallax_map
 from ..geometry.skeletons.skeleton import Skeleton
-from ..geometry.textures import parallax_map
 from ..gl.context import gl_context
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster

@@ -14,7 +14,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..geometry.camera import Camera
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..geometry.skeletons.frusta import frusta_bounds
 from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import gl_context

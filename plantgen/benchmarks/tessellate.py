@@ -22,7 +22,7 @@ import tracemalloc
 import numpy as np
 
 from .._resources import shipped_grammar
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.raster import gs_buffer_bytes

@@ -17,10 +17,10 @@ import sys
 
 import numpy as np
 
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
+from ..geometry.meshes.textures import aspect_error, mesh_aspects, weighted_median
 from ..geometry.skeletons import relief
 from ..geometry.skeletons.skin import skin_skeleton
-from ..geometry.textures import aspect_error, mesh_aspects, weighted_median
 from ..pipeline import grow_file
 
 #: The shipped models with relief materials (Table 1's and the well).

@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import fields
 from ..geometry.bvh import build_bvh, trace_bvh
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.scan import scan_target, target_hits
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits

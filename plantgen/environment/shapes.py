@@ -27,7 +27,7 @@ from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input
 from ..geometry.bvh import build_bvh, trace_bvh
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.scan import scan_target, target_hits
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits

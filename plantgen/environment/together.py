@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits, Meter
 from ..lsystem.derive import Derivation

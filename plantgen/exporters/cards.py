@@ -1,12 +1,12 @@
 """Leaves written as cards (``plantgen export --leaves cards``): each plant's leaf polygons
-replaced by their cards (:mod:`plantgen.geometry.leaf_cards`), which glTF writes as
+replaced by their cards (:mod:`plantgen.geometry.meshes.leaf_cards`), which glTF writes as
 alpha-cut quads over one atlas of the leaf shapes."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from ..geometry.leaf_cards import leaf_cards
+from ..geometry.meshes.leaf_cards import leaf_cards
 from .formats import ExportError
 from .plants import Plant
 

@@ -44,7 +44,7 @@ it (between the material's dark and light colour; with ``colours`` given: that c
 no COLOR_0) (a leaf is seen from both sides; the frusta's materials stay single-sided,
 so back faces are culled); NORMAL is the polygon's normal, TEXCOORD_0 spans each leaf's
 bounding box in its plane (:func:`~plantgen.exporters.plants.leaf_uv`). Leaves written as
-cards (a plant's ``cards``, :mod:`plantgen.geometry.leaf_cards`) are one quad each, in a
+cards (a plant's ``cards``, :mod:`plantgen.geometry.meshes.leaf_cards`) are one quad each, in a
 material ``"<material> (leaf card)"``: double-sided, ``alphaMode: MASK`` (cut-off 0.5), its
 base colour texture the cards' atlas (white, alpha the shape; sampled clamped, without
 mipmaps: averaged mipmaps would thin the cut-outs away with distance), each
@@ -81,8 +81,8 @@ from urllib.parse import quote
 import numpy as np
 
 from ..files import write_all_atomically, write_atomically
+from ..geometry.meshes.textures import mesh_tangents
 from ..geometry.skeletons.frames import similarity_trs, turn_placements
-from ..geometry.textures import mesh_tangents
 from ..images import png_bytes
 from .formats import ExportError
 from .impostors import impostor_coverages, impostor_part
@@ -317,7 +317,7 @@ class _Document:
 
     def card_material(self, name: str, rgb, atlas) -> int:
         """A double-sided leaf-card material: base colour ``rgb`` times the card ``atlas``
-        (:class:`~plantgen.geometry.leaf_cards.CardAtlas`, clamped at its edges), cut where
+        (:class:`~plantgen.geometry.meshes.leaf_cards.CardAtlas`, clamped at its edges), cut where
         its alpha is under 0.5 (``alphaMode: MASK``); one per name and atlas."""
         key = (name, id(atlas))
         if key not in self.card_materials:

@@ -1,14 +1,14 @@
 """An impostor as a file's last level of detail: a card (two triangles, the bounding
 sphere's diameter a side, facing +z of the plant's frame at its centre) whose texture
 coordinates span the atlas tile seen from +z (what a reader without an impostor shader
-shows), the atlas's layout (:meth:`~plantgen.geometry.impostor.Impostor.layout`) beside
+shows), the atlas's layout (:meth:`~plantgen.geometry.meshes.impostor.Impostor.layout`) beside
 it for the shader that picks the tile of each view (see the docs' engine assets page)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.impostor import Impostor, octahedral_uv
+from ..geometry.meshes.impostor import Impostor, octahedral_uv
 from ..geometry.skeletons.frames import up_rotation
 from .plants import Part
 

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..files import check_finite, write_atomically
-from ..geometry.mesh import TessellatedMesh
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.mesh import TessellatedMesh
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.skeleton import Skeleton
 from .formats import ExportError, writable_format
 from .plants import (

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_all_atomically
-from ..geometry.mesh import TessellatedMesh
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.mesh import TessellatedMesh
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import material_palette
 from .formats import ExportError
 from .gltf import generator

@@ -11,10 +11,10 @@ from typing import Protocol
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.impostor import Impostor
-from ..geometry.leaf_cards import LeafCards
-from ..geometry.mesh import TessellatedMesh
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.impostor import Impostor
+from ..geometry.meshes.leaf_cards import LeafCards
+from ..geometry.meshes.mesh import TessellatedMesh
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.frames import up_rotation
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.skeletons.skeleton import Skeleton
@@ -72,7 +72,7 @@ class Plant:
     ``sway``: how its copies sway (:class:`~plantgen.exporters.sway.PlantSway`), for the
     formats that write an animation; None: the plant stands still. ``detail``: its levels
     of detail (:class:`PlantDetail`), written by glTF and USD; None: the full mesh only.
-    ``cards``: the leaves as cards (:class:`~plantgen.geometry.leaf_cards.LeafCards`, whose
+    ``cards``: the leaves as cards (:class:`~plantgen.geometry.meshes.leaf_cards.LeafCards`, whose
     quads ``leaves`` then is; :func:`~plantgen.exporters.cards.card_plant`), written by glTF
     with their atlas; None: the leaves are polygons."""
 

@@ -2,7 +2,7 @@
 and the companion files' names (:func:`bake_textures`, :func:`texture_files`).
 
 :func:`bake_textures` bakes, for each material name with relief that the plants' meshes
-use, the maps of :mod:`plantgen.geometry.textures` (base colour, tangent-space normal,
+use, the maps of :mod:`plantgen.geometry.meshes.textures` (base colour, tangent-space normal,
 height), the normal map at the material's median aspect over every plant's faces. A mesh
 whose vertices already carry the relief (GS+R, ``displaced``) gets the base colour only:
 a normal map on top of its tilted normals would count the relief twice, and a height map
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.textures import MaterialTextures, bake_material, mesh_aspects, weighted_median
+from ..geometry.meshes.textures import MaterialTextures, bake_material, mesh_aspects, weighted_median
 from ..images import png_bytes
 
 __all__ = ["KINDS", "Textures", "bake_textures", "bucket_name", "png_writes", "split_by_aspect",
@@ -35,7 +35,7 @@ KINDS = ("basecolor", "normal", "height")
 
 @dataclass(frozen=True, eq=False)
 class Textures:
-    """The baked maps of a model by material name (:class:`~plantgen.geometry.textures.
+    """The baked maps of a model by material name (:class:`~plantgen.geometry.meshes.textures.
     MaterialTextures`), and which kinds (:data:`KINDS`) the files carry: all three, or the
     base colour only for a displaced (GS+R) mesh."""
 
@@ -51,7 +51,7 @@ class Textures:
 
 def bake_textures(meshes, *, displaced: bool = False, bases: dict | None = None) -> Textures:
     """The textures of every relief material the tessellated ``meshes`` (an iterable of
-    :class:`~plantgen.geometry.mesh.TessellatedMesh`, None skipped) use, keyed by material
+    :class:`~plantgen.geometry.meshes.mesh.TessellatedMesh`, None skipped) use, keyed by material
     name; each normal map at the area-weighted median aspect of that material's faces over
     all the meshes. ``displaced``: the meshes carry their relief (GS+R): base colour only.
     ``bases``: {name: material} for names that stand for another material's relief (the
@@ -88,8 +88,8 @@ def split_by_aspect(plants, step: float) -> tuple[list, dict]:
     to a material :func:`bucket_name` of their bucket's aspect (appended to the mesh's
     names, so the leaves' indices stand), each with its own normal map. Returns the plants
     and {bucket name: material} (``bases`` of :func:`bake_textures`)."""
+    from ..geometry.meshes.textures import row_aspects
     from ..geometry.skeletons.relief import default_shell
-    from ..geometry.textures import row_aspects
 
     rows = [None if p.mesh is None else row_aspects(p.mesh) for p in plants]
     gathered: dict[str, list] = {}

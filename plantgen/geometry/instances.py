@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .mesh import tessellate
+from .meshes.mesh import tessellate
 from .skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from .vec import reduce_to_root
 
@@ -269,7 +269,7 @@ class PlacedMeshes:
 
     @classmethod
     def tessellate(cls, placed: PlacedPlants, level: int, relief: bool = False) -> PlacedMeshes:
-        """Each plant tessellated once (:func:`plantgen.geometry.mesh.tessellate`)."""
+        """Each plant tessellated once (:func:`plantgen.geometry.meshes.mesh.tessellate`)."""
         out = []
         for plant in placed.plants:
             mesh = tessellate(plant.frusta, level, relief=relief)

@@ -78,7 +78,7 @@ from ..errors import PlantgenError
 from ..knobs import check_knobs, knob
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from .polygons import Polygons
+from .meshes.polygons import Polygons
 from .reference import PairTester, row_boxes
 from .skeletons.frusta import Frusta
 from .skeletons.skeleton import Skeleton

@@ -1,5 +1,5 @@
 """Baking an octahedral impostor with the ray caster (RC, RC+R with ``relief``): each of
-the N×N views of :mod:`plantgen.geometry.impostor` is one render of the plant's frusta
+the N×N views of :mod:`plantgen.geometry.meshes.impostor` is one render of the plant's frusta
 and leaves, whose hits give the tile's base colour (the material's colour, a leaf's shade
 in 16 tones, through the renderer's label pass: the same hits as its colour render),
 depth (the exact ray distance) and normal (the cross product of the hit points'
@@ -13,10 +13,10 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.impostor import Impostor, frame_basis, view_directions
+from ..geometry.meshes.impostor import Impostor, frame_basis, view_directions
+from ..geometry.meshes.textures import linear_to_srgb
 from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
-from ..geometry.textures import linear_to_srgb
 from ..settings import RaycastSettings
 from .context import gl_context, renderer_name
 from .raycast import Raycaster
@@ -30,7 +30,7 @@ LEAF_TONES = 16
 
 
 def impostor_camera(centre, radius: float, direction, size: int) -> Camera:
-    """The near-orthographic camera of one view (see :mod:`plantgen.geometry.impostor`)."""
+    """The near-orthographic camera of one view (see :mod:`plantgen.geometry.meshes.impostor`)."""
     centre = np.asarray(centre, dtype=np.float64)
     _, up = frame_basis(direction)
     distance = DISTANCE_FACTOR * radius
@@ -91,7 +91,7 @@ def _normals(points: np.ndarray, hit: np.ndarray, direction: np.ndarray) -> np.n
 def bake_impostor(frusta: Frusta, material_names, leaves=None, *, frames: int = 8, size: int = 1024,
                   hemi: bool = True, relief: bool = True, caster: Raycaster | None = None,
                   progress=None) -> Impostor:
-    """The :class:`~plantgen.geometry.impostor.Impostor` of a plant (its ``frusta``,
+    """The :class:`~plantgen.geometry.meshes.impostor.Impostor` of a plant (its ``frusta``,
     ``material_names`` and ``leaves``, a Polygons or None, in its own frame, y up):
     ``frames``² views in a ``size``² atlas (``size`` a multiple of ``frames``), by RC+R
     (``relief``) or RC. ``progress(stage, done, total)`` per view."""

@@ -1,6 +1,6 @@
 """Leaves in the frame: a grammar's filled polygons rasterised beside the frusta.
 
-Both renderers draw a model's :class:`~plantgen.geometry.polygons.Polygons` the same way
+Both renderers draw a model's :class:`~plantgen.geometry.meshes.polygons.Polygons` the same way
 (shaders/leaf.glsl): one indexed draw into the frame's depth buffer, where the ray-cast
 frusta write ``gl_FragDepth`` from the same projection (so leaves and frusta hide each
 other correctly), and, with shadows, one draw into the light's map, so leaves cast and
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
 from .shaders import build_program, mat4, set_uniforms

@@ -1,9 +1,9 @@
 """Raster renderer for tessellated frusta (GS, GS+R), the polygonal side of Table 1.
 
-A :class:`~plantgen.geometry.mesh.TessellatedMesh` is uploaded once (float32 positions
+A :class:`~plantgen.geometry.meshes.mesh.TessellatedMesh` is uploaded once (float32 positions
 relative to the mesh's own origin, normals, texture coordinates, uint32 indices) and
 drawn with one indexed draw call, back faces culled (the mesh is closed). A swaying
-scene's mesh is a :class:`~plantgen.geometry.skinned_mesh.SkinnedMesh`, uploaded once at
+scene's mesh is a :class:`~plantgen.geometry.meshes.skinned_mesh.SkinnedMesh`, uploaded once at
 rest (moving vertices relative to their pivot segment's rest start, and their binding)
 and posed by the vertex shader from the pose buffer of :mod:`plantgen.gl.pose`. The camera,
 light, material palette, height maps, sky, ground and shadow map are the ray caster's
@@ -20,10 +20,10 @@ import numpy as np
 
 from ..geometry.camera import Camera, box_corners
 from ..geometry.instances import PlacedMeshes
-from ..geometry.mesh import TessellatedMesh
-from ..geometry.skinned_mesh import SkinnedMesh
+from ..geometry.meshes.mesh import TessellatedMesh
+from ..geometry.meshes.skinned_mesh import SkinnedMesh
+from ..geometry.meshes.textures import mesh_tangents, mesh_uv_scales
 from ..geometry.stage import Ground
-from ..geometry.textures import mesh_tangents, mesh_uv_scales
 from ..settings import ParallaxSettings, ShadowSettings
 from .context import gl_context
 from .frame import (
@@ -119,7 +119,7 @@ class RasterRenderer(OffscreenRenderer):
 
     def upload(self, mesh: TessellatedMesh | SkinnedMesh, frusta, program):
         """Upload ``mesh`` (once per mesh object and program; a NORMAL_MAP program's with
-        the mesh's tangents, :func:`~plantgen.geometry.textures.mesh_tangents`); returns
+        the mesh's tangents, :func:`~plantgen.geometry.meshes.textures.mesh_tangents`); returns
         (vao, origin)."""
         key = (mesh, program)  # strong references: identity stays valid while cached
         if self._uploaded is not None and self._uploaded[0][0] is mesh and self._uploaded[0][1] is program:
@@ -188,13 +188,13 @@ class RasterRenderer(OffscreenRenderer):
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
         normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
-            normal map} (:func:`~plantgen.geometry.textures.bake_normal_map`, glTF's
+            normal map} (:func:`~plantgen.geometry.meshes.textures.bake_normal_map`, glTF's
             convention) shading the lateral faces of a still mesh as a glTF reader would;
             None: none. With ``parallax``: (H, W, 4) uint8, the alpha the relief height w
-            (:func:`~plantgen.geometry.textures.parallax_map`)
+            (:func:`~plantgen.geometry.meshes.textures.parallax_map`)
         parallax : GS+POM: parallax occlusion mapping of these maps with these knobs
             (``raster.glsl``'s PARALLAX), on a mesh at the relief's outer shell
-            (:func:`~plantgen.geometry.mesh.outer_shell_mesh`); None: none
+            (:func:`~plantgen.geometry.meshes.mesh.outer_shell_mesh`); None: none
         """
         skinned = isinstance(mesh, SkinnedMesh)
         if skinned and poses is None:
@@ -468,7 +468,7 @@ def normal_map_texture(ctx, names, normal_maps):
     size (smaller ones repeated texel by texel), repeating in u and v, trilinear: as an
     engine samples the exported map (without anisotropic filtering: llvmpipe's made GS+POM's
     gathers 500 times slower and wrong). RGBA8 where the maps are (H, W, 4), the alpha the
-    height (GS+POM, :func:`~plantgen.geometry.textures.parallax_map`)."""
+    height (GS+POM, :func:`~plantgen.geometry.meshes.textures.parallax_map`)."""
     maps, shape = _normal_layers(names, normal_maps)
     components = _components(maps)
     layers = np.empty((len(names), *shape, components), np.uint8)

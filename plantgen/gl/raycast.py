@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import PlantgenError
 from ..geometry.camera import Camera, box_corners
 from ..geometry.instances import PlacedPlants
-from ..geometry.mesh import tessellate, triangle_count
+from ..geometry.meshes.mesh import tessellate, triangle_count
 from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint

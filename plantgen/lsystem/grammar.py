@@ -27,8 +27,8 @@ from pathlib import Path
 
 from .. import fields
 from ..errors import PlantgenError
+from ..geometry.meshes.surfaces import SURFACES
 from ..geometry.skeletons.materials import MAX_MATERIALS
-from ..geometry.surfaces import SURFACES
 from ..limits import Limits, hint
 from ..limits import limits as default_limits
 from ..tolerances import tol

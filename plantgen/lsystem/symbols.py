@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from ..geometry.surfaces import SURFACES
+from ..geometry.meshes.surfaces import SURFACES
 
 __all__ = ["ARITY", "DERIVATION_ACTIONS", "QUERY_PREFIX", "SYMBOLS", "UNSUPPORTED", "Action", "Symbol", "by_action",
            "markdown_table", "unsupported_warning"]

@@ -36,8 +36,8 @@ from math import cos, radians, sin, sqrt
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry import surfaces
-from ..geometry.polygons import PolygonBuilder, Polygons
+from ..geometry.meshes import surfaces
+from ..geometry.meshes.polygons import PolygonBuilder, Polygons
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..limits import limits as default_limits

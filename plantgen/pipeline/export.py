@@ -38,8 +38,8 @@ from ..exporters.formats import check_export_outputs
 from ..exporters.plants import level_plant
 from ..exporters.textures import bake_textures, split_by_aspect
 from ..geometry.instances import detail_levels, detail_order, screen_coverage
-from ..geometry.mesh import tessellate, triangle_count
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.mesh import tessellate, triangle_count
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.frames import UP_AXES
 from ..geometry.skeletons.frusta import Frusta, frusta_bounds
 from ..geometry.skeletons.skeleton import Skeleton

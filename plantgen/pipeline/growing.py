@@ -20,7 +20,7 @@ from .._resources import grammars_dir, missing_hint, short_names
 from ..environment import environment_for
 from ..environment.together import TogetherPlant, grow_together
 from ..errors import PlantgenError
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.skeletons.swc import read_swc
 from ..limits import Limits

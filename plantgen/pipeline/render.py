@@ -29,7 +29,7 @@ from ..errors import PlantgenError
 from ..files import check_outputs, write_all_atomically
 from ..geometry.camera import Camera, Orbit, auto_camera, orbit_view
 from ..geometry.instances import PlacedPlants
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.frusta import Frusta
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT, Ground

@@ -11,7 +11,7 @@ from .._resources import closest, shipped_names
 from ..animation import AnimatedScene
 from ..errors import PlantgenError
 from ..geometry.camera import Camera
-from ..geometry.polygons import Polygons
+from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.frusta import Frusta
 from ..geometry.stage import Ground
 from ..pipeline import animate_model, grow_file, resolve_input, stage_model

@@ -5,7 +5,7 @@ read-back), plus the per-frame CPU update of an animated scene. An animated scen
 on the GPU by every method (:mod:`plantgen.gl.pose`): RC and RC+R get their records from
 the compute program (a frame where a joint may turn sharp is skinned on the CPU), GS and
 GS+R draw a mesh built once at rest and posed by the vertex shader from the same program's
-pose buffer (:mod:`plantgen.geometry.skinned_mesh`); the CPU time of that (the dispatch)
+pose buffer (:mod:`plantgen.geometry.meshes.skinned_mesh`); the CPU time of that (the dispatch)
 is added to each frame.
 """
 
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exporters.textures import bake_textures
-from ..geometry.mesh import TessellatedMesh, outer_shell_mesh, tessellate, triangle_count
-from ..geometry.textures import parallax_map
+from ..geometry.meshes.mesh import TessellatedMesh, outer_shell_mesh, tessellate, triangle_count
+from ..geometry.meshes.textures import parallax_map
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer, normal_map_bytes
 from ..gl.raycast import Raycaster

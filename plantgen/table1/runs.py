@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.mesh import triangle_count
+from ..geometry.meshes.mesh import triangle_count
 from ..geometry.reference import render_reference
 from ..geometry.skeletons.materials import material_height_maps
 from ..gl.context import gl_context, renderer_name

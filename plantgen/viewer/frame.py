@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry.instances import PlacedPlants
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.rt import RayTracer

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import PlantgenError
 from ..geometry.instances import PlacedPlants
-from ..geometry.mesh import triangle_count
+from ..geometry.meshes.mesh import triangle_count
 from ..limits import Limits
 from ..pipeline import PreparedModel, prepare_model
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings

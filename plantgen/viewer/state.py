@@ -17,7 +17,7 @@ from functools import partial
 
 from ..geometry.camera import Camera
 from ..geometry.instances import PlacedMeshes, PlacedPlants
-from ..geometry.mesh import tessellate
+from ..geometry.meshes.mesh import tessellate
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
 from ..gl.rt import RayTracer

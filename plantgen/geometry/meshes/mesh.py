@@ -95,10 +95,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tolerances import tol
-from .skeletons import relief as relief_maps
-from .skeletons.frusta import Frusta, plane_height
-from .vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_root, unit
+from ...tolerances import tol
+from ..skeletons import relief as relief_maps
+from ..skeletons.frusta import Frusta, plane_height
+from ..vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_root, unit
 
 __all__ = [
     "TessellatedMesh", "tessellate", "triangle_count", "lateral_triangles_per_row",

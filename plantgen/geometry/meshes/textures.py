@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .skeletons import relief
-from .skeletons.materials import material_palette
-from .vec import any_perpendicular
+from ..skeletons import relief
+from ..skeletons.materials import material_palette
+from ..vec import any_perpendicular
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
            "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "mesh_uv_scales",
@@ -179,7 +179,7 @@ def face_derivatives(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray):
 
 
 def mesh_aspects(mesh) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Per material index of a :class:`~plantgen.geometry.mesh.TessellatedMesh`: the
+    """Per material index of a :class:`~plantgen.geometry.meshes.mesh.TessellatedMesh`: the
     aspect ρ/L of each lateral face (ρ = |∂P/∂u|/2π, L = |∂P/∂v|: the radius over the
     texture period there), the face's area and its radius ρ, each (k,) float64."""
     dp_du, dp_dv, area, ok = face_derivatives(mesh.vertices, mesh.uv, mesh.faces)

@@ -25,8 +25,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ..tolerances import tol
-from .vec import unit
+from ...tolerances import tol
+from ..vec import unit
 
 __all__ = ["Polygons", "PolygonBuilder", "triangulate", "best_fit_normal"]
 
