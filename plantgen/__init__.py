@@ -37,7 +37,7 @@ def render(path, output=None, settings=None, *, seed=None, iterations=None, smoo
     The render's settings come whole (``settings``, a :class:`plantgen.settings.RenderSettings`)
     or as keywords named as the command's options, with their defaults (see
     ``plantgen render --help``): ``size=(w, h)``, ``camera`` (``"auto"``, a camera JSON
-    path or a :class:`plantgen.geometry.camera.Camera`), ``azimuth``, ``elevation``,
+    path or a :class:`plantgen.geometry.rays.camera.Camera`), ``azimuth``, ``elevation``,
     ``distance``, ``zoom``, ``fov``, ``effects``, ``relief``, ``shadows``, ``shadow_res``,
     ``shadow_caster``, ``ssaa``, ``background`` (``"sky"``, a colour, ``"none"``), ``time``,
     and the relief march's ``march``, ``linear_steps``, ``binary_steps``,

@@ -1,6 +1,6 @@
 """Knobs: a setting's one declaration (its default, range, command-line name and help).
 
-A setting is a field of a frozen dataclass (:mod:`plantgen.settings`, :class:`plantgen.geometry.camera.Orbit`)
+A setting is a field of a frozen dataclass (:mod:`plantgen.settings`, :class:`plantgen.geometry.rays.camera.Orbit`)
 declared with :func:`knob`: the field's default is the setting's only default, and its
 :class:`Knob` metadata says how the command line spells it, what it accepts and what it
 does. The command line builds its options from these (``plantgen.cli.options.knob_options``),

@@ -1,4 +1,4 @@
-"""Point clouds (:class:`~plantgen.geometry.scan.PointCloud`) to files and back: LAS 1.4
+"""Point clouds (:class:`~plantgen.geometry.rays.scan.PointCloud`) to files and back: LAS 1.4
 and LAZ through laspy (``pip install 'plantgen[scan]'``), binary PLY by numpy.
 
 :func:`write_points` picks the format by the suffix (``.las``, ``.laz``, ``.ply``) and
@@ -46,7 +46,7 @@ import numpy as np
 
 from .errors import PlantgenError
 from .files import check_finite, check_output, write_atomically
-from .geometry.scan import LABELS, PART_NAMES, PointCloud
+from .geometry.rays.scan import LABELS, PART_NAMES, PointCloud
 from .geometry.skeletons.frames import UP_AXES, up_rotation
 
 __all__ = ["FILE_LABELS", "POINT_SUFFIXES", "PointFileError", "check_point_output", "las_scale", "point_format",

@@ -60,8 +60,8 @@ from . import fields
 from ._resources import grammars_dir, missing_hint
 from .errors import PlantgenError
 from .files import read_yaml, real_path
-from .geometry.camera import Camera, CameraError, box_corners
 from .geometry.meshes.polygons import Polygons
+from .geometry.rays.camera import Camera, CameraError, box_corners
 from .geometry.skeletons.skeleton import Skeleton, SkeletonError
 from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
 from .limits import Limits

@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, is_dataclass, replace
 
 from .errors import PlantgenError
-from .geometry.camera import Orbit
+from .geometry.rays.camera import Orbit
 from .knobs import check_knobs, knob
 
 __all__ = ["EFFECTS", "DEFAULT_SIZE", "LOD_EXPORT_LEVELS",
@@ -263,7 +263,7 @@ class ShadowSettings:
 @dataclass(frozen=True)
 class DetailSettings:
     """The level of detail of a scene drawn instanced (the ``lod`` effect;
-    :mod:`plantgen.geometry.instances`): per copy, the segments whose subtree spans fewer
+    :mod:`plantgen.geometry.rays.instances`): per copy, the segments whose subtree spans fewer
     than ``lod_pixels`` pixels from the copy's nearest point are left out, twigs first
     (in the light's pass: texels of the shadow map); 0 draws every segment."""
 
@@ -325,7 +325,7 @@ class MotionSettings:
 @dataclass(frozen=True)
 class ViewSettings:
     """Where the camera is: ``camera`` ``"auto"`` (the scene's, else the model framed), a
-    camera JSON path or a :class:`~plantgen.geometry.camera.Camera`; ``orbit`` turns it."""
+    camera JSON path or a :class:`~plantgen.geometry.rays.camera.Camera`; ``orbit`` turns it."""
 
     camera: object = knob("auto", "--camera", "'auto' frames the model to span most of the viewport (or uses the "
                           "scene's camera); a camera JSON written by --camera-out or by the viewer's C key is taken "
@@ -382,7 +382,7 @@ class ParallaxSettings:
 class LevelSettings:
     """The levels of detail an export writes (glTF ``MSFT_lod``, a USD variantSet
     ``lod``): ``levels`` per plant, level 0 the full mesh and each next one at most half the
-    rows of the one above (:func:`plantgen.geometry.instances.detail_levels`); None: as the
+    rows of the one above (:func:`plantgen.geometry.rays.instances.detail_levels`); None: as the
     scene's effects say (:meth:`export_levels`). Their screen coverages follow
     :class:`DetailSettings`' ``lod_pixels``."""
 

@@ -1,6 +1,6 @@
 """Ray queries against a model: :func:`trace` casts rays of your own (light interception,
 visibility, sensors) at the exact frusta and leaf triangles that ``plantgen scan`` and
-the renderers see, through one bounding volume hierarchy (:mod:`plantgen.geometry.bvh`).
+the renderers see, through one bounding volume hierarchy (:mod:`plantgen.geometry.rays.bvh`).
 
 ``precision="float64"`` is the CPU reference: the BVH walked in numpy, every candidate
 tested with the reference's exact ray-cone intersection (clipped by the cutting planes,
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PlantgenError
-from .geometry.reference import Hits, PairTester, shade_hits
-from .geometry.scan import PART_NAMES, ScanTarget, SceneTarget, scan_target, scene_target
+from .geometry.rays.reference import Hits, PairTester, shade_hits
+from .geometry.rays.scan import PART_NAMES, ScanTarget, SceneTarget, scan_target, scene_target
 from .geometry.skeletons.skeleton import Skeleton
 from .geometry.vec import cross, dot
 from .limits import Limits
@@ -166,8 +166,8 @@ def _facing(normal, D) -> np.ndarray:
 def trace_target(target: ScanTarget | SceneTarget, origins, directions, *, any_hit: bool = False,
                  precision: str = "float64", t_min: float = 0.0, t_max: float = np.inf,
                  limits: Limits | None = None) -> TraceResult:
-    """:func:`trace` against a :class:`~plantgen.geometry.scan.ScanTarget` or
-    :class:`~plantgen.geometry.scan.SceneTarget` already made (its BVH is built on the
+    """:func:`trace` against a :class:`~plantgen.geometry.rays.scan.ScanTarget` or
+    :class:`~plantgen.geometry.rays.scan.SceneTarget` already made (its BVH is built on the
     first call and kept)."""
     limits = limits or default_limits
     O, D, shape = _rays(origins, directions, limits)
@@ -211,8 +211,8 @@ def trace(model, origins, directions, *, any_hit: bool = False, precision: str =
     ``model``: a grammar or scene (a path, or a shipped name such as ``"pine"``, grown with
     ``seed``), a grown model (:func:`plantgen.pipeline.grow_file`), a
     :class:`~plantgen.Skeleton` or a (Skeleton, leaf Polygons) pair, or a
-    :class:`~plantgen.geometry.scan.ScanTarget` or
-    :class:`~plantgen.geometry.scan.SceneTarget` (reuse one to trace many batches: its BVH
+    :class:`~plantgen.geometry.rays.scan.ScanTarget` or
+    :class:`~plantgen.geometry.rays.scan.SceneTarget` (reuse one to trace many batches: its BVH
     is built once). A scene is traced through two levels: each distinct plant once, the
     rays moved into each copy's frame in float64; its ``primitive`` is then
     ``copy · target.stride + the plant's primitive``, its labels those of the merged scene.

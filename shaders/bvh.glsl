@@ -1,4 +1,4 @@
-// Traversal of the bounding volume hierarchy (plantgen.geometry.bvh): the one ray search
+// Traversal of the bounding volume hierarchy (plantgen.geometry.rays.bvh): the one ray search
 // of every GPU query (render --method rt, scan, plantgen.trace). Included by programs that
 // trace rays; they get closest hits (bvh_closest) and any hits (bvh_any, shadow rays).
 //
@@ -111,7 +111,7 @@ float bvh_row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float dis
     return bvh_row_hit_at(f, recenter_shift(f, o, d), o, d, t_min, t_max, distance, footprint_scale, face);
 }
 
-// Möller-Trumbore, both faces, as plantgen.geometry.scan._triangle_hits (the grazing
+// Möller-Trumbore, both faces, as plantgen.geometry.rays.scan._triangle_hits (the grazing
 // guard |det| > TOL_TRIANGLE_GRAZING * |e1||e2||d|), with the ray first moved to the
 // point nearest v0 (float32 keeps the digits of a far eye). t > t_min; NO_HIT on a miss.
 float bvh_triangle_hit(vec3 v0, vec3 e1, vec3 e2, float size, vec3 o, vec3 d, float t_min) {

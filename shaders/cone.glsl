@@ -10,7 +10,7 @@
 // closing to a point need no branch. Points with r(y) < 0 (the mirror nappe) are outside.
 // Every ray/cone intersection goes through cone_quadratic and solve_quadratic (pbrt-v4's
 // Quadratic: the discriminant as a difference of products, the stable q form); their numpy
-// twins in plantgen/geometry/reference.py read line for line the same.
+// twins in plantgen/geometry/rays/reference.py read line for line the same.
 
 #ifndef CONE_GLSL
 #define CONE_GLSL
@@ -128,7 +128,7 @@ void two_product(float a, float b, out float p, out float e) {
 // a*b - c*d within about an ulp even where the two products nearly cancel (as pbrt-v4's
 // DifferenceOfProducts, with exact products instead of fma): the products' difference is
 // exact there, and their rounding errors are added back.
-// Twin: plantgen.geometry.reference.difference_of_products.
+// Twin: plantgen.geometry.rays.reference.difference_of_products.
 float difference_of_products(float a, float b, float c, float d) {
     float ab, ab_error, cd, cd_error;
     two_product(a, b, ab, ab_error);
@@ -142,7 +142,7 @@ float difference_of_products(float a, float b, float c, float d) {
 // t_q = q/a and t_c = c/q (neither cancels; where a = 0, a line, c/q = -c/(2b) is its one
 // root). t_q is NO_HIT where a = 0; t_c is t_q where q = 0 (b = 0 and a*c = 0). Returns the
 // discriminant: no real root where it is negative.
-// Twin: plantgen.geometry.reference.solve_quadratic.
+// Twin: plantgen.geometry.rays.reference.solve_quadratic.
 float solve_quadratic(float a, float b, float c, out float t_q, out float t_c) {
     float disc = difference_of_products(b, b, a, c);
     float root = sqrt(max(disc, 0.0));
@@ -156,7 +156,7 @@ float solve_quadratic(float a, float b, float c, out float t_q, out float t_c) {
 // e relative to the base: g(t) = a*t^2 + 2*b*t + c <= 0 inside the double cone. With
 // e_y = e.axis, d_y = d.axis, the parts E, D perpendicular to the axis and the radius at
 // e's height r0 = r1 + dr + k*e_y: a = D.D - (k*d_y)^2, b = E.D - k*d_y*r0, c = E.E - r0^2.
-// Returns e_y and d_y. Twin: plantgen.geometry.reference.cone_quadratic.
+// Returns e_y and d_y. Twin: plantgen.geometry.rays.reference.cone_quadratic.
 void cone_quadratic(Frustum f, float dr, vec3 e, vec3 d, out float a, out float b, out float c,
                     out float e_y, out float d_y) {
     float k = frustum_slope(f);
@@ -218,7 +218,7 @@ bool frustum_interval(Frustum f, float dr, vec3 o, vec3 d, float t_min, float t_
 }
 
 // The ray parameter of the point of o + t*d nearest the axis segment {C1 + s*axis,
-// 0 <= s <= h} (step 2 of plantgen.geometry.reference): re-centring the ray there gives
+// 0 <= s <= h} (step 2 of plantgen.geometry.rays.reference): re-centring the ray there gives
 // the quadratic numbers of the size of the ray's distance from the axis, not of the eye's.
 float recenter_shift(Frustum f, vec3 o, vec3 d) {
     vec3 E = o - f.base;
@@ -235,7 +235,7 @@ vec3 safe_normalize(vec3 x, vec3 fallback) {
 
 // The nearest hit of the ray o + t*d (t > t_min) with the frustum's skin: the cone between
 // its planes, and a flat cap on each open end. A line-by-line port of
-// plantgen.geometry.reference._pair_hits (there: E = O - C1, already re-centred by the
+// plantgen.geometry.rays.reference._pair_hits (there: E = O - C1, already re-centred by the
 // caller here). `kind` is FACE_CONE, FACE_LO or FACE_HI. Returns false for a miss.
 bool frustum_hit(Frustum f, vec3 o, vec3 d, float t_min, out float t_hit, out int kind) {
     float k = frustum_slope(f);

@@ -31,7 +31,7 @@ in vec4 rec5;              // u_offset, twist, shell, tag (material + 256 open_l
 
 uniform mat4 view_projection;   // render-origin-relative world -> clip
 uniform float hull_padding;     // relative growth of the pyramid (covers rasterisation edges)
-// The copy's placement (plantgen.geometry.instances): a record in its plant's frame is
+// The copy's placement (plantgen.geometry.rays.instances): a record in its plant's frame is
 // turned, scaled and moved to copy_offset (the copy's origin minus the render origin,
 // formed in float64 on the CPU). Merged records draw with the identity (exact in float32).
 uniform mat3 copy_turn;

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plantgen.geometry.camera import Camera
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plantgen.geometry.scan import PointCloud
+from plantgen.geometry.rays.scan import PointCloud
 
 
 def row_residuals(frusta, rows, points, slack):

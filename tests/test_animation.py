@@ -11,7 +11,7 @@ from PIL import Image
 from test_effects import SCENE
 
 from plantgen.animation import AnimatedScene
-from plantgen.geometry.camera import Camera
+from plantgen.geometry.rays.camera import Camera
 from plantgen.gl.raycast import Raycaster
 from plantgen.gl.records import RECORD_BYTES, RecordStream
 from plantgen.pipeline import grow_file
@@ -141,7 +141,7 @@ def test_shadowed_frames_change_only_where_the_moving_plant_or_its_shadow_is(gl_
     """No flicker: between consecutive frames (one light window for the clip), pixels
     change only on the moving plant and in its shadow, in either frame; the static post,
     its shadow and the open ground stay identical."""
-    from plantgen.geometry.reference import intersect_frusta
+    from plantgen.geometry.rays.reference import intersect_frusta
     from plantgen.gl.passes import ShadowSettings
 
     anim = AnimatedScene.from_scene(scene)

@@ -19,7 +19,7 @@ from _cli import run_cli
 
 from plantgen import table1
 from plantgen.errors import PlantgenError
-from plantgen.geometry.camera import Camera
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.table1 import (
     PAPER_TABLE1,

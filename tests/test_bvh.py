@@ -1,4 +1,4 @@
-"""The BVH build (plantgen.geometry.bvh): structural invariants on random, degenerate and
+"""The BVH build (plantgen.geometry.rays.bvh): structural invariants on random, degenerate and
 coincident boxes, for both build methods."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.bvh import BVH_METHODS, BVHError, build_bvh, float32_boxes, morton_codes, refit_bvh
+from plantgen.geometry.rays.bvh import BVH_METHODS, BVHError, build_bvh, float32_boxes, morton_codes, refit_bvh
 
 
 def check_invariants(bvh, lo, hi, leaf_size):

@@ -1,4 +1,4 @@
-"""The float64 BVH traversal (plantgen.geometry.bvh): closest and any hit equal brute
+"""The float64 BVH traversal (plantgen.geometry.rays.bvh): closest and any hit equal brute
 force over every primitive, on plants with leaves and on the hard cases (far from the
 origin, grazing rays, origins inside boxes, zero-length and very large rows), one level
 and two (one plant placed 100,000 times)."""
@@ -11,7 +11,7 @@ from _geometry_helpers import chain_skeleton, random_tree
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.bvh import (
+from plantgen.geometry.rays.bvh import (
     BVH_METHODS,
     BVHError,
     box_columns,
@@ -22,8 +22,8 @@ from plantgen.geometry.bvh import (
     trace_bvh,
     trace_scene,
 )
-from plantgen.geometry.instances import PlacedPlants
-from plantgen.geometry.scan import scan_target, target_hits
+from plantgen.geometry.rays.instances import PlacedPlants
+from plantgen.geometry.rays.scan import scan_target, target_hits
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import grow_file, model_leaves
 

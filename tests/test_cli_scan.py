@@ -58,7 +58,7 @@ def test_the_options_are_the_scan_settings_knobs():
     import click
 
     from plantgen.cli.scan import scan
-    from plantgen.geometry.scan import ScanSettings
+    from plantgen.geometry.rays.scan import ScanSettings
     from plantgen.knobs import knob_fields
 
     params = {p.name: p for p in scan.params}

@@ -2,7 +2,7 @@
 
 A small program includes cone.glsl and evaluates difference_of_products, solve_quadratic
 and plane_height per pixel on inputs from a float texture; the numpy twins
-(plantgen.geometry.reference, plantgen.geometry.skeletons.frusta) evaluate the same inputs in
+(plantgen.geometry.rays.reference, plantgen.geometry.skeletons.frusta) evaluate the same inputs in
 float32.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from plantgen._resources import shaders_dir
-from plantgen.geometry.reference import difference_of_products, solve_quadratic
+from plantgen.geometry.rays.reference import difference_of_products, solve_quadratic
 from plantgen.geometry.skeletons.frusta import plane_height
 from plantgen.gl.context import release_framebuffer
 from plantgen.gl.shaders import build_program

@@ -14,8 +14,8 @@ import pytest
 from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_meshes
 
-from plantgen.geometry.instances import detail_levels, detail_order
 from plantgen.geometry.meshes.mesh import tessellate
+from plantgen.geometry.rays.instances import detail_levels, detail_order
 from plantgen.geometry.skeletons.frusta import frusta_bounds
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import export_model, grow_file, plant_detail

@@ -10,8 +10,8 @@ from functools import cache
 import numpy as np
 import pytest
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.instances import PlacedPlants, detail_order, place_frusta, similarity_parts
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.instances import PlacedPlants, detail_order, place_frusta, similarity_parts
 from plantgen.geometry.skeletons.frusta import section_points
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
@@ -184,8 +184,8 @@ def test_a_small_forest_with_detail_stays_within_the_error_goal():
 def test_instanced_raster_draws_the_merged_mesh(relief):
     """GS (and GS+R): each plant's mesh once, a copy per draw, gives the image of the
     copies' meshes placed on the CPU and merged (the same tessellation, moved in float64)."""
-    from plantgen.geometry.instances import PlacedMeshes
     from plantgen.geometry.meshes.mesh import tessellate
+    from plantgen.geometry.rays.instances import PlacedMeshes
     from plantgen.gl.raster import RasterRenderer
 
     placed, camera, ground = _grove((1e4, 0.0, 0.0))

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from _geometry_helpers import chain_skeleton, random_tree, y_junction
 
-from plantgen.geometry.camera import auto_camera, box_corners, depth_range
-from plantgen.geometry.reference import inside_frusta
+from plantgen.geometry.rays.camera import auto_camera, box_corners, depth_range
+from plantgen.geometry.rays.reference import inside_frusta
+from plantgen.geometry.rays.stability import surface_samples
 from plantgen.geometry.skeletons.frusta import (
     PYRAMID_TRIANGLES,
     Frusta,
@@ -24,7 +25,6 @@ from plantgen.geometry.skeletons.frusta import (
 )
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
-from plantgen.geometry.stability import surface_samples
 
 
 def _rim_points(f, rows, which, count=16):
@@ -240,8 +240,8 @@ def test_radius_steps_are_modelled_not_fitted():
     assert f.report.step_joints == 1
     assert f.r1[1] == 0.2          # the step stays as modelled
     # still watertight from the inside of the thinner segment outwards
-    from plantgen.geometry.reference import intersect_frusta
-    from plantgen.geometry.stability import medial_axis_rays
+    from plantgen.geometry.rays.reference import intersect_frusta
+    from plantgen.geometry.rays.stability import medial_axis_rays
 
     o, d = medial_axis_rays(f, 500, seed=2)
     assert intersect_frusta(f, o, d).hit.all()

@@ -12,7 +12,7 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
-from plantgen.geometry.camera import Camera, auto_camera
+from plantgen.geometry.rays.camera import Camera, auto_camera
 from plantgen.geometry.skeletons.frusta import Frusta, frusta_bounds
 from plantgen.geometry.skeletons.materials import MAX_MATERIALS
 from plantgen.geometry.stage import Ground
@@ -486,7 +486,7 @@ AGREEMENT_CASES = list(HARD_CASES) + SKINNED
 
 @pytest.mark.parametrize("name", AGREEMENT_CASES)
 def test_agrees_with_the_float64_reference(gl_ctx, caster, skinned, name):
-    from plantgen.geometry.reference import render_reference
+    from plantgen.geometry.rays.reference import render_reference
 
     frusta = HARD_CASES[name] if name in HARD_CASES else skinned[name]
     direction = (0.6, 0.35, 1.0) if AGREEMENT_CASES.index(name) % 2 == 0 else (0.1, -1.0, 0.2)
@@ -525,7 +525,7 @@ def relief_cases():
 
 @pytest.mark.parametrize("name", ["bark_chain", "y_junction"])
 def test_relief_agrees_with_the_reference_and_its_error_falls_with_the_steps(gl_ctx, caster, name):
-    from plantgen.geometry.reference import render_reference
+    from plantgen.geometry.rays.reference import render_reference
 
     frusta = relief_cases()[name]
     assert (frusta.shell > 0).all()

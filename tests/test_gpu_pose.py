@@ -34,9 +34,9 @@ from test_effects import SCENE
 from test_sway_skin import small_scene
 
 from plantgen.animation import AnimatedScene
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.meshes.skinned_mesh import skin_positions
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.motion import pose, sway_rig
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton

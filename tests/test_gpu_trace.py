@@ -3,7 +3,7 @@ float64 reference, hit for hit: the same primitive for >= 99.9 % of random rays,
 float32 rounding; far from the origin, grazing rays, any hit, instanced scenes.
 
 The reference is brute force in float64 (every ray against every primitive,
-plantgen.geometry.scan.cast_first_returns), so the tests also prove that the hierarchy
+plantgen.geometry.rays.scan.cast_first_returns), so the tests also prove that the hierarchy
 loses no hit. Models are small (a few hundred primitives, a few thousand rays).
 """
 
@@ -16,10 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen.errors import PlantgenError
-from plantgen.geometry.bvh import BVH, build_bvh
-from plantgen.geometry.instances import place_frusta
-from plantgen.geometry.reference import row_boxes
-from plantgen.geometry.scan import ScanTarget, cast_first_returns, scan_target
+from plantgen.geometry.rays.bvh import BVH, build_bvh
+from plantgen.geometry.rays.instances import place_frusta
+from plantgen.geometry.rays.reference import row_boxes
+from plantgen.geometry.rays.scan import ScanTarget, cast_first_returns, scan_target
 from plantgen.geometry.skeletons.frusta import Frusta
 from plantgen.gl.trace import BVH_STACK, LEAF_COUNT_BITS, GpuPlant, trace_rays, upload_bvh
 
@@ -261,8 +261,8 @@ def test_copies_that_are_not_similarities_keep_full_maps(gl_ctx, kind):
     """A scene with one copy mirrored or scaled unevenly (possible through the API only)
     keeps the 64-byte 3x4 maps for all its copies, and still traces as the float64
     two-level reference does, copy for copy and row for row; without it, 32 bytes."""
-    from plantgen.geometry.bvh import scene_bvh, trace_scene
-    from plantgen.geometry.scan import target_hits
+    from plantgen.geometry.rays.bvh import scene_bvh, trace_scene
+    from plantgen.geometry.rays.scan import target_hits
     from plantgen.gl.trace import AFFINE_COPY_BYTES, COPY_BYTES
 
     plant = _target(50, seed=31, leaves=0)
@@ -348,7 +348,7 @@ def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
     GPU, its range solved again in float64: beam for beam the float64 scan's primitive
     (>= 99.9 %) and there exactly its range; the beams stream in chunks (the finder never
     sees more than the chunk), and progress counts every beam."""
-    from plantgen.geometry.scan import ScanSettings, beam_returns, scan_plant
+    from plantgen.geometry.rays.scan import ScanSettings, beam_returns, scan_plant
     from plantgen.gl.trace import trace_target
     from plantgen.pipeline import grow_file, model_leaves, skin_model
 
@@ -374,7 +374,7 @@ def test_the_scans_gpu_path_gives_the_reference_ranges(gl_ctx):
 def test_a_scenes_scan_on_the_gpu_gives_the_reference_ranges(gl_ctx):
     """A scene's scan (each distinct plant once, two levels) with the GPU's search: beam
     for beam the float64 two-level scan's primitive (>= 99.9 %) and there its range."""
-    from plantgen.geometry.scan import ScanSettings, beam_returns, scene_target
+    from plantgen.geometry.rays.scan import ScanSettings, beam_returns, scene_target
     from plantgen.gl.trace import trace_target
     from plantgen.pipeline import grow_file
 
@@ -387,13 +387,13 @@ def test_a_scenes_scan_on_the_gpu_gives_the_reference_ranges(gl_ctx):
 
 def test_one_plant_placed_100000_times_far_from_the_origin(gl_ctx):
     """The two-level traversal against the float64 two-level reference
-    (plantgen.geometry.bvh.trace_scene) on one plant placed 100,000 times over 3 km, 1e4
+    (plantgen.geometry.rays.bvh.trace_scene) on one plant placed 100,000 times over 3 km, 1e4
     from the origin: the same (copy, row) for >= 99.9 % of the rays, t within float32
     rounding; the plant is held once, each copy costs its 32-byte map and its share of the
     top level, under 64 bytes in all."""
-    from plantgen.geometry.bvh import build_scene_bvh, trace_scene
-    from plantgen.geometry.instances import PlacedPlants
-    from plantgen.geometry.scan import target_hits
+    from plantgen.geometry.rays.bvh import build_scene_bvh, trace_scene
+    from plantgen.geometry.rays.instances import PlacedPlants
+    from plantgen.geometry.rays.scan import target_hits
     from plantgen.geometry.skeletons.skin import skin_skeleton
     from plantgen.gl.trace import COPY_BYTES
 
@@ -436,7 +436,7 @@ def test_wide_nodes_hold_every_primitive_once(n):
     consecutive), gives each slot a box holding its binary node's float32 box, and its
     reference the leaf's primitives in the GPU's order; the stack a walk needs is what the
     bound says."""
-    from plantgen.geometry.bvh import float32_boxes
+    from plantgen.geometry.rays.bvh import float32_boxes
     from plantgen.gl.trace import decode_nodes, leaf_order, node_words, stack_need, wide_nodes
 
     rng = np.random.default_rng(n)

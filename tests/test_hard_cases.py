@@ -1,5 +1,5 @@
 """The hard-case suite (README.md, "Accuracy and stability"), one test per case
-(plantgen.geometry.stability): finite outputs, hits on the skin between the planes,
+(plantgen.geometry.rays.stability): finite outputs, hits on the skin between the planes,
 nearest against brute-force marching, no holes from the medial axis, and float32 (the
 GPU) close to float64."""
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from _geometry_helpers import chain_skeleton, y_junction
 
-from plantgen.geometry.reference import intersect_frusta
+from plantgen.geometry.rays.reference import intersect_frusta
+from plantgen.geometry.rays.stability import HARD_CASES, evaluate_case, medial_axis_rays, model_size
 from plantgen.geometry.skeletons.skin import skin_skeleton
-from plantgen.geometry.stability import HARD_CASES, evaluate_case, medial_axis_rays, model_size
 
 
 @pytest.mark.parametrize("case", HARD_CASES, ids=[c.name for c in HARD_CASES])

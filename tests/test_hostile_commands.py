@@ -284,7 +284,7 @@ def test_writers_escape_what_their_format_cannot_hold(tmp_path):
 
 
 def test_no_writer_writes_a_number_that_is_not_finite(tmp_path):
-    from plantgen.geometry.scan import PointCloud
+    from plantgen.geometry.rays.scan import PointCloud
     from plantgen.scanfiles import PointFileError, write_points
 
     cloud = PointCloud(np.array([[0.0, 1.0, np.inf]]), plant=np.zeros(1, int), part=np.zeros(1, int),

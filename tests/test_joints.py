@@ -16,11 +16,11 @@ from _geometry_helpers import chain_skeleton
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.reference import intersect_frusta, render_reference
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.reference import intersect_frusta, render_reference
+from plantgen.geometry.rays.stability import medial_axis_rays
 from plantgen.geometry.skeletons.frusta import cone_slope, seam_gap
 from plantgen.geometry.skeletons.skin import skin_skeleton, sphere_base_radius
-from plantgen.geometry.stability import medial_axis_rays
 
 # The issue's held-out chains: (bends in degrees, joint radii root first), lengths 1.
 ISSUE_CHAINS = {
@@ -220,7 +220,7 @@ def seam_closeups(frusta, views=12, fov=0.5, size=64, seed=0):
     """Cameras 8 r outside points of the seams, zoomed in (``fov`` degrees): a few
     thousandths of r per pixel, so the slab next to the shared plane where float32
     rounding decides which row owns a hit spans pixels."""
-    from plantgen.geometry.stability import seam_points
+    from plantgen.geometry.rays.stability import seam_points
 
     rng = np.random.default_rng(seed)
     points, outward, radius = seam_points(frusta, views, rng)

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.meshes.polygons import Polygons
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground

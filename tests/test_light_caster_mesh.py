@@ -16,8 +16,8 @@ from test_shadow_cache import CAMERAS, SHADOWS, bent_trunk, render
 
 from plantgen.benchmarks.light_caster import CASTERS, MESH_CASTER_TRIANGLES, markdown, measure_scene
 from plantgen.errors import PlantgenError
-from plantgen.geometry.instances import PlacedPlants
 from plantgen.geometry.meshes.mesh import triangle_count
+from plantgen.geometry.rays.instances import PlacedPlants
 from plantgen.gl.raycast import Raycaster
 from plantgen.limits import LimitError, limits
 from plantgen.settings import ShadowSettings

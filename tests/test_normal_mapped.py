@@ -12,7 +12,7 @@ from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_f
 
 from plantgen.geometry.meshes import textures as tx
 from plantgen.geometry.meshes.mesh import generator_points, tessellate
-from plantgen.geometry.reference import render_reference
+from plantgen.geometry.rays.reference import render_reference
 from plantgen.geometry.skeletons import relief
 from plantgen.geometry.skeletons.skin import skin_skeleton
 

@@ -11,9 +11,9 @@ import pytest
 from _relief_frustum import LENGTH, RADIUS, axis_bands, face_on_camera, relief_frustum
 from click.testing import CliRunner
 
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.meshes import textures as tx
 from plantgen.geometry.meshes.mesh import outer_shell_mesh, tessellate
+from plantgen.geometry.rays.camera import Camera
 from plantgen.settings import ParallaxSettings, RaycastSettings
 
 LEVEL = 3

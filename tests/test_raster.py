@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from test_mesh import BENT, chain_frusta, concat_frusta
 
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.meshes.mesh import tessellate
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.frusta import frusta_bounds
 from plantgen.gl.raster import RasterRenderer, gs_buffer_bytes
 from plantgen.gl.raycast import Raycaster

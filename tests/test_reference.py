@@ -11,9 +11,9 @@ from _geometry_helpers import chain_skeleton, random_tree, y_junction
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.instances import row_spheres
-from plantgen.geometry.reference import (
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.instances import row_spheres
+from plantgen.geometry.rays.reference import (
     difference_of_products,
     inside_frusta,
     intersect_frusta,
@@ -22,10 +22,10 @@ from plantgen.geometry.reference import (
     shade_hits,
     solve_quadratic,
 )
+from plantgen.geometry.rays.stability import hit_residuals, medial_axis_rays, surface_samples
 from plantgen.geometry.skeletons import relief
 from plantgen.geometry.skeletons.frusta import Frusta, surface_uv, true_normals
 from plantgen.geometry.skeletons.skin import skin_skeleton
-from plantgen.geometry.stability import hit_residuals, medial_axis_rays, surface_samples
 
 
 def _rays_at(frusta, count, seed, distance=4.0):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from test_glsl_raycast import HARD_CASES, TEX_H, TEX_W, frusta_chain, look_at, relief_cases, silhouette_edges
 
-from plantgen.geometry.camera import auto_camera
-from plantgen.geometry.reference import render_reference
+from plantgen.geometry.rays.camera import auto_camera
+from plantgen.geometry.rays.reference import render_reference
 from plantgen.geometry.skeletons.frusta import Frusta
 from plantgen.geometry.skeletons.materials import MAX_MATERIALS
 from plantgen.gl import material_uniforms as render_materials

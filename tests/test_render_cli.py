@@ -9,7 +9,7 @@ import pytest
 from _cli import run_cli
 from PIL import Image
 
-from plantgen.geometry.camera import Camera
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 
 SIZE = "96x72"

@@ -14,7 +14,7 @@ from _cli import run_cli
 from PIL import Image
 
 import plantgen
-from plantgen.geometry.camera import Camera, auto_camera, orbit_angles, orbit_direction
+from plantgen.geometry.rays.camera import Camera, auto_camera, orbit_angles, orbit_direction
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import load_skeleton

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from _geometry_helpers import chain_skeleton
 
-from plantgen.geometry.bvh import build_bvh
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.reference import row_boxes
+from plantgen.geometry.rays.bvh import build_bvh
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.reference import row_boxes
 from plantgen.geometry.skeletons.frusta import Frusta
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl import trace

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from _cli import run_cli
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.instances import PlacedPlants
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.instances import PlacedPlants
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground
 from plantgen.gl.raycast import Raycaster
@@ -153,7 +153,7 @@ def test_a_swaying_plants_frames_refit_the_bvh_and_show_rcs_surfaces(gl_ctx):
     """An animation's frames (rows posed on the CPU): the tracer refits its BVH instead of
     building another; the refitted tree bounds every posed row; each frame covers RC's
     pixels with RC's depths, though the rows have moved from where the tree was built."""
-    from plantgen.geometry.reference import row_boxes
+    from plantgen.geometry.rays.reference import row_boxes
 
     model = prepare_model("dancing_cacti")
     anim = model.anim

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from plantgen.benchmarks.scaling import BUDGET_DATA, markdown, measure, tile_placed
-from plantgen.geometry.instances import PlacedPlants
+from plantgen.geometry.rays.instances import PlacedPlants
 from plantgen.gl.records import RECORD_BYTES
 from plantgen.gl.rt import RayTracer
 from plantgen.pipeline import prepare_model

@@ -1,4 +1,4 @@
-"""Simulated laser scans (plantgen.geometry.scan) and their files (plantgen.scanfiles):
+"""Simulated laser scans (plantgen.geometry.rays.scan) and their files (plantgen.scanfiles):
 points on the exact surfaces (distances computed here from the frusta's definition, not
 by the ray caster), labels that match what was hit, leaves on their planes, determinism,
 misses, grazing rays, scanners inside the plant's box, divergence, airborne passes, and
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from _scan_helpers import labelled_residuals
 
-from plantgen.geometry.reference import intersect_frusta
-from plantgen.geometry.scan import (
+from plantgen.geometry.rays.reference import intersect_frusta
+from plantgen.geometry.rays.scan import (
     PART_NAMES,
     ScanError,
     ScanSettings,
@@ -324,7 +324,7 @@ def test_a_scans_memory_grows_with_the_points_it_keeps_not_its_beams(monkeypatch
     (the beams are traced a chunk at a time; what stays is the points)."""
     import tracemalloc
 
-    import plantgen.geometry.scan as scan
+    import plantgen.geometry.rays.scan as scan
 
     monkeypatch.setattr(scan, "SCAN_CHUNK_RAYS", 1 << 12)
     target, settings = _crown_scan(2.0)
@@ -347,7 +347,7 @@ def test_a_scans_memory_grows_with_the_points_it_keeps_not_its_beams(monkeypatch
 
 
 def test_the_scan_budget_is_estimated_before_and_counted_while_it_runs(monkeypatch):
-    import plantgen.geometry.scan as scan
+    import plantgen.geometry.rays.scan as scan
 
     target, settings = _crown_scan(0.5)
     grids = scan.beam_grids(target, settings)

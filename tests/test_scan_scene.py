@@ -1,4 +1,4 @@
-"""Scanning an instanced scene through two levels (plantgen.geometry.scan.SceneTarget):
+"""Scanning an instanced scene through two levels (plantgen.geometry.rays.scan.SceneTarget):
 the hits, ranges and labels of the merged scene, without placing its copies."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry.scan import ScanSettings, scan_points, scan_target, scene_target
+from plantgen.geometry.rays.scan import ScanSettings, scan_points, scan_target, scene_target
 from plantgen.pipeline import grow_file, model_leaves, skin_model
 
 
@@ -81,7 +81,7 @@ def test_beams_stream_in_bounded_chunks(monkeypatch):
     the points do not depend on the chunking."""
     from _geometry_helpers import random_tree
 
-    import plantgen.geometry.scan as scan
+    import plantgen.geometry.rays.scan as scan
 
     target = scan_target(random_tree(60, seed=5))
     settings = ScanSettings(angular_step=0.5, scanners=2)

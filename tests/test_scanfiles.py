@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from _scan_helpers import labelled_residuals
 
-from plantgen.geometry.scan import LABELS, ScanSettings, scan_plant
+from plantgen.geometry.rays.scan import LABELS, ScanSettings, scan_plant
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import grow_file, skin_model

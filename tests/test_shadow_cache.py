@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from test_shadows import GROUND, light_towards
 
-from plantgen.geometry.camera import Camera
 from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.meshes.polygons import Polygons
+from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl.frame import ShadowKey

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.reference import intersect_frusta
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.rays.reference import intersect_frusta
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.stage import Ground

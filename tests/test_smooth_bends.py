@@ -15,12 +15,12 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from plantgen.benchmarks.skinning import torus_bend_error
-from plantgen.geometry.reference import intersect_frusta
+from plantgen.geometry.rays.reference import intersect_frusta
+from plantgen.geometry.rays.stability import chain, medial_axis_rays
 from plantgen.geometry.skeletons.frusta import seam_gap
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.geometry.skeletons.smooth import DEFAULT_RADIUS_FACTOR, MIN_ARC_RATIO, smooth_bends
-from plantgen.geometry.stability import chain, medial_axis_rays
 
 
 def _frusta_arrays(f):

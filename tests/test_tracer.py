@@ -11,7 +11,7 @@ from _geometry_helpers import chain_skeleton
 
 import plantgen
 from plantgen.errors import PlantgenError
-from plantgen.geometry.scan import cast_first_returns, scan_target
+from plantgen.geometry.rays.scan import cast_first_returns, scan_target
 from plantgen.limits import LimitError, Limits
 from plantgen.tracer import TraceError, trace_target
 
@@ -129,7 +129,7 @@ def test_float32_hook(monkeypatch):
 def test_a_scene_is_traced_through_two_levels():
     """desert by name: its copies' hits carry the merged scene's labels; normals turned
     into the world face the rays and are unit."""
-    from plantgen.geometry.scan import SceneTarget
+    from plantgen.geometry.rays.scan import SceneTarget
     from plantgen.pipeline import grow_file, model_leaves, skin_model
 
     two = plantgen.tracer._target("desert", Limits())

@@ -18,8 +18,8 @@ from _cli import run_cli
 from _viewer import Viewer
 from PIL import Image
 
-from plantgen.geometry.camera import Camera, orbit_angles
 from plantgen.geometry.meshes.mesh import tessellate
+from plantgen.geometry.rays.camera import Camera, orbit_angles
 from plantgen.gl.raster import RasterRenderer
 from plantgen.pipeline import frame_arguments, prepare_model, stage_model
 from plantgen.settings import RenderSettings

@@ -13,8 +13,8 @@ import pytest
 from _cli import run_cli
 from PIL import Image
 
-from plantgen.geometry.camera import auto_camera, orbit_angles
 from plantgen.geometry.meshes.mesh import triangle_count
+from plantgen.geometry.rays.camera import auto_camera, orbit_angles
 from plantgen.pipeline import prepare_model, render_model
 from plantgen.settings import MAX_SUBDIV
 from plantgen.viewer.handlers import ACTIONS

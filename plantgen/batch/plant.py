@@ -21,9 +21,9 @@ import numpy as np
 from ..errors import PlantgenError
 from ..exporters import export_mesh
 from ..files import write_atomically
-from ..geometry.camera import Camera, auto_camera
 from ..geometry.meshes.mesh import tessellate
-from ..geometry.scan import scan_plant
+from ..geometry.rays.camera import Camera, auto_camera
+from ..geometry.rays.scan import scan_plant
 from ..geometry.skeletons.swc import write_swc
 from ..geometry.skeletons.topology import branches
 from ..gl.raycast import Raycaster, RaycastSettings, label_image

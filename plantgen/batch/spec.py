@@ -48,7 +48,7 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input, read_yaml, real_path
-from ..geometry.scan import ScanSettings
+from ..geometry.rays.scan import ScanSettings
 from ..knobs import knob_of
 from ..limits import Limits
 from ..limits import limits as default_limits
@@ -86,7 +86,7 @@ class Outputs:
     """What each plant gets: ``npz``, ``swc`` (bool), ``glb`` (level m or None), views
     (``size`` (w, h), ``azimuths`` degrees, ``relief``) as ``png`` and optionally ``depth``
     and a ``mask`` (one of :data:`MASK_KINDS` or None), and ``points``: a simulated laser
-    scan (:func:`plantgen.geometry.scan.scan_plant` with ``scan``'s knobs, its noise drawn
+    scan (:func:`plantgen.geometry.rays.scan.scan_plant` with ``scan``'s knobs, its noise drawn
     from the plant's seed) written in that format (one of :data:`POINT_FORMATS`, or None)."""
 
     npz: bool = True
@@ -327,7 +327,7 @@ def _parse_outputs(raw, where: str) -> Outputs:
 
 def _point_fields(raw, where: str) -> dict:
     """``points`` and ``scan`` of :class:`Outputs` from a spec's ``points:`` (true, or a
-    mapping of ``format`` and :class:`~plantgen.geometry.scan.ScanSettings` knobs by field
+    mapping of ``format`` and :class:`~plantgen.geometry.rays.scan.ScanSettings` knobs by field
     name)."""
     raw = raw if isinstance(raw, dict) else {}
     knobs = {f.name for f in dataclasses.fields(ScanSettings)}

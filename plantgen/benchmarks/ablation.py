@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.reference import render_reference
+from ..geometry.rays.reference import render_reference
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings

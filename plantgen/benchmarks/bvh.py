@@ -5,9 +5,9 @@ reference traversal's rays a second (closest hit and any hit) on each tree.
 Run: ``python -m plantgen.benchmarks.bvh [MODEL ...] [--random N] [--rays R] [--repeats K]
 [--copies C] [--out FILE]``. Each model (shipped grammar or scene names; default
 broadleaf, pine_needles and forest) is grown and skinned; its primitives are what a scan
-sees (:func:`~plantgen.geometry.scan.scan_target`: rows, relief shell left out, and leaf
+sees (:func:`~plantgen.geometry.rays.scan.scan_target`: rows, relief shell left out, and leaf
 triangles); a scene's are its distinct plants' in two levels, as the scan and
-:func:`plantgen.trace` trace it (:func:`~plantgen.geometry.scan.scene_target`; the
+:func:`plantgen.trace` trace it (:func:`~plantgen.geometry.rays.scan.scene_target`; the
 primitives counted once per distinct plant). ``--random N`` adds N random boxes (0:
 none). Rays start outside the model's box and aim at random points inside it, so most
 cross it. Times are medians of ``--repeats`` runs (SAH on more than 200,000 primitives:
@@ -27,8 +27,16 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..geometry.bvh import BVH_METHODS, TOP_LEAF_SIZE, build_bvh, build_scene_bvh, scene_bvh, trace_bvh, trace_scene
-from ..geometry.scan import scan_target, scene_target, target_hits
+from ..geometry.rays.bvh import (
+    BVH_METHODS,
+    TOP_LEAF_SIZE,
+    build_bvh,
+    build_scene_bvh,
+    scene_bvh,
+    trace_bvh,
+    trace_scene,
+)
+from ..geometry.rays.scan import scan_target, scene_target, target_hits
 from ..pipeline import grow_file, model_leaves, place_scene, skin_model
 from .arguments import report
 from .scan import machine

@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..files import write_atomically
-from ..geometry.camera import box_corners
-from ..geometry.instances import PlacedMeshes, PlacedPlants
+from ..geometry.rays.camera import box_corners
+from ..geometry.rays.instances import PlacedMeshes, PlacedPlants
 from ..geometry.skeletons.materials import material_height_maps
 from ..gl.context import renderer_name
 from ..gl.frame import frame_view

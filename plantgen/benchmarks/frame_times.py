@@ -21,7 +21,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from ..geometry.camera import auto_camera
+from ..geometry.rays.camera import auto_camera
 from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster

@@ -1,14 +1,14 @@
 """Print the hard-case table: each case's worst errors in float64 and float32.
 
 Run: ``python -m plantgen.benchmarks.hard_cases [--rays N] [--no-march]``. Columns are
-described in :mod:`plantgen.geometry.stability`.
+described in :mod:`plantgen.geometry.rays.stability`.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from ..geometry.stability import HARD_CASES, evaluate_case, format_table
+from ..geometry.rays.stability import HARD_CASES, evaluate_case, format_table
 
 
 def main(argv=None) -> None:

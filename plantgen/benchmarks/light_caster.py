@@ -30,7 +30,7 @@ drawn every frame, ``ShadowSettings(cache=False)``) and interleaved frame by fra
   says so).
 
 Error: the light's rays through ``--rays`` texels picked at random where any caster drew
-(and two texels around) are cast by :func:`plantgen.geometry.reference.intersect_frusta`
+(and two texels around) are cast by :func:`plantgen.geometry.rays.reference.intersect_frusta`
 (float64, the relief marched with ``--samples`` samples and bisected to 1e-9 of the row)
 into the same frusta (no ground, no leaves); per caster: the share of those texels covered
 by one of the map and the reference only, and, where both hit, the share of texels whose
@@ -53,7 +53,7 @@ import numpy as np
 from .._resources import grammars_dir
 from ..files import read_yaml
 from ..geometry.meshes.mesh import triangle_count
-from ..geometry.reference import intersect_frusta
+from ..geometry.rays.reference import intersect_frusta
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..settings import DEFAULT_SIZE, RaycastSettings, ShadowSettings

@@ -19,7 +19,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..geometry.scan import ScanSettings, beam_returns, scene_target
+from ..geometry.rays.scan import ScanSettings, beam_returns, scene_target
 from ..gl import trace
 from ..gl.context import renderer_name
 from ..gl.rt import RayTracer

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.scan import ScanSettings, beam_returns, scan_target, scene_target
+from ..geometry.rays.scan import ScanSettings, beam_returns, scan_target, scene_target
 from ..gl import trace
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster

@@ -17,7 +17,7 @@ under every tile. Leaves (world polygons, not instanced) are left out, and so ar
 the table measures the rows' cost as the copies grow.
 
 For each N: *scene BVH s* builds the two levels (a BVH per distinct plant and the top level
-over the copies, :func:`~plantgen.geometry.bvh.build_scene_bvh`), *top level s* the top
+over the copies, :func:`~plantgen.geometry.rays.bvh.build_scene_bvh`), *top level s* the top
 level alone; *GPU MiB* is what the ray tracer uploads (nodes, primitives, records, copies);
 *B/copy* what a copy adds to it: (bytes - the bytes of the same plants placed once each) /
 (copies - plants); *of budget* the GPU bytes over the memory goal's budget, 1.2 times the
@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh
-from ..geometry.camera import Camera
-from ..geometry.instances import PlacedPlants
+from ..geometry.rays.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh
+from ..geometry.rays.camera import Camera
+from ..geometry.rays.instances import PlacedPlants
 from ..gl.context import renderer_name
 from ..gl.raycast import Raycaster
 from ..gl.records import RECORD_BYTES

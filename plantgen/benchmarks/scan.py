@@ -4,14 +4,14 @@ reference against the float32 fast path, and the fast path's range error, beam b
 Run: ``python -m plantgen.benchmarks.scan [MODEL ...] [--step DEG] [--repeats R]
 [--brute N]``. Each model (shipped grammar names; default pine, elm, broadleaf) is grown,
 skinned and scanned by ``scanners`` terrestrial scanners at ``--step`` degrees
-(:mod:`plantgen.geometry.scan`), ``--repeats`` times per precision, interleaved; the
+(:mod:`plantgen.geometry.rays.scan`), ``--repeats`` times per precision, interleaved; the
 table gives the median time, points and beams per second, and for the fast path the
 median and largest |range - reference range| over the beams both hit (model units, and
 over the model's size), the beams whose range is off by more than 1e-4 of the size (a
 thin twig missed at its edge, the one behind hit) and the beams only one of them hits
 (silhouette pixels). Both
 trace the beams through the target's BVH; ``--brute N`` also times the
-reference without it (:func:`~plantgen.geometry.reference.intersect_frusta`: every
+reference without it (:func:`~plantgen.geometry.rays.reference.intersect_frusta`: every
 beam against every row's box) on N random beams of the first scanner, extrapolated to
 the whole scan: what the binning buys. The machine is printed with the table.
 """
@@ -26,8 +26,8 @@ import time
 
 import numpy as np
 
-from ..geometry.reference import intersect_frusta
-from ..geometry.scan import ScanSettings, TerrestrialBeams, beam_returns, scan_target, scanner_positions
+from ..geometry.rays.reference import intersect_frusta
+from ..geometry.rays.scan import ScanSettings, TerrestrialBeams, beam_returns, scan_target, scanner_positions
 from ..pipeline import grow_file, skin_model
 
 MODELS = ("pine", "elm", "broadleaf")

@@ -13,8 +13,8 @@ import argparse
 import numpy as np
 from PIL import Image, ImageDraw
 
-from ..geometry.camera import Camera
 from ..geometry.meshes.mesh import tessellate
+from ..geometry.rays.camera import Camera
 from ..geometry.skeletons.frusta import frusta_bounds
 from ..geometry.skeletons.skin import skin_skeleton
 from ..gl.context import gl_context

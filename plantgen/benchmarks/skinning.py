@@ -23,12 +23,12 @@ import time
 
 import numpy as np
 
-from ..geometry.reference import intersect_frusta
+from ..geometry.rays.reference import intersect_frusta
+from ..geometry.rays.stability import chain, medial_axis_rays
 from ..geometry.skeletons.frusta import pyramid_volume_ratio
 from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.skeletons.smooth import DEFAULT_RADIUS_FACTOR, smooth_bends
-from ..geometry.stability import chain, medial_axis_rays
 from ..pipeline import load_skeleton
 
 

@@ -13,7 +13,7 @@ import click
 from ..batch import BatchError, parse_spec, run_batch, simple_spec, summary_lines
 from ..batch.engine import MAX_WORKERS
 from ..batch.spec import MASK_KINDS, MAX_VIEW_SIDE
-from ..geometry.scan import ScanSettings
+from ..geometry.rays.scan import ScanSettings
 from ..knobs import knob_of
 from ..settings import MeshSettings
 from .options import allow_path_opt, knob_option, knob_options, limit_opt, limits_from, quiet_opt, take_settings

@@ -17,7 +17,7 @@ import click
 
 from ..errors import PlantgenError
 from ..fields import show
-from ..geometry.camera import Orbit
+from ..geometry.rays.camera import Orbit
 from ..knobs import Knob
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
@@ -158,7 +158,7 @@ def take_settings(cls, params: dict):
 
 
 def orbit_from(azimuth, elevation, distance, zoom, fov) -> Orbit:
-    """The :class:`~plantgen.geometry.camera.Orbit` the camera options give (one line for a
+    """The :class:`~plantgen.geometry.rays.camera.Orbit` the camera options give (one line for a
     value out of range)."""
     try:
         return Orbit(azimuth=azimuth, elevation=elevation, distance=distance, zoom=zoom, fov_y=fov)

@@ -9,7 +9,7 @@ import click
 import numpy as np
 from click.core import ParameterSource
 
-from ..geometry.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
+from ..geometry.rays.scan import PART_NAMES, ScanSettings, scan_plant, scan_scene
 from ..geometry.skeletons.frames import UP_AXES
 from ..pipeline import check_finite_frusta, check_scan_memory, grow_file, model_leaves, skin_model, skinning
 from ..scanfiles import check_point_output, las_scale, write_points

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..files import check_folder, check_output
-from ..geometry.camera import Camera
+from ..geometry.rays.camera import Camera
 from ..knobs import knob_of
 from ..pipeline import existing_input
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings

@@ -15,7 +15,7 @@ direction the light travels, as a scene's light): the answer is
 Each ray starts ``offset`` plus one and a half times the radius of the segment the module
 hangs from away from the module, so a bud does not shade itself with its own branch
 (its leaves do shade it). The plant's branches (skinned into frusta) and leaf triangles go
-into one BVH (:mod:`plantgen.geometry.bvh`), and every ray is traced by its float64
+into one BVH (:mod:`plantgen.geometry.rays.bvh`), and every ray is traced by its float64
 traversal, any hit; the obstacles' shapes by their own ray distance.
 
 The answer, 4 numbers (5 with ``allocation``): the light q, and the unit mean of the open
@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import fields
-from ..geometry.bvh import build_bvh, trace_bvh
 from ..geometry.meshes.polygons import Polygons
-from ..geometry.scan import scan_target, target_hits
+from ..geometry.rays.bvh import build_bvh, trace_bvh
+from ..geometry.rays.scan import scan_target, target_hits
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..lsystem.queries import QueryState

@@ -26,9 +26,9 @@ import numpy as np
 from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input
-from ..geometry.bvh import build_bvh, trace_bvh
 from ..geometry.meshes.polygons import Polygons
-from ..geometry.scan import scan_target, target_hits
+from ..geometry.rays.bvh import build_bvh, trace_bvh
+from ..geometry.rays.scan import scan_target, target_hits
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..tolerances import tol
@@ -206,7 +206,7 @@ class Shape:
 
     def _mesh_ray(self, o, d, reach):
         """A mesh's ray distance: its triangles traced by the one BVH traversal
-        (:mod:`plantgen.geometry.bvh`), built once; 0 from inside."""
+        (:mod:`plantgen.geometry.rays.bvh`), built once; 0 from inside."""
         if self.__dict__.get("_bvh") is None:
             tri = self.triangles + self.center
             n = len(tri)

@@ -10,11 +10,11 @@ from typing import Protocol
 
 import numpy as np
 
-from ..geometry.camera import Camera
 from ..geometry.meshes.impostor import Impostor
 from ..geometry.meshes.leaf_cards import LeafCards
 from ..geometry.meshes.mesh import TessellatedMesh
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.rays.camera import Camera
 from ..geometry.skeletons.frames import up_rotation
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.skeletons.skeleton import Skeleton
@@ -37,7 +37,7 @@ Progress = Callable[[str, int, int], None] | None
 @dataclass(frozen=True, eq=False)
 class DetailLevel:
     """One level of detail of a plant: ``rows`` (r,) the mesh rows it keeps (ascending; a
-    prefix of the detail order, :func:`~plantgen.geometry.instances.detail_levels`, so
+    prefix of the detail order, :func:`~plantgen.geometry.rays.instances.detail_levels`, so
     every kept row's parent is kept), ``mesh`` their tessellation (its row i is the plant
     mesh's row ``rows[i]``; chains cut where a child is dropped are capped), ``leaves`` (p,)
     the leaf polygons it keeps (those hanging from a kept segment) and ``size``: the kept
@@ -54,7 +54,7 @@ class PlantDetail:
     """A plant's levels of detail, level 0 (every row) first, and ``coverage`` (L,): the
     screen coverage (projected bounding diameter over the image height) below which level
     k + 1 may stand in for level k (the last: below it the plant may be left out);
-    :func:`~plantgen.geometry.instances.screen_coverage`."""
+    :func:`~plantgen.geometry.rays.instances.screen_coverage`."""
 
     levels: tuple
     coverage: np.ndarray

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry.camera import Camera, depth_range
+from ..geometry.rays.camera import Camera, depth_range
 from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
 from ..settings import MAX_SSAA, ShadowSettings
@@ -95,7 +95,7 @@ class FrameView:
 
 def frame_view(camera: Camera, point_sets) -> FrameView:
     """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
-    in ``point_sets`` (see :func:`plantgen.geometry.camera.depth_range`)."""
+    in ``point_sets`` (see :func:`plantgen.geometry.rays.camera.depth_range`)."""
     eye = np.asarray(camera.eye, dtype=np.float64)
     right, up, fwd = camera.basis()
     near, far = depth_range(point_sets, eye, fwd)

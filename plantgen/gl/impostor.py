@@ -12,9 +12,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..geometry.camera import Camera
 from ..geometry.meshes.impostor import Impostor, frame_basis, view_directions
 from ..geometry.meshes.textures import linear_to_srgb
+from ..geometry.rays.camera import Camera
 from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
 from ..settings import RaycastSettings

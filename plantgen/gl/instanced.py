@@ -1,4 +1,4 @@
-"""Drawing a :class:`~plantgen.geometry.instances.PlacedPlants`: one GPU copy per distinct
+"""Drawing a :class:`~plantgen.geometry.rays.instances.PlacedPlants`: one GPU copy per distinct
 plant, a few uniforms per placed copy.
 
 Both renderers draw a forest the same way: per distinct plant one vertex array (the ray
@@ -7,7 +7,7 @@ draw with the copy's placement in three uniforms (``copy_turn`` (mat3), ``copy_s
 ``copy_offset`` = the copy's origin minus the render origin, formed in float64 here so a
 copy far from the world's origin keeps float32's digits) and as many rows (or
 triangles) as its level of detail asks for: a prefix of the plant's detail order
-(:func:`plantgen.geometry.instances.detail_counts`). Per copy 52 bytes cross to the GPU
+(:func:`plantgen.geometry.rays.instances.detail_counts`). Per copy 52 bytes cross to the GPU
 per draw and nothing is stored there, so the GPU holds the distinct plants only.
 
 Which copies: those whose ball meets the view's frustum (:func:`visible_copies`); in the
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.instances import PlacedPlants, PlantCopies, detail_counts, pixels_per_radian, similarity_parts
+from ..geometry.rays.instances import PlacedPlants, PlantCopies, detail_counts, pixels_per_radian, similarity_parts
 
 __all__ = ["CopyDraws", "copy_uniform_bytes", "visible_copies", "eye_copy_draws", "light_copy_draws",
            "draw_copies", "COPY_UNIFORM_BYTES", "IDENTITY_TURN", "IDENTITY_PLACEMENT"]

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.camera import box_corners
+from ..geometry.rays.camera import box_corners
 from ..settings import ShadowSettings
 from ..tolerances import tol
 from .context import release_framebuffer

@@ -18,11 +18,11 @@ import time
 
 import numpy as np
 
-from ..geometry.camera import Camera, box_corners
-from ..geometry.instances import PlacedMeshes
 from ..geometry.meshes.mesh import TessellatedMesh
 from ..geometry.meshes.skinned_mesh import SkinnedMesh
 from ..geometry.meshes.textures import mesh_tangents, mesh_uv_scales
+from ..geometry.rays.camera import Camera, box_corners
+from ..geometry.rays.instances import PlacedMeshes
 from ..geometry.stage import Ground
 from ..settings import ParallaxSettings, ShadowSettings
 from .context import gl_context

@@ -24,9 +24,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.camera import Camera, box_corners
-from ..geometry.instances import PlacedPlants
 from ..geometry.meshes.mesh import tessellate, triangle_count
+from ..geometry.rays.camera import Camera, box_corners
+from ..geometry.rays.instances import PlacedPlants
 from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
@@ -158,7 +158,7 @@ class Raycaster(OffscreenRenderer):
         ----------
         frusta : Frusta, n rows (world units, float64), or the rows of a frame posed on the
             GPU (:class:`plantgen.gl.records.StreamedRows`, with ``record_buffer``), or a
-            :class:`~plantgen.geometry.instances.PlacedPlants` drawn instanced
+            :class:`~plantgen.geometry.rays.instances.PlacedPlants` drawn instanced
             (:mod:`plantgen.gl.instanced`: records per distinct plant, uploaded once)
         camera : the view; rays go through pixel centres
         settings : relief on/off and its step knobs

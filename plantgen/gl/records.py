@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.instances import PlacedPlants
+from ..geometry.rays.instances import PlacedPlants
 from ..geometry.skeletons.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.skeletons.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
 from ..geometry.skeletons.frusta import frusta_bounds
@@ -51,7 +51,7 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     -------
     (n, 24) float32 (``out`` when given): base - origin, h | axis, r1 | ref_dir, r2 |
     plane_lo | plane_hi | u_offset, twist, shell, tag. Plane offsets are relative to the
-    base point (d - n·base, formed in float64), as plantgen.geometry.reference uploads them.
+    base point (d - n·base, formed in float64), as plantgen.geometry.rays.reference uploads them.
     96 bytes per segment. ``tag`` = material + 256·(lower end open) + 512·(upper end open)
     + 1024·slot + 131072·(slots - 1) (``v_part``: 7 bits each; under 2^24, exact in float32);
     an end is open unless a continuing row shares its plane (open ends are capped surfaces,
@@ -179,5 +179,5 @@ class StreamedRows:
 
 def rows_box(rows) -> np.ndarray:
     """(2, 3) world box of ``rows``: a Frusta's bounds, or the ``box`` of a
-    :class:`StreamedRows` or a :class:`~plantgen.geometry.instances.PlacedPlants`."""
+    :class:`StreamedRows` or a :class:`~plantgen.geometry.rays.instances.PlacedPlants`."""
     return rows.box if isinstance(rows, (StreamedRows, PlacedPlants)) else frusta_bounds(rows)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.camera import Camera
+from ..geometry.rays.camera import Camera
 from .passes import LightWindow
 
 __all__ = ["RenderResult", "RenderStats", "RaycastStats", "RasterStats", "WorkCounts", "WorkCounter"]

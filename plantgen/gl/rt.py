@@ -3,7 +3,7 @@
 The ray caster (:mod:`plantgen.gl.raycast`) rasterises one bounding pyramid per row and
 casts the pixel's ray against that row: its cost grows with the rows drawn. The ray
 tracer draws one full-screen triangle whose fragments trace their pixel's ray through a
-bounding volume hierarchy (:mod:`plantgen.geometry.bvh`, searched by ``shaders/bvh.glsl``,
+bounding volume hierarchy (:mod:`plantgen.geometry.rays.bvh`, searched by ``shaders/bvh.glsl``,
 uploaded by :mod:`plantgen.gl.trace`): a ray costs about the log of the rows. The row it
 finds is hit and shaded by the ray caster's own code (``shaders/row.glsl``), so the two
 methods show the same surfaces.
@@ -16,18 +16,18 @@ surface, and the leaves' triangles) lies in its way (``SHADOW_RAYS`` in
 ``shaders/shadow.glsl``). The ground casts no shadow here (it lies under everything it
 could shade).
 
-An instanced scene (:class:`~plantgen.geometry.instances.PlacedPlants`) is traced with
+An instanced scene (:class:`~plantgen.geometry.rays.instances.PlacedPlants`) is traced with
 two levels: each distinct plant's BVH once, a top level over the copies; its leaves (world
 polygons) are one more "plant" placed once. The BVH is built once per model (kept while
 the same objects are rendered) and uploaded relative to the eye.
 
 Animation (``refit``): a frame's rows (posed and skinned on the CPU) replace the last
 frame's; where they are as many (rows and leaf triangles), the BVH is not rebuilt but
-refitted (:func:`~plantgen.geometry.bvh.refit_bvh`: the same tree, every box recomputed
+refitted (:func:`~plantgen.geometry.rays.bvh.refit_bvh`: the same tree, every box recomputed
 from the posed rows' boxes bottom up, in numpy) and uploaded again with the rows. The
 refit is done on the CPU, not on the GPU from the records a pose program writes
 (:mod:`plantgen.gl.pose`): a row's box (relief shell and oblique ends,
-:func:`~plantgen.geometry.reference.row_boxes`) rounded outward has no GLSL twin yet, and
+:func:`~plantgen.geometry.rays.reference.row_boxes`) rounded outward has no GLSL twin yet, and
 the frame's float64 rows are what a refit from the float64 boxes needs to lose no ray.
 """
 
@@ -39,9 +39,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh, copy_boxes, refit_bvh
-from ..geometry.instances import PlacedPlants
-from ..geometry.reference import row_boxes
+from ..geometry.rays.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh, copy_boxes, refit_bvh
+from ..geometry.rays.instances import PlacedPlants
+from ..geometry.rays.reference import row_boxes
 from .frame import FrameLighting, FrameView
 from .passes import frame_passes
 from .raycast import Raycaster
@@ -113,7 +113,7 @@ class RayTracer(Raycaster):
     shadow knobs of the map (resolution, caster, its march) do not apply: a shadow ray
     meets what the eye's rays meet (with relief, the relief surface).
 
-    ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.bvh.build_bvh`);
+    ``leaf_size``, ``method``: the BVH's build knobs (:func:`plantgen.geometry.rays.bvh.build_bvh`);
     ``shadow_ray_offset``: pixel footprints a shadow ray starts off its surface; ``refit``:
     rows (Frusta) as many as the last ones drawn refit their BVH instead of building
     another (an animation's frames, module docstring).

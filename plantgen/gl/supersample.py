@@ -2,7 +2,7 @@
 averaged into one pixel.
 
 The sub-pixel centres of the large frame are the rays of an N x N grid inside each pixel
-(:meth:`plantgen.geometry.camera.Camera.scaled`), so the average is a box filter over the
+(:meth:`plantgen.geometry.rays.camera.Camera.scaled`), so the average is a box filter over the
 pixel: thin twigs that a single ray per pixel hits in some pixels and misses in the next
 ("dots") cover each pixel in proportion. Colours are averaged in linear light (the
 shaders' display encoding, ``to_display`` in ``shaders/shading.glsl``, is undone first and

@@ -1,10 +1,10 @@
-"""Ray queries on the GPU: a BVH (:mod:`plantgen.geometry.bvh`) and its primitives in
+"""Ray queries on the GPU: a BVH (:mod:`plantgen.geometry.rays.bvh`) and its primitives in
 storage buffers, searched by ``shaders/bvh.glsl`` (one compute invocation per ray,
 ``shaders/trace.glsl``), closest hit or any hit.
 
 Precision: everything the GPU holds is float32 relative to a frame origin formed in
 float64 here: row records (:func:`plantgen.gl.records.pack_records`), leaf triangles and
-node boxes (rounded outward, :func:`plantgen.geometry.bvh.float32_boxes`, so a float32
+node boxes (rounded outward, :func:`plantgen.geometry.rays.bvh.float32_boxes`, so a float32
 box never loses a ray its float64 box keeps, then put on each node's 8-bit grid rounded
 outward again, :func:`node_words`: 48 bytes a 4-wide node). A plant of one kind (rows or
 leaf triangles) uploads its data in the GPU's leaf order (:func:`leaf_order`), with no
@@ -20,7 +20,7 @@ as the quaternion u = conj(q) / sqrt(scale) turns it, u·v·conj(u) = turnᵀ·v
 its rotation q and uniform scale (a quaternion times a real turns and scales at once),
 where every copy of the scene is a similarity that keeps handedness (the scene format's:
 a positive scale and a rotation). A scene with a copy that mirrors, scales unevenly or
-shears (possible only through the API, :class:`~plantgen.geometry.instances.PlacedPlants`
+shears (possible only through the API, :class:`~plantgen.geometry.rays.instances.PlacedPlants`
 built by hand) keeps the full 3x4 map instead, :data:`AFFINE_COPY_BYTES` a copy (the
 shader's ``BVH_AFFINE_COPIES``), exact for any invertible map. The copies go up in the
 top level's leaf order, so a top-level leaf's ``first`` is its first copy's slot and no
@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PlantgenError
-from ..geometry.bvh import BVH, build_bvh, float32_boxes
-from ..geometry.instances import similarity_parts
+from ..geometry.rays.bvh import BVH, build_bvh, float32_boxes
+from ..geometry.rays.instances import similarity_parts
 from ..geometry.skeletons.frames import similarity_trs
 from ..geometry.skeletons.frusta import plane_height
 from ..limits import LimitError, hint
@@ -622,10 +622,10 @@ _TARGETS_KEPT = 2
 
 
 def target_bvh(target, ctx=None) -> GpuBvh:
-    """The uploaded BVH of a :class:`~plantgen.geometry.scan.ScanTarget` (its rows and leaf
+    """The uploaded BVH of a :class:`~plantgen.geometry.rays.scan.ScanTarget` (its rows and leaf
     triangles, a BVH over its boxes with leaves of GPU_LEAF_SIZE, relative to its root
     box's centre) or of a
-    :class:`~plantgen.geometry.scan.SceneTarget` (each distinct plant's, and the top level
+    :class:`~plantgen.geometry.rays.scan.SceneTarget` (each distinct plant's, and the top level
     over its copies); the last few targets stay uploaded."""
     for i, (t, gpu) in enumerate(_targets):
         if t is target and (ctx is None or gpu.ctx is ctx):

@@ -37,9 +37,9 @@ from ..exporters import (
 from ..exporters.formats import check_export_outputs
 from ..exporters.plants import level_plant
 from ..exporters.textures import bake_textures, split_by_aspect
-from ..geometry.instances import detail_levels, detail_order, screen_coverage
 from ..geometry.meshes.mesh import tessellate, triangle_count
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.rays.instances import detail_levels, detail_order, screen_coverage
 from ..geometry.skeletons.frames import UP_AXES
 from ..geometry.skeletons.frusta import Frusta, frusta_bounds
 from ..geometry.skeletons.skeleton import Skeleton
@@ -297,7 +297,7 @@ def plant_detail(frusta: Frusta, parent, mesh, leaves: Polygons | None, levels: 
                  relief: bool = False, height: int = DEFAULT_SIZE[1]) -> PlantDetail | None:
     """A plant's levels of detail (None for ``levels`` < 2, or a plant too small to have
     two): level k tessellates the rows of ``frusta`` (``parent``: the skeleton's) that
-    :func:`~plantgen.geometry.instances.detail_levels` keeps, at ``mesh``'s level (with
+    :func:`~plantgen.geometry.rays.instances.detail_levels` keeps, at ``mesh``'s level (with
     ``relief``: displaced), with the ``leaves`` hanging from a kept segment; the screen coverages are for
     ``pixels`` on an image ``height`` pixels high (:func:`screen_coverage`)."""
     if levels < 2:

@@ -27,9 +27,9 @@ import numpy as np
 from ..animation import AnimatedScene
 from ..errors import PlantgenError
 from ..files import check_outputs, write_all_atomically
-from ..geometry.camera import Camera, Orbit, auto_camera, orbit_view
-from ..geometry.instances import PlacedPlants
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.rays.camera import Camera, Orbit, auto_camera, orbit_view
+from ..geometry.rays.instances import PlacedPlants
 from ..geometry.skeletons.frusta import Frusta
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT, Ground

@@ -1,5 +1,5 @@
 """``plantgen scan``'s budget: a laser scan's memory, refused before anything is skinned.
-The scan itself (:mod:`plantgen.geometry.scan`) and its files (:mod:`plantgen.scanfiles`)
+The scan itself (:mod:`plantgen.geometry.rays.scan`) and its files (:mod:`plantgen.scanfiles`)
 are run by the command (:mod:`plantgen.cli.scan`) on a grown, skinned model
 (:func:`~plantgen.pipeline.growing.grow_file`, :func:`~plantgen.pipeline.render.skin_model`)."""
 

@@ -11,7 +11,7 @@ For each model the bench (:func:`~plantgen.table1.runs.bench_model`)
    resolution: the float64 reference is too slow for 1024x768 on a CPU, and a down-scaled
    view would hide exactly the facets and relief that the knobs trade away);
 3. renders the **reference** in that window: the float64 reference ray caster
-   (:func:`plantgen.geometry.reference.render_reference`), once without relief (for RC
+   (:func:`plantgen.geometry.rays.reference.render_reference`), once without relief (for RC
    and GS) and once with the relief marched with ``reference_relief_samples`` samples and
    bisected to 1e-9 (for RC+R and GS+R). 384 samples is converged to the metric's
    resolution: on the elm (thin bark furrows, the hardest map) 384 and 1024 samples differ

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..geometry.camera import Camera
+from ..geometry.rays.camera import Camera
 
 __all__ = ["eval_camera", "SILHOUETTE_WEIGHT"]
 

@@ -10,8 +10,8 @@ import numpy as np
 from .._resources import closest, shipped_names
 from ..animation import AnimatedScene
 from ..errors import PlantgenError
-from ..geometry.camera import Camera
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.rays.camera import Camera
 from ..geometry.skeletons.frusta import Frusta
 from ..geometry.stage import Ground
 from ..pipeline import animate_model, grow_file, resolve_input, stage_model

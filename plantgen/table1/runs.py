@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.meshes.mesh import triangle_count
-from ..geometry.reference import render_reference
+from ..geometry.rays.reference import render_reference
 from ..geometry.skeletons.materials import material_height_maps
 from ..gl.context import gl_context, renderer_name
 from ..gl.raster import PARALLAX_SCALE_BYTES, PARALLAX_SHELL_BYTES, gs_buffer_bytes

@@ -12,8 +12,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..geometry.instances import PlacedPlants
 from ..geometry.meshes.mesh import tessellate
+from ..geometry.rays.instances import PlacedPlants
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.rt import RayTracer

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..geometry.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
+from ..geometry.rays.camera import MAX_ELEVATION, Orbit, orbit_angles, orbit_view
 from ..knobs import knob_of
 from ..pipeline import stage_model
 from ..settings import MAX_SSAA, MAX_SUBDIV, RaycastSettings

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import PlantgenError
-from ..geometry.instances import PlacedPlants
 from ..geometry.meshes.mesh import triangle_count
+from ..geometry.rays.instances import PlacedPlants
 from ..limits import Limits
 from ..pipeline import PreparedModel, prepare_model
 from ..settings import DEFAULT_SIZE, MeshSettings, RenderSettings

@@ -15,9 +15,9 @@ from collections import deque
 from dataclasses import replace
 from functools import partial
 
-from ..geometry.camera import Camera
-from ..geometry.instances import PlacedMeshes, PlacedPlants
 from ..geometry.meshes.mesh import tessellate
+from ..geometry.rays.camera import Camera
+from ..geometry.rays.instances import PlacedMeshes, PlacedPlants
 from ..gl.raster import RasterRenderer
 from ..gl.raycast import Raycaster
 from ..gl.rt import RayTracer

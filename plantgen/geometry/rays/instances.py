@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .meshes.mesh import tessellate
-from .skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
-from .vec import reduce_to_root
+from ..meshes.mesh import tessellate
+from ..skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls
+from ..vec import reduce_to_root
 
 __all__ = ["PlacedPlants", "PlantCopies", "PlacedMesh", "PlacedMeshes", "place_frusta", "row_spheres",
            "detail_sizes", "detail_order", "detail_counts", "detail_levels", "screen_coverage", "similarity_parts",

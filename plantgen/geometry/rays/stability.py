@@ -35,11 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tolerances import tol
+from ...tolerances import tol
+from ..skeletons.frusta import Frusta, plane_height
+from ..skeletons.skeleton import Skeleton
+from ..skeletons.skin import skin_skeleton
 from .reference import inside_frusta, intersect_frusta, march_rays, shade_hits
-from .skeletons.frusta import Frusta, plane_height
-from .skeletons.skeleton import Skeleton
-from .skeletons.skin import skin_skeleton
 
 __all__ = ["HardCase", "HARD_CASES", "case_rays", "medial_axis_rays", "evaluate_case", "seam_points",
            "format_table", "chain", "surface_samples", "model_size", "hit_residuals"]
