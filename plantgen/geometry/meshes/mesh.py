@@ -35,52 +35,9 @@ m = 0 a cone keeps 88 % of its volume, against 90 % for ``N`` columns to the tip
 the ``u`` of its fan triangle); a closed end gets no cap. A row continuing from such a
 point owns its own apex ring.
 
-**Knuckles** (``skin_skeleton(max_bend_deg=...)``: bends past 120° by default, and joints
-whose plane would not cut a cone in an ellipse or whose segments' planes would cross).
-Skinning gives the parent segment P and the child C planes ⟂ their axes through the
-joint J and fills the bend with fan slices around the hinge line (through J, ⟂ the medial
-plane): *outer* slices continue the chain and sweep the outer side, *inner* slices cover
-the inner side (see :mod:`plantgen.geometry.skeletons.skin`). Their union is what the ray caster
-draws; the mesh is its boundary:
-
-- *outer side*: each outer slice is a cylinder strip between two planes through the
-  hinge line; on the outer half (``N/2`` columns from hinge point to hinge point) it has
-  width, on the inner half none. The mesh tessellates that half only, ``B`` bands across,
-  the two columns at the hinge points as triangle fans: ``(N - 2)·B`` triangles a slice,
-  every vertex on the slice's cylinder (the strips sweep the zone of the sphere of radius
-  r around J that the paper's bend should show, to 10° slices). Columns are turned (by at
-  most half a column, interpolated along P) so that two columns of P's top ring, of every
-  slice ring and of C's bottom ring sit exactly on the hinge points.
-- *inner side*: P's and C's cylinders overlap there; for equal radii the bisector
-  ("mitre") plane through the hinge line, normal ``M1 + M2``, cuts both in the same
-  ellipse and separates the parts that lie inside the other cylinder. P's generators on
-  the inner half end at that plane instead of at P's ⟂ plane (``min`` of the two heights;
-  they agree on the hinge line), C's start there; both rings keep ``N`` columns, every
-  vertex on its own cone at the ray caster's ``(u, v)`` and normal (8), and C's inner half
-  ring is a copy of P's. The inner slices lie inside P ∪ C and get no triangles, no caps.
-- where the two cut curves differ (radii or tapers that differ, by more than
-  ``tol.seam_snap`` of the radius), a *bridge* band of ``N - 2`` triangles (``N`` if the
-  hinge points differ) joins P's curve to C's in the cutting plane: the part of one
-  cross-section the other does not cover. It is counted with P's row.
-- a trim may take at most 90 % of any generator of P or C (45 % at each end of a segment
-  between two knuckles, so the two never cross). Where the mitre would cut deeper (bends
-  near 180°, or segments shorter than about ``1.1·r·tan(bend/2)``, twice that between
-  two knuckles) P and C are cut by planes turned less far (both by the smaller of their
-  two limits, symmetric about the mitre), the bridge joins the two cuts, and the mesh is
-  still closed, consistently wound and positive but overlaps itself there: the
-  boundary of the union is then not local to the joint (it runs into the next segments
-  and their caps, as it does where a chain crosses itself).
-- a knuckle without bend (under ``tol.flat_bend`` rad) joins P's top ring to C's bottom
-  ring directly (copies), or caps both where their radii differ (as a radius step).
-
-So a chain with knuckles is one closed surface without zero-area triangles. Its rows no
-longer all carry ``16·4^m`` triangles (:attr:`TessellatedMesh.uniform_rows` is False:
-a renderer must take each face's row from ``face_row``, not from index // 16·4^m), and
-:func:`triangle_count` given the frusta counts them exactly. Vertices that no face uses
-(the inner half of slice rings, inner slices) are dropped, so meshes with knuckles have
-no fixed vertex layout; texture coordinates stay continuous through the fan (its slices
-advance u by their twist), C's trimmed vertices carry C's (u, v), P's carry P's (copies
-at one position where they meet), so the mesh is closed once welded by position.
+**Knuckles** (``skin_skeleton(max_bend_deg=...)``: bends past 120° by default) are found and
+cut in :mod:`plantgen.geometry.meshes.knuckles`, whose docstring says how the mesh bounds them;
+their rows no longer all carry ``16·4^m`` triangles (:attr:`TessellatedMesh.uniform_rows`).
 
 Everything is vectorised over rows with index templates (one quad template shifted by
 ring and column strides); rows are processed in chunks only to bound memory. Apex rings
@@ -97,8 +54,10 @@ import numpy as np
 
 from ...tolerances import tol
 from ..skeletons import relief as relief_maps
-from ..skeletons.frusta import Frusta, plane_height
-from ..vec import any_perpendicular, cross, dot, norm, plane_through, reduce_to_root, unit
+from ..skeletons.frusta import Frusta
+from ..vec import cross, dot, reduce_to_root, unit
+from .generators import bands_along, columns_around, generator_points, lateral_triangles_per_row, slice_triangles
+from .knuckles import Knuckles, cut_height, find_knuckles
 
 __all__ = [
     "TessellatedMesh", "tessellate", "triangle_count", "lateral_triangles_per_row",
@@ -108,152 +67,11 @@ __all__ = [
 #: A relief height function: (material (k,) int, u (k,) float, v (k,) float) -> w (k,) in [0, 1].
 HeightFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
-#: Most of a generator's length (between the row's own planes) a knuckle trim may take;
-#: half of it at each end of a segment between two knuckles.
-_TRIM_SHARE = 0.9
-#: Generators sampled on the inner half to bound a trim and to compare the cut curves.
-_TRIM_SAMPLES = 33
-
-
-def columns_around(m: int) -> int:
-    """Number of vertex columns around the axis at level ``m``: ``8·2^m``."""
-    return 8 * 2 ** int(m)
-
-
-def bands_along(m: int) -> int:
-    """Number of bands (rings minus one) along the axis at level ``m``: ``2^m``."""
-    return 2 ** int(m)
-
-
-def lateral_triangles_per_row(m: int) -> int:
-    """Lateral triangles per frustum row at level ``m``: ``16·4^m`` (Table 1's caption),
-    a cone closing to a point included."""
-    return 2 * columns_around(m) * bands_along(m)
-
-
-def slice_triangles(m: int) -> int:
-    """Triangles of one outer knuckle fan slice at level ``m``: ``(8·2^m - 2)·2^m``
-    (its outer half, fanned at the two hinge points)."""
-    return (columns_around(m) - 2) * bands_along(m)
-
 
 def _check_level(m) -> int:
     if isinstance(m, bool) or int(m) != m or not 0 <= int(m) <= 8:
         raise ValueError(f"subdivision level must be an integer in 0..8, got {m!r}")
     return int(m)
-
-
-# ---------------------------------------------------------------------------- geometry
-def generator_points(frusta: Frusta, rows, u, v, offset=0.0, relief_slope=None):
-    """Surface points at texture coordinates ``(u, v)``: the inverse of (6)–(7).
-
-    The generator at angle ``φ = 2π(u - u_offset - v·twist)`` around the axis (``φ = 0``
-    along ``ref_dir``) is cut by the two planes at ``P_l`` and ``P_u``; the point is
-    ``P = P_l + v·(P_u - P_l)``. ``offset`` moves to the concentric cone with radii
-    ``r1 + offset`` and ``r2 + offset`` (the relief shell of §3).
-
-    All arguments broadcast against each other (numpy rules), so a grid of rows (k, 1, 1),
-    rings (k, R, 1) and columns (1, 1, C) costs trigonometry only per column and per ring.
-
-    Parameters
-    ----------
-    rows : int array, frustum row of each point
-    u, v : float arrays, texture coordinates (u in turns, v in [0, 1])
-    offset : float array or scalar, radial offset in model units
-    relief_slope : optional pair ``(shell·∂w/∂u, shell·∂w/∂v)`` (model units per unit of
-        u and v): tilt the normal by the relief's gradient as the ray caster shades
-        relief (``N - shell·(∂w/∂u·t_u/|∂P/∂u| + ∂w/∂v·t_v/|∂P/∂v|)``, t_u around the
-        axis, t_v along the generator, |∂P/∂u| = 2πρ, |∂P/∂v| the generator between
-        the planes)
-
-    Returns
-    -------
-    points : (..., 3) float64, model units
-    normals : (..., 3) float64, unit interpolated normals (8)
-    """
-    rows = np.asarray(rows)
-    u, v, offset = (np.asarray(x, dtype=np.float64) for x in (u, v, offset))
-    length = frusta.length[rows]
-    r1 = frusta.r1[rows]
-    slope = frusta.slope[rows]
-    axis = frusta.axis[rows]
-    ref = frusta.ref_dir[rows]
-    binormal = np.cross(axis, ref)
-    # φ = 2πu - β with β = 2π(u_offset + v·twist): cos and sin by the angle-difference rule.
-    beta = 2 * np.pi * (frusta.u_offset[rows] + v * frusta.twist[rows])
-    cos_u, sin_u = np.cos(2 * np.pi * u), np.sin(2 * np.pi * u)
-    cos_b, sin_b = np.cos(beta), np.sin(beta)
-    cos_phi = cos_u * cos_b + sin_u * sin_b
-    sin_phi = sin_u * cos_b - cos_u * sin_b
-    start_radius = r1 + offset
-
-    def axial_cut(plane):
-        """Axial coordinate y (from C1) where each generator meets ``plane``."""
-        normal, d = plane[rows, :3], plane[rows, 3]
-        n_axis = np.einsum("...j,...j->...", normal, axis)
-        n_radial = cos_phi * np.einsum("...j,...j->...", normal, ref) \
-            + sin_phi * np.einsum("...j,...j->...", normal, binormal)
-        # relative to C1 so far models keep digits; a generator ∥ the plane stays finite
-        gap = d - np.einsum("...j,...j->...", normal, frusta.base[rows])
-        return plane_height(gap, n_axis, n_radial, start_radius, slope,
-                            guard=lambda rise: np.where(np.abs(rise) < tol.tiny,
-                                                        np.copysign(tol.tiny, rise), rise))[0]
-
-    y_lo, y_hi = axial_cut(frusta.plane_lo), axial_cut(frusta.plane_hi)
-    y = y_lo + v * (y_hi - y_lo)  # P = P_l + v (P_u - P_l) along the straight generator
-    radial = cos_phi[..., None] * ref + sin_phi[..., None] * binormal
-    points = frusta.base[rows] + y[..., None] * axis + (start_radius + slope * y)[..., None] * radial
-
-    cone_len = np.hypot(slope, 1.0)
-    scale = np.maximum(np.maximum(np.abs(r1), np.abs(frusta.r2[rows])), length)
-    n_axial, n_radial = _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale)
-    normals = n_axial[..., None] * axis + n_radial[..., None] * radial
-    if relief_slope is not None:
-        around = -sin_phi[..., None] * ref + cos_phi[..., None] * binormal  # axis × e_r
-        along = (axis + slope[..., None] * radial) / cone_len[..., None]
-        normals = _relief_tilted(normals, relief_slope, around, along, start_radius + slope * y,
-                                 (y_hi - y_lo) * cone_len, tol.zero_length * scale)
-    return points, normals
-
-
-def _blended_normal(v, y_lo, y_hi, length, start_radius, slope, cone_len, scale):
-    """(axial, radial) components of the interpolated normal (8) at ``v`` on generators cut
-    at axial heights ``y_lo`` and ``y_hi`` (from C1) of cones ``r(y) = start_radius +
-    slope·y`` of axial ``length``; ``cone_len = √(1 + slope²)``, ``scale`` the rows' size.
-
-    N_l = P_l - C1, N_u = P_u - C2, each made unit, blended by v. Both lie in the plane of
-    the axis and the radial direction, so the blend is done on (axial, radial) components.
-    Where a cone closes to a point on a plane (P_l = C1 or P_u = C2) the cone's own outward
-    normal on that generator, (-k, 1), stands in.
-    """
-    def unit_or_cone(axial, radius):
-        norm = np.hypot(axial, radius)
-        tiny = norm <= tol.zero_length * scale
-        safe = np.where(tiny, 1.0, norm)
-        return (np.where(tiny, -slope / cone_len, axial / safe),
-                np.where(tiny, 1.0 / cone_len, radius / safe))
-
-    lo_axial, lo_radial = unit_or_cone(y_lo, start_radius + slope * y_lo)
-    hi_axial, hi_radial = unit_or_cone(y_hi - length, start_radius + slope * y_hi)
-    n_axial = (1 - v) * lo_axial + v * hi_axial
-    n_radial = (1 - v) * lo_radial + v * hi_radial
-    norm = np.hypot(n_axial, n_radial)
-    degenerate = norm <= 0
-    norm = np.where(degenerate, 1.0, norm)
-    return (np.where(degenerate, -slope / cone_len, n_axial / norm),
-            np.where(degenerate, 1.0 / cone_len, n_radial / norm))
-
-
-def _relief_tilted(normals, relief_slope, around, along, radius, generator_length, floor):
-    """(..., 3) unit ``normals`` tilted by the relief's gradient ``relief_slope`` (see
-    :func:`generator_points`): ``around`` and ``along`` are the unit tangents t_u and t_v,
-    ``radius`` ρ and ``generator_length`` (|∂P/∂v|) are floored at ``floor``."""
-    du, dv = (np.asarray(x, dtype=np.float64) for x in relief_slope)
-    radius = np.maximum(radius, floor)
-    generator_length = np.maximum(generator_length, floor)
-    tilted = normals - (du / (2 * np.pi * radius))[..., None] * around \
-        - (dv / generator_length)[..., None] * along
-    return tilted / np.linalg.norm(tilted, axis=-1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------- the mesh
@@ -366,186 +184,6 @@ def _default_height(material_names) -> HeightFunction:
     return height
 
 
-# ---------------------------------------------------------------------------- knuckles
-@dataclass
-class _Knuckles:
-    """The K knuckles of a frusta (see the module docstring), each the parent row P, its
-    outer fan slices and the child row C, with the cuts the mesh uses.
-
-    ``slices`` (S,) are the outer slice rows, knuckle by knuckle in chain order, knuckle k's
-    at ``slices[start[k]:start[k + 1]]``; ``inner`` the inner slice rows. Per knuckle (K,):
-    ``joint`` J, ``hinge`` the unit hinge direction k (the fan turns P's axis M1 about it
-    to C's axis M2), ``inner_p`` = k × M1 and ``inner_c`` = k × M2 (towards the inside of
-    the bend), ``bend`` (radians), ``radius_p``/``radius_c`` the radii at J, the trimming
-    planes ``plane_p`` (P keeps n·x <= d) and ``plane_c`` (C keeps n·x >= d), and flags
-    ``flat`` (no bend), ``merged`` (equal radii: one hinge point a side) and ``mitred``
-    (the two cut curves are one). ``hinge_col`` is the column on the hinge point k.
-    """
-
-    parent: np.ndarray
-    child: np.ndarray
-    slices: np.ndarray
-    start: np.ndarray
-    inner: np.ndarray
-    joint: np.ndarray = None
-    hinge: np.ndarray = None
-    inner_p: np.ndarray = None
-    inner_c: np.ndarray = None
-    bend: np.ndarray = None
-    radius_p: np.ndarray = None
-    radius_c: np.ndarray = None
-    plane_p: np.ndarray = None
-    plane_c: np.ndarray = None
-    flat: np.ndarray = None
-    merged: np.ndarray = None
-    mitred: np.ndarray = None
-    hinge_col: np.ndarray = None
-
-    @property
-    def slice_knuckle(self) -> np.ndarray:
-        """(S,) the knuckle of each outer slice."""
-        return np.repeat(np.arange(len(self.parent)), np.diff(self.start))
-
-
-
-def _find_knuckles(frusta: Frusta) -> _Knuckles | None:
-    """The knuckles of ``frusta``: runs of short continuing rows (fan slices) from a row
-    with length P to one C, all based at one point J where P ends and C starts; their
-    inner slices are the short open rows with an outer slice's planes swapped. Fan rows
-    that do not fit (no C, no common point, no radius) stay ordinary rows. None: no
-    knuckle."""
-    n = len(frusta.length)
-    short = ~frusta.has_length if n else np.zeros(0, bool)
-    if not short.any():
-        return None
-    parent = frusta.parent_row
-    has_parent = parent >= 0
-    child_of = np.full(n, -1, np.int64)
-    child_of[parent[has_parent]] = np.flatnonzero(has_parent)
-    first = np.flatnonzero(short & has_parent)
-    first = first[~short[parent[first]]]
-    top = frusta.top
-    rows_p, rows_c, slices, start = [], [], [], [0]
-    for f in first:
-        run, c = [int(f)], int(child_of[f])
-        while c >= 0 and short[c]:
-            run.append(c)
-            c = int(child_of[c])
-        if c < 0:
-            continue
-        p, joint = int(parent[f]), frusta.base[f]
-        radius = max(frusta.r2[p], frusta.r1[c], float(frusta.r1[run].max()))
-        slack = tol.joint_gap * max(1.0, float(np.abs(joint).max()) + radius)
-        gaps = np.concatenate([norm(frusta.base[run] - joint), norm(top[[p]] - joint),
-                               norm(frusta.base[[c]] - joint)])
-        smallest = min(frusta.r2[p], frusta.r1[c], float(frusta.r1[run].min()))
-        if gaps.max() > slack or not smallest > tol.zero_length * radius:
-            continue
-        rows_p.append(p)
-        rows_c.append(c)
-        slices.extend(run)
-        start.append(len(slices))
-    if not rows_p:
-        return None
-    outer = {frusta.plane_hi[o].tobytes() + frusta.plane_lo[o].tobytes() for o in slices}
-    candidates = np.flatnonzero(short & ~has_parent & (child_of < 0))
-    inner = [i for i in candidates
-             if frusta.plane_lo[i].tobytes() + frusta.plane_hi[i].tobytes() in outer]
-    kn = _Knuckles(np.array(rows_p, np.int64), np.array(rows_c, np.int64),
-                   np.array(slices, np.int64), np.array(start, np.int64), np.array(inner, np.int64))
-    _knuckle_cuts(frusta, kn)
-    return kn
-
-
-def _cut_height(frusta: Frusta, rows, e, plane):
-    """Axial heights (and rises) where generators of ``rows`` in radial directions ``e``
-    (..., 3) meet ``plane`` (..., 4) (:func:`plane_height`; arguments broadcast)."""
-    n, d = plane[..., :3], plane[..., 3]
-    return plane_height(d - dot(n, frusta.base[rows]), dot(n, frusta.axis[rows]), dot(n, e),
-                        frusta.r1[rows], frusta.slope[rows])
-
-
-def _inner_generators(frusta: Frusta, rows, hinge, inner):
-    """(K, S, 3) radial directions of ``rows`` (K,) from the hinge k over the inner half
-    (towards ``inner``), ends excluded."""
-    beta = np.linspace(0.0, np.pi, _TRIM_SAMPLES + 2)[1:-1]
-    axis = frusta.axis[rows]
-    k_perp = unit(hinge - axis * dot(hinge, axis)[:, None])
-    return (np.cos(beta)[None, :, None] * k_perp[:, None, :]
-            + np.sin(beta)[None, :, None] * inner[:, None, :])
-
-
-def _trim_plane(axis, inner, joint, gamma, below: bool):
-    """(K, 4) the plane through the hinge line turned by ``gamma`` from the ⟂ plane of
-    ``axis`` towards the inside (P: ``below``, it keeps n·x <= d) or back (C)."""
-    normal = axis * np.cos(gamma)[:, None] + inner * (np.sin(gamma) * (1 if below else -1))[:, None]
-    return plane_through(normal, joint)
-
-
-def _trim_angle(frusta: Frusta, rows, joint, hinge, inner, limit, below: bool, share):
-    """(K,) the largest turn of the trimming plane, up to ``limit`` (the mitre), whose cut
-    takes at most ``share`` (K,) of each sampled inner generator of ``rows`` (K,)."""
-    e = _inner_generators(frusta, rows, hinge, inner)
-    r = rows[:, None]
-    y_lo = _cut_height(frusta, r, e, frusta.plane_lo[r])[0]
-    y_hi = _cut_height(frusta, r, e, frusta.plane_hi[r])[0]
-    room = share[:, None] * (y_hi - y_lo)
-    axis = frusta.axis[rows]
-
-    def fits(gamma):
-        y, rise = _cut_height(frusta, r, e, _trim_plane(axis, inner, joint, gamma, below)[:, None, :])
-        cut = y_hi - y if below else y - y_lo
-        return np.all((rise > tol.generator_rise) & (np.abs(cut) <= room), axis=1)
-
-    lo, hi = np.zeros_like(limit), limit.copy()
-    whole = fits(hi)
-    lo[whole] = hi[whole]
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        good = fits(mid)
-        lo, hi = np.where(good, mid, lo), np.where(good, hi, mid)
-    return lo
-
-
-def _knuckle_cuts(frusta: Frusta, kn: _Knuckles) -> None:
-    """Hinge, bend, radii, trimming planes and flags of the knuckles (in place)."""
-    head = kn.slices[kn.start[:-1]]
-    n_lo, n_hi = frusta.plane_lo[kn.slices, :3], frusta.plane_hi[kn.slices, :3]
-    turn = cross(n_lo, n_hi)
-    kn.bend = np.add.reduceat(np.arctan2(norm(turn), dot(n_lo, n_hi)), kn.start[:-1])
-    m1, m2 = frusta.axis[kn.parent], frusta.axis[kn.child]
-    kn.flat = kn.bend < tol.flat_bend
-    helper = any_perpendicular(m1)
-    k = np.where(kn.flat[:, None], helper, unit(np.add.reduceat(turn, kn.start[:-1], axis=0), helper))
-    kn.hinge = k = unit(k - m1 * dot(k, m1)[:, None], helper)
-    kn.inner_p, kn.inner_c = unit(cross(k, m1)), unit(cross(k, m2))
-    kn.joint = joint = frusta.base[head]
-    kn.radius_p = frusta.r1[kn.parent] + frusta.slope[kn.parent] * dot(joint - frusta.base[kn.parent], m1)
-    kn.radius_c = frusta.r1[kn.child] + frusta.slope[kn.child] * dot(joint - frusta.base[kn.child], m2)
-    half = np.where(kn.flat, 0.0, 0.5 * kn.bend)
-    both_ends = np.isin(kn.parent, kn.child), np.isin(kn.child, kn.parent)
-    share_p, share_c = (np.where(b, 0.5 * _TRIM_SHARE, _TRIM_SHARE) for b in both_ends)
-    gamma_p = _trim_angle(frusta, kn.parent, joint, k, kn.inner_p, half, True, share_p)
-    gamma_c = _trim_angle(frusta, kn.child, joint, k, kn.inner_c, half, False, share_c)
-    gamma_p = gamma_c = np.minimum(gamma_p, gamma_c)   # a short side holds both back
-    kn.plane_p = _trim_plane(m1, kn.inner_p, joint, gamma_p, True)
-    kn.plane_c = _trim_plane(m2, kn.inner_c, joint, gamma_c, False)
-    at_mitre = (gamma_p == half) & (gamma_c == half) & ~kn.flat
-    kn.plane_c[at_mitre] = kn.plane_p[at_mitre]          # one plane, bit for bit
-    radius = np.maximum(kn.radius_p, kn.radius_c)
-    kn.merged = np.abs(kn.radius_p - kn.radius_c) <= tol.seam_snap * radius
-    # the two cut curves, generator by generator (the mitre maps P's β to C's β)
-    ends = []
-    for rows, inner, plane in ((kn.parent, kn.inner_p, kn.plane_p), (kn.child, kn.inner_c, kn.plane_c)):
-        e = _inner_generators(frusta, rows, k, inner)
-        r = rows[:, None]
-        y = _cut_height(frusta, r, e, plane[:, None, :])[0]
-        ends.append(frusta.base[r] + y[..., None] * frusta.axis[r]
-                    + (frusta.r1[r] + frusta.slope[r] * y)[..., None] * e)
-    gap = norm(ends[0] - ends[1]).max(axis=1)
-    kn.mitred = at_mitre & kn.merged & (gap <= tol.seam_snap * radius)
-
-
 # ---------------------------------------------------------------------------- the plan
 @dataclass
 class _Plan:
@@ -564,7 +202,7 @@ class _Plan:
 
     columns: int
     bands: int
-    knuckles: _Knuckles | None
+    knuckles: Knuckles | None
     grid: np.ndarray
     lune: np.ndarray
     hidden: np.ndarray
@@ -615,7 +253,7 @@ def _plan(frusta: Frusta, m: int, caps) -> _Plan:
         raise ValueError(f"caps must be True, False or 'tips', got {caps!r}")
     n = len(frusta.length)
     columns, bands = columns_around(m), bands_along(m)
-    kn = _find_knuckles(frusta)
+    kn = find_knuckles(frusta)
     grid, lune, hidden = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
     if kn is not None:
         grid[kn.slices] = grid[kn.inner] = False
@@ -805,8 +443,8 @@ def _trimmed_rings(frusta: Frusta, plan: _Plan, turns, evaluate, rows):
     phi = 2 * np.pi * (u - frusta.u_offset[r] - v_nom * frusta.twist[r])
     ref = frusta.ref_dir[r]
     e = np.cos(phi)[..., None] * ref + np.sin(phi)[..., None] * cross(frusta.axis[r], ref)
-    y_lo = _cut_height(frusta, r, e, frusta.plane_lo[r])[0]
-    y_hi = _cut_height(frusta, r, e, frusta.plane_hi[r])[0]
+    y_lo = cut_height(frusta, r, e, frusta.plane_lo[r])[0]
+    y_hi = cut_height(frusta, r, e, frusta.plane_hi[r])[0]
     y_a, y_b = y_lo, y_hi
     for ends, planes, inner in ((kn.child, kn.plane_c, kn.inner_c), (kn.parent, kn.plane_p, kn.inner_p)):
         which = np.full(len(frusta.length), -1, np.int64)
@@ -817,7 +455,7 @@ def _trimmed_rings(frusta: Frusta, plan: _Plan, turns, evaluate, rows):
         if not has.any():
             continue
         kk = np.maximum(k, 0)[:, None, None]
-        y_t = _cut_height(frusta, r, e, planes[kk])[0]
+        y_t = cut_height(frusta, r, e, planes[kk])[0]
         side = has[:, None, None] & (dot(e, inner[kk]) > 0)
         if ends is kn.child:
             y_a = np.where(side, np.maximum(y_lo, y_t), y_a)
