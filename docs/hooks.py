@@ -67,7 +67,7 @@ def _knob_rows(cls):
 
 def _settings_classes():
     from plantgen import settings
-    from plantgen.geometry.rays.scan import ScanSettings
+    from plantgen.geometry.rays.scan_settings import ScanSettings
 
     return [
         (settings.EffectSettings, "render, view"), (settings.RaycastSettings, "render, view, bench"),
