@@ -12,6 +12,7 @@ models from the files' own descriptions. The tests
 
 from __future__ import annotations
 
+import logging
 import re
 from dataclasses import MISSING, fields, is_dataclass
 
@@ -187,5 +188,93 @@ def expand(markdown: str) -> str:
     return MARKER.sub(table, markdown)
 
 
+# ---------------------------------------------------------------------------- the prose check
+# The strict build checks links; these check the text a reader meets. A page fails on a
+# paragraph that repeats another (the same run of words twice), a paragraph that starts
+# mid-sentence (a lower-case word after a blank line: the tail of a sentence whose head
+# went missing), and a heading or paragraph that starts with a stray space.
+
+#: How many words in a row count as a repeat; the share of a paragraph's runs that must
+#: reappear in one earlier paragraph of the page for it to count as repeated; and the
+#: fewest runs a paragraph needs to be judged (a one-line caption may recur by design).
+REPEAT_RUN = 6
+REPEAT_SHARE = 0.5
+REPEAT_MIN_RUNS = 12
+#: A paragraph may start in lower case with the product's name, or after a code block
+#: whose command it goes on describing ("... one command: ```...``` installs plantgen").
+LOWER_CASE_NAMES = ("plantgen",)
+FENCE = re.compile(r"^\s*(```|~~~)")
+#: Blocks that are not prose: tables, lists, quotes, HTML, admonitions, snippets, markers,
+#: images, math, indented code and footnotes.
+NOT_PROSE = re.compile(r"^(\||[-*+] |\d+[.)] |>|<|!!!|\?\?\?|--8<--|!\[|\$\$|:::|\[\^|    |\t)")
+
+
+def _blocks(markdown: str):
+    """(line number, first line, text) of each blank-line separated block outside fences;
+    a fenced code block yields one block whose first line is its fence."""
+    block, start, fenced = [], 0, False
+    for number, line in enumerate(markdown.splitlines() + [""], 1):
+        if FENCE.match(line):
+            if block and not fenced:
+                yield start, block[0], " ".join(part.strip() for part in block)
+            if not fenced:
+                yield number, line.strip(), ""
+            fenced, block = not fenced, []
+            continue
+        if fenced:
+            continue
+        if line.strip():
+            if not block:
+                start = number
+            block.append(line)
+        elif block:
+            yield start, block[0], " ".join(part.strip() for part in block)
+            block = []
+
+
+def _numbers(text: str) -> set[str]:
+    return set(re.findall(r"\d[\d.,]*", text))
+
+
+def _runs(text: str) -> set[tuple[str, ...]]:
+    words = re.findall(r"[\w`'-]+", text.lower())
+    return {tuple(words[i:i + REPEAT_RUN]) for i in range(len(words) - REPEAT_RUN + 1)}
+
+
+def prose_problems(markdown: str) -> list[str]:
+    """What reads wrong in ``markdown``: one line per problem, naming its line number."""
+    out, seen, after_list = [], [], False
+    for number, first, text in _blocks(markdown):
+        if FENCE.match(first):
+            after_list = True          # what follows a command may go on its sentence
+            continue
+        heading = first.lstrip().startswith("#")
+        if heading and re.match(r"^#+\s{2,}\S|^\s+#", first):
+            out.append(f"line {number}: heading starts with a stray space: {first.strip()[:60]!r}")
+        if heading:
+            after_list = False
+            continue
+        indented = re.match(r"^ {1,3}\S", first) and not NOT_PROSE.match(first.lstrip())
+        if indented and not after_list:
+            out.append(f"line {number}: paragraph starts with a stray space: {first.strip()[:60]!r}")
+        prose = not NOT_PROSE.match(first) and not first.startswith(" ")
+        if prose and re.match(r"^[a-z]", first) and not after_list and not first.startswith(LOWER_CASE_NAMES):
+            out.append(f"line {number}: paragraph starts mid-sentence: {first[:60]!r}")
+        after_list = bool(NOT_PROSE.match(first)) and not first.startswith(("|", "<", "!["))
+        if not prose:
+            continue
+        runs, numbers = _runs(text), _numbers(text)
+        for other_number, other, other_numbers in seen:
+            # a caption that states other figures (a bench's note under each table) is no repeat
+            if len(runs) >= REPEAT_MIN_RUNS and len(runs & other) >= REPEAT_SHARE * len(runs) \
+                    and numbers == other_numbers:
+                out.append(f"line {number}: paragraph repeats line {other_number}'s: {first.strip()[:60]!r}")
+                break
+        seen.append((number, runs, numbers))
+    return out
+
+
 def on_page_markdown(markdown: str, page, config, files) -> str:   # noqa: ARG001 (MkDocs' hook signature)
+    for problem in prose_problems(markdown):
+        logging.getLogger("mkdocs.plugins.plantgen.prose").warning("%s: %s", page.file.src_uri, problem)
     return expand(markdown)

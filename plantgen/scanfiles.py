@@ -1,5 +1,5 @@
 """Point clouds (:class:`~plantgen.geometry.rays.scan.PointCloud`) to files and back: LAS 1.4
-and LAZ through laspy (``pip install 'plantgen[scan]'``), binary PLY by numpy.
+and LAZ through laspy (the scan extra: ``pip install '.[scan]'``), binary PLY by numpy.
 
 :func:`write_points` picks the format by the suffix (``.las``, ``.laz``, ``.ply``) and
 writes atomically (:func:`plantgen.files.write_atomically`): nothing half-written is
@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PlantgenError
+from .errors import PlantgenError, missing_extra
 from .files import check_finite, check_output, write_atomically
 from .geometry.rays.scan import LABELS, PART_NAMES, PointCloud
 from .geometry.skeletons.frames import UP_AXES, up_rotation
@@ -55,7 +55,7 @@ __all__ = ["FILE_LABELS", "POINT_SUFFIXES", "PointFileError", "check_point_outpu
 #: The suffixes :func:`write_points` knows.
 POINT_SUFFIXES = (".las", ".laz", ".ply")
 #: How to install what LAS and LAZ need.
-INSTALL = "pip install 'plantgen[scan]'"
+INSTALL = missing_extra("LAS and LAZ point files", "scan")
 #: The labels' names in the files (``order`` is ``branch_order`` there) and descriptions.
 FILE_LABELS = {"plant": ("plant", "plant (scene instance)"),
                "part": ("part", "0 stem, 1 branch, 2 leaf"),
@@ -88,12 +88,12 @@ def check_point_output(path, *, place: bool = True) -> str:
     (:func:`plantgen.files.check_output`); one line for each refusal."""
     fmt = point_format(path)
     if fmt in ("las", "laz") and importlib.util.find_spec("laspy") is None:
-        raise PointFileError(f"{path}: writing .{fmt} needs the optional package 'laspy': {INSTALL}")
+        raise PointFileError(f"{path}: {INSTALL} (laspy missing)")
     if fmt == "laz":
         import laspy
 
         if not laspy.LazBackend.detect_available():
-            raise PointFileError(f"{path}: writing .laz needs a LAZ backend for laspy (lazrs): {INSTALL}")
+            raise PointFileError(f"{path}: {INSTALL} (laspy's LAZ backend, lazrs, missing)")
     if place:
         check_output(path, PointFileError)
     return fmt
@@ -262,5 +262,5 @@ def read_points(path) -> PointCloud:
     if fmt == "ply":
         return _read_ply(path)
     if importlib.util.find_spec("laspy") is None:
-        raise PointFileError(f"{path}: reading .{fmt} needs the optional package 'laspy': {INSTALL}")
+        raise PointFileError(f"{path}: {INSTALL} (laspy missing)")
     return _read_las(path)

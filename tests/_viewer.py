@@ -34,7 +34,7 @@ def viewer_unavailable() -> str | None:
                                      ("pyglet", importlib.util.find_spec("pyglet"))) if not ok]
     if missing:
         return (f"the viewer's window tests need {', '.join(missing)} (apt-get install xvfb xdotool; "
-                "pip install 'plantgen[view]')")
+                "pip install '.[view]')")
     return None
 
 

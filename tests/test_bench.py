@@ -92,12 +92,12 @@ def test_image_error_of_a_depth_image_against_itself_is_zero_and_a_moved_one_is_
 def test_a_missing_scikit_image_is_one_line_naming_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "skimage", None)          # `import skimage...` raises ImportError
     monkeypatch.setitem(sys.modules, "skimage.metrics", None)
-    with pytest.raises(PlantgenError, match=r"pip install 'plantgen\[bench\]'"):
+    with pytest.raises(PlantgenError, match=r"pip install '\.\[bench\]'"):
         ssim(np.zeros((16, 16)), np.zeros((16, 16)))
     code, stdout, stderr = run_cli("bench", "--quick", "--out", tmp_path / "b")
     assert code == 2
     lines = stderr.strip().splitlines()
-    assert len(lines) == 1 and "scikit-image" in lines[0] and "pip install 'plantgen[bench]'" in lines[0], stderr
+    assert len(lines) == 1 and "scikit-image" in lines[0] and "pip install '.[bench]'" in lines[0], stderr
     assert "Traceback" not in stderr
     assert not (tmp_path / "b").exists()
 

@@ -13,7 +13,7 @@ import sys
 from dataclasses import MISSING, fields, is_dataclass
 
 import pytest
-from _docs import DOCS, REPO, hooks, page, table_after
+from _docs import DOCS, README, REPO, hooks, page, table_after
 
 from plantgen.knobs import knob_fields
 from plantgen.settings import RenderSettings
@@ -104,7 +104,8 @@ def _has_docs_extra() -> bool:
 
 @pytest.mark.skipif(not _has_docs_extra(), reason="the docs extra is not installed (pip install '.[docs]')")
 def test_the_site_builds_strictly(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+    # no --quiet: MkDocs drops warnings below ERROR before its strict count sees them
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
                           cwd=REPO, capture_output=True, text=True, timeout=300, env=_env())
     assert proc.returncode == 0, proc.stderr[-3000:]
     html = (tmp_path / "site" / "reference" / "grammar" / "index.html").read_text(encoding="utf-8")
@@ -117,3 +118,87 @@ def _env() -> dict:
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH", "")]))
     return env
+
+
+# ---------------------------------------------------------------------------- the prose check
+#: How docs/how-to/render.md read before it was mended (issue 46): a sentence's tail after
+#: the camera section, the camera paragraph twice, and sections opening on a stray space.
+GARBLED = """## Cameras
+
+The camera file holds `eye`, `target`, `up`, `fov_y` (vertical, degrees), `width` and
+`height`; `--camera-out cam.json` writes the one a render used and `--camera cam.json`
+reads it back. Rays go through pixel centres. `--depth-out depth.npy` writes float32
+distances along each pixel's ray, shape (height, width), row 0 the top row of the PNG,
+`inf` for a miss. `--camera auto` (the default) frames the model so it spans most of the
+viewport, or takes the scene's camera.
+
+dark and light colour, a fixed function of its index, so neighbours read apart. With
+shadows the leaves are drawn into the light's map too, so they cast shadows on the ground,
+the branches and each other, and receive them.
+
+The camera file holds `eye`, `target`, `up`, `fov_y` (vertical, degrees), `width` and
+`height`; rays go through pixel centres; `--depth-out` writes float32 distances along
+each pixel's ray, shape (height, width), row 0 the top row of the PNG, `inf` for a miss.
+`auto` frames the model so it spans most of the viewport (or takes the scene's camera).
+
+## The camera without a file
+
+ `--azimuth DEG` (around the vertical axis; 0 looks from +z,
+90 from +x), `--elevation DEG` (above the horizontal, within 89) turn the automatic camera.
+"""
+
+
+def test_the_prose_check_finds_each_kind_of_garble():
+    problems = hooks().prose_problems(GARBLED)
+    kinds = [p.split(": ", 1)[1].split(":")[0] for p in problems]
+    assert kinds == ["paragraph starts mid-sentence", "paragraph repeats line 3's",
+                     "paragraph starts with a stray space"], problems
+    assert problems[0].startswith("line 10:")
+    assert hooks().prose_problems("# Title\n\n#  Spaced heading\n\nText.\n")[0].startswith("line 3: heading")
+
+
+def test_the_prose_check_passes_what_reads_well():
+    good = """# Title
+
+One command:
+
+```sh
+plantgen grow pine
+```
+
+derives the L-system; the text goes on after the command.
+
+plantgen starts many sentences with its own name.
+
+- a list item
+  that wraps
+
+  and a second paragraph of the item, indented.
+
+| a | table |
+|---|---|
+
+Under one table the bench says 1,234 rays took 5.6 s on the first run of this very long caption.
+
+Under one table the bench says 2,345 rays took 7.8 s on the first run of this very long caption.
+"""
+    assert hooks().prose_problems(good) == []
+
+
+def test_every_page_reads_cleanly():
+    """The prose check over every page and the README (the strict build runs it as well)."""
+    found = {name: hooks().prose_problems((DOCS / name).read_text(encoding="utf-8")) for name in _pages()}
+    found["README.md"] = hooks().prose_problems(README.read_text(encoding="utf-8"))
+    assert {name: p for name, p in found.items() if p} == {}
+
+
+@pytest.mark.skipif(not _has_docs_extra(), reason="the docs extra is not installed (pip install '.[docs]')")
+def test_a_garbled_page_fails_the_strict_build(tmp_path):
+    """The hook's warnings stop MkDocs in strict mode (a small site with the same hook)."""
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "index.md").write_text("# Garbled\n\n" + GARBLED, encoding="utf-8")
+    (tmp_path / "mkdocs.yml").write_text(f"site_name: t\nhooks:\n  - {DOCS / 'hooks.py'}\n", encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120, env=_env())
+    assert proc.returncode != 0
+    assert "paragraph starts mid-sentence" in proc.stderr

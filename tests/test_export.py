@@ -352,7 +352,7 @@ def test_a_missing_extra_is_one_line_naming_the_install_command(tmp_path, monkey
                         lambda name, *a: None if name in ("pxr", "scipy") else real(name, *a))
     for suffix, extra in ((".usda", "usd"), (".qsm.mat", "qsm")):
         code, _, stderr = run_cli("export", "saguaro", "-o", tmp_path / f"s{suffix}")
-        assert code == 2 and f"pip install 'plantgen[{extra}]'" in stderr, stderr
+        assert code == 2 and f"pip install '.[{extra}]'" in stderr, stderr
         assert len(stderr.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
 
@@ -404,3 +404,20 @@ def test_export_help_documents_formats_and_up_conventions():
                  "EXT_mesh_gpu_instancing", "PointInstancer", "--unit", "--qsm-tolerance", "[default: nodes]",
                  "Blender 3.4", "camera, light and ground"):
         assert word in stdout, word
+
+
+def test_every_missing_extra_is_worded_once():
+    """One wording for a missing extra (plantgen.errors.missing_extra), with the install
+    command the README uses (``pip install '.[NAME]'`` in the clone): no module spells
+    another (``plantgen[NAME]`` would ask an index for a package of that name)."""
+    import re
+    from pathlib import Path
+
+    import plantgen
+    from plantgen.errors import missing_extra
+
+    root = Path(plantgen.__file__).resolve().parent
+    found = {m for p in root.rglob("*.py") for m in re.findall(r"pip install '([^']*)'", p.read_text(encoding="utf-8"))}
+    assert found and all(re.fullmatch(r"\.\[([a-z]+|\{extra\})\]", c) for c in found), found
+    assert missing_extra("plantgen view", "view") == ("plantgen view needs the view extra: "
+                                                      "pip install '.[view]' (in plantgen's folder)")

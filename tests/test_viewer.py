@@ -324,7 +324,7 @@ def test_without_the_view_extra_the_install_command_is_named(tmp_path):
                           env={**os.environ, "DISPLAY": ":0"})
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "pip install 'plantgen[view]'" in lines[0], proc.stderr
+    assert len(lines) == 1 and "pip install '.[view]'" in lines[0], proc.stderr
 
 
 def test_bad_input_is_one_line_before_any_window(tmp_path):

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import PlantgenError
+from ..errors import PlantgenError, missing_extra
 from ..limits import Limits
 from .manifest import MANIFEST_NAME, Manifest
 from .plant import make_plant, output_kinds, plant_row
@@ -93,7 +93,7 @@ def _require_dask() -> None:
         import dask.distributed  # noqa: F401
         import pyarrow  # noqa: F401
     except ImportError:
-        raise PlantgenError("plantgen batch needs the batch extra: pip install 'plantgen[batch]'") from None
+        raise PlantgenError(missing_extra("plantgen batch", "batch")) from None
 
 
 def _probe(scheduler: str) -> None:

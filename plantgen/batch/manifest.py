@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PlantgenError
+from ..errors import PlantgenError, missing_extra
 from ..files import temporary_name, write_atomically
 from .plant import files_column, relative_files
 from .schema import FORMAT, METRIC_COLUMNS, arrow_schema
@@ -48,7 +48,7 @@ def _pyarrow():
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
-        raise PlantgenError("plantgen batch needs the batch extra: pip install 'plantgen[batch]'") from None
+        raise PlantgenError(missing_extra("plantgen batch", "batch")) from None
     return pa, pq
 
 

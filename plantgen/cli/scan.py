@@ -58,7 +58,8 @@ def _plant_ids(grown) -> tuple[object, object]:
 @click.command()
 @input_arg
 @output_opt("its suffix names the format: .las or .laz (LAS 1.4, point format 6, the labels as extra "
-            "bytes; needs pip install 'plantgen[scan]') or .ply (binary, double coordinates). Default: INPUT's "
+            "bytes; needs the scan extra: pip install '.[scan]') or .ply (binary, double coordinates). "
+            "Default: INPUT's "
             "name with .ply, in the current directory.", required=False)
 @knob_options(ScanSettings)
 @click.option("--scan-seed", type=click.IntRange(min=0), default=0, show_default=True,

@@ -72,7 +72,7 @@ def view(input: Path, start_method, subdiv, seed, iterations, shots, watch, snap
     command is printed). When the input file or a grammar it includes is saved, the plant
     is grown again and swapped in, keeping the camera; a broken edit keeps the last good
     plant and shows the error. Needs a display and the view extra:
-    pip install 'plantgen[view]'.
+    pip install '.[view]' (in plantgen's folder).
 
     \b
     Examples:

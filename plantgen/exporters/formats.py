@@ -54,7 +54,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import PlantgenError
+from ..errors import PlantgenError, missing_extra
 from ..files import check_outputs
 from ..geometry.skeletons.frames import UP_AXES
 
@@ -99,7 +99,8 @@ class Format:
 
     @property
     def install(self) -> str:
-        return f"pip install 'plantgen[{self.extra}]'"
+        """One line naming the extra this format needs and its install command."""
+        return missing_extra(f"writing {self.suffix}", self.extra)
 
     def load_writer(self) -> Callable:
         """The writer function, its module imported now (check :func:`check_extra` first)."""
@@ -154,8 +155,7 @@ def export_file_type(path: str | Path) -> str:
 def check_extra(fmt: Format, path) -> None:
     """One line naming the install command when the package ``fmt``'s writer needs is missing."""
     if fmt.module is not None and importlib.util.find_spec(fmt.module) is None:
-        raise ExportError(f"{path}: writing {fmt.suffix} needs the optional package '{fmt.module}': "
-                          f"{fmt.install}")
+        raise ExportError(f"{path}: {fmt.install} ({fmt.module} missing)")
 
 
 def writable_format(path: str | Path, kind: str) -> Format:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import missing_extra
 from .configs import METHODS
 from .curves import FAMILIES, family_front, family_points
 
@@ -75,8 +76,7 @@ def plot_curves(results: dict, out_dir: Path) -> list[Path] | str:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        return ("matplotlib is not installed: curves written as CSV only "
-                "(install the extra: pip install 'plantgen[bench]')")
+        return missing_extra("drawing the curves (matplotlib)", "bench") + "; curves written as CSV only"
     written = []
     for m in results["models"]:
         families = [f for f in FAMILIES if family_points(m, f)]

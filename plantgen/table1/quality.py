@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PlantgenError
+from ..errors import PlantgenError, missing_extra
 
 __all__ = ["ssim", "require_skimage", "silhouette_mismatch", "depth_shading", "ImageError", "image_error",
            "matched_level", "quality_bound", "pareto_front", "MATCH_REL_TOL", "MATCH_ABS_TOL",
@@ -43,7 +43,7 @@ __all__ = ["ssim", "require_skimage", "silhouette_mismatch", "depth_shading", "I
 SSIM_WINDOW = 11
 SSIM_SIGMA = 1.5
 #: What to install where scikit-image is missing.
-SKIMAGE_HINT = "pip install 'plantgen[bench]'"
+SKIMAGE_HINT = missing_extra("the bench's error metric (SSIM, scikit-image)", "bench")
 #: Depth shading: ambient + diffuse·max(0, n·l) on hits.
 SHADING_AMBIENT = 0.15
 SHADING_DIFFUSE = 0.85
@@ -61,8 +61,7 @@ def require_skimage():
     try:
         from skimage.metrics import structural_similarity
     except ImportError:
-        raise PlantgenError("scikit-image is not installed: the bench's error metric (SSIM) "
-                            f"needs it ({SKIMAGE_HINT})") from None
+        raise PlantgenError(SKIMAGE_HINT) from None
     return structural_similarity
 
 

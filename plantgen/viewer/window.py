@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from ..errors import PlantgenError
+from ..errors import PlantgenError, missing_extra
 from ..gl.shaders import build_program, set_uniforms
 from ..images import write_png
 from .hud import help_panel, text_panel
@@ -28,7 +28,7 @@ from .session import ViewerSession
 __all__ = ["ViewerError", "INSTALL_HINT", "check_viewer_available", "open_window", "run_window"]
 
 #: The command that installs what the viewer needs.
-INSTALL_HINT = "pip install 'plantgen[view]'"
+INSTALL_HINT = missing_extra("plantgen view", "view")
 
 #: OpenGL version the viewer's window asks for (the renderers' shaders are GLSL 4.30).
 WINDOW_GL = (4, 3)
@@ -51,7 +51,7 @@ def check_viewer_available() -> None:
     ``DISPLAY``)."""
     missing = [m for m in ("moderngl_window", "pyglet") if importlib.util.find_spec(m) is None]
     if missing:
-        raise ViewerError(f"plantgen view needs {' and '.join(m.replace('_', '-') for m in missing)}: {INSTALL_HINT}")
+        raise ViewerError(f"{INSTALL_HINT} ({' and '.join(m.replace('_', '-') for m in missing)} missing)")
     if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")) and not os.environ.get("DISPLAY"):
         raise ViewerError("no display to open a window on (DISPLAY is not set); plantgen render writes "
                           "images without one")
@@ -62,7 +62,7 @@ def open_window(title: str, size: tuple):
     try:
         from moderngl_window.context.pyglet.window import Window
     except ImportError as exc:
-        raise ViewerError(f"plantgen view cannot import its window library ({exc}): {INSTALL_HINT}") from None
+        raise ViewerError(f"{INSTALL_HINT} (its window library failed to import: {exc})") from None
     except Exception as exc:   # pyglet opens the display when its window module loads
         raise ViewerError(f"cannot open the display {os.environ.get('DISPLAY', '')!r}: {_short(exc)}") from None
     try:
