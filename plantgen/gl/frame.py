@@ -313,17 +313,20 @@ class OffscreenRenderer:
             self._sky_vao = self.ctx.vertex_array(sky, [])
         return self._sky_vao
 
-    def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting):
-        """Draws of the ground square: a callable drawing it into the frame and, with a light
-        window, one drawing it into the light's map (relative to the light's anchor; for
-        :meth:`_draw_frame`).
+    def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting, background=None):
+        """Draws of the ground (its square; a disc is cut out of it): a callable drawing it
+        into the frame and, with a light window, one drawing it into the light's map
+        (relative to the light's anchor; for :meth:`_draw_frame`). It fades at its edge
+        into the sky, or into ``background`` (r, g, b, a) where the frame's is flat.
 
         Returns (frame draw, light draw or None, [objects to release after the frame]).
         """
         ctx = self.ctx
         shadowed = lighting.window is not None
-        program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines})
-        set_uniforms(program, **lighting.shading, **lighting.receiver,
+        program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines,
+                                                     "FLAT_BACKGROUND": background is not None})
+        set_uniforms(program, **lighting.shading, **lighting.receiver, **ground.uniforms(),
+                     **({} if background is None else {"background": tuple(background)}),
                      view_projection=mat4(view.view_projection),
                      ground_material=lighting.ground_material, origin_offset=tuple(view.eye))
         buf = ctx.buffer((ground.quad() - view.eye).astype(np.float32).tobytes())
@@ -345,12 +348,13 @@ class OffscreenRenderer:
         return frame_draw, light_draw, [vao, light_vao, buf, light_buf]
 
     def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
-                      *, labels=None) -> Surroundings:
-        """The frame's draws besides the model's own: the ground square and the leaves
-        (``leaves``: a Polygons or None; ``labels`` (p,): draw them as a part mask)."""
+                      *, labels=None, background=None) -> Surroundings:
+        """The frame's draws besides the model's own: the ground (fading into ``background``
+        where it is flat) and the leaves (``leaves``: a Polygons or None; ``labels`` (p,):
+        draw them as a part mask)."""
         out = Surroundings([], [], [], [])
         if ground is not None:
-            draw, light_draw, garbage = self._ground_draws(ground, view, lighting)
+            draw, light_draw, garbage = self._ground_draws(ground, view, lighting, background)
             out.before.append(draw)
             out.light.append(light_draw)
             out.garbage.extend(garbage)

@@ -75,7 +75,7 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
         if leaves:
             out.append(("leaf.glsl", {"SHADOW_PASS": True}))
     if ground:
-        out.append(("ground.glsl", {"SHADOWS": shadowed}))
+        out.append(("ground.glsl", {"SHADOWS": shadowed, "FLAT_BACKGROUND": flat_background}))
     out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed}))
     if leaves:
         labels = bool(getattr(settings, "labels", False))

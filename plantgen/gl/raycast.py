@@ -206,7 +206,8 @@ class Raycaster(OffscreenRenderer):
                                             else model_box if model_box is not None else rows_box(frusta))
         lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye,
                                   anchor=None if record_buffer is None else view.eye)
-        extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
+        extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None,
+                                    background=background)
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n and not placed else None)
         if record_buffer is None:

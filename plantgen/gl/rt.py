@@ -237,7 +237,8 @@ class RayTracer(Raycaster):
         receivers = {k: v for k, v in defines.items() if k != "SHADOWS"} if shadows is not None else {}
         variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
         if ground:
-            variants.append(("ground.glsl", {"SHADOWS": shadows is not None, **receivers}))
+            variants.append(("ground.glsl", {"SHADOWS": shadows is not None, **receivers,
+                                             "FLAT_BACKGROUND": flat_background}))
         variants.append(("rt.glsl", defines))
         if leaves:
             variants.append(("leaf.glsl", {"SHADOWS": shadows is not None, "LABELS": False, **receivers}))
@@ -263,10 +264,11 @@ class RayTracer(Raycaster):
     def _march(settings) -> dict:
         return {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
 
-    def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None):
+    def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None,
+                      background=None):
         if lighting.receiver_defines:
             lighting = replace(lighting, receiver={**lighting.receiver, "pixel_footprint": view.pixel_footprint()})
-        out = super()._surroundings(ground, leaves, view, lighting, labels=labels)
+        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background)
         frame = self._frame
         if frame is not None:
             out.before.insert(0, self._bind)        # the BVH and heights for every receiver
