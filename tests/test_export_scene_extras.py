@@ -54,12 +54,15 @@ def unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def test_a_grammar_exports_no_camera_light_or_ground(tmp_path):
-    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ()
+def test_a_grammar_exports_its_ground_disc_but_no_camera_or_light(tmp_path):
+    """A single plant's export carries the ground disc plantgen render draws under it
+    (issue 43), and no camera or light."""
+    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ("ground",)
     doc = glb_json(tmp_path / "s.glb")
     assert "cameras" not in doc and "extensions" not in doc and "extensionsUsed" not in doc
-    assert [m["name"] for m in doc["meshes"]] == ["saguaro"]
-    assert scene_extras(grow_file("saguaro")) is None
+    assert [m["name"] for m in doc["meshes"]] == ["saguaro", "Ground"]
+    extras = scene_extras(grow_file("saguaro"))
+    assert extras.camera is None and extras.light is None and extras.ground.shape == "disc"
 
 
 def test_auto_camera_is_the_one_render_frames(auto_yard):

@@ -413,8 +413,8 @@ class OffscreenRenderer:
                     extras: Surroundings) -> tuple[float, float, bool]:
         """Run one frame's passes in order: the shadow map (with ``shadows``: drawn by
         ``light`` and the light draws of ``extras``, or reused, :meth:`_draw_shadow_map`),
-        the sky, the ground (``extras.before``), the model (``draw_model()``) and the
-        leaves (``extras.after``), with the depth test on from the ground on.
+        the ground (``extras.before``), the sky where nothing covers the far plane, the
+        model (``draw_model()``) and the leaves (``extras.after``), depth tested.
 
         Returns (frame_ms, shadow_ms, shadow_cached): wall milliseconds from the first pass
         to glFinish, those of the shadow pass alone (0 for a reused map), and whether the
@@ -430,11 +430,17 @@ class OffscreenRenderer:
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
-        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
-        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.disable(ctx.CULL_FACE | ctx.BLEND)
         ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
-        for draw in (*extras.before, draw_model, *extras.after):
+        for draw in extras.before:
+            draw()
+        # the sky after the ground, at the far plane: the depth test skips the sky's
+        # fragments the ground covers before they are shaded
+        ctx.depth_func = "<="
+        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.depth_func = "<"
+        for draw in (draw_model, *extras.after):
             draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3

@@ -239,10 +239,12 @@ def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None) -> SceneExt
     """What a glTF or USD export writes around a scene's plants: the camera ``plantgen
     render`` would use at its default size (the scene's camera, or for ``camera: auto``
     the model framed as :func:`stage_model` frames it, its frusta skinned with ``skin``),
-    the scene's light and its ground; None for a grammar or a skeleton."""
+    the scene's light and its ground; for a grammar or a skeleton, only the ground disc
+    ``plantgen render`` draws under it (:func:`~plantgen.geometry.stage.model_ground`)."""
     scene = grown.scene
     if scene is None:
-        return None
+        frusta = check_finite_frusta(skin(grown.skeleton), source or grown.name)
+        return SceneExtras(ground=stage_model(grown, frusta, *DEFAULT_SIZE, ground="auto").ground)
     width, height = DEFAULT_SIZE
     if scene.camera is not None:
         camera = scene.camera.at_size(width, height)

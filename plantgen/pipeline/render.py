@@ -84,8 +84,8 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
     ``orbit`` then turns, moves or zooms it around its target (:func:`orbit_view`; a
     framed view is framed anew from the new direction). ``ground`` is ``--ground``
     (:class:`~plantgen.settings.ImageSettings`): ``auto`` puts a single plant on its
-    ground disc (:func:`model_ground`), ``none`` drops every ground; None (the
-    benches') keeps the scene's ground only, as the paper's figures were measured."""
+    ground disc (:func:`model_ground`), ``none`` drops every ground; ``scene`` or None
+    (the benches') keep the scene's ground only, as the paper's figures were measured."""
     scene, leaves = grown.scene, model_leaves(grown)
     points = None if leaves is None else leaves.vertices
     framed = camera is None and (scene is None or scene.camera is None)
@@ -104,6 +104,16 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
         floor = model_ground(_model_box(frusta, points)) if ground == "auto" else None
         return Staging(camera, tuple(MODEL_LIGHT.towards()), floor, leaves)
     return Staging(camera, tuple(scene.light.towards()), None if ground == "none" else scene.ground, leaves)
+
+
+def ground_asked(image: ImageSettings) -> str:
+    """``--ground`` as a render stages it (:func:`stage_model`): ``auto`` draws no ground
+    disc under a single plant on a transparent background (the alpha stays the plant's
+    coverage; a scene keeps its ground)."""
+    if image.ground == "auto" and parse_background(image.background) is not None \
+            and parse_background(image.background)[3] < 1:
+        return "scene"
+    return image.ground
 
 
 def _model_box(frusta: Frusta, points) -> np.ndarray:
@@ -468,7 +478,7 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
     frusta = model.frusta_at(motion.start)
     staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit,
-                          ground=image.ground)
+                          ground=ground_asked(image))
     march, shadows = request.frame(model.effects)
     lod_pixels = request.lod_pixels(model.effects)
     march = _method_for(march, model, frusta, width * height * image.ssaa ** 2, lod_pixels, frames is not None,
