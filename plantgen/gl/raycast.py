@@ -189,10 +189,9 @@ class Raycaster(OffscreenRenderer):
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
         """
-        n = len(frusta)
+        n, placed = len(frusta), isinstance(frusta, PlacedPlants)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         t0 = time.perf_counter()
-        placed = isinstance(frusta, PlacedPlants)
         records = pack_records(frusta, camera.eye) if record_buffer is None and not placed else None
         pack_ms = (time.perf_counter() - t0) * 1e3
         leaf_box = leaf_bounds(leaves)
@@ -206,8 +205,8 @@ class Raycaster(OffscreenRenderer):
                                             else model_box if model_box is not None else rows_box(frusta))
         lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye,
                                   anchor=None if record_buffer is None else view.eye)
-        extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None,
-                                    background=background)
+        extras = self._surroundings(ground, leaves, view, lighting, background=background,
+                                    labels=leaf_labels if settings.labels else None)
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n and not placed else None)
         if record_buffer is None:
