@@ -54,14 +54,22 @@ def unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def test_a_grammar_exports_its_ground_disc_but_no_camera_or_light(tmp_path):
-    """A single plant's export carries the ground disc plantgen render draws under it
-    (issue 43), and no camera or light."""
-    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ("ground",)
+def test_a_grammar_exports_no_camera_light_or_ground(tmp_path):
+    assert export_model("saguaro", tmp_path / "s.glb", level=0)["scene"] == ()
     doc = glb_json(tmp_path / "s.glb")
     assert "cameras" not in doc and "extensions" not in doc and "extensionsUsed" not in doc
+    assert [m["name"] for m in doc["meshes"]] == ["saguaro"]
+    assert scene_extras(grow_file("saguaro")) is None
+
+
+def test_a_grammar_exports_its_ground_disc_when_asked(tmp_path):
+    """With ``ground=True`` a single plant's export carries the ground disc plantgen render
+    draws under it (issue 43: a reference renderer sees the same ground), no camera or light."""
+    assert export_model("saguaro", tmp_path / "s.glb", level=0, ground=True)["scene"] == ("ground",)
+    doc = glb_json(tmp_path / "s.glb")
+    assert "cameras" not in doc and "extensions" not in doc
     assert [m["name"] for m in doc["meshes"]] == ["saguaro", "Ground"]
-    extras = scene_extras(grow_file("saguaro"))
+    extras = scene_extras(grow_file("saguaro"), ground=True)
     assert extras.camera is None and extras.light is None and extras.ground.shape == "disc"
 
 
