@@ -60,8 +60,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None, asset: AssetSettings | None = None,
-                 ground: bool = False) -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None, ground=False) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -101,8 +100,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``levels`` ([(rows, triangles)] per level of detail, summed over the plants written
     once; empty: none), ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
-    besides its plants: glTF and USD, :func:`scene_extras`; for a grammar ``("ground",)`` with
-    ``ground``, its ground disc as ``plantgen render`` draws it, else empty), ``textures``
+    besides its plants: glTF and USD, :func:`scene_extras`; a grammar's ground disc with ``ground``), ``textures``
     (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
