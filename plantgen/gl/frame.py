@@ -33,7 +33,7 @@ from .material_uniforms import HeightTextures, palette_uniforms, shading_uniform
 from .passes import LightWindow, ShadowPass, light_window
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
-from .supersample import resolve_supersamples
+from .supersample import GpuResolve
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "ShadowKey", "LightPass",
            "light_anchor", "check_background", "check_ssaa"]
@@ -236,6 +236,7 @@ class OffscreenRenderer:
         self._shadow = ShadowPass(self.ctx)
         self._leaves = LeafLayer(self.ctx)
         self._sky_vao = None
+        self._resolver = GpuResolve(self.ctx)
         self.last_light_window = None
         self.last_resolve_ms = 0.0
 
@@ -265,6 +266,7 @@ class OffscreenRenderer:
         if self._fbo is not None:
             release_framebuffer(self._fbo)
         self._fbo = self._fbo_size = None
+        self._resolver.release()
         self._heights.release()
         self._shadow.release()
         self._leaves.release()
@@ -371,9 +373,9 @@ class OffscreenRenderer:
             if self._fbo is not None:
                 release_framebuffer(self._fbo)
             ctx = self.ctx
+            # textures, not renderbuffers: supersampling's resolve samples them (GpuResolve)
             self._fbo = ctx.framebuffer(
-                color_attachments=[ctx.renderbuffer((width, height), 4),
-                                   ctx.renderbuffer((width, height), 1, dtype="f4")],
+                color_attachments=[ctx.texture((width, height), 4), ctx.texture((width, height), 1, dtype="f4")],
                 depth_attachment=ctx.depth_renderbuffer((width, height)))
             self._fbo_size = (width, height)
         return self._fbo
@@ -469,18 +471,18 @@ class OffscreenRenderer:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
-        averaged down (:func:`plantgen.gl.supersample.resolve_supersamples`)."""
+        averaged down on the GPU first (:class:`plantgen.gl.supersample.GpuResolve`;
+        ``last_resolve_ms``: that pass and its read back)."""
         fbo = self._fbo
-        w, h, k = width * ssaa, height * ssaa, 4 if alpha else 3
-        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)
-        color = color.reshape(h, w, k)[::-1]
-        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
-                             np.float32).reshape(h, w)[::-1]
         self.last_resolve_ms = 0.0
-        if ssaa == 1:
-            return color.copy(), dist.copy()
-        t0 = time.perf_counter()
-        out = resolve_supersamples(color, dist, ssaa)
-        self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
-        return out
+        if ssaa > 1:
+            t0 = time.perf_counter()
+            out = self._resolver.resolve(fbo.color_attachments[0], fbo.color_attachments[1], width, height,
+                                         ssaa, alpha)
+            self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
+            return out
+        k = 4 if alpha else 3
+        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)
+        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1), np.float32)
+        return color.reshape(height, width, k)[::-1].copy(), dist.reshape(height, width)[::-1].copy()
 
