@@ -5,7 +5,7 @@ float32 distance + depth, resized on demand), the relief height textures, the sk
 ground square and the light's shadow map. A renderer (:class:`~plantgen.gl.raycast.
 Raycaster`, :class:`~plantgen.gl.raster.RasterRenderer`) prepares its programs and
 its model's draw, then :meth:`OffscreenRenderer._draw_frame` runs the passes in order
-(shadow map, sky, ground, model) and :meth:`OffscreenRenderer._read_back` returns the
+(shadow map, ground, sky, model) and :meth:`OffscreenRenderer._read_back` returns the
 image and the distances.
 
 The shadow map is paid once: the light's pass is drawn relative to its own origin (the

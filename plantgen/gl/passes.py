@@ -84,7 +84,9 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
 
 
 def frame_passes(shadows: bool, ground: bool, segments: bool, leaves: bool = False) -> list[str]:
-    """Names of the passes of one frame, in order."""
+    """Names of the passes of one frame, in order, but for the sky: it is drawn after the
+    ground, at the far plane, so the depth test skips it where the ground covers it
+    (:meth:`plantgen.gl.frame.OffscreenRenderer._draw_frame`); it is named before."""
     return ((["shadow"] if shadows and (segments or ground or leaves) else []) + ["sky"]
             + (["ground"] if ground else []) + (["frusta"] if segments else []) + (["leaves"] if leaves else []))
 
