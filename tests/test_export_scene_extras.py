@@ -10,6 +10,7 @@ import struct
 
 import numpy as np
 import pytest
+from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_scene
 
 from plantgen.geometry.skeletons.frames import up_rotation
@@ -71,6 +72,9 @@ def test_a_grammar_exports_its_ground_disc_when_asked(tmp_path):
     assert [m["name"] for m in doc["meshes"]] == ["saguaro", "Ground"]
     extras = scene_extras(grow_file("saguaro"), ground=True)
     assert extras.camera is None and extras.light is None and extras.ground.shape == "disc"
+    code, _, err = run_cli("export", "saguaro", "-o", tmp_path / "c.glb", "--subdiv", "0", "--ground")
+    assert code == 0, err
+    assert [m["name"] for m in glb_json(tmp_path / "c.glb")["meshes"]] == ["saguaro", "Ground"]
 
 
 def test_auto_camera_is_the_one_render_frames(auto_yard):
