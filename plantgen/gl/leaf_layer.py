@@ -107,9 +107,11 @@ class LeafLayer:
         vbo, ibo, origin = self._upload(polygons, labels)
         shadowed = lighting.window is not None and labels is None
         receives = lighting.shadowed and labels is None
+        looks = lighting.defines("leaf.glsl") if labels is None else {}
         program = build_program(ctx, "leaf.glsl", {"SHADOWS": receives, "LABELS": labels is not None,
-                                                   **(lighting.receiver_defines if receives else {})})
-        set_uniforms(program, **({} if labels is not None else {**lighting.shading, **lighting.receiver}),
+                                                   **(lighting.receiver_defines if receives else {}), **looks})
+        shading = {**lighting.shading, **lighting.receiver, **(lighting.sky if looks.get("SKY_LIGHT") else {})}
+        set_uniforms(program, **({} if labels is not None else shading),
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()))
         count = polygons.triangles.size
