@@ -119,7 +119,7 @@ class EffectSettings:
 #: The sky light's rays a pixel by default (``--sky-samples``).
 SKY_SAMPLES = 8
 #: The filmic tone curve's knee: linear light below it is kept, above it rolled off towards 1.
-TONE_KNEE = 0.6
+TONE_KNEE = 0.7
 #: Pixel footprints a sky ray starts off its surface (as RT's shadow rays).
 SKY_RAY_OFFSET = 1.0
 
