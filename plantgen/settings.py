@@ -127,8 +127,9 @@ SKY_RAY_OFFSET = 1.0
 @dataclass(frozen=True)
 class LookSettings:
     """How light reads (the effects ``tone``, ``translucency``, ``sky``; set from the effects
-    in force by :meth:`RenderSettings.frame`, by default those of :data:`DEFAULT_EFFECTS`
-    for a caller that builds its settings itself), and the knob of each accuracy trade-off.
+    in force by :meth:`RenderSettings.frame`; all off by default, today's shading, for a
+    caller that builds its settings itself: :meth:`defaults` gives those of
+    :data:`DEFAULT_EFFECTS`), and the knob of each accuracy trade-off.
 
     tone : the tone curve (``tone_curve``, in linear light, after ``exposure``) and the
         real sRGB transfer curve; off: clip, then c^(1/2.2) (as before). ``filmic``: the
@@ -147,9 +148,9 @@ class LookSettings:
         ``sun_samples`` a pixel either way
     """
 
-    tone: bool = "tone" in DEFAULT_EFFECTS
-    translucency: bool = "translucency" in DEFAULT_EFFECTS
-    sky: bool = "sky" in DEFAULT_EFFECTS
+    tone: bool = False
+    translucency: bool = False
+    sky: bool = False
     transmission: float = knob(0.5, "--leaf-transmission", "Translucency: the fraction of the light falling on a "
                                "leaf's far side that comes through it (0..1).", lo=0, hi=1, metavar="F")
     sky_samples: int = knob(SKY_SAMPLES, "--sky-samples", "Sky light: rays a pixel towards the sky (more: less "
@@ -171,6 +172,12 @@ class LookSettings:
 
     def __post_init__(self):
         check_knobs(self)
+
+    @classmethod
+    def defaults(cls) -> LookSettings:
+        """The looks of :data:`DEFAULT_EFFECTS` (what a render gets unless it says otherwise)."""
+        return cls(tone="tone" in DEFAULT_EFFECTS, translucency="translucency" in DEFAULT_EFFECTS,
+                   sky="sky" in DEFAULT_EFFECTS)
 
     def defines(self) -> dict[str, bool]:
         """The shader variant: ``TONE_MAP`` (``TONE_ACES``), ``TRANSLUCENT``, ``SKY_LIGHT``,

@@ -58,14 +58,14 @@ def light_program(settings, shadows: ShadowSettings) -> tuple[str, dict]:
 
 def look_defines(look, program: str, shadowed: bool = False) -> dict:
     """The defines of the looks (:class:`~plantgen.settings.LookSettings`, None: none) that
-    ``program`` takes: every program its tone curve (``TONE_MAP``), the shadow receivers the
+    ``program`` takes: every program its tone curve (``TONE_MAP``, ``TONE_ACES``), the shadow receivers the
     soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``)
     and the leaves the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
     off gives no define: the program is today's."""
     if look is None:
         return {}
     on = look.defines()
-    out = {"TONE_MAP": on["TONE_MAP"]}
+    out = {"TONE_MAP": on["TONE_MAP"], "TONE_ACES": on["TONE_ACES"]}
     if program == "sky.glsl":
         return out
     out["SOFT_SUN"] = on["SOFT_SUN"] and shadowed
