@@ -164,28 +164,24 @@ class Raycaster(OffscreenRenderer, BvhCache):
             :class:`~plantgen.geometry.instances.PlacedPlants` drawn instanced
             (:mod:`plantgen.gl.instanced`: records per distinct plant, uploaded once)
         camera : the view; rays go through pixel centres
-        settings : relief on/off and its step knobs
+        settings : relief on/off and its step knobs, the looks (``look``; with ``sky`` a BVH)
         material_names : names of the material indices (choose colours and height maps)
         light_dir : (3,) direction towards the light (normalised here); default: the
             model light of :mod:`plantgen.geometry.stage`
         ground : optional ground square, rasterised into the same depth buffer
         shadows : None (no shadow pass, no shadow map sampled) or the shadow map's knobs:
-            the frusta and the ground first write their depth into the light's map, then
-            every surface samples it (plantgen.gl.passes)
+            casters write their depth into the light's map, every surface samples it
         shadow_box : (2, 3) world box the light's window must cover (default: the frusta's
-            bounds); an animation passes one box for all frames, so the map's texels stay
-            put and shadows do not shimmer
-        record_buffer : a moderngl buffer already holding ``pack_records(frusta,
-            camera.eye)`` (an animation updates only what moved); None: packed and
-            uploaded here. Its contents are the caller's (an animation rewrites them in
-            place), so the light's pass draws them as they are (relative to the eye) and
-            its map is drawn every frame, never kept; without it the light's records are
-            packed relative to the light's anchor, once per map, and the map is kept
+            bounds); an animation passes one for all frames (no shimmer)
+        record_buffer : a moderngl buffer already holding ``pack_records(frusta, camera.eye)``
+            (an animation updates only what moved); None: packed and uploaded here. Its
+            contents are the caller's, so the light's pass draws them as they are and its
+            map is drawn every frame; without it the light's records are packed relative
+            to the light's anchor, once per map, and the map is kept
         count_work : a diagnostic render that also counts the fragments shaded and the
-            relief samples taken (``stats.work``); its time is not the plain program's
+            relief samples taken (``stats.work``)
         background : None (the sky) or (r, g, b, a) in [0, 1], display-encoded: a flat
-            colour; a = 0 gives a transparent background and a colour with alpha
-            (``color`` is (h, w, 4))
+            colour; a = 0: transparent, ``color`` (h, w, 4)
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
@@ -208,13 +204,12 @@ class Raycaster(OffscreenRenderer, BvhCache):
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
                                             else model_box if model_box is not None else rows_box(frusta))
-        lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye,
-                                  anchor=None if record_buffer is None else view.eye,
-                                  look=None if settings.labels else settings.look)
-        lighting = self._sky_lighting(lighting, sky_bvh, settings, view, repeats, model_box)
+        lighting = self._sky_lighting(self._lighting(
+            material_names, ground, light_dir, shadows, box, view.eye, anchor=None if record_buffer is None
+            else view.eye, look=None if settings.labels else settings.look), sky_bvh, settings, view, repeats,
+            model_box)
         extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
-        if sky_bvh is not None:
-            extras.before.insert(0, sky_bvh.bind)
+        extras.before[:0] = [sky_bvh.bind] if sky_bvh is not None else []
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n and not placed else None)
         if record_buffer is None:
