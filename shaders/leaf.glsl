@@ -78,8 +78,13 @@ void main() {
 #if defined TRANSLUCENT || defined SKY_LIGHT
 #if defined SKY_LIGHT
     float distance = length(v_position);
-    float sky_front = sky_light_traced(v_position, n, flat_normal, distance);
-    float sky_back = sky_light_traced(v_position, -n, -flat_normal, distance);
+    // the far side's sky, dimmed by the transmission, with half the rays
+    float sky_front = sky_light_traced(v_position, n, flat_normal, distance, sky_samples);
+#if defined TRANSLUCENT
+    float sky_back = sky_light_traced(v_position, -n, -flat_normal, distance, max(sky_samples / 2, 1));
+#else
+    float sky_back = 0.0;
+#endif
 #else
     float sky_front = 0.5 + 0.5 * n.y, sky_back = 0.5 - 0.5 * n.y;
 #endif

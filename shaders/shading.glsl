@@ -26,6 +26,7 @@ uniform vec2 material_gloss[MAX_MATERIALS];     // (specular strength, Blinn-Pho
 uniform float leaf_transmission;                // TRANSLUCENT: fraction through a leaf
 uniform float exposure;                         // TONE_MAP: linear light scale before the curve
 uniform float tone_knee;                        // TONE_MAP: the filmic curve's knee
+uniform int sky_samples;                        // SKY_LIGHT: rays a pixel (sky_light.glsl)
 
 // Sky seen along unit direction `dir` (y up): horizon haze to zenith blue, darker below.
 vec3 sky_color(vec3 dir) {

@@ -16,28 +16,28 @@
 #define SKY_LIGHT_GLSL
 #include "bvh.glsl"
 
-uniform int sky_samples;        // rays a pixel
+// sky_samples (rays a pixel) is shading.glsl's
 uniform float sky_reach;        // world units a ray looks for an occluder
 uniform float sky_ray_offset;   // pixel footprints off the surface
 
 // The fraction of the sky's light reaching p (`distance` from the eye) about unit normal
-// n, traced; in [0, 1]. The rays start off the surface along `side` (unit: the
-// geometric normal on n's side).
-float sky_light_traced(vec3 p, vec3 n, vec3 side, float distance) {
+// n, traced with `samples` rays; in [0, 1]. The rays start off the surface along `side`
+// (unit: the geometric normal on n's side).
+float sky_light_traced(vec3 p, vec3 n, vec3 side, float distance, int samples) {
     float lift = sky_ray_offset * (pixel_footprint.x * distance + pixel_footprint.y);
     vec3 o = p + lift * side;
     vec3 t, b;
     look_basis(n, t, b);
     vec2 shift = pixel_random(1u);
     float open = 0.0;
-    for (int i = 0; i < sky_samples; ++i) {
-        vec2 u = look_sample(i, sky_samples, shift);
+    for (int i = 0; i < samples; ++i) {
+        vec2 u = look_sample(i, samples, shift);
         vec2 disc = look_disc(u);                     // cosine-weighted: the disc lifted
         vec3 d = normalize(disc.x * t + disc.y * b + sqrt(max(1.0 - u.x, 0.0)) * n);
         if (d.y <= 0.0) continue;                     // below the horizon: no sky
         if (bvh_trace(o, d, 0.0, sky_reach, true, distance, true).prim < 0) open += 1.0;
     }
-    return open / float(sky_samples);
+    return open / float(samples);
 }
 
 #endif
