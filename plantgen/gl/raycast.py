@@ -198,7 +198,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         model_box = union_box(rows_box(frusta) if n else None, leaf_box)
         view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
                           + ([] if model_box is None else [box_corners(model_box)]))
-        sky_bvh = self._sky_bvh(settings, frusta, leaves, camera)
+        sky_bvh = self._sky_bvh(settings, frusta, leaves, camera, record_buffer)
         programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
                                   leaf_box is not None, bvh_defines=sky_bvh.defines() if sky_bvh else None)
         tex, repeats = self._heights.get(tuple(material_names))
@@ -231,11 +231,15 @@ class Raycaster(OffscreenRenderer, BvhCache):
             shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
-    def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera):
+    def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
         """The GPU BVH the sky light traces (the ``sky`` effect; None without it): the
-        model's rows and leaves, built and uploaded once per model and eye (BvhCache)."""
+        model's rows and leaves, built and uploaded once per model and eye (BvhCache).
+        Frames posed on the GPU (``record_buffer``) have no BVH: one line."""
         if settings.labels or not settings.look.sky or not (len(frusta) or leaves is not None):
             return None
+        if record_buffer is not None:
+            raise PlantgenError("the sky light traces a BVH, which the ray caster's animation frames (posed on the "
+                                "GPU) do not have: animate it with --method rt, or leave out the sky effect")
         return self.gpu_bvh(frusta, leaves, camera.eye)
 
     @staticmethod

@@ -140,7 +140,7 @@ class RayTracer(Raycaster):
         return {**defines, **gpu.defines(), "SHADOWS": shadows is not None,
                 "SHADOW_RAYS": shadows is not None}
 
-    def _sky_bvh(self, settings, frusta, leaves, camera):
+    def _sky_bvh(self, settings, frusta, leaves, camera, record_buffer=None):
         frame = self._frame
         return frame["gpu"] if frame is not None and settings.look.sky and not frame["gpu"].empty else None
 
