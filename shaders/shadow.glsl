@@ -68,9 +68,9 @@ uniform float shadow_bias;         // world units subtracted from the receiver's
 uniform float shadow_max_slope;    // clamp of the receiver plane's depth gradient
 
 #if defined SOFT_SUN
-// The soft sun (percentage-closer soft shadows): `sun_samples` taps over the disc the sun
-// (radius `sun_radius`, the tangent of its half angle) subtends between the receiver and
-// the window's near plane find the occluders' mean depth; the penumbra's radius is then
+// The soft sun (percentage-closer soft shadows): the centre and `sun_samples` taps over the
+// disc the sun (radius `sun_radius`, the tangent of its half angle) subtends between the
+// receiver and the window's near plane find the occluders' mean depth; the penumbra's radius is then
 // sun_radius * (receiver - occluder depth), at least 1.5 texels, and as many taps over
 // that disc are compared, each with the receiver-plane depth at its offset. The taps are
 // the pixel's own sequence (shading.glsl's look_sample): noise, not banding.
@@ -99,6 +99,10 @@ float shadow_visibility(vec3 p, vec3 n) {
     float texel = 2.0 * max(light_half.x, light_half.y) / float(textureSize(shadow_map, 0).x);
     vec2 shift = pixel_random(3u);
     float search = max(sun_radius * (lp.z - light_depth.x), 1.5 * texel), blockers = 0.0, found = 0.0, z;
+    if (sun_tap(lp, vec2(0.0), grad, z)) {      // the centre too: a thin occluder is not missed
+        blockers += z;
+        found += 1.0;
+    }
     for (int i = 0; i < sun_samples; ++i) {
         if (sun_tap(lp, search * look_disc(look_sample(i, sun_samples, shift)), grad, z)) {
             blockers += z;
