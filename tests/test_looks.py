@@ -274,3 +274,11 @@ def test_a_wider_sun_widens_the_shadows_edge_and_keeps_the_rest(renderers, kind)
     assert 10 < changed[0].sum() < changed[1].sum()        # a penumbra, wider with a wider sun
     assert changed[1].mean() < 0.1                           # far from the shadow's edge: as before
     assert np.array_equal(shadowed_ground(renderers, kind, 8.0), shadowed_ground(renderers, kind, 8.0))
+
+
+def test_the_ray_caster_and_the_ray_tracer_trace_the_same_sky(renderers):
+    # the same rows, the same BVH, the same per-pixel sequence: the same light
+    rc, seen = partly_open(renderers, "rc", 8)
+    rt, seen_rt = partly_open(renderers, "rt", 8)
+    assert np.array_equal(seen, seen_rt)
+    assert np.mean(np.abs(rc[seen] - rt[seen])) < 0.01
