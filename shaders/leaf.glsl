@@ -13,7 +13,8 @@
 // Variants: SHADOWS (receive: sample the light's map, shaders/shadow.glsl, with the
 // facet's own plane as the receiver plane; with SHADOW_RAYS a shadow ray through the BVH
 // instead, plantgen.gl.rt); SHADOW_PASS (cast: depth only into the
-// light's map, both faces); LABELS (a part mask: the leaf's label in red, unshaded).
+// light's map, both faces; with EYE_DEPTH the same into the eye's frame, ahead of a costly
+// shading, plantgen.gl.leaf_layer); LABELS (a part mask: the leaf's label in red, unshaded).
 
 #if defined VERTEX_SHADER
 

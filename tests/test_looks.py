@@ -282,3 +282,23 @@ def test_the_ray_caster_and_the_ray_tracer_trace_the_same_sky(renderers):
     rt, seen_rt = partly_open(renderers, "rt", 8)
     assert np.array_equal(seen, seen_rt)
     assert np.mean(np.abs(rc[seen] - rt[seen])) < 0.01
+
+
+def test_the_leaves_depth_pass_ahead_of_the_sky_changes_no_pixel(renderers, monkeypatch):
+    # with the sky light, the leaves' depth is drawn first so only the nearest leaf of a
+    # pixel traces its rays: the frame is the one every leaf shaded in turn gives
+    from plantgen.gl.leaf_layer import LeafLayer
+
+    frusta = skin_skeleton(column((0.0, 0.0, 0.0), 2.0, 0.1))
+    camera = Camera((0.0, 1.0, 4.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 35.0, 40, 40)
+    leaves = [square((0.1 * k, 1.0 + 0.05 * k, 0.3 * k - 0.5), 0.4, (0.2, 0.3, 1.0)) for k in range(4)]
+    stack = Polygons(np.concatenate([p.vertices for p in leaves]),
+                     np.concatenate([p.triangles + 4 * k for k, p in enumerate(leaves)]),
+                     np.repeat(np.arange(4), 2), np.ones(4, np.int32), np.concatenate([p.normal for p in leaves]))
+    look = LookSettings(sky=True, translucency=True, tone=True, sky_samples=4)
+    for kind in ("rc", "rt"):
+        first = draw(renderers, kind, frusta, camera, look, leaves=stack)
+        monkeypatch.setattr(LeafLayer, "_nearest_first", lambda *args: None)
+        each = draw(renderers, kind, frusta, camera, look, leaves=stack)
+        monkeypatch.undo()
+        assert np.array_equal(first.color, each.color) and np.array_equal(first.distance, each.distance)
