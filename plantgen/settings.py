@@ -23,13 +23,14 @@ range, help) from it. A new effect or knob is one field here plus the code that 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, is_dataclass, replace
 
 from .errors import PlantgenError
 from .geometry.rays.camera import Orbit
 from .knobs import check_knobs, knob
 
-__all__ = ["EFFECTS", "DEFAULT_SIZE", "LOD_EXPORT_LEVELS",
+__all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "LookSettings", "LOD_EXPORT_LEVELS",
            "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings", "ParallaxSettings",
            "DetailSettings",
            "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "LevelSettings",
@@ -39,8 +40,14 @@ __all__ = ["EFFECTS", "DEFAULT_SIZE", "LOD_EXPORT_LEVELS",
 
 #: The effects a scene may list; a render simulates only those in force. ``lod``: a still
 #: scene is drawn instanced (each distinct plant once on the GPU, a transform per copy)
-#: with detail that follows the pixel (:class:`DetailSettings`).
-EFFECTS = ("relief", "shadows", "animation", "lod")
+#: with detail that follows the pixel (:class:`DetailSettings`). The looks
+#: (:class:`LookSettings`): ``tone`` (a filmic tone curve in linear light, then the sRGB
+#: transfer curve), ``translucency`` (leaves lit from behind glow: sun and sky through the
+#: leaf), ``sky`` (the sky's light occluded by the model: hemisphere rays through its BVH).
+EFFECTS = ("relief", "shadows", "animation", "lod", "tone", "translucency", "sky")
+#: Effects in force unless the command removes them (``--no-tone``, ``--effects``): cheap,
+#: they cost a plain frame next to nothing.
+DEFAULT_EFFECTS = ("tone", "translucency")
 #: The levels of detail an export writes for a scene that lists ``lod`` (level 0 full).
 LOD_EXPORT_LEVELS = 4
 #: The image size when neither the command nor a camera file gives one.
@@ -74,8 +81,9 @@ def parse_effect_list(text: str) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class EffectSettings:
     """Which effects a frame simulates: ``effects`` replaces the scene's list (None keeps
-    it); ``relief`` and ``shadows`` True or False add or remove that effect (None: as the
-    list says)."""
+    it, with :data:`DEFAULT_EFFECTS` added); ``relief``, ``shadows``, ``tone``,
+    ``translucency`` and ``sky`` True or False add or remove that effect (None: as the list
+    says)."""
 
     effects: tuple | None = knob(None, "--effects", "Comma-separated effects replacing the scene's list, e.g. "
                                  f"relief,shadows (known: {', '.join(EFFECTS)}; 'none' for none).",
@@ -84,6 +92,14 @@ class EffectSettings:
                                kind="bool")
     shadows: bool | None = knob(None, "--shadows", "Shadow-map the light. Default: on when the effects list it.",
                                 kind="bool")
+    tone: bool | None = knob(None, "--tone", "A filmic tone curve and the sRGB encoding (--no-tone: clip and a plain "
+                             "2.2 power, as before). Default: on unless --effects leaves it out.", kind="bool")
+    translucency: bool | None = knob(None, "--translucency", "Leaves let light through: a leaf lit from behind glows "
+                                     "with the sun and the sky behind it. Default: on unless --effects leaves it "
+                                     "out.", kind="bool")
+    sky: bool | None = knob(None, "--sky-light", "Sky light with occlusion: a few rays a pixel towards the sky "
+                            "through the model's BVH, so crevices and the inside of a crown darken (costs; see "
+                            "--sky-samples). Default: on when the effects list sky.", kind="bool")
 
     def __post_init__(self):
         if isinstance(self.effects, str):
@@ -93,9 +109,96 @@ class EffectSettings:
 
     def resolve(self, scene_effects=()) -> tuple[str, ...]:
         """The effects in force for a model whose scene lists ``scene_effects``."""
-        flags = (("relief", self.relief), ("shadows", self.shadows))
-        return resolve_effects(scene_effects, replace=self.effects, add=[n for n, f in flags if f],
+        flags = (("relief", self.relief), ("shadows", self.shadows), ("tone", self.tone),
+                 ("translucency", self.translucency), ("sky", self.sky))
+        defaults = list(DEFAULT_EFFECTS) if self.effects is None else []
+        return resolve_effects(scene_effects, replace=self.effects, add=defaults + [n for n, f in flags if f],
                                remove=[n for n, f in flags if f is False])
+
+
+#: The sky light's rays a pixel by default (``--sky-samples``).
+SKY_SAMPLES = 8
+#: The filmic tone curve's knee: linear light below it is kept, above it rolled off towards 1.
+TONE_KNEE = 0.7
+#: Pixel footprints a sky ray starts off its surface (as RT's shadow rays).
+SKY_RAY_OFFSET = 1.0
+
+
+@dataclass(frozen=True)
+class LookSettings:
+    """How light reads (the effects ``tone``, ``translucency``, ``sky``; set from the effects
+    in force by :meth:`RenderSettings.frame`; all off by default, today's shading, for a
+    caller that builds its settings itself: :meth:`defaults` gives those of
+    :data:`DEFAULT_EFFECTS`), and the knob of each accuracy trade-off.
+
+    tone : the tone curve (``tone_curve``, in linear light, after ``exposure``) and the
+        real sRGB transfer curve; off: clip, then c^(1/2.2) (as before). ``filmic``: the
+        identity up to :data:`TONE_KNEE`, then an exponential shoulder with slope 1 at the
+        knee towards 1 (shadows and mid-tones as before, highlights rolled off); ``aces``:
+        the rational fit of ACES's RRT+ODT published by K. Narkowicz (2016), whose toe
+        darkens deep shadows about five-fold
+    translucency : leaves transmit: the sun behind a leaf, and the sky on its far side,
+        come through it, tinted by its albedo, ``transmission`` of it
+    sky : the ambient light is the sky's seen along ``sky_samples`` cosine-weighted rays a
+        pixel traced through the BVH (up to ``sky_reach`` times the model's size), instead
+        of an unoccluded hemisphere; the sequence is a hash of the pixel (deterministic)
+    exposure : the tone curve's input scale
+    sun_angle : the sun's angular diameter in degrees (0: a point, hard shadows): a
+        penumbra in the shadow map's filter, shadow rays jittered over the disc in RT,
+        ``sun_samples`` a pixel either way
+    """
+
+    tone: bool = False
+    translucency: bool = False
+    sky: bool = False
+    transmission: float = knob(0.5, "--leaf-transmission", "Translucency: the fraction of the light falling on a "
+                               "leaf's far side that comes through it (0..1).", lo=0, hi=1, metavar="F")
+    sky_samples: int = knob(SKY_SAMPLES, "--sky-samples", "Sky light: rays a pixel towards the sky (more: less "
+                            "noise, each costs about one shadow ray).", kind="int", lo=1, hi=256, metavar="N")
+    sky_reach: float = knob(0.5, "--sky-reach", "Sky light: how far a sky ray looks for an occluder, in model "
+                            "sizes (the diagonal of its box); farther rays cost more.", lo=0, lo_open=True,
+                            metavar="F")
+    tone_curve: str = knob("filmic", "--tone-curve", "Tone curve: filmic (linear up to a knee, then a smooth "
+                           "shoulder towards white: shadows as before, highlights no longer clipped) or aces (the "
+                           "ACES film look: more contrast, deep shadows darker).", kind="choice",
+                           choices=("filmic", "aces"))
+    exposure: float = knob(1.0, "--exposure", "Tone curve: scale the linear light by this before the curve "
+                           "(above 1 brighter).", lo=0, lo_open=True, hi=100, metavar="F")
+    sun_samples: int = knob(16, "--sun-samples", "Soft sun: shadow-map taps, or shadow rays with --method rt, a "
+                            "pixel (more: smoother penumbrae, slower).", kind="int", lo=1, hi=256, metavar="N")
+    sun_angle: float = knob(0.0, "--sun-angle", "The sun's angular diameter in degrees (the real sun: 0.53): soft "
+                            "shadow edges, widening with the distance to the occluder (0: a point light, hard "
+                            "shadows).", lo=0, hi=30, metavar="DEG")
+
+    def __post_init__(self):
+        check_knobs(self)
+
+    @classmethod
+    def defaults(cls) -> LookSettings:
+        """The looks of :data:`DEFAULT_EFFECTS` (what a render gets unless it says otherwise)."""
+        return cls(tone="tone" in DEFAULT_EFFECTS, translucency="translucency" in DEFAULT_EFFECTS,
+                   sky="sky" in DEFAULT_EFFECTS)
+
+    def defines(self) -> dict[str, bool]:
+        """The shader variant: ``TONE_MAP`` (``TONE_ACES``), ``TRANSLUCENT``, ``SKY_LIGHT``,
+        ``SOFT_SUN``."""
+        return {"TONE_MAP": self.tone, "TONE_ACES": self.tone and self.tone_curve == "aces",
+                "TRANSLUCENT": self.translucency, "SKY_LIGHT": self.sky, "SOFT_SUN": self.sun_angle > 0}
+
+    def shading_uniforms(self) -> dict:
+        """Uniforms of ``shaders/shading.glsl`` (every program's)."""
+        return {"leaf_transmission": self.transmission, "exposure": self.exposure, "tone_knee": TONE_KNEE}
+
+    def sun_uniforms(self) -> dict:
+        """Uniforms of ``shaders/shadow.glsl`` (the receivers'): the sun disc's radius as the
+        tangent of its half angle, its samples."""
+        return {"sun_radius": math.tan(math.radians(self.sun_angle) / 2), "sun_samples": self.sun_samples}
+
+    def sky_uniforms(self, model_size: float) -> dict:
+        """Uniforms of ``shaders/sky_light.glsl`` for a model whose box has diagonal
+        ``model_size`` (world units)."""
+        return {"sky_samples": self.sky_samples, "sky_reach": self.sky_reach * max(float(model_size), 1e-6),
+                "sky_ray_offset": SKY_RAY_OFFSET}
 
 
 @dataclass(frozen=True)
@@ -119,6 +222,7 @@ class RaycastSettings:
     v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
     hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
         a silhouette tangent to the pyramid are not lost to rasterisation rules
+    look : how light reads (:class:`LookSettings`: the looks' effects and knobs)
     labels : write each pixel's row label instead of its colour: red = the row's
         ``material`` index / 255, unshaded (part masks)
     proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
@@ -160,6 +264,7 @@ class RaycastSettings:
     proxy: str = "pyramid"
     height_fetch: str = "gather"
     labels: bool = False
+    look: LookSettings = LookSettings()
 
     def __post_init__(self):
         check_knobs(self)
@@ -444,8 +549,11 @@ class RenderSettings:
 
     def frame(self, effects) -> tuple[RaycastSettings, ShadowSettings | None]:
         """The ray caster's knobs and the shadow map's for the ``effects`` in force: relief
-        on iff they hold ``relief``; no shadow map without ``shadows``."""
-        return (replace(self.march, relief="relief" in effects),
+        on iff they hold ``relief``, each look iff they hold it (:class:`LookSettings`); no
+        shadow map without ``shadows``."""
+        look = replace(self.march.look, tone="tone" in effects, translucency="translucency" in effects,
+                       sky="sky" in effects)
+        return (replace(self.march, relief="relief" in effects, look=look),
                 self.shadows if "shadows" in effects else None)
 
     def lod_pixels(self, effects) -> float:
