@@ -205,7 +205,8 @@ def _qsm_summary(info: dict) -> None:
     unit = m.unit
     lost = 1 - info["volume"] / info["volume_frusta"] if info["volume_frusta"] else 0.0
     click.echo(f"{info['segments']:,} segments -> {info['cylinders']:,} cylinders "
-               f"(volume {lost:.3%} under the frusta's; tolerance {info['tolerance']:g}), {info['up']}-up, metres")
+               f"(volume {lost:.3%} under the tapered branches'; tolerance {info['tolerance']:g}), "
+               f"{info['up']}-up, metres")
     dbh = (f"DBH {m.dbh * unit:.4g} m" if m.dbh is not None
            else f"no DBH (the trunk is shorter than {m.breast_height * unit:g} m)")
     click.echo(f"height {m.height * unit:.4g} m; {dbh}; wood volume {m.volume * unit ** 3:.4g} m³ "
