@@ -25,7 +25,7 @@ COL_MAX = 30
 
 #: The section of each settings class's knobs (a knob of a class not named here: OTHER).
 SETTINGS_SECTIONS = {
-    "EffectSettings": EFFECTS, "ShadowSettings": EFFECTS,
+    "EffectSettings": EFFECTS, "ShadowSettings": EFFECTS, "LookSettings": EFFECTS,
     "RaycastSettings": QUALITY, "DetailSettings": QUALITY, "MeshSettings": QUALITY, "ParallaxSettings": QUALITY,
     "ImageSettings": OUTPUT, "MotionSettings": OUTPUT, "LevelSettings": OUTPUT, "KeyframeSettings": OUTPUT,
     "AssetSettings": OUTPUT,
