@@ -88,17 +88,17 @@ class EffectSettings:
     effects: tuple | None = knob(None, "--effects", "Comma-separated effects replacing the scene's list, e.g. "
                                  f"relief,shadows (known: {', '.join(EFFECTS)}; 'none' for none).",
                                  kind="list", metavar="LIST")
-    relief: bool | None = knob(None, "--relief", "Relief-map the frusta (§3). Default: on when the effects list it.",
-                               kind="bool")
-    shadows: bool | None = knob(None, "--shadows", "Shadow-map the light. Default: on when the effects list it.",
-                                kind="bool")
+    relief: bool | None = knob(None, "--relief", "Carve the bark's relief into the branches (relief mapping). "
+                               "Default: on when the effects list it.", kind="bool")
+    shadows: bool | None = knob(None, "--shadows", "Cast the light's shadows (a shadow map). Default: on when the "
+                                "effects list it.", kind="bool")
     tone: bool | None = knob(None, "--tone", "A filmic tone curve and the sRGB encoding (--no-tone: clip and a plain "
                              "2.2 power, as before). Default: on unless --effects leaves it out.", kind="bool")
     translucency: bool | None = knob(None, "--translucency", "Leaves let light through: a leaf lit from behind glows "
                                      "with the sun and the sky behind it. Default: on unless --effects leaves it "
                                      "out.", kind="bool")
     sky: bool | None = knob(None, "--sky-light", "Sky light with occlusion: a few rays a pixel towards the sky "
-                            "through the model's BVH, so crevices and the inside of a crown darken (costs; see "
+                            "through the model's ray-tracing tree, so crevices and the inside of a crown darken (costs; see "
                             "--sky-samples). Default: on when the effects list sky.", kind="bool")
 
     def __post_init__(self):
@@ -240,26 +240,27 @@ class RaycastSettings:
     """
 
     relief: bool = False
-    method: str = knob("auto", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
-                       "(rc), or trace each pixel's ray through a BVH (rt: its cost grows with the log of the rows; "
-                       "shadows by shadow rays; an animation's frames posed on the CPU, the BVH refitted to them); "
-                       "auto: rt for an instanced scene at full detail (--lod-pixels 0) with many rows a pixel, "
+    method: str = knob("auto", "--method", "How each pixel finds the branches: ray cast each branch piece over "
+                       "its patch of screen (rc), or trace each pixel's ray through a tree of boxes (rt: it pays "
+                       "off on scenes of very many pieces; shadows by shadow rays; an animation posed on the CPU); "
+                       "auto: rt for an instanced scene at full detail (--lod-pixels 0) with many pieces a pixel, "
                        "else rc (the faster, as measured).",
                        kind="choice", choices=("auto", "rc", "rt"))
-    march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
-                      "--linear-steps for every ray (fixed, the paper's).", kind="choice",
+    march: str = knob("adaptive", "--march", "Relief: the samples a ray takes, sized to what each pixel sees "
+                      "(adaptive), or --linear-steps for every ray (fixed, the paper's).", kind="choice",
                       choices=("adaptive", "fixed"))
-    linear_steps: int = knob(32, "--linear-steps", "Relief: uniform samples through the shell (adaptive march: the "
-                             "most).", kind="int", lo=1, hi=4096)
-    march_density: float = knob(2.0, "--march-density", "Relief, adaptive march: samples per relief texel the ray "
-                                "crosses.", lo=0, lo_open=True)
+    linear_steps: int = knob(32, "--linear-steps", "Relief: evenly spaced samples through the relief layer (adaptive "
+                             "march: the most).", kind="int", lo=1, hi=4096)
+    march_density: float = knob(2.0, "--march-density", "Relief, adaptive march: samples per texel of the relief "
+                                "texture the ray crosses.", lo=0, lo_open=True)
     march_min_steps: int = 4
     march_precision: float = MARCH_PRECISION
-    binary_steps: int = knob(12, "--binary-steps", "Relief: bisection steps after the first sample below the surface "
-                             f"(adaptive march: the most; it stops at {MARCH_PRECISION:g} pixel).",
+    binary_steps: int = knob(12, "--binary-steps", "Relief: halving steps that refine the hit after the first sample "
+                             f"below the surface (adaptive march: the most; it stops at {MARCH_PRECISION:g} pixel).",
                              kind="int", lo=0, hi=64)
-    v_exact: bool = knob(False, "--v-exact", "Relief: v of (7) per sample, or interpolated between entry and exit "
-                         "(the paper's fast path).", kind="bool", flag="--v-exact/--v-interpolated")
+    v_exact: bool = knob(False, "--v-exact", "Relief: compute the texture's lengthwise coordinate at every sample "
+                         "(exact), or interpolate it between where the ray enters and leaves the relief layer (the "
+                         "paper's fast path).", kind="bool", flag="--v-exact/--v-interpolated")
     hull_padding: float = 0.02
     proxy: str = "pyramid"
     height_fetch: str = "gather"
@@ -305,6 +306,12 @@ class RaycastSettings:
                  f"+ {self.binary_steps} binary steps")
         return f"{name}+R ({steps}, v {'exact' if self.v_exact else 'interpolated'})"
 
+    def summary(self) -> str:
+        """How the frame was drawn, in plain words (``ray cast with relief mapping``): what
+        a report prints without ``--verbose`` (:meth:`describe` is the detail)."""
+        name = "ray traced" if self.method == "rt" else "ray cast"
+        return name + (" with relief mapping" if self.relief else "")
+
 
 @dataclass(frozen=True)
 class ShadowSettings:
@@ -342,13 +349,14 @@ class ShadowSettings:
 
     resolution: int = knob(2048, "--shadow-res", "Shadow map texels per side.", kind="int", lo=16, hi=16384)
     caster: str = knob("relief", "--shadow-caster", "What casts the shadow: with relief the relief surface, ray cast "
-                       "(relief), or the inner cone (inner, cheaper); or the frusta tessellated at "
-                       "--shadow-mesh-level and rasterised (mesh: an engine's caster, displaced by the relief).",
+                       "(relief), or the branch under its relief (inner, cheaper); or the branches as triangles at "
+                       "--shadow-mesh-level (mesh: as a game engine casts, displaced by the relief).",
                        kind="choice", choices=("relief", "inner", "mesh"))
-    mesh_level: int = knob(6, "--shadow-mesh-level", "Mesh caster: subdivision level m (16·4^m triangles a frustum).",
+    mesh_level: int = knob(6, "--shadow-mesh-level", "Mesh caster: subdivision level m (16·4^m triangles a branch "
+                           "piece).",
                            kind="int", lo=0, hi=8)
-    march: str = knob("secant", "--shadow-march", "Relief caster: the light's march ((u, v) interpolated along each "
-                      "ray, regula falsi) or the eye's (an angle per sample, bisection).", kind="choice",
+    march: str = knob("secant", "--shadow-march", "Relief caster: how the light's rays find the relief: the light's "
+                      "own march (secant, cheaper) or the eye's (bisect).", kind="choice",
                       choices=("secant", "bisect"))
     march_density: float = knob(0.5, "--shadow-march-density", "Relief caster: samples per relief texel the light's "
                                 "ray crosses (a texel counts at least one map texel).", lo=0, lo_open=True)
@@ -412,9 +420,8 @@ class MotionSettings:
     frames: int | None = knob(None, "--frames", "Write an animation of this many frames (-o .gif or .webp).",
                               kind="int", lo=1, hi=100_000)
     fps: float = knob(12.0, "--fps", "Frames per second of the animation (0.01..1000).", lo=0.01, hi=1000)
-    pose: str = knob("gpu", "--pose", "Where an animation's moving segments are posed and skinned each frame: a "
-                     "compute shader writing the ray caster's records, or the vertex shader skinning a mesh built once "
-                     "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu). "
+    pose: str = knob("gpu", "--pose", "Where an animation's moving branches are posed each frame: on the GPU (gpu; "
+                     "a frame where a joint may turn sharp is posed on the CPU) or in numpy (cpu). "
                      "--method rt poses on the CPU.",
                      kind="choice", choices=("gpu", "cpu"))
 
