@@ -98,7 +98,8 @@ class EffectSettings:
                                      "with the sun and the sky behind it. Default: on unless --effects leaves it "
                                      "out.", kind="bool")
     sky: bool | None = knob(None, "--sky-light", "Sky light with occlusion: a few rays a pixel towards the sky "
-                            "through the model's ray-tracing tree, so crevices and the inside of a crown darken (costs; see "
+                            "through the model's ray-tracing tree, so crevices and the inside of a crown darken "
+                            "(costs; see "
                             "--sky-samples). Default: on when the effects list sky.", kind="bool")
 
     def __post_init__(self):

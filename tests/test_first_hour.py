@@ -299,12 +299,18 @@ def test_a_huge_size_is_one_sensible_line():
 
 
 def test_extras_are_spelled_one_way_in_messages():
-    """Every install command plantgen prints is pip install 'plantgen[EXTRA]'."""
+    """Every install command plantgen prints is the README's, pip install '.[EXTRA]' in the
+    clone (``plantgen[EXTRA]`` would ask an index for a package of that name), worded once
+    by plantgen.errors.missing_extra."""
+    from plantgen.errors import missing_extra
+
     pattern = re.compile(r"pip install (\S+)")
     found = [(path.name, spelled) for path in PACKAGE.rglob("*.py") for spelled in pattern.findall(path.read_text())]
     assert found
-    odd = [(name, s) for name, s in found if not re.match(r"'plantgen\[[a-z{}.]+\]'", s)]
+    odd = [(name, s) for name, s in found if not re.match(r"'\.\[([a-z]+|\{extra\})\]'", s)]
     assert not odd, odd
+    assert missing_extra("plantgen view", "view") == ("plantgen view needs the view extra: "
+                                                      "pip install '.[view]' (in plantgen's folder)")
 
 
 # ---------------------------------------------------------------------- every shipped name renders
