@@ -45,7 +45,7 @@ def render(path, output=None, settings=None, *, seed=None, iterations=None, smoo
 
     Returns a :class:`plantgen.RenderedImage`: ``.array`` (h, w, 3) uint8 (RGBA with
     ``background="none"``), ``.distance``, ``.camera``, ``.report``, ``.save(path)``; in a
-    Jupyter notebook it displays itself. ``output`` (a ``.png`` path) also writes it.
+    Jupyter notebook it displays itself. ``output`` (a ``.png``, ``.jpg`` or ``.webp`` path) also writes it.
     """
     from .images import RenderedImage
     from .pipeline import check_image_output, render_model

@@ -13,7 +13,8 @@ from PIL import Image, ImageColor
 from .errors import PlantgenError
 from .files import write_atomically
 
-__all__ = ["ANIMATION_SUFFIXES", "TRANSPARENT", "RenderedImage", "parse_background", "write_png", "png_bytes",
+__all__ = ["ANIMATION_SUFFIXES", "IMAGE_FORMATS", "TRANSPARENT", "check_transparency", "image_format",
+           "write_image", "RenderedImage", "parse_background", "write_png", "png_bytes",
            "write_animation"]
 
 #: The background value of a transparent image: (r, g, b, a) with a = 0.
@@ -60,11 +61,9 @@ class RenderedImage:
         return Image.fromarray(self.array)
 
     def save(self, path) -> Path:
-        """Write the image as a PNG at ``path`` (atomically)."""
-        path = Path(path)
-        if path.suffix.lower() != ".png":
-            raise PlantgenError(f"{path}: the image output must end in .png")
-        return write_png(path, self.array)
+        """Write the image at ``path`` (atomically), as its suffix says: PNG, JPEG or WebP
+        (:func:`write_image`)."""
+        return write_image(path, self.array)
 
     def _repr_png_(self) -> bytes:
         buffer = io.BytesIO()
@@ -79,6 +78,34 @@ class RenderedImage:
         return f"<plantgen.RenderedImage {mode} {self.size[0]}x{self.size[1]}>"
 
 ANIMATION_SUFFIXES = (".gif", ".webp")
+#: A still's suffixes and the format Pillow writes each in.
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP"}
+#: JPEG's quality (Pillow's scale); WebP stills are written lossless.
+JPEG_QUALITY = 92
+
+
+def image_format(path) -> str:
+    """The Pillow format of a still at ``path`` by its suffix; one line for another suffix."""
+    path = Path(path)
+    fmt = IMAGE_FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise PlantgenError(f"{path}: the image output must end in .png, .jpg or .webp")
+    return fmt
+
+
+def check_transparency(path, transparent: bool) -> None:
+    """One line for a transparent image asked of a JPEG, which has no alpha."""
+    if transparent and image_format(path) == "JPEG":
+        raise PlantgenError(f"{path}: a JPEG has no transparency: write .png or .webp with --background none")
+
+
+def write_image(path, color: np.ndarray) -> Path:
+    """Write (h, w, 3) or (h, w, 4) uint8 ``color`` at ``path`` as its suffix says: PNG,
+    JPEG (quality :data:`JPEG_QUALITY`; RGB only) or WebP (lossless)."""
+    fmt = image_format(path)
+    check_transparency(path, color.ndim == 3 and color.shape[-1] == 4)
+    options = {"JPEG": {"quality": JPEG_QUALITY}, "WEBP": {"lossless": True}}.get(fmt, {})
+    return write_atomically(path, lambda p: Image.fromarray(color).save(p, format=fmt, **options))
 
 
 def write_png(path, color: np.ndarray) -> Path:

@@ -34,6 +34,15 @@ GAME_LEVEL_TRIANGLES = (80_000, 40_000, 20_000, 10_000)
 #: derivation that does not grow still spends its ``derive_work`` budget.
 STEP_WORK = 200
 
+#: A derivation whose steps alone would spend more than its ``derive_work`` budget (its
+#: iterations times ``STEP_WORK`` per rule group, the least a step costs, known before the
+#: first step) can end within the budget only by settling: reaching a fixed point or a
+#: cycle, whose remaining steps are skipped. It is given this many steps to settle, then
+#: refused with the estimate (a tenth of a second or so: a step of a short string costs
+#: about 100 µs), instead of spending the whole budget first (16 s for a counter
+#: ``A(x) -> A(x+1)`` asked for a million iterations).
+SETTLE_STEPS = 2_000
+
 #: How much more than rewriting a step of a context-sensitive grammar costs per module:
 #: finding each module's context neighbours sorts and searches the string's bracket
 #: depths, a few times the rewriting's cost, so such a step counts its modules four times.

@@ -23,13 +23,14 @@ range, help) from it. A new effect or knob is one field here plus the code that 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, is_dataclass, replace
 
 from .errors import PlantgenError
 from .geometry.rays.camera import Orbit
 from .knobs import check_knobs, knob
 
-__all__ = ["EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "LOD_EXPORT_LEVELS",
+__all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "LookSettings", "LOD_EXPORT_LEVELS",
            "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings", "ParallaxSettings",
            "DetailSettings",
            "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "LevelSettings",
@@ -39,8 +40,14 @@ __all__ = ["EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "LOD_EXPORT_LEVELS",
 
 #: The effects a scene may list; a render simulates only those in force. ``lod``: a still
 #: scene is drawn instanced (each distinct plant once on the GPU, a transform per copy)
-#: with detail that follows the pixel (:class:`DetailSettings`).
-EFFECTS = ("relief", "shadows", "animation", "lod")
+#: with detail that follows the pixel (:class:`DetailSettings`). The looks
+#: (:class:`LookSettings`): ``tone`` (a filmic tone curve in linear light, then the sRGB
+#: transfer curve), ``translucency`` (leaves lit from behind glow: sun and sky through the
+#: leaf), ``sky`` (the sky's light occluded by the model: hemisphere rays through its BVH).
+EFFECTS = ("relief", "shadows", "animation", "lod", "tone", "translucency", "sky")
+#: Effects in force unless the command removes them (``--no-tone``, ``--effects``): cheap,
+#: they cost a plain frame next to nothing.
+DEFAULT_EFFECTS = ("tone", "translucency")
 #: The levels of detail an export writes for a scene that lists ``lod`` (level 0 full).
 LOD_EXPORT_LEVELS = 4
 #: The image size when neither the command nor a camera file gives one.
@@ -76,16 +83,26 @@ def parse_effect_list(text: str) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class EffectSettings:
     """Which effects a frame simulates: ``effects`` replaces the scene's list (None keeps
-    it); ``relief`` and ``shadows`` True or False add or remove that effect (None: as the
-    list says)."""
+    it, with :data:`DEFAULT_EFFECTS` added); ``relief``, ``shadows``, ``tone``,
+    ``translucency`` and ``sky`` True or False add or remove that effect (None: as the list
+    says)."""
 
     effects: tuple | None = knob(None, "--effects", "Comma-separated effects replacing the scene's list, e.g. "
                                  f"relief,shadows (known: {', '.join(EFFECTS)}; 'none' for none).",
                                  kind="list", metavar="LIST")
-    relief: bool | None = knob(None, "--relief", "Relief-map the frusta (§3). Default: on when the effects list it.",
-                               kind="bool")
-    shadows: bool | None = knob(None, "--shadows", "Shadow-map the light. Default: on when the effects list it.",
-                                kind="bool")
+    relief: bool | None = knob(None, "--relief", "Carve the bark's relief into the branches (relief mapping). "
+                               "Default: on when the effects list it.", kind="bool")
+    shadows: bool | None = knob(None, "--shadows", "Cast the light's shadows (a shadow map). Default: on when the "
+                                "effects list it.", kind="bool")
+    tone: bool | None = knob(None, "--tone", "A filmic tone curve and the sRGB encoding (--no-tone: clip and a plain "
+                             "2.2 power, as before). Default: on unless --effects leaves it out.", kind="bool")
+    translucency: bool | None = knob(None, "--translucency", "Leaves let light through: a leaf lit from behind glows "
+                                     "with the sun and the sky behind it. Default: on unless --effects leaves it "
+                                     "out.", kind="bool")
+    sky: bool | None = knob(None, "--sky-light", "Sky light with occlusion: a few rays a pixel towards the sky "
+                            "through the model's ray-tracing tree, so crevices and the inside of a crown darken "
+                            "(costs; see "
+                            "--sky-samples). Default: on when the effects list sky.", kind="bool")
 
     def __post_init__(self):
         if isinstance(self.effects, str):
@@ -95,9 +112,96 @@ class EffectSettings:
 
     def resolve(self, scene_effects=()) -> tuple[str, ...]:
         """The effects in force for a model whose scene lists ``scene_effects``."""
-        flags = (("relief", self.relief), ("shadows", self.shadows))
-        return resolve_effects(scene_effects, replace=self.effects, add=[n for n, f in flags if f],
+        flags = (("relief", self.relief), ("shadows", self.shadows), ("tone", self.tone),
+                 ("translucency", self.translucency), ("sky", self.sky))
+        defaults = list(DEFAULT_EFFECTS) if self.effects is None else []
+        return resolve_effects(scene_effects, replace=self.effects, add=defaults + [n for n, f in flags if f],
                                remove=[n for n, f in flags if f is False])
+
+
+#: The sky light's rays a pixel by default (``--sky-samples``).
+SKY_SAMPLES = 8
+#: The filmic tone curve's knee: linear light below it is kept, above it rolled off towards 1.
+TONE_KNEE = 0.7
+#: Pixel footprints a sky ray starts off its surface (as RT's shadow rays).
+SKY_RAY_OFFSET = 1.0
+
+
+@dataclass(frozen=True)
+class LookSettings:
+    """How light reads (the effects ``tone``, ``translucency``, ``sky``; set from the effects
+    in force by :meth:`RenderSettings.frame`; all off by default, today's shading, for a
+    caller that builds its settings itself: :meth:`defaults` gives those of
+    :data:`DEFAULT_EFFECTS`), and the knob of each accuracy trade-off.
+
+    tone : the tone curve (``tone_curve``, in linear light, after ``exposure``) and the
+        real sRGB transfer curve; off: clip, then c^(1/2.2) (as before). ``filmic``: the
+        identity up to :data:`TONE_KNEE`, then an exponential shoulder with slope 1 at the
+        knee towards 1 (shadows and mid-tones as before, highlights rolled off); ``aces``:
+        the rational fit of ACES's RRT+ODT published by K. Narkowicz (2016), whose toe
+        darkens deep shadows about five-fold
+    translucency : leaves transmit: the sun behind a leaf, and the sky on its far side,
+        come through it, tinted by its albedo, ``transmission`` of it
+    sky : the ambient light is the sky's seen along ``sky_samples`` cosine-weighted rays a
+        pixel traced through the BVH (up to ``sky_reach`` times the model's size), instead
+        of an unoccluded hemisphere; the sequence is a hash of the pixel (deterministic)
+    exposure : the tone curve's input scale
+    sun_angle : the sun's angular diameter in degrees (0: a point, hard shadows): a
+        penumbra in the shadow map's filter, shadow rays jittered over the disc in RT,
+        ``sun_samples`` a pixel either way
+    """
+
+    tone: bool = False
+    translucency: bool = False
+    sky: bool = False
+    transmission: float = knob(0.5, "--leaf-transmission", "Translucency: the fraction of the light falling on a "
+                               "leaf's far side that comes through it (0..1).", lo=0, hi=1, metavar="F")
+    sky_samples: int = knob(SKY_SAMPLES, "--sky-samples", "Sky light: rays a pixel towards the sky (more: less "
+                            "noise, each costs about one shadow ray).", kind="int", lo=1, hi=256, metavar="N")
+    sky_reach: float = knob(0.5, "--sky-reach", "Sky light: how far a sky ray looks for an occluder, in model "
+                            "sizes (the diagonal of its box); farther rays cost more.", lo=0, lo_open=True,
+                            metavar="F")
+    tone_curve: str = knob("filmic", "--tone-curve", "Tone curve: filmic (linear up to a knee, then a smooth "
+                           "shoulder towards white: shadows as before, highlights no longer clipped) or aces (the "
+                           "ACES film look: more contrast, deep shadows darker).", kind="choice",
+                           choices=("filmic", "aces"))
+    exposure: float = knob(1.0, "--exposure", "Tone curve: scale the linear light by this before the curve "
+                           "(above 1 brighter).", lo=0, lo_open=True, hi=100, metavar="F")
+    sun_samples: int = knob(16, "--sun-samples", "Soft sun: shadow-map taps, or shadow rays with --method rt, a "
+                            "pixel (more: smoother penumbrae, slower).", kind="int", lo=1, hi=256, metavar="N")
+    sun_angle: float = knob(0.0, "--sun-angle", "The sun's angular diameter in degrees (the real sun: 0.53): soft "
+                            "shadow edges, widening with the distance to the occluder (0: a point light, hard "
+                            "shadows).", lo=0, hi=30, metavar="DEG")
+
+    def __post_init__(self):
+        check_knobs(self)
+
+    @classmethod
+    def defaults(cls) -> LookSettings:
+        """The looks of :data:`DEFAULT_EFFECTS` (what a render gets unless it says otherwise)."""
+        return cls(tone="tone" in DEFAULT_EFFECTS, translucency="translucency" in DEFAULT_EFFECTS,
+                   sky="sky" in DEFAULT_EFFECTS)
+
+    def defines(self) -> dict[str, bool]:
+        """The shader variant: ``TONE_MAP`` (``TONE_ACES``), ``TRANSLUCENT``, ``SKY_LIGHT``,
+        ``SOFT_SUN``."""
+        return {"TONE_MAP": self.tone, "TONE_ACES": self.tone and self.tone_curve == "aces",
+                "TRANSLUCENT": self.translucency, "SKY_LIGHT": self.sky, "SOFT_SUN": self.sun_angle > 0}
+
+    def shading_uniforms(self) -> dict:
+        """Uniforms of ``shaders/shading.glsl`` (every program's)."""
+        return {"leaf_transmission": self.transmission, "exposure": self.exposure, "tone_knee": TONE_KNEE}
+
+    def sun_uniforms(self) -> dict:
+        """Uniforms of ``shaders/shadow.glsl`` (the receivers'): the sun disc's radius as the
+        tangent of its half angle, its samples."""
+        return {"sun_radius": math.tan(math.radians(self.sun_angle) / 2), "sun_samples": self.sun_samples}
+
+    def sky_uniforms(self, model_size: float) -> dict:
+        """Uniforms of ``shaders/sky_light.glsl`` for a model whose box has diagonal
+        ``model_size`` (world units)."""
+        return {"sky_samples": self.sky_samples, "sky_reach": self.sky_reach * max(float(model_size), 1e-6),
+                "sky_ray_offset": SKY_RAY_OFFSET}
 
 
 @dataclass(frozen=True)
@@ -121,6 +225,7 @@ class RaycastSettings:
     v_exact : v of (7) per sample (exact) instead of interpolated between entry and exit
     hull_padding : growth of the bounding pyramid relative to the radius, so pixels on
         a silhouette tangent to the pyramid are not lost to rasterisation rules
+    look : how light reads (:class:`LookSettings`: the looks' effects and knobs)
     labels : write each pixel's row label instead of its colour: red = the row's
         ``material`` index / 255, unshaded (part masks)
     proxy : ``"pyramid"`` (§2.6) or ``"screen"``: every segment covers the whole screen, a
@@ -138,30 +243,32 @@ class RaycastSettings:
     """
 
     relief: bool = False
-    method: str = knob("auto", "--method", "How rays find rows: rasterise a bounding pyramid per row and cast "
-                       "(rc), or trace each pixel's ray through a BVH (rt: its cost grows with the log of the rows; "
-                       "shadows by shadow rays; an animation's frames posed on the CPU, the BVH refitted to them); "
-                       "auto: rt for an instanced scene at full detail (--lod-pixels 0) with many rows a pixel, "
+    method: str = knob("auto", "--method", "How each pixel finds the branches: ray cast each branch piece over "
+                       "its patch of screen (rc), or trace each pixel's ray through a tree of boxes (rt: it pays "
+                       "off on scenes of very many pieces; shadows by shadow rays; an animation posed on the CPU); "
+                       "auto: rt for an instanced scene at full detail (--lod-pixels 0) with many pieces a pixel, "
                        "else rc (the faster, as measured).",
                        kind="choice", choices=("auto", "rc", "rt"))
-    march: str = knob("adaptive", "--march", "Relief: samples sized to what each pixel sees (adaptive), or "
-                      "--linear-steps for every ray (fixed, the paper's).", kind="choice",
+    march: str = knob("adaptive", "--march", "Relief: the samples a ray takes, sized to what each pixel sees "
+                      "(adaptive), or --linear-steps for every ray (fixed, the paper's).", kind="choice",
                       choices=("adaptive", "fixed"))
-    linear_steps: int = knob(32, "--linear-steps", "Relief: uniform samples through the shell (adaptive march: the "
-                             "most).", kind="int", lo=1, hi=4096)
-    march_density: float = knob(2.0, "--march-density", "Relief, adaptive march: samples per relief texel the ray "
-                                "crosses.", lo=0, lo_open=True)
+    linear_steps: int = knob(32, "--linear-steps", "Relief: evenly spaced samples through the relief layer (adaptive "
+                             "march: the most).", kind="int", lo=1, hi=4096)
+    march_density: float = knob(2.0, "--march-density", "Relief, adaptive march: samples per texel of the relief "
+                                "texture the ray crosses.", lo=0, lo_open=True)
     march_min_steps: int = 4
     march_precision: float = MARCH_PRECISION
-    binary_steps: int = knob(12, "--binary-steps", "Relief: bisection steps after the first sample below the surface "
-                             f"(adaptive march: the most; it stops at {MARCH_PRECISION:g} pixel).",
+    binary_steps: int = knob(12, "--binary-steps", "Relief: halving steps that refine the hit after the first sample "
+                             f"below the surface (adaptive march: the most; it stops at {MARCH_PRECISION:g} pixel).",
                              kind="int", lo=0, hi=64)
-    v_exact: bool = knob(False, "--v-exact", "Relief: v of (7) per sample, or interpolated between entry and exit "
-                         "(the paper's fast path).", kind="bool", flag="--v-exact/--v-interpolated")
+    v_exact: bool = knob(False, "--v-exact", "Relief: compute the texture's lengthwise coordinate at every sample "
+                         "(exact), or interpolate it between where the ray enters and leaves the relief layer (the "
+                         "paper's fast path).", kind="bool", flag="--v-exact/--v-interpolated")
     hull_padding: float = 0.02
     proxy: str = "pyramid"
     height_fetch: str = "gather"
     labels: bool = False
+    look: LookSettings = LookSettings()
 
     def __post_init__(self):
         check_knobs(self)
@@ -202,6 +309,12 @@ class RaycastSettings:
                  f"+ {self.binary_steps} binary steps")
         return f"{name}+R ({steps}, v {'exact' if self.v_exact else 'interpolated'})"
 
+    def summary(self) -> str:
+        """How the frame was drawn, in plain words (``ray cast with relief mapping``): what
+        a report prints without ``--verbose`` (:meth:`describe` is the detail)."""
+        name = "ray traced" if self.method == "rt" else "ray cast"
+        return name + (" with relief mapping" if self.relief else "")
+
 
 @dataclass(frozen=True)
 class ShadowSettings:
@@ -239,13 +352,14 @@ class ShadowSettings:
 
     resolution: int = knob(2048, "--shadow-res", "Shadow map texels per side.", kind="int", lo=16, hi=16384)
     caster: str = knob("relief", "--shadow-caster", "What casts the shadow: with relief the relief surface, ray cast "
-                       "(relief), or the inner cone (inner, cheaper); or the frusta tessellated at "
-                       "--shadow-mesh-level and rasterised (mesh: an engine's caster, displaced by the relief).",
+                       "(relief), or the branch under its relief (inner, cheaper); or the branches as triangles at "
+                       "--shadow-mesh-level (mesh: as a game engine casts, displaced by the relief).",
                        kind="choice", choices=("relief", "inner", "mesh"))
-    mesh_level: int = knob(6, "--shadow-mesh-level", "Mesh caster: subdivision level m (16·4^m triangles a frustum).",
+    mesh_level: int = knob(6, "--shadow-mesh-level", "Mesh caster: subdivision level m (16·4^m triangles a branch "
+                           "piece).",
                            kind="int", lo=0, hi=8)
-    march: str = knob("secant", "--shadow-march", "Relief caster: the light's march ((u, v) interpolated along each "
-                      "ray, regula falsi) or the eye's (an angle per sample, bisection).", kind="choice",
+    march: str = knob("secant", "--shadow-march", "Relief caster: how the light's rays find the relief: the light's "
+                      "own march (secant, cheaper) or the eye's (bisect).", kind="choice",
                       choices=("secant", "bisect"))
     march_density: float = knob(0.5, "--shadow-march-density", "Relief caster: samples per relief texel the light's "
                                 "ray crosses (a texel counts at least one map texel).", lo=0, lo_open=True)
@@ -313,9 +427,8 @@ class MotionSettings:
     frames: int | None = knob(None, "--frames", "Write an animation of this many frames (-o .gif or .webp).",
                               kind="int", lo=1, hi=100_000)
     fps: float = knob(12.0, "--fps", "Frames per second of the animation (0.01..1000).", lo=0.01, hi=1000)
-    pose: str = knob("gpu", "--pose", "Where an animation's moving segments are posed and skinned each frame: a "
-                     "compute shader writing the ray caster's records, or the vertex shader skinning a mesh built once "
-                     "(gpu; a frame where a joint may turn sharp is skinned on the CPU), or numpy (cpu). "
+    pose: str = knob("gpu", "--pose", "Where an animation's moving branches are posed each frame: on the GPU (gpu; "
+                     "a frame where a joint may turn sharp is posed on the CPU) or in numpy (cpu). "
                      "--method rt poses on the CPU.",
                      kind="choice", choices=("gpu", "cpu"))
 
@@ -450,8 +563,11 @@ class RenderSettings:
 
     def frame(self, effects) -> tuple[RaycastSettings, ShadowSettings | None]:
         """The ray caster's knobs and the shadow map's for the ``effects`` in force: relief
-        on iff they hold ``relief``; no shadow map without ``shadows``."""
-        return (replace(self.march, relief="relief" in effects),
+        on iff they hold ``relief``, each look iff they hold it (:class:`LookSettings`); no
+        shadow map without ``shadows``."""
+        look = replace(self.march.look, tone="tone" in effects, translucency="translucency" in effects,
+                       sky="sky" in effects)
+        return (replace(self.march, relief="relief" in effects, look=look),
                 self.shadows if "shadows" in effects else None)
 
     def lod_pixels(self, effects) -> float:

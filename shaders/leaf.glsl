@@ -8,10 +8,13 @@
 // A leaf is a thin sheet seen from either side: no face is culled, and the shading normal
 // is the leaf's normal turned towards the eye (lit on both sides). Leaves carry no relief.
 //
+// Looks (shading.glsl): TRANSLUCENT (light on the far side comes through: a leaf lit from
+// behind glows), SKY_LIGHT (the sky traced on both sides, sky_light.glsl), TONE_MAP.
 // Variants: SHADOWS (receive: sample the light's map, shaders/shadow.glsl, with the
 // facet's own plane as the receiver plane; with SHADOW_RAYS a shadow ray through the BVH
 // instead, plantgen.gl.rt); SHADOW_PASS (cast: depth only into the
-// light's map, both faces); LABELS (a part mask: the leaf's label in red, unshaded).
+// light's map, both faces; with EYE_DEPTH the same into the eye's frame, ahead of a costly
+// shading, plantgen.gl.leaf_layer); LABELS (a part mask: the leaf's label in red, unshaded).
 
 #if defined VERTEX_SHADER
 
@@ -40,9 +43,10 @@ void main() {
 void main() {}
 #else
 #include "shading.glsl"
-#if defined SHADOW_RAYS
+#if defined SHADOW_RAYS || defined SKY_LIGHT
 #include "bvh.glsl"
 #endif
+#include "sky_light.glsl"
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif
@@ -72,7 +76,24 @@ void main() {
     float visibility = 1.0;
 #endif
     vec3 albedo = material_albedo(material, v_shade.y);
+#if defined TRANSLUCENT || defined SKY_LIGHT
+#if defined SKY_LIGHT
+    float distance = length(v_position);
+    // the far side's sky, dimmed by the transmission, with half the rays
+    float sky_front = sky_light_traced(v_position, n, flat_normal, distance, sky_samples);
+#if defined TRANSLUCENT
+    float sky_back = sky_light_traced(v_position, -n, -flat_normal, distance, max(sky_samples / 2, 1));
+#else
+    float sky_back = 0.0;
+#endif
+#else
+    float sky_front = 0.5 + 0.5 * n.y, sky_back = 0.5 - 0.5 * n.y;
+#endif
+    // the far side's sun: visible where the sheet itself is (its shadow test is the same)
+    out_color = vec4(to_display(shade_leaf(albedo, material, n, to_eye, sky_front, sky_back, visibility)), 1.0);
+#else
     out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility)), 1.0);
+#endif
 #endif
     out_distance = length(v_position);
 }

@@ -14,7 +14,8 @@
 // window: the shadow map pass of plantgen.render.passes; with RELIEF the relief surface
 // is what casts the shadow, found by light_march.glsl, or with LIGHT_BISECT by the eye's
 // march), LABELS (write the row's material slot as a label, unshaded: part masks,
-// plantgen.render.raycast.label_image).
+// plantgen.render.raycast.label_image), SKY_LIGHT (the sky's light traced through the BVH,
+// sky_light.glsl).
 
 #include "cone.glsl"
 
@@ -143,6 +144,7 @@ flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 
 #include "eye.glsl"
 #include "row.glsl"
+#include "sky_light.glsl"
 
 #if defined STATS
 // Work counters of a diagnostic render (plantgen.render.raycast.Raycaster.work): the

@@ -5,7 +5,8 @@
 // normals then turned into the world. With SHADOWS the light's visibility comes from a
 // shadow ray (shadow.glsl with SHADOW_RAYS: any hit through the same BVH; no map).
 // The BVH is uploaded relative to the eye (the render origin), like the ray caster's
-// records. Variants: RELIEF, V_EXACT, MARCH_FIXED (row.glsl), SHADOWS, TWO_LEVEL.
+// records. Variants: RELIEF, V_EXACT, MARCH_FIXED (row.glsl), SHADOWS, TWO_LEVEL, and the looks
+// (shading.glsl; SKY_LIGHT: sky_light.glsl).
 
 #if defined VERTEX_SHADER
 
@@ -18,6 +19,7 @@ void main() {
 
 #include "shading.glsl"
 #include "bvh.glsl"
+#include "sky_light.glsl"
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif

@@ -2,6 +2,12 @@
 // directional light with Blinn-Phong, and a sky background. Include after declaring
 // nothing; it declares its own uniforms (their values: plantgen.render.materials's
 // shading_uniforms and palette_uniforms; MAX_MATERIALS is a define from Python).
+//
+// The looks (plantgen.settings.LookSettings, each a define): TONE_MAP (to_display is a
+// filmic tone curve in linear light, then the sRGB transfer curve; without it: clip, then
+// c^(1/2.2)); TRANSLUCENT (shade_leaf: light falling on a leaf's far side comes through it,
+// tinted by its albedo); SKY_LIGHT (shade_surface_sky: the sky's light as traced by
+// sky_light.glsl, occluded, instead of the open hemisphere).
 
 #ifndef SHADING_GLSL
 #define SHADING_GLSL
@@ -16,6 +22,11 @@ uniform vec3 ground_tint;                       // sky colour below the horizon
 uniform vec3 material_dark[MAX_MATERIALS];      // albedo where the texture is low
 uniform vec3 material_light[MAX_MATERIALS];     // albedo where the texture is high
 uniform vec2 material_gloss[MAX_MATERIALS];     // (specular strength, Blinn-Phong exponent)
+// The looks' knobs (plantgen.settings.LookSettings.uniforms; unused without their define)
+uniform float leaf_transmission;                // TRANSLUCENT: fraction through a leaf
+uniform float exposure;                         // TONE_MAP: linear light scale before the curve
+uniform float tone_knee;                        // TONE_MAP: the filmic curve's knee
+uniform int sky_samples;                        // SKY_LIGHT: rays a pixel (sky_light.glsl)
 
 // Sky seen along unit direction `dir` (y up): horizon haze to zenith blue, darker below.
 vec3 sky_color(vec3 dir) {
@@ -44,6 +55,46 @@ vec3 facing_normal(vec3 n, vec3 n_true, vec3 to_eye) {
     float len = length(bent);
     return len > 0.0 ? bent / len : n_true;
 }
+
+#if defined FRAGMENT_SHADER
+// Deterministic per-pixel numbers for the looks' samples (sky_light.glsl, shadow.glsl's
+// soft sun): an integer hash (the 32-bit finaliser of MurmurHash3 over a mix of the
+// words) of the pixel and a salt; no time seed, so a frame drawn twice is the same.
+uint look_hash(uvec3 v) {
+    uint h = v.x * 0x9E3779B1u ^ (v.y + 0x7F4A7C15u) * 0x85EBCA77u ^ (v.z + 0x165667B1u) * 0xC2B2AE3Du;
+    h ^= h >> 16; h *= 0x85EBCA6Bu;
+    h ^= h >> 13; h *= 0xC2B2AE35u;
+    h ^= h >> 16;
+    return h;
+}
+
+// Two numbers in [0, 1) from this fragment's pixel and `salt`.
+vec2 pixel_random(uint salt) {
+    uvec2 px = uvec2(gl_FragCoord.xy);
+    uint a = look_hash(uvec3(px, salt));
+    uint b = look_hash(uvec3(px, salt ^ 0xA5A5A5A5u));
+    return vec2(a >> 8, b >> 8) * (1.0 / 16777216.0);
+}
+
+// Sample i of n of a pixel's sequence in [0, 1)^2: n strata in u1, the golden ratio in u2,
+// both shifted by `shift` (a Cranley-Patterson rotation, pixel_random).
+vec2 look_sample(int i, int n, vec2 shift) {
+    return fract(vec2((float(i) + 0.5) / float(n), 0.6180339887 * float(i)) + shift);
+}
+
+// A unit basis (t, b) perpendicular to unit n.
+void look_basis(vec3 n, out vec3 t, out vec3 b) {
+    vec3 a = abs(n.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    t = normalize(cross(a, n));
+    b = cross(n, t);
+}
+
+// A point of the unit disc, uniform in area, from u in [0, 1)^2.
+vec2 look_disc(vec2 u) {
+    float r = sqrt(u.x), phi = 6.283185307 * u.y;
+    return r * vec2(cos(phi), sin(phi));
+}
+#endif
 
 // The unit normal of the facet the rasteriser draws at eye-relative `position` (from the
 // screen-space derivatives), turned to agree with `fallback`, which it is where the
@@ -77,7 +128,65 @@ vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float oc
     return shade_surface_visible(albedo, material, normal, to_eye, occlusion, 1.0);
 }
 
+// As shade_surface_visible, the sky's light given whole: `sky_light` is the fraction of
+// the ambient (sky) colour reaching the surface, (0.5 + 0.5 n.y) on an open surface
+// (sky_light.glsl traces it); `normal` faces the eye.
+vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_light, float light_visibility) {
+    int m = clamp(material, 0, MAX_MATERIALS - 1);
+    float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
+    vec3 halfway = normalize(light_dir + to_eye);
+    float specular = diffuse > 0.0
+        ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
+    return albedo * (ambient_color * sky_light + light_color * diffuse) + light_color * specular * light_visibility;
+}
+
+// A leaf, a thin sheet: the side the eye sees (`n`, facing the eye) shaded as a surface,
+// lit by `sky_front` of the sky; with TRANSLUCENT the light falling on the far side comes
+// through, `leaf_transmission` of it, tinted by the albedo: the sun (diffuse on the far
+// side, times its visibility) and `sky_back` of the sky. Open sky: sky_front = 0.5 + 0.5
+// n.y, sky_back = 0.5 - 0.5 n.y.
+vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_front, float sky_back,
+                float light_visibility) {
+    vec3 lit = shade_surface_sky(albedo, material, n, to_eye, sky_front, light_visibility);
+#if defined TRANSLUCENT
+    float behind = max(-dot(n, light_dir), 0.0) * light_visibility;
+    lit += leaf_transmission * albedo * (light_color * behind + ambient_color * sky_back);
+#endif
+    return lit;
+}
+
+#if defined TONE_MAP
+// The tone curve, per channel in linear light, after `exposure`; 0 -> 0, increasing, below
+// 1. The numpy twin: plantgen.gl.supersample.tone_curve.
+#if defined TONE_ACES
+// The rational fit of ACES's reference rendering and output transforms published by
+// K. Narkowicz ("ACES Filmic Tone Mapping Curve", 2016): x (2.51 x + 0.03) / (x (2.43 x +
+// 0.59) + 0.14); increasing for x >= 0 (its slope's numerator, 1.408 x^2 + 0.703 x +
+// 0.0042, is positive); 1 -> 0.80.
+vec3 tone_curve(vec3 x) {
+    x = max(x * exposure, 0.0);
+    return clamp(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0);
+}
+#else
+// Filmic: the identity up to the knee k, then k + (1 - k)(1 - exp(-(x - k) / (1 - k))),
+// whose slope is 1 at the knee and which tends to 1: highlights roll off, never clip.
+vec3 tone_curve(vec3 x) {
+    x = max(x * exposure, 0.0);
+    vec3 shoulder = tone_knee + (1.0 - tone_knee) * (1.0 - exp(-(x - tone_knee) / (1.0 - tone_knee)));
+    return mix(x, shoulder, step(tone_knee, x));
+}
+#endif
+
+// The sRGB transfer curve (IEC 61966-2-1) of linear values in [0, 1].
+vec3 srgb_encode(vec3 c) {
+    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+// Linear colour to display: the tone curve, then sRGB.
+vec3 to_display(vec3 linear) { return srgb_encode(tone_curve(linear)); }
+#else
 // Linear colour to display (sRGB-like gamma).
 vec3 to_display(vec3 linear) { return pow(clamp(linear, 0.0, 1.0), vec3(1.0 / 2.2)); }
+#endif
 
 #endif

@@ -405,19 +405,3 @@ def test_export_help_documents_formats_and_up_conventions():
                  "Blender 3.4", "camera, light and ground"):
         assert word in stdout, word
 
-
-def test_every_missing_extra_is_worded_once():
-    """One wording for a missing extra (plantgen.errors.missing_extra), with the install
-    command the README uses (``pip install '.[NAME]'`` in the clone): no module spells
-    another (``plantgen[NAME]`` would ask an index for a package of that name)."""
-    import re
-    from pathlib import Path
-
-    import plantgen
-    from plantgen.errors import missing_extra
-
-    root = Path(plantgen.__file__).resolve().parent
-    found = {m for p in root.rglob("*.py") for m in re.findall(r"pip install '([^']*)'", p.read_text(encoding="utf-8"))}
-    assert found and all(re.fullmatch(r"\.\[([a-z]+|\{extra\})\]", c) for c in found), found
-    assert missing_extra("plantgen view", "view") == ("plantgen view needs the view extra: "
-                                                      "pip install '.[view]' (in plantgen's folder)")

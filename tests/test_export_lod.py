@@ -216,6 +216,10 @@ def test_the_command_line_asks_for_levels_and_refuses_bad_ones(grove, tmp_path):
     code, stdout, stderr = run_cli("export", grove, "-o", out, "--subdiv", "0", "--no-textures", "--lod-levels", "3")
     assert code == 0, stderr
     assert "levels of detail: 3" in stdout
+    assert "level 0: " in stdout and " branch pieces, " in stdout and "rows" not in stdout   # plain words
+    code, stdout, stderr = run_cli("export", grove, "-o", out, "--subdiv", "0", "--no-textures", "--lod-levels", "3",
+                                   "--verbose")
+    assert code == 0 and "lod0 " in stdout and " rows, " in stdout and " frusta, m = 0" in stdout, stderr
     code, _, stderr = run_cli("export", grove, "-o", out, "--lod-levels", "0")
     assert code == 2 and len(stderr.strip().splitlines()) == 1 and "--lod-levels" in stderr
     obj = tmp_path / "grove.obj"

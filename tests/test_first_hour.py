@@ -41,43 +41,65 @@ def one_line(stderr: str) -> str:
 
 
 # ---------------------------------------------------------------------- 1. names
-def test_list_names_every_shipped_grammar_and_scene_with_its_segments(monkeypatch):
+def test_list_names_every_shipped_grammar_and_scene_without_growing_any(monkeypatch):
+    """The listing reads the files' descriptions: nothing is grown, cold or warm (issue 45)."""
+    import plantgen.cli.listing as listing
+
+    def no_growing(*args, **kwargs):
+        raise AssertionError("plantgen list grew a model")
+
+    monkeypatch.setattr(listing, "grow_file", no_growing)
     code, stdout, stderr = run_cli("list", "--json")
     assert code == 0 and stderr == "", stderr
     rows = json.loads(stdout)
     assert [r["name"] for r in rows] == shipped_names()
     by_name = {r["name"]: r for r in rows}
     assert {"pine", "forest", "abop_monopodial", "abop_sympodial", "ocotillo"} <= set(by_name)
-    assert all(r["segments"] > 0 and r["description"] for r in rows)
+    assert all(r["description"] and "segments" not in r for r in rows)
     assert by_name["forest"]["kind"] == "scene" and by_name["pine"]["kind"] == "grammar"
-    # the counts are what grow makes of each file at its own seed
+    code, stdout, stderr = run_cli("list")
+    assert code == 0 and stderr == "", stderr
+    header, *lines = stdout.strip().splitlines()
+    assert header.split() == ["NAME", "KIND", "DESCRIPTION"]
+    assert [line.split()[0] for line in lines] == shipped_names()
+
+
+def test_list_segments_are_what_grow_makes_and_come_from_the_cache_after(monkeypatch):
+    """``--segments`` grows each model once at its own seed; a second listing reads the
+    counts from the cache (two models, a grammar and a scene, to keep the test short)."""
+    import plantgen.cli.listing as listing
+
+    monkeypatch.setattr(listing, "shipped_names", lambda: ["saguaro", "well"])
+    code, stdout, stderr = run_cli("list", "--segments", "--json")
+    assert code == 0 and stderr == "", stderr
+    by_name = {r["name"]: r for r in json.loads(stdout)}
     assert by_name["saguaro"]["segments"] == len(plantgen.grow("saguaro"))
     assert by_name["well"]["segments"] == len(plantgen.grow("well"))
-    # a second listing reads the counts from the cache: nothing is grown again
-    import plantgen.cli.listing as listing
 
     def no_growing(*args, **kwargs):
         raise AssertionError("grown again despite the cache")
 
     monkeypatch.setattr(listing, "grow_file", no_growing)
-    code, stdout, stderr = run_cli("list")
+    code, stdout, stderr = run_cli("list", "--segments")
     assert code == 0 and stderr == "", stderr
     header, *lines = stdout.strip().splitlines()
     assert header.split()[:3] == ["NAME", "KIND", "SEGMENTS"]
-    assert [line.split()[0] for line in lines] == shipped_names()
-    forest = next(line for line in lines if line.startswith("forest "))
-    assert f"{by_name['forest']['segments']:,}" in forest
+    well = next(line for line in lines if line.startswith("well "))
+    assert f"{by_name['well']['segments']:,}" in well
 
 
 def test_list_grows_a_shipped_file_again_once_it_changes(tmp_path, monkeypatch):
     """The cache is keyed on the files' bytes: a stale entry is never shown."""
+    import plantgen.cli.listing as listing
+
+    monkeypatch.setattr(listing, "shipped_names", lambda: ["saguaro"])
     cache = tmp_path / "cache" / "plantgen" / "list.json"
-    assert run_cli("list")[0] == 0 and cache.is_file()
+    assert run_cli("list", "--segments")[0] == 0 and cache.is_file()
     data = json.loads(cache.read_text())
     data["saguaro"]["segments"] = 999_999
     data["saguaro"]["digest"] = "not the file's"
     cache.write_text(json.dumps(data))
-    code, stdout, _ = run_cli("list", "--json")
+    code, stdout, _ = run_cli("list", "--segments", "--json")
     assert code == 0
     assert next(r for r in json.loads(stdout) if r["name"] == "saguaro")["segments"] == 30
 
@@ -277,12 +299,18 @@ def test_a_huge_size_is_one_sensible_line():
 
 
 def test_extras_are_spelled_one_way_in_messages():
-    """Every install command plantgen prints is pip install 'plantgen[EXTRA]'."""
+    """Every install command plantgen prints is the README's, pip install '.[EXTRA]' in the
+    clone (``plantgen[EXTRA]`` would ask an index for a package of that name), worded once
+    by plantgen.errors.missing_extra."""
+    from plantgen.errors import missing_extra
+
     pattern = re.compile(r"pip install (\S+)")
     found = [(path.name, spelled) for path in PACKAGE.rglob("*.py") for spelled in pattern.findall(path.read_text())]
     assert found
-    odd = [(name, s) for name, s in found if not re.match(r"'plantgen\[[a-z{}.]+\]'", s)]
+    odd = [(name, s) for name, s in found if not re.match(r"'\.\[([a-z]+|\{extra\})\]'", s)]
     assert not odd, odd
+    assert missing_extra("plantgen view", "view") == ("plantgen view needs the view extra: "
+                                                      "pip install '.[view]' (in plantgen's folder)")
 
 
 # ---------------------------------------------------------------------- every shipped name renders

@@ -90,7 +90,7 @@ def test_the_game_asset_is_levels_cards_and_an_impostor_within_budget(broadleaf_
     """m = 0 (the default for a game asset), 4 levels each within its budget, cards, the
     impostor last with its layout; coverages fall level by level."""
     out, text, err = broadleaf_game
-    assert "m = 0" in text and "leaf cards:" in text and "impostor: 4x4 views" in text
+    assert "at subdivision level 0" in text and "leaf cards:" in text and "impostor: 4x4 views" in text
     assert "over its budget" not in err
     doc, _ = glb_json(out)
     root = next(n for n in doc["nodes"] if "MSFT_lod" in n.get("extensions", {}))

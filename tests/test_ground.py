@@ -3,6 +3,8 @@ its shadow; a scene's square fades at its edge; ``--ground none`` draws none."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -105,16 +107,18 @@ def test_a_scenes_square_fades_at_its_edge(gl_ctx):
     assert len(steps) > 20 and max(steps) <= 4.0, (len(steps), max(steps))
 
 
-@pytest.mark.parametrize("background", ["sky", "none"])
+@pytest.mark.parametrize("background, tone", [("sky", True), ("none", True), ("sky", False), ("none", False)])
 @pytest.mark.parametrize("n", [2, 3])
-def test_the_gpu_resolve_is_the_cpu_average(gl_ctx, background, n):
+def test_the_gpu_resolve_is_the_cpu_average(gl_ctx, background, tone, n):
     """Supersampling averages on the GPU (GpuResolve): the same pixels as the CPU's
-    reference average of the large frame, to one level of 255, and the same distances."""
+    reference average of the large frame, in the frame's own encoding (sRGB with the tone
+    effect, else c^(1/2.2)), to one level of 255, and the same distances."""
     from plantgen.gl.raycast import Raycaster
     from plantgen.gl.supersample import resolve_supersamples
     model = prepare_model("pine")
     frusta = model.frusta_at(0.0)
     settings, _ = RenderSettings().frame(model.effects)
+    settings = replace(settings, look=replace(settings.look, tone=tone))
     staging = stage_model(model.grown, frusta, 96, 72, ground="auto")
     caster = Raycaster()
     result = caster.render(frusta, settings=settings,
@@ -122,7 +126,7 @@ def test_the_gpu_resolve_is_the_cpu_average(gl_ctx, background, n):
     fbo, k = caster._fbo, result.color.shape[-1]
     large = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8).reshape(72 * n, 96 * n, k)
     distance = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1), np.float32)
-    color, centre = resolve_supersamples(large[::-1], distance.reshape(72 * n, 96 * n)[::-1], n)
+    color, centre = resolve_supersamples(large[::-1], distance.reshape(72 * n, 96 * n)[::-1], n, srgb=tone)
     assert color.shape == result.color.shape
     assert np.abs(color.astype(int) - result.color.astype(int)).max() <= 1
     assert np.array_equal(centre, result.distance)

@@ -29,13 +29,16 @@ from hypothesis import strategies as st
 
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.swc import write_swc
+from plantgen.limits import SETTLE_STEPS
 from plantgen.lsystem.grammar import parse_grammar
 from plantgen.pipeline import grow
 
 RUNNER = Path(__file__).with_name("hostile_runner.py")
 MEMORY = 1 << 30            # the issue's bound: 1 GB of address space
-CASE_SECONDS = 2.0          # the issue's bound per hostile input ...
-SLOW_CASE_SECONDS = 15.0    # ... but for a derivation spending its whole default work budget
+#: The CPU time a hostile input's refusal may take: 5x the 1 s the issue sets (issue 45: a
+#: bound that stays keeps a 5x margin on a busy 2-core machine). The cases also assert the
+#: work counters the refusals name, which do not depend on the machine.
+CASE_SECONDS = 5.0
 PROCESS_SECONDS = 120       # the subprocess, start-up and every case together
 
 GRAMMAR = "name: g\naxiom: F\n"
@@ -176,10 +179,13 @@ def test_derivations_that_do_not_grow_end_quickly_with_few_progress_lines(tmp_pa
     assert_refused(huge_r, "over the limit of 1,000,000 (limit iterations", outputs=[cases[2][-1]])
     # no fixed point: the work budget (modules x steps) ends it, its progress at most a line
     # a second before the one error line
+    # no fixed point: its steps alone would spend past the work budget (modules x steps), so
+    # it is refused once it has not settled in SETTLE_STEPS steps, the estimate in the line
     *progress, error = count_r["stderr"].rstrip("\n").splitlines()
     assert all(line.startswith("  derivation step ") for line in progress)
     assert len(progress) <= count_r["seconds"] + 1
-    assert_refused({**count_r, "stderr": error}, "derive_work", outputs=[cases[3][-1]], seconds=SLOW_CASE_SECONDS)
+    assert_refused({**count_r, "stderr": error}, ("derive_work", "400,", f"first {SETTLE_STEPS:,} steps"),
+                   outputs=[cases[3][-1]])
 
 
 # ---------------------------------------------------------------------- 4. limits the file may raise
@@ -449,3 +455,34 @@ def test_mutated_grammars_and_scenes_grow_or_fail_in_one_line(tmp_path, data):
         assert len(stderr.strip().splitlines()) == 1 and stderr.startswith("plantgen: error: "), stderr
         assert not out.exists()
     assert not list(folder.glob(".*.part*"))
+
+
+# ---------------------------------------------------------------------- 5. refusals before the work (issue 45)
+def test_the_slow_refusals_come_before_their_work(tmp_path):
+    """Inputs that used to be refused only after seconds of work: each refusal now names the
+    count it was estimated from, taken before the work (or, for the scanners, as the grids
+    come, O(1) each)."""
+    blank = write(tmp_path, "blank.swc", "\n" * 2_000_000)
+    digits = write(tmp_path, "digits.swc", f"# material {'9' * 5000}: bark\n1 3 0 0 0 0.1 -1\n2 3 0 1 0 0.1 1\n"
+                                           "3 3 0 2 0 0.1 2\n")
+    scanners = ";".join(f"{i % 100},1,{i // 100}" for i in range(10_000))
+    cases = [["grow", blank, "-o", tmp_path / "b.npz"], ["grow", digits, "-o", tmp_path / "d.npz"],
+             ["scan", "saguaro", "--scanner-positions", scanners, "--limit", "scan_rays=20000000",
+              "-o", tmp_path / "s.ply"]]
+    blank_r, digits_r, scan_r = run_cases(tmp_path, cases)
+    assert_refused(blank_r, ("2,000,001 lines", "limit segments"), outputs=[cases[0][-1]])
+    assert_refused(digits_r, "a material type code of 5,000 digits", outputs=[cases[1][-1]])
+    assert_refused(scan_r, ("a scan of 10000 scanners (the first", "limit scan_rays"), outputs=[cases[2][-1]])
+    first = int(scan_r["stderr"].split("(the first ")[1].split()[0])
+    assert first < 10_000                     # refused part way through the scanners, not after all
+
+
+def test_a_counter_that_settles_late_is_still_grown():
+    """The settling allowance: a derivation whose steps would overspend the budget is grown
+    when it settles within SETTLE_STEPS steps (its fixed point skips the rest)."""
+    from plantgen.lsystem.derive import derive
+
+    grammar = parse_grammar({"axiom": "A(0)", "iterations": 1_000_000,
+                             "rules": [f"A(x) : x < {SETTLE_STEPS // 2} -> A(x+1)"]})
+    ms = derive(grammar)
+    assert ms.fixed_point == SETTLE_STEPS // 2 and ms.params[0, 0] == SETTLE_STEPS // 2

@@ -80,13 +80,15 @@ def test_render_chooses_per_input_and_says_so(tmp_path):
     code, full, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--lod-pixels", "0",
                                  "--time-frames", "8")
     assert code == 0, stderr
-    assert "RT (--method auto)" in full and "shadow rays" in full
+    assert "ray traced (--method auto)" in full and "shadow rays" in full
     code, lod, stderr = run_cli("render", scene, "-o", out, "--size", "64x48")
     assert code == 0, stderr
-    assert "RC (--method auto)" in lod and "level of detail" in lod
+    assert "ray cast (--method auto)" in lod and "level of detail" in lod
     code, cast, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--lod-pixels", "0", "--method", "rc")
     assert code == 0, stderr
-    assert "RC" in cast and "--method auto" not in cast
+    assert "ray cast" in cast and "--method auto" not in cast
+    code, verbose, stderr = run_cli("render", scene, "-o", out, "--size", "64x48", "--verbose")
+    assert code == 0 and "RC (--method auto)" in verbose, stderr
 
 
 def test_the_method_bench_times_both_methods_and_checks_auto():
@@ -98,3 +100,5 @@ def test_the_method_bench_times_both_methods_and_checks_auto():
     assert row["auto"] == "rc"                       # a plant placed once: never worth a BVH for one still
     text = markdown(result)
     assert "| saguaro | 64x48 |" in text and result["renderer"] in text
+    assert "[start:summary] -->\n| inputs | size | faster frame | times faster |" in text     # what the docs quote
+    assert f"| single plants | 64x48 | {'RC' if row['rc_ms'] < row['rt_ms'] else 'RT'} on 1 of 1 |" in text

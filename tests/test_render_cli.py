@@ -46,7 +46,7 @@ def test_render_writes_image_camera_and_depth_that_agree(gl_ctx, skeleton_file, 
                                    "--camera-out", cam_path, "--depth-out", depth_path)
     assert code == 0, stderr
     assert "GL renderer: " + gl_ctx.info["GL_RENDERER"] in stdout
-    assert "segments: 3 -> 3 frusta (96 bytes each" in stdout and "frame:" in stdout and " ms" in stdout
+    assert "model: 3 branch segments (" in stdout and "frame:" in stdout and " ms" in stdout
     image = Image.open(out)
     assert image.size == (96, 72) and image.mode == "RGB"
     cam = json.loads(cam_path.read_text())
@@ -92,7 +92,7 @@ def test_relief_flags_and_scene_effects(gl_ctx, tmp_path):
                 "--depth-out", tmp_path / f"{name}.npy", "--linear-steps", "16"]
         code, stdout, stderr = run_cli(*args, *([flag] if flag else []))
         assert code == 0, stderr
-        assert ("RC+R" in stdout) == (flag != "--no-relief")
+        assert ("ray cast with relief mapping" in stdout) == (flag != "--no-relief")
         depth[name] = np.load(tmp_path / f"{name}.npy")
     assert np.array_equal(depth["default"], depth["--relief"])   # the scene asked for relief
     assert not np.array_equal(depth["default"], depth["--no-relief"])
@@ -115,7 +115,8 @@ def test_bad_files_exit_2_and_leave_nothing_half_written(gl_ctx, skeleton_file, 
     bad_cam.write_text('{"eye": [0, 0, 1]}')
     cases = [
         (["render", tmp_path / "nope.npz", "-o", tmp_path / "x.png"], "nope.npz"),
-        (["render", skeleton_file, "-o", tmp_path / "x.jpg"], "must end in .png"),
+        (["render", skeleton_file, "-o", tmp_path / "x.bmp"], "must end in .png, .jpg or .webp"),
+        (["render", skeleton_file, "-o", tmp_path / "x.jpg", "--background", "none"], "no transparency"),
         (["render", skeleton_file, "-o", tmp_path / "x.png", "--camera", bad_cam], "target"),
         (["render", skeleton_file, "-o", tmp_path / "no_dir" / "x.png", "--size", SIZE], "cannot write"),
         (["render", skeleton_file, "-o", tmp_path / "x.png", "--depth-out", tmp_path / "d.txt"], ".npy"),

@@ -193,7 +193,7 @@ def test_export_smooth_bends_loads_back_watertight_with_the_bent_tube_volume(tmp
                                    "--smooth-bends", "30")
     assert code == 0, stderr
     assert "smooth bends: +9 arc segments" in stdout           # ceil(90° / 10°)
-    assert "2 segments -> 11 frusta" in stdout
+    assert "2 branch segments (11 pieces written)" in stdout
     mesh = trimesh.load(out)
     mesh.merge_vertices()
     assert mesh.is_watertight

@@ -32,6 +32,7 @@ from ..limits import Limits
 from ..metrics import tree_metrics
 from ..pipeline import check_export_size, check_finite_mesh, grow_file, model_leaves, skin_model
 from ..scanfiles import write_points
+from ..settings import LookSettings
 from .schema import METRIC_COLUMNS, SINGLE_FILE_KINDS, empty_row
 from .spec import Outputs, PlantTask
 
@@ -113,7 +114,7 @@ def _labels(frusta, skeleton, kind: str) -> np.ndarray:
 def _render_views(task, outputs: Outputs, frusta, skeleton, leaves, root: Path, timings: dict) -> None:
     t0 = time.perf_counter()
     caster = _caster()
-    settings = RaycastSettings(relief=outputs.relief)
+    settings = RaycastSettings(relief=outputs.relief, look=LookSettings.defaults())
     labels = _labels(frusta, skeleton, outputs.mask) if outputs.mask else None
     top = 255 if leaves is None or outputs.mask != "order" else LEAF_ORDER_LABEL - 1
     if labels is not None and labels.max() > top:

@@ -32,7 +32,7 @@ from .arguments import image_size, report
 from .scaling import median_frame, tile_placed
 from .scan import machine
 
-__all__ = ["measure", "markdown", "main"]
+__all__ = ["measure", "markdown", "main", "summary"]
 
 
 def _plant_row(name: str, size, frames: int) -> dict:
@@ -102,6 +102,32 @@ def _line(row: dict) -> str:
             f"RC {row['rc_ms']:,.0f} ms, RT {row['rt_ms']:,.0f} ms")
 
 
+def _times(x: float) -> str:
+    """A ratio as the summary prints it: one decimal under 10, none above."""
+    return f"{x:.1f}" if x < 9.95 else f"{x:.0f}"
+
+
+def summary(rows: list[dict]) -> list[str]:
+    """The table the docs quote, between snippet section markers (``--8<--
+    "llvmpipe/method_choice.md:summary"``): per kind of input (single plants, instanced
+    scenes) and size, which method draws the faster frame on how many inputs and by how
+    much (the slower frame over the faster, least to most), from ``rows``' ``rc_ms`` and
+    ``rt_ms``."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        kind = "instanced scenes" if r["placed"] > r["distinct"] else "single plants"
+        groups.setdefault((kind, tuple(r["size"])), []).append(r)
+    lines = ["<!-- --8<-- [start:summary] -->", "| inputs | size | faster frame | times faster |",
+             "| --- | --- | --- | --- |"]
+    for (kind, (w, h)), group in sorted(groups.items(), key=lambda item: (item[0][0] != "single plants", item[0][1])):
+        for method, key, other in (("RC", "rc_ms", "rt_ms"), ("RT", "rt_ms", "rc_ms")):
+            won = [r[other] / r[key] for r in group if r[key] < r[other]]
+            if won:
+                span = " to ".join(dict.fromkeys(_times(x) for x in (min(won), max(won))))
+                lines.append(f"| {kind} | {w}x{h} | {method} on {len(won)} of {len(group)} | {span} |")
+    return lines + ["<!-- --8<-- [end:summary] -->"]
+
+
 def markdown(result: dict) -> str:
     lines = ["### RC or RT: which is faster, and what `--method auto` picks", "",
              "| | |", "| --- | --- |",
@@ -125,6 +151,7 @@ def markdown(result: dict) -> str:
                      f"{r['rc_ms']:,.0f} | {r['rt_ms']:,.0f} | {r['rc_ms'] / r['rt_ms']:.2f} | {r['build_ms']:,.0f} | "
                      f"{r['auto'].upper()} | {still.upper()} | {r['auto_frames'].upper()} | {frame.upper()} |")
     n = len(result["rows"])
+    lines += ["", "Which is faster, by kind of input:", "", *summary(result["rows"])]
     lines += ["", f"Auto chose the method of the faster still (one frame, RT's BVH build included) on {still_right} "
               f"of {n} inputs, and, told of the warm-up and the {result['frames']} timed frames, the method of the "
               f"faster frame (a frame after the first) on {frame_right} of {n}. RT build "

@@ -26,13 +26,20 @@ from .options import (
     seed_opt,
     smooth_bends_opt,
     take_settings,
+    verbose_opt,
 )
 from .progress import StageBars
+from .sections import OUTPUT, QUALITY, SectionedCommand
 
 _SUFFIXES = ", ".join(EXPORT_FORMATS)
 
 
-@click.command()
+#: Where export's options go in ``--help`` (beside the settings' own sections).
+SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_step": QUALITY, "up": OUTPUT,
+            "instancing": OUTPUT, "unit": OUTPUT, "qsm_tolerance": QUALITY, "lod_pixels": OUTPUT, "ground_disc": OUTPUT}
+
+
+@click.command(cls=SectionedCommand, sections=SECTIONS)
 @input_arg
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
             ".obj its .mtl, a .qsm.csv a .treedata.csv. Default: INPUT's name with .glb, in the current directory.",
@@ -48,7 +55,7 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
               help="Normal maps per aspect: split each relief material's segments into buckets RATIO apart in "
                    "radius over length, each with its own normal map (exact for its aspect; e.g. 2). "
                    "Default: one normal map per material, at its median aspect.")
-@click.option("--ground/--no-ground", default=False, show_default=True,
+@click.option("--ground/--no-ground", "ground_disc", default=False, show_default=True,
               help="glTF, USD: under a single plant (a grammar or a skeleton), write the ground disc that "
                    "plantgen render draws there, without its fade. A scene writes its own ground either way.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
@@ -78,20 +85,22 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @limit_opt
 @allow_path_opt
 @quiet_opt
+@verbose_opt
 def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing,
-           unit, qsm_tolerance, ground, seed, smooth_bends, limit_values, allow_paths, quiet, **keys) -> None:
+           unit, qsm_tolerance, ground_disc, seed, smooth_bends, limit_values, allow_paths, quiet, verbose,
+           **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
-    Meshes: vertices lie on the exact frusta, with the normals (8) and (u, v) of the ray
-    caster; open chain ends are capped. glTF, OBJ and USD keep material names and
+    Meshes: vertices lie on the exact branch surfaces, with the normals and texture
+    coordinates the renderer uses; open branch ends are capped. glTF, OBJ and USD keep material names and
     colours. A scene's repeated plants are written once and instanced in glTF and USD
     (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
     camera, light and ground too (the camera render would use, a directional light, the
     ground square in its material); a grammar only its ground disc, with --ground. glTF, OBJ and USD carry the
     relief as textures: per relief material a base colour, a tangent-space normal map
     and a height map, PNG (inside a .glb, beside the others; --no-textures: none).
-    A grammar's leaves ({ . } polygons) go into every mesh format beside the frusta, in
+    A grammar's leaves ({ . } polygons) go into every mesh format beside the branches, in
     their material (a scene's too: an instanced plant carries its own grammar's): glTF
     gives them double-sided "<material> (leaf)" materials, USD a double-sided Leaves
     mesh, PLY and STL plain triangles. SWC and the cylinder models carry the skeleton
@@ -120,6 +129,9 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
       plantgen export elm -o elm.qsm.csv            # TreeQSM cylinders + elm.treedata.csv
       plantgen export pine -o pine.swc --up z
+
+    --verbose prints the summary in the renderer's own terms (frusta, rows, m), which the
+    glossary explains (docs: reference/glossary.md).
     """
     output = output or Path(input.stem + ".glb")
     asset = take_settings(AssetSettings, keys)
@@ -131,13 +143,13 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
                             textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
-                            levels=take_settings(LevelSettings, keys), asset=asset, ground=ground)
+                            levels=take_settings(LevelSettings, keys), asset=asset, ground=ground_disc)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:
         return
     if "triangles" in info:
-        _mesh_summary(info)
+        _mesh_summary(info, verbose)
     elif "cylinders" in info:
         _qsm_summary(info)
     else:
@@ -151,10 +163,15 @@ def _leaves(info: dict) -> str:
     return f", {leaves:,} of leaves, double-sided" if leaves else ""
 
 
-def _mesh_summary(info: dict) -> None:
-    click.echo(f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {info['level']}"
-               f"{' with relief' if info['relief'] else ''}: {info['triangles']:,} triangles "
-               f"({info['caps']:,} caps{_leaves(info)}), {info['vertices']:,} vertices, {info['up']}-up")
+def _mesh_summary(info: dict, verbose: bool = False) -> None:
+    relief = " with relief" if info["relief"] else ""
+    if verbose:
+        made = f"{info['segments']:,} segments -> {info['rows']:,} frusta, m = {info['level']}{relief}"
+    else:
+        pieces = f" ({info['rows']:,} pieces written)" if info["rows"] != info["segments"] else ""
+        made = f"{info['segments']:,} branch segments{pieces} at subdivision level {info['level']}{relief}"
+    click.echo(f"{made}: {info['triangles']:,} triangles ({info['caps']:,} caps{_leaves(info)}), "
+               f"{info['vertices']:,} vertices, {info['up']}-up")
     if info.get("smooth_segments"):
         click.echo(f"smooth bends: +{info['smooth_segments']:,} arc segments")
     if info["copies"] > 1:
@@ -167,7 +184,7 @@ def _mesh_summary(info: dict) -> None:
         click.echo(f"textures of {name}: {baked['size'][1]}x{baked['size'][0]} "
                    f"({', '.join(kinds[k] for k in baked['kinds'])}"
                    f"{'; normal map at r/L ' + format(baked['aspect'], '.3g') if 'normal' in baked['kinds'] else ''})")
-    _levels_summary(info)
+    _levels_summary(info, verbose)
     for line in info.get("asset_lines", ()):
         click.echo(line)
     sway = info.get("animation")
@@ -177,11 +194,13 @@ def _mesh_summary(info: dict) -> None:
                    f"in {sway['skins']:,} {'skin' if sway['skins'] == 1 else 'skins'}")
 
 
-def _levels_summary(info: dict) -> None:
+def _levels_summary(info: dict, verbose: bool = False) -> None:
     levels = info.get("levels")
     if levels:
+        each = "lod{k} {rows:,} rows, {triangles:,} triangles" if verbose else \
+            "level {k}: {rows:,} branch pieces, {triangles:,} triangles"
         click.echo(f"levels of detail: {len(levels)} (" + "; ".join(
-            f"lod{k} {rows:,} rows, {triangles:,} triangles" for k, (rows, triangles) in enumerate(levels))
+            each.format(k=k, rows=rows, triangles=triangles) for k, (rows, triangles) in enumerate(levels))
             + "; each plant written once)")
 
 
@@ -190,7 +209,8 @@ def _qsm_summary(info: dict) -> None:
     unit = m.unit
     lost = 1 - info["volume"] / info["volume_frusta"] if info["volume_frusta"] else 0.0
     click.echo(f"{info['segments']:,} segments -> {info['cylinders']:,} cylinders "
-               f"(volume {lost:.3%} under the frusta's; tolerance {info['tolerance']:g}), {info['up']}-up, metres")
+               f"(volume {lost:.3%} under the tapered branches'; tolerance {info['tolerance']:g}), "
+               f"{info['up']}-up, metres")
     dbh = (f"DBH {m.dbh * unit:.4g} m" if m.dbh is not None
            else f"no DBH (the trunk is shorter than {m.breast_height * unit:g} m)")
     click.echo(f"height {m.height * unit:.4g} m; {dbh}; wood volume {m.volume * unit ** 3:.4g} m³ "

@@ -37,11 +37,12 @@ __all__ = ["cli", "main"]
 @click.version_option(package_name="plantgen")
 @debug_opt
 def cli() -> None:
-    """plantgen: L-system plants skinned with relief-mapped conical frusta.
+    """plantgen: plants grown from L-system grammars, drawn as tapered tubes with bark relief.
 
     Grammars and scenes are YAML files; every command also takes a shipped one by
     name, from any folder (`plantgen list` names them all). Run `plantgen COMMAND
-    --help` for each command's options.
+    --help` for each command's options. The paper's terms that --verbose reports use
+    (RC, RT, GS, frusta, rows) are explained in the glossary (docs: reference/glossary.md).
 
     \b
     Examples:

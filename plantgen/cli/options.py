@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from dataclasses import fields
+from dataclasses import fields, is_dataclass
 from pathlib import Path
 
 import click
@@ -21,11 +21,13 @@ from ..geometry.rays.camera import Orbit
 from ..knobs import Knob
 from ..limits import MAX_IMAGE_SIDE, Limits
 from ..limits import limits as default_limits
-from ..settings import build_settings, option_names, settings_knobs
+from ..settings import build_settings, option_names
+from .sections import LIMITS, MODEL, OTHER, OUTPUT, SectionedOption, section_of
 
-__all__ = ["MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "define_values", "finite", "input_arg",
-           "iterations_opt", "knob_option", "knob_options", "limit_opt", "limits_from", "orbit_from", "output_opt",
-           "parse_size", "quiet_opt", "seed_opt", "size_opt", "smooth_bends_opt", "take_settings"]
+__all__ = ["GLOSSARY", "MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "define_values", "finite",
+           "input_arg", "iterations_opt", "knob_option", "knob_options", "limit_opt", "limits_from", "orbit_from",
+           "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt", "smooth_bends_opt", "take_settings",
+           "verbose_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
@@ -69,27 +71,35 @@ def finite(ctx, param, value):
 #: INPUT: a grammar or scene .yaml, a shipped model's name, or a skeleton .npz.
 input_arg = click.argument("input", type=click.Path(dir_okay=False, path_type=Path))
 
-seed_opt = click.option("--seed", type=click.IntRange(min=0),
+seed_opt = click.option("--seed", type=click.IntRange(min=0), cls=SectionedOption, section=MODEL,
                         help="Override the seed of the grammar or scene file.")
 
-iterations_opt = click.option("--iterations", type=click.IntRange(min=0),
+iterations_opt = click.option("--iterations", type=click.IntRange(min=0), cls=SectionedOption, section=MODEL,
                               help="Override the grammar's iteration count.")
 
-quiet_opt = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+quiet_opt = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.", cls=SectionedOption,
+                         section=OTHER)
 
 smooth_bends_opt = click.option(
     "--smooth-bends", "smooth_bends", type=click.FloatRange(0, 180, max_open=True), default=None,
+    cls=SectionedOption, section=MODEL,
     callback=finite, metavar="ANGLE",
-    help="Replace every continuing joint bent by more than ANGLE degrees by an arc of short "
-         "frusta tangent to both segments (at most 10° per frustum), so bent branches read as "
-         "smooth tubes rather than polylines; radii and texture stay continuous. Default: off "
-         "(the frusta meet at the skeleton's joints).")
+    help="Round every joint where a branch bends by more than ANGLE degrees into an arc of short "
+         "pieces (at most 10° each), so bent branches read as smooth tubes rather than polylines; "
+         "radii and texture stay continuous. Default: off (straight pieces meet at the joints).")
+
+#: Where the glossary of the paper's terms is, as ``--help`` and the reports point to it.
+GLOSSARY = "docs: reference/glossary.md"
+
+verbose_opt = click.option(
+    "-v", "--verbose", is_flag=True, cls=SectionedOption, section=OTHER,
+    help=f"Print the detail in the renderer's own terms (RC+R, frusta, rows; {GLOSSARY}).")
 
 
 def output_opt(what: str, *, required: bool = True):
     """``-o/--output FILE``; ``what`` says what is written and how the suffix is read."""
     return click.option("-o", "--output", type=click.Path(path_type=Path),   # checked by plantgen.files.check_output
-                        required=required, help=f"File to write: {what}")
+                        required=required, help=f"File to write: {what}", cls=SectionedOption, section=OUTPUT)
 
 
 def size_opt(*param_decls: str, what: str = "Image size", default: str):
@@ -113,11 +123,13 @@ def _click_type(k: Knob):
     return str
 
 
-def knob_option(k: Knob, default, *, help: str | None = None):
-    """The click option of one knob: name, type, range, default and help from the settings."""
+def knob_option(k: Knob, default, *, help: str | None = None, section: str | None = None):
+    """The click option of one knob: name, type, range, default and help from the settings;
+    ``section``: its heading in a sectioned ``--help`` (:mod:`plantgen.cli.sections`)."""
     if k.kind == "bool":
         flag = k.flag or f"--{k.name.replace('_', '-')}/--no-{k.name.replace('_', '-')}"
-        return click.option(flag, k.name, default=default, show_default=default is not None, help=help or k.help)
+        return click.option(flag, k.name, default=default, show_default=default is not None, help=help or k.help,
+                            cls=SectionedOption, section=section)
     extra = {}
     if k.kind == "size":
         extra["callback"] = parse_size
@@ -125,19 +137,31 @@ def knob_option(k: Knob, default, *, help: str | None = None):
         extra["callback"] = finite
     shown = default is not None and k.kind != "size"
     return click.option(k.option, k.name, type=_click_type(k), default=default, show_default=shown,
-                        metavar=k.metavar, help=help or k.help, **extra)
+                        metavar=k.metavar, help=help or k.help, cls=SectionedOption, section=section, **extra)
+
+
+def owned_knobs(cls):
+    """(settings class, knob, default) of every knob of ``cls``, nested settings included, in
+    declaration order: the class says the knob's ``--help`` section."""
+    for f in fields(cls):
+        k = f.metadata.get("knob")
+        if k is not None:
+            yield cls, k, f.default
+        elif is_dataclass(f.default):
+            yield from owned_knobs(type(f.default))
 
 
 def knob_options(*classes, skip=(), helps=None):
     """Every knob of the settings ``classes`` (nested settings included) as click
     options, in declaration order; ``skip`` names knobs a command does not take, ``helps``
-    replaces a knob's help text by name (a command that says it otherwise)."""
+    replaces a knob's help text by name (a command that says it otherwise). Each option's
+    ``--help`` section is its settings class's (:func:`plantgen.cli.sections.section_of`)."""
     helps = helps or {}
     decorators = []
     for cls in classes:
-        for k, default in settings_knobs(cls):
+        for owner, k, default in owned_knobs(cls):
             if k.name not in skip:
-                decorators.append(knob_option(k, default, help=helps.get(k.name)))
+                decorators.append(knob_option(k, default, help=helps.get(k.name), section=section_of(owner)))
 
     def apply(command):
         for decorator in reversed(decorators):
@@ -192,7 +216,8 @@ def _limit_defaults() -> str:
 
 #: ``--limit NAME=N``: set a budget of plantgen.limits.Limits for this run.
 limit_opt = click.option(
-    "--limit", "limit_values", metavar="NAME=N", multiple=True, callback=_parse_limits,
+    "--limit", "limit_values", metavar="NAME=N", multiple=True, callback=_parse_limits, cls=SectionedOption,
+    section=LIMITS,
     help="Set a budget for this run, higher or lower (repeatable); a file may lower a budget, "
          f"never raise it. Names and defaults: {_limit_defaults()} (docs: how-to/untrusted-input.md).")
 
@@ -205,7 +230,7 @@ def limits_from(values: dict) -> Limits:
 #: ``--allow-path DIR``: a folder a scene or a batch spec may read grammars from besides its own.
 allow_path_opt = click.option(
     "--allow-path", "allow_paths", metavar="DIR", multiple=True,
-    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    type=click.Path(exists=True, file_okay=False, path_type=Path), cls=SectionedOption, section=LIMITS,
     help="A folder a scene (or a batch spec) may read grammars from besides its own folder and "
          "the shipped grammars (repeatable). Without it, a grammar path that leaves its folder "
          "(../x.yaml, /abs/path, a link pointing out) is refused before it is opened.")
@@ -220,6 +245,7 @@ def _set_debug(ctx, param, value):
 
 #: ``--debug``: an unexpected failure prints its Python traceback.
 debug_opt = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
+                         cls=SectionedOption, section=OTHER,
                          help="On an unexpected failure (a bug, exit status 1), print the Python "
                               "traceback too; also PLANTGEN_DEBUG=1. Bad input stays one line.")
 

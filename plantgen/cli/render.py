@@ -23,14 +23,20 @@ from .options import (
     seed_opt,
     smooth_bends_opt,
     take_settings,
+    verbose_opt,
 )
 from .progress import StageBars
+from .sections import EFFECTS, OUTPUT, QUALITY, SectionedCommand
+
+#: Where render's options that are not plain settings go in ``--help`` (and the settings
+#: that belong elsewhere than their class's section).
+SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "pose": QUALITY, "time": EFFECTS}
 
 
-@click.command()
+@click.command(cls=SectionedCommand, sections=SECTIONS)
 @input_arg
-@output_opt("the image (.png), or with --frames the animation (.gif or .webp). Default: INPUT's name "
-            "with .png (with --frames: .gif), in the current directory.", required=False)
+@output_opt("the image (.png, .jpg or .webp), or with --frames the animation (.gif or .webp). Default: "
+            "INPUT's name with .png (with --frames: .gif), in the current directory.", required=False)
 @knob_options(RenderSettings)
 @click.option("--camera-out", type=click.Path(path_type=Path),
               help="Write the camera used (eye, target, up, fov_y, width, height) as JSON.")
@@ -46,20 +52,22 @@ from .progress import StageBars
 @limit_opt
 @allow_path_opt
 @quiet_opt
+@verbose_opt
 def render(input: Path, output: Path | None, camera_out, depth_out, seed, iterations, timed_frames, smooth_bends,
-           limit_values, allow_paths, quiet, **knobs) -> None:
-    """Ray cast INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
-    into a PNG.
+           limit_values, allow_paths, quiet, verbose, **knobs) -> None:
+    """Draw INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
+    into an image (.png, .jpg or .webp) or an animation.
 
-    Skins the skeleton with conical frusta and renders them with the analytic GLSL ray
-    caster (headless EGL). Prints the GL renderer, segment count and frame time. Only
-    the effects in use are simulated: no shadow pass without shadows, no relief march
-    without relief, no re-skinning of what does not move.
+    Each branch is drawn as a tapered tube, ray cast on the GPU (headless). Prints what
+    was drawn, the effects and the frame time. Only the effects in use cost time: no
+    shadows, no relief, no motion unless asked for (--effects, --relief, --shadows).
 
-    The camera is framed automatically (or is the scene's); --azimuth, --elevation,
-    --distance or --zoom and --fov turn it around the model, or --camera takes a camera
-    JSON back. A still is drawn once; --time-frames N times N more draws and prints the
-    median. On a terminal, a line on stderr shows the stage and its progress.
+    The camera frames the model (or is the scene's); --azimuth, --elevation, --distance
+    or --zoom and --fov turn it around the model, or --camera takes a camera JSON back.
+    A still is drawn once; --time-frames N draws it N more times and prints the median.
+    On a terminal, a line on stderr shows the stage and its progress. --verbose prints
+    the detail in the renderer's own terms (RC, RT, frusta, rows), which the glossary
+    explains (docs: reference/glossary.md).
 
     \b
     Examples:
@@ -89,7 +97,7 @@ def render(input: Path, output: Path | None, camera_out, depth_out, seed, iterat
     for line in report.warnings:     # never silenced, as in grow
         click.echo(line, err=True)
     if not quiet:
-        print_report(report)
+        print_report(report, verbose)
 
 
 def shadow_line(use: ShadowUse, cache: bool = True) -> str:
@@ -104,27 +112,37 @@ def shadow_line(use: ShadowUse, cache: bool = True) -> str:
     return text + (", every draw (the geometry moves)" if cache else ", every draw (--no-shadow-cache)")
 
 
-def print_report(report: RenderReport) -> None:
-    """The render's report on stdout: GL renderer, segments, effects, frame time, files."""
-    mode = report.settings.describe() + (" (--method auto)" if report.request.march.method == "auto" else "")
-    cam = report.camera
-    click.echo(f"GL renderer: {report.renderer}")
+def model_line(report: RenderReport, verbose: bool = False) -> str:
+    """What was drawn: the branch segments and the pieces on the GPU (``verbose``: in the
+    renderer's terms, frusta and rows)."""
     placed = report.placed
     traced = report.settings.method == "rt"
-    if placed is not None:
-        drawn = report.result.stats.segments
+    if placed is None:
+        kib = report.rows * RECORD_BYTES / 1024
+        if verbose:
+            return (f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
+                    f"each, {kib:.1f} KiB uploaded)")
+        pieces = f", drawn as {report.rows:,} pieces" if report.rows != report.segments else ""
+        return f"model: {report.segments:,} branch segments{pieces} ({kib:.1f} KiB on the GPU)"
+    drawn = report.result.stats.segments
+    kib = placed.unique_rows * RECORD_BYTES / 1024
+    copies = f"{placed.copies:,} copies of {len(placed.plants)} plants"
+    if verbose:
         detail = "traced (every row: a BVH of each plant, one over the copies)" if traced else \
             f"drawn (level of detail: {report.lod_pixels:g} px)"
-        click.echo(f"segments: {report.segments:,} placed ({placed.copies:,} copies of {len(placed.plants)} plants), "
-                   f"{placed.unique_rows:,} frusta on the GPU ({placed.unique_rows * RECORD_BYTES / 1024:.1f} KiB), "
-                   f"{drawn:,} {detail}")
-    else:
-        click.echo(f"segments: {report.segments:,} -> {report.rows:,} frusta ({RECORD_BYTES} bytes "
-                   f"each, {report.rows * RECORD_BYTES / 1024:.1f} KiB uploaded)")
-    shadows = "shadow rays" if traced else f"shadow map {report.shadows.resolution}²" if report.shadows else ""
-    click.echo("effects: " + (", ".join(report.effects) or "none") + (f" ({shadows})" if report.shadows else ""))
-    if report.shadow_use is not None:
-        click.echo(shadow_line(report.shadow_use, report.shadows.cache))
+        return (f"segments: {report.segments:,} placed ({copies}), {placed.unique_rows:,} frusta on the GPU "
+                f"({kib:.1f} KiB), {drawn:,} {detail}")
+    detail = "all traced" if traced else f"{drawn:,} drawn (level of detail: {report.lod_pixels:g} px)"
+    return (f"scene: {copies}, {report.segments:,} branch segments in all; {placed.unique_rows:,} branch pieces "
+            f"on the GPU ({kib:.1f} KiB), {detail}")
+
+
+def frame_line(report: RenderReport, verbose: bool = False) -> str:
+    """The frame's (or the frames' median) time, size and way of drawing."""
+    cam = report.camera
+    traced = report.settings.method == "rt"
+    mode = report.settings.describe() if verbose else report.settings.summary()
+    mode += " (--method auto)" if report.request.march.method == "auto" else ""
     size = f"{cam.width}x{cam.height}"
     if report.ssaa > 1:
         n = report.ssaa
@@ -133,13 +151,24 @@ def print_report(report: RenderReport) -> None:
     if report.frames > 1:
         where = (f"on the GPU in {report.gpu_frames} of {report.frames} frames" if report.gpu_frames
                  else "on the CPU")
-        click.echo(f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
-                   f"{report.update_ms:.2f} ms update (pose, skin, {'BVH refit, ' if traced else ''}upload: {where}) "
-                   f"at {size}, {mode}")
-    elif report.timed:
-        click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
-                   f"(median of {report.timed} frames after a warm-up)")
-    else:
-        click.echo(f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
-                   "(one draw, the driver's first: --time-frames N for a median)")
+        work = f"pose, skin, {'BVH refit, ' if traced else ''}upload: {where}" if verbose else f"posed {where}"
+        return (f"frames: {report.frames}, median {report.frame_ms:.1f} ms render + "
+                f"{report.update_ms:.2f} ms update ({work}) at {size}, {mode}")
+    if report.timed:
+        return f"frame: {report.frame_ms:.1f} ms at {size}, {mode} (median of {report.timed} frames after a warm-up)"
+    return (f"frame: {report.frame_ms:.1f} ms at {size}, {mode} "
+            "(one draw, the driver's first: --time-frames N for a median)")
+
+
+def print_report(report: RenderReport, verbose: bool = False) -> None:
+    """The render's report on stdout: GL renderer, what was drawn, effects, frame time,
+    files; in plain words, or with ``verbose`` in the renderer's terms (RC+R, frusta, rows)."""
+    click.echo(f"GL renderer: {report.renderer}")
+    click.echo(model_line(report, verbose))
+    traced = report.settings.method == "rt"
+    shadows = "shadow rays" if traced else f"shadow map {report.shadows.resolution}²" if report.shadows else ""
+    click.echo("effects: " + (", ".join(report.effects) or "none") + (f" ({shadows})" if report.shadows else ""))
+    if report.shadow_use is not None:
+        click.echo(shadow_line(report.shadow_use, report.shadows.cache))
+    click.echo(frame_line(report, verbose))
     click.echo("wrote " + ", ".join(str(p) for p in report.written))

@@ -27,6 +27,7 @@ from .options import (
     smooth_bends_opt,
     take_settings,
 )
+from .sections import EFFECTS, MODEL, OUTPUT, QUALITY, SectionedCommand
 
 
 def _keys_epilog() -> str:
@@ -35,7 +36,12 @@ def _keys_epilog() -> str:
         f"  {k.ljust(width)}  {t}" for k, t in help_lines())
 
 
-@click.command(epilog=_keys_epilog())
+#: Where view's options go in ``--help`` (beside the settings' own sections).
+SECTIONS = {"size": OUTPUT, "ssaa": QUALITY, "pose": QUALITY, "time": EFFECTS, "start_method": QUALITY,
+            "subdiv": QUALITY, "shots": OUTPUT, "snapshot": OUTPUT, "watch": MODEL}
+
+
+@click.command(epilog=_keys_epilog(), cls=SectionedCommand, sections=SECTIONS)
 @input_arg
 @knob_options(RenderSettings, skip=("frames", "fps", "method"), helps={
     "size": "Window size (WIDTHxHEIGHT pixels; default: the camera file's, else "

@@ -30,7 +30,7 @@ from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
 from .material_uniforms import HeightTextures, palette_uniforms, shading_uniforms
-from .passes import LightWindow, ShadowPass, light_window
+from .passes import LightWindow, ShadowPass, light_window, traced_look
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
 from .supersample import GpuResolve
@@ -132,6 +132,10 @@ class FrameLighting:
     receiver_defines : defines of the receivers' programs besides ``SHADOWS``: with shadow
         rays instead of a map (``SHADOW_RAYS``, render --method rt, :mod:`plantgen.gl.rt`)
         those of the BVH they trace; then ``window`` is None and no map is drawn
+    look : the looks (:class:`~plantgen.settings.LookSettings`; None: none, today's
+        shading), their defines by program :func:`~plantgen.gl.passes.traced_look`
+    bvh_defines : with the sky light, the defines of the BVH its rays trace
+    sky : with the sky light, the uniforms of the programs that trace it (the leaves')
     """
 
     names: tuple
@@ -141,6 +145,18 @@ class FrameLighting:
     anchor: np.ndarray | None = None
     caster_window: LightWindow | None = None
     receiver_defines: dict = field(default_factory=dict)
+    look: object = None
+    bvh_defines: dict = field(default_factory=dict)
+    sky: dict = field(default_factory=dict)
+
+    def defines(self, program: str) -> dict:
+        """The looks' defines of ``program`` in this frame (:func:`traced_look`)."""
+        return traced_look(self.look, program, self.shadowed, self.bvh_defines)
+
+    @property
+    def srgb(self) -> bool:
+        """Whether the frame is encoded with the tone curve and sRGB (else c^(1/2.2))."""
+        return self.look is not None and self.look.tone
 
     @property
     def shadowed(self) -> bool:
@@ -283,30 +299,33 @@ class OffscreenRenderer:
 
     # ------------------------------------------------------------------ frame set-up
     def _lighting(self, material_names, ground: Ground | None, light_dir, shadows, caster_box,
-                  eye, anchor=None) -> FrameLighting:
+                  eye, anchor=None, look=None) -> FrameLighting:
         """The frame's palette and light: ``light_dir`` (3,) towards the light (None: the
         model light); with ``shadows``, the light's window around ``caster_box`` (2, 3)
         world box, relative to the light pass's ``anchor`` (default :func:`light_anchor`
-        of the box) and, for the receivers, to ``eye``."""
+        of the box) and, for the receivers, to ``eye``; ``look`` the looks (a
+        :class:`~plantgen.settings.LookSettings` or None)."""
         if light_dir is None:
             light_dir = MODEL_LIGHT.towards()
         names = tuple(material_names) + ((ground.material,) if ground is not None else ())
-        shading = {**shading_uniforms(light_dir), **palette_uniforms(names)}
+        shading = {**shading_uniforms(light_dir), **palette_uniforms(names),
+                   **(look.shading_uniforms() if look is not None else {})}
         if shadows is None:
-            return FrameLighting(names, shading, None, {})
+            return FrameLighting(names, shading, None, {}, look=look)
         anchor = light_anchor(caster_box) if anchor is None else np.asarray(anchor, dtype=np.float64)
         caster_window = light_window(caster_box, -np.asarray(light_dir, dtype=np.float64), anchor)
         window = caster_window.shifted(anchor - np.asarray(eye, dtype=np.float64))
         self.last_light_window = window
         receiver = dict(window.uniforms(), shadow_bias=shadows.bias * window.texel_size(shadows.resolution),
-                        shadow_max_slope=shadows.max_slope, shadow_map=1)
-        return FrameLighting(names, shading, window, receiver, anchor, caster_window)
+                        shadow_max_slope=shadows.max_slope, shadow_map=1,
+                        **(look.sun_uniforms() if look is not None and look.sun_angle > 0 else {}))
+        return FrameLighting(names, shading, window, receiver, anchor, caster_window, look=look)
 
     def _sky(self, view: FrameView, lighting: FrameLighting, background=None):
         """The background's full-screen triangle (vertex array cached per program): the sky,
         or with ``background`` (r, g, b, a) a flat colour (see :func:`check_background`)."""
         if background is None:
-            sky = build_program(self.ctx, "sky.glsl")
+            sky = build_program(self.ctx, "sky.glsl", lighting.defines("sky.glsl"))
             set_uniforms(sky, **view.ray_uniforms(), **lighting.shading)
         else:
             sky = build_program(self.ctx, "sky.glsl", {"FLAT_BACKGROUND": True})
@@ -326,6 +345,7 @@ class OffscreenRenderer:
         ctx = self.ctx
         shadowed = lighting.window is not None
         program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines,
+                                                     **lighting.defines("ground.glsl"),
                                                      "FLAT_BACKGROUND": background is not None})
         set_uniforms(program, **lighting.shading, **lighting.receiver, **ground.uniforms(),
                      **({} if background is None else {"background": tuple(background)}),
@@ -462,23 +482,24 @@ class OffscreenRenderer:
         frame_ms, shadow_ms, cached = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
                                                        shadows, light, extras)
         color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
-                                      alpha=background is not None and background[3] < 1)
+                                      alpha=background is not None and background[3] < 1, srgb=lighting.srgb)
         work = counter.read(dist) if counter is not None else None
         return FrameOutput(color, dist, frame_ms, shadow_ms, work, cached)
 
     def _read_back(self, width: int, height: int, *, ssaa: int = 1,
-                   alpha: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                   alpha: bool = False, srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
-        averaged down on the GPU first (:class:`plantgen.gl.supersample.GpuResolve`;
-        ``last_resolve_ms``: that pass and its read back)."""
+        averaged down on the GPU first, in linear light (``srgb`` the frame's encoding;
+        :class:`plantgen.gl.supersample.GpuResolve`; ``last_resolve_ms``: that pass and its
+        read back)."""
         fbo = self._fbo
         self.last_resolve_ms = 0.0
         if ssaa > 1:
             t0 = time.perf_counter()
             out = self._resolver.resolve(fbo.color_attachments[0], fbo.color_attachments[1], width, height,
-                                         ssaa, alpha)
+                                         ssaa, alpha, srgb=srgb)
             self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
             return out
         k = 4 if alpha else 3

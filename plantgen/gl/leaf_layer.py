@@ -107,20 +107,26 @@ class LeafLayer:
         vbo, ibo, origin = self._upload(polygons, labels)
         shadowed = lighting.window is not None and labels is None
         receives = lighting.shadowed and labels is None
+        looks = lighting.defines("leaf.glsl") if labels is None else {}
         program = build_program(ctx, "leaf.glsl", {"SHADOWS": receives, "LABELS": labels is not None,
-                                                   **(lighting.receiver_defines if receives else {})})
-        set_uniforms(program, **({} if labels is not None else {**lighting.shading, **lighting.receiver}),
+                                                   **(lighting.receiver_defines if receives else {}), **looks})
+        shading = {**lighting.shading, **lighting.receiver, **(lighting.sky if looks.get("SKY_LIGHT") else {})}
+        set_uniforms(program, **({} if labels is not None else shading),
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()))
         count = polygons.triangles.size
         layout = LEAF_VERTEX_LAYOUT if labels is None else ("3f 12x 2f", "position", "shade")  # no normal
         vao = ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
+        nearest = self._nearest_first(vbo, ibo, origin, view, count) if looks.get("SKY_LIGHT") else None
 
         def frame_draw():
             ctx.disable(ctx.CULL_FACE)
+            if nearest is not None:
+                nearest[0]()
             vao.render(mode=ctx.TRIANGLES, vertices=count)
+            ctx.depth_func = "<"
         if not shadowed:
-            return frame_draw, None, [vao]
+            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])]
         caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor
         set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
                      origin_from_eye=tuple((origin - lighting.anchor).tolist()))
@@ -130,4 +136,25 @@ class LeafLayer:
         def light_draw():
             ctx.disable(ctx.CULL_FACE)
             light_vao.render(mode=ctx.TRIANGLES, vertices=count)
-        return frame_draw, light_draw, [vao, light_vao]
+        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])]
+
+    def _nearest_first(self, vbo, ibo, origin, view, count: int):
+        """A depth-only pass of the leaves from the eye (``leaf.glsl``'s SHADOW_PASS, no colour
+        written), after which the shaded pass draws with the depth test ``<=``: only the
+        nearest leaf of a pixel runs the shading, for a shading that costs (the sky light's
+        rays); leaves behind it are dropped by the early depth test. Returns (the draw,
+        its vertex array to release)."""
+        ctx = self.ctx
+        depth = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True, "EYE_DEPTH": True})
+        set_uniforms(depth, view_projection=mat4(view.view_projection),
+                     origin_from_eye=tuple((origin - view.eye).tolist()))
+        vao = ctx.vertex_array(depth, [(vbo, "3f 20x", "position")], index_buffer=ibo, index_element_size=4)
+
+        def draw():
+            fbo = ctx.fbo
+            mask = fbo.color_mask
+            fbo.color_mask = tuple((False,) * 4 for _ in mask) if isinstance(mask[0], tuple) else (False,) * 4
+            vao.render(mode=ctx.TRIANGLES, vertices=count)
+            fbo.color_mask = mask
+            ctx.depth_func = "<="
+        return draw, vao

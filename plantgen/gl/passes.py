@@ -31,7 +31,7 @@ from ..settings import ShadowSettings
 from ..tolerances import tol
 from .context import release_framebuffer
 
-__all__ = ["LightWindow", "light_window", "ShadowPass", "light_defines", "light_program",
+__all__ = ["LightWindow", "light_window", "ShadowPass", "light_defines", "light_program", "look_defines", "traced_look",
            "program_variants", "frame_passes"]
 
 #: Shadow maps a renderer keeps (by what they depend on): two, so a run that alternates
@@ -56,18 +56,48 @@ def light_program(settings, shadows: ShadowSettings) -> tuple[str, dict]:
     return "raycast.glsl", light_defines(settings, shadows)
 
 
+def look_defines(look, program: str, shadowed: bool = False) -> dict:
+    """The defines of the looks (:class:`~plantgen.settings.LookSettings`, None: none) that
+    ``program`` takes: every program its tone curve (``TONE_MAP``, ``TONE_ACES``), the shadow receivers the
+    soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``)
+    and the leaves the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
+    off gives no define: the program is today's."""
+    if look is None:
+        return {}
+    on = look.defines()
+    out = {"TONE_MAP": on["TONE_MAP"], "TONE_ACES": on["TONE_ACES"]}
+    if program == "sky.glsl":
+        return out
+    out["SOFT_SUN"] = on["SOFT_SUN"] and shadowed
+    if program in ("raycast.glsl", "rt.glsl", "leaf.glsl"):
+        out["SKY_LIGHT"] = on["SKY_LIGHT"]
+    if program == "leaf.glsl":
+        out["TRANSLUCENT"] = on["TRANSLUCENT"]
+    return out
+
+
+def traced_look(look, program: str, shadowed: bool, bvh_defines: dict | None) -> dict:
+    """:func:`look_defines`, with those of the BVH (``bvh_defines``) where the sky light
+    traces it."""
+    out = look_defines(look, program, shadowed)
+    return {**out, **(bvh_defines or {})} if out.get("SKY_LIGHT") else out
+
+
 def program_variants(settings, shadows: ShadowSettings | None, ground: bool, flat_background: bool = False,
-                     leaves: bool = False) -> list:
+                     leaves: bool = False, bvh_defines: dict | None = None) -> list:
     """(program file, defines) of every program one frame uses.
 
     ``settings`` is the :class:`~plantgen.gl.raycast.RaycastSettings` (relief on iff the
     effects hold ``relief``); ``shadows`` is None without the ``shadows`` effect (then no
     shadow pass runs and no program samples a map); ``ground``: the scene has a ground;
     ``flat_background``: a flat colour (or transparency) instead of the sky; ``leaves``:
-    the model has leaf polygons (shaders/leaf.glsl, drawn by either renderer).
+    the model has leaf polygons (shaders/leaf.glsl, drawn by either renderer);
+    ``bvh_defines``: those of the BVH the sky light traces (with ``SKY_LIGHT``).
     """
     shadowed = shadows is not None
-    out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
+    look = getattr(settings, "look", None)
+    labels = bool(getattr(settings, "labels", False))
+    out = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else look_defines(look, "sky.glsl"))]
     if shadowed:
         out.append(light_program(settings, shadows))
         if ground:
@@ -75,11 +105,13 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
         if leaves:
             out.append(("leaf.glsl", {"SHADOW_PASS": True}))
     if ground:
-        out.append(("ground.glsl", {"SHADOWS": shadowed, "FLAT_BACKGROUND": flat_background}))
-    out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed}))
+        out.append(("ground.glsl", {"SHADOWS": shadowed, "FLAT_BACKGROUND": flat_background,
+                                    **look_defines(look, "ground.glsl", shadowed)}))
+    out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
+                                 **({} if labels else traced_look(look, "raycast.glsl", shadowed, bvh_defines))}))
     if leaves:
-        labels = bool(getattr(settings, "labels", False))
-        out.append(("leaf.glsl", {"SHADOWS": shadowed and not labels, "LABELS": labels}))
+        out.append(("leaf.glsl", {"SHADOWS": shadowed and not labels, "LABELS": labels,
+                                  **({} if labels else traced_look(look, "leaf.glsl", shadowed, bvh_defines))}))
     return out
 
 

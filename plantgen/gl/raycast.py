@@ -32,6 +32,7 @@ from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
 from ..settings import RaycastSettings, ShadowSettings
+from .bvh_cache import BvhCache
 from .context import gl_context
 from .frame import (
     FrameLighting,
@@ -45,7 +46,7 @@ from .frame import (
 )
 from .instanced import IDENTITY_PLACEMENT, draw_copies, eye_copy_draws, light_copy_draws
 from .leaf_layer import leaf_bounds, union_box
-from .passes import frame_passes, light_defines, light_program, program_variants
+from .passes import frame_passes, light_defines, light_program, program_variants, traced_look
 from .records import (
     PYRAMID_CORNERS,
     PYRAMID_TRIANGLES,
@@ -72,7 +73,7 @@ CASTER_MESH_BYTES_PER_TRIANGLE = 96
 CASTER_MESHES_KEPT = 8
 
 
-class Raycaster(OffscreenRenderer):
+class Raycaster(OffscreenRenderer, BvhCache):
     """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
 
     Programs are compiled per variant (defines) and cached; nothing is compiled or run that
@@ -90,12 +91,14 @@ class Raycaster(OffscreenRenderer):
         # the mesh caster's meshes, least recently used first:
         # (frusta, level, relief, origin, vbo, ibo, indices, bytes counted)
         self._caster_meshes: list[tuple] = []
+        self._init_bvh()         # the sky light's BVH (BvhCache), built when asked
 
     def release(self) -> None:
         """Free every GL object of this renderer, a placed scene's records and the mesh
         caster's mesh included."""
         self._release_placed()
         self._release_caster_mesh()
+        self._release_bvh()
         super().release()
 
     def _release_caster_mesh(self, keep: int = 0) -> None:
@@ -161,28 +164,24 @@ class Raycaster(OffscreenRenderer):
             :class:`~plantgen.geometry.rays.instances.PlacedPlants` drawn instanced
             (:mod:`plantgen.gl.instanced`: records per distinct plant, uploaded once)
         camera : the view; rays go through pixel centres
-        settings : relief on/off and its step knobs
+        settings : relief on/off and its step knobs, the looks (``look``; with ``sky`` a BVH)
         material_names : names of the material indices (choose colours and height maps)
         light_dir : (3,) direction towards the light (normalised here); default: the
             model light of :mod:`plantgen.geometry.stage`
         ground : optional ground square, rasterised into the same depth buffer
         shadows : None (no shadow pass, no shadow map sampled) or the shadow map's knobs:
-            the frusta and the ground first write their depth into the light's map, then
-            every surface samples it (plantgen.gl.passes)
+            casters write their depth into the light's map, every surface samples it
         shadow_box : (2, 3) world box the light's window must cover (default: the frusta's
-            bounds); an animation passes one box for all frames, so the map's texels stay
-            put and shadows do not shimmer
-        record_buffer : a moderngl buffer already holding ``pack_records(frusta,
-            camera.eye)`` (an animation updates only what moved); None: packed and
-            uploaded here. Its contents are the caller's (an animation rewrites them in
-            place), so the light's pass draws them as they are (relative to the eye) and
-            its map is drawn every frame, never kept; without it the light's records are
-            packed relative to the light's anchor, once per map, and the map is kept
+            bounds); an animation passes one for all frames (no shimmer)
+        record_buffer : a moderngl buffer already holding ``pack_records(frusta, camera.eye)``
+            (an animation updates only what moved); None: packed and uploaded here. Its
+            contents are the caller's, so the light's pass draws them as they are and its
+            map is drawn every frame; without it the light's records are packed relative
+            to the light's anchor, once per map, and the map is kept
         count_work : a diagnostic render that also counts the fragments shaded and the
-            relief samples taken (``stats.work``); its time is not the plain program's
+            relief samples taken (``stats.work``)
         background : None (the sky) or (r, g, b, a) in [0, 1], display-encoded: a flat
-            colour; a = 0 gives a transparent background and a colour with alpha
-            (``color`` is (h, w, 4))
+            colour; a = 0: transparent, ``color`` (h, w, 4)
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
@@ -198,15 +197,19 @@ class Raycaster(OffscreenRenderer):
         model_box = union_box(rows_box(frusta) if n else None, leaf_box)
         view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
                           + ([] if model_box is None else [box_corners(model_box)]))
+        sky_bvh = self._sky_bvh(settings, frusta, leaves, camera, record_buffer)
         programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
-                                  leaf_box is not None)
+                                  leaf_box is not None, bvh_defines=sky_bvh.defines() if sky_bvh else None)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
                                             else model_box if model_box is not None else rows_box(frusta))
-        lighting = self._lighting(material_names, ground, light_dir, shadows, box, view.eye,
-                                  anchor=None if record_buffer is None else view.eye)
+        lighting = self._sky_lighting(self._lighting(
+            material_names, ground, light_dir, shadows, box, view.eye, anchor=None if record_buffer is None
+            else view.eye, look=None if settings.labels else settings.look), sky_bvh, settings, view, repeats,
+            model_box)
         extras = self._surroundings(ground, leaves, view, lighting, background=background,
                                     labels=leaf_labels if settings.labels else None)
+        extras.before[:0] = [sky_bvh.bind] if sky_bvh is not None else []
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n and not placed else None)
         if record_buffer is None:
@@ -228,20 +231,45 @@ class Raycaster(OffscreenRenderer):
             shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
+    def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
+        """The GPU BVH the sky light traces (the ``sky`` effect; None without it): the
+        model's rows and leaves, built and uploaded once per model and eye (BvhCache).
+        Frames posed on the GPU (``record_buffer``) have no BVH: one line."""
+        if settings.labels or not settings.look.sky or not (len(frusta) or leaves is not None):
+            return None
+        if record_buffer is not None:
+            raise PlantgenError("the sky light traces a BVH, which the ray caster's animation frames (posed on the "
+                                "GPU) do not have: animate it with --method rt, or leave out the sky effect")
+        return self.gpu_bvh(frusta, leaves, camera.eye)
+
+    @staticmethod
+    def _sky_lighting(lighting: FrameLighting, gpu, settings: RaycastSettings, view: FrameView, repeats,
+                      model_box) -> FrameLighting:
+        """``lighting`` with the sky light's BVH defines and uniforms (its rays' march, the
+        pixel footprint, the reach in the model's size) when ``gpu`` is given."""
+        if gpu is None:
+            return lighting
+        size = float(np.linalg.norm(np.subtract(*model_box))) if model_box is not None else 1.0
+        march = {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
+        sky = {**settings.look.sky_uniforms(size), **march, "texture_repeat": repeats,
+               "pixel_footprint": view.pixel_footprint()}
+        return replace(lighting, bvh_defines=gpu.defines(), sky=sky)
+
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
-                  flat_background: bool = False, leaves: bool = False) -> dict:
+                  flat_background: bool = False, leaves: bool = False, bvh_defines: dict | None = None) -> dict:
         """Build every program the frame uses (plantgen.gl.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
-        (file, defines switched on) built."""
-        variants = program_variants(settings, shadows, ground, flat_background, leaves)
+        (file, defines switched on) built. ``bvh_defines``: those of the sky light's BVH."""
+        variants = program_variants(settings, shadows, ground, flat_background, leaves, bvh_defines)
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
         for name, defines in variants:
             build_program(self.ctx, name, defines)
         shadowed = shadows is not None
+        looks = {} if settings.labels else traced_look(settings.look, "raycast.glsl", shadowed, bvh_defines)
         frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
-                                                          "STATS": count_work})
+                                                          "STATS": count_work, **looks})
         light = build_program(self.ctx, *light_program(settings, shadows)) if shadowed else None
         return {"frame": frame, "light": light, "built": built}
 
@@ -256,7 +284,8 @@ class Raycaster(OffscreenRenderer):
         """Set the eye's frusta program and return (draw callable, vertex arrays to release,
         rows drawn). ``rec_buf``: the records' buffer, or a PlacedPlants drawn copy by copy
         (:mod:`plantgen.gl.instanced`) with ``lod_pixels``."""
-        set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver,
+        sky = {k: v for k, v in lighting.sky.items() if k.startswith("sky_")}   # the rest: set below
+        set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver, **sky,
                      **settings.march_uniforms(), **IDENTITY_PLACEMENT, texture_repeat=repeats,
                      pixel_footprint=view.pixel_footprint(),
                      view_projection=mat4(view.view_projection),

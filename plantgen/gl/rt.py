@@ -33,20 +33,15 @@ the frame's float64 rows are what a refit from the float64 boxes needs to lose n
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 
-import numpy as np
-
 from ..errors import PlantgenError
-from ..geometry.rays.bvh import TOP_LEAF_SIZE, build_bvh, build_scene_bvh, copy_boxes, refit_bvh
-from ..geometry.rays.instances import PlacedPlants
-from ..geometry.rays.reference import row_boxes
+from .bvh_cache import leaf_triangles
 from .frame import FrameLighting, FrameView
-from .passes import frame_passes
+from .passes import frame_passes, look_defines, traced_look
 from .raycast import Raycaster
 from .shaders import build_program, set_uniforms
-from .trace import GPU_LEAF_SIZE, GpuPlant, upload_bvh
+from .trace import GPU_LEAF_SIZE
 
 __all__ = ["RayTracer", "leaf_triangles", "SHADOW_RAY_OFFSET", "choose_method", "RT_ROWS_PER_PIXEL",
            "RT_PLACED_PER_DISTINCT"]
@@ -92,20 +87,6 @@ def choose_method(method: str, *, placed_rows: int, distinct_rows: int, pixels: 
 _ROW_DEFINES = ("RELIEF", "V_EXACT", "MARCH_FIXED", "HEIGHT_FETCH4")
 
 
-def leaf_triangles(leaves) -> np.ndarray:
-    """(t, 3, 3) float64 world triangles of a Polygons (none: (0, 3, 3))."""
-    if leaves is None or not len(leaves.triangles):
-        return np.zeros((0, 3, 3))
-    return np.asarray(leaves.vertices, np.float64)[np.asarray(leaves.triangles)]
-
-
-def _triangle_boxes(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Boxes of triangles padded for rounding (as the scan's)."""
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    pad = 1e-9 * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True) + 1e-12
-    return lo - pad, hi + pad
-
-
 class RayTracer(Raycaster):
     """Renders Frusta or a PlacedPlants by tracing each pixel's ray through a BVH (module
     docstring); the same ``render`` arguments as :class:`Raycaster` but for GPU-posed
@@ -123,79 +104,8 @@ class RayTracer(Raycaster):
                  shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False):
         super().__init__(ctx, limits)
         self.leaf_size, self.method, self.refit = leaf_size, method, bool(refit)
-        self.refits = 0          # BVHs refitted (not built) so far
         self.shadow_ray_offset = float(shadow_ray_offset)
-        self._built = None       # (model, leaves, plants, top, matrices, copy_plant)
-        self._gpu = None         # (model, leaves, eye, GpuBvh)
         self._frame = None       # the frame being rendered: model, leaves, settings
-        #: milliseconds of the last BVH build (0 when kept) and upload
-        self.last_build_ms = 0.0
-        self.last_upload_ms = 0.0
-
-    def release(self) -> None:
-        if self._gpu is not None:
-            self._gpu[3].release()
-            self._gpu = None
-        super().release()
-
-    # ------------------------------------------------------------------ the BVH
-    def _build(self, model, leaves):
-        """The BVH of ``model`` (Frusta or PlacedPlants) and ``leaves`` (world Polygons or
-        None), built once per pair of objects."""
-        if self._built is not None and self._built[0] is model and self._built[1] is leaves:
-            self.last_build_ms = 0.0
-            return self._built[2:]
-        t0 = time.perf_counter()
-        tri = leaf_triangles(leaves)
-        build = {"leaf_size": self.leaf_size, "method": self.method}
-        if isinstance(model, PlacedPlants):
-            scene = build_scene_bvh(model, **build)
-            plants = [GpuPlant(p.frusta, None, b) for p, b in zip(model.plants, scene.blas, strict=True)]
-            top, matrices, copy_plant = scene.tlas, scene.matrix, scene.plant
-            if len(tri):      # the leaves: one more plant, placed once where they are
-                t_lo, t_hi = _triangle_boxes(tri)
-                bvh = build_bvh(t_lo, t_hi, **build)
-                plants.append(GpuPlant(None, tri, bvh))
-                c_lo, c_hi = copy_boxes(bvh.lo[0], bvh.hi[0], np.eye(4)[None])
-                top = build_bvh(np.concatenate([scene.copy_lo, c_lo]), np.concatenate([scene.copy_hi, c_hi]),
-                                leaf_size=TOP_LEAF_SIZE, method=self.method)
-                matrices = np.concatenate([matrices, np.eye(4)[None]])
-                copy_plant = np.r_[copy_plant, len(plants) - 1]
-        else:
-            lo, hi = row_boxes(model, shell=True) if len(model) else (np.zeros((0, 3)), np.zeros((0, 3)))
-            if len(tri):
-                t_lo, t_hi = _triangle_boxes(tri)
-                lo, hi = np.concatenate([lo, t_lo]), np.concatenate([hi, t_hi])
-            last = self._built[2][0] if self._built is not None and self._built[3] is None else None
-            if self.refit and last is not None and last.rows == len(model) and len(last.bvh.prims) == len(lo):
-                bvh = refit_bvh(last.bvh, lo, hi)        # an animation's next frame: the same rows moved
-                self.refits += 1
-            else:
-                bvh = build_bvh(lo, hi, **build)
-            plants = [GpuPlant(model if len(model) else None, tri, bvh)]
-            top = matrices = copy_plant = None
-        self._built = (model, leaves, plants, top, matrices, copy_plant)
-        self.last_build_ms = (time.perf_counter() - t0) * 1e3
-        return self._built[2:]
-
-    def gpu_bvh(self, model, leaves, eye):
-        """The uploaded BVH of ``model`` and ``leaves`` relative to ``eye`` (kept while all
-        three stay the same)."""
-        eye = np.asarray(eye, np.float64)
-        g = self._gpu
-        if g is not None and g[0] is model and g[1] is leaves and np.array_equal(g[2], eye):
-            self.last_build_ms = self.last_upload_ms = 0.0
-            return g[3]
-        plants, top, matrices, copy_plant = self._build(model, leaves)
-        t0 = time.perf_counter()
-        if g is not None:
-            g[3].release()
-            self._gpu = None
-        gpu = upload_bvh(self.ctx, plants, eye, top=top, matrices=matrices, copy_plant=copy_plant,
-                         max_bytes=self.limits.max_render_bytes)
-        self._gpu = (model, leaves, eye.copy(), gpu)
-        self.last_upload_ms = (time.perf_counter() - t0) * 1e3
-        return gpu
 
     # ------------------------------------------------------------------ the frame
     def render(self, frusta, camera, settings=None, material_names=("bark",), light_dir=None, ground=None, *,
@@ -230,33 +140,41 @@ class RayTracer(Raycaster):
         return {**defines, **gpu.defines(), "SHADOWS": shadows is not None,
                 "SHADOW_RAYS": shadows is not None}
 
+    def _sky_bvh(self, settings, frusta, leaves, camera, record_buffer=None):
+        frame = self._frame
+        return frame["gpu"] if frame is not None and settings.look.sky and not frame["gpu"].empty else None
+
     def _programs(self, settings, shadows, ground: bool, count_work: bool = False, flat_background: bool = False,
-                  leaves: bool = False) -> dict:
+                  leaves: bool = False, bvh_defines: dict | None = None) -> dict:
         frame = self._frame
         defines = self._defines(settings, shadows, frame["gpu"])
         receivers = {k: v for k, v in defines.items() if k != "SHADOWS"} if shadows is not None else {}
-        variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else {})]
+        look, shadowed = settings.look, shadows is not None
+        variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else look_defines(look, "sky.glsl"))]
         if ground:
-            variants.append(("ground.glsl", {"SHADOWS": shadows is not None, **receivers,
-                                             "FLAT_BACKGROUND": flat_background}))
+            variants.append(("ground.glsl", {"SHADOWS": shadowed, **receivers, "FLAT_BACKGROUND": flat_background,
+                                             **look_defines(look, "ground.glsl", shadowed)}))
+        defines = {**defines, **traced_look(look, "rt.glsl", shadowed, bvh_defines)}
         variants.append(("rt.glsl", defines))
         if leaves:
-            variants.append(("leaf.glsl", {"SHADOWS": shadows is not None, "LABELS": False, **receivers}))
+            variants.append(("leaf.glsl", {"SHADOWS": shadowed, "LABELS": False, **receivers,
+                                           **traced_look(look, "leaf.glsl", shadowed, bvh_defines)}))
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
         for name, d in variants:
             build_program(self.ctx, name, d)
         return {"frame": build_program(self.ctx, "rt.glsl", defines), "light": None, "built": built}
 
-    def _lighting(self, material_names, ground, light_dir, shadows, caster_box, eye, anchor=None) -> FrameLighting:
-        base = super()._lighting(material_names, ground, light_dir, None, caster_box, eye, anchor)
+    def _lighting(self, material_names, ground, light_dir, shadows, caster_box, eye, anchor=None,
+                  look=None) -> FrameLighting:
+        base = super()._lighting(material_names, ground, light_dir, None, caster_box, eye, anchor, look)
         frame = self._frame
         if shadows is None or frame is None:
             return base
         settings = frame["settings"]
         defines = self._defines(settings, shadows, frame["gpu"])
         receiver = {"shadow_ray_offset": self.shadow_ray_offset, "texture_repeat": frame["repeats"],
-                    **self._march(settings)}
+                    **self._march(settings), **(look.sun_uniforms() if look is not None and look.sun_angle > 0 else {})}
         return replace(base, receiver=receiver,
                        receiver_defines={k: v for k, v in defines.items() if k != "SHADOWS"})
 
@@ -281,7 +199,7 @@ class RayTracer(Raycaster):
 
     def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting, settings, rec_buf, repeats, tex,
                      n: int, lod_pixels: float = 0.0):
-        set_uniforms(program, **{**view.ray_uniforms(), **lighting.shading, **lighting.receiver,
+        set_uniforms(program, **{**view.ray_uniforms(), **lighting.shading, **lighting.receiver, **lighting.sky,
                                  **self._march(settings), "texture_repeat": repeats,
                                  "pixel_footprint": view.pixel_footprint(),
                                  "depth_coeffs": (view.projection[2, 2], view.projection[2, 3])})

@@ -7,26 +7,55 @@ pixel: thin twigs that a single ray per pixel hits in some pixels and misses in 
 ("dots") cover each pixel in proportion. Colours are averaged in linear light (the
 shaders' display encoding, ``to_display`` in ``shaders/shading.glsl``, is undone first and
 applied again after), so an edge keeps its brightness; with a transparent background the
-colours are averaged weighted by their alpha (coverage). The renderers average on the GPU
-(:class:`GpuResolve`, ``shaders/resolve.glsl``); :func:`resolve_supersamples` is the same
-average on the CPU, the reference the tests hold the GPU's to.
+colours are averaged weighted by their alpha (coverage). A frame drawn with the ``tone``
+effect is sRGB-encoded (after the tone curve): ``srgb`` undoes and applies that instead.
+The renderers average on the GPU (:class:`GpuResolve`, ``shaders/resolve.glsl``);
+:func:`resolve_supersamples` is the same average on the CPU, the reference the tests hold
+the GPU's to.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..settings import MAX_SSAA  # the largest supersampling factor: its home is the settings
+from ..settings import MAX_SSAA, TONE_KNEE  # the largest supersampling factor: its home is the settings
 from .context import release_framebuffer
 from .shaders import build_program, set_uniforms
 
-__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples", "GpuResolve"]
+__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples", "srgb_encode", "srgb_decode", "tone_curve",
+           "GpuResolve"]
 
 #: The exponent of the shaders' display encoding: ``to_display(c) = c^(1/2.2)``.
 DISPLAY_GAMMA = 2.2
 
 
 _TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** DISPLAY_GAMMA).astype(np.float32)
+
+
+def srgb_decode(c):
+    """Linear values of sRGB-encoded ``c`` in [0, 1] (IEC 61966-2-1)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def srgb_encode(c):
+    """sRGB encoding of linear ``c`` in [0, 1] (shading.glsl's ``srgb_encode``)."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
+
+
+def tone_curve(x, exposure: float = 1.0, curve: str = "filmic", knee: float = TONE_KNEE):
+    """The ``tone`` effect's curve of linear light, in [0, 1) (shading.glsl's
+    ``tone_curve``): ``filmic``, the identity up to ``knee`` then an exponential shoulder;
+    ``aces``, the rational fit of ACES's RRT+ODT published by K. Narkowicz (2016)."""
+    x = np.maximum(np.asarray(x, dtype=np.float64) * exposure, 0.0)
+    if curve == "aces":
+        return np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
+    shoulder = knee + (1.0 - knee) * (1.0 - np.exp(-(x - knee) / (1.0 - knee)))
+    return np.where(x < knee, x, shoulder)
+
+
+_SRGB_TO_LINEAR = srgb_decode(np.arange(256) / 255.0).astype(np.float32)
 
 
 def _block_sums(image: np.ndarray, n: int) -> np.ndarray:
@@ -44,7 +73,8 @@ def _block_sums(image: np.ndarray, n: int) -> np.ndarray:
     return total
 
 
-def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int, *,
+                         srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Average each ``n`` x ``n`` block of a supersampled frame into one pixel.
 
     Parameters
@@ -52,6 +82,7 @@ def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tup
     color : (h*n, w*n, 3 or 4) uint8, display-encoded; a 4th channel is alpha (coverage)
     distance : (h*n, w*n) float32 distances along each sub-pixel's ray (inf for a miss)
     n : samples per pixel side (1 returns the inputs)
+    srgb : the frame is sRGB-encoded (the ``tone`` effect), else c^(1/2.2)
 
     Returns
     -------
@@ -63,7 +94,7 @@ def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tup
     n = int(n)
     if n == 1:
         return color, distance
-    linear = _TO_LINEAR[color[..., :3]]                                  # (h*n, w*n, 3)
+    linear = (_SRGB_TO_LINEAR if srgb else _TO_LINEAR)[color[..., :3]]   # (h*n, w*n, 3)
     if color.shape[-1] == 4:
         alpha = color[..., 3:].astype(np.float32) / 255.0
         weight = _block_sums(alpha, n)
@@ -72,7 +103,8 @@ def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int) -> tup
     else:
         mean = _block_sums(linear, n) / (n * n)
         coverage = None
-    rgb = np.round(255.0 * np.clip(mean, 0.0, 1.0) ** (1.0 / DISPLAY_GAMMA)).astype(np.uint8)
+    encoded = srgb_encode(mean) if srgb else np.clip(mean, 0.0, 1.0) ** (1.0 / DISPLAY_GAMMA)
+    rgb = np.round(255.0 * encoded).astype(np.uint8)
     if coverage is not None:
         rgb = np.concatenate([rgb, np.round(255.0 * coverage).astype(np.uint8)], axis=-1)
     hn, wn = distance.shape
@@ -103,22 +135,26 @@ class GpuResolve:
             self._size = (width, height)
         return self._fbo
 
-    def resolve(self, color_texture, distance_texture, width: int, height: int, n: int, alpha: bool):
+    def resolve(self, color_texture, distance_texture, width: int, height: int, n: int, alpha: bool, *,
+                srgb: bool = False):
         """The final (height, width, 3 or 4) uint8 colour and (height, width) float32
         distance, row 0 the top row, of a frame drawn at ``n`` samples per side into
-        ``color_texture`` (RGBA8) and ``distance_texture`` (R32F)."""
+        ``color_texture`` (RGBA8) and ``distance_texture`` (R32F); ``srgb``: the frame is
+        sRGB-encoded (the ``tone`` effect), else c^(1/2.2), as :func:`resolve_supersamples`."""
         ctx = self.ctx
-        program = build_program(ctx, "resolve.glsl", {"COVERAGE": bool(alpha), "FACTOR": int(n)})
-        vao = self._vaos.get((alpha, n))
+        srgb = bool(srgb)
+        program = build_program(ctx, "resolve.glsl", {"COVERAGE": bool(alpha), "FACTOR": int(n), "SRGB": srgb})
+        key = (bool(alpha), int(n), srgb)
+        vao = self._vaos.get(key)
         if vao is None or vao.program is not program:
-            vao = self._vaos[alpha, n] = ctx.vertex_array(program, [])
+            vao = self._vaos[key] = ctx.vertex_array(program, [])
         fbo = self._target(width, height)
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         color_texture.use(0)
         distance_texture.use(1)
         set_uniforms(program, frame_color=0, frame_distance=1)
-        program["to_linear"].value = _TO_LINEAR.tolist()
+        program["to_linear"].value = (_SRGB_TO_LINEAR if srgb else _TO_LINEAR).tolist()
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
         vao.render(mode=ctx.TRIANGLES, vertices=3)
         k = 4 if alpha else 3

@@ -47,7 +47,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import PlantgenError
-from ..limits import CONTEXT_WORK, SEQUENTIAL_WORK, STEP_WORK, LimitError, Limits, Meter, hint
+from ..limits import CONTEXT_WORK, SEQUENTIAL_WORK, SETTLE_STEPS, STEP_WORK, LimitError, Limits, Meter, hint
 from ..limits import limits as default_limits
 from .expr import EvalContext, ExprError
 from .grammar import Grammar, ModuleTemplate, Pattern, Rule
@@ -295,6 +295,7 @@ class Derivation:
         self.step, self.total = 0, len(self.string[0])
         self.before = self.fixed_point = None     # the string, generator state and globals before the last step
         self.ended = False
+        self.step_floor = STEP_WORK * (len(self.groups) + 1)     # the least any step spends
         self.state = run_hook(grammar, "start", self.state, self.rng)
 
     def rewrite(self) -> bool:
@@ -335,6 +336,8 @@ class Derivation:
                 and self.rng.bit_generator.state == self.before[1] and self.state == self.before[2]):   # a fixed point
             self.fixed_point, self.iterations = self.step - 1, self.step
             return
+        if self.step == SETTLE_STEPS:
+            self._check_floor()
         if self.seen is None or self.total > CYCLE_WINDOW:
             return
         key = _fingerprint(self.string, self.rng, self.state)
@@ -344,6 +347,16 @@ class Derivation:
             self.seen = None
         else:
             self.seen[key] = self.step
+
+    def _check_floor(self) -> None:
+        """Refuse, with the estimate, a derivation that has not settled by ``SETTLE_STEPS``
+        and whose remaining steps alone would spend past its ``derive_work`` budget."""
+        floor = (self.iterations - self.step) * self.step_floor
+        if self.work.spent + floor > self.work.limit:
+            raise LimitError(f"{self.grammar.path}: {self.iterations:,} derivation steps spend at least "
+                             f"{self.work.spent + floor:,} of derive_work (each at least {self.step_floor:,}), "
+                             f"over the limit of {self.work.limit:,}, and the derivation did not settle into a "
+                             f"fixed point or a cycle in its first {SETTLE_STEPS:,} steps ({hint(self.work.name)})")
 
     def result(self) -> ModuleString:
         return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point,

@@ -39,7 +39,16 @@ from ..gl.raycast import Raycaster
 from ..gl.records import RecordStream
 from ..gl.result import RenderResult
 from ..gl.rt import RayTracer, choose_method
-from ..images import ANIMATION_SUFFIXES, parse_background, write_animation, write_png
+from ..images import (
+    ANIMATION_SUFFIXES,
+    IMAGE_FORMATS,
+    TRANSPARENT,
+    check_transparency,
+    image_format,
+    parse_background,
+    write_animation,
+    write_image,
+)
 from ..limits import MAX_IMAGE_SIDE, LimitError, Limits, hint
 from ..scene import Scene
 from ..settings import (
@@ -290,10 +299,9 @@ class RenderReport:
 
 
 def check_image_output(output) -> Path:
-    """A still's ``.png`` output, checked before any work (one line)."""
+    """A still's output (``.png``, ``.jpg`` or ``.webp``), checked before any work (one line)."""
     output = Path(output)
-    if output.suffix.lower() != ".png":
-        raise PlantgenError(f"{output}: the image output must end in .png")
+    image_format(output)
     return check_outputs([output])[0]
 
 
@@ -305,8 +313,9 @@ def check_render_outputs(output: Path, motion: MotionSettings, depth_out=None, c
             raise PlantgenError(f"{output}: an animation (--frames) must end in .gif or .webp")
         if depth_out is not None:
             raise PlantgenError("--depth-out writes one frame: leave out --frames")
-    elif output.suffix.lower() != ".png":
-        raise PlantgenError(f"{output}: the image output must end in .png (or .gif/.webp with --frames)")
+    elif output.suffix.lower() not in IMAGE_FORMATS:
+        raise PlantgenError(f"{output}: the image output must end in .png, .jpg or .webp (or .gif/.webp with "
+                            "--frames)")
     if depth_out is not None and Path(depth_out).suffix.lower() != ".npy":
         raise PlantgenError(f"{depth_out}: the depth output must end in .npy")
     if camera_out is not None and Path(camera_out).suffix.lower() != ".json":
@@ -519,7 +528,7 @@ def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_
     result = report.result
     fps = report.request.motion.fps
     writes = [(output, (lambda p: write_animation(p, report.colors, fps)) if report.colors
-               else (lambda p: write_png(p, result.color)))]
+               else (lambda p: write_image(p, result.color)))]
     if camera_out is not None:
         writes.append((camera_out, report.camera.save))
     if depth_out is not None:
@@ -532,8 +541,9 @@ def _write_render_outputs(output: Path, report: RenderReport, camera_out, depth_
 
 def render_file(input_path, output, settings: RenderSettings | None = None, *, camera_out=None, depth_out=None,
                 **options) -> RenderReport:
-    """:func:`render_model`, then write the image: a PNG (RGBA over a transparent
-    background), or with ``frames`` an animated GIF/WebP; optionally the camera JSON
+    """:func:`render_model`, then write the image: a PNG, JPEG or WebP by its suffix (RGBA
+    over a transparent background: a JPEG refuses it, before any work), or with ``frames``
+    an animated GIF/WebP; optionally the camera JSON
     (``camera_out``) and the depth ``.npy`` (``depth_out``: float32 (height, width)
     distances along each pixel's ray from the eye, ``inf`` for a miss, row 0 the top row
     of the PNG; with supersampling, from one more draw through the pixel centres).
@@ -543,6 +553,8 @@ def render_file(input_path, output, settings: RenderSettings | None = None, *, c
     keywords = {k: options.pop(k) for k in option_names(RenderSettings) if k in options}
     request = request_settings(settings, keywords)
     check_render_outputs(output, request.motion, depth_out, camera_out)
+    if request.motion.frames is None:
+        check_transparency(output, parse_background(request.image.background) == TRANSPARENT)
     report = render_model(input_path, request, exact_distance=depth_out is not None, **options)
     report.written = _write_render_outputs(output, report, camera_out, depth_out)
     return report

@@ -264,12 +264,15 @@ def beam_grids(target: ScanTarget, settings: ScanSettings, limits: Limits | None
     if settings.mode == "airborne":
         return _airborne_lines(target, settings, limits)
     step = math.radians(settings.angular_step)
-    grids = []
-    for p in _terrestrial_positions(target, settings):
+    grids, fired, positions = [], 0, _terrestrial_positions(target, settings)
+    for p in positions:
         pad = _reach(p[None], lo, hi) * half * (1 + 1e-9)
         grid = TerrestrialBeams(p, lo - pad, hi + pad, step)
         grid.pad = pad
         grids.append(grid)
+        fired += grid.count * settings.sub_rays      # checked as the grids come: O(1) a scanner
+        if limits is not None and fired > limits.max_scan_rays:
+            limits.check("scan_rays", fired, f"a scan of {len(positions)} scanners (the first {len(grids)} alone)")
     return grids
 
 

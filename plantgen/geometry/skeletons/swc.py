@@ -78,7 +78,11 @@ CUSTOM_TYPES = tuple(range(5, 20))
 #: Node ids per header line that lists nodes.
 IDS_PER_LINE = 16
 
-_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d{1,18})\s*:\s?(.*)$")
+_MATERIAL_LINE = re.compile(r"#\s*material\s+(\d+)\s*:\s?(.*)$")
+#: The most digits of a material line's type code (an int64's), and the most blank lines
+#: an SWC file may have beside its nodes and comments.
+MAX_CODE_DIGITS = 18
+MAX_BLANK_LINES = 100_000
 _UP_LINE = re.compile(r"#\s*up\s*:\s*([yz])\b")
 _LIST_LINE = re.compile(r"#\s*plantgen\s+(continues|starts|zero-length)\s*:(.*)$")
 
@@ -194,6 +198,9 @@ class _Header:
         if m := _UP_LINE.match(comment):
             self.up = m.group(1)
         elif m := _MATERIAL_LINE.match(comment):
+            if len(m.group(1)) > MAX_CODE_DIGITS:
+                raise SkeletonError(f"{where}: a material type code of {len(m.group(1)):,} digits "
+                                    f"(at most {MAX_CODE_DIGITS})")
             if int(m.group(1)) not in self.names and len(self.names) >= MAX_MATERIAL_NAMES:
                 raise SkeletonError(f"{where}: over {MAX_MATERIAL_NAMES} material names in the header")
             self.names[int(m.group(1))] = unescape_text(m.group(2).strip())[:100] or f"swc{m.group(1)}"
@@ -218,6 +225,14 @@ def _bounded_lines(text: str, path, limits: Limits) -> list[str]:
     if marks > most_marks:
         raise LimitError(f"{path}: {marks:,} comment marks ('#'), over the {most_marks:,} an SWC file of at most "
                          f"{limits.max_segments:,} segments holds ({hint('segments')})")
+    # counted in C before any line is split off: a file of blank lines is refused at once
+    # (10 MB of them took 9 s to split and walk)
+    most_lines = limits.max_segments + 1 + most_marks + MAX_BLANK_LINES
+    count = text.count("\n") + 1
+    if count > most_lines:
+        raise LimitError(f"{path}: {count:,} lines, over the {most_lines:,} an SWC file of at most "
+                         f"{limits.max_segments:,} segments holds (its nodes, its comments and "
+                         f"{MAX_BLANK_LINES:,} blank lines; {hint('segments')})")
     lines = text.splitlines()
     nodes = sum(1 for line in lines if line.strip() and not line.lstrip().startswith("#"))
     limits.check("segments", nodes - 1, f"{path}: SWC segments (nodes but the first)")
