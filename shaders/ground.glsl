@@ -6,7 +6,9 @@
 // sky along the pixel's ray, or the flat background), reaching it exactly at the edge: no
 // edge shows. Variants: SHADOWS (sample the shadow map; with SHADOW_RAYS shadow rays through
 // the BVH instead, plantgen.gl.rt), SHADOW_PASS (depth only, into the light's map),
-// FLAT_BACKGROUND (fade into the flat colour `background`, alpha included).
+// FLAT_BACKGROUND (fade into the flat colour `background`, alpha included), and the looks
+// (shading.glsl; SKY_LIGHT: the sky traced through the model's BVH, sky_light.glsl, so the
+// ground darkens under and beside the plant).
 
 #if defined VERTEX_SHADER
 
@@ -26,9 +28,10 @@ void main() {
 void main() {}
 #else
 #include "shading.glsl"
-#if defined SHADOW_RAYS
+#if defined SHADOW_RAYS || defined SKY_LIGHT
 #include "bvh.glsl"
 #endif
+#include "sky_light.glsl"
 #if defined SHADOWS
 #include "shadow.glsl"
 #endif
@@ -67,7 +70,13 @@ void main() {
 #else
     float visibility = 1.0;
 #endif
-    vec3 lit = shade_surface_visible(albedo, ground_material, vec3(0.0, 1.0, 0.0), to_eye, 1.0, visibility);
+    vec3 up = vec3(0.0, 1.0, 0.0);
+#if defined SKY_LIGHT
+    float sky = sky_light_traced(v_position, up, up, length(v_position), sky_samples);
+    vec3 lit = shade_surface_sky(albedo, ground_material, up, to_eye, sky, visibility);
+#else
+    vec3 lit = shade_surface_visible(albedo, ground_material, up, to_eye, 1.0, visibility);
+#endif
 #if defined FLAT_BACKGROUND
     out_color = mix(vec4(to_display(lit), 1.0), background, fade);
 #else

@@ -344,10 +344,11 @@ class OffscreenRenderer:
         """
         ctx = self.ctx
         shadowed = lighting.window is not None
+        looks = lighting.defines("ground.glsl")
         program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines,
-                                                     **lighting.defines("ground.glsl"),
-                                                     "FLAT_BACKGROUND": background is not None})
-        set_uniforms(program, **lighting.shading, **lighting.receiver, **ground.uniforms(),
+                                                     **looks, "FLAT_BACKGROUND": background is not None})
+        shading = {**lighting.shading, **lighting.receiver, **(lighting.sky if looks.get("SKY_LIGHT") else {})}
+        set_uniforms(program, **shading, **ground.uniforms(),
                      **({} if background is None else {"background": tuple(background)}),
                      view_projection=mat4(view.view_projection),
                      ground_material=lighting.ground_material, origin_offset=tuple(view.eye))

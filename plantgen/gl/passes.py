@@ -59,8 +59,8 @@ def light_program(settings, shadows: ShadowSettings) -> tuple[str, dict]:
 def look_defines(look, program: str, shadowed: bool = False) -> dict:
     """The defines of the looks (:class:`~plantgen.settings.LookSettings`, None: none) that
     ``program`` takes: every program its tone curve (``TONE_MAP``, ``TONE_ACES``), the shadow receivers the
-    soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``)
-    and the leaves the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
+    soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``),
+    the leaves and the ground the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
     off gives no define: the program is today's."""
     if look is None:
         return {}
@@ -69,7 +69,7 @@ def look_defines(look, program: str, shadowed: bool = False) -> dict:
     if program == "sky.glsl":
         return out
     out["SOFT_SUN"] = on["SOFT_SUN"] and shadowed
-    if program in ("raycast.glsl", "rt.glsl", "leaf.glsl"):
+    if program in ("raycast.glsl", "rt.glsl", "leaf.glsl", "ground.glsl"):
         out["SKY_LIGHT"] = on["SKY_LIGHT"]
     if program == "leaf.glsl":
         out["TRANSLUCENT"] = on["TRANSLUCENT"]
@@ -106,7 +106,7 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
             out.append(("leaf.glsl", {"SHADOW_PASS": True}))
     if ground:
         out.append(("ground.glsl", {"SHADOWS": shadowed, "FLAT_BACKGROUND": flat_background,
-                                    **look_defines(look, "ground.glsl", shadowed)}))
+                                    **traced_look(look, "ground.glsl", shadowed, bvh_defines)}))
     out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
                                  **({} if labels else traced_look(look, "raycast.glsl", shadowed, bvh_defines))}))
     if leaves:

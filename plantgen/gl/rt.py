@@ -153,7 +153,7 @@ class RayTracer(Raycaster):
         variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else look_defines(look, "sky.glsl"))]
         if ground:
             variants.append(("ground.glsl", {"SHADOWS": shadowed, **receivers, "FLAT_BACKGROUND": flat_background,
-                                             **look_defines(look, "ground.glsl", shadowed)}))
+                                             **traced_look(look, "ground.glsl", shadowed, bvh_defines)}))
         defines = {**defines, **traced_look(look, "rt.glsl", shadowed, bvh_defines)}
         variants.append(("rt.glsl", defines))
         if leaves:
