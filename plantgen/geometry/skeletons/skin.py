@@ -66,12 +66,16 @@ from .skeleton import Skeleton
 from .smooth import DEFAULT_STEP_DEG
 from .smooth import smooth_bends as smooth_bends_of
 
-__all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled",
-           "seam_radii", "sphere_base_radius"]
+__all__ = ["skin_skeleton", "continuing_children", "lead_forks", "material_shell", "crossing_rows_sampled",
+           "seam_radii", "sphere_base_radius", "FORK_LEAD_MAX_BEND_DEG"]
+
+#: The largest bend (degrees) at which a fork's child may lead on from its parent
+#: (:func:`lead_forks`); a fork whose children all turn further keeps its capped end.
+FORK_LEAD_MAX_BEND_DEG = 90.0
 
 
 def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
-                  smooth_step_deg: float = DEFAULT_STEP_DEG, **options) -> Frusta:
+                  smooth_step_deg: float = DEFAULT_STEP_DEG, lead: bool = True, **options) -> Frusta:
     """Skin a skeleton with conical frusta (§2), optionally smoothing its bends first.
 
     smooth_bends : None (the default: the skeleton as it is), or an angle in degrees:
@@ -82,9 +86,14 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
         rows share one period of the texture's v (``v_part``), and the report counts the
         joints smoothed and the segments added (``smooth_joints``, ``smooth_segments``;
         ``n_segments`` is the original count).
+    lead : let one child of every fork continue its parent (:func:`lead_forks`, the
+        default): a fork's parent otherwise ends in a flat cap with its thinner children
+        standing on it (a visible step). False: the skeleton's own ``continues``
     options : the keyword arguments of :func:`_skin` (shell, seam_fit, max_bend_deg,
         fan_step_deg, twist, extend_side_branches)
     """
+    if lead:
+        skeleton = lead_forks(skeleton)
     if smooth_bends is None:
         return _skin(skeleton, **options)
     refined = smooth_bends_of(skeleton, float(smooth_bends), step_deg=float(smooth_step_deg))
@@ -249,6 +258,48 @@ def continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     first_child[parent[cand]] = cand         # last write wins: the lowest index
     cont &= first_child[np.maximum(parent, 0)] == np.arange(n)
     return np.flatnonzero(cont), np.flatnonzero((parent >= 0) & ~cont)
+
+
+def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG) -> Skeleton:
+    """The skeleton with one child of every fork continuing its parent (unchanged where
+    there is no fork to lead; applying it twice changes nothing).
+
+    A *fork* is a segment no child continues, with side branches of its material starting
+    at its end point (L-system forks ``F [ +K ] [ -K ]`` bracket every child). Its end would
+    be an open row, capped by a flat disc, with the children, thinner, standing on that
+    disc: a collar at every fork. Its *leader*, the thickest of those children (then the
+    least bent from the parent's axis, then the first), becomes the parent's continuing
+    child, its base radius the parent's end radius: the parent flows into the leader in
+    one surface (seam, texture frame and normals shared at the joint plane) that tapers
+    to the leader's own radius along the leader's first segment, and the fork's other
+    children grow out of that surface (side branches, started inside the parent). Children
+    bent by more than ``max_bend_deg`` do not lead."""
+    n = len(skeleton)
+    child, side = continuing_children(skeleton)
+    if side.size == 0:
+        return skeleton
+    parent = skeleton.parent
+    led = np.zeros(n, dtype=bool)
+    led[parent[child]] = True
+    host = parent[side]
+    d_host = skeleton.end[host] - skeleton.start[host]
+    d_side = skeleton.end[side] - skeleton.start[side]
+    cos_b = dot(d_host, d_side) / np.maximum(norm(d_host) * norm(d_side), tol.tiny)
+    size = np.maximum(np.maximum(skeleton.r_end[host], norm(d_host)), tol.tiny)
+    at_end = norm(skeleton.start[side] - skeleton.end[host]) <= tol.same_length * size
+    ok = (~led[host] & at_end & (skeleton.material[side] == skeleton.material[host])
+          & (norm(d_side) > 0) & (cos_b > np.cos(np.radians(max_bend_deg))))
+    if not ok.any():
+        return skeleton
+    cand, host, cos_b = side[ok], host[ok], cos_b[ok]
+    order = np.lexsort((cand, -cos_b, -skeleton.r_start[cand], host))   # by host, best first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = host[order][1:] != host[order][:-1]
+    leader = cand[order][first]
+    continues, r_start = skeleton.continues.copy(), skeleton.r_start.copy()
+    continues[leader] = True
+    r_start[leader] = skeleton.r_end[parent[leader]]
+    return dataclasses.replace(skeleton, r_start=r_start, continues=continues)
 
 
 def _extend_side_branches(seg: _Segments, start, host, side) -> None:

@@ -40,7 +40,7 @@ from ..vec import any_perpendicular, cross, reduce_to_root, tree_roots
 from .frusta import Frusta
 from .motion import SwayRig
 from .skeleton import Skeleton
-from .skin import continuing_children, crossing_rows_sampled, material_shell, seam_radii
+from .skin import continuing_children, crossing_rows_sampled, lead_forks, material_shell, seam_radii
 
 __all__ = ["SwaySkin", "SwayPose", "PathSum", "BEND_LIMIT_COS", "SHARP_SAMPLES"]
 
@@ -115,6 +115,7 @@ class SwaySkin:
             if not np.array_equal(values[has_p], values[p]):
                 return None
         self = cls()
+        skeleton = lead_forks(skeleton)        # as skin_skeleton does: fixed at rest, once
         self._plan_pose(skeleton, rig)
         self._plan_skin(skeleton)
         moved = np.abs(self.rc - self.r0c) > tol.seam_radius_change * np.maximum(self.r0c, tol.tiny)
