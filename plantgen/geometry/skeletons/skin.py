@@ -114,9 +114,12 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     ----------
     skeleton : Skeleton with n segments (world units, y up)
     shell : dict material name -> relief shell thickness, or None for
-        :data:`plantgen.geometry.skeletons.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
-        segment's mean radius (r_start + r_end)/2; a value v < 0 means an absolute
-        thickness of -v world units. Names missing from a given dict get 0 (no relief).
+        :data:`plantgen.geometry.skeletons.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction
+        of the radius: the relief is v·r(y) deep at every height y, so it is as deep on both
+        sides of a joint (the row's ``shell``, its bound, is v times the segment's larger
+        end radius; :func:`plantgen.geometry.skeletons.frusta.relief_scale`); a value v < 0
+        means -v world units at the segment's thicker end, following the radius along it.
+        Names missing from a given dict get 0 (no relief).
     seam_fit : close every continuing joint's seam exactly (the default): each continuing
         child's r1 is set so that the two cones touch one sphere around the joint, and the
         joint plane passes through the crossings of their boundary lines, which are then
@@ -168,8 +171,11 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     ref_dir = _reference_directions(rows.axis, rows.parent_row)
     row_twist = np.full(n_rows, float(twist))
     row_shell = np.zeros(n_rows)
-    mean_r = 0.5 * (skeleton.r_start + skeleton.r_end)
-    row_shell[:] = material_shell(skeleton, shell, mean_r)[rows.segment] if n else 0.0
+    # the shell bounds a relief as deep as the material's fraction of the radius at every
+    # height (relief_scale); a side branch's own radius, not the one moved into its parent
+    thick_end = np.maximum(seg.r_start, seg.r_end)
+    thick_end[side] = np.maximum(skeleton.r_start[side], skeleton.r_end[side])
+    row_shell[:] = material_shell(skeleton, shell, thick_end)[rows.segment] if n else 0.0
     row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
     u_offset = _u_offsets(rows, ref_dir, row_twist)
     return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
@@ -323,15 +329,16 @@ def _extend_side_branches(seg: _Segments, start, host, side) -> None:
     seg.length[side] = seg.length[side] + delta
 
 
-def material_shell(skeleton: Skeleton, shell, radius_mean):
+def material_shell(skeleton: Skeleton, shell, radius):
     """(n,) absolute shell thickness per segment from the per-material table ``shell``
-    (see :func:`skin_skeleton`) and the (n,) mean radii."""
+    (see :func:`skin_skeleton`) and the (n,) radii its fractions apply to (each segment's
+    larger end radius: the shell bounds a relief v·r(y) deep)."""
     table = dict(relief.DEFAULT_SHELL) if shell is None else dict(shell)
     per_mat = np.array([float(table.get(name, relief.default_shell(name) if shell is None else 0.0))
                         for name in skeleton.material_names] or [0.0])
     frac = per_mat[skeleton.material] if len(skeleton) else np.zeros(0)
-    # positive: fraction of the segment's mean radius; negative: absolute thickness -value
-    return np.where(frac >= 0, frac * radius_mean, -frac)
+    # positive: fraction of the radius; negative: absolute thickness -value
+    return np.where(frac >= 0, frac * radius, -frac)
 
 
 # ============================================================================ joint planes

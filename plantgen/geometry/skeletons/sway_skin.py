@@ -309,9 +309,9 @@ class SwaySkin:
         sc = np.sqrt(1.0 + kc * kc)
         self.medial = {"sigma": sigma, "rp": self.rp, "rho_c": self.rc / sc,
                        "ec_m": -kc / sc, "ec_n": sigma / sc}
-        mean_r = 0.5 * (sk.r_start + sk.r_end)
+        thick_end = np.maximum(self.r_start, self.r_end)     # as skinning: seam radii, not moved sides
         self.constant = {"twist": np.zeros(n), "material": sk.material.astype(np.int32),
-                         "shell": material_shell(sk, None, mean_r), "segment": np.arange(n),
+                         "shell": material_shell(sk, None, thick_end), "segment": np.arange(n),
                          "v_part": np.tile(np.array([0, 1], np.int64), (n, 1))}
         for arr in (self.r_start, self.r_end, self.length):
             arr.setflags(write=False)
