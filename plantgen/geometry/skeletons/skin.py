@@ -273,13 +273,13 @@ def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG)
     A *fork* is a segment no child continues, with side branches of its material starting
     at its end point (L-system forks ``F [ +K ] [ -K ]`` bracket every child). Its end would
     be an open row, capped by a flat disc, with the children, thinner, standing on that
-    disc: a collar at every fork. Its *leader*, the thickest of those children (then the
-    least bent from the parent's axis, then the first), becomes the parent's continuing
-    child, its base radius the parent's end radius: the parent flows into the leader in
-    one surface (seam, texture frame and normals shared at the joint plane) that tapers
-    to the leader's own radius along the leader's first segment, and the fork's other
-    children grow out of that surface (side branches, started inside the parent). Children
-    bent by more than ``max_bend_deg`` do not lead."""
+    disc: a collar at every fork. Its *leader*, the least bent of its thickest children
+    (radii within ``tol.radius_step`` of the thickest; then the first), becomes the
+    parent's continuing child, its base radius the parent's end radius: the parent flows
+    into the leader in one surface (seam, texture frame and normals shared at the joint
+    plane) that tapers to the leader's own radius along the leader's first segment, and
+    the fork's other children grow out of that surface (side branches, started inside the
+    parent). Children bent by more than ``max_bend_deg`` do not lead."""
     n = len(skeleton)
     child, side = continuing_children(skeleton)
     if side.size == 0:
@@ -298,7 +298,11 @@ def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG)
     if not ok.any():
         return skeleton
     cand, host, cos_b = side[ok], host[ok], cos_b[ok]
-    order = np.lexsort((cand, -cos_b, -skeleton.r_start[cand], host))   # by host, best first
+    radius = skeleton.r_start[cand]
+    thickest = np.zeros(n)
+    np.maximum.at(thickest, host, radius)
+    thin = radius < (1.0 - tol.radius_step) * thickest[host]   # within radius_step: as thick
+    order = np.lexsort((cand, -cos_b, thin, host))               # by host, best first
     first = np.ones(len(order), dtype=bool)
     first[1:] = host[order][1:] != host[order][:-1]
     leader = cand[order][first]
