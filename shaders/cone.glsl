@@ -93,7 +93,7 @@ float frustum_radius(Frustum f, float dr, float y) { return f.r1 + dr + frustum_
 // The relief's depth at axial height y as a fraction of the shell: r(y)/max(r1, r2) in
 // [0, 1] (1 where both radii are 0). The relief follows the radius, so a shell that is a
 // fraction of the radius is as deep on both sides of a joint.
-// Twin: plantgen.geometry.frusta.relief_scale.
+// Twin: plantgen.geometry.skeletons.frusta.relief_scale.
 float relief_scale(Frustum f, float y) {
     float big = max(f.r1, f.r2);
     return big > 0.0 ? clamp(frustum_radius(f, 0.0, y) / big, 0.0, 1.0) : 1.0;

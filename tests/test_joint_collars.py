@@ -1,7 +1,7 @@
 """Joints that cannot be seen (issue 43): no collar or step where a child meets its parent.
 
 The shipped trees fork as ``F [ K ] [ K ]``: every child is bracketed, so before
-:func:`plantgen.geometry.skin.lead_forks` no child continued its parent, which ended in a
+:func:`plantgen.geometry.skeletons.skin.lead_forks` no child continued its parent, which ended in a
 flat cap with its thinner children standing on it. Invariants with a physical meaning:
 
 - every fork is led: no parent row is capped where its children start;
@@ -21,11 +21,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantgen.geometry import relief
-from plantgen.geometry.camera import Camera
-from plantgen.geometry.frusta import relief_scale, seam_gap, surface_normals, surface_uv
-from plantgen.geometry.skeleton import Skeleton
-from plantgen.geometry.skin import continuing_children, lead_forks, skin_skeleton
+from plantgen.geometry.rays.camera import Camera
+from plantgen.geometry.skeletons import relief
+from plantgen.geometry.skeletons.frusta import relief_scale, seam_gap, surface_normals, surface_uv
+from plantgen.geometry.skeletons.skeleton import Skeleton
+from plantgen.geometry.skeletons.skin import continuing_children, lead_forks, skin_skeleton
 from plantgen.geometry.vec import dot, norm, unit
 from plantgen.pipeline import grow
 

@@ -416,7 +416,7 @@ class RasterRenderer(OffscreenRenderer):
 def row_depths(frusta) -> np.ndarray:
     """(n, 4) float32: each row's relief depth (model units) where its axis meets its lower
     and upper ends, shell·r1/max(r1, r2) and shell·r2/max(r1, r2) (the relief follows the
-    radius: :func:`~plantgen.geometry.frusta.relief_scale`), its v slots and its slot (a
+    radius: :func:`~plantgen.geometry.skeletons.frusta.relief_scale`), its v slots and its slot (a
     row's own v is its texture v times the slots less the slot), for GS+POM's march depth."""
     out = np.zeros((len(frusta), 4), np.float32)
     out[:, 0] = frusta.shell * relief_scale(frusta, np.arange(len(frusta)), np.zeros(len(frusta)))
