@@ -36,7 +36,7 @@ from .geometry.meshes.skinned_mesh import SkinnedMesh, bind_vertices
 from .geometry.skeletons.frusta import Frusta, frusta_bounds
 from .geometry.skeletons.motion import pose, sway_rig, turn_at, turn_coefficients
 from .geometry.skeletons.skeleton import Skeleton
-from .geometry.skeletons.skin import skin_skeleton
+from .geometry.skeletons.skin import lead_forks, skin_skeleton
 from .geometry.skeletons.sway_skin import SwaySkin
 from .geometry.vec import rotate
 
@@ -115,6 +115,9 @@ class AnimatedScene:
     leaves: Polygons | None = None
 
     def __post_init__(self):
+        # the forks' leaders chosen once, at rest (skin_skeleton would choose them again in
+        # every pose, and a near tie could change hands while the plant sways)
+        self.skeleton = lead_forks(self.skeleton)
         self.segment_instance = np.asarray(self.segment_instance, dtype=np.int64)
         moving_instance = np.array([m is not None and m.moves for m in self.motions] or [False])
         moving = (moving_instance[self.segment_instance] if len(self.skeleton)

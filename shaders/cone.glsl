@@ -33,7 +33,8 @@ struct Frustum {
     bool open_hi;   // the upper end is capped
     float u_offset; // added to u so u is continuous across joints
     float twist;    // turns; u gains v*twist
-    float shell;    // relief shell thickness (0: no relief)
+    float shell;    // relief shell thickness (0: no relief): the relief's bound, its
+                    // depth at height y shell * relief_scale(f, y)
     int material;   // material index
     float v_slot;   // the row's slot of the texture's v, of v_slots (Frusta.v_part):
     float v_slots;  // the texture is looked up at (v_slot + v) / v_slots
@@ -88,6 +89,15 @@ float plane_height(float gap, float n_axis, float n_radial, float r1, float k, f
 
 // Radius of the cone grown by `dr` at axial coordinate y (negative on the mirror nappe).
 float frustum_radius(Frustum f, float dr, float y) { return f.r1 + dr + frustum_slope(f) * y; }
+
+// The relief's depth at axial height y as a fraction of the shell: r(y)/max(r1, r2) in
+// [0, 1] (1 where both radii are 0). The relief follows the radius, so a shell that is a
+// fraction of the radius is as deep on both sides of a joint.
+// Twin: plantgen.geometry.skeletons.frusta.relief_scale.
+float relief_scale(Frustum f, float y) {
+    float big = max(f.r1, f.r2);
+    return big > 0.0 ? clamp(frustum_radius(f, 0.0, y) / big, 0.0, 1.0) : 1.0;
+}
 
 // Signed distances to the two cutting planes: lo >= 0 and hi <= 0 inside.
 float plane_lo_side(Frustum f, vec3 p) { return dot(f.plane_lo.xyz, p - f.base) - f.plane_lo.w; }

@@ -34,11 +34,14 @@ uniform sampler2DArray height_corners;   // RGBA8: texel (i, j) = the cell whose
                                          // texel is (i, j - 1), in textureGather's order
 uniform vec2 height_range[MAX_MATERIALS];  // lowest and highest height of each material's map
 
-// The part of the shell a material's relief can occupy: (lowest, highest) height of its map
+// The part of the shell a material's relief can occupy: its map's lowest height times the
+// relief's shallowest depth along the row (relief_scale at the thinner end), its highest
 // times the shell. Above it the light's rays cannot meet the relief, and by the lowest
 // level every ray has met it: only this band is marched.
 vec2 relief_band(Frustum f) {
-    return f.shell * height_range[clamp(f.material, 0, MAX_MATERIALS - 1)];
+    vec2 range = height_range[clamp(f.material, 0, MAX_MATERIALS - 1)];
+    float shallow = max(f.r1, f.r2) > 0.0 ? clamp(min(f.r1, f.r2) / max(f.r1, f.r2), 0.0, 1.0) : 1.0;
+    return f.shell * vec2(range.x * shallow, range.y);
 }
 
 // Bilinear height of map m at u_rep = u * repeat.x (turns) and y = v * repeat.y * height
@@ -91,10 +94,14 @@ struct LightPath {
 };
 
 // The distance from the axis minus the relief's radius at fraction s of the path, in world
-// units: > 0 above the relief, <= 0 on or under it (w - h of (12), times the shell).
+// units: > 0 above the relief, <= 0 on or under it (w - h of (12), times the relief's
+// depth there: the shell times relief_scale, the cone's radius over the larger end's).
 float light_gap(Frustum f, HeightMap m, LightPath p, float s) {
     float h = cell_height(m, p.u_in + s * p.du + s * (1.0 - s) * p.bend, p.y_in + s * p.dy);
-    return length(p.q_in + s * p.dq) - (p.r_in + s * p.dr) - f.shell * h;
+    float radius = p.r_in + s * p.dr;
+    float big = max(f.r1, f.r2);
+    float depth = f.shell * (big > 0.0 ? clamp(radius / big, 0.0, 1.0) : 1.0);
+    return length(p.q_in + s * p.dq) - radius - depth * h;
 }
 
 // The signed angle from a to b, in turns.

@@ -28,7 +28,7 @@
 // plantgen.geometry.meshes.mesh.tessellate with relief and a height of 1), the top of the
 // relief, so that what the mesh covers holds the whole relief. Each fragment walks its
 // view ray down into the shell in tangent space: depth d in [0, 1] below the mesh (a
-// fraction of the row's shell thickness, model units, RowShell) meets the relief where
+// fraction of the relief's depth there, model units, RowShell) meets the relief where
 // d = 1 - w(u, v). The walk goes in layers (pom_min_layers face-on up to pom_max_layers at
 // grazing angles, mixed by the view's cosine as engines do), then pom_refine_steps secant
 // steps between the last layer above the relief and the first below it (1: the classic
@@ -152,7 +152,9 @@ vec3 normal_mapped(vec3 n, int material, vec2 uv) {
 
 #if defined PARALLAX
 in vec2 v_uv_scale;
-layout(std430, binding = 4) readonly buffer RowShell { float row_shell[]; };  // shell thickness, model units
+// per row: the relief's depth (model units) at its lower and upper ends, its v slots and
+// slot (plantgen.gl.raster.row_depths; the relief follows the radius, so its depth does)
+layout(std430, binding = 4) readonly buffer RowShell { vec4 row_shell[]; };
 uniform int pom_min_layers;
 uniform int pom_max_layers;
 uniform int pom_refine_steps;
@@ -267,7 +269,9 @@ void main() {
 #endif
 #if defined PARALLAX
     if (lateral) {
-        ParallaxHit hit = parallax_march(normal, to_eye, row_shell[row], material);
+        vec4 depths = row_shell[row];
+        float depth = mix(depths.x, depths.y, clamp(uv.y * depths.z - depths.w, 0.0, 1.0));  // at the row's own v
+        ParallaxHit hit = parallax_march(normal, to_eye, depth, material);
         normal = normal_mapped(normal, material, hit.uv);
         texel = hit.height;
         along = hit.along;

@@ -43,10 +43,12 @@ ShellRay shell_ray(Frustum f, vec3 o, vec3 d) {
     return r;
 }
 
-// Relief height w of (12) at t: 0 on the inner cone, 1 on the outer one.
+// Relief height w of (12) at t: 0 on the inner cone, 1 at the relief's full depth there
+// (shell * relief_scale: the relief follows the radius).
 float shell_height_at(Frustum f, ShellRay r, float t) {
     float radial = length(r.q0 + t * r.dq);
-    return (radial - (f.r1 + frustum_slope(f) * (r.y0 + t * r.dy))) / f.shell;
+    float y = r.y0 + t * r.dy;
+    return (radial - (f.r1 + frustum_slope(f) * y)) / max(f.shell * relief_scale(f, y), 1e-30);
 }
 
 // (u, v) at t: u from the point's angle (6), v interpolated between entry and exit (the
@@ -194,8 +196,9 @@ void row_surface(Frustum f, vec3 p, vec3 d, int face, bool cap, out vec3 normal,
         vec3 tangent_u = cross(f.axis, e_r);
         float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
         float len_v = max((s_hi - s_lo) * length(g) * f.v_slots, TOL_TANGENT_FLOOR_F32);  // |dP/dv_tex|
-        normal = normalize(normal - f.shell * (dh_du / len_u * tangent_u
-                                               + dh_dv / len_v * normalize(g)));
+        float depth = f.shell * relief_scale(f, y);
+        normal = normalize(normal - depth * (dh_du / len_u * tangent_u
+                                             + dh_dv / len_v * normalize(g)));
     }
 #endif
     albedo = material_albedo(f.material, texel);

@@ -24,7 +24,7 @@ from plantgen.geometry.skeletons.frusta import (
     true_normals,
 )
 from plantgen.geometry.skeletons.skeleton import Skeleton
-from plantgen.geometry.skeletons.skin import skin_skeleton
+from plantgen.geometry.skeletons.skin import lead_forks, skin_skeleton
 
 
 def _rim_points(f, rows, which, count=16):
@@ -54,7 +54,9 @@ def test_contract_on_a_random_tree():
     assert np.all(np.einsum("ij,ij->i", f.plane_hi[:, :3], f.axis) > 0)
     assert np.all((f.u_offset >= 0) & (f.u_offset < 1))
     assert set(np.unique(f.segment)) == set(range(len(sk)))
-    assert f.report.joints == int(sk.continues.sum())
+    # the skeleton's continuing joints and one leader per fork (lead_forks)
+    assert f.report.joints == int(lead_forks(sk).continues.sum()) > int(sk.continues.sum())
+    assert skin_skeleton(sk, lead=False).report.joints == int(sk.continues.sum())
 
 
 def test_roots_and_tips_are_cut_square_and_capped():

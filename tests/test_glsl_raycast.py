@@ -299,7 +299,8 @@ def relief_caster(monkeypatch):
 
 
 def relief_coordinates(frusta, points):
-    """Shell height w of (12), u of (6) and exact v of (7) of points near row 0."""
+    """Relief height w of (12) (a fraction of the relief's depth there), u of (6) and exact v
+    of (7) of points near row 0."""
     i = 0
     axis, ref = frusta.axis[i], frusta.ref_dir[i]
     e = points - frusta.base[i]
@@ -307,7 +308,9 @@ def relief_coordinates(frusta, points):
     perp = e - y[:, None] * axis
     radial = np.linalg.norm(perp, axis=1)
     k = (frusta.r2[i] - frusta.r1[i]) / frusta.length[i]
-    w = (radial - (frusta.r1[i] + k * y)) / frusta.shell[i]
+    # the relief is shell·r(y)/max(r1, r2) deep (relief_scale: it follows the radius)
+    depth = frusta.shell[i] * np.clip((frusta.r1[i] + k * y) / max(frusta.r1[i], frusta.r2[i]), 0.0, 1.0)
+    w = (radial - (frusta.r1[i] + k * y)) / depth
     u = np.mod(np.arctan2(perp @ np.cross(axis, ref), perp @ ref) / (2 * np.pi), 1.0)
     g = axis + k * perp / radial[:, None]
     s_lo = -(points @ frusta.plane_lo[i, :3] - frusta.plane_lo[i, 3]) / (g @ frusta.plane_lo[i, :3])

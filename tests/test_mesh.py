@@ -15,7 +15,14 @@ from plantgen.geometry.meshes.mesh import (
     tessellate,
     triangle_count,
 )
-from plantgen.geometry.skeletons.frusta import ROW_FIELDS, Frusta, parent_rows_from_planes, surface_normals, surface_uv
+from plantgen.geometry.skeletons.frusta import (
+    ROW_FIELDS,
+    Frusta,
+    parent_rows_from_planes,
+    relief_scale,
+    surface_normals,
+    surface_uv,
+)
 from plantgen.geometry.skeletons.skin import skin_skeleton
 
 
@@ -367,7 +374,10 @@ def test_default_relief_heights_are_the_relief_modules_maps():
     rows, ring = lateral_vertex_rows(flat, frusta)
     u = flat.uv[: len(rows), 0].astype(float)
     w = relief.sample_height(relief.height_map(frusta.material_names[0]), u, ring / bands_along(2))
-    residual = cone_residual(frusta, rows, bumpy.vertices[: len(rows)], offset=w * frusta.shell[rows])
+    # the relief follows the radius: its depth where the flat (inner) vertex lies
+    y = np.einsum("ij,ij->i", flat.vertices[: len(rows)] - frusta.base[rows], frusta.axis[rows])
+    depth = frusta.shell[rows] * relief_scale(frusta, rows, y)
+    residual = cone_residual(frusta, rows, bumpy.vertices[: len(rows)], offset=w * depth)
     assert np.abs(residual).max() < 1e-12
     assert frusta.shell.max() > 0 and np.ptp(w) > 0.2
 

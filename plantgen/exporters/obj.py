@@ -198,7 +198,7 @@ def mtl_maps(files: dict, baked, base_colour: bool = True) -> list[str]:
         lines += [f"norm {files['normal'][0].name}", f"map_Bump {files['normal'][0].name}"]
     if "height" in files:
         lines += [f"# height: 0..1 of the relief shell, {baked.amplitude:.6g} model units at the median radius "
-                  f"(shell {baked.shell:g} of each segment's mean radius)", f"disp {files['height'][0].name}"]
+                  f"(shell {baked.shell:g} of the radius)", f"disp {files['height'][0].name}"]
     return lines
 
 

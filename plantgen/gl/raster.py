@@ -23,6 +23,7 @@ from ..geometry.meshes.skinned_mesh import SkinnedMesh
 from ..geometry.meshes.textures import mesh_tangents, mesh_uv_scales
 from ..geometry.rays.camera import Camera, box_corners
 from ..geometry.rays.instances import PlacedMeshes
+from ..geometry.skeletons.frusta import relief_scale
 from ..geometry.stage import Ground
 from ..settings import ParallaxSettings, ShadowSettings
 from .context import gl_context
@@ -141,10 +142,10 @@ class RasterRenderer(OffscreenRenderer):
             cap_rows = mesh.face_row if len(mesh.face_row) else np.zeros(1, np.int32)
         caps_buf = ctx.buffer(np.ascontiguousarray(cap_rows, np.int32).tobytes())
         tangents = _tangent_buffer(ctx, mesh, program)
-        # GS+POM: each row's shell thickness (model units), 4 B a row; each vertex's uv scales, 8 B
-        # (mesh_uv_scales)
+        # GS+POM: each row's relief depth (model units) at its two ends and its v slot, 16 B a
+        # row (row_depths); each vertex's uv scales, 8 B (mesh_uv_scales)
         parallax = "uv_scale" in program
-        shells = ctx.buffer(np.ascontiguousarray(frusta.shell, np.float32).tobytes()) if parallax else None
+        shells = ctx.buffer(row_depths(frusta).tobytes()) if parallax else None
         scales = ctx.buffer(mesh_uv_scales(mesh.vertices, mesh.uv, mesh.faces).tobytes()) if parallax else None
         vao = ctx.vertex_array(program, [(vbo, "3f 3f 2f", "position", "normal", "texcoord")]
                                + ([(bind, "2i", "bind")] if binding is not None else [])
@@ -410,6 +411,18 @@ class RasterRenderer(OffscreenRenderer):
         vaos = [self.ctx.vertex_array(caster, [(u[0], "3f 20x", "position")], index_buffer=u[1],
                                       index_element_size=4) for u in uploads]
         return [self._placed_draws(caster, uploads, meshes, plan, "origin_from_eye", vaos=vaos)], vaos
+
+
+def row_depths(frusta) -> np.ndarray:
+    """(n, 4) float32: each row's relief depth (model units) where its axis meets its lower
+    and upper ends, shell·r1/max(r1, r2) and shell·r2/max(r1, r2) (the relief follows the
+    radius: :func:`~plantgen.geometry.skeletons.frusta.relief_scale`), its v slots and its slot (a
+    row's own v is its texture v times the slots less the slot), for GS+POM's march depth."""
+    out = np.zeros((len(frusta), 4), np.float32)
+    out[:, 0] = frusta.shell * relief_scale(frusta, np.arange(len(frusta)), np.zeros(len(frusta)))
+    out[:, 1] = frusta.shell * relief_scale(frusta, np.arange(len(frusta)), frusta.length)
+    out[:, 2], out[:, 3] = frusta.v_part[:, 1], frusta.v_part[:, 0]
+    return out
 
 
 def placed_buffer_bytes(meshes: PlacedMeshes) -> int:

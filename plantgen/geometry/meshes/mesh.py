@@ -54,7 +54,7 @@ import numpy as np
 
 from ...tolerances import tol
 from ..skeletons import relief as relief_maps
-from ..skeletons.frusta import Frusta
+from ..skeletons.frusta import Frusta, relief_scale
 from ..vec import cross, dot, reduce_to_root, unit
 from .generators import bands_along, columns_around, generator_points, lateral_triangles_per_row, slice_triangles
 from .knuckles import Knuckles, cut_height, find_knuckles
@@ -355,7 +355,12 @@ def _surface(frusta: Frusta, relief: bool, height, step_u: float, step_v: float)
         def w_at(du, dv):
             return np.asarray(height(mm, (uu + du) % 1.0, vv + dv), dtype=np.float64).reshape(shape)
 
-        thick = shell[rows]
+        # the relief's depth where the inner cone's point lies (relief_scale: it follows
+        # the radius, as the ray caster's does)
+        inner, _ = generator_points(frusta, rows, u, v)
+        rows_b = np.broadcast_to(rows, shape)
+        along = dot(inner - frusta.base[rows_b], frusta.axis[rows_b]).reshape(shape)
+        thick = shell[rows] * relief_scale(frusta, rows_b.ravel(), along.ravel()).reshape(shape)
         offset = np.clip(w_at(0.0, 0.0), 0.0, 1.0) * thick
         # Central differences one texel apart, as the ray caster takes them (per unit of the
         # row's own v: the texture's v moves 1/slots as fast).

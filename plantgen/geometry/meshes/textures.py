@@ -15,8 +15,8 @@ axis, v along the segment's texture period; rows are v, row 0 at v = 0, as
 - ``base_colour`` (H, W, 3) uint8: the ray caster's albedo mix(dark, light, w)
   (``shading.glsl``'s ``material_albedo``) encoded as sRGB.
 
-The relief's slopes in the tangent frame. The shell is ``f·r̄`` thick (f the material's
-fraction, r̄ the segment's mean radius), u goes once around (|∂P/∂u| = 2πρ) and v spans
+The relief's slopes in the tangent frame. The relief is ``f·r̄`` deep (f the material's
+fraction, r̄ the radius where the point lies: it follows the radius), u goes once around (|∂P/∂u| = 2πρ) and v spans
 the texture period along the segment (|∂P/∂v| = L, the generator's length times the
 row's ``v_part`` slots). So the tangent-space normal is (-f·(r̄/ρ)/(2π)·∂w/∂u,
 -f·(r̄/L)·∂w/∂v, 1): the u-slope is the same on every segment (r̄/ρ = 1 up to the taper),

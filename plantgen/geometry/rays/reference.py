@@ -28,8 +28,9 @@ One row, one ray (``_pair_hits``; the GLSL caster mirrors it line by line):
 6. The nearest counting t (+ t0) is the hit.
 
 Relief (§3, float64 only): the outer cone r + shell bounds a height field
-r(y) + shell·h(u, v), (u, v) of the concentric cone through the point (so the shell
-shares the surface's (u, v)); w of (11)–(12) is (ρ - r(y))/shell. The ray interval
+r(y) + shell·σ(y)·h(u, v), σ(y) = r(y)/max(r1, r2) (``relief_scale``: the relief follows
+the radius, as deep on both sides of a joint), (u, v) of the concentric cone through the
+point (so the shell shares the surface's (u, v)); w of (11)–(12) is (ρ - r(y))/(shell·σ(y)). The ray interval
 inside the row's planes and bounding sphere is sampled densely (``relief_samples``)
 and the first inside sample is refined by bisection to below ``tol.relief_bisection``
 (relative to the row's size).
@@ -47,6 +48,7 @@ from ..skeletons.frusta import (
     Frusta,
     bounding_pyramids,
     facing_normals,
+    relief_scale,
     shade_rows_uv_normals,
     surface_uv,
     true_normals,
@@ -288,7 +290,8 @@ def _pair_hits(up: _Upload, rows, O, D, recenter: bool, t_min: float):
 
 # ------------------------------------------------------------------------------ relief
 def _inside_relief(frusta, rows, points, height):
-    """(m,) bool: point inside row's relief solid (between planes, ρ <= r(y) + shell·h)."""
+    """(m,) bool: point inside row's relief solid (between planes, ρ <= r(y) + shell·σ(y)·h,
+    σ = :func:`~plantgen.geometry.skeletons.frusta.relief_scale`)."""
     rel = points - frusta.base[rows]
     a = frusta.axis[rows]
     y = dot(rel, a)
@@ -296,7 +299,7 @@ def _inside_relief(frusta, rows, points, height):
     r_in = frusta.r1[rows] + frusta.slope[rows] * y
     lo, hi = frusta.plane_lo[rows], frusta.plane_hi[rows]
     between = (dot(lo[:, :3], points) - lo[:, 3] >= 0) & (dot(hi[:, :3], points) - hi[:, 3] <= 0)
-    shell = frusta.shell[rows]
+    shell = frusta.shell[rows] * relief_scale(frusta, rows, y)
     u, v = surface_uv(frusta, rows, points)
     w = height(rows, u, v) if height is not None else np.zeros(len(rows))
     top = r_in + shell * w

@@ -19,7 +19,10 @@ Contract (float64 on the CPU; converted to float32 only at upload):
 ``u_offset``    (n,) f8     added to u (§2.3) so u is continuous across joints
 ``twist``       (n,) f8     twist angle θ in turns; u gains v·twist
 ``material``    (n,) i4     index into ``material_names``
-``shell``       (n,) f8     relief shell thickness (0: no relief on this segment)
+``shell``       (n,) f8     relief shell thickness (0: no relief on this segment): the bound
+                            of the relief, whose depth at axial height y is
+                            shell·r(y)/max(r1, r2) (:func:`relief_scale`), so a shell that
+                            is a fraction of the radius is as deep on both sides of a joint
 ``segment``     (n,) i8     index of the skeleton segment this row came from (sharp-bend
                             splitting can give one skeleton segment several rows)
 ``v_part``      (n, 2) i8   (slot, slots): the row's share of the texture's v, a slot of
@@ -68,7 +71,7 @@ from ...tolerances import tol
 from ..vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
 
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
-           "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at",
+           "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at", "relief_scale",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
            "frusta_bounds", "row_end_balls", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
            "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals", "MAX_V_SLOTS"]
@@ -421,6 +424,18 @@ def cone_radius_at(frusta: Frusta, rows, y, offset=0.0) -> np.ndarray:
     (m,) (world units from C1); ``offset`` (scalar or (m,)) selects a concentric cone."""
     rows = np.asarray(rows)
     return frusta.r1[rows] + offset + frusta.slope[rows] * np.asarray(y, dtype=np.float64)
+
+
+def relief_scale(frusta: Frusta, rows, y) -> np.ndarray:
+    """(m,) the relief's depth at axial heights ``y`` (m,) of rows ``rows`` (m,), as a
+    fraction of their shell: r(y)/max(r1, r2), clamped to [0, 1] (1 where both radii are
+    0). The relief follows the radius, so with a shell that is a fraction f of the radius
+    (skinning's default) it is f·r(y) deep on either side of a joint: no step at the
+    shared plane. GLSL twin: ``relief_scale`` in ``shaders/cone.glsl``."""
+    rows = np.asarray(rows)
+    big = np.maximum(frusta.r1[rows], frusta.r2[rows])
+    radius = frusta.r1[rows] + frusta.slope[rows] * np.asarray(y, dtype=np.float64)
+    return np.where(big > 0, np.clip(radius / np.where(big > 0, big, 1.0), 0.0, 1.0), 1.0)
 
 
 def _local(frusta, rows, points):

@@ -2,7 +2,12 @@
 
 A height map is an (H, W) uint8 array: row j covers v in [j/H, (j+1)/H), column i covers
 u in [i/W, (i+1)/W); texel (j, i) has its centre at (u, v) = ((i + 0.5)/W, (j + 0.5)/H).
-Height w = value / 255 in [0, 1]: 0 on the inner cone, 1 on the outer shell (§3).
+Height w = value / 255 in [0, 1]: 0 on the inner cone, 1 at the relief's full depth, the
+shell times r(y)/max(r1, r2) (:func:`plantgen.geometry.frusta.relief_scale`; §3).
+
+The last row repeats the first (the pattern's period spans rows 0 to H - 1), so with v
+clamped a segment's top (v = 1) and its continuing neighbour's bottom (v = 0) read the same
+heights: the relief and the bark's colour meet in phase at every joint.
 
 Sampling (:func:`sample_height`) is bilinear, *repeat* in u and *clamp to edge* in v,
 exactly GL_LINEAR with GL_REPEAT (s) and GL_CLAMP_TO_EDGE (t) on a texture uploaded with
@@ -20,8 +25,10 @@ Materials: ``bark`` (furrows running along v), ``cactus`` (saguaro ribs along th
 all zero). Any other name gets the bark map and bark's shell thickness (documented
 fallback: unknown materials look like bark rather than vanish).
 
-Shell thickness (:data:`DEFAULT_SHELL`) is a fraction of each segment's mean radius, the
-convention of :func:`plantgen.geometry.skeletons.skin.skin_skeleton`'s ``shell`` argument.
+Shell thickness (:data:`DEFAULT_SHELL`) is a fraction of the radius: the relief is that
+fraction of r(y) deep at every height (the convention of
+:func:`plantgen.geometry.skeletons.skin.skin_skeleton`'s ``shell`` argument), as deep on both sides
+of a joint.
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ __all__ = ["MATERIALS", "DEFAULT_SHELL", "REPEATS", "height_map", "height_maps",
 
 MATERIALS = ("bark", "cactus", "stone", "aloe", "leaf")
 
-#: Relief shell thickness per material, as a fraction of the segment's mean radius.
+#: Relief depth per material, as a fraction of the radius (at every height of a segment).
 DEFAULT_SHELL = {"bark": 0.15, "cactus": 0.12, "stone": 0.10, "aloe": 0.05, "leaf": 0.0}
 
 #: Texture repeats (around u, along v per segment) per material; all 1: (u, v) of the
@@ -111,7 +118,13 @@ _GENERATORS = {"bark": _bark, "cactus": _cactus, "stone": _stone, "aloe": _aloe,
 def _cached(name: str, size: tuple[int, int]) -> np.ndarray:
     key = name if name in _GENERATORS else "bark"
     rng = np.random.default_rng(zlib.crc32(key.encode()))
-    field = _GENERATORS[key](rng, size)
+    h, w = size
+    # One period of the (periodic) pattern over rows 0..H-2, and row H-1 a copy of row 0: v
+    # clamps to the edge rows, so a row's v = 1 and its continuing neighbour's v = 0 read
+    # the same heights and the relief meets in phase across every joint.
+    field = _GENERATORS[key](rng, (h - 1, w)) if h > 1 else _GENERATORS[key](rng, size)
+    if h > 1:
+        field = np.concatenate([field, field[:1]], axis=0)
     out = np.clip(np.rint(np.clip(field, 0.0, 1.0) * 255.0), 0, 255).astype(np.uint8)
     out.setflags(write=False)
     return out

@@ -66,12 +66,16 @@ from .skeleton import Skeleton
 from .smooth import DEFAULT_STEP_DEG
 from .smooth import smooth_bends as smooth_bends_of
 
-__all__ = ["skin_skeleton", "continuing_children", "material_shell", "crossing_rows_sampled",
-           "seam_radii", "sphere_base_radius"]
+__all__ = ["skin_skeleton", "continuing_children", "lead_forks", "material_shell", "crossing_rows_sampled",
+           "seam_radii", "sphere_base_radius", "FORK_LEAD_MAX_BEND_DEG"]
+
+#: The largest bend (degrees) at which a fork's child may lead on from its parent
+#: (:func:`lead_forks`); a fork whose children all turn further keeps its capped end.
+FORK_LEAD_MAX_BEND_DEG = 90.0
 
 
 def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
-                  smooth_step_deg: float = DEFAULT_STEP_DEG, **options) -> Frusta:
+                  smooth_step_deg: float = DEFAULT_STEP_DEG, lead: bool = True, **options) -> Frusta:
     """Skin a skeleton with conical frusta (§2), optionally smoothing its bends first.
 
     smooth_bends : None (the default: the skeleton as it is), or an angle in degrees:
@@ -82,9 +86,14 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
         rows share one period of the texture's v (``v_part``), and the report counts the
         joints smoothed and the segments added (``smooth_joints``, ``smooth_segments``;
         ``n_segments`` is the original count).
+    lead : let one child of every fork continue its parent (:func:`lead_forks`, the
+        default): a fork's parent otherwise ends in a flat cap with its thinner children
+        standing on it (a visible step). False: the skeleton's own ``continues``
     options : the keyword arguments of :func:`_skin` (shell, seam_fit, max_bend_deg,
         fan_step_deg, twist, extend_side_branches)
     """
+    if lead:
+        skeleton = lead_forks(skeleton)
     if smooth_bends is None:
         return _skin(skeleton, **options)
     refined = smooth_bends_of(skeleton, float(smooth_bends), step_deg=float(smooth_step_deg))
@@ -105,9 +114,12 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     ----------
     skeleton : Skeleton with n segments (world units, y up)
     shell : dict material name -> relief shell thickness, or None for
-        :data:`plantgen.geometry.skeletons.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction of the
-        segment's mean radius (r_start + r_end)/2; a value v < 0 means an absolute
-        thickness of -v world units. Names missing from a given dict get 0 (no relief).
+        :data:`plantgen.geometry.skeletons.relief.DEFAULT_SHELL`. A value v >= 0 is a fraction
+        of the radius: the relief is v·r(y) deep at every height y, so it is as deep on both
+        sides of a joint (the row's ``shell``, its bound, is v times the segment's larger
+        end radius; :func:`plantgen.geometry.skeletons.frusta.relief_scale`); a value v < 0
+        means -v world units at the segment's thicker end, following the radius along it.
+        Names missing from a given dict get 0 (no relief).
     seam_fit : close every continuing joint's seam exactly (the default): each continuing
         child's r1 is set so that the two cones touch one sphere around the joint, and the
         joint plane passes through the crossings of their boundary lines, which are then
@@ -159,8 +171,11 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     ref_dir = _reference_directions(rows.axis, rows.parent_row)
     row_twist = np.full(n_rows, float(twist))
     row_shell = np.zeros(n_rows)
-    mean_r = 0.5 * (skeleton.r_start + skeleton.r_end)
-    row_shell[:] = material_shell(skeleton, shell, mean_r)[rows.segment] if n else 0.0
+    # the shell bounds a relief as deep as the material's fraction of the radius at every
+    # height (relief_scale); a side branch's own radius, not the one moved into its parent
+    thick_end = np.maximum(seg.r_start, seg.r_end)
+    thick_end[side] = np.maximum(skeleton.r_start[side], skeleton.r_end[side])
+    row_shell[:] = material_shell(skeleton, shell, thick_end)[rows.segment] if n else 0.0
     row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
     u_offset = _u_offsets(rows, ref_dir, row_twist)
     return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
@@ -251,6 +266,52 @@ def continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(cont), np.flatnonzero((parent >= 0) & ~cont)
 
 
+def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG) -> Skeleton:
+    """The skeleton with one child of every fork continuing its parent (unchanged where
+    there is no fork to lead; applying it twice changes nothing).
+
+    A *fork* is a segment no child continues, with side branches of its material starting
+    at its end point (L-system forks ``F [ +K ] [ -K ]`` bracket every child). Its end would
+    be an open row, capped by a flat disc, with the children, thinner, standing on that
+    disc: a collar at every fork. Its *leader*, the least bent of its thickest children
+    (radii within ``tol.radius_step`` of the thickest; then the first), becomes the
+    parent's continuing child, its base radius the parent's end radius: the parent flows
+    into the leader in one surface (seam, texture frame and normals shared at the joint
+    plane) that tapers to the leader's own radius along the leader's first segment, and
+    the fork's other children grow out of that surface (side branches, started inside the
+    parent). Children bent by more than ``max_bend_deg`` do not lead."""
+    n = len(skeleton)
+    child, side = continuing_children(skeleton)
+    if side.size == 0:
+        return skeleton
+    parent = skeleton.parent
+    led = np.zeros(n, dtype=bool)
+    led[parent[child]] = True
+    host = parent[side]
+    d_host = skeleton.end[host] - skeleton.start[host]
+    d_side = skeleton.end[side] - skeleton.start[side]
+    cos_b = dot(d_host, d_side) / np.maximum(norm(d_host) * norm(d_side), tol.tiny)
+    size = np.maximum(np.maximum(skeleton.r_end[host], norm(d_host)), tol.tiny)
+    at_end = norm(skeleton.start[side] - skeleton.end[host]) <= tol.same_length * size
+    ok = (~led[host] & at_end & (skeleton.material[side] == skeleton.material[host])
+          & (norm(d_side) > 0) & (cos_b > np.cos(np.radians(max_bend_deg))))
+    if not ok.any():
+        return skeleton
+    cand, host, cos_b = side[ok], host[ok], cos_b[ok]
+    radius = skeleton.r_start[cand]
+    thickest = np.zeros(n)
+    np.maximum.at(thickest, host, radius)
+    thin = radius < (1.0 - tol.radius_step) * thickest[host]   # within radius_step: as thick
+    order = np.lexsort((cand, -cos_b, thin, host))               # by host, best first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = host[order][1:] != host[order][:-1]
+    leader = cand[order][first]
+    continues, r_start = skeleton.continues.copy(), skeleton.r_start.copy()
+    continues[leader] = True
+    r_start[leader] = skeleton.r_end[parent[leader]]
+    return dataclasses.replace(skeleton, r_start=r_start, continues=continues)
+
+
 def _extend_side_branches(seg: _Segments, start, host, side) -> None:
     """Move the bases of side branches ``side`` (s,) back into their ``host`` (s,) segments
     along their own axes, keeping their slopes (in place).
@@ -272,15 +333,16 @@ def _extend_side_branches(seg: _Segments, start, host, side) -> None:
     seg.length[side] = seg.length[side] + delta
 
 
-def material_shell(skeleton: Skeleton, shell, radius_mean):
+def material_shell(skeleton: Skeleton, shell, radius):
     """(n,) absolute shell thickness per segment from the per-material table ``shell``
-    (see :func:`skin_skeleton`) and the (n,) mean radii."""
+    (see :func:`skin_skeleton`) and the (n,) radii its fractions apply to (each segment's
+    larger end radius: the shell bounds a relief v·r(y) deep)."""
     table = dict(relief.DEFAULT_SHELL) if shell is None else dict(shell)
     per_mat = np.array([float(table.get(name, relief.default_shell(name) if shell is None else 0.0))
                         for name in skeleton.material_names] or [0.0])
     frac = per_mat[skeleton.material] if len(skeleton) else np.zeros(0)
-    # positive: fraction of the segment's mean radius; negative: absolute thickness -value
-    return np.where(frac >= 0, frac * radius_mean, -frac)
+    # positive: fraction of the radius; negative: absolute thickness -value
+    return np.where(frac >= 0, frac * radius, -frac)
 
 
 # ============================================================================ joint planes

@@ -40,7 +40,7 @@ from ..vec import any_perpendicular, cross, reduce_to_root, tree_roots
 from .frusta import Frusta
 from .motion import SwayRig
 from .skeleton import Skeleton
-from .skin import continuing_children, crossing_rows_sampled, material_shell, seam_radii
+from .skin import continuing_children, crossing_rows_sampled, lead_forks, material_shell, seam_radii
 
 __all__ = ["SwaySkin", "SwayPose", "PathSum", "BEND_LIMIT_COS", "SHARP_SAMPLES"]
 
@@ -115,6 +115,7 @@ class SwaySkin:
             if not np.array_equal(values[has_p], values[p]):
                 return None
         self = cls()
+        skeleton = lead_forks(skeleton)        # as skin_skeleton does: fixed at rest, once
         self._plan_pose(skeleton, rig)
         self._plan_skin(skeleton)
         moved = np.abs(self.rc - self.r0c) > tol.seam_radius_change * np.maximum(self.r0c, tol.tiny)
@@ -308,9 +309,9 @@ class SwaySkin:
         sc = np.sqrt(1.0 + kc * kc)
         self.medial = {"sigma": sigma, "rp": self.rp, "rho_c": self.rc / sc,
                        "ec_m": -kc / sc, "ec_n": sigma / sc}
-        mean_r = 0.5 * (sk.r_start + sk.r_end)
+        thick_end = np.maximum(self.r_start, self.r_end)     # as skinning: seam radii, not moved sides
         self.constant = {"twist": np.zeros(n), "material": sk.material.astype(np.int32),
-                         "shell": material_shell(sk, None, mean_r), "segment": np.arange(n),
+                         "shell": material_shell(sk, None, thick_end), "segment": np.arange(n),
                          "v_part": np.tile(np.array([0, 1], np.int64), (n, 1))}
         for arr in (self.r_start, self.r_end, self.length):
             arr.setflags(write=False)
