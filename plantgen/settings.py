@@ -30,7 +30,7 @@ from .errors import PlantgenError
 from .geometry.rays.camera import Orbit
 from .knobs import check_knobs, knob
 
-__all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "LookSettings", "LOD_EXPORT_LEVELS",
+__all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "LookSettings", "LOD_EXPORT_LEVELS",
            "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings", "ParallaxSettings",
            "DetailSettings",
            "ImageSettings", "MotionSettings", "ViewSettings", "RenderSettings", "MeshSettings", "LevelSettings",
@@ -52,6 +52,8 @@ DEFAULT_EFFECTS = ("tone", "translucency")
 LOD_EXPORT_LEVELS = 4
 #: The image size when neither the command nor a camera file gives one.
 DEFAULT_SIZE = (1024, 768)
+#: The ``--ground`` values: ``auto`` (the scene's ground; a disc under a single plant) or ``none``.
+GROUND_CHOICES = ("auto", "none")
 #: The most samples per pixel side of supersampling.
 MAX_SSAA = 8
 #: The finest GS subdivision level m anyone may ask for (the triangle budgets may stop it sooner).
@@ -393,7 +395,8 @@ class DetailSettings:
 class ImageSettings:
     """The picture: ``size`` (width, height) in pixels (None: a camera file's, else
     :data:`DEFAULT_SIZE`), ``ssaa`` samples per pixel side, ``background`` by name
-    (``sky``, a colour, ``none``: :func:`plantgen.images.parse_background`)."""
+    (``sky``, a colour, ``none``: :func:`plantgen.images.parse_background`), ``ground``
+    (:data:`GROUND_CHOICES`: ``auto``, the scene's or a single plant's disc, or ``none``)."""
 
     size: tuple | None = knob(None, "--size", "Image size (WIDTHxHEIGHT pixels; default: the camera file's, else "
                               f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}).", kind="size", metavar="WxH")
@@ -403,6 +406,9 @@ class ImageSettings:
     background: str = knob("sky", "--background", "The background: 'sky', a colour (white, '#20304a') or 'none' "
                            "for a transparent PNG (RGBA: the alpha is the model's coverage).", kind="str",
                            metavar="COLOUR|none")
+    ground: str = knob("auto", "--ground", "The ground: 'auto' is the scene's ground, and under a single plant a "
+                       "sand disc that fades into the sky and takes the plant's shadow; 'none' draws no ground.",
+                       kind="choice", choices=GROUND_CHOICES)
 
     def __post_init__(self):
         check_knobs(self)

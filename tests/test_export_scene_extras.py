@@ -10,6 +10,7 @@ import struct
 
 import numpy as np
 import pytest
+from _cli import run_cli
 from _node import assert_khronos_valid, needs_node, three_js_scene
 
 from plantgen.geometry.skeletons.frames import up_rotation
@@ -60,6 +61,20 @@ def test_a_grammar_exports_no_camera_light_or_ground(tmp_path):
     assert "cameras" not in doc and "extensions" not in doc and "extensionsUsed" not in doc
     assert [m["name"] for m in doc["meshes"]] == ["saguaro"]
     assert scene_extras(grow_file("saguaro")) is None
+
+
+def test_a_grammar_exports_its_ground_disc_when_asked(tmp_path):
+    """With ``ground=True`` a single plant's export carries the ground disc plantgen render
+    draws under it (issue 43: a reference renderer sees the same ground), no camera or light."""
+    assert export_model("saguaro", tmp_path / "s.glb", level=0, ground=True)["scene"] == ("ground",)
+    doc = glb_json(tmp_path / "s.glb")
+    assert "cameras" not in doc and "extensions" not in doc
+    assert [m["name"] for m in doc["meshes"]] == ["saguaro", "Ground"]
+    extras = scene_extras(grow_file("saguaro"), ground=True)
+    assert extras.camera is None and extras.light is None and extras.ground.shape == "disc"
+    code, _, err = run_cli("export", "saguaro", "-o", tmp_path / "c.glb", "--subdiv", "0", "--ground")
+    assert code == 0, err
+    assert [m["name"] for m in glb_json(tmp_path / "c.glb")["meshes"]] == ["saguaro", "Ground"]
 
 
 def test_auto_camera_is_the_one_render_frames(auto_yard):

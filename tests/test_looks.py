@@ -233,6 +233,26 @@ def test_inside_a_closed_tube_no_sky_reaches(renderers, kind):
     assert srgb_like(traced.color).mean() < 0.05 * srgb_like(plain.color).mean()
 
 
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_ground_traces_the_sky_too(renderers, kind):
+    """The ground gets the sky light as the model does: open ground keeps the open
+    hemisphere's light exactly; beside a post's foot the post hides part of the sky."""
+    frusta = skin_skeleton(column((0.0, 0.0, 0.0), 2.5, 0.4))
+    camera = Camera((0.0, 6.0, 3.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0), 45.0, 64, 64)
+    kw = dict(ground=Ground(40.0), light_dir=(0.0, -1.0, 0.0))      # the sun below: the ground gets sky alone
+    plain = draw(renderers, kind, frusta, camera, PLAIN, **kw)
+    traced = draw(renderers, kind, frusta, camera, sky_only(LookSettings(sky_samples=64, sky_reach=0.3)), **kw)
+    origins, dirs = camera.rays()
+    hit = origins + np.where(np.isfinite(plain.distance), plain.distance, 0.0)[..., None] * dirs
+    ground = np.isfinite(plain.distance) & (np.abs(hit[..., 1]) < 1e-2)
+    r = np.hypot(hit[..., 0], hit[..., 2])
+    far, near = ground & (r > 1.5), ground & (r < 0.6)
+    assert far.sum() > 500 and near.sum() > 10
+    assert np.abs(traced.color[far].astype(int) - plain.color[far].astype(int)).max() <= 1
+    ratio = srgb_like(traced.color[near]).mean() / srgb_like(plain.color[near]).mean()
+    assert ratio < 0.85, ratio
+
+
 def partly_open(renderers, kind, samples):
     """A leaf on the ground beside a post, lit by the sky alone: linear colours (h, w, 3)."""
     frusta = skin_skeleton(column((0.0, 0.0, 0.0), 3.0, 0.6))

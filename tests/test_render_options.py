@@ -106,7 +106,7 @@ def test_a_background_colour_stays_exact_and_none_is_transparent(gl_ctx, tmp_pat
     for n in (1, 3):
         out, depth = tmp_path / f"b{n}.png", tmp_path / f"b{n}.npy"
         code, _, err = run_cli("render", "saguaro", "-o", out, "--size", SIZE, "--background", "#204060",
-                               "--ssaa", str(n), "--depth-out", depth)
+                               "--ssaa", str(n), "--depth-out", depth, "--ground", "none")
         assert code == 0, err
         rgb = np.asarray(Image.open(out))
         miss = ~np.isfinite(np.load(depth))

@@ -36,7 +36,7 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 
 #: Where export's options go in ``--help`` (beside the settings' own sections).
 SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_step": QUALITY, "up": OUTPUT,
-            "instancing": OUTPUT, "unit": OUTPUT, "qsm_tolerance": QUALITY, "lod_pixels": OUTPUT}
+            "instancing": OUTPUT, "unit": OUTPUT, "qsm_tolerance": QUALITY, "lod_pixels": OUTPUT, "ground_disc": OUTPUT}
 
 
 @click.command(cls=SectionedCommand, sections=SECTIONS)
@@ -55,6 +55,9 @@ SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_st
               help="Normal maps per aspect: split each relief material's segments into buckets RATIO apart in "
                    "radius over length, each with its own normal map (exact for its aspect; e.g. 2). "
                    "Default: one normal map per material, at its median aspect.")
+@click.option("--ground/--no-ground", "ground_disc", default=False, show_default=True,
+              help="glTF, USD: under a single plant (a grammar or a skeleton), write the ground disc that "
+                   "plantgen render draws there, without its fade. A scene writes its own ground either way.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")
@@ -84,7 +87,8 @@ SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_st
 @quiet_opt
 @verbose_opt
 def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing,
-           unit, qsm_tolerance, seed, smooth_bends, limit_values, allow_paths, quiet, verbose, **keys) -> None:
+           unit, qsm_tolerance, ground_disc, seed, smooth_bends, limit_values, allow_paths, quiet, verbose,
+           **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
 
@@ -93,7 +97,7 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
     colours. A scene's repeated plants are written once and instanced in glTF and USD
     (core glTF nodes by default, which every reader opens). glTF and USD carry a scene's
     camera, light and ground too (the camera render would use, a directional light, the
-    ground square in its material); a grammar gets none. glTF, OBJ and USD carry the
+    ground square in its material); a grammar only its ground disc, with --ground. glTF, OBJ and USD carry the
     relief as textures: per relief material a base colour, a tangent-space normal map
     and a height map, PNG (inside a .glb, beside the others; --no-textures: none).
     A grammar's leaves ({ . } polygons) go into every mesh format beside the branches, in
@@ -139,7 +143,7 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
                             textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
-                            levels=take_settings(LevelSettings, keys), asset=asset)
+                            levels=take_settings(LevelSettings, keys), asset=asset, ground=ground_disc)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:

@@ -132,12 +132,27 @@ def light_rotation(light: Light, up: str = "y") -> np.ndarray:
     return np.stack([x, np.cross(back, x), back], axis=1)
 
 
+#: The rim vertices of an exported ground disc.
+DISC_SIDES = 64
+
+
 def ground_mesh(ground: Ground, up: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The ground square's vertices (4, 3), unit normals (4, 3) and two triangles (2, 3),
-    facing up, in the ``up`` frame."""
+    """The ground's vertices (k, 3), unit normals (k, 3) and triangles (t, 3), facing up,
+    in the ``up`` frame: a square's two triangles, or a disc's fan of :data:`DISC_SIDES`
+    (its rim's polygon; the renderers' fade into the sky is not written)."""
     rot = up_rotation(up)
-    normals = np.tile(rot @ np.array([0.0, 1.0, 0.0]), (4, 1))
-    return ground.quad() @ rot.T, normals, np.array([[0, 1, 2], [2, 1, 3]])
+    if ground.shape == "disc":
+        angle = np.linspace(0.0, 2 * np.pi, DISC_SIDES, endpoint=False)
+        cx, cz = ground.centre
+        rim = np.stack([cx + ground.half * np.cos(angle), np.full(DISC_SIDES, float(ground.height)),
+                        cz - ground.half * np.sin(angle)], axis=1)
+        vertices = np.concatenate([[[cx, float(ground.height), cz]], rim])
+        k = np.arange(DISC_SIDES)
+        faces = np.stack([np.zeros(DISC_SIDES, int), 1 + k, 1 + (k + 1) % DISC_SIDES], axis=1)
+    else:
+        vertices, faces = ground.quad(), np.array([[0, 1, 2], [2, 1, 3]])
+    normals = np.tile(rot @ np.array([0.0, 1.0, 0.0]), (len(vertices), 1))
+    return vertices @ rot.T, normals, faces
 
 
 def ground_colour(ground: Ground, colours: Colours = None) -> tuple[float, float, float]:

@@ -11,23 +11,70 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Ground", "Light", "Sway", "MODEL_LIGHT", "SCENE_LIGHT"]
+__all__ = ["GROUND_SHAPES", "GROUND_FADE", "Ground", "model_ground", "Light", "Sway", "MODEL_LIGHT", "SCENE_LIGHT"]
+
+
+#: Ground shapes: ``square`` (a scene's, of side ``size``), ``disc`` (of diameter ``size``:
+#: a single plant's, :func:`model_ground`).
+GROUND_SHAPES = ("square", "disc")
+#: The fraction of a ground's half size (the square's half side, the disc's radius) over
+#: which it fades into the sky behind it, ending at its edge: no edge shows.
+GROUND_FADE = 0.3
+#: A single plant's ground disc: its radius in units of the plant's largest size (the
+#: plant's shadow under the model light is shorter than its height), and never less than
+#: :data:`MODEL_GROUND_MIN_RADIUS` world units.
+MODEL_GROUND_REACH = 2.5
+MODEL_GROUND_MIN_RADIUS = 1.0
 
 
 @dataclass(frozen=True)
 class Ground:
-    """A square of side ``size`` (world units) at y = ``height``, centred under the origin,
-    facing up, shaded with the material named ``material``."""
+    """A ground at y = ``height``, facing up, shaded with the material named ``material``:
+    a square of side ``size`` (world units) or a disc of diameter ``size`` (``shape``),
+    centred at ``centre`` (x, z). Its outer ``fade`` (a fraction of its half size) fades
+    into the sky behind it, so its edge does not show against the sky."""
 
     size: float = 10.0
     height: float = 0.0
     material: str = "sand"
+    shape: str = "square"
+    centre: tuple = (0.0, 0.0)
+    fade: float = GROUND_FADE
+
+    def __post_init__(self):
+        if self.shape not in GROUND_SHAPES:
+            raise ValueError(f"ground shape must be one of {GROUND_SHAPES}, got {self.shape!r}")
+        object.__setattr__(self, "centre", (float(self.centre[0]), float(self.centre[1])))
+
+    @property
+    def half(self) -> float:
+        """The half size: the square's half side, the disc's radius."""
+        return float(self.size) / 2
 
     def quad(self) -> np.ndarray:
-        """(4, 3) float64 corners in triangle-strip order, facing up."""
-        half = float(self.size) / 2
+        """(4, 3) float64 corners in triangle-strip order, facing up: the square, or the
+        square around the disc (the shader cuts the disc out of it)."""
+        half = self.half
         y = float(self.height)
-        return np.array([[-half, y, half], [half, y, half], [-half, y, -half], [half, y, -half]])
+        cx, cz = self.centre
+        return np.array([[cx - half, y, cz + half], [cx + half, y, cz + half],
+                         [cx - half, y, cz - half], [cx + half, y, cz - half]])
+
+    def uniforms(self) -> dict:
+        """The ground shader's uniforms of its shape and fade (``shaders/ground.glsl``)."""
+        return {"ground_centre": self.centre, "ground_half": self.half,
+                "ground_fade": float(np.clip(self.fade, 1e-6, 1.0)), "ground_disc": self.shape == "disc"}
+
+
+def model_ground(box, material: str = "sand") -> Ground:
+    """A single plant's ground: a disc under the plant's world box ``box`` (2, 3), at its
+    lowest point, centred under it, of radius :data:`MODEL_GROUND_REACH` times the box's
+    largest side (the plant's shadow falls on it), fading into the sky at its rim."""
+    box = np.asarray(box, dtype=np.float64)
+    extent = float(np.max(box[1] - box[0]))
+    radius = max(MODEL_GROUND_REACH * extent, MODEL_GROUND_MIN_RADIUS)
+    centre = 0.5 * (box[0] + box[1])
+    return Ground(size=2 * radius, height=float(box[0, 1]), shape="disc", centre=(centre[0], centre[2]))
 
 
 @dataclass(frozen=True)

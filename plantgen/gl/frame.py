@@ -5,7 +5,7 @@ float32 distance + depth, resized on demand), the relief height textures, the sk
 ground square and the light's shadow map. A renderer (:class:`~plantgen.gl.raycast.
 Raycaster`, :class:`~plantgen.gl.raster.RasterRenderer`) prepares its programs and
 its model's draw, then :meth:`OffscreenRenderer._draw_frame` runs the passes in order
-(shadow map, sky, ground, model) and :meth:`OffscreenRenderer._read_back` returns the
+(shadow map, ground, sky, model) and :meth:`OffscreenRenderer._read_back` returns the
 image and the distances.
 
 The shadow map is paid once: the light's pass is drawn relative to its own origin (the
@@ -33,7 +33,7 @@ from .material_uniforms import HeightTextures, palette_uniforms, shading_uniform
 from .passes import LightWindow, ShadowPass, light_window, traced_look
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
-from .supersample import resolve_supersamples
+from .supersample import GpuResolve
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "ShadowKey", "LightPass",
            "light_anchor", "check_background", "check_ssaa"]
@@ -252,6 +252,7 @@ class OffscreenRenderer:
         self._shadow = ShadowPass(self.ctx)
         self._leaves = LeafLayer(self.ctx)
         self._sky_vao = None
+        self._resolver = GpuResolve(self.ctx)
         self.last_light_window = None
         self.last_resolve_ms = 0.0
 
@@ -281,6 +282,7 @@ class OffscreenRenderer:
         if self._fbo is not None:
             release_framebuffer(self._fbo)
         self._fbo = self._fbo_size = None
+        self._resolver.release()
         self._heights.release()
         self._shadow.release()
         self._leaves.release()
@@ -332,18 +334,22 @@ class OffscreenRenderer:
             self._sky_vao = self.ctx.vertex_array(sky, [])
         return self._sky_vao
 
-    def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting):
-        """Draws of the ground square: a callable drawing it into the frame and, with a light
-        window, one drawing it into the light's map (relative to the light's anchor; for
-        :meth:`_draw_frame`).
+    def _ground_draws(self, ground: Ground, view: FrameView, lighting: FrameLighting, background=None):
+        """Draws of the ground (its square; a disc is cut out of it): a callable drawing it
+        into the frame and, with a light window, one drawing it into the light's map
+        (relative to the light's anchor; for :meth:`_draw_frame`). It fades at its edge
+        into the sky, or into ``background`` (r, g, b, a) where the frame's is flat.
 
         Returns (frame draw, light draw or None, [objects to release after the frame]).
         """
         ctx = self.ctx
         shadowed = lighting.window is not None
+        looks = lighting.defines("ground.glsl")
         program = build_program(ctx, "ground.glsl", {"SHADOWS": lighting.shadowed, **lighting.receiver_defines,
-                                                     **lighting.defines("ground.glsl")})
-        set_uniforms(program, **lighting.shading, **lighting.receiver,
+                                                     **looks, "FLAT_BACKGROUND": background is not None})
+        shading = {**lighting.shading, **lighting.receiver, **(lighting.sky if looks.get("SKY_LIGHT") else {})}
+        set_uniforms(program, **shading, **ground.uniforms(),
+                     **({} if background is None else {"background": tuple(background)}),
                      view_projection=mat4(view.view_projection),
                      ground_material=lighting.ground_material, origin_offset=tuple(view.eye))
         buf = ctx.buffer((ground.quad() - view.eye).astype(np.float32).tobytes())
@@ -365,12 +371,13 @@ class OffscreenRenderer:
         return frame_draw, light_draw, [vao, light_vao, buf, light_buf]
 
     def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
-                      *, labels=None) -> Surroundings:
-        """The frame's draws besides the model's own: the ground square and the leaves
-        (``leaves``: a Polygons or None; ``labels`` (p,): draw them as a part mask)."""
+                      *, labels=None, background=None) -> Surroundings:
+        """The frame's draws besides the model's own: the ground (fading into ``background``
+        where it is flat) and the leaves (``leaves``: a Polygons or None; ``labels`` (p,):
+        draw them as a part mask)."""
         out = Surroundings([], [], [], [])
         if ground is not None:
-            draw, light_draw, garbage = self._ground_draws(ground, view, lighting)
+            draw, light_draw, garbage = self._ground_draws(ground, view, lighting, background)
             out.before.append(draw)
             out.light.append(light_draw)
             out.garbage.extend(garbage)
@@ -387,9 +394,9 @@ class OffscreenRenderer:
             if self._fbo is not None:
                 release_framebuffer(self._fbo)
             ctx = self.ctx
+            # textures, not renderbuffers: supersampling's resolve samples them (GpuResolve)
             self._fbo = ctx.framebuffer(
-                color_attachments=[ctx.renderbuffer((width, height), 4),
-                                   ctx.renderbuffer((width, height), 1, dtype="f4")],
+                color_attachments=[ctx.texture((width, height), 4), ctx.texture((width, height), 1, dtype="f4")],
                 depth_attachment=ctx.depth_renderbuffer((width, height)))
             self._fbo_size = (width, height)
         return self._fbo
@@ -429,8 +436,8 @@ class OffscreenRenderer:
                     extras: Surroundings) -> tuple[float, float, bool]:
         """Run one frame's passes in order: the shadow map (with ``shadows``: drawn by
         ``light`` and the light draws of ``extras``, or reused, :meth:`_draw_shadow_map`),
-        the sky, the ground (``extras.before``), the model (``draw_model()``) and the
-        leaves (``extras.after``), with the depth test on from the ground on.
+        the ground (``extras.before``), the sky where nothing covers the far plane, the
+        model (``draw_model()``) and the leaves (``extras.after``), depth tested.
 
         Returns (frame_ms, shadow_ms, shadow_cached): wall milliseconds from the first pass
         to glFinish, those of the shadow pass alone (0 for a reused map), and whether the
@@ -446,11 +453,17 @@ class OffscreenRenderer:
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         fbo.clear(depth=1.0)
-        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
-        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.disable(ctx.CULL_FACE | ctx.BLEND)
         ctx.enable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
-        for draw in (*extras.before, draw_model, *extras.after):
+        for draw in extras.before:
+            draw()
+        # the sky after the ground, at the far plane: the depth test skips the sky's
+        # fragments the ground covers before they are shaded
+        ctx.depth_func = "<="
+        sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
+        ctx.depth_func = "<"
+        for draw in (draw_model, *extras.after):
             draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3
@@ -479,19 +492,19 @@ class OffscreenRenderer:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
-        averaged down (:func:`plantgen.gl.supersample.resolve_supersamples`, in linear
-        light: ``srgb`` the frame's encoding)."""
+        averaged down on the GPU first, in linear light (``srgb`` the frame's encoding;
+        :class:`plantgen.gl.supersample.GpuResolve`; ``last_resolve_ms``: that pass and its
+        read back)."""
         fbo = self._fbo
-        w, h, k = width * ssaa, height * ssaa, 4 if alpha else 3
-        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)
-        color = color.reshape(h, w, k)[::-1]
-        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
-                             np.float32).reshape(h, w)[::-1]
         self.last_resolve_ms = 0.0
-        if ssaa == 1:
-            return color.copy(), dist.copy()
-        t0 = time.perf_counter()
-        out = resolve_supersamples(color, dist, ssaa, srgb=srgb)
-        self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
-        return out
+        if ssaa > 1:
+            t0 = time.perf_counter()
+            out = self._resolver.resolve(fbo.color_attachments[0], fbo.color_attachments[1], width, height,
+                                         ssaa, alpha, srgb=srgb)
+            self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
+            return out
+        k = 4 if alpha else 3
+        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8)
+        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1), np.float32)
+        return color.reshape(height, width, k)[::-1].copy(), dist.reshape(height, width)[::-1].copy()
 

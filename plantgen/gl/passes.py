@@ -59,8 +59,8 @@ def light_program(settings, shadows: ShadowSettings) -> tuple[str, dict]:
 def look_defines(look, program: str, shadowed: bool = False) -> dict:
     """The defines of the looks (:class:`~plantgen.settings.LookSettings`, None: none) that
     ``program`` takes: every program its tone curve (``TONE_MAP``, ``TONE_ACES``), the shadow receivers the
-    soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``)
-    and the leaves the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
+    soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``),
+    the leaves and the ground the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
     off gives no define: the program is today's."""
     if look is None:
         return {}
@@ -69,7 +69,7 @@ def look_defines(look, program: str, shadowed: bool = False) -> dict:
     if program == "sky.glsl":
         return out
     out["SOFT_SUN"] = on["SOFT_SUN"] and shadowed
-    if program in ("raycast.glsl", "rt.glsl", "leaf.glsl"):
+    if program in ("raycast.glsl", "rt.glsl", "leaf.glsl", "ground.glsl"):
         out["SKY_LIGHT"] = on["SKY_LIGHT"]
     if program == "leaf.glsl":
         out["TRANSLUCENT"] = on["TRANSLUCENT"]
@@ -105,7 +105,8 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
         if leaves:
             out.append(("leaf.glsl", {"SHADOW_PASS": True}))
     if ground:
-        out.append(("ground.glsl", {"SHADOWS": shadowed, **look_defines(look, "ground.glsl", shadowed)}))
+        out.append(("ground.glsl", {"SHADOWS": shadowed, "FLAT_BACKGROUND": flat_background,
+                                    **traced_look(look, "ground.glsl", shadowed, bvh_defines)}))
     out.append(("raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
                                  **({} if labels else traced_look(look, "raycast.glsl", shadowed, bvh_defines))}))
     if leaves:
@@ -115,7 +116,9 @@ def program_variants(settings, shadows: ShadowSettings | None, ground: bool, fla
 
 
 def frame_passes(shadows: bool, ground: bool, segments: bool, leaves: bool = False) -> list[str]:
-    """Names of the passes of one frame, in order."""
+    """Names of the passes of one frame, in order, but for the sky: it is drawn after the
+    ground, at the far plane, so the depth test skips it where the ground covers it
+    (:meth:`plantgen.gl.frame.OffscreenRenderer._draw_frame`); it is named before."""
     return ((["shadow"] if shadows and (segments or ground or leaves) else []) + ["sky"]
             + (["ground"] if ground else []) + (["frusta"] if segments else []) + (["leaves"] if leaves else []))
 

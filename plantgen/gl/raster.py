@@ -217,7 +217,7 @@ class RasterRenderer(OffscreenRenderer):
                                   anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
         draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh, parallax)
-        extras = self._surroundings(ground, leaves, view, lighting)
+        extras = self._surroundings(ground, leaves, view, lighting, background=background)
         light = None
         if shadowed:
             # a skinned mesh is posed by a buffer rewritten every frame: no key, its map drawn each time
@@ -357,7 +357,7 @@ class RasterRenderer(OffscreenRenderer):
                      height_maps=0, texture_repeat=repeats, n_rows=0)
         plan = eye_copy_draws(placed, view, lod_pixels, origins)
         draw = self._placed_draws(program, uploads, meshes, plan, "origin_from_eye", tex)
-        extras = self._surroundings(ground, None, view, lighting)
+        extras = self._surroundings(ground, None, view, lighting, background=background)
         light = None
         if shadowed:
             key = ShadowKey(("raster.glsl", meshes.level, float(lod_pixels)), (meshes,), ground, shadows.resolution,

@@ -188,10 +188,9 @@ class Raycaster(OffscreenRenderer, BvhCache):
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
         """
-        n = len(frusta)
+        n, placed = len(frusta), isinstance(frusta, PlacedPlants)
         background, ssaa = check_background(background), check_ssaa(ssaa)
         t0 = time.perf_counter()
-        placed = isinstance(frusta, PlacedPlants)
         records = pack_records(frusta, camera.eye) if record_buffer is None and not placed else None
         pack_ms = (time.perf_counter() - t0) * 1e3
         leaf_box = leaf_bounds(leaves)
@@ -208,7 +207,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
             material_names, ground, light_dir, shadows, box, view.eye, anchor=None if record_buffer is None
             else view.eye, look=None if settings.labels else settings.look), sky_bvh, settings, view, repeats,
             model_box)
-        extras = self._surroundings(ground, leaves, view, lighting, labels=leaf_labels if settings.labels else None)
+        extras = self._surroundings(ground, leaves, view, lighting, background=background,
+                                    labels=leaf_labels if settings.labels else None)
         extras.before[:0] = [sky_bvh.bind] if sky_bvh is not None else []
         rec_buf = record_buffer if record_buffer is not None else (
             self.ctx.buffer(records.tobytes()) if n and not placed else None)

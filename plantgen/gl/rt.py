@@ -152,8 +152,8 @@ class RayTracer(Raycaster):
         look, shadowed = settings.look, shadows is not None
         variants = [("sky.glsl", {"FLAT_BACKGROUND": True} if flat_background else look_defines(look, "sky.glsl"))]
         if ground:
-            variants.append(("ground.glsl", {"SHADOWS": shadowed, **receivers,
-                                             **look_defines(look, "ground.glsl", shadowed)}))
+            variants.append(("ground.glsl", {"SHADOWS": shadowed, **receivers, "FLAT_BACKGROUND": flat_background,
+                                             **traced_look(look, "ground.glsl", shadowed, bvh_defines)}))
         defines = {**defines, **traced_look(look, "rt.glsl", shadowed, bvh_defines)}
         variants.append(("rt.glsl", defines))
         if leaves:
@@ -182,10 +182,11 @@ class RayTracer(Raycaster):
     def _march(settings) -> dict:
         return {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
 
-    def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None):
+    def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None,
+                      background=None):
         if lighting.receiver_defines:
             lighting = replace(lighting, receiver={**lighting.receiver, "pixel_footprint": view.pixel_footprint()})
-        out = super()._surroundings(ground, leaves, view, lighting, labels=labels)
+        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background)
         frame = self._frame
         if frame is not None:
             out.before.insert(0, self._bind)        # the BVH and heights for every receiver

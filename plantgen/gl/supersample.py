@@ -9,6 +9,9 @@ shaders' display encoding, ``to_display`` in ``shaders/shading.glsl``, is undone
 applied again after), so an edge keeps its brightness; with a transparent background the
 colours are averaged weighted by their alpha (coverage). A frame drawn with the ``tone``
 effect is sRGB-encoded (after the tone curve): ``srgb`` undoes and applies that instead.
+The renderers average on the GPU (:class:`GpuResolve`, ``shaders/resolve.glsl``);
+:func:`resolve_supersamples` is the same average on the CPU, the reference the tests hold
+the GPU's to.
 """
 
 from __future__ import annotations
@@ -16,8 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..settings import MAX_SSAA, TONE_KNEE  # the largest supersampling factor: its home is the settings
+from .context import release_framebuffer
+from .shaders import build_program, set_uniforms
 
-__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples", "srgb_encode", "srgb_decode", "tone_curve"]
+__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples", "srgb_encode", "srgb_decode", "tone_curve",
+           "GpuResolve"]
 
 #: The exponent of the shaders' display encoding: ``to_display(c) = c^(1/2.2)``.
 DISPLAY_GAMMA = 2.2
@@ -104,3 +110,63 @@ def resolve_supersamples(color: np.ndarray, distance: np.ndarray, n: int, *,
     hn, wn = distance.shape
     centre = distance.reshape(hn // n, n, wn // n, n)[:, n // 2, :, n // 2]
     return rgb, np.ascontiguousarray(centre)
+
+
+class GpuResolve:
+    """:func:`resolve_supersamples` as a pass on the GPU (``shaders/resolve.glsl``): the
+    large frame's colour and distance textures averaged into a framebuffer of the final
+    size, so only the final image is read back (the large one, read back and averaged on
+    the CPU, took longer than the frame's own draw). The target is kept for the next
+    frame of the same size."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._fbo = None
+        self._size = None
+        self._vaos: dict = {}
+
+    def _target(self, width: int, height: int):
+        if self._size != (width, height):
+            if self._fbo is not None:
+                release_framebuffer(self._fbo)
+            ctx = self.ctx
+            self._fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((width, height), 4),
+                                                           ctx.renderbuffer((width, height), 1, dtype="f4")])
+            self._size = (width, height)
+        return self._fbo
+
+    def resolve(self, color_texture, distance_texture, width: int, height: int, n: int, alpha: bool, *,
+                srgb: bool = False):
+        """The final (height, width, 3 or 4) uint8 colour and (height, width) float32
+        distance, row 0 the top row, of a frame drawn at ``n`` samples per side into
+        ``color_texture`` (RGBA8) and ``distance_texture`` (R32F); ``srgb``: the frame is
+        sRGB-encoded (the ``tone`` effect), else c^(1/2.2), as :func:`resolve_supersamples`."""
+        ctx = self.ctx
+        srgb = bool(srgb)
+        program = build_program(ctx, "resolve.glsl", {"COVERAGE": bool(alpha), "FACTOR": int(n), "SRGB": srgb})
+        key = (bool(alpha), int(n), srgb)
+        vao = self._vaos.get(key)
+        if vao is None or vao.program is not program:
+            vao = self._vaos[key] = ctx.vertex_array(program, [])
+        fbo = self._target(width, height)
+        fbo.use()
+        fbo.viewport = (0, 0, width, height)
+        color_texture.use(0)
+        distance_texture.use(1)
+        set_uniforms(program, frame_color=0, frame_distance=1)
+        program["to_linear"].value = (_SRGB_TO_LINEAR if srgb else _TO_LINEAR).tolist()
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+        vao.render(mode=ctx.TRIANGLES, vertices=3)
+        k = 4 if alpha else 3
+        color = np.frombuffer(fbo.read(components=k, attachment=0, alignment=1), np.uint8).reshape(height, width, k)
+        dist = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4", alignment=1),
+                             np.float32).reshape(height, width)
+        return color[::-1].copy(), dist[::-1].copy()
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos = {}
+        if self._fbo is not None:
+            release_framebuffer(self._fbo)
+        self._fbo = self._size = None

@@ -68,6 +68,7 @@ from .render import (
     check_render_outputs,
     estimate_render_bytes,
     frame_arguments,
+    ground_asked,
     model_leaves,
     place_scene,
     prepare_model,
@@ -85,7 +86,8 @@ __all__ = [
     "GrowResult", "grow", "grow_file", "load_skeleton", "load_input", "read_skeleton", "resolve_input",
     "existing_input", "SKELETON_SUFFIXES",
     # render: the model made ready, then plantgen render
-    "Staging", "stage_model", "model_leaves", "PreparedModel", "prepare_model", "place_scene", "animate_model",
+    "Staging", "stage_model", "ground_asked", "model_leaves", "PreparedModel",
+    "prepare_model", "place_scene", "animate_model",
     "skinning", "skin_model", "frame_arguments", "request_settings", "RenderReport", "ShadowUse",
     "check_image_output", "check_render_outputs", "estimate_render_bytes", "render_model", "render_file",
     "RENDER_BYTES_PER_PIXEL", "FRAME_BYTES_PER_PIXEL", "SHADOW_BYTES_PER_TEXEL",

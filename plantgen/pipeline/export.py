@@ -60,7 +60,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None, asset: AssetSettings | None = None) -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None, ground=False) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -100,7 +100,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``levels`` ([(rows, triangles)] per level of detail, summed over the plants written
     once; empty: none), ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
-    besides its plants: glTF and USD, :func:`scene_extras`; empty for a grammar), ``textures``
+    besides its plants: glTF and USD, :func:`scene_extras`; a grammar's ground disc with ``ground``), ``textures``
     (:func:`_texture_summary`); for a cylinder model, what :func:`~plantgen.exporters.qsm.write_qsm`
     returns. Triangles and memory are estimated before anything is built and refused over ``limits``.
     """
@@ -122,7 +122,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
                                            input_path, output_path, timings, progress, skin, timeline,
                                            _export_detail(grown, fmt, asset.levels(levels), detail, summary))
     t3 = time.perf_counter()
-    extras = scene_extras(grown, skin, input_path) if fmt.scene else None
+    extras = scene_extras(grown, skin, input_path, ground=ground) if fmt.scene else None
     plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
@@ -235,14 +235,19 @@ def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: f
     return dict(summary, path=summary["paths"][-1])
 
 
-def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None) -> SceneExtras | None:
+def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None, *, ground: bool = False) -> SceneExtras | None:
     """What a glTF or USD export writes around a scene's plants: the camera ``plantgen
     render`` would use at its default size (the scene's camera, or for ``camera: auto``
     the model framed as :func:`stage_model` frames it, its frusta skinned with ``skin``),
-    the scene's light and its ground; None for a grammar or a skeleton."""
+    the scene's light and its ground; for a grammar or a skeleton, None, or with ``ground``
+    only the ground disc ``plantgen render`` draws under it
+    (:func:`~plantgen.geometry.stage.model_ground`: a reference renderer sees what it sees)."""
     scene = grown.scene
     if scene is None:
-        return None
+        if not ground:
+            return None
+        frusta = check_finite_frusta(skin(grown.skeleton), source or grown.name)
+        return SceneExtras(ground=stage_model(grown, frusta, *DEFAULT_SIZE, ground="auto").ground)
     width, height = DEFAULT_SIZE
     if scene.camera is not None:
         camera = scene.camera.at_size(width, height)

@@ -30,9 +30,9 @@ from ..files import check_outputs, write_all_atomically
 from ..geometry.meshes.polygons import Polygons
 from ..geometry.rays.camera import Camera, Orbit, auto_camera, orbit_view
 from ..geometry.rays.instances import PlacedPlants
-from ..geometry.skeletons.frusta import Frusta
+from ..geometry.skeletons.frusta import Frusta, frusta_bounds
 from ..geometry.skeletons.skin import skin_skeleton
-from ..geometry.stage import MODEL_LIGHT, Ground
+from ..geometry.stage import MODEL_LIGHT, Ground, model_ground
 from ..gl.context import renderer_name
 from ..gl.pose import PoseStream
 from ..gl.raycast import Raycaster
@@ -70,7 +70,7 @@ from .growing import GrowResult, grow_file
 @dataclass(frozen=True)
 class Staging:
     """What a renderer needs of a model besides its frusta: the view, the light (``light_dir``
-    (3,) towards it) and the ground (None without a scene's ground)."""
+    (3,) towards it) and the ground (None: none drawn)."""
 
     camera: Camera
     light_dir: tuple
@@ -86,12 +86,15 @@ def model_leaves(grown: GrowResult) -> Polygons | None:
 
 
 def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
-                camera: Camera | None = None, orbit: Orbit | None = None) -> Staging:
+                camera: Camera | None = None, orbit: Orbit | None = None, ground: str | None = None) -> Staging:
     """The scene's camera (at ``width`` x ``height``), light and ground; for a grammar or a
     skeleton, or a scene whose camera is ``auto``, the model framed to fill the view
     (:func:`auto_camera`) and the default model light. ``camera`` replaces the view;
     ``orbit`` then turns, moves or zooms it around its target (:func:`orbit_view`; a
-    framed view is framed anew from the new direction)."""
+    framed view is framed anew from the new direction). ``ground`` is ``--ground``
+    (:class:`~plantgen.settings.ImageSettings`): ``auto`` puts a single plant on its
+    ground disc (:func:`model_ground`), ``none`` drops every ground; ``scene`` or None
+    (the benches') keep the scene's ground only, as the paper's figures were measured."""
     scene, leaves = grown.scene, model_leaves(grown)
     points = None if leaves is None else leaves.vertices
     framed = camera is None and (scene is None or scene.camera is None)
@@ -107,8 +110,27 @@ def stage_model(grown: GrowResult, frusta: Frusta, width: int, height: int, *,
                 return auto_camera(frusta, width, height, fov_y=fov_y, direction=direction, points=points)
         camera = orbit_view(camera, orbit, reframe)
     if scene is None:
-        return Staging(camera, tuple(MODEL_LIGHT.towards()), None, leaves)
-    return Staging(camera, tuple(scene.light.towards()), scene.ground, leaves)
+        floor = model_ground(_model_box(frusta, points)) if ground == "auto" else None
+        return Staging(camera, tuple(MODEL_LIGHT.towards()), floor, leaves)
+    return Staging(camera, tuple(scene.light.towards()), None if ground == "none" else scene.ground, leaves)
+
+
+def ground_asked(image: ImageSettings) -> str:
+    """``--ground`` as a render stages it (:func:`stage_model`): ``auto`` draws no ground
+    disc under a single plant on a transparent background (the alpha stays the plant's
+    coverage; a scene keeps its ground)."""
+    if image.ground == "auto" and parse_background(image.background) is not None \
+            and parse_background(image.background)[3] < 1:
+        return "scene"
+    return image.ground
+
+
+def _model_box(frusta: Frusta, points) -> np.ndarray:
+    """(2, 3) world box of a model's frusta (a placed scene's copies) and ``points``."""
+    box = frusta.box if isinstance(frusta, PlacedPlants) else frusta_bounds(frusta)
+    if points is not None and len(points):
+        box = np.stack([np.minimum(box[0], points.min(axis=0)), np.maximum(box[1], points.max(axis=0))])
+    return box
 
 
 def skinning(smooth_bends: float | None = None):
@@ -464,7 +486,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
     if frames is not None and model.placed is not None:
         raise PlantgenError(f"{input_path}: a scene drawn with the lod effect is a still (leave out --frames)")
     frusta = model.frusta_at(motion.start)
-    staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit)
+    staging = stage_model(model.grown, frusta, width, height, camera=camera, orbit=request.view.orbit,
+                          ground=ground_asked(image))
     march, shadows = request.frame(model.effects)
     lod_pixels = request.lod_pixels(model.effects)
     march = _method_for(march, model, frusta, width * height * image.ssaa ** 2, lod_pixels, frames is not None,

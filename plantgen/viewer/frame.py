@@ -17,7 +17,7 @@ from ..geometry.rays.instances import PlacedPlants
 from ..gl.pose import PoseStream
 from ..gl.raster import RasterRenderer
 from ..gl.rt import RayTracer
-from ..pipeline import frame_arguments, stage_model
+from ..pipeline import frame_arguments, ground_asked, stage_model
 from .options import FrameStats
 from .state import ViewerState
 
@@ -34,10 +34,11 @@ def draw(state: ViewerState, width: int, height: int):
         request = state.request()
         settings, shadow = request.frame(state.effects())
         staging = stage_model(state.model.grown, state.model.anim.rest_frusta()[0], width, height,
-                              camera=state.camera)
+                              camera=state.camera, ground=ground_asked(state.options.settings.image))
         return _drawn(state, _draw_posed(state, staging, request, settings, _merged_caster(state, shadow)), t0)
     frusta = state.frusta()
-    staging = stage_model(state.model.grown, frusta, width, height, camera=state.camera)
+    staging = stage_model(state.model.grown, frusta, width, height, camera=state.camera,
+                          ground=ground_asked(state.options.settings.image))
     request = state.request()
     settings, shadow = request.frame(state.effects())
     args = frame_arguments(frusta, staging, shadow, request.image)
