@@ -50,3 +50,70 @@ def test_framing_sampling_does_not_grow_with_the_rows(monkeypatch):
         auto_camera(skin_skeleton(random_tree(n, seed=2)), 64, 48)
         sampled.append(sum(counts))
     assert sampled[1] < 3 * sampled[0]
+
+
+# ----------------------------------------------------------------------------- scenes
+def _grid_scene(n: int, seeds: int | None = None) -> dict:
+    grid = {"count": [n, 1], "spacing": [2, 2]}
+    if seeds is not None:
+        grid["seeds"] = seeds
+    return {"instances": [{"grammar": "saguaro", "seed": 1, "grid": grid}]}
+
+
+class _Grower:
+    """A stand-in for the pipeline's grower: a fixed small plant a call, spending
+    ``work`` of the meter; counts its calls and the lengths taken of its skeletons."""
+
+    def __init__(self, meter=None, work: int = 0):
+        self.calls, self.lens, self.meter, self.work = 0, [0], meter, work
+        from plantgen.geometry.skeletons.skeleton import Skeleton
+        lens = self.lens
+
+        class Counted(Skeleton):
+            def __len__(self):
+                lens[0] += 1
+                return super().__len__()
+        self.plant = Counted(**{k: getattr(random_tree(12, seed=1), k) for k in
+                                ("start", "end", "r_start", "r_end", "parent", "continues", "material",
+                                 "material_names")})
+
+    def __call__(self, gpath, seed, iterations):
+        self.calls += 1
+        if self.meter is not None:
+            self.meter.spend(self.work, "derive")
+        return self.plant
+
+
+def test_growing_copies_takes_work_linear_in_the_copies():
+    from plantgen.scene import parse_scene
+    lens = []
+    for n in (300, 600):
+        grower = _Grower()
+        scene = parse_scene(_grid_scene(n), "grid.yaml", grow_grammar=grower)
+        assert grower.calls == n and len(scene.instances) == n
+        lens.append(grower.lens[0])
+    assert lens[1] < 2.5 * lens[0]          # the old running sum re-done per plant was quadratic
+
+
+def test_a_scene_over_the_derive_work_is_refused_before_its_copies_grow():
+    from plantgen.limits import LimitError, limits
+    from plantgen.scene import parse_scene
+    meter = limits.meter("derive_work")
+    grower = _Grower(meter, work=13_000)
+    with pytest.raises(LimitError, match="derive_work of about 130,000,000 estimated"):
+        parse_scene({"instances": [{"grammar": "saguaro", "seed": 1, "grid": {"count": [100, 100]}}]},
+                    "grid.yaml", grow_grammar=grower, work=meter)
+    assert grower.calls <= 3                # the probes, not the copies
+
+
+def test_a_scene_over_the_segments_is_refused_before_its_copies_grow():
+    from plantgen.limits import LimitError, Limits
+    from plantgen.scene import parse_scene
+    grower = _Grower()
+    with pytest.raises(LimitError, match="segments of about 1,200 estimated"):
+        parse_scene(_grid_scene(100), "grid.yaml", grow_grammar=grower, limits=Limits(max_segments=1000))
+    assert grower.calls <= 3
+    grower = _Grower()                      # one seed: grown once, placed 100 times
+    assert len(parse_scene(_grid_scene(100, seeds=1), "grid.yaml", grow_grammar=grower,
+                           limits=Limits(max_segments=1000)).instances) == 100
+    assert grower.calls == 1

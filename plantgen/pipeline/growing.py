@@ -230,7 +230,7 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
         return drawing             # the skeleton and its leaves: the scene's copies carry both
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
-                        allow_paths=allow_paths)
+                        allow_paths=allow_paths, work=work)
     t0 = time.perf_counter()
     if progress is not None:
         progress("place", 0, None)
