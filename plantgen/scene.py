@@ -51,6 +51,7 @@ inside the scene's folder (or a folder the caller allows).
 from __future__ import annotations
 
 import hashlib
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -186,18 +187,26 @@ class Scene:
         whose skeletons are equal (a grid of a deterministic grammar, an explicit skeleton
         placed many times, the same grammar and seed twice) are one plant. Named after
         their source (``saguaro``; ``saguaro-2``, ... where one source gives several)."""
+        if "_plants" in self.__dict__:       # worked out once a scene (it is frozen)
+            return list(self.__dict__["_plants"])
         groups: dict[bytes, list[int]] = {}
+        keys: dict[tuple[int, int], bytes] = {}   # copies of one grown plant share its arrays: hashed once
         for k, inst in enumerate(self.instances):
-            groups.setdefault(_plant_key(inst.skeleton, inst.polygons), []).append(k)
+            same = (id(inst.skeleton), id(inst.polygons))
+            if same not in keys:
+                keys[same] = _plant_key(inst.skeleton, inst.polygons)
+            groups.setdefault(keys[same], []).append(k)
         sources = [Path(self.instances[ks[0]].source).stem or "plant" for ks in groups.values()]
+        counts = Counter(sources)
         seen: dict[str, int] = {}
         out = []
         for ks, source in zip(groups.values(), sources, strict=True):
             seen[source] = seen.get(source, 0) + 1
-            name = source if sources.count(source) == 1 else f"{source}-{seen[source]}"
+            name = source if counts[source] == 1 else f"{source}-{seen[source]}"
             first = self.instances[ks[0]]
             out.append(ScenePlant(name, first.skeleton, np.stack([self.instances[k].matrix for k in ks]),
                                   np.array(ks), first.polygons))
+        self.__dict__["_plants"] = tuple(out)
         return out
 
     def segment_instance(self) -> np.ndarray:

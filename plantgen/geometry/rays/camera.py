@@ -23,8 +23,8 @@ from ...limits import limits as default_limits
 from ...tolerances import tol
 from ..skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls, section_points
 
-__all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "box_corners", "depth_range", "orbit_angles",
-           "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
+__all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "frame_copies", "box_corners", "depth_range",
+           "orbit_angles", "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
 
 #: The direction :func:`auto_camera` looks from (from the model towards the eye, not unit).
 AUTO_DIRECTION = (0.35, 0.25, 1.0)
@@ -220,13 +220,43 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
         box = np.stack([np.minimum(box[0], points.min(axis=0)), np.maximum(box[1], points.max(axis=0))])
     if len(frusta.base) == 0:
         return Camera.auto(box, width, height, fov_y=fov_y, direction=direction, fill=fill)
+    rows = FrameRows(frusta, points, float(np.abs(box).max()))
+    camera = _frame(rows, box, width, height, fov_y, direction, fill)
+    if stats is not None:
+        stats.update(rows=len(frusta.base), sampled=rows.sampled, passes=rows.passes)
+    return camera
+
+
+def frame_copies(plants, width: int = 1024, height: int = 768, *, fov_y: float = 40.0,
+                 direction=AUTO_DIRECTION, fill: float = 0.9) -> Camera:
+    """A camera framing copies of plants as :func:`auto_camera` frames one model, at the
+    cost of one plant's bound times its copies: ``plants`` is [(frusta, matrices (k, 4, 4)
+    of its copies, its leaf vertices (m, 3) or None)], each copy framed as the eight
+    corners of its plant's box (:func:`frusta_bounds`, leaves included) moved by its
+    matrix: never cutting a copy off, a little wider than framing every placed row."""
+    corners = []
+    for frusta, matrices, leaves in plants:
+        box = frusta_bounds(frusta)
+        if leaves is not None and len(leaves):
+            box = np.stack([np.minimum(box[0], leaves.min(axis=0)), np.maximum(box[1], leaves.max(axis=0))])
+        m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+        corners.append((np.einsum("kij,pj->kpi", m[:, :3, :3], box_corners(box)) + m[:, None, :3, 3]).reshape(-1, 3))
+    points = np.concatenate(corners) if corners else np.zeros((0, 3))
+    if not len(points):
+        return Camera.auto(np.zeros((2, 3)), width, height, fov_y=fov_y, direction=direction, fill=fill)
+    box = np.stack([points.min(axis=0), points.max(axis=0)])
+    return _frame(FrameRows(None, points, float(np.abs(box).max())), box, width, height, fov_y, direction, fill)
+
+
+def _frame(rows: FrameRows, box, width: int, height: int, fov_y: float, direction, fill: float) -> Camera:
+    """:func:`auto_camera`'s solve over ``rows``: the distance from ``direction`` at which
+    everything fits, re-centred on its projected extent, twice, then the distance again."""
     toward_eye = np.asarray(direction, dtype=np.float64)
     toward_eye /= np.linalg.norm(toward_eye)
     probe = Camera(tuple(toward_eye), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), fov_y, width, height)
     right, up, fwd = probe.basis()
     tan_y = np.tan(np.radians(fov_y) / 2) * fill
     tan_x = tan_y * width / height
-    rows = FrameRows(frusta, points, float(np.abs(box).max()))
     view = (right, up, fwd)
     target = 0.5 * (box[0] + box[1])
     for _ in range(2):   # solve the distance, re-centre on the projected extent, solve again
@@ -235,8 +265,6 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
         target = target + dist * (0.5 * (x_lo + x_hi) * right + 0.5 * (y_lo + y_hi) * up)
     dist = rows.distance(target, view, tan_x, tan_y)
     eye = target - fwd * dist
-    if stats is not None:
-        stats.update(rows=len(frusta.base), sampled=rows.sampled, passes=rows.passes)
     return Camera(tuple(eye.tolist()), tuple(target.tolist()), (0.0, 1.0, 0.0), fov_y, width, height)
 
 
@@ -251,9 +279,10 @@ class FrameRows:
     it, so the result is the exact extreme over every row's samples. ``sampled`` counts
     the rows sampled over the passes, ``passes`` the passes (work counters)."""
 
-    def __init__(self, frusta: Frusta, points: np.ndarray, scale: float):
+    def __init__(self, frusta: Frusta | None, points: np.ndarray, scale: float):
         self.frusta, self.points, self.sampled, self.passes = frusta, points, 0, 0
-        (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta)
+        self.n = 0 if frusta is None else len(frusta.base)
+        (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta) if self.n else ((np.zeros((0, 3)), np.zeros(0)),) * 2
         self.centres = np.concatenate([c_lo, c_hi])
         self.radii = np.concatenate([r_lo, r_hi]) * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * scale)
 
@@ -276,7 +305,9 @@ class FrameRows:
         bound an objective (a ball each); ``exact(rows)`` gives each objective's maximum
         over the samples of ``rows`` and the points."""
         self.passes += 1
-        n = len(self.frusta.base)
+        n = self.n
+        if n == 0:
+            return exact(np.zeros(0, np.int64))
         top = min(FRAME_PROBE, 2 * n - 1)
         probe = np.unique(np.concatenate([np.argpartition(-u, top)[:top + 1] % n for u in bounds]))
         bars = exact(probe)
