@@ -117,3 +117,65 @@ def test_a_scene_over_the_segments_is_refused_before_its_copies_grow():
     assert len(parse_scene(_grid_scene(100, seeds=1), "grid.yaml", grow_grammar=grower,
                            limits=Limits(max_segments=1000)).instances) == 100
     assert grower.calls == 1
+
+
+# ----------------------------------------------------------------------------- export
+def _write_scene(tmp_path, instances) -> str:
+    import yaml
+    path = tmp_path / "grid.yaml"
+    path.write_text(yaml.safe_dump({"name": "grid", "instances": instances}))
+    return str(path)
+
+
+def _glb_json(path) -> dict:
+    import json
+    import struct
+    blob = path.read_bytes()
+    (length,) = struct.unpack("<I", blob[12:16])
+    return json.loads(blob[20:20 + length])
+
+
+def test_an_instanced_scene_is_framed_per_copy_not_per_placed_segment(tmp_path, monkeypatch):
+    """900 copies of one plant, camera auto: framing costs the plant's bound times 900
+    transforms (no placed segment is sampled); one mesh, 900 copy nodes written."""
+    from plantgen.limits import Limits
+    from plantgen.pipeline import export_model
+    counts = _sampled_rows(monkeypatch)
+    scene = _write_scene(tmp_path, [{"grammar": "saguaro", "seed": 1,
+                                     "grid": {"count": [30, 30], "spacing": [3, 3], "seeds": 1}}])
+    # the placed copies' skin (27,000 segments x 1 KiB) is over this budget, and over the
+    # segments of one model; the plant's is not
+    info = export_model(scene, tmp_path / "grid.glb", level=0, textures=False,
+                        limits=Limits(max_export_bytes=8 << 20, max_segments=10_000))
+    assert sum(counts) == 0 and info["plants"] == 1 and info["copies"] == 900
+    doc = _glb_json(tmp_path / "grid.glb")
+    assert len(doc["meshes"]) == 1
+    assert sum(1 for n in doc["nodes"] if n.get("mesh") == 0) == 900
+    assert "camera" in info["scene"]
+
+
+def test_an_export_over_the_default_level_makes_the_finest_that_fits(tmp_path):
+    from plantgen.limits import Limits
+    from plantgen.pipeline import export_model
+    scene = _write_scene(tmp_path, [{"grammar": "saguaro", "seed": 1, "grid": {"count": [2, 1], "seeds": 1}}])
+    full = export_model(scene, tmp_path / "a.glb", level=None, textures=False)
+    assert full["level"] == 1 and not any("--subdiv" in w for w in full["warnings"])
+    low = export_model(scene, tmp_path / "b.glb", level=None, textures=False,
+                       limits=Limits(max_export_triangles=full["triangles"] - 1))
+    assert low["level"] == 0 and any("exported at --subdiv 0" in w for w in low["warnings"])
+    with pytest.raises(Exception, match="m = 1"):     # a level asked for is never lowered
+        export_model(scene, tmp_path / "c.glb", level=1, textures=False,
+                     limits=Limits(max_export_triangles=full["triangles"] - 1))
+
+
+def test_the_glb_buffer_is_laid_out_once_and_reads_back(tmp_path):
+    import trimesh
+
+    from plantgen.pipeline import export_model
+    scene = _write_scene(tmp_path, [{"grammar": "saguaro", "seed": 1, "grid": {"count": [3, 1], "seeds": 1}}])
+    export_model(scene, tmp_path / "s.glb", level=1)
+    doc = _glb_json(tmp_path / "s.glb")
+    size = (tmp_path / "s.glb").stat().st_size
+    assert doc["buffers"][0]["byteLength"] <= size
+    loaded = trimesh.load(tmp_path / "s.glb", force="scene")
+    assert len(loaded.geometry) >= 1 and len(loaded.graph.nodes_geometry) == 3

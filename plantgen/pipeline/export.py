@@ -131,7 +131,9 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
                                                   summary)
     t3 = time.perf_counter()
     instanced = fmt.instancing and instancing != "off"
-    extras = scene_extras(grown, skin, input_path, instanced=instanced) if fmt.scene else None
+    # more placed segments than one model may have: framed per copy, not on every placed row
+    per_copy = instanced and grown.segments > limits.max_segments
+    extras = scene_extras(grown, skin, input_path, instanced=per_copy) if fmt.scene else None
     plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
@@ -167,8 +169,9 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
     memory is over ``limits.max_export_bytes`` at its least: the segments it skins (every
     placed copy where the format or ``instancing`` writes each copy, else each distinct
     plant once), 16·4^m triangles each at the format's bytes; and for a glTF or USD scene
-    framed automatically and written copy by copy, the skin of every placed copy its camera
-    is framed on (instanced, the camera frames each distinct plant's bound per copy)."""
+    framed automatically, the skin of every placed copy its camera is framed on (written
+    instanced with more placed segments than ``limits.max_segments``, the camera frames each
+    distinct plant's bound per copy instead: :func:`scene_extras`)."""
     if grown.segments == 0:
         raise ExportError(f"{input_path}: the model has no segments" + (
             " (its polygons alone are not exported; plantgen render and scan draw them)"
@@ -183,8 +186,8 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
                           f"of {limits.max_export_triangles:,}; choose a lower --subdiv ({hint('export_triangles')})")
     need = estimate_export_bytes(triangles, fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
     what = f"{skinned:,} segments{'' if each else ' (each distinct plant once)'} at m = {level}"
-    if fmt.scene and each and grown.scene is not None and grown.scene.camera is None \
-            and grown.segments * SKIN_BYTES_PER_SEGMENT > need:     # the framed camera skins every copy
+    if fmt.scene and (each or grown.segments <= limits.max_segments) and grown.scene is not None \
+            and grown.scene.camera is None and grown.segments * SKIN_BYTES_PER_SEGMENT > need:   # skins every copy
         need = grown.segments * SKIN_BYTES_PER_SEGMENT
         what = f"framing the scene's camera on its {grown.segments:,} placed segments"
     if need > limits.max_export_bytes:
