@@ -179,3 +179,17 @@ def test_the_glb_buffer_is_laid_out_once_and_reads_back(tmp_path):
     assert doc["buffers"][0]["byteLength"] <= size
     loaded = trimesh.load(tmp_path / "s.glb", force="scene")
     assert len(loaded.geometry) >= 1 and len(loaded.graph.nodes_geometry) == 3
+
+
+# ----------------------------------------------------------------------------- the bench
+def test_the_pipeline_bench_quick_run_writes_a_table_of_every_stage(tmp_path):
+    from plantgen.benchmarks import pipeline as bench
+    skel = bench.synthetic_skeleton(400, seed=3)
+    skel.validate()
+    assert len(skel) == 400 and (skel.parent[1:] < np.arange(1, 400)).all()
+    out = tmp_path / "stages.md"
+    assert bench.main(["--quick", "--kinds", "npz,scene", "--out", str(out)]) == 0
+    text = out.read_text()
+    for stage in ("read", "skin", "frame", "check", "upload/BVH", "write", "derive"):
+        assert f"| {stage} |" in text
+    assert "| **npz** | *size* | 1,000 | 10,000 |" in text and "per 10x" in text

@@ -115,6 +115,7 @@ class Run:
         self.kind, self.size, self.label = kind, size, label
         self.stages: dict[str, tuple[float, int]] = {}
         self.refused: tuple[str, float, str] | None = None
+        self.skipped: dict[str, str] = {}      # stage: the refusal that left it out
 
     @contextmanager
     def stage(self, name: str):
@@ -139,13 +140,18 @@ def _plant_stages(run: Run, skeleton: Skeleton, grown, gl: bool) -> None:
         camera = auto_camera(frusta, 64, 48)
     with run.stage("check"):
         check_finite_frusta(frusta, run.label)
-        check_export_size([frusta], [None], len(skeleton), 0, "glb", None, run.label, "bench.glb")
+        try:
+            check_export_size([frusta], [None], len(skeleton), 0, "glb", None, run.label, "bench.glb")
+        except PlantgenError as exc:         # the write is refused: the check's time is the refusal's
+            run.skipped["write"] = str(exc).splitlines()[0]
     with run.stage("upload/BVH"):
         (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta)
         build_bvh(np.minimum(c_lo - r_lo[:, None], c_hi - r_hi[:, None]),
                   np.maximum(c_lo + r_lo[:, None], c_hi + r_hi[:, None]))
     if gl:
         _draw(run, grown, frusta, camera)
+    if "write" in run.skipped:
+        return
     with run.stage("write"), tempfile.TemporaryDirectory() as tmp:
         mesh = tessellate(frusta, 0)
         write_plants([Plant(run.label, skeleton, mesh, None)], Path(tmp) / "bench.glb")
@@ -235,6 +241,8 @@ def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene")) ->
 def _cell(run: Run, stage: str) -> str:
     if run.refused is not None and run.refused[0] == stage:
         return f"refused in {run.refused[1]:.2f} s"
+    if stage in run.skipped:
+        return "refused at check"
     if stage not in run.stages:
         return ""
     seconds, peak = run.stages[stage]
@@ -265,11 +273,12 @@ def markdown(runs: list[Run], title: str) -> str:
         lines.append(f"| **{kind}** | *size* | " + " | ".join(f"{r.size:,}" for r in mine)
                      + " |" * (width - len(mine)) + " |  |")
         for stage in STAGES:
-            if not any(stage in r.stages for r in mine):
+            if not any(stage in r.stages or stage in r.skipped for r in mine):
                 continue
             cells = [_cell(r, stage) for r in mine] + [""] * (width - len(mine))
             lines.append(f"| {kind} | {stage} | " + " | ".join(cells) + f" | {growth(mine, stage)} |")
     refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
+    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
     if refusals:
         lines += ["", "Refused:", "", *refusals]
     return "\n".join(lines) + "\n"

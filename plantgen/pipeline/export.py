@@ -73,9 +73,7 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     ----------
     input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
     output_path : the file; its suffix names the format (:mod:`plantgen.exporters.formats`)
-    level, relief, up : the tessellation (GS, GS+R); ``"y"`` or ``"z"`` (default: the format's);
-        ``level`` None: :data:`DEFAULT_LEVEL`, or the finest level under it whose triangles
-        and memory fit the limits (a warning says so)
+    level, relief, up : the tessellation (GS, GS+R; None: :func:`_fitting_level`); ``"y"``, ``"z"`` or the format's
     instancing : how a scene's repeated plants are written where the format can
         (glTF, USD): ``"nodes"`` (the default) once, with one node per copy sharing the
         plant's mesh (core glTF, which every reader opens; USD instanceable references);
@@ -130,10 +128,7 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
                                                   _export_detail(grown, fmt, asset.levels(levels), detail, summary),
                                                   summary)
     t3 = time.perf_counter()
-    instanced = fmt.instancing and instancing != "off"
-    # more placed segments than one model may have: framed per copy, not on every placed row
-    per_copy = instanced and grown.segments > limits.max_segments
-    extras = scene_extras(grown, skin, input_path, instanced=per_copy) if fmt.scene else None
+    extras = scene_extras(grown, skin, input_path, _per_copy(grown, fmt, instancing, limits)) if fmt.scene else None
     plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
@@ -144,6 +139,12 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
                                                          if getattr(extras, k) is not None),
                    textures=_texture_summary(baked))
     return summary
+
+
+def _per_copy(grown: GrowResult, fmt, instancing: str, limits: Limits) -> bool:
+    """Whether a scene's camera is framed per copy (:func:`scene_extras`): written
+    instanced, with more placed segments than one model may have."""
+    return bool(fmt.instancing and instancing != "off" and grown.segments > limits.max_segments)
 
 
 def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings, unit: float = 1.0):
