@@ -83,8 +83,7 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
     progress : ``progress(stage, done, total)``: :func:`grow_file`'s stages, ``tessellate``, ``write``
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
-        mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
-        segments they add)
+        mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the segments they add)
     keyframes : the keys of the sway a glTF or USD export writes for a scene that lists
         ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
         defaults, over one common period); a format without animation writes the
@@ -99,9 +98,9 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's
-    plants (once per distinct plant when instanced), beside the frusta and counted in
-    ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
+    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's plants (once
+    per distinct plant when instanced), beside the frusta and counted in ``triangles``, ``vertices`` and
+    ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``levels`` ([(rows, triangles)] per level of detail, summed over the plants written
     once; empty: none), ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
@@ -130,9 +129,10 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     t3 = time.perf_counter()
     extras = scene_extras(grown, skin, input_path, _per_copy(grown, fmt, instancing, limits)) if fmt.scene else None
     plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
+    t4 = time.perf_counter()
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
-    timings["write"] = time.perf_counter() - t3
+    timings.update(finish=t4 - t3, write=time.perf_counter() - t4)   # finish: the camera, cards, textures
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
                    smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
