@@ -32,7 +32,7 @@ def test_framing_samples_few_rows_and_gives_the_camera_of_every_row(monkeypatch,
     stats = {}
     pruned = auto_camera(f, 160, 90, direction=direction, points=points, stats=stats)
     assert stats["passes"] == 5 and stats["sampled"] == sum(counts)
-    assert sum(counts) < 0.25 * 5 * len(f)          # most rows are never sampled
+    assert sum(counts) < 0.05 * 5 * len(f)          # most rows are never sampled
     monkeypatch.setattr(camera_module, "FRAME_PROBE", 10 ** 9)   # every row sampled: the old framing
     counts.clear()
     full = auto_camera(f, 160, 90, direction=direction, points=points)

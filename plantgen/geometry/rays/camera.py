@@ -185,9 +185,10 @@ class Camera:
 # ---------------------------------------------------------------------- framing
 #: Frustum rows :func:`auto_camera` samples at a time (bounds its memory, not its result).
 FRAME_CHUNK = 1 << 15
-#: Rows a framing pass samples first, those whose bounds reach farthest: their exact
-#: extreme is the bar every other row's bound must reach for it to be sampled at all.
-FRAME_PROBE = 64
+#: Rows a framing pass samples first, those whose bounds reach farthest (1: the farthest
+#: alone): their exact extreme is the bar every other row's bound must reach for it to be
+#: sampled at all.
+FRAME_PROBE = 1
 #: How far past its end ball (:func:`row_end_balls`) a section's sample balls may reach,
 #: relative to the ball's radius: the slack is at most 1/cos(π/24) - 1 < 0.0087.
 FRAME_BALL_GROW = 1.01
@@ -215,12 +216,12 @@ def auto_camera(frusta: Frusta, width: int = 1024, height: int = 768, *, fov_y: 
         over every pass) and ``passes``, or None
     """
     points = np.zeros((0, 3)) if points is None else np.asarray(points, np.float64).reshape(-1, 3)
-    box = frusta_bounds(frusta)
+    rows = FrameRows(frusta, points)
+    box = rows.box
     if len(points):
         box = np.stack([np.minimum(box[0], points.min(axis=0)), np.maximum(box[1], points.max(axis=0))])
     if len(frusta.base) == 0:
         return Camera.auto(box, width, height, fov_y=fov_y, direction=direction, fill=fill)
-    rows = FrameRows(frusta, points, float(np.abs(box).max()))
     camera = _frame(rows, box, width, height, fov_y, direction, fill)
     if stats is not None:
         stats.update(rows=len(frusta.base), sampled=rows.sampled, passes=rows.passes)
@@ -245,7 +246,7 @@ def frame_copies(plants, width: int = 1024, height: int = 768, *, fov_y: float =
     if not len(points):
         return Camera.auto(np.zeros((2, 3)), width, height, fov_y=fov_y, direction=direction, fill=fill)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
-    return _frame(FrameRows(None, points, float(np.abs(box).max())), box, width, height, fov_y, direction, fill)
+    return _frame(FrameRows(None, points), box, width, height, fov_y, direction, fill)
 
 
 def _frame(rows: FrameRows, box, width: int, height: int, fov_y: float, direction, fill: float) -> Camera:
@@ -279,12 +280,24 @@ class FrameRows:
     it, so the result is the exact extreme over every row's samples. ``sampled`` counts
     the rows sampled over the passes, ``passes`` the passes (work counters)."""
 
-    def __init__(self, frusta: Frusta | None, points: np.ndarray, scale: float):
+    def __init__(self, frusta: Frusta | None, points: np.ndarray):
         self.frusta, self.points, self.sampled, self.passes = frusta, points, 0, 0
         self.n = 0 if frusta is None else len(frusta.base)
         (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta) if self.n else ((np.zeros((0, 3)), np.zeros(0)),) * 2
         self.centres = np.concatenate([c_lo, c_hi])
-        self.radii = np.concatenate([r_lo, r_hi]) * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * scale)
+        radii = np.concatenate([r_lo, r_hi])
+        #: (2, 3) the box around the rows (:func:`frusta_bounds`, from the same balls)
+        self.box = (np.stack([(self.centres - radii[:, None]).min(axis=0), (self.centres + radii[:, None]).max(axis=0)])
+                    if self.n else np.zeros((2, 3)))
+        self.radii = radii * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * float(np.abs(self.box).max()))
+        self._view, self._projected = None, None
+
+    def projected(self, view, target) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(a, b, z) (2n,) each: the balls' centres less ``target`` along the ``view``'s
+        right, up and forward axes (the centres projected once a view; bounds only)."""
+        if self._view is not view:
+            self._view, self._projected = view, tuple(self.centres @ axis for axis in view)
+        return tuple(p - float(np.dot(target, axis)) for p, axis in zip(self._projected, view, strict=True))
 
     def balls(self, rows: np.ndarray):
         """(centres (m, 3), radii (m,)) of the section samples of ``rows`` (row indices),
@@ -308,8 +321,9 @@ class FrameRows:
         n = self.n
         if n == 0:
             return exact(np.zeros(0, np.int64))
-        top = min(FRAME_PROBE, 2 * n - 1)
-        probe = np.unique(np.concatenate([np.argpartition(-u, top)[:top + 1] % n for u in bounds]))
+        top = min(FRAME_PROBE, 2 * n)
+        probe = np.unique(np.concatenate([[np.argmax(u) % n] if top == 1 else np.argpartition(-u, top - 1)[:top] % n
+                                          for u in bounds]))
         bars = exact(probe)
         keep = np.zeros(2 * n, bool)
         for u, bar in zip(bounds, bars, strict=True):
@@ -322,8 +336,7 @@ class FrameRows:
     def distance(self, target, view, tan_x, tan_y) -> float:
         """:func:`_framing_distance` over every row's samples and the points."""
         right, up, fwd = view
-        rel = self.centres - target
-        bound = _framing_need(rel @ right, rel @ up, rel @ fwd, self.radii, tan_x, tan_y)
+        bound = _framing_need(*self.projected(view, target), self.radii, tan_x, tan_y)
 
         def exact(rows):
             return [max(_framing_distance(rel @ right, rel @ up, rel @ fwd, r, tan_x, tan_y)
@@ -334,9 +347,7 @@ class FrameRows:
         """(x_lo, x_hi, y_lo, y_hi): the tangents of the samples' and points' extent in the
         view from ``dist`` before ``target``."""
         right, up, fwd = view
-        rel = self.centres - target
-        a, b, r = rel @ right, rel @ up, self.radii
-        z = rel @ fwd
+        (a, b, z), r = self.projected(view, target), self.radii
         near, far = dist + z - r, dist + z + r
         with np.errstate(divide="ignore", invalid="ignore"):
             def reach(num):   # an upper bound of num'/depth for any num' <= num, depth in [near, far]
