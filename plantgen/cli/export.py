@@ -37,7 +37,9 @@ _SUFFIXES = ", ".join(EXPORT_FORMATS)
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
             ".obj its .mtl, a .qsm.csv a .treedata.csv. Default: INPUT's name with .glb, in the current directory.",
             required=False)
-@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
+@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level,
+             help="Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap. Not given: 1, or "
+                  "the finest level under it whose triangles and memory fit the limits (a line says so).")
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
 @click.option("--textures/--no-textures", default=True, show_default=True,
