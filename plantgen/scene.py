@@ -51,6 +51,7 @@ inside the scene's folder (or a folder the caller allows).
 from __future__ import annotations
 
 import hashlib
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -64,7 +65,7 @@ from .geometry.meshes.polygons import Polygons
 from .geometry.rays.camera import Camera, CameraError, box_corners
 from .geometry.skeletons.skeleton import Skeleton, SkeletonError
 from .geometry.stage import SCENE_LIGHT, Ground, Light, Sway
-from .limits import Limits
+from .limits import LimitError, Limits, hint
 from .limits import limits as default_limits
 from .lsystem.grammar import GrammarError
 from .settings import EFFECTS, parse_effect_list, resolve_effects
@@ -186,18 +187,26 @@ class Scene:
         whose skeletons are equal (a grid of a deterministic grammar, an explicit skeleton
         placed many times, the same grammar and seed twice) are one plant. Named after
         their source (``saguaro``; ``saguaro-2``, ... where one source gives several)."""
+        if "_plants" in self.__dict__:       # worked out once a scene (it is frozen)
+            return list(self.__dict__["_plants"])
         groups: dict[bytes, list[int]] = {}
+        keys: dict[tuple[int, int], bytes] = {}   # copies of one grown plant share its arrays: hashed once
         for k, inst in enumerate(self.instances):
-            groups.setdefault(_plant_key(inst.skeleton, inst.polygons), []).append(k)
+            same = (id(inst.skeleton), id(inst.polygons))
+            if same not in keys:
+                keys[same] = _plant_key(inst.skeleton, inst.polygons)
+            groups.setdefault(keys[same], []).append(k)
         sources = [Path(self.instances[ks[0]].source).stem or "plant" for ks in groups.values()]
+        counts = Counter(sources)
         seen: dict[str, int] = {}
         out = []
         for ks, source in zip(groups.values(), sources, strict=True):
             seen[source] = seen.get(source, 0) + 1
-            name = source if sources.count(source) == 1 else f"{source}-{seen[source]}"
+            name = source if counts[source] == 1 else f"{source}-{seen[source]}"
             first = self.instances[ks[0]]
             out.append(ScenePlant(name, first.skeleton, np.stack([self.instances[k].matrix for k in ks]),
                                   np.array(ks), first.polygons))
+        self.__dict__["_plants"] = tuple(out)
         return out
 
     def segment_instance(self) -> np.ndarray:
@@ -524,6 +533,10 @@ def _grown_parts(grown) -> tuple[Skeleton, Polygons | None]:
     return grown.skeleton, grown.polygons
 
 
+#: The key under which a scene's plant cache keeps its running total of segments grown.
+GROWN_SEGMENTS = "segments grown"
+
+
 def _copy_skeleton(inst, placement: _Placement, seed: int, grammar: tuple[str, Path] | None, grow_grammar,
                    cache: dict, limits: Limits) -> tuple[Skeleton, Polygons | None, str]:
     """The skeleton and leaf polygons (None for none) of one copy, in its own frame, and
@@ -537,9 +550,62 @@ def _copy_skeleton(inst, placement: _Placement, seed: int, grammar: tuple[str, P
             cache[key] = _grown_parts(grow_grammar(gpath, seed, placement.iterations))
         except PlantgenError as exc:
             raise SceneError(f"{placement.where}: {exc}") from None
-        limits.check("segments", sum(len(parts[0]) for parts in cache.values()),
-                     f"{placement.where}: segments grown for the scene")
+        grown = cache.setdefault(GROWN_SEGMENTS, 0) + len(cache[key][0])    # a running total: O(1) a plant
+        cache[GROWN_SEGMENTS] = limits.check("segments", grown, f"{placement.where}: segments grown for the scene")
     return *cache[key], name
+
+
+def _forecast(entries, base: Path, grow_grammar, cache: dict, budget: _Budget, allow_paths=(), work=None) -> None:
+    """Refuse a scene whose plants would pass a limit before its copies are grown.
+
+    Copies of one grammar at one iteration count differ by seed only: one probe plant
+    (its first seed; kept in ``cache``, so not grown twice) gives the segments and the
+    ``derive_work`` (``work``, the meter, when given) of each, and the scene's totals are
+    estimated as that times the distinct seeds (the segments grown and the derive work) or
+    the copies (the segments placed). Where an estimate passes its limit, two more probes
+    confirm it with the least of the three; the refusal names the estimate."""
+    groups: dict[tuple, list] = {}
+    for inst, placement in entries:
+        if "skeleton" in inst:
+            continue
+        name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
+        gpath = resolve_grammar(name, base, placement.where, allow_paths)
+        group = groups.setdefault((str(gpath), placement.iterations), [set(), 0, inst, placement, (name, gpath)])
+        group[0].update(placement.seed + c for _, _, c, _ in placement.copies)
+        group[1] += len(placement.copies)
+    totals = {"segments": [0, 0], "drawn_segments": [0, 0], "derive_work": [0, 0]}
+    for seeds, copies, inst, placement, grammar in groups.values():
+        order = sorted(seeds)
+        each = [_probe(inst, placement, s, grammar, grow_grammar, cache, budget.limits, work) for s in order[:1]]
+        if _over(totals, each[0], len(seeds), copies, budget.limits, work):
+            each += [_probe(inst, placement, s, grammar, grow_grammar, cache, budget.limits, work) for s in order[1:3]]
+        least = tuple(min(e[i] for e in each) for i in range(2))
+        for key, per, count in (("segments", least[0], len(seeds)), ("drawn_segments", least[0], copies),
+                                ("derive_work", least[1], len(seeds))):
+            totals[key][0] += per * count
+            totals[key][1] += count
+    for key, (total, count) in totals.items():
+        limit = work.limit if key == "derive_work" and work is not None else getattr(budget.limits, f"max_{key}")
+        if total > limit:
+            raise LimitError(f"{entries[0][1].where.rsplit(':', 1)[0]}: {key} of about {total:,} estimated "
+                             f"from probe plants for {count:,} plants, over the limit of {limit:,} ({hint(key)})")
+
+
+def _probe(inst, placement: _Placement, seed: int, grammar, grow_grammar, cache: dict, limits: Limits,
+           work) -> tuple[int, int]:
+    """(segments, derive work) of the plant of ``seed`` (grown into ``cache`` if new)."""
+    before = work.spent if work is not None else 0
+    known = (str(grammar[1]), seed, placement.iterations) in cache
+    skel = _copy_skeleton(inst, placement, seed, grammar, grow_grammar, cache, limits)[0]
+    spent = (work.spent - before) if work is not None and not known else 0
+    return len(skel), spent
+
+
+def _over(totals: dict, each: tuple[int, int], seeds: int, copies: int, limits: Limits, work) -> bool:
+    """Whether one probe's counts alone, times the seeds or copies, pass a limit."""
+    return (totals["segments"][0] + each[0] * seeds > limits.max_segments
+            or totals["drawn_segments"][0] + each[0] * copies > limits.max_drawn_segments
+            or (work is not None and totals["derive_work"][0] + each[1] * seeds > work.limit))
 
 
 def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: dict, budget: _Budget,
@@ -576,14 +642,17 @@ def grows_together(data, path: str = "<scene>") -> bool:
 
 
 def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_grammar=None,
-                limits: Limits | None = None, allow_paths=()) -> Scene:
+                limits: Limits | None = None, allow_paths=(), work=None) -> Scene:
     """Validate a scene mapping and grow its instances.
 
     ``grow_grammar(path, seed, iterations)`` grows one grammar (injected by the pipeline,
     which keeps this module free of L-system details) into a Skeleton, or into a drawing
     with ``skeleton`` and ``polygons`` (its leaves, which the copies carry). ``limits`` caps the
     instances and the scene's total segments; grammars are read only from the scene's
-    folder, the folders of ``allow_paths`` and the shipped grammars.
+    folder, the folders of ``allow_paths`` and the shipped grammars. ``work``: the
+    ``derive_work`` meter ``grow_grammar`` spends, if any: with it, a scene whose plants
+    would pass it is refused from a probe plant's work before its copies grow
+    (:func:`_forecast`; so are the segment limits, with or without it).
     """
     limits = limits or default_limits
     _check_keys(data, SCENE_KEYS, path)
@@ -604,6 +673,8 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     cache: dict[tuple, tuple] = {}
     # Every instance (grid copies included) is read and counted before any plant is grown.
     placements = [_parse_placement(inst, k, path, base_seed, seed, budget) for k, inst in enumerate(data["instances"])]
+    _forecast(list(zip(data["instances"], placements, strict=True)), base, grow_grammar, cache, budget, allow_paths,
+              work)
     for inst, placement in zip(data["instances"], placements, strict=True):
         instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)
 

@@ -44,7 +44,9 @@ SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_st
 @output_opt(f"its suffix names the format: {_SUFFIXES}. A .gltf gets its .bin beside it, an "
             ".obj its .mtl, a .qsm.csv a .treedata.csv. Default: INPUT's name with .glb, in the current directory.",
             required=False)
-@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level)
+@knob_option(knob_of(MeshSettings, "level"), MeshSettings().level,
+             help="Subdivision level m: 16·4^m triangles per frustum, plus 8·2^m per cap. Not given: 1, or "
+                  "the finest level under it whose triangles and memory fit the limits (a line says so).")
 @click.option("--relief/--no-relief", default=MeshSettings().relief, show_default=True,
               help="Displace vertices onto the relief shell (GS+R).")
 @click.option("--textures/--no-textures", default=True, show_default=True,
@@ -123,7 +125,7 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
       plantgen export well -o well.obj              # and well.mtl
       plantgen export oasis -o oasis.usda           # instanceable references, y-up stage
       plantgen export oasis -o oasis.glb --instancing gpu   # EXT_mesh_gpu_instancing
-      plantgen export forest -o forest.glb --subdiv 0       # 4 levels of detail per plant (MSFT_lod)
+      plantgen export forest -o forest.glb          # 4 levels of detail per plant (MSFT_lod)
       plantgen export dancing_cacti -o dance.glb    # 100 swaying skins, one looping animation
       plantgen export broadleaf -o tree.glb --asset game    # levels, leaf cards, impostor, textures
       plantgen export saguaro -o saguaro.stl        # z-up, as slicers and Blender expect
@@ -135,8 +137,9 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
     """
     output = output or Path(input.stem + ".glb")
     asset = take_settings(AssetSettings, keys)
-    if asset.game and click.get_current_context().get_parameter_source("subdiv").name == "DEFAULT":
-        subdiv = 0                                  # a game asset's levels within their budgets
+    if click.get_current_context().get_parameter_source("subdiv").name == "DEFAULT":
+        # a game asset's levels within their budgets; else the default, or the finest level that fits the limits
+        subdiv = 0 if asset.game else None
     with StageBars(enabled=not quiet) as bars:
         info = export_model(input, output, level=subdiv, relief=relief, seed=seed,
                             limits=limits_from(limit_values), allow_paths=allow_paths, up=up,

@@ -127,7 +127,7 @@ class _Buffer:
     """The binary buffer, its buffer views and accessors, built up in order."""
 
     def __init__(self) -> None:
-        self.chunks: list[bytes] = []
+        self.chunks: list[tuple[int, object]] = []   # (offset, bytes or a contiguous array)
         self.size = 0
         self.views: list[dict] = []
         self.accessors: list[dict] = []
@@ -135,7 +135,7 @@ class _Buffer:
     def add(self, array: np.ndarray, kind: str, component: int, target: int | None = None,
             bounds: bool = False, normalized: bool = False) -> int:
         """Append ``array`` ((count, width) or (count,)) as one view and one accessor; its index."""
-        view = self._view(np.ascontiguousarray(array).tobytes(), target)
+        view = self._view(np.ascontiguousarray(array), target)
         accessor = {"bufferView": view, "componentType": component, "count": int(len(array)), "type": kind}
         if normalized:
             accessor["normalized"] = True
@@ -148,28 +148,36 @@ class _Buffer:
     def add_blocks(self, blocks: np.ndarray, kind: str, component: int) -> list[int]:
         """Append ``blocks`` (b, count, width) as one view holding b accessors, one a block
         (float32 or 4-byte-aligned rows); their indices."""
-        view = self._view(np.ascontiguousarray(blocks).tobytes(), None)
+        view = self._view(np.ascontiguousarray(blocks), None)
         size = blocks[0].nbytes if len(blocks) else 0
         first = len(self.accessors)
         self.accessors += [{"bufferView": view, "byteOffset": b * size, "componentType": component,
                             "count": int(blocks.shape[1]), "type": kind} for b in range(len(blocks))]
         return list(range(first, len(self.accessors)))
 
-    def _view(self, data: bytes, target: int | None) -> int:
-        pad = (-self.size) % 4
-        if pad:
-            self.chunks.append(bytes(pad))
-            self.size += pad
-        view = {"buffer": 0, "byteOffset": self.size, "byteLength": len(data)}
+    def _view(self, data, target: int | None) -> int:
+        """A view of ``data`` (bytes, or a contiguous array: kept, not copied, until the
+        buffer is written) at the next 4-byte boundary; its index."""
+        self.size += (-self.size) % 4
+        length = data.nbytes if isinstance(data, np.ndarray) else len(data)
+        view = {"buffer": 0, "byteOffset": self.size, "byteLength": length}
         if target is not None:
             view["target"] = target
-        self.chunks.append(data)
-        self.size += len(data)
+        self.chunks.append((self.size, data))
+        self.size += length
         self.views.append(view)
         return len(self.views) - 1
 
+    def fill(self, out: memoryview) -> None:
+        """Copy every view's bytes into ``out`` (at least :attr:`size` bytes, zeroed)."""
+        for offset, data in self.chunks:
+            raw = data.reshape(-1).view(np.uint8) if isinstance(data, np.ndarray) else data
+            out[offset:offset + len(raw)] = raw if isinstance(raw, bytes) else raw.data
+
     def data(self) -> bytes:
-        return b"".join(self.chunks)
+        out = bytearray(self.size)
+        self.fill(memoryview(out))
+        return bytes(out)
 
 
 def byte_weights(weights: np.ndarray) -> np.ndarray:
@@ -534,15 +542,22 @@ class _Document:
         return doc
 
 
-def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "nodes",
-                  name: str = "plantgen", progress: Progress = None,
-                  animation: Timeline | None = None, extras: SceneExtras | None = None,
-                  textures: Textures | None = None, image_uris: dict | None = None) -> tuple[dict, bytes]:
-    """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``; with
-    ``animation``, the plants that sway are skinned and their sway is the animation
-    ``"sway"``; with ``extras``, the scene's ground, camera and light; with ``textures``,
-    the relief's maps (images in the buffer, or the files ``image_uris`` names:
+def gltf_document(plants: list[Plant], **options) -> tuple[dict, bytes]:
+    """The glTF JSON (without ``buffers``) and the binary buffer of ``plants``; ``options``:
+    ``up``, ``colours``, ``instancing``, ``name``, ``progress``; ``animation``: the plants
+    that sway are skinned and their sway is the animation ``"sway"``; ``extras``: the
+    scene's ground, camera and light; ``textures``: the relief's maps (images in the
+    buffer, or the files ``image_uris`` names:
     :func:`~plantgen.exporters.textures.texture_files`) (see the module docstring)."""
+    doc, buffer = _document(plants, **options)
+    return doc, buffer.data()
+
+
+def _document(plants: list[Plant], *, up: str = "y", colours: Colours = None, instancing: str = "nodes",
+              name: str = "plantgen", progress: Progress = None,
+              animation: Timeline | None = None, extras: SceneExtras | None = None,
+              textures: Textures | None = None, image_uris: dict | None = None) -> tuple[dict, _Buffer]:
+    """:func:`gltf_document` with the buffer unwritten (its views' arrays kept)."""
     if instancing not in ("gpu", "nodes"):
         raise ValueError(f"instancing must be 'gpu' or 'nodes', got {instancing!r}")
     doc = _Document(up, colours, animation, textures, image_uris)
@@ -569,17 +584,23 @@ def gltf_document(plants: list[Plant], *, up: str = "y", colours: Colours = None
             progress("write", done + 1, len(plants))
     if extras is not None:
         doc.extras(extras)
-    return doc.json(name), doc.buffer.data()
+    return doc.json(name), doc.buffer
 
 
-def _glb(doc: dict, data: bytes) -> bytes:
-    doc = dict(doc, buffers=[{"byteLength": len(data)}])
+def _glb(doc: dict, buffer: _Buffer) -> bytearray:
+    """The ``.glb`` file: its header, JSON chunk and binary chunk laid out in one block,
+    each view's bytes copied once, so it is written in one go."""
+    doc = dict(doc, buffers=[{"byteLength": buffer.size}])
     text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
     text += b" " * ((-len(text)) % 4)
-    data += bytes((-len(data)) % 4)
-    total = 12 + 8 + len(text) + 8 + len(data)
-    return b"".join([struct.pack("<III", GLB_MAGIC, 2, total), struct.pack("<II", len(text), GLB_JSON), text,
-                     struct.pack("<II", len(data), GLB_BIN), data])
+    size = buffer.size + (-buffer.size) % 4
+    total = 12 + 8 + len(text) + 8 + size
+    out = bytearray(total)
+    head = 12 + 8 + len(text) + 8
+    out[:head] = b"".join([struct.pack("<III", GLB_MAGIC, 2, total), struct.pack("<II", len(text), GLB_JSON), text,
+                           struct.pack("<II", size, GLB_BIN)])
+    buffer.fill(memoryview(out)[head:])
+    return out
 
 
 def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours: Colours = None,
@@ -598,12 +619,13 @@ def write_gltf(plants: list[Plant], path: str | Path, *, up: str = "y", colours:
     files = None
     if textures is not None and not glb:
         files = texture_files(path, textures, [n for p in plants for n in p.mesh.material_names], v_up=False)
-    doc, data = gltf_document(plants, up=up, colours=colours, instancing=instancing,
-                              name=name or path.name.split(".")[0] or "plantgen", progress=progress,
-                              animation=animation, extras=extras, textures=textures, image_uris=files)
+    doc, buffer = _document(plants, up=up, colours=colours, instancing=instancing,
+                            name=name or path.name.split(".")[0] or "plantgen", progress=progress,
+                            animation=animation, extras=extras, textures=textures, image_uris=files)
     if glb:
-        blob = _glb(doc, data)
+        blob = _glb(doc, buffer)
         return [write_atomically(path, lambda tmp: Path(tmp).write_bytes(blob), ExportError)]
+    data = buffer.data()
     bin_path = path.with_suffix(".bin")
     doc = dict(doc, buffers=[{"byteLength": len(data), "uri": quote(bin_path.name)}])
     text = json.dumps(doc, indent=1)

@@ -269,9 +269,10 @@ def material_colours(names, colours: Colours = None) -> list[tuple[float, float,
 def turned_mesh(mesh: TessellatedMesh, up: str) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (float64) and unit normals (float32) of ``mesh`` in the ``up`` frame."""
     rot = up_rotation(up)
-    normals = mesh.normals.astype(np.float64) @ rot.T
+    # einsum, not ``@``: a threaded BLAS matrix product of (n, 3) by (3, 3) crawls on busy cores
+    normals = np.einsum("ij,kj->ik", mesh.normals.astype(np.float64), rot)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    return mesh.vertices @ rot.T, normals.astype(np.float32)
+    return np.einsum("ij,kj->ik", mesh.vertices, rot), normals.astype(np.float32)
 
 
 def vertex_labels(mesh: TessellatedMesh, labels: Mapping[str, np.ndarray] | None) -> dict:
@@ -301,12 +302,23 @@ def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np
     parts = []
     for mat in used:
         faces = mesh.faces if len(used) == 1 else mesh.faces[face_material == mat]
-        keep, inverse = np.unique(faces, return_inverse=True)
+        keep, inverse = _used_vertices(faces, len(vertices))
         joints, weights = (None, None) if influences is None else (influences[0][keep], influences[1][keep])
         parts.append(Part(int(mat), vertices[keep], normals[keep], mesh.uv[keep].astype(np.float32),
                           inverse.reshape(faces.shape), {k: v[keep] for k, v in per_vertex.items()} or None,
                           joints=joints, weights=weights))
     return parts
+
+
+def _used_vertices(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(keep, inverse): the vertices ``faces`` use, ascending, and the faces renumbered
+    into them (``np.unique(faces, return_inverse=True)``, by a mask of ``count``
+    vertices: linear, not a sort)."""
+    used = np.zeros(count, dtype=bool)
+    used[faces.ravel()] = True
+    keep = np.flatnonzero(used)
+    rank = np.cumsum(used, dtype=np.int64) - 1
+    return keep, rank[faces.ravel()]
 
 
 def leaf_name(material: str) -> str:
@@ -359,7 +371,7 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
     parts = []
     for mat in np.unique(triangle_material):
         faces = polygons.triangles[triangle_material == mat]
-        keep, inverse = np.unique(faces, return_inverse=True)
+        keep, inverse = _used_vertices(faces, len(vertices))
         skin = {}
         if joints is not None:
             skin["joints"] = np.zeros((len(keep), 4), np.int64)

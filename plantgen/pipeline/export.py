@@ -39,6 +39,7 @@ from ..exporters.plants import level_plant
 from ..exporters.textures import bake_textures, split_by_aspect
 from ..geometry.meshes.mesh import tessellate, triangle_count
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.rays.camera import frame_copies
 from ..geometry.rays.instances import detail_levels, detail_order, screen_coverage
 from ..geometry.skeletons.frames import UP_AXES
 from ..geometry.skeletons.frusta import Frusta, frusta_bounds
@@ -54,7 +55,11 @@ from .render import model_leaves, skinning, smoothing, stage_model
 INSTANCING = ("nodes", "gpu", "off")
 
 
-def export_model(input_path, output_path, *, level: int = 1, relief: bool = False,
+#: The tessellation level an export makes when none is asked for, where it fits the limits.
+DEFAULT_LEVEL = 1
+
+
+def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, relief: bool = False,
                  seed: int | None = None, limits: Limits | None = None, allow_paths=(),
                  up: str | None = None, instancing: str = "nodes", unit: float = 1.0,
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
@@ -68,7 +73,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     ----------
     input_path : a skeleton ``.npz`` or ``.swc``, a grammar or a scene
     output_path : the file; its suffix names the format (:mod:`plantgen.exporters.formats`)
-    level, relief, up : the tessellation (GS, GS+R); ``"y"`` or ``"z"`` (default: the format's)
+    level, relief, up : the tessellation (GS, GS+R; None: :func:`_fitting_level`); ``"y"``, ``"z"`` or the format's
     instancing : how a scene's repeated plants are written where the format can
         (glTF, USD): ``"nodes"`` (the default) once, with one node per copy sharing the
         plant's mesh (core glTF, which every reader opens; USD instanceable references);
@@ -78,8 +83,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     qsm_tolerance : the cylinder model's volume tolerance (:mod:`plantgen.exporters.qsm`)
     progress : ``progress(stage, done, total)``: :func:`grow_file`'s stages, ``tessellate``, ``write``
     smooth_bends : None, or bends past this many degrees become arcs of frusta before the
-        mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the
-        segments they add)
+        mesh is made (:func:`skinning`; the summary's ``smooth_segments`` counts the segments they add)
     keyframes : the keys of the sway a glTF or USD export writes for a scene that lists
         ``animation`` and sways (:class:`~plantgen.settings.KeyframeSettings`; None: its
         defaults, over one common period); a format without animation writes the
@@ -94,9 +98,9 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     written), ``path`` (the main one), ``timings`` (seconds per stage) and, for meshes,
     ``rows``, ``caps``, ``triangles`` and ``vertices`` (written), ``plants`` and
     ``copies`` (distinct plants and their copies), ``drawn`` (triangles with every copy),
-    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's
-    plants (once per distinct plant when instanced), beside the frusta and counted in
-    ``triangles``, ``vertices`` and ``drawn``), ``animation`` (None, or the
+    ``level``, ``relief``, ``leaf_triangles`` (the leaf polygons of a grammar, or of a scene's plants (once
+    per distinct plant when instanced), beside the frusta and counted in ``triangles``, ``vertices`` and
+    ``drawn``), ``animation`` (None, or the
     sway written: ``keys``, ``duration``, ``rate``, ``loops``, ``joints``, ``skins``),
     ``levels`` ([(rows, triangles)] per level of detail, summed over the plants written
     once; empty: none), ``scene`` (what of a scene's ``"camera"``, ``"light"`` and ``"ground"`` the file holds
@@ -108,7 +112,7 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings(), unit)
     up, t0 = up or fmt.up, time.perf_counter()
     grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
-    _export_budget(grown, fmt, instancing, level, limits, input_path, output_path)
+    _export_budget(grown, fmt, instancing, 0 if level is None else level, limits, input_path, output_path)
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
         skeleton.validate()
     timings = {"load": time.perf_counter() - t0}
@@ -118,21 +122,30 @@ def export_model(input_path, output_path, *, level: int = 1, relief: bool = Fals
     if fmt.kind == "skeleton":
         return _export_skeleton(grown, fmt, output_path, up, unit, qsm_tolerance, summary)
     skin = skinning(smoothing(grown, smooth_bends))
-    plants, smoothed = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief, limits,
-                                           input_path, output_path, timings, progress, skin, timeline,
-                                           _export_detail(grown, fmt, asset.levels(levels), detail, summary))
+    plants, smoothed, level = _tessellated_plants(grown, fmt, instancing if fmt.instancing else "off", level, relief,
+                                                  limits, input_path, output_path, timings, progress, skin, timeline,
+                                                  _export_detail(grown, fmt, asset.levels(levels), detail, summary),
+                                                  summary)
     t3 = time.perf_counter()
-    extras = scene_extras(grown, skin, input_path, ground=ground) if fmt.scene else None
+    extras = (scene_extras(grown, skin, input_path, _per_copy(grown, fmt, instancing, limits), ground=ground)
+              if fmt.scene else None)
     plants, baked = _finished(plants, asset, skin, relief, textures and fmt.textures and aspect_step, summary, progress)
+    t4 = time.perf_counter()
     paths = write_plants(plants, output_path, up=up, instancing="gpu" if instancing == "gpu" else "nodes", unit=unit,
                          name=grown.name, progress=progress, animation=timeline, extras=extras, textures=baked)
-    timings["write"] = time.perf_counter() - t3
+    timings.update(finish=t4 - t3, write=time.perf_counter() - t4)   # finish: the camera, cards, textures
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
                    smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
                    scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
                                                          if getattr(extras, k) is not None),
                    textures=_texture_summary(baked))
     return summary
+
+
+def _per_copy(grown: GrowResult, fmt, instancing: str, limits: Limits) -> bool:
+    """Whether a scene's camera is framed per copy (:func:`scene_extras`): written
+    instanced, with more placed segments than one model may have."""
+    return bool(fmt.instancing and instancing != "off" and grown.segments > limits.max_segments)
 
 
 def _export_checks(output_path: Path, up: str | None, instancing: str, asset: AssetSettings, unit: float = 1.0):
@@ -158,7 +171,9 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
     memory is over ``limits.max_export_bytes`` at its least: the segments it skins (every
     placed copy where the format or ``instancing`` writes each copy, else each distinct
     plant once), 16·4^m triangles each at the format's bytes; and for a glTF or USD scene
-    framed automatically, the skin of every placed copy its camera is framed on."""
+    framed automatically, the skin of every placed copy its camera is framed on (written
+    instanced with more placed segments than ``limits.max_segments``, the camera frames each
+    distinct plant's bound per copy instead: :func:`scene_extras`)."""
     if grown.segments == 0:
         raise ExportError(f"{input_path}: the model has no segments" + (
             " (its polygons alone are not exported; plantgen render and scan draw them)"
@@ -173,8 +188,8 @@ def _export_budget(grown: GrowResult, fmt, instancing: str, level: int, limits: 
                           f"of {limits.max_export_triangles:,}; choose a lower --subdiv ({hint('export_triangles')})")
     need = estimate_export_bytes(triangles, fmt.name) + skinned * SKIN_BYTES_PER_SEGMENT
     what = f"{skinned:,} segments{'' if each else ' (each distinct plant once)'} at m = {level}"
-    if fmt.scene and grown.scene is not None and grown.scene.camera is None \
-            and grown.segments * SKIN_BYTES_PER_SEGMENT > need:     # the framed camera skins every copy
+    if fmt.scene and (each or grown.segments <= limits.max_segments) and grown.scene is not None \
+            and grown.scene.camera is None and grown.segments * SKIN_BYTES_PER_SEGMENT > need:   # skins every copy
         need = grown.segments * SKIN_BYTES_PER_SEGMENT
         what = f"framing the scene's camera on its {grown.segments:,} placed segments"
     if need > limits.max_export_bytes:
@@ -235,13 +250,16 @@ def _export_skeleton(grown: GrowResult, fmt, output_path: Path, up: str, unit: f
     return dict(summary, path=summary["paths"][-1])
 
 
-def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None, *, ground: bool = False) -> SceneExtras | None:
+def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None, instanced: bool = False, *,
+                 ground: bool = False) -> SceneExtras | None:
     """What a glTF or USD export writes around a scene's plants: the camera ``plantgen
     render`` would use at its default size (the scene's camera, or for ``camera: auto``
-    the model framed as :func:`stage_model` frames it, its frusta skinned with ``skin``),
-    the scene's light and its ground; for a grammar or a skeleton, None, or with ``ground``
-    only the ground disc ``plantgen render`` draws under it
-    (:func:`~plantgen.geometry.stage.model_ground`: a reference renderer sees what it sees)."""
+    the model framed as :func:`stage_model` frames it, its frusta skinned with ``skin``;
+    ``instanced``: each distinct plant skinned once and its box framed per copy,
+    :func:`~plantgen.geometry.rays.camera.frame_copies`), the scene's light and its
+    ground; for a grammar or a skeleton, None, or with ``ground`` only the ground disc
+    ``plantgen render`` draws under it (:func:`~plantgen.geometry.stage.model_ground`: a
+    reference renderer sees what it sees)."""
     scene = grown.scene
     if scene is None:
         if not ground:
@@ -251,6 +269,10 @@ def scene_extras(grown: GrowResult, skin=skin_skeleton, source=None, *, ground: 
     width, height = DEFAULT_SIZE
     if scene.camera is not None:
         camera = scene.camera.at_size(width, height)
+    elif instanced:
+        camera = frame_copies([(check_finite_frusta(skin(p.skeleton), source or grown.name), p.matrices,
+                                None if p.polygons is None else p.polygons.vertices) for p in scene.plants()],
+                              width, height)
     else:
         camera = stage_model(grown, check_finite_frusta(skin(grown.skeleton), source or grown.name), width,
                              height).camera
@@ -403,19 +425,25 @@ def check_export_size(frusta: list[Frusta], leaves: list, segments: int, level: 
 def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, relief: bool, limits: Limits,
                         input_path, output_path, timings: dict, progress,
                         skin=skin_skeleton, timeline: Timeline | None = None,
-                        detail: tuple[int, float] = (1, 0.0)) -> tuple[list[Plant], int]:
+                        detail: tuple[int, float] = (1, 0.0), summary: dict | None = None
+                        ) -> tuple[list[Plant], int, int]:
     """Skin every plant with ``skin``, check the export's triangles and memory against the
     limits (and its sway's keys, with a ``timeline``), and tessellate (``timings`` gains
     ``skin`` and ``tessellate``), each plant at ``detail`` = (levels, pixels)
-    (:func:`plant_detail`); also the segments smooth bends added."""
+    (:func:`plant_detail`); also the segments smooth bends added and the level made
+    (``level`` None: :func:`_fitting_level`, its warning added to ``summary``)."""
     t1 = time.perf_counter()
     parts = _export_parts(grown, instancing != "off")
     frusta = [check_finite_frusta(skin(part[1]), input_path) for part in parts]
     t2 = time.perf_counter()
     timings["skin"] = t2 - t1
     copies = 2 if detail[0] > 1 else 1      # the lower levels hold under n/2 + n/4 + ... rows: under the full's
-    check_export_size(frusta * copies, [part[3] for part in parts] * copies, sum(len(part[1]) for part in parts),
-                      level, fmt.name, limits, input_path, output_path)
+    sizes = (frusta * copies, [part[3] for part in parts] * copies, sum(len(part[1]) for part in parts))
+    if level is None:
+        level, note = _fitting_level(sizes, fmt.name, limits, input_path, output_path)
+        if note and summary is not None:
+            summary["warnings"] = (*summary["warnings"], note)
+    check_export_size(*sizes, level, fmt.name, limits, input_path, output_path)
     if timeline is not None:
         check_sway_size([(len(part[1]), 1 if part[2] is None else len(part[2])) for part in parts
                          if part[4] is not None and any(s is not None and s.moves for c in part[4][1] for s in c)],
@@ -431,7 +459,29 @@ def _tessellated_plants(grown: GrowResult, fmt, instancing: str, level: int, rel
         if progress is not None:
             progress("tessellate", k + 1, len(parts))
     timings["tessellate"] = time.perf_counter() - t2
-    return plants, sum(f.report.smooth_segments for f in frusta)
+    return plants, sum(f.report.smooth_segments for f in frusta), level
+
+
+def _fitting_level(sizes: tuple, fmt_name: str, limits: Limits, source, output) -> tuple[int, str]:
+    """(level, note): :data:`DEFAULT_LEVEL` where its triangles and memory fit the limits
+    (:func:`check_export_size` of ``sizes``: frusta, leaves, segments), else the finest
+    lower level that fits and a line saying so (at level 0 the check's own refusal)."""
+    for level in range(DEFAULT_LEVEL, 0, -1):
+        try:
+            check_export_size(*sizes, level, fmt_name, limits, source, output)
+        except (ExportError, LimitError) as exc:
+            over = str(exc)
+            continue
+        return level, "" if level == DEFAULT_LEVEL else _lowered(source, level, over)
+    return 0, _lowered(source, 0, over)
+
+
+def _lowered(source, level: int, over: str) -> str:
+    """The warning of an export made at ``level`` below the default (``over``: the refusal
+    of the level above)."""
+    reason = over.split(": ", 1)[-1].split(";")[0]
+    return (f"{source}: exported at --subdiv {level}, the finest level within the limits (the default, "
+            f"--subdiv {DEFAULT_LEVEL}: {reason})")
 
 
 #: Bytes a written joint takes apart from its keys (its node, skin entry, channel and

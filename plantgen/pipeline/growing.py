@@ -230,7 +230,7 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
         return drawing             # the skeleton and its leaves: the scene's copies carry both
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
-                        allow_paths=allow_paths)
+                        allow_paths=allow_paths, work=work)
     t0 = time.perf_counter()
     if progress is not None:
         progress("place", 0, None)
@@ -254,14 +254,18 @@ def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, 
     t0 = time.perf_counter()
     placed = parse_scene(data, str(path), seed=seed, grow_grammar=record, limits=limits, allow_paths=allow_paths)
     where = Path(path).parent
-    plants, grown = [], []
+    plants, grown, taken = [], [], set()
+    by_seed: dict[tuple, list] = {}           # (grammar, seed): its keys in order (a lookup, not a scan a copy)
+    for k in keys:
+        by_seed.setdefault(k[:2], []).append(k)
     for inst in placed.instances:
         if inst.source == "skeleton":
             continue
         gpath = str(resolve_grammar(inst.source, where, str(path), allow_paths))
-        key = next((k for k in keys if k[:2] == (gpath, inst.seed) and k not in grown), None)
+        key = next((k for k in by_seed.get((gpath, inst.seed), ()) if k not in taken), None)
         if key is not None:
             grown.append(key)
+            taken.add(key)
             plants.append(TogetherPlant(parsed(gpath), key[1], key[2], inst.matrix))
     strings = grow_together(plants, limits=limits, work=work)
     timings["derive"] = timings.get("derive", 0.0) + time.perf_counter() - t0

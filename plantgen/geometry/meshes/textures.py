@@ -291,11 +291,13 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
 
 
 def _vertex_sums(faces: np.ndarray, per_face: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(V, k) sums over each vertex's faces of ``per_face`` (F, k)."""
-    out = np.zeros((n_vertices, per_face.shape[1]))
-    for corner in range(3):
-        np.add.at(out, faces[:, corner], per_face)
-    return out
+    """(V, k) sums over each vertex's faces of ``per_face`` (F, k): a bincount over the
+    corners in order (every face's first corner, then second, then third), so each sum
+    adds up in the order ``np.add.at`` corner by corner would, many times faster."""
+    corners = np.asarray(faces).T.ravel()
+    values = np.asarray(per_face, dtype=np.float64)
+    return np.stack([np.bincount(corners, weights=np.tile(values[:, k], 3), minlength=n_vertices)
+                     for k in range(values.shape[1])], axis=1).reshape(n_vertices, values.shape[1])
 
 
 def mesh_uv_scales(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:

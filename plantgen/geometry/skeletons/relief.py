@@ -3,7 +3,7 @@
 A height map is an (H, W) uint8 array: row j covers v in [j/H, (j+1)/H), column i covers
 u in [i/W, (i+1)/W); texel (j, i) has its centre at (u, v) = ((i + 0.5)/W, (j + 0.5)/H).
 Height w = value / 255 in [0, 1]: 0 on the inner cone, 1 at the relief's full depth, the
-shell times r(y)/max(r1, r2) (:func:`plantgen.geometry.frusta.relief_scale`; §3).
+shell times r(y)/max(r1, r2) (:func:`plantgen.geometry.skeletons.frusta.relief_scale`; §3).
 
 The last row repeats the first (the pattern's period spans rows 0 to H - 1), so with v
 clamped a segment's top (v = 1) and its continuing neighbour's bottom (v = 0) read the same

@@ -1,0 +1,315 @@
+"""Stage-by-stage scaling: each stage of ``grow``, ``render``, ``export`` and ``scan``, its
+CPU time and peak memory at sizes ten times apart, and how it grows per 10x.
+
+Run: ``python -m plantgen.benchmarks.pipeline [--quick | --full] [--gl] [--out FILE]``.
+
+Inputs (every size from one generator, so the sizes differ in size only):
+
+- *npz*: a skeleton synthesised with numpy (:func:`synthetic_skeleton`: chains of 20
+  segments, each hanging from a random earlier segment), saved and read back;
+- *grammar*: a ternary tree grammar (``X -> F[+X][-X][&X]``) whose iterations give
+  about 10 k, 90 k and 800 k segments (:func:`tree_grammar`);
+- *scene 1 seed* and *scene N seeds*: a grid of saguaros, its copies of one grown plant
+  or each of its own seed (``grid: seeds``), written instanced.
+
+Stages: *read* (load the npz, parse the grammar or scene), *derive* and *interpret* (the
+L-system; a scene's copies grow in *derive*), *skin* (frusta; a scene's distinct plants),
+*frame* (the automatic camera: :func:`~plantgen.geometry.rays.camera.auto_camera`, or
+:func:`~plantgen.geometry.rays.camera.frame_copies` for a scene), *check* (finite rows and
+the export's budget), *upload/BVH* (the scan's BVH over the rows' boxes), *draw* (one
+64x48 ray-cast frame, with ``--gl``) and *write* (tessellate at m = 0 and write a .glb).
+grow runs read to interpret, render adds skin, frame, check and draw, export skin,
+frame, check and write, scan skin and upload/BVH.
+
+Times are CPU seconds of this process (``time.process_time``: steadier than wall time on
+busy cores; a GL draw's driver threads count too); memory is the peak Python and numpy
+allocations of the stage over what was held before it (``tracemalloc``). *per 10x* is
+the growth of the largest size's figure over the one before, scaled to a tenfold step
+((t2/t1)^(1/log10(n2/n1))). A run that a limit refuses shows *refused* and how long the
+refusal took. ``--quick`` (the tests') runs the two smallest sizes; the default adds the
+middle ones; ``--full`` all, up to 1 M segments and 10,000 copies.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+import tracemalloc
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlantgenError
+from ..exporters import Plant, write_plants
+from ..geometry.meshes.mesh import tessellate
+from ..geometry.rays.bvh import build_bvh
+from ..geometry.rays.camera import auto_camera, frame_copies
+from ..geometry.skeletons.frusta import row_end_balls
+from ..geometry.skeletons.skeleton import Skeleton
+from ..geometry.skeletons.skin import skin_skeleton
+from ..limits import Limits
+from ..pipeline import check_export_size, grow_file
+from ..pipeline.checks import check_finite_frusta
+from .arguments import report
+
+__all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "main"]
+
+#: The stages, in pipeline order.
+STAGES = ("read", "derive", "interpret", "skin", "frame", "check", "upload/BVH", "draw", "write")
+#: Sizes a run measures: segments (npz, grammar iterations) and copies (scenes), by run.
+SIZES = {
+    "quick": {"npz": (1_000, 10_000), "grammar": (6, 8), "scene": (10, 100)},
+    "default": {"npz": (10_000, 100_000), "grammar": (9, 11), "scene": (100, 1_000)},
+    "full": {"npz": (10_000, 100_000, 1_000_000), "grammar": (9, 11, 13), "scene": (100, 1_000, 10_000)},
+}
+
+
+#: The grammar runs' limits: the largest tree derives about 9.6 M modules (11 a segment),
+#: over the default ``max_modules``.
+GRAMMAR_LIMITS = Limits().raised(modules=20_000_000, derive_bytes=4 << 30, derive_work=200_000_000)
+
+
+def synthetic_skeleton(n: int, seed: int = 0, chain: int = 20) -> Skeleton:
+    """A branching skeleton of ``n`` segments (rounded down to whole chains of ``chain``):
+    chain b starts at the end of a random segment of an earlier chain and runs straight,
+    upward-leaning, in steps of 5 cm; radii taper with the distance from the root."""
+    rng = np.random.default_rng(seed)
+    m = max(n // chain, 1)
+    n = m * chain
+    hang = np.concatenate([[-1], (rng.random(m - 1) * (np.arange(1, m) * chain)).astype(np.int64)])
+    direction = rng.normal(size=(m, 3))
+    direction[:, 1] = np.abs(direction[:, 1]) + 1.0
+    direction *= 0.05 / np.linalg.norm(direction, axis=1, keepdims=True)
+    on = np.where(hang >= 0, hang // chain, 0)
+    step = np.where(hang >= 0, hang % chain + 1, 0)
+    root = np.zeros((m, 3))
+    for _ in range(m):                       # a chain's root follows its parent chain's: settle by depth
+        new = np.where((hang >= 0)[:, None], root[on] + direction[on] * step[:, None], 0.0)
+        if np.array_equal(new, root):
+            break
+        root = new
+    k = np.arange(chain + 1)
+    points = root[:, None, :] + k[None, :, None] * direction[:, None, :]          # (m, chain + 1, 3)
+    start, end = points[:, :-1].reshape(-1, 3), points[:, 1:].reshape(-1, 3)
+    parent = np.arange(-1, n - 1, dtype=np.int64)
+    parent[::chain] = hang
+    continues = np.ones(n, bool)
+    continues[::chain] = False
+    radius = 0.02 / (1.0 + np.linalg.norm(start, axis=1))
+    return Skeleton(start=start, end=end, r_start=radius, r_end=radius * 0.97, parent=parent, continues=continues,
+                    material=np.zeros(n, np.int32), material_names=("bark",))
+
+
+def tree_grammar(iterations: int) -> str:
+    """A ternary tree grammar: ``(3^iterations - 1) / 2`` segments, deterministic."""
+    return ("name: ternary_bench\nseed: 1\n"
+            f"iterations: {int(iterations)}\naxiom: X\n"
+            "turtle: {step: 0.1, angle: 30, radius: 0.01, width_factor: 0.9}\n"
+            "rules:\n  - \"X -> F[+X][-X][&X]\"\n")
+
+
+class Run:
+    """One input at one size: each stage's (CPU seconds, peak bytes), or its refusal."""
+
+    def __init__(self, kind: str, size: int, label: str):
+        self.kind, self.size, self.label = kind, size, label
+        self.stages: dict[str, tuple[float, int]] = {}
+        self.refused: tuple[str, float, str] | None = None
+        self.skipped: dict[str, str] = {}      # stage: the refusal that left it out
+
+    @contextmanager
+    def stage(self, name: str):
+        held = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        t0 = time.process_time()
+        try:
+            yield
+        except PlantgenError as exc:
+            self.refused = (name, time.process_time() - t0, str(exc).splitlines()[0])
+            raise
+        finally:
+            peak = tracemalloc.get_traced_memory()[1] - held
+            self.stages[name] = (time.process_time() - t0, max(peak, 0))
+
+
+def _plant_stages(run: Run, skeleton: Skeleton, grown, gl: bool) -> None:
+    """The stages after growing of one plant: skin, frame, check, upload/BVH, draw, write."""
+    with run.stage("skin"):
+        frusta = skin_skeleton(skeleton)
+    with run.stage("frame"):
+        camera = auto_camera(frusta, 64, 48)
+    with run.stage("check"):
+        check_finite_frusta(frusta, run.label)
+        try:
+            check_export_size([frusta], [None], len(skeleton), 0, "glb", None, run.label, "bench.glb")
+        except PlantgenError as exc:         # the write is refused: the check's time is the refusal's
+            run.skipped["write"] = str(exc).splitlines()[0]
+    with run.stage("upload/BVH"):
+        (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta)
+        build_bvh(np.minimum(c_lo - r_lo[:, None], c_hi - r_hi[:, None]),
+                  np.maximum(c_lo + r_lo[:, None], c_hi + r_hi[:, None]))
+    if gl:
+        _draw(run, grown, frusta, camera)
+    if "write" in run.skipped:
+        return
+    with run.stage("write"), tempfile.TemporaryDirectory() as tmp:
+        mesh = tessellate(frusta, 0)
+        write_plants([Plant(run.label, skeleton, mesh, None)], Path(tmp) / "bench.glb")
+
+
+def _draw(run: Run, grown, frusta, camera) -> None:
+    """One 64x48 ray-cast frame (headless GL)."""
+    from ..gl.raycast import Raycaster
+    from ..pipeline import frame_arguments, stage_model
+    view = frame_arguments(frusta, stage_model(grown, frusta, 64, 48, camera=camera), None)
+    raycaster = Raycaster()
+    with run.stage("draw"):
+        raycaster.render(frusta, **view)
+
+
+def _npz_run(n: int, tmp: Path, gl: bool) -> Run:
+    run = Run("npz", n, f"npz {n:,}")
+    path = tmp / f"plant{n}.npz"
+    synthetic_skeleton(n).save(path)
+    with run.stage("read"):
+        grown = grow_file(path)
+    _plant_stages(run, grown.skeleton, grown, gl)
+    return run
+
+
+def _grammar_run(iterations: int, tmp: Path, gl: bool) -> Run:
+    path = tmp / f"tree{iterations}.yaml"
+    path.write_text(tree_grammar(iterations))
+    run = Run("grammar", (3 ** iterations - 1) // 2, f"grammar {iterations} steps")
+    held = tracemalloc.get_traced_memory()[0]
+    tracemalloc.reset_peak()
+    t0 = time.process_time()
+    try:
+        grown = grow_file(path, limits=GRAMMAR_LIMITS)
+    except PlantgenError as exc:
+        run.refused = ("derive", time.process_time() - t0, str(exc).splitlines()[0])
+        run.stages["derive"] = (time.process_time() - t0, 0)
+        return run
+    peak = max(tracemalloc.get_traced_memory()[1] - held, 0)
+    spent = time.process_time() - t0
+    timed = {"read": grown.timings.get("parse", 0.0), "derive": grown.timings.get("derive", 0.0),
+             "interpret": grown.timings.get("interpret", 0.0)}
+    scale = spent / max(sum(timed.values()), 1e-9)       # wall timings to this process's CPU
+    for name, seconds in timed.items():
+        run.stages[name] = (seconds * scale, peak)          # one peak for the three: grown together
+    run.size = len(grown.skeleton)
+    _plant_stages(run, grown.skeleton, grown, gl)
+    return run
+
+
+def _scene_run(copies: int, distinct: bool, tmp: Path) -> Run:
+    side = max(int(round(math.sqrt(copies))), 1)
+    run = Run("scene N seeds" if distinct else "scene 1 seed", side * side, "")
+    run.label = f"{run.kind} {run.size:,}"
+    path = tmp / f"grid{copies}{distinct}.yaml"
+    seeds = "" if distinct else ", seeds: 1"
+    path.write_text(f"name: grid\ninstances:\n  - {{grammar: saguaro, seed: 1, "
+                    f"grid: {{count: [{side}, {side}], spacing: [4, 4], jitter: 0.3{seeds}}}}}\n")
+    try:
+        with run.stage("derive"):
+            grown = grow_file(path)
+        plants = grown.scene.plants()
+        with run.stage("skin"):
+            skinned = [(skin_skeleton(p.skeleton), p.matrices, None) for p in plants]
+        with run.stage("frame"):
+            frame_copies(skinned, 64, 48)
+        with run.stage("check"):
+            check_export_size([f for f, _, _ in skinned], [None] * len(skinned),
+                              sum(len(p.skeleton) for p in plants), 0, "glb", None, run.label, "bench.glb")
+        with run.stage("write"), tempfile.TemporaryDirectory() as out:
+            write_plants([Plant(p.name, p.skeleton, tessellate(f, 0), m) for p, (f, m, _) in
+                          zip(plants, skinned, strict=True)], Path(out) / "bench.glb")
+    except PlantgenError:
+        pass
+    return run
+
+
+def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene")) -> list[Run]:
+    """Every run of ``sizes`` (one of :data:`SIZES`), smallest first."""
+    tracemalloc.start()
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            runs = [_npz_run(n, Path(tmp), gl) for n in (sizes["npz"] if "npz" in kinds else ())]
+            runs += [_grammar_run(its, Path(tmp), gl) for its in (sizes["grammar"] if "grammar" in kinds else ())]
+            runs += [_scene_run(copies, distinct, Path(tmp)) for distinct in (False, True)
+                     for copies in (sizes["scene"] if "scene" in kinds else ())]
+    finally:
+        tracemalloc.stop()
+    return runs
+
+
+def _cell(run: Run, stage: str) -> str:
+    if run.refused is not None and run.refused[0] == stage:
+        return f"refused in {run.refused[1]:.2f} s"
+    if stage in run.skipped:
+        return "refused at check"
+    if stage not in run.stages:
+        return ""
+    seconds, peak = run.stages[stage]
+    return f"{seconds:.3f} s, {peak / 2**20:,.1f} MiB"
+
+
+def growth(runs: list[Run], stage: str) -> str:
+    """The growth per 10x of ``stage`` between the two largest sizes that ran it."""
+    done = [r for r in runs if stage in r.stages and (r.refused is None or r.refused[0] != stage)]
+    if len(done) < 2:
+        return ""
+    (a, b) = done[-2:]
+    ta, tb = a.stages[stage][0], b.stages[stage][0]
+    if b.size <= a.size or ta < 0.005:
+        return ""
+    return f"{(tb / ta) ** (1 / math.log10(b.size / a.size)):.1f}x"
+
+
+def markdown(runs: list[Run], title: str) -> str:
+    """The table: a row per input kind and stage, a column per size, the growth per 10x."""
+    kinds = list(dict.fromkeys(r.kind for r in runs))
+    width = max(sum(1 for r in runs if r.kind == k) for k in kinds)
+    lines = [f"### {title}", "",
+             "| input | stage | " + " | ".join(f"size {i + 1}" for i in range(width)) + " | per 10x |",
+             "|---|---|" + "---|" * width + "---|"]
+    for kind in kinds:
+        mine = [r for r in runs if r.kind == kind]
+        lines.append(f"| **{kind}** | *size* | " + " | ".join(f"{r.size:,}" for r in mine)
+                     + " |" * (width - len(mine)) + " |  |")
+        for stage in STAGES:
+            if not any(stage in r.stages or stage in r.skipped for r in mine):
+                continue
+            cells = [_cell(r, stage) for r in mine] + [""] * (width - len(mine))
+            lines.append(f"| {kind} | {stage} | " + " | ".join(cells) + f" | {growth(mine, stage)} |")
+    refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
+    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
+    if refusals:
+        lines += ["", "Refused:", "", *refusals]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--quick", action="store_true", help="the two smallest sizes (the tests')")
+    group.add_argument("--full", action="store_true", help="every size: 1 M segments, 10,000 copies")
+    parser.add_argument("--gl", action="store_true", help="time a 64x48 ray-cast draw (headless GL)")
+    parser.add_argument("--kinds", default="npz,grammar,scene", help="comma-separated inputs to run")
+    parser.add_argument("--out", type=Path, help="also write the Markdown table here")
+    args = parser.parse_args(argv)
+    run = "quick" if args.quick else "full" if args.full else "default"
+    runs = measure(SIZES[run], args.gl, tuple(args.kinds.split(",")))
+    title = (f"Stage scaling ({run} run; {platform.machine()}, {os.cpu_count()} cores; CPU seconds and peak "
+             f"allocations a stage)")
+    return report(markdown(runs, title), args.out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
