@@ -136,10 +136,13 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     timings.update(finish=t4 - t3, write=time.perf_counter() - t4)   # finish: the camera, cards, textures
     summary.update(_mesh_counts(plants), level=level, relief=relief, paths=paths, path=paths[-1],
                    smooth_segments=smoothed, animation=_animation_counts(plants, timeline),
-                   scene=() if extras is None else tuple(k for k in ("camera", "light", "ground")
-                                                         if getattr(extras, k) is not None),
-                   textures=_texture_summary(baked))
+                   scene=_extras_written(extras), textures=_texture_summary(baked))
     return summary
+
+
+def _extras_written(extras: SceneExtras | None) -> tuple[str, ...]:
+    """Which of a scene's camera, light and ground an export's file holds."""
+    return () if extras is None else tuple(k for k in ("camera", "light", "ground") if getattr(extras, k) is not None)
 
 
 def _per_copy(grown: GrowResult, fmt, instancing: str, limits: Limits) -> bool:
