@@ -3,12 +3,13 @@ own Python, ``blender --background --factory-startup --python cycles_reference.p
 it imports a glTF that ``plantgen export`` wrote and renders it with Cycles on the CPU as
 plantgen would light it. It imports nothing from plantgen: the job file carries every number.
 
-The job (JSON): ``file`` (the .glb), ``out`` (the PNG to write), ``size`` [w, h],
-``samples``, ``seed``, ``threads`` (0: all), ``transparent`` (film alpha: the coverage
-mask), the ``camera`` plantgen wrote with ``--camera-out`` (``eye``, ``target``, ``up``,
-``fov_y``: y up), the ``light`` (``towards``: the unit direction to the sun, y up, and its
-``color``), ``ambient`` (plantgen's ambient colour) and ``sky`` (``zenith``, ``horizon``,
-``ground``: plantgen's sky gradient).
+The job (JSON): ``file`` (the .glb), ``size`` [w, h], ``threads`` (0: all), the
+``renders`` to make of it, one import for all (each a ``name``, the PNG ``out``,
+``samples``, ``seed`` and ``transparent``: film alpha, the coverage mask), the ``camera``
+plantgen wrote with ``--camera-out`` (``eye``, ``target``, ``up``, ``fov_y``: y up), the
+``light`` (``towards``: the unit direction to the sun, y up, and its ``color``),
+``ambient`` (plantgen's ambient colour) and ``sky`` (``zenith``, ``horizon``, ``ground``:
+plantgen's sky gradient).
 
 What it sets, and why (the traps of Debian's Blender 3.4 as a reference):
 
@@ -24,10 +25,11 @@ What it sets, and why (the traps of Debian's Blender 3.4 as a reference):
   of normal n plantgen's ambient term, ambient · (1 + n_y) / 2;
 - the 'Standard' view transform (sRGB out), no denoiser, no adaptive sampling, a fixed seed.
 
-It prints one line ``CYCLES {json}`` with the seconds of the import and the scene's
-building (``import_s``) and of the render (``render_s``); Blender's own status lines tell
-the render's set-up (kernels, BVH, images) from its sampling. Blender is z up: a y-up
-vector (x, y, z) is Blender's (x, -z, y).
+Before each render it prints ``CYCLES-START name``, after it one line ``CYCLES {json}``
+with the seconds of the import and the scene's building (``import_s``, once for all) and
+of the render (``render_s``); Blender's own status lines between the two tell the
+render's set-up (kernels, BVH, images) from its sampling. Blender is z up: a y-up vector
+(x, y, z) is Blender's (x, -z, y).
 """
 
 import json
@@ -140,29 +142,30 @@ def build_world(scene, sky, ambient):
     scene.world = world
 
 
-def set_render(scene, job):
-    """Cycles on the CPU: fixed samples and seed, no denoiser, no adaptive sampling, the
-    Standard view transform, the job's size; a transparent film for a coverage mask."""
+def set_render(scene, job, still):
+    """Cycles on the CPU: the still's samples and seed, no denoiser, no adaptive sampling,
+    the Standard view transform, the job's size; a transparent film for a coverage mask."""
     scene.render.engine = "CYCLES"
     cycles = scene.cycles
     cycles.device = "CPU"
-    cycles.samples = int(job["samples"])
-    cycles.seed = int(job.get("seed", 0))
+    cycles.samples = int(still["samples"])
+    cycles.seed = int(still.get("seed", 0))
     cycles.use_denoising = False
     cycles.use_adaptive_sampling = False
-    scene.render.film_transparent = bool(job.get("transparent", False))
+    transparent = bool(still.get("transparent", False))
+    scene.render.film_transparent = transparent
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
     scene.render.resolution_x, scene.render.resolution_y = job["size"]
     scene.render.resolution_percentage = 100
     scene.render.image_settings.file_format = "PNG"
-    scene.render.image_settings.color_mode = "RGBA" if job.get("transparent") else "RGB"
+    scene.render.image_settings.color_mode = "RGBA" if transparent else "RGB"
     threads = int(job.get("threads", 0))
     scene.render.threads_mode = "FIXED" if threads else "AUTO"
     if threads:
         scene.render.threads = threads
-    scene.render.filepath = job["out"]
+    scene.render.filepath = still["out"]
 
 
 def render_timed():
@@ -182,9 +185,12 @@ def main():
     add_camera(scene, job["camera"])
     add_sun(scene, job["light"])
     build_world(scene, job["sky"], job["ambient"])
-    set_render(scene, job)
     imported = time.perf_counter() - start
-    print("CYCLES " + json.dumps({"import_s": imported, "render_s": render_timed()}), flush=True)
+    for still in job["renders"]:
+        set_render(scene, job, still)
+        print("CYCLES-START " + still["name"], flush=True)
+        seconds = render_timed()
+        print("CYCLES " + json.dumps({"name": still["name"], "import_s": imported, "render_s": seconds}), flush=True)
 
 
 if __name__ == "__main__":

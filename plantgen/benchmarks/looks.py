@@ -36,7 +36,6 @@ import shlex
 import shutil
 import subprocess
 import sys
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -49,7 +48,7 @@ from ..gl.material_uniforms import AMBIENT_COLOR, LIGHT_COLOR, SKY
 from .arguments import image_size, report
 from .side_by_side import labelled_panels
 
-__all__ = ["SCENES", "BLENDER_SCRIPT", "flip_error", "coverage_overlap", "cycles_job", "render_cycles",
+__all__ = ["SCENES", "BLENDER_SCRIPT", "flip_error", "coverage_overlap", "cycles_job", "still", "render_cycles",
            "samples_to_match", "main"]
 
 #: The scenes of issue 43: four grammars, the well, and a cut of the forest (shipped here).
@@ -214,13 +213,11 @@ def glb_light(glb: Path) -> list[float]:
 
 
 # ----------------------------------------------------------------------------- Cycles' side
-def cycles_job(glb: Path, camera: Path, size, samples: int, seed: int = 0, transparent: bool = False,
-               threads: int = 0) -> dict:
-    """The job :mod:`~plantgen.benchmarks.cycles_reference` reads: the file, plantgen's
-    camera, sun, ambient and sky, and the render's settings (``out`` is set when it runs)."""
+def cycles_job(glb: Path, camera: Path, size, threads: int = 0) -> dict:
+    """The job :mod:`~plantgen.benchmarks.cycles_reference` reads, less its ``renders``:
+    the file, plantgen's camera, sun, ambient and sky, the image's size."""
     view = json.loads(Path(camera).read_text())
-    return {"file": str(glb), "size": [int(size[0]), int(size[1])], "samples": int(samples), "seed": int(seed),
-            "transparent": bool(transparent), "threads": int(threads),
+    return {"file": str(glb), "size": [int(size[0]), int(size[1])], "threads": int(threads),
             "camera": {key: view[key] for key in ("eye", "target", "up", "fov_y")},
             "light": {"towards": glb_light(glb), "color": list(LIGHT_COLOR)},
             "ambient": list(AMBIENT_COLOR),
@@ -228,55 +225,70 @@ def cycles_job(glb: Path, camera: Path, size, samples: int, seed: int = 0, trans
                     "ground": list(SKY["ground_tint"])}}
 
 
+def still(samples: int, seed: int = 0, transparent: bool = False, kind: str = "cycles") -> dict:
+    """One render of a job: its samples, seed and film; its name says all three."""
+    return {"name": f"{kind}_{samples}spp_seed{seed}{'_alpha' if transparent else ''}", "samples": int(samples),
+            "seed": int(seed), "transparent": bool(transparent)}
+
+
 def job_key(job: dict) -> str:
-    """The cache key of a job: a hash of the glb's bytes, the job (less its paths) and the
-    Blender script, so a changed scene, export, setting or script renders anew."""
+    """The cache folder of a job: a hash of the glb's bytes, the job (less its paths, its
+    threads and its renders, which name their own files) and the Blender script, so a
+    changed scene, export, view or script renders anew."""
     digest = hashlib.sha256(Path(job["file"]).read_bytes())
-    settings = {k: v for k, v in job.items() if k not in ("file", "out")}
+    settings = {k: v for k, v in job.items() if k not in ("file", "threads", "renders")}
     digest.update(json.dumps(settings, sort_keys=True).encode())
     digest.update(BLENDER_SCRIPT.read_bytes())
     return digest.hexdigest()[:20]
 
 
-def blender_times(log: str) -> dict:
-    """Seconds from Blender's output: ``import_s`` (the script's import and scene build),
-    ``setup_s`` (the render before its first sample: kernels, BVH, images, from the
-    ``Sample 0/N`` status line's clock) and ``sampling_s`` (the rest of the render)."""
+def _clock(match) -> float:
+    return int(match.group(1)) * 60 + float(match.group(2))
+
+
+def blender_times(log: str) -> dict[str, dict]:
+    """Seconds of each render, by name, from Blender's output: ``import_s`` (the script's
+    import and scene build, once for all), ``setup_s`` (the render before its first
+    sample: kernels, BVH, images, the ``Sample 0/N`` status line's clock) and
+    ``sampling_s`` (the rest of the render)."""
     times = {}
-    for line in log.splitlines():
-        if line.startswith("CYCLES "):
-            times = json.loads(line[len("CYCLES "):])
-    first = re.search(r"Time:(\d+):(\d+\.\d+) \|[^\n]*\| Sample 0/", log)
-    if not times:
-        return {}
-    setup = int(first.group(1)) * 60 + float(first.group(2)) if first else 0.0
-    setup = min(setup, times["render_s"])
-    return {"import_s": times["import_s"], "setup_s": setup, "sampling_s": times["render_s"] - setup}
+    for part in log.split("CYCLES-START ")[1:]:
+        done = re.search(r"^CYCLES (\{.*\})$", part, re.MULTILINE)
+        if not done:
+            continue
+        record = json.loads(done.group(1))
+        first = re.search(r"Time:(\d+):(\d+\.\d+) \|[^\n]*\| Sample 0/", part)
+        setup = min(_clock(first), record["render_s"]) if first else 0.0
+        times[record["name"]] = {"import_s": record["import_s"], "setup_s": setup,
+                                 "sampling_s": record["render_s"] - setup}
+    return times
 
 
-def render_cycles(job: dict, cache: Path, name: str, blender: str, timeout: float = 3600) -> dict:
-    """Render ``job`` in Blender, or take it from ``cache``: {"image": Path, times...}.
-    Blender's output goes to a log beside the image; a failure is a one-line PlantgenError."""
+def render_cycles(job: dict, stills: list[dict], cache: Path, blender: str, timeout: float = 7200) -> dict[str, dict]:
+    """Each of ``stills`` of ``job``, from ``cache`` or rendered by one Blender run (one
+    import): {name: {"image": Path, "samples", seconds...}}. Blender's output goes to a log
+    beside the images; a failure is a one-line PlantgenError naming it."""
     folder = cache / job_key(job)
-    image, record = folder / f"{name}.png", folder / f"{name}.json"
-    if image.exists() and record.exists():
-        return {"image": image, **json.loads(record.read_text())}
-    folder.mkdir(parents=True, exist_ok=True)
-    job = {**job, "out": str(image)}
-    (folder / f"{name}.job.json").write_text(json.dumps(job, indent=1))
-    log = folder / f"{name}.log"
-    command = [blender, "--background", "--factory-startup", "--python", str(BLENDER_SCRIPT), "--",
-               str(folder / f"{name}.job.json")]
-    start = time.perf_counter()
-    with open(log, "w") as out:
-        done = subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, timeout=timeout)
-    text = log.read_text(errors="replace")
-    times = blender_times(text)
-    if done.returncode != 0 or not image.exists() or not times:
-        raise PlantgenError(f"Blender could not render {Path(job['file']).name} ({name}): see {log}")
-    times["wall_s"] = time.perf_counter() - start
-    record.write_text(json.dumps(times))
-    return {"image": image, **times}
+    todo = [s for s in stills if not all((folder / f"{s['name']}{ext}").exists() for ext in (".png", ".json"))]
+    if todo:
+        folder.mkdir(parents=True, exist_ok=True)
+        renders = [{**s, "out": str(folder / f"{s['name']}.png")} for s in todo]
+        spec = folder / f"job_{todo[0]['name']}.json"
+        spec.write_text(json.dumps({**job, "renders": renders}, indent=1))
+        log = folder / f"job_{todo[0]['name']}.log"
+        command = [blender, "--background", "--factory-startup", "--python", str(BLENDER_SCRIPT), "--", str(spec)]
+        with open(log, "w") as out:
+            done = subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, timeout=timeout)
+        times = blender_times(log.read_text(errors="replace"))
+        for s in todo:
+            if s["name"] in times and (folder / f"{s['name']}.png").exists():
+                (folder / f"{s['name']}.json").write_text(json.dumps(times[s["name"]]))
+        missing = [s["name"] for s in todo if s["name"] not in times]
+        if done.returncode != 0 or missing:
+            what = ", ".join(missing) or f"exit status {done.returncode}"
+            raise PlantgenError(f"Blender could not render {Path(job['file']).name} ({what}): see {log}")
+    return {s["name"]: {"image": folder / f"{s['name']}.png", "samples": s["samples"],
+                        **json.loads((folder / f"{s['name']}.json").read_text())} for s in stills}
 
 
 def find_blender(blender: str | None) -> str:
@@ -298,7 +310,7 @@ class Settings:
     samples: tuple = (1, 4, 16, 64, 256)
     variants: tuple = ("default",)
     frames: int = 5
-    max_triangles: int = 2_000_000
+    max_triangles: int = 1_000_000
     max_subdiv: int = 6
     threads: int = 0
     cache: Path = DEFAULT_CACHE
@@ -308,20 +320,16 @@ class Settings:
 
 def cycles_renders(glb: Path, camera: Path, settings: Settings) -> tuple[dict, dict, list[dict]]:
     """Blender's coverage mask (transparent film, 4 samples), the reference (seed 0) and
-    the ladder (seed 1, so no rung is the reference itself), each cached."""
-    cache, size = settings.cache.expanduser(), settings.size
-
-    def one(samples, seed=0, transparent=False, name=""):
-        job = cycles_job(glb, camera, size, samples, seed, transparent, settings.threads)
-        result = render_cycles(job, cache, name or f"cycles_{samples}", settings.blender)
-        settings.say(f"  Cycles {name or 'ladder'}, {samples} spp: set-up {result['setup_s']:.1f} s, "
-                     f"sampling {result['sampling_s']:.1f} s")
-        return {"samples": samples, **result}
-
-    mask = one(4, transparent=True, name="mask")
-    reference = one(settings.reference_samples, name="reference")
-    ladder = [one(s, seed=1) for s in settings.samples]
-    return mask, reference, ladder
+    the ladder (seed 1, so no rung is the reference itself), each cached; one Blender run
+    makes those missing."""
+    job = cycles_job(glb, camera, settings.size, settings.threads)
+    mask, reference = still(4, transparent=True, kind="mask"), still(settings.reference_samples, kind="reference")
+    ladder = [still(s, seed=1) for s in settings.samples]
+    done = render_cycles(job, [mask, reference, *ladder], settings.cache.expanduser(), settings.blender)
+    for s in (mask, reference, *ladder):
+        r = done[s["name"]]
+        settings.say(f"  Cycles {s['name']}: set-up {r['setup_s']:.1f} s, sampling {r['sampling_s']:.1f} s")
+    return done[mask["name"]], done[reference["name"]], [done[s["name"]] for s in ladder]
 
 
 def _rgb(path: Path) -> np.ndarray:
@@ -452,7 +460,7 @@ def parse_arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--samples", type=_counts, default=(1, 4, 16, 64, 256),
                         help="Cycles' ladder, comma-separated (default 1,4,16,64,256)")
     parser.add_argument("--frames", type=int, default=5, help="plantgen's warm frames timed (the median)")
-    parser.add_argument("--max-triangles", type=int, default=2_000_000,
+    parser.add_argument("--max-triangles", type=int, default=1_000_000,
                         help="the reference export's triangle budget (picks its --subdiv)")
     parser.add_argument("--max-subdiv", type=int, default=6, help="the reference export's finest --subdiv")
     parser.add_argument("--threads", type=int, default=0, help="Cycles' threads (0: all)")
