@@ -27,6 +27,7 @@ scene: each variant beside the reference). It needs Blender (``blender`` on the 
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import math
@@ -315,7 +316,7 @@ class Settings:
     threads: int = 0
     cache: Path = DEFAULT_CACHE
     blender: str = "blender"
-    say: object = print
+    say: object = functools.partial(print, flush=True)
 
 
 def cycles_renders(glb: Path, camera: Path, settings: Settings) -> tuple[dict, dict, list[dict]]:
@@ -483,7 +484,7 @@ def main(argv=None) -> int:
         flip_error(np.zeros((8, 8, 3), np.uint8), np.zeros((8, 8, 3), np.uint8))
         work = settings.cache.expanduser() / "plantgen"
         results = [measure_scene(s.strip(), settings, work / s.strip()) for s in args.scenes.split(",") if s.strip()]
-    except (PlantgenError, subprocess.TimeoutExpired) as exc:
+    except (PlantgenError, subprocess.TimeoutExpired, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
