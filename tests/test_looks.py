@@ -120,12 +120,13 @@ def test_a_failing_blender_is_one_line(tmp_path):
 
 
 def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
-    ladder = [{"samples": s, "flip": f, "sampling_s": 0.5 * s, "setup_s": 3.0} for s, f in ((1, 0.2), (4, 0.1))]
+    ladder = [{"samples": s, "flip": f, "flip_model": 3 * f, "sampling_s": 0.5 * s, "setup_s": 3.0}
+              for s, f in ((1, 0.2), (4, 0.1))]
     runs = [looks.PlantgenRun(options, tmp_path / "x.png", frame_ms=10.0, shadow_ms=90.0, flip=flip,
-                              extra=looks.samples_to_match(ladder, flip))
+                              flip_model=3 * flip, extra=looks.samples_to_match(ladder, flip))
             for options, flip in (("default", 0.15), ("--effects relief,shadows", 0.05))]
     result = {"scene": "well", "renderer": "llvmpipe (LLVM 15.0.6, 256 bits)", "frusta": 8, "subdiv": 6,
-              "overlap": 0.99, "reference": {}, "ladder": ladder, "runs": runs}
+              "overlap": 0.99, "covered": 0.25, "reference": {}, "ladder": ladder, "runs": runs}
     settings = looks.Settings(size=(64, 48), reference_samples=16, samples=(1, 4),
                               variants=("default", "--effects relief,shadows"))
     text = looks.looks_table([result], settings)
@@ -136,3 +137,4 @@ def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
     # 0.15 lies 0.415 of the way from 0.2 to 0.1 in log FLIP: 4^0.415 = 1.8 samples, 0.9 s, 89x the 10 ms frame
     assert match.endswith("| 1.8 | 0.9 | 89× | 9× |")
     assert "| well | `--effects relief,shadows` | 0.050 | 10 + 90 | >4 | >2.0 | >200× | >20× |" in text
+    assert "| well | 25 % | 0.450 | 0.150 | 0.600 | 0.300 |" in text          # over the covered pixels
