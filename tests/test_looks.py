@@ -123,7 +123,8 @@ def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
     ladder = [{"samples": s, "flip": f, "flip_model": 3 * f, "sampling_s": 0.5 * s, "setup_s": 3.0}
               for s, f in ((1, 0.2), (4, 0.1))]
     runs = [looks.PlantgenRun(options, tmp_path / "x.png", frame_ms=10.0, shadow_ms=90.0, flip=flip,
-                              flip_model=3 * flip, extra=looks.samples_to_match(ladder, flip))
+                              flip_model=3 * flip, extra=looks.samples_to_match(ladder, flip),
+                              extra_model=looks.samples_to_match(ladder, 3 * flip, "flip_model"))
             for options, flip in (("default", 0.15), ("--effects relief,shadows", 0.05))]
     result = {"scene": "well", "renderer": "llvmpipe (LLVM 15.0.6, 256 bits)", "frusta": 8, "subdiv": 6,
               "overlap": 0.99, "covered": 0.25, "reference": {}, "ladder": ladder, "runs": runs}
@@ -138,3 +139,4 @@ def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
     assert match.endswith("| 1.8 | 0.9 | 89× | 9× |")
     assert "| well | `--effects relief,shadows` | 0.050 | 10 + 90 | >4 | >2.0 | >200× | >20× |" in text
     assert "| well | 25 % | 0.450 | 0.150 | 0.600 | 0.300 |" in text          # over the covered pixels
+    assert "| well | default | 0.450 | 1.8 | 0.9 | 89× | 9× |" in text

@@ -100,19 +100,20 @@ def coverage_overlap(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.logical_and(a, b).sum() / union) if union else 1.0
 
 
-def samples_to_match(ladder: list[dict], target: float) -> dict:
-    """Where Cycles' ladder (``samples``, ``flip``, ``sampling_s``, ``setup_s`` each) reaches
-    FLIP ``target``: samples and sampling seconds interpolated in log(samples) between the
-    two rungs it falls between; ``bound`` '<' below the first rung, '>' past the last."""
+def samples_to_match(ladder: list[dict], target: float, score: str = "flip") -> dict:
+    """Where Cycles' ladder (``samples``, ``score``, ``sampling_s``, ``setup_s`` each)
+    reaches the score ``target``: samples and sampling seconds interpolated in log(samples)
+    between the two rungs it falls between; ``bound`` '<' below the first rung, '>' past
+    the last."""
     rungs = sorted(ladder, key=lambda r: r["samples"])
     if not rungs:
         return {"samples": None, "sampling_s": None, "setup_s": None, "bound": ""}
     setup = float(np.median([r["setup_s"] for r in rungs]))
-    if target >= rungs[0]["flip"]:
+    if target >= rungs[0][score]:
         return {"samples": rungs[0]["samples"], "sampling_s": rungs[0]["sampling_s"], "setup_s": setup, "bound": "<"}
     for lo, hi in zip(rungs, rungs[1:], strict=False):
-        if hi["flip"] <= target:
-            t = (math.log(lo["flip"]) - math.log(target)) / max(math.log(lo["flip"]) - math.log(hi["flip"]), 1e-12)
+        if hi[score] <= target:
+            t = (math.log(lo[score]) - math.log(target)) / max(math.log(lo[score]) - math.log(hi[score]), 1e-12)
             samples, seconds = (_log_between(lo[key], hi[key], t) for key in ("samples", "sampling_s"))
             return {"samples": samples, "sampling_s": seconds, "setup_s": setup, "bound": ""}
     last = rungs[-1]
@@ -137,7 +138,8 @@ class PlantgenRun:
     shadow_ms: float = 0.0
     flip: float = float("nan")
     flip_model: float = float("nan")
-    extra: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)            # Cycles matching the FLIP
+    extra_model: dict = field(default_factory=dict)      # Cycles matching the FLIP on the model
 
 
 def plantgen_command(*args: str) -> list[str]:
@@ -368,6 +370,7 @@ def measure_scene(scene: str, settings: Settings, work: Path) -> dict:
         run = render_variant(scene, options, k, camera, work, settings.frames)
         run.flip, run.flip_model = scores(truth, run.image, covered)
         run.extra = samples_to_match(ladder, run.flip)
+        run.extra_model = samples_to_match(ladder, run.flip_model, "flip_model")
         settings.say(f"  plantgen {options}: FLIP {run.flip:.3f} ({run.flip_model:.3f} on the model), "
                      f"frame {run.frame_ms:.1f} ms + shadow map {run.shadow_ms:.1f} ms")
         runs.append(run)
@@ -385,10 +388,10 @@ def _plantgen_ms(run: PlantgenRun) -> float:
     return run.frame_ms + run.shadow_ms
 
 
-def _match_cells(run: PlantgenRun) -> tuple[str, ...]:
-    """The samples and sampling seconds Cycles needs to match ``run``'s FLIP, and those
-    seconds over plantgen's warm frame and over the frame plus the shadow map."""
-    match = run.extra
+def _match_cells(run: PlantgenRun, match: dict) -> tuple[str, ...]:
+    """The samples and sampling seconds Cycles needs to match ``run`` (``match``: from
+    :func:`samples_to_match`), and those seconds over plantgen's warm frame and over the
+    frame plus the shadow map."""
     if match.get("samples") is None:
         return "–", "–", "–", "–"
     bound = match["bound"]
@@ -423,15 +426,16 @@ def looks_table(results: list[dict], settings: Settings) -> str:
               "|---|---|---|---|---|---|---|---|"]
     for r in results:
         for run in r["runs"]:
-            cells = " | ".join(_match_cells(run))
+            cells = " | ".join(_match_cells(run, run.extra))
             lines.append(f"| {r['scene']} | {_variant_name(run.options)} | {run.flip:.3f} | "
                          f"{run.frame_ms:.0f} + {run.shadow_ms:.0f} | {cells} |")
     return "\n".join(lines + model_table(results, settings)) + "\n"
 
 
 def model_table(results: list[dict], settings: Settings) -> list[str]:
-    """The lines of the table of FLIP over the model's pixels alone (either renderer's
-    coverage), where the sky, alike in both, does not dilute the difference."""
+    """The lines of the tables of FLIP over the model's pixels alone (either renderer's
+    coverage), where the sky, alike in both, does not dilute the difference, and of what
+    Cycles needs to match those."""
     heads = [_variant_name(v) for v in settings.variants] + [f"Cycles {s} spp" for s in settings.samples]
     lines = ["", "The same scores over the pixels either renderer covers (the model and its ground), "
              "leaving out the sky, which the two draw alike:", "",
@@ -439,6 +443,13 @@ def model_table(results: list[dict], settings: Settings) -> list[str]:
     for r in results:
         cells = [f"{run.flip_model:.3f}" for run in r["runs"]] + [f"{rung['flip_model']:.3f}" for rung in r["ladder"]]
         lines.append(f"| {r['scene']} | {100 * r['covered']:.0f} % | " + " | ".join(cells) + " |")
+    lines += ["", "What Cycles needs to match each plantgen image's FLIP on the model:", "",
+              "| scene | plantgen | FLIP on the model | Cycles spp | Cycles sampling (s) "
+              "| Cycles / frame | Cycles / (frame + shadow map) |", "|---|---|---|---|---|---|---|"]
+    for r in results:
+        for run in r["runs"]:
+            cells = " | ".join(_match_cells(run, run.extra_model))
+            lines.append(f"| {r['scene']} | {_variant_name(run.options)} | {run.flip_model:.3f} | {cells} |")
     return lines
 
 
