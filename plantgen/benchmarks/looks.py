@@ -397,7 +397,11 @@ def _match_cells(run: PlantgenRun, match: dict) -> tuple[str, ...]:
     bound = match["bound"]
     samples = f"{bound}{match['samples']:.0f}" if bound else f"{match['samples']:.1f}"
     ratios = [match["sampling_s"] / max(ms / 1000, 1e-9) for ms in (run.frame_ms, _plantgen_ms(run))]
-    return (samples, f"{bound}{match['sampling_s']:.1f}", *(f"{bound}{r:,.0f}×" for r in ratios))
+    return (samples, f"{bound}{match['sampling_s']:.1f}", *(f"{bound}{_ratio(r)}×" for r in ratios))
+
+
+def _ratio(r: float) -> str:
+    return f"{r:.1f}" if r < 10 else f"{r:,.0f}"
 
 
 def looks_table(results: list[dict], settings: Settings) -> str:
@@ -467,8 +471,9 @@ def looks_picture(results: list[dict], settings: Settings) -> np.ndarray:
 def results_json(results: list[dict], settings: Settings) -> str:
     """Every number of the run, for other tools (paths as strings)."""
     def plain(value):
-        if isinstance(value, Path):
-            return str(value)
+        if isinstance(value, Path):        # the cache under the home folder, as ~
+            home = str(Path.home())
+            return "~" + str(value)[len(home):] if str(value).startswith(home + os.sep) else str(value)
         if isinstance(value, PlantgenRun):
             return plain(asdict(value))
         if isinstance(value, dict):
