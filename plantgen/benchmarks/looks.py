@@ -521,7 +521,7 @@ def main(argv=None) -> int:
     try:
         settings.blender = find_blender(args.blender)
         flip_error(np.zeros((8, 8, 3), np.uint8), np.zeros((8, 8, 3), np.uint8))
-        work = settings.cache.expanduser() / "plantgen"
+        work = settings.cache.expanduser() / "plantgen" / f"{settings.size[0]}x{settings.size[1]}"
         results = [measure_scene(s.strip(), settings, work / s.strip()) for s in args.scenes.split(",") if s.strip()]
     except (PlantgenError, subprocess.TimeoutExpired, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
