@@ -1,0 +1,142 @@
+"""The looks benchmark (plantgen.benchmarks.looks): FLIP as it scores, the ladder's
+matching, the glb's sun, and Blender's side on a tiny scene where Blender is installed."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from plantgen.benchmarks import looks
+from plantgen.errors import PlantgenError
+
+
+def _picture(seed=0, h=48, w=64):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    base = np.stack([x / w, y / h, 0.5 + 0.3 * np.sin(x / 5.0)], axis=-1)
+    return np.clip(base + 0.02 * rng.standard_normal((h, w, 3)), 0, 1)
+
+
+def test_flip_is_zero_for_identical_images_and_rises_with_noise():
+    pytest.importorskip("flip_evaluator")
+    image = _picture()
+    same, error_map = looks.flip_error(image, image)
+    assert same == pytest.approx(0.0, abs=1e-6) and error_map.shape == image.shape[:2]
+    rng = np.random.default_rng(1)
+    scores = [looks.flip_error(image, np.clip(image + s * rng.standard_normal(image.shape), 0, 1))[0]
+              for s in (0.02, 0.1, 0.3)]
+    assert 0 < scores[0] < scores[1] < scores[2] <= 1
+    as_bytes = (image * 255).round().astype(np.uint8)
+    assert looks.flip_error(as_bytes, as_bytes)[0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_without_flip_evaluator_one_line_naming_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "flip_evaluator", None)
+    with pytest.raises(PlantgenError, match=r"bench extra"):
+        looks.flip_error(_picture(), _picture())
+
+
+def test_without_blender_the_benchmark_stops_with_one_line(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(looks.shutil, "which", lambda name: None)
+    assert looks.main(["--scenes", "saguaro", "--out", str(tmp_path), "--cache", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Blender" in err[0] and not (tmp_path / "looks.md").exists()
+
+
+def test_samples_to_match_interpolates_in_log_samples_and_says_when_out_of_range():
+    ladder = [{"samples": s, "flip": f, "sampling_s": 0.1 * s, "setup_s": 2.0}
+              for s, f in ((1, 0.2), (4, 0.1), (16, 0.05))]
+    middle = looks.samples_to_match(ladder, 0.1 * 2 ** -0.5)          # halfway in log FLIP between 4 and 16
+    assert middle["samples"] == pytest.approx(8.0) and middle["bound"] == "" and middle["setup_s"] == 2.0
+    assert looks.samples_to_match(ladder, 0.3)["bound"] == "<"
+    assert looks.samples_to_match(ladder, 0.01)["bound"] == ">"
+
+
+def test_coverage_overlap():
+    a = np.zeros((4, 4), np.uint8)
+    a[:2] = 255
+    b = np.zeros_like(a)
+    b[1:3] = 255
+    assert looks.coverage_overlap(a, a) == 1.0
+    assert looks.coverage_overlap(a, b) == pytest.approx(1 / 3)
+
+
+def test_blender_timing_lines_split_set_up_from_sampling():
+    log = ("Blender 3.4.1\nCYCLES-START a\n"
+           "Fra:1 Mem:1M | Time:00:01.50 | Scene, ViewLayer | Updating Scene\n"
+           "Fra:1 Mem:1M | Time:00:07.38 | Mem:89M | Scene, ViewLayer | Sample 0/16\n"
+           "Fra:1 Mem:1M | Time:00:11.43 | Mem:89M | Scene, ViewLayer | Sample 16/16\n"
+           'CYCLES {"name": "a", "import_s": 2.0, "render_s": 11.5}\n'
+           "CYCLES-START b\nFra:1 Mem:1M | Time:01:02.00 | Mem:89M | Scene, ViewLayer | Sample 0/4\n"
+           'CYCLES {"name": "b", "import_s": 2.0, "render_s": 63.0}\nCYCLES-START c\nError: out of memory\n')
+    times = looks.blender_times(log)
+    assert set(times) == {"a", "b"}
+    assert times["a"]["setup_s"] == pytest.approx(7.38) and times["a"]["sampling_s"] == pytest.approx(11.5 - 7.38)
+    assert times["b"]["setup_s"] == pytest.approx(62.0) and times["b"]["import_s"] == 2.0
+    assert looks.blender_times("no such line") == {}
+
+
+def test_the_light_of_a_scene_glb_is_its_scenes_and_a_grammar_gets_the_model_light(tmp_path):
+    from plantgen.geometry.stage import MODEL_LIGHT
+
+    glb, _ = looks.export_reference_glb("well", tmp_path, 8, 200, 0)
+    towards = np.asarray(looks.glb_light(glb))
+    expected = np.array([0.5, 1.0, 0.35]) / np.linalg.norm([0.5, 1.0, 0.35])   # well.yaml's light, reversed
+    assert towards == pytest.approx(expected, abs=1e-5)
+    (tmp_path / "saguaro").mkdir()
+    glb, _ = looks.export_reference_glb("saguaro", tmp_path / "saguaro", 30, 200, 0)
+    assert looks.glb_light(glb) == pytest.approx(list(MODEL_LIGHT.towards()))
+
+
+def test_cycles_of_a_tiny_scene_covers_what_plantgen_covers(blender, tmp_path):
+    """The saguaro (a grammar: its file has no camera or sun, the job gives them) at 64x48
+    and 4 samples: Blender's transparent film covers the pixels plantgen's --background
+    none covers, so the two are framed alike."""
+    camera, mask, framed = looks.frame_scene("saguaro", tmp_path, (64, 48))
+    assert framed.frusta == 30 and framed.renderer
+    glb, level = looks.export_reference_glb("saguaro", tmp_path, framed.frusta, 20_000, 6)
+    assert level == 2
+    job, mask_still = looks.cycles_job(glb, camera, (64, 48)), looks.still(4, transparent=True, kind="mask")
+    result = looks.render_cycles(job, [mask_still], tmp_path / "cache", blender, timeout=600)[mask_still["name"]]
+    from PIL import Image
+
+    theirs = np.asarray(Image.open(result["image"]).convert("RGBA"))[..., 3]
+    ours = np.asarray(Image.open(mask).convert("RGBA"))[..., 3]
+    assert theirs.shape == ours.shape == (48, 64)
+    assert (ours > 127).mean() > 0.03 and looks.coverage_overlap(ours, theirs) > 0.8
+    assert result["sampling_s"] >= 0 and result["setup_s"] >= 0
+    again = looks.render_cycles(job, [mask_still], tmp_path / "cache", "/nonexistent/blender")   # cached
+    assert again[mask_still["name"]]["image"] == result["image"]
+
+
+def test_a_failing_blender_is_one_line(tmp_path):
+    glb = tmp_path / "x.glb"
+    glb.write_bytes(b"not a glb")
+    job = {"file": str(glb), "size": [8, 8]}
+    with pytest.raises(PlantgenError, match="Blender could not render x.glb"):
+        looks.render_cycles(job, [looks.still(1)], tmp_path / "cache", "/bin/false")
+
+
+def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
+    ladder = [{"samples": s, "flip": f, "flip_model": 3 * f, "sampling_s": 0.5 * s, "setup_s": 3.0}
+              for s, f in ((1, 0.2), (4, 0.1))]
+    runs = [looks.PlantgenRun(options, tmp_path / "x.png", frame_ms=10.0, shadow_ms=90.0, flip=flip,
+                              flip_model=3 * flip, extra=looks.samples_to_match(ladder, flip),
+                              extra_model=looks.samples_to_match(ladder, 3 * flip, "flip_model"))
+            for options, flip in (("default", 0.15), ("--effects relief,shadows", 0.05))]
+    result = {"scene": "well", "renderer": "llvmpipe (LLVM 15.0.6, 256 bits)", "frusta": 8, "subdiv": 6,
+              "overlap": 0.99, "covered": 0.25, "reference": {}, "ladder": ladder, "runs": runs}
+    settings = looks.Settings(size=(64, 48), reference_samples=16, samples=(1, 4),
+                              variants=("default", "--effects relief,shadows"))
+    text = looks.looks_table([result], settings)
+    assert "llvmpipe (LLVM 15.0.6, 256 bits)" in text and "16 samples" in text
+    assert ("| well | 0.150 (10 + 90 ms) | 0.050 (10 + 90 ms) | 0.200 (0.5 s) | 0.100 (2.0 s) | 3.0 | 0.990 | 6 |"
+            in text)
+    match = next(line for line in text.splitlines() if line.startswith("| well | default |"))
+    # 0.15 lies 0.415 of the way from 0.2 to 0.1 in log FLIP: 4^0.415 = 1.8 samples, 0.9 s, 89x the 10 ms frame
+    assert match.endswith("| 1.8 | 0.9 | 89× | 8.9× |")
+    assert "| well | `--effects relief,shadows` | 0.050 | 10 + 90 | >4 | >2.0 | >200× | >20× |" in text
+    assert "| well | 25 % | 0.450 | 0.150 | 0.600 | 0.300 |" in text          # over the covered pixels
+    assert "| well | default | 0.450 | 1.8 | 0.9 | 89× | 8.9× |" in text
