@@ -157,7 +157,7 @@ def run_plantgen(args: list[str], what: str, timeout: float = 1800) -> str:
 
 
 def parse_render(text: str, run: PlantgenRun) -> PlantgenRun:
-    """Fill ``run`` from ``plantgen render``'s report: the GL renderer, the frusta, the
+    """Fill ``run`` from ``plantgen render --verbose``'s report: the GL renderer, the frusta, the
     frame's milliseconds (the median with --time-frames) and the shadow map's, drawn once."""
     if m := re.search(r"GL renderer: (.+)", text):
         run.renderer = m.group(1).strip()
@@ -175,7 +175,7 @@ def frame_scene(scene: str, work: Path, size) -> tuple[Path, Path, PlantgenRun]:
     (the default render with --background none): (camera.json, mask.png, the run)."""
     camera, mask = work / "camera.json", work / "mask.png"
     text = run_plantgen(["render", model_input(scene), "-o", str(mask), "--size", f"{size[0]}x{size[1]}",
-                         "--background", "none", "--camera-out", str(camera)], f"frame {scene}")
+                         "--background", "none", "--camera-out", str(camera), "--verbose"], f"frame {scene}")
     return camera, mask, parse_render(text, PlantgenRun("mask", mask))
 
 
@@ -185,7 +185,7 @@ def render_variant(scene: str, options: str, k: int, camera: Path, work: Path, f
     out = work / f"plantgen_{k}.png"
     extra = [] if options.strip() in ("", "default") else shlex.split(options)
     text = run_plantgen(["render", model_input(scene), "-o", str(out), "--camera", str(camera),
-                         "--time-frames", str(frames), *extra], f"render {scene} {options}")
+                         "--time-frames", str(frames), "--verbose", *extra], f"render {scene} {options}")
     return parse_render(text, PlantgenRun(options, out))
 
 
