@@ -75,6 +75,15 @@ def test_a_grammar_exports_its_ground_disc_when_asked(tmp_path):
     code, _, err = run_cli("export", "saguaro", "-o", tmp_path / "c.glb", "--subdiv", "0", "--ground")
     assert code == 0, err
     assert [m["name"] for m in glb_json(tmp_path / "c.glb")["meshes"]] == ["saguaro", "Ground"]
+    # every attribute of the disc has one entry a vertex (Blender's importer indexes the
+    # texture coordinates by the vertex indices), the uv within the unit square
+    ground = next(m for m in doc["meshes"] if m["name"] == "Ground")["primitives"][0]["attributes"]
+    counts = {name: doc["accessors"][index]["count"] for name, index in ground.items()}
+    assert len(set(counts.values())) == 1 and counts["POSITION"] > 4, counts
+    from plantgen.exporters.plants import ground_mesh, ground_uv
+
+    uv = ground_uv(ground_mesh(extras.ground)[0])
+    assert uv.shape == (counts["POSITION"], 2) and uv.min() == 0.0 and uv.max() == 1.0
 
 
 def test_auto_camera_is_the_one_render_frames(auto_yard):

@@ -191,12 +191,14 @@ def render_variant(scene: str, options: str, k: int, camera: Path, work: Path, f
 
 def export_reference_glb(scene: str, work: Path, frusta: int, max_triangles: int, max_subdiv: int) -> tuple[Path, int]:
     """``scene`` exported with the relief in the vertices at the finest level m (16·4^m
-    triangles a frustum) whose triangles stay under ``max_triangles``: (the glb, m)."""
+    triangles a frustum) whose triangles stay under ``max_triangles``, and its ground (a
+    grammar's: the disc the render draws): (the glb, m)."""
     level = int(math.floor(math.log(max(max_triangles / (FRUSTUM_TRIANGLES * max(frusta, 1)), 1.0), 4)))
     level = max(0, min(max_subdiv, level))
     glb = work / "reference.glb"
-    run_plantgen(["export", model_input(scene), "-o", str(glb), "--relief", "--subdiv", str(level), "--no-sway"],
-                 f"export {scene}")
+    # --ground: a single plant's file carries the ground disc plantgen's render draws under it
+    run_plantgen(["export", model_input(scene), "-o", str(glb), "--relief", "--subdiv", str(level), "--no-sway",
+                  "--ground"], f"export {scene}")
     return glb, level
 
 

@@ -82,7 +82,7 @@ import numpy as np
 
 from ..files import write_all_atomically, write_atomically
 from ..geometry.meshes.textures import mesh_tangents
-from ..geometry.skeletons.frames import similarity_trs, turn_placements
+from ..geometry.skeletons.frames import similarity_trs, turn_placements, up_rotation
 from ..images import png_bytes
 from .formats import ExportError
 from .impostors import impostor_coverages, impostor_part
@@ -95,6 +95,7 @@ from .plants import (
     camera_pose,
     ground_colour,
     ground_mesh,
+    ground_uv,
     leaf_name,
     leaf_parts,
     level_plant,
@@ -383,8 +384,7 @@ class _Document:
         (``KHR_lights_punctual``, directional), each a node at the scene's root."""
         if extras.ground is not None:
             vertices, normals, faces = ground_mesh(extras.ground, self.up)
-            part = Part(0, vertices, normals.astype(np.float32), np.array([[0, 1], [1, 1], [0, 0], [1, 0]], np.float32),
-                        faces)
+            part = Part(0, vertices, normals.astype(np.float32), ground_uv(vertices @ up_rotation(self.up)), faces)
             material = self.material(extras.ground.material, ground_colour(extras.ground, self.colours))
             self.meshes.append({"name": "Ground", "primitives": [_primitive(self.buffer, part, material)]})
             self.node({"name": "Ground", "mesh": len(self.meshes) - 1})

@@ -23,7 +23,8 @@ from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
 
 __all__ = ["Colours", "DetailLevel", "MeshWriter", "PlantDetail", "Part", "Plant", "Progress", "SceneExtras",
-           "SkeletonWriter", "camera_pose", "ground_colour", "ground_mesh", "leaf_name", "leaf_parts", "leaf_subset",
+           "SkeletonWriter", "camera_pose", "ground_colour", "ground_mesh", "ground_uv", "leaf_name", "leaf_parts",
+           "leaf_subset",
            "leaf_uv", "level_plant", "light_rotation", "material_colours", "material_parts", "merged_materials",
            "single_plant", "turned_mesh"]
 
@@ -153,6 +154,15 @@ def ground_mesh(ground: Ground, up: str = "y") -> tuple[np.ndarray, np.ndarray, 
         vertices, faces = ground.quad(), np.array([[0, 1, 2], [2, 1, 3]])
     normals = np.tile(rot @ np.array([0.0, 1.0, 0.0]), (len(vertices), 1))
     return vertices @ rot.T, normals, faces
+
+
+def ground_uv(vertices: np.ndarray) -> np.ndarray:
+    """(k, 2) float32 texture coordinates of a ground's vertices (k, 3), y up: x and z
+    scaled to [0, 1] over its extent (a square's corners get 0 and 1, a disc's rim its
+    circle inscribed in the unit square), one per vertex."""
+    horizontal = np.asarray(vertices, dtype=np.float64)[:, [0, 2]]
+    lo, hi = horizontal.min(axis=0), horizontal.max(axis=0)
+    return ((horizontal - lo) / np.where(hi > lo, hi - lo, 1.0)).astype(np.float32)
 
 
 def ground_colour(ground: Ground, colours: Colours = None) -> tuple[float, float, float]:
