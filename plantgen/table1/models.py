@@ -23,7 +23,7 @@ __all__ = ["BenchModel", "PAPER_VARIANTS", "load_model", "check_models"]
 #: foliage or detail keeps the paper's variant behind a define (``plantgen grow pine
 #: --define foliage=0``). Table 1's rows are also skinned one frustum per segment, as the
 #: paper drew them, whatever ``turtle: smooth_bends`` a grammar sets (the saguaro's).
-PAPER_VARIANTS = {"pine": {"foliage": 0}}
+PAPER_VARIANTS = {"pine": {"foliage": 0}, "aloe": {"blades": 0}}
 
 
 @dataclass
