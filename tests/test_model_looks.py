@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from plantgen.geometry.scan import ScanSettings, scan_plant
-from plantgen.geometry.skin import skin_skeleton
 from plantgen.pipeline import GrowResult, grow_file, skin_model
 from plantgen.table1.models import PAPER_VARIANTS
 
@@ -113,8 +112,7 @@ def test_the_saguaros_elbows_are_smooth_by_default():
     assert _max_joint_bend(saguaro.skeleton) > 30          # the skeleton's elbows are sharp
     frusta = skin_model(saguaro)
     assert len(frusta) > len(saguaro.skeleton)             # the skin bends them into arcs
-    plain = skin_skeleton(saguaro.skeleton)
-    assert len(plain) == 30
+    assert len(skin_model(saguaro, 179.0)) == 30              # --smooth-bends 179: the polyline
 
 
 def test_table1s_bench_grows_the_papers_variants():
