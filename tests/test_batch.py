@@ -257,7 +257,7 @@ def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
     from plantgen.pipeline import grow_file, model_leaves, resolve_input, skin_model
 
     data = yaml.safe_load(resolve_input("saguaro").read_text())
-    assert "turtle" not in data
+    assert data.pop("turtle") == {"smooth_bends": 20}       # the shipped saguaro's; the plain copy has none
     (tmp_path / "plain.yaml").write_text(yaml.safe_dump(data))
     (tmp_path / "smooth.yaml").write_text(yaml.safe_dump({**data, "turtle": {"smooth_bends": 30}}))
     spec = {"seed": 5, "plants": [{"grammar": "smooth.yaml", "seeds": "0:1"}],

@@ -264,7 +264,10 @@ def test_the_shipped_forest_is_a_thousand_plants_from_a_few_grown_ones():
     scene = grown.scene
     plants = scene.plants()
     assert len(scene.instances) >= 1000 and len(plants) >= 10
-    assert grown.segments >= 5_000_000 and "skeleton" not in vars(grown)     # never merged here
+    # a million segments placed, 20 times what is grown (the pines' needles are sprays of
+    # leaf polygons, so fewer segments than the leafless forest's 6 million)
+    assert grown.segments >= 1_000_000 and "skeleton" not in vars(grown)     # never merged here
+    assert grown.segments >= 20 * sum(len(p.skeleton) for p in plants)
     assert {"lod", "shadows", "relief"} <= set(scene.effects)
     assert scene.camera.eye[1] < 2.0          # eye height
 

@@ -31,7 +31,7 @@ from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.swc import write_swc
 from plantgen.limits import SETTLE_STEPS
 from plantgen.lsystem.grammar import parse_grammar
-from plantgen.pipeline import grow
+from plantgen.pipeline import grow, grow_file
 
 RUNNER = Path(__file__).with_name("hostile_runner.py")
 MEMORY = 1 << 30            # the bound: 1 GB of address space
@@ -363,7 +363,7 @@ def test_sizes_are_estimated_and_refused_before_allocating(tmp_path):
                                                   "height": 100000}))
     deep_json = write(tmp_path, "deep.json", "[" * 100000 + "]" * 100000)
     skel = tmp_path / "s.npz"
-    grow("pine").save(skel)
+    grow_file("pine", defines={"foliage": 0}).skeleton.save(skel)     # the paper's pine: 16,816 segments
     cases = [["render", skel, "-o", tmp_path / "a.png", "--camera", cam],
              ["render", skel, "-o", tmp_path / "b.png", "--camera", deep_json],
              ["render", skel, "-o", tmp_path / "c.gif", "--size", "16384x16384", "--frames", "100000"],

@@ -93,12 +93,13 @@ def test_gs_levels_stay_within_the_triangle_budget(session):
     session.key("BRACKETRIGHT")
     assert (session.method, session.level) == ("GS", 2)
     frame = session.draw(*SIZE)
-    assert len(session.mesh(session.frusta()).faces) == 30 * 16 * 4 ** 2 + session.mesh(session.frusta()).n_caps * 32
+    rows = len(session.frusta())        # the saguaro's 30 segments, its elbows smoothed into arcs
+    assert len(session.mesh(session.frusta()).faces) == rows * 16 * 4 ** 2 + session.mesh(session.frusta()).n_caps * 32
     assert frame.stats.triangles == len(session.mesh(session.frusta()).faces)
     for _ in range(10):
         session.key("BRACKETRIGHT")
-    # the keys climb to the finest level the viewer's triangle budget allows (30 segments:
-    # m = 7 is 7.9 M triangles, m = 8 would be 31 M), never past the settings' finest level
+    # the keys climb to the finest level the viewer's triangle budget allows (30 segments
+    # were m = 7, 7.9 M triangles; m = 8 would be 31 M), never past the settings' finest level
     frusta = session.frusta()
     caps = int(frusta.open_lo.sum() + frusta.open_hi.sum())
     assert session.level <= MAX_SUBDIV
@@ -208,7 +209,8 @@ def test_smooth_bends_reach_the_viewer_and_its_render_command(gl_ctx, tmp_path):
     # draws is the one its printed command renders
     options = ViewOptions(input="saguaro", size=SIZE, watch=False, shots=tmp_path, smooth_bends=10.0)
     model = options.prepare()
-    assert len(model.frusta_at(0.0)) > len(prepare_model("saguaro").frusta_at(0.0))
+    # (its grammar smooths bends past 20°; 179° leaves the polyline)
+    assert len(model.frusta_at(0.0)) > len(prepare_model("saguaro", smooth_bends=179.0).frusta_at(0.0))
     s = ViewerSession(gl_ctx, options, model, say=lambda line: None, warn=lambda line: None)
     try:
         frame = s.draw(*SIZE)

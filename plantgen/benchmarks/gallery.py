@@ -53,7 +53,7 @@ class Entry:
 
 
 #: Shipped grammars with leaves, rendered beside Table 1's models.
-LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles")
+LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles", "pine_sprays")
 #: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
 #: markers, grown by light.
 ENVIRONMENT_MODELS = ("topiary", "colonised", "self_organizing", "stand")
