@@ -166,12 +166,15 @@ def _write_las(cloud: PointCloud, path: Path, fmt: str, up: str) -> None:
     write_atomically(path, write, PointFileError)
 
 
-def _ply_bytes(cloud: PointCloud, up: str) -> bytes:
+def _ply_parts(cloud: PointCloud, up: str) -> tuple[bytes, np.ndarray]:
+    """The PLY header and the vertex table (written as it lies: no copy of every point's
+    bytes beside it, a scan's peak memory)."""
     xyz, scanners = _turned(cloud, up)
     fields = [("x", np.float64), ("y", np.float64), ("z", np.float64)]
     fields += [(FILE_LABELS[k][0], dtype) for k, dtype in LABELS.items()]
     table = np.empty(len(cloud), dtype=np.dtype([(n, np.dtype(t).newbyteorder("<")) for n, t in fields]))
     table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    del xyz
     for name, values in cloud.labels().items():
         table[FILE_LABELS[name][0]] = values
     lines = ["ply", "format binary_little_endian 1.0", "comment plantgen simulated laser scan", f"comment up {up}",
@@ -181,7 +184,13 @@ def _ply_bytes(cloud: PointCloud, up: str) -> bytes:
     lines.append(f"element vertex {len(cloud)}")
     lines += [f"property {_PLY_TYPES[np.dtype(t)]} {n}" for n, t in fields]
     lines.append("end_header")
-    return ("\n".join(lines) + "\n").encode("utf-8") + table.tobytes()
+    return ("\n".join(lines) + "\n").encode("utf-8"), table
+
+
+def _write_ply(path, header: bytes, table: np.ndarray) -> None:
+    with open(path, "wb") as fh:
+        fh.write(header)
+        fh.write(table.view(np.uint8))
 
 
 def write_points(cloud: PointCloud, path, *, up: str = "z") -> Path:
@@ -192,8 +201,8 @@ def write_points(cloud: PointCloud, path, *, up: str = "z") -> Path:
     fmt = check_point_output(path)
     check_finite(path, "a point", cloud.xyz, cloud.scanners, error=PointFileError)
     if fmt == "ply":
-        data = _ply_bytes(cloud, up)
-        return write_atomically(path, lambda tmp: Path(tmp).write_bytes(data), PointFileError)
+        header, table = _ply_parts(cloud, up)
+        return write_atomically(path, lambda tmp: _write_ply(tmp, header, table), PointFileError)
     _write_las(cloud, path, fmt, up)
     return path
 

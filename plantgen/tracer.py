@@ -2,10 +2,12 @@
 visibility, sensors) at the exact frusta and leaf triangles that ``plantgen scan`` and
 the renderers see, through one bounding volume hierarchy (:mod:`plantgen.geometry.rays.bvh`).
 
-``precision="float64"`` is the CPU reference: the BVH walked in numpy, every candidate
-tested with the reference's exact ray-cone intersection (clipped by the cutting planes,
-open ends capped) and the scan's leaf-triangle test, all in float64.
-``precision="float32"`` walks the BVH on the GPU (:mod:`plantgen.gl.trace`) to find the
+``device="cpu"`` (``precision="float64"``) is the CPU reference: the BVH walked by
+compiled, multi-threaded code (:mod:`plantgen.geometry.rays.native_trace`; by numpy where
+numba does not run), every candidate tested with the reference's exact ray-cone
+intersection (clipped by the cutting planes, open ends capped) and the scan's
+leaf-triangle test, all in float64.
+``device="gl"`` (``precision="float32"``) walks the BVH on the GPU (:mod:`plantgen.gl.trace`) to find the
 primitive, then solves that primitive again in float64 (the scan's rule), so distances
 are the reference's wherever the two find the same primitive.
 """
@@ -25,10 +27,13 @@ from .geometry.vec import cross, dot
 from .limits import Limits
 from .limits import limits as default_limits
 
-__all__ = ["PRECISIONS", "TraceError", "TraceResult", "trace", "trace_target"]
+__all__ = ["DEVICES", "PRECISIONS", "TraceError", "TraceResult", "trace", "trace_target"]
 
 #: How :func:`trace` may walk the BVH.
 PRECISIONS = ("float64", "float32")
+#: Where :func:`trace` walks it: the compiled float64 CPU traversal, the GPU's float32
+#: one (each hit solved again in float64), or the GPU where a hardware one exists.
+DEVICES = ("cpu", "gl", "auto")
 
 
 class TraceError(PlantgenError, ValueError):
@@ -130,6 +135,24 @@ def _gpu_primitives(target: ScanTarget, O, D, any_hit: bool, t_min: float, t_max
     return find(target, O, D, any_hit=any_hit, t_min=t_min, t_max=t_max)
 
 
+def _device(device: str | None, precision: str) -> str:
+    """"cpu" or "gl": ``device`` ("auto": the GPU where a hardware GL context exists,
+    :func:`plantgen.gl.context.hardware_gl`), or by ``precision`` where it is None."""
+    if precision not in PRECISIONS:
+        raise TraceError(f"trace precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if device is None:
+        return "gl" if precision == "float32" else "cpu"
+    if device not in DEVICES:
+        raise TraceError(f"trace device must be one of {', '.join(DEVICES)}, got {device!r}")
+    if device == "auto":
+        from .gl.context import hardware_gl
+
+        device = "gl" if hardware_gl() else "cpu"
+    if device == "cpu" and precision == "float32":
+        raise TraceError("trace precision='float32' is the GPU's traversal: use device='gl' (or 'auto')")
+    return device
+
+
 def _normals(target, prim, O, D, t) -> np.ndarray:
     """Unit normals (k, 3) at hits (k,) of primitive ``prim``, facing against the rays."""
     if isinstance(target, SceneTarget):                 # in each copy's frame, turned back to the world
@@ -165,21 +188,20 @@ def _facing(normal, D) -> np.ndarray:
 
 def trace_target(target: ScanTarget | SceneTarget, origins, directions, *, any_hit: bool = False,
                  precision: str = "float64", t_min: float = 0.0, t_max: float = np.inf,
-                 limits: Limits | None = None) -> TraceResult:
+                 limits: Limits | None = None, device: str | None = None) -> TraceResult:
     """:func:`trace` against a :class:`~plantgen.geometry.rays.scan.ScanTarget` or
     :class:`~plantgen.geometry.rays.scan.SceneTarget` already made (its BVH is built on the
     first call and kept)."""
     limits = limits or default_limits
     O, D, shape = _rays(origins, directions, limits)
-    if precision not in PRECISIONS:
-        raise TraceError(f"trace precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    device = _device(device, precision)
     t_min, t_max = float(t_min), float(t_max)
     if not (np.isfinite(t_min) and t_min >= 0 and t_max > t_min):
         raise TraceError(f"trace needs 0 <= t_min < t_max with t_min finite, got t_min={t_min:g}, t_max={t_max:g}")
     m = len(O)
     t, prim = np.full(m, np.inf), np.full(m, -1, np.int64)
     if m and len(target):
-        if precision == "float64":
+        if device == "cpu":
             t, prim = target.first_hits(O, D, any_hit=any_hit, t_min=t_min, t_max=t_max)
         else:
             t, prim = (np.asarray(a) for a in _gpu_primitives(target, O, D, any_hit, t_min, t_max))
@@ -204,7 +226,8 @@ def trace_target(target: ScanTarget | SceneTarget, origins, directions, *, any_h
 
 
 def trace(model, origins, directions, *, any_hit: bool = False, precision: str = "float64", t_min: float = 0.0,
-          t_max: float = np.inf, seed: int | None = None, limits: Limits | None = None) -> TraceResult:
+          t_max: float = np.inf, seed: int | None = None, limits: Limits | None = None,
+          device: str | None = None) -> TraceResult:
     """Cast rays at a model; per ray the closest hit (or, with ``any_hit``, whether it hits
     anything: a shadow or visibility query, which stops at the first hit it finds).
 
@@ -218,9 +241,11 @@ def trace(model, origins, directions, *, any_hit: bool = False, precision: str =
     ``copy · target.stride + the plant's primitive``, its labels those of the merged scene.
     ``origins``, ``directions``: arrays of shape (..., 3) (broadcast
     together; directions need not be unit, t is in units of their length). Hits count
-    where ``t_min < t < t_max``. ``precision``: "float64" (the CPU reference) or
-    "float32" (the GPU traversal, each hit's t solved again in float64). Returns a
-    :class:`TraceResult`.
+    where ``t_min < t < t_max``. ``device``: "cpu" (the compiled float64 traversal,
+    :mod:`plantgen.geometry.rays.native_trace`; the numpy one where numba does not run),
+    "gl" (the GPU's float32 traversal, each hit's t solved again in float64) or "auto"
+    (the GPU where a hardware one exists, else the CPU); left out, ``precision`` decides:
+    "float64" the CPU, "float32" the GPU. Returns a :class:`TraceResult`.
 
     Bad rays (wrong shapes, non-finite numbers, zero directions) and more rays than the
     limit ``scan_rays`` allows raise a :class:`~plantgen.errors.PlantgenError` with a
@@ -236,5 +261,6 @@ def trace(model, origins, directions, *, any_hit: bool = False, precision: str =
     """
     limits = limits or default_limits
     _rays(origins, directions, limits)                    # refuse bad rays before growing anything
+    _device(device if device != "auto" else None, precision)  # ... and bad choices
     return trace_target(_target(model, limits, seed), origins, directions, any_hit=any_hit, precision=precision,
-                        t_min=t_min, t_max=t_max, limits=limits)
+                        t_min=t_min, t_max=t_max, limits=limits, device=device)

@@ -327,6 +327,7 @@ def test_a_scans_memory_grows_with_the_points_it_keeps_not_its_beams(monkeypatch
     import plantgen.geometry.rays.scan as scan
 
     monkeypatch.setattr(scan, "SCAN_CHUNK_RAYS", 1 << 12)
+    monkeypatch.setattr(scan, "LABEL_CHUNK", 1 << 10)     # as a real scan's millions of points: chunked
     target, settings = _crown_scan(2.0)
     scan_points(target, settings)                   # the target's BVH built outside the measure
     runs = []

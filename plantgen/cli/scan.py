@@ -30,13 +30,15 @@ from .progress import StageBars
 
 def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
     """(settings, the GPU's search or None): --scan-precision float32 finds each beam's
-    primitive on the GPU, and so does a scan that left --scan-precision out where a GL
-    context exists (float64 ranges either way); float64 asked for, or no GL, gives None
-    (float32 asked for without GL: the frusta tested in float32 on the CPU, and a line on
-    stderr says so)."""
+    primitive on the GPU, and so does a scan that left --scan-precision out where a GPU
+    draws the GL context (float64 ranges either way); float64 asked for, no GL, or a
+    software GL (llvmpipe) where the compiled CPU traversal runs, gives None (float32
+    asked for without GL: the frusta tested in float32 on the CPU, and a line on stderr
+    says so)."""
     if settings.precision == "float64" and chosen:
         return settings, None
-    from ..gl.context import GLContextError, gl_context
+    from ..geometry.rays.native_trace import available
+    from ..gl.context import GLContextError, gl_context, hardware_gl
     from ..gl.trace import trace_target
 
     try:
@@ -44,6 +46,8 @@ def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
     except GLContextError as exc:
         if chosen and not quiet:
             click.echo(f"no GPU traversal ({exc}); float32 on the CPU", err=True)
+        return settings, None
+    if not chosen and not hardware_gl() and available():      # no GPU: the compiled float64 walk is faster
         return settings, None
     return replace(settings, precision="float32"), lambda target, origins, dirs: trace_target(target, origins, dirs)
 

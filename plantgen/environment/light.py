@@ -16,7 +16,8 @@ Each ray starts ``offset`` plus one and a half times the radius of the segment t
 hangs from away from the module, so a bud does not shade itself with its own branch
 (its leaves do shade it). The plant's branches (skinned into frusta) and leaf triangles go
 into one BVH (:mod:`plantgen.geometry.rays.bvh`), and every ray is traced by its float64
-traversal, any hit; the obstacles' shapes by their own ray distance.
+traversal, any hit (compiled, :mod:`plantgen.geometry.rays.native_trace`, where numba
+runs); the obstacles' shapes by their own ray distance.
 
 The answer, 4 numbers (5 with ``allocation``): the light q, and the unit mean of the open
 directions weighted by their light, in the module's frame (H, L, U; the direction a shoot
@@ -37,8 +38,7 @@ import numpy as np
 
 from .. import fields
 from ..geometry.meshes.polygons import Polygons
-from ..geometry.rays.bvh import build_bvh, trace_bvh
-from ..geometry.rays.scan import scan_target, target_hits
+from ..geometry.rays.scan import scan_target
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..lsystem.queries import QueryState
@@ -113,9 +113,7 @@ class Light:
             skeleton = Skeleton.concatenate([skeleton, others[0]])
             polygons = Polygons.concatenate([polygons, others[1]], [0, len(drawing.skeleton)])
         target = scan_target(skeleton, polygons) if len(skeleton) or len(polygons) else None
-        bvh = build_bvh(target.lo, target.hi) if target is not None and len(target) else None
-        # one frame origin for every batch of rays: the hit test rounds the same, however batched
-        hits = target_hits(target, origin=target.base) if bvh is not None else None
+        traced = target is not None and len(target) > 0
         dirs = self.dirs if self.sun is None else np.concatenate([self.dirs, self.sun[None]])
         if self.rotation is not None:
             dirs = dirs @ self.rotation                  # the world's sky in the plant's frame
@@ -132,8 +130,8 @@ class Light:
             origin = (p[:, None] + (self.offset + 1.5 * r)[:, None, None] * dirs[None]).reshape(-1, 3)
             direction = np.broadcast_to(dirs[None], (m, len(dirs), 3)).reshape(-1, 3)
             open_ = np.ones(len(origin), dtype=bool)
-            if bvh is not None:
-                t, _ = trace_bvh(bvh, origin, direction, hits, any_hit=True)
+            if traced:        # one frame origin for every batch: the hit test rounds the same, however batched
+                t, _ = target.first_hits(origin, direction, origin=target.base, any_hit=True)
                 open_ &= ~np.isfinite(t)
             for shape in self.obstacles:
                 rest = np.flatnonzero(open_)

@@ -27,8 +27,7 @@ from .. import fields
 from ..errors import PlantgenError
 from ..files import read_input
 from ..geometry.meshes.polygons import Polygons
-from ..geometry.rays.bvh import build_bvh, trace_bvh
-from ..geometry.rays.scan import scan_target, target_hits
+from ..geometry.rays.scan import scan_target
 from ..geometry.skeletons.skeleton import Skeleton
 from ..limits import Limits
 from ..tolerances import tol
@@ -215,9 +214,8 @@ class Shape:
             faces = Polygons(tri.reshape(-1, 3), np.arange(3 * n).reshape(n, 3), np.arange(n), np.zeros(n, np.int32),
                              normal)
             target = scan_target(Skeleton.empty(), faces)
-            object.__setattr__(self, "_bvh", (build_bvh(target.lo, target.hi), target_hits(target)))
-        bvh, hits = self.__dict__["_bvh"]
-        t, _ = trace_bvh(bvh, o, d, hits, t_max=reach)
+            object.__setattr__(self, "_bvh", target)
+        t, _ = self.__dict__["_bvh"].first_hits(o, d, t_max=reach)
         return np.where(self.distance(o) < 0, 0.0, t)
 
 

@@ -13,7 +13,7 @@ import moderngl
 
 from ..errors import PlantgenError
 
-__all__ = ["GLContextError", "gl_context", "renderer_name", "release_framebuffer", "REQUIRED_GL_VERSION"]
+__all__ = ["GLContextError", "gl_context", "hardware_gl", "renderer_name", "release_framebuffer", "REQUIRED_GL_VERSION"]
 
 #: OpenGL core version the shaders are written for (``#version 430``).
 REQUIRED_GL_VERSION = 430
@@ -54,6 +54,21 @@ def gl_context():
 def renderer_name() -> str:
     """The GL_RENDERER string of the shared context, e.g. ``llvmpipe (LLVM 15.0.6, 256 bits)``."""
     return str(gl_context().info["GL_RENDERER"])
+
+
+#: GL_RENDERER words of a software rasteriser (Mesa's): no GPU behind the context.
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "lavapipe")
+
+
+def hardware_gl() -> bool:
+    """Whether a GL context exists here and a GPU draws it (not a software rasteriser,
+    :data:`SOFTWARE_RENDERERS`): where it does not, the compiled CPU traversal is the
+    faster tracer (``plantgen.trace(device="auto")``, ``plantgen scan``)."""
+    try:
+        name = renderer_name().lower()
+    except GLContextError:
+        return False
+    return not any(word in name for word in SOFTWARE_RENDERERS)
 
 
 _parking = {}

@@ -366,9 +366,11 @@ def float32_boxes(bvh: BVH, origin=None) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ============================================================================ float64 traversal
-# The reference traversal. A batch of rays walks the tree breadth first, one level of
-# (ray, node) pairs at a time (a slab test per pair, inner nodes replaced by their two
-# children). Closest hit: the leaves a ray meets are then tested nearest first, by their
+# The numpy traversal: the oracle of plantgen.geometry.rays.native_trace (the compiled
+# walk every CPU ray takes where numba runs) and its fallback where numba does not.
+# A batch of rays walks the tree breadth first, one level of (ray, node) pairs at a
+# time (a slab test per pair, inner nodes replaced by their two children). Closest
+# hit: the leaves a ray meets are then tested nearest first, by their
 # boxes' entry distance, in rounds of 1, 2, 4, ... leaves a ray; after each round a ray
 # drops the leaves that its closest hit so far lies before. The result is the stack
 # traversal's: the smallest t in (t_min, t_max), ties to the smaller primitive id. Any

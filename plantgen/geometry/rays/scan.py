@@ -172,10 +172,16 @@ def _nearest(key: np.ndarray, t: np.ndarray, *others) -> tuple:
 
 
 def _beam_returns(sub, t, prim, samples: int, how: str):
-    """(beams, range, primitive) of every beam with a return, in beam order."""
-    sub, t, prim = _nearest(sub, t, prim)              # each sub-ray's first hit
+    """(beams, range, primitive) of every beam with a return, in beam order. The sub-rays
+    come from :func:`_candidates` increasing, one hit each: then they are sorted already
+    (no sort, no copy: a scan's peak memory is its points), else each one's nearest hit
+    is taken first."""
+    if len(sub) > 1 and not (sub[1:] > sub[:-1]).all():
+        sub, t, prim = _nearest(sub, t, prim)          # each sub-ray's first hit
+    if samples == 1:
+        return sub, t, prim
     beam = sub // samples
-    if how == "first" or samples == 1:
+    if how == "first":
         beam, t, prim = _nearest(beam, t, prim)
         return beam, t, prim
     starts = np.flatnonzero(np.r_[True, beam[1:] != beam[:-1]])

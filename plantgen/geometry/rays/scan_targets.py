@@ -21,6 +21,17 @@ from .scan_settings import BRANCH, LEAF, STEM, ScanError
 
 
 # ============================================================================ what a scan sees
+def _native_on(native: bool | None) -> bool:
+    """Whether a float64 trace walks the compiled traversal: not where ``native`` is False
+    (the numpy oracle), nor where :func:`plantgen.geometry.rays.native_trace.available` is
+    not (numba missing or failing: one line says so)."""
+    if native is False:
+        return False
+    from .native_trace import available  # numba's import is paid by the first trace, not by every import
+
+    return available()
+
+
 @dataclass(frozen=True, eq=False)
 class ScanTarget:
     """The primitives a scan sees and their labels: the frusta's rows (primitives
@@ -64,16 +75,29 @@ class ScanTarget:
         return build_bvh(self.lo, self.hi)
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
-                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0, native: bool | None = None):
         """t (m,) and primitive (m,) of each ray's first hit in (t_min, t_max) (inf, -1:
         none; ``any_hit``: any hit), through the BVH (rows tested in ``precision``
         relative to ``origin``; ``packets`` as :func:`~plantgen.geometry.rays.bvh.trace_bvh`
-        takes it)."""
+        takes it). float64 walks the compiled traversal
+        (:mod:`plantgen.geometry.rays.native_trace`) where it runs, else (and with ``native``
+        False: the numpy oracle) :func:`~plantgen.geometry.rays.bvh.trace_bvh`."""
         from .bvh import trace_bvh
 
+        if precision == "float64" and _native_on(native):
+            t, _, prim = self.native.trace(origins, dirs, any_hit=any_hit, t_min=t_min, t_max=t_max, origin=origin)
+            return t, prim
         hits = target_hits(self, origin=origin, precision=precision, t_min=t_min)
         return trace_bvh(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
                          boxes=self.box_columns, packets=packets)
+
+    @cached_property
+    def native(self):
+        """The compiled traversal's :class:`~plantgen.geometry.rays.native_trace.NativeScene`,
+        from :attr:`bvh` (gathered on first use)."""
+        from .native_trace import native_scene
+
+        return native_scene(self)
 
     @cached_property
     def pair_tester(self) -> PairTester:
@@ -89,7 +113,10 @@ class ScanTarget:
         return box_columns(self.lo, self.hi)
 
     def hit_distance(self, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
-        """t (k,) of rays (k,) against primitives ``prim`` (k,) in float64 (inf: a miss)."""
+        """t (k,) of rays (k,) against primitives ``prim`` (k,) in float64 (inf: a miss;
+        compiled where :mod:`plantgen.geometry.rays.native_trace` runs)."""
+        if len(self) and _native_on(None):
+            return self.native.distances(0, prim, origins, dirs, t_min=t_min)
         return target_hits(self, t_min=t_min)(np.asarray(prim, np.int64), origins, dirs)
 
     def primitive_labels(self, prim) -> dict:
@@ -249,6 +276,13 @@ class SceneTarget:
 
         return scene_bvh([t.bvh for t in self.targets], self.matrices)
 
+    @cached_property
+    def native(self):
+        """The compiled traversal's arrays, from :attr:`bvh` (gathered on first use)."""
+        from .native_trace import native_scene
+
+        return native_scene(self)
+
     @property
     def stride(self) -> int:
         return max((len(t) for t in self.targets), default=1) or 1
@@ -264,11 +298,14 @@ class SceneTarget:
         return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
-                   t_min: float = 0.0, t_max=np.inf, packets: int = 0):
+                   t_min: float = 0.0, t_max=np.inf, packets: int = 0, native: bool | None = None):
         """As :meth:`ScanTarget.first_hits`, each ray moved into the frames of the copies it
         meets (in float64); primitives as ``copy · stride + primitive``."""
         from .bvh import trace_scene
 
+        if precision == "float64" and _native_on(native):
+            t, copy, prim = self.native.trace(origins, dirs, any_hit=any_hit, t_min=t_min, t_max=t_max)
+            return t, np.where(copy >= 0, copy * self.stride + prim, -1)
         hits = [target_hits(t, precision=precision, t_min=t_min) for t in self.targets]
         t, copy, prim = trace_scene(self.bvh, origins, dirs, hits, any_hit=any_hit, t_min=t_min, t_max=t_max,
                                     plant_boxes=[t.box_columns for t in self.targets])

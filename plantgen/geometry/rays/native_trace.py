@@ -1,0 +1,686 @@
+"""The compiled CPU traversal: the two-level BVH and the exact primitive tests in native,
+multi-threaded float64 code (numba).
+
+It walks the very arrays the GPU upload is made from (:attr:`ScanTarget.bvh
+<plantgen.geometry.rays.scan_targets.ScanTarget.bvh>`, :attr:`SceneTarget.bvh
+<plantgen.geometry.rays.scan_targets.SceneTarget.bvh>` and its :attr:`~plantgen.geometry.rays.bvh.SceneBVH.flat`
+node array): no second build. Each ray walks the top level over the copies nearest box
+first (a small stack a ray), is moved into a copy's frame in float64 and walks that
+plant's tree the same way; a leaf's primitives are culled by their own boxes and then
+tested exactly:
+
+- a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
+  float64, recentred: the slope-form cone, the quadratic in pbrt-v4's stable form with
+  the discriminant as a difference of exact products, the oblique cutting planes with
+  their joint slack, open ends capped), operation for operation;
+- a leaf triangle by the scan's Möller-Trumbore test (both faces; a ray in its plane
+  misses), operation for operation.
+
+The answer is the numpy traversal's (:func:`~plantgen.geometry.rays.bvh.trace_bvh`,
+:func:`~plantgen.geometry.rays.bvh.trace_scene`): the smallest t in (t_min, t_max), ties to
+the smaller copy, then primitive; with ``any_hit`` the first hit found. Rays are
+independent, so the thread count changes no result. Compiled on first use and cached
+on disk (``cache=True``; numba falls back to its user-wide cache directory, or
+``NUMBA_CACHE_DIR``, where the package's own is read-only).
+
+Without numba (or where its compiler fails) :func:`available` is False, one line says
+so, and the callers walk the numpy traversal instead.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+
+from ...tolerances import tol
+from ..vec import dot
+
+__all__ = ["NativeScene", "available", "compile_seconds", "native_scene", "pair_distances", "warm_up"]
+
+try:                                          # an optional accelerator: numpy walks without it
+    import numba
+    from numba import njit, prange
+    _NUMBA_ERROR = None
+except Exception as error:                    # noqa: BLE001 - any failure means "no compiler"
+    numba, prange, _NUMBA_ERROR = None, range, error
+
+    def njit(*args, **kwargs):                # the kernels stay plain Python, never called
+        return (lambda f: f) if not args or not callable(args[0]) else args[0]
+
+#: Half an ulp of 1.0 times the joint slack (:func:`plantgen.geometry.rays.reference._joint_slack`'s factor).
+JOINT_SLACK = float(tol.joint_slack * (np.finfo(np.float64).eps / 2))
+RECENTER_PARALLEL = float(tol.recenter_parallel)
+SPLIT = 2.0 ** 27 + 1.0                       # Veltkamp's split of a float64
+#: Rays a worker thread takes at a time.
+RAY_BLOCK = 64
+#: Blocks of rays a thread takes at a time (numba's parallel chunk size): a scan's beams
+#: cost unevenly (the sky against a crown), so threads take small chunks as they free up.
+BLOCKS_A_CHUNK = 4
+#: Row fields (columns of the row table): base (3), axis (3), h, r1, k, n_lo (3), n_hi (3),
+#: d_lo, d_hi, open_lo, open_hi.
+ROW_WIDTH = 19
+
+
+# ============================================================================ the primitive tests
+@njit(cache=True, inline="always")
+def _dot(ax, ay, az, bx, by, bz):
+    return ax * bx + ay * by + az * bz
+
+
+@njit(cache=True, inline="always")
+def _two_product(a, b):
+    a_big = SPLIT * a
+    a_hi = a_big - (a_big - a)
+    a_lo = a - a_hi
+    b_big = SPLIT * b
+    b_hi = b_big - (b_big - b)
+    b_lo = b - b_hi
+    p = a * b
+    return p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
+
+
+@njit(cache=True)
+def _solve(A, B, C):
+    """solve_quadratic of reference.py: (disc, t_q, t_c)."""
+    bb, bb_e = _two_product(B, B)
+    ac, ac_e = _two_product(A, C)
+    disc = (bb - ac) + (bb_e - ac_e)
+    root = np.sqrt(max(disc, 0.0))
+    q = -(B + (root if B >= 0 else -root))
+    t_q = q / A if A != 0 else np.inf
+    t_c = C / q if q != 0 else t_q
+    return disc, t_q, t_c
+
+
+@njit(cache=True)
+def _lateral(R, i, ex, ey, ez, dx, dy, dz, t_lo, s_lo, s_hi, best):
+    """The nearest lateral root beyond ``t_lo`` between the planes (reference step 4)."""
+    ax, ay, az, r1, k = R[i, 3], R[i, 4], R[i, 5], R[i, 7], R[i, 8]
+    e_y = _dot(ex, ey, ez, ax, ay, az)
+    d_y = _dot(dx, dy, dz, ax, ay, az)
+    epx, epy, epz = ex - e_y * ax, ey - e_y * ay, ez - e_y * az
+    dpx, dpy, dpz = dx - d_y * ax, dy - d_y * ay, dz - d_y * az
+    r0 = r1 + 0.0 + k * e_y
+    A = _dot(dpx, dpy, dpz, dpx, dpy, dpz) - k * k * d_y * d_y
+    B = _dot(epx, epy, epz, dpx, dpy, dpz) - k * d_y * r0
+    C = _dot(epx, epy, epz, epx, epy, epz) - r0 * r0
+    disc, t1, t2 = _solve(A, B, C)
+    if not disc >= 0:
+        return best
+    for j in range(2):
+        t = t1 if j == 0 else t2
+        if not np.isfinite(t):
+            continue
+        X, Y, Z = ex + t * dx, ey + t * dy, ez + t * dz
+        y = _dot(X, Y, Z, ax, ay, az)
+        if not (r1 + k * y >= 0):
+            continue
+        if not (_dot(R[i, 9], R[i, 10], R[i, 11], X, Y, Z) - R[i, 15] >= -s_lo):
+            continue
+        if not (_dot(R[i, 12], R[i, 13], R[i, 14], X, Y, Z) - R[i, 16] <= s_hi):
+            continue
+        if t > t_lo and t < best:
+            best = t
+    return best
+
+
+@njit(cache=True)
+def _cap(R, i, upper, ex, ey, ez, dx, dy, dz, t_lo, slack_o, best):
+    """An open end's disc (reference step 5): the lower (``upper`` False) or upper one."""
+    c, o = (12, 9) if upper else (9, 12)
+    dc, do = (16, 15) if upper else (15, 16)
+    ax, ay, az, r1, k = R[i, 3], R[i, 4], R[i, 5], R[i, 7], R[i, 8]
+    den = _dot(R[i, c], R[i, c + 1], R[i, c + 2], dx, dy, dz)
+    if den == 0:
+        return best
+    t = (R[i, dc] - _dot(R[i, c], R[i, c + 1], R[i, c + 2], ex, ey, ez)) / den
+    if not np.isfinite(t):
+        return best
+    X, Y, Z = ex + t * dx, ey + t * dy, ez + t * dz
+    y = _dot(X, Y, Z, ax, ay, az)
+    rr = r1 + k * y
+    px, py, pz = X - y * ax, Y - y * ay, Z - y * az
+    if not (rr >= 0 and _dot(px, py, pz, px, py, pz) <= rr * rr):
+        return best
+    other = _dot(R[i, o], R[i, o + 1], R[i, o + 2], X, Y, Z) - R[i, do]
+    if not ((other >= slack_o) if upper else (other <= slack_o)):
+        return best
+    if t > t_lo and t < best:
+        return t
+    return best
+
+
+@njit(cache=True)
+def row_hit(R, i, ox, oy, oz, dx, dy, dz, t_min, origin):
+    """t of the ray (o, d) at row ``i`` of the row table ``R`` (inf: a miss), the rows
+    relative to ``origin`` (3,): the reference's float64 pair test, recentred."""
+    cx, cy, cz = R[i, 0] - origin[0], R[i, 1] - origin[1], R[i, 2] - origin[2]
+    ax, ay, az, h = R[i, 3], R[i, 4], R[i, 5], R[i, 6]
+    ex, ey, ez = (ox - origin[0]) - cx, (oy - origin[1]) - cy, (oz - origin[2]) - cz
+    dd = _dot(dx, dy, dz, dx, dy, dz)
+    size = np.sqrt(_dot(cx, cy, cz, cx, cy, cz)) + h
+    slack = JOINT_SLACK * size
+    s_lo = 0.0 if R[i, 17] != 0 else slack
+    s_hi = 0.0 if R[i, 18] != 0 else slack
+    b_ = _dot(dx, dy, dz, ax, ay, az)
+    d_ = _dot(dx, dy, dz, ex, ey, ez)
+    e_ = _dot(ax, ay, az, ex, ey, ez)
+    denom = dd - b_ * b_
+    if denom <= RECENTER_PARALLEL * dd:
+        s_axis = h * 0.5
+    else:
+        s_axis = min(max(e_ + b_ * (b_ * e_ - d_) / denom, 0.0), h)
+    t0 = (s_axis * b_ - d_) / dd
+    ex, ey, ez = ex + t0 * dx, ey + t0 * dy, ez + t0 * dz
+    t_lo = t_min - t0
+    best = _lateral(R, i, ex, ey, ez, dx, dy, dz, t_lo, s_lo, s_hi, np.inf)
+    if R[i, 17] != 0:
+        best = _cap(R, i, False, ex, ey, ez, dx, dy, dz, t_lo, s_hi, best)
+    if R[i, 18] != 0:
+        best = _cap(R, i, True, ex, ey, ez, dx, dy, dz, t_lo, -s_lo, best)
+    return best + t0
+
+
+@njit(cache=True)
+def triangle_hit(T, j, ox, oy, oz, dx, dy, dz):
+    """t of the ray (o, d) at triangle ``j`` of the table ``T`` (v0, e1, e2, size): the
+    scan's Möller-Trumbore test, both faces (inf: a miss)."""
+    e1x, e1y, e1z, e2x, e2y, e2z = T[j, 3], T[j, 4], T[j, 5], T[j, 6], T[j, 7], T[j, 8]
+    px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+    det = _dot(e1x, e1y, e1z, px, py, pz)
+    scale = T[j, 9] * np.sqrt(_dot(dx, dy, dz, dx, dy, dz))
+    if not (abs(det) > 1e-12 * scale):
+        return np.inf
+    inv = 1.0 / det
+    sx, sy, sz = ox - T[j, 0], oy - T[j, 1], oz - T[j, 2]
+    u = _dot(sx, sy, sz, px, py, pz) * inv
+    qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+    v = _dot(dx, dy, dz, qx, qy, qz) * inv
+    t = _dot(e2x, e2y, e2z, qx, qy, qz) * inv
+    if u >= 0 and v >= 0 and u + v <= 1 and t > 0:
+        return t
+    return np.inf
+
+
+@njit(cache=True)
+def _prim_hit(kind, R, T, g, ox, oy, oz, dx, dy, dz, t_min, origin):
+    """t of primitive ``g`` (its ``kind``: a row >= 0, a triangle -1 - j), only beyond ``t_min``."""
+    k = kind[g]
+    if k >= 0:
+        t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin)
+    else:
+        t = triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
+    return t if t > t_min else np.inf
+
+
+# ============================================================================ the walk
+@njit(cache=True, inline="always")
+def _fmin(a, b):
+    return b if a != a else (a if b != b else min(a, b))
+
+
+@njit(cache=True, inline="always")
+def _fmax(a, b):
+    return b if a != a else (a if b != b else max(a, b))
+
+
+@njit(cache=True, inline="always")
+def _slab(box, n, ox, oy, oz, ix, iy, iz, careful):
+    """(near, far) of the ray (o, 1/d) through box ``n`` of ``box`` (k, >= 6): the numpy
+    traversal's slab test. Where 1/d is infinite (a ray parallel to a face) a product may
+    be NaN (0·inf), which numpy's fmin / fmax skip: so does the slow path here; rays with
+    every 1/d finite (``careful`` False) take the fast one (no NaN can arise there, the
+    same numbers)."""
+    if careful:
+        return _slab_nan(box, n, ox, oy, oz, ix, iy, iz)
+    t1, t2 = (box[n, 0] - ox) * ix, (box[n, 3] - ox) * ix
+    near, far = (t1, t2) if t1 < t2 else (t2, t1)
+    t1, t2 = (box[n, 1] - oy) * iy, (box[n, 4] - oy) * iy
+    a, b = (t1, t2) if t1 < t2 else (t2, t1)
+    near, far = near if near > a else a, far if far < b else b
+    t1, t2 = (box[n, 2] - oz) * iz, (box[n, 5] - oz) * iz
+    a, b = (t1, t2) if t1 < t2 else (t2, t1)
+    return near if near > a else a, far if far < b else b
+
+
+@njit(cache=True)
+def _slab_nan(box, n, ox, oy, oz, ix, iy, iz):
+    """:func:`_slab` with numpy's NaN rule (fmin / fmax skip a NaN)."""
+    t1, t2 = (box[n, 0] - ox) * ix, (box[n, 3] - ox) * ix
+    near, far = _fmin(t1, t2), _fmax(t1, t2)
+    t1, t2 = (box[n, 1] - oy) * iy, (box[n, 4] - oy) * iy
+    near, far = _fmax(near, _fmin(t1, t2)), _fmin(far, _fmax(t1, t2))
+    t1, t2 = (box[n, 2] - oz) * iz, (box[n, 5] - oz) * iz
+    return _fmax(near, _fmin(t1, t2)), _fmin(far, _fmax(t1, t2))
+
+
+@njit(cache=True, inline="always")
+def _inv(d):
+    return 1.0 / d if d != 0 else (np.inf if not np.signbit(d) else -np.inf)
+
+
+@njit(cache=True, inline="always")
+def _leaf(scene, node, ray, t_min, t_hi, copy, best, any_hit, origin):
+    """Test the primitives of leaf ``node`` of the plants' tree against ``ray`` (origin,
+    direction, 1 / direction: 9 numbers); fold hits into ``best`` (t, copy, primitive as
+    global ids). True where ``any_hit`` and one was found."""
+    nodes, slot_box, prims, slot_kind, R, T = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
+    ox, oy, oz, dx, dy, dz, ix, iy, iz, careful = ray
+    first, count = int(nodes[node, 6]), int(nodes[node, 7])
+    for s in range(first, first + count):
+        near, far = _slab(slot_box, s, ox, oy, oz, ix, iy, iz, careful)
+        if not (max(near, t_min) <= far and far > t_min and near <= min(t_hi, best[0])):
+            continue
+        t = _prim_hit(slot_kind, R, T, s, ox, oy, oz, dx, dy, dz, t_min, origin)
+        if not t < t_hi:
+            continue
+        g = prims[s]
+        if t < best[0] or (t == best[0] and (copy < best[1] or (copy == best[1] and g < best[2]))):
+            best[0], best[1], best[2] = t, copy, g
+            if any_hit:
+                return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _children(boxes, left, ray, t_min, hi):
+    """Which of the children ``left``, ``left + 1`` the ray's segment (t_min, hi] meets
+    (hi: the ray's end, or its best hit so far), and whether the right one is nearer."""
+    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
+    n0, f0 = _slab(boxes, left, ox, oy, oz, ix, iy, iz, careful)
+    n1, f1 = _slab(boxes, left + 1, ox, oy, oz, ix, iy, iz, careful)
+    n0, n1 = max(n0, t_min), max(n1, t_min)
+    return n0 <= f0 and f0 > t_min and n0 <= hi, n1 <= f1 and f1 > t_min and n1 <= hi, n1 < n0
+
+
+@njit(cache=True, inline="always")
+def _push(stack, top, left, ok0, ok1, right_first):
+    """Push the children met, the nearer one last (popped first); the new top."""
+    if ok0 and ok1:
+        stack[top + 1], stack[top + 2] = (left, left + 1) if right_first else (left + 1, left)
+        return top + 2
+    if ok0 or ok1:
+        stack[top + 1] = left if ok0 else left + 1
+        return top + 1
+    return top
+
+
+@njit(cache=True, inline="always")
+def _meets_root(boxes, node, ray, t_min, t_hi):
+    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
+    near, far = _slab(boxes, node, ox, oy, oz, ix, iy, iz, careful)
+    near = max(near, t_min)
+    return near <= far and far > t_min and near < t_hi
+
+
+@njit(cache=True)
+def _walk(scene, root, ray, t_min, t_hi, copy, best, any_hit, stack, origin):
+    """One plant's tree from node ``root`` for ``ray`` in its frame, nearest box first;
+    True where ``any_hit`` found a hit."""
+    nodes = scene[0]
+    if not _meets_root(nodes, root, ray, t_min, t_hi):
+        return False
+    below = np.nextafter(t_hi, -np.inf)               # a box must start before the ray's end
+    top = 0
+    stack[0] = root
+    while top >= 0:
+        node = stack[top]
+        top -= 1
+        if nodes[node, 7] > 0:
+            if _leaf(scene, node, ray, t_min, t_hi, copy, best, any_hit, origin):
+                return True
+            continue
+        left = int(nodes[node, 6])
+        ok0, ok1, right_first = _children(nodes, left, ray, t_min, min(below, best[0]))
+        top = _push(stack, top, left, ok0, ok1, right_first)
+    return False
+
+
+@njit(cache=True, inline="always")
+def _ray(o0, o1, o2, d0, d1, d2):
+    """What a walk reads of a ray: origin, direction, 1 / direction and whether a slab
+    test may meet a NaN (:func:`_slab`)."""
+    i0, i1, i2 = _inv(d0), _inv(d1), _inv(d2)
+    careful = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
+    return o0, o1, o2, d0, d1, d2, i0, i1, i2, careful
+
+
+@njit(cache=True, inline="always")
+def _to_copy(inverse, c, O, D):
+    """The ray (O, D) moved into copy ``c``'s frame (float64, t kept), as :func:`_ray`."""
+    m = inverse[c]
+    o0 = m[0, 0] * O[0] + m[0, 1] * O[1] + m[0, 2] * O[2] + m[0, 3]
+    o1 = m[1, 0] * O[0] + m[1, 1] * O[1] + m[1, 2] * O[2] + m[1, 3]
+    o2 = m[2, 0] * O[0] + m[2, 1] * O[1] + m[2, 2] * O[2] + m[2, 3]
+    d0 = m[0, 0] * D[0] + m[0, 1] * D[1] + m[0, 2] * D[2]
+    d1 = m[1, 0] * D[0] + m[1, 1] * D[1] + m[1, 2] * D[2]
+    d2 = m[2, 0] * D[0] + m[2, 1] * D[1] + m[2, 2] * D[2]
+    return _ray(o0, o1, o2, d0, d1, d2)
+
+
+@njit(cache=True)
+def _copies(scene, top, node, O, D, ray, t_min, t_hi, any_hit, best, stack, order, origin):
+    """The copies of top-level leaf ``node`` the ray meets, nearest box first (``order``:
+    scratch of the largest leaf's size), each walked in its frame; True where ``any_hit``
+    found a hit."""
+    t_nodes, t_prims, copy_box, copy_plant, inverse, roots = top[1], top[2], top[3], top[4], top[5], top[6]
+    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
+    k = 0
+    for s in range(t_nodes[node, 0], t_nodes[node, 0] + t_nodes[node, 1]):
+        c = t_prims[s]
+        near, far = _slab(copy_box, c, ox, oy, oz, ix, iy, iz, careful)
+        near = max(near, t_min)
+        if roots[copy_plant[c]] < 0 or not (near <= far and far > t_min and near < t_hi):
+            continue
+        j = k                                   # insertion by entry distance, ties by copy
+        while j > 0 and (order[0, j - 1] > near or (order[0, j - 1] == near and order[1, j - 1] > c)):
+            order[0, j], order[1, j] = order[0, j - 1], order[1, j - 1]
+            j -= 1
+        order[0, j], order[1, j] = near, c
+        k += 1
+    for j in range(k):
+        if order[0, j] > best[0]:               # every later copy starts beyond the best hit
+            break
+        c = int(order[1, j])
+        if _walk(scene, roots[copy_plant[c]], _to_copy(inverse, c, O, D), t_min, t_hi, c, best, any_hit, stack,
+                 origin):
+            return True
+    return False
+
+
+@njit(cache=True)
+def _trace_one(scene, top, O, D, t_min, t_hi, any_hit, best, stacks, order, origin):
+    """One ray through the copies (the top level ``top``), each copy's plant walked in its
+    frame; fills ``best`` (t, copy, global primitive)."""
+    t_box, t_nodes = top[0], top[1]
+    ray = _ray(O[0], O[1], O[2], D[0], D[1], D[2])
+    if not _meets_root(t_box, 0, ray, t_min, t_hi):
+        return
+    stack = stacks[0]
+    sp = 0
+    stack[0] = 0
+    while sp >= 0:
+        node = stack[sp]
+        sp -= 1
+        if t_nodes[node, 1] > 0:
+            if _copies(scene, top, node, O, D, ray, t_min, t_hi, any_hit, best, stacks[1], order, origin):
+                return
+            continue
+        hi = min(np.nextafter(t_hi, -np.inf), best[0])
+        ok0, ok1, right_first = _children(t_box, t_nodes[node, 0], ray, t_min, hi)
+        sp = _push(stack, sp, t_nodes[node, 0], ok0, ok1, right_first)
+
+
+@njit(cache=True, parallel=True)
+def _trace_all(scene, top, O, D, t_min, t_hi, any_hit, depth, widest, origin, out_t, out_c, out_p):
+    """Every ray (m,), in blocks of :data:`RAY_BLOCK` across the threads."""
+    m = len(O)
+    blocks = (m + RAY_BLOCK - 1) // RAY_BLOCK
+    for b in prange(blocks):
+        stacks = np.empty((2, depth), np.int64)
+        order = np.empty((2, widest))
+        best = np.empty(3)
+        for r in range(b * RAY_BLOCK, min(m, (b + 1) * RAY_BLOCK)):
+            best[0], best[1], best[2] = np.inf, -1.0, -1.0
+            _trace_one(scene, top, O[r], D[r], t_min, t_hi[r], any_hit, best, stacks, order, origin)
+            out_t[r], out_c[r], out_p[r] = best[0], int(best[1]), int(best[2])
+
+
+@njit(cache=True, parallel=True)
+def _pairs_all(kind, R, T, prim, O, D, t_min, origin, out_t):
+    """t of each ray (k,) at its primitive ``prim`` (k,) (global ids; -1: inf)."""
+    for r in prange(len(prim)):
+        g = prim[r]
+        out_t[r] = np.inf if g < 0 else _prim_hit(kind, R, T, g, O[r, 0], O[r, 1], O[r, 2], D[r, 0], D[r, 1],
+                                                  D[r, 2], t_min, origin)
+
+
+# ============================================================================ the Python side
+_STATE = {"failed": None, "compile_s": None, "noticed": False}
+#: One kernel call at a time: numba's default threading layer (workqueue) aborts the
+#: process where two Python threads (a Dask worker's, say) launch parallel kernels at once.
+_LOCK = threading.RLock()
+
+
+def _notice(why: str) -> None:
+    """One line on stderr, once: the compiled traversal is off and why."""
+    if not _STATE["noticed"]:
+        _STATE["noticed"] = True
+        print(f"plantgen: the compiled CPU tracer is off ({why}); rays are traced by the numpy traversal",
+              file=sys.stderr)
+
+
+def available() -> bool:
+    """Whether the compiled traversal runs here: numba imports, its compile succeeded
+    (tried on first call, :func:`warm_up`) and ``PLANTGEN_CPU_TRACER`` is not ``numpy``.
+    Where it does not, one line on stderr says why (once) and False is returned."""
+    if os.environ.get("PLANTGEN_CPU_TRACER", "").lower() == "numpy":
+        return False
+    if _NUMBA_ERROR is not None:
+        _notice(f"numba does not import: {type(_NUMBA_ERROR).__name__}: {_NUMBA_ERROR}".splitlines()[0])
+        return False
+    if _STATE["compile_s"] is None and _STATE["failed"] is None:
+        warm_up()
+    return _STATE["failed"] is None
+
+
+def warm_up() -> float:
+    """Compile the kernels (or load them from numba's cache) on a tiny scene; the seconds
+    it took (:func:`compile_seconds`). A failure turns the traversal off with one line."""
+    with _LOCK:                                          # one thread compiles, the others wait for it
+        if _STATE["compile_s"] is not None or _STATE["failed"] is not None or _NUMBA_ERROR is not None:
+            return _STATE["compile_s"] or 0.0
+        start = time.perf_counter()
+        try:
+            tiny = _tiny()
+            tiny.trace(np.array([[0.0, -1.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), any_hit=False)
+            tiny.distances(0, np.zeros(1, np.int64), np.array([[0.0, -1.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+        except Exception as error:                       # noqa: BLE001 - numba's errors are many
+            _STATE["failed"] = error
+            _notice(f"numba could not compile it: {type(error).__name__}: {error}".splitlines()[0])
+            return 0.0
+        _STATE["compile_s"] = time.perf_counter() - start
+        return _STATE["compile_s"]
+
+
+def compile_seconds() -> float | None:
+    """Seconds the first :func:`warm_up` took (compiling, or loading numba's cache); None
+    before it ran."""
+    return _STATE["compile_s"]
+
+
+def _tiny() -> NativeScene:
+    """One unit cylinder row and one triangle in one leaf (the kernels' types, compiled)."""
+    R = np.zeros((1, ROW_WIDTH))
+    R[0, 3:9] = [0.0, 1.0, 0.0, 1.0, 1.0, 0.0]
+    R[0, 9:17] = [0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]
+    R[0, 17:19] = 1.0
+    T = np.array([[2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
+    box = np.array([[-1.0, 0.0, -1.0, 3.0, 1.0, 1.0]])
+    two = (np.repeat(box[:, :3], 2, 0), np.repeat(box[:, 3:], 2, 0))
+    return NativeScene(nodes_f=box.copy(), nodes_i=np.array([[0, 2]], np.int64), prim_box=two,
+                       prims=np.arange(2, dtype=np.int64), kind=np.array([0, -1], np.int64), rows=R, triangles=T,
+                       roots=np.zeros(1, np.int64), prim_first=np.array([0, 2], np.int64), top=_one_copy(box[0]),
+                       depth=4)
+
+
+def _one_copy(box) -> dict:
+    """A top level of one copy (the identity) around ``box`` (6,): a single plant's."""
+    box = np.asarray(box, np.float64).reshape(1, 6)
+    return {"t_box": box.copy(), "t_nodes": np.array([[0, 1]], np.int64), "t_prims": np.zeros(1, np.int64),
+            "copy_box": box.copy(), "copy_plant": np.zeros(1, np.int64), "inverse": np.eye(4)[None].copy()}
+
+
+class NativeScene:
+    """The arrays the compiled walk reads (module docstring), gathered once per target from
+    its BVHs and rows: ``nodes_f`` (N, 6) node boxes, ``nodes_i`` (N, 2) first and count
+    (the plants' trees in one array, :attr:`~plantgen.geometry.rays.bvh.SceneBVH.flat`),
+    ``prim_box`` (lo, hi) (G, 3) each: the primitives' own boxes, ``prims`` the leaves'
+    primitives,
+    ``kind`` (G,) a row (>= 0) or a triangle (-1 - j), the ``rows`` (:data:`ROW_WIDTH`
+    columns) and ``triangles`` (v0, e1, e2, size) tables, each plant's root node and first
+    primitive, and the top level (``top``: a dict of the copies' arrays)."""
+
+    def __init__(self, *, nodes_f, nodes_i, prim_box, prims, kind, rows, triangles, roots, prim_first, top, depth):
+        c = np.ascontiguousarray
+        prims = c(prims, np.int64)
+        kind, rows, triangles = _slot_order(c(kind, np.int64), prims, rows, triangles)
+        nodes = np.concatenate([np.asarray(nodes_f, np.float64), np.asarray(nodes_i, np.float64)], axis=1)
+        # what a walk reads, in the order it reads it: a node's box, first and count in one
+        # 64-byte row; a leaf's primitives' boxes, kinds and tables in its slots' order
+        slot_box = np.empty((len(prims), 6))
+        slot_box[:, :3], slot_box[:, 3:] = prim_box[0][prims], prim_box[1][prims]
+        self.scene = (c(nodes), slot_box, prims, c(kind[prims]),
+                      c(rows, np.float64), c(triangles, np.float64))
+        self.kind = kind
+        self.roots = c(roots, np.int64)
+        self.prim_first = c(prim_first, np.int64)
+        self.top = (c(top["t_box"], np.float64), c(top["t_nodes"], np.int64), c(top["t_prims"], np.int64),
+                    c(top["copy_box"], np.float64), c(top["copy_plant"], np.int64), c(top["inverse"], np.float64),
+                    self.roots)
+        self.depth = int(depth) + 2
+        self.widest = max(int(self.top[1][:, 1].max(initial=0)), 1)     # copies in the largest top leaf
+        self.copy_plant = self.top[4]
+
+    def trace(self, origins, dirs, *, any_hit: bool = False, t_min: float = 0.0, t_max=np.inf,
+              origin=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """t (m,), copy (m,) and the primitive of its plant (m,) of each ray's closest hit
+        in (t_min, t_max) (``any_hit``: a hit; inf, -1, -1: none), rows tested relative
+        to ``origin`` (3,) of the plants' frame (None: 0)."""
+        O = _rows3(origins)
+        D = _rows3(dirs)
+        m = len(O)
+        t_hi = np.empty(m)
+        t_hi[:] = t_max                                   # writable and contiguous: one compiled type
+        out_t, out_c, out_p = np.full(m, np.inf), np.full(m, -1, np.int64), np.full(m, -1, np.int64)
+        if m and len(self.scene[0]) and len(self.top[1]):
+            with _LOCK:                       # numba's workqueue threads serve one caller at a time
+                was = numba.set_parallel_chunksize(BLOCKS_A_CHUNK)      # blocks handed out as threads free up
+                try:
+                    _trace_all(self.scene, self.top, O, D, float(t_min), t_hi, bool(any_hit), self.depth,
+                               self.widest, _origin(origin), out_t, out_c, out_p)
+                finally:
+                    numba.set_parallel_chunksize(was)
+        hit = out_c >= 0
+        out_p[hit] -= self.prim_first[self.copy_plant[out_c[hit]]]
+        return out_t, out_c, out_p
+
+    def distances(self, plant: int, prim, origins, dirs, *, t_min: float = 0.0, origin=None) -> np.ndarray:
+        """t (k,) of rays (k,) at plant ``plant``'s primitives ``prim`` (k,), in its frame
+        (inf: a miss, or a primitive -1)."""
+        prim = np.asarray(prim, np.int64).reshape(-1)
+        g = np.where(prim >= 0, prim + self.prim_first[plant], -1).astype(np.int64)
+        O = _rows3(origins)
+        D = _rows3(dirs)
+        out = np.empty(len(g))
+        if len(g):
+            with _LOCK:
+                _pairs_all(self.kind, self.scene[4], self.scene[5], g, O, D, float(t_min), _origin(origin), out)
+        return out
+
+
+def _slot_order(kind, prims, rows, triangles):
+    """The row and triangle tables reordered as the leaves' slots ``prims`` list their
+    primitives, and ``kind`` (by global primitive) pointing into them."""
+    slot_kind = kind[prims]
+    row_order = slot_kind[slot_kind >= 0]
+    tri_order = -1 - slot_kind[slot_kind < 0]
+    new_row = np.empty(len(rows), np.int64)
+    new_row[row_order] = np.arange(len(row_order))
+    new_tri = np.empty(len(triangles), np.int64)
+    new_tri[tri_order] = np.arange(len(tri_order))
+    out = np.where(kind >= 0, new_row[np.maximum(kind, 0)] if len(rows) else 0,
+                   -1 - (new_tri[np.maximum(-1 - kind, 0)] if len(triangles) else 0))
+    return out.astype(np.int64), np.asarray(rows)[row_order], np.asarray(triangles)[tri_order]
+
+
+def _rows3(a) -> np.ndarray:
+    """(m, 3) float64, C-contiguous and writable: the one array type the kernels are
+    compiled for (a read-only view, a broadcast's, would compile them again)."""
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    return a if a.flags.writeable else a.copy()
+
+
+def _origin(origin) -> np.ndarray:
+    return np.zeros(3) if origin is None else np.array(origin, dtype=np.float64).reshape(3)
+
+
+def _row_table(targets) -> np.ndarray:
+    """(rows, :data:`ROW_WIDTH`) the targets' rows as the float64 pair test uploads them
+    (:class:`~plantgen.geometry.rays.reference.PairTester`, origin 0)."""
+    parts = []
+    for target in targets:
+        if not target.rows:
+            continue
+        up = target.pair_tester.upload
+        parts.append(np.column_stack([up.c1, up.a, up.h, up.r1, up.k, up.n_lo, up.n_hi, up.d_lo, up.d_hi,
+                                      up.open_lo, up.open_hi]).astype(np.float64, copy=False))
+    return np.concatenate(parts) if parts else np.zeros((0, ROW_WIDTH))
+
+
+def _triangle_table(targets) -> np.ndarray:
+    """(triangles, 10) v0, e1, e2 and the edges' lengths' product, plant by plant: the
+    numbers of :attr:`~plantgen.geometry.rays.scan_targets.ScanTarget.triangle_edges`, filled in place."""
+    total = sum(len(t.triangles) for t in targets)
+    out, k = np.empty((total, 10)), 0
+    for t in targets:
+        tri = t.triangles
+        part = out[k:k + len(tri)]
+        k += len(tri)
+        part[:, 0:3] = tri[:, 0]
+        np.subtract(tri[:, 1], tri[:, 0], out=part[:, 3:6])
+        np.subtract(tri[:, 2], tri[:, 0], out=part[:, 6:9])
+        e1, e2 = part[:, 3:6], part[:, 6:9]
+        part[:, 9] = np.sqrt(dot(e1, e1) * dot(e2, e2))
+    return out
+
+
+def _joined(targets, *names) -> tuple:
+    """Each of the targets' arrays ``names`` joined plant by plant (one target's: as is)."""
+    if len(targets) == 1:
+        return tuple(getattr(targets[0], n) for n in names)
+    return tuple(np.concatenate([getattr(t, n) for t in targets]) for n in names)
+
+
+def _kinds(targets) -> np.ndarray:
+    """(G,) each primitive's row (>= 0) or triangle (-1 - j) in the tables, plant by plant."""
+    out, rows, tris = [], 0, 0
+    for t in targets:
+        n, k = t.rows, len(t.triangles)
+        out += [np.arange(rows, rows + n), -1 - np.arange(tris, tris + k)]
+        rows, tris = rows + n, tris + k
+    return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
+
+
+def native_scene(target) -> NativeScene:
+    """The :class:`NativeScene` of a :class:`~plantgen.geometry.rays.scan_targets.ScanTarget` (one copy,
+    the identity) or a :class:`~plantgen.geometry.rays.scan_targets.SceneTarget` (its two-level BVH),
+    from the BVHs they hold (built once, shared with the GPU upload)."""
+    boxes = lambda lo, hi: np.concatenate([lo, hi], axis=1)  # noqa: E731
+    if hasattr(target, "targets"):
+        targets, sb = tuple(target.targets), target.bvh
+        flat, roots, prim_first = sb.flat
+        roots = np.where([b.nodes > 0 for b in sb.blas], roots, -1) if len(roots) else roots
+        top = {"t_box": boxes(sb.tlas.lo, sb.tlas.hi), "t_nodes": np.column_stack([sb.tlas.first, sb.tlas.count]),
+               "t_prims": sb.tlas.prims, "copy_box": boxes(sb.copy_lo, sb.copy_hi), "copy_plant": sb.plant,
+               "inverse": sb.inverse}
+        depth = max([sb.tlas.depth()] + [b.depth() for b in sb.blas])
+    else:
+        targets, flat = (target,), target.bvh
+        roots, prim_first = np.zeros(1, np.int64), np.array([0, len(target)], np.int64)
+        top = _one_copy(np.concatenate([flat.lo[0], flat.hi[0]]) if flat.nodes else np.zeros(6))
+        depth = flat.depth()
+    return NativeScene(nodes_f=boxes(flat.lo, flat.hi), nodes_i=np.column_stack([flat.first, flat.count]),
+                       prim_box=_joined(targets, "lo", "hi"),
+                       prims=flat.prims, kind=_kinds(targets), rows=_row_table(targets),
+                       triangles=_triangle_table(targets), roots=roots, prim_first=prim_first, top=top, depth=depth)
+
+
+def pair_distances(target, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:
+    """t (k,) of rays (k,) at a :class:`~plantgen.geometry.rays.scan_targets.ScanTarget`'s primitives
+    ``prim`` (k,), float64 (the scan's re-solve), compiled."""
+    return target.native.distances(0, prim, origins, dirs, t_min=t_min)
