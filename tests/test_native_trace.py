@@ -1,5 +1,5 @@
 """The compiled CPU traversal (plantgen.geometry.rays.native_trace) against the numpy oracle
-(plantgen.geometry.bvh's float64 traversal with the reference's pair test): the same
+(plantgen.geometry.rays.bvh's float64 traversal with the reference's pair test): the same
 primitive and the same t, closest and any hit, one level and two, on random rays and on
 the hard cases (grazing rays, rays along an axis, far from the origin, zero-size rows and
 copies, empty plants); the thread count changes nothing; without numba one line says so."""
@@ -18,8 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plantgen.geometry.rays import native_trace
-from plantgen.geometry.scan import scan_target, scene_target
-from plantgen.geometry.skeleton import Skeleton
+from plantgen.geometry.rays.scan import scan_target, scene_target
+from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.pipeline import grow_file, model_leaves
 
 pytestmark = pytest.mark.skipif(not native_trace.available(), reason="numba does not run here")
@@ -194,7 +194,7 @@ def test_hit_distance_is_the_oracles(bush):
     rng = np.random.default_rng(4)
     O, D = random_rays(*target.box(), 2000, rng)
     prim = rng.integers(-1, len(target), 2000)
-    from plantgen.geometry.scan import target_hits
+    from plantgen.geometry.rays.scan import target_hits
     want = np.full(2000, np.inf)
     ok = prim >= 0
     want[ok] = target_hits(target, t_min=0.1)(prim[ok], O[ok], D[ok])
@@ -205,7 +205,7 @@ def test_without_numba_one_line_and_the_numpy_walk():
     code = ("import sys; sys.modules['numba'] = None\n"
             "import numpy as np\n"
             "from _geometry_helpers import random_tree\n"
-            "from plantgen.geometry.scan import scan_target\n"
+            "from plantgen.geometry.rays.scan import scan_target\n"
             "t = scan_target(random_tree(10, seed=1))\n"
             "print(np.isfinite(t.first_hits(np.array([[0.0, -5, 0]]), np.array([[0.0, 1, 0]]))[0]).sum())\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.dirname(__file__), *sys.path])}
