@@ -55,7 +55,7 @@ __all__ = ["FILE_LABELS", "POINT_SUFFIXES", "PointFileError", "check_point_outpu
 #: The suffixes :func:`write_points` knows.
 POINT_SUFFIXES = (".las", ".laz", ".ply")
 #: How to install what LAS and LAZ need.
-INSTALL = missing_extra("LAS and LAZ point files", "scan")
+INSTALL = missing_extra("LAS and LAZ support", "scan")
 #: The labels' names in the files (``order`` is ``branch_order`` there) and descriptions.
 FILE_LABELS = {"plant": ("plant", "plant (scene instance)"),
                "part": ("part", "0 stem, 1 branch, 2 leaf"),

@@ -135,7 +135,8 @@ def test_refusals_are_one_line(tmp_path, bush_scan, monkeypatch):
 
     real = scanfiles.importlib.util.find_spec
     monkeypatch.setattr(scanfiles.importlib.util, "find_spec", lambda name: None if name == "laspy" else real(name))
-    with pytest.raises(PointFileError, match=r"needs the optional package 'laspy': pip install 'plantgen\[scan\]'"):
+    wording = r"LAS and LAZ support needs the scan extra: pip install '\.\[scan\]'.*laspy missing"
+    with pytest.raises(PointFileError, match=wording):
         check_point_output(tmp_path / "a.las")
     assert check_point_output(tmp_path / "a.ply") == "ply"          # PLY needs nothing
     assert not list(tmp_path.iterdir())
