@@ -52,6 +52,7 @@ from functools import cached_property
 import numpy as np
 
 from ...errors import PlantgenError
+from .morton import highest_bit, morton_codes
 
 __all__ = ["BVH", "BVH_METHODS", "BVHError", "SceneBVH", "TOP_LEAF_SIZE", "box_columns", "brute_force", "build_bvh",
            "build_scene_bvh", "copy_boxes", "float32_boxes", "morton_codes", "reduce_closest", "refit_bvh", "scene_bvh",
@@ -170,45 +171,13 @@ def _check_boxes(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-# ------------------------------------------------------------------------------ Morton codes
-def _spread21(x: np.ndarray) -> np.ndarray:
-    """uint64 values of 21 bits spread out to every third bit."""
-    x = x & np.uint64(0x1FFFFF)
-    x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    x = (x | (x << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    x = (x | (x << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    x = (x | (x << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return x
-
-
-def morton_codes(points: np.ndarray) -> np.ndarray:
-    """(n,) uint64 63-bit Morton codes of points (n, 3): 21 bits an axis over the points'
-    bounding cube (x in the highest of each three bits)."""
-    points = np.asarray(points, dtype=np.float64)
-    if not len(points):
-        return np.zeros(0, np.uint64)
-    lo = points.min(axis=0)
-    extent = float((points.max(axis=0) - lo).max())
-    q = np.clip((points - lo) / (extent if extent > 0 else np.inf) * (2 ** 21 - 1), 0, 2 ** 21 - 1)
-    q = q.astype(np.uint64)
-    return (_spread21(q[:, 0]) << np.uint64(2)) | (_spread21(q[:, 1]) << np.uint64(1)) | _spread21(q[:, 2])
-
-
-def _highest_bit(x: np.ndarray) -> np.ndarray:
-    """The highest set bit of each uint64 (0 for 0), exactly."""
-    for s in (1, 2, 4, 8, 16, 32):
-        x = x | (x >> np.uint64(s))
-    return x ^ (x >> np.uint64(1))
-
-
 # ------------------------------------------------------------------------------ the splits
 def _lbvh_splits(codes: np.ndarray):
     """A split function over primitives already sorted by ``codes``."""
 
     def split(order, s, e):
         c0, c1 = codes[s], codes[e - 1]
-        top = _highest_bit(c0 ^ c1)
+        top = highest_bit(c0 ^ c1)
         value = c1 & ~(top - np.uint64(1))
         mid = np.searchsorted(codes, value, side="left")
         return np.where(top == 0, (s + e) // 2, mid)
