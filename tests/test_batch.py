@@ -275,8 +275,9 @@ def test_a_batch_plant_is_what_render_and_export_make(tmp_path, client):
     view_camera(frusta, (64, 48), 30, model_leaves(grown)).save(tmp_path / "cam.json")
     images = {}
     for name in ("smooth", "plain"):
+        # a batch draws the plant alone, as before the render's default ground: --ground none
         code, _, err = run_cli("render", tmp_path / f"{name}.yaml", "--seed", seed, "--camera", tmp_path / "cam.json",
-                               "--no-relief", "-o", tmp_path / f"{name}.png")
+                               "--no-relief", "--ground", "none", "-o", tmp_path / f"{name}.png")
         assert code == 0, err
         images[name] = np.asarray(Image.open(tmp_path / f"{name}.png"))
     batch_png = np.asarray(Image.open(tmp_path / "out" / files["png"][0]))

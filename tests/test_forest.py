@@ -198,7 +198,15 @@ def test_instanced_raster_draws_the_merged_mesh(relief):
     instanced = renderer.render_placed(meshes, camera, **kw)
     hit = np.isfinite(merged.distance)
     assert hit.sum() > 2000
-    np.testing.assert_array_equal(np.isfinite(instanced.distance), hit)
+    # the same coverage but where a silhouette crosses a pixel centre (float32 placement
+    # 1e4 from the origin against float64): a pixel that differs has a neighbour on the
+    # other side of the merged image's silhouette, and such pixels are a few in 10,000
+    differs = np.isfinite(instanced.distance) != hit
+    padded = np.pad(hit, 1, mode="edge")
+    edge = ((padded[1:-1, :-2] != hit) | (padded[1:-1, 2:] != hit)
+            | (padded[:-2, 1:-1] != hit) | (padded[2:, 1:-1] != hit))
+    assert not (differs & ~edge).any() and differs.mean() <= 1e-4, np.argwhere(differs)
+    hit &= np.isfinite(instanced.distance)
     rel = np.abs(instanced.distance[hit] / merged.distance[hit] - 1)
     assert np.quantile(rel, 0.99) <= 4e-6       # the last percent: where surfaces cross
     same = np.abs(instanced.color.astype(int) - merged.color).max(axis=-1) <= 1

@@ -42,7 +42,8 @@ def distance_to_skeleton(points, skel):
 
 def test_render_writes_image_camera_and_depth_that_agree(gl_ctx, skeleton_file, tmp_path):
     out, cam_path, depth_path = tmp_path / "a.png", tmp_path / "cam.json", tmp_path / "d.npy"
-    code, stdout, stderr = run_cli("render", skeleton_file, "-o", out, "--size", SIZE,
+    # --ground none: the model's own depth (tests/test_ground.py checks the ground's)
+    code, stdout, stderr = run_cli("render", skeleton_file, "-o", out, "--size", SIZE, "--ground", "none",
                                    "--camera-out", cam_path, "--depth-out", depth_path)
     assert code == 0, stderr
     assert "GL renderer: " + gl_ctx.info["GL_RENDERER"] in stdout

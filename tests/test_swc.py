@@ -135,7 +135,7 @@ def test_export_and_render_read_swc(tmp_path):
     write_swc(skel, tmp_path / "s.swc", up="z")
     code, stdout, stderr = run_cli("export", tmp_path / "s.swc", "-o", tmp_path / "s.glb", "--subdiv", "0")
     assert code == 0, stderr
-    assert f"{len(skel)} segments" in stdout
+    assert f"{len(skel)} branch segments" in stdout
     code, stdout, stderr = run_cli("export", "saguaro", "-o", tmp_path / "e.swc")
     assert code == 0, stderr
     assert_same(read_swc(tmp_path / "e.swc"), skel)

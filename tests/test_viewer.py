@@ -108,7 +108,7 @@ def test_orbit_methods_and_screenshots_match_plantgen_render(x_display, tmp_path
         model = prepare_model("saguaro")
         frusta = model.frusta_at(0.0)
         settings, shadows = RenderSettings().frame(("shadows",))
-        staging = stage_model(model.grown, frusta, 320, 240, camera=Camera.load(second))
+        staging = stage_model(model.grown, frusta, 320, 240, camera=Camera.load(second), ground="auto")
         expected = RasterRenderer(gl_ctx).render(tessellate(frusta, 2), frusta,
                                                  **frame_arguments(frusta, staging, shadows))
         assert np.array_equal(gs, expected.color)

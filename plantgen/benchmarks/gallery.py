@@ -119,6 +119,10 @@ def entries() -> list[Entry]:
         "--snapshot", "{out}/viewer.png"), ("viewer.png",), (960, 600), display=True))
     out.append(Entry("bench", ("plantgen", "bench", "--out", "{out}/bench/llvmpipe"),
                      tuple(f"bench/llvmpipe/curves_{m}.png" for m in TABLE1_MODELS), slow=True))
+    # plantgen beside Blender's Cycles of its own export, scored with FLIP (needs Blender)
+    out.append(Entry("looks", ("python", "-m", "plantgen.benchmarks.looks", "--size", "256x192", "--reference-samples",
+                               "256", "--samples", "1,4,16,64", "--out", "{out}/bench/llvmpipe"),
+                     ("bench/llvmpipe/looks.png",), slow=True))
     return out
 
 
