@@ -216,14 +216,6 @@ SPEED = re.compile(
 #: The prose pages: they never type a speed figure, they point at the benchmark tables (or
 #: include a bench's table by snippet).
 PROSE = ("how-to", "tutorials", "explanation")
-#: Pages still carrying figures of measurements no committed bench table holds (issue 46:
-#: to move into a bench's table); the test fails when one of them is clean, so the list
-#: only shrinks.
-PROSE_PENDING = {"explanation/motion.md": "the GPU pose's costs: no bench writes them yet"}
-#: Speed figures on each benchmark page that no table on it holds (issue 46): at most this
-#: many, so a new one fails; lower the count as they are moved into the benches' tables.
-BENCH_PENDING = {"batch.md": 1, "bvh.md": 2, "forest.md": 3, "rt.md": 9, "scaling.md": 1, "scan.md": 4,
-                 "table1.md": 8}
 
 
 def _fences_out(text: str) -> str:
@@ -277,10 +269,8 @@ def test_the_readme_and_the_guides_type_no_speed_figure():
     for name in _prose_pages():
         text = (DOCS / name).read_text(encoding="utf-8")
         found[name] = speed_figures(re.sub(r'^--8<--\s+".*"\s*$', "", text, flags=re.M))   # included: a table's
-    typed = {name: [f for f, _ in figures] for name, figures in found.items() if figures and name not in PROSE_PENDING}
+    typed = {name: [f for f, _ in figures] for name, figures in found.items() if figures}
     assert typed == {}, f"pages that type speed figures instead of pointing at a bench table: {typed}"
-    clean = [name for name in PROSE_PENDING if not found.get(name)]
-    assert clean == [], f"no longer pending, take them off PROSE_PENDING: {clean}"
 
 
 def test_the_guides_include_the_bench_summary_they_quote():
@@ -289,7 +279,7 @@ def test_the_guides_include_the_bench_summary_they_quote():
     assert "| single plants | 1024x768 | RC on 5 of 5 |" in text
 
 
-@pytest.mark.parametrize("name", sorted({p.name for p in (DOCS / "benchmarks").glob("*.md")} | set(BENCH_PENDING)))
+@pytest.mark.parametrize("name", sorted(p.name for p in (DOCS / "benchmarks").glob("*.md")))
 def test_a_benchmark_page_quotes_only_figures_its_tables_hold(name):
     """A benchmark page's prose may discuss the numbers of its tables and of the bench
     files it includes (a bench's output, tables and notes, is the source); a speed figure
@@ -301,4 +291,4 @@ def test_a_benchmark_page_quotes_only_figures_its_tables_hold(name):
     held = table_numbers(text) | set(re.findall(r"\d[\d,]*(?:\.\d+)?", included))
     prose = "\n".join(line for line in snippet.sub("", text).splitlines() if not line.lstrip().startswith("|"))
     loose = [figure for figure, numbers in speed_figures(prose) if not set(numbers) <= held]
-    assert len(loose) <= BENCH_PENDING.get(name, 0), f"figures no table on the page holds: {loose}"
+    assert loose == [], f"figures no table on the page holds: {loose}"

@@ -86,7 +86,8 @@ smooth_bends_opt = click.option(
     callback=finite, metavar="ANGLE",
     help="Round every joint where a branch bends by more than ANGLE degrees into an arc of short "
          "pieces (at most 10° each), so bent branches read as smooth tubes rather than polylines; "
-         "radii and texture stay continuous. Default: off (straight pieces meet at the joints).")
+         "radii and texture stay continuous. Default: the grammar's `turtle: smooth_bends` setting "
+         "(the saguaro's: 20), else off (straight pieces meet at the joints).")
 
 #: Where the glossary of the paper's terms is, as ``--help`` and the reports point to it.
 GLOSSARY = "docs: reference/glossary.md"
