@@ -154,6 +154,9 @@ def set_render(scene, job, still):
     cycles.use_adaptive_sampling = False
     transparent = bool(still.get("transparent", False))
     scene.render.film_transparent = transparent
+    for obj in scene.objects:          # a mask leaves out what plantgen's mask leaves out
+        if any(obj.name.split(".")[0] == name for name in job.get("mask_hides", ())):
+            obj.hide_render = transparent
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0

@@ -221,9 +221,14 @@ def glb_light(glb: Path) -> list[float]:
 # ----------------------------------------------------------------------------- Cycles' side
 def cycles_job(glb: Path, camera: Path, size, threads: int = 0) -> dict:
     """The job :mod:`~plantgen.benchmarks.cycles_reference` reads, less its ``renders``:
-    the file, plantgen's camera, sun, ambient and sky, the image's size."""
+    the file, plantgen's camera, sun, ambient and sky, the image's size, and what a
+    coverage mask leaves out (``mask_hides``: a single plant's ground disc, which
+    ``plantgen render --background none`` does not draw; a scene's ground it does)."""
     view = json.loads(Path(camera).read_text())
+    data = Path(glb).read_bytes()
+    scene = "cameras" in json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
     return {"file": str(glb), "size": [int(size[0]), int(size[1])], "threads": int(threads),
+            "mask_hides": [] if scene else ["Ground"],
             "camera": {key: view[key] for key in ("eye", "target", "up", "fov_y")},
             "light": {"towards": glb_light(glb), "color": list(LIGHT_COLOR)},
             "ambient": list(AMBIENT_COLOR),
