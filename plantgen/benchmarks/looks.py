@@ -202,13 +202,18 @@ def export_reference_glb(scene: str, work: Path, frusta: int, max_triangles: int
     return glb, level
 
 
+def glb_document(glb: Path) -> dict:
+    """The JSON chunk of a glb file (its first chunk: the length at bytes 12-16, the text
+    from byte 20)."""
+    data = Path(glb).read_bytes()
+    return json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+
+
 def glb_light(glb: Path) -> list[float]:
     """The unit direction towards the sun of a plantgen glb (y up): its
     ``KHR_lights_punctual`` node's, or the model light plantgen gives a grammar (whose file
     has none). The intensity is left out: plantgen's renderer draws every light at 1."""
-    data = glb.read_bytes()
-    length = int.from_bytes(data[12:16], "little")
-    document = json.loads(data[20:20 + length])
+    document = glb_document(glb)
     for node in document.get("nodes", []):
         if "KHR_lights_punctual" in node.get("extensions", {}):
             x, y, z, w = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
@@ -225,8 +230,7 @@ def cycles_job(glb: Path, camera: Path, size, threads: int = 0) -> dict:
     coverage mask leaves out (``mask_hides``: a single plant's ground disc, which
     ``plantgen render --background none`` does not draw; a scene's ground it does)."""
     view = json.loads(Path(camera).read_text())
-    data = Path(glb).read_bytes()
-    scene = "cameras" in json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+    scene = "cameras" in glb_document(glb)
     return {"file": str(glb), "size": [int(size[0]), int(size[1])], "threads": int(threads),
             "mask_hides": [] if scene else ["Ground"],
             "camera": {key: view[key] for key in ("eye", "target", "up", "fov_y")},
