@@ -21,7 +21,7 @@ def _picture(seed=0, h=48, w=64):
 
 
 def test_flip_is_zero_for_identical_images_and_rises_with_noise():
-    pytest.importorskip("flip_evaluator")
+    pytest.importorskip("flip_evaluator", reason="flip-evaluator (the bench and test extras) is not installed")
     image = _picture()
     same, error_map = looks.flip_error(image, image)
     assert same == pytest.approx(0.0, abs=1e-6) and error_map.shape == image.shape[:2]
