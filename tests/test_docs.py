@@ -229,18 +229,38 @@ def speed_figures(text: str) -> list[tuple[str, tuple[str, ...]]]:
             for m in SPEED.finditer(_fences_out(text))]
 
 
+#: An include on a line of its own (``--8<-- "file"`` or ``"file:section"``) and the
+#: section markers inside an included file, as pymdownx.snippets reads them.
+SNIPPET = re.compile(r'^--8<--\s+"([^":]+)(?::([\w-]+))?"\s*$', re.M)
+SECTION_MARK = re.compile(r"^.*--8<-- \[(start|end):([\w-]+)\].*$")
+
+
 def with_snippets(text: str) -> str:
-    """``text`` with its ``--8<--`` includes resolved by pymdownx.snippets, configured as
-    mkdocs.yml configures it (the bench tables of gallery/bench)."""
-    import markdown
+    """``text`` with its ``--8<--`` includes resolved from mkdocs.yml's snippet base path
+    (the bench tables of gallery/bench): a whole file, or the lines between a section's
+    start and end markers; the markers themselves left out, as the site drops them. Read
+    here, not through pymdownx, so the test extra alone runs these tests."""
     import yaml
 
     config = yaml.safe_load((REPO / "mkdocs.yml").read_text(encoding="utf-8"))
     options = next(e["pymdownx.snippets"] for e in config["markdown_extensions"]
                    if isinstance(e, dict) and "pymdownx.snippets" in e)
-    options = {**options, "base_path": [str(REPO / p) for p in options["base_path"]]}
-    md = markdown.Markdown(extensions=["pymdownx.snippets"], extension_configs={"pymdownx.snippets": options})
-    return "\n".join(md.preprocessors["snippet"].run(text.split("\n")))
+    bases = [REPO / p for p in options["base_path"]]
+
+    def include(m: re.Match) -> str:
+        path = next(base / m.group(1) for base in bases if (base / m.group(1)).is_file())
+        lines, inside = [], m.group(2) is None
+        for line in path.read_text(encoding="utf-8").splitlines():
+            mark = SECTION_MARK.match(line)
+            if mark:
+                if mark.group(2) == m.group(2):
+                    inside = mark.group(1) == "start"
+                continue
+            if inside:
+                lines.append(line)
+        return "\n".join(lines)
+
+    return SNIPPET.sub(include, text)
 
 
 def table_numbers(text: str) -> set[str]:
