@@ -31,8 +31,11 @@ What each tracer is given, built from the same skinned frusta and leaf triangles
 
 Mitsuba's rays are ``mi.Ray3f`` made from the same numpy arrays once (float32), traced by
 ``scene.ray_intersect_preliminary`` (the distance and primitive, what plantgen's tracers
-return: ``ray_intersect`` would add a surface interaction) and ``scene.ray_test`` for the
-shadow rays, each result read back into numpy.
+return) and ``scene.ray_test`` for the shadow rays, each result read back into numpy.
+``scene.ray_intersect``, which adds the full surface interaction, is not timed: on the
+forest it took 26 to 40 s a call for 4,800 rays here, every call, not only the first
+(Mitsuba 3.9.1; apparently Dr.Jit records the instanced shapes' interaction code anew
+each time).
 
 *build s*: from the distinct plants' primitives to a traceable scene: plantgen's BVH
 (and the CPU tracer's gathered arrays, or RT's upload); Mitsuba's shapes made from
