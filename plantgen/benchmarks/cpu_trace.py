@@ -2,7 +2,9 @@
 the numpy one it replaces, on a scene's two-level BVH, in one run.
 
 Run: ``python -m plantgen.benchmarks.cpu_trace [--scene forest] [--size 1024x768]
-[--sample 8] [--scan-step 0.5] [--full-scan] [--out cpu_trace.md]``.
+[--sample 8] [--scan-step 0.5] [--full-scan] [--out cpu_trace.md]`` (``--scene forest_cut``: the
+looks bench's cut of the forest). The rays are made by :func:`scene_rays`, :func:`shadow_rays`
+and :func:`scan_rays`, which the peer bench (:mod:`plantgen.benchmarks.peers`) shares.
 
 Rows: the eye's rays of the scene's default camera at ``--size`` (closest hit), the
 shadow rays of those that hit towards the scene's light (any hit, t_min 1e-4), and a
