@@ -56,7 +56,7 @@ def test_the_peers_trace_what_plantgen_traces(tiny, gl_ctx, tmp_path):
     assert list(rows) == [peers.NUMBA, peers.GLSL, peers.CURVES, peers.TRIANGLES]
     assert result["counts"]["primary"] == 48 * 36 and result["counts"]["scan"] > 0
     assert 0.05 < result["hits"] < 0.95
-    assert rows[peers.GLSL]["agree"] >= 0.999 and rows[peers.GLSL]["depth_diff"] < 1e-4
+    assert rows[peers.GLSL]["agree"] >= 0.995 and rows[peers.GLSL]["depth_diff"] < 1e-4
     for name in (peers.CURVES, peers.TRIANGLES):     # other primitives (round curves, 16 facets): most rays
         assert rows[name]["agree"] >= 0.98, (name, rows[name]["agree"])
         assert rows[name]["depth_diff"] < 1e-3, (name, rows[name]["depth_diff"])
