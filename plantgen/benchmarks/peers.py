@@ -37,16 +37,17 @@ forest it took 26 to 40 s a call for 4,800 rays here, every call, not only the f
 (Mitsuba 3.9.1; apparently Dr.Jit records the instanced shapes' interaction code anew
 each time).
 
-*build s*: from the distinct plants' primitives to a traceable scene: plantgen's BVH
-(and the CPU tracer's gathered arrays, or RT's upload); Mitsuba's shapes made from
-float32 arrays and ``mi.load_dict`` (its Embree build). *peak MiB*: how far the process's
-peak resident memory rose from just before the build through the tracer's warm-up
-traces (its compilers' and drivers' memory included: Dr.Jit's LLVM kernels, llvmpipe's
-shader; the numba kernels are loaded from numba's cache before; Linux only). Then every
-ray kind is traced by each tracer in turn, ``--rounds`` times (the median; rays/s of wall
-time). Agreement with plantgen's float64 tracer: the share of primary rays where a
-tracer's hit or miss is its, the median absolute difference of their depths where both
-hit (scene units, metres), and the share of shadow rays it finds blocked or free alike.
+*build s*: from the distinct plants' primitives to a traceable scene: plantgen's BVH (and
+the CPU tracer's gathered arrays, or RT's upload); Mitsuba's shapes made from float32 arrays
+and ``mi.load_dict`` (its Embree build). *peak MiB*: how far the process's peak resident
+memory rose from just before the build through the tracer's warm-up traces (its compilers'
+and drivers' memory included: Dr.Jit's LLVM kernels, llvmpipe's shader; the numba kernels
+are loaded from numba's cache before; Linux only). Then every ray kind is traced by each
+tracer in turn, ``--rounds`` times (the median; rays/s of wall time, and of the process's
+CPU time: every thread's, what other jobs change least). Agreement with plantgen's float64
+tracer: the share of primary rays where a tracer's hit or miss is its, the median absolute
+difference of their depths where both hit (scene units, metres), and the share of shadow
+rays it finds blocked or free alike.
 """
 
 from __future__ import annotations
@@ -319,19 +320,22 @@ def measure_scene(scene: str, mitsuba, size=(320, 240), scan_step: float = 2.0, 
         for name, tracer in tracers.items():
             ready[name] = _ready(tracer, rays)
             say(f"{scene}, {name}: build {ready[name]['build_s']:.2f} s, peak {ready[name]['peak_mib']:.0f} MiB")
-        times = {(name, kind): [] for name in tracers for kind in KINDS}
+        times = {(name, kind): ([], []) for name in tracers for kind in KINDS}
         for _ in range(rounds):
             for kind in KINDS:
                 for name, tracer in tracers.items():
-                    t0 = time.perf_counter()
+                    c, t0 = time.process_time(), time.perf_counter()
                     tracer.trace(*rays[kind])
-                    times[name, kind].append(time.perf_counter() - t0)
+                    times[name, kind][0].append(time.perf_counter() - t0)
+                    times[name, kind][1].append(time.process_time() - c)
     reference = ready[NUMBA]["t"]
     rows = {}
     for name in tracers:
-        rate = {kind: len(rays[kind][0]) / statistics.median(times[name, kind]) for kind in KINDS}
+        rate, rate_cpu = ({kind: len(rays[kind][0]) / max(statistics.median(times[name, kind][i]), 1e-9)
+                           for kind in KINDS} for i in (0, 1))
         agree, diff = _agreement(reference["primary"], ready[name]["t"]["primary"])
         rows[name] = {"build_s": ready[name]["build_s"], "peak_mib": ready[name]["peak_mib"], "rate": rate,
+                      "rate_cpu": rate_cpu,
                       "agree": agree, "depth_diff": diff,
                       "agree_shadow": _agreement(reference["shadow"], ready[name]["t"]["shadow"])[0]}
         say(f"{scene}, {name}: " + ", ".join(f"{k} {v:,.0f}/s" for k, v in rate.items()) + f"; agrees {agree:.4f}")
@@ -376,18 +380,26 @@ def _heading(r: dict) -> list[str]:
             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
 
 
+def _cells(r: dict, row: dict, key: str) -> str:
+    peers = r["rows"].get(CURVES), r["rows"].get(TRIANGLES)
+    return " | ".join(_cell(row[key][k], *(p[key][k] if p else None for p in peers)) for k in KINDS)
+
+
 def markdown(results: list[dict]) -> str:
     """The tables: a section a scene."""
     lines = []
     for r in results:
         lines += _heading(r)
-        peers = r["rows"].get(CURVES), r["rows"].get(TRIANGLES)
         for name, row in r["rows"].items():
-            cells = [_cell(row["rate"][k], *(p["rate"][k] if p else None for p in peers)) for k in KINDS]
             same = ("(reference)", "", "(reference)") if name == NUMBA else \
                 (f"{row['agree']:.4f}", f"{row['depth_diff']:.1e}", f"{row['agree_shadow']:.4f}")
-            lines.append(f"| {name} | {row['build_s']:.2f} | {row['peak_mib']:,.0f} | {' | '.join(cells)} | "
+            lines.append(f"| {name} | {row['build_s']:.2f} | {row['peak_mib']:,.0f} | {_cells(r, row, 'rate')} | "
                          f"{' | '.join(same)} |")
+        lines += ["", "The same rounds in the process's CPU time (every thread: numba's, Dr.Jit's, llvmpipe's), "
+                  "what the other jobs on a shared machine change least:", "",
+                  "| tracer | primary rays/s of CPU | shadow rays/s of CPU | scan rays/s of CPU |",
+                  "|---|---:|---:|---:|"]
+        lines += [f"| {name} | {_cells(r, row, 'rate_cpu')} |" for name, row in r["rows"].items()]
         lines += ["", f"GL renderer: {r['notes'].get('renderer', r['notes'].get(GLSL, 'not run (--no-gl)'))}; "
                   f"{r['versions']}; numba {r['threads']} threads. Machine: {r['machine']} (at the end). "
                   f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}.", ""]
