@@ -2,7 +2,9 @@
 the numpy one it replaces, on a scene's two-level BVH, in one run.
 
 Run: ``python -m plantgen.benchmarks.cpu_trace [--scene forest] [--size 1024x768]
-[--sample 8] [--scan-step 0.5] [--full-scan] [--out cpu_trace.md]``.
+[--sample 8] [--scan-step 0.5] [--full-scan] [--out cpu_trace.md]`` (``--scene forest_cut``: the
+looks bench's cut of the forest). The rays are made by :func:`scene_rays`, :func:`shadow_rays`
+and :func:`scan_rays`, which the peer bench (:mod:`plantgen.benchmarks.peers`) shares.
 
 Rows: the eye's rays of the scene's default camera at ``--size`` (closest hit), the
 shadow rays of those that hit towards the scene's light (any hit, t_min 1e-4), and a
@@ -32,12 +34,62 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.rays import native_trace
+from ..geometry.rays.beams import beam_grids
 from ..geometry.rays.scan import ScanSettings, beam_returns, scene_target
 from ..pipeline import prepare_model, stage_model
 from .arguments import image_size, report
+from .looks import model_input
 from .scan import machine
 
-__all__ = ["compile_times", "full_scan", "main", "markdown", "measure"]
+__all__ = ["SCANNER", "SHADOW_T_MIN", "compile_times", "full_scan", "main", "markdown", "measure", "scan_rays",
+           "scan_settings", "scene_rays", "shadow_rays"]
+
+#: Where the benches' terrestrial scanner stands (issue 44's rays: inside the forest).
+SCANNER = "2,1.5,10"
+#: Where a shadow ray starts counting hits, past the surface it leaves.
+SHADOW_T_MIN = 1e-4
+
+
+# ---------------------------------------------------------------------------- the rays (shared)
+def scene_rays(scene: str, size) -> tuple:
+    """``scene`` (a shipped name, a path, or ``forest_cut``: the looks bench's cut of the
+    forest) grown and staged at ``size`` (width, height): (staging, its two-level
+    :class:`~plantgen.geometry.rays.scan.SceneTarget`, the eye rays' origins (n, 3) and unit
+    directions (n, 3), one a pixel of the scene's camera)."""
+    model = prepare_model(model_input(scene))
+    placed = model.placed if model.placed is not None else model.frusta_at(0)
+    staging = stage_model(model.grown, placed, *size)
+    target = scene_target(model.grown.scene.plants())
+    O, D = (np.ascontiguousarray(a.reshape(-1, 3), dtype=np.float64) for a in staging.camera.rays())
+    return staging, target, O, D
+
+
+def shadow_rays(staging, origins, dirs, t) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow rays of the eye rays that hit (``t`` finite): from each hit point towards
+    the scene's light (``staging.light_dir`` points at it), unit directions; trace them
+    from ``t_min`` :data:`SHADOW_T_MIN` (any hit)."""
+    hit = np.isfinite(t)
+    light = np.asarray(staging.light_dir, np.float64)
+    so = np.ascontiguousarray(origins[hit] + t[hit, None] * dirs[hit])
+    return so, np.ascontiguousarray(np.broadcast_to(light / np.linalg.norm(light), so.shape))
+
+
+def scan_settings(step: float) -> ScanSettings:
+    """One terrestrial scanner at :data:`SCANNER`, ``step`` degrees between beams, ideal beams."""
+    return ScanSettings(positions=SCANNER, angular_step=step)
+
+
+def scan_rays(target, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every beam of :func:`scan_settings` at ``step`` against ``target`` as plain rays:
+    origins (n, 3) and unit directions (n, 3), in the scan's beam order (the beams
+    :func:`~plantgen.geometry.rays.scan.beam_returns` traces, without its bookkeeping)."""
+    parts = []
+    for grid in beam_grids(target, scan_settings(step)):
+        beam = np.arange(grid.count, dtype=np.int64)
+        parts.append(grid.rays(grid.a0 + beam // grid.nb, grid.b0 + beam % grid.nb))
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return tuple(np.ascontiguousarray(np.concatenate(p)) for p in zip(*parts, strict=True))
 
 
 def _timed(run):
@@ -70,7 +122,7 @@ def _compare(target, O, D, sample: int, **kw) -> dict:
 
 def _scan(target, step: float) -> dict:
     """One terrestrial scanner at 2,1.5,10: beams/s numpy against compiled."""
-    settings = ScanSettings(positions="2,1.5,10", angular_step=step)
+    settings = scan_settings(step)
     out = {}
     for name, numpy_on in (("numba", False), ("numpy", True)):
         _numpy_walk(numpy_on)
@@ -123,19 +175,12 @@ def measure(scene: str = "forest", size=(1024, 768), sample: int = 8, scan_step:
     compiled = compile_times()
     say(f"compile {compiled['compile']:.1f} s, cached {compiled['cached']:.2f} s")
     native_trace.warm_up()
-    model = prepare_model(scene)
-    placed = model.placed if model.placed is not None else model.frusta_at(0)
-    staging = stage_model(model.grown, placed, *size)
-    target = scene_target(model.grown.scene.plants())
+    staging, target, O, D = scene_rays(scene, size)
     _, build_wall, _ = _timed(lambda: (target.bvh, target.native))
-    O, D = (a.reshape(-1, 3) for a in staging.camera.rays())
     rows = {"eye rays (closest hit)": _compare(target, O, D, sample)}
     eye = rows["eye rays (closest hit)"]
-    hit = np.isfinite(eye["hit_t"])
-    light = np.asarray(staging.light_dir, np.float64)
-    so = O[hit] + eye["hit_t"][hit, None] * D[hit]
-    sd = np.ascontiguousarray(np.broadcast_to(-light / np.linalg.norm(light), so.shape))
-    rows["shadow rays (any hit)"] = _compare(target, so, sd, sample, any_hit=True, t_min=1e-4)
+    so, sd = shadow_rays(staging, O, D, eye["hit_t"])
+    rows["shadow rays (any hit)"] = _compare(target, so, sd, sample, any_hit=True, t_min=SHADOW_T_MIN)
     for name, r in rows.items():
         say(f"{name}: numpy {r['numpy'][0]:,.0f}/s, numba {r['numba'][0]:,.0f}/s, same {r['same']:.6f}")
     scan = _scan(target, scan_step)
