@@ -11,7 +11,7 @@ up), the ``light`` (``towards``: the unit direction to the sun, y up, its ``colo
 ``angle``, the sun's angular diameter in degrees), ``ambient`` (plantgen's ambient
 colour), ``sky`` (``zenith``, ``horizon``, ``ground``: plantgen's sky gradient),
 ``leaf_transmission`` (plantgen's translucent leaves; 0: opaque) and ``matte`` (the
-objects whose materials lose Principled's specular layer: the ground).
+objects whose materials become Lambertian: the ground).
 
 What it sets, and why (the traps of Debian's Blender 3.4 as a reference):
 
@@ -22,8 +22,9 @@ What it sets, and why (the traps of Debian's Blender 3.4 as a reference):
   angle (0 by default: a hard shadow, as a shadow map gives);
 - the leaves (materials named ``... (leaf)``) add a Translucent BSDF of
   ``leaf_transmission`` times their colour, as plantgen's translucent leaves pass the light
-  falling on their far side; the ground is matte (Principled's specular 0: plantgen's sand
-  is nearly Lambertian, where the default specular lights the far ground up). The ground's
+  falling on their far side; the ground is Lambertian (a Diffuse BSDF: plantgen's sand
+  is nearly so, where the imported Principled BSDF's specular and retro-reflection light
+  the far ground up). The ground's
   fade into the sky is in the file (its texture's alpha, ``alphaMode: BLEND``): camera
   rays pass through its rim to the sky;
 - the camera is rebuilt from plantgen's (the import ignores the aspect ratio), vertical
@@ -34,7 +35,10 @@ What it sets, and why (the traps of Debian's Blender 3.4 as a reference):
 - linear light out, unclipped: each still is written as a 32-bit EXR and then as a
   (h, w, 4) float32 ``out.npy`` (row 0 at the top), which the benchmark tones with
   plantgen's own display curve (the tone curve and sRGB of plantgen's default render);
-  no denoiser, no adaptive sampling, a fixed seed.
+  no denoiser, no adaptive sampling, a fixed seed;
+- a box pixel filter one pixel wide (Cycles' default is a 1.5-pixel Blackman-Harris,
+  which blurs across neighbours): the converged reference is each pixel's own area
+  averaged, what plantgen's ``--ssaa N`` converges to.
 
 Before each render it prints ``CYCLES-START name``, after it one line ``CYCLES {json}``
 with the seconds of the import and the scene's building (``import_s``, once for all) and
@@ -187,18 +191,40 @@ def translucent_leaves(transmission):
 
 
 def matte(names):
-    """The materials of the objects ``names`` (the ground) without Principled's specular
-    layer: plantgen draws its ground nearly Lambertian (a specular of 0.02), where the
-    importer's default specular 0.5 reflects the sky at grazing angles and lights the far
-    ground up."""
+    """The materials of the objects ``names`` (the ground) made Lambertian, as plantgen
+    draws its ground (a specular of 0.02): a Diffuse BSDF of the imported base colour,
+    mixed with a Transparent BSDF by its alpha (the fade at the rim). The importer's
+    Principled BSDF would add a specular layer that reflects the sky at grazing angles and
+    a retro-reflective diffuse, both lighting the far ground up."""
     for obj in bpy.data.objects:
         if obj.type != "MESH" or obj.name.split(".")[0] not in names:
             continue
         for slot in obj.material_slots:
             if slot.material is not None and slot.material.use_nodes:
-                for node in slot.material.node_tree.nodes:
-                    if node.type == "BSDF_PRINCIPLED":
-                        node.inputs["Specular"].default_value = 0.0
+                lambert(slot.material.node_tree)
+
+
+def lambert(tree):
+    """``tree``'s Principled BSDF replaced at its output by Diffuse over Transparent by alpha."""
+    output = next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"), None)
+    bsdf = next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if output is None or bsdf is None:
+        return
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    colour = bsdf.inputs["Base Color"]
+    if colour.is_linked:
+        tree.links.new(colour.links[0].from_socket, diffuse.inputs["Color"])
+    else:
+        diffuse.inputs["Color"].default_value = colour.default_value
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    alpha = bsdf.inputs["Alpha"]
+    if alpha.is_linked:
+        tree.links.new(alpha.links[0].from_socket, mix.inputs["Fac"])
+    else:
+        mix.inputs["Fac"].default_value = alpha.default_value
+    tree.links.new(tree.nodes.new("ShaderNodeBsdfTransparent").outputs[0], mix.inputs[1])
+    tree.links.new(diffuse.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], output.inputs["Surface"])
 
 
 def set_render(scene, job, still):
@@ -211,6 +237,7 @@ def set_render(scene, job, still):
     cycles.seed = int(still.get("seed", 0))
     cycles.use_denoising = False
     cycles.use_adaptive_sampling = False
+    cycles.pixel_filter_type, cycles.filter_width = "BOX", 1.0   # a pixel's own area, as plantgen's --ssaa averages
     transparent = bool(still.get("transparent", False))
     scene.render.film_transparent = transparent
     for obj in scene.objects:          # a mask leaves out what plantgen's mask leaves out
@@ -257,8 +284,8 @@ def main():
     add_camera(scene, job["camera"])
     add_sun(scene, job["light"])
     build_world(scene, job["sky"], job["ambient"])
-    translucent_leaves(float(job.get("leaf_transmission", 0.0)))
     matte(job.get("matte", ()))
+    translucent_leaves(float(job.get("leaf_transmission", 0.0)))
     imported = time.perf_counter() - start
     for still in job["renders"]:
         set_render(scene, job, still)
