@@ -124,8 +124,20 @@ def test_cycles_of_a_tiny_scene_covers_what_plantgen_covers(blender, tmp_path):
     glb, level = looks.export_reference_glb("saguaro", tmp_path, framed.frusta, 20_000, 6)
     assert level == 2
     job, mask_still = looks.cycles_job(glb, camera, (64, 48)), looks.still(4, transparent=True, kind="mask")
-    result = looks.render_cycles(job, [mask_still], tmp_path / "cache", blender, timeout=600)[mask_still["name"]]
+    colour = looks.still(16)
+    done = looks.render_cycles(job, [mask_still, colour], tmp_path / "cache", blender, timeout=600)
+    result = done[mask_still["name"]]
     from PIL import Image
+
+    # the colour still: Cycles' linear light toned as plantgen's default, and its ground
+    # (right of the plant, clear of its shadow) plantgen's own sand within a few levels
+    linear = np.load(done[colour["name"]]["image"].with_suffix(".npy"))
+    shown = np.asarray(Image.open(done[colour["name"]]["image"]).convert("RGB"))
+    assert linear.shape == (48, 64, 4) and np.array_equal(shown, looks.display_image(linear[..., :3]))
+    plantgen = np.asarray(Image.open(looks.render_variant("saguaro", "default", 0, camera, tmp_path, 1).image)
+                          .convert("RGB")).astype(float)
+    sand = np.s_[29:36, 48:64]
+    assert np.abs(shown[sand].astype(float).mean(axis=(0, 1)) - plantgen[sand].mean(axis=(0, 1))).max() < 3.0
 
     theirs = np.asarray(Image.open(result["image"]).convert("RGBA"))[..., 3]
     ours = np.asarray(Image.open(mask).convert("RGBA"))[..., 3]
