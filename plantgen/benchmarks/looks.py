@@ -5,8 +5,10 @@ export of the same scene, with NVIDIA's FLIP (``flip-evaluator``, LDR, the mean)
 For each scene: plantgen frames it once (``--camera-out``, ``--background none`` for its
 coverage mask); ``plantgen export --relief`` writes it with the relief in the vertices, at
 the finest subdivision under a triangle budget (the reference must carry the geometry the
-image it judges shows); Blender renders that file from the same camera, sun and sky
-(:mod:`plantgen.benchmarks.cycles_reference`): the reference at ``--reference-samples``,
+image it judges shows, and the ground's mottle and fade); Blender renders that file from
+the same camera, sun and sky (:mod:`plantgen.benchmarks.cycles_reference`: the ground
+Lambertian, the leaves translucent as plantgen's default leaves are), in linear light,
+which :func:`display_image` tones with plantgen's default display curve: the reference at ``--reference-samples``,
 a ladder of ``--samples`` (another seed) and a transparent coverage mask. plantgen renders
 each ``--variants`` entry (``plantgen render`` options: ``default`` for none), timed as the
 median of warm frames. Each image is scored against the reference; the ladder's scores

@@ -142,7 +142,8 @@ DISC_SIDES = 64
 def ground_mesh(ground: Ground, up: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ground's vertices (k, 3), unit normals (k, 3) and triangles (t, 3), facing up,
     in the ``up`` frame: a square's two triangles, or a disc's fan of :data:`DISC_SIDES`
-    (its rim's polygon; the renderers' fade into the sky is not written)."""
+    (its rim's polygon; the renderers' fade into the sky is the alpha of
+    :func:`ground_texture`, which glTF writes)."""
     rot = up_rotation(up)
     if ground.shape == "disc":
         angle = np.linspace(0.0, 2 * np.pi, DISC_SIDES, endpoint=False)
