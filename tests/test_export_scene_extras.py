@@ -121,7 +121,62 @@ def test_three_js_reads_the_scene_camera_light_and_ground(yard, auto_yard, tmp_p
     assert len(ground) == 4
     assert np.allclose(ground, grown.scene.ground.quad() @ rot.T, atol=1e-6)
     sand = next(m for m in doc["materials"] if m["name"] == "sand")
-    assert sand["pbrMetallicRoughness"]["baseColorFactor"][:3] == pytest.approx([0.575, 0.47, 0.3])
+    assert sand["pbrMetallicRoughness"]["baseColorFactor"] == [1.0, 1.0, 1.0, 1.0] and sand["alphaMode"] == "BLEND"
+    texture = ground_texture_of(tmp_path / "yard.glb")
+    inside = texture[..., 3] == 255
+    linear = srgb_to_linear(texture[..., :3][inside])
+    assert linear.mean(axis=0) == pytest.approx([0.575, 0.47, 0.3], abs=0.01)   # the sand's colour, mottled
+
+
+def ground_texture_of(path) -> np.ndarray:
+    """The decoded base colour texture of a glb's ground material, (n, n, 4) uint8."""
+    import io
+
+    from PIL import Image
+
+    data = path.read_bytes()
+    doc = glb_json(path)
+    binary = data[20 + struct.unpack_from("<I", data, 12)[0] + 8:]
+    ground = next(m for m in doc["meshes"] if m["name"] == "Ground")["primitives"][0]["material"]
+    texture = doc["textures"][doc["materials"][ground]["pbrMetallicRoughness"]["baseColorTexture"]["index"]]
+    view = doc["bufferViews"][doc["images"][texture["source"]]["bufferView"]]
+    start = view.get("byteOffset", 0)
+    return np.asarray(Image.open(io.BytesIO(binary[start:start + view["byteLength"]])).convert("RGBA"))
+
+
+def srgb_to_linear(c) -> np.ndarray:
+    c = np.asarray(c, np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def test_the_exported_ground_fades_into_the_sky_at_its_rim_as_the_render_draws_it(tmp_path):
+    """Issue 43: the ground's texture is plantgen's ground, its mottle and its fade: opaque
+    inside, its alpha falling to 0 at the rim (the disc's and the square's), its colour the
+    renderer's mottled albedo; a valid glTF that trimesh loads."""
+    import trimesh
+
+    from plantgen.geometry.skeletons.materials import material_palette
+    from plantgen.geometry.stage import Ground
+
+    export_model("saguaro", tmp_path / "s.glb", level=0, ground=True)
+    texture = ground_texture_of(tmp_path / "s.glb")
+    n = texture.shape[0]
+    alpha = texture[..., 3].astype(float) / 255
+    assert alpha[n // 2, n // 2] == 1.0 and alpha[0, 0] == 0.0 and alpha[n // 2, 0] < 0.01   # the rim's
+    assert 0.2 < alpha[n // 2, int(0.1 * n)] < 0.8                                           # fading
+    row = alpha[n // 2, : n // 2]
+    assert np.all(np.diff(row) >= 0)                   # rising monotonely from the rim inwards
+    extras = scene_extras(grow_file("saguaro"), ground=True)
+    ground = extras.ground
+    t = (np.arange(n) + 0.5) / n
+    x, z = np.meshgrid(ground.centre[0] + ground.half * (2 * t - 1), ground.centre[1] + ground.half * (2 * t - 1))
+    palette = material_palette(["sand"])
+    want = palette["dark"][0] + (palette["light"][0] - palette["dark"][0]) * ground.mottle(x, z)[..., None]
+    assert np.abs(srgb_to_linear(texture[..., :3]) - want).max() < 0.01    # column: x, row: z
+    assert trimesh.load(tmp_path / "s.glb").geometry["Ground"].visual.material.baseColorTexture.size == (n, n)
+    square = Ground(size=8.0, fade=0.25)
+    assert square.opacity(0.0, 0.0) == 1.0 and square.opacity(2.9, 0.0) == 1.0
+    assert square.opacity(3.9, 3.0) < 0.05 and square.opacity(4.1, 0.0) == 0.0 and 0 < square.opacity(3.5, 3.5) < 1
 
 
 @pytest.mark.parametrize("up", ["y", "z"])

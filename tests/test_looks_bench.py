@@ -79,6 +79,30 @@ def test_blender_timing_lines_split_set_up_from_sampling():
     assert looks.blender_times("no such line") == {}
 
 
+def test_the_reference_is_toned_as_plantgens_default_and_carries_its_sun_and_leaves(tmp_path):
+    """Cycles' linear light goes through plantgen's display curve (the tone curve, then
+    sRGB, as the default render's): below the knee it is sRGB, above it rolls off instead
+    of clipping; without the tone, clip then c^(1/2.2). The job passes plantgen's default
+    sun angle and leaf transmission, and leaves the ground matte."""
+    from plantgen.settings import TONE_KNEE, LookSettings
+
+    linear = np.array([[[0.0, 0.2, 0.5], [TONE_KNEE, 1.0, 1.5]]])
+    toned = looks.display_image(linear, LookSettings(tone=True))
+    srgb = np.rint(255 * (1.055 * np.array([0.2, 0.5]) ** (1 / 2.4) - 0.055))
+    assert toned[0, 0].tolist() == [0, *srgb.astype(int).tolist()]
+    assert toned[0, 1, 0] < toned[0, 1, 1] < toned[0, 1, 2] < 255               # rolled off, still rising
+    plain = looks.display_image(linear, LookSettings(tone=False))
+    assert plain[0, 1].tolist() == [int(np.rint(255 * TONE_KNEE ** (1 / 2.2))), 255, 255]
+    assert np.array_equal(looks.display_image(linear), looks.display_image(linear, LookSettings.defaults()))
+    camera = tmp_path / "camera.json"
+    camera.write_text('{"eye": [0, 1, 5], "target": [0, 1, 0], "up": [0, 1, 0], "fov_y": 40}')
+    glb, _ = looks.export_reference_glb("saguaro", tmp_path, 30, 200, 0)
+    job = looks.cycles_job(glb, camera, (64, 48))
+    defaults = LookSettings.defaults()
+    assert job["light"]["angle"] == defaults.sun_angle and job["matte"] == ["Ground"]
+    assert job["leaf_transmission"] == (defaults.transmission if defaults.translucency else 0.0)
+
+
 def test_the_light_of_a_scene_glb_is_its_scenes_and_a_grammar_gets_the_model_light(tmp_path):
     from plantgen.geometry.stage import MODEL_LIGHT
 
@@ -100,8 +124,20 @@ def test_cycles_of_a_tiny_scene_covers_what_plantgen_covers(blender, tmp_path):
     glb, level = looks.export_reference_glb("saguaro", tmp_path, framed.frusta, 20_000, 6)
     assert level == 2
     job, mask_still = looks.cycles_job(glb, camera, (64, 48)), looks.still(4, transparent=True, kind="mask")
-    result = looks.render_cycles(job, [mask_still], tmp_path / "cache", blender, timeout=600)[mask_still["name"]]
+    colour = looks.still(16)
+    done = looks.render_cycles(job, [mask_still, colour], tmp_path / "cache", blender, timeout=600)
+    result = done[mask_still["name"]]
     from PIL import Image
+
+    # the colour still: Cycles' linear light toned as plantgen's default, and its ground
+    # (right of the plant, clear of its shadow) plantgen's own sand within a few levels
+    linear = np.load(done[colour["name"]]["image"].with_suffix(".npy"))
+    shown = np.asarray(Image.open(done[colour["name"]]["image"]).convert("RGB"))
+    assert linear.shape == (48, 64, 4) and np.array_equal(shown, looks.display_image(linear[..., :3]))
+    plantgen = np.asarray(Image.open(looks.render_variant("saguaro", "default", 0, camera, tmp_path, 1).image)
+                          .convert("RGB")).astype(float)
+    sand = np.s_[29:36, 48:64]
+    assert np.abs(shown[sand].astype(float).mean(axis=(0, 1)) - plantgen[sand].mean(axis=(0, 1))).max() < 3.0
 
     theirs = np.asarray(Image.open(result["image"]).convert("RGBA"))[..., 3]
     ours = np.asarray(Image.open(mask).convert("RGBA"))[..., 3]

@@ -5,8 +5,10 @@ export of the same scene, with NVIDIA's FLIP (``flip-evaluator``, LDR, the mean)
 For each scene: plantgen frames it once (``--camera-out``, ``--background none`` for its
 coverage mask); ``plantgen export --relief`` writes it with the relief in the vertices, at
 the finest subdivision under a triangle budget (the reference must carry the geometry the
-image it judges shows); Blender renders that file from the same camera, sun and sky
-(:mod:`plantgen.benchmarks.cycles_reference`): the reference at ``--reference-samples``,
+image it judges shows, and the ground's mottle and fade); Blender renders that file from
+the same camera, sun and sky (:mod:`plantgen.benchmarks.cycles_reference`: the ground
+Lambertian, the leaves translucent as plantgen's default leaves are), in linear light,
+which :func:`display_image` tones with plantgen's default display curve: the reference at ``--reference-samples``,
 a ladder of ``--samples`` (another seed) and a transparent coverage mask. plantgen renders
 each ``--variants`` entry (``plantgen render`` options: ``default`` for none), timed as the
 median of warm frames. Each image is scored against the reference; the ladder's scores
@@ -46,10 +48,13 @@ from PIL import Image
 from ..errors import PlantgenError, missing_extra
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.material_uniforms import AMBIENT_COLOR, LIGHT_COLOR, SKY
+from ..gl.supersample import srgb_encode, tone_curve
+from ..settings import LookSettings
 from .arguments import image_size, report
 from .side_by_side import labelled_panels
 
 __all__ = ["SCENES", "BLENDER_SCRIPT", "flip_error", "coverage_overlap", "cycles_job", "still", "render_cycles",
+           "display_image",
            "samples_to_match", "main"]
 
 #: The scenes of issue 43: four grammars, the well, and a cut of the forest (shipped here).
@@ -226,15 +231,19 @@ def glb_light(glb: Path) -> list[float]:
 # ----------------------------------------------------------------------------- Cycles' side
 def cycles_job(glb: Path, camera: Path, size, threads: int = 0) -> dict:
     """The job :mod:`~plantgen.benchmarks.cycles_reference` reads, less its ``renders``:
-    the file, plantgen's camera, sun, ambient and sky, the image's size, and what a
-    coverage mask leaves out (``mask_hides``: a single plant's ground disc, which
-    ``plantgen render --background none`` does not draw; a scene's ground it does)."""
+    the file, plantgen's camera, sun (its colour, and the angular diameter of plantgen's
+    default sun), ambient and sky, the leaves' transmission where plantgen's default
+    leaves are translucent (0 where not), the image's size, and what a coverage mask
+    leaves out (``mask_hides``: a single plant's ground disc, which ``plantgen render
+    --background none`` does not draw; a scene's ground it does)."""
     view = json.loads(Path(camera).read_text())
     scene = "cameras" in glb_document(glb)
+    looks = LookSettings.defaults()
     return {"file": str(glb), "size": [int(size[0]), int(size[1])], "threads": int(threads),
-            "mask_hides": [] if scene else ["Ground"],
+            "mask_hides": [] if scene else ["Ground"], "matte": ["Ground"],
             "camera": {key: view[key] for key in ("eye", "target", "up", "fov_y")},
-            "light": {"towards": glb_light(glb), "color": list(LIGHT_COLOR)},
+            "light": {"towards": glb_light(glb), "color": list(LIGHT_COLOR), "angle": float(looks.sun_angle)},
+            "leaf_transmission": float(looks.transmission) if looks.translucency else 0.0,
             "ambient": list(AMBIENT_COLOR),
             "sky": {"zenith": list(SKY["sky_zenith"]), "horizon": list(SKY["sky_horizon"]),
                     "ground": list(SKY["ground_tint"])}}
@@ -284,10 +293,10 @@ def render_cycles(job: dict, stills: list[dict], cache: Path, blender: str, time
     import): {name: {"image": Path, "samples", seconds...}}. Blender's output goes to a log
     beside the images; a failure is a one-line PlantgenError naming it."""
     folder = cache / job_key(job)
-    todo = [s for s in stills if not all((folder / f"{s['name']}{ext}").exists() for ext in (".png", ".json"))]
+    todo = [s for s in stills if not all((folder / f"{s['name']}{ext}").exists() for ext in (".npy", ".json"))]
     if todo:
         folder.mkdir(parents=True, exist_ok=True)
-        renders = [{**s, "out": str(folder / f"{s['name']}.png")} for s in todo]
+        renders = [{**s, "out": str(folder / s["name"])} for s in todo]
         spec = folder / f"job_{todo[0]['name']}.json"
         spec.write_text(json.dumps({**job, "renders": renders}, indent=1))
         log = folder / f"job_{todo[0]['name']}.log"
@@ -296,14 +305,33 @@ def render_cycles(job: dict, stills: list[dict], cache: Path, blender: str, time
             done = subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, timeout=timeout)
         times = blender_times(log.read_text(errors="replace"))
         for s in todo:
-            if s["name"] in times and (folder / f"{s['name']}.png").exists():
+            if s["name"] in times and (folder / f"{s['name']}.npy").exists():
                 (folder / f"{s['name']}.json").write_text(json.dumps(times[s["name"]]))
         missing = [s["name"] for s in todo if s["name"] not in times]
         if done.returncode != 0 or missing:
             what = ", ".join(missing) or f"exit status {done.returncode}"
             raise PlantgenError(f"Blender could not render {Path(job['file']).name} ({what}): see {log}")
+    for s in stills:                   # the display image, toned as plantgen's default is
+        linear = np.load(folder / f"{s['name']}.npy")
+        rgb = display_image(linear[..., :3])
+        image = np.dstack([rgb, np.rint(255 * np.clip(linear[..., 3], 0, 1))]) if s["transparent"] else rgb
+        Image.fromarray(image.astype(np.uint8)).save(folder / f"{s['name']}.png")
     return {s["name"]: {"image": folder / f"{s['name']}.png", "samples": s["samples"],
                         **json.loads((folder / f"{s['name']}.json").read_text())} for s in stills}
+
+
+def display_image(linear: np.ndarray, looks: LookSettings | None = None) -> np.ndarray:
+    """(h, w, 3) uint8: Cycles' linear light as plantgen's renderer writes its own, with
+    the display curve of ``looks`` (default: plantgen's default looks): the tone curve
+    (``tone_curve`` after ``exposure``), then the sRGB transfer curve, where the tone is
+    on; else clipped, then c^(1/2.2)."""
+    looks = LookSettings.defaults() if looks is None else looks
+    linear = np.asarray(linear, dtype=np.float64)
+    if looks.tone:
+        shown = srgb_encode(tone_curve(linear, looks.exposure, looks.tone_curve))
+    else:
+        shown = np.clip(linear, 0.0, 1.0) ** (1 / 2.2)
+    return np.rint(255 * np.clip(shown, 0.0, 1.0)).astype(np.uint8)
 
 
 def find_blender(blender: str | None) -> str:

@@ -59,7 +59,8 @@ SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_st
                    "Default: one normal map per material, at its median aspect.")
 @click.option("--ground/--no-ground", "ground_disc", default=False, show_default=True,
               help="glTF, USD: under a single plant (a grammar or a skeleton), write the ground disc that "
-                   "plantgen render draws there, without its fade. A scene writes its own ground either way.")
+                   "plantgen render draws there (glTF: its mottle and its fade at the rim in a texture; USD: "
+                   "flat). A scene writes its own ground either way.")
 @click.option("--up", type=click.Choice(UP_AXES), default=None,
               help="The up axis of the file. Default: the format's convention: y for glTF, OBJ, "
                    "USD and SWC; z for PLY, STL and QSM. z turns the model +90° about x.")

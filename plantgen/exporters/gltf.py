@@ -51,8 +51,10 @@ mipmaps: averaged mipmaps would thin the cut-outs away with distance), each
 vertex's ``COLOR_0`` its leaf's shade as for polygons, TEXCOORD_0 the card's tile.
 
 A scene (``extras``, :class:`~plantgen.exporters.plants.SceneExtras`) adds, at the scene's
-root: its ground, a mesh ``"Ground"`` (two triangles facing up, the ground material's
-colour, a material named as the ground's); its camera, a node ``"Camera"`` with a
+root: its ground, a mesh ``"Ground"`` (a square's two triangles or a disc's fan, facing up,
+in a material named as the ground's: white times a texture of the ground as the renderers
+draw it, its mottled albedo and an alpha fading to 0 over its outer ``fade``,
+``alphaMode: BLEND``, so its edge does not show against the sky); its camera, a node ``"Camera"`` with a
 perspective camera (``yfov`` the camera's fov_y, ``aspectRatio`` its width over height,
 ``znear`` and ``zfar`` 1/1000 and 1000 times the eye-target distance) placed at the eye,
 looking at the target with the camera's up; its light, a node ``"Sun"`` with a
@@ -93,8 +95,8 @@ from .plants import (
     Progress,
     SceneExtras,
     camera_pose,
-    ground_colour,
     ground_mesh,
+    ground_texture,
     ground_uv,
     leaf_name,
     leaf_parts,
@@ -385,7 +387,7 @@ class _Document:
         if extras.ground is not None:
             vertices, normals, faces = ground_mesh(extras.ground, self.up)
             part = Part(0, vertices, normals.astype(np.float32), ground_uv(vertices @ up_rotation(self.up)), faces)
-            material = self.material(extras.ground.material, ground_colour(extras.ground, self.colours))
+            material = self.ground_material(extras.ground)
             self.meshes.append({"name": "Ground", "primitives": [_primitive(self.buffer, part, material)]})
             self.node({"name": "Ground", "mesh": len(self.meshes) - 1})
         if extras.camera is not None:
@@ -401,6 +403,20 @@ class _Document:
                                 "intensity": float(extras.light.intensity)})
             self.node({"name": "Sun", **_pose(light_rotation(extras.light, self.up)),
                        "extensions": {LIGHTS_EXTENSION: {"light": len(self.lights) - 1}}})
+
+    def ground_material(self, ground) -> int:
+        """The ground's material, named as its material: white times its texture
+        (:func:`~plantgen.exporters.plants.ground_texture`: the mottled albedo, and the
+        opacity fading to 0 at its rim), ``alphaMode: BLEND``, so what lies behind its rim
+        (the sky) shows through it as in plantgen's renders; its index."""
+        self.images.append({"name": f"{ground.material} ground", "mimeType": "image/png",
+                            "bufferView": self.buffer._view(png_bytes(ground_texture(ground, self.colours)), None)})
+        self.texture_list.append({"sampler": 0, "source": len(self.images) - 1})
+        material = _material(ground.material, (1.0, 1.0, 1.0), False)
+        material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": len(self.texture_list) - 1}
+        material["alphaMode"] = "BLEND"
+        self.materials.append(material)
+        return len(self.materials) - 1
 
     def still(self, plant: Plant, mesh: int, instancing: str, lower: list[int] = (), coverage=None) -> None:
         """A plant that does not sway: one node, its copies instanced or one node each;

@@ -14,6 +14,7 @@ from ..geometry.meshes.impostor import Impostor
 from ..geometry.meshes.leaf_cards import LeafCards
 from ..geometry.meshes.mesh import TessellatedMesh
 from ..geometry.meshes.polygons import Polygons
+from ..geometry.meshes.textures import bake_base_colour, linear_to_srgb
 from ..geometry.rays.camera import Camera
 from ..geometry.skeletons.frames import up_rotation
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
@@ -23,7 +24,8 @@ from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
 
 __all__ = ["Colours", "DetailLevel", "MeshWriter", "PlantDetail", "Part", "Plant", "Progress", "SceneExtras",
-           "SkeletonWriter", "camera_pose", "ground_colour", "ground_mesh", "ground_uv", "leaf_name", "leaf_parts",
+           "SkeletonWriter", "camera_pose", "GROUND_TEXEL", "GROUND_TEXTURE_SIDES",
+           "ground_colour", "ground_mesh", "ground_texture", "ground_uv", "leaf_name", "leaf_parts",
            "leaf_subset",
            "leaf_uv", "level_plant", "light_rotation", "material_colours", "material_parts", "merged_materials",
            "single_plant", "turned_mesh"]
@@ -140,7 +142,8 @@ DISC_SIDES = 64
 def ground_mesh(ground: Ground, up: str = "y") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ground's vertices (k, 3), unit normals (k, 3) and triangles (t, 3), facing up,
     in the ``up`` frame: a square's two triangles, or a disc's fan of :data:`DISC_SIDES`
-    (its rim's polygon; the renderers' fade into the sky is not written)."""
+    (its rim's polygon; the renderers' fade into the sky is the alpha of
+    :func:`ground_texture`, which glTF writes)."""
     rot = up_rotation(up)
     if ground.shape == "disc":
         angle = np.linspace(0.0, 2 * np.pi, DISC_SIDES, endpoint=False)
@@ -171,6 +174,35 @@ def ground_colour(ground: Ground, colours: Colours = None) -> tuple[float, float
     if isinstance(colours, Mapping):
         return material_colours([ground.material], colours)[0]
     return material_colours([ground.material])[0]
+
+
+#: An exported ground texture's texel, at most, in world units (the mottle's waves are
+#: about 2.4 units and longer), and its side's bounds in texels (a power of two).
+GROUND_TEXEL = 0.25
+GROUND_TEXTURE_SIDES = (64, 1024)
+
+
+def ground_texture(ground: Ground, colours: Colours = None) -> np.ndarray:
+    """(n, n, 4) uint8 RGBA: the ground as the renderers draw it, over its square (the
+    disc's bounding square), row 0 at the square's -z edge and column 0 at its -x edge
+    (:func:`ground_uv`'s v and u, y up). RGB: its albedo, sRGB, the material's dark and
+    light colour mixed by the procedural mottle (:meth:`~plantgen.geometry.stage.Ground.mottle`),
+    or ``colours``' flat colour where it names the ground's material; alpha (linear): its
+    opacity, fading to 0 at its edge (:meth:`~plantgen.geometry.stage.Ground.opacity`), so
+    the sky shows through its rim as in the renderers. ``n``: the power of two that keeps a
+    texel within :data:`GROUND_TEXEL`, within :data:`GROUND_TEXTURE_SIDES`."""
+    lo, hi = GROUND_TEXTURE_SIDES
+    n = int(min(hi, max(lo, 2 ** int(np.ceil(np.log2(max(float(ground.size) / GROUND_TEXEL, 1.0)))))))
+    t = (np.arange(n) + 0.5) / n
+    x = ground.centre[0] - ground.half + 2 * ground.half * t[None, :]
+    z = ground.centre[1] - ground.half + 2 * ground.half * t[:, None]
+    x, z = np.broadcast_arrays(x, z)
+    if isinstance(colours, Mapping) and ground.material in colours:
+        rgb = linear_to_srgb(np.broadcast_to(ground_colour(ground, colours), (n, n, 3)))
+    else:
+        rgb = bake_base_colour(ground.material, ground.mottle(x, z))
+    alpha = np.rint(255.0 * ground.opacity(x, z)).astype(np.uint8)
+    return np.dstack([rgb, alpha])
 
 
 class MeshWriter(Protocol):

@@ -60,6 +60,24 @@ class Ground:
         return np.array([[cx - half, y, cz + half], [cx + half, y, cz + half],
                          [cx - half, y, cz - half], [cx + half, y, cz - half]])
 
+    def mottle(self, x, z) -> np.ndarray:
+        """The ground's soft procedural mottle at world (``x``, ``z``), in [0.25, 0.75]: where
+        its albedo lies between the material's dark and light colour (the numpy twin of
+        ``shaders/ground.glsl``'s)."""
+        x, z = np.asarray(x, dtype=np.float64), np.asarray(z, dtype=np.float64)
+        return 0.5 + 0.25 * np.sin(x * 1.7 + np.sin(z * 0.9)) * np.sin(z * 1.3 + np.sin(x * 0.7))
+
+    def opacity(self, x, z) -> np.ndarray:
+        """1 inside the ground, falling smoothly to 0 at its edge over its outer ``fade``, 0
+        beyond (the numpy twin of ``shaders/ground.glsl``'s ``1 - ground_edge_fade``): how
+        much of the ground covers the sky behind it at world (``x``, ``z``)."""
+        dx = np.abs(np.asarray(x, dtype=np.float64) - self.centre[0])
+        dz = np.abs(np.asarray(z, dtype=np.float64) - self.centre[1])
+        r = np.hypot(dx, dz) if self.shape == "disc" else np.maximum(dx, dz)
+        inner = self.half * (1.0 - float(np.clip(self.fade, 1e-6, 1.0)))
+        t = np.clip((r - inner) / max(self.half - inner, 1e-12), 0.0, 1.0)
+        return np.where(r > self.half, 0.0, 1.0 - t * t * (3.0 - 2.0 * t))
+
     def uniforms(self) -> dict:
         """The ground shader's uniforms of its shape and fade (``shaders/ground.glsl``)."""
         return {"ground_centre": self.centre, "ground_half": self.half,
