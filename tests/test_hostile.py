@@ -486,3 +486,25 @@ def test_a_counter_that_settles_late_is_still_grown():
                              "rules": [f"A(x) : x < {SETTLE_STEPS // 2} -> A(x+1)"]})
     ms = derive(grammar)
     assert ms.fixed_point == SETTLE_STEPS // 2 and ms.params[0, 0] == SETTLE_STEPS // 2
+
+
+def test_the_query_pass_is_charged_to_the_work_before_each_walk(monkeypatch):
+    """A string of half a million modules with one ``?P``, walked by the turtle after every
+    step: each walk is charged to ``derive_work`` (``QUERY_WORK`` a module) before it is
+    taken, so the budget ends it after a few walks, not after a hundred (65 s of CPU when
+    only its rewriting was counted)."""
+    from plantgen.limits import QUERY_WORK, LimitError, limits
+    from plantgen.lsystem import queries
+    from plantgen.lsystem.derive import derive
+
+    walks = []
+    real = queries.interpret_plant
+    monkeypatch.setattr(queries, "interpret_plant", lambda ms, *a, **k: walks.append(len(ms)) or real(ms, *a, **k))
+    grammar = parse_grammar({"axiom": "C(0) ?P(0,0,0) X(0)", "iterations": 200,
+                             "rules": ["C(x) -> C(x+1)", "X(n) : n < 19 -> X(n+1) X(n+1)", "X(n) : n >= 19 -> F"]})
+    with pytest.raises(LimitError, match=r"the query pass after step \d+: derive_work reaches") as refused:
+        derive(grammar)
+    walked = sum(walks)
+    assert walked * QUERY_WORK <= limits.max_derive_work           # every walk taken was paid for first
+    assert len(walks) < 30 and walked < 3 * 2 ** 19                # at most a couple of the full-size walks
+    assert int(str(refused.value).split("after step ")[1].split(":")[0]) <= 21

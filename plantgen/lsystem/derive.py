@@ -288,7 +288,7 @@ class Derivation:
         if len(self.string[0]) > limits.max_modules:
             raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} "
                                   "modules")
-        self.queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
+        self.queries = Queries(grammar, environment, limits, self.work) if uses_queries(grammar) else None
         self.groups = _rule_groups(grammar.rules)
         self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
