@@ -508,3 +508,40 @@ def test_the_query_pass_is_charged_to_the_work_before_each_walk(monkeypatch):
     assert walked * QUERY_WORK <= limits.max_derive_work           # every walk taken was paid for first
     assert len(walks) < 30 and walked < 3 * 2 ** 19                # at most a couple of the full-size walks
     assert int(str(refused.value).split("after step ")[1].split(":")[0]) <= 21
+
+
+def test_a_stand_whose_steps_alone_pass_the_work_is_refused_before_it_derives(tmp_path, monkeypatch):
+    """grow: together: 10,000 saguaros take every step they are given (none settles), each
+    at least its floor: the sum is known before the first step (it was refused at step 5,
+    after 22 s of CPU). The refusal names the floor; no derivation is started."""
+    from plantgen._resources import grammars_dir
+    from plantgen.environment import together
+    from plantgen.errors import PlantgenError
+    from plantgen.lsystem.derive import steps_floor
+
+    started = []
+    real = together.Derivation
+    monkeypatch.setattr(together, "Derivation", lambda *a, **k: started.append(1) or real(*a, **k))
+    scene = write(tmp_path, "stand.yaml", "grow: together\ninstances:\n  - {grammar: saguaro, seed: 1, "
+                                          "grid: {count: [100, 100], spacing: [4, 4]}}\n")
+    floor = steps_floor(parse_grammar(yaml.safe_load((grammars_dir() / "saguaro.yaml").read_text())))
+    with pytest.raises(PlantgenError, match=f"10,000 plants grown together take steps that spend at least "
+                                            f"{10_000 * floor:,} of derive_work"):
+        grow_file(scene)
+    assert started == []
+
+
+def test_each_plant_of_a_stand_is_charged_for_its_drawing(tmp_path):
+    """The drawing every plant makes for the others after each step is charged to the work:
+    nine saguaros grown together spend more than their rewriting alone."""
+    from plantgen._resources import grammars_dir
+    from plantgen.environment.together import TogetherPlant, grow_together
+    from plantgen.limits import QUERY_WORK, limits
+    from plantgen.lsystem.derive import derive
+
+    grammar = parse_grammar(yaml.safe_load((grammars_dir() / "saguaro.yaml").read_text()))
+    alone = limits.meter("derive_work")
+    strings = [derive(grammar, seed=s, work=alone) for s in range(9)]
+    stand = limits.meter("derive_work")
+    grow_together([TogetherPlant(grammar, s, None, np.eye(4)) for s in range(9)], limits=limits, work=stand)
+    assert stand.spent >= alone.spent + QUERY_WORK * sum(len(ms) for ms in strings)

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.skeleton import Skeleton
-from ..limits import Limits, Meter
-from ..lsystem.derive import Derivation
+from ..limits import QUERY_WORK, LimitError, Limits, Meter, hint
+from ..lsystem.derive import Derivation, steps_floor
 from ..lsystem.grammar import Grammar
 from ..lsystem.strings import ModuleString
 from ..lsystem.turtle import interpret_plant
@@ -62,11 +62,34 @@ class _World:
                 Polygons.concatenate([p for _, p in parts], offsets).transformed(back))
 
 
+def _check_steps(plants: list[TogetherPlant], limits: Limits, work: Meter | None) -> None:
+    """Refuse a stand whose plants' steps alone would spend past ``work``: plants grown
+    together take every step they are given (none settles early), each spending at least
+    its floor (``STEP_WORK`` a rule group, plus one), so the sum is known before the first
+    step, from each grammar's rule groups and step count (O(1) a plant)."""
+    if work is None:
+        return
+    floors: dict = {}
+    total = work.spent
+    for plant in plants:
+        key = (id(plant.grammar), plant.iterations)
+        if key not in floors:
+            floors[key] = steps_floor(plant.grammar, plant.iterations)
+        total += floors[key]
+    if total > work.limit:
+        raise LimitError(f"{plants[0].grammar.path}: {len(plants):,} plants grown together take steps that spend at "
+                         f"least {total:,} of derive_work, over the limit of {work.limit:,} ({hint(work.name)})")
+
+
 def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | None = None,
                   progress=None) -> list[ModuleString]:
     """Derive ``plants`` in lockstep in one shared space (see the module's notes): their
     derived strings, in order. ``progress(step, modules)`` after each step, all plants'
-    modules together."""
+    modules together. A stand whose steps alone would spend past ``work`` is refused before
+    any plant derives (:func:`_check_steps`); each plant's drawing for the others, a turtle
+    walk over its string after every step, is charged to ``work`` (``QUERY_WORK`` a module)
+    before it is taken, as the query pass is."""
+    _check_steps(plants, limits, work)
     world = _World(plants)
     runs = []
     for i, plant in enumerate(plants):
@@ -86,6 +109,9 @@ def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | 
             run.interpret()
             drawing = run.queries.pending[3] if run.queries is not None else None
             if drawing is None:
+                if work is not None:
+                    work.spend(len(run.string[0]) * QUERY_WORK, f"{run.grammar.path}: drawn for the stand after "
+                                                                f"step {step}")
                 drawing = interpret_plant(run.result(), run.grammar.turtle, run.grammar.materials, run.grammar.path,
                                           limits)
             world.put(i, drawing.skeleton, drawing.polygons)

@@ -350,13 +350,16 @@ def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, 
     placed = parse_scene(data, str(path), seed=seed, grow_grammar=record, limits=limits, allow_paths=allow_paths)
     where = Path(path).parent
     plants, grown, taken = [], [], set()
+    resolved: dict[str, str] = {}             # a grammar's name: its path, resolved once, not once a copy
     by_seed: dict[tuple, list] = {}           # (grammar, seed): its keys in order (a lookup, not a scan a copy)
     for k in keys:
         by_seed.setdefault(k[:2], []).append(k)
     for inst in placed.instances:
         if inst.source == "skeleton":
             continue
-        gpath = str(resolve_grammar(inst.source, where, str(path), allow_paths))
+        if inst.source not in resolved:
+            resolved[inst.source] = str(resolve_grammar(inst.source, where, str(path), allow_paths))
+        gpath = resolved[inst.source]
         key = next((k for k in by_seed.get((gpath, inst.seed), ()) if k not in taken), None)
         if key is not None:
             grown.append(key)
