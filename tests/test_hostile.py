@@ -545,3 +545,31 @@ def test_each_plant_of_a_stand_is_charged_for_its_drawing(tmp_path):
     stand = limits.meter("derive_work")
     grow_together([TogetherPlant(grammar, s, None, np.eye(4)) for s in range(9)], limits=limits, work=stand)
     assert stand.spent >= alone.spent + QUERY_WORK * sum(len(ms) for ms in strings)
+
+
+def test_a_plants_light_among_the_stand_is_charged_for_the_others_it_gathers():
+    """A stand's light gathers the other plants for each plant at every step (P squared a
+    step): each gathering is charged QUERY_WORK a segment gathered, before it is made, so a
+    large stand ends at the budget (196 self_organizing trees ran on for many minutes)."""
+    from _geometry_helpers import random_tree
+
+    from plantgen.environment import together
+    from plantgen.geometry.meshes.polygons import Polygons
+    from plantgen.limits import QUERY_WORK, LimitError, Meter
+
+    grammar = parse_grammar({"axiom": "F", "rules": []})
+    plants = [together.TogetherPlant(grammar, s, None, np.eye(4)) for s in range(3)]
+    meter = Meter("derive_work", 10 ** 9)
+    world = together._World(plants, meter)
+    trees = [random_tree(n, seed=n) for n in (10, 20, 40)]
+    for i, tree in enumerate(trees):
+        world.put(i, tree, Polygons.empty())
+    world.put(2, trees[2], Polygons.empty())            # drawn again: counted once
+    assert world.segments == 70 and meter.spent == 0
+    others = world.others(0)
+    assert len(others[0]) == 60 and meter.spent == 60 * QUERY_WORK
+    small = together._World(plants, Meter("derive_work", 59 * QUERY_WORK))
+    for i, tree in enumerate(trees):
+        small.put(i, tree, Polygons.empty())
+    with pytest.raises(LimitError, match="the light of plant 1 of the stand, among the others"):
+        small.others(0)

@@ -40,18 +40,30 @@ class TogetherPlant:
 
 
 class _World:
-    """Every plant's latest drawing, placed in the world."""
+    """Every plant's latest drawing, placed in the world, and its segments in all (a running
+    total). Gathering the others for a plant's light is charged to ``work``, ``QUERY_WORK``
+    a segment gathered, before it is done: a stand of P plants gathers P - 1 plants for
+    each of them at every step, so its cost grows as P squared, and a large stand ends at
+    the budget instead of running for hours."""
 
-    def __init__(self, plants: list[TogetherPlant]):
-        self.plants = plants
+    def __init__(self, plants: list[TogetherPlant], work: Meter | None = None):
+        self.plants, self.work = plants, work
         self.placed: list[tuple[Skeleton, Polygons] | None] = [None] * len(plants)
+        self.segments = 0
 
     def put(self, i: int, skeleton: Skeleton, polygons: Polygons) -> None:
         m = self.plants[i].matrix
+        if self.placed[i] is not None:
+            self.segments -= len(self.placed[i][0])
         self.placed[i] = (skeleton.transformed(m), polygons.transformed(m))
+        self.segments += len(skeleton)
 
     def others(self, i: int):
         """The other plants' (Skeleton, Polygons) in plant ``i``'s frame, None for none."""
+        if self.work is not None:
+            own = len(self.placed[i][0]) if self.placed[i] is not None else 0
+            self.work.spend((self.segments - own) * QUERY_WORK, f"{self.plants[i].grammar.path}: the light of "
+                                                                  f"plant {i + 1} of the stand, among the others")
         parts = [p for j, p in enumerate(self.placed) if j != i and p is not None]
         if not parts:
             return None
@@ -90,7 +102,7 @@ def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | 
     walk over its string after every step, is charged to ``work`` (``QUERY_WORK`` a module)
     before it is taken, as the query pass is."""
     _check_steps(plants, limits, work)
-    world = _World(plants)
+    world = _World(plants, work)
     runs = []
     for i, plant in enumerate(plants):
         env = environment_for(plant.grammar, seed=plant.seed, limits=limits)
