@@ -4,6 +4,7 @@ the same array for array, the progress lines the same, the refusals still before
 
 from __future__ import annotations
 
+import multiprocessing
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +121,7 @@ def test_the_pool_charges_each_plants_work_to_the_scene(tmp_path, monkeypatch):
         with pytest.raises(PlantgenError, match="instance 1: .*derive_work reaches") as refused:
             grow_file(path, jobs=jobs, limits=Limits(max_derive_work=work[base] * 8))
         assert "derive_work of about" not in str(refused.value)     # not the forecast: the plants
+        assert multiprocessing.active_children() == []             # the pool stopped, none left growing
     assert pools == [(7, 2)]
     assert len(grow_file(path, jobs=2, limits=Limits(max_derive_work=sum(work[base + k] for k in range(8)))
                          ).scene.instances) == 8

@@ -313,26 +313,45 @@ def _grow_in_pool(requests, jobs: int, sources: dict, limits: Limits, work: Mete
     plant may spend the derive work the scene has left; the scene's meter is charged
     with each plant's work as it comes, so the scene is refused at the plant where
     growing one by one would refuse it. ``took(drawing, modules)`` counts each (the
-    progress line). The stage times are the pool's wall time, split as its processes spent it."""
+    progress line). The stage times are the pool's wall time, split as its processes spent it.
+    Left before the last plant (a refusal, an error, an interrupt), the pool's processes
+    are stopped at once: none grows on past the refusal, nor holds the command's exit."""
     tasks = [(str(g), s, its, work.spent) for g, s, its in requests]
     t0 = time.perf_counter()
     spent: dict = {}
     pool = ProcessPoolExecutor(jobs, mp_context=_pool_context(), initializer=_start_worker,
                                initargs=(sources, limits))
+    came = 0
     try:
-        chunk = max(1, len(tasks) // (jobs * 8))
+        chunk = max(1, min(16, len(tasks) // (jobs * 8)))
         for (drawing, n, used, times), (g, s, _) in zip(pool.map(_grow_in_worker, tasks, chunksize=chunk),
                                                          requests, strict=True):
+            came += 1
             work.spend(used, f"{g}: seed {s}")
             for stage, seconds in times.items():
                 spent[stage] = spent.get(stage, 0.0) + seconds
             took(drawing, n)
             yield drawing
     finally:
-        pool.shutdown(wait=False, cancel_futures=True)
+        _close_pool(pool, came == len(tasks))
         wall, total = time.perf_counter() - t0, sum(spent.values()) or 1.0
         for stage, seconds in spent.items():
             timings[stage] = timings.get(stage, 0.0) + wall * seconds / total
+
+
+def _close_pool(pool: ProcessPoolExecutor, finished: bool) -> None:
+    """Shut ``pool`` down: its processes are idle once every plant came back; else they are
+    stopped where they stand (a refusal must not wait for the plants still growing)."""
+    if finished:
+        pool.shutdown(wait=True)
+        return
+    processes = list((getattr(pool, "_processes", None) or {}).values())   # the executor has no public stop
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5)
 
 
 def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, timings) -> dict:
