@@ -230,7 +230,7 @@ def limits_from(values: dict) -> Limits:
 
 #: ``--jobs N``: the processes a scene's distinct plants may grow in.
 jobs_opt = click.option(
-    "--jobs", type=click.IntRange(min=1), default=None, cls=SectionedOption, section=OTHER,
+    "--jobs", type=click.IntRange(min=1), default=None, cls=SectionedOption, section=MODEL,
     help="Processes a scene's distinct plants grow in (default: the cores this process may use; 1: one by "
          "one). A scene whose plants are forecast to take under a few tenths of a second grows them one by "
          "one anyway; the plants are the same either way.")
