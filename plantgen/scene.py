@@ -661,13 +661,13 @@ def _grow_ahead(entries, base: Path, grow_many, cache: dict, estimate: int, limi
     grown = grow_many([(Path(g), s, its) for g, s, its in requests], estimate)
     if grown is None:
         return
-    asked = iter(requests.items())
-    key, where = None, ""
     try:
-        for key, where in asked:
-            _keep(cache, key, next(grown), limits, where)
-    except PlantgenError as exc:
-        raise SceneError(f"{where}: {exc}") from None
+        for key, where in requests.items():
+            try:
+                plant = next(grown)
+            except PlantgenError as exc:            # the plant's own error, named as one by one names it
+                raise SceneError(f"{where}: {exc}") from None
+            _keep(cache, key, plant, limits, where)
     finally:
         close = getattr(grown, "close", None)
         if close is not None:

@@ -101,22 +101,41 @@ def test_a_scene_refused_by_its_forecast_starts_no_pool(tmp_path, monkeypatch):
     assert pools == []
 
 
+def _bush(tmp_path) -> tuple[str, dict, dict]:
+    """A grammar whose plants differ by seed (each step doubles or stays): its path, and
+    each seed's derive work and segments, grown here as a pool process grows them."""
+    from plantgen.limits import Limits
+    gpath = tmp_path / "bush.yaml"
+    gpath.write_text(yaml.safe_dump({"axiom": "A", "iterations": 10, "rules": ["A ->(0.5) F[+A]A", "A ->(0.5) FA"]}))
+    gpath = str(gpath.resolve())
+    growing._start_worker({gpath: yaml.safe_load(Path(gpath).read_text())}, Limits())   # this process as a worker
+    grown = {s: growing._grow_in_worker((gpath, s, None, 0)) for s in range(1, 25)}
+    return gpath, {s: g[2] for s, g in grown.items()}, {s: len(g[0].skeleton) for s, g in grown.items()}
+
+
+def _first_light_seed(figures: dict) -> int:
+    """A seed whose plant is lighter than the mean of it and the seven after it: a scene
+    of those eight seeds passes its forecast (the first seed's figure times eight)."""
+    return next(b for b in range(1, 17) if figures[b] * 8 < sum(figures[b + k] for k in range(8)))
+
+
+def _bush_scene(tmp_path, base: int) -> Path:
+    path = tmp_path / "grid.yaml"
+    path.write_text(yaml.safe_dump({"instances": [{"grammar": "bush.yaml", "seed": base, "grid": {"count": [8, 1]}}]}))
+    return path
+
+
 def test_the_pool_charges_each_plants_work_to_the_scene(tmp_path, monkeypatch):
     """The forecast is the first seed's work times the seeds: a scene whose other plants
     cost more passes it, and is refused as its plants come back from the pool, the
     scene's meter charged with each plant's work."""
     from plantgen.errors import PlantgenError
     from plantgen.limits import Limits
-    gpath = tmp_path / "bush.yaml"          # a bush of a seed's luck: each step doubles or stays
-    gpath.write_text(yaml.safe_dump({"axiom": "A", "iterations": 10, "rules": ["A ->(0.5) F[+A]A", "A ->(0.5) FA"]}))
-    gpath = str(gpath.resolve())
-    growing._start_worker({gpath: yaml.safe_load(Path(gpath).read_text())}, Limits())   # this process as a worker
-    work = {s: growing._grow_in_worker((gpath, s, None, 0))[2] for s in range(1, 25)}
-    base = next(b for b in range(1, 17) if work[b] * 8 < sum(work[b + k] for k in range(8)))
+    _, work, _ = _bush(tmp_path)
+    base = _first_light_seed(work)
     monkeypatch.setattr(growing, "PARALLEL_WORK", 0)
     pools = _pools(monkeypatch)
-    path = tmp_path / "grid.yaml"
-    path.write_text(yaml.safe_dump({"instances": [{"grammar": "bush.yaml", "seed": base, "grid": {"count": [8, 1]}}]}))
+    path = _bush_scene(tmp_path, base)
     for jobs in (2, 1):                     # the pool, then one by one: both refuse
         with pytest.raises(PlantgenError, match="instance 1: .*derive_work reaches") as refused:
             grow_file(path, jobs=jobs, limits=Limits(max_derive_work=work[base] * 8))
@@ -125,6 +144,20 @@ def test_the_pool_charges_each_plants_work_to_the_scene(tmp_path, monkeypatch):
     assert pools == [(7, 2)]
     assert len(grow_file(path, jobs=2, limits=Limits(max_derive_work=sum(work[base + k] for k in range(8)))
                          ).scene.instances) == 8
+
+
+def test_the_pool_counts_each_plants_segments_as_it_comes(tmp_path, monkeypatch):
+    from plantgen.limits import LimitError, Limits
+    _, _, segments = _bush(tmp_path)
+    base = _first_light_seed(segments)
+    monkeypatch.setattr(growing, "PARALLEL_WORK", 0)
+    path = _bush_scene(tmp_path, base)
+    said = {}
+    for jobs in (2, 1):
+        with pytest.raises(LimitError, match="grid.yaml: instance 1: segments grown for the scene: ") as refused:
+            grow_file(path, jobs=jobs, limits=Limits(max_segments=segments[base] * 8))
+        said[jobs] = str(refused.value)
+    assert said[1] == said[2]               # the same plant, the same line
 
 
 def test_jobs_must_be_a_positive_integer(tmp_path):
