@@ -254,13 +254,16 @@ def _grow_walls(run: Run, path: Path) -> None:
     try:
         for _ in range(GROW_REPEATS):
             for stage, jobs in (("grow, 1 job", 1), ("grow, all cores", available_cores())):
-                t0 = time.perf_counter()
+                before, t0 = os.times(), time.perf_counter()
                 grow_file(path, jobs=jobs)
-                run.walls.setdefault(stage, []).append(time.perf_counter() - t0)
+                wall, after = time.perf_counter() - t0, os.times()
+                cpu = sum(after[:4]) - sum(before[:4])        # this process's and its pool's, user and system
+                run.walls.setdefault(stage, []).append(wall)
+                run.walls.setdefault(f"{stage} cpu", []).append(cpu)
     finally:
         tracemalloc.start()
-    for stage, walls in run.walls.items():
-        run.stages[stage] = (statistics.median(walls), -1)
+    for stage in ("grow, 1 job", "grow, all cores"):
+        run.stages[stage] = (statistics.median(run.walls[stage]), -1)
 
 
 def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene")) -> list[Run]:
@@ -321,10 +324,12 @@ def markdown(runs: list[Run], title: str) -> str:
     pools = [r for r in runs if "grow, all cores" in r.stages]
     if pools:
         lines += ["", f"Growth of the distinct-seed scenes, one plant at a time against a pool over "
-                      f"{available_cores()} cores (wall seconds, median of {GROW_REPEATS}, alternated):", ""]
+                      f"{available_cores()} cores (wall seconds, median of {GROW_REPEATS}, alternated; then the CPU "
+                      f"seconds of this process and its pool's processes):", ""]
         lines += [f"- {r.label}: {r.stages['grow, 1 job'][0]:.2f} s and {r.stages['grow, all cores'][0]:.2f} s, "
-                  f"{r.stages['grow, 1 job'][0] / max(r.stages['grow, all cores'][0], 1e-9):.2f} times as fast"
-                  for r in pools]
+                  f"{r.stages['grow, 1 job'][0] / max(r.stages['grow, all cores'][0], 1e-9):.2f} times as fast; "
+                  f"CPU of every process {statistics.median(r.walls['grow, 1 job cpu']):.2f} s and "
+                  f"{statistics.median(r.walls['grow, all cores cpu']):.2f} s" for r in pools]
     refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
     refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
     if refusals:
