@@ -232,7 +232,7 @@ def limits_from(values: dict) -> Limits:
 jobs_opt = click.option(
     "--jobs", type=click.IntRange(min=1), default=None, cls=SectionedOption, section=MODEL,
     help="Processes a scene's distinct plants grow in (default: the cores this process may use; 1: one by "
-         "one). A scene whose plants are forecast to take under a few tenths of a second grows them one by "
+         "one). A scene whose plants are forecast to take under about a tenth of a second grows them one by "
          "one anyway; the plants are the same either way.")
 
 
