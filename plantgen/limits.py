@@ -19,8 +19,8 @@ from dataclasses import dataclass, fields, replace
 
 from .errors import PlantgenError
 
-__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "SEQUENTIAL_WORK",
-           "STEP_WORK", "hint", "limits"]
+__all__ = ["CONTEXT_WORK", "GAME_LEVEL_TRIANGLES", "LimitError", "Limits", "MAX_IMAGE_SIDE", "Meter", "QUERY_WORK",
+           "SEQUENTIAL_WORK", "STEP_WORK", "hint", "limits"]
 
 #: The largest image side (pixels) plantgen renders: the GL texture size every OpenGL 4.3
 #: driver plantgen has met supports. A hard bound, not a budget: no option raises it.
@@ -47,6 +47,14 @@ SETTLE_STEPS = 2_000
 #: finding each module's context neighbours sorts and searches the string's bracket
 #: depths, a few times the rewriting's cost, so such a step counts its modules four times.
 CONTEXT_WORK = 4
+
+#: How much the query pass of a grammar with query or communication modules (``?P``,
+#: ``?E``) costs per module of the string, counted against ``derive_work`` before each
+#: step's turtle walk: the walk interprets every module in Python, about 40 times what
+#: rewriting one costs (a drawing module; a few times for the others). Without it a
+#: string of half a million modules walked a hundred times spent 65 s of CPU before its
+#: rewriting alone reached the budget.
+QUERY_WORK = 40
 
 #: How much a step of a grammar with a new left context (``<<``) costs per module, and
 #: again per rule group tried on it: such a step is sequential, a module at a time in
@@ -78,8 +86,9 @@ class Limits:
     max_derive_bytes : bytes of a derived module string (modules × (5 + 8 × parameters))
     max_derive_work : modules rewritten over all steps of all derivations of one input;
         each step also counts ``STEP_WORK`` per rule group (a derivation that does not
-        grow still ends), and a context-sensitive one counts its modules ``CONTEXT_WORK``
-        times
+        grow still ends), a context-sensitive one counts its modules ``CONTEXT_WORK``
+        times, and the query pass of one with query modules each module it walks
+        ``QUERY_WORK`` times
     max_segments : segments of one input's skeleton; for a scene, the segments grown (each
         distinct plant once, an explicit skeleton per copy)
     max_drawn_segments : segments a scene places (every copy's: what a merged skeleton, a

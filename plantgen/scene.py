@@ -547,15 +547,22 @@ def _copy_skeleton(inst, placement: _Placement, seed: int, grammar: tuple[str, P
     key = (str(gpath), seed, placement.iterations)
     if key not in cache:
         try:
-            cache[key] = _grown_parts(grow_grammar(gpath, seed, placement.iterations))
+            grown = grow_grammar(gpath, seed, placement.iterations)
         except PlantgenError as exc:
             raise SceneError(f"{placement.where}: {exc}") from None
-        grown = cache.setdefault(GROWN_SEGMENTS, 0) + len(cache[key][0])    # a running total: O(1) a plant
-        cache[GROWN_SEGMENTS] = limits.check("segments", grown, f"{placement.where}: segments grown for the scene")
+        _keep(cache, key, grown, limits, placement.where)
     return *cache[key], name
 
 
-def _forecast(entries, base: Path, grow_grammar, cache: dict, budget: _Budget, allow_paths=(), work=None) -> None:
+def _keep(cache: dict, key: tuple, grown, limits: Limits, where: str) -> None:
+    """Keep a grown plant in the scene's ``cache`` under ``key`` (grammar path, seed,
+    iterations) and add its segments to the running total of segments grown."""
+    cache[key] = _grown_parts(grown)
+    total = cache.setdefault(GROWN_SEGMENTS, 0) + len(cache[key][0])    # a running total: O(1) a plant
+    cache[GROWN_SEGMENTS] = limits.check("segments", total, f"{where}: segments grown for the scene")
+
+
+def _forecast(entries, base: Path, grow_grammar, cache: dict, budget: _Budget, allow_paths=(), work=None) -> int:
     """Refuse a scene whose plants would pass a limit before its copies are grown.
 
     Copies of one grammar at one iteration count differ by seed only: one probe plant
@@ -563,7 +570,8 @@ def _forecast(entries, base: Path, grow_grammar, cache: dict, budget: _Budget, a
     ``derive_work`` (``work``, the meter, when given) of each, and the scene's totals are
     estimated as that times the distinct seeds (the segments grown and the derive work) or
     the copies (the segments placed). Where an estimate passes its limit, two more probes
-    confirm it with the least of the three; the refusal names the estimate."""
+    confirm it with the least of the three; the refusal names the estimate. Returns the
+    estimated derive work of the scene's distinct plants (0 without ``work``)."""
     groups: dict[tuple, list] = {}
     for inst, placement in entries:
         if "skeleton" in inst:
@@ -589,6 +597,7 @@ def _forecast(entries, base: Path, grow_grammar, cache: dict, budget: _Budget, a
         if total > limit:
             raise LimitError(f"{entries[0][1].where.rsplit(':', 1)[0]}: {key} of about {total:,} estimated "
                              f"from probe plants for {count:,} plants, over the limit of {limit:,} ({hint(key)})")
+    return totals["derive_work"][0]
 
 
 def _probe(inst, placement: _Placement, seed: int, grammar, grow_grammar, cache: dict, limits: Limits,
@@ -628,6 +637,43 @@ def _grow_copies(inst, placement: _Placement, base: Path, grow_grammar, cache: d
     return out
 
 
+def _grow_ahead(entries, base: Path, grow_many, cache: dict, estimate: int, limits: Limits, allow_paths=()) -> None:
+    """Grow the scene's distinct plants not yet in ``cache`` all at once, when
+    ``grow_many`` takes them: ``grow_many(requests, estimate)``, ``requests`` [(grammar
+    path, seed, iterations)] in the order the copies would grow them one by one,
+    ``estimate`` the scene's derive work forecast from its probe plants, returns None to
+    leave them to be grown one by one, or an iterator of the grown plants in the order
+    asked (a pool of processes, :func:`plantgen.pipeline.growing.grow_file`'s ``jobs``).
+    Each plant is kept and counted as it comes, so the segments grown are checked as the
+    work goes, and an error names the first copy of its plant, as growing one by one does."""
+    requests: dict[tuple, str] = {}          # (grammar path, seed, iterations): where its first copy is
+    for inst, placement in entries:
+        if "skeleton" in inst:
+            continue
+        name = fields.text(inst["grammar"], "grammar", placement.where, SceneError)
+        gpath = str(resolve_grammar(name, base, placement.where, allow_paths))
+        for _, _, c, _ in placement.copies:
+            key = (gpath, placement.seed + c, placement.iterations)
+            if key not in cache:
+                requests.setdefault(key, placement.where)
+    if len(requests) < 2:
+        return
+    grown = grow_many([(Path(g), s, its) for g, s, its in requests], estimate)
+    if grown is None:
+        return
+    try:
+        for key, where in requests.items():
+            try:
+                plant = next(grown)
+            except PlantgenError as exc:            # the plant's own error, named as one by one names it
+                raise SceneError(f"{where}: {exc}") from None
+            _keep(cache, key, plant, limits, where)
+    finally:
+        close = getattr(grown, "close", None)
+        if close is not None:
+            close()
+
+
 # ---------------------------------------------------------------------------- scene
 def is_scene(data) -> bool:
     return isinstance(data, dict) and "instances" in data
@@ -642,7 +688,7 @@ def grows_together(data, path: str = "<scene>") -> bool:
 
 
 def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_grammar=None,
-                limits: Limits | None = None, allow_paths=(), work=None) -> Scene:
+                limits: Limits | None = None, allow_paths=(), work=None, grow_many=None) -> Scene:
     """Validate a scene mapping and grow its instances.
 
     ``grow_grammar(path, seed, iterations)`` grows one grammar (injected by the pipeline,
@@ -652,7 +698,9 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     folder, the folders of ``allow_paths`` and the shipped grammars. ``work``: the
     ``derive_work`` meter ``grow_grammar`` spends, if any: with it, a scene whose plants
     would pass it is refused from a probe plant's work before its copies grow
-    (:func:`_forecast`; so are the segment limits, with or without it).
+    (:func:`_forecast`; so are the segment limits, with or without it). ``grow_many``, if
+    given, may grow the distinct plants left after the forecast all at once (in parallel:
+    :func:`_grow_ahead`); the scene is the same either way.
     """
     limits = limits or default_limits
     _check_keys(data, SCENE_KEYS, path)
@@ -673,8 +721,10 @@ def parse_scene(data, path: str = "<scene>", *, seed: int | None = None, grow_gr
     cache: dict[tuple, tuple] = {}
     # Every instance (grid copies included) is read and counted before any plant is grown.
     placements = [_parse_placement(inst, k, path, base_seed, seed, budget) for k, inst in enumerate(data["instances"])]
-    _forecast(list(zip(data["instances"], placements, strict=True)), base, grow_grammar, cache, budget, allow_paths,
-              work)
+    entries = list(zip(data["instances"], placements, strict=True))
+    estimate = _forecast(entries, base, grow_grammar, cache, budget, allow_paths, work)
+    if grow_many is not None:
+        _grow_ahead(entries, base, grow_many, cache, estimate, limits, allow_paths)
     for inst, placement in zip(data["instances"], placements, strict=True):
         instances += _grow_copies(inst, placement, base, grow_grammar, cache, budget, allow_paths)
 

@@ -486,3 +486,90 @@ def test_a_counter_that_settles_late_is_still_grown():
                              "rules": [f"A(x) : x < {SETTLE_STEPS // 2} -> A(x+1)"]})
     ms = derive(grammar)
     assert ms.fixed_point == SETTLE_STEPS // 2 and ms.params[0, 0] == SETTLE_STEPS // 2
+
+
+def test_the_query_pass_is_charged_to_the_work_before_each_walk(monkeypatch):
+    """A string of half a million modules with one ``?P``, walked by the turtle after every
+    step: each walk is charged to ``derive_work`` (``QUERY_WORK`` a module) before it is
+    taken, so the budget ends it after a few walks, not after a hundred (65 s of CPU when
+    only its rewriting was counted)."""
+    from plantgen.limits import QUERY_WORK, LimitError, limits
+    from plantgen.lsystem import queries
+    from plantgen.lsystem.derive import derive
+
+    walks = []
+    real = queries.interpret_plant
+    monkeypatch.setattr(queries, "interpret_plant", lambda ms, *a, **k: walks.append(len(ms)) or real(ms, *a, **k))
+    grammar = parse_grammar({"axiom": "C(0) ?P(0,0,0) X(0)", "iterations": 200,
+                             "rules": ["C(x) -> C(x+1)", "X(n) : n < 19 -> X(n+1) X(n+1)", "X(n) : n >= 19 -> F"]})
+    with pytest.raises(LimitError, match=r"the query pass after step \d+: derive_work reaches") as refused:
+        derive(grammar)
+    walked = sum(walks)
+    assert walked * QUERY_WORK <= limits.max_derive_work           # every walk taken was paid for first
+    assert len(walks) < 30 and walked < 3 * 2 ** 19                # at most a couple of the full-size walks
+    assert int(str(refused.value).split("after step ")[1].split(":")[0]) <= 21
+
+
+def test_a_stand_whose_steps_alone_pass_the_work_is_refused_before_it_derives(tmp_path, monkeypatch):
+    """grow: together: 10,000 saguaros take every step they are given (none settles), each
+    at least its floor: the sum is known before the first step (it was refused at step 5,
+    after 22 s of CPU). The refusal names the floor; no derivation is started."""
+    from plantgen._resources import grammars_dir
+    from plantgen.environment import together
+    from plantgen.errors import PlantgenError
+    from plantgen.lsystem.derive import steps_floor
+
+    started = []
+    real = together.Derivation
+    monkeypatch.setattr(together, "Derivation", lambda *a, **k: started.append(1) or real(*a, **k))
+    scene = write(tmp_path, "stand.yaml", "grow: together\ninstances:\n  - {grammar: saguaro, seed: 1, "
+                                          "grid: {count: [100, 100], spacing: [4, 4]}}\n")
+    floor = steps_floor(parse_grammar(yaml.safe_load((grammars_dir() / "saguaro.yaml").read_text())))
+    with pytest.raises(PlantgenError, match=f"10,000 plants grown together take steps that spend at least "
+                                            f"{10_000 * floor:,} of derive_work"):
+        grow_file(scene)
+    assert started == []
+
+
+def test_each_plant_of_a_stand_is_charged_for_its_drawing(tmp_path):
+    """The drawing every plant makes for the others after each step is charged to the work:
+    nine saguaros grown together spend more than their rewriting alone."""
+    from plantgen._resources import grammars_dir
+    from plantgen.environment.together import TogetherPlant, grow_together
+    from plantgen.limits import QUERY_WORK, limits
+    from plantgen.lsystem.derive import derive
+
+    grammar = parse_grammar(yaml.safe_load((grammars_dir() / "saguaro.yaml").read_text()))
+    alone = limits.meter("derive_work")
+    strings = [derive(grammar, seed=s, work=alone) for s in range(9)]
+    stand = limits.meter("derive_work")
+    grow_together([TogetherPlant(grammar, s, None, np.eye(4)) for s in range(9)], limits=limits, work=stand)
+    assert stand.spent >= alone.spent + QUERY_WORK * sum(len(ms) for ms in strings)
+
+
+def test_a_plants_light_among_the_stand_is_charged_for_the_others_it_gathers():
+    """A stand's light gathers the other plants for each plant at every step (P squared a
+    step): each gathering is charged QUERY_WORK a segment gathered, before it is made, so a
+    large stand ends at the budget (196 self_organizing trees ran on for many minutes)."""
+    from _geometry_helpers import random_tree
+
+    from plantgen.environment import together
+    from plantgen.geometry.meshes.polygons import Polygons
+    from plantgen.limits import QUERY_WORK, LimitError, Meter
+
+    grammar = parse_grammar({"axiom": "F", "rules": []})
+    plants = [together.TogetherPlant(grammar, s, None, np.eye(4)) for s in range(3)]
+    meter = Meter("derive_work", 10 ** 9)
+    world = together._World(plants, meter)
+    trees = [random_tree(n, seed=n) for n in (10, 20, 40)]
+    for i, tree in enumerate(trees):
+        world.put(i, tree, Polygons.empty())
+    world.put(2, trees[2], Polygons.empty())            # drawn again: counted once
+    assert world.segments == 70 and meter.spent == 0
+    others = world.others(0)
+    assert len(others[0]) == 60 and meter.spent == 60 * QUERY_WORK
+    small = together._World(plants, Meter("derive_work", 59 * QUERY_WORK))
+    for i, tree in enumerate(trees):
+        small.put(i, tree, Polygons.empty())
+    with pytest.raises(LimitError, match="the light of plant 1 of the stand, among the others"):
+        small.others(0)

@@ -193,3 +193,6 @@ def test_the_pipeline_bench_quick_run_writes_a_table_of_every_stage(tmp_path):
     for stage in ("read", "skin", "frame", "check", "upload/BVH", "write", "derive"):
         assert f"| {stage} |" in text
     assert "| **npz** | *size* | 1,000 | 10,000 |" in text and "per 10x" in text
+    for stage in ("grow, 1 job", "grow, all cores"):      # the distinct-seed scenes, grown both ways
+        assert f"| scene N seeds | {stage} | " in text and f"| scene 1 seed | {stage} |" not in text
+    assert "- scene N seeds 100: " in text and " times as fast" in text

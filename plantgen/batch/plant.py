@@ -206,7 +206,7 @@ def make_plant(task: PlantTask, outputs: Outputs, out_dir: str, limits: Limits |
     try:
         t0 = time.perf_counter()
         grown = grow_file(task.grammar, seed=task.seed, limits=limits, defines=dict(task.defines),
-                          allow_paths=allow_paths)
+                          allow_paths=allow_paths, jobs=1)     # the batch's workers are its parallelism
         skeleton = grown.skeleton
         timings["grow"] = time.perf_counter() - t0
         if len(skeleton) == 0:

@@ -14,7 +14,9 @@ Inputs (every size from one generator, so the sizes differ in size only):
 
 Stages: *read* (load the npz, parse the grammar or scene), *derive* and *interpret* (the
 L-system; a scene's copies grow in *derive*), *skin* (frusta; a scene's distinct plants),
-*frame* (the automatic camera: :func:`~plantgen.geometry.rays.camera.auto_camera`, or
+*grow, 1 job* and *grow, all cores* (a distinct-seed scene grown again, untraced, one
+plant at a time and in a pool of processes: wall seconds, the median of
+:data:`GROW_REPEATS`), *frame* (the automatic camera: :func:`~plantgen.geometry.rays.camera.auto_camera`, or
 :func:`~plantgen.geometry.rays.camera.frame_copies` for a scene), *check* (finite rows and
 the export's budget), *upload/BVH* (the scan's BVH over the rows' boxes), *draw* (one
 64x48 ray-cast frame, with ``--gl``) and *write* (tessellate at m = 0 and write a .glb).
@@ -36,6 +38,7 @@ import argparse
 import math
 import os
 import platform
+import statistics
 import sys
 import tempfile
 import time
@@ -56,12 +59,17 @@ from ..geometry.skeletons.skin import skin_skeleton
 from ..limits import Limits
 from ..pipeline import check_export_size, grow_file
 from ..pipeline.checks import check_finite_frusta
+from ..pipeline.growing import available_cores
 from .arguments import report
 
 __all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "main"]
 
-#: The stages, in pipeline order.
-STAGES = ("read", "derive", "interpret", "skin", "frame", "check", "upload/BVH", "draw", "write")
+#: The stages, in pipeline order; a distinct-seed scene's growth is also timed in wall
+#: seconds one plant at a time and in a pool over every core (``--jobs``).
+STAGES = ("read", "derive", "grow, 1 job", "grow, all cores", "interpret", "skin", "frame", "check", "upload/BVH",
+          "draw", "write")
+#: How many times a distinct-seed scene is grown each way for the medians of its wall times.
+GROW_REPEATS = 3
 #: Sizes a run measures: segments (npz, grammar iterations) and copies (scenes), by run.
 SIZES = {
     "quick": {"npz": (1_000, 10_000), "grammar": (6, 8), "scene": (10, 100)},
@@ -122,6 +130,7 @@ class Run:
         self.stages: dict[str, tuple[float, int]] = {}
         self.refused: tuple[str, float, str] | None = None
         self.skipped: dict[str, str] = {}      # stage: the refusal that left it out
+        self.walls: dict[str, list[float]] = {}   # stage: wall seconds of each repeat (no memory traced)
 
     @contextmanager
     def stage(self, name: str):
@@ -218,7 +227,7 @@ def _scene_run(copies: int, distinct: bool, tmp: Path) -> Run:
                     f"grid: {{count: [{side}, {side}], spacing: [4, 4], jitter: 0.3{seeds}}}}}\n")
     try:
         with run.stage("derive"):
-            grown = grow_file(path)
+            grown = grow_file(path, jobs=1)          # this process's CPU: every plant grown in it
         plants = grown.scene.plants()
         with run.stage("skin"):
             skinned = [(skin_skeleton(p.skeleton), p.matrices, None) for p in plants]
@@ -231,8 +240,30 @@ def _scene_run(copies: int, distinct: bool, tmp: Path) -> Run:
             write_plants([Plant(p.name, p.skeleton, tessellate(f, 0), m) for p, (f, m, _) in
                           zip(plants, skinned, strict=True)], Path(out) / "bench.glb")
     except PlantgenError:
-        pass
+        return run
+    if distinct:
+        _grow_walls(run, path)
     return run
+
+
+def _grow_walls(run: Run, path: Path) -> None:
+    """The scene grown one plant at a time and in a pool over every core this process may
+    use, alternately, :data:`GROW_REPEATS` times each, untraced: wall seconds (the pool's
+    work is its processes' CPU time, which this process's clock does not see)."""
+    tracemalloc.stop()
+    try:
+        for _ in range(GROW_REPEATS):
+            for stage, jobs in (("grow, 1 job", 1), ("grow, all cores", available_cores())):
+                before, t0 = os.times(), time.perf_counter()
+                grow_file(path, jobs=jobs)
+                wall, after = time.perf_counter() - t0, os.times()
+                cpu = sum(after[:4]) - sum(before[:4])        # this process's and its pool's, user and system
+                run.walls.setdefault(stage, []).append(wall)
+                run.walls.setdefault(f"{stage} cpu", []).append(cpu)
+    finally:
+        tracemalloc.start()
+    for stage in ("grow, 1 job", "grow, all cores"):
+        run.stages[stage] = (statistics.median(run.walls[stage]), -1)
 
 
 def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene")) -> list[Run]:
@@ -257,6 +288,8 @@ def _cell(run: Run, stage: str) -> str:
     if stage not in run.stages:
         return ""
     seconds, peak = run.stages[stage]
+    if peak < 0:                             # a wall time, its memory not traced
+        return f"{seconds:.3f} s wall"
     return f"{seconds:.3f} s, {peak / 2**20:,.1f} MiB"
 
 
@@ -288,6 +321,15 @@ def markdown(runs: list[Run], title: str) -> str:
                 continue
             cells = [_cell(r, stage) for r in mine] + [""] * (width - len(mine))
             lines.append(f"| {kind} | {stage} | " + " | ".join(cells) + f" | {growth(mine, stage)} |")
+    pools = [r for r in runs if "grow, all cores" in r.stages]
+    if pools:
+        lines += ["", f"Growth of the distinct-seed scenes, one plant at a time against a pool over "
+                      f"{available_cores()} cores (wall seconds, median of {GROW_REPEATS}, alternated; then the CPU "
+                      f"seconds of this process and its pool's processes):", ""]
+        lines += [f"- {r.label}: {r.stages['grow, 1 job'][0]:.2f} s and {r.stages['grow, all cores'][0]:.2f} s, "
+                  f"{r.stages['grow, 1 job'][0] / max(r.stages['grow, all cores'][0], 1e-9):.2f} times as fast; "
+                  f"CPU of every process {statistics.median(r.walls['grow, 1 job cpu']):.2f} s and "
+                  f"{statistics.median(r.walls['grow, all cores cpu']):.2f} s" for r in pools]
     refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
     refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
     if refusals:

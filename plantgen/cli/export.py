@@ -17,6 +17,7 @@ from .options import (
     allow_path_opt,
     finite,
     input_arg,
+    jobs_opt,
     knob_option,
     knob_options,
     limit_opt,
@@ -87,10 +88,11 @@ SECTIONS = {"subdiv": QUALITY, "relief": QUALITY, "textures": OUTPUT, "aspect_st
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
+@jobs_opt
 @quiet_opt
 @verbose_opt
 def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures: bool, aspect_step, up, instancing,
-           unit, qsm_tolerance, ground_disc, seed, smooth_bends, limit_values, allow_paths, quiet, verbose,
+           unit, qsm_tolerance, ground_disc, seed, smooth_bends, limit_values, allow_paths, jobs, quiet, verbose,
            **keys) -> None:
     """Write INPUT (a skeleton .npz or .swc, a grammar or a scene) as a mesh, an SWC
     skeleton or a forestry cylinder model; the format follows OUTPUT's suffix.
@@ -147,7 +149,7 @@ def export(input: Path, output: Path | None, subdiv: int, relief: bool, textures
                             instancing=instancing, unit=unit, qsm_tolerance=qsm_tolerance, progress=bars,
                             smooth_bends=smooth_bends, keyframes=take_settings(KeyframeSettings, keys),
                             textures=textures, aspect_step=aspect_step, detail=take_settings(DetailSettings, keys),
-                            levels=take_settings(LevelSettings, keys), asset=asset, ground=ground_disc)
+                            levels=take_settings(LevelSettings, keys), asset=asset, ground=ground_disc, jobs=jobs)
     for line in info["warnings"]:    # never silenced by --quiet, as in grow
         click.echo(line, err=True)
     if quiet:

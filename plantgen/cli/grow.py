@@ -19,6 +19,7 @@ from .options import (
     define_values,
     input_arg,
     iterations_opt,
+    jobs_opt,
     limit_opt,
     limits_from,
     output_opt,
@@ -47,9 +48,10 @@ from .progress import StageBars
                    "reads back upright). The .npz is always y-up.")
 @limit_opt
 @allow_path_opt
+@jobs_opt
 @quiet_opt
 def grow(input: Path, output: Path | None, seed, iterations, max_modules, defines, formats, up, limit_values,
-         allow_paths, quiet) -> None:
+         allow_paths, jobs, quiet) -> None:
     """Grow INPUT (a grammar or scene .yaml, or a shipped one by name) into a skeleton;
     a skeleton .npz or .swc is read back, checked and written again.
 
@@ -68,7 +70,8 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
     _check_outputs(output, formats, up)
     with StageBars(enabled=not quiet) as bars:
         result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules, progress=bars,
-                           limits=limits_from(limit_values), allow_paths=allow_paths, defines=define_values(defines))
+                           limits=limits_from(limit_values), allow_paths=allow_paths, defines=define_values(defines),
+                           jobs=jobs)
     for line in result.warnings:     # never silenced by --quiet: a symbol not drawn is news
         click.echo(line, err=True)
     skel = result.skeleton

@@ -25,9 +25,9 @@ from ..settings import build_settings, option_names
 from .sections import LIMITS, MODEL, OTHER, OUTPUT, SectionedOption, section_of
 
 __all__ = ["GLOSSARY", "MAX_SIDE", "allow_path_opt", "debug_opt", "debug_requested", "define_values", "finite",
-           "input_arg", "iterations_opt", "knob_option", "knob_options", "limit_opt", "limits_from", "orbit_from",
-           "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt", "smooth_bends_opt", "take_settings",
-           "verbose_opt"]
+           "input_arg", "iterations_opt", "jobs_opt", "knob_option", "knob_options", "limit_opt", "limits_from",
+           "orbit_from", "output_opt", "parse_size", "quiet_opt", "seed_opt", "size_opt", "smooth_bends_opt",
+           "take_settings", "verbose_opt"]
 
 #: The largest image side ``WIDTHxHEIGHT`` accepts, in pixels.
 MAX_SIDE = MAX_IMAGE_SIDE
@@ -226,6 +226,14 @@ limit_opt = click.option(
 def limits_from(values: dict) -> Limits:
     """The limits a command runs under: the defaults with ``--limit`` values in place."""
     return default_limits.raised(**values)
+
+
+#: ``--jobs N``: the processes a scene's distinct plants may grow in.
+jobs_opt = click.option(
+    "--jobs", type=click.IntRange(min=1), default=None, cls=SectionedOption, section=MODEL,
+    help="Processes a scene's distinct plants grow in (default: the cores this process may use; 1: one by "
+         "one). A scene whose plants are forecast to take under about a tenth of a second grows them one by "
+         "one anyway; the plants are the same either way.")
 
 
 #: ``--allow-path DIR``: a folder a scene or a batch spec may read grammars from besides its own.

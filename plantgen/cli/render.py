@@ -15,6 +15,7 @@ from .options import (
     allow_path_opt,
     input_arg,
     iterations_opt,
+    jobs_opt,
     knob_options,
     limit_opt,
     limits_from,
@@ -51,10 +52,11 @@ SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "pose": 
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
+@jobs_opt
 @quiet_opt
 @verbose_opt
 def render(input: Path, output: Path | None, camera_out, depth_out, seed, iterations, timed_frames, smooth_bends,
-           limit_values, allow_paths, quiet, verbose, **knobs) -> None:
+           limit_values, allow_paths, jobs, quiet, verbose, **knobs) -> None:
     """Draw INPUT (a grammar or scene .yaml, a shipped name, or a skeleton .npz or .swc)
     into an image (.png, .jpg or .webp) or an animation.
 
@@ -93,7 +95,8 @@ def render(input: Path, output: Path | None, camera_out, depth_out, seed, iterat
     with StageBars(enabled=not quiet) as bars:
         report = render_file(input, output, settings, camera_out=camera_out, depth_out=depth_out, seed=seed,
                              iterations=iterations, timed_frames=timed_frames, progress=bars,
-                             limits=limits_from(limit_values), allow_paths=allow_paths, smooth_bends=smooth_bends)
+                             limits=limits_from(limit_values), allow_paths=allow_paths, smooth_bends=smooth_bends,
+                             jobs=jobs)
     for line in report.warnings:     # never silenced, as in grow
         click.echo(line, err=True)
     if not quiet:

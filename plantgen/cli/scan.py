@@ -16,6 +16,7 @@ from ..scanfiles import check_point_output, las_scale, write_points
 from .options import (
     allow_path_opt,
     input_arg,
+    jobs_opt,
     knob_options,
     limit_opt,
     limits_from,
@@ -74,9 +75,10 @@ def _plant_ids(grown) -> tuple[object, object]:
 @smooth_bends_opt
 @limit_opt
 @allow_path_opt
+@jobs_opt
 @quiet_opt
 def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth_bends, limit_values, allow_paths,
-         quiet, **knobs) -> None:
+         jobs, quiet, **knobs) -> None:
     """Scan INPUT (a grammar or scene .yaml, a shipped one by name, or a skeleton .npz /
     .swc) with simulated laser scanners and write the points, each labelled with its
     plant, part (stem, branch, leaf), branch order, segment, leaf and scanner.
@@ -97,7 +99,7 @@ def scan(input: Path, output: Path | None, scan_seed: int, up: str, seed, smooth
     chosen = click.get_current_context().get_parameter_source("scan_precision") is not ParameterSource.DEFAULT
     settings = take_settings(ScanSettings, knobs)
     limits = limits_from(limit_values)
-    grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths)
+    grown = grow_file(input, seed=seed, limits=limits, allow_paths=allow_paths, jobs=jobs)
     check_scan_memory(grown, limits, input)
     settings, finder = _gpu_finder(settings, quiet, chosen)
     with StageBars(enabled=not quiet) as bars:

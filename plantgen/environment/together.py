@@ -18,8 +18,8 @@ import numpy as np
 
 from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.skeleton import Skeleton
-from ..limits import Limits, Meter
-from ..lsystem.derive import Derivation
+from ..limits import QUERY_WORK, LimitError, Limits, Meter, hint
+from ..lsystem.derive import Derivation, steps_floor
 from ..lsystem.grammar import Grammar
 from ..lsystem.strings import ModuleString
 from ..lsystem.turtle import interpret_plant
@@ -40,18 +40,30 @@ class TogetherPlant:
 
 
 class _World:
-    """Every plant's latest drawing, placed in the world."""
+    """Every plant's latest drawing, placed in the world, and its segments in all (a running
+    total). Gathering the others for a plant's light is charged to ``work``, ``QUERY_WORK``
+    a segment gathered, before it is done: a stand of P plants gathers P - 1 plants for
+    each of them at every step, so its cost grows as P squared, and a large stand ends at
+    the budget instead of running for hours."""
 
-    def __init__(self, plants: list[TogetherPlant]):
-        self.plants = plants
+    def __init__(self, plants: list[TogetherPlant], work: Meter | None = None):
+        self.plants, self.work = plants, work
         self.placed: list[tuple[Skeleton, Polygons] | None] = [None] * len(plants)
+        self.segments = 0
 
     def put(self, i: int, skeleton: Skeleton, polygons: Polygons) -> None:
         m = self.plants[i].matrix
+        if self.placed[i] is not None:
+            self.segments -= len(self.placed[i][0])
         self.placed[i] = (skeleton.transformed(m), polygons.transformed(m))
+        self.segments += len(skeleton)
 
     def others(self, i: int):
         """The other plants' (Skeleton, Polygons) in plant ``i``'s frame, None for none."""
+        if self.work is not None:
+            own = len(self.placed[i][0]) if self.placed[i] is not None else 0
+            self.work.spend((self.segments - own) * QUERY_WORK, f"{self.plants[i].grammar.path}: the light of "
+                                                                  f"plant {i + 1} of the stand, among the others")
         parts = [p for j, p in enumerate(self.placed) if j != i and p is not None]
         if not parts:
             return None
@@ -62,12 +74,35 @@ class _World:
                 Polygons.concatenate([p for _, p in parts], offsets).transformed(back))
 
 
+def _check_steps(plants: list[TogetherPlant], limits: Limits, work: Meter | None) -> None:
+    """Refuse a stand whose plants' steps alone would spend past ``work``: plants grown
+    together take every step they are given (none settles early), each spending at least
+    its floor (``STEP_WORK`` a rule group, plus one), so the sum is known before the first
+    step, from each grammar's rule groups and step count (O(1) a plant)."""
+    if work is None:
+        return
+    floors: dict = {}
+    total = work.spent
+    for plant in plants:
+        key = (id(plant.grammar), plant.iterations)
+        if key not in floors:
+            floors[key] = steps_floor(plant.grammar, plant.iterations)
+        total += floors[key]
+    if total > work.limit:
+        raise LimitError(f"{plants[0].grammar.path}: {len(plants):,} plants grown together take steps that spend at "
+                         f"least {total:,} of derive_work, over the limit of {work.limit:,} ({hint(work.name)})")
+
+
 def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | None = None,
                   progress=None) -> list[ModuleString]:
     """Derive ``plants`` in lockstep in one shared space (see the module's notes): their
     derived strings, in order. ``progress(step, modules)`` after each step, all plants'
-    modules together."""
-    world = _World(plants)
+    modules together. A stand whose steps alone would spend past ``work`` is refused before
+    any plant derives (:func:`_check_steps`); each plant's drawing for the others, a turtle
+    walk over its string after every step, is charged to ``work`` (``QUERY_WORK`` a module)
+    before it is taken, as the query pass is."""
+    _check_steps(plants, limits, work)
+    world = _World(plants, work)
     runs = []
     for i, plant in enumerate(plants):
         env = environment_for(plant.grammar, seed=plant.seed, limits=limits)
@@ -86,6 +121,9 @@ def grow_together(plants: list[TogetherPlant], *, limits: Limits, work: Meter | 
             run.interpret()
             drawing = run.queries.pending[3] if run.queries is not None else None
             if drawing is None:
+                if work is not None:
+                    work.spend(len(run.string[0]) * QUERY_WORK, f"{run.grammar.path}: drawn for the stand after "
+                                                                f"step {step}")
                 drawing = interpret_plant(run.result(), run.grammar.turtle, run.grammar.materials, run.grammar.path,
                                           limits)
             world.put(i, drawing.skeleton, drawing.polygons)

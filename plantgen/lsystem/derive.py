@@ -56,7 +56,7 @@ from .strings import ModuleString, module_bytes
 from .symbols import Action, by_action
 
 __all__ = ["DEFAULT_MAX_MODULES", "Derivation", "DerivationLimit", "ModuleString", "apply_interpretation",
-           "context_neighbours", "cut_branches", "derive", "module_bytes"]
+           "context_neighbours", "cut_branches", "derive", "module_bytes", "steps_floor"]
 
 DEFAULT_MAX_MODULES = default_limits.max_modules
 
@@ -288,7 +288,7 @@ class Derivation:
         if len(self.string[0]) > limits.max_modules:
             raise DerivationLimit(f"{grammar.path}: the axiom alone exceeds the limit of {limits.max_modules} "
                                   "modules")
-        self.queries = Queries(grammar, environment, limits) if uses_queries(grammar) else None
+        self.queries = Queries(grammar, environment, limits, self.work) if uses_queries(grammar) else None
         self.groups = _rule_groups(grammar.rules)
         self.together = together
         self.seen: dict[bytes, int] | None = None if together else {}   # state fingerprint -> its step
@@ -361,6 +361,13 @@ class Derivation:
     def result(self) -> ModuleString:
         return ModuleString(*self.string, self.grammar.symbols, fixed_point=self.fixed_point,
                             globals=dict(self.state) if self.state else None)
+
+
+def steps_floor(grammar: Grammar, iterations: int | None = None) -> int:
+    """The least ``derive_work`` that ``iterations`` steps of ``grammar`` (its own count by
+    default) spend when none is skipped: ``STEP_WORK`` a rule group, plus one, a step."""
+    steps = grammar.iterations if iterations is None else int(iterations)
+    return steps * STEP_WORK * (len(_rule_groups(grammar.rules)) + 1)
 
 
 def _unchanged(before, after) -> bool:

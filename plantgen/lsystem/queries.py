@@ -25,7 +25,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import PlantgenError
-from ..limits import Limits
+from ..limits import QUERY_WORK, Limits, Meter
 from .grammar import Grammar
 from .strings import ModuleString
 from .symbols import SYMBOLS, Action
@@ -101,8 +101,9 @@ def communication_arity(grammar: Grammar) -> int | None:
 class Queries:
     """The query pass of one derivation: :meth:`update` writes the answers into a string."""
 
-    def __init__(self, grammar: Grammar, environment: Environment | None, limits: Limits):
-        self.grammar, self.environment = grammar, environment
+    def __init__(self, grammar: Grammar, environment: Environment | None, limits: Limits,
+                 work: Meter | None = None):
+        self.grammar, self.environment, self.work = grammar, environment, work
         self.meter = limits.meter("queries")
         self.limits = limits
         self.pending = None          # (string, step, rows, drawing) walked by interpret, not yet written
@@ -129,6 +130,8 @@ class Queries:
         if not len(rows):
             return None
         self.meter.spend(len(rows), f"{self.grammar.path}: query modules after step {step}")
+        if self.work is not None:        # the walk over the whole string, charged before it is taken
+            self.work.spend(len(sym) * QUERY_WORK, f"{self.grammar.path}: the query pass after step {step}")
         ms = ModuleString(*string, self.grammar.symbols)
         drawing = interpret_plant(ms, self.grammar.turtle, self.grammar.materials, self.grammar.path, self.limits,
                                   queries=True)

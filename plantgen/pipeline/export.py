@@ -65,7 +65,8 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
                  qsm_tolerance: float = 1e-3, progress=None, smooth_bends: float | None = None,
                  keyframes: KeyframeSettings | None = None, textures: bool = True,
                  aspect_step: float | None = None, detail: DetailSettings | None = None,
-                 levels: LevelSettings | None = None, asset: AssetSettings | None = None, ground=False) -> dict:
+                 levels: LevelSettings | None = None, asset: AssetSettings | None = None, ground=False,
+                 jobs: int | None = None) -> dict:
     """The library side of ``plantgen export``: input file -> skin -> tessellate -> file,
     or, for a skeleton format (``.swc``, ``.qsm.csv``, ``.qsm.mat``), input -> file.
 
@@ -111,7 +112,7 @@ def export_model(input_path, output_path, *, level: int | None = DEFAULT_LEVEL, 
     output_path, limits = Path(output_path), in_force(limits)
     fmt, asset = _export_checks(output_path, up, instancing, asset or AssetSettings(), unit)
     up, t0 = up or fmt.up, time.perf_counter()
-    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress)
+    grown = grow_file(input_path, seed=seed, limits=limits, allow_paths=allow_paths, progress=progress, jobs=jobs)
     _export_budget(grown, fmt, instancing, 0 if level is None else level, limits, input_path, output_path)
     for skeleton in _distinct_skeletons(grown, fmt.kind == "skeleton"):
         skeleton.validate()

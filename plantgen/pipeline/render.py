@@ -204,16 +204,16 @@ def place_scene(scene: Scene, skin=skin_skeleton, source="scene") -> PlacedPlant
 
 def prepare_model(input_path, *, effects: EffectSettings | None = None, seed=None, iterations=None,
                   limits: Limits | None = None, allow_paths=(), smooth_bends=None, progress=None,
-                  budget=None) -> PreparedModel:
+                  budget=None, jobs: int | None = None) -> PreparedModel:
     """Grow or load ``input_path`` and settle its effects (``effects``, an
     :class:`~plantgen.settings.EffectSettings`, resolved against the scene's list);
     ``smooth_bends``: see :func:`skinning`. One line for a model with no segment. A still
     scene with the ``lod`` effect is placed (:func:`place_scene`), not merged. ``progress``:
     :func:`grow_file`'s, then the stage ``skin``. ``budget(segments, effects)``, if given,
     is called with the segments that will be skinned (every placed copy's, or a placed
-    scene's distinct plants') before any is."""
+    scene's distinct plants') before any is. ``jobs``: :func:`grow_file`'s."""
     grown = grow_file(input_path, seed=seed, iterations=iterations, limits=limits, allow_paths=allow_paths,
-                      progress=progress)
+                      progress=progress, jobs=jobs)
     if progress is not None:
         progress("skin", 0, None)
     chosen = (effects or EffectSettings()).resolve(grown.scene.effects if grown.scene is not None else ())
@@ -444,7 +444,7 @@ def _method_for(march: RaycastSettings, model: PreparedModel, frusta, pixels: in
 
 def render_model(input_path, settings: RenderSettings | None = None, *, seed=None, iterations=None,
                  timed_frames: int = 0, exact_distance: bool = False, progress=None, limits: Limits | None = None,
-                 allow_paths=(), smooth_bends=None, **options) -> RenderReport:
+                 allow_paths=(), smooth_bends=None, jobs: int | None = None, **options) -> RenderReport:
     """Grow or load ``input_path`` (grammar, scene, skeleton ``.npz``/``.swc`` or shipped
     name), skin it and ray cast it as ``settings`` (a :class:`~plantgen.settings.RenderSettings`)
     ask; nothing is written (see :func:`render_file`).
@@ -462,9 +462,9 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         distances through the pixel centres (else: the sub-sample nearest each centre)
     progress : ``progress(stage, done, total)``: :func:`prepare_model`'s stages, then
         ``render`` (a still) or ``frames`` (after each animation frame)
-    limits, allow_paths : the budgets in force (``max_render_bytes`` bounds the memory the
-        render is estimated to take, before any is allocated) and the folders a scene may
-        read grammars from
+    limits, allow_paths, jobs : the budgets in force (``max_render_bytes`` bounds the memory
+        the render is estimated to take, before any is allocated), the folders a scene may
+        read grammars from, and the processes its plants may grow in (:func:`grow_file`)
     smooth_bends : None, or bends past this many degrees become arcs (:func:`skinning`)
     """
     limits, request = in_force(limits), request_settings(settings, options)
@@ -480,7 +480,8 @@ def render_model(input_path, settings: RenderSettings | None = None, *, seed=Non
         _check_render_memory(limits, str(input_path), width, height, frames,
                              shadow_res if "shadows" in effects else None, segments, image.ssaa)
     model = prepare_model(input_path, effects=request.effects, seed=seed, iterations=iterations, limits=limits,
-                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress, budget=budget)
+                          allow_paths=allow_paths, smooth_bends=smooth_bends, progress=progress, budget=budget,
+                          jobs=jobs)
     _check_render_memory(limits, str(input_path), width, height, frames,
                          shadow_res if "shadows" in model.effects else None, model.skinned_segments, image.ssaa)
     if frames is not None and model.placed is not None:

@@ -72,10 +72,13 @@ class ViewOptions:
 
     def prepare(self, iterations: int | None = None) -> PreparedModel:
         """Grow the input with these options (the first model, and each reload); a grammar
-        ``iterations`` steps deep when given (a growth step), else as the options say."""
+        ``iterations`` steps deep when given (a growth step), else as the options say. A
+        scene's plants grow in this process (``jobs=1``): a process with a window, its GL
+        context and their threads is not forked into a pool."""
         iterations = self.iterations if iterations is None else iterations
         return prepare_model(self.input, effects=self.settings.effects, seed=self.seed, iterations=iterations,
-                             limits=self.limits, allow_paths=self.allow_paths, smooth_bends=self.smooth_bends)
+                             limits=self.limits, allow_paths=self.allow_paths, smooth_bends=self.smooth_bends,
+                             jobs=1)
 
 
 @dataclass
