@@ -25,7 +25,7 @@ import numpy as np
 from ..geometry.rays.camera import Camera, depth_range
 from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
-from ..settings import MAX_SSAA, ShadowSettings
+from ..settings import AA_CHOICES, MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
@@ -36,7 +36,7 @@ from .shaders import build_program, mat4, set_uniforms
 from .supersample import GpuResolve
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "ShadowKey", "LightPass",
-           "light_anchor", "check_background", "check_ssaa"]
+           "light_anchor", "check_background", "check_ssaa", "coverage_aa"]
 
 
 def check_background(background) -> tuple | None:
@@ -57,6 +57,16 @@ def check_ssaa(ssaa) -> int:
     if n != ssaa or not 1 <= n <= MAX_SSAA:
         raise ValueError(f"ssaa must be an integer in 1..{MAX_SSAA}, got {ssaa!r}")
     return n
+
+
+def coverage_aa(aa: str, ssaa: int = 1, labels: bool = False, background=None) -> bool:
+    """Whether a frame draws with coverage anti-aliasing: ``aa`` is ``"coverage"`` (of
+    :data:`~plantgen.settings.AA_CHOICES`; ``"none"``: one ray a pixel), at one sample a
+    side (supersampling replaces it), in colour (a part mask's labels are never mixed) and
+    over an opaque background (a transparent one has no colour to blend a thin row with)."""
+    if aa not in AA_CHOICES:
+        raise ValueError(f"aa must be one of {', '.join(AA_CHOICES)}, got {aa!r}")
+    return aa == "coverage" and ssaa == 1 and not labels and (background is None or background[3] >= 1)
 
 
 @dataclass(frozen=True)
@@ -475,32 +485,36 @@ class OffscreenRenderer:
 
     def _finish_frame(self, camera: Camera, view: FrameView, lighting: FrameLighting, background, draw_model,
                       shadows: ShadowSettings | None, light: LightPass | None, extras: Surroundings, *, ssaa: int,
-                      count_work: bool) -> FrameOutput:
+                      count_work: bool, smooth: bool = False) -> FrameOutput:
         """The frame's tail, the same for both renderers: count the work if asked, run the
         passes (:meth:`_draw_frame`; ``light`` the renderer's part of the light's pass),
-        read the frame back at ``camera``'s size (:meth:`_read_back`) and read the counters."""
+        read the frame back at ``camera``'s size (:meth:`_read_back`; ``smooth``: through
+        coverage anti-aliasing's edge pass) and read the counters."""
         counter = WorkCounter(self.ctx) if count_work else None
         frame_ms, shadow_ms, cached = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
                                                        shadows, light, extras)
-        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
+        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa, smooth=smooth,
                                       alpha=background is not None and background[3] < 1, srgb=lighting.srgb)
         work = counter.read(dist) if counter is not None else None
         return FrameOutput(color, dist, frame_ms, shadow_ms, work, cached)
 
-    def _read_back(self, width: int, height: int, *, ssaa: int = 1,
+    def _read_back(self, width: int, height: int, *, ssaa: int = 1, smooth: bool = False,
                    alpha: bool = False, srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
         averaged down on the GPU first, in linear light (``srgb`` the frame's encoding;
         :class:`plantgen.gl.supersample.GpuResolve`; ``last_resolve_ms``: that pass and its
-        read back)."""
+        read back); with ``smooth`` a frame of one ray a pixel goes through coverage
+        anti-aliasing's edge pass the same way (:meth:`~plantgen.gl.supersample.GpuResolve.
+        smooth_edges`)."""
         fbo = self._fbo
         self.last_resolve_ms = 0.0
-        if ssaa > 1:
+        if ssaa > 1 or smooth:
             t0 = time.perf_counter()
-            out = self._resolver.resolve(fbo.color_attachments[0], fbo.color_attachments[1], width, height,
-                                         ssaa, alpha, srgb=srgb)
+            color, distance = fbo.color_attachments[0], fbo.color_attachments[1]
+            out = (self._resolver.resolve(color, distance, width, height, ssaa, alpha, srgb=srgb) if ssaa > 1
+                   else self._resolver.smooth_edges(color, distance, width, height, alpha))
             self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
             return out
         k = 4 if alpha else 3

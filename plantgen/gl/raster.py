@@ -35,6 +35,7 @@ from .frame import (
     ShadowKey,
     check_background,
     check_ssaa,
+    coverage_aa,
     frame_view,
 )
 from .instanced import IDENTITY_TURN, draw_copies, eye_copy_draws, light_copy_draws
@@ -161,7 +162,7 @@ class RasterRenderer(OffscreenRenderer):
                shadows: ShadowSettings | None = None, shadow_box=None,
                count_work: bool = False, background=None, ssaa: int = 1, leaves=None,
                poses=None, bounds=None, normal_maps=None,
-               parallax: ParallaxSettings | None = None) -> RenderResult:
+               parallax: ParallaxSettings | None = None, aa: str = "none") -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -184,8 +185,9 @@ class RasterRenderer(OffscreenRenderer):
             bounds), as for the ray caster
         count_work : a diagnostic render that also counts the fragments shaded
             (``stats.work``), as for the ray caster
-        background, ssaa : a flat or transparent background and supersampling, as for the
-            ray caster
+        background, ssaa, aa : a flat or transparent background, supersampling and the
+            anti-aliasing, as for the ray caster (``"coverage"``: the edge pass alone; the
+            tessellated branches have no floor radius)
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
         normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
@@ -225,7 +227,7 @@ class RasterRenderer(OffscreenRenderer):
                                                  ground, shadows.resolution, lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._mesh_light_pass(origin, lighting, mesh, poses))
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work)
+                                 ssaa=ssaa, count_work=count_work, smooth=coverage_aa(aa, ssaa, False, background))
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
             passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),
