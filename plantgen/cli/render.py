@@ -30,7 +30,7 @@ from .sections import EFFECTS, OUTPUT, QUALITY, SectionedCommand
 
 #: Where render's options that are not plain settings go in ``--help`` (and the settings
 #: that belong elsewhere than their class's section).
-SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "pose": QUALITY, "time": EFFECTS}
+SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "aa": QUALITY, "pose": QUALITY, "time": EFFECTS}
 
 
 @click.command(cls=SectionedCommand, sections=SECTIONS)

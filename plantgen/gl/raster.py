@@ -339,7 +339,7 @@ class RasterRenderer(OffscreenRenderer):
 
     def render_placed(self, meshes: PlacedMeshes, camera: Camera, *, light_dir=None, ground: Ground | None = None,
                       shadows: ShadowSettings | None = None, shadow_box=None, background=None, ssaa: int = 1,
-                      lod_pixels: float = 0.0) -> RenderResult:
+                      lod_pixels: float = 0.0, aa: str = "none") -> RenderResult:
         """Rasterise a placed scene's meshes (GS, GS+R), each plant's mesh uploaded once and
         drawn once per copy the view sees (:mod:`plantgen.gl.instanced`), each copy's first
         rows of the detail order as ``lod_pixels`` asks (the light's pass: in its texels).
@@ -366,7 +366,7 @@ class RasterRenderer(OffscreenRenderer):
                             lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._placed_light_draw(meshes, uploads, lighting, shadows, lod_pixels))
         out = self._finish_frame(camera, view, lighting, background, draw, shadows, light, extras, ssaa=ssaa,
-                                 count_work=False)
+                                 count_work=False, smooth=coverage_aa(aa, ssaa, False, background))
         triangles = sum(int(pm.row_faces[c]) for pm, d in zip(meshes.meshes, plan, strict=True)
                         for c in d.counts.tolist())
         stats = RasterStats(
