@@ -56,8 +56,9 @@ DEFAULT_SIZE = (1024, 768)
 #: The ``--ground`` values: ``auto`` (the scene's ground; a disc under a single plant) or ``none``.
 GROUND_CHOICES = ("auto", "none")
 #: ``--aa``: coverage anti-aliasing (branches thinner than a pixel cast a pixel wide, drawn
-#: last, blended by their share of the pixel) or none (one ray a pixel, as before).
-AA_CHOICES = ("coverage", "none")
+#: last, blended by their share of the pixel), the same and an edge pass (``edges``: the
+#: frame's edges smoothed along their direction), or none (one ray a pixel, as before).
+AA_CHOICES = ("coverage", "edges", "none")
 #: Coverage anti-aliasing's floor: a row thinner than this many pixels across is cast this wide.
 AA_FLOOR_PIXELS = 1.0
 #: The most samples per pixel side of supersampling.
@@ -410,9 +411,10 @@ class ImageSettings:
     ssaa: int = knob(1, "--ssaa", "Supersampling: N x N rays a pixel, averaged in linear light (thin twigs stop "
                      "breaking into dots; the frame costs about N² times as much).", kind="int", lo=1, hi=MAX_SSAA,
                      metavar="N")
-    aa: str = knob("coverage", "--aa", "Anti-aliasing of thin branches: 'coverage' draws a twig thinner than a "
-                   "pixel as a continuous line a pixel wide, blended by its share of the pixel; 'none' one ray a "
-                   "pixel, as before (thin twigs break into dots). --ssaa N above 1 replaces it.",
+    aa: str = knob("coverage", "--aa", "Anti-aliasing: 'coverage' draws a twig thinner than a pixel as a "
+                   "continuous line a pixel wide, blended by its share of the pixel; 'edges' also smooths the "
+                   "image's edges along their direction (softer, and blurs fine detail); 'none' one ray a pixel, "
+                   "as before (thin twigs break into dots). --ssaa N above 1 replaces it.",
                    kind="choice", choices=AA_CHOICES)
     background: str = knob("sky", "--background", "The background: 'sky', a colour (white, '#20304a') or 'none' "
                            "for a transparent PNG (RGBA: the alpha is the model's coverage).", kind="str",

@@ -24,6 +24,10 @@ uniform float edge_relative;        // ... and relative to the brightest of the 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out float out_distance;
 
+#ifndef RIDGE
+#define RIDGE 2.0
+#endif
+
 float luma(vec3 c) { return dot(c, vec3(0.299, 0.587, 0.114)); }
 
 // The luma of the pixel at `q`, clamped to the image.
@@ -55,7 +59,13 @@ void main() {
     }
     // the luma gradient from the neighbours; the edge runs across it
     vec2 gradient = vec2(2.0 * (e - w) + (ne + se) - (nw + sw), 2.0 * (n - s) + (nw + ne) - (sw + se));
-    vec2 along = length(gradient) > 0.0 ? normalize(vec2(-gradient.y, gradient.x)) : vec2(1.0, 0.0);
+    // a ridge or a dot (a line a pixel wide, a speck: no step to smooth, their gradient
+    // small against their contrast; a step edge's is 4 times it) is left as drawn
+    if (length(gradient) < RIDGE * contrast) {
+        out_color = centre;
+        return;
+    }
+    vec2 along = normalize(vec2(-gradient.y, gradient.x));
     // taps along the edge: half a pixel and a pixel and a half either side (bilinear)
     vec3 inner = 0.5 * (texture(frame_color, uv + 0.5 * along * texel).rgb
                         + texture(frame_color, uv - 0.5 * along * texel).rgb);

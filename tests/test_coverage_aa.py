@@ -93,23 +93,26 @@ def test_the_line_is_nearer_the_supersampled_twig(gl_ctx, twig_frames):
 
 
 def test_a_wide_surface_keeps_its_colours(gl_ctx):
-    """A branch many pixels wide keeps its colours inside its outline: no darkening (the
-    mean moves by under a quarter level); the edge pass softens a few pixels of the bark's
-    own pattern by a few levels, the rest are drawn as before."""
+    """A branch many pixels wide is drawn as before: with ``coverage`` pixel for pixel (it
+    is no thin row); with ``edges`` no darkening (the mean moves by under a quarter level
+    inside its outline), the edge pass softening a few pixels of the bark's pattern by a few
+    levels."""
     from plantgen.gl.raycast import Raycaster
     caster, frusta, camera = Raycaster(gl_ctx), relief_frustum("bark"), face_on_camera(96, 96)
-    none, coverage = (caster.render(frusta, camera, material_names=("bark",), background=BACKGROUND, aa=aa)
-                      for aa in ("none", "coverage"))
+    none, coverage, edges = (caster.render(frusta, camera, material_names=("bark",), background=BACKGROUND, aa=aa)
+                             for aa in ("none", "coverage", "edges"))
+    assert np.array_equal(none.color, coverage.color)
     hit = np.isfinite(none.distance)
     inside = hit.copy()
     for axis in (0, 1):
         for shift in (-2, -1, 1, 2):
             inside &= np.roll(hit, shift, axis=axis)
     assert inside.sum() > 500
-    a, b = none.color[inside].astype(float), coverage.color[inside].astype(float)
+    a, b = none.color[inside].astype(float), edges.color[inside].astype(float)
     change = np.abs(a - b).max(axis=-1)
     assert abs(a.mean() - b.mean()) < 0.25 and change.max() <= 8 and (change == 0).mean() > 0.8
-    assert np.array_equal(none.distance, coverage.distance)     # the distances are the centre rays'
+    assert not np.array_equal(none.color, edges.color)
+    assert np.array_equal(none.distance, edges.distance)       # the distances are the centre rays'
 
 
 def test_aa_none_draws_what_the_ray_caster_drew(gl_ctx):
@@ -135,7 +138,7 @@ def test_supersampling_replaces_it(gl_ctx):
 
 
 def test_where_it_applies():
-    assert coverage_aa("coverage") and not coverage_aa("none")
+    assert coverage_aa("coverage") and coverage_aa("edges") and not coverage_aa("none")
     assert not coverage_aa("coverage", ssaa=2)                         # supersampling instead
     assert not coverage_aa("coverage", labels=True)                    # a part mask's labels
     assert not coverage_aa("coverage", background=(0.0, 0.0, 0.0, 0.0))   # nothing to blend with

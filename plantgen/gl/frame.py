@@ -60,13 +60,14 @@ def check_ssaa(ssaa) -> int:
 
 
 def coverage_aa(aa: str, ssaa: int = 1, labels: bool = False, background=None) -> bool:
-    """Whether a frame draws with coverage anti-aliasing: ``aa`` is ``"coverage"`` (of
-    :data:`~plantgen.settings.AA_CHOICES`; ``"none"``: one ray a pixel), at one sample a
-    side (supersampling replaces it), in colour (a part mask's labels are never mixed) and
-    over an opaque background (a transparent one has no colour to blend a thin row with)."""
+    """Whether a frame draws with coverage anti-aliasing: ``aa`` is ``"coverage"`` or
+    ``"edges"`` (of :data:`~plantgen.settings.AA_CHOICES`; ``"none"``: one ray a pixel), at
+    one sample a side (supersampling replaces it), in colour (a part mask's labels are never
+    mixed) and over an opaque background (a transparent one has no colour to blend a thin
+    row with). With ``"edges"`` the frame then goes through the edge pass."""
     if aa not in AA_CHOICES:
         raise ValueError(f"aa must be one of {', '.join(AA_CHOICES)}, got {aa!r}")
-    return aa == "coverage" and ssaa == 1 and not labels and (background is None or background[3] >= 1)
+    return aa != "none" and ssaa == 1 and not labels and (background is None or background[3] >= 1)
 
 
 @dataclass(frozen=True)

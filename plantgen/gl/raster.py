@@ -185,9 +185,8 @@ class RasterRenderer(OffscreenRenderer):
             bounds), as for the ray caster
         count_work : a diagnostic render that also counts the fragments shaded
             (``stats.work``), as for the ray caster
-        background, ssaa, aa : a flat or transparent background, supersampling and the
-            anti-aliasing, as for the ray caster (``"coverage"``: the edge pass alone; the
-            tessellated branches have no floor radius)
+        background, ssaa, aa : background, supersampling and anti-aliasing, as for the ray
+            caster (no floor radius here: only ``"edges"``'s edge pass changes the frame)
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
         normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
@@ -227,7 +226,8 @@ class RasterRenderer(OffscreenRenderer):
                                                  ground, shadows.resolution, lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._mesh_light_pass(origin, lighting, mesh, poses))
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work, smooth=coverage_aa(aa, ssaa, False, background))
+                                 ssaa=ssaa, count_work=count_work,
+                                 smooth=aa == "edges" and coverage_aa(aa, ssaa, False, background))
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
             passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),
@@ -366,7 +366,7 @@ class RasterRenderer(OffscreenRenderer):
                             lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._placed_light_draw(meshes, uploads, lighting, shadows, lod_pixels))
         out = self._finish_frame(camera, view, lighting, background, draw, shadows, light, extras, ssaa=ssaa,
-                                 count_work=False, smooth=coverage_aa(aa, ssaa, False, background))
+                                 count_work=False, smooth=aa == "edges" and coverage_aa(aa, ssaa, False, background))
         triangles = sum(int(pm.row_faces[c]) for pm, d in zip(meshes.meshes, plan, strict=True)
                         for c in d.counts.tolist())
         stats = RasterStats(

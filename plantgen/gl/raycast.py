@@ -200,8 +200,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
         aa : ``"coverage"``: coverage anti-aliasing where it applies (:func:`~plantgen.gl.
-            frame.coverage_aa`; :meth:`_thin_rows_draw`, and the edge pass in ``resolve_ms``);
-            ``"none"``: one ray a pixel
+            frame.coverage_aa`, :meth:`_thin_rows_draw`); ``"edges"``: and the edge pass (in
+            ``resolve_ms``); ``"none"``: one ray a pixel
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
         """
@@ -235,7 +235,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
             frusta, programs["light"], lighting, settings, shadows, tuple(material_names), record_buffer,
             (leaves if has_leaves else None, ground), lod_pixels)
         out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work, smooth=coverage)
+                                 ssaa=ssaa, count_work=count_work, smooth=coverage and aa == "edges")
         stats = RaycastStats(
             passes=frame_passes(shadows is not None, ground is not None, n > 0, has_leaves), near=view.near,
             far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=drawn,

@@ -114,8 +114,8 @@ class RayTracer(Raycaster):
                shadows=None, shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
                ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0, aa: str = "none"):
         """Trace ``frusta`` (Frusta or PlacedPlants) as seen by ``camera``: the arguments of
-        :meth:`Raycaster.render` (``lod_pixels`` is ignored: every row is traced; with ``aa``
-        coverage the edges are smoothed, but no row is cast at the floor radius: the BVH's
+        :meth:`Raycaster.render` (``lod_pixels`` is ignored: every row is traced; ``aa``
+        ``"edges"`` smooths the edges, but no row is cast at the floor radius: the BVH's
         boxes hold the rows' own radii, :attr:`casts_thin_rows`)."""
         from ..settings import RaycastSettings
 
