@@ -146,3 +146,16 @@ def test_where_it_applies():
     assert ImageSettings().aa == "coverage" and AA_FLOOR_PIXELS == 1.0
     with pytest.raises(ValueError):
         coverage_aa("fxaa")
+
+
+def test_the_bench_writes_its_table(gl_ctx, tmp_path):
+    """``python -m plantgen.benchmarks.anti_aliasing``: a row per variant, ``--aa none``'s
+    ratios 1, the renderer named."""
+    from plantgen.benchmarks import anti_aliasing
+    out = tmp_path / "aa.md"
+    assert anti_aliasing.main(["saguaro", "--sizes", "64x48", "--frames", "1", "--out", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    rows = [line for line in text.splitlines() if line.startswith("| saguaro |")]
+    assert [r.split("|")[3].strip() for r in rows] == ["`--aa none`", "`--aa coverage`", "`--aa edges`",
+                                                        "`--ssaa 2`"]
+    assert rows[0].split("|")[6:8] == [" 1.00 ", " 1.00 "] and "GL renderer:" in text

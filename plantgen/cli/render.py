@@ -148,6 +148,8 @@ def frame_line(report: RenderReport, verbose: bool = False) -> str:
         n = report.ssaa
         size += (f" with {n}x{n} supersampling ({n * n} samples a pixel: a {cam.width * n}x{cam.height * n} "
                  f"frame, averaged down in {report.result.stats.resolve_ms:.0f} ms more)")
+    elif report.request.image.aa == "edges" and report.result is not None and report.result.stats.resolve_ms > 0:
+        size += f" with the edge pass ({report.result.stats.resolve_ms:.0f} ms more, read back included)"
     if report.frames > 1:
         where = (f"on the GPU in {report.gpu_frames} of {report.frames} frames" if report.gpu_frames
                  else "on the CPU")
