@@ -25,7 +25,7 @@ import numpy as np
 from ..geometry.rays.camera import Camera, depth_range
 from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
-from ..settings import AA_CHOICES, MAX_SSAA, ShadowSettings
+from ..settings import AA_CHOICES, AA_FLOOR_PIXELS, MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
@@ -103,6 +103,11 @@ class FrameView:
         distance s from the eye (the adaptive relief march's footprint)."""
         return (float(2.0 * np.tan(np.radians(self.camera.fov_y) / 2) / self.camera.height), 0.0)
 
+    def floor_radius(self) -> float:
+        """Coverage anti-aliasing's floor radius per unit of distance from the eye: half of
+        :data:`~plantgen.settings.AA_FLOOR_PIXELS` pixels."""
+        return 0.5 * AA_FLOOR_PIXELS * self.pixel_footprint()[0]
+
 
 def frame_view(camera: Camera, point_sets) -> FrameView:
     """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
@@ -119,13 +124,15 @@ def frame_view(camera: Camera, point_sets) -> FrameView:
 @dataclass(frozen=True)
 class Surroundings:
     """What a frame draws besides the model: callables drawn before it (the ground) and
-    after it (the leaves), into the light's map (``light``), and GL objects to release once
-    the frame is drawn."""
+    after it (the leaves), into the light's map (``light``), GL objects to release once
+    the frame is drawn, and coverage anti-aliasing's blended passes (``thin``, the thin
+    leaves'), drawn after everything opaque."""
 
     before: list
     after: list
     light: list
     garbage: list
+    thin: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -382,10 +389,12 @@ class OffscreenRenderer:
         return frame_draw, light_draw, [vao, light_vao, buf, light_buf]
 
     def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
-                      *, labels=None, background=None) -> Surroundings:
+                      *, labels=None, background=None, coverage_floor: float = 0.0) -> Surroundings:
         """The frame's draws besides the model's own: the ground (fading into ``background``
         where it is flat) and the leaves (``leaves``: a Polygons or None; ``labels`` (p,):
-        draw them as a part mask)."""
+        draw them as a part mask; ``coverage_floor``: coverage anti-aliasing's floor
+        radius a unit of distance, the thin leaves' pass in ``thin``,
+        :meth:`~plantgen.gl.leaf_layer.LeafLayer.draws`)."""
         out = Surroundings([], [], [], [])
         if ground is not None:
             draw, light_draw, garbage = self._ground_draws(ground, view, lighting, background)
@@ -393,8 +402,10 @@ class OffscreenRenderer:
             out.light.append(light_draw)
             out.garbage.extend(garbage)
         if leaves is not None and len(leaves.triangles):
-            draw, light_draw, garbage = self._leaves.draws(leaves, view, lighting, labels=labels)
+            draw, light_draw, garbage, thin = self._leaves.draws(leaves, view, lighting, labels=labels,
+                                                                 coverage_floor=coverage_floor)
             out.after.append(draw)
+            out.thin.extend([thin] if thin is not None else [])
             out.light.append(light_draw)
             out.garbage.extend(garbage)
         out.light[:] = [d for d in out.light if d is not None]
@@ -474,7 +485,7 @@ class OffscreenRenderer:
         ctx.depth_func = "<="
         sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
-        for draw in (draw_model, *extras.after):
+        for draw in (draw_model, *extras.after, *extras.thin):
             draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3

@@ -218,7 +218,8 @@ class RasterRenderer(OffscreenRenderer):
                                   anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
         draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh, parallax)
-        extras = self._surroundings(ground, leaves, view, lighting, background=background)
+        floor = view.floor_radius() if coverage_aa(aa, ssaa, False, background) else 0.0
+        extras = self._surroundings(ground, leaves, view, lighting, background=background, coverage_floor=floor)
         light = None
         if shadowed:
             # a skinned mesh is posed by a buffer rewritten every frame: no key, its map drawn each time
@@ -226,8 +227,7 @@ class RasterRenderer(OffscreenRenderer):
                                                  ground, shadows.resolution, lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._mesh_light_pass(origin, lighting, mesh, poses))
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work,
-                                 smooth=aa == "edges" and coverage_aa(aa, ssaa, False, background))
+                                 ssaa=ssaa, count_work=count_work, smooth=aa == "edges" and floor > 0)
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
             passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),

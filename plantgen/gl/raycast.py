@@ -31,7 +31,7 @@ from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from ..settings import AA_FLOOR_PIXELS, RaycastSettings, ShadowSettings
+from ..settings import RaycastSettings, ShadowSettings
 from .bvh_cache import BvhCache
 from .context import gl_context
 from .frame import (
@@ -199,9 +199,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
-        aa : ``"coverage"``: coverage anti-aliasing where it applies (:func:`~plantgen.gl.
-            frame.coverage_aa`, :meth:`_thin_rows_draw`); ``"edges"``: and the edge pass (in
-            ``resolve_ms``); ``"none"``: one ray a pixel
+        aa : ``"coverage"`` (:func:`~plantgen.gl.frame.coverage_aa`, :meth:`_thin_rows_draw`),
+            ``"edges"`` (and the edge pass, in ``resolve_ms``) or ``"none"`` (one ray a pixel)
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
         """
@@ -225,7 +224,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
             else view.eye, look=None if settings.labels else settings.look), sky_bvh, settings, view, repeats,
             model_box)
         extras = self._surroundings(ground, leaves, view, lighting, background=background,
-                                    labels=leaf_labels if settings.labels else None)
+                                    labels=leaf_labels if settings.labels else None,
+                                    coverage_floor=view.floor_radius() if coverage else 0.0)
         extras.before[:0] = [sky_bvh.bind] if sky_bvh is not None else []
         has_leaves = bool(extras.after)
         draw_frusta, drawn = self._eye_draws(programs["frame"], view, lighting, settings,
@@ -250,7 +250,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         height textures, rows, lod_pixels)) of ``rows``, a PlacedPlants or (records, a
         caller's record buffer or None: the records are uploaded here), what it leaves
         added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's pass of the
-        thin rows appended to ``extras.after`` (after the leaves). Returns (draw, rows drawn)."""
+        thin rows put first in ``extras.thin`` (drawn after everything opaque). Returns (draw, rows drawn)."""
         repeats, tex, n, lod_pixels = textures
         if not isinstance(rows, PlacedPlants):
             records, record_buffer = rows
@@ -260,7 +260,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
                                               thin)
         extras.garbage.extend(vaos)
-        extras.after.extend([self._thin_rows_draw(program, draw)] if thin else [])
+        extras.thin[:0] = [self._thin_rows_draw(program, draw)] if thin else []
         return draw, drawn
 
     def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
@@ -328,7 +328,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
                      view_projection=mat4(view.view_projection),
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
         if thin_rows:
-            set_uniforms(program, coverage_floor=0.5 * AA_FLOOR_PIXELS * view.pixel_footprint()[0], coverage_pass=0)
+            set_uniforms(program, coverage_floor=view.floor_radius(), coverage_pass=0)
         if not n:
             return (lambda: None), [], 0
         ctx = self.ctx

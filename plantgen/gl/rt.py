@@ -187,10 +187,11 @@ class RayTracer(Raycaster):
         return {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
 
     def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None,
-                      background=None):
+                      background=None, coverage_floor: float = 0.0):
         if lighting.receiver_defines:
             lighting = replace(lighting, receiver={**lighting.receiver, "pixel_footprint": view.pixel_footprint()})
-        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background)
+        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background,
+                                    coverage_floor=coverage_floor)
         frame = self._frame
         if frame is not None:
             out.before.insert(0, self._bind)        # the BVH and heights for every receiver
