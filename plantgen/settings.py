@@ -31,6 +31,7 @@ from .geometry.rays.camera import Orbit
 from .knobs import check_knobs, knob
 
 __all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "AA_CHOICES", "AA_FLOOR_PIXELS",
+           "AA_ALPHA_EXPONENT",
            "LookSettings", "LOD_EXPORT_LEVELS",
            "MAX_SSAA", "MAX_SUBDIV", "EffectSettings", "RaycastSettings", "ShadowSettings", "ParallaxSettings",
            "DetailSettings",
@@ -61,6 +62,12 @@ GROUND_CHOICES = ("auto", "none")
 AA_CHOICES = ("coverage", "edges", "none")
 #: Coverage anti-aliasing's floor: a row thinner than this many pixels across is cast this wide.
 AA_FLOOR_PIXELS = 1.0
+#: Coverage anti-aliasing blends a thin piece by its coverage to this power: the frame is
+#: blended in its display encoding, where a dark twig or needle over the bright sky at a
+#: given coverage comes out darker than the average of the pixel in linear light (what
+#: supersampling gives); the power lightens it. Chosen on the pine at 512x384 against
+#: ``--ssaa 4``: 1.3 gave the lowest FLIP and error of 1, 1.2, 1.3, 1.5, 1.7 and 2.
+AA_ALPHA_EXPONENT = 1.3
 #: The most samples per pixel side of supersampling.
 MAX_SSAA = 8
 #: The finest GS subdivision level m anyone may ask for (the triangle budgets may stop it sooner).

@@ -78,6 +78,7 @@ in vec3 v_normal;
 flat in vec2 v_shade;
 #if defined THIN_LEAVES
 flat in float v_coverage;
+uniform float coverage_exponent;   // the alpha is the coverage to this power (plantgen.settings.AA_ALPHA_EXPONENT)
 #endif
 
 layout(location = 0) out vec4 out_color;
@@ -121,7 +122,7 @@ void main() {
 #endif
 #endif
 #if defined THIN_LEAVES
-    out_color.a = v_coverage;
+    out_color.a = pow(v_coverage, coverage_exponent);
 #endif
     out_distance = length(v_position);
 }

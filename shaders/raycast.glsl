@@ -171,6 +171,7 @@ uniform vec2 light_depth;      // near, far along light_forward from light_origi
 flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 #if defined THIN_COVERAGE
 flat in vec2 f_true_radii;
+uniform float coverage_exponent;   // the alpha is the coverage to this power (plantgen.settings.AA_ALPHA_EXPONENT)
 
 // The share of its pixel a hit at p on row f (cast at the floor) covers: the row's true
 // radius over the cast one there (1 for a row at or above the floor).
@@ -265,7 +266,7 @@ void main() {
     row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
     write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);
 #if defined THIN_COVERAGE
-    out_color.a = thin_coverage(f, p);
+    out_color.a = pow(thin_coverage(f, p), coverage_exponent);
 #endif
 #endif
 }

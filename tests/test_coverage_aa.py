@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 from _relief_frustum import face_on_camera, relief_frustum
 
+from plantgen.geometry.meshes.polygons import Polygons
 from plantgen.geometry.rays.camera import Camera
 from plantgen.geometry.skeletons.skeleton import Skeleton
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl.frame import coverage_aa
+from plantgen.gl.leaf_layer import thin_leaf_data
 from plantgen.pipeline import frame_arguments, prepare_model, render_model, stage_model
 from plantgen.settings import AA_FLOOR_PIXELS, ImageSettings, RenderSettings
 
@@ -159,3 +161,36 @@ def test_the_bench_writes_its_table(gl_ctx, tmp_path):
     assert [r.split("|")[3].strip() for r in rows] == ["`--aa none`", "`--aa coverage`", "`--aa edges`",
                                                         "`--ssaa 2`"]
     assert rows[0].split("|")[6:8] == [" 1.00 ", " 1.00 "] and "GL renderer:" in text
+
+
+def needle(width_pixels: float, height_pixels: float = 20.0) -> Polygons:
+    """A needle: a flat quad facing the eye across most of the view, ``height_pixels``
+    above the centre, rising 6 pixels over its length, ``width_pixels`` across."""
+    px = pixel_world()
+    x0, x1, y0, y1, w = -50 * px, 50 * px, (height_pixels - 3) * px, (height_pixels + 3) * px, width_pixels * px / 2
+    vertices = np.array([[x0, y0 - w, 0.0], [x1, y1 - w, 0.0], [x1, y1 + w, 0.0], [x0, y0 + w, 0.0]])
+    return Polygons(vertices, np.array([[0, 1, 2], [0, 2, 3]]), np.array([0, 0]), np.array([1], np.int32),
+                    np.array([[0.0, 0.0, 1.0]]))
+
+
+def test_thin_leaf_data_measures_a_leaf_across_its_long_axis():
+    data = thin_leaf_data(needle(0.5), origin=(0.0, 0.0, 0.0))
+    px = pixel_world()
+    assert np.allclose(data[:, 6], 0.5 * px * np.cos(np.arctan2(6, 100)), rtol=1e-3)   # across the slanted axis
+    assert np.allclose(data[:, 0:3], [0.0, 20 * px, 0.0], atol=1e-6)                  # the centroid
+    across = data[:, 3:6] / np.linalg.norm(data[:, 3:6], axis=1, keepdims=True)
+    assert np.allclose(np.abs(across @ np.array([6.0, -100.0, 0.0]) / np.hypot(6, 100)), 1.0, atol=1e-3)
+
+
+def test_a_needle_a_fifth_of_a_pixel_across_is_a_continuous_line(gl_ctx):
+    """A leaf polygon thinner than a pixel (a pine needle) is widened to the floor and
+    blended: a line in every column with the anti-aliasing, dots and gaps without."""
+    from plantgen.gl.raycast import Raycaster
+    caster, camera = Raycaster(gl_ctx), twig_camera()
+    leaves, span = needle(0.2), slice(WIDTH // 2 - 44, WIDTH // 2 + 44)
+    top = slice(0, HEIGHT // 2 - 8)                     # the needle's rows, clear of the twig
+    colors = {aa: caster.render(thin_twig(0.1), camera, material_names=("bark", "needle"), leaves=leaves,
+                                background=BACKGROUND, aa=aa).color for aa in ("none", "coverage")}
+    on, off = (twig_columns(colors[aa][top])[span] for aa in ("coverage", "none"))
+    assert on.all(), np.where(~on)[0]
+    assert (~off).sum() > 20, (~off).sum()

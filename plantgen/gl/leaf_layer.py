@@ -17,6 +17,7 @@ import numpy as np
 from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
+from ..settings import AA_ALPHA_EXPONENT
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["LeafLayer", "leaf_vertices", "thin_leaf_data", "THIN_LEAF_LAYOUT",
@@ -191,7 +192,8 @@ class LeafLayer:
         set_uniforms(program, **({} if labels is not None else shading),
                      view_projection=mat4(view.view_projection),
                      origin_from_eye=tuple((origin - view.eye).tolist()),
-                     **({"coverage_floor": coverage_floor, "coverage_pass": 0} if thin else {}))
+                     **({"coverage_floor": coverage_floor, "coverage_pass": 0,
+                         "coverage_exponent": AA_ALPHA_EXPONENT} if thin else {}))
         count = polygons.triangles.size
         layout = LEAF_VERTEX_LAYOUT if labels is None else ("3f 12x 2f", "position", "shade")  # no normal
         attributes = [(vbo, *layout)] + ([(self._thin_buffer(polygons, origin), *THIN_LEAF_LAYOUT)] if thin else [])

@@ -31,7 +31,7 @@ from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from ..settings import RaycastSettings, ShadowSettings
+from ..settings import AA_ALPHA_EXPONENT, RaycastSettings, ShadowSettings
 from .bvh_cache import BvhCache
 from .context import gl_context
 from .frame import (
@@ -328,7 +328,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
                      view_projection=mat4(view.view_projection),
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
         if thin_rows:
-            set_uniforms(program, coverage_floor=view.floor_radius(), coverage_pass=0)
+            set_uniforms(program, coverage_floor=view.floor_radius(), coverage_pass=0,
+                         coverage_exponent=AA_ALPHA_EXPONENT)
         if not n:
             return (lambda: None), [], 0
         ctx = self.ctx
