@@ -194,3 +194,13 @@ def test_a_needle_a_fifth_of_a_pixel_across_is_a_continuous_line(gl_ctx):
     on, off = (twig_columns(colors[aa][top])[span] for aa in ("coverage", "none"))
     assert on.all(), np.where(~on)[0]
     assert (~off).sum() > 20, (~off).sum()
+
+
+def test_the_distances_stay_those_of_one_ray_a_pixel(gl_ctx):
+    """The thin pieces' own pass writes their distances where they are the nearest on a
+    pixel centre's ray, so the pine's distances (its needles, its twigs) are those of
+    ``--aa none`` but where two thin pieces cross on one ray (the last drawn wins)."""
+    on = render_model("pine", size=SIZE).result.distance
+    off = render_model("pine", size=SIZE, aa="none").result.distance
+    assert (np.isfinite(on) != np.isfinite(off)).mean() < 0.002
+    assert (on == off).mean() > 0.99, (on == off).mean()

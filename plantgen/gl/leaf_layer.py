@@ -18,6 +18,7 @@ from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
 from ..settings import AA_ALPHA_EXPONENT
+from .coverage import coverage_passes
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["LeafLayer", "leaf_vertices", "thin_leaf_data", "THIN_LEAF_LAYOUT",
@@ -105,31 +106,6 @@ def union_box(*boxes) -> np.ndarray | None:
     return np.stack([np.min([b[0] for b in given], axis=0), np.max([b[1] for b in given], axis=0)])
 
 
-def _blended_pass(ctx, program, render):
-    """Coverage anti-aliasing's pass 1 of ``program`` (a THIN_LEAVES program; ``render()``
-    draws it): ``coverage_pass`` 1, blended by the fragments' alpha over what is there,
-    depth tested, no depth and no distance written (the ray caster's thin rows are drawn
-    the same way, plantgen.gl.raycast)."""
-    def draw():
-        set_uniforms(program, coverage_pass=1)
-        fbo = ctx.fbo
-        masks = fbo.color_mask
-        ctx.enable(ctx.BLEND)
-        ctx.blend_func = (ctx.SRC_ALPHA, ctx.ONE_MINUS_SRC_ALPHA, ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)
-        ctx.disable(ctx.CULL_FACE)
-        fbo.depth_mask = False
-        fbo.color_mask = ((True,) * 4,) + ((False,) * 4,) * (len(masks) - 1)
-        try:
-            render()
-        finally:
-            fbo.color_mask = masks
-            fbo.depth_mask = True
-            ctx.disable(ctx.BLEND)
-            ctx.blend_func = ctx.DEFAULT_BLENDING
-            set_uniforms(program, coverage_pass=0)
-    return draw
-
-
 class LeafLayer:
     """The GL side of one renderer's leaves: the uploaded vertices of the last ``Polygons``
     drawn, and the draws of one frame."""
@@ -172,12 +148,12 @@ class LeafLayer:
         """The leaves' draws for one frame seen through ``view`` (a FrameView) and lit by
         ``lighting`` (a FrameLighting; its window, if any, gets the light's draw). With
         ``coverage_floor`` (coverage anti-aliasing: the floor radius per unit of distance)
-        the leaves narrower than the floor's width are left to a draw of their own, drawn
-        widened and blended after everything opaque (leaf.glsl's THIN_LEAVES; not with the
-        sky light, whose depth pass draws every leaf as it is).
+        the leaves narrower than the floor's width are left to draws of their own after
+        everything opaque (:func:`~plantgen.gl.coverage.coverage_passes`, leaf.glsl's
+        THIN_LEAVES; not with the sky light, whose depth pass draws every leaf as it is).
 
         Returns (frame draw, light draw or None, [vertex arrays to release after the frame],
-        the thin leaves' draw or None).
+        the thin leaves' (blend, distance) draws or ()).
         """
         ctx = self.ctx
         vbo, ibo, origin = self._upload(polygons, labels)
@@ -206,10 +182,10 @@ class LeafLayer:
                 nearest[0]()
             vao.render(mode=ctx.TRIANGLES, vertices=count)
             ctx.depth_func = "<"
-        thin_draw = _blended_pass(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) if thin \
-            else None
+        thin_draws = coverage_passes(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) \
+            if thin else ()
         if not shadowed:
-            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draw
+            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draws
         caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor
         set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
                      origin_from_eye=tuple((origin - lighting.anchor).tolist()))
@@ -219,7 +195,7 @@ class LeafLayer:
         def light_draw():
             ctx.disable(ctx.CULL_FACE)
             light_vao.render(mode=ctx.TRIANGLES, vertices=count)
-        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])], thin_draw
+        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])], thin_draws
 
     def _nearest_first(self, vbo, ibo, origin, view, count: int):
         """A depth-only pass of the leaves from the eye (``leaf.glsl``'s SHADOW_PASS, no colour

@@ -34,6 +34,7 @@ from ..limits import limits as default_limits
 from ..settings import AA_ALPHA_EXPONENT, RaycastSettings, ShadowSettings
 from .bvh_cache import BvhCache
 from .context import gl_context
+from .coverage import coverage_passes
 from .frame import (
     FrameLighting,
     FrameView,
@@ -199,7 +200,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
-        aa : ``"coverage"`` (:func:`~plantgen.gl.frame.coverage_aa`, :meth:`_thin_rows_draw`),
+        aa : ``"coverage"`` (:func:`~plantgen.gl.frame.coverage_aa`, :mod:`~plantgen.gl.coverage`),
             ``"edges"`` (and the edge pass, in ``resolve_ms``) or ``"none"`` (one ray a pixel)
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
@@ -249,8 +250,9 @@ class Raycaster(OffscreenRenderer, BvhCache):
         """The frusta's draw for the eye (:meth:`_frusta_draw` with ``textures`` = (repeats,
         height textures, rows, lod_pixels)) of ``rows``, a PlacedPlants or (records, a
         caller's record buffer or None: the records are uploaded here), what it leaves
-        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's pass of the
-        thin rows put first in ``extras.thin`` (drawn after everything opaque). Returns (draw, rows drawn)."""
+        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's passes of the
+        thin rows put first in ``extras.thin`` and ``extras.thin_distance`` (drawn after
+        everything opaque, :func:`~plantgen.gl.coverage.coverage_passes`). Returns (draw, rows drawn)."""
         repeats, tex, n, lod_pixels = textures
         if not isinstance(rows, PlacedPlants):
             records, record_buffer = rows
@@ -260,7 +262,10 @@ class Raycaster(OffscreenRenderer, BvhCache):
         draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
                                               thin)
         extras.garbage.extend(vaos)
-        extras.thin[:0] = [self._thin_rows_draw(program, draw)] if thin else []
+        if thin:
+            blend, distance = coverage_passes(self.ctx, program, draw)
+            extras.thin.insert(0, blend)
+            extras.thin_distance.insert(0, distance)
         return draw, drawn
 
     def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
@@ -353,33 +358,6 @@ class Raycaster(OffscreenRenderer, BvhCache):
                 ctx.cull_face = "front"   # back faces: an eye inside a pyramid still sees it
             _draw_rows(program, vaos, plan, render, n)
         return draw, vaos, (n if plan is None else sum(c.rows for c in plan))
-
-    def _thin_rows_draw(self, program, draw_frusta):
-        """Coverage anti-aliasing's pass 1, drawn after everything opaque: ``draw_frusta``
-        again with ``coverage_pass`` 1, so only the rows thinner than the floor give
-        fragments, each blended over what is behind it by its alpha (its share of the
-        pixel), depth tested, no depth and no distance written (a thin row hides nothing;
-        the distances stay those of the rays through the pixel centres as far as the
-        opaque surfaces go)."""
-        ctx = self.ctx
-
-        def draw():
-            set_uniforms(program, coverage_pass=1)
-            fbo = ctx.fbo
-            masks = fbo.color_mask
-            ctx.enable(ctx.BLEND)
-            ctx.blend_func = (ctx.SRC_ALPHA, ctx.ONE_MINUS_SRC_ALPHA, ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA)
-            fbo.depth_mask = False
-            fbo.color_mask = ((True,) * 4,) + ((False,) * 4,) * (len(masks) - 1)
-            try:
-                draw_frusta()
-            finally:
-                fbo.color_mask = masks
-                fbo.depth_mask = True
-                ctx.disable(ctx.BLEND)
-                ctx.blend_func = ctx.DEFAULT_BLENDING
-                set_uniforms(program, coverage_pass=0)
-        return draw
 
     def _light_pass(self, frusta, caster, lighting: FrameLighting, settings: RaycastSettings,
                     shadows: ShadowSettings, material_names: tuple, record_buffer, surroundings,
