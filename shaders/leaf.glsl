@@ -18,8 +18,8 @@
 // THIN_LEAVES (coverage anti-aliasing, plantgen.gl.leaf_layer.thin_leaf_data: a leaf
 // narrower than the floor width at its distance, a needle, is drawn widened to the floor
 // across its long axis, its alpha its true width over the floor's; such leaves are drawn
-// by passes of their own after everything opaque, plantgen.gl.coverage's 2 and 1, the rest
-// by pass 0).
+// by a pass of their own after everything opaque, plantgen.gl.coverage's 1, the rest by
+// pass 0; they write no distance).
 
 #if defined VERTEX_SHADER
 
@@ -40,7 +40,7 @@ in vec3 thin_offset;            // the vertex's offset from the leaf's long axis
 in float thin_width;            // the leaf's width across its long axis
 uniform float coverage_floor;   // the floor radius per unit of distance from the eye
 uniform int coverage_pass;      // 0: the leaves at or above the floor; 1: the narrower, widened
-                                // (blended); 2: the same at their own size (distance)
+                                // (blended)
 flat out float v_coverage;      // the leaf's share of the floor's width (1: not widened)
 #endif
 
@@ -51,12 +51,12 @@ void main() {
 #if defined THIN_LEAVES
     float floor_width = 2.0 * coverage_floor * length(thin_centre + origin_from_eye);
     bool thin = thin_width < floor_width;
-    if (thin && coverage_pass == 1) v_position += thin_offset * (floor_width / max(thin_width, 1e-30) - 1.0);
+    if (thin) v_position += thin_offset * (floor_width / max(thin_width, 1e-30) - 1.0);
     v_coverage = thin ? thin_width / floor_width : 1.0;
 #endif
     gl_Position = view_projection * vec4(v_position, 1.0);
 #if defined THIN_LEAVES
-    if (thin != (coverage_pass != 0)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
+    if (thin != (coverage_pass == 1)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
 #endif
 }
 

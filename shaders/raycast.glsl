@@ -263,6 +263,14 @@ void main() {
     gl_FragDepth = eye_depth(distance, d);
 #else
 
+#if defined THIN_COVERAGE
+    if (coverage_pass == 2) {      // the distance alone (plantgen.gl.coverage), no shading
+        out_color = vec4(0.0);
+        out_distance = distance;
+        gl_FragDepth = eye_depth(distance, d);
+        return;
+    }
+#endif
     vec3 normal, receiver_normal, albedo;
     row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
     write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);

@@ -1,7 +1,8 @@
 """Coverage anti-aliasing's passes of thin pieces (``--aa coverage``): the ray caster's rows
 thinner than the floor radius (``raycast.glsl``'s THIN_COVERAGE) and the leaves narrower
 than the floor width (``leaf.glsl``'s THIN_LEAVES) are left out of the opaque draw
-(``coverage_pass`` 0) and drawn after everything opaque by two passes of their own:
+(``coverage_pass`` 0) and drawn after everything opaque by passes of their own (the thin
+leaves by the first alone: they leave no distance, :mod:`plantgen.gl.leaf_layer`):
 
 - ``coverage_pass`` 1, widened to the floor, blended by their alpha (their share of the
   pixel) over what is there, writing neither depth nor distance: a thin piece hides nothing;

@@ -148,12 +148,13 @@ class LeafLayer:
         """The leaves' draws for one frame seen through ``view`` (a FrameView) and lit by
         ``lighting`` (a FrameLighting; its window, if any, gets the light's draw). With
         ``coverage_floor`` (coverage anti-aliasing: the floor radius per unit of distance)
-        the leaves narrower than the floor's width are left to draws of their own after
-        everything opaque (:func:`~plantgen.gl.coverage.coverage_passes`, leaf.glsl's
-        THIN_LEAVES; not with the sky light, whose depth pass draws every leaf as it is).
+        the leaves narrower than the floor's width are left to a draw of their own after
+        everything opaque, the blend of :func:`~plantgen.gl.coverage.coverage_passes`
+        (leaf.glsl's THIN_LEAVES; not with the sky light, whose depth pass draws every leaf
+        as it is): they hide nothing and leave no distance.
 
         Returns (frame draw, light draw or None, [vertex arrays to release after the frame],
-        the thin leaves' (blend, distance) draws or ()).
+        the thin leaves' (blend,) draw or ()).
         """
         ctx = self.ctx
         vbo, ibo, origin = self._upload(polygons, labels)
@@ -182,7 +183,9 @@ class LeafLayer:
                 nearest[0]()
             vao.render(mode=ctx.TRIANGLES, vertices=count)
             ctx.depth_func = "<"
-        thin_draws = coverage_passes(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) \
+        # the blend alone: a distance pass of the needles cost the pine about as much as the
+        # blend (llvmpipe rasterising them once more), so thin leaves leave no distance
+        thin_draws = coverage_passes(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count))[:1] \
             if thin else ()
         if not shadowed:
             return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draws
