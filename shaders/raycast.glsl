@@ -18,16 +18,16 @@
 // sky_light.glsl), THIN_COVERAGE (coverage anti-aliasing, plantgen.gl.raycast: a row
 // thinner than the floor radius at its distance from the eye is cast as if it had that
 // radius, so it stays a continuous line instead of breaking into dots, and its alpha is its
-// true radius over the floor's, its share of the pixel; such rows are drawn by passes of
-// their own after everything opaque (plantgen.gl.coverage: coverage_pass 2 their distance,
-// 1 their colour, blended), the rest by pass 0).
+// true radius over the floor's, its share of the pixel; such rows are drawn by a pass of
+// their own after everything opaque (plantgen.gl.coverage: coverage_pass 1, blended, no
+// depth or distance written), the rest by pass 0).
 
 #include "cone.glsl"
 
 #if defined THIN_COVERAGE
 uniform float coverage_floor;   // the floor radius per unit of distance from the eye
 uniform int coverage_pass;      // 0: the rows at or above the floor; 1: the thinner rows, cast at
-                                // the floor (blended); 2: the same at their own size (distance)
+                                // the floor (blended)
 #endif
 
 #if defined VERTEX_SHADER
@@ -125,7 +125,7 @@ void main() {
     f_true_radii = vec2(f_rec1.w, f_rec2.w);
     vec2 floor_radii = coverage_floor * vec2(length(f_rec0.xyz), length(f_rec0.xyz + f_rec0.w * f_rec1.xyz));
     bool thin = f_rec1.w < floor_radii.x || f_rec2.w < floor_radii.y;
-    if (thin && coverage_pass == 1) {
+    if (thin) {
         f_rec1.w = max(f_rec1.w, floor_radii.x);
         f_rec2.w = max(f_rec2.w, floor_radii.y);
         f_rec5.z = 0.0;
@@ -149,7 +149,7 @@ void main() {
     gl_Position = vec4(2.0 * screen - 1.0, 1e-9 * corner.z, 1.0);   // (keeps `corner` live)
 #endif
 #if defined THIN_COVERAGE
-    if (thin != (coverage_pass != 0)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
+    if (thin != (coverage_pass == 1)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
 #endif
 }
 
@@ -263,14 +263,6 @@ void main() {
     gl_FragDepth = eye_depth(distance, d);
 #else
 
-#if defined THIN_COVERAGE
-    if (coverage_pass == 2) {      // the distance alone (plantgen.gl.coverage), no shading
-        out_color = vec4(0.0);
-        out_distance = distance;
-        gl_FragDepth = eye_depth(distance, d);
-        return;
-    }
-#endif
     vec3 normal, receiver_normal, albedo;
     row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
     write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);

@@ -196,16 +196,21 @@ def test_a_needle_a_fifth_of_a_pixel_across_is_a_continuous_line(gl_ctx):
     assert (~off).sum() > 20, (~off).sum()
 
 
-def test_the_distances_keep_the_thin_rows(gl_ctx):
-    """The thin rows' own distance pass writes their distances where they are the nearest
-    on a pixel centre's ray: the twig's distances are those of ``--aa none`` (thin leaves
-    leave none: their pass would cost as much as their blend)."""
+def test_the_distances_are_the_opaque_surfaces(gl_ctx):
+    """The thin pieces write no distance (their pass blends colour alone): the distances
+    are ``--aa none``'s but where a thin piece is the nearest on a pixel centre's ray;
+    ``--depth-out`` draws once more without the anti-aliasing for them."""
     from plantgen.gl.raycast import Raycaster
     caster, frusta, camera = Raycaster(gl_ctx), thin_twig(0.1), twig_camera()
     off, on = (draw(caster, frusta, camera, aa=aa).distance for aa in ("none", "coverage"))
-    assert np.isfinite(off).sum() > 10
-    np.testing.assert_array_equal(on, off)
-    leaves = needle(0.2)
-    off, on = (caster.render(frusta, camera, material_names=("bark", "needle"), leaves=leaves, background=BACKGROUND,
-                             aa=aa).distance for aa in ("none", "coverage"))
-    assert np.isfinite(off).sum() > np.isfinite(on).sum()        # the needle's centre hits
+    assert np.isfinite(off).sum() > 10 and not np.isfinite(on).any()
+    wide = render_model("saguaro", size=SIZE)      # no piece thinner than a pixel
+    np.testing.assert_array_equal(wide.result.distance, render_model("saguaro", size=SIZE, aa="none").result.distance)
+
+
+def test_depth_out_draws_the_distances_without_it(gl_ctx):
+    """``--depth-out`` (exact distances) gets those of one ray a pixel, thin twigs included."""
+    exact = render_model("broadleaf", size=SIZE, exact_distance=True)
+    plain = render_model("broadleaf", size=SIZE, aa="none")
+    np.testing.assert_array_equal(exact.distance, plain.result.distance)
+    assert not np.array_equal(exact.result.distance, exact.distance)     # the frame's own lack the twigs

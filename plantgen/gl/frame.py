@@ -125,16 +125,14 @@ def frame_view(camera: Camera, point_sets) -> FrameView:
 class Surroundings:
     """What a frame draws besides the model: callables drawn before it (the ground) and
     after it (the leaves), into the light's map (``light``), GL objects to release once
-    the frame is drawn, and coverage anti-aliasing's passes of thin pieces, drawn after
-    everything opaque (:mod:`~plantgen.gl.coverage`): the blends (``thin``), then the
-    distances (``thin_distance``)."""
+    the frame is drawn, and coverage anti-aliasing's blended passes of thin pieces
+    (``thin``), drawn after everything opaque (:mod:`~plantgen.gl.coverage`)."""
 
     before: list
     after: list
     light: list
     garbage: list
     thin: list = field(default_factory=list)
-    thin_distance: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -407,8 +405,7 @@ class OffscreenRenderer:
             draw, light_draw, garbage, thin = self._leaves.draws(leaves, view, lighting, labels=labels,
                                                                  coverage_floor=coverage_floor)
             out.after.append(draw)
-            out.thin.extend(thin[:1])
-            out.thin_distance.extend(thin[1:])
+            out.thin.extend([thin] if thin is not None else [])
             out.light.append(light_draw)
             out.garbage.extend(garbage)
         out.light[:] = [d for d in out.light if d is not None]
@@ -488,7 +485,7 @@ class OffscreenRenderer:
         ctx.depth_func = "<="
         sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
-        for draw in (draw_model, *extras.after, *extras.thin, *extras.thin_distance):
+        for draw in (draw_model, *extras.after, *extras.thin):
             draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3

@@ -18,7 +18,7 @@ from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
 from ..settings import AA_ALPHA_EXPONENT
-from .coverage import coverage_passes
+from .coverage import coverage_pass
 from .shaders import build_program, mat4, set_uniforms
 
 __all__ = ["LeafLayer", "leaf_vertices", "thin_leaf_data", "THIN_LEAF_LAYOUT",
@@ -149,12 +149,12 @@ class LeafLayer:
         ``lighting`` (a FrameLighting; its window, if any, gets the light's draw). With
         ``coverage_floor`` (coverage anti-aliasing: the floor radius per unit of distance)
         the leaves narrower than the floor's width are left to a draw of their own after
-        everything opaque, the blend of :func:`~plantgen.gl.coverage.coverage_passes`
-        (leaf.glsl's THIN_LEAVES; not with the sky light, whose depth pass draws every leaf
-        as it is): they hide nothing and leave no distance.
+        everything opaque (:func:`~plantgen.gl.coverage.coverage_pass`, leaf.glsl's
+        THIN_LEAVES; not with the sky light, whose depth pass draws every leaf as it is):
+        they hide nothing and leave no distance.
 
         Returns (frame draw, light draw or None, [vertex arrays to release after the frame],
-        the thin leaves' (blend,) draw or ()).
+        the thin leaves' draw or None).
         """
         ctx = self.ctx
         vbo, ibo, origin = self._upload(polygons, labels)
@@ -183,12 +183,10 @@ class LeafLayer:
                 nearest[0]()
             vao.render(mode=ctx.TRIANGLES, vertices=count)
             ctx.depth_func = "<"
-        # the blend alone: a distance pass of the needles cost the pine about as much as the
-        # blend (llvmpipe rasterising them once more), so thin leaves leave no distance
-        thin_draws = coverage_passes(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count))[:1] \
-            if thin else ()
+        thin_draw = coverage_pass(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) \
+            if thin else None
         if not shadowed:
-            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draws
+            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draw
         caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor
         set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
                      origin_from_eye=tuple((origin - lighting.anchor).tolist()))
@@ -198,7 +196,7 @@ class LeafLayer:
         def light_draw():
             ctx.disable(ctx.CULL_FACE)
             light_vao.render(mode=ctx.TRIANGLES, vertices=count)
-        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])], thin_draws
+        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])], thin_draw
 
     def _nearest_first(self, vbo, ibo, origin, view, count: int):
         """A depth-only pass of the leaves from the eye (``leaf.glsl``'s SHADOW_PASS, no colour

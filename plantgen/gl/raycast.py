@@ -34,7 +34,7 @@ from ..limits import limits as default_limits
 from ..settings import AA_ALPHA_EXPONENT, RaycastSettings, ShadowSettings
 from .bvh_cache import BvhCache
 from .context import gl_context
-from .coverage import coverage_passes
+from .coverage import coverage_pass
 from .frame import (
     FrameLighting,
     FrameView,
@@ -250,9 +250,9 @@ class Raycaster(OffscreenRenderer, BvhCache):
         """The frusta's draw for the eye (:meth:`_frusta_draw` with ``textures`` = (repeats,
         height textures, rows, lod_pixels)) of ``rows``, a PlacedPlants or (records, a
         caller's record buffer or None: the records are uploaded here), what it leaves
-        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's passes of the
-        thin rows put first in ``extras.thin`` and ``extras.thin_distance`` (drawn after
-        everything opaque, :func:`~plantgen.gl.coverage.coverage_passes`). Returns (draw, rows drawn)."""
+        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's pass of the
+        thin rows put first in ``extras.thin`` (drawn after everything opaque,
+        :func:`~plantgen.gl.coverage.coverage_pass`). Returns (draw, rows drawn)."""
         repeats, tex, n, lod_pixels = textures
         if not isinstance(rows, PlacedPlants):
             records, record_buffer = rows
@@ -262,10 +262,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
                                               thin)
         extras.garbage.extend(vaos)
-        if thin:
-            blend, distance = coverage_passes(self.ctx, program, draw)
-            extras.thin.insert(0, blend)
-            extras.thin_distance.insert(0, distance)
+        extras.thin[:0] = [coverage_pass(self.ctx, program, draw)] if thin else []
         return draw, drawn
 
     def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
