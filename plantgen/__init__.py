@@ -39,7 +39,8 @@ def render(path, output=None, settings=None, *, seed=None, iterations=None, smoo
     ``plantgen render --help``): ``size=(w, h)``, ``camera`` (``"auto"``, a camera JSON
     path or a :class:`plantgen.geometry.rays.camera.Camera`), ``azimuth``, ``elevation``,
     ``distance``, ``zoom``, ``fov``, ``effects``, ``relief``, ``shadows``, ``shadow_res``,
-    ``shadow_caster``, ``ssaa``, ``background`` (``"sky"``, a colour, ``"none"``), ``time``,
+    ``shadow_caster``, ``ssaa``, ``aa`` (``"coverage"``, ``"edges"``, ``"none"``),
+    ``background`` (``"sky"``, a colour, ``"none"``), ``time``,
     and the relief march's ``march``, ``linear_steps``, ``binary_steps``,
     ``march_density``, ``v_exact``.
 

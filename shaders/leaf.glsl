@@ -14,7 +14,12 @@
 // facet's own plane as the receiver plane; with SHADOW_RAYS a shadow ray through the BVH
 // instead, plantgen.gl.rt); SHADOW_PASS (cast: depth only into the
 // light's map, both faces; with EYE_DEPTH the same into the eye's frame, ahead of a costly
-// shading, plantgen.gl.leaf_layer); LABELS (a part mask: the leaf's label in red, unshaded).
+// shading, plantgen.gl.leaf_layer); LABELS (a part mask: the leaf's label in red, unshaded);
+// THIN_LEAVES (coverage anti-aliasing, plantgen.gl.leaf_layer.thin_leaf_data: a leaf
+// narrower than the floor width at its distance, a needle, is drawn widened to the floor
+// across its long axis, its alpha its true width over the floor's; such leaves are drawn
+// by a pass of their own after everything opaque, plantgen.gl.coverage's 1, the rest by
+// pass 0; they write no distance).
 
 #if defined VERTEX_SHADER
 
@@ -29,11 +34,30 @@ out vec3 v_position;            // eye-relative
 out vec3 v_normal;
 flat out vec2 v_shade;
 
+#if defined THIN_LEAVES
+in vec3 thin_centre;            // the leaf's centroid, relative to the leaves' origin
+in vec3 thin_offset;            // the vertex's offset from the leaf's long axis, across it
+in float thin_width;            // the leaf's width across its long axis
+uniform float coverage_floor;   // the floor radius per unit of distance from the eye
+uniform int coverage_pass;      // 0: the leaves at or above the floor; 1: the narrower, widened
+                                // (blended)
+flat out float v_coverage;      // the leaf's share of the floor's width (1: not widened)
+#endif
+
 void main() {
     v_position = position + origin_from_eye;
     v_normal = normal;
     v_shade = shade;
+#if defined THIN_LEAVES
+    float floor_width = 2.0 * coverage_floor * length(thin_centre + origin_from_eye);
+    bool thin = thin_width < floor_width;
+    if (thin) v_position += thin_offset * (floor_width / max(thin_width, 1e-30) - 1.0);
+    v_coverage = thin ? thin_width / floor_width : 1.0;
+#endif
     gl_Position = view_projection * vec4(v_position, 1.0);
+#if defined THIN_LEAVES
+    if (thin != (coverage_pass == 1)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
+#endif
 }
 
 #elif defined FRAGMENT_SHADER
@@ -54,6 +78,10 @@ void main() {}
 in vec3 v_position;
 in vec3 v_normal;
 flat in vec2 v_shade;
+#if defined THIN_LEAVES
+flat in float v_coverage;
+uniform float coverage_exponent;   // the alpha is the coverage to this power (plantgen.settings.AA_ALPHA_EXPONENT)
+#endif
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out float out_distance;
@@ -94,6 +122,9 @@ void main() {
 #else
     out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility)), 1.0);
 #endif
+#endif
+#if defined THIN_LEAVES
+    out_color.a = pow(v_coverage, coverage_exponent);
 #endif
     out_distance = length(v_position);
 }

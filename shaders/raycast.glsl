@@ -15,9 +15,20 @@
 // is what casts the shadow, found by light_march.glsl, or with LIGHT_BISECT by the eye's
 // march), LABELS (write the row's material slot as a label, unshaded: part masks,
 // plantgen.render.raycast.label_image), SKY_LIGHT (the sky's light traced through the BVH,
-// sky_light.glsl).
+// sky_light.glsl), THIN_COVERAGE (coverage anti-aliasing, plantgen.gl.raycast: a row
+// thinner than the floor radius at its distance from the eye is cast as if it had that
+// radius, so it stays a continuous line instead of breaking into dots, and its alpha is its
+// true radius over the floor's, its share of the pixel; such rows are drawn by a pass of
+// their own after everything opaque (plantgen.gl.coverage: coverage_pass 1, blended, no
+// depth or distance written), the rest by pass 0).
 
 #include "cone.glsl"
+
+#if defined THIN_COVERAGE
+uniform float coverage_floor;   // the floor radius per unit of distance from the eye
+uniform int coverage_pass;      // 0: the rows at or above the floor; 1: the thinner rows, cast at
+                                // the floor (blended)
+#endif
 
 #if defined VERTEX_SHADER
 
@@ -40,6 +51,9 @@ uniform float copy_scale;
 uniform vec3 copy_offset;
 
 flat out vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
+#if defined THIN_COVERAGE
+flat out vec2 f_true_radii;   // the row's own radii (r1, r2) before the floor
+#endif
 
 // Axial height where the edge line base + y*axis + (r1 + k*y)*q of the pyramid meets
 // `plane`; `rise` is the line's approach rate to the plane (small: grazing).
@@ -105,6 +119,18 @@ void main() {
     f_rec3 = vec4(copy_turn * rec3.xyz, copy_scale * rec3.w);
     f_rec4 = vec4(copy_turn * rec4.xyz, copy_scale * rec4.w);
     f_rec5 = vec4(rec5.xy, copy_scale * rec5.z, rec5.w);
+#if defined THIN_COVERAGE
+    // the floor at each end (records are eye-relative): a thinner row is cast at the floor,
+    // without its relief (under a pixel it shows none)
+    f_true_radii = vec2(f_rec1.w, f_rec2.w);
+    vec2 floor_radii = coverage_floor * vec2(length(f_rec0.xyz), length(f_rec0.xyz + f_rec0.w * f_rec1.xyz));
+    bool thin = f_rec1.w < floor_radii.x || f_rec2.w < floor_radii.y;
+    if (thin) {
+        f_rec1.w = max(f_rec1.w, floor_radii.x);
+        f_rec2.w = max(f_rec2.w, floor_radii.y);
+        f_rec5.z = 0.0;
+    }
+#endif
     vec3 base = f_rec0.xyz; float h = f_rec0.w;
     vec3 axis = f_rec1.xyz; vec3 ref_dir = f_rec2.xyz;
     float shell = f_rec5.z;
@@ -121,6 +147,9 @@ void main() {
 #if defined SCREEN_PROXY
     vec2 screen = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);   // one full-screen triangle
     gl_Position = vec4(2.0 * screen - 1.0, 1e-9 * corner.z, 1.0);   // (keeps `corner` live)
+#endif
+#if defined THIN_COVERAGE
+    if (thin != (coverage_pass == 1)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);   // not this pass's: no area
 #endif
 }
 
@@ -141,6 +170,20 @@ uniform vec2 light_depth;      // near, far along light_forward from light_origi
 #endif
 
 flat in vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
+#if defined THIN_COVERAGE
+flat in vec2 f_true_radii;
+uniform float coverage_exponent;   // the alpha is the coverage to this power (plantgen.settings.AA_ALPHA_EXPONENT)
+
+// The share of its pixel a hit at p on row f (cast at the floor) covers: the row's true
+// radius over the cast one there (1 for a row at or above the floor).
+float thin_coverage(Frustum f, vec3 p) {
+    float y, radial; vec3 e_r;
+    frustum_local(f, p, y, radial, e_r);
+    float s = clamp(y / max(f.h, 1e-30), 0.0, 1.0);
+    float cast_radius = mix(f.r1, f.r2, s);
+    return cast_radius > 0.0 ? clamp(mix(f_true_radii.x, f_true_radii.y, s) / cast_radius, 0.0, 1.0) : 1.0;
+}
+#endif
 
 #include "eye.glsl"
 #include "row.glsl"
@@ -223,6 +266,9 @@ void main() {
     vec3 normal, receiver_normal, albedo;
     row_surface(f, p, d, face, cap, normal, receiver_normal, albedo);
     write_hit(albedo, f.material, normal, receiver_normal, p, d, distance);
+#if defined THIN_COVERAGE
+    out_color.a = pow(thin_coverage(f, p), coverage_exponent);
+#endif
 #endif
 }
 

@@ -61,7 +61,8 @@ def _forest_rows(copies, sizes, frames: int, scene: str = "forest") -> list[dict
         staging = stage_model(model.grown, base, *size)
         for n in copies:
             placed = tile_placed(base, n)
-            args = {**frame_arguments(placed, staging, None), "leaves": None}
+            # one ray a pixel, RC and RT alike (coverage anti-aliasing casts only RC's thin rows at a floor)
+            args = {**frame_arguments(placed, staging, None), "leaves": None, "aa": "none"}
             rt, rc = RayTracer(), Raycaster()
             t0 = time.perf_counter()
             rt.render(placed, settings=settings, **args)          # builds and uploads the BVH

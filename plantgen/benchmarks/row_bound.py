@@ -41,7 +41,7 @@ def _frame_runs(say) -> dict:
     for name, size, relief, shadows in (("forest RT 512x384", (512, 384), False, False),
                                         ("forest RT+R, shadow rays, 1024x768", (1024, 768), True, True)):
         staging = stage_model(model.grown, placed, *size)
-        args = frame_arguments(placed, staging, ShadowSettings())
+        args = {**frame_arguments(placed, staging, ShadowSettings()), "aa": "none"}   # one ray a pixel, as RT
         if not shadows:
             args = {**args, "shadows": None}
         rt = RayTracer()

@@ -31,7 +31,7 @@ from .sections import EFFECTS, OUTPUT, QUALITY, SectionedCommand
 
 #: Where render's options that are not plain settings go in ``--help`` (and the settings
 #: that belong elsewhere than their class's section).
-SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "pose": QUALITY, "time": EFFECTS}
+SECTIONS = {"camera_out": OUTPUT, "depth_out": OUTPUT, "ssaa": QUALITY, "aa": QUALITY, "pose": QUALITY, "time": EFFECTS}
 
 
 @click.command(cls=SectionedCommand, sections=SECTIONS)
@@ -151,6 +151,8 @@ def frame_line(report: RenderReport, verbose: bool = False) -> str:
         n = report.ssaa
         size += (f" with {n}x{n} supersampling ({n * n} samples a pixel: a {cam.width * n}x{cam.height * n} "
                  f"frame, averaged down in {report.result.stats.resolve_ms:.0f} ms more)")
+    elif report.request.image.aa == "edges" and report.result is not None and report.result.stats.resolve_ms > 0:
+        size += f" with the edge pass ({report.result.stats.resolve_ms:.0f} ms more, read back included)"
     if report.frames > 1:
         where = (f"on the GPU in {report.gpu_frames} of {report.frames} frames" if report.gpu_frames
                  else "on the CPU")

@@ -37,7 +37,7 @@ def _keys_epilog() -> str:
 
 
 #: Where view's options go in ``--help`` (beside the settings' own sections).
-SECTIONS = {"size": OUTPUT, "ssaa": QUALITY, "pose": QUALITY, "time": EFFECTS, "start_method": QUALITY,
+SECTIONS = {"size": OUTPUT, "ssaa": QUALITY, "aa": QUALITY, "pose": QUALITY, "time": EFFECTS, "start_method": QUALITY,
             "subdiv": QUALITY, "shots": OUTPUT, "snapshot": OUTPUT, "watch": MODEL}
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from ..geometry.rays.camera import Camera, depth_range
 from ..geometry.skeletons.materials import MAX_MATERIALS
 from ..geometry.stage import MODEL_LIGHT, Ground
-from ..settings import MAX_SSAA, ShadowSettings
+from ..settings import AA_CHOICES, AA_FLOOR_PIXELS, MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
@@ -36,7 +36,7 @@ from .shaders import build_program, mat4, set_uniforms
 from .supersample import GpuResolve
 
 __all__ = ["OffscreenRenderer", "FrameView", "frame_view", "FrameLighting", "Surroundings", "ShadowKey", "LightPass",
-           "light_anchor", "check_background", "check_ssaa"]
+           "light_anchor", "check_background", "check_ssaa", "coverage_aa"]
 
 
 def check_background(background) -> tuple | None:
@@ -57,6 +57,17 @@ def check_ssaa(ssaa) -> int:
     if n != ssaa or not 1 <= n <= MAX_SSAA:
         raise ValueError(f"ssaa must be an integer in 1..{MAX_SSAA}, got {ssaa!r}")
     return n
+
+
+def coverage_aa(aa: str, ssaa: int = 1, labels: bool = False, background=None) -> bool:
+    """Whether a frame draws with coverage anti-aliasing: ``aa`` is ``"coverage"`` or
+    ``"edges"`` (of :data:`~plantgen.settings.AA_CHOICES`; ``"none"``: one ray a pixel), at
+    one sample a side (supersampling replaces it), in colour (a part mask's labels are never
+    mixed) and over an opaque background (a transparent one has no colour to blend a thin
+    row with). With ``"edges"`` the frame then goes through the edge pass."""
+    if aa not in AA_CHOICES:
+        raise ValueError(f"aa must be one of {', '.join(AA_CHOICES)}, got {aa!r}")
+    return aa != "none" and ssaa == 1 and not labels and (background is None or background[3] >= 1)
 
 
 @dataclass(frozen=True)
@@ -92,6 +103,11 @@ class FrameView:
         distance s from the eye (the adaptive relief march's footprint)."""
         return (float(2.0 * np.tan(np.radians(self.camera.fov_y) / 2) / self.camera.height), 0.0)
 
+    def floor_radius(self) -> float:
+        """Coverage anti-aliasing's floor radius per unit of distance from the eye: half of
+        :data:`~plantgen.settings.AA_FLOOR_PIXELS` pixels."""
+        return 0.5 * AA_FLOOR_PIXELS * self.pixel_footprint()[0]
+
 
 def frame_view(camera: Camera, point_sets) -> FrameView:
     """The :class:`FrameView` whose depth range encloses every (k, 3) array of world points
@@ -108,13 +124,15 @@ def frame_view(camera: Camera, point_sets) -> FrameView:
 @dataclass(frozen=True)
 class Surroundings:
     """What a frame draws besides the model: callables drawn before it (the ground) and
-    after it (the leaves), into the light's map (``light``), and GL objects to release once
-    the frame is drawn."""
+    after it (the leaves), into the light's map (``light``), GL objects to release once
+    the frame is drawn, and coverage anti-aliasing's blended passes of thin pieces
+    (``thin``), drawn after everything opaque (:mod:`~plantgen.gl.coverage`)."""
 
     before: list
     after: list
     light: list
     garbage: list
+    thin: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -371,10 +389,12 @@ class OffscreenRenderer:
         return frame_draw, light_draw, [vao, light_vao, buf, light_buf]
 
     def _surroundings(self, ground: Ground | None, leaves, view: FrameView, lighting: FrameLighting,
-                      *, labels=None, background=None) -> Surroundings:
+                      *, labels=None, background=None, coverage_floor: float = 0.0) -> Surroundings:
         """The frame's draws besides the model's own: the ground (fading into ``background``
         where it is flat) and the leaves (``leaves``: a Polygons or None; ``labels`` (p,):
-        draw them as a part mask)."""
+        draw them as a part mask; ``coverage_floor``: coverage anti-aliasing's floor
+        radius a unit of distance, the thin leaves' pass in ``thin``,
+        :meth:`~plantgen.gl.leaf_layer.LeafLayer.draws`)."""
         out = Surroundings([], [], [], [])
         if ground is not None:
             draw, light_draw, garbage = self._ground_draws(ground, view, lighting, background)
@@ -382,8 +402,10 @@ class OffscreenRenderer:
             out.light.append(light_draw)
             out.garbage.extend(garbage)
         if leaves is not None and len(leaves.triangles):
-            draw, light_draw, garbage = self._leaves.draws(leaves, view, lighting, labels=labels)
+            draw, light_draw, garbage, thin = self._leaves.draws(leaves, view, lighting, labels=labels,
+                                                                 coverage_floor=coverage_floor)
             out.after.append(draw)
+            out.thin.extend([thin] if thin is not None else [])
             out.light.append(light_draw)
             out.garbage.extend(garbage)
         out.light[:] = [d for d in out.light if d is not None]
@@ -463,7 +485,7 @@ class OffscreenRenderer:
         ctx.depth_func = "<="
         sky_vao.render(mode=ctx.TRIANGLES, vertices=3)
         ctx.depth_func = "<"
-        for draw in (draw_model, *extras.after):
+        for draw in (draw_model, *extras.after, *extras.thin):
             draw()
         ctx.finish()
         frame_ms = (time.perf_counter() - t_draw) * 1e3
@@ -475,32 +497,36 @@ class OffscreenRenderer:
 
     def _finish_frame(self, camera: Camera, view: FrameView, lighting: FrameLighting, background, draw_model,
                       shadows: ShadowSettings | None, light: LightPass | None, extras: Surroundings, *, ssaa: int,
-                      count_work: bool) -> FrameOutput:
+                      count_work: bool, smooth: bool = False) -> FrameOutput:
         """The frame's tail, the same for both renderers: count the work if asked, run the
         passes (:meth:`_draw_frame`; ``light`` the renderer's part of the light's pass),
-        read the frame back at ``camera``'s size (:meth:`_read_back`) and read the counters."""
+        read the frame back at ``camera``'s size (:meth:`_read_back`; ``smooth``: through
+        coverage anti-aliasing's edge pass) and read the counters."""
         counter = WorkCounter(self.ctx) if count_work else None
         frame_ms, shadow_ms, cached = self._draw_frame(view, self._sky(view, lighting, background), draw_model,
                                                        shadows, light, extras)
-        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa,
+        color, dist = self._read_back(camera.width, camera.height, ssaa=ssaa, smooth=smooth,
                                       alpha=background is not None and background[3] < 1, srgb=lighting.srgb)
         work = counter.read(dist) if counter is not None else None
         return FrameOutput(color, dist, frame_ms, shadow_ms, work, cached)
 
-    def _read_back(self, width: int, height: int, *, ssaa: int = 1,
+    def _read_back(self, width: int, height: int, *, ssaa: int = 1, smooth: bool = False,
                    alpha: bool = False, srgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The frame's (height, width, 3) uint8 colour ((.., 4) with ``alpha``: coverage)
         and (height, width) float32 distance, row 0 the top row; a frame drawn with
         ``ssaa`` samples per side (``width`` x ``height`` being the final image's) is
         averaged down on the GPU first, in linear light (``srgb`` the frame's encoding;
         :class:`plantgen.gl.supersample.GpuResolve`; ``last_resolve_ms``: that pass and its
-        read back)."""
+        read back); with ``smooth`` a frame of one ray a pixel goes through coverage
+        anti-aliasing's edge pass the same way (:meth:`~plantgen.gl.supersample.GpuResolve.
+        smooth_edges`)."""
         fbo = self._fbo
         self.last_resolve_ms = 0.0
-        if ssaa > 1:
+        if ssaa > 1 or smooth:
             t0 = time.perf_counter()
-            out = self._resolver.resolve(fbo.color_attachments[0], fbo.color_attachments[1], width, height,
-                                         ssaa, alpha, srgb=srgb)
+            color, distance = fbo.color_attachments[0], fbo.color_attachments[1]
+            out = (self._resolver.resolve(color, distance, width, height, ssaa, alpha, srgb=srgb) if ssaa > 1
+                   else self._resolver.smooth_edges(color, distance, width, height, alpha))
             self.last_resolve_ms = (time.perf_counter() - t0) * 1e3
             return out
         k = 4 if alpha else 3

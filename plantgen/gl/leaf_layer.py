@@ -17,9 +17,12 @@ import numpy as np
 from ..geometry.meshes.polygons import Polygons
 from ..geometry.skeletons.materials import leaf_tones
 from ..geometry.vec import norm, unit
+from ..settings import AA_ALPHA_EXPONENT
+from .coverage import coverage_pass
 from .shaders import build_program, mat4, set_uniforms
 
-__all__ = ["LeafLayer", "leaf_vertices", "leaf_bounds", "union_box", "LEAF_VERTEX_LAYOUT"]
+__all__ = ["LeafLayer", "leaf_vertices", "thin_leaf_data", "THIN_LEAF_LAYOUT",
+           "leaf_bounds", "union_box", "LEAF_VERTEX_LAYOUT"]
 
 #: One interleaved float32 vertex: position (relative to the leaves' origin), normal,
 #: (material slot, tone).
@@ -56,6 +59,38 @@ def leaf_vertices(polygons: Polygons, origin, labels=None) -> np.ndarray:
     return out
 
 
+#: Coverage anti-aliasing's per-vertex data of the leaves (:func:`thin_leaf_data`): the
+#: leaf's centroid, the vertex's offset across the leaf's long axis, the leaf's width.
+THIN_LEAF_LAYOUT = ("3f 3f 1f", "thin_centre", "thin_offset", "thin_width")
+
+
+def thin_leaf_data(polygons: Polygons, origin) -> np.ndarray:
+    """(v, 7) float32 per vertex (:data:`THIN_LEAF_LAYOUT`): its polygon's centroid relative to
+    ``origin``, the vertex's offset from the polygon's long axis along the polygon's second
+    principal axis (across the leaf, in its plane), and the polygon's width along that axis
+    (the spread of those offsets). A needle's width is its thickness; the shader widens a
+    leaf narrower than a pixel by scaling the offsets (leaf.glsl's THIN_LEAVES)."""
+    v = np.asarray(polygons.vertices, np.float64)
+    owner = polygons.vertex_polygon
+    count = max(len(polygons), 1)
+    n = np.maximum(np.bincount(owner, minlength=count), 1).astype(np.float64)
+    centre = np.stack([np.bincount(owner, weights=v[:, k], minlength=count) for k in range(3)], axis=1) / n[:, None]
+    d = v - centre[owner]
+    spread = np.zeros((count, 3, 3))
+    np.add.at(spread, owner, d[:, :, None] * d[:, None, :])
+    across = np.linalg.eigh(spread)[1][:, :, 1]          # the second principal axis (ascending order)
+    offset = np.einsum("ij,ij->i", d, across[owner])
+    high = np.full(count, -np.inf)
+    low = np.full(count, np.inf)
+    np.maximum.at(high, owner, offset)
+    np.minimum.at(low, owner, offset)
+    out = np.empty((len(v), 7), np.float32)
+    out[:, 0:3] = centre[owner] - np.asarray(origin, np.float64)
+    out[:, 3:6] = offset[:, None] * across[owner]
+    out[:, 6] = (high - low)[owner] if len(v) else 0.0
+    return out
+
+
 def leaf_bounds(polygons: Polygons | None) -> np.ndarray | None:
     """(2, 3) world box of the leaves' vertices, None without leaves."""
     if polygons is None or len(polygons.triangles) == 0:
@@ -78,12 +113,24 @@ class LeafLayer:
     def __init__(self, ctx):
         self.ctx = ctx
         self._uploaded = None   # (polygons, labels key, vbo, ibo, origin)
+        self._thin = None       # (polygons, buffer of thin_leaf_data)
 
     def release(self) -> None:
         if self._uploaded is not None:
             for obj in self._uploaded[2:4]:
                 obj.release()
         self._uploaded = None
+        if self._thin is not None:
+            self._thin[1].release()
+        self._thin = None
+
+    def _thin_buffer(self, polygons: Polygons, origin):
+        """The buffer of :func:`thin_leaf_data` (kept while the same Polygons is drawn)."""
+        if self._thin is None or self._thin[0] is not polygons:
+            if self._thin is not None:
+                self._thin[1].release()
+            self._thin = (polygons, self.ctx.buffer(thin_leaf_data(polygons, origin).tobytes()))
+        return self._thin[1]
 
     def _upload(self, polygons: Polygons, labels):
         key = None if labels is None else np.asarray(labels).tobytes()
@@ -97,26 +144,37 @@ class LeafLayer:
         self._uploaded = (polygons, key, vbo, ibo, origin)
         return vbo, ibo, origin
 
-    def draws(self, polygons: Polygons, view, lighting, *, labels=None):
+    def draws(self, polygons: Polygons, view, lighting, *, labels=None, coverage_floor: float = 0.0):
         """The leaves' draws for one frame seen through ``view`` (a FrameView) and lit by
-        ``lighting`` (a FrameLighting; its window, if any, gets the light's draw).
+        ``lighting`` (a FrameLighting; its window, if any, gets the light's draw). With
+        ``coverage_floor`` (coverage anti-aliasing: the floor radius per unit of distance)
+        the leaves narrower than the floor's width are left to a draw of their own after
+        everything opaque (:func:`~plantgen.gl.coverage.coverage_pass`, leaf.glsl's
+        THIN_LEAVES; not with the sky light, whose depth pass draws every leaf as it is):
+        they hide nothing and leave no distance.
 
-        Returns (frame draw, light draw or None, [vertex arrays to release after the frame]).
+        Returns (frame draw, light draw or None, [vertex arrays to release after the frame],
+        the thin leaves' draw or None).
         """
         ctx = self.ctx
         vbo, ibo, origin = self._upload(polygons, labels)
         shadowed = lighting.window is not None and labels is None
         receives = lighting.shadowed and labels is None
         looks = lighting.defines("leaf.glsl") if labels is None else {}
+        thin = coverage_floor > 0 and labels is None and not looks.get("SKY_LIGHT")
         program = build_program(ctx, "leaf.glsl", {"SHADOWS": receives, "LABELS": labels is not None,
-                                                   **(lighting.receiver_defines if receives else {}), **looks})
+                                                   **(lighting.receiver_defines if receives else {}), **looks,
+                                                   "THIN_LEAVES": thin})
         shading = {**lighting.shading, **lighting.receiver, **(lighting.sky if looks.get("SKY_LIGHT") else {})}
         set_uniforms(program, **({} if labels is not None else shading),
                      view_projection=mat4(view.view_projection),
-                     origin_from_eye=tuple((origin - view.eye).tolist()))
+                     origin_from_eye=tuple((origin - view.eye).tolist()),
+                     **({"coverage_floor": coverage_floor, "coverage_pass": 0,
+                         "coverage_exponent": AA_ALPHA_EXPONENT} if thin else {}))
         count = polygons.triangles.size
         layout = LEAF_VERTEX_LAYOUT if labels is None else ("3f 12x 2f", "position", "shade")  # no normal
-        vao = ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
+        attributes = [(vbo, *layout)] + ([(self._thin_buffer(polygons, origin), *THIN_LEAF_LAYOUT)] if thin else [])
+        vao = ctx.vertex_array(program, attributes, index_buffer=ibo, index_element_size=4)
         nearest = self._nearest_first(vbo, ibo, origin, view, count) if looks.get("SKY_LIGHT") else None
 
         def frame_draw():
@@ -125,8 +183,10 @@ class LeafLayer:
                 nearest[0]()
             vao.render(mode=ctx.TRIANGLES, vertices=count)
             ctx.depth_func = "<"
+        thin_draw = coverage_pass(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) \
+            if thin else None
         if not shadowed:
-            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])]
+            return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draw
         caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor
         set_uniforms(caster, view_projection=mat4(lighting.caster_window.matrix()),
                      origin_from_eye=tuple((origin - lighting.anchor).tolist()))
@@ -136,7 +196,7 @@ class LeafLayer:
         def light_draw():
             ctx.disable(ctx.CULL_FACE)
             light_vao.render(mode=ctx.TRIANGLES, vertices=count)
-        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])]
+        return frame_draw, light_draw, [vao, light_vao, *(nearest[1:] if nearest else [])], thin_draw
 
     def _nearest_first(self, vbo, ibo, origin, view, count: int):
         """A depth-only pass of the leaves from the eye (``leaf.glsl``'s SHADOW_PASS, no colour

@@ -35,6 +35,7 @@ from .frame import (
     ShadowKey,
     check_background,
     check_ssaa,
+    coverage_aa,
     frame_view,
 )
 from .instanced import IDENTITY_TURN, draw_copies, eye_copy_draws, light_copy_draws
@@ -161,7 +162,7 @@ class RasterRenderer(OffscreenRenderer):
                shadows: ShadowSettings | None = None, shadow_box=None,
                count_work: bool = False, background=None, ssaa: int = 1, leaves=None,
                poses=None, bounds=None, normal_maps=None,
-               parallax: ParallaxSettings | None = None) -> RenderResult:
+               parallax: ParallaxSettings | None = None, aa: str = "none") -> RenderResult:
         """Rasterise ``mesh`` (tessellated from ``frusta``) as seen by ``camera``.
 
         Parameters
@@ -184,8 +185,8 @@ class RasterRenderer(OffscreenRenderer):
             bounds), as for the ray caster
         count_work : a diagnostic render that also counts the fragments shaded
             (``stats.work``), as for the ray caster
-        background, ssaa : a flat or transparent background and supersampling, as for the
-            ray caster
+        background, ssaa, aa : background, supersampling and anti-aliasing, as for the ray
+            caster (no floor radius here: only ``"edges"``'s edge pass changes the frame)
         leaves : a Polygons (the grammar's leaves) drawn beside the mesh, as for the ray
             caster
         normal_maps : GS+N: {material slot (int) or name: (H, W, 3) uint8 tangent-space
@@ -217,7 +218,8 @@ class RasterRenderer(OffscreenRenderer):
                                   anchor=view.eye if skinned else None)
         draw_mesh = self._mesh_draw(program, vao, origin, view, lighting, repeats, tex, mesh, poses)
         draw_mesh = self._normal_mapped(program, names, normal_maps, draw_mesh, parallax)
-        extras = self._surroundings(ground, leaves, view, lighting, background=background)
+        floor = view.floor_radius() if coverage_aa(aa, ssaa, False, background) else 0.0
+        extras = self._surroundings(ground, leaves, view, lighting, background=background, coverage_floor=floor)
         light = None
         if shadowed:
             # a skinned mesh is posed by a buffer rewritten every frame: no key, its map drawn each time
@@ -225,7 +227,7 @@ class RasterRenderer(OffscreenRenderer):
                                                  ground, shadows.resolution, lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._mesh_light_pass(origin, lighting, mesh, poses))
         out = self._finish_frame(camera, view, lighting, background, draw_mesh, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work)
+                                 ssaa=ssaa, count_work=count_work, smooth=aa == "edges" and floor > 0)
         leaf_tris = len(leaves.triangles) if extras.after else 0
         stats = RasterStats(
             passes=frame_passes(shadowed, ground is not None, len(mesh.faces) > 0, leaf_tris > 0),
@@ -337,7 +339,7 @@ class RasterRenderer(OffscreenRenderer):
 
     def render_placed(self, meshes: PlacedMeshes, camera: Camera, *, light_dir=None, ground: Ground | None = None,
                       shadows: ShadowSettings | None = None, shadow_box=None, background=None, ssaa: int = 1,
-                      lod_pixels: float = 0.0) -> RenderResult:
+                      lod_pixels: float = 0.0, aa: str = "none") -> RenderResult:
         """Rasterise a placed scene's meshes (GS, GS+R), each plant's mesh uploaded once and
         drawn once per copy the view sees (:mod:`plantgen.gl.instanced`), each copy's first
         rows of the detail order as ``lod_pixels`` asks (the light's pass: in its texels).
@@ -364,7 +366,7 @@ class RasterRenderer(OffscreenRenderer):
                             lighting.anchor, lighting.caster_window)
             light = LightPass(key, lambda: self._placed_light_draw(meshes, uploads, lighting, shadows, lod_pixels))
         out = self._finish_frame(camera, view, lighting, background, draw, shadows, light, extras, ssaa=ssaa,
-                                 count_work=False)
+                                 count_work=False, smooth=aa == "edges" and coverage_aa(aa, ssaa, False, background))
         triangles = sum(int(pm.row_faces[c]) for pm, d in zip(meshes.meshes, plan, strict=True)
                         for c in d.counts.tolist())
         stats = RasterStats(

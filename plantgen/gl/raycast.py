@@ -31,9 +31,10 @@ from ..geometry.skeletons.frusta import ROW_FIELDS, Frusta
 from ..geometry.stage import Ground
 from ..limits import LimitError, Limits, hint
 from ..limits import limits as default_limits
-from ..settings import RaycastSettings, ShadowSettings
+from ..settings import AA_ALPHA_EXPONENT, RaycastSettings, ShadowSettings
 from .bvh_cache import BvhCache
 from .context import gl_context
+from .coverage import coverage_pass
 from .frame import (
     FrameLighting,
     FrameView,
@@ -42,6 +43,7 @@ from .frame import (
     ShadowKey,
     check_background,
     check_ssaa,
+    coverage_aa,
     frame_view,
 )
 from .instanced import IDENTITY_PLACEMENT, draw_copies, eye_copy_draws, light_copy_draws
@@ -73,12 +75,24 @@ CASTER_MESH_BYTES_PER_TRIANGLE = 96
 CASTER_MESHES_KEPT = 8
 
 
+def _timed_pack(frusta, eye) -> tuple:
+    """(:func:`pack_records` of ``frusta`` relative to ``eye``, its milliseconds)."""
+    t0 = time.perf_counter()
+    records = pack_records(frusta, eye)
+    return records, (time.perf_counter() - t0) * 1e3
+
+
 class Raycaster(OffscreenRenderer, BvhCache):
     """Renders Frusta with the GLSL ray caster into an offscreen framebuffer.
 
     Programs are compiled per variant (defines) and cached; nothing is compiled or run that
     the settings do not ask for (no relief march without relief).
     """
+
+    #: Whether coverage anti-aliasing casts the rows thinner than its floor a floor wide and
+    #: blends them (the ray caster: its rows' pyramids are built per frame, so they grow with
+    #: the floor); the tracer's BVH boxes hold the rows' own radii, so it does not.
+    casts_thin_rows = True
 
     def __init__(self, ctx=None, limits: Limits | None = None):
         super().__init__(ctx)
@@ -154,7 +168,8 @@ class Raycaster(OffscreenRenderer, BvhCache):
                material_names=("bark",), light_dir=None,
                ground: Ground | None = None, *, shadows: ShadowSettings | None = None,
                shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
-               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0) -> RenderResult:
+               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0,
+               aa: str = "none") -> RenderResult:
         """Ray cast ``frusta`` as seen by ``camera``.
 
         Parameters
@@ -185,21 +200,23 @@ class Raycaster(OffscreenRenderer, BvhCache):
         ssaa : samples per pixel side: the frame is drawn at ``ssaa`` times the camera's
             size and averaged down (:mod:`plantgen.gl.supersample`); ``frame_ms`` is
             the large frame's
+        aa : ``"coverage"`` (:func:`~plantgen.gl.frame.coverage_aa`, :mod:`~plantgen.gl.coverage`),
+            ``"edges"`` (and the edge pass, in ``resolve_ms``) or ``"none"`` (one ray a pixel)
         lod_pixels : with a PlacedPlants: each copy draws the rows whose detail spans at
             least this many pixels (the light's pass: texels of its map); 0 draws all
         """
         n, placed = len(frusta), isinstance(frusta, PlacedPlants)
         background, ssaa = check_background(background), check_ssaa(ssaa)
-        t0 = time.perf_counter()
-        records = pack_records(frusta, camera.eye) if record_buffer is None and not placed else None
-        pack_ms = (time.perf_counter() - t0) * 1e3
+        coverage = coverage_aa(aa, ssaa, settings.labels, background)
+        records, pack_ms = _timed_pack(frusta, camera.eye) if record_buffer is None and not placed else (None, 0.0)
         leaf_box = leaf_bounds(leaves)
         model_box = union_box(rows_box(frusta) if n else None, leaf_box)
-        view = frame_view(camera.scaled(ssaa), ([] if ground is None else [ground.quad()])
-                          + ([] if model_box is None else [box_corners(model_box)]))
+        view = frame_view(camera.scaled(ssaa), [g.quad() for g in (ground,) if g is not None]
+                          + [box_corners(b) for b in (model_box,) if b is not None])
         sky_bvh = self._sky_bvh(settings, frusta, leaves, camera, record_buffer)
         programs = self._programs(settings, shadows, ground is not None, count_work, background is not None,
-                                  leaf_box is not None, bvh_defines=sky_bvh.defines() if sky_bvh else None)
+                                  leaf_box is not None, sky_bvh.defines() if sky_bvh else None,
+                                  coverage and self.casts_thin_rows)
         tex, repeats = self._heights.get(tuple(material_names))
         box = None if shadows is None else (np.asarray(shadow_box, np.float64) if shadow_box is not None
                                             else model_box if model_box is not None else rows_box(frusta))
@@ -208,28 +225,45 @@ class Raycaster(OffscreenRenderer, BvhCache):
             else view.eye, look=None if settings.labels else settings.look), sky_bvh, settings, view, repeats,
             model_box)
         extras = self._surroundings(ground, leaves, view, lighting, background=background,
-                                    labels=leaf_labels if settings.labels else None)
+                                    labels=leaf_labels if settings.labels else None,
+                                    coverage_floor=view.floor_radius() if coverage else 0.0)
         extras.before[:0] = [sky_bvh.bind] if sky_bvh is not None else []
-        rec_buf = record_buffer if record_buffer is not None else (
-            self.ctx.buffer(records.tobytes()) if n and not placed else None)
-        if record_buffer is None:
-            extras.garbage.append(rec_buf)
-        draw_frusta, vaos, drawn = self._frusta_draw(programs["frame"], view, lighting, settings,
-                                                     frusta if placed else rec_buf, repeats, tex, n, lod_pixels)
-        extras.garbage.extend(vaos)
+        has_leaves = bool(extras.after)
+        draw_frusta, drawn = self._eye_draws(programs["frame"], view, lighting, settings,
+                                             frusta if placed else (records, record_buffer),
+                                             (repeats, tex, n, lod_pixels), coverage and self.casts_thin_rows, extras)
         light = None if shadows is None else self._light_pass(
             frusta, programs["light"], lighting, settings, shadows, tuple(material_names), record_buffer,
-            (leaves if extras.after else None, ground), lod_pixels)
+            (leaves if has_leaves else None, ground), lod_pixels)
         out = self._finish_frame(camera, view, lighting, background, draw_frusta, shadows, light, extras,
-                                 ssaa=ssaa, count_work=count_work)
+                                 ssaa=ssaa, count_work=count_work, smooth=coverage and aa == "edges")
         stats = RaycastStats(
-            passes=frame_passes(shadows is not None, ground is not None, n > 0, bool(extras.after)),
-            near=view.near, far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=drawn,
-            record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0,
-            pack_ms=pack_ms, program=("raycast.glsl", settings.defines()), ssaa=ssaa,
-            resolve_ms=self.last_resolve_ms, programs=programs["built"], work=out.work,
-            shadow_cached=out.shadow_cached)
+            passes=frame_passes(shadows is not None, ground is not None, n > 0, has_leaves), near=view.near,
+            far=view.far, shadow_ms=out.shadow_ms, light_window=lighting.window, segments=drawn,
+            record_bytes=RECORD_BYTES, upload_bytes=records.nbytes if records is not None else 0, pack_ms=pack_ms,
+            program=("raycast.glsl", settings.defines()), ssaa=ssaa, resolve_ms=self.last_resolve_ms,
+            programs=programs["built"], work=out.work, shadow_cached=out.shadow_cached)
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
+
+    def _eye_draws(self, program, view: FrameView, lighting: FrameLighting, settings: RaycastSettings, rows,
+                   textures: tuple, thin: bool, extras) -> tuple:
+        """The frusta's draw for the eye (:meth:`_frusta_draw` with ``textures`` = (repeats,
+        height textures, rows, lod_pixels)) of ``rows``, a PlacedPlants or (records, a
+        caller's record buffer or None: the records are uploaded here), what it leaves
+        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's pass of the
+        thin rows put first in ``extras.thin`` (drawn after everything opaque,
+        :func:`~plantgen.gl.coverage.coverage_pass`). Returns (draw, rows drawn)."""
+        repeats, tex, n, lod_pixels = textures
+        if not isinstance(rows, PlacedPlants):
+            records, record_buffer = rows
+            rows = record_buffer if record_buffer is not None else (
+                self.ctx.buffer(records.tobytes()) if n else None)
+            extras.garbage.extend([rows] if record_buffer is None else [])
+        draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
+                                              thin)
+        extras.garbage.extend(vaos)
+        extras.thin[:0] = [coverage_pass(self.ctx, program, draw)] if thin else []
+        return draw, drawn
 
     def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
         """The GPU BVH the sky light traces (the ``sky`` effect; None without it): the
@@ -256,11 +290,13 @@ class Raycaster(OffscreenRenderer, BvhCache):
         return replace(lighting, bvh_defines=gpu.defines(), sky=sky)
 
     def _programs(self, settings: RaycastSettings, shadows, ground: bool, count_work: bool = False,
-                  flat_background: bool = False, leaves: bool = False, bvh_defines: dict | None = None) -> dict:
+                  flat_background: bool = False, leaves: bool = False, bvh_defines: dict | None = None,
+                  thin_rows: bool = False) -> dict:
         """Build every program the frame uses (plantgen.gl.passes.program_variants) and
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
-        (file, defines switched on) built. ``bvh_defines``: those of the sky light's BVH."""
+        (file, defines switched on) built. ``bvh_defines``: those of the sky light's BVH;
+        ``thin_rows``: the frusta cast with THIN_COVERAGE (coverage anti-aliasing)."""
         variants = program_variants(settings, shadows, ground, flat_background, leaves, bvh_defines)
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
@@ -269,7 +305,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         shadowed = shadows is not None
         looks = {} if settings.labels else traced_look(settings.look, "raycast.glsl", shadowed, bvh_defines)
         frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
-                                                          "STATS": count_work, **looks})
+                                                          "STATS": count_work, **looks, "THIN_COVERAGE": thin_rows})
         light = build_program(self.ctx, *light_program(settings, shadows)) if shadowed else None
         return {"frame": frame, "light": light, "built": built}
 
@@ -280,16 +316,22 @@ class Raycaster(OffscreenRenderer, BvhCache):
             index_buffer=self._template_ibo if indexed else None, index_element_size=4)
 
     def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting,
-                     settings: RaycastSettings, rec_buf, repeats, tex, n: int, lod_pixels: float = 0.0):
+                     settings: RaycastSettings, rec_buf, repeats, tex, n: int, lod_pixels: float = 0.0,
+                     thin_rows: bool = False):
         """Set the eye's frusta program and return (draw callable, vertex arrays to release,
         rows drawn). ``rec_buf``: the records' buffer, or a PlacedPlants drawn copy by copy
-        (:mod:`plantgen.gl.instanced`) with ``lod_pixels``."""
+        (:mod:`plantgen.gl.instanced`) with ``lod_pixels``; ``thin_rows``: coverage
+        anti-aliasing's floor radius is set, and the draw is its pass 0 (the rows at or
+        above the floor; :meth:`_thin_rows_draw` draws the rest)."""
         sky = {k: v for k, v in lighting.sky.items() if k.startswith("sky_")}   # the rest: set below
         set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver, **sky,
                      **settings.march_uniforms(), **IDENTITY_PLACEMENT, texture_repeat=repeats,
                      pixel_footprint=view.pixel_footprint(),
                      view_projection=mat4(view.view_projection),
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
+        if thin_rows:
+            set_uniforms(program, coverage_floor=view.floor_radius(), coverage_pass=0,
+                         coverage_exponent=AA_ALPHA_EXPONENT)
         if not n:
             return (lambda: None), [], 0
         ctx = self.ctx

@@ -100,6 +100,8 @@ class RayTracer(Raycaster):
     another (an animation's frames, module docstring).
     """
 
+    casts_thin_rows = False
+
     def __init__(self, ctx=None, limits=None, *, leaf_size: int = GPU_LEAF_SIZE, method: str = "lbvh",
                  shadow_ray_offset: float = SHADOW_RAY_OFFSET, refit: bool = False):
         super().__init__(ctx, limits)
@@ -110,9 +112,11 @@ class RayTracer(Raycaster):
     # ------------------------------------------------------------------ the frame
     def render(self, frusta, camera, settings=None, material_names=("bark",), light_dir=None, ground=None, *,
                shadows=None, shadow_box=None, record_buffer=None, count_work: bool = False, background=None,
-               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0):
+               ssaa: int = 1, leaves=None, leaf_labels=None, lod_pixels: float = 0.0, aa: str = "none"):
         """Trace ``frusta`` (Frusta or PlacedPlants) as seen by ``camera``: the arguments of
-        :meth:`Raycaster.render` (``lod_pixels`` is ignored: every row is traced)."""
+        :meth:`Raycaster.render` (``lod_pixels`` is ignored: every row is traced; ``aa``
+        ``"edges"`` smooths the edges, but no row is cast at the floor radius: the BVH's
+        boxes hold the rows' own radii, :attr:`casts_thin_rows`)."""
         from ..settings import RaycastSettings
 
         settings = settings if settings is not None else RaycastSettings()
@@ -125,7 +129,7 @@ class RayTracer(Raycaster):
         try:
             result = super().render(frusta, camera, settings, material_names, light_dir, ground, shadows=shadows,
                                     shadow_box=shadow_box, background=background, ssaa=ssaa, leaves=leaves,
-                                    leaf_labels=leaf_labels)
+                                    leaf_labels=leaf_labels, aa=aa)
         finally:
             self._frame = None
         stats = replace(result.stats, program=("rt.glsl", self._defines(settings, shadows, gpu)),
@@ -145,7 +149,7 @@ class RayTracer(Raycaster):
         return frame["gpu"] if frame is not None and settings.look.sky and not frame["gpu"].empty else None
 
     def _programs(self, settings, shadows, ground: bool, count_work: bool = False, flat_background: bool = False,
-                  leaves: bool = False, bvh_defines: dict | None = None) -> dict:
+                  leaves: bool = False, bvh_defines: dict | None = None, thin_rows: bool = False) -> dict:
         frame = self._frame
         defines = self._defines(settings, shadows, frame["gpu"])
         receivers = {k: v for k, v in defines.items() if k != "SHADOWS"} if shadows is not None else {}
@@ -183,10 +187,11 @@ class RayTracer(Raycaster):
         return {k: v for k, v in settings.march_uniforms().items() if k != "hull_padding"}
 
     def _surroundings(self, ground, leaves, view: FrameView, lighting: FrameLighting, *, labels=None,
-                      background=None):
+                      background=None, coverage_floor: float = 0.0):
         if lighting.receiver_defines:
             lighting = replace(lighting, receiver={**lighting.receiver, "pixel_footprint": view.pixel_footprint()})
-        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background)
+        out = super()._surroundings(ground, leaves, view, lighting, labels=labels, background=background,
+                                    coverage_floor=coverage_floor)
         frame = self._frame
         if frame is not None:
             out.before.insert(0, self._bind)        # the BVH and heights for every receiver
@@ -198,7 +203,7 @@ class RayTracer(Raycaster):
         frame["gpu"].bind()
 
     def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting, settings, rec_buf, repeats, tex,
-                     n: int, lod_pixels: float = 0.0):
+                     n: int, lod_pixels: float = 0.0, thin_rows: bool = False):
         set_uniforms(program, **{**view.ray_uniforms(), **lighting.shading, **lighting.receiver, **lighting.sky,
                                  **self._march(settings), "texture_repeat": repeats,
                                  "pixel_footprint": view.pixel_footprint(),

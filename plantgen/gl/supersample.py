@@ -22,7 +22,8 @@ from ..settings import MAX_SSAA, TONE_KNEE  # the largest supersampling factor: 
 from .context import release_framebuffer
 from .shaders import build_program, set_uniforms
 
-__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "resolve_supersamples", "srgb_encode", "srgb_decode", "tone_curve",
+__all__ = ["DISPLAY_GAMMA", "MAX_SSAA", "EDGE_THRESHOLD", "EDGE_RELATIVE",
+           "resolve_supersamples", "srgb_encode", "srgb_decode", "tone_curve",
            "GpuResolve"]
 
 #: The exponent of the shaders' display encoding: ``to_display(c) = c^(1/2.2)``.
@@ -54,6 +55,12 @@ def tone_curve(x, exposure: float = 1.0, curve: str = "filmic", knee: float = TO
     shoulder = knee + (1.0 - knee) * (1.0 - np.exp(-(x - knee) / (1.0 - knee)))
     return np.where(x < knee, x, shoulder)
 
+
+#: Coverage anti-aliasing's edge pass (:meth:`GpuResolve.smooth_edges`): a pixel is on an
+#: edge where the luma (display-encoded, 0..1) of it and its eight neighbours spans at least
+#: this much, and at least :data:`EDGE_RELATIVE` of the brightest of them.
+EDGE_THRESHOLD = 0.05
+EDGE_RELATIVE = 0.1
 
 _SRGB_TO_LINEAR = srgb_decode(np.arange(256) / 255.0).astype(np.float32)
 
@@ -141,20 +148,35 @@ class GpuResolve:
         distance, row 0 the top row, of a frame drawn at ``n`` samples per side into
         ``color_texture`` (RGBA8) and ``distance_texture`` (R32F); ``srgb``: the frame is
         sRGB-encoded (the ``tone`` effect), else c^(1/2.2), as :func:`resolve_supersamples`."""
-        ctx = self.ctx
         srgb = bool(srgb)
-        program = build_program(ctx, "resolve.glsl", {"COVERAGE": bool(alpha), "FACTOR": int(n), "SRGB": srgb})
-        key = (bool(alpha), int(n), srgb)
-        vao = self._vaos.get(key)
+        program = build_program(self.ctx, "resolve.glsl", {"COVERAGE": bool(alpha), "FACTOR": int(n), "SRGB": srgb})
+        set_uniforms(program, frame_color=0, frame_distance=1)
+        program["to_linear"].value = (_SRGB_TO_LINEAR if srgb else _TO_LINEAR).tolist()
+        return self._run(program, color_texture, distance_texture, width, height, alpha)
+
+    def smooth_edges(self, color_texture, distance_texture, width: int, height: int, alpha: bool):
+        """Coverage anti-aliasing's edge pass (``shaders/edges.glsl``) over a frame drawn at
+        one ray a pixel: the (height, width, 3 or 4) uint8 colour with its edges smoothed
+        along their direction (:data:`EDGE_THRESHOLD`, :data:`EDGE_RELATIVE`) and the
+        (height, width) float32 distance as drawn, row 0 the top row."""
+        program = build_program(self.ctx, "edges.glsl")
+        set_uniforms(program, frame_color=0, frame_distance=1, edge_threshold=EDGE_THRESHOLD,
+                     edge_relative=EDGE_RELATIVE)
+        color_texture.repeat_x = color_texture.repeat_y = False     # the taps clamp at the border
+        return self._run(program, color_texture, distance_texture, width, height, alpha)
+
+    def _run(self, program, color_texture, distance_texture, width: int, height: int, alpha: bool):
+        """Draw ``program``'s full-screen triangle into the target of the final size, the
+        frame's textures on units 0 and 1, and read the target back."""
+        ctx = self.ctx
+        vao = self._vaos.get(id(program))
         if vao is None or vao.program is not program:
-            vao = self._vaos[key] = ctx.vertex_array(program, [])
+            vao = self._vaos[id(program)] = ctx.vertex_array(program, [])
         fbo = self._target(width, height)
         fbo.use()
         fbo.viewport = (0, 0, width, height)
         color_texture.use(0)
         distance_texture.use(1)
-        set_uniforms(program, frame_color=0, frame_distance=1)
-        program["to_linear"].value = (_SRGB_TO_LINEAR if srgb else _TO_LINEAR).tolist()
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
         vao.render(mode=ctx.TRIANGLES, vertices=3)
         k = 4 if alpha else 3

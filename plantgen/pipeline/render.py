@@ -34,6 +34,7 @@ from ..geometry.skeletons.frusta import Frusta, frusta_bounds
 from ..geometry.skeletons.skin import skin_skeleton
 from ..geometry.stage import MODEL_LIGHT, Ground, model_ground
 from ..gl.context import renderer_name
+from ..gl.frame import coverage_aa
 from ..gl.pose import PoseStream
 from ..gl.raycast import Raycaster
 from ..gl.records import RecordStream
@@ -235,7 +236,7 @@ def frame_arguments(frusta: Frusta, staging: Staging, shadows, image: ImageSetti
     supersampling."""
     return {"camera": staging.camera, "material_names": frusta.material_names, "light_dir": staging.light_dir,
             "ground": staging.ground, "shadows": shadows, "background": parse_background(image.background),
-            "ssaa": image.ssaa, "leaves": staging.leaves}
+            "ssaa": image.ssaa, "aa": image.aa, "leaves": staging.leaves}
 
 
 # ---------------------------------------------------------------------- plantgen render
@@ -397,16 +398,16 @@ def _render_frames(raycaster: Raycaster, anim: AnimatedScene, times, view: dict,
 
 def _render_still(raycaster: Raycaster, frusta: Frusta, view: dict, timed_frames: int, exact_distance: bool):
     """One draw, or a warm-up and ``timed_frames`` timed draws (the last is kept). With
-    supersampling and ``exact_distance``, the distances come from one more draw at one
-    sample a pixel (rays through the pixel centres). The shadow map is drawn by the first
+    supersampling or coverage anti-aliasing and ``exact_distance``, the distances come from
+    one more draw at one sample a pixel (rays through the pixel centres). The shadow map is drawn by the first
     draw and reused by the others (the light, the geometry and the map stay). Returns
     (result, frame ms, distances, ShadowUse)."""
     runs = [raycaster.render(frusta, **view) for _ in range(int(timed_frames) + 1 if timed_frames else 1)]
     result = runs[-1]
     frame_times = [r.frame_ms for r in (runs[1:] if timed_frames else runs)]
     distance = result.distance
-    if exact_distance and view["ssaa"] > 1:
-        distance = raycaster.render(frusta, **{**view, "ssaa": 1}).distance
+    if exact_distance and (view["ssaa"] > 1 or coverage_aa(view["aa"], view["ssaa"], False, view["background"])):
+        distance = raycaster.render(frusta, **{**view, "ssaa": 1, "aa": "none"}).distance
     return result, frame_times, distance, ShadowUse.of([r.stats for r in runs])
 
 
