@@ -120,7 +120,9 @@ class SkinReport:
     with the paper's planes on the skeleton's radii, ``after`` as built with the seams fitted
     (``skin_skeleton(seam_fit=True)``, the default; None without). Joints with a radius step of more
     than ``tol.radius_step`` (5 %, ``step_joints``) are left out of both: their mismatch is
-    modelled.
+    modelled. The ``before`` figures are worked out when first read
+    (:meth:`measure_paper_seams`): fitted seams do not need the paper's planes, and a
+    render never reads them (half the skinning time of a million segments).
     """
 
     n_segments: int = 0
@@ -133,12 +135,31 @@ class SkinReport:
     not_ellipse: int = 0            # ... of which the paper's plane is not an ellipse cut
     planes_crossing: int = 0        # ... of which next to a segment whose planes cross inside it
     fan_rows: int = 0
-    seam_mismatch_max_before: float = 0.0
-    seam_mismatch_mean_before: float = 0.0
     seam_mismatch_max_after: float | None = None
     seam_mismatch_mean_after: float | None = None
     smooth_joints: int = 0          # joints replaced by arcs (skin_skeleton(smooth_bends=...))
     smooth_segments: int = 0        # segments those arcs added before skinning
+    _paper_seams: Callable[[], tuple[float, float]] | tuple[float, float] = field(
+        default=(0.0, 0.0), repr=False, compare=False)
+
+    def measure_paper_seams(self, measure: Callable[[], tuple[float, float]]) -> None:
+        """Work out the ``before`` figures with ``measure()`` -> (max, mean) when first read."""
+        self._paper_seams = measure
+
+    def _paper(self) -> tuple[float, float]:
+        if callable(self._paper_seams):
+            self._paper_seams = tuple(self._paper_seams())
+        return self._paper_seams
+
+    @property
+    def seam_mismatch_max_before(self) -> float:
+        """The largest seam mismatch with the paper's planes (0 without a smooth joint)."""
+        return self._paper()[0]
+
+    @property
+    def seam_mismatch_mean_before(self) -> float:
+        """The mean seam mismatch with the paper's planes (0 without a smooth joint)."""
+        return self._paper()[1]
 
     def lines(self) -> list[str]:
         s = [f"{self.n_segments} segments -> {self.n_rows} rows; {self.joints} joints, "

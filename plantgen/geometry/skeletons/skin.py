@@ -51,6 +51,7 @@ import numpy as np
 from ...tolerances import tol
 from ..vec import (
     any_perpendicular,
+    by_rows,
     cross,
     dot,
     norm,
@@ -144,17 +145,12 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     """
     n = len(skeleton)
     report = SkinReport(n_segments=n)
-    axis, length = _segment_axes(skeleton)
-    seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
-                    skeleton.r_end.copy())
-    child, side = continuing_children(skeleton)
+    seg, joints, side = _segments_and_joints(skeleton, extend_side_branches)
+    child = joints.child
     report.joints, report.side_branches = len(child), len(side)
-    if extend_side_branches and side.size:
-        _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
+    report.measure_paper_seams(lambda: _paper_seams(skeleton, extend_side_branches))
     lo = plane_through(seg.axis, seg.base)
     hi = plane_through(seg.axis, skeleton.end)
-    parent = skeleton.parent[child]
-    joints = _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child])
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
     if child.size:
         sharp, bend, medial = _joint_cuts(seg, joints, skeleton, lo, hi, seam_fit, max_bend_deg, report)
@@ -240,6 +236,20 @@ class _Rows:
 
 
 # ============================================================================ segments
+def _segments_and_joints(skeleton: Skeleton, extend_side_branches: bool):
+    """The segments as skinning starts from them (:class:`_Segments`: side branches moved
+    into their parents when ``extend_side_branches``), the continuing joints
+    (:class:`_Joints`) and (s,) the side branches."""
+    axis, length = _segment_axes(skeleton)
+    seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
+                    skeleton.r_end.copy())
+    child, side = continuing_children(skeleton)
+    if extend_side_branches and side.size:
+        _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
+    parent = skeleton.parent[child]
+    return seg, _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child]), side
+
+
 def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) unit axes and (n,) lengths of the segments; a zero-length segment points up
     and gets a length of ``tol.zero_length`` times its size."""
@@ -525,14 +535,46 @@ def _line_crossing(p1, d1, p2, d2, nm, scale):
     return np.clip(s, -tol.runaway * scale, tol.runaway * scale), den
 
 
-def _seam_mismatch_at(seg: _Segments, joints: _Joints, point, rc) -> np.ndarray:
-    """(j,) minor semi-axis of the parent's cut minus the child's at joint planes through
-    ``point`` (j, 3), the children starting with radii ``rc`` (j,) (§2.2)."""
-    k = seg.slope
-    par, child = joints.parent, joints.child
+def _seam_mismatch_at(seg: _Segments, k, par, child, point, rc) -> np.ndarray:
+    """(m,) minor semi-axis of the parent's cut minus the child's at joint planes through
+    ``point`` (m, 3), at the joints of segments ``par`` and ``child`` (m,), the children
+    starting with radii ``rc`` (m,) (§2.2); ``k`` (n,) the segments' slopes. Row-wise."""
     b_parent = minor_semi_axis(point, seg.base[par], seg.axis[par], seg.r_start[par], k[par])
     kc = cone_slope(rc, seg.r_end[child], seg.length[child])
     return b_parent - minor_semi_axis(point, seg.base[child], seg.axis[child], rc, kc)
+
+
+def _paper_mismatch(seg: _Segments, joints: _Joints, k, rp, rc, rows) -> np.ndarray:
+    """(r,) |seam mismatch| / rp with the paper's planes (:func:`_joint_planes`) at the
+    joints ``rows`` (r,), the children's radii ``rc`` (j,), the parents' ``rp`` (j,),
+    evaluated a block of joints at a time (:func:`by_rows`): only the planes' points are
+    kept, and only at the joints measured."""
+    par, child = joints.parent, joints.child
+
+    def block(s):
+        _, point, _ = _joint_planes(joints.point[s], joints.parent_axis[s], joints.child_axis[s], rp[s], rc[s],
+                                    k[par[s]], k[child[s]])
+        return np.abs(_seam_mismatch_at(seg, k, par[s], child[s], point, rc[s])) / np.maximum(rp[s], tol.tiny)
+    return by_rows(block, rows)
+
+
+def _smooth_joints(rp, rc) -> np.ndarray:
+    """(j,) bool: the joints whose radii ``rp``, ``rc`` (j,) agree within ``tol.radius_step``
+    (the others are radius steps: modelled, not measured as seam errors)."""
+    return np.abs(rp - rc) <= tol.radius_step * np.maximum(rp, rc)
+
+
+def _paper_seams(skeleton: Skeleton, extend_side_branches: bool) -> tuple[float, float]:
+    """(max, mean) seam mismatch with the paper's planes on the skeleton's radii at its
+    smooth joints (0, 0 without one): the report's ``before`` figures, worked out from the
+    skeleton when first read (:meth:`SkinReport.measure_paper_seams`)."""
+    seg, joints, _ = _segments_and_joints(skeleton, extend_side_branches)
+    rp, rc = seg.r_end[joints.parent], seg.r_start[joints.child]
+    smooth = _smooth_joints(rp, rc)
+    if not smooth.any():
+        return 0.0, 0.0
+    rel = _paper_mismatch(seg, joints, seg.slope, rp, rc, np.flatnonzero(smooth))
+    return float(rel.max()), float(rel.mean())
 
 
 def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, seam_fit: bool,
@@ -548,21 +590,17 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
     ``seg.r_start``) and :func:`_sphere_planes`; a knuckle keeps the skeleton's radius
     (its fan is a cylinder of that radius), as does a joint whose child's radius would
     move more than ``tol.seam_radius_change`` or has no closing radius; as that changes the radii below it, the
-    planes and knuckles are found again until no new knuckle appears.
+    planes and knuckles are found again until no new knuckle appears. Row-wise work runs
+    a block of joints at a time (:func:`by_rows`).
     """
     par, child = joints.parent, joints.child
     J, M1, M2 = joints.point, joints.parent_axis, joints.child_axis
     rp, rc0 = seg.r_end[par], seg.r_start[child].copy()
     k = seg.slope
-    normal, point, nm = _joint_planes(J, M1, M2, rp, rc0, k[par], k[child])
-    smooth = np.abs(rp - rc0) <= tol.radius_step * np.maximum(rp, rc0)
-    report.step_joints = int((~smooth).sum())
-    if smooth.any():
-        rel = np.abs(_seam_mismatch_at(seg, joints, point, rc0))[smooth] / np.maximum(rp[smooth], tol.tiny)
-        report.seam_mismatch_max_before = float(rel.max())
-        report.seam_mismatch_mean_before = float(rel.mean())
+    report.step_joints = int((~_smooth_joints(rp, rc0)).sum())
     sharp = np.zeros(len(child), dtype=bool)
     if not seam_fit:
+        normal, point, nm = by_rows(_joint_planes, J, M1, M2, rp, rc0, k[par], k[child])
         _set_joint_planes(lo, hi, joints, normal, point)
         sharp, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
     else:
@@ -573,7 +611,7 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
             failed = np.zeros(len(child), dtype=bool)
             failed[fit] = seam_radii(seg.r_start, seg.r_end, seg.length, par[fit], child[fit])
             k = seg.slope
-            normal, point, nm = _sphere_planes(J, M1, M2, rp, seg.r_start[child], k[par], k[child])
+            normal, point, nm = by_rows(_sphere_planes, J, M1, M2, rp, seg.r_start[child], k[par], k[child])
             _set_joint_planes(lo, hi, joints, normal, point)
             found, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
             moved = np.abs(seg.r_start[child] - rc0) > tol.seam_radius_change * np.maximum(rc0, tol.tiny)
@@ -582,9 +620,8 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
                 break
             sharp |= found
         report.sharp_joints = int(sharp.sum())
-        fitted = linked & ~sharp
-        left = np.abs(_seam_mismatch_at(seg, joints, point, seg.r_start[child]))[fitted]
-        left = left / np.maximum(rp[fitted], tol.tiny)
+        left = by_rows(lambda s: np.abs(_seam_mismatch_at(seg, k, par[s], child[s], point[s], seg.r_start[child[s]]))
+                       / np.maximum(rp[s], tol.tiny), np.flatnonzero(linked & ~sharp))
         report.seam_mismatch_max_after = float(left.max()) if left.size else 0.0
         report.seam_mismatch_mean_after = float(left.mean()) if left.size else 0.0
     hi[par[sharp]] = plane_through(M1[sharp], J[sharp])
