@@ -68,7 +68,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...tolerances import tol
-from ..vec import ancestor_count, cross, dot, norm, reduce_to_root, unit
+from ..vec import ROW_BLOCK, ancestor_count, cross, dot, norm, reduce_to_root, unit
 
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at", "relief_scale",
@@ -602,12 +602,23 @@ def row_end_balls(frusta: Frusta) -> list[tuple[np.ndarray, np.ndarray]]:
 def frusta_bounds(frusta: Frusta) -> np.ndarray:
     """(2, 3) float64 axis-aligned box around every frustum, relief shells included (the
     balls of :func:`row_end_balls`)."""
-    if len(frusta.base) == 0:
+    n = len(frusta.base)
+    if n == 0:
         return np.zeros((2, 3))
-    balls = row_end_balls(frusta)
-    pts = np.concatenate([c for c, _ in balls])
-    r = np.concatenate([r for _, r in balls])[:, None]
-    return np.stack([(pts - r).min(axis=0), (pts + r).max(axis=0)])
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for s in range(0, n, ROW_BLOCK):       # a block of rows at a time: min and max are exact
+        for c, r in row_end_balls(_row_block(frusta, s, s + ROW_BLOCK)):
+            lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
+            hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
+    return np.stack([lo, hi])
+
+
+def _row_block(frusta: Frusta, start: int, stop: int) -> Frusta:
+    """Rows ``start:stop`` of ``frusta`` (views, no checks) for row-wise work a block at a
+    time; its ``parent_row`` is not re-indexed."""
+    rows = {f: getattr(frusta, f)[start:stop] for f in ROW_FIELDS}
+    pr = frusta.parent_row[start:stop]
+    return Frusta.from_rows(rows, frusta.material_names, pr, pr < 0, frusta.open_hi[start:stop])
 
 
 def section_points(frusta: Frusta, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
