@@ -280,7 +280,8 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
         weight = np.where(ok, area, 0.0)[:, None]
         tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
         tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
-        return np.concatenate([tu * weight, tv * weight], axis=1)
+        tu, tv = tu * weight, tv * weight
+        return tuple(np.ascontiguousarray(d[:, k]) for d in (tu, tv) for k in range(3))
     sums = _vertex_sums(faces, by_rows(weighted, np.asarray(faces)), len(vertices))
     return by_rows(_vertex_tangents, sums[:, :3], sums[:, 3:], normals)
 
@@ -302,18 +303,20 @@ def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
     return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
 
 
-def _vertex_sums(faces: np.ndarray, per_face: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(V, k) sums over each vertex's faces of ``per_face`` (F, k): a bincount over the
-    corners in order (every face's first corner, then second, then third), so each sum
-    adds up in the order ``np.add.at`` corner by corner would, many times faster."""
+def _vertex_sums(faces: np.ndarray, per_face, n_vertices: int) -> np.ndarray:
+    """(V, k) sums over each vertex's faces of ``per_face`` (F, k), or of its k columns
+    given as (F,) arrays: a bincount over the corners in order (every face's first
+    corner, then second, then third), so each sum adds up in the order ``np.add.at``
+    corner by corner would, many times faster."""
     corners = np.asarray(faces).T.ravel()
-    values = np.asarray(per_face, dtype=np.float64)
-    count = len(values)
-    out = np.empty((n_vertices, values.shape[1]))
+    if isinstance(per_face, np.ndarray):
+        per_face = [per_face[:, k] for k in range(per_face.shape[1])]
+    count = len(faces)
+    out = np.empty((n_vertices, len(per_face)))
     weights = np.empty(3 * count)          # a column three times over (np.tile's), one buffer for all
-    for k in range(values.shape[1]):
+    for k, column in enumerate(per_face):
         for corner in range(3):
-            weights[corner * count:(corner + 1) * count] = values[:, k]
+            weights[corner * count:(corner + 1) * count] = column
         out[:, k] = np.bincount(corners, weights=weights, minlength=n_vertices)
     return out
 
