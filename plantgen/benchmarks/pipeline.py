@@ -17,9 +17,11 @@ L-system; a scene's copies grow in *derive*), *skin* (frusta; a scene's distinct
 *frame* (the automatic camera: :func:`~plantgen.geometry.rays.camera.auto_camera`, or
 :func:`~plantgen.geometry.rays.camera.frame_copies` for a scene), *check* (finite rows and
 the export's budget), *upload/BVH* (the scan's BVH over the rows' boxes), *draw* (one
-64x48 ray-cast frame, with ``--gl``) and *write* (tessellate at m = 0 and write a .glb).
+64x48 ray-cast frame, with ``--gl``), *mesh* (tessellate at m = 0 and bake the relief's
+maps, as an export does by default) and *write* (the .glb writer, tangents included; the
+table's notes give its MB/s: the file's bytes over the stage's CPU seconds).
 grow runs read to interpret, render adds skin, frame, check and draw, export skin,
-frame, check and write, scan skin and upload/BVH.
+frame, check, mesh and write, scan skin and upload/BVH.
 
 Times are CPU seconds of this process (``time.process_time``: steadier than wall time on
 busy cores; a GL draw's driver threads count too); memory is the peak Python and numpy
@@ -47,6 +49,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..exporters import Plant, write_plants
+from ..exporters.textures import bake_textures
 from ..geometry.meshes.mesh import tessellate
 from ..geometry.rays.bvh import build_bvh
 from ..geometry.rays.camera import auto_camera, frame_copies
@@ -58,10 +61,10 @@ from ..pipeline import check_export_size, grow_file
 from ..pipeline.checks import check_finite_frusta
 from .arguments import report
 
-__all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "main"]
+__all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "writer_speed", "main"]
 
 #: The stages, in pipeline order.
-STAGES = ("read", "derive", "interpret", "skin", "frame", "check", "upload/BVH", "draw", "write")
+STAGES = ("read", "derive", "interpret", "skin", "frame", "check", "upload/BVH", "draw", "mesh", "write")
 #: Sizes a run measures: segments (npz, grammar iterations) and copies (scenes), by run.
 SIZES = {
     "quick": {"npz": (1_000, 10_000), "grammar": (6, 8), "scene": (10, 100)},
@@ -122,6 +125,7 @@ class Run:
         self.stages: dict[str, tuple[float, int]] = {}
         self.refused: tuple[str, float, str] | None = None
         self.skipped: dict[str, str] = {}      # stage: the refusal that left it out
+        self.written = 0                       # bytes of the .glb the write stage wrote
 
     @contextmanager
     def stage(self, name: str):
@@ -157,10 +161,24 @@ def _plant_stages(run: Run, skeleton: Skeleton, grown, gl: bool) -> None:
     if gl:
         _draw(run, grown, frusta, camera)
     if "write" in run.skipped:
+        run.skipped["mesh"] = run.skipped["write"]
         return
+    _write(run, [(run.label, skeleton, frusta, None)])
+
+
+def _write(run: Run, plants: list) -> None:
+    """The export's last stages for ``plants`` [(name, skeleton, frusta, matrices)]: *mesh*
+    (tessellate at m = 0 and bake the relief's maps, as ``plantgen export`` does by
+    default) and *write* (the .glb writer: material split, up turn, tangents, packing, JSON
+    and the file); ``run.written`` gets the file's bytes."""
+    with run.stage("mesh"):
+        meshes = [tessellate(frusta, 0) for _, _, frusta, _ in plants]
+        textures = bake_textures(meshes)
     with run.stage("write"), tempfile.TemporaryDirectory() as tmp:
-        mesh = tessellate(frusta, 0)
-        write_plants([Plant(run.label, skeleton, mesh, None)], Path(tmp) / "bench.glb")
+        path = Path(tmp) / "bench.glb"
+        write_plants([Plant(name, skeleton, mesh, matrices) for (name, skeleton, _, matrices), mesh
+                      in zip(plants, meshes, strict=True)], path, textures=textures)
+        run.written = path.stat().st_size
 
 
 def _draw(run: Run, grown, frusta, camera) -> None:
@@ -227,9 +245,7 @@ def _scene_run(copies: int, distinct: bool, tmp: Path) -> Run:
         with run.stage("check"):
             check_export_size([f for f, _, _ in skinned], [None] * len(skinned),
                               sum(len(p.skeleton) for p in plants), 0, "glb", None, run.label, "bench.glb")
-        with run.stage("write"), tempfile.TemporaryDirectory() as out:
-            write_plants([Plant(p.name, p.skeleton, tessellate(f, 0), m) for p, (f, m, _) in
-                          zip(plants, skinned, strict=True)], Path(out) / "bench.glb")
+        _write(run, [(p.name, p.skeleton, f, m) for p, (f, m, _) in zip(plants, skinned, strict=True)])
     except PlantgenError:
         pass
     return run
@@ -288,11 +304,23 @@ def markdown(runs: list[Run], title: str) -> str:
                 continue
             cells = [_cell(r, stage) for r in mine] + [""] * (width - len(mine))
             lines.append(f"| {kind} | {stage} | " + " | ".join(cells) + f" | {growth(mine, stage)} |")
+    writes = [f"- {r.label}: {r.written / 1e6:,.1f} MB in {r.stages['write'][0]:.3f} s, "
+              f"{writer_speed(r):,.0f} MB/s" for r in runs if r.written and r.stages["write"][0] > 0]
+    if writes:
+        lines += ["", "The glb writer (the file's bytes over the write stage's CPU seconds; 1 MB = 10^6 bytes):",
+                  "", *writes]
     refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
-    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
+    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items() if stage != "mesh"]
     if refusals:
         lines += ["", "Refused:", "", *refusals]
     return "\n".join(lines) + "\n"
+
+
+def writer_speed(run: Run) -> float:
+    """The glb writer's MB/s in ``run``: the file's bytes (10^6 a MB) over the CPU seconds
+    of its write stage (the material split, up turn, tangents, packing, JSON and file,
+    after the mesh and its maps are built)."""
+    return run.written / 1e6 / run.stages["write"][0]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -183,12 +183,15 @@ def mesh_aspects(mesh) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per material index of a :class:`~plantgen.geometry.meshes.mesh.TessellatedMesh`: the
     aspect ρ/L of each lateral face (ρ = |∂P/∂u|/2π, L = |∂P/∂v|: the radius over the
     texture period there), the face's area and its radius ρ, each (k,) float64."""
-    dp_du, dp_dv, area, ok = face_derivatives(mesh.vertices, mesh.uv, mesh.faces)
-    lu, lv = np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)
-    ok &= (lv > 0) & (area > 0)
-    aspect = lu / (2.0 * np.pi * np.where(ok, lv, 1.0))
+    vertices, uv = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.uv, dtype=np.float64)
+
+    def per_face(faces):                 # row-wise: a block of faces at a time (by_rows)
+        dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, faces)
+        lu, lv = np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)
+        ok &= (lv > 0) & (area > 0)
+        return lu / (2.0 * np.pi * np.where(ok, lv, 1.0)), area, lu / (2.0 * np.pi), ok
+    aspect, area, radius, ok = by_rows(per_face, np.asarray(mesh.faces))
     material = mesh.face_material
-    radius = lu / (2.0 * np.pi)
     return {int(m): (aspect[ok & (material == m)], area[ok & (material == m)], radius[ok & (material == m)])
             for m in np.unique(material[ok])}
 
