@@ -601,7 +601,16 @@ def row_end_balls(frusta: Frusta) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def frusta_bounds(frusta: Frusta) -> np.ndarray:
     """(2, 3) float64 axis-aligned box around every frustum, relief shells included (the
-    balls of :func:`row_end_balls`)."""
+    balls of :func:`row_end_balls`). Worked out once a Frusta (its rows are a value: kept
+    with it, as renderers keep their work on it) and a copy handed out."""
+    box = frusta.__dict__.get("_bounds")
+    if box is None:
+        box = _bounds(frusta)
+        object.__setattr__(frusta, "_bounds", box)
+    return box.copy()
+
+
+def _bounds(frusta: Frusta) -> np.ndarray:
     n = len(frusta.base)
     if n == 0:
         return np.zeros((2, 3))

@@ -35,7 +35,7 @@ from ...errors import PlantgenError
 from ...files import open_input, write_atomically
 from ...limits import LimitError, Limits, hint
 from ...limits import limits as default_limits
-from ..vec import ROW_BLOCK
+from ..vec import ROW_BLOCK, by_rows
 
 #: The most material names a skeleton file (.npz, .swc) may hold: a grammar has at most
 #: 16, a scene's merged skeleton the distinct ones of its plants.
@@ -151,9 +151,10 @@ class Skeleton:
         if np.any(self.continues & ~has_p):
             raise SkeletonError("a root segment cannot continue a parent")
         scale = max(1.0, float(np.abs(self.bounds).max())) if n else 1.0
-        gap = np.linalg.norm(self.start[has_p] - self.end[self.parent[has_p]], axis=1)
+        child = np.flatnonzero(has_p)
+        gap = by_rows(lambda rows: np.linalg.norm(self.start[rows] - self.end[self.parent[rows]], axis=1), child)
         if gap.size and gap.max() > tol * scale:
-            bad = int(idx[has_p][np.argmax(gap)])
+            bad = int(child[np.argmax(gap)])
             raise SkeletonError(f"segment {bad} does not start where its parent ends (gap {gap.max():.3g})")
         if n and (self.material.min() < 0 or self.material.max() >= len(self.material_names)):
             raise SkeletonError("material index outside material_names")

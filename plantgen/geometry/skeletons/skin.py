@@ -254,14 +254,14 @@ def _segments_and_joints(skeleton: Skeleton, extend_side_branches: bool):
 def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) unit axes and (n,) lengths of the segments; a zero-length segment points up
     and gets a length of ``tol.zero_length`` times its size."""
-    n = len(skeleton)
-    vec = skeleton.end - skeleton.start
-    length = norm(vec)
-    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (n, 3))
-    axis = np.where(length[:, None] > 0, vec / np.where(length > 0, length, 1)[:, None], up)
-    size = np.maximum(np.maximum(skeleton.r_start, skeleton.r_end), 1.0)
-    length = np.where(length > 0, length, tol.zero_length * size)
-    return axis, length
+    def block(start, end, r_start, r_end):          # row-wise (by_rows)
+        vec = end - start
+        length = norm(vec)
+        up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (len(vec), 3))
+        axis = np.where(length[:, None] > 0, vec / np.where(length > 0, length, 1)[:, None], up)
+        size = np.maximum(np.maximum(r_start, r_end), 1.0)
+        return axis, np.where(length > 0, length, tol.zero_length * size)
+    return by_rows(block, skeleton.start, skeleton.end, skeleton.r_start, skeleton.r_end)
 
 
 def continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
