@@ -22,6 +22,7 @@ from ...limits import MAX_IMAGE_SIDE, Limits
 from ...limits import limits as default_limits
 from ...tolerances import tol
 from ..skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls, section_points
+from ..vec import ROW_BLOCK
 
 __all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "frame_copies", "box_corners", "depth_range",
            "orbit_angles", "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
@@ -283,12 +284,14 @@ class FrameRows:
     def __init__(self, frusta: Frusta | None, points: np.ndarray):
         self.frusta, self.points, self.sampled, self.passes = frusta, points, 0, 0
         self.n = 0 if frusta is None else len(frusta.base)
-        (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta) if self.n else ((np.zeros((0, 3)), np.zeros(0)),) * 2
-        self.centres = np.concatenate([c_lo, c_hi])
-        radii = np.concatenate([r_lo, r_hi])
-        #: (2, 3) the box around the rows (:func:`frusta_bounds`, from the same balls)
-        self.box = (np.stack([(self.centres - radii[:, None]).min(axis=0), (self.centres + radii[:, None]).max(axis=0)])
-                    if self.n else np.zeros((2, 3)))
+        n = self.n
+        self.centres, radii = np.empty((2 * n, 3)), np.empty(2 * n)
+        for s in range(0, n, ROW_BLOCK):     # the balls a block of rows at a time, into the (2n,) arrays
+            e = min(s + ROW_BLOCK, n)
+            (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta.subset_view(s, e))
+            self.centres[s:e], self.centres[n + s:n + e], radii[s:e], radii[n + s:n + e] = c_lo, c_hi, r_lo, r_hi
+        #: (2, 3) the box around the rows (:func:`frusta_bounds`: the box of the same balls)
+        self.box = frusta_bounds(frusta) if n else np.zeros((2, 3))
         self.radii = radii * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * float(np.abs(self.box).max()))
         self._view, self._projected = None, None
 

@@ -308,6 +308,14 @@ class Frusta:
             object.__setattr__(self, name, value)
         return self
 
+    def subset_view(self, start: int, stop: int) -> Frusta:
+        """Rows ``start:stop`` as a Frusta of views (no checks, no copies, no report), for
+        row-wise work a block at a time; ``parent_row`` is not re-indexed (rows whose
+        parent lies outside keep its index), so only row-wise work may use it."""
+        pr = self.parent_row[start:stop]
+        return Frusta.from_rows({f: getattr(self, f)[start:stop] for f in ROW_FIELDS}, self.material_names, pr,
+                                self.open_lo[start:stop], self.open_hi[start:stop])
+
     def subset(self, rows) -> Frusta:
         """The given rows ((k,) int or (n,) bool) as a new Frusta (parent_row remapped; -1
         where the parent is dropped); no report."""
@@ -616,18 +624,10 @@ def _bounds(frusta: Frusta) -> np.ndarray:
         return np.zeros((2, 3))
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for s in range(0, n, ROW_BLOCK):       # a block of rows at a time: min and max are exact
-        for c, r in row_end_balls(_row_block(frusta, s, s + ROW_BLOCK)):
+        for c, r in row_end_balls(frusta.subset_view(s, s + ROW_BLOCK)):
             lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
             hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
     return np.stack([lo, hi])
-
-
-def _row_block(frusta: Frusta, start: int, stop: int) -> Frusta:
-    """Rows ``start:stop`` of ``frusta`` (views, no checks) for row-wise work a block at a
-    time; its ``parent_row`` is not re-indexed."""
-    rows = {f: getattr(frusta, f)[start:stop] for f in ROW_FIELDS}
-    pr = frusta.parent_row[start:stop]
-    return Frusta.from_rows(rows, frusta.material_names, pr, pr < 0, frusta.open_hi[start:stop])
 
 
 def section_points(frusta: Frusta, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
