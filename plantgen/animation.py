@@ -127,7 +127,8 @@ class AnimatedScene:
         self._moving_skeleton = self.skeleton.subset(self.moving_segments)
         self._rig = sway_rig(self._moving_skeleton, self.segment_instance[self.moving_segments],
                              self.motions)
-        self._static = self._skin(self.skeleton.subset(self.static_segments))
+        static = len(self.static_segments) == len(self.skeleton)     # all: the skeleton as it is
+        self._static = self._skin(self.skeleton if static else self.skeleton.subset(self.static_segments))
         # the per-frame path of the default skinning: topology worked out once
         self._plan = (SwaySkin.plan(self._moving_skeleton, self._rig)
                       if self.animated and self.skin is skin_skeleton else None)

@@ -338,3 +338,20 @@ def test_texture_slots_are_checked_where_frusta_are_made():
         with pytest.raises(ValueError, match="v_part"):
             dataclasses.replace(f, v_part=np.array(bad))
     assert dataclasses.replace(f, v_part=np.array([[MAX_V_SLOTS - 1, MAX_V_SLOTS]])).v_part[0, 0] == MAX_V_SLOTS - 1
+
+
+def test_the_paper_seam_figures_are_worked_out_when_read_and_bounds_are_kept():
+    """The report's 'before' seam figures (the paper's planes on the skeleton's radii) are
+    worked out from the skeleton when first read, and kept; they do not depend on how the
+    seams were then cut. A Frusta's box is worked out once and handed out as a copy."""
+    sk = random_tree(500, seed=9)
+    fitted, plain = skin_skeleton(sk), skin_skeleton(sk, seam_fit=False)
+    assert callable(fitted.report._paper_seams)              # not worked out by skinning
+    assert fitted.report.seam_mismatch_max_before == plain.report.seam_mismatch_max_before > 0
+    assert fitted.report.seam_mismatch_mean_before == plain.report.seam_mismatch_mean_before > 0
+    assert not callable(fitted.report._paper_seams)          # kept once read
+    box = frusta_bounds(fitted)
+    box[0] = 1e9                                             # the caller's copy
+    again = frusta_bounds(fitted)
+    assert again.tobytes() == frusta_bounds(dataclasses.replace(fitted)).tobytes()
+    assert (again[0] < 1e9).all()

@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 from plantgen.geometry.vec import (
     ancestor_count,
     any_perpendicular,
+    by_rows,
     cross,
     dot,
     norm,
@@ -83,3 +84,26 @@ def test_pointer_jumping_matches_a_walk_up_the_tree():
     labels = np.array([f"{i}," for i in range(len(parent))], dtype=object)
     joined = reduce_to_root(parent, labels, lambda own, up: own + up)
     assert joined.tolist() == ["".join(f"{j}," for j in p) for p in paths]
+
+
+def test_by_rows_gives_the_whole_call_bit_for_bit_a_block_at_a_time():
+    """by_rows evaluates a row-wise function a block at a time into results allocated
+    once: the same bytes as one call, for one result or several, ragged last block and
+    fewer rows than a block included."""
+    rng = np.random.default_rng(7)
+    a, b = rng.normal(size=(1000, 3)), rng.normal(size=(1000, 3))
+    calls = []
+
+    def planes(x, y):
+        calls.append(len(x))
+        return unit(cross(x, y)), dot(x, y), (x[:, 0] > 0)
+    whole = planes(a, b)
+    calls.clear()
+    blocked = by_rows(planes, a, b, block=64)
+    assert calls == [64] * 15 + [40]
+    for w, got in zip(whole, blocked, strict=True):
+        assert w.dtype == got.dtype and w.shape == got.shape and w.tobytes() == got.tobytes()
+    single = by_rows(lambda x: norm(x), a, block=300)
+    assert single.tobytes() == norm(a).tobytes()
+    assert by_rows(lambda x: norm(x), a[:5], block=300).tobytes() == norm(a[:5]).tobytes()
+    assert by_rows(lambda x: norm(x), a[:0]).shape == (0,)

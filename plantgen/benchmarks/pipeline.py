@@ -19,9 +19,11 @@ plant at a time and in a pool of processes: wall seconds, the median of
 :data:`GROW_REPEATS`), *frame* (the automatic camera: :func:`~plantgen.geometry.rays.camera.auto_camera`, or
 :func:`~plantgen.geometry.rays.camera.frame_copies` for a scene), *check* (finite rows and
 the export's budget), *upload/BVH* (the scan's BVH over the rows' boxes), *draw* (one
-64x48 ray-cast frame, with ``--gl``) and *write* (tessellate at m = 0 and write a .glb).
+64x48 ray-cast frame, with ``--gl``), *mesh* (tessellate at m = 0 and bake the relief's
+maps, as an export does by default) and *write* (the .glb writer, tangents included; the
+table's notes give its MB/s: the file's bytes over the stage's CPU seconds).
 grow runs read to interpret, render adds skin, frame, check and draw, export skin,
-frame, check and write, scan skin and upload/BVH.
+frame, check, mesh and write, scan skin and upload/BVH.
 
 Times are CPU seconds of this process (``time.process_time``: steadier than wall time on
 busy cores; a GL draw's driver threads count too); memory is the peak Python and numpy
@@ -50,6 +52,7 @@ import numpy as np
 
 from ..errors import PlantgenError
 from ..exporters import Plant, write_plants
+from ..exporters.textures import bake_textures
 from ..geometry.meshes.mesh import tessellate
 from ..geometry.rays.bvh import build_bvh
 from ..geometry.rays.camera import auto_camera, frame_copies
@@ -62,12 +65,12 @@ from ..pipeline.checks import check_finite_frusta
 from ..pipeline.growing import available_cores
 from .arguments import report
 
-__all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "main"]
+__all__ = ["STAGES", "SIZES", "synthetic_skeleton", "tree_grammar", "measure", "markdown", "writer_speed", "main"]
 
 #: The stages, in pipeline order; a distinct-seed scene's growth is also timed in wall
 #: seconds one plant at a time and in a pool over every core (``--jobs``).
 STAGES = ("read", "derive", "grow, 1 job", "grow, all cores", "interpret", "skin", "frame", "check", "upload/BVH",
-          "draw", "write")
+          "draw", "mesh", "write")
 #: How many times a distinct-seed scene is grown each way for the medians of its wall times.
 GROW_REPEATS = 3
 #: Sizes a run measures: segments (npz, grammar iterations) and copies (scenes), by run.
@@ -125,15 +128,19 @@ def tree_grammar(iterations: int) -> str:
 class Run:
     """One input at one size: each stage's (CPU seconds, peak bytes), or its refusal."""
 
-    def __init__(self, kind: str, size: int, label: str):
-        self.kind, self.size, self.label = kind, size, label
+    def __init__(self, kind: str, size: int, label: str, repeats: int = 1):
+        self.kind, self.size, self.label, self.repeats = kind, size, label, repeats
         self.stages: dict[str, tuple[float, int]] = {}
+        self.samples: dict[str, list[tuple[float, int]]] = {}
         self.refused: tuple[str, float, str] | None = None
         self.skipped: dict[str, str] = {}      # stage: the refusal that left it out
         self.walls: dict[str, list[float]] = {}   # stage: wall seconds of each repeat (no memory traced)
+        self.written = 0                       # bytes of the .glb the write stage wrote
 
     @contextmanager
     def stage(self, name: str):
+        """Time one run of stage ``name``: ``stages[name]`` is the median CPU time of its
+        runs so far and their largest peak."""
         held = tracemalloc.get_traced_memory()[0]
         tracemalloc.reset_peak()
         t0 = time.process_time()
@@ -144,32 +151,62 @@ class Run:
             raise
         finally:
             peak = tracemalloc.get_traced_memory()[1] - held
-            self.stages[name] = (time.process_time() - t0, max(peak, 0))
+            samples = self.samples.setdefault(name, [])
+            samples.append((time.process_time() - t0, max(peak, 0)))
+            self.stages[name] = (statistics.median(t for t, _ in samples), max(p for _, p in samples))
+
+    def timed(self, name: str, work, repeats: int | None = None):
+        """``work()`` run ``repeats`` times (default :attr:`repeats`), each a sample of
+        stage ``name``; the last result."""
+        for _ in range(self.repeats if repeats is None else repeats):
+            with self.stage(name):
+                out = work()
+        return out
 
 
 def _plant_stages(run: Run, skeleton: Skeleton, grown, gl: bool) -> None:
     """The stages after growing of one plant: skin, frame, check, upload/BVH, draw, write."""
-    with run.stage("skin"):
-        frusta = skin_skeleton(skeleton)
-    with run.stage("frame"):
-        camera = auto_camera(frusta, 64, 48)
-    with run.stage("check"):
+    frusta = run.timed("skin", lambda: skin_skeleton(skeleton))
+    camera = run.timed("frame", lambda: auto_camera(frusta, 64, 48))
+
+    def check():
         check_finite_frusta(frusta, run.label)
         try:
             check_export_size([frusta], [None], len(skeleton), 0, "glb", None, run.label, "bench.glb")
         except PlantgenError as exc:         # the write is refused: the check's time is the refusal's
             run.skipped["write"] = str(exc).splitlines()[0]
-    with run.stage("upload/BVH"):
+    run.timed("check", check)
+
+    def bvh():
         (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta)
         build_bvh(np.minimum(c_lo - r_lo[:, None], c_hi - r_hi[:, None]),
                   np.maximum(c_lo + r_lo[:, None], c_hi + r_hi[:, None]))
+    run.timed("upload/BVH", bvh)
     if gl:
         _draw(run, grown, frusta, camera)
     if "write" in run.skipped:
+        run.skipped["mesh"] = run.skipped["write"]
         return
-    with run.stage("write"), tempfile.TemporaryDirectory() as tmp:
-        mesh = tessellate(frusta, 0)
-        write_plants([Plant(run.label, skeleton, mesh, None)], Path(tmp) / "bench.glb")
+    _write(run, [(run.label, skeleton, frusta, None)])
+
+
+def _write(run: Run, plants: list) -> None:
+    """The export's last stages for ``plants`` [(name, skeleton, frusta, matrices)]: *mesh*
+    (tessellate at m = 0 and bake the relief's maps, as ``plantgen export`` does by
+    default) and *write* (the .glb writer: material split, up turn, tangents, packing, JSON
+    and the file); ``run.written`` gets the file's bytes."""
+    def mesh():
+        meshes = [tessellate(frusta, 0) for _, _, frusta, _ in plants]
+        return meshes, bake_textures(meshes)
+    meshes, textures = run.timed("mesh", mesh)
+
+    def write():
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "bench.glb"
+            write_plants([Plant(name, skeleton, mesh, matrices) for (name, skeleton, _, matrices), mesh
+                          in zip(plants, meshes, strict=True)], path, textures=textures)
+            run.written = path.stat().st_size
+    run.timed("write", write)
 
 
 def _draw(run: Run, grown, frusta, camera) -> None:
@@ -178,67 +215,63 @@ def _draw(run: Run, grown, frusta, camera) -> None:
     from ..pipeline import frame_arguments, stage_model
     view = frame_arguments(frusta, stage_model(grown, frusta, 64, 48, camera=camera), None)
     raycaster = Raycaster()
-    with run.stage("draw"):
-        raycaster.render(frusta, **view)
+    run.timed("draw", lambda: raycaster.render(frusta, **view))
 
 
-def _npz_run(n: int, tmp: Path, gl: bool) -> Run:
-    run = Run("npz", n, f"npz {n:,}")
+def _npz_run(n: int, tmp: Path, gl: bool, repeats: int = 1) -> Run:
+    run = Run("npz", n, f"npz {n:,}", repeats)
     path = tmp / f"plant{n}.npz"
     synthetic_skeleton(n).save(path)
-    with run.stage("read"):
-        grown = grow_file(path)
+    grown = run.timed("read", lambda: grow_file(path))
     _plant_stages(run, grown.skeleton, grown, gl)
     return run
 
 
-def _grammar_run(iterations: int, tmp: Path, gl: bool) -> Run:
+def _grammar_run(iterations: int, tmp: Path, gl: bool, repeats: int = 1) -> Run:
     path = tmp / f"tree{iterations}.yaml"
     path.write_text(tree_grammar(iterations))
-    run = Run("grammar", (3 ** iterations - 1) // 2, f"grammar {iterations} steps")
-    held = tracemalloc.get_traced_memory()[0]
-    tracemalloc.reset_peak()
-    t0 = time.process_time()
-    try:
-        grown = grow_file(path, limits=GRAMMAR_LIMITS)
-    except PlantgenError as exc:
-        run.refused = ("derive", time.process_time() - t0, str(exc).splitlines()[0])
-        run.stages["derive"] = (time.process_time() - t0, 0)
-        return run
-    peak = max(tracemalloc.get_traced_memory()[1] - held, 0)
-    spent = time.process_time() - t0
-    timed = {"read": grown.timings.get("parse", 0.0), "derive": grown.timings.get("derive", 0.0),
-             "interpret": grown.timings.get("interpret", 0.0)}
-    scale = spent / max(sum(timed.values()), 1e-9)       # wall timings to this process's CPU
-    for name, seconds in timed.items():
-        run.stages[name] = (seconds * scale, peak)          # one peak for the three: grown together
+    run = Run("grammar", (3 ** iterations - 1) // 2, f"grammar {iterations} steps", repeats)
+    for _ in range(repeats):          # each grow a sample of read, derive and interpret
+        held = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        t0 = time.process_time()
+        try:
+            grown = grow_file(path, limits=GRAMMAR_LIMITS)
+        except PlantgenError as exc:
+            run.refused = ("derive", time.process_time() - t0, str(exc).splitlines()[0])
+            run.stages["derive"] = (time.process_time() - t0, 0)
+            return run
+        peak = max(tracemalloc.get_traced_memory()[1] - held, 0)
+        spent = time.process_time() - t0
+        timed = {"read": grown.timings.get("parse", 0.0), "derive": grown.timings.get("derive", 0.0),
+                 "interpret": grown.timings.get("interpret", 0.0)}
+        scale = spent / max(sum(timed.values()), 1e-9)       # wall timings to this process's CPU
+        for name, seconds in timed.items():         # one peak for the three: grown together
+            samples = run.samples.setdefault(name, [])
+            samples.append((seconds * scale, peak))
+            run.stages[name] = (statistics.median(t for t, _ in samples), max(p for _, p in samples))
     run.size = len(grown.skeleton)
     _plant_stages(run, grown.skeleton, grown, gl)
     return run
 
 
-def _scene_run(copies: int, distinct: bool, tmp: Path) -> Run:
+def _scene_run(copies: int, distinct: bool, tmp: Path, repeats: int = 1) -> Run:
     side = max(int(round(math.sqrt(copies))), 1)
-    run = Run("scene N seeds" if distinct else "scene 1 seed", side * side, "")
+    run = Run("scene N seeds" if distinct else "scene 1 seed", side * side, "", repeats)
     run.label = f"{run.kind} {run.size:,}"
     path = tmp / f"grid{copies}{distinct}.yaml"
     seeds = "" if distinct else ", seeds: 1"
     path.write_text(f"name: grid\ninstances:\n  - {{grammar: saguaro, seed: 1, "
                     f"grid: {{count: [{side}, {side}], spacing: [4, 4], jitter: 0.3{seeds}}}}}\n")
     try:
-        with run.stage("derive"):
-            grown = grow_file(path, jobs=1)          # this process's CPU: every plant grown in it
+        grown = run.timed("derive", lambda: grow_file(path, jobs=1), repeats=1)   # once, in this process
         plants = grown.scene.plants()
-        with run.stage("skin"):
-            skinned = [(skin_skeleton(p.skeleton), p.matrices, None) for p in plants]
-        with run.stage("frame"):
-            frame_copies(skinned, 64, 48)
-        with run.stage("check"):
-            check_export_size([f for f, _, _ in skinned], [None] * len(skinned),
-                              sum(len(p.skeleton) for p in plants), 0, "glb", None, run.label, "bench.glb")
-        with run.stage("write"), tempfile.TemporaryDirectory() as out:
-            write_plants([Plant(p.name, p.skeleton, tessellate(f, 0), m) for p, (f, m, _) in
-                          zip(plants, skinned, strict=True)], Path(out) / "bench.glb")
+        skinned = run.timed("skin", lambda: [(skin_skeleton(p.skeleton), p.matrices, None) for p in plants])
+        run.timed("frame", lambda: frame_copies(skinned, 64, 48))
+        run.timed("check", lambda: check_export_size([f for f, _, _ in skinned], [None] * len(skinned),
+                                                     sum(len(p.skeleton) for p in plants), 0, "glb", None,
+                                                     run.label, "bench.glb"))
+        _write(run, [(p.name, p.skeleton, f, m) for p, (f, m, _) in zip(plants, skinned, strict=True)])
     except PlantgenError:
         return run
     if distinct:
@@ -266,14 +299,16 @@ def _grow_walls(run: Run, path: Path) -> None:
         run.stages[stage] = (statistics.median(run.walls[stage]), -1)
 
 
-def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene")) -> list[Run]:
-    """Every run of ``sizes`` (one of :data:`SIZES`), smallest first."""
+def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene"), repeats: int = 1) -> list[Run]:
+    """Every run of ``sizes`` (one of :data:`SIZES`), smallest first; each stage timed
+    ``repeats`` times (the median; a scene's growth once)."""
     tracemalloc.start()
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            runs = [_npz_run(n, Path(tmp), gl) for n in (sizes["npz"] if "npz" in kinds else ())]
-            runs += [_grammar_run(its, Path(tmp), gl) for its in (sizes["grammar"] if "grammar" in kinds else ())]
-            runs += [_scene_run(copies, distinct, Path(tmp)) for distinct in (False, True)
+            runs = [_npz_run(n, Path(tmp), gl, repeats) for n in (sizes["npz"] if "npz" in kinds else ())]
+            runs += [_grammar_run(its, Path(tmp), gl, repeats)
+                     for its in (sizes["grammar"] if "grammar" in kinds else ())]
+            runs += [_scene_run(copies, distinct, Path(tmp), repeats) for distinct in (False, True)
                      for copies in (sizes["scene"] if "scene" in kinds else ())]
     finally:
         tracemalloc.stop()
@@ -330,11 +365,23 @@ def markdown(runs: list[Run], title: str) -> str:
                   f"{r.stages['grow, 1 job'][0] / max(r.stages['grow, all cores'][0], 1e-9):.2f} times as fast; "
                   f"CPU of every process {statistics.median(r.walls['grow, 1 job cpu']):.2f} s and "
                   f"{statistics.median(r.walls['grow, all cores cpu']):.2f} s" for r in pools]
+    writes = [f"- {r.label}: {r.written / 1e6:,.1f} MB in {r.stages['write'][0]:.3f} s, "
+              f"{writer_speed(r):,.0f} MB/s" for r in runs if r.written and r.stages["write"][0] > 0]
+    if writes:
+        lines += ["", "The glb writer (the file's bytes over the write stage's CPU seconds; 1 MB = 10^6 bytes):",
+                  "", *writes]
     refusals = [f"- {r.label}: {r.refused[2]}" for r in runs if r.refused is not None]
-    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items()]
+    refusals += [f"- {r.label}, {stage}: {why}" for r in runs for stage, why in r.skipped.items() if stage != "mesh"]
     if refusals:
         lines += ["", "Refused:", "", *refusals]
     return "\n".join(lines) + "\n"
+
+
+def writer_speed(run: Run) -> float:
+    """The glb writer's MB/s in ``run``: the file's bytes (10^6 a MB) over the CPU seconds
+    of its write stage (the material split, up turn, tangents, packing, JSON and file,
+    after the mesh and its maps are built)."""
+    return run.written / 1e6 / run.stages["write"][0]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -345,11 +392,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gl", action="store_true", help="time a 64x48 ray-cast draw (headless GL)")
     parser.add_argument("--kinds", default="npz,grammar,scene", help="comma-separated inputs to run")
     parser.add_argument("--out", type=Path, help="also write the Markdown table here")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="times each stage runs, the median quoted (default: 3 with --full, else 1)")
     args = parser.parse_args(argv)
     run = "quick" if args.quick else "full" if args.full else "default"
-    runs = measure(SIZES[run], args.gl, tuple(args.kinds.split(",")))
-    title = (f"Stage scaling ({run} run; {platform.machine()}, {os.cpu_count()} cores; CPU seconds and peak "
-             f"allocations a stage)")
+    repeats = max(1, args.repeats if args.repeats is not None else 3 if args.full else 1)
+    runs = measure(SIZES[run], args.gl, tuple(args.kinds.split(",")), repeats)
+    title = (f"Stage scaling ({run} run; {platform.machine()}, {os.cpu_count()} cores; CPU seconds, the median of "
+             f"{repeats} runs, and peak allocations a stage)")
     return report(markdown(runs, title), args.out)
 
 

@@ -104,9 +104,11 @@ def write_plants(plants: list[Plant], path: str | Path, *, up: str | None = None
     fmt = writable_format(path, "mesh")
     if not any(p.mesh is not None and len(p.mesh.faces) for p in plants):
         raise ExportError(f"{path}: nothing to export (the model has no segments)")
+    def scaled(values):     # times the unit (a copy of every vertex) only where the unit scales
+        return None if values is None else values * unit if unit != 1.0 else values
     for p in plants:        # no writer writes NaN or infinity
-        check_finite(path, "a vertex", None if p.mesh is None else p.mesh.vertices * unit, p.matrices,
-                     None if p.leaves is None else p.leaves.vertices * unit, error=ExportError)
+        check_finite(path, "a vertex", scaled(None if p.mesh is None else p.mesh.vertices), p.matrices,
+                     scaled(None if p.leaves is None else p.leaves.vertices), error=ExportError)
     writer: MeshWriter = fmt.load_writer()
     plants = [merged_materials(p) for p in plants]      # one material of each name
     return writer(plants, path, up=up or fmt.up, colours=colours, instancing=instancing, unit=unit, name=name,

@@ -20,6 +20,7 @@ from ..geometry.skeletons.frames import up_rotation
 from ..geometry.skeletons.materials import leaf_colours, leaf_tones, material_colour
 from ..geometry.skeletons.skeleton import Skeleton
 from ..geometry.stage import Ground, Light
+from ..geometry.vec import by_rows
 from .formats import ExportError, export_format
 from .sway import PlantSway, Timeline
 
@@ -311,10 +312,13 @@ def material_colours(names, colours: Colours = None) -> list[tuple[float, float,
 def turned_mesh(mesh: TessellatedMesh, up: str) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (float64) and unit normals (float32) of ``mesh`` in the ``up`` frame."""
     rot = up_rotation(up)
-    # einsum, not ``@``: a threaded BLAS matrix product of (n, 3) by (3, 3) crawls on busy cores
-    normals = np.einsum("ij,kj->ik", mesh.normals.astype(np.float64), rot)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    return np.einsum("ij,kj->ik", mesh.vertices, rot), normals.astype(np.float32)
+
+    def turned_normals(normals):         # row-wise: a block of rows at a time (by_rows)
+        # einsum, not ``@``: a threaded BLAS matrix product of (n, 3) by (3, 3) crawls on busy cores
+        normals = np.einsum("ij,kj->ik", normals.astype(np.float64), rot)
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+        return normals.astype(np.float32)
+    return np.einsum("ij,kj->ik", mesh.vertices, rot), by_rows(turned_normals, mesh.normals)
 
 
 def vertex_labels(mesh: TessellatedMesh, labels: Mapping[str, np.ndarray] | None) -> dict:
@@ -355,9 +359,12 @@ def material_parts(mesh: TessellatedMesh, up: str = "y", labels: Mapping[str, np
 def _used_vertices(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """(keep, inverse): the vertices ``faces`` use, ascending, and the faces renumbered
     into them (``np.unique(faces, return_inverse=True)``, by a mask of ``count``
-    vertices: linear, not a sort)."""
+    vertices: linear, not a sort); where they use every vertex, ``keep`` is ``slice(None)``
+    and ``inverse`` the faces (int64), so nothing is gathered or renumbered."""
     used = np.zeros(count, dtype=bool)
     used[faces.ravel()] = True
+    if used.all():
+        return slice(None), faces.astype(np.int64, copy=False).ravel()
     keep = np.flatnonzero(used)
     rank = np.cumsum(used, dtype=np.int64) - 1
     return keep, rank[faces.ravel()]
@@ -416,9 +423,10 @@ def leaf_parts(polygons: Polygons | None, up: str = "y", joints: np.ndarray | No
         keep, inverse = _used_vertices(faces, len(vertices))
         skin = {}
         if joints is not None:
-            skin["joints"] = np.zeros((len(keep), 4), np.int64)
+            kept = len(vertices) if isinstance(keep, slice) else len(keep)
+            skin["joints"] = np.zeros((kept, 4), np.int64)
             skin["joints"][:, 0] = joints[keep]
-            skin["weights"] = np.zeros((len(keep), 4))
+            skin["weights"] = np.zeros((kept, 4))
             skin["weights"][:, 0] = 1.0
         parts.append(Part(int(mat), vertices[keep], normals[keep], uv[keep], inverse.reshape(faces.shape),
                           leaf=True, colours=None if shade is None else shade[keep], **skin))

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..skeletons import relief
 from ..skeletons.materials import material_palette
-from ..vec import any_perpendicular
+from ..vec import any_perpendicular, by_rows, cross
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
            "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "mesh_uv_scales",
@@ -165,12 +165,13 @@ def face_derivatives(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray):
     """Per face (F,): ∂P/∂u and ∂P/∂v (F, 3) from its corners' positions (V, 3) and
     texture coordinates (V, 2), its area (F,), and ``ok`` (F,) bool where the texture
     coordinates span the face (not a cap, whose corners share one v)."""
-    p = np.asarray(vertices, dtype=np.float64)[faces]
-    t = np.asarray(uv, dtype=np.float64)[faces]
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
+    p0, p1, p2 = (vertices.take(faces[:, k], axis=0) for k in range(3))    # corner by corner:
+    t0, t1, t2 = (uv.take(faces[:, k], axis=0) for k in range(3))          # contiguous rows
+    e1, e2 = p1 - p0, p2 - p0
+    d1, d2 = t1 - t0, t2 - t0
     det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    area = 0.5 * np.linalg.norm(cross(e1, e2), axis=1)
     ok = np.abs(det) > 1e-12
     safe = np.where(ok, det, 1.0)[:, None]
     dp_du = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / safe
@@ -182,12 +183,15 @@ def mesh_aspects(mesh) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per material index of a :class:`~plantgen.geometry.meshes.mesh.TessellatedMesh`: the
     aspect ρ/L of each lateral face (ρ = |∂P/∂u|/2π, L = |∂P/∂v|: the radius over the
     texture period there), the face's area and its radius ρ, each (k,) float64."""
-    dp_du, dp_dv, area, ok = face_derivatives(mesh.vertices, mesh.uv, mesh.faces)
-    lu, lv = np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)
-    ok &= (lv > 0) & (area > 0)
-    aspect = lu / (2.0 * np.pi * np.where(ok, lv, 1.0))
+    vertices, uv = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.uv, dtype=np.float64)
+
+    def per_face(faces):                 # row-wise: a block of faces at a time (by_rows)
+        dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, faces)
+        lu, lv = np.linalg.norm(dp_du, axis=1), np.linalg.norm(dp_dv, axis=1)
+        ok &= (lv > 0) & (area > 0)
+        return lu / (2.0 * np.pi * np.where(ok, lv, 1.0)), area, lu / (2.0 * np.pi), ok
+    aspect, area, radius, ok = by_rows(per_face, np.asarray(mesh.faces))
     material = mesh.face_material
-    radius = lu / (2.0 * np.pi)
     return {int(m): (aspect[ok & (material == m)], area[ok & (material == m)], radius[ok & (material == m)])
             for m in np.unique(material[ok])}
 
@@ -269,14 +273,26 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     """(V, 4) float32 glTF tangents: xyz the unit direction of increasing u (the faces'
     ∂P/∂u summed by area, made ⟂ the vertex normal), w = ±1 so that cross(N, T)·w points
     along -v (glTF's "up in the image"). Vertices no textured face uses (caps) get any unit
-    vector ⟂ their normal and w = 1."""
-    dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, faces)
-    n_vertices = len(vertices)
-    weight = np.where(ok, area, 0.0)[:, None]
-    tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
-    tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
-    t_sum = _vertex_sums(faces, tu * weight, n_vertices)
-    b_sum = _vertex_sums(faces, tv * weight, n_vertices)
+    vector ⟂ their normal and w = 1. The per-face and per-vertex work runs a block of
+    rows at a time (:func:`~plantgen.geometry.vec.by_rows`: the same numbers, without
+    full-size temporaries of every face's corners)."""
+    vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
+
+    def weighted(face_rows):
+        dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, face_rows)
+        weight = np.where(ok, area, 0.0)[:, None]
+        tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
+        tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
+        tu, tv = tu * weight, tv * weight
+        return tuple(np.ascontiguousarray(d[:, k]) for d in (tu, tv) for k in range(3))
+    sums = _vertex_sums(faces, by_rows(weighted, np.asarray(faces)), len(vertices))
+    return by_rows(_vertex_tangents, sums[:, :3], sums[:, 3:], normals)
+
+
+def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
+    """(m, 4) float32 tangents of vertices whose faces' area-weighted ∂P/∂u and ∂P/∂v
+    directions sum to ``t_sum`` and ``b_sum`` (m, 3), with ``normals`` (m, 3) (see
+    :func:`mesh_tangents`). Row-wise."""
     n = np.asarray(normals, dtype=np.float64)
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     t = t_sum - np.sum(t_sum * n, axis=1, keepdims=True) * n
@@ -290,14 +306,22 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
 
 
-def _vertex_sums(faces: np.ndarray, per_face: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(V, k) sums over each vertex's faces of ``per_face`` (F, k): a bincount over the
-    corners in order (every face's first corner, then second, then third), so each sum
-    adds up in the order ``np.add.at`` corner by corner would, many times faster."""
+def _vertex_sums(faces: np.ndarray, per_face, n_vertices: int) -> np.ndarray:
+    """(V, k) sums over each vertex's faces of ``per_face`` (F, k), or of its k columns
+    given as (F,) arrays: a bincount over the corners in order (every face's first
+    corner, then second, then third), so each sum adds up in the order ``np.add.at``
+    corner by corner would, many times faster."""
     corners = np.asarray(faces).T.ravel()
-    values = np.asarray(per_face, dtype=np.float64)
-    return np.stack([np.bincount(corners, weights=np.tile(values[:, k], 3), minlength=n_vertices)
-                     for k in range(values.shape[1])], axis=1).reshape(n_vertices, values.shape[1])
+    if isinstance(per_face, np.ndarray):
+        per_face = [per_face[:, k] for k in range(per_face.shape[1])]
+    count = len(faces)
+    out = np.empty((n_vertices, len(per_face)))
+    weights = np.empty(3 * count)          # a column three times over (np.tile's), one buffer for all
+    for k, column in enumerate(per_face):
+        for corner in range(3):
+            weights[corner * count:(corner + 1) * count] = column
+        out[:, k] = np.bincount(corners, weights=weights, minlength=n_vertices)
+    return out
 
 
 def mesh_uv_scales(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ from ...limits import MAX_IMAGE_SIDE, Limits
 from ...limits import limits as default_limits
 from ...tolerances import tol
 from ..skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls, section_points
+from ..vec import ROW_BLOCK, by_rows
 
 __all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "frame_copies", "box_corners", "depth_range",
            "orbit_angles", "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
@@ -283,21 +284,26 @@ class FrameRows:
     def __init__(self, frusta: Frusta | None, points: np.ndarray):
         self.frusta, self.points, self.sampled, self.passes = frusta, points, 0, 0
         self.n = 0 if frusta is None else len(frusta.base)
-        (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta) if self.n else ((np.zeros((0, 3)), np.zeros(0)),) * 2
-        self.centres = np.concatenate([c_lo, c_hi])
-        radii = np.concatenate([r_lo, r_hi])
-        #: (2, 3) the box around the rows (:func:`frusta_bounds`, from the same balls)
-        self.box = (np.stack([(self.centres - radii[:, None]).min(axis=0), (self.centres + radii[:, None]).max(axis=0)])
-                    if self.n else np.zeros((2, 3)))
+        n = self.n
+        self.centres, radii = np.empty((2 * n, 3)), np.empty(2 * n)
+        for s in range(0, n, ROW_BLOCK):     # the balls a block of rows at a time, into the (2n,) arrays
+            e = min(s + ROW_BLOCK, n)
+            (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta.subset_view(s, e))
+            self.centres[s:e], self.centres[n + s:n + e], radii[s:e], radii[n + s:n + e] = c_lo, c_hi, r_lo, r_hi
+        #: (2, 3) the box around the rows (:func:`frusta_bounds`: the box of the same balls)
+        self.box = frusta_bounds(frusta) if n else np.zeros((2, 3))
         self.radii = radii * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * float(np.abs(self.box).max()))
         self._view, self._projected = None, None
 
-    def projected(self, view, target) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(a, b, z) (2n,) each: the balls' centres less ``target`` along the ``view``'s
-        right, up and forward axes (the centres projected once a view; bounds only)."""
+    def bounds(self, view, target, bound) -> tuple[np.ndarray, ...]:
+        """``bound(a, b, z, radius)``, elementwise, over the balls: (a, b, z) their centres
+        less ``target`` along the ``view``'s right, up and forward axes (the centres
+        projected once a view), evaluated a block of balls at a time (:func:`by_rows`)."""
         if self._view is not view:
             self._view, self._projected = view, tuple(self.centres @ axis for axis in view)
-        return tuple(p - float(np.dot(target, axis)) for p, axis in zip(self._projected, view, strict=True))
+        shift = [float(np.dot(target, axis)) for axis in view]
+        return by_rows(lambda a, b, z, r: bound(a - shift[0], b - shift[1], z - shift[2], r),
+                       *self._projected, self.radii)
 
     def balls(self, rows: np.ndarray):
         """(centres (m, 3), radii (m,)) of the section samples of ``rows`` (row indices),
@@ -336,7 +342,7 @@ class FrameRows:
     def distance(self, target, view, tan_x, tan_y) -> float:
         """:func:`_framing_distance` over every row's samples and the points."""
         right, up, fwd = view
-        bound = _framing_need(*self.projected(view, target), self.radii, tan_x, tan_y)
+        bound = self.bounds(view, target, lambda a, b, z, r: _framing_need(a, b, z, r, tan_x, tan_y))
 
         def exact(rows):
             return [max(_framing_distance(rel @ right, rel @ up, rel @ fwd, r, tan_x, tan_y)
@@ -347,12 +353,14 @@ class FrameRows:
         """(x_lo, x_hi, y_lo, y_hi): the tangents of the samples' and points' extent in the
         view from ``dist`` before ``target``."""
         right, up, fwd = view
-        (a, b, z), r = self.projected(view, target), self.radii
-        near, far = dist + z - r, dist + z + r
-        with np.errstate(divide="ignore", invalid="ignore"):
-            def reach(num):   # an upper bound of num'/depth for any num' <= num, depth in [near, far]
-                return np.where(near > 0, np.where(num > 0, num / near, num / far), np.inf)
-            bounds = [reach(r - a), reach(a + r), reach(r - b), reach(b + r)]
+
+        def reaches(a, b, z, r):
+            near, far = dist + z - r, dist + z + r
+            with np.errstate(divide="ignore", invalid="ignore"):
+                def reach(num):   # an upper bound of num'/depth for any num' <= num, depth in [near, far]
+                    return np.where(near > 0, np.where(num > 0, num / near, num / far), np.inf)
+                return reach(r - a), reach(a + r), reach(r - b), reach(b + r)
+        bounds = list(self.bounds(view, target, reaches))
 
         def exact(rows):
             x_lo = y_lo = np.inf

@@ -35,6 +35,7 @@ from ...errors import PlantgenError
 from ...files import open_input, write_atomically
 from ...limits import LimitError, Limits, hint
 from ...limits import limits as default_limits
+from ..vec import ROW_BLOCK, by_rows
 
 #: The most material names a skeleton file (.npz, .swc) may hold: a grammar has at most
 #: 16, a scene's merged skeleton the distinct ones of its plants.
@@ -107,9 +108,13 @@ class Skeleton:
         :func:`plantgen.metrics.geometry_bounds`)."""
         if len(self) == 0:
             return np.zeros((2, 3))
-        pts = np.concatenate([self.start, self.end])
-        r = np.concatenate([self.r_start, self.r_end])[:, None]
-        return np.stack([(pts - r).min(axis=0), (pts + r).max(axis=0)])
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for s in range(0, len(self), ROW_BLOCK):      # a block at a time: min and max are exact
+            for pts, r in ((self.start[s:s + ROW_BLOCK], self.r_start[s:s + ROW_BLOCK, None]),
+                           (self.end[s:s + ROW_BLOCK], self.r_end[s:s + ROW_BLOCK, None])):
+                lo = np.minimum(lo, (pts - r).min(axis=0))
+                hi = np.maximum(hi, (pts + r).max(axis=0))
+        return np.stack([lo, hi])
 
     @property
     def height(self) -> float:
@@ -129,10 +134,13 @@ class Skeleton:
         n = len(self)
         for name in ("start", "end", "r_start", "r_end"):
             values = getattr(self, name)
-            if not np.all(np.isfinite(values)):
+            # NaN propagates through min and max, inf reaches them: finite extremes mean
+            # finite values, found without a full-size temporary
+            top = max(float(values.max()), -float(values.min())) if n else 0.0
+            if not np.isfinite(top):
                 bad = int(np.flatnonzero(~np.isfinite(values).reshape(n, -1).all(axis=1))[0])
                 raise SkeletonError(f"{name} holds NaN or inf (segment {bad})")
-            if n and float(np.abs(values).max()) > tolerances.tol.max_coordinate:
+            if top > tolerances.tol.max_coordinate:
                 raise SkeletonError(f"{name} holds values beyond {tolerances.tol.max_coordinate:g}")
         if np.any(self.r_start < 0) or np.any(self.r_end < 0):
             raise SkeletonError("negative radius")
@@ -143,9 +151,10 @@ class Skeleton:
         if np.any(self.continues & ~has_p):
             raise SkeletonError("a root segment cannot continue a parent")
         scale = max(1.0, float(np.abs(self.bounds).max())) if n else 1.0
-        gap = np.linalg.norm(self.start[has_p] - self.end[self.parent[has_p]], axis=1)
+        child = np.flatnonzero(has_p)
+        gap = by_rows(lambda rows: np.linalg.norm(self.start[rows] - self.end[self.parent[rows]], axis=1), child)
         if gap.size and gap.max() > tol * scale:
-            bad = int(idx[has_p][np.argmax(gap)])
+            bad = int(child[np.argmax(gap)])
             raise SkeletonError(f"segment {bad} does not start where its parent ends (gap {gap.max():.3g})")
         if n and (self.material.min() < 0 or self.material.max() >= len(self.material_names)):
             raise SkeletonError("material index outside material_names")

@@ -17,7 +17,8 @@
 4. sharp joints (:func:`_sharp_joints`) and their knuckle fans (:func:`_row_layout`,
    :func:`_fill_knuckle_fans`);
 5. texture frames: reference directions carried along each chain
-   (:func:`_reference_directions`) and u offsets (:func:`_u_offsets`, §2.3).
+   (:func:`~plantgen.geometry.skeletons.texture_frames.reference_directions`) and u
+   offsets (:func:`~plantgen.geometry.skeletons.texture_frames.u_offsets`, §2.3).
 
 With ``smooth_bends=ANGLE``, :func:`skin_skeleton` first refines the skeleton
 (:func:`plantgen.geometry.skeletons.smooth.smooth_bends`: joints bent past ANGLE become arcs of short
@@ -51,13 +52,12 @@ import numpy as np
 from ...tolerances import tol
 from ..vec import (
     any_perpendicular,
+    by_rows,
     cross,
     dot,
     norm,
     plane_through,
-    reduce_to_root,
     rotate,
-    tree_roots,
     unit,
 )
 from . import relief
@@ -65,6 +65,7 @@ from .frusta import Frusta, SkinReport, cone_slope, minor_semi_axis, plane_heigh
 from .skeleton import Skeleton
 from .smooth import DEFAULT_STEP_DEG
 from .smooth import smooth_bends as smooth_bends_of
+from .texture_frames import reference_directions, u_offsets
 
 __all__ = ["skin_skeleton", "continuing_children", "lead_forks", "material_shell", "crossing_rows_sampled",
            "seam_radii", "sphere_base_radius", "FORK_LEAD_MAX_BEND_DEG"]
@@ -144,17 +145,12 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     """
     n = len(skeleton)
     report = SkinReport(n_segments=n)
-    axis, length = _segment_axes(skeleton)
-    seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
-                    skeleton.r_end.copy())
-    child, side = continuing_children(skeleton)
+    seg, joints, side = _segments_and_joints(skeleton, extend_side_branches)
+    child = joints.child
     report.joints, report.side_branches = len(child), len(side)
-    if extend_side_branches and side.size:
-        _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
+    report.measure_paper_seams(lambda: _paper_seams(skeleton, extend_side_branches))
     lo = plane_through(seg.axis, seg.base)
     hi = plane_through(seg.axis, skeleton.end)
-    parent = skeleton.parent[child]
-    joints = _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child])
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
     if child.size:
         sharp, bend, medial = _joint_cuts(seg, joints, skeleton, lo, hi, seam_fit, max_bend_deg, report)
@@ -168,16 +164,17 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
                            row_of_seg, fan_count)
 
     n_rows = len(rows.length)
-    ref_dir = _reference_directions(rows.axis, rows.parent_row)
+    ref_dir = reference_directions(rows.axis, rows.parent_row)
     row_twist = np.full(n_rows, float(twist))
-    row_shell = np.zeros(n_rows)
     # the shell bounds a relief as deep as the material's fraction of the radius at every
     # height (relief_scale); a side branch's own radius, not the one moved into its parent
     thick_end = np.maximum(seg.r_start, seg.r_end)
     thick_end[side] = np.maximum(skeleton.r_start[side], skeleton.r_end[side])
-    row_shell[:] = material_shell(skeleton, shell, thick_end)[rows.segment] if n else 0.0
+    row_shell = material_shell(skeleton, shell, thick_end) if n else np.zeros(0)
+    if n_rows != n:                      # fan rows: each row's segment's
+        row_shell = row_shell[rows.segment]
     row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
-    u_offset = _u_offsets(rows, ref_dir, row_twist)
+    u_offset = u_offsets(rows, ref_dir, row_twist)
     return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
                   plane_lo=rows.plane_lo, plane_hi=rows.plane_hi, ref_dir=ref_dir,
                   u_offset=u_offset, twist=row_twist, material=row_material, shell=row_shell,
@@ -240,17 +237,31 @@ class _Rows:
 
 
 # ============================================================================ segments
+def _segments_and_joints(skeleton: Skeleton, extend_side_branches: bool):
+    """The segments as skinning starts from them (:class:`_Segments`: side branches moved
+    into their parents when ``extend_side_branches``), the continuing joints
+    (:class:`_Joints`) and (s,) the side branches."""
+    axis, length = _segment_axes(skeleton)
+    seg = _Segments(skeleton.start.copy(), axis, length, skeleton.r_start.copy(),
+                    skeleton.r_end.copy())
+    child, side = continuing_children(skeleton)
+    if extend_side_branches and side.size:
+        _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
+    parent = skeleton.parent[child]
+    return seg, _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child]), side
+
+
 def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) unit axes and (n,) lengths of the segments; a zero-length segment points up
     and gets a length of ``tol.zero_length`` times its size."""
-    n = len(skeleton)
-    vec = skeleton.end - skeleton.start
-    length = norm(vec)
-    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (n, 3))
-    axis = np.where(length[:, None] > 0, vec / np.where(length > 0, length, 1)[:, None], up)
-    size = np.maximum(np.maximum(skeleton.r_start, skeleton.r_end), 1.0)
-    length = np.where(length > 0, length, tol.zero_length * size)
-    return axis, length
+    def block(start, end, r_start, r_end):          # row-wise (by_rows)
+        vec = end - start
+        length = norm(vec)
+        up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (len(vec), 3))
+        axis = np.where(length[:, None] > 0, vec / np.where(length > 0, length, 1)[:, None], up)
+        size = np.maximum(np.maximum(r_start, r_end), 1.0)
+        return axis, np.where(length > 0, length, tol.zero_length * size)
+    return by_rows(block, skeleton.start, skeleton.end, skeleton.r_start, skeleton.r_end)
 
 
 def continuing_children(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -525,14 +536,46 @@ def _line_crossing(p1, d1, p2, d2, nm, scale):
     return np.clip(s, -tol.runaway * scale, tol.runaway * scale), den
 
 
-def _seam_mismatch_at(seg: _Segments, joints: _Joints, point, rc) -> np.ndarray:
-    """(j,) minor semi-axis of the parent's cut minus the child's at joint planes through
-    ``point`` (j, 3), the children starting with radii ``rc`` (j,) (§2.2)."""
-    k = seg.slope
-    par, child = joints.parent, joints.child
+def _seam_mismatch_at(seg: _Segments, k, par, child, point, rc) -> np.ndarray:
+    """(m,) minor semi-axis of the parent's cut minus the child's at joint planes through
+    ``point`` (m, 3), at the joints of segments ``par`` and ``child`` (m,), the children
+    starting with radii ``rc`` (m,) (§2.2); ``k`` (n,) the segments' slopes. Row-wise."""
     b_parent = minor_semi_axis(point, seg.base[par], seg.axis[par], seg.r_start[par], k[par])
     kc = cone_slope(rc, seg.r_end[child], seg.length[child])
     return b_parent - minor_semi_axis(point, seg.base[child], seg.axis[child], rc, kc)
+
+
+def _paper_mismatch(seg: _Segments, joints: _Joints, k, rp, rc, rows) -> np.ndarray:
+    """(r,) |seam mismatch| / rp with the paper's planes (:func:`_joint_planes`) at the
+    joints ``rows`` (r,), the children's radii ``rc`` (j,), the parents' ``rp`` (j,),
+    evaluated a block of joints at a time (:func:`by_rows`): only the planes' points are
+    kept, and only at the joints measured."""
+    par, child = joints.parent, joints.child
+
+    def block(s):
+        _, point, _ = _joint_planes(joints.point[s], joints.parent_axis[s], joints.child_axis[s], rp[s], rc[s],
+                                    k[par[s]], k[child[s]])
+        return np.abs(_seam_mismatch_at(seg, k, par[s], child[s], point, rc[s])) / np.maximum(rp[s], tol.tiny)
+    return by_rows(block, rows)
+
+
+def _smooth_joints(rp, rc) -> np.ndarray:
+    """(j,) bool: the joints whose radii ``rp``, ``rc`` (j,) agree within ``tol.radius_step``
+    (the others are radius steps: modelled, not measured as seam errors)."""
+    return np.abs(rp - rc) <= tol.radius_step * np.maximum(rp, rc)
+
+
+def _paper_seams(skeleton: Skeleton, extend_side_branches: bool) -> tuple[float, float]:
+    """(max, mean) seam mismatch with the paper's planes on the skeleton's radii at its
+    smooth joints (0, 0 without one): the report's ``before`` figures, worked out from the
+    skeleton when first read (:meth:`SkinReport.measure_paper_seams`)."""
+    seg, joints, _ = _segments_and_joints(skeleton, extend_side_branches)
+    rp, rc = seg.r_end[joints.parent], seg.r_start[joints.child]
+    smooth = _smooth_joints(rp, rc)
+    if not smooth.any():
+        return 0.0, 0.0
+    rel = _paper_mismatch(seg, joints, seg.slope, rp, rc, np.flatnonzero(smooth))
+    return float(rel.max()), float(rel.mean())
 
 
 def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, seam_fit: bool,
@@ -548,21 +591,17 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
     ``seg.r_start``) and :func:`_sphere_planes`; a knuckle keeps the skeleton's radius
     (its fan is a cylinder of that radius), as does a joint whose child's radius would
     move more than ``tol.seam_radius_change`` or has no closing radius; as that changes the radii below it, the
-    planes and knuckles are found again until no new knuckle appears.
+    planes and knuckles are found again until no new knuckle appears. Row-wise work runs
+    a block of joints at a time (:func:`by_rows`).
     """
     par, child = joints.parent, joints.child
     J, M1, M2 = joints.point, joints.parent_axis, joints.child_axis
     rp, rc0 = seg.r_end[par], seg.r_start[child].copy()
     k = seg.slope
-    normal, point, nm = _joint_planes(J, M1, M2, rp, rc0, k[par], k[child])
-    smooth = np.abs(rp - rc0) <= tol.radius_step * np.maximum(rp, rc0)
-    report.step_joints = int((~smooth).sum())
-    if smooth.any():
-        rel = np.abs(_seam_mismatch_at(seg, joints, point, rc0))[smooth] / np.maximum(rp[smooth], tol.tiny)
-        report.seam_mismatch_max_before = float(rel.max())
-        report.seam_mismatch_mean_before = float(rel.mean())
+    report.step_joints = int((~_smooth_joints(rp, rc0)).sum())
     sharp = np.zeros(len(child), dtype=bool)
     if not seam_fit:
+        normal, point, nm = by_rows(_joint_planes, J, M1, M2, rp, rc0, k[par], k[child])
         _set_joint_planes(lo, hi, joints, normal, point)
         sharp, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
     else:
@@ -573,7 +612,7 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
             failed = np.zeros(len(child), dtype=bool)
             failed[fit] = seam_radii(seg.r_start, seg.r_end, seg.length, par[fit], child[fit])
             k = seg.slope
-            normal, point, nm = _sphere_planes(J, M1, M2, rp, seg.r_start[child], k[par], k[child])
+            normal, point, nm = by_rows(_sphere_planes, J, M1, M2, rp, seg.r_start[child], k[par], k[child])
             _set_joint_planes(lo, hi, joints, normal, point)
             found, bend = _sharp_joints(seg, joints, normal, lo, hi, max_bend_deg, report)
             moved = np.abs(seg.r_start[child] - rc0) > tol.seam_radius_change * np.maximum(rc0, tol.tiny)
@@ -582,9 +621,8 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
                 break
             sharp |= found
         report.sharp_joints = int(sharp.sum())
-        fitted = linked & ~sharp
-        left = np.abs(_seam_mismatch_at(seg, joints, point, seg.r_start[child]))[fitted]
-        left = left / np.maximum(rp[fitted], tol.tiny)
+        left = by_rows(lambda s: np.abs(_seam_mismatch_at(seg, k, par[s], child[s], point[s], seg.r_start[child[s]]))
+                       / np.maximum(rp[s], tol.tiny), np.flatnonzero(linked & ~sharp))
         report.seam_mismatch_max_after = float(left.max()) if left.size else 0.0
         report.seam_mismatch_mean_after = float(left.mean()) if left.size else 0.0
     hi[par[sharp]] = plane_through(M1[sharp], J[sharp])
@@ -637,11 +675,13 @@ def _sharp_joints(seg: _Segments, joints: _Joints, normal, lo, hi, max_bend_deg:
     joint_of_parent[par] = np.arange(len(child))
     crossing_flag = np.zeros(len(child), dtype=bool)
     for _ in range(8):
-        lo_now, hi_now = lo.copy(), hi.copy()
-        hi_now[par[sharp]] = plane_through(M1[sharp], J[sharp])
-        lo_now[child[sharp]] = plane_through(M2[sharp], J[sharp])
-        bad_rows = _crossing_rows(seg.base, seg.axis, seg.length, seg.r_start, seg.r_end,
-                                  lo_now, hi_now)
+        lo_now, hi_now = lo, hi
+        if sharp.any():
+            lo_now, hi_now = lo.copy(), hi.copy()
+            hi_now[par[sharp]] = plane_through(M1[sharp], J[sharp])
+            lo_now[child[sharp]] = plane_through(M2[sharp], J[sharp])
+        bad_rows = by_rows(_crossing_rows, seg.base, seg.axis, seg.length, seg.r_start, seg.r_end,
+                           lo_now, hi_now)
         jl, jh = joint_of_child[bad_rows], joint_of_parent[bad_rows]
         marks = np.concatenate([jl[jl >= 0], jh[jh >= 0]])
         new = marks[~sharp[marks]]
@@ -719,11 +759,15 @@ def _row_layout(seg: _Segments, lo, hi, joints: _Joints, sharp, bend, skeleton: 
         steps = np.maximum(1, np.ceil(np.degrees(theta) / fan_step_deg - tol.count_rounding))
         fan_count[child[sj]] = 2 * (steps.astype(np.int64) + 1)   # outer + inner slices
     row_of_seg = np.arange(n) + np.cumsum(fan_count)
-    rows = _Rows.empty(n + int(fan_count.sum()))
-    rows.base[row_of_seg], rows.axis[row_of_seg], rows.length[row_of_seg] = seg.base, seg.axis, seg.length
-    rows.r1[row_of_seg], rows.r2[row_of_seg] = seg.r_start, seg.r_end
-    rows.plane_lo[row_of_seg], rows.plane_hi[row_of_seg] = lo, hi
-    rows.segment[row_of_seg] = np.arange(n)
+    if not sj.size:      # no fan: the segments' arrays are the rows, as they are
+        rows = _Rows(seg.base, seg.axis, seg.length, seg.r_start, seg.r_end, lo, hi, np.arange(n),
+                     np.full(n, -1, dtype=np.int64))
+    else:
+        rows = _Rows.empty(n + int(fan_count.sum()))
+        rows.base[row_of_seg], rows.axis[row_of_seg], rows.length[row_of_seg] = seg.base, seg.axis, seg.length
+        rows.r1[row_of_seg], rows.r2[row_of_seg] = seg.r_start, seg.r_end
+        rows.plane_lo[row_of_seg], rows.plane_hi[row_of_seg] = lo, hi
+        rows.segment[row_of_seg] = np.arange(n)
     linked = _linked(skeleton, par, child)
     rows.parent_row[row_of_seg[child[linked]]] = row_of_seg[par[linked]]
     return rows, row_of_seg, fan_count
@@ -781,83 +825,3 @@ def _fill_knuckle_fans(rows: _Rows, seg: _Segments, joints: _Joints, sj, bend, m
     rows.parent_row[fan[out]] = np.where(slot[out] == 0, row_of_seg[par[jj[out]]], fan[out] - 1)
     last_out = out & (slot + 1 == total)
     rows.parent_row[row_of_seg[child[jj[last_out]]]] = fan[last_out]
-
-
-# ============================================================================ texture frames
-def _reference_directions(axis, parent_row) -> np.ndarray:
-    """(n, 3) unit u = 0 directions ⟂ the row axes (n, 3): rotation-minimising frames
-    carried along each continuing chain (``parent_row`` (n,)); a chain (root or side
-    branch) starts from a fixed helper direction projected off its axis."""
-    n_rows = len(axis)
-    has_parent = parent_row >= 0
-    quat = np.zeros((n_rows, 4))
-    quat[:, 0] = 1.0
-    if has_parent.any():
-        quat[has_parent] = _min_rotation_quat(axis[parent_row[has_parent]], axis[has_parent])
-    chain = reduce_to_root(parent_row, quat, _quat_mul)
-    roots = np.flatnonzero(~has_parent)
-    root_perp = np.empty((n_rows, 3))
-    root_perp[roots] = any_perpendicular(axis[roots])
-    ref = _quat_rotate(chain, root_perp[tree_roots(parent_row)])
-    ref = ref - axis * dot(ref, axis)[:, None]
-    length = norm(ref)
-    weak = length < tol.frame_weak
-    ref = ref / np.where(weak, 1.0, length)[:, None]
-    if weak.any():
-        ref[weak] = any_perpendicular(axis[weak])
-    return ref
-
-
-def _u_offsets(rows: _Rows, ref_dir, twist) -> np.ndarray:
-    """(n,) u offsets (§2.3): the parent's u = 0 point on the shared plane gets the same u
-    from the child; offsets accumulate along each continuing chain. (The point lies on the
-    child's lower plane, v = 0 there, so the child's u is its angle alone.)"""
-    c = np.flatnonzero(rows.parent_row >= 0)
-    local = np.zeros(len(rows.length))
-    if c.size:
-        p = rows.parent_row[c]
-        ref_p, a_p, base_p, r1_p = ref_dir[p], rows.axis[p], rows.base[p], rows.r1[p]
-        k = cone_slope(rows.r1, rows.r2, rows.length)[p]
-        nrm, d = rows.plane_hi[p, :3], rows.plane_hi[p, 3]
-        y_u, _ = plane_height(d - dot(nrm, base_p), dot(nrm, a_p), dot(nrm, ref_p), r1_p, k)
-        point = base_p + y_u[:, None] * a_p + (r1_p + k * y_u)[:, None] * ref_p
-        rel = point - rows.base[c]
-        a_c, ref_c = rows.axis[c], ref_dir[c]
-        u_child = np.arctan2(dot(rel, cross(a_c, ref_c)), dot(rel, ref_c)) / (2 * np.pi)
-        local[c] = twist[p] - u_child
-    total = reduce_to_root(rows.parent_row, local, np.add)
-    wrapped = total - np.floor(total)
-    return np.where(wrapped < 1.0, wrapped, 0.0)      # -1e-17 wraps to 1.0 in floats
-
-
-def _quat_mul(p, q):
-    """(m, 4) Hamilton products of (m, 4) quaternions (w, x, y, z)."""
-    pw, px, py, pz = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
-    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    out = np.empty_like(p)
-    out[:, 0] = pw * qw - px * qx - py * qy - pz * qz
-    out[:, 1] = pw * qx + px * qw + py * qz - pz * qy
-    out[:, 2] = pw * qy - px * qz + py * qw + pz * qx
-    out[:, 3] = pw * qz + px * qy - py * qx + pz * qw
-    return out
-
-
-def _quat_rotate(q, v):
-    """(m, 3) vectors ``v`` (m, 3) rotated by unit (m, 4) quaternions."""
-    w, u = q[:, :1], q[:, 1:]
-    t = 2.0 * cross(u, v)
-    return v + w * t + cross(u, t)
-
-
-def _min_rotation_quat(a, b):
-    """(m, 4) unit quaternions of the smallest rotation taking unit a (m, 3) to unit b
-    (m, 3): the normalised (1 + a·b, a × b); for a = -b (within ``tol.parallel``) a half
-    turn about an axis ⟂ a."""
-    q = np.empty((len(a), 4))
-    q[:, 0] = 1.0 + dot(a, b)
-    q[:, 1:] = cross(a, b)
-    flat = q[:, 0] < tol.parallel
-    if flat.any():
-        q[flat, 0] = 0.0
-        q[flat, 1:] = any_perpendicular(a[flat])
-    return q / np.linalg.norm(q, axis=1, keepdims=True)

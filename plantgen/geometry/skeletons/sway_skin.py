@@ -562,8 +562,9 @@ def _medial_planes(plan: SwaySkin, c, s, kp):
 
 def _texture_frames(plan: SwaySkin, seg: _FrameSegments, joints: _FrameJoints):
     """(n,) unit complex e^(iψ): each row's reference direction in its frame (e1, e2),
-    and (n,) u offsets (skinning's ``_u_offsets``), from the medial frames (N_m, n1) and
-    (N_m, n2) of the linked joints, which the transport maps onto each other."""
+    and (n,) u offsets (skinning's
+    :func:`~plantgen.geometry.skeletons.texture_frames.u_offsets`), from the medial frames
+    (N_m, n1) and (N_m, n2) of the linked joints, which the transport maps onto each other."""
     li = plan.linked
     p, ch = plan.link_par, plan.link_child
     nm = joints.nm.take(li, 1)
