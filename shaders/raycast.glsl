@@ -120,11 +120,13 @@ void main() {
     f_rec4 = vec4(copy_turn * rec4.xyz, copy_scale * rec4.w);
     f_rec5 = vec4(rec5.xy, copy_scale * rec5.z, rec5.w);
 #if defined THIN_COVERAGE
-    // the floor at each end (records are eye-relative): a thinner row is cast at the floor,
-    // without its relief (under a pixel it shows none)
+    // the floor at each end (records are eye-relative): a row thinner than it at both ends is
+    // cast at the floor, without its relief (under a pixel it shows none). A row wider at
+    // either end stays opaque at its own radii: a cone closing to a point (a roof, a branch
+    // tip) keeps its relief and its depth, and only its last pixel or two go unsmoothed.
     f_true_radii = vec2(f_rec1.w, f_rec2.w);
     vec2 floor_radii = coverage_floor * vec2(length(f_rec0.xyz), length(f_rec0.xyz + f_rec0.w * f_rec1.xyz));
-    bool thin = f_rec1.w < floor_radii.x || f_rec2.w < floor_radii.y;
+    bool thin = f_rec1.w < floor_radii.x && f_rec2.w < floor_radii.y;
     if (thin) {
         f_rec1.w = max(f_rec1.w, floor_radii.x);
         f_rec2.w = max(f_rec2.w, floor_radii.y);

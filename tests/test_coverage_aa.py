@@ -15,7 +15,7 @@ from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.gl.frame import coverage_aa
 from plantgen.gl.leaf_layer import thin_leaf_data
 from plantgen.pipeline import frame_arguments, prepare_model, render_model, stage_model
-from plantgen.settings import AA_FLOOR_PIXELS, ImageSettings, RenderSettings
+from plantgen.settings import AA_FLOOR_PIXELS, ImageSettings, RaycastSettings, RenderSettings
 
 WIDTH, HEIGHT, DISTANCE, FOV = 128, 96, 10.0, 40.0
 BACKGROUND = (0.9, 0.9, 0.9, 1.0)      # flat and opaque: a thin row blends with it
@@ -115,6 +115,25 @@ def test_a_wide_surface_keeps_its_colours(gl_ctx):
     assert abs(a.mean() - b.mean()) < 0.25 and change.max() <= 8 and (change == 0).mean() > 0.8
     assert not np.array_equal(none.color, edges.color)
     assert np.array_equal(none.distance, edges.distance)       # the distances are the centre rays'
+
+
+def test_a_cone_closing_to_a_point_stays_opaque_with_its_relief(gl_ctx):
+    """A wide cone closing to a point (the well's roof, a branch's last tip) is thinner than
+    the floor at one end only: it is drawn as without the anti-aliasing, pixel for pixel,
+    its relief and its distances kept (it was once cast in the thin pieces' blended pass,
+    which drops the relief, and the well's shingles went flat)."""
+    from plantgen.gl.raycast import Raycaster
+    px = pixel_world()
+    skeleton = Skeleton(np.array([[0.0, -30 * px, 0.0]]), np.array([[0.0, 30 * px, 0.0]]), np.array([25 * px]),
+                        np.array([0.0]), np.array([-1]), np.zeros(1, bool), np.zeros(1, int), ("bark",))
+    cone, camera = skin_skeleton(skeleton), twig_camera()
+    caster = Raycaster(gl_ctx)
+    settings = RaycastSettings(relief=True)
+    none, coverage = (caster.render(cone, camera, settings, material_names=("bark",), background=BACKGROUND, aa=aa)
+                      for aa in ("none", "coverage"))
+    assert np.isfinite(none.distance).sum() > 1000
+    assert np.array_equal(none.color, coverage.color)
+    assert np.array_equal(none.distance, coverage.distance)
 
 
 def test_aa_none_draws_what_the_ray_caster_drew(gl_ctx):
