@@ -4,10 +4,15 @@ multi-threaded float64 code (numba).
 It walks the very arrays the GPU upload is made from (:attr:`ScanTarget.bvh
 <plantgen.geometry.rays.scan_targets.ScanTarget.bvh>`, :attr:`SceneTarget.bvh
 <plantgen.geometry.rays.scan_targets.SceneTarget.bvh>` and its :attr:`~plantgen.geometry.rays.bvh.SceneBVH.flat`
-node array): no second build. Each ray walks the top level over the copies nearest box
-first (a small stack a ray), is moved into a copy's frame in float64 and walks that
-plant's tree the same way; a leaf's primitives are culled by their own boxes and then
-tested exactly:
+node array): no second build. A ray walks the top level over the copies nearest box
+first, is moved into a copy's frame in float64 and walks that plant's tree the same way;
+a leaf's primitives are culled by their own boxes and then tested exactly. Closest hits
+are walked a packet of :data:`RAY_BLOCK` neighbouring rays at a time (a scan's beams, a
+camera's pixels, in the order given): ranged traversal, each node narrowing the packet's
+range of rays to the first and last that meet it (each ray culled by its own best hit),
+each leaf testing every ray of its range as a lone walk would; the nodes near the root are
+then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x).
+Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The tests:
 
 - a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
   float64, recentred: the slope-form cone, the quadratic in pbrt-v4's stable form with
@@ -19,7 +24,8 @@ tested exactly:
 The answer is the numpy traversal's (:func:`~plantgen.geometry.rays.bvh.trace_bvh`,
 :func:`~plantgen.geometry.rays.bvh.trace_scene`): the smallest t in (t_min, t_max), ties to
 the smaller copy, then primitive; with ``any_hit`` the first hit found. Rays are
-independent, so the thread count changes no result. Compiled on first use and cached
+independent (a packet tests, for each of its rays, every primitive a lone walk of that ray
+would), so neither the packets nor the thread count change any result. Compiled on first use and cached
 on disk (``cache=True``; numba falls back to its user-wide cache directory, or
 ``NUMBA_CACHE_DIR``, where the package's own is read-only).
 
