@@ -90,7 +90,7 @@ def _scan(target, step: float) -> dict:
 
 def compile_times() -> dict:
     """Seconds to compile into an empty cache and to load it, each in a fresh process."""
-    code = "from plantgen.geometry import native_trace as n; print(n.warm_up())"
+    code = "from plantgen.geometry.rays import native_trace as n; print(n.warm_up())"
     out = {}
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
