@@ -283,7 +283,7 @@ def _better(t, copy, g, best_t, best_c, best_g):
     return t < best_t or (t == best_t and (copy < best_c or (copy == best_c and g < best_g)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _slot_hit(slot_kind, R, T, s, ox, oy, oz, dx, dy, dz, t_min, t_hi, origin):
     """t of the ray at the primitive of leaf slot ``s`` within (t_min, t_hi), else inf."""
     k = slot_kind[s]
@@ -329,7 +329,7 @@ def _walk(nodes, slot_box, prims, slot_kind, R, T, root, ox, oy, oz, dx, dy, dz,
     return best_t, best_c, best_g, False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _push(stack, top, left, ok0, ok1, right_first):
     """Push the children met, the nearer one last (popped first); the new top."""
     if ok0 and ok1:
@@ -341,7 +341,7 @@ def _push(stack, top, left, ok0, ok1, right_first):
     return top
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _moved(m, o0, o1, o2, d0, d1, d2):
     """The ray (o, d) moved by the 4x4 ``m`` (float64, t kept)."""
     return (m[0, 0] * o0 + m[0, 1] * o1 + m[0, 2] * o2 + m[0, 3],
@@ -352,7 +352,7 @@ def _moved(m, o0, o1, o2, d0, d1, d2):
             m[2, 0] * d0 + m[2, 1] * d1 + m[2, 2] * d2)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _sorted_copies(top, node, o0, o1, o2, i0, i1, i2, careful, t_min, t_hi, order_t, order_c):
     """The copies of top-level leaf ``node`` the ray meets, sorted by entry distance (ties
     by copy) into ``order_t``, ``order_c``: their count."""
@@ -426,7 +426,7 @@ def _meets(box, n, o, inv, care, r, t_min, below, best_t):
     return near <= far and far > t_min and near <= min(below[r], best_t[r])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _range(box, n, o, inv, care, f, l, t_min, below, best_t):
     """The first and last rays of [f, l] that meet box ``n`` (f > l: none)."""
     while f <= l and not _meets(box, n, o, inv, care, f, t_min, below, best_t):
@@ -436,7 +436,7 @@ def _range(box, n, o, inv, care, f, l, t_min, below, best_t):
     return f, l
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _right_first(box, n, o, inv, care, r, t_min):
     """Whether child ``n + 1`` is nearer than child ``n`` along ray ``r`` (a miss: farthest)."""
     n0, f0 = _enter(box, n, o[r, 0], o[r, 1], o[r, 2], inv[r, 0], inv[r, 1], inv[r, 2], care[r], t_min)
