@@ -70,3 +70,31 @@ def test_the_options_are_the_scan_settings_knobs():
         elif k.lo is not None or k.hi is not None:
             assert isinstance(p.type, click.IntRange | click.FloatRange)
             assert (p.type.min, p.type.max, p.type.min_open, p.type.max_open) == (k.lo, k.hi, k.lo_open, k.hi_open)
+
+
+def test_no_gpu_device_node_scans_on_the_cpu_without_a_gl_context(tmp_path, monkeypatch):
+    """Where the machine has no GPU device node, ``plantgen scan`` takes the compiled CPU
+    walk without creating a GL context (llvmpipe's, only to learn it is software); where
+    one is listed, the context is asked as before."""
+    import plantgen.cli.scan as scan_cli
+    import plantgen.gl.context as context
+    from plantgen.geometry.rays import native_trace
+
+    if not native_trace.available():
+        pytest.skip("numba does not run here: the scan asks GL for its float32 search instead")
+    asked = []
+
+    def no_context():
+        asked.append(True)
+        raise context.GLContextError("asked for a GL context")
+
+    monkeypatch.setattr(context, "gl_context", no_context)
+    monkeypatch.setattr(scan_cli, "gpu_device_nodes", list)
+    code, out, err = run_cli("scan", "saguaro", "-o", tmp_path / "s.ply", "--angular-step", "1")
+    assert code == 0, err
+    assert asked == [] and "float64" in out and "wrote" in out
+    monkeypatch.setattr(scan_cli, "gpu_device_nodes", lambda: ["/dev/dri/renderD128"])
+    code, out, err = run_cli("scan", "saguaro", "-o", tmp_path / "t.ply", "--angular-step", "1")
+    assert code == 0, err
+    assert asked == [True] and "float64" in out         # no context: the float64 CPU walk all the same
+

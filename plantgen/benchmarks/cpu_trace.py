@@ -142,7 +142,7 @@ def _scan(target, step: float) -> dict:
 
 def compile_times() -> dict:
     """Seconds to compile into an empty cache and to load it, each in a fresh process."""
-    code = "from plantgen.geometry import native_trace as n; print(n.warm_up())"
+    code = "from plantgen.geometry.rays import native_trace as n; print(n.warm_up())"
     out = {}
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
@@ -188,11 +188,21 @@ def measure(scene: str = "forest", size=(1024, 768), sample: int = 8, scan_step:
     result = {"scene": scene, "size": size, "sample": sample, "scan_step": scan_step, "compile": compiled,
               "gather_s": build_wall, "rows": rows, "scan": scan, "copies": target.bvh.copies,
               "primitives": sum(len(t) for t in target.targets), "threads": _threads(), "machine": machine(),
-              "load": os.getloadavg()}
+              "load": os.getloadavg(), "renderer": _renderer()}
     if full:
         result["full_scan"] = full_scan(scene)
         say(f"full scan: {result['full_scan']}")
     return result
+
+
+def _renderer() -> str:
+    """The GL renderer string of this machine (the GLSL tracer's device), or why there is none."""
+    from ..gl.context import GLContextError, renderer_name
+
+    try:
+        return renderer_name()
+    except GLContextError as exc:
+        return f"none ({str(exc).splitlines()[0][:80]})"
 
 
 def _threads() -> int:
@@ -223,7 +233,8 @@ def markdown(r: dict) -> str:
         lines += ["", (f"`plantgen scan {r['scene']} --scanner-positions 2,1.5,10 --angular-step 0.05` (CPU, "
                        f"growing included): {f['wall']:.1f} s wall, {f['cpu']:.1f} s CPU, {f['peak_mb']:,.0f} MB peak")
                   if "error" not in f else f"full scan failed: {f['error']}"]
-    lines += ["", f"Machine: {r['machine']}; load average at the end {r['load'][0]:.2f}. "
+    lines += ["", f"Machine: {r['machine']}; GL renderer {r.get('renderer', 'not asked')}; load average at the end "
+              f"{r['load'][0]:.2f}. "
               f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}."]
     return "\n".join(lines) + "\n"
 

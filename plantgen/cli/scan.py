@@ -33,12 +33,16 @@ def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
     """(settings, the GPU's search or None): --scan-precision float32 finds each beam's
     primitive on the GPU, and so does a scan that left --scan-precision out where a GPU
     draws the GL context (float64 ranges either way); float64 asked for, no GL, or a
-    software GL (llvmpipe) where the compiled CPU traversal runs, gives None (float32
+    software GL (llvmpipe) where the compiled CPU traversal runs, gives None (no GPU device
+    node, :func:`gpu_device_nodes`: not even a GL context is made; float32
     asked for without GL: the frusta tested in float32 on the CPU, and a line on stderr
     says so)."""
     if settings.precision == "float64" and chosen:
         return settings, None
     from ..geometry.rays.native_trace import available
+
+    if not chosen and not gpu_device_nodes() and available():   # no GPU here: EGL could only give llvmpipe
+        return settings, None
     from ..gl.context import GLContextError, gl_context, hardware_gl
     from ..gl.trace import trace_target
 
@@ -51,6 +55,24 @@ def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
     if not chosen and not hardware_gl() and available():      # no GPU: the compiled float64 walk is faster
         return settings, None
     return replace(settings, precision="float32"), lambda target, origins, dirs: trace_target(target, origins, dirs)
+
+
+#: Device nodes a GPU's EGL driver opens on Linux: DRM render nodes (Mesa's hardware
+#: drivers), NVIDIA's, and WSL2's GPU.
+GPU_DEVICE_NODES = ("/dev/dri/renderD*", "/dev/nvidia[0-9]*", "/dev/dxg")
+
+
+def gpu_device_nodes() -> list[str]:
+    """The GPU device nodes of this machine (Linux; elsewhere one placeholder, so that the
+    GL context is asked): where there is none, EGL can only give a software rasteriser,
+    and ``plantgen scan`` takes the compiled CPU walk without creating a GL context to
+    learn that (llvmpipe's context costs about 0.6 s and its address space)."""
+    import glob
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return ["(not Linux: ask the GL context)"]
+    return [p for pattern in GPU_DEVICE_NODES for p in glob.glob(pattern)]
 
 
 def _plant_ids(grown) -> tuple[object, object]:

@@ -4,10 +4,15 @@ multi-threaded float64 code (numba).
 It walks the very arrays the GPU upload is made from (:attr:`ScanTarget.bvh
 <plantgen.geometry.rays.scan_targets.ScanTarget.bvh>`, :attr:`SceneTarget.bvh
 <plantgen.geometry.rays.scan_targets.SceneTarget.bvh>` and its :attr:`~plantgen.geometry.rays.bvh.SceneBVH.flat`
-node array): no second build. Each ray walks the top level over the copies nearest box
-first (a small stack a ray), is moved into a copy's frame in float64 and walks that
-plant's tree the same way; a leaf's primitives are culled by their own boxes and then
-tested exactly:
+node array): no second build. A ray walks the top level over the copies nearest box
+first, is moved into a copy's frame in float64 and walks that plant's tree the same way;
+a leaf's primitives are culled by their own boxes and then tested exactly. Closest hits
+are walked a packet of :data:`RAY_BLOCK` neighbouring rays at a time (a scan's beams, a
+camera's pixels, in the order given): ranged traversal, each node narrowing the packet's
+range of rays to the first and last that meet it (each ray culled by its own best hit),
+each leaf testing every ray of its range as a lone walk would; the nodes near the root are
+then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x).
+Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The tests:
 
 - a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
   float64, recentred: the slope-form cone, the quadratic in pbrt-v4's stable form with
@@ -19,7 +24,8 @@ tested exactly:
 The answer is the numpy traversal's (:func:`~plantgen.geometry.rays.bvh.trace_bvh`,
 :func:`~plantgen.geometry.rays.bvh.trace_scene`): the smallest t in (t_min, t_max), ties to
 the smaller copy, then primitive; with ``any_hit`` the first hit found. Rays are
-independent, so the thread count changes no result. Compiled on first use and cached
+independent (a packet tests, for each of its rays, every primitive a lone walk of that ray
+would), so neither the packets nor the thread count change any result. Compiled on first use and cached
 on disk (``cache=True``; numba falls back to its user-wide cache directory, or
 ``NUMBA_CACHE_DIR``, where the package's own is read-only).
 
@@ -264,40 +270,66 @@ def _inv(d):
 
 
 @njit(cache=True, inline="always")
-def _leaf(scene, node, ray, t_min, t_hi, copy, best, any_hit, origin):
-    """Test the primitives of leaf ``node`` of the plants' tree against ``ray`` (origin,
-    direction, 1 / direction: 9 numbers); fold hits into ``best`` (t, copy, primitive as
-    global ids). True where ``any_hit`` and one was found."""
-    nodes, slot_box, prims, slot_kind, R, T = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
-    ox, oy, oz, dx, dy, dz, ix, iy, iz, careful = ray
-    first, count = int(nodes[node, 6]), int(nodes[node, 7])
-    for s in range(first, first + count):
-        near, far = _slab(slot_box, s, ox, oy, oz, ix, iy, iz, careful)
-        if not (max(near, t_min) <= far and far > t_min and near <= min(t_hi, best[0])):
-            continue
-        t = _prim_hit(slot_kind, R, T, s, ox, oy, oz, dx, dy, dz, t_min, origin)
-        if not t < t_hi:
-            continue
-        g = prims[s]
-        if t < best[0] or (t == best[0] and (copy < best[1] or (copy == best[1] and g < best[2]))):
-            best[0], best[1], best[2] = t, copy, g
-            if any_hit:
-                return True
-    return False
+def _enter(box, n, ox, oy, oz, ix, iy, iz, careful, t_min):
+    """(max(near, t_min), far) of the ray through box ``n`` (:func:`_slab`)."""
+    near, far = _slab(box, n, ox, oy, oz, ix, iy, iz, careful)
+    return max(near, t_min), far
 
 
 @njit(cache=True, inline="always")
-def _children(boxes, left, ray, t_min, hi):
-    """Which of the children ``left``, ``left + 1`` the ray's segment (t_min, hi] meets
-    (hi: the ray's end, or its best hit so far), and whether the right one is nearer."""
-    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
-    n0, f0 = _slab(boxes, left, ox, oy, oz, ix, iy, iz, careful)
-    n1, f1 = _slab(boxes, left + 1, ox, oy, oz, ix, iy, iz, careful)
-    n0, n1 = max(n0, t_min), max(n1, t_min)
-    return n0 <= f0 and f0 > t_min and n0 <= hi, n1 <= f1 and f1 > t_min and n1 <= hi, n1 < n0
+def _better(t, copy, g, best_t, best_c, best_g):
+    """Whether the hit (t, copy, g) beats the best so far: the smaller t, ties to the
+    smaller copy, then primitive (the numpy traversal's rule)."""
+    return t < best_t or (t == best_t and (copy < best_c or (copy == best_c and g < best_g)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
+def _slot_hit(slot_kind, R, T, s, ox, oy, oz, dx, dy, dz, t_min, t_hi, origin):
+    """t of the ray at the primitive of leaf slot ``s`` within (t_min, t_hi), else inf."""
+    k = slot_kind[s]
+    t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin) if k >= 0 else \
+        triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
+    return t if t > t_min and t < t_hi else np.inf
+
+
+@njit(cache=True)
+def _walk(nodes, slot_box, prims, slot_kind, R, T, root, ox, oy, oz, dx, dy, dz, t_min, t_hi, copy,
+          best_t, best_c, best_g, any_hit, stack, origin):
+    """One ray through one plant's tree from node ``root`` (in its frame), nearest child
+    first, culled by the best hit so far: the new best (t, copy, primitive) and whether
+    ``any_hit`` found one."""
+    i0, i1, i2 = _inv(dx), _inv(dy), _inv(dz)
+    careful = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
+    near, far = _enter(nodes, root, ox, oy, oz, i0, i1, i2, careful, t_min)
+    if not (near <= far and far > t_min and near < t_hi):
+        return best_t, best_c, best_g, False
+    below = np.nextafter(t_hi, -np.inf)               # a box must start before the ray's end
+    top = 0
+    stack[0] = root
+    while top >= 0:
+        node = stack[top]
+        top -= 1
+        first, count = int(nodes[node, 6]), int(nodes[node, 7])
+        if count > 0:
+            for s in range(first, first + count):
+                near, far = _enter(slot_box, s, ox, oy, oz, i0, i1, i2, careful, t_min)
+                if not (near <= far and far > t_min and near <= min(t_hi, best_t)):
+                    continue
+                t = _slot_hit(slot_kind, R, T, s, ox, oy, oz, dx, dy, dz, t_min, t_hi, origin)
+                if t < np.inf and _better(t, copy, prims[s], best_t, best_c, best_g):
+                    best_t, best_c, best_g = t, copy, prims[s]
+                    if any_hit:
+                        return best_t, best_c, best_g, True
+            continue
+        hi = min(below, best_t)
+        n0, f0 = _enter(nodes, first, ox, oy, oz, i0, i1, i2, careful, t_min)
+        n1, f1 = _enter(nodes, first + 1, ox, oy, oz, i0, i1, i2, careful, t_min)
+        top = _push(stack, top, first, n0 <= f0 and f0 > t_min and n0 <= hi, n1 <= f1 and f1 > t_min and n1 <= hi,
+                    n1 < n0)
+    return best_t, best_c, best_g, False
+
+
+@njit(cache=True)
 def _push(stack, top, left, ok0, ok1, right_first):
     """Push the children met, the nearer one last (popped first); the new top."""
     if ok0 and ok1:
@@ -309,125 +341,242 @@ def _push(stack, top, left, ok0, ok1, right_first):
     return top
 
 
-@njit(cache=True, inline="always")
-def _meets_root(boxes, node, ray, t_min, t_hi):
-    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
-    near, far = _slab(boxes, node, ox, oy, oz, ix, iy, iz, careful)
-    near = max(near, t_min)
-    return near <= far and far > t_min and near < t_hi
+@njit(cache=True)
+def _moved(m, o0, o1, o2, d0, d1, d2):
+    """The ray (o, d) moved by the 4x4 ``m`` (float64, t kept)."""
+    return (m[0, 0] * o0 + m[0, 1] * o1 + m[0, 2] * o2 + m[0, 3],
+            m[1, 0] * o0 + m[1, 1] * o1 + m[1, 2] * o2 + m[1, 3],
+            m[2, 0] * o0 + m[2, 1] * o1 + m[2, 2] * o2 + m[2, 3],
+            m[0, 0] * d0 + m[0, 1] * d1 + m[0, 2] * d2,
+            m[1, 0] * d0 + m[1, 1] * d1 + m[1, 2] * d2,
+            m[2, 0] * d0 + m[2, 1] * d1 + m[2, 2] * d2)
 
 
 @njit(cache=True)
-def _walk(scene, root, ray, t_min, t_hi, copy, best, any_hit, stack, origin):
-    """One plant's tree from node ``root`` for ``ray`` in its frame, nearest box first;
-    True where ``any_hit`` found a hit."""
-    nodes = scene[0]
-    if not _meets_root(nodes, root, ray, t_min, t_hi):
-        return False
-    below = np.nextafter(t_hi, -np.inf)               # a box must start before the ray's end
-    top = 0
-    stack[0] = root
-    while top >= 0:
-        node = stack[top]
-        top -= 1
-        if nodes[node, 7] > 0:
-            if _leaf(scene, node, ray, t_min, t_hi, copy, best, any_hit, origin):
-                return True
-            continue
-        left = int(nodes[node, 6])
-        ok0, ok1, right_first = _children(nodes, left, ray, t_min, min(below, best[0]))
-        top = _push(stack, top, left, ok0, ok1, right_first)
-    return False
-
-
-@njit(cache=True, inline="always")
-def _ray(o0, o1, o2, d0, d1, d2):
-    """What a walk reads of a ray: origin, direction, 1 / direction and whether a slab
-    test may meet a NaN (:func:`_slab`)."""
-    i0, i1, i2 = _inv(d0), _inv(d1), _inv(d2)
-    careful = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
-    return o0, o1, o2, d0, d1, d2, i0, i1, i2, careful
-
-
-@njit(cache=True, inline="always")
-def _to_copy(inverse, c, O, D):
-    """The ray (O, D) moved into copy ``c``'s frame (float64, t kept), as :func:`_ray`."""
-    m = inverse[c]
-    o0 = m[0, 0] * O[0] + m[0, 1] * O[1] + m[0, 2] * O[2] + m[0, 3]
-    o1 = m[1, 0] * O[0] + m[1, 1] * O[1] + m[1, 2] * O[2] + m[1, 3]
-    o2 = m[2, 0] * O[0] + m[2, 1] * O[1] + m[2, 2] * O[2] + m[2, 3]
-    d0 = m[0, 0] * D[0] + m[0, 1] * D[1] + m[0, 2] * D[2]
-    d1 = m[1, 0] * D[0] + m[1, 1] * D[1] + m[1, 2] * D[2]
-    d2 = m[2, 0] * D[0] + m[2, 1] * D[1] + m[2, 2] * D[2]
-    return _ray(o0, o1, o2, d0, d1, d2)
-
-
-@njit(cache=True)
-def _copies(scene, top, node, O, D, ray, t_min, t_hi, any_hit, best, stack, order, origin):
-    """The copies of top-level leaf ``node`` the ray meets, nearest box first (``order``:
-    scratch of the largest leaf's size), each walked in its frame; True where ``any_hit``
-    found a hit."""
-    t_nodes, t_prims, copy_box, copy_plant, inverse, roots = top[1], top[2], top[3], top[4], top[5], top[6]
-    ox, oy, oz, _, _, _, ix, iy, iz, careful = ray
+def _sorted_copies(top, node, o0, o1, o2, i0, i1, i2, careful, t_min, t_hi, order_t, order_c):
+    """The copies of top-level leaf ``node`` the ray meets, sorted by entry distance (ties
+    by copy) into ``order_t``, ``order_c``: their count."""
+    t_nodes, t_prims, copy_box, copy_plant, roots = top[1], top[2], top[3], top[4], top[6]
     k = 0
     for s in range(t_nodes[node, 0], t_nodes[node, 0] + t_nodes[node, 1]):
         c = t_prims[s]
-        near, far = _slab(copy_box, c, ox, oy, oz, ix, iy, iz, careful)
-        near = max(near, t_min)
+        near, far = _enter(copy_box, c, o0, o1, o2, i0, i1, i2, careful, t_min)
         if roots[copy_plant[c]] < 0 or not (near <= far and far > t_min and near < t_hi):
             continue
         j = k                                   # insertion by entry distance, ties by copy
-        while j > 0 and (order[0, j - 1] > near or (order[0, j - 1] == near and order[1, j - 1] > c)):
-            order[0, j], order[1, j] = order[0, j - 1], order[1, j - 1]
+        while j > 0 and (order_t[j - 1] > near or (order_t[j - 1] == near and order_c[j - 1] > c)):
+            order_t[j], order_c[j] = order_t[j - 1], order_c[j - 1]
             j -= 1
-        order[0, j], order[1, j] = near, c
+        order_t[j], order_c[j] = near, c
         k += 1
-    for j in range(k):
-        if order[0, j] > best[0]:               # every later copy starts beyond the best hit
-            break
-        c = int(order[1, j])
-        if _walk(scene, roots[copy_plant[c]], _to_copy(inverse, c, O, D), t_min, t_hi, c, best, any_hit, stack,
-                 origin):
-            return True
-    return False
+    return k
 
 
 @njit(cache=True)
-def _trace_one(scene, top, O, D, t_min, t_hi, any_hit, best, stacks, order, origin):
-    """One ray through the copies (the top level ``top``), each copy's plant walked in its
-    frame; fills ``best`` (t, copy, global primitive)."""
-    t_box, t_nodes = top[0], top[1]
-    ray = _ray(O[0], O[1], O[2], D[0], D[1], D[2])
-    if not _meets_root(t_box, 0, ray, t_min, t_hi):
-        return
-    stack = stacks[0]
+def _trace_one(scene, top, o0, o1, o2, d0, d1, d2, t_min, t_hi, any_hit, tstack, stack, order_t, order_c, origin):
+    """One ray through the copies (the top level ``top``, nearest box first), each copy's
+    plant walked in its frame: (t, copy, global primitive) of its hit (inf, -1, -1)."""
+    nodes, slot_box, prims, slot_kind, R, T = scene
+    t_box, t_nodes, inverse, plant_of, roots = top[0], top[1], top[5], top[4], top[6]
+    best_t, best_c, best_g = np.inf, -1, -1
+    i0, i1, i2 = _inv(d0), _inv(d1), _inv(d2)
+    careful = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
+    near, far = _enter(t_box, 0, o0, o1, o2, i0, i1, i2, careful, t_min)
+    if not (near <= far and far > t_min and near < t_hi):
+        return best_t, best_c, best_g
+    below = np.nextafter(t_hi, -np.inf)
     sp = 0
-    stack[0] = 0
+    tstack[0] = 0
     while sp >= 0:
-        node = stack[sp]
+        node = tstack[sp]
         sp -= 1
+        first = t_nodes[node, 0]
         if t_nodes[node, 1] > 0:
-            if _copies(scene, top, node, O, D, ray, t_min, t_hi, any_hit, best, stacks[1], order, origin):
-                return
+            k = _sorted_copies(top, node, o0, o1, o2, i0, i1, i2, careful, t_min, t_hi, order_t, order_c)
+            for j in range(k):
+                if order_t[j] > best_t:             # every later copy starts beyond the best hit
+                    break
+                c = order_c[j]
+                ox, oy, oz, dx, dy, dz = _moved(inverse[c], o0, o1, o2, d0, d1, d2)
+                best_t, best_c, best_g, done = _walk(nodes, slot_box, prims, slot_kind, R, T, roots[plant_of[c]],
+                                                     ox, oy, oz, dx, dy, dz, t_min, t_hi, c, best_t, best_c, best_g,
+                                                     any_hit, stack, origin)
+                if done:
+                    return best_t, best_c, best_g
             continue
-        hi = min(np.nextafter(t_hi, -np.inf), best[0])
-        ok0, ok1, right_first = _children(t_box, t_nodes[node, 0], ray, t_min, hi)
-        sp = _push(stack, sp, t_nodes[node, 0], ok0, ok1, right_first)
+        hi = min(below, best_t)
+        n0, f0 = _enter(t_box, first, o0, o1, o2, i0, i1, i2, careful, t_min)
+        n1, f1 = _enter(t_box, first + 1, o0, o1, o2, i0, i1, i2, careful, t_min)
+        sp = _push(tstack, sp, first, n0 <= f0 and f0 > t_min and n0 <= hi, n1 <= f1 and f1 > t_min and n1 <= hi,
+                   n1 < n0)
+    return best_t, best_c, best_g
+
+
+# ============================================================================ packets
+# Closest-hit rays are walked a packet (:data:`RAY_BLOCK` neighbouring rays) at a time, by
+# ranged traversal: a node holds the range [f, l] of the packet's rays that may meet it,
+# narrowed at each node to its first and last ray that do (each ray culled by its own best
+# hit, exactly as alone); a leaf tests each ray of its range as a lone walk would. Every
+# primitive a lone walk tests is tested, so each ray's hit is the lone walk's, bit for
+# bit; neighbouring rays (a scan's beams, a camera's pixels) share the nodes near the root.
+@njit(cache=True, inline="always")
+def _meets(box, n, o, inv, care, r, t_min, below, best_t):
+    """Whether ray ``r`` of a packet meets box ``n`` before its end and its best hit."""
+    near, far = _enter(box, n, o[r, 0], o[r, 1], o[r, 2], inv[r, 0], inv[r, 1], inv[r, 2], care[r], t_min)
+    return near <= far and far > t_min and near <= min(below[r], best_t[r])
+
+
+@njit(cache=True)
+def _range(box, n, o, inv, care, f, l, t_min, below, best_t):
+    """The first and last rays of [f, l] that meet box ``n`` (f > l: none)."""
+    while f <= l and not _meets(box, n, o, inv, care, f, t_min, below, best_t):
+        f += 1
+    while l > f and not _meets(box, n, o, inv, care, l, t_min, below, best_t):
+        l -= 1
+    return f, l
+
+
+@njit(cache=True)
+def _right_first(box, n, o, inv, care, r, t_min):
+    """Whether child ``n + 1`` is nearer than child ``n`` along ray ``r`` (a miss: farthest)."""
+    n0, f0 = _enter(box, n, o[r, 0], o[r, 1], o[r, 2], inv[r, 0], inv[r, 1], inv[r, 2], care[r], t_min)
+    n1, f1 = _enter(box, n + 1, o[r, 0], o[r, 1], o[r, 2], inv[r, 0], inv[r, 1], inv[r, 2], care[r], t_min)
+    if not (n0 <= f0):
+        return True
+    if not (n1 <= f1):
+        return False
+    return n1 < n0
+
+
+@njit(cache=True)
+def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, co, cd, ci, cc, f, l, t_min, t_hi, below, copy,
+                 best_t, best_c, best_g, sn, sf, sl, origin):
+    """Rays [f, l] of a packet through one plant's tree from ``root``, in a copy's frame
+    (origins ``co``, directions ``cd``, 1 / directions ``ci``, careful ``cc``); each
+    ray's best hit updated; ``sn``, ``sf``, ``sl``: the stack's nodes and ranges."""
+    sp = 0
+    sn[0], sf[0], sl[0] = root, f, l
+    while sp >= 0:
+        node, f, l = sn[sp], sf[sp], sl[sp]
+        sp -= 1
+        f, l = _range(nodes, node, co, ci, cc, f, l, t_min, below, best_t)
+        if f > l:
+            continue
+        count = int(nodes[node, 7])
+        first = int(nodes[node, 6])
+        if count > 0:
+            for r in range(f, l + 1):
+                if r != f and r != l and not _meets(nodes, node, co, ci, cc, r, t_min, below, best_t):
+                    continue
+                ox, oy, oz, dx, dy, dz = co[r, 0], co[r, 1], co[r, 2], cd[r, 0], cd[r, 1], cd[r, 2]
+                i0, i1, i2, care = ci[r, 0], ci[r, 1], ci[r, 2], cc[r]
+                th = t_hi[r]
+                for s in range(first, first + count):
+                    near, far = _enter(slot_box, s, ox, oy, oz, i0, i1, i2, care, t_min)
+                    if not (near <= far and far > t_min and near <= min(th, best_t[r])):
+                        continue
+                    k = slot_kind[s]
+                    if k >= 0:
+                        t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin)
+                    else:
+                        t = triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
+                    if not (t > t_min and t < th):
+                        continue
+                    g = prims[s]
+                    bt = best_t[r]
+                    if t < bt or (t == bt and (copy < best_c[r] or (copy == best_c[r] and g < best_g[r]))):
+                        best_t[r], best_c[r], best_g[r] = t, copy, g
+            continue
+        nearer_right = _right_first(nodes, first, co, ci, cc, f, t_min)
+        a, b = (first, first + 1) if nearer_right else (first + 1, first)
+        sn[sp + 1], sf[sp + 1], sl[sp + 1] = a, f, l
+        sn[sp + 2], sf[sp + 2], sl[sp + 2] = b, f, l
+        sp += 2
+
+
+@njit(cache=True)
+def _trace_packet(nodes, slot_box, prims, slot_kind, R, T, t_box, t_nodes, t_prims, copy_box, copy_plant, inverse,
+                  roots, O, D, a, n, t_min, t_hi, wi, wc, below, co, cd, ci, cc, best_t, best_c, best_g,
+                  tn, tf, tl, sn, sf, sl, origin):
+    """Rays ``a`` .. ``a + n - 1`` (one packet) through the copies: their closest hits in
+    ``best_t``, ``best_c``, ``best_g`` (t, copy, global primitive)."""
+    wo = O[a:a + n]
+    for r in range(n):
+        i0, i1, i2 = _inv(D[a + r, 0]), _inv(D[a + r, 1]), _inv(D[a + r, 2])
+        wi[r, 0], wi[r, 1], wi[r, 2] = i0, i1, i2
+        wc[r] = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
+        below[r] = np.nextafter(t_hi[a + r], -np.inf)
+        best_t[r], best_c[r], best_g[r] = np.inf, -1, -1
+    th = t_hi[a:a + n]
+    sp = 0
+    tn[0], tf[0], tl[0] = 0, 0, n - 1
+    while sp >= 0:
+        node, f, l = tn[sp], tf[sp], tl[sp]
+        sp -= 1
+        f, l = _range(t_box, node, wo, wi, wc, f, l, t_min, below, best_t)
+        if f > l:
+            continue
+        first, count = t_nodes[node, 0], t_nodes[node, 1]
+        if count > 0:
+            for s in range(first, first + count):
+                c = t_prims[s]
+                root = roots[copy_plant[c]]
+                if root < 0:
+                    continue
+                cf, cl = _range(copy_box, c, wo, wi, wc, f, l, t_min, below, best_t)
+                if cf > cl:
+                    continue
+                m = inverse[c]
+                for r in range(cf, cl + 1):
+                    o0, o1, o2 = wo[r, 0], wo[r, 1], wo[r, 2]
+                    d0, d1, d2 = D[a + r, 0], D[a + r, 1], D[a + r, 2]
+                    co[r, 0] = m[0, 0] * o0 + m[0, 1] * o1 + m[0, 2] * o2 + m[0, 3]
+                    co[r, 1] = m[1, 0] * o0 + m[1, 1] * o1 + m[1, 2] * o2 + m[1, 3]
+                    co[r, 2] = m[2, 0] * o0 + m[2, 1] * o1 + m[2, 2] * o2 + m[2, 3]
+                    x = m[0, 0] * d0 + m[0, 1] * d1 + m[0, 2] * d2
+                    y = m[1, 0] * d0 + m[1, 1] * d1 + m[1, 2] * d2
+                    z = m[2, 0] * d0 + m[2, 1] * d1 + m[2, 2] * d2
+                    cd[r, 0], cd[r, 1], cd[r, 2] = x, y, z
+                    i0, i1, i2 = _inv(x), _inv(y), _inv(z)
+                    ci[r, 0], ci[r, 1], ci[r, 2] = i0, i1, i2
+                    cc[r] = abs(i0) == np.inf or abs(i1) == np.inf or abs(i2) == np.inf
+                _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, co, cd, ci, cc, cf, cl, t_min, th,
+                             below, c, best_t, best_c, best_g, sn, sf, sl, origin)
+            continue
+        nearer_right = _right_first(t_box, first, wo, wi, wc, f, t_min)
+        x, y = (first, first + 1) if nearer_right else (first + 1, first)
+        tn[sp + 1], tf[sp + 1], tl[sp + 1] = x, f, l
+        tn[sp + 2], tf[sp + 2], tl[sp + 2] = y, f, l
+        sp += 2
 
 
 @njit(cache=True, parallel=True)
 def _trace_all(scene, top, O, D, t_min, t_hi, any_hit, depth, widest, origin, out_t, out_c, out_p):
-    """Every ray (m,), in blocks of :data:`RAY_BLOCK` across the threads."""
-    m = len(O)
-    blocks = (m + RAY_BLOCK - 1) // RAY_BLOCK
-    for b in prange(blocks):
-        stacks = np.empty((2, depth), np.int64)
-        order = np.empty((2, widest))
-        best = np.empty(3)
-        for r in range(b * RAY_BLOCK, min(m, (b + 1) * RAY_BLOCK)):
-            best[0], best[1], best[2] = np.inf, -1.0, -1.0
-            _trace_one(scene, top, O[r], D[r], t_min, t_hi[r], any_hit, best, stacks, order, origin)
-            out_t[r], out_c[r], out_p[r] = best[0], int(best[1]), int(best[2])
+    """Every ray (m,), in blocks of :data:`RAY_BLOCK` across the threads: closest hits a
+    packet a block, any hits a ray at a time."""
+    nodes, slot_box, prims, slot_kind, R, T = scene
+    t_box, t_nodes, t_prims, copy_box, copy_plant, inverse, roots = top
+    m, P = len(O), RAY_BLOCK
+    for b in prange((m + P - 1) // P):
+        a = b * P
+        n = min(m, a + P) - a
+        tn, tf, tl = np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty(depth, np.int64)
+        if any_hit:
+            order_t, order_c = np.empty(widest), np.empty(widest, np.int64)
+            for r in range(a, a + n):
+                out_t[r], out_c[r], out_p[r] = _trace_one(scene, top, O[r, 0], O[r, 1], O[r, 2], D[r, 0], D[r, 1],
+                                                          D[r, 2], t_min, t_hi[r], True, tn, tf, order_t, order_c,
+                                                          origin)
+            continue
+        sn, sf, sl = np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty(depth, np.int64)
+        wi, co, cd, ci = np.empty((P, 3)), np.empty((P, 3)), np.empty((P, 3)), np.empty((P, 3))
+        wc, cc = np.empty(P, np.bool_), np.empty(P, np.bool_)
+        below, best_t = np.empty(P), np.empty(P)
+        best_c, best_g = np.empty(P, np.int64), np.empty(P, np.int64)
+        _trace_packet(nodes, slot_box, prims, slot_kind, R, T, t_box, t_nodes, t_prims, copy_box, copy_plant,
+                      inverse, roots, O, D, a, n, t_min, t_hi, wi, wc, below, co, cd, ci, cc, best_t, best_c, best_g,
+                      tn, tf, tl, sn, sf, sl, origin)
+        out_t[a:a + n], out_c[a:a + n], out_p[a:a + n] = best_t[:n], best_c[:n], best_g[:n]
 
 
 @njit(cache=True, parallel=True)

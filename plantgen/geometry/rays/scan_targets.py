@@ -159,9 +159,11 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
         hung = polygon_segment >= 0
         leaf_plant[hung] = segment_plant[polygon_segment[hung]]
     lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
-    if len(triangles):
-        t_lo, t_hi = triangles.min(axis=1), triangles.max(axis=1)
-        pad = 1e-9 * np.maximum(np.abs(t_lo).max(axis=1), np.abs(t_hi).max(axis=1))[:, None] + 1e-12
+    if len(triangles):               # min / max of the 3 corners pairwise: exact, and fast where axis=1 is not
+        v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+        t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
+        big = np.maximum(np.abs(t_lo), np.abs(t_hi))
+        pad = 1e-9 * np.maximum(np.maximum(big[:, 0], big[:, 1]), big[:, 2])[:, None] + 1e-12
         lo, hi = np.concatenate([lo, t_lo - pad]), np.concatenate([hi, t_hi + pad])
     base = skeleton.start[0].copy() if n else (triangles.reshape(-1, 3).min(axis=0) if len(triangles) else np.zeros(3))
     return ScanTarget(frusta, triangles, triangle_polygon, lo, hi, topology.segment_order.astype(np.int64)
