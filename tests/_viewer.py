@@ -81,8 +81,11 @@ class Viewer:
     def __init__(self, display: str, args, cwd: Path, title: str):
         env = {**os.environ, "DISPLAY": display, "PYTHONUNBUFFERED": "1"}
         self.display, self.title = display, title
+        # Ctrl-C as a terminal sends it: a suite started in the background by a shell without job
+        # control ignores SIGINT, which the viewer would inherit (and Python then keeps ignoring)
         self.proc = subprocess.Popen([sys.executable, "-m", "plantgen", "view", *map(str, args)], cwd=cwd, env=env,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         self.lines: queue.Queue = queue.Queue()
         self.out, self.err = [], []
         for stream, keep, tag in ((self.proc.stdout, self.out, "out"), (self.proc.stderr, self.err, "err")):

@@ -52,6 +52,9 @@ class Entry:
     slow: bool = False
 
 
+#: The looks bench's variants on this round's defaults (docs/benchmarks/looks.md).
+LOOKS_ROUND_VARIANTS = ("default;--aa none;--no-tone --no-translucency --ground none --aa none;--shadows;"
+                        "--shadows --sky-light --sky-samples 4")
 #: Shipped grammars with leaves, rendered beside Table 1's models.
 LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles", "pine_sprays")
 #: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
@@ -123,6 +126,11 @@ def entries() -> list[Entry]:
     out.append(Entry("looks", ("python", "-m", "plantgen.benchmarks.looks", "--size", "256x192", "--reference-samples",
                                "256", "--samples", "1,4,16,64", "--out", "{out}/bench/llvmpipe"),
                      ("bench/llvmpipe/looks.png",), slow=True))
+    # the same on this round's defaults, with the anti-aliasing and each effect as a variant
+    out.append(Entry("looks_round", (
+        "python", "-m", "plantgen.benchmarks.looks", "--size", "256x192", "--reference-samples", "256", "--samples",
+        "1,4,16,64", "--variants", LOOKS_ROUND_VARIANTS, "--name", "looks_round", "--out", "{out}/bench/llvmpipe"),
+        ("bench/llvmpipe/looks_round.png",), slow=True))
     return out
 
 

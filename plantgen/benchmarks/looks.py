@@ -22,8 +22,8 @@ a re-run renders only what changed. Run::
         --variants "default;--effects shadows;--effects relief,shadows"
 
 It writes ``looks.md`` (the table), ``looks.json`` (every number) and ``looks.png`` (per
-scene: each variant beside the reference). It needs Blender (``blender`` on the PATH, or
-``--blender``) and the ``bench`` extra (flip-evaluator).
+scene: each variant beside the reference); ``--name`` sets the files' name. It needs
+Blender (``blender`` on the PATH, or ``--blender``) and the ``bench`` extra (flip-evaluator).
 """
 
 from __future__ import annotations
@@ -547,6 +547,7 @@ def parse_arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help=f"Cycles' images (default {DEFAULT_CACHE})")
     parser.add_argument("--blender", default=os.environ.get("BLENDER", "blender"), help="the Blender executable")
     parser.add_argument("--out", type=Path, default=Path("."), help="folder of looks.md, looks.json, looks.png")
+    parser.add_argument("--name", default="looks", help="the files' name before .md, .json, .png (default looks)")
     return parser.parse_args(argv)
 
 
@@ -566,9 +567,9 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "looks.json").write_text(results_json(results, settings))
-    Image.fromarray(looks_picture(results, settings)).save(args.out / "looks.png")
-    return report(looks_table(results, settings), args.out / "looks.md")
+    (args.out / f"{args.name}.json").write_text(results_json(results, settings))
+    Image.fromarray(looks_picture(results, settings)).save(args.out / f"{args.name}.png")
+    return report(looks_table(results, settings), args.out / f"{args.name}.md")
 
 
 if __name__ == "__main__":
