@@ -204,6 +204,14 @@ def matte(names):
                 lambert(slot.material.node_tree)
 
 
+def feed(tree, source, target):
+    """``target`` takes what feeds ``source``: the link into it, else its value."""
+    if source.is_linked:
+        tree.links.new(source.links[0].from_socket, target)
+    else:
+        target.default_value = source.default_value
+
+
 def lambert(tree):
     """``tree``'s Principled BSDF replaced at its output by Diffuse over Transparent by alpha."""
     output = next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"), None)
@@ -211,17 +219,9 @@ def lambert(tree):
     if output is None or bsdf is None:
         return
     diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    colour = bsdf.inputs["Base Color"]
-    if colour.is_linked:
-        tree.links.new(colour.links[0].from_socket, diffuse.inputs["Color"])
-    else:
-        diffuse.inputs["Color"].default_value = colour.default_value
+    feed(tree, bsdf.inputs["Base Color"], diffuse.inputs["Color"])
     mix = tree.nodes.new("ShaderNodeMixShader")
-    alpha = bsdf.inputs["Alpha"]
-    if alpha.is_linked:
-        tree.links.new(alpha.links[0].from_socket, mix.inputs["Fac"])
-    else:
-        mix.inputs["Fac"].default_value = alpha.default_value
+    feed(tree, bsdf.inputs["Alpha"], mix.inputs["Fac"])
     tree.links.new(tree.nodes.new("ShaderNodeBsdfTransparent").outputs[0], mix.inputs[1])
     tree.links.new(diffuse.outputs[0], mix.inputs[2])
     tree.links.new(mix.outputs[0], output.inputs["Surface"])
