@@ -50,7 +50,7 @@ def test_the_peers_trace_what_plantgen_traces(tiny, gl_ctx, tmp_path):
     try:
         mitsuba = peers.load_mitsuba()
     except PlantgenError as exc:               # installed, but its LLVM backend finds no libLLVM here
-        pytest.skip(str(exc))
+        pytest.skip(f"Mitsuba is installed but its LLVM backend cannot start here: {exc}")
     result = peers.measure_scene(tiny, mitsuba, size=(48, 36), scan_step=2.0, rounds=1, say=lambda *_: None)
     rows = result["rows"]
     assert list(rows) == [peers.NUMBA, peers.GLSL, peers.CURVES, peers.TRIANGLES]
