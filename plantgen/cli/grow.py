@@ -72,11 +72,11 @@ def grow(input: Path, output: Path | None, seed, iterations, max_modules, define
         result = grow_file(input, seed=seed, iterations=iterations, max_modules=max_modules, progress=bars,
                            limits=limits_from(limit_values), allow_paths=allow_paths, defines=define_values(defines),
                            jobs=jobs)
+    skel = result.skeleton
+    if len(skel) == 0 and model_leaves(result) is None:     # refused in one line, before any warning
+        raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")
     for line in result.warnings:     # never silenced by --quiet: a symbol not drawn is news
         click.echo(line, err=True)
-    skel = result.skeleton
-    if len(skel) == 0 and model_leaves(result) is None:
-        raise PlantgenError(f"{input}: the grammar draws no segments (no F in the derived string)")
     written = _write_outputs(skel, output, formats, up)
     leaves = result.polygons
     if leaves is not None and len(leaves):       # like SWC, the skeleton files hold no leaves
