@@ -98,3 +98,19 @@ def test_no_gpu_device_node_scans_on_the_cpu_without_a_gl_context(tmp_path, monk
     assert code == 0, err
     assert asked == [True] and "float64" in out         # no context: the float64 CPU walk all the same
 
+
+
+def test_a_refused_scan_does_not_wait_for_the_compile(tmp_path, monkeypatch):
+    """The path is chosen without compiling the CPU tracer (numba's cold compile takes tens
+    of seconds on a fresh machine): a scan refused by its ray budget exits 2 without a
+    compile, and the compile comes with the first trace of a scan that goes ahead."""
+    import plantgen.cli.scan as scan_cli
+    from plantgen.geometry.rays import native_trace
+
+    compiles = []
+    monkeypatch.setattr(native_trace, "warm_up", lambda: compiles.append(True) or 0.0)
+    monkeypatch.setattr(native_trace, "_STATE", {"failed": None, "compile_s": None, "noticed": False})
+    monkeypatch.setattr(scan_cli, "gpu_device_nodes", list)
+    code, _, err = run_cli("scan", "saguaro", "-o", tmp_path / "s.ply", "--angular-step", "0.001")
+    assert code == 2 and "scan_rays" in err
+    assert compiles == [] and not (tmp_path / "s.ply").exists()

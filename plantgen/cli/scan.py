@@ -39,9 +39,9 @@ def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
     says so)."""
     if settings.precision == "float64" and chosen:
         return settings, None
-    from ..geometry.rays.native_trace import available
+    from ..geometry.rays.native_trace import wanted
 
-    if not chosen and not gpu_device_nodes() and available():   # no GPU here: EGL could only give llvmpipe
+    if not chosen and not gpu_device_nodes() and wanted():   # no GPU here: EGL could only give llvmpipe
         return settings, None
     from ..gl.context import GLContextError, gl_context, hardware_gl
     from ..gl.trace import trace_target
@@ -52,7 +52,7 @@ def _gpu_finder(settings: ScanSettings, quiet: bool, chosen: bool):
         if chosen and not quiet:
             click.echo(f"no GPU traversal ({exc}); float32 on the CPU", err=True)
         return settings, None
-    if not chosen and not hardware_gl() and available():      # no GPU: the compiled float64 walk is faster
+    if not chosen and not hardware_gl() and wanted():      # no GPU: the compiled float64 walk is faster
         return settings, None
     return replace(settings, precision="float32"), lambda target, origins, dirs: trace_target(target, origins, dirs)
 

@@ -603,6 +603,14 @@ def _notice(why: str) -> None:
               file=sys.stderr)
 
 
+def wanted() -> bool:
+    """Whether the compiled traversal is meant to run here, known without compiling it:
+    numba imports and ``PLANTGEN_CPU_TRACER`` is not ``numpy``. A command chooses its path
+    with this before any budget check, so that a refusal never waits on the compile; the
+    compile (or its failure, and then the numpy traversal) comes with the first trace."""
+    return os.environ.get("PLANTGEN_CPU_TRACER", "").lower() != "numpy" and _NUMBA_ERROR is None
+
+
 def available() -> bool:
     """Whether the compiled traversal runs here: numba imports, its compile succeeded
     (tried on first call, :func:`warm_up`) and ``PLANTGEN_CPU_TRACER`` is not ``numpy``.
