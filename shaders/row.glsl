@@ -170,10 +170,30 @@ bool row_hit(Frustum f, vec3 o, vec3 d, float t_min, float t_max, float distance
 
 #if defined FRAGMENT_SHADER && !defined SHADOW_PASS
 #include "shading.glsl"
+#if defined RELIEF
+// The relief's tilt at p, whose texture coordinates are uv: the height map's gradient in
+// the (u, v) frame (central differences a texel apart) times the relief's depth there, a
+// vector along the surface; a normal minus it leans as the relief does.
+vec3 relief_tilt(Frustum f, vec3 p, HeightMap heights, vec2 uv) {
+    vec2 du = vec2(1.0 / (heights.size.x * heights.repeat.x), 0.0);
+    vec2 dv = vec2(0.0, 1.0 / (heights.size.y * heights.repeat.y));
+    float dh_du = (height_in(heights, uv + du) - height_in(heights, uv - du)) / (2.0 * du.x);
+    float dh_dv = (height_in(heights, uv + dv) - height_in(heights, uv - dv)) / (2.0 * dv.y);
+    float y, radial; vec3 e_r, g; float s_lo, s_hi;
+    frustum_local(f, p, y, radial, e_r);
+    generator_params(f, p, e_r, g, s_lo, s_hi);
+    vec3 tangent_u = cross(f.axis, e_r);
+    float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
+    float len_v = max((s_hi - s_lo) * length(g) * f.v_slots, TOL_TANGENT_FLOOR_F32);  // |dP/dv_tex|
+    float depth = f.shell * relief_scale(f, y);
+    return depth * (dh_du / len_u * tangent_u + dh_dv / len_v * normalize(g));
+}
+#endif
+
 // The surface of row f at its hit p (the ray's direction d, unit; all in f's frame): the
 // shading normal (interpolated (8), tilted by the relief, a cap's plane; turned to face
-// the eye), the receiver plane's normal for shadows (the true tangent plane, or the
-// relief's), and the albedo of its texture.
+// the eye), the receiver plane's normal for shadows (the surface's own tangent plane: the
+// cone's, or the relief's), and the albedo of its texture.
 void row_surface(Frustum f, vec3 p, vec3 d, int face, bool cap, out vec3 normal, out vec3 receiver_normal,
                  out vec3 albedo) {
     // Shading: u, v and the interpolated normal (6)-(8), texture colour, one light.
@@ -183,38 +203,30 @@ void row_surface(Frustum f, vec3 p, vec3 d, int face, bool cap, out vec3 normal,
     vec2 uv = frustum_uv_at(f, p, v);
     HeightMap heights = height_map(f.material);
     float texel = height_in(heights, uv);
-#if defined RELIEF
-    if (f.shell > 0.0 && !cap) {
-        // Tilt the normal by the height map's gradient in the (u, v) frame.
-        vec2 du = vec2(1.0 / (heights.size.x * heights.repeat.x), 0.0);
-        vec2 dv = vec2(0.0, 1.0 / (heights.size.y * heights.repeat.y));
-        float dh_du = (height_in(heights, uv + du) - height_in(heights, uv - du)) / (2.0 * du.x);
-        float dh_dv = (height_in(heights, uv + dv) - height_in(heights, uv - dv)) / (2.0 * dv.y);
-        float y, radial; vec3 e_r, g; float s_lo, s_hi;
-        frustum_local(f, p, y, radial, e_r);
-        generator_params(f, p, e_r, g, s_lo, s_hi);
-        vec3 tangent_u = cross(f.axis, e_r);
-        float len_u = TWO_PI * max(radial, TOL_TANGENT_FLOOR_F32);            // |dP/du|
-        float len_v = max((s_hi - s_lo) * length(g) * f.v_slots, TOL_TANGENT_FLOOR_F32);  // |dP/dv_tex|
-        float depth = f.shell * relief_scale(f, y);
-        normal = normalize(normal - depth * (dh_du / len_u * tangent_u
-                                             + dh_dv / len_v * normalize(g)));
-    }
-#endif
     albedo = material_albedo(f.material, texel);
     // the cone's own normal e_r - k*axis: what (8) is bent towards where it turns away from
-    // the eye, and (below) the receiver plane of the shadow test
+    // the eye, and the receiver plane of the shadow test
     vec3 true_normal = normal;
+    float y, radial; vec3 e_r;
     if (!cap) {
-        float y_t, radial_t; vec3 e_r_t;
-        frustum_local(f, p, y_t, radial_t, e_r_t);
-        true_normal = normalize(e_r_t - frustum_slope(f) * f.axis);
-        normal = facing_normal(normal, true_normal, -d);
+        frustum_local(f, p, y, radial, e_r);
+        true_normal = normalize(e_r - frustum_slope(f) * f.axis);
     }
     receiver_normal = true_normal;
 #if defined RELIEF
-    if (f.shell > 0.0 && !cap) receiver_normal = normal;
+    if (f.shell > 0.0 && !cap) {
+        vec3 tilt = relief_tilt(f, p, heights, uv);
+        normal = normalize(normal - tilt);
+        // The receiver plane is the relief surface's own: the tilt applied to the cone the
+        // relief grows at this height (its slope grows with the relief, which follows the
+        // radius), not to (8), which on a steep cone is nearly radial, tens of degrees off
+        // the surface: a plane that far off shadows the relief with itself.
+        float big = max(f.r1, f.r2);
+        float slope = frustum_slope(f) * (1.0 + (big > 0.0 ? f.shell * texel / big : 0.0));
+        receiver_normal = normalize(normalize(e_r - slope * f.axis) - tilt);
+    }
 #endif
+    if (!cap) normal = facing_normal(normal, true_normal, -d);
 }
 #endif
 
