@@ -1,0 +1,94 @@
+"""The compiled cull of a stand's leaves (:mod:`plantgen.environment.together`): which of
+many boxes (clusters of leaf triangles) any of a batch of rays may meet, by a slab test
+no tighter than the compiled walk's (:mod:`plantgen.geometry.rays.native_trace`), so that
+a triangle inside a box no ray meets is one no ray's box test reaches, and leaving it out
+of a target changes no ray's any hit. Compiled and cached as the walk is; where the walk
+does not run, every box is met."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .native_trace import KERNEL_LOCK, available, njit, prange
+
+__all__ = ["boxes_met"]
+
+
+@njit(cache=True, inline="always")
+def _inv(d):
+    return 1.0 / d if d != 0 else (np.inf if not np.signbit(d) else -np.inf)
+
+
+@njit(cache=True, inline="always")
+def _cull_axis(lo, hi, o, i, near, far):
+    """(near, far) narrowed by one axis of a box; an axis whose product is NaN (a ray in
+    a face plane, parallel to it) narrows nothing (looser than the walk's slab, never
+    tighter)."""
+    a, b = (lo - o) * i, (hi - o) * i
+    if a != a or b != b:
+        return near, far
+    return max(near, min(a, b)), min(far, max(a, b))
+
+
+@njit(cache=True, inline="always")
+def _cull_meets(box, n, ox, oy, oz, ix, iy, iz, t_min):
+    """Whether the ray may meet box ``n`` of ``box`` (k, 6) beyond ``t_min``: true
+    wherever the walk's slab test of any box inside it passes."""
+    near, far = _cull_axis(box[n, 0], box[n, 3], ox, ix, -np.inf, np.inf)
+    near, far = _cull_axis(box[n, 1], box[n, 4], oy, iy, near, far)
+    near, far = _cull_axis(box[n, 2], box[n, 5], oz, iz, near, far)
+    return max(near, t_min) <= far and far > t_min
+
+
+@njit(cache=True, parallel=True)
+def _boxes_met(box, group, skip, O, D, t_min, met):
+    """``met`` (c,): whether any ray may meet each box, the boxes taken group by group
+    (a plant's leaves), a group's box first; group ``skip`` is left out."""
+    groups = len(group) - 1
+    gbox = np.empty((groups, 6))
+    for g in range(groups):
+        for a in range(3):
+            gbox[g, a], gbox[g, 3 + a] = np.inf, -np.inf
+            for k in range(group[g], group[g + 1]):
+                gbox[g, a], gbox[g, 3 + a] = min(gbox[g, a], box[k, a]), max(gbox[g, 3 + a], box[k, 3 + a])
+    for g in prange(groups):
+        left = 0 if g == skip else group[g + 1] - group[g]
+        for r in range(len(O)):
+            if left == 0:
+                break
+            ox, oy, oz = O[r, 0], O[r, 1], O[r, 2]
+            ix, iy, iz = _inv(D[r, 0]), _inv(D[r, 1]), _inv(D[r, 2])
+            if not _cull_meets(gbox, g, ox, oy, oz, ix, iy, iz, t_min):
+                continue
+            for k in range(group[g], group[g + 1]):
+                if not met[k] and _cull_meets(box, k, ox, oy, oz, ix, iy, iz, t_min):
+                    met[k] = True
+                    left -= 1
+
+
+def _rows3(a) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    return a if a.flags.writeable else a.copy()
+
+
+def boxes_met(lo, hi, group, origins, dirs, *, skip: int = -1, t_min: float = 0.0) -> np.ndarray:
+    """(c,) bool: the boxes (``lo``, ``hi``: (c, 3) each) that a ray (``origins``, ``dirs``
+    (m, 3)) may meet beyond ``t_min``, by a slab test no tighter than the compiled walk's:
+    wherever a ray passes the walk's test of a box inside one, it meets that one.
+    ``group`` ((g + 1,) offsets) gathers the boxes (a plant's leaves), tested a group's
+    box first; group ``skip`` is left out (all False). True for all the others where the
+    compiled walk does not run."""
+    group = np.ascontiguousarray(group, np.int64)
+    met = np.zeros(len(lo), np.bool_)
+    O, D = _rows3(origins), _rows3(dirs)
+    if not len(O):
+        return met
+    if not available():
+        met[:] = True
+        if 0 <= skip < len(group) - 1:
+            met[group[skip]:group[skip + 1]] = False
+        return met
+    box = np.ascontiguousarray(np.concatenate([np.reshape(lo, (-1, 3)), np.reshape(hi, (-1, 3))], axis=1), np.float64)
+    with KERNEL_LOCK:
+        _boxes_met(box, group, int(skip), O, D, float(t_min), met)
+    return met
