@@ -28,7 +28,7 @@ from ..lsystem.turtle import interpret_plant
 from . import environment_for
 from .light import Light
 
-__all__ = ["CLUSTER", "Neighbours", "StandLeaves", "TogetherPlant", "grow_together"]
+__all__ = ["BLOCK", "CLUSTER", "Neighbours", "StandLeaves", "TogetherPlant", "grow_together"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,16 +41,18 @@ class TogetherPlant:
     matrix: np.ndarray
 
 
-#: Leaf triangles a cluster of a plant's leaves holds: the light culls the other plants'
-#: leaves a cluster at a time (:meth:`StandLeaves.met`).
-CLUSTER = 8
+#: Leaf triangles a cluster of a plant's leaves holds, and clusters a block: the light
+#: culls the other plants' leaves a cluster at a time, a block's box first
+#: (:meth:`StandLeaves.met`).
+CLUSTER, BLOCK = 2, 16
 
 
 class _Placed(NamedTuple):
     """A plant's drawing placed in the world: its skeleton, its leaves' vertices and
     triangles (as :meth:`Polygons.transformed` moves them), their polygons and segments,
     and its triangles in clusters (Morton order of their centres, :data:`CLUSTER` a
-    cluster): ``order``, each cluster's first in it and its box (lo, hi)."""
+    cluster): ``order``, each cluster's first in it and its box (lo, hi), and each block's
+    first cluster (:data:`BLOCK` a block)."""
 
     skeleton: Skeleton
     vertices: np.ndarray
@@ -61,6 +63,7 @@ class _Placed(NamedTuple):
     first: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
+    block: np.ndarray
 
 
 def _affine(points: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -88,8 +91,10 @@ def _placed(skeleton: Skeleton, polygons: Polygons, m: np.ndarray) -> _Placed:
         c = corners[order]
         lo = np.minimum.reduceat(np.minimum(np.minimum(c[:, 0], c[:, 1]), c[:, 2]), first[:-1], axis=0)
         hi = np.maximum.reduceat(np.maximum(np.maximum(c[:, 0], c[:, 1]), c[:, 2]), first[:-1], axis=0)
+    c = len(first) - 1
     return _Placed(skeleton.transformed(m), vertices, triangles, np.asarray(polygons.polygon, np.int64),
-                   np.asarray(polygons.segment, np.int64), order.astype(np.int64), first, lo, hi)
+                   np.asarray(polygons.segment, np.int64), order.astype(np.int64), first, lo, hi,
+                   np.r_[np.arange(0, c, BLOCK), c].astype(np.int64))
 
 
 def _moved_boxes(lo: np.ndarray, hi: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -139,7 +144,7 @@ class StandLeaves:
 
         s = self.world.stand()
         lo, hi = _moved_boxes(s.lo, s.hi, self.back)
-        met = boxes_met(lo, hi, s.group, origins, dirs, skip=self.i)
+        met = boxes_met(lo, hi, s.block, s.group, origins, dirs, skip=self.i)
         keep = np.flatnonzero(met[s.cluster])
         corners, at = np.unique(s.triangles[keep], return_inverse=True)
         vertices = _affine(s.vertices[corners], self.back)
@@ -152,8 +157,8 @@ class _Stand(NamedTuple):
     """Every plant's placed leaves joined (plant by plant), their clusters numbered across
     all: vertices, triangles (into them), each triangle's polygon, each polygon's segment
     (among the skeletons joined), the clusters' boxes (lo, hi), each triangle's cluster,
-    each plant's first cluster (``group``), and each plant's first polygon, segment and
-    triangle."""
+    each block's first cluster (``block``), each plant's first block (``group``), and
+    each plant's first polygon, segment and triangle."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -162,6 +167,7 @@ class _Stand(NamedTuple):
     lo: np.ndarray
     hi: np.ndarray
     cluster: np.ndarray
+    block: np.ndarray
     group: np.ndarray
     polygon_first: np.ndarray
     segment_first: np.ndarray
@@ -174,10 +180,13 @@ def _stand(placed: list[_Placed]) -> _Stand:
     triangle_first = first(len(p.triangles) for p in placed)
     polygon_first = first(len(p.segment) for p in placed)
     segment_first = first(len(p.skeleton) for p in placed)
-    group = first(len(p.first) - 1 for p in placed)
+    clusters = first(len(p.first) - 1 for p in placed)
+    block = np.r_[np.concatenate([p.block[:-1] + k for p, k in zip(placed, clusters, strict=False)]),
+                  clusters[-1]].astype(np.int64)
+    group = first(len(p.block) - 1 for p in placed)
     cluster = np.empty(int(triangle_first[-1]), np.int64)
     for j, p in enumerate(placed):
-        where = np.repeat(np.arange(len(p.first) - 1), np.diff(p.first)) + group[j]
+        where = np.repeat(np.arange(len(p.first) - 1), np.diff(p.first)) + clusters[j]
         cluster[triangle_first[j] + p.order] = where
     cat = lambda arrays, shape: np.concatenate(list(arrays)).reshape(shape)  # noqa: E731
     return _Stand(cat((p.vertices for p in placed), (-1, 3)),
@@ -186,7 +195,7 @@ def _stand(placed: list[_Placed]) -> _Stand:
                   cat((np.where(p.segment >= 0, p.segment + o, -1) for p, o in zip(placed, segment_first,
                                                                                    strict=False)), (-1,)),
                   cat((p.lo for p in placed), (-1, 3)), cat((p.hi for p in placed), (-1, 3)),
-                  cluster, group, polygon_first, segment_first, triangle_first)
+                  cluster, block, group, polygon_first, segment_first, triangle_first)
 
 
 class Neighbours(NamedTuple):

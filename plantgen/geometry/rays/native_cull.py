@@ -40,19 +40,30 @@ def _cull_meets(box, n, ox, oy, oz, ix, iy, iz, t_min):
     return max(near, t_min) <= far and far > t_min
 
 
-@njit(cache=True, parallel=True)
-def _boxes_met(box, group, skip, O, D, t_min, met):
-    """``met`` (c,): whether any ray may meet each box, the boxes taken group by group
-    (a plant's leaves), a group's box first; group ``skip`` is left out."""
-    groups = len(group) - 1
-    gbox = np.empty((groups, 6))
-    for g in range(groups):
+@njit(cache=True)
+def _unions(box, first):
+    """(k, 6) the box around each run ``box[first[j]:first[j + 1]]`` (k + 1 offsets)."""
+    out = np.empty((len(first) - 1, 6))
+    for j in range(len(first) - 1):
         for a in range(3):
-            gbox[g, a], gbox[g, 3 + a] = np.inf, -np.inf
-            for k in range(group[g], group[g + 1]):
-                gbox[g, a], gbox[g, 3 + a] = min(gbox[g, a], box[k, a]), max(gbox[g, 3 + a], box[k, 3 + a])
-    for g in prange(groups):
-        left = 0 if g == skip else group[g + 1] - group[g]
+            lo, hi = np.inf, -np.inf
+            for n in range(first[j], first[j + 1]):
+                lo, hi = min(lo, box[n, a]), max(hi, box[n, 3 + a])
+            out[j, a], out[j, 3 + a] = lo, hi
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _boxes_met(box, block, group, skip, O, D, t_min, met):
+    """``met`` (c,): whether any ray may meet each box; the boxes taken group by group (a
+    plant's leaves: ``group`` offsets into the blocks), a group's box first, then block
+    by block (``block`` offsets into the boxes), a block's box first; group ``skip`` is
+    left out. A block or group all met is not tested again."""
+    bbox = _unions(box, block)
+    gbox = _unions(bbox, group)
+    block_left = block[1:] - block[:-1]
+    for g in prange(len(group) - 1):
+        left = 0 if g == skip else block[group[g + 1]] - block[group[g]]
         for r in range(len(O)):
             if left == 0:
                 break
@@ -60,10 +71,14 @@ def _boxes_met(box, group, skip, O, D, t_min, met):
             ix, iy, iz = _inv(D[r, 0]), _inv(D[r, 1]), _inv(D[r, 2])
             if not _cull_meets(gbox, g, ox, oy, oz, ix, iy, iz, t_min):
                 continue
-            for k in range(group[g], group[g + 1]):
-                if not met[k] and _cull_meets(box, k, ox, oy, oz, ix, iy, iz, t_min):
-                    met[k] = True
-                    left -= 1
+            for b in range(group[g], group[g + 1]):
+                if block_left[b] == 0 or not _cull_meets(bbox, b, ox, oy, oz, ix, iy, iz, t_min):
+                    continue
+                for k in range(block[b], block[b + 1]):
+                    if not met[k] and _cull_meets(box, k, ox, oy, oz, ix, iy, iz, t_min):
+                        met[k] = True
+                        left -= 1
+                        block_left[b] -= 1
 
 
 def _rows3(a) -> np.ndarray:
@@ -71,13 +86,15 @@ def _rows3(a) -> np.ndarray:
     return a if a.flags.writeable else a.copy()
 
 
-def boxes_met(lo, hi, group, origins, dirs, *, skip: int = -1, t_min: float = 0.0) -> np.ndarray:
+def boxes_met(lo, hi, block, group, origins, dirs, *, skip: int = -1, t_min: float = 0.0) -> np.ndarray:
     """(c,) bool: the boxes (``lo``, ``hi``: (c, 3) each) that a ray (``origins``, ``dirs``
     (m, 3)) may meet beyond ``t_min``, by a slab test no tighter than the compiled walk's:
     wherever a ray passes the walk's test of a box inside one, it meets that one.
-    ``group`` ((g + 1,) offsets) gathers the boxes (a plant's leaves), tested a group's
-    box first; group ``skip`` is left out (all False). True for all the others where the
-    compiled walk does not run."""
+    ``block`` ((b + 1,) offsets) gathers the boxes into blocks and ``group`` ((g + 1,)
+    offsets) the blocks into groups (a plant's leaves), each tested by its box before
+    what it holds; group ``skip`` is left out (all False). True for all the others where
+    the compiled walk does not run."""
+    block = np.ascontiguousarray(block, np.int64)
     group = np.ascontiguousarray(group, np.int64)
     met = np.zeros(len(lo), np.bool_)
     O, D = _rows3(origins), _rows3(dirs)
@@ -86,9 +103,9 @@ def boxes_met(lo, hi, group, origins, dirs, *, skip: int = -1, t_min: float = 0.
     if not available():
         met[:] = True
         if 0 <= skip < len(group) - 1:
-            met[group[skip]:group[skip + 1]] = False
+            met[block[group[skip]]:block[group[skip + 1]]] = False
         return met
     box = np.ascontiguousarray(np.concatenate([np.reshape(lo, (-1, 3)), np.reshape(hi, (-1, 3))], axis=1), np.float64)
     with KERNEL_LOCK:
-        _boxes_met(box, group, int(skip), O, D, float(t_min), met)
+        _boxes_met(box, block, group, int(skip), O, D, float(t_min), met)
     return met
