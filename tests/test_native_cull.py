@@ -79,6 +79,36 @@ def test_the_cull_is_never_tighter_than_the_walks_slab_test():
     assert 0 < met_any < n * m
 
 
+def test_boxes_moved_by_a_matrix_hold_the_moved_triangles_padded_boxes():
+    """Clusters of triangles boxed in the world, culled in a plant's frame (``matrix``):
+    wherever the walk's slab test passes a triangle's padded box in the frame (its
+    vertices moved as :meth:`Polygons.transformed` moves them, boxed as the scan target
+    boxes them), the cull meets its cluster."""
+    rng = np.random.default_rng(3)
+    t = 600
+    world = rng.uniform(-8, 8, (t, 1, 3)) + rng.normal(scale=0.05, size=(t, 3, 3))   # small triangles
+    lo, hi = world.min(axis=1), world.max(axis=1)                                    # a cluster a triangle
+    angle = 0.7
+    m = np.eye(4)
+    m[:3, :3] = 1.3 * np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
+    m[:3, 3] = [3.1, 0.0, -1.7]
+    back = np.linalg.inv(m)
+    frame = (world.reshape(-1, 3) @ back[:3, :3].T + back[:3, 3]).reshape(t, 3, 3)
+    t_lo, t_hi = frame.min(axis=1), frame.max(axis=1)
+    pad = 1e-9 * np.maximum(np.abs(t_lo), np.abs(t_hi)).max(axis=1)[:, None] + 1e-12
+    t_lo, t_hi = t_lo - pad, t_hi + pad
+    origins, dirs = rng.uniform(-6, 6, (200, 3)), rng.normal(size=(200, 3))
+    met_any = 0
+    for r in range(len(origins)):
+        near, far = slab(t_lo, t_hi, np.broadcast_to(origins[r], (t, 3)), np.broadcast_to(1.0 / dirs[r], (t, 3)))
+        passes = (np.maximum(near, 0.0) <= far) & (far > 0.0)
+        met = native_cull.boxes_met(lo, hi, np.array([0, 8 * (t // 16), t]), np.array([0, 2]), origins[r:r + 1],
+                                    dirs[r:r + 1], matrix=back)
+        assert not (passes & ~met).any()
+        met_any += met.sum()
+    assert 0 < met_any < 0.5 * t * len(origins)
+
+
 def test_a_stand_grown_with_the_cull_derives_what_it_derives_with_every_leaf_kept(tmp_path, monkeypatch):
     scene = tmp_path / "stand.yaml"
     scene.write_text("name: stand\nseed: 5\ngrow: together\ninstances:\n  - grammar: self_organizing\n"
@@ -101,7 +131,7 @@ def test_a_stand_grown_with_the_cull_derives_what_it_derives_with_every_leaf_kep
     growing.grow_file(scene)
     assert together.CLUSTER >= 1 and sum(k for k, _ in kept) < 0.8 * sum(n for _, n in kept)   # leaves left out
 
-    def every(lo, hi, block, group, origins, dirs, *, skip=-1, t_min=0.0):
+    def every(lo, hi, block, group, origins, dirs, *, matrix=None, skip=-1, t_min=0.0):
         met = np.ones(len(lo), bool)
         met[block[group[skip]]:block[group[skip + 1]]] = False
         return met

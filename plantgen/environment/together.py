@@ -97,22 +97,6 @@ def _placed(skeleton: Skeleton, polygons: Polygons, m: np.ndarray) -> _Placed:
                    np.r_[np.arange(0, c, BLOCK), c].astype(np.int64))
 
 
-def _moved_boxes(lo: np.ndarray, hi: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Boxes (lo, hi) moved by the 4 x 4 ``m`` and grown, each holding the moved box and
-    a leaf triangle's padded box (:func:`~plantgen.geometry.rays.scan_targets.scan_target`'s)
-    around any triangle inside it however its vertices round on the way: a centre and a
-    half size through ``m`` and its absolute value, widened by 1e-7 of the largest
-    coordinate plus 1e-7 (the rounding and the pad are below 1e-9 of it)."""
-    m = np.asarray(m, dtype=np.float64)
-    centre = 0.5 * (lo + hi)
-    half = np.maximum(hi - centre, centre - lo)
-    c = centre @ m[:3, :3].T + m[:3, 3]
-    h = half @ np.abs(m[:3, :3]).T
-    grow = 1e-7 * ((np.abs(c) + h).max(axis=1, initial=0.0) + 1.0)
-    h = h + grow[:, None]
-    return c - h, c + h
-
-
 class StandLeaves:
     """The other plants' leaves as plant ``i`` sees them (:meth:`_World.others`): ``segment``
     (p,), each of their polygons' segment among the other skeletons joined in order (-1:
@@ -143,8 +127,7 @@ class StandLeaves:
         from ..geometry.rays.native_cull import boxes_met
 
         s = self.world.stand()
-        lo, hi = _moved_boxes(s.lo, s.hi, self.back)
-        met = boxes_met(lo, hi, s.block, s.group, origins, dirs, skip=self.i)
+        met = boxes_met(s.lo, s.hi, s.block, s.group, origins, dirs, matrix=self.back, skip=self.i)
         keep = np.flatnonzero(met[s.cluster])
         corners, at = np.unique(s.triangles[keep], return_inverse=True)
         vertices = _affine(s.vertices[corners], self.back)
