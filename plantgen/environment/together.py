@@ -7,7 +7,9 @@ is drawn and placed in the world, and only then is every plant's environment ask
 stand after the same step, whatever their order. A ``light`` part traces its sky against
 the other plants too (placed, in its own plant's frame), and takes the sky and the sun as
 the world's, whatever the plant's rotation. Plants without query modules are drawn each
-step all the same, for the others to see.
+step all the same, for the others to see. The others' branches are all traced; of their
+leaves, only the clusters some ray of the step may reach (:class:`StandLeaves`), which
+changes no ray's answer.
 """
 
 from __future__ import annotations
