@@ -17,7 +17,10 @@ hangs from away from the module, so a bud does not shade itself with its own bra
 (its leaves do shade it). The plant's branches (skinned into frusta) and leaf triangles go
 into one BVH (:mod:`plantgen.geometry.rays.bvh`), and every ray is traced by its float64
 traversal, any hit (compiled, :mod:`plantgen.geometry.rays.native_trace`, where numba
-runs); the obstacles' shapes by their own ray distance.
+runs); the obstacles' shapes by their own ray distance. Among plants grown together the
+target holds the others' branches and only those of their leaves that a ray of the step
+may reach (:class:`~plantgen.environment.together.StandLeaves`): the same answers, each
+ray's any hit the same, for a fraction of the leaves.
 
 The answer, 4 numbers (5 with ``allocation``): the light q, and the unit mean of the open
 directions weighted by their light, in the module's frame (H, L, U; the direction a shoot
@@ -107,13 +110,6 @@ class Light:
         k = len(state)
         self.limits.check("light_rays", k * self.rays_per_query, f"step {state.step}: light rays")
         drawing = state.drawing
-        skeleton, polygons = drawing.skeleton, drawing.polygons
-        others = self.neighbours() if self.neighbours is not None else None
-        if others is not None:         # after the plant's own segments: its indices stay as they are
-            skeleton = Skeleton.concatenate([skeleton, others[0]])
-            polygons = Polygons.concatenate([polygons, others[1]], [0, len(drawing.skeleton)])
-        target = scan_target(skeleton, polygons) if len(skeleton) or len(polygons) else None
-        traced = target is not None and len(target) > 0
         dirs = self.dirs if self.sun is None else np.concatenate([self.dirs, self.sun[None]])
         if self.rotation is not None:
             dirs = dirs @ self.rotation                  # the world's sky in the plant's frame
@@ -123,11 +119,13 @@ class Light:
         if state.segment is not None and len(drawing.skeleton):
             hung = state.segment >= 0
             radius[hung] = drawing.skeleton.r_end[state.segment[hung]]
+        target = self._target(state, dirs, radius)
+        traced = target is not None and len(target) > 0
         out = np.zeros((k, self.width))
         for lo in range(0, k, self.batch):
             p, r = state.position[lo:lo + self.batch], radius[lo:lo + self.batch]
             m = len(p)
-            origin = (p[:, None] + (self.offset + 1.5 * r)[:, None, None] * dirs[None]).reshape(-1, 3)
+            origin = self._origins(p, r, dirs)
             direction = np.broadcast_to(dirs[None], (m, len(dirs), 3)).reshape(-1, 3)
             open_ = np.ones(len(origin), dtype=bool)
             if traced:        # one frame origin for every batch: the hit test rounds the same, however batched
@@ -147,6 +145,44 @@ class Light:
         if self.allocation is not None:
             out[:, 4] = allocate(state, out[:, 0], *self.allocation)
         return out
+
+    def _origins(self, p: np.ndarray, r: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """(len(p) * len(dirs), 3) the rays' origins from the modules at ``p`` hanging from
+        segments of end radius ``r`` (row by row: the same numbers for any batch)."""
+        return (p[:, None] + (self.offset + 1.5 * r)[:, None, None] * dirs[None]).reshape(-1, 3)
+
+    def _target(self, state: QueryState, dirs: np.ndarray, radius: np.ndarray):
+        """The scan target the rays are traced against: the plant's drawing, and with
+        :attr:`neighbours` the other plants after its own segments (its indices stay as
+        they are): all their branches, and those clusters of their leaves that some ray
+        of this step may meet (:meth:`~plantgen.environment.together.StandLeaves.met`:
+        a leaf no ray's box test passes changes no any hit). None for nothing drawn."""
+        drawing = state.drawing
+        skeleton, polygons = drawing.skeleton, drawing.polygons
+        others = self.neighbours() if self.neighbours is not None else None
+        if others is not None:
+            skeleton = Skeleton.concatenate([skeleton, others.skeleton])
+            polygons = _with_leaves_met(polygons, len(drawing.skeleton), others.leaves,
+                                        self._origins(state.position, radius, dirs),
+                                        np.broadcast_to(dirs[None], (len(state), len(dirs), 3)).reshape(-1, 3))
+        return scan_target(skeleton, polygons) if len(skeleton) or len(polygons) else None
+
+
+def _with_leaves_met(own: Polygons, own_segments: int, leaves, origins: np.ndarray, dirs: np.ndarray) -> Polygons:
+    """``own`` polygons and, after them, the other plants' ``leaves``
+    (:class:`~plantgen.environment.together.StandLeaves`): all their polygons, numbered
+    as :meth:`Polygons.concatenate` numbers the joined sets, with the triangles some ray
+    (``origins``, ``dirs``) may meet (:meth:`~plantgen.environment.together.StandLeaves.met`;
+    materials and normals zero: the scan reads neither)."""
+    vertices, triangles, polygon = leaves.met(origins, dirs) if len(leaves) else \
+        (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
+    p = len(own) + len(leaves.segment)
+    return Polygons(np.concatenate([own.vertices, vertices]).reshape(-1, 3),
+                    np.concatenate([own.triangles, triangles + len(own.vertices)]).reshape(-1, 3).astype(np.int64),
+                    np.concatenate([own.polygon, polygon + len(own)]).astype(np.int64),
+                    np.zeros(p, np.int32), np.zeros((p, 3)),
+                    np.concatenate([own.segment, np.where(leaves.segment >= 0, leaves.segment + own_segments, -1)])
+                    .astype(np.int64))
 
 
 def allocate(state: QueryState, q: np.ndarray, alpha: float, lam: float) -> np.ndarray:

@@ -593,6 +593,8 @@ _STATE = {"failed": None, "compile_s": None, "noticed": False}
 #: One kernel call at a time: numba's default threading layer (workqueue) aborts the
 #: process where two Python threads (a Dask worker's, say) launch parallel kernels at once.
 _LOCK = threading.RLock()
+#: The same lock, for the compiled kernels of other modules (:mod:`plantgen.geometry.rays.native_cull`).
+KERNEL_LOCK = _LOCK
 
 
 def _notice(why: str) -> None:
