@@ -44,6 +44,10 @@ __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour"
 #: Largest difference, in units of the 8-bit height, a texture size may leave against the
 #: renderers' map (:func:`texture_size`): one step, 1/255.
 SIZE_TOLERANCE = 1.0
+#: Faces from which :func:`mesh_tangents` runs compiled where numba does
+#: (:mod:`~plantgen.geometry.meshes.native_tangents`): at about 0.7 µs of numpy a face,
+#: numba's import and its cache's load (about 0.4 s of CPU) pay from about half a million.
+COMPILED_FACES = 1 << 19
 
 
 @dataclass(frozen=True)
@@ -275,7 +279,13 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     along -v (glTF's "up in the image"). Vertices no textured face uses (caps) get any unit
     vector ⟂ their normal and w = 1. The per-face and per-vertex work runs a block of
     rows at a time (:func:`~plantgen.geometry.vec.by_rows`: the same numbers, without
-    full-size temporaries of every face's corners)."""
+    full-size temporaries of every face's corners). From :data:`COMPILED_FACES` faces on,
+    where numba runs, compiled kernels compute the same numbers bit for bit
+    (:mod:`~plantgen.geometry.meshes.native_tangents`)."""
+    if len(faces) >= COMPILED_FACES:
+        compiled = _compiled_tangents(vertices, normals, uv, faces)
+        if compiled is not None:
+            return compiled
     vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
 
     def weighted(face_rows):
@@ -287,6 +297,21 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
         return tuple(np.ascontiguousarray(d[:, k]) for d in (tu, tv) for k in range(3))
     sums = _vertex_sums(faces, by_rows(weighted, np.asarray(faces)), len(vertices))
     return by_rows(_vertex_tangents, sums[:, :3], sums[:, 3:], normals)
+
+
+def _compiled_tangents(vertices, normals, uv, faces) -> np.ndarray | None:
+    """:func:`mesh_tangents` by the compiled kernels; None where numba does not run."""
+    from .native_tangents import tangent_kernels  # numba's import is paid by large meshes only
+    kernels = tangent_kernels()
+    if kernels is None:
+        return None
+    face_sums, vertex_tangents = kernels
+
+    def exact(a):                 # float32 as it is (widened exactly in the kernels), else float64
+        return np.ascontiguousarray(a, dtype=np.float32 if np.asarray(a).dtype == np.float32 else np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    sums = face_sums(np.ascontiguousarray(vertices, dtype=np.float64), exact(uv), faces, len(vertices))
+    return vertex_tangents(sums, exact(normals))
 
 
 def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
