@@ -45,9 +45,10 @@ __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour"
 #: renderers' map (:func:`texture_size`): one step, 1/255.
 SIZE_TOLERANCE = 1.0
 #: Faces from which :func:`mesh_tangents` runs compiled where numba does
-#: (:mod:`~plantgen.geometry.meshes.native_tangents`): at about 0.7 µs of numpy a face,
-#: numba's import and its cache's load (about 0.4 s of CPU) pay from about half a million.
-COMPILED_FACES = 1 << 19
+#: (:mod:`~plantgen.geometry.meshes.native_tangents`): numpy takes about 0.8 µs of CPU a
+#: face and the kernels 0.15, so numba's import and its cache's load, about 0.45 s of CPU
+#: once a process, pay from about 700,000 faces; from a million they surely do.
+COMPILED_FACES = 1 << 20
 
 
 @dataclass(frozen=True)
