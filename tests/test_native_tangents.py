@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from plantgen.benchmarks.pipeline import synthetic_skeleton
-from plantgen.exporters import Plant, write_plants
+from plantgen.exporters import Plant, gltf, write_plants
 from plantgen.exporters.plants import material_parts
 from plantgen.exporters.textures import bake_textures
 from plantgen.geometry.meshes import native_tangents
@@ -104,3 +104,23 @@ def test_without_numba_numpy_computes_them():
               "fallback = tx.mesh_tangents(mesh.vertices, mesh.normals, mesh.uv, mesh.faces)\n"
               "print(native_tangents.tangent_kernels() is None, numpy.tobytes() == fallback.tobytes())\n")
     assert _run(code) == "True True"
+
+
+def test_an_export_whose_plants_reach_the_threshold_compiles_every_primitive(monkeypatch, tmp_path):
+    """numba's load is paid once an export: plants whose faces together reach
+    COMPILED_FACES have each primitive's tangents compiled, small ones included."""
+    skeleton = grow_file("saguaro").skeleton
+    mesh = tessellate(skin_skeleton(skeleton), 1)
+    textures = bake_textures([mesh])
+    asked = []
+    was = tx.mesh_tangents
+
+    def spy(*args, compiled=None):
+        asked.append(compiled)
+        return was(*args, compiled=compiled)
+    monkeypatch.setattr(gltf, "mesh_tangents", spy)
+    monkeypatch.setattr(gltf, "COMPILED_FACES", 3 * len(mesh.faces))
+    for copies in (2, 3):                 # under and at the threshold: numpy's choice, then compiled
+        plants = [Plant(f"saguaro {k}", skeleton, mesh, None) for k in range(copies)]
+        write_plants(plants, tmp_path / f"{copies}.glb", textures=textures)
+    assert asked == [None] * 2 + [True] * 3

@@ -86,7 +86,7 @@ from urllib.parse import quote
 import numpy as np
 
 from ..files import write_all_atomically, write_atomically
-from ..geometry.meshes.textures import mesh_tangents
+from ..geometry.meshes.textures import COMPILED_FACES, mesh_tangents
 from ..geometry.skeletons.frames import similarity_trs, turn_placements, up_rotation
 from ..images import png_bytes
 from .formats import ExportError
@@ -307,6 +307,7 @@ class _Document:
         self.card_textures: dict = {}
         self.card_sampler = 0
         self.impostors: set = set()
+        self.compiled_tangents = False      # every primitive's tangents compiled (:func:`_document`)
 
     def node(self, node: dict, root: bool = True) -> int:
         self.nodes.append(node)
@@ -336,7 +337,8 @@ class _Document:
                 material = self.material(mat_name, colour, part.leaf)
             primitives.append(_primitive(self.buffer, part, material, 0 if rig is None else rig.joints))
             if self.normal_mapped(mat_name, part.leaf):
-                tangents = mesh_tangents(part.vertices, part.normals, part.uv, part.faces)
+                tangents = mesh_tangents(part.vertices, part.normals, part.uv, part.faces,
+                                         compiled=True if self.compiled_tangents else None)
                 primitives[-1]["attributes"]["TANGENT"] = self.buffer.add(tangents, "VEC4", FLOAT, ARRAY_BUFFER)
         self.meshes.append({"name": plant.name, "primitives": primitives})
         return len(self.meshes) - 1
@@ -601,6 +603,10 @@ def _document(plants: list[Plant], *, up: str = "y", colours: Colours = None, in
     if instancing not in ("gpu", "nodes"):
         raise ValueError(f"instancing must be 'gpu' or 'nodes', got {instancing!r}")
     doc = _Document(up, colours, animation, textures, image_uris)
+    # numba's load is paid once an export: where the plants' faces together reach the
+    # threshold, every primitive's tangents are compiled (1,024 saguaros, say), not only a large one's
+    doc.compiled_tangents = textures is not None and sum(
+        len(plant.mesh.faces) for plant in plants if plant.mesh is not None) >= COMPILED_FACES
     for done, plant in enumerate(plants):
         sways = animation is not None and plant.sway is not None and plant.sway.moves
         rig = joint_rig(plant.skeleton, plant.mesh, plant.sway, plant.leaves, up, plant.name) if sways else None

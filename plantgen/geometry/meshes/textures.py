@@ -274,16 +274,17 @@ def parallax_map(baked: MaterialTextures) -> np.ndarray:
     return np.concatenate([baked.normal, baked.height[..., None]], axis=2)
 
 
-def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray,
+                  compiled: bool | None = None) -> np.ndarray:
     """(V, 4) float32 glTF tangents: xyz the unit direction of increasing u (the faces'
     ∂P/∂u summed by area, made ⟂ the vertex normal), w = ±1 so that cross(N, T)·w points
     along -v (glTF's "up in the image"). Vertices no textured face uses (caps) get any unit
     vector ⟂ their normal and w = 1. The per-face and per-vertex work runs a block of
     rows at a time (:func:`~plantgen.geometry.vec.by_rows`: the same numbers, without
-    full-size temporaries of every face's corners). From :data:`COMPILED_FACES` faces on,
-    where numba runs, compiled kernels compute the same numbers bit for bit
-    (:mod:`~plantgen.geometry.meshes.native_tangents`)."""
-    if len(faces) >= COMPILED_FACES:
+    full-size temporaries of every face's corners). ``compiled`` (None: from
+    :data:`COMPILED_FACES` faces on) where numba runs: compiled kernels compute the same
+    numbers bit for bit (:mod:`~plantgen.geometry.meshes.native_tangents`)."""
+    if len(faces) >= COMPILED_FACES if compiled is None else compiled:
         compiled = _compiled_tangents(vertices, normals, uv, faces)
         if compiled is not None:
             return compiled
