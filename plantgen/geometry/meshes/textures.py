@@ -34,7 +34,7 @@ import numpy as np
 
 from ..skeletons import relief
 from ..skeletons.materials import material_palette
-from ..vec import any_perpendicular, by_rows, cross
+from ..vec import any_perpendicular, by_rows, cross, dot, norm
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
            "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "mesh_uv_scales",
@@ -176,7 +176,7 @@ def face_derivatives(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray):
     e1, e2 = p1 - p0, p2 - p0
     d1, d2 = t1 - t0, t2 - t0
     det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    area = 0.5 * np.linalg.norm(cross(e1, e2), axis=1)
+    area = 0.5 * norm(cross(e1, e2))      # np.linalg.norm's sum, left to right, without its reduction
     ok = np.abs(det) > 1e-12
     safe = np.where(ok, det, 1.0)[:, None]
     dp_du = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / safe
@@ -293,8 +293,8 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
     def weighted(face_rows):
         dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, face_rows)
         weight = np.where(ok, area, 0.0)[:, None]
-        tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
-        tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
+        tu = dp_du / np.maximum(norm(dp_du), 1e-300)[:, None]
+        tv = dp_dv / np.maximum(norm(dp_dv), 1e-300)[:, None]
         tu, tv = tu * weight, tv * weight
         return tuple(np.ascontiguousarray(d[:, k]) for d in (tu, tv) for k in range(3))
     sums = _vertex_sums(faces, by_rows(weighted, np.asarray(faces)), len(vertices))
@@ -319,17 +319,19 @@ def _compiled_tangents(vertices, normals, uv, faces) -> np.ndarray | None:
 def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
     """(m, 4) float32 tangents of vertices whose faces' area-weighted ∂P/∂u and ∂P/∂v
     directions sum to ``t_sum`` and ``b_sum`` (m, 3), with ``normals`` (m, 3) (see
-    :func:`mesh_tangents`). Row-wise."""
+    :func:`mesh_tangents`). Row-wise. Lengths and dot products add their three terms left
+    to right, as numpy's reductions along a row do (the numbers of ``np.linalg.norm`` and
+    ``np.sum(axis=1)``, without their slow reductions over rows of three)."""
     n = np.asarray(normals, dtype=np.float64)
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    t = t_sum - np.sum(t_sum * n, axis=1, keepdims=True) * n
-    length = np.linalg.norm(t, axis=1)
+    n = n / np.maximum(norm(n), 1e-300)[:, None]
+    t = t_sum - dot(t_sum, n)[:, None] * n
+    length = norm(t)
     bad = length < 1e-12
     if np.any(bad):
         t[bad] = any_perpendicular(n[bad])
-        length[bad] = np.linalg.norm(t[bad], axis=1)
+        length[bad] = norm(t[bad])
     t /= length[:, None]
-    w = np.where(np.sum(np.cross(n, t) * b_sum, axis=1) > 0, -1.0, 1.0)
+    w = np.where(dot(cross(n, t), b_sum) > 0, -1.0, 1.0)
     return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
 
 
