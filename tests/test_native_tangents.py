@@ -124,3 +124,18 @@ def test_an_export_whose_plants_reach_the_threshold_compiles_every_primitive(mon
         plants = [Plant(f"saguaro {k}", skeleton, mesh, None) for k in range(copies)]
         write_plants(plants, tmp_path / f"{copies}.glb", textures=textures)
     assert asked == [None] * 2 + [True] * 3
+
+
+@needs_numba
+def test_faces_the_kernels_cannot_index_are_numpys(monkeypatch):
+    """The kernels check no index: faces out of range or negative are left to numpy,
+    whose errors say so (not a read outside the arrays)."""
+    vertices = np.eye(3) * [1.0, 2.0, 3.0]
+    uv = np.array([[0, 0], [1, 0], [0, 1]], np.float32)
+    normals = np.ones((3, 3), np.float32)
+    monkeypatch.setattr(tx, "COMPILED_FACES", 0)
+    with pytest.raises(IndexError):
+        tx.mesh_tangents(vertices, normals, uv, np.array([[0, 1, 3]]))
+    with pytest.raises(ValueError, match="negative"):
+        tx.mesh_tangents(vertices, normals, uv, np.array([[0, 1, -1]]))
+    assert tx.mesh_tangents(vertices, normals, uv, np.array([[0, 1, 2]])).shape == (3, 4)

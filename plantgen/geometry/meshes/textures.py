@@ -302,7 +302,8 @@ def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, fac
 
 
 def _compiled_tangents(vertices, normals, uv, faces) -> np.ndarray | None:
-    """:func:`mesh_tangents` by the compiled kernels; None where numba does not run."""
+    """:func:`mesh_tangents` by the compiled kernels; None where numba does not run (or
+    fails to compile them for these arrays' types)."""
     from .native_tangents import tangent_kernels  # numba's import is paid by large meshes only
     kernels = tangent_kernels()
     if kernels is None:
@@ -312,8 +313,16 @@ def _compiled_tangents(vertices, normals, uv, faces) -> np.ndarray | None:
     def exact(a):                 # float32 as it is (widened exactly in the kernels), else float64
         return np.ascontiguousarray(a, dtype=np.float32 if np.asarray(a).dtype == np.float32 else np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    sums = face_sums(np.ascontiguousarray(vertices, dtype=np.float64), exact(uv), faces, len(vertices))
-    return vertex_tangents(sums, exact(normals))
+    vertices, uv, normals = np.asarray(vertices), np.asarray(uv), np.asarray(normals)
+    count = len(vertices)
+    if (vertices.shape != (count, 3) or uv.shape != (count, 2) or normals.shape != (count, 3)
+            or faces.ndim != 2 or faces.shape[1] != 3 or (len(faces) and not 0 <= faces.min() <= faces.max() < count)):
+        return None               # the kernels check no index: numpy's errors (or its wrapping) then
+    try:                          # types not compiled yet (float64 maps) compile here: numba's errors are many
+        sums = face_sums(np.ascontiguousarray(vertices, dtype=np.float64), exact(uv), faces, len(vertices))
+        return vertex_tangents(sums, exact(normals))
+    except Exception:             # noqa: BLE001 - numpy computes them then
+        return None
 
 
 def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
