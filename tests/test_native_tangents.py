@@ -15,13 +15,22 @@ from plantgen.benchmarks.pipeline import synthetic_skeleton
 from plantgen.exporters import Plant, gltf, write_plants
 from plantgen.exporters.plants import material_parts
 from plantgen.exporters.textures import bake_textures
-from plantgen.geometry.meshes import native_tangents
 from plantgen.geometry.meshes import textures as tx
 from plantgen.geometry.meshes.mesh import tessellate
 from plantgen.geometry.skeletons.skin import skin_skeleton
 from plantgen.pipeline import grow_file
 
-needs_numba = pytest.mark.skipif(native_tangents.tangent_kernels() is None, reason="numba does not run here")
+
+@pytest.fixture
+def numba_runs():
+    """Skips where numba does not run; asked at the test, not at collection, so that a run
+    of other tests neither imports numba nor compiles the kernels."""
+    from plantgen.geometry.meshes import native_tangents
+    if native_tangents.tangent_kernels() is None:
+        pytest.skip("numba does not run here: numpy computes every tangent")
+
+
+needs_numba = pytest.mark.usefixtures("numba_runs")
 
 
 def _both(monkeypatch, vertices, normals, uv, faces):
