@@ -34,7 +34,7 @@ import numpy as np
 
 from ..skeletons import relief
 from ..skeletons.materials import material_palette
-from ..vec import any_perpendicular, by_rows, cross
+from ..vec import any_perpendicular, by_rows, cross, dot, norm
 
 __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour", "bake_material",
            "bake_normal_map", "decode_normal", "linear_to_srgb", "mesh_aspects", "mesh_tangents", "mesh_uv_scales",
@@ -44,6 +44,11 @@ __all__ = ["MaterialTextures", "TextureSize", "aspect_error", "bake_base_colour"
 #: Largest difference, in units of the 8-bit height, a texture size may leave against the
 #: renderers' map (:func:`texture_size`): one step, 1/255.
 SIZE_TOLERANCE = 1.0
+#: Faces from which :func:`mesh_tangents` runs compiled where numba does
+#: (:mod:`~plantgen.geometry.meshes.native_tangents`): numpy takes about 0.8 µs of CPU a
+#: face and the kernels 0.15, so numba's import and its cache's load, about 0.45 s of CPU
+#: once a process, pay from about 700,000 faces; from a million they surely do.
+COMPILED_FACES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -171,7 +176,7 @@ def face_derivatives(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray):
     e1, e2 = p1 - p0, p2 - p0
     d1, d2 = t1 - t0, t2 - t0
     det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    area = 0.5 * np.linalg.norm(cross(e1, e2), axis=1)
+    area = 0.5 * norm(cross(e1, e2))      # np.linalg.norm's sum, left to right, without its reduction
     ok = np.abs(det) > 1e-12
     safe = np.where(ok, det, 1.0)[:, None]
     dp_du = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / safe
@@ -269,40 +274,73 @@ def parallax_map(baked: MaterialTextures) -> np.ndarray:
     return np.concatenate([baked.normal, baked.height[..., None]], axis=2)
 
 
-def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def mesh_tangents(vertices: np.ndarray, normals: np.ndarray, uv: np.ndarray, faces: np.ndarray,
+                  compiled: bool | None = None) -> np.ndarray:
     """(V, 4) float32 glTF tangents: xyz the unit direction of increasing u (the faces'
     ∂P/∂u summed by area, made ⟂ the vertex normal), w = ±1 so that cross(N, T)·w points
     along -v (glTF's "up in the image"). Vertices no textured face uses (caps) get any unit
     vector ⟂ their normal and w = 1. The per-face and per-vertex work runs a block of
     rows at a time (:func:`~plantgen.geometry.vec.by_rows`: the same numbers, without
-    full-size temporaries of every face's corners)."""
+    full-size temporaries of every face's corners). ``compiled`` (None: from
+    :data:`COMPILED_FACES` faces on) where numba runs: compiled kernels compute the same
+    numbers bit for bit (:mod:`~plantgen.geometry.meshes.native_tangents`)."""
+    if len(faces) >= COMPILED_FACES if compiled is None else compiled:
+        compiled = _compiled_tangents(vertices, normals, uv, faces)
+        if compiled is not None:
+            return compiled
     vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
 
     def weighted(face_rows):
         dp_du, dp_dv, area, ok = face_derivatives(vertices, uv, face_rows)
         weight = np.where(ok, area, 0.0)[:, None]
-        tu = dp_du / np.maximum(np.linalg.norm(dp_du, axis=1, keepdims=True), 1e-300)
-        tv = dp_dv / np.maximum(np.linalg.norm(dp_dv, axis=1, keepdims=True), 1e-300)
+        tu = dp_du / np.maximum(norm(dp_du), 1e-300)[:, None]
+        tv = dp_dv / np.maximum(norm(dp_dv), 1e-300)[:, None]
         tu, tv = tu * weight, tv * weight
         return tuple(np.ascontiguousarray(d[:, k]) for d in (tu, tv) for k in range(3))
     sums = _vertex_sums(faces, by_rows(weighted, np.asarray(faces)), len(vertices))
     return by_rows(_vertex_tangents, sums[:, :3], sums[:, 3:], normals)
 
 
+def _compiled_tangents(vertices, normals, uv, faces) -> np.ndarray | None:
+    """:func:`mesh_tangents` by the compiled kernels; None where numba does not run (or
+    fails to compile them for these arrays' types)."""
+    from .native_tangents import tangent_kernels  # numba's import is paid by large meshes only
+    kernels = tangent_kernels()
+    if kernels is None:
+        return None
+    face_sums, vertex_tangents = kernels
+
+    def exact(a):                 # float32 as it is (widened exactly in the kernels), else float64
+        return np.ascontiguousarray(a, dtype=np.float32 if np.asarray(a).dtype == np.float32 else np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    vertices, uv, normals = np.asarray(vertices), np.asarray(uv), np.asarray(normals)
+    count = len(vertices)
+    if (vertices.shape != (count, 3) or uv.shape != (count, 2) or normals.shape != (count, 3)
+            or faces.ndim != 2 or faces.shape[1] != 3 or (len(faces) and not 0 <= faces.min() <= faces.max() < count)):
+        return None               # the kernels check no index: numpy's errors (or its wrapping) then
+    try:                          # types not compiled yet (float64 maps) compile here: numba's errors are many
+        sums = face_sums(np.ascontiguousarray(vertices, dtype=np.float64), exact(uv), faces, len(vertices))
+        return vertex_tangents(sums, exact(normals))
+    except Exception:             # noqa: BLE001 - numpy computes them then
+        return None
+
+
 def _vertex_tangents(t_sum, b_sum, normals) -> np.ndarray:
     """(m, 4) float32 tangents of vertices whose faces' area-weighted ∂P/∂u and ∂P/∂v
     directions sum to ``t_sum`` and ``b_sum`` (m, 3), with ``normals`` (m, 3) (see
-    :func:`mesh_tangents`). Row-wise."""
+    :func:`mesh_tangents`). Row-wise. Lengths and dot products add their three terms left
+    to right, as numpy's reductions along a row do (the numbers of ``np.linalg.norm`` and
+    ``np.sum(axis=1)``, without their slow reductions over rows of three)."""
     n = np.asarray(normals, dtype=np.float64)
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    t = t_sum - np.sum(t_sum * n, axis=1, keepdims=True) * n
-    length = np.linalg.norm(t, axis=1)
+    n = n / np.maximum(norm(n), 1e-300)[:, None]
+    t = t_sum - dot(t_sum, n)[:, None] * n
+    length = norm(t)
     bad = length < 1e-12
     if np.any(bad):
         t[bad] = any_perpendicular(n[bad])
-        length[bad] = np.linalg.norm(t[bad], axis=1)
+        length[bad] = norm(t[bad])
     t /= length[:, None]
-    w = np.where(np.sum(np.cross(n, t) * b_sum, axis=1) > 0, -1.0, 1.0)
+    w = np.where(dot(cross(n, t), b_sum) > 0, -1.0, 1.0)
     return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
 
 
