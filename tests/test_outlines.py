@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from plantgen.geometry.meshes import outlines as outlines_module
 from plantgen.geometry.meshes.outlines import triangulate, triangulate_outlines
 from plantgen.geometry.meshes.polygons import PolygonBuilder, Polygons
 
@@ -66,9 +67,22 @@ def _same(a, b) -> bool:
             and np.array_equal(a[1], b[1]) and np.asarray(a[2], np.float64).tobytes() == b[2].tobytes())
 
 
-def test_all_at_once_is_one_by_one_bit_for_bit():
+def _large(rng) -> list[np.ndarray]:
+    """Outlines of more points than a batch takes (BATCH_POINTS): a wavy ring, a star."""
+    k = outlines_module.BATCH_POINTS + 9
+    ang = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    r = 1 + 0.3 * np.sin(5 * ang) * rng.uniform(0.5, 1.0, k)
+    return [np.c_[r * np.cos(ang), r * np.sin(ang), np.zeros(k)] @ _rotation(rng),
+            np.c_[np.cos(ang) * (1 + (np.arange(k) % 2)), np.sin(ang) * (1 + (np.arange(k) % 2)), np.zeros(k)]]
+
+
+@pytest.mark.parametrize("pairs", [None, 40])
+def test_all_at_once_is_one_by_one_bit_for_bit(pairs, monkeypatch):
+    """As triangulate of each, whole groups at once and (``pairs`` 40) a few outlines a call."""
+    if pairs is not None:
+        monkeypatch.setattr(outlines_module, "BATCH_PAIRS", pairs)
     rng = np.random.default_rng(44)
-    outlines = _hand_built() + _random(rng, 400)
+    outlines = _hand_built() + _random(rng, 400) + _large(rng)
     got = triangulate_outlines(outlines)
     expected = [triangulate(o) if len(o) >= 3 else None for o in outlines]
     wrong = [i for i, e in enumerate(expected) if not _same(e, _each(got, i))]
@@ -79,6 +93,7 @@ def test_all_at_once_is_one_by_one_bit_for_bit():
     assert 10 < dropped < len(outlines) // 2
     assert expected[1][1].tolist() != [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]]   # the L is not a fan
     assert len(got.vertices) == got.vertex_count.sum() and len(got.triangles) == got.triangle_count.sum()
+    assert got.triangle_count[-2:].tolist() == [len(o) - 2 for o in outlines[-2:]]     # the large ones, whole
 
 
 def test_an_outline_alone_and_among_others_is_the_same():

@@ -13,7 +13,8 @@ coordinates as a ``(k, 3) @ (3,)`` product each (BLAS's matrix-vector product, t
 stacked ``matmul``); the ear clipping takes every outline's corners at once, round by
 round, each round clipping (or dropping) the first corner :func:`triangulate` would. An
 outline it does not follow (a point that is not finite; no Newell normal, where the
-least-squares plane's stands in) goes through :func:`triangulate` on its own. Nothing
+least-squares plane's stands in; more than :data:`BATCH_POINTS` points) goes through
+:func:`triangulate` on its own. Nothing
 here imports GL.
 """
 
@@ -277,14 +278,24 @@ def _clip_group(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     return found, normal, tris, count
 
 
+#: Outlines of more points than this go through :func:`triangulate` one by one: each round
+#: of :func:`_ear_clip_many` tests every corner against every point (m² tests a round, m
+#: rounds), where :func:`_ear_clip` stops at the first ear (leaves have a handful of points).
+BATCH_POINTS = 32
+
+#: Corner-point pairs (outlines times m²) that one call of :func:`_clip_group` takes at
+#: most: its temporaries stay a few tens of MB however many outlines come.
+BATCH_PAIRS = 1 << 22
+
+
 def _grouped(outlines: list[np.ndarray]) -> tuple[dict[int, list], list[int]]:
-    """The outlines of three points or more, deduplicated and grouped by the points kept:
-    ({m: [(outline indices, (g, m, 3) points)]}, indices of those left to
-    :func:`triangulate`: a point not finite)."""
+    """The outlines of three to :data:`BATCH_POINTS` points, deduplicated and grouped by
+    the points kept: ({m: [(outline indices, (g, m, 3) points)]}, indices of those left to
+    :func:`triangulate`: a point not finite, or more points)."""
     lengths = np.array([len(o) for o in outlines], np.int64)
     groups: dict[int, list] = {}
-    alone: list[int] = []
-    for k in np.unique(lengths[lengths >= 3]).tolist():
+    alone: list[int] = np.flatnonzero(lengths > BATCH_POINTS).tolist()
+    for k in np.unique(lengths[(lengths >= 3) & (lengths <= BATCH_POINTS)]).tolist():
         ids = np.flatnonzero(lengths == k)
         p = np.stack([outlines[i] for i in ids])
         finite = np.isfinite(p).all(axis=(1, 2))
@@ -309,14 +320,16 @@ def triangulate_outlines(outlines) -> Triangulated:
     done = []                          # (outline indices, (g, m, 3) points, (g, t, 3) triangles)
     groups, alone = _grouped(outlines)
     for m, parts in groups.items():
-        ids = np.concatenate([i for i, _ in parts])
-        p = np.concatenate([q for _, q in parts])
-        found, normals, tris, counts = _clip_group(p)
-        alone += ids[~found].tolist()
-        ids, p = ids[found], p[found]
-        normal[ids], tcount[ids] = normals, counts
-        vcount[ids] = np.where(counts > 0, m, 0)
-        done.append((ids, p, tris))
+        every, points = np.concatenate([i for i, _ in parts]), np.concatenate([q for _, q in parts])
+        rows = max(BATCH_PAIRS // (m * m), 1)
+        for start in range(0, len(every), rows):
+            ids, p = every[start:start + rows], points[start:start + rows]
+            found, normals, tris, counts = _clip_group(p)
+            alone += ids[~found].tolist()
+            ids, p = ids[found], p[found]
+            normal[ids], tcount[ids] = normals, counts
+            vcount[ids] = np.where(counts > 0, m, 0)
+            done.append((ids, p, tris))
     single = {}
     for i in alone:
         got = triangulate(outlines[i])
