@@ -110,11 +110,9 @@ def las_scale(lo, hi) -> tuple[float, np.ndarray]:
     return scale, np.round(centre / scale) * scale
 
 
-def _turned(cloud: PointCloud, up: str) -> tuple[np.ndarray, np.ndarray]:
+def _check_up(up: str) -> None:
     if up not in UP_AXES:
         raise PointFileError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
-    rot = up_rotation(up)
-    return cloud.xyz @ rot.T, cloud.scanners @ rot.T
 
 
 def _metadata(cloud: PointCloud, up: str, scanners: np.ndarray) -> dict:
@@ -125,8 +123,7 @@ def _metadata(cloud: PointCloud, up: str, scanners: np.ndarray) -> dict:
 def _write_las(cloud: PointCloud, path: Path, fmt: str, up: str) -> None:
     import laspy
 
-    if up not in UP_AXES:
-        raise PointFileError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}")
+    _check_up(up)
     rot = up_rotation(up)
     scanners = cloud.scanners @ rot.T
     header = laspy.LasHeader(point_format=6, version="1.4")
@@ -166,17 +163,27 @@ def _write_las(cloud: PointCloud, path: Path, fmt: str, up: str) -> None:
     write_atomically(path, write, PointFileError)
 
 
-def _ply_parts(cloud: PointCloud, up: str) -> tuple[bytes, np.ndarray]:
-    """The PLY header and the vertex table (written as it lies: no copy of every point's
-    bytes beside it, a scan's peak memory)."""
-    xyz, scanners = _turned(cloud, up)
+#: Points whose PLY rows are made and written at a time (the vertex table's bytes of a
+#: whole scan, 41 a point, are never in memory beside the points).
+PLY_CHUNK = 1 << 18
+
+
+def _turned_axis(xyz: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """One turned coordinate of the points, ``xyz @ row`` as BLAS gives it: for a signed
+    axis (every up axis's row) the coordinate itself, negated where the row says, with a
+    zero written as +0 (BLAS sums the three products from +0: -0 comes out +0)."""
+    axis = np.flatnonzero(row)
+    if len(axis) == 1 and abs(row[axis[0]]) == 1.0:
+        column = xyz[:, axis[0]]
+        return (column if row[axis[0]] > 0 else -column) + 0.0
+    return xyz @ row
+
+
+def _ply_header(cloud: PointCloud, up: str) -> tuple[bytes, np.dtype]:
+    """The PLY header and the dtype of a vertex row (little-endian, packed)."""
+    scanners = cloud.scanners @ up_rotation(up).T
     fields = [("x", np.float64), ("y", np.float64), ("z", np.float64)]
     fields += [(FILE_LABELS[k][0], dtype) for k, dtype in LABELS.items()]
-    table = np.empty(len(cloud), dtype=np.dtype([(n, np.dtype(t).newbyteorder("<")) for n, t in fields]))
-    table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    del xyz
-    for name, values in cloud.labels().items():
-        table[FILE_LABELS[name][0]] = values
     lines = ["ply", "format binary_little_endian 1.0", "comment plantgen simulated laser scan", f"comment up {up}",
              "comment part " + " ".join(f"{i}={n}" for i, n in enumerate(PART_NAMES))]
     lines += [f"comment scanner {k} {p[0]:.17g} {p[1]:.17g} {p[2]:.17g}" for k, p in enumerate(scanners)]
@@ -184,13 +191,24 @@ def _ply_parts(cloud: PointCloud, up: str) -> tuple[bytes, np.ndarray]:
     lines.append(f"element vertex {len(cloud)}")
     lines += [f"property {_PLY_TYPES[np.dtype(t)]} {n}" for n, t in fields]
     lines.append("end_header")
-    return ("\n".join(lines) + "\n").encode("utf-8"), table
+    return ("\n".join(lines) + "\n").encode("utf-8"), np.dtype([(n, np.dtype(t).newbyteorder("<")) for n, t in fields])
 
 
-def _write_ply(path, header: bytes, table: np.ndarray) -> None:
+def _write_ply(path, cloud: PointCloud, up: str) -> None:
+    """Write the header, then the vertex rows :data:`PLY_CHUNK` points at a time (each
+    point's coordinates turned to ``up`` and its labels)."""
+    header, row = _ply_header(cloud, up)
+    rot, labels = up_rotation(up), cloud.labels()
     with open(path, "wb") as fh:
         fh.write(header)
-        fh.write(table.view(np.uint8))
+        for start in range(0, len(cloud), PLY_CHUNK):
+            part = slice(start, min(start + PLY_CHUNK, len(cloud)))
+            table = np.empty(part.stop - start, dtype=row)
+            for i, name in enumerate("xyz"):
+                table[name] = _turned_axis(cloud.xyz[part], rot[i])
+            for name, values in labels.items():
+                table[FILE_LABELS[name][0]] = values[part]
+            fh.write(table.view(np.uint8))
 
 
 def write_points(cloud: PointCloud, path, *, up: str = "z") -> Path:
@@ -201,8 +219,8 @@ def write_points(cloud: PointCloud, path, *, up: str = "z") -> Path:
     fmt = check_point_output(path)
     check_finite(path, "a point", cloud.xyz, cloud.scanners, error=PointFileError)
     if fmt == "ply":
-        header, table = _ply_parts(cloud, up)
-        return write_atomically(path, lambda tmp: _write_ply(tmp, header, table), PointFileError)
+        _check_up(up)                        # refused before any file is made
+        return write_atomically(path, lambda tmp: _write_ply(tmp, cloud, up), PointFileError)
     _write_las(cloud, path, fmt, up)
     return path
 

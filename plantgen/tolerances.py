@@ -170,7 +170,7 @@ class Tolerances:
     """Relative (to the square of an outline's extent, the extent floored at this many world
     units): a leaf outline's Newell vector (twice its area) below this has no normal (the
     least-squares plane's stands in), and an ear-clipping corner turning less (twice its
-    triangle's area) is collinear and dropped (``plantgen.geometry.meshes.polygons``)."""
+    triangle's area) is collinear and dropped (``plantgen.geometry.meshes.outlines``)."""
 
     outline_duplicate: float = 1e-9
     """Relative (to an outline's extent, floored as for ``polygon_area``): consecutive

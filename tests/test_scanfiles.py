@@ -99,6 +99,30 @@ def test_ply_reads_back_with_trimesh_and_by_hand(tmp_path, bush_scan):
     assert np.allclose(back.xyz, bush_scan.xyz, rtol=0, atol=1e-12) and back.metadata["seed"] == 5
 
 
+def test_ply_rows_written_a_chunk_at_a_time_are_the_whole_tables(tmp_path, bush_scan, monkeypatch):
+    """The vertex rows, made and written PLY_CHUNK points at a time, are the bytes of the
+    whole table at once: each coordinate the z-up product's (xyz @ Z_UP.T, BLAS's, -0
+    coming out +0), each label as it is, for chunks that do and do not divide the points."""
+    import dataclasses
+
+    from plantgen import scanfiles
+
+    xyz = bush_scan.xyz.copy()
+    xyz[::7] = -0.0                              # signed zeros: the product writes +0
+    xyz[1::7, 1] = 0.0
+    cloud = dataclasses.replace(bush_scan, xyz=xyz)
+    whole = write_points(cloud, tmp_path / "whole.ply").read_bytes()
+    header, table = parse_ply(tmp_path / "whole.ply")
+    turned = xyz @ Z_UP.T
+    assert np.stack([table["x"], table["y"], table["z"]], axis=1).tobytes() == (turned + 0.0).tobytes()
+    assert not np.signbit(table["x"][::7]).any() and np.signbit(xyz[::7]).all()
+    assert (turned + 0.0).tobytes() == turned.tobytes()            # what the matrix product gave before
+    for chunk in (1000, 7, len(cloud)):
+        monkeypatch.setattr(scanfiles, "PLY_CHUNK", chunk)
+        assert write_points(cloud, tmp_path / f"{chunk}.ply").read_bytes() == whole
+    assert len(cloud) > 1000
+
+
 def test_up_y_keeps_plantgens_frame(tmp_path, bush_scan):
     _, table = parse_ply(write_points(bush_scan, tmp_path / "y.ply", up="y"))
     assert np.array_equal(np.stack([table["x"], table["y"], table["z"]], axis=1), bush_scan.xyz)

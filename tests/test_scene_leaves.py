@@ -89,6 +89,21 @@ def test_a_scene_carries_every_copys_leaves_where_its_placement_puts_them(grove,
     assert leaves.triangle_areas().sum() == pytest.approx(one.triangle_areas().sum() * (0.5**2 + 2.0**2))
 
 
+def test_a_scenes_leaves_are_placed_on_first_use(grove):
+    """A scan traces a scene's copies through two levels: growing it places no leaves in
+    the world (the stage ``place`` is not timed) until ``polygons`` is first read, which
+    places them once, as Scene.polygons does."""
+    grown = grow_file(grove)
+    assert "place" not in grown.timings and "_polygons" in vars(grown) and vars(grown)["_polygons"] is None
+    leaves = grown.polygons
+    assert "place" in grown.timings and grown.polygons is leaves
+    expected = grown.scene.polygons()
+    for name in ("vertices", "triangles", "polygon", "material", "normal", "segment"):
+        assert np.array_equal(getattr(leaves, name), getattr(expected, name)), name
+    grown.polygons = None                          # set by hand: kept as set, then placed again on reading
+    assert grown.polygons is not leaves and len(grown.polygons) == len(leaves)
+
+
 def test_scene_leaf_normals_are_unit_and_follow_the_winding(grove):
     leaves = grow_file(grove).polygons
     assert np.allclose(np.linalg.norm(leaves.normal, axis=1), 1.0)

@@ -52,11 +52,30 @@ def available_cores() -> int:
         return max(os.cpu_count() or 1, 1)
 
 
+class _PlacedOnFirstUse:
+    """:attr:`GrowResult.polygons`: a scene's (None given) are placed, every copy's leaves
+    in the world, on first use, as its skeleton is (a scan of a forest, which traces the
+    copies through two levels, never places its million leaves)."""
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return None                      # the field's default
+        value = obj.__dict__.get("_polygons")
+        if value is None and obj.__dict__.get("scene") is not None:
+            t0 = time.perf_counter()
+            value = obj.__dict__["_polygons"] = obj.scene.polygons()
+            obj.timings["place"] = obj.timings.get("place", 0.0) + time.perf_counter() - t0
+        return value
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__["_polygons"] = value
+
+
 @dataclass
 class GrowResult:
     """A grown skeleton with what it took: module count and seconds per stage. A scene's
-    merged skeleton (every copy placed) is built on first use: an instanced render of a
-    forest never builds it."""
+    merged skeleton and its leaves (every copy placed) are built on first use: an
+    instanced render of a forest never builds the skeleton, its scan neither."""
 
     skeleton: Skeleton | None
     kind: str                        # "grammar", "scene" or "skeleton"
@@ -65,8 +84,8 @@ class GrowResult:
     timings: dict = field(default_factory=dict)   # stage -> seconds
     scene: Scene | None = None
     sources: tuple = ()              # every file read: the input, and a scene's grammars
-    polygons: Polygons | None = None  # the filled polygons (leaves) of a grammar or a scene, in place;
-                                      # None for a skeleton file
+    polygons: Polygons | None = _PlacedOnFirstUse()  # the filled polygons (leaves) of a grammar or a
+                                      # scene, in place (a scene's placed on first use); None for a skeleton file
     warnings: tuple[str, ...] = ()   # one line each: what the turtle skipped (for stderr)
     smooth_bends: float | None = None  # a grammar's turtle: smooth_bends (degrees), the default
     iterations: int | None = None    # a grammar's derivation steps (its own, or as asked); None otherwise
@@ -267,13 +286,8 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
 
     scene = parse_scene(data, str(path), seed=seed, grow_grammar=grow_one, limits=limits,
                         allow_paths=allow_paths, work=work, grow_many=grow_many)
-    t0 = time.perf_counter()
-    if progress is not None:
-        progress("place", 0, None)
-    polygons = scene.polygons()
-    timings["place"] = time.perf_counter() - t0
-    return GrowResult(None, kind, scene.name, modules[0], timings, scene,
-                      sources=(path, *(Path(k) for k in grammars)), polygons=polygons, warnings=tuple(warnings))
+    return GrowResult(None, kind, scene.name, modules[0], timings, scene,     # placed on first use
+                      sources=(path, *(Path(k) for k in grammars)), warnings=tuple(warnings))
 
 
 #: A pool process's state: the scene's grammar mappings, the limits, and the grammars it parsed.

@@ -14,8 +14,10 @@ A :class:`Polygons` of ``p`` polygons made of ``t`` triangles over ``v`` vertice
                              a swaying animation moves the polygon with it
 ==============  ===========  ============================================================
 
-:func:`triangulate` turns one outline (any simple polygon, concave too, not necessarily
-planar) into triangles by ear clipping in its best-fit plane. Nothing here imports GL.
+The outlines are triangulated by :mod:`plantgen.geometry.meshes.outlines`
+(:func:`triangulate`: one outline, any simple polygon, concave too, not necessarily planar,
+by ear clipping in its best-fit plane; :class:`PolygonBuilder` triangulates the outlines
+added to it all at once, the same triangles). Nothing here imports GL.
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ...tolerances import tol
 from ..vec import unit
+from .outlines import best_fit_normal, triangulate, triangulate_outlines
 
 __all__ = ["Polygons", "PolygonBuilder", "triangulate", "best_fit_normal"]
 
@@ -122,151 +124,63 @@ class Polygons:
                         np.concatenate([p.normal for p in parts]).reshape(-1, 3), segment)
 
 
-def best_fit_normal(points: np.ndarray) -> np.ndarray:
-    """Unit normal of the plane that best fits an outline (Newell's method: exact for a
-    planar polygon, oriented by its winding; the least-squares plane's normal when the
-    Newell vector vanishes, e.g. for a self-cancelling figure eight)."""
-    p = np.asarray(points, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    n = np.array([np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
-                  np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
-                  np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1]))])
-    size = np.linalg.norm(n)
-    scale = max(float(np.ptp(p, axis=0).max()), tol.polygon_area)
-    if size > tol.polygon_area * scale * scale:
-        return n / size
-    _, _, vt = np.linalg.svd(p - p.mean(axis=0))
-    return vt[2]
-
-
-def _plane_coordinates(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """(k, 2): the points in an orthonormal basis (e1, e2) of the plane with e1 × e2 = normal."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(normal, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    rel = points - points.mean(axis=0)
-    return np.stack([rel @ e1, rel @ e2], axis=1)
-
-
-def _dedupe(points: np.ndarray) -> np.ndarray:
-    """The outline without repeated consecutive points (the closing one included)."""
-    scale = max(float(np.ptp(points, axis=0).max()) if len(points) else 0.0, tol.polygon_area)
-    keep = []
-    for i, p in enumerate(points):
-        if not keep or np.linalg.norm(p - points[keep[-1]]) > tol.outline_duplicate * scale:
-            keep.append(i)
-    if len(keep) > 1 and np.linalg.norm(points[keep[0]] - points[keep[-1]]) <= tol.outline_duplicate * scale:
-        keep.pop()
-    return points[keep]
-
-
-def _cross2(o, a, b) -> float:
-    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-
-def _inside(p, a, b, c) -> bool:
-    """p inside or on the counter-clockwise triangle abc."""
-    return _cross2(a, b, p) >= 0 and _cross2(b, c, p) >= 0 and _cross2(c, a, p) >= 0
-
-
-def _ear_clip(uv: np.ndarray) -> list[tuple[int, int, int]]:
-    """Triangles (index triples, counter-clockwise) of a counter-clockwise simple polygon
-    in the plane. An outline with no ear left (self-intersecting) is finished as a fan of
-    its remaining vertices rather than dropped."""
-    idx = list(range(len(uv)))
-    tris: list[tuple[int, int, int]] = []
-    scale = max(float(np.ptp(uv, axis=0).max()), tol.polygon_area)
-    flat = tol.polygon_area * scale * scale
-    while len(idx) > 3:
-        n = len(idx)
-        for k in range(n):
-            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % n]
-            a, b, c = uv[i0], uv[i1], uv[i2]
-            turn = _cross2(a, b, c)
-            if turn < -flat:
-                continue                      # reflex corner
-            if turn <= flat:
-                del idx[k]                    # collinear corner: no triangle, drop it
-                break
-            if any(_inside(uv[j], a, b, c) for j in idx if j not in (i0, i1, i2)):
-                continue
-            tris.append((i0, i1, i2))
-            del idx[k]
-            break
-        else:                                 # no ear: not a simple polygon
-            tris.extend((idx[0], idx[m], idx[m + 1]) for m in range(1, len(idx) - 1))
-            return tris
-    if len(idx) == 3 and abs(_cross2(uv[idx[0]], uv[idx[1]], uv[idx[2]])) > flat:
-        tris.append(tuple(idx))
-    return tris
-
-
-def triangulate(points) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Triangulate one outline in its best-fit plane.
-
-    Returns (vertices (k, 3), triangles (t, 3) indices into them, counter-clockwise about
-    the normal, unit normal (3,)), or None for an outline with fewer than three distinct
-    points or no area.
-    """
-    pts = _dedupe(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-    if len(pts) < 3:
-        return None
-    normal = best_fit_normal(pts)
-    uv = _plane_coordinates(pts, normal)
-    x, y = uv[:, 0], uv[:, 1]
-    signed = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-    if signed < 0:            # clockwise about the normal (least-squares case): flip the normal
-        normal = -normal
-        uv = _plane_coordinates(pts, normal)
-    tris = _ear_clip(uv)
-    if not tris:
-        return None
-    return pts, np.array(tris, dtype=np.int64).reshape(-1, 3), normal
-
-
 class PolygonBuilder:
-    """Collects outlines as the turtle closes them and builds the :class:`Polygons`."""
+    """Collects outlines as the turtle closes them and builds the :class:`Polygons`. The
+    outlines added are triangulated together (:func:`triangulate_outlines`) when the
+    polygons are built, when polygons already triangulated are appended after them
+    (:meth:`extend`) or when :attr:`degenerate` is asked; the polygons are those
+    :func:`triangulate` of each outline in turn gives, in the order added."""
 
     def __init__(self) -> None:
-        self._verts: list[np.ndarray] = []
-        self._tris: list[np.ndarray] = []
-        self._poly: list[np.ndarray] = []
+        self._parts: list[Polygons] = []         # triangulated so far, in order
+        self._outlines: list[np.ndarray] = []    # added since, not yet triangulated
         self._mats: list[int] = []
-        self._normals: list[np.ndarray] = []
         self._segments: list[int] = []
-        self._count = 0
-        self.degenerate = 0       # outlines dropped: under three distinct points or no area
+        self._dropped = 0
+
+    @property
+    def degenerate(self) -> int:
+        """Outlines dropped: under three distinct points or no area."""
+        self._triangulate()
+        return self._dropped
 
     def add(self, outline, material: int, segment: int = -1) -> None:
-        got = triangulate(outline) if len(outline) >= 3 else None
-        if got is None:
-            self.degenerate += 1
-            return
-        verts, tris, normal = got
-        self._tris.append(tris + self._count)
-        self._poly.append(np.full(len(tris), len(self._mats), dtype=np.int64))
-        self._verts.append(verts)
-        self._count += len(verts)
+        self._outlines.append(np.array(outline, dtype=np.float64).reshape(-1, 3))
         self._mats.append(material)
-        self._normals.append(normal)
         self._segments.append(segment)
+
+    def _triangulate(self) -> None:
+        """Triangulate the outlines added since the last time, as one more part."""
+        if not self._outlines:
+            return
+        got = triangulate_outlines(self._outlines)
+        kept = got.triangle_count > 0
+        self._dropped += int((~kept).sum())
+        first = np.cumsum(got.vertex_count) - got.vertex_count
+        self._parts.append(Polygons(
+            got.vertices, got.triangles + np.repeat(first, got.triangle_count)[:, None],
+            np.repeat(np.arange(int(kept.sum()), dtype=np.int64), got.triangle_count[kept]),
+            np.array(self._mats, dtype=np.int32)[kept], got.normal[kept],
+            np.array(self._segments, dtype=np.int64)[kept]))
+        self._outlines, self._mats, self._segments = [], [], []
 
     def extend(self, polygons: Polygons) -> None:
         """Append polygons already triangulated (placed surfaces), after those added so far."""
         if not len(polygons):
             return
-        self._tris.append(polygons.triangles + self._count)
-        self._poly.append(polygons.polygon + len(self._mats))
-        self._verts.append(polygons.vertices)
-        self._count += len(polygons.vertices)
-        self._mats.extend(polygons.material.tolist())
-        self._normals.extend(polygons.normal)
-        self._segments.extend(polygons.segment.tolist())
+        self._triangulate()
+        self._parts.append(polygons)
 
     def build(self) -> Polygons:
-        if not self._mats:
+        self._triangulate()
+        parts = [p for p in self._parts if len(p)]
+        if not parts:
             return Polygons.empty()
-        return Polygons(np.concatenate(self._verts), np.concatenate(self._tris), np.concatenate(self._poly),
-                        np.array(self._mats, dtype=np.int32), np.array(self._normals, dtype=np.float64),
-                        np.array(self._segments, dtype=np.int64))
+        vertex_first = np.cumsum([0] + [len(p.vertices) for p in parts])
+        polygon_first = np.cumsum([0] + [len(p) for p in parts])
+        return Polygons(np.concatenate([p.vertices for p in parts]),
+                        np.concatenate([p.triangles + v for p, v in zip(parts, vertex_first, strict=False)]),
+                        np.concatenate([p.polygon + k for p, k in zip(parts, polygon_first, strict=False)]),
+                        np.concatenate([p.material for p in parts]).astype(np.int32),
+                        np.concatenate([p.normal for p in parts]).astype(np.float64),
+                        np.concatenate([p.segment for p in parts]).astype(np.int64))

@@ -79,6 +79,23 @@ def _xz_corners(lo, hi) -> np.ndarray:
     return np.stack([x, z], axis=-1)
 
 
+def _trig_of_steps(steps, step: float, start: float | None = None):
+    """((cos, sin) of angles, indices of ``steps`` into them): of ``start + steps·step``
+    (``steps·step`` without a start), each angle the same float either way: taken once
+    for each step of the range a 1-d run of integer ``steps`` spans where that range is
+    the shorter, else for every step."""
+    steps = np.asarray(steps)
+    span = int(steps.max()) - int(steps.min()) + 1 if steps.ndim == 1 and len(steps) else 0
+    if np.issubdtype(steps.dtype, np.integer) and 0 < span < len(steps):
+        lo = int(steps.min())
+        angle, at = np.arange(lo, lo + span, dtype=np.float64) * step, steps - lo
+    else:
+        angle, at = steps.astype(np.float64) * step, ...
+    if start is not None:
+        angle = start + angle
+    return (np.cos(angle), np.sin(angle)), at
+
+
 class TerrestrialBeams:
     """The beam grid of a scanner at ``position`` looking at the box (``lo``, ``hi``):
     beam (a, b) at azimuth φ_c + a·Δ and elevation b·Δ (module docstring), a in
@@ -137,11 +154,13 @@ class TerrestrialBeams:
         return (*self._azimuths(lo, hi), *self._elevations(lo, hi))
 
     def rays(self, a, b) -> tuple[np.ndarray, np.ndarray]:
-        """Origins (k, 3) and unit directions (k, 3) of beams (a, b)."""
-        phi = self.phi + np.asarray(a, dtype=np.float64) * self.step
-        theta = np.asarray(b, dtype=np.float64) * self.step
-        c = np.cos(theta)
-        d = np.stack([c * np.cos(phi), np.sin(theta), c * np.sin(phi)], axis=-1)
+        """Origins (k, 3) and unit directions (k, 3) of beams (a, b). The sines and cosines
+        are taken once per azimuth and elevation a run of beams spans (a chunk of a grid's
+        beams spans a few rows), each the same number as taken beam by beam."""
+        (cos_phi, sin_phi), at_a = _trig_of_steps(a, self.step, self.phi)
+        (cos_theta, sin_theta), at_b = _trig_of_steps(b, self.step)
+        c = cos_theta[at_b]
+        d = np.stack([c * cos_phi[at_a], sin_theta[at_b], c * sin_phi[at_a]], axis=-1)
         return np.broadcast_to(self.origin, d.shape), d
 
 
