@@ -286,3 +286,28 @@ def test_depth_out_draws_the_distances_without_it(gl_ctx):
     plain = render_model("broadleaf", size=SIZE, aa="none")
     np.testing.assert_array_equal(exact.distance, plain.result.distance)
     assert not np.array_equal(exact.result.distance, exact.distance)     # the frame's own lack the twigs
+
+
+def test_a_leaf_pass_that_would_draw_no_leaf_is_skipped(gl_ctx, monkeypatch):
+    """Where every leaf is thinner than the floor at its distance (a needle), the opaque
+    pass leaves the leaves out; where none is, the thin pass is not drawn: the same image
+    and distances as both passes drew (each draws every leaf and keeps those of its own)."""
+    from plantgen.gl.leaf_layer import LeafLayer
+    from plantgen.gl.raycast import Raycaster
+    camera, floor = twig_camera(), 0.5 * pixel_world() / DISTANCE
+    layer = LeafLayer(gl_ctx)
+    thin, wide = needle(0.3), needle(3.0)
+    assert layer.thin_share(thin, (0.0, 0.0, 0.0), camera.eye, floor) == "all"
+    assert layer.thin_share(wide, (0.0, 0.0, 0.0), camera.eye, floor) == "none"
+    assert layer.thin_share(thin, (0.0, 0.0, 0.0), camera.eye, floor * 0.25) == "none"
+    layer.release()
+    frames = {}
+    for share in ("skipped", "both"):
+        if share == "both":
+            monkeypatch.setattr(LeafLayer, "thin_share", lambda *args: "some")
+        caster = Raycaster(gl_ctx)
+        frames[share] = [caster.render(thin_twig(0.1), camera, material_names=("bark", "needle"), leaves=leaves,
+                                       background=BACKGROUND, aa="coverage") for leaves in (thin, wide)]
+    for skipped, both in zip(frames["skipped"], frames["both"], strict=True):
+        assert np.array_equal(skipped.color, both.color)
+        assert np.array_equal(skipped.distance, both.distance)
