@@ -84,6 +84,12 @@ class Tolerances:
     """Relative (to the row's length plus its largest radius): the GPU pyramid grows by
     this besides ``hull_padding`` so that float32 rounding of its corners loses no pixel."""
 
+    ribbon_margin: float = 1.0 / 64.0
+    """Relative and in pixels: coverage anti-aliasing's screen quad of a thin row
+    (``raycast.glsl``'s THIN_RIBBON) reaches this fraction of its width and this many
+    pixels more beyond the bound of the row's projected radius (second-order terms of the
+    perspective, float32 rounding)."""
+
     # ------------------------------------------------------------------ skinning
     same_length: float = 1e-9
     """Relative (to the larger of the two): two lengths of one row closer than this are
@@ -247,7 +253,8 @@ class Tolerances:
 
 #: The fields GLSL programs use, as macros ``TOL_<FIELD>``.
 GLSL_FIELDS = ("facing_min", "generator_rise", "joint_slack", "plane_tilt_cos", "pyramid_grazing", "pyramid_pad",
-               "recenter_parallel", "shadow_normal", "triangle_grazing", "tangent_floor_f32", "parallax_grazing_cos")
+               "ribbon_margin", "recenter_parallel", "shadow_normal", "triangle_grazing", "tangent_floor_f32",
+               "parallax_grazing_cos")
 
 #: The tolerances of plantgen.
 tol = Tolerances()

@@ -20,7 +20,11 @@
 // radius, so it stays a continuous line instead of breaking into dots, and its alpha is its
 // true radius over the floor's, its share of the pixel; such rows are drawn by a pass of
 // their own after everything opaque (plantgen.gl.coverage: coverage_pass 1, blended, no
-// depth or distance written), the rest by pass 0).
+// depth or distance written), the rest by pass 0); THIN_RIBBON (with THIN_COVERAGE, pass 1's
+// program: each thin row's proxy is one screen quad around its axis's projection, as wide
+// as its cast radius's, instead of its pyramid's back faces: the same pixels' rays from two
+// triangles instead of up to six, each of which llvmpipe shades in 4 x 4 blocks of its
+// own; thick rows are dropped).
 
 #include "cone.glsl"
 
@@ -53,6 +57,12 @@ uniform vec3 copy_offset;
 flat out vec4 f_rec0, f_rec1, f_rec2, f_rec3, f_rec4, f_rec5;
 #if defined THIN_COVERAGE
 flat out vec2 f_true_radii;   // the row's own radii (r1, r2) before the floor
+#endif
+#if defined THIN_RIBBON
+uniform vec2 viewport;          // width, height in pixels (as eye.glsl's)
+uniform vec3 cam_forward;       // unit
+uniform vec3 cam_up_scaled;     // unit up * tan(fov_y / 2)
+uniform float ribbon_near;      // the eye distance along cam_forward the axis is cut at (the near plane)
 #endif
 
 // Axial height where the edge line base + y*axis + (r1 + k*y)*q of the pyramid meets
@@ -111,6 +121,39 @@ vec3 pyramid_corner(vec3 base, vec3 axis, vec3 ref_dir, vec3 side, float r1, flo
     return base + y * axis + radius * q;
 }
 
+#if defined THIN_RIBBON
+// The screen quad (corner: sx = -1 or +1 across, end 0 or 1 along; clip coordinates) that
+// holds the projection of the cone r1 + k*y cut by the two planes (both relative to the
+// render origin, grown by the padding): the axis between the planes' lowest and highest
+// cuts (as the grazing pyramid takes them) is projected, and the quad reaches `width`
+// pixels beyond it on every side, a bound on the projected radius anywhere along it (a
+// sphere of radius r at distance rho, eye depth w, spans at most f*r*rho/w^2 pixels).
+vec4 ribbon_corner(vec3 base, vec3 axis, float r1, float k, vec4 plane_lo, vec4 plane_hi, vec3 corner) {
+    vec2 range_lo = plane_axial_range(plane_lo, base, axis, r1, k);
+    vec2 range_hi = plane_axial_range(plane_hi, base, axis, r1, k);
+    float y_lo = min(range_lo.x, range_hi.x), y_hi = max(range_lo.y, range_hi.y);
+    float r_max = max(max(r1 + k * y_lo, r1 + k * y_hi), 0.0);
+    vec3 p0 = base + y_lo * axis, p1 = base + y_hi * axis;
+    float w0 = dot(p0, cam_forward), w1 = dot(p1, cam_forward);
+    if (max(w0, w1) < ribbon_near) return vec4(0.0, 0.0, 2.0, 1.0);    // behind the near plane
+    if (w0 < ribbon_near) { p0 = mix(p0, p1, (ribbon_near - w0) / (w1 - w0)); w0 = ribbon_near; }
+    if (w1 < ribbon_near) { p1 = mix(p1, p0, (ribbon_near - w1) / (w0 - w1)); w1 = ribbon_near; }
+    vec2 half_view = 0.5 * viewport;
+    vec4 c0 = view_projection * vec4(p0, 1.0), c1 = view_projection * vec4(p1, 1.0);
+    vec2 s0 = c0.xy / c0.w * half_view, s1 = c1.xy / c1.w * half_view;   // pixels from the centre
+    float focal = half_view.y / length(cam_up_scaled);
+    float w_min = min(w0, w1);
+    float width = r_max * focal * max(length(p0), length(p1)) / (w_min * w_min) * (1.0 + TOL_RIBBON_MARGIN)
+                + TOL_RIBBON_MARGIN;
+    vec2 e = s1 - s0;
+    float len = length(e);
+    vec2 along = len > 1e-6 ? e / len : vec2(1.0, 0.0);
+    vec2 across = vec2(-along.y, along.x);
+    vec2 s = (corner.z < 0.5 ? s0 - width * along : s1 + width * along) + corner.x * width * across;
+    return vec4(s / half_view, 0.0, 1.0);
+}
+#endif
+
 void main() {
     // the record placed (directions turned; lengths, radii, plane offsets, shell scaled)
     f_rec0 = vec4(copy_turn * (copy_scale * rec0.xyz) + copy_offset, copy_scale * rec0.w);
@@ -144,6 +187,11 @@ void main() {
     // planes relative to the render origin, grown by `pad` all round (moved outwards)
     vec4 plane_lo = vec4(f_rec3.xyz, f_rec3.w + dot(f_rec3.xyz, base) - pad);
     vec4 plane_hi = vec4(f_rec4.xyz, f_rec4.w + dot(f_rec4.xyz, base) + pad);
+#if defined THIN_RIBBON
+    gl_Position = thin ? ribbon_corner(base, axis, r1 + pad, k, plane_lo, plane_hi, corner)
+                       : vec4(0.0, 0.0, 2.0, 1.0);     // a thick row: pass 0's
+    return;
+#endif
     vec3 p = pyramid_corner(base, axis, ref_dir, side, r1 + pad, k, plane_lo, plane_hi, corner);
     gl_Position = view_projection * vec4(p, 1.0);
 #if defined SCREEN_PROXY

@@ -136,6 +136,59 @@ def test_a_cone_closing_to_a_point_stays_opaque_with_its_relief(gl_ctx):
     assert np.array_equal(none.distance, coverage.distance)
 
 
+def bent_twigs(seed: int = 3, chains: int = 12, links: int = 5):
+    """Thin twigs (0.05 to 0.4 pixel in radius) bending every way over the view, its corners
+    included, one pointing straight at the eye (end-on) and one leaving it sideways: chains
+    of ``links`` segments, skinned with their tilted joint planes."""
+    rng = np.random.default_rng(seed)
+    px = pixel_world()
+    starts, ends, parents = [], [], []
+    for c in range(chains):
+        point = np.array([rng.uniform(-60, 60) * px, rng.uniform(-45, 45) * px, rng.uniform(-3, 3)])
+        if c == 0:
+            point = np.zeros(3)
+        for k in range(links):
+            step = rng.normal(size=3) * np.array([8 * px, 8 * px, 0.5])
+            if c == 0:
+                step = np.array([0.0, 0.0, 0.6])                      # along the view: end-on
+            elif c == 1:
+                step = np.array([14 * px, 2 * px, 0.0])               # out of the view sideways
+            parents.append(len(starts) - 1 if k else -1)
+            starts.append(point)
+            point = point + step
+            ends.append(point)
+    n = len(starts)
+    r = rng.uniform(0.05, 0.4, n) * px
+    skeleton = Skeleton(np.array(starts), np.array(ends), r, 0.8 * r, np.array(parents), np.zeros(n, bool),
+                        np.zeros(n, int), ("bark",))
+    return skin_skeleton(skeleton)
+
+
+def test_the_thin_rows_quads_draw_what_their_pyramids_drew(gl_ctx):
+    """Coverage anti-aliasing's pass of thin rows draws each as one screen quad around it
+    (raycast.glsl's THIN_RIBBON): the same image and distances, bit for bit, as the
+    pyramids' back faces drew (the quad holds every pixel whose ray meets the row, and no
+    pixel twice; its fragments are not the pyramids'); twigs every way and the coconut's
+    fronds."""
+    from plantgen.gl.raycast import Raycaster
+    ribbon, pyramid = Raycaster(gl_ctx), Raycaster(gl_ctx)
+    pyramid.thin_ribbons = False
+    model = prepare_model("coconut")
+    coconut = model.frusta_at(0.0)
+    staging = stage_model(model.grown, coconut, *SIZE, ground="auto")
+    settings, _ = RenderSettings().frame(model.effects)
+    cases = [(bent_twigs(), {"camera": twig_camera(), "material_names": ("bark",), "background": BACKGROUND,
+                             "aa": "coverage"}),
+             (coconut, {**frame_arguments(coconut, staging, None, ImageSettings()), "settings": settings})]
+    for frusta, args in cases:
+        a, b = ribbon.render(frusta, **args), pyramid.render(frusta, **args)
+        assert np.array_equal(a.color, b.color)
+        assert np.array_equal(a.distance, b.distance)
+        assert not np.array_equal(a.color, ribbon.render(frusta, **{**args, "aa": "none"}).color)   # thin rows
+        work = [c.render(frusta, **args, count_work=True).stats.work.fragments for c in (ribbon, pyramid)]
+        assert work[0] != work[1], work        # the quads were drawn
+
+
 def test_aa_none_draws_what_the_ray_caster_drew(gl_ctx):
     """``--aa none`` is the frame the ray caster draws without the argument (today's); the
     default differs from it."""
@@ -233,3 +286,28 @@ def test_depth_out_draws_the_distances_without_it(gl_ctx):
     plain = render_model("broadleaf", size=SIZE, aa="none")
     np.testing.assert_array_equal(exact.distance, plain.result.distance)
     assert not np.array_equal(exact.result.distance, exact.distance)     # the frame's own lack the twigs
+
+
+def test_a_leaf_pass_that_would_draw_no_leaf_is_skipped(gl_ctx, monkeypatch):
+    """Where every leaf is thinner than the floor at its distance (a needle), the opaque
+    pass leaves the leaves out; where none is, the thin pass is not drawn: the same image
+    and distances as both passes drew (each draws every leaf and keeps those of its own)."""
+    from plantgen.gl.leaf_layer import LeafLayer
+    from plantgen.gl.raycast import Raycaster
+    camera, floor = twig_camera(), 0.5 * pixel_world() / DISTANCE
+    layer = LeafLayer(gl_ctx)
+    thin, wide = needle(0.3), needle(3.0)
+    assert layer.thin_share(thin, (0.0, 0.0, 0.0), camera.eye, floor) == "all"
+    assert layer.thin_share(wide, (0.0, 0.0, 0.0), camera.eye, floor) == "none"
+    assert layer.thin_share(thin, (0.0, 0.0, 0.0), camera.eye, floor * 0.25) == "none"
+    layer.release()
+    frames = {}
+    for share in ("skipped", "both"):
+        if share == "both":
+            monkeypatch.setattr(LeafLayer, "thin_share", lambda *args: "some")
+        caster = Raycaster(gl_ctx)
+        frames[share] = [caster.render(thin_twig(0.1), camera, material_names=("bark", "needle"), leaves=leaves,
+                                       background=BACKGROUND, aa="coverage") for leaves in (thin, wide)]
+    for skipped, both in zip(frames["skipped"], frames["both"], strict=True):
+        assert np.array_equal(skipped.color, both.color)
+        assert np.array_equal(skipped.distance, both.distance)

@@ -54,14 +54,44 @@ def flip_error(image: np.ndarray, reference: np.ndarray) -> float | None:
     return float(mean)
 
 
-def frame_view(model_name: str, width: int, height: int):
-    """(frusta, the keyword arguments of the ray caster's default frame) of ``model_name``."""
-    request = RenderSettings.from_options(size=(width, height))
+def staged_view(model, frusta, width: int, height: int, request: RenderSettings) -> dict:
+    """The keyword arguments of the ray caster's frame of ``model`` (a prepared model, its
+    ``frusta``) as ``plantgen render`` draws it with ``request``'s options: the effects,
+    the ground and the anti-aliasing they ask for."""
+    effects = request.effects.resolve(model.grown.scene.effects if model.grown.scene is not None else ())
+    staging = stage_model(model.grown, frusta, width, height, ground=ground_asked(request.image))
+    settings, shadows = request.frame(effects)
+    return {**frame_arguments(frusta, staging, shadows, request.image), "settings": settings}
+
+
+def frame_view(model_name: str, width: int, height: int, **options):
+    """(frusta, the keyword arguments of the ray caster's default frame) of ``model_name``;
+    ``options``: ``plantgen render``'s, by their settings names (``tone=False``, ``aa="none"``)."""
+    request = RenderSettings.from_options(size=(width, height), **options)
     model = prepare_model(model_name, effects=request.effects)
     frusta = model.frusta_at(0.0)
-    staging = stage_model(model.grown, frusta, width, height, ground=ground_asked(request.image))
-    settings, shadows = request.frame(model.effects)
-    return frusta, {**frame_arguments(frusta, staging, shadows, request.image), "settings": settings}
+    return frusta, staged_view(model, frusta, width, height, request)
+
+
+def interleaved_times(caster: Raycaster, frusta, views: dict, frames: int) -> tuple[dict, dict]:
+    """Draw each of ``views`` (name: the keyword arguments of ``caster.render``) in
+    ``frames`` interleaved rounds after one warm-up round (so a load that comes and goes on
+    shared cores touches them alike). Returns ({name: (frame ms list, wall ms list, CPU ms
+    list)}, {name: the last round's colour image}). The CPU time is the process's over the
+    render call, every thread's (llvmpipe rasterises and shades in this process's threads,
+    so it is the frame's work, which waiting for a shared core does not lengthen)."""
+    times: dict = {name: ([], [], []) for name in views}
+    images = {}
+    for round_ in range(frames + 1):
+        for name, kw in views.items():
+            t0, c0 = time.perf_counter(), time.process_time()
+            result = caster.render(frusta, **kw)
+            wall, cpu = (time.perf_counter() - t0) * 1e3, (time.process_time() - c0) * 1e3
+            images[name] = result.color
+            if round_:           # the first round warms the programs and the driver up
+                for k, value in enumerate((result.frame_ms, wall, cpu)):
+                    times[name][k].append(value)
+    return times, images
 
 
 def measure(model_name: str, width: int, height: int, frames: int) -> list[dict]:
@@ -71,21 +101,11 @@ def measure(model_name: str, width: int, height: int, frames: int) -> list[dict]
     frusta, view = frame_view(model_name, width, height)
     caster = Raycaster()
     reference = caster.render(frusta, **{**view, **REFERENCE}).color
-    times: dict = {name: ([], []) for name, _ in VARIANTS}
-    images = {}
-    for round_ in range(frames + 1):
-        for name, kw in VARIANTS:
-            t0 = time.perf_counter()
-            result = caster.render(frusta, **{**view, **kw})
-            wall = (time.perf_counter() - t0) * 1e3
-            images[name] = result.color
-            if round_:           # the first round warms the programs and the driver up
-                times[name][0].append(result.frame_ms)
-                times[name][1].append(wall)
-    base = [statistics.median(t) for t in times["none"]]
+    times, images = interleaved_times(caster, frusta, {name: {**view, **kw} for name, kw in VARIANTS}, frames)
+    base = [statistics.median(t) for t in times["none"][:2]]
     rows = []
     for name, _ in VARIANTS:
-        frame, wall = (statistics.median(t) for t in times[name])
+        frame, wall = (statistics.median(t) for t in times[name][:2])
         rows.append({"model": model_name, "size": f"{width}x{height}", "variant": name, "frame_ms": frame,
                      "wall_ms": wall, "frame_ratio": frame / base[0], "wall_ratio": wall / base[1],
                      "mae": float(np.abs(images[name].astype(float) - reference.astype(float)).mean()),

@@ -113,7 +113,7 @@ class LeafLayer:
     def __init__(self, ctx):
         self.ctx = ctx
         self._uploaded = None   # (polygons, labels key, vbo, ibo, origin)
-        self._thin = None       # (polygons, buffer of thin_leaf_data)
+        self._thin = None       # (polygons, buffer of thin_leaf_data, (least, greatest) leaf width)
 
     def release(self) -> None:
         if self._uploaded is not None:
@@ -129,8 +129,30 @@ class LeafLayer:
         if self._thin is None or self._thin[0] is not polygons:
             if self._thin is not None:
                 self._thin[1].release()
-            self._thin = (polygons, self.ctx.buffer(thin_leaf_data(polygons, origin).tobytes()))
+            data = thin_leaf_data(polygons, origin)
+            widths = (float(data[:, 6].min()), float(data[:, 6].max())) if len(data) else (0.0, 0.0)
+            self._thin = (polygons, self.ctx.buffer(data.tobytes()), widths)
         return self._thin[1]
+
+    def thin_share(self, polygons: Polygons, origin, eye, coverage_floor: float) -> str:
+        """Whether every leaf is narrower than the floor's width at its distance from
+        ``eye`` (``"all"``), none is (``"none"``), or either may be (``"some"``): leaf.glsl's
+        THIN_LEAVES test bounded over the leaves' box and their least and greatest width,
+        with a margin for its float32 rounding. A pass that would draw no leaf is skipped:
+        the pine's needles, all thin at a whole-tree view, took a tenth of its frame to
+        be run through the opaque pass and clipped there (llvmpipe, 256x192)."""
+        self._thin_buffer(polygons, origin)
+        least, greatest = self._thin[2]
+        box = np.asarray(polygons.bounds, np.float64)
+        eye = np.asarray(eye, np.float64)
+        near = float(np.linalg.norm(np.clip(eye, box[0], box[1]) - eye))
+        far = float(np.linalg.norm(np.maximum(np.abs(box[0] - eye), np.abs(box[1] - eye))))
+        margin = 1e-4
+        if greatest < 2.0 * coverage_floor * near * (1.0 - margin):
+            return "all"
+        if least > 2.0 * coverage_floor * far * (1.0 + margin):
+            return "none"
+        return "some"
 
     def _upload(self, polygons: Polygons, labels):
         key = None if labels is None else np.asarray(labels).tobytes()
@@ -177,14 +199,17 @@ class LeafLayer:
         vao = ctx.vertex_array(program, attributes, index_buffer=ibo, index_element_size=4)
         nearest = self._nearest_first(vbo, ibo, origin, view, count) if looks.get("SKY_LIGHT") else None
 
+        share = self.thin_share(polygons, origin, view.eye, coverage_floor) if thin else "none"
+
         def frame_draw():
             ctx.disable(ctx.CULL_FACE)
             if nearest is not None:
                 nearest[0]()
-            vao.render(mode=ctx.TRIANGLES, vertices=count)
+            if share != "all":          # else every leaf is the thin pass's
+                vao.render(mode=ctx.TRIANGLES, vertices=count)
             ctx.depth_func = "<"
         thin_draw = coverage_pass(ctx, program, lambda: vao.render(mode=ctx.TRIANGLES, vertices=count)) \
-            if thin else None
+            if share != "none" else None
         if not shadowed:
             return frame_draw, None, [vao, *(nearest[1:] if nearest else [])], thin_draw
         caster = build_program(ctx, "leaf.glsl", {"SHADOW_PASS": True})      # relative to the light's anchor

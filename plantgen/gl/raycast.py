@@ -65,6 +65,9 @@ __all__ = ["RaycastSettings", "Raycaster", "render_frusta", "label_image"]
 
 #: Vertices of one instance's bounding pyramid (12 triangles).
 PYRAMID_VERTICES = len(PYRAMID_TRIANGLES) * 3
+#: Coverage anti-aliasing's screen quad of a thin row (raycast.glsl's THIN_RIBBON): two
+#: triangles over the pyramid template's corners 0, 1, 4, 5 (sx = -1, +1 at either end).
+RIBBON_TRIANGLES = np.array([[0, 1, 5], [0, 5, 4]], dtype=np.int32)
 
 
 #: Bytes the mesh caster's mesh takes a triangle, host and GPU together (about half a
@@ -93,6 +96,12 @@ class Raycaster(OffscreenRenderer, BvhCache):
     #: blends them (the ray caster: its rows' pyramids are built per frame, so they grow with
     #: the floor); the tracer's BVH boxes hold the rows' own radii, so it does not.
     casts_thin_rows = True
+    #: Whether coverage anti-aliasing's pass draws each thin row as one screen quad around
+    #: it (raycast.glsl's THIN_RIBBON: two triangles, the same pixels and colours) rather
+    #: than by its pyramid's back faces (up to six triangles, each of which llvmpipe shades
+    #: in 4 x 4 blocks of its own: on llvmpipe the pass took the elm and the coconut 1.5
+    #: times the CPU time at 512x384).
+    thin_ribbons = True
 
     def __init__(self, ctx=None, limits: Limits | None = None):
         super().__init__(ctx)
@@ -100,6 +109,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         self.limits = limits if limits is not None else default_limits
         self._template_vbo = self.ctx.buffer(PYRAMID_CORNERS.tobytes())
         self._template_ibo = self.ctx.buffer(PYRAMID_TRIANGLES.tobytes())
+        self._ribbon_ibo = self.ctx.buffer(RIBBON_TRIANGLES.tobytes())
         self.programs_used: set[tuple] = set()
         self._placed = None      # (PlacedPlants, [record buffer per plant]): uploaded once
         # the mesh caster's meshes, least recently used first:
@@ -231,7 +241,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         has_leaves = bool(extras.after)
         draw_frusta, drawn = self._eye_draws(programs["frame"], view, lighting, settings,
                                              frusta if placed else (records, record_buffer),
-                                             (repeats, tex, n, lod_pixels), coverage and self.casts_thin_rows, extras)
+                                             (repeats, tex, n, lod_pixels), programs["thin"], extras)
         light = None if shadows is None else self._light_pass(
             frusta, programs["light"], lighting, settings, shadows, tuple(material_names), record_buffer,
             (leaves if has_leaves else None, ground), lod_pixels)
@@ -246,13 +256,15 @@ class Raycaster(OffscreenRenderer, BvhCache):
         return RenderResult(out.color, out.distance, out.frame_ms, camera, stats)
 
     def _eye_draws(self, program, view: FrameView, lighting: FrameLighting, settings: RaycastSettings, rows,
-                   textures: tuple, thin: bool, extras) -> tuple:
+                   textures: tuple, thin, extras) -> tuple:
         """The frusta's draw for the eye (:meth:`_frusta_draw` with ``textures`` = (repeats,
         height textures, rows, lod_pixels)) of ``rows``, a PlacedPlants or (records, a
         caller's record buffer or None: the records are uploaded here), what it leaves
-        added to ``extras.garbage``; with ``thin``, coverage anti-aliasing's pass of the
-        thin rows put first in ``extras.thin`` (drawn after everything opaque,
-        :func:`~plantgen.gl.coverage.coverage_pass`). Returns (draw, rows drawn)."""
+        added to ``extras.garbage``; with ``thin`` (a program, None: no coverage
+        anti-aliasing), coverage anti-aliasing's pass of the thin rows put first in
+        ``extras.thin`` (drawn after everything opaque by ``thin``: ``program`` itself, or
+        its THIN_RIBBON variant, :func:`~plantgen.gl.coverage.coverage_pass`). Returns
+        (draw, rows drawn)."""
         repeats, tex, n, lod_pixels = textures
         if not isinstance(rows, PlacedPlants):
             records, record_buffer = rows
@@ -260,9 +272,15 @@ class Raycaster(OffscreenRenderer, BvhCache):
                 self.ctx.buffer(records.tobytes()) if n else None)
             extras.garbage.extend([rows] if record_buffer is None else [])
         draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
-                                              thin)
+                                              thin is not None)
         extras.garbage.extend(vaos)
-        extras.thin[:0] = [coverage_pass(self.ctx, program, draw)] if thin else []
+        if thin is not None:
+            thin_draw = draw
+            if thin is not program:      # the THIN_RIBBON variant: its own vertex arrays
+                thin_draw, thin_vaos, _ = self._frusta_draw(thin, view, lighting, settings, rows, repeats, tex, n,
+                                                            lod_pixels, True, ribbon=True)
+                extras.garbage.extend(thin_vaos)
+            extras.thin[:0] = [coverage_pass(self.ctx, thin, thin_draw)]
         return draw, drawn
 
     def _sky_bvh(self, settings: RaycastSettings, frusta, leaves, camera: Camera, record_buffer=None):
@@ -296,7 +314,9 @@ class Raycaster(OffscreenRenderer, BvhCache):
         record them in :attr:`programs_used`. Returns the frusta program for the eye
         (``frame``), the light's pass (``light``, None without shadows) and the list of
         (file, defines switched on) built. ``bvh_defines``: those of the sky light's BVH;
-        ``thin_rows``: the frusta cast with THIN_COVERAGE (coverage anti-aliasing)."""
+        ``thin_rows``: the frusta cast with THIN_COVERAGE (coverage anti-aliasing), whose
+        pass of thin rows is drawn by ``thin`` (the THIN_RIBBON variant with
+        :attr:`thin_ribbons`, else the frame's program; None without ``thin_rows``)."""
         variants = program_variants(settings, shadows, ground, flat_background, leaves, bvh_defines)
         built = [(name, tuple(sorted(k for k, v in d.items() if v))) for name, d in variants]
         self.programs_used.update(built)
@@ -304,25 +324,33 @@ class Raycaster(OffscreenRenderer, BvhCache):
             build_program(self.ctx, name, defines)
         shadowed = shadows is not None
         looks = {} if settings.labels else traced_look(settings.look, "raycast.glsl", shadowed, bvh_defines)
-        frame = build_program(self.ctx, "raycast.glsl", {**settings.defines(), "SHADOWS": shadowed,
-                                                          "STATS": count_work, **looks, "THIN_COVERAGE": thin_rows})
+        defines = {**settings.defines(), "SHADOWS": shadowed, "STATS": count_work, **looks, "THIN_COVERAGE": thin_rows}
+        frame = build_program(self.ctx, "raycast.glsl", defines)
+        thin = None
+        if thin_rows:
+            ribbon = self.thin_ribbons and settings.proxy != "screen"
+            thin = build_program(self.ctx, "raycast.glsl", {**defines, "THIN_RIBBON": True}) if ribbon else frame
         light = build_program(self.ctx, *light_program(settings, shadows)) if shadowed else None
-        return {"frame": frame, "light": light, "built": built}
+        return {"frame": frame, "thin": thin, "light": light, "built": built}
 
-    def _instances(self, program, rec_buf, *, indexed: bool = True):
-        """The vertex array drawing one pyramid per record of ``rec_buf``."""
+    def _instances(self, program, rec_buf, *, indexed: bool = True, ribbon: bool = False):
+        """The vertex array drawing one pyramid per record of ``rec_buf`` (with ``ribbon``:
+        one screen quad, :data:`RIBBON_TRIANGLES`)."""
+        ibo = self._ribbon_ibo if ribbon else self._template_ibo
         return self.ctx.vertex_array(
             program, [(self._template_vbo, "3f", "corner"), (rec_buf, RECORD_LAYOUT, *RECORD_ATTRIBUTES)],
-            index_buffer=self._template_ibo if indexed else None, index_element_size=4)
+            index_buffer=ibo if indexed else None, index_element_size=4)
 
     def _frusta_draw(self, program, view: FrameView, lighting: FrameLighting,
                      settings: RaycastSettings, rec_buf, repeats, tex, n: int, lod_pixels: float = 0.0,
-                     thin_rows: bool = False):
+                     thin_rows: bool = False, *, ribbon: bool = False):
         """Set the eye's frusta program and return (draw callable, vertex arrays to release,
         rows drawn). ``rec_buf``: the records' buffer, or a PlacedPlants drawn copy by copy
         (:mod:`plantgen.gl.instanced`) with ``lod_pixels``; ``thin_rows``: coverage
         anti-aliasing's floor radius is set, and the draw is its pass 0 (the rows at or
-        above the floor; :meth:`_thin_rows_draw` draws the rest)."""
+        above the floor; :func:`~plantgen.gl.coverage.coverage_pass` draws the rest, by
+        this draw or, with ``ribbon``, by this one of ``program``, the THIN_RIBBON variant:
+        one screen quad a row, no face culled)."""
         sky = {k: v for k, v in lighting.sky.items() if k.startswith("sky_")}   # the rest: set below
         set_uniforms(program, **view.ray_uniforms(), **lighting.shading, **lighting.receiver, **sky,
                      **settings.march_uniforms(), **IDENTITY_PLACEMENT, texture_repeat=repeats,
@@ -331,25 +359,29 @@ class Raycaster(OffscreenRenderer, BvhCache):
                      depth_coeffs=(view.projection[2, 2], view.projection[2, 3]))
         if thin_rows:
             set_uniforms(program, coverage_floor=view.floor_radius(), coverage_pass=0,
-                         coverage_exponent=AA_ALPHA_EXPONENT)
+                         coverage_exponent=AA_ALPHA_EXPONENT, **({"ribbon_near": view.near} if ribbon else {}))
         if not n:
             return (lambda: None), [], 0
         ctx = self.ctx
         screen_proxy = settings.proxy == "screen"
         placed = rec_buf if isinstance(rec_buf, PlacedPlants) else None
         buffers = self.placed_buffers(placed) if placed is not None else [rec_buf]
-        vaos = [self._instances(program, buf, indexed=not screen_proxy) for buf in buffers]
+        vaos = [self._instances(program, buf, indexed=not screen_proxy, ribbon=ribbon) for buf in buffers]
         plan = eye_copy_draws(placed, view, lod_pixels) if placed is not None else None
 
         def render(vao, count):
             if screen_proxy:
                 vao.render(mode=ctx.TRIANGLES, vertices=3, instances=count)
             else:
-                vao.render(mode=ctx.TRIANGLES, vertices=PYRAMID_VERTICES, instances=count)
+                vao.render(mode=ctx.TRIANGLES, vertices=RIBBON_TRIANGLES.size if ribbon else PYRAMID_VERTICES,
+                           instances=count)
 
         def draw():
             tex.use(0)
-            if not screen_proxy:
+            if ribbon:
+                ctx.enable(ctx.DEPTH_TEST)
+                ctx.disable(ctx.CULL_FACE)      # a quad: whichever way it winds
+            elif not screen_proxy:
                 ctx.enable(ctx.DEPTH_TEST | ctx.CULL_FACE)
                 ctx.front_face = "ccw"
                 ctx.cull_face = "front"   # back faces: an eye inside a pyramid still sees it

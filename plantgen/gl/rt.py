@@ -167,7 +167,7 @@ class RayTracer(Raycaster):
         self.programs_used.update(built)
         for name, d in variants:
             build_program(self.ctx, name, d)
-        return {"frame": build_program(self.ctx, "rt.glsl", defines), "light": None, "built": built}
+        return {"frame": build_program(self.ctx, "rt.glsl", defines), "thin": None, "light": None, "built": built}
 
     def _lighting(self, material_names, ground, light_dir, shadows, caster_box, eye, anchor=None,
                   look=None) -> FrameLighting:
