@@ -13,18 +13,26 @@ every path.
 
 from __future__ import annotations
 
+import contextvars
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from ..tolerances import tol
 
 __all__ = ["dot", "norm", "cross", "unit", "any_perpendicular", "rotate", "plane_through",
-           "by_rows", "ROW_BLOCK", "reduce_to_root", "ancestor_count", "tree_roots"]
+           "by_rows", "ROW_BLOCK", "MAX_ROW_WORKERS", "row_workers", "in_threads", "reduce_to_root",
+           "ancestor_count", "tree_roots"]
 
 #: Rows a block of :func:`by_rows` (the temporaries of a few dozen (rows, 3) float64
 #: operations stay in the cache and are reused, not faulted in afresh per operation).
 ROW_BLOCK = 1 << 14
+
+#: Most threads :func:`by_rows` runs blocks on (beyond a few, the interpreter's share of
+#: each block's work leaves the extra threads waiting).
+MAX_ROW_WORKERS = 4
 
 
 # ============================================================================ vectors
@@ -95,7 +103,11 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     24 MB that the next reads back from memory; a block's stay in the cache).
 
     ``arrays`` share their first dimension; ``fn`` returns an array or a tuple of arrays
-    whose first dimension is that too. Returns what ``fn`` does."""
+    whose first dimension is that too, and changes nothing it did not make: with more
+    than one core (:func:`row_workers`) the blocks after the first run on
+    :func:`row_workers` threads at once (numpy lets go of the interpreter inside its
+    operations), each in a copy of the caller's context (its ``np.errstate``), each
+    writing its own rows. Returns what ``fn`` does."""
     m = len(arrays[0])
     if m <= block:
         return fn(*arrays)
@@ -105,11 +117,38 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     out = tuple(np.empty((m,) + p.shape[1:], dtype=p.dtype) for p in parts)
     for o, p in zip(out, parts, strict=True):
         o[:block] = p
-    for s in range(block, m, block):
+
+    def one(s):
         got = fn(*(a[s:s + block] for a in arrays))
         for o, p in zip(out, (got,) if single else got, strict=True):
             o[s:s + block] = p
+    in_threads(one, range(block, m, block))
     return out[0] if single else out
+
+
+def row_workers() -> int:
+    """Threads :func:`by_rows` and :func:`in_threads` use: the CPU cores this process may
+    run on (its affinity where the system says), at most :data:`MAX_ROW_WORKERS`."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):          # no affinity on this system (macOS, Windows)
+        cores = os.cpu_count() or 1
+    return max(min(cores, MAX_ROW_WORKERS), 1)
+
+
+def in_threads(work: Callable, items, workers: int | None = None) -> list:
+    """``[work(item) for item in items]``, on ``workers`` threads (default
+    :func:`row_workers`; one: in this thread, in order), each call in a copy of the
+    caller's context (``np.errstate`` holds in the workers too). Results in the items'
+    order; the first item's exception, in that order, is raised after every call ended.
+    ``work`` must change nothing that another call reads."""
+    items = list(items)
+    workers = row_workers() if workers is None else workers
+    if workers <= 1 or len(items) <= 1:
+        return [work(item) for item in items]
+    with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
+        futures = [pool.submit(contextvars.copy_context().run, work, item) for item in items]
+    return [f.result() for f in futures]
 
 
 # ============================================================================ trees
