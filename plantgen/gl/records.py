@@ -17,6 +17,7 @@ from ..geometry.rays.instances import PlacedPlants
 from ..geometry.skeletons.frusta import PYRAMID_CORNERS as _CORNERS_F64
 from ..geometry.skeletons.frusta import PYRAMID_TRIANGLES as _TRIANGLES_I64
 from ..geometry.skeletons.frusta import frusta_bounds
+from ..geometry.vec import in_threads
 
 __all__ = ["RECORD_FLOATS", "RECORD_BYTES", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "pack_records", "record_tags", "rc_buffer_bytes", "RecordStream", "StreamedRows", "rows_box",
@@ -29,6 +30,8 @@ RECORD_BYTES = 4 * RECORD_FLOATS
 #: The record's vertex-array layout (per instance) and attribute names in raycast.glsl.
 RECORD_LAYOUT = "4f 4f 4f 4f 4f 4f/i"
 RECORD_ATTRIBUTES = ("rec0", "rec1", "rec2", "rec3", "rec4", "rec5")
+#: Rows from which :func:`pack_records` fills its two halves of the columns on two threads.
+PACK_THREADS_ROWS = 1 << 16
 
 #: The bounding pyramid's template as uploaded: corner i is (sx, sz, end); 12 triangles
 #: wound counter-clockwise seen from outside (plantgen.geometry.skeletons.frusta's, in GL types).
@@ -67,19 +70,26 @@ def pack_records(frusta, origin, out: np.ndarray | None = None) -> np.ndarray:
     material = np.asarray(frusta.material)
     if n and (material.min() < 0 or material.max() > 255):
         raise PlantgenError("material indices must lie in 0..255 for the ray caster")
-    np.subtract(frusta.base, origin, out=out[:, 0:3])
-    out[:, 3] = frusta.length
-    out[:, 4:7] = frusta.axis
-    out[:, 7] = frusta.r1
-    out[:, 8:11] = frusta.ref_dir
-    out[:, 11] = frusta.r2
-    for col, plane in ((12, frusta.plane_lo), (16, frusta.plane_hi)):
-        out[:, col:col + 3] = plane[:, :3]
-        out[:, col + 3] = plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base)
-    out[:, 20] = frusta.u_offset
-    out[:, 21] = frusta.twist
-    out[:, 22] = frusta.shell
-    out[:, 23] = record_tags(material, frusta.open_lo, frusta.open_hi, frusta.v_part)
+
+    def rows(out):          # the row's own values
+        np.subtract(frusta.base, origin, out=out[:, 0:3])
+        out[:, 3] = frusta.length
+        out[:, 4:7] = frusta.axis
+        out[:, 7] = frusta.r1
+        out[:, 8:11] = frusta.ref_dir
+        out[:, 11] = frusta.r2
+        out[:, 20] = frusta.u_offset
+        out[:, 21] = frusta.twist
+        out[:, 22] = frusta.shell
+
+    def planes(out):        # the planes and the tags
+        for col, plane in ((12, frusta.plane_lo), (16, frusta.plane_hi)):
+            out[:, col:col + 3] = plane[:, :3]
+            out[:, col + 3] = plane[:, 3] - np.einsum("ij,ij->i", plane[:, :3], frusta.base)
+        out[:, 23] = record_tags(material, frusta.open_lo, frusta.open_hi, frusta.v_part)
+    # each half of the columns whole on a thread of its own (numpy lets go of the interpreter
+    # as it copies): every value is the same whichever runs first
+    in_threads(lambda fill: fill(out), (rows, planes), workers=None if n >= PACK_THREADS_ROWS else 1)
     return out
 
 
