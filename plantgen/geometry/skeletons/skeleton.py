@@ -108,12 +108,14 @@ class Skeleton:
         :func:`plantgen.metrics.geometry_bounds`)."""
         if len(self) == 0:
             return np.zeros((2, 3))
+        def block(s):           # a block at a time: min and max are exact
+            return [((pts - r).min(axis=0), (pts + r).max(axis=0))
+                    for pts, r in ((self.start[s:s + ROW_BLOCK], self.r_start[s:s + ROW_BLOCK, None]),
+                                   (self.end[s:s + ROW_BLOCK], self.r_end[s:s + ROW_BLOCK, None]))]
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for s in range(0, len(self), ROW_BLOCK):      # a block at a time: min and max are exact
-            for pts, r in ((self.start[s:s + ROW_BLOCK], self.r_start[s:s + ROW_BLOCK, None]),
-                           (self.end[s:s + ROW_BLOCK], self.r_end[s:s + ROW_BLOCK, None])):
-                lo = np.minimum(lo, (pts - r).min(axis=0))
-                hi = np.maximum(hi, (pts + r).max(axis=0))
+        for extremes in in_threads(block, range(0, len(self), ROW_BLOCK)):    # folded in row order
+            for low, high in extremes:
+                lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         return np.stack([lo, hi])
 
     @property
