@@ -91,8 +91,13 @@ def rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 def plane_through(normal: np.ndarray, point: np.ndarray) -> np.ndarray:
     """(m, 4) planes ``(nx, ny, nz, d)`` with unit normals ``normal`` (m, 3) through the
-    points ``point`` (m, 3): ``d = n·point``."""
-    return np.concatenate([normal, dot(normal, point)[:, None]], axis=1)
+    points ``point`` (m, 3): ``d = n·point``. Written into one array (a concatenate of an
+    (m, 3) and an (m, 1) array copies a row at a time)."""
+    d = dot(normal, point)
+    out = np.empty((len(normal), 4), dtype=np.result_type(normal, d))
+    out[:, :3] = normal
+    out[:, 3] = d
+    return out
 
 
 def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
