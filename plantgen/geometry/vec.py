@@ -166,7 +166,9 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
     ----------
     parent : (n,) int, parent of each node, -1 for a root
     values : (n, ...) per-node values
-    combine : associative ``combine(own, ancestors)`` on (k, ...) rows, e.g. ``np.add``
+    combine : associative ``combine(own, ancestors)`` on (k, ...) rows, row-wise (row i of
+        the result from row i of each argument), e.g. ``np.add``: each round combines a
+        block of nodes at a time (:func:`by_rows`, on threads), every read before any write
 
     Returns
     -------
@@ -177,7 +179,7 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
     live = np.flatnonzero(jump >= 0)
     while live.size:
         ancestor = jump[live]
-        total[live] = combine(total[live], total[ancestor])
+        total[live] = by_rows(lambda own, up: combine(total[own], total[up]), live, ancestor)
         jump[live] = jump[ancestor]
         live = live[jump[live] >= 0]
     return total
