@@ -290,7 +290,20 @@ def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG)
     into the leader in one surface (seam, texture frame and normals shared at the joint
     plane) that tapers to the leader's own radius along the leader's first segment, and
     the fork's other children grow out of that surface (side branches, started inside the
-    parent). Children bent by more than ``max_bend_deg`` do not lead."""
+    parent). Children bent by more than ``max_bend_deg`` do not lead.
+
+    The skeleton returned is marked as led at ``max_bend_deg`` (kept with it, as a Frusta
+    keeps its box): leading it again at that angle returns it at once (a still render
+    leads at rest, then skins, which leads again)."""
+    if skeleton.__dict__.get("_led_at") == max_bend_deg:
+        return skeleton
+    led_skeleton = _lead_forks(skeleton, max_bend_deg)
+    object.__setattr__(led_skeleton, "_led_at", max_bend_deg)
+    return led_skeleton
+
+
+def _lead_forks(skeleton: Skeleton, max_bend_deg: float) -> Skeleton:
+    """:func:`lead_forks`' work: the skeleton itself where no fork is led."""
     n = len(skeleton)
     child, side = continuing_children(skeleton)
     if side.size == 0:
