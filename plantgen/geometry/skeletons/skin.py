@@ -149,8 +149,8 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     child = joints.child
     report.joints, report.side_branches = len(child), len(side)
     report.measure_paper_seams(lambda: _paper_seams(skeleton, extend_side_branches))
-    lo = plane_through(seg.axis, seg.base)
-    hi = plane_through(seg.axis, skeleton.end)
+    lo = by_rows(plane_through, seg.axis, seg.base)
+    hi = by_rows(plane_through, seg.axis, skeleton.end)
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
     if child.size:
         sharp, bend, medial = _joint_cuts(seg, joints, skeleton, lo, hi, seam_fit, max_bend_deg, report)
@@ -646,7 +646,7 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
 def _set_joint_planes(lo, hi, joints: _Joints, normal, point) -> None:
     """Share each joint's plane (normals, points (j, 3)) between its parent's ``hi`` and
     its child's ``lo`` (n, 4), in place, bit for bit."""
-    plane = plane_through(normal, point)
+    plane = by_rows(plane_through, normal, point)
     lo[joints.child] = plane
     hi[joints.parent] = plane
 
@@ -673,14 +673,15 @@ def _sharp_joints(seg: _Segments, joints: _Joints, normal, lo, hi, max_bend_deg:
     k = seg.slope
     par, child = joints.parent, joints.child
     M1, M2, J = joints.parent_axis, joints.child_axis, joints.point
-    kp = k[par]
-    cos_b = np.clip(dot(M1, M2), -1, 1)
-    bend = np.degrees(np.arccos(cos_b))
-    past_limit = bend > max_bend_deg
-    sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
-    sin_c = np.abs(k[child]) / np.sqrt(1 + k[child] ** 2)
-    not_ellipse = ((dot(normal, M1) <= sin_p + tol.ellipse_margin)
-                   | (dot(normal, M2) <= sin_c + tol.ellipse_margin))
+
+    def joint_tests(p, c, m1, m2, nrm):     # row-wise (by_rows): the bend, past the limit, not an ellipse
+        kp, kc = k[p], k[c]
+        bend = np.degrees(np.arccos(np.clip(dot(m1, m2), -1, 1)))
+        sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
+        sin_c = np.abs(kc) / np.sqrt(1 + kc ** 2)
+        return bend, bend > max_bend_deg, ((dot(nrm, m1) <= sin_p + tol.ellipse_margin)
+                                           | (dot(nrm, m2) <= sin_c + tol.ellipse_margin))
+    bend, past_limit, not_ellipse = by_rows(joint_tests, par, child, M1, M2, normal)
     sharp = past_limit | not_ellipse
     joint_of_child = np.full(n, -1, dtype=np.int64)
     joint_of_child[child] = np.arange(len(child))
