@@ -110,9 +110,9 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     ``arrays`` share their first dimension; ``fn`` returns an array or a tuple of arrays
     whose first dimension is that too, and changes nothing it did not make: with more
     than one core (:func:`row_workers`) the blocks after the first run on
-    :func:`row_workers` threads at once (numpy lets go of the interpreter inside its
-    operations), each in a copy of the caller's context (its ``np.errstate``), each
-    writing its own rows. Returns what ``fn`` does."""
+    :func:`row_workers` threads at once, every n-th block on the n-th thread (numpy lets
+    go of the interpreter inside its operations), each in a copy of the caller's context
+    (its ``np.errstate``), each writing its own rows. Returns what ``fn`` does."""
     m = len(arrays[0])
     if m <= block:
         return fn(*arrays)
@@ -123,11 +123,13 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     for o, p in zip(out, parts, strict=True):
         o[:block] = p
 
-    def one(s):
-        got = fn(*(a[s:s + block] for a in arrays))
-        for o, p in zip(out, (got,) if single else got, strict=True):
-            o[s:s + block] = p
-    in_threads(one, range(block, m, block))
+    def blocks(starts):
+        for s in starts:
+            got = fn(*(a[s:s + block] for a in arrays))
+            for o, p in zip(out, (got,) if single else got, strict=True):
+                o[s:s + block] = p
+    starts, workers = range(block, m, block), row_workers()
+    in_threads(blocks, [starts[i::workers] for i in range(workers)])    # every workers-th block a thread
     return out[0] if single else out
 
 
