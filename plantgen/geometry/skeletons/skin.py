@@ -51,10 +51,12 @@ import numpy as np
 
 from ...tolerances import tol
 from ..vec import (
+    ROW_BLOCK,
     any_perpendicular,
     by_rows,
     cross,
     dot,
+    in_threads,
     norm,
     plane_through,
     rotate,
@@ -248,7 +250,8 @@ def _segments_and_joints(skeleton: Skeleton, extend_side_branches: bool):
     if extend_side_branches and side.size:
         _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
     parent = skeleton.parent[child]
-    return seg, _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child]), side
+    point, parent_axis, child_axis = by_rows(lambda c, p: (skeleton.start[c], seg.axis[p], seg.axis[c]), child, parent)
+    return seg, _Joints(child, parent, point, parent_axis, child_axis), side
 
 
 def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -646,16 +649,22 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
 def _set_joint_planes(lo, hi, joints: _Joints, normal, point) -> None:
     """Share each joint's plane (normals, points (j, 3)) between its parent's ``hi`` and
     its child's ``lo`` (n, 4), in place, bit for bit."""
-    plane = by_rows(plane_through, normal, point)
-    lo[joints.child] = plane
-    hi[joints.parent] = plane
+    child, parent = joints.child, joints.parent
+
+    def share(s):           # a block of joints: their rows are theirs alone (one continuing child a parent)
+        plane = plane_through(normal[s:s + ROW_BLOCK], point[s:s + ROW_BLOCK])
+        lo[child[s:s + ROW_BLOCK]] = plane
+        hi[parent[s:s + ROW_BLOCK]] = plane
+    in_threads(share, range(0, len(child), ROW_BLOCK))
 
 
 def _linked(skeleton: Skeleton, parent, child) -> np.ndarray:
     """(j,) bool: the joints whose child continues the chain's surface (the skeleton's radii
     agree to ``tol.same_length``); the others are radius steps, capped on both sides."""
-    r_end0, r_start0 = skeleton.r_end[parent], skeleton.r_start[child]
-    return np.abs(r_end0 - r_start0) <= tol.same_length * np.maximum(r_end0, r_start0)
+    def linked(p, c):       # row-wise (by_rows)
+        r_end0, r_start0 = skeleton.r_end[p], skeleton.r_start[c]
+        return np.abs(r_end0 - r_start0) <= tol.same_length * np.maximum(r_end0, r_start0)
+    return by_rows(linked, parent, child)
 
 
 # ============================================================================ sharp joints

@@ -29,7 +29,7 @@ def reference_directions(axis, parent_row) -> np.ndarray:
     roots = np.flatnonzero(~has_parent)
     root_perp = np.empty((n_rows, 3))
     root_perp[roots] = by_rows(any_perpendicular, axis[roots])
-    return by_rows(_carried_frame, chain, root_perp[tree_roots(parent_row)], axis)
+    return by_rows(lambda c, root, a: _carried_frame(c, root_perp[root], a), chain, tree_roots(parent_row), axis)
 
 
 def _carried_frame(chain, root_perp, axis) -> np.ndarray:
