@@ -10,8 +10,6 @@ themselves, and say so in one line).
 
 from __future__ import annotations
 
-import ctypes
-import os
 import sys
 import traceback
 import warnings
@@ -32,14 +30,7 @@ from .render import render
 from .scan import scan
 from .view import view
 
-__all__ = ["cli", "main", "keep_freed_memory", "HEAP_KEEP_BYTES"]
-
-#: glibc's ``mallopt`` parameters (malloc.h): the free memory at the top of the heap that
-#: ``free`` keeps, and the size from which an allocation is a mapping of its own.
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
-#: A command's allocations below this come from the heap, and up to this much of what
-#: they free stays there for the next (:func:`keep_freed_memory`).
-HEAP_KEEP_BYTES = 1 << 30
+__all__ = ["cli", "main"]
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -67,28 +58,9 @@ for _command in (list_models, grow, export, render, scan, view, bench, batch):
 cli.add_command(debug_opt(convert))
 
 
-def keep_freed_memory() -> bool:
-    """Have glibc keep the memory a command frees and hand it out again (``mallopt``:
-    allocations under :data:`HEAP_KEEP_BYTES` come from the heap, which keeps up to that
-    much free). By default it gives back the free top of its heap past a few dozen MiB and
-    maps each array over 32 MiB on its own, so the next array is faulted in afresh, page
-    by page: a million-segment skin makes and drops dozens of them. The same numbers; the
-    process keeps the memory it freed (up to its peak) until it ends.
-    Returns whether it was set (False off glibc: nothing changes)."""
-    try:
-        if not os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc"):
-            return False
-        mallopt = ctypes.CDLL(None).mallopt
-    except (AttributeError, OSError, ValueError):     # not glibc, or no confstr name here
-        return False
-    return bool(mallopt(M_MMAP_THRESHOLD, HEAP_KEEP_BYTES)) and bool(mallopt(M_TRIM_THRESHOLD, HEAP_KEEP_BYTES))
-
-
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: user errors become one line on stderr and exit status 2, an
-    unexpected failure one line and exit status 1 (the traceback with ``--debug``). The
-    process keeps the memory it frees for reuse (:func:`keep_freed_memory`)."""
-    keep_freed_memory()
+    unexpected failure one line and exit status 1 (the traceback with ``--debug``)."""
     debug_requested(reset=True)
     try:
         with np.errstate(all="ignore"), warnings.catch_warnings():
