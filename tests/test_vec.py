@@ -79,8 +79,12 @@ def test_pointer_jumping_matches_a_walk_up_the_tree():
     assert ancestor_count(parent).tolist() == [len(p) - 1 for p in paths]
     assert tree_roots(parent).tolist() == [p[-1] for p in paths]
     values = np.random.default_rng(2).normal(size=len(parent))
-    np.testing.assert_allclose(reduce_to_root(parent, values, np.add),
-                               [values[p].sum() for p in paths], rtol=1e-12)
+    kept = values.copy()
+    summed = reduce_to_root(parent, values, np.add)
+    np.testing.assert_allclose(summed, [values[p].sum() for p in paths], rtol=1e-12)
+    assert np.array_equal(values, kept)                 # the caller's values untouched
+    given = values.copy()                               # overwrite: combined in place, the same bytes
+    assert reduce_to_root(parent, given, np.add, overwrite=True) is given and given.tobytes() == summed.tobytes()
     # an order-sensitive combine: own value first, then the ancestors'
     labels = np.array([f"{i}," for i in range(len(parent))], dtype=object)
     joined = reduce_to_root(parent, labels, lambda own, up: own + up)

@@ -160,7 +160,7 @@ def in_threads(work: Callable, items, workers: int | None = None) -> list:
 
 # ============================================================================ trees
 def reduce_to_root(parent: np.ndarray, values: np.ndarray,
-                   combine: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+                   combine: Callable[[np.ndarray, np.ndarray], np.ndarray], overwrite: bool = False) -> np.ndarray:
     """Per node ``i``: ``combine(values[i], combine(values[parent[i]], ...))`` down to its
     root, by pointer jumping.
 
@@ -171,12 +171,13 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
     combine : associative ``combine(own, ancestors)`` on (k, ...) rows, row-wise (row i of
         the result from row i of each argument), e.g. ``np.add``: each round combines a
         block of nodes at a time (:func:`by_rows`, on threads), every read before any write
+    overwrite : ``values`` is the caller's to give: combined in place (returned), not copied
 
     Returns
     -------
     (n, ...) combined values, ``values``' dtype
     """
-    total = values.copy()
+    total = values if overwrite else values.copy()
     jump = np.asarray(parent, dtype=np.int64).copy()
     live = np.flatnonzero(jump >= 0)
     while live.size:
@@ -190,10 +191,10 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
 def ancestor_count(parent: np.ndarray) -> np.ndarray:
     """(n,) int64: how many ancestors each node has (0 for a root)."""
     parent = np.asarray(parent, dtype=np.int64)
-    return reduce_to_root(parent, (parent >= 0).astype(np.int64), np.add)
+    return reduce_to_root(parent, (parent >= 0).astype(np.int64), np.add, overwrite=True)
 
 
 def tree_roots(parent: np.ndarray) -> np.ndarray:
     """(n,) int64: the root of each node's tree (a root is its own)."""
     parent = np.asarray(parent, dtype=np.int64)
-    return reduce_to_root(parent, np.arange(len(parent)), lambda own, ancestor: ancestor)
+    return reduce_to_root(parent, np.arange(len(parent)), lambda own, ancestor: ancestor, overwrite=True)
