@@ -293,6 +293,11 @@ def test_skins_and_meshes_are_checked_finite_before_they_are_drawn_or_written():
     r1[3] = np.inf
     with pytest.raises(PlantgenError, match=f"x.yaml: the skin of segment {frusta.segment[3]} is not finite"):
         check_finite_frusta(replace(frusta, r1=r1), "x.yaml")
+    base = frusta.base.copy()
+    base[7, 1] = np.nan                        # NaN, not the first row's nor the extreme's
+    with pytest.raises(PlantgenError, match=f"x.yaml: the skin of segment {frusta.segment[7]} is not finite"):
+        check_finite_frusta(replace(frusta, base=base), "x.yaml")
+    assert check_finite_frusta(frusta, "x.yaml") is frusta
     vertices = np.zeros((4, 3))
     vertices[2] = np.nan
     mesh = SimpleNamespace(vertices=vertices, normals=np.ones((4, 3)), uv=np.zeros((4, 2)),

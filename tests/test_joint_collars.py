@@ -240,3 +240,21 @@ def test_the_band_measure_sees_the_collars_of_unled_forks(gl_ctx, trees):
         frusta = skin_skeleton(sk, lead=False)
         for parent, child in close_up_joints(sk, continuing=0):
             assert band_excess(joint_bands(frusta, parent, child, relief=False)) > BAND_SLACK
+
+
+def test_a_led_skeleton_is_not_led_again(monkeypatch):
+    """lead_forks marks what it returns as led at its angle: leading it again at that angle
+    (a still render leads at rest, then skinning leads) returns it without looking at a
+    joint; at another angle, or a fresh skeleton, the forks are worked out."""
+    from plantgen.geometry.skeletons import skin
+    sk = Skeleton(np.array([[0, 0, 0], [0, 1, 0], [0, 1, 0.0]]), np.array([[0, 1, 0], [0.3, 2, 0], [-0.3, 2, 0]]),
+                  np.array([0.3, 0.2, 0.1]), np.array([0.25, 0.15, 0.1]), np.array([-1, 0, 0]), np.zeros(3, bool),
+                  np.zeros(3, np.int32))
+    calls = []
+    real = skin.continuing_children
+    monkeypatch.setattr(skin, "continuing_children", lambda s: calls.append(1) or real(s))
+    led = lead_forks(sk)
+    assert led.continues.tolist() == [False, True, False] and len(calls) == 1
+    assert lead_forks(led) is led and len(calls) == 1
+    lead_forks(led, max_bend_deg=30.0)
+    assert len(calls) == 2

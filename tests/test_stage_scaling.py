@@ -52,6 +52,31 @@ def test_framing_sampling_does_not_grow_with_the_rows(monkeypatch):
     assert sampled[1] < 3 * sampled[0]
 
 
+def test_a_render_s_cpu_stages_are_the_same_bytes_on_one_thread_or_two(tmp_path, monkeypatch):
+    """Reading an .npz, skinning, framing and packing the records run their blocks (or the
+    archive's members) on a thread per core: the skeleton, the rows,
+    the box, the camera and the records are the same bytes as on one thread."""
+    from plantgen.benchmarks.pipeline import synthetic_skeleton
+    from plantgen.geometry import vec
+    from plantgen.geometry.skeletons.frusta import ROW_FIELDS, frusta_bounds
+    from plantgen.geometry.skeletons.skeleton import Skeleton
+    from plantgen.gl.records import PACK_BLOCK, pack_records
+    path = tmp_path / "plant.npz"
+    synthetic_skeleton(PACK_BLOCK + 5 * vec.ROW_BLOCK + 20, seed=3).save(path)
+    runs = []
+    for workers in (1, 2):
+        monkeypatch.setattr(vec, "row_workers", lambda w=workers: w)
+        skeleton = Skeleton.load(path)
+        frusta = skin_skeleton(skeleton)
+        camera = auto_camera(frusta, 64, 48)
+        arrays = [getattr(skeleton, k) for k in ("start", "end", "r_start", "r_end", "parent", "continues")]
+        arrays += [getattr(frusta, k) for k in ROW_FIELDS]
+        arrays += [frusta_bounds(frusta), np.array(camera.eye), pack_records(frusta, np.array(camera.eye))]
+        runs.append([np.ascontiguousarray(a).tobytes() for a in arrays])
+    assert len(frusta.base) > PACK_BLOCK
+    assert runs[0] == runs[1]
+
+
 # ----------------------------------------------------------------------------- scenes
 def _grid_scene(n: int, seeds: int | None = None) -> dict:
     grid = {"count": [n, 1], "spacing": [2, 2]}

@@ -11,6 +11,7 @@ from plantgen.geometry.vec import (
     by_rows,
     cross,
     dot,
+    in_threads,
     norm,
     plane_through,
     reduce_to_root,
@@ -78,8 +79,12 @@ def test_pointer_jumping_matches_a_walk_up_the_tree():
     assert ancestor_count(parent).tolist() == [len(p) - 1 for p in paths]
     assert tree_roots(parent).tolist() == [p[-1] for p in paths]
     values = np.random.default_rng(2).normal(size=len(parent))
-    np.testing.assert_allclose(reduce_to_root(parent, values, np.add),
-                               [values[p].sum() for p in paths], rtol=1e-12)
+    kept = values.copy()
+    summed = reduce_to_root(parent, values, np.add)
+    np.testing.assert_allclose(summed, [values[p].sum() for p in paths], rtol=1e-12)
+    assert np.array_equal(values, kept)                 # the caller's values untouched
+    given = values.copy()                               # overwrite: combined in place, the same bytes
+    assert reduce_to_root(parent, given, np.add, overwrite=True) is given and given.tobytes() == summed.tobytes()
     # an order-sensitive combine: own value first, then the ancestors'
     labels = np.array([f"{i}," for i in range(len(parent))], dtype=object)
     joined = reduce_to_root(parent, labels, lambda own, up: own + up)
@@ -100,10 +105,37 @@ def test_by_rows_gives_the_whole_call_bit_for_bit_a_block_at_a_time():
     whole = planes(a, b)
     calls.clear()
     blocked = by_rows(planes, a, b, block=64)
-    assert calls == [64] * 15 + [40]
+    assert sorted(calls, reverse=True) == [64] * 15 + [40]      # the blocks after the first on threads
     for w, got in zip(whole, blocked, strict=True):
         assert w.dtype == got.dtype and w.shape == got.shape and w.tobytes() == got.tobytes()
     single = by_rows(lambda x: norm(x), a, block=300)
     assert single.tobytes() == norm(a).tobytes()
     assert by_rows(lambda x: norm(x), a[:5], block=300).tobytes() == norm(a[:5]).tobytes()
     assert by_rows(lambda x: norm(x), a[:0]).shape == (0,)
+
+
+def test_in_threads_keeps_the_order_the_first_failure_and_the_callers_errstate():
+    """in_threads gives the items' results in their order on two threads as on one; the
+    first item's exception in that order is raised (after every call ended); each call
+    runs under the caller's np.errstate, so a division by zero raises in a worker too."""
+    done = []
+
+    def square(i):
+        done.append(i)
+        return i * i
+    assert in_threads(square, range(50), workers=2) == [i * i for i in range(50)]
+    assert in_threads(square, range(50), workers=1) == [i * i for i in range(50)]
+    done.clear()
+
+    def fail(i):
+        done.append(i)
+        if i in (3, 7):
+            raise ValueError(f"item {i}")
+        return i
+    with pytest.raises(ValueError, match="item 3"):
+        in_threads(fail, range(10), workers=2)
+    assert sorted(done) == list(range(10))
+    with np.errstate(divide="raise"), pytest.raises(FloatingPointError):
+        in_threads(lambda x: np.ones(4) / x, [np.ones(4), np.zeros(4)], workers=2)
+    with np.errstate(divide="ignore"):
+        assert np.isinf(in_threads(lambda x: np.ones(4) / x, [np.ones(4), np.zeros(4)], workers=2)[1]).all()

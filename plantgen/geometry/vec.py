@@ -13,18 +13,26 @@ every path.
 
 from __future__ import annotations
 
+import contextvars
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from ..tolerances import tol
 
 __all__ = ["dot", "norm", "cross", "unit", "any_perpendicular", "rotate", "plane_through",
-           "by_rows", "ROW_BLOCK", "reduce_to_root", "ancestor_count", "tree_roots"]
+           "by_rows", "ROW_BLOCK", "MAX_ROW_WORKERS", "row_workers", "in_threads", "reduce_to_root",
+           "ancestor_count", "tree_roots"]
 
 #: Rows a block of :func:`by_rows` (the temporaries of a few dozen (rows, 3) float64
 #: operations stay in the cache and are reused, not faulted in afresh per operation).
 ROW_BLOCK = 1 << 14
+
+#: Most threads :func:`by_rows` runs blocks on (beyond a few, the interpreter's share of
+#: each block's work leaves the extra threads waiting).
+MAX_ROW_WORKERS = 4
 
 
 # ============================================================================ vectors
@@ -83,8 +91,13 @@ def rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 def plane_through(normal: np.ndarray, point: np.ndarray) -> np.ndarray:
     """(m, 4) planes ``(nx, ny, nz, d)`` with unit normals ``normal`` (m, 3) through the
-    points ``point`` (m, 3): ``d = n·point``."""
-    return np.concatenate([normal, dot(normal, point)[:, None]], axis=1)
+    points ``point`` (m, 3): ``d = n·point``. Written into one array (a concatenate of an
+    (m, 3) and an (m, 1) array copies a row at a time)."""
+    d = dot(normal, point)
+    out = np.empty((len(normal), 4), dtype=np.result_type(normal, d))
+    out[:, :3] = normal
+    out[:, 3] = d
+    return out
 
 
 def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
@@ -95,7 +108,11 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     24 MB that the next reads back from memory; a block's stay in the cache).
 
     ``arrays`` share their first dimension; ``fn`` returns an array or a tuple of arrays
-    whose first dimension is that too. Returns what ``fn`` does."""
+    whose first dimension is that too, and changes nothing it did not make: with more
+    than one core (:func:`row_workers`) the blocks after the first run on
+    :func:`row_workers` threads at once, every n-th block on the n-th thread (numpy lets
+    go of the interpreter inside its operations), each in a copy of the caller's context
+    (its ``np.errstate``), each writing its own rows. Returns what ``fn`` does."""
     m = len(arrays[0])
     if m <= block:
         return fn(*arrays)
@@ -105,16 +122,45 @@ def by_rows(fn: Callable, *arrays: np.ndarray, block: int = ROW_BLOCK):
     out = tuple(np.empty((m,) + p.shape[1:], dtype=p.dtype) for p in parts)
     for o, p in zip(out, parts, strict=True):
         o[:block] = p
-    for s in range(block, m, block):
-        got = fn(*(a[s:s + block] for a in arrays))
-        for o, p in zip(out, (got,) if single else got, strict=True):
-            o[s:s + block] = p
+
+    def blocks(starts):
+        for s in starts:
+            got = fn(*(a[s:s + block] for a in arrays))
+            for o, p in zip(out, (got,) if single else got, strict=True):
+                o[s:s + block] = p
+    starts, workers = range(block, m, block), row_workers()
+    in_threads(blocks, [starts[i::workers] for i in range(workers)])    # every workers-th block a thread
     return out[0] if single else out
+
+
+def row_workers() -> int:
+    """Threads :func:`by_rows` and :func:`in_threads` use: the CPU cores this process may
+    run on (its affinity where the system says), at most :data:`MAX_ROW_WORKERS`."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):          # no affinity on this system (macOS, Windows)
+        cores = os.cpu_count() or 1
+    return max(min(cores, MAX_ROW_WORKERS), 1)
+
+
+def in_threads(work: Callable, items, workers: int | None = None) -> list:
+    """``[work(item) for item in items]``, on ``workers`` threads (default
+    :func:`row_workers`; one: in this thread, in order), each call in a copy of the
+    caller's context (``np.errstate`` holds in the workers too). Results in the items'
+    order; the first item's exception, in that order, is raised after every call ended.
+    ``work`` must change nothing that another call reads."""
+    items = list(items)
+    workers = row_workers() if workers is None else workers
+    if workers <= 1 or len(items) <= 1:
+        return [work(item) for item in items]
+    with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
+        futures = [pool.submit(contextvars.copy_context().run, work, item) for item in items]
+    return [f.result() for f in futures]
 
 
 # ============================================================================ trees
 def reduce_to_root(parent: np.ndarray, values: np.ndarray,
-                   combine: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+                   combine: Callable[[np.ndarray, np.ndarray], np.ndarray], overwrite: bool = False) -> np.ndarray:
     """Per node ``i``: ``combine(values[i], combine(values[parent[i]], ...))`` down to its
     root, by pointer jumping.
 
@@ -122,18 +168,21 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
     ----------
     parent : (n,) int, parent of each node, -1 for a root
     values : (n, ...) per-node values
-    combine : associative ``combine(own, ancestors)`` on (k, ...) rows, e.g. ``np.add``
+    combine : associative ``combine(own, ancestors)`` on (k, ...) rows, row-wise (row i of
+        the result from row i of each argument), e.g. ``np.add``: each round combines a
+        block of nodes at a time (:func:`by_rows`, on threads), every read before any write
+    overwrite : ``values`` is the caller's to give: combined in place (returned), not copied
 
     Returns
     -------
     (n, ...) combined values, ``values``' dtype
     """
-    total = values.copy()
+    total = values if overwrite else values.copy()
     jump = np.asarray(parent, dtype=np.int64).copy()
     live = np.flatnonzero(jump >= 0)
     while live.size:
         ancestor = jump[live]
-        total[live] = combine(total[live], total[ancestor])
+        total[live] = by_rows(lambda own, up: combine(total[own], total[up]), live, ancestor)
         jump[live] = jump[ancestor]
         live = live[jump[live] >= 0]
     return total
@@ -142,10 +191,10 @@ def reduce_to_root(parent: np.ndarray, values: np.ndarray,
 def ancestor_count(parent: np.ndarray) -> np.ndarray:
     """(n,) int64: how many ancestors each node has (0 for a root)."""
     parent = np.asarray(parent, dtype=np.int64)
-    return reduce_to_root(parent, (parent >= 0).astype(np.int64), np.add)
+    return reduce_to_root(parent, (parent >= 0).astype(np.int64), np.add, overwrite=True)
 
 
 def tree_roots(parent: np.ndarray) -> np.ndarray:
     """(n,) int64: the root of each node's tree (a root is its own)."""
     parent = np.asarray(parent, dtype=np.int64)
-    return reduce_to_root(parent, np.arange(len(parent)), lambda own, ancestor: ancestor)
+    return reduce_to_root(parent, np.arange(len(parent)), lambda own, ancestor: ancestor, overwrite=True)

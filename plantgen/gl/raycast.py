@@ -269,7 +269,7 @@ class Raycaster(OffscreenRenderer, BvhCache):
         if not isinstance(rows, PlacedPlants):
             records, record_buffer = rows
             rows = record_buffer if record_buffer is not None else (
-                self.ctx.buffer(records.tobytes()) if n else None)
+                self.ctx.buffer(records) if n else None)     # the array's memory, not a copy of it
             extras.garbage.extend([rows] if record_buffer is None else [])
         draw, vaos, drawn = self._frusta_draw(program, view, lighting, settings, rows, repeats, tex, n, lod_pixels,
                                               thin is not None)

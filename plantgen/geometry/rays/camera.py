@@ -21,8 +21,8 @@ from ...knobs import knob
 from ...limits import MAX_IMAGE_SIDE, Limits
 from ...limits import limits as default_limits
 from ...tolerances import tol
-from ..skeletons.frusta import ROW_FIELDS, Frusta, frusta_bounds, row_end_balls, section_points
-from ..vec import ROW_BLOCK, by_rows
+from ..skeletons.frusta import ROW_FIELDS, Frusta, end_balls, frusta_bounds, section_points
+from ..vec import by_rows
 
 __all__ = ["Camera", "CameraError", "Orbit", "auto_camera", "frame_copies", "box_corners", "depth_range",
            "orbit_angles", "orbit_direction", "orbit_view", "AUTO_DIRECTION"]
@@ -190,8 +190,8 @@ FRAME_CHUNK = 1 << 15
 #: alone): their exact extreme is the bar every other row's bound must reach for it to be
 #: sampled at all.
 FRAME_PROBE = 1
-#: How far past its end ball (:func:`row_end_balls`) a section's sample balls may reach,
-#: relative to the ball's radius: the slack is at most 1/cos(π/24) - 1 < 0.0087.
+#: How far past its end ball (:func:`~plantgen.geometry.skeletons.frusta.row_end_balls`) a
+#: section's sample balls may reach, relative to the ball's radius: the slack is at most 1/cos(π/24) - 1 < 0.0087.
 FRAME_BALL_GROW = 1.01
 
 
@@ -274,8 +274,8 @@ class FrameRows:
     """The rows :func:`auto_camera` frames, their sections sampled only where they may
     matter.
 
-    A row's two end balls (:func:`row_end_balls`, grown by :data:`FRAME_BALL_GROW` to hold
-    its section samples' balls) bound every quantity a pass takes the extreme of. A pass
+    A row's two end balls (:func:`~plantgen.geometry.skeletons.frusta.row_end_balls`, grown by
+    :data:`FRAME_BALL_GROW` to hold its section samples' balls) bound every quantity a pass takes the extreme of. A pass
     samples the :data:`FRAME_PROBE` rows whose bounds reach farthest, then the rows whose
     bounds reach that exact extreme (or are not finite): no other row's samples can reach
     it, so the result is the exact extreme over every row's samples. ``sampled`` counts
@@ -285,11 +285,8 @@ class FrameRows:
         self.frusta, self.points, self.sampled, self.passes = frusta, points, 0, 0
         self.n = 0 if frusta is None else len(frusta.base)
         n = self.n
-        self.centres, radii = np.empty((2 * n, 3)), np.empty(2 * n)
-        for s in range(0, n, ROW_BLOCK):     # the balls a block of rows at a time, into the (2n,) arrays
-            e = min(s + ROW_BLOCK, n)
-            (c_lo, r_lo), (c_hi, r_hi) = row_end_balls(frusta.subset_view(s, e))
-            self.centres[s:e], self.centres[n + s:n + e], radii[s:e], radii[n + s:n + e] = c_lo, c_hi, r_lo, r_hi
+        # the balls a block of rows at a time, into the (2n,) arrays, and the rows' box from them
+        self.centres, radii = end_balls(frusta) if n else (np.empty((0, 3)), np.empty(0))
         #: (2, 3) the box around the rows (:func:`frusta_bounds`: the box of the same balls)
         self.box = frusta_bounds(frusta) if n else np.zeros((2, 3))
         self.radii = radii * FRAME_BALL_GROW + (2 * tol.frame_extent + 1e-9 * float(np.abs(self.box).max()))

@@ -68,12 +68,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...tolerances import tol
-from ..vec import ROW_BLOCK, ancestor_count, cross, dot, norm, reduce_to_root, unit
+from ..vec import ROW_BLOCK, ancestor_count, cross, dot, in_threads, norm, reduce_to_root, unit
 
 __all__ = ["Frusta", "SkinReport", "ROW_FIELDS", "PYRAMID_CORNERS", "PYRAMID_TRIANGLES",
            "parent_rows_from_planes", "cone_slope", "plane_height", "plane_heights", "cone_radius_at", "relief_scale",
            "surface_uv", "surface_normals", "true_normals", "shade_rows_uv_normals",
-           "frusta_bounds", "row_end_balls", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
+           "frusta_bounds", "row_end_balls", "end_balls", "section_points", "bounding_pyramids", "pyramid_volume_ratio",
            "minor_semi_axis", "seam_mismatch", "seam_gap", "facing_normals", "MAX_V_SLOTS"]
 
 #: Names of the per-row arrays of the contract, in contract order.
@@ -619,14 +619,41 @@ def frusta_bounds(frusta: Frusta) -> np.ndarray:
 
 
 def _bounds(frusta: Frusta) -> np.ndarray:
+    return _ball_blocks(frusta)
+
+
+def end_balls(frusta: Frusta) -> tuple[np.ndarray, np.ndarray]:
+    """(centres (2n, 3), radii (2n,)): :func:`row_end_balls` of every row, the lower ends'
+    then the upper ends', worked out a block of rows at a time on
+    :func:`~plantgen.geometry.vec.in_threads`; :func:`frusta_bounds`' box is kept from the
+    same balls (the automatic camera needs both)."""
+    n = len(frusta.base)
+    centres, radii = np.empty((2 * n, 3)), np.empty(2 * n)
+    box = _ball_blocks(frusta, centres, radii)
+    if frusta.__dict__.get("_bounds") is None:
+        object.__setattr__(frusta, "_bounds", box)
+    return centres, radii
+
+
+def _ball_blocks(frusta: Frusta, centres=None, radii=None) -> np.ndarray:
+    """(2, 3) the box of the rows' end balls, a block of rows at a time (min and max are
+    exact; the blocks' extremes are folded in row order, as one by one), on threads; with
+    ``centres`` (2n, 3) and ``radii`` (2n,), the balls are written there too."""
     n = len(frusta.base)
     if n == 0:
         return np.zeros((2, 3))
+
+    def block(s):
+        e = min(s + ROW_BLOCK, n)
+        balls = row_end_balls(frusta.subset_view(s, e))
+        if centres is not None:
+            for (c, r), at in zip(balls, (s, n + s), strict=True):
+                centres[at:at + e - s], radii[at:at + e - s] = c, r
+        return [((c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0)) for c, r in balls]
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for s in range(0, n, ROW_BLOCK):       # a block of rows at a time: min and max are exact
-        for c, r in row_end_balls(frusta.subset_view(s, s + ROW_BLOCK)):
-            lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
-            hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
+    for extremes in in_threads(block, range(0, n, ROW_BLOCK)):
+        for low, high in extremes:
+            lo, hi = np.minimum(lo, low), np.maximum(hi, high)
     return np.stack([lo, hi])
 
 

@@ -35,7 +35,7 @@ from ...errors import PlantgenError
 from ...files import open_input, write_atomically
 from ...limits import LimitError, Limits, hint
 from ...limits import limits as default_limits
-from ..vec import ROW_BLOCK, by_rows
+from ..vec import ROW_BLOCK, by_rows, in_threads
 
 #: The most material names a skeleton file (.npz, .swc) may hold: a grammar has at most
 #: 16, a scene's merged skeleton the distinct ones of its plants.
@@ -108,12 +108,14 @@ class Skeleton:
         :func:`plantgen.metrics.geometry_bounds`)."""
         if len(self) == 0:
             return np.zeros((2, 3))
+        def block(s):           # a block at a time: min and max are exact
+            return [((pts - r).min(axis=0), (pts + r).max(axis=0))
+                    for pts, r in ((self.start[s:s + ROW_BLOCK], self.r_start[s:s + ROW_BLOCK, None]),
+                                   (self.end[s:s + ROW_BLOCK], self.r_end[s:s + ROW_BLOCK, None]))]
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for s in range(0, len(self), ROW_BLOCK):      # a block at a time: min and max are exact
-            for pts, r in ((self.start[s:s + ROW_BLOCK], self.r_start[s:s + ROW_BLOCK, None]),
-                           (self.end[s:s + ROW_BLOCK], self.r_end[s:s + ROW_BLOCK, None])):
-                lo = np.minimum(lo, (pts - r).min(axis=0))
-                hi = np.maximum(hi, (pts + r).max(axis=0))
+        for extremes in in_threads(block, range(0, len(self), ROW_BLOCK)):    # folded in row order
+            for low, high in extremes:
+                lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         return np.stack([lo, hi])
 
     @property
@@ -275,22 +277,30 @@ def _read_npz(fh, path, limits: Limits) -> dict:
     """The arrays of a skeleton ``.npz`` (an open binary file), each header checked before
     its data is read: the kinds and shapes of :data:`NPZ_ARRAYS`, no object array (numpy
     would unpickle it), at most ``max_segments`` rows, at most ``max_skeleton_bytes``
-    unpacked."""
+    unpacked. The members are inflated on :func:`~plantgen.geometry.vec.in_threads`'
+    threads (zlib lets go of the interpreter); a failure is the first array's, in
+    :data:`NPZ_ARRAYS` order, as when they are read one by one."""
     with zipfile.ZipFile(fh) as archive:
         members = {info.filename: info for info in archive.infolist()}
         unpacked = sum(info.file_size for info in members.values())
         if unpacked > limits.max_skeleton_bytes:
             raise LimitError(f"{path}: unpacks to {unpacked:,} bytes, over the limit of "
                              f"{limits.max_skeleton_bytes:,} ({hint('skeleton_bytes')})")
-        out = {}
-        for name, (kinds, columns) in NPZ_ARRAYS.items():
-            info = members.get(f"{name}.npy")
-            if info is None:
-                if name == "material_names":
-                    continue
-                raise SkeletonError(f"{path}: not a plantgen skeleton (missing array '{name}')")
-            with archive.open(info) as member:
-                out[name] = _read_npy(member, name, kinds, columns, path, limits)
+        names, missing = [], None
+        for name in NPZ_ARRAYS:
+            if f"{name}.npy" in members:
+                names.append(name)
+            elif name != "material_names":
+                missing = name
+                break
+
+        def read(name):
+            kinds, columns = NPZ_ARRAYS[name]
+            with archive.open(members[f"{name}.npy"]) as member:
+                return _read_npy(member, name, kinds, columns, path, limits)
+        out = dict(zip(names, in_threads(read, names), strict=True))
+    if missing is not None:
+        raise SkeletonError(f"{path}: not a plantgen skeleton (missing array '{missing}')")
     return out
 
 

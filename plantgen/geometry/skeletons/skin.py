@@ -51,10 +51,12 @@ import numpy as np
 
 from ...tolerances import tol
 from ..vec import (
+    ROW_BLOCK,
     any_perpendicular,
     by_rows,
     cross,
     dot,
+    in_threads,
     norm,
     plane_through,
     rotate,
@@ -149,8 +151,8 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     child = joints.child
     report.joints, report.side_branches = len(child), len(side)
     report.measure_paper_seams(lambda: _paper_seams(skeleton, extend_side_branches))
-    lo = plane_through(seg.axis, seg.base)
-    hi = plane_through(seg.axis, skeleton.end)
+    lo = by_rows(plane_through, seg.axis, seg.base)
+    hi = by_rows(plane_through, seg.axis, skeleton.end)
     sharp, bend, medial = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
     if child.size:
         sharp, bend, medial = _joint_cuts(seg, joints, skeleton, lo, hi, seam_fit, max_bend_deg, report)
@@ -248,7 +250,8 @@ def _segments_and_joints(skeleton: Skeleton, extend_side_branches: bool):
     if extend_side_branches and side.size:
         _extend_side_branches(seg, skeleton.start, skeleton.parent[side], side)
     parent = skeleton.parent[child]
-    return seg, _Joints(child, parent, skeleton.start[child], seg.axis[parent], seg.axis[child]), side
+    point, parent_axis, child_axis = by_rows(lambda c, p: (skeleton.start[c], seg.axis[p], seg.axis[c]), child, parent)
+    return seg, _Joints(child, parent, point, parent_axis, child_axis), side
 
 
 def _segment_axes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -290,7 +293,20 @@ def lead_forks(skeleton: Skeleton, max_bend_deg: float = FORK_LEAD_MAX_BEND_DEG)
     into the leader in one surface (seam, texture frame and normals shared at the joint
     plane) that tapers to the leader's own radius along the leader's first segment, and
     the fork's other children grow out of that surface (side branches, started inside the
-    parent). Children bent by more than ``max_bend_deg`` do not lead."""
+    parent). Children bent by more than ``max_bend_deg`` do not lead.
+
+    The skeleton returned is marked as led at ``max_bend_deg`` (kept with it, as a Frusta
+    keeps its box): leading it again at that angle returns it at once (a still render
+    leads at rest, then skins, which leads again)."""
+    if skeleton.__dict__.get("_led_at") == max_bend_deg:
+        return skeleton
+    led_skeleton = _lead_forks(skeleton, max_bend_deg)
+    object.__setattr__(led_skeleton, "_led_at", max_bend_deg)
+    return led_skeleton
+
+
+def _lead_forks(skeleton: Skeleton, max_bend_deg: float) -> Skeleton:
+    """:func:`lead_forks`' work: the skeleton itself where no fork is led."""
     n = len(skeleton)
     child, side = continuing_children(skeleton)
     if side.size == 0:
@@ -633,16 +649,22 @@ def _joint_cuts(seg: _Segments, joints: _Joints, skeleton: Skeleton, lo, hi, sea
 def _set_joint_planes(lo, hi, joints: _Joints, normal, point) -> None:
     """Share each joint's plane (normals, points (j, 3)) between its parent's ``hi`` and
     its child's ``lo`` (n, 4), in place, bit for bit."""
-    plane = plane_through(normal, point)
-    lo[joints.child] = plane
-    hi[joints.parent] = plane
+    child, parent = joints.child, joints.parent
+
+    def share(s):           # a block of joints: their rows are theirs alone (one continuing child a parent)
+        plane = plane_through(normal[s:s + ROW_BLOCK], point[s:s + ROW_BLOCK])
+        lo[child[s:s + ROW_BLOCK]] = plane
+        hi[parent[s:s + ROW_BLOCK]] = plane
+    in_threads(share, range(0, len(child), ROW_BLOCK))
 
 
 def _linked(skeleton: Skeleton, parent, child) -> np.ndarray:
     """(j,) bool: the joints whose child continues the chain's surface (the skeleton's radii
     agree to ``tol.same_length``); the others are radius steps, capped on both sides."""
-    r_end0, r_start0 = skeleton.r_end[parent], skeleton.r_start[child]
-    return np.abs(r_end0 - r_start0) <= tol.same_length * np.maximum(r_end0, r_start0)
+    def linked(p, c):       # row-wise (by_rows)
+        r_end0, r_start0 = skeleton.r_end[p], skeleton.r_start[c]
+        return np.abs(r_end0 - r_start0) <= tol.same_length * np.maximum(r_end0, r_start0)
+    return by_rows(linked, parent, child)
 
 
 # ============================================================================ sharp joints
@@ -660,14 +682,15 @@ def _sharp_joints(seg: _Segments, joints: _Joints, normal, lo, hi, max_bend_deg:
     k = seg.slope
     par, child = joints.parent, joints.child
     M1, M2, J = joints.parent_axis, joints.child_axis, joints.point
-    kp = k[par]
-    cos_b = np.clip(dot(M1, M2), -1, 1)
-    bend = np.degrees(np.arccos(cos_b))
-    past_limit = bend > max_bend_deg
-    sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
-    sin_c = np.abs(k[child]) / np.sqrt(1 + k[child] ** 2)
-    not_ellipse = ((dot(normal, M1) <= sin_p + tol.ellipse_margin)
-                   | (dot(normal, M2) <= sin_c + tol.ellipse_margin))
+
+    def joint_tests(p, c, m1, m2, nrm):     # row-wise (by_rows): the bend, past the limit, not an ellipse
+        kp, kc = k[p], k[c]
+        bend = np.degrees(np.arccos(np.clip(dot(m1, m2), -1, 1)))
+        sin_p = np.abs(kp) / np.sqrt(1 + kp * kp)
+        sin_c = np.abs(kc) / np.sqrt(1 + kc ** 2)
+        return bend, bend > max_bend_deg, ((dot(nrm, m1) <= sin_p + tol.ellipse_margin)
+                                           | (dot(nrm, m2) <= sin_c + tol.ellipse_margin))
+    bend, past_limit, not_ellipse = by_rows(joint_tests, par, child, M1, M2, normal)
     sharp = past_limit | not_ellipse
     joint_of_child = np.full(n, -1, dtype=np.int64)
     joint_of_child[child] = np.arange(len(child))

@@ -25,11 +25,11 @@ def reference_directions(axis, parent_row) -> np.ndarray:
     if has_parent.any():
         with_parent = np.flatnonzero(has_parent)
         quat[with_parent] = by_rows(lambda rows: _min_rotation_quat(axis[parent_row[rows]], axis[rows]), with_parent)
-    chain = reduce_to_root(parent_row, quat, _quat_mul)
+    chain = reduce_to_root(parent_row, quat, _quat_mul, overwrite=True)
     roots = np.flatnonzero(~has_parent)
     root_perp = np.empty((n_rows, 3))
     root_perp[roots] = by_rows(any_perpendicular, axis[roots])
-    return by_rows(_carried_frame, chain, root_perp[tree_roots(parent_row)], axis)
+    return by_rows(lambda c, root, a: _carried_frame(c, root_perp[root], a), chain, tree_roots(parent_row), axis)
 
 
 def _carried_frame(chain, root_perp, axis) -> np.ndarray:
@@ -64,7 +64,7 @@ def u_offsets(rows, ref_dir, twist) -> np.ndarray:
         a_c, ref_c = rows.axis[c], ref_dir[c]
         u_child = np.arctan2(dot(rel, cross(a_c, ref_c)), dot(rel, ref_c)) / (2 * np.pi)
         local[c] = twist[p] - u_child
-    total = reduce_to_root(rows.parent_row, local, np.add)
+    total = reduce_to_root(rows.parent_row, local, np.add, overwrite=True)
     wrapped = total - np.floor(total)
     return np.where(wrapped < 1.0, wrapped, 0.0)      # -1e-17 wraps to 1.0 in floats
 
