@@ -26,8 +26,11 @@ grow runs read to interpret, render adds skin, frame, check and draw, export ski
 frame, check, mesh and write, scan skin and upload/BVH.
 
 Times are CPU seconds of this process (``time.process_time``: steadier than wall time on
-busy cores; a GL draw's driver threads count too); memory is the peak Python and numpy
-allocations of the stage over what was held before it (``tracemalloc``). *per 10x* is
+busy cores; a GL draw's driver threads count too), of runs with no allocation traced;
+memory is the peak Python and numpy allocations of the stage over what was held before
+it (``tracemalloc``), from one more run of the stage, traced (tracing slows work that makes
+many Python objects, the more the more objects are alive: 1,024 distinct plants' skins
+took 11-14 times 100's traced, 9.3 times untraced). *per 10x* is
 the growth of the largest size's figure over the one before, scaled to a tenfold step
 ((t2/t1)^(1/log10(n2/n1))). A run that a limit refuses shows *refused* and how long the
 refusal took. ``--quick`` (the tests') runs the two smallest sizes; the default adds the
@@ -37,6 +40,7 @@ middle ones; ``--full`` all, up to 1 M segments and 10,000 copies.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import platform
@@ -138,30 +142,50 @@ class Run:
         self.written = 0                       # bytes of the .glb the write stage wrote
 
     @contextmanager
-    def stage(self, name: str):
-        """Time one run of stage ``name``: ``stages[name]`` is the median CPU time of its
-        runs so far and their largest peak."""
-        held = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
+    def stage(self, name: str, traced: bool = False):
+        """One run of stage ``name``: untraced, a sample of its CPU time; ``traced``, of its
+        peak allocations (:func:`traced_peak`). ``stages[name]`` is the median CPU time of
+        its untraced runs so far and the largest traced peak."""
         t0 = time.process_time()
         try:
-            yield
+            with traced_peak() if traced else contextlib.nullcontext([0]) as peak:
+                yield
         except PlantgenError as exc:
-            self.refused = (name, time.process_time() - t0, str(exc).splitlines()[0])
+            if not traced:
+                self.refused = (name, time.process_time() - t0, str(exc).splitlines()[0])
             raise
         finally:
-            peak = tracemalloc.get_traced_memory()[1] - held
             samples = self.samples.setdefault(name, [])
-            samples.append((time.process_time() - t0, max(peak, 0)))
-            self.stages[name] = (statistics.median(t for t, _ in samples), max(p for _, p in samples))
+            samples.append((None, peak[0]) if traced else (time.process_time() - t0, 0))
+            self.note(name)
+
+    def note(self, name: str) -> None:
+        """``stages[name]`` from its samples: (median untraced CPU seconds, largest peak)."""
+        samples = self.samples[name]
+        times = [t for t, _ in samples if t is not None]
+        self.stages[name] = (statistics.median(times) if times else 0.0, max(p for _, p in samples))
 
     def timed(self, name: str, work, repeats: int | None = None):
-        """``work()`` run ``repeats`` times (default :attr:`repeats`), each a sample of
-        stage ``name``; the last result."""
+        """``work()`` run ``repeats`` times untraced (default :attr:`repeats`), each a
+        sample of stage ``name``'s time, then once traced, its memory; the last result."""
         for _ in range(self.repeats if repeats is None else repeats):
             with self.stage(name):
-                out = work()
-        return out
+                work()
+        with self.stage(name, traced=True):
+            return work()
+
+
+@contextmanager
+def traced_peak():
+    """Trace allocations for the block: yields a one-item list that holds, after it, the
+    peak of what was allocated during it (what was held before is not traced)."""
+    peak = [0]
+    tracemalloc.start()
+    try:
+        yield peak
+    finally:
+        peak[0] = max(tracemalloc.get_traced_memory()[1], 0)
+        tracemalloc.stop()
 
 
 def _plant_stages(run: Run, skeleton: Skeleton, grown, gl: bool) -> None:
@@ -231,25 +255,23 @@ def _grammar_run(iterations: int, tmp: Path, gl: bool, repeats: int = 1) -> Run:
     path = tmp / f"tree{iterations}.yaml"
     path.write_text(tree_grammar(iterations))
     run = Run("grammar", (3 ** iterations - 1) // 2, f"grammar {iterations} steps", repeats)
-    for _ in range(repeats):          # each grow a sample of read, derive and interpret
-        held = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
+    for k in range(repeats + 1):      # each grow a sample of read, derive and interpret; the last traced
+        traced = k == repeats
         t0 = time.process_time()
         try:
-            grown = grow_file(path, limits=GRAMMAR_LIMITS)
+            with traced_peak() if traced else contextlib.nullcontext([0]) as peak:
+                grown = grow_file(path, limits=GRAMMAR_LIMITS)
         except PlantgenError as exc:
             run.refused = ("derive", time.process_time() - t0, str(exc).splitlines()[0])
             run.stages["derive"] = (time.process_time() - t0, 0)
             return run
-        peak = max(tracemalloc.get_traced_memory()[1] - held, 0)
         spent = time.process_time() - t0
         timed = {"read": grown.timings.get("parse", 0.0), "derive": grown.timings.get("derive", 0.0),
                  "interpret": grown.timings.get("interpret", 0.0)}
         scale = spent / max(sum(timed.values()), 1e-9)       # wall timings to this process's CPU
         for name, seconds in timed.items():         # one peak for the three: grown together
-            samples = run.samples.setdefault(name, [])
-            samples.append((seconds * scale, peak))
-            run.stages[name] = (statistics.median(t for t, _ in samples), max(p for _, p in samples))
+            run.samples.setdefault(name, []).append((None, peak[0]) if traced else (seconds * scale, 0))
+            run.note(name)
     run.size = len(grown.skeleton)
     _plant_stages(run, grown.skeleton, grown, gl)
     return run
@@ -283,18 +305,14 @@ def _grow_walls(run: Run, path: Path) -> None:
     """The scene grown one plant at a time and in a pool over every core this process may
     use, alternately, :data:`GROW_REPEATS` times each, untraced: wall seconds (the pool's
     work is its processes' CPU time, which this process's clock does not see)."""
-    tracemalloc.stop()
-    try:
-        for _ in range(GROW_REPEATS):
-            for stage, jobs in (("grow, 1 job", 1), ("grow, all cores", available_cores())):
-                before, t0 = os.times(), time.perf_counter()
-                grow_file(path, jobs=jobs)
-                wall, after = time.perf_counter() - t0, os.times()
-                cpu = sum(after[:4]) - sum(before[:4])        # this process's and its pool's, user and system
-                run.walls.setdefault(stage, []).append(wall)
-                run.walls.setdefault(f"{stage} cpu", []).append(cpu)
-    finally:
-        tracemalloc.start()
+    for _ in range(GROW_REPEATS):
+        for stage, jobs in (("grow, 1 job", 1), ("grow, all cores", available_cores())):
+            before, t0 = os.times(), time.perf_counter()
+            grow_file(path, jobs=jobs)
+            wall, after = time.perf_counter() - t0, os.times()
+            cpu = sum(after[:4]) - sum(before[:4])        # this process's and its pool's, user and system
+            run.walls.setdefault(stage, []).append(wall)
+            run.walls.setdefault(f"{stage} cpu", []).append(cpu)
     for stage in ("grow, 1 job", "grow, all cores"):
         run.stages[stage] = (statistics.median(run.walls[stage]), -1)
 
@@ -302,16 +320,12 @@ def _grow_walls(run: Run, path: Path) -> None:
 def measure(sizes: dict, gl: bool = False, kinds=("npz", "grammar", "scene"), repeats: int = 1) -> list[Run]:
     """Every run of ``sizes`` (one of :data:`SIZES`), smallest first; each stage timed
     ``repeats`` times (the median; a scene's growth once)."""
-    tracemalloc.start()
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            runs = [_npz_run(n, Path(tmp), gl, repeats) for n in (sizes["npz"] if "npz" in kinds else ())]
-            runs += [_grammar_run(its, Path(tmp), gl, repeats)
-                     for its in (sizes["grammar"] if "grammar" in kinds else ())]
-            runs += [_scene_run(copies, distinct, Path(tmp), repeats) for distinct in (False, True)
-                     for copies in (sizes["scene"] if "scene" in kinds else ())]
-    finally:
-        tracemalloc.stop()
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = [_npz_run(n, Path(tmp), gl, repeats) for n in (sizes["npz"] if "npz" in kinds else ())]
+        runs += [_grammar_run(its, Path(tmp), gl, repeats)
+                 for its in (sizes["grammar"] if "grammar" in kinds else ())]
+        runs += [_scene_run(copies, distinct, Path(tmp), repeats) for distinct in (False, True)
+                 for copies in (sizes["scene"] if "scene" in kinds else ())]
     return runs
 
 
