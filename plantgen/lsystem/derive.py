@@ -785,10 +785,13 @@ def _assemble(string, matched: np.ndarray, out_len: np.ndarray, pieces: list, wi
     new_np[offsets[keep]] = nparam[keep]
     new_par[offsets[keep]] = params[keep]
     for sub, s, k, p in pieces:
-        pos = offsets[sub][None, :] + np.arange(len(s))[:, None]  # (L, k)
-        new_sym[pos] = s[:, None]
-        new_np[pos] = k[:, None]
-        new_par[pos] = p
+        # (k, L): each rewritten module's successor run in place, one after the next, so the
+        # writes go through the new string once in order (L passes a successor position at
+        # a time strode the whole string, slower per module the more it outgrew the cache)
+        pos = offsets[sub][:, None] + np.arange(len(s))[None, :]
+        new_sym[pos] = s[None, :]
+        new_np[pos] = k[None, :]
+        new_par[pos] = p.swapaxes(0, 1)
     return new_sym, new_np, new_par
 
 
