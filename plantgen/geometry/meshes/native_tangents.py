@@ -28,14 +28,7 @@ import time
 
 import numpy as np
 
-try:                                          # an optional accelerator: numpy computes without it
-    from numba import njit
-    _NUMBA_ERROR = None
-except Exception as error:                    # noqa: BLE001 - any failure means "no compiler"
-    _NUMBA_ERROR = error
-
-    def njit(*args, **kwargs):                # the kernels stay plain Python, never called
-        return (lambda f: f) if not args or not callable(args[0]) else args[0]
+from ..compiled import NUMBA_ERROR, njit
 
 __all__ = ["compile_seconds", "face_sums", "tangent_kernels", "vertex_tangents"]
 
@@ -133,7 +126,7 @@ def tangent_kernels():
     """(:func:`face_sums`, :func:`vertex_tangents`) compiled (or loaded from numba's
     cache: the first call compiles them on a tiny mesh), or None where numba does not
     import or compile, or ``PLANTGEN_COMPILED_TANGENTS`` is ``0``."""
-    if os.environ.get("PLANTGEN_COMPILED_TANGENTS", "") == "0" or _NUMBA_ERROR is not None:
+    if os.environ.get("PLANTGEN_COMPILED_TANGENTS", "") == "0" or NUMBA_ERROR is not None:
         return None
     with _LOCK:
         if _STATE["compile_s"] is None and _STATE["failed"] is None:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .native_trace import KERNEL_LOCK, available, njit, prange
+from ..compiled import njit, prange
+from .native_trace import KERNEL_LOCK, available
 
 __all__ = ["GROW", "boxes_met"]
 

@@ -43,19 +43,12 @@ import time
 import numpy as np
 
 from ...tolerances import tol
+from ..compiled import NUMBA_ERROR, njit, numba, prange
 from ..vec import dot
 
 __all__ = ["NativeScene", "available", "compile_seconds", "native_scene", "pair_distances", "warm_up"]
 
-try:                                          # an optional accelerator: numpy walks without it
-    import numba
-    from numba import njit, prange
-    _NUMBA_ERROR = None
-except Exception as error:                    # noqa: BLE001 - any failure means "no compiler"
-    numba, prange, _NUMBA_ERROR = None, range, error
-
-    def njit(*args, **kwargs):                # the kernels stay plain Python, never called
-        return (lambda f: f) if not args or not callable(args[0]) else args[0]
+_NUMBA_ERROR = NUMBA_ERROR                    # numpy walks where numba does not import
 
 #: Half an ulp of 1.0 times the joint slack (:func:`plantgen.geometry.rays.reference._joint_slack`'s factor).
 JOINT_SLACK = float(tol.joint_slack * (np.finfo(np.float64).eps / 2))
