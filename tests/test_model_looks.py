@@ -56,6 +56,21 @@ def test_the_paper_pine_and_aloe_are_table1s_segments_without_leaves():
     assert np.allclose(trunk(paper), trunk(leafy))
 
 
+def test_table1s_scenes_grow_the_paper_variants_of_their_plants():
+    """The desert's and the oasis's aloes are the paper's (no blades) when Table 1 grows
+    them, as the lone aloe is; grown as shipped, the same scenes' aloes carry blades."""
+    from plantgen.table1.models import load_model
+
+    def leaves(scene) -> int:
+        return sum(len(i.polygons) for i in scene.instances if i.polygons is not None)
+
+    for name in ("desert", "oasis"):
+        assert leaves(grow_file(name).scene) > 0
+        assert leaves(grow_file(name, variants=PAPER_VARIANTS).scene) == 0
+        assert load_model(name, (64, 48)).leaves is None
+    assert len(load_model("desert", (64, 48)).frusta) == len(grow_file("desert").skeleton) == 801
+
+
 # ------------------------------------------------------------------ aloe
 def _aloe_slices():
     """The aloe's blade slices: (leaves, steps, 4 polygons) of polygon indices, in the

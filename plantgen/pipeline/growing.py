@@ -185,13 +185,16 @@ def read_skeleton(path: str | Path, limits: Limits | None = None) -> Skeleton:
 
 def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | None = None,
               max_modules: int | None = None, progress=None, limits: Limits | None = None,
-              allow_paths=(), defines=None, jobs: int | None = None) -> GrowResult:
+              allow_paths=(), defines=None, jobs: int | None = None, variants=None) -> GrowResult:
     """Grow a grammar or scene, or load a skeleton ``.npz`` / ``.swc``; time every stage.
 
     ``max_modules`` sets the limit of that name (as ``--max-modules`` does); the grammars
     of a scene are read from its folder, the folders of ``allow_paths`` and the shipped ones.
     ``defines`` ({name: number}) overrides a grammar's defines of those names (as
-    ``--define`` does; a name the grammar does not define is an error). ``progress``:
+    ``--define`` does; a name the grammar does not define is an error). ``variants``
+    ({grammar file stem: {name: number}}) sets defines in every grammar of that stem
+    this input grows, itself or a scene's (each grammar keeps the names it does not
+    define): Table 1's paper variants, inside its scenes too. ``progress``:
     ``progress(stage, done, total)`` (stages ``derive``, ``interpret``, ``grow``,
     ``place``; ``total`` None where not known). A name that is neither a file nor a
     shipped grammar is one line with the closest shipped name; a shipped grammar's
@@ -208,7 +211,7 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     path = existing_input(path)
     try:
         result = _grow_path(path, seed, iterations, progress, limits, allow_paths, defines,
-                            available_cores() if jobs is None else jobs)
+                            available_cores() if jobs is None else jobs, variants or {})
     except PlantgenError as exc:     # a shipped grammar is named as commands take it, not by its long path
         exc.args = (short_names(str(exc)), *exc.args[1:])
         raise
@@ -216,10 +219,13 @@ def grow_file(path: str | Path, *, seed: int | None = None, iterations: int | No
     return result
 
 
-def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines, jobs: int) -> GrowResult:
+def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_paths, defines, jobs: int,
+               variants: dict) -> GrowResult:
     """:func:`grow_file` of a path that exists."""
     said: list[str] = []
     kind, data = load_input(path, limits, said)
+    if kind == "grammar":
+        data = _variant(data, path, variants)
     timings: dict = {}
     if kind == "skeleton":
         t0 = time.perf_counter()
@@ -249,6 +255,7 @@ def _grow_path(path: Path, seed, iterations, progress, limits: Limits, allow_pat
         t0 = time.perf_counter()
         if key not in grammars:
             data, said_here = read_grammar_data(gpath, GrammarError, limits)
+            data = _variant(data, Path(gpath), variants)
             warnings.extend(w for w in said_here if w not in warnings)
             grammars[key] = parse_grammar(data, key, limits)
             sources[key] = data
@@ -401,6 +408,16 @@ def _grow_together(data, path, seed, limits: Limits, work, allow_paths, parsed, 
     strings = grow_together(plants, limits=limits, work=work)
     timings["derive"] = timings.get("derive", 0.0) + time.perf_counter() - t0
     return dict(zip(grown, strings, strict=True))
+
+
+def _variant(data, path: Path, variants: dict):
+    """A grammar's mapping with the defines ``variants`` sets for its file's stem (the
+    names it defines; the others left), else the mapping itself."""
+    wanted = variants.get(path.stem)
+    own = data.get("defines") if isinstance(data, dict) else None
+    if not wanted or not isinstance(own, dict):
+        return data
+    return {**data, "defines": {**own, **{k: v for k, v in wanted.items() if k in own}}}
 
 
 def _override_defines(data, kind: str, defines: dict, path) -> dict:

@@ -21,8 +21,9 @@ __all__ = ["BenchModel", "PAPER_VARIANTS", "load_model", "check_models"]
 
 #: The defines that make a shipped model of Table 1 the paper's: a model that gained
 #: foliage or detail keeps the paper's variant behind a define (``plantgen grow pine
-#: --define foliage=0``). Table 1's rows are also skinned one frustum per segment, as the
-#: paper drew them, whatever ``turtle: smooth_bends`` a grammar sets (the saguaro's).
+#: --define foliage=0``), in a scene too (the desert's and the oasis's aloes). Table 1's
+#: rows are also skinned one frustum per segment, as the paper drew them, whatever
+#: ``turtle: smooth_bends`` a grammar sets (the saguaro's).
 PAPER_VARIANTS = {"pine": {"foliage": 0}, "aloe": {"blades": 0}}
 
 
@@ -45,7 +46,7 @@ class BenchModel:
 def load_model(name: str, size) -> BenchModel:
     """Grow, skin, frame and light ``name`` (a shipped name or a path) for ``size``
     (width, height) timing frames."""
-    grown = grow_file(name, defines=PAPER_VARIANTS.get(str(name)))
+    grown = grow_file(name, variants=PAPER_VARIANTS)
     if str(name) in PAPER_TABLE1:
         grown.smooth_bends = None      # the paper's frusta: one per segment
     effects = tuple(grown.scene.effects) if grown.scene is not None else ()
