@@ -255,3 +255,22 @@ def test_the_table_says_when_the_reference_has_no_ground_and_how_each_variant_wa
     assert "relief in the vertices, without a ground under a single plant;" in text
     assert "(`--ground none`: filmic; `--no-tone --ground none`: clip, 2.2)" in text
     assert '"reference_ground": "none"' in looks.results_json([result], settings)
+
+
+def test_the_picture_shows_the_reference_in_each_display_curve_a_variant_was_judged_by(tmp_path):
+    from PIL import Image
+
+    from plantgen.settings import LookSettings
+
+    linear = np.dstack([1.4 * _picture(), np.ones((48, 64))]).astype(np.float32)
+    np.save(tmp_path / "reference.npy", linear)
+    Image.fromarray(looks.display_image(linear[..., :3])).save(tmp_path / "reference.png")
+    runs = [looks.PlantgenRun(options, tmp_path / "x.png", tone=looks.display_name(looks.variant_looks(options)))
+            for options in ("--ground none", "--shadows", "--no-tone --ground none")]
+    result = {"reference": {"image": tmp_path / "reference.png", "linear": tmp_path / "reference.npy"}, "runs": runs}
+    one = looks.reference_panels(result, looks.Settings(reference_samples=16))
+    assert [label for _, label in one] == ["Cycles 16 spp"]
+    panels = looks.reference_panels(result, looks.Settings(reference_samples=16, reference_tone="variant"))
+    assert [label for _, label in panels] == ["Cycles 16 spp (filmic)", "Cycles 16 spp (clip, 2.2)"]
+    assert np.array_equal(panels[0][0], one[0][0])
+    assert np.array_equal(panels[1][0], looks.display_image(linear[..., :3], LookSettings()))

@@ -578,13 +578,25 @@ def model_table(results: list[dict], settings: Settings) -> list[str]:
     return lines
 
 
+def reference_panels(result: dict, settings: Settings) -> list[tuple[np.ndarray, str]]:
+    """Cycles' reference of a scene, labelled: as toned for plantgen's default, or, where
+    each variant was judged by its own display curve (``--reference-tone variant``), once
+    in each of those curves."""
+    label = f"Cycles {settings.reference_samples} spp"
+    if settings.reference_tone != "variant":
+        return [(_rgb(result["reference"]["image"]), label)]
+    linear = np.load(result["reference"]["linear"])[..., :3]
+    tones = {run.tone: variant_looks(run.options) for run in result["runs"]}
+    return [(display_image(linear, looks), f"{label} ({tone})") for tone, looks in tones.items()]
+
+
 def looks_picture(results: list[dict], settings: Settings) -> np.ndarray:
     """Per scene a row: each plantgen variant, then Cycles' reference, labelled."""
     rows = []
     for r in results:
         panels = [(_rgb(run.image), f"{r['scene']}: plantgen {run.options} (FLIP {run.flip:.3f})")
                   for run in r["runs"]]
-        panels.append((_rgb(r["reference"]["image"]), f"Cycles {settings.reference_samples} spp"))
+        panels += reference_panels(r, settings)
         rows.append(labelled_panels(panels, settings.size[0]))
     return np.concatenate(rows, axis=0)
 
