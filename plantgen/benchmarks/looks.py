@@ -22,8 +22,12 @@ a re-run renders only what changed. Run::
         --variants "default;--effects shadows;--effects relief,shadows"
 
 It writes ``looks.md`` (the table), ``looks.json`` (every number) and ``looks.png`` (per
-scene: each variant beside the reference); ``--name`` sets the files' name. It needs
-Blender (``blender`` on the PATH, or ``--blender``) and the ``bench`` extra (flip-evaluator).
+scene: each variant beside the reference); ``--name`` sets the files' name.
+``--reference-ground none`` exports a single plant without its ground disc (the baseline's
+scene, for variants with ``--ground none``); ``--reference-tone variant`` judges each variant
+by the reference toned with its own display curve (``--no-tone``: clipped, c^(1/2.2)) instead
+of plantgen's default one. It needs Blender (``blender`` on the PATH, or ``--blender``) and
+the ``bench`` extra (flip-evaluator).
 """
 
 from __future__ import annotations
