@@ -177,3 +177,100 @@ def test_the_table_gives_each_variant_and_rung_and_what_cycles_needs(tmp_path):
     assert "| well | `--effects relief,shadows` | 0.050 | 10 + 90 | >4 | >2.0 | >200× | >20× |" in text
     assert "| well | 25 % | 0.450 | 0.150 | 0.600 | 0.300 |" in text          # over the covered pixels
     assert "| well | default | 0.450 | 1.8 | 0.9 | 89× | 8.9× |" in text
+
+
+def test_a_groundless_reference_has_no_disc_under_a_single_plant_and_a_key_and_folder_of_its_own(tmp_path):
+    """--reference-ground none: a single plant's export has no ground disc (the baseline's
+    scene, for renders with --ground none); auto (the default) has it. The two files are
+    cached apart (the glb is in the key) and exported in folders apart."""
+    camera = tmp_path / "camera.json"
+    camera.write_text('{"eye": [0, 1, 5], "target": [0, 1, 0], "up": [0, 1, 0], "fov_y": 40}')
+    names, keys = {}, {}
+    for ground in looks.REFERENCE_GROUNDS:
+        (tmp_path / ground).mkdir()
+        glb, _ = looks.export_reference_glb("saguaro", tmp_path / ground, 30, 200, 0, ground)
+        document = looks.glb_document(glb)
+        names[ground] = {item.get("name", "") for part in ("nodes", "meshes") for item in document.get(part, [])}
+        keys[ground] = looks.job_key(looks.cycles_job(glb, camera, (64, 48)))
+    assert "Ground" in names["auto"] and not any("Ground" in name for name in names["none"])
+    assert keys["auto"] != keys["none"]
+    args = looks.parse_arguments(["--reference-ground", "none", "--size", "64x48"])
+    assert args.reference_ground == "none" and looks.parse_arguments([]).reference_ground == "auto"
+    folders = {ground: looks.work_folder(looks.Settings(size=(64, 48), reference_ground=ground, cache=tmp_path))
+               for ground in looks.REFERENCE_GROUNDS}
+    assert folders["auto"] == tmp_path / "plantgen" / "64x48" and folders["none"] != folders["auto"]
+    with pytest.raises(SystemExit):
+        looks.parse_arguments(["--reference-ground", "disc"])
+
+
+def test_a_variant_is_judged_by_the_reference_toned_with_its_own_display_curve(tmp_path):
+    """--reference-tone variant: each variant's reference and ladder are Cycles' linear
+    light toned with that variant's display curve (--no-tone: clip and 2.2; an --effects
+    list without tone: the same; --tone-curve, --exposure), each rung scored anew."""
+    from plantgen.settings import LookSettings
+
+    assert looks.variant_looks("default") == looks.variant_looks("--ground none --shadows") == LookSettings.defaults()
+    for options in ("--no-tone --no-translucency --ground none --aa none", "--effects shadows"):
+        assert not looks.variant_looks(options).tone
+    aces = looks.variant_looks("--effects shadows,tone --tone-curve aces --exposure 2")
+    assert aces.tone and aces.tone_curve == "aces" and aces.exposure == 2.0
+    assert looks.display_name(aces) == "aces at exposure 2" and looks.display_name(LookSettings()) == "clip, 2.2"
+    rng = np.random.default_rng(3)
+    linear = np.dstack([1.4 * _picture(), np.ones((48, 64))]).astype(np.float32)   # past 1: the curves part
+    noisy = np.clip(linear + 0.05 * rng.standard_normal(linear.shape), 0, None).astype(np.float32)
+    np.save(tmp_path / "reference.npy", linear)
+    np.save(tmp_path / "rung.npy", noisy)
+    reference = {"linear": tmp_path / "reference.npy"}
+    ladder = [{"samples": 1, "linear": tmp_path / "reference.npy"}, {"samples": 4, "linear": tmp_path / "rung.npy"}]
+    covered = np.zeros((48, 64), bool)
+    covered[10:30, 20:40] = True
+    plain, toned = LookSettings(), LookSettings.defaults()
+    truth, rungs = looks.toned_judge(plain, reference, ladder, covered)
+    assert np.array_equal(truth, looks.display_image(linear[..., :3], plain))
+    assert not np.array_equal(truth, looks.display_image(linear[..., :3], toned))
+    assert rungs[0]["flip"] == rungs[0]["flip_model"] == 0.0 and rungs[1]["flip"] > 0.0
+    assert "flip" not in ladder[1]                                          # the ladder itself untouched
+    _, default_rungs = looks.toned_judge(toned, reference, ladder, covered)
+    expected = looks.scores(looks.display_image(linear[..., :3]), looks.display_image(noisy[..., :3]), covered)
+    assert (default_rungs[1]["flip"], default_rungs[1]["flip_model"]) == expected != (rungs[1]["flip"],
+                                                                                     rungs[1]["flip_model"])
+    assert looks.parse_arguments(["--reference-tone", "variant"]).reference_tone == "variant"
+    assert looks.parse_arguments([]).reference_tone == "default"
+
+
+def test_the_table_says_when_the_reference_has_no_ground_and_how_each_variant_was_judged(tmp_path):
+    ladder = [{"samples": 1, "flip": 0.2, "flip_model": 0.6, "sampling_s": 0.5, "setup_s": 3.0}]
+    runs = [looks.PlantgenRun(options, tmp_path / "x.png", frame_ms=10.0, flip=0.1, flip_model=0.3, tone=tone,
+                              extra=looks.samples_to_match(ladder, 0.1),
+                              extra_model=looks.samples_to_match(ladder, 0.3, "flip_model"))
+            for options, tone in (("--ground none", "filmic"), ("--no-tone --ground none", "clip, 2.2"))]
+    result = {"scene": "pine", "renderer": "llvmpipe", "frusta": 8, "subdiv": 1, "overlap": 0.8, "covered": 0.1,
+              "reference": {}, "ladder": ladder, "runs": runs}
+    variants = tuple(run.options for run in runs)
+    plain = looks.looks_table([result], looks.Settings(size=(64, 48), samples=(1,), variants=variants))
+    assert "without a ground" not in plain and "own display curve" not in plain
+    settings = looks.Settings(size=(64, 48), samples=(1,), variants=variants, reference_ground="none",
+                              reference_tone="variant")
+    text = looks.looks_table([result], settings)
+    assert "relief in the vertices, without a ground under a single plant;" in text
+    assert "(`--ground none`: filmic; `--no-tone --ground none`: clip, 2.2)" in text
+    assert '"reference_ground": "none"' in looks.results_json([result], settings)
+
+
+def test_the_picture_shows_the_reference_in_each_display_curve_a_variant_was_judged_by(tmp_path):
+    from PIL import Image
+
+    from plantgen.settings import LookSettings
+
+    linear = np.dstack([1.4 * _picture(), np.ones((48, 64))]).astype(np.float32)
+    np.save(tmp_path / "reference.npy", linear)
+    Image.fromarray(looks.display_image(linear[..., :3])).save(tmp_path / "reference.png")
+    runs = [looks.PlantgenRun(options, tmp_path / "x.png", tone=looks.display_name(looks.variant_looks(options)))
+            for options in ("--ground none", "--shadows", "--no-tone --ground none")]
+    result = {"reference": {"image": tmp_path / "reference.png", "linear": tmp_path / "reference.npy"}, "runs": runs}
+    one = looks.reference_panels(result, looks.Settings(reference_samples=16))
+    assert [label for _, label in one] == ["Cycles 16 spp"]
+    panels = looks.reference_panels(result, looks.Settings(reference_samples=16, reference_tone="variant"))
+    assert [label for _, label in panels] == ["Cycles 16 spp (filmic)", "Cycles 16 spp (clip, 2.2)"]
+    assert np.array_equal(panels[0][0], one[0][0])
+    assert np.array_equal(panels[1][0], looks.display_image(linear[..., :3], LookSettings()))

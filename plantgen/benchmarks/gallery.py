@@ -55,6 +55,8 @@ class Entry:
 #: The looks bench's variants on this round's defaults (docs/benchmarks/looks.md).
 LOOKS_ROUND_VARIANTS = ("default;--aa none;--no-tone --no-translucency --ground none --aa none;--shadows;"
                         "--shadows --sky-light --sky-samples 4")
+#: The looks bench's variants in the void (no ground under the plant, nor in the reference).
+LOOKS_VOID_VARIANTS = "--ground none;--no-tone --no-translucency --ground none --aa none"
 #: Shipped grammars with leaves, rendered beside Table 1's models.
 LEAFY_MODELS = ("abop_bush", "broadleaf", "pine_needles", "pine_sprays")
 #: Shipped grammars that grow in an environment (?E): clipped to a shape, colonising
@@ -131,6 +133,12 @@ def entries() -> list[Entry]:
         "python", "-m", "plantgen.benchmarks.looks", "--size", "256x192", "--reference-samples", "256", "--samples",
         "1,4,16,64", "--variants", LOOKS_ROUND_VARIANTS, "--name", "looks_round", "--out", "{out}/bench/llvmpipe"),
         ("bench/llvmpipe/looks_round.png",), slow=True))
+    # the single plants in the void (the baseline's scene): the new look and the old defaults, no ground
+    out.append(Entry("looks_void", (
+        "python", "-m", "plantgen.benchmarks.looks", "--scenes", "saguaro,broadleaf,pine,coconut", "--size", "256x192",
+        "--reference-samples", "256", "--samples", "1,4,16,64", "--reference-ground", "none", "--reference-tone",
+        "variant", "--variants", LOOKS_VOID_VARIANTS, "--name", "looks_void", "--out", "{out}/bench/llvmpipe"),
+        ("bench/llvmpipe/looks_void.png",), slow=True))
     return out
 
 

@@ -22,8 +22,12 @@ a re-run renders only what changed. Run::
         --variants "default;--effects shadows;--effects relief,shadows"
 
 It writes ``looks.md`` (the table), ``looks.json`` (every number) and ``looks.png`` (per
-scene: each variant beside the reference); ``--name`` sets the files' name. It needs
-Blender (``blender`` on the PATH, or ``--blender``) and the ``bench`` extra (flip-evaluator).
+scene: each variant beside the reference); ``--name`` sets the files' name.
+``--reference-ground none`` exports a single plant without its ground disc (the baseline's
+scene, for variants with ``--ground none``); ``--reference-tone variant`` judges each variant
+by the reference toned with its own display curve (``--no-tone``: clipped, c^(1/2.2)) instead
+of plantgen's default one. It needs Blender (``blender`` on the PATH, or ``--blender``) and
+the ``bench`` extra (flip-evaluator).
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import shlex
 import shutil
 import subprocess
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +53,7 @@ from ..errors import PlantgenError, missing_extra
 from ..geometry.stage import MODEL_LIGHT
 from ..gl.material_uniforms import AMBIENT_COLOR, LIGHT_COLOR, SKY
 from ..gl.supersample import srgb_encode, tone_curve
-from ..settings import LookSettings
+from ..settings import EffectSettings, LookSettings
 from .arguments import image_size, report
 from .side_by_side import labelled_panels
 
@@ -143,6 +147,7 @@ class PlantgenRun:
     shadow_ms: float = 0.0
     flip: float = float("nan")
     flip_model: float = float("nan")
+    tone: str = ""                                       # the display curve its reference got
     extra: dict = field(default_factory=dict)            # Cycles matching the FLIP
     extra_model: dict = field(default_factory=dict)      # Cycles matching the FLIP on the model
 
@@ -194,16 +199,19 @@ def render_variant(scene: str, options: str, k: int, camera: Path, work: Path, f
     return parse_render(text, PlantgenRun(options, out))
 
 
-def export_reference_glb(scene: str, work: Path, frusta: int, max_triangles: int, max_subdiv: int) -> tuple[Path, int]:
+def export_reference_glb(scene: str, work: Path, frusta: int, max_triangles: int, max_subdiv: int,
+                         ground: str = "auto") -> tuple[Path, int]:
     """``scene`` exported with the relief in the vertices at the finest level m (16·4^m
-    triangles a frustum) whose triangles stay under ``max_triangles``, and its ground (a
-    grammar's: the disc the render draws): (the glb, m)."""
+    triangles a frustum) whose triangles stay under ``max_triangles``, and its ground:
+    ``ground`` ``auto`` gives a grammar the disc the render draws, ``none`` none (a scene
+    writes its own ground either way): (the glb, m)."""
     level = int(math.floor(math.log(max(max_triangles / (FRUSTUM_TRIANGLES * max(frusta, 1)), 1.0), 4)))
     level = max(0, min(max_subdiv, level))
     glb = work / "reference.glb"
     # --ground: a single plant's file carries the ground disc plantgen's render draws under it
+    disc = ["--ground"] if ground == "auto" else []
     run_plantgen(["export", model_input(scene), "-o", str(glb), "--relief", "--subdiv", str(level), "--no-sway",
-                  "--ground"], f"export {scene}")
+                  *disc], f"export {scene}")
     return glb, level
 
 
@@ -316,8 +324,9 @@ def render_cycles(job: dict, stills: list[dict], cache: Path, blender: str, time
         rgb = display_image(linear[..., :3])
         image = np.dstack([rgb, np.rint(255 * np.clip(linear[..., 3], 0, 1))]) if s["transparent"] else rgb
         Image.fromarray(image.astype(np.uint8)).save(folder / f"{s['name']}.png")
-    return {s["name"]: {"image": folder / f"{s['name']}.png", "samples": s["samples"],
-                        **json.loads((folder / f"{s['name']}.json").read_text())} for s in stills}
+    return {s["name"]: {"image": folder / f"{s['name']}.png", "linear": folder / f"{s['name']}.npy",
+                        "samples": s["samples"], **json.loads((folder / f"{s['name']}.json").read_text())}
+            for s in stills}
 
 
 def display_image(linear: np.ndarray, looks: LookSettings | None = None) -> np.ndarray:
@@ -334,6 +343,24 @@ def display_image(linear: np.ndarray, looks: LookSettings | None = None) -> np.n
     return np.rint(255 * np.clip(shown, 0.0, 1.0)).astype(np.uint8)
 
 
+def variant_looks(options: str) -> LookSettings:
+    """The display curve of a render with ``options`` (``plantgen render``'s: ``default``
+    for none): the tone curve on unless ``--no-tone`` or an ``--effects`` list without
+    ``tone`` turns it off, ``--tone-curve``, ``--exposure``; the rest of the looks the
+    defaults'. Other options are left alone."""
+    parser = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
+    parser.add_argument("--effects")
+    parser.add_argument("--tone", dest="tone", action="store_const", const=True, default=None)
+    parser.add_argument("--no-tone", dest="tone", action="store_const", const=False)
+    parser.add_argument("--tone-curve", default=LookSettings.tone_curve)
+    parser.add_argument("--exposure", type=float, default=LookSettings.exposure)
+    words = [] if options.strip() in ("", "default") else shlex.split(options)
+    known, _ = parser.parse_known_args(words)
+    effects = EffectSettings(effects=known.effects, tone=known.tone).resolve()
+    return replace(LookSettings.defaults(), tone="tone" in effects, tone_curve=known.tone_curve,
+                   exposure=known.exposure)
+
+
 def find_blender(blender: str | None) -> str:
     """The Blender executable: ``blender`` given, else on the PATH; a PlantgenError without."""
     found = shutil.which(blender or "blender")
@@ -344,6 +371,13 @@ def find_blender(blender: str | None) -> str:
 
 
 # ----------------------------------------------------------------------------- one scene
+#: ``--reference-ground``: the ground plantgen's default render draws, or none under a single plant.
+REFERENCE_GROUNDS = ("auto", "none")
+#: ``--reference-tone``: the reference toned with plantgen's default display curve for every
+#: variant, or with each variant's own.
+REFERENCE_TONES = ("default", "variant")
+
+
 @dataclass
 class Settings:
     """The benchmark's knobs, as the command line gives them."""
@@ -355,10 +389,21 @@ class Settings:
     frames: int = 5
     max_triangles: int = 1_000_000
     max_subdiv: int = 6
+    reference_ground: str = "auto"
+    reference_tone: str = "default"
     threads: int = 0
     cache: Path = DEFAULT_CACHE
     blender: str = "blender"
     say: object = functools.partial(print, flush=True)
+
+
+def work_folder(settings: Settings) -> Path:
+    """Where plantgen's images, camera and export of each scene go (a folder a scene): by
+    image size, and apart for a reference without ground, whose export differs."""
+    name = f"{settings.size[0]}x{settings.size[1]}"
+    if settings.reference_ground != "auto":
+        name += f"_reference-ground-{settings.reference_ground}"
+    return settings.cache.expanduser() / "plantgen" / name
 
 
 def cycles_renders(glb: Path, camera: Path, settings: Settings) -> tuple[dict, dict, list[dict]]:
@@ -383,11 +428,33 @@ def _alpha(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGBA"))[..., 3]
 
 
-def scores(truth: np.ndarray, image: Path, covered: np.ndarray) -> tuple[float, float]:
-    """Mean FLIP of ``image`` against ``truth``: over the whole image, and over the
-    ``covered`` pixels (either renderer's model: the sky, alike in both, left out)."""
-    mean, error_map = flip_error(truth, _rgb(image))
+def scores(truth: np.ndarray, image: Path | np.ndarray, covered: np.ndarray) -> tuple[float, float]:
+    """Mean FLIP of ``image`` (a file or an sRGB array) against ``truth``: over the whole
+    image, and over the ``covered`` pixels (either renderer's model: the sky, alike in
+    both, left out)."""
+    mean, error_map = flip_error(truth, image if isinstance(image, np.ndarray) else _rgb(image))
     return mean, float(error_map[covered].mean()) if covered.any() else mean
+
+
+def toned_judge(looks: LookSettings, reference: dict, ladder: list[dict], covered: np.ndarray) -> tuple:
+    """The reference and the ladder's scores as a render with ``looks`` is judged
+    (``--reference-tone variant``): Cycles' linear light toned with that render's display
+    curve, each rung scored against the reference toned alike. (truth, ladder)."""
+    def toned(still: dict) -> np.ndarray:
+        return display_image(np.load(still["linear"])[..., :3], looks)
+    truth = toned(reference)
+    rungs = []
+    for rung in ladder:
+        flip, flip_model = scores(truth, toned(rung), covered)
+        rungs.append({**rung, "flip": flip, "flip_model": flip_model})
+    return truth, rungs
+
+
+def display_name(looks: LookSettings) -> str:
+    """The display curve of ``looks`` in words: the tone curve (and its exposure), or 'clip, 2.2'."""
+    if not looks.tone:
+        return "clip, 2.2"
+    return looks.tone_curve + ("" if looks.exposure == 1 else f" at exposure {looks.exposure:g}")
 
 
 def measure_scene(scene: str, settings: Settings, work: Path) -> dict:
@@ -397,19 +464,25 @@ def measure_scene(scene: str, settings: Settings, work: Path) -> dict:
     work.mkdir(parents=True, exist_ok=True)
     settings.say(f"{scene}: framing, exporting")
     camera, mask, framed = frame_scene(scene, work, settings.size)
-    glb, level = export_reference_glb(scene, work, framed.frusta, settings.max_triangles, settings.max_subdiv)
+    glb, level = export_reference_glb(scene, work, framed.frusta, settings.max_triangles, settings.max_subdiv,
+                                      settings.reference_ground)
     cycles_mask, reference, ladder = cycles_renders(glb, camera, settings)
     truth = _rgb(reference["image"])
     ours, theirs = _alpha(mask), _alpha(cycles_mask["image"])
     covered = (ours > 127) | (theirs > 127)
     for rung in ladder:
         rung["flip"], rung["flip_model"] = scores(truth, rung["image"], covered)
-    runs = []
+    runs, judges = [], {}
     for k, options in enumerate(settings.variants):
         run = render_variant(scene, options, k, camera, work, settings.frames)
-        run.flip, run.flip_model = scores(truth, run.image, covered)
-        run.extra = samples_to_match(ladder, run.flip)
-        run.extra_model = samples_to_match(ladder, run.flip_model, "flip_model")
+        looks = variant_looks(options) if settings.reference_tone == "variant" else LookSettings.defaults()
+        run.tone = display_name(looks)
+        if run.tone not in judges:
+            judges[run.tone] = toned_judge(looks, reference, ladder, covered)
+        run_truth, run_ladder = judges[run.tone]
+        run.flip, run.flip_model = scores(run_truth, run.image, covered)
+        run.extra = samples_to_match(run_ladder, run.flip)
+        run.extra_model = samples_to_match(run_ladder, run.flip_model, "flip_model")
         settings.say(f"  plantgen {options}: FLIP {run.flip:.3f} ({run.flip_model:.3f} on the model), "
                      f"frame {run.frame_ms:.1f} ms + shadow map {run.shadow_ms:.1f} ms")
         runs.append(run)
@@ -448,10 +521,11 @@ def looks_table(results: list[dict], settings: Settings) -> str:
     w, h = settings.size
     renderers = sorted({r["renderer"] for r in results if r["renderer"]})
     ladder_heads = [f"Cycles {s} spp" for s in settings.samples]
+    ground = "" if settings.reference_ground == "auto" else ", without a ground under a single plant"
     lines = [f"Images {w}x{h}; the reference: Cycles (CPU) at {settings.reference_samples} samples of plantgen's "
-             f"glTF export with the relief in the vertices; mean FLIP (LDR), lower is closer. plantgen on "
+             f"glTF export with the relief in the vertices{ground}; mean FLIP (LDR), lower is closer. plantgen on "
              f"{', '.join(renderers) or 'an unknown GL renderer'}: the median of {settings.frames} warm frames "
-             "plus the shadow map, drawn once.", "",
+             "plus the shadow map, drawn once." + tone_legend(results, settings), "",
              "| scene | " + " | ".join(_variant_name(v) for v in settings.variants) + " | "
              + " | ".join(ladder_heads) + " | Cycles set-up (s) | masks' overlap | export m |",
              "|---" * (len(settings.variants) + len(ladder_heads) + 4) + "|"]
@@ -475,6 +549,18 @@ def looks_table(results: list[dict], settings: Settings) -> str:
     return "\n".join(lines + model_table(results, settings)) + "\n"
 
 
+def tone_legend(results: list[dict], settings: Settings) -> str:
+    """How the reference was toned, where each variant got its own display curve
+    (``--reference-tone variant``; '' otherwise): each variant's curve, and the ladder's
+    columns toned with the default's."""
+    if settings.reference_tone != "variant" or not results:
+        return ""
+    curves = "; ".join(f"{_variant_name(run.options)}: {run.tone}" for run in results[0]["runs"])
+    return (" Cycles' linear light is toned for each variant with that variant's own display curve, the "
+            f"reference and the ladder it is matched on ({curves}); the ladder's columns are toned with "
+            f"plantgen's default curve ({display_name(LookSettings.defaults())}).")
+
+
 def model_table(results: list[dict], settings: Settings) -> list[str]:
     """The lines of the tables of FLIP over the model's pixels alone (either renderer's
     coverage), where the sky, alike in both, does not dilute the difference, and of what
@@ -496,13 +582,25 @@ def model_table(results: list[dict], settings: Settings) -> list[str]:
     return lines
 
 
+def reference_panels(result: dict, settings: Settings) -> list[tuple[np.ndarray, str]]:
+    """Cycles' reference of a scene, labelled: as toned for plantgen's default, or, where
+    each variant was judged by its own display curve (``--reference-tone variant``), once
+    in each of those curves."""
+    label = f"Cycles {settings.reference_samples} spp"
+    if settings.reference_tone != "variant":
+        return [(_rgb(result["reference"]["image"]), label)]
+    linear = np.load(result["reference"]["linear"])[..., :3]
+    tones = {run.tone: variant_looks(run.options) for run in result["runs"]}
+    return [(display_image(linear, looks), f"{label} ({tone})") for tone, looks in tones.items()]
+
+
 def looks_picture(results: list[dict], settings: Settings) -> np.ndarray:
     """Per scene a row: each plantgen variant, then Cycles' reference, labelled."""
     rows = []
     for r in results:
         panels = [(_rgb(run.image), f"{r['scene']}: plantgen {run.options} (FLIP {run.flip:.3f})")
                   for run in r["runs"]]
-        panels.append((_rgb(r["reference"]["image"]), f"Cycles {settings.reference_samples} spp"))
+        panels += reference_panels(r, settings)
         rows.append(labelled_panels(panels, settings.size[0]))
     return np.concatenate(rows, axis=0)
 
@@ -521,7 +619,8 @@ def results_json(results: list[dict], settings: Settings) -> str:
             return [plain(v) for v in value]
         return value
     head = {"size": list(settings.size), "reference_samples": settings.reference_samples,
-            "samples": list(settings.samples), "variants": list(settings.variants)}
+            "samples": list(settings.samples), "variants": list(settings.variants),
+            "reference_ground": settings.reference_ground, "reference_tone": settings.reference_tone}
     return json.dumps({"settings": head, "scenes": plain(results)}, indent=1)
 
 
@@ -543,6 +642,14 @@ def parse_arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--max-triangles", type=int, default=1_000_000,
                         help="the reference export's triangle budget (picks its --subdiv)")
     parser.add_argument("--max-subdiv", type=int, default=6, help="the reference export's finest --subdiv")
+    parser.add_argument("--reference-ground", choices=REFERENCE_GROUNDS, default="auto",
+                        help="the reference's ground: auto, the one plantgen's default render draws (a single "
+                             "plant's disc, a scene's own); none, no disc under a single plant (a scene keeps "
+                             "its own), to score renders with --ground none (default auto)")
+    parser.add_argument("--reference-tone", choices=REFERENCE_TONES, default="default",
+                        help="how Cycles' linear light is toned for each variant's score: default, with "
+                             "plantgen's default display curve for all; variant, with the variant's own (its "
+                             "--no-tone, --tone-curve, --exposure, --effects), the ladder too (default default)")
     parser.add_argument("--threads", type=int, default=0, help="Cycles' threads (0: all)")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help=f"Cycles' images (default {DEFAULT_CACHE})")
     parser.add_argument("--blender", default=os.environ.get("BLENDER", "blender"), help="the Blender executable")
@@ -557,11 +664,13 @@ def main(argv=None) -> int:
     variants = tuple(v.strip() for v in args.variants.split(";") if v.strip())
     settings = Settings(size=args.size, reference_samples=args.reference_samples, samples=args.samples,
                         variants=variants, frames=args.frames, max_triangles=args.max_triangles,
-                        max_subdiv=args.max_subdiv, threads=args.threads, cache=args.cache, blender=args.blender)
+                        max_subdiv=args.max_subdiv, reference_ground=args.reference_ground,
+                        reference_tone=args.reference_tone, threads=args.threads,
+                        cache=args.cache, blender=args.blender)
     try:
         settings.blender = find_blender(args.blender)
         flip_error(np.zeros((8, 8, 3), np.uint8), np.zeros((8, 8, 3), np.uint8))
-        work = settings.cache.expanduser() / "plantgen" / f"{settings.size[0]}x{settings.size[1]}"
+        work = work_folder(settings)
         results = [measure_scene(s.strip(), settings, work / s.strip()) for s in args.scenes.split(",") if s.strip()]
     except (PlantgenError, subprocess.TimeoutExpired, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
