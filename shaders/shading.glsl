@@ -7,7 +7,9 @@
 // filmic tone curve in linear light, then the sRGB transfer curve; without it: clip, then
 // c^(1/2.2)); TRANSLUCENT (shade_leaf: light falling on a leaf's far side comes through it,
 // tinted by its albedo); SKY_LIGHT (shade_surface_sky: the sky's light as traced by
-// sky_light.glsl, occluded, instead of the open hemisphere).
+// sky_light.glsl, occluded, instead of the open hemisphere); GROUND_BOUNCE (the light the
+// sunlit ground sends up, `ground_light`, reaches the lower hemisphere: (0.5 - 0.5 n.y) of
+// it on a surface of normal n, as the sky reaches the upper; 0 where no ground is drawn).
 
 #ifndef SHADING_GLSL
 #define SHADING_GLSL
@@ -27,6 +29,7 @@ uniform float leaf_transmission;                // TRANSLUCENT: fraction through
 uniform float exposure;                         // TONE_MAP: linear light scale before the curve
 uniform float tone_knee;                        // TONE_MAP: the filmic curve's knee
 uniform int sky_samples;                        // SKY_LIGHT: rays a pixel (sky_light.glsl)
+uniform vec3 ground_light;                      // GROUND_BOUNCE: the ground's albedo times its light
 
 // Sky seen along unit direction `dir` (y up): horizon haze to zenith blue, darker below.
 vec3 sky_color(vec3 dir) {
@@ -107,7 +110,19 @@ vec3 facet_normal(vec3 position, vec3 fallback) {
 }
 #endif
 
-// One directional light, Blinn-Phong, plus a hemispherical ambient term.
+// The light the ground reflects onto a surface of unit normal n: `ground_light` over the
+// lower hemisphere, (0.5 - 0.5 n.y) of it, as the sky's ambient reaches (0.5 + 0.5 n.y);
+// none without GROUND_BOUNCE.
+vec3 ground_bounce(vec3 n) {
+#if defined GROUND_BOUNCE
+    return ground_light * (0.5 - 0.5 * n.y);
+#else
+    return vec3(0.0);
+#endif
+}
+
+// One directional light, Blinn-Phong, plus a hemispherical ambient term (and with
+// GROUND_BOUNCE the ground's light from below).
 // normal and to_eye are unit vectors; the normal is flipped to face the eye.
 // `light_visibility` in [0, 1] scales the direct light (1: lit, 0: in shadow; see shadow.glsl).
 vec3 shade_surface_visible(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion,
@@ -119,7 +134,7 @@ vec3 shade_surface_visible(vec3 albedo, int material, vec3 normal, vec3 to_eye, 
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
     float sky_light = 0.5 + 0.5 * n.y;
-    vec3 lit = albedo * (ambient_color * sky_light * occlusion + light_color * diffuse)
+    vec3 lit = albedo * ((ambient_color * sky_light + ground_bounce(n)) * occlusion + light_color * diffuse)
              + light_color * specular * light_visibility;
     return lit;
 }
@@ -130,27 +145,29 @@ vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float oc
 
 // As shade_surface_visible, the sky's light given whole: `sky_light` is the fraction of
 // the ambient (sky) colour reaching the surface, (0.5 + 0.5 n.y) on an open surface
-// (sky_light.glsl traces it); `normal` faces the eye.
+// (sky_light.glsl traces it; the ground's light, GROUND_BOUNCE, is not traced); `normal`
+// faces the eye.
 vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_light, float light_visibility) {
     int m = clamp(material, 0, MAX_MATERIALS - 1);
     float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
     vec3 halfway = normalize(light_dir + to_eye);
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
-    return albedo * (ambient_color * sky_light + light_color * diffuse) + light_color * specular * light_visibility;
+    return albedo * (ambient_color * sky_light + ground_bounce(n) + light_color * diffuse)
+         + light_color * specular * light_visibility;
 }
 
 // A leaf, a thin sheet: the side the eye sees (`n`, facing the eye) shaded as a surface,
 // lit by `sky_front` of the sky; with TRANSLUCENT the light falling on the far side comes
 // through, `leaf_transmission` of it, tinted by the albedo: the sun (diffuse on the far
-// side, times its visibility) and `sky_back` of the sky. Open sky: sky_front = 0.5 + 0.5
-// n.y, sky_back = 0.5 - 0.5 n.y.
+// side, times its visibility), `sky_back` of the sky and the ground's light on the far
+// side (GROUND_BOUNCE). Open sky: sky_front = 0.5 + 0.5 n.y, sky_back = 0.5 - 0.5 n.y.
 vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_front, float sky_back,
                 float light_visibility) {
     vec3 lit = shade_surface_sky(albedo, material, n, to_eye, sky_front, light_visibility);
 #if defined TRANSLUCENT
     float behind = max(-dot(n, light_dir), 0.0) * light_visibility;
-    lit += leaf_transmission * albedo * (light_color * behind + ambient_color * sky_back);
+    lit += leaf_transmission * albedo * (light_color * behind + ambient_color * sky_back + ground_bounce(-n));
 #endif
     return lit;
 }

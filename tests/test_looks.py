@@ -36,7 +36,7 @@ from plantgen.settings import (
 
 NAMES = ("bark", "leaf")
 PLAIN = LookSettings()                                   # every look off: today's shading
-LOOK_DEFINES = ("TONE_MAP", "TONE_ACES", "TRANSLUCENT", "SKY_LIGHT", "SOFT_SUN")
+LOOK_DEFINES = ("TONE_MAP", "TONE_ACES", "TRANSLUCENT", "SKY_LIGHT", "SOFT_SUN", "GROUND_BOUNCE")
 
 
 def column(base=(0.0, 0.0, 0.0), height: float = 2.0, radius: float = 0.3) -> Skeleton:
@@ -140,12 +140,14 @@ def test_with_the_looks_off_no_program_has_their_defines_or_code(gl_ctx):
 
 
 def test_the_effects_turn_the_looks_on_and_off():
-    assert set(DEFAULT_EFFECTS) == {"tone", "translucency"}
-    assert EffectSettings().resolve(("relief",)) == ("relief", "tone", "translucency")
+    assert set(DEFAULT_EFFECTS) == {"tone", "translucency", "bounce"}
+    assert EffectSettings().resolve(("relief",)) == ("relief", "tone", "translucency", "bounce")
     assert EffectSettings(effects="relief").resolve(()) == ("relief",)           # --effects replaces all
-    assert EffectSettings(tone=False, sky=True).resolve(()) == ("translucency", "sky")
+    assert EffectSettings(tone=False, sky=True, bounce=False).resolve(()) == ("translucency", "sky")
     march, _ = RenderSettings().frame(("tone", "sky"))
-    assert (march.look.tone, march.look.translucency, march.look.sky) == (True, False, True)
+    assert (march.look.tone, march.look.translucency, march.look.sky, march.look.bounce) == (True, False, True, False)
+    march, _ = RenderSettings().frame(("bounce",))
+    assert march.look.bounce and march.look.defines()["GROUND_BOUNCE"]
     march, _ = RenderSettings().frame(())
     assert march.look == PLAIN and not any(march.look.defines().values())
 
@@ -275,6 +277,79 @@ def test_more_sky_samples_lower_the_noise_and_a_frame_is_deterministic(renderers
     assert errors[1] < 0.5 * errors[0]
     # the post darkens the leaf next to it: occlusion, not an open hemisphere
     assert reference[seen].min() < 0.8 * np.percentile(reference[seen], 95)
+
+
+# ---------------------------------------------------------------------- the ground's light
+BOUNCE = LookSettings(bounce=True)
+LIGHT = (0.45, 0.8, 0.35)                     # the model light's, towards the sun
+
+
+def shaded_side(renderers, kind, look, ground, leaf=None):
+    """A post on ``ground`` seen from the side the sun does not reach (its normals
+    horizontal, turned from the light, so the sky and the ground light it alone):
+    linear colours of its pixels (k, 3), and of the ground's (m, 3)."""
+    frusta = skin_skeleton(column((0.0, 0.0, 0.0), 3.0, 0.5))
+    camera = Camera((-4.5, 1.5, -3.5), (0.0, 1.5, 0.0), (0.0, 1.0, 0.0), 30.0, 48, 48)
+    result = draw(renderers, kind, frusta, camera, look, ground=ground, light_dir=LIGHT, leaves=leaf)
+    origins, dirs = camera.rays()
+    seen = np.isfinite(result.distance)
+    hit = origins + np.where(seen, result.distance, 0.0)[..., None] * dirs
+    post = seen & (hit[..., 1] > 0.1) & (np.hypot(hit[..., 0], hit[..., 2]) < 0.6)
+    floor = seen & (np.abs(hit[..., 1]) < 1e-2) & (np.hypot(hit[..., 0], hit[..., 2]) > 1.0)
+    assert post.sum() > 100
+    return srgb_like(result.color[post]), srgb_like(result.color[floor])
+
+
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_sunlit_ground_lights_the_shaded_side_from_below(renderers, kind):
+    """Cycles' reference of the looks bench lights a plant's shaded side with the sand's
+    light; plantgen lit it with the sky alone, so the saguaro's shade was a third of the
+    reference's. On a vertical surface turned from the sun the sky gives ambient / 2 and
+    the ground ground_light / 2: each channel grows by 1 + ground_light / ambient,
+    whatever the albedo."""
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, ground_light
+
+    sand = Ground(40.0)
+    plain, plain_floor = shaded_side(renderers, kind, PLAIN, sand)
+    bounced, bounced_floor = shaded_side(renderers, kind, BOUNCE, sand)
+    expected = 1.0 + np.asarray(ground_light(LIGHT, "sand")) / np.asarray(AMBIENT_COLOR)
+    assert np.all(expected > 1.5)                             # the sand's light is not small beside the sky's
+    ratio = bounced.mean(axis=0) / plain.mean(axis=0)
+    assert ratio == pytest.approx(expected, rel=0.04), (ratio, expected)
+    # the ground faces up: none of its own light reaches it
+    assert len(plain_floor) > 50 and np.array_equal(bounced_floor, plain_floor)
+    # no ground, no ground light
+    alone, _ = shaded_side(renderers, kind, PLAIN, None)
+    alone_bounce, _ = shaded_side(renderers, kind, BOUNCE, None)
+    assert np.array_equal(alone, alone_bounce)
+
+
+def test_the_ground_light_is_the_grounds_albedo_times_its_light():
+    from plantgen.geometry.skeletons.materials import PALETTE
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, LIGHT_COLOR, ground_light
+
+    dark, light, _ = PALETTE["grass"]
+    up = np.asarray(LIGHT) / np.linalg.norm(LIGHT)
+    expected = 0.5 * (np.asarray(dark) + np.asarray(light)) * (np.asarray(LIGHT_COLOR) * up[1] + AMBIENT_COLOR)
+    assert ground_light(LIGHT, "grass") == pytest.approx(expected, rel=1e-6)
+    below = ground_light((0.0, -1.0, 0.0), "grass")               # the sun under the horizon: the sky alone
+    assert below == pytest.approx(0.5 * (np.asarray(dark) + np.asarray(light)) * AMBIENT_COLOR, rel=1e-6)
+    assert ground_light(LIGHT, None) == (0.0, 0.0, 0.0)
+
+
+def test_a_leaf_takes_the_ground_light_through_it(renderers):
+    """A translucent leaf facing up, seen from above: its far side faces the ground, whose
+    light comes through it with the bounce (its near side, facing up, gets none)."""
+    frusta = skin_skeleton(column((5.0, 0.0, -5.0), 0.5, 0.05))
+    camera = Camera((0.0, 4.0, 0.5), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 30.0, 40, 40)
+    leaf = square((0.0, 1.0, 0.0), 0.6, (0.0, 1.0, 0.0))
+    kw = dict(leaves=leaf, ground=Ground(40.0), light_dir=LIGHT)
+    through = LookSettings(translucency=True)
+    a = draw(renderers, "rc", frusta, camera, through, **kw)
+    b = draw(renderers, "rc", frusta, camera, replace(through, bounce=True), **kw)
+    seen = np.isfinite(a.distance) & (a.distance < 3.5)
+    assert seen.sum() > 100
+    assert srgb_like(b.color[seen]).mean() > 1.05 * srgb_like(a.color[seen]).mean()
 
 
 # ---------------------------------------------------------------------- soft sun

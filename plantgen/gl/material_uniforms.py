@@ -11,7 +11,7 @@ import numpy as np
 
 from ..geometry.skeletons.materials import MAX_MATERIALS, material_height_maps, material_palette
 
-__all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms",
+__all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms", "ground_light",
            "HeightTextures", "corner_maps"]
 
 LIGHT_COLOR = (1.0, 0.96, 0.9)
@@ -28,6 +28,22 @@ def shading_uniforms(light_dir) -> dict:
     light = light / np.linalg.norm(light)
     return {"light_dir": tuple(light), "light_color": LIGHT_COLOR,
             "ambient_color": AMBIENT_COLOR, **SKY}
+
+
+def ground_light(light_dir, material: str | None) -> tuple[float, float, float]:
+    """The ``bounce`` look's ``ground_light`` (shaders/shading.glsl): what an open, flat
+    ground of ``material`` sends up, its albedo (the mottle's mean, halfway between the
+    material's dark and light colours) times the light it gets, the sun at its elevation
+    (``light_dir`` (3,) towards the light, y up) and the whole sky's ambient; a surface of
+    normal n gets (1 - n_y) / 2 of it. None (no ground): black."""
+    if material is None:
+        return (0.0, 0.0, 0.0)
+    light = np.asarray(light_dir, dtype=np.float64)
+    light = light / np.linalg.norm(light)
+    palette = material_palette([material])
+    albedo = 0.5 * (palette["dark"][0].astype(np.float64) + palette["light"][0].astype(np.float64))
+    falling = np.asarray(LIGHT_COLOR) * max(float(light[1]), 0.0) + np.asarray(AMBIENT_COLOR)
+    return tuple(float(v) for v in albedo * falling)
 
 
 def palette_uniforms(material_names) -> dict[str, np.ndarray]:
