@@ -50,9 +50,9 @@ void write_hit(vec3 albedo, int material, vec3 normal, vec3 receiver_normal, vec
     vec3 n_eye = dot(normal, d) > 0.0 ? -normal : normal;
     vec3 side = dot(receiver_normal, d) > 0.0 ? -receiver_normal : receiver_normal;
     float sky = sky_light_traced(p, n_eye, side, distance, sky_samples);
-    vec3 color = shade_surface_sky(albedo, material, n_eye, -d, sky, visibility);
+    vec3 color = shade_surface_sky(albedo, material, n_eye, -d, sky, visibility, p);
 #else
-    vec3 color = shade_surface_visible(albedo, material, normal, -d, 1.0, visibility);
+    vec3 color = shade_surface_visible(albedo, material, normal, -d, 1.0, visibility, p);
 #endif
     out_color = vec4(to_display(color), 1.0);
     out_distance = distance;

@@ -118,9 +118,10 @@ void main() {
     float sky_front = 0.5 + 0.5 * n.y, sky_back = 0.5 - 0.5 * n.y;
 #endif
     // the far side's sun: visible where the sheet itself is (its shadow test is the same)
-    out_color = vec4(to_display(shade_leaf(albedo, material, n, to_eye, sky_front, sky_back, visibility)), 1.0);
+    out_color = vec4(to_display(shade_leaf(albedo, material, n, to_eye, sky_front, sky_back, visibility,
+                                                v_position)), 1.0);
 #else
-    out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility)), 1.0);
+    out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility, v_position)), 1.0);
 #endif
 #endif
 #if defined THIN_LEAVES

@@ -29,7 +29,7 @@ from ..settings import AA_CHOICES, AA_FLOOR_PIXELS, MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
-from .material_uniforms import HeightTextures, ground_light, palette_uniforms, shading_uniforms
+from .material_uniforms import HeightTextures, ground_uniforms, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, light_window, traced_look
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
@@ -329,7 +329,7 @@ class OffscreenRenderer:
         bounce = look is not None and look.bounce and ground is not None
         shading = {**shading_uniforms(light_dir), **palette_uniforms(names),
                    **(look.shading_uniforms() if look is not None else {}),
-                   "ground_light": ground_light(light_dir, ground.material if bounce else None)}
+                   **ground_uniforms(ground if bounce else None, light_dir, eye)}
         if shadows is None:
             return FrameLighting(names, shading, None, {}, look=look)
         anchor = light_anchor(caster_box) if anchor is None else np.asarray(anchor, dtype=np.float64)

@@ -12,6 +12,7 @@ import numpy as np
 from ..geometry.skeletons.materials import MAX_MATERIALS, material_height_maps, material_palette
 
 __all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms", "ground_light",
+           "ground_uniforms",
            "HeightTextures", "corner_maps"]
 
 LIGHT_COLOR = (1.0, 0.96, 0.9)
@@ -44,6 +45,19 @@ def ground_light(light_dir, material: str | None) -> tuple[float, float, float]:
     albedo = 0.5 * (palette["dark"][0].astype(np.float64) + palette["light"][0].astype(np.float64))
     falling = np.asarray(LIGHT_COLOR) * max(float(light[1]), 0.0) + np.asarray(AMBIENT_COLOR)
     return tuple(float(v) for v in albedo * falling)
+
+
+def ground_uniforms(ground, light_dir, eye) -> dict:
+    """The ``bounce`` look's uniforms of shaders/shading.glsl for ``ground`` (a
+    :class:`~plantgen.geometry.stage.Ground`, None: none, no light from below) lit from
+    ``light_dir``, seen from ``eye`` (3,) world, the render origin: ``ground_light``
+    (:func:`ground_light`), the eye's height above the ground and the ground's reach, its
+    half size to the middle of its fade (``ground_share`` takes it for a disc's radius)."""
+    if ground is None:
+        return {"ground_light": (0.0, 0.0, 0.0), "ground_eye_height": 0.0, "ground_reach": 1.0}
+    return {"ground_light": ground_light(light_dir, ground.material),
+            "ground_eye_height": float(eye[1]) - float(ground.height),
+            "ground_reach": ground.half * (1.0 - 0.5 * float(np.clip(ground.fade, 0.0, 1.0)))}
 
 
 def palette_uniforms(material_names) -> dict[str, np.ndarray]:
