@@ -284,12 +284,14 @@ BOUNCE = LookSettings(bounce=True)
 LIGHT = (0.45, 0.8, 0.35)                     # the model light's, towards the sun
 
 
-def shaded_side(renderers, kind, look, ground, leaf=None):
+def shaded_side(renderers, kind, look, ground, leaf=None, height: float = 3.0, heights: bool = False):
     """A post on ``ground`` seen from the side the sun does not reach (its normals
     horizontal, turned from the light, so the sky and the ground light it alone):
-    linear colours of its pixels (k, 3), and of the ground's (m, 3)."""
-    frusta = skin_skeleton(column((0.0, 0.0, 0.0), 3.0, 0.5))
-    camera = Camera((-4.5, 1.5, -3.5), (0.0, 1.5, 0.0), (0.0, 1.0, 0.0), 30.0, 48, 48)
+    linear colours of its pixels (k, 3), and of the ground's (m, 3); with ``heights``
+    also the post's pixels' heights (k,)."""
+    frusta = skin_skeleton(column((0.0, 0.0, 0.0), height, 0.5))
+    mid = 0.5 * height
+    camera = Camera((-1.5 * height, mid, -1.17 * height), (0.0, mid, 0.0), (0.0, 1.0, 0.0), 30.0, 48, 48)
     result = draw(renderers, kind, frusta, camera, look, ground=ground, light_dir=LIGHT, leaves=leaf)
     origins, dirs = camera.rays()
     seen = np.isfinite(result.distance)
@@ -297,6 +299,8 @@ def shaded_side(renderers, kind, look, ground, leaf=None):
     post = seen & (hit[..., 1] > 0.1) & (np.hypot(hit[..., 0], hit[..., 2]) < 0.6)
     floor = seen & (np.abs(hit[..., 1]) < 1e-2) & (np.hypot(hit[..., 0], hit[..., 2]) > 1.0)
     assert post.sum() > 100
+    if heights:
+        return srgb_like(result.color[post]), hit[..., 1][post]
     return srgb_like(result.color[post]), srgb_like(result.color[floor])
 
 
@@ -309,7 +313,7 @@ def test_the_sunlit_ground_lights_the_shaded_side_from_below(renderers, kind):
     whatever the albedo."""
     from plantgen.gl.material_uniforms import AMBIENT_COLOR, ground_light
 
-    sand = Ground(40.0)
+    sand = Ground(4000.0)                                     # the ground's edge far below the horizon
     plain, plain_floor = shaded_side(renderers, kind, PLAIN, sand)
     bounced, bounced_floor = shaded_side(renderers, kind, BOUNCE, sand)
     expected = 1.0 + np.asarray(ground_light(LIGHT, "sand")) / np.asarray(AMBIENT_COLOR)
@@ -350,6 +354,30 @@ def test_a_leaf_takes_the_ground_light_through_it(renderers):
     seen = np.isfinite(a.distance) & (a.distance < 3.5)
     assert seen.sum() > 100
     assert srgb_like(b.color[seen]).mean() > 1.05 * srgb_like(a.color[seen]).mean()
+
+
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_ground_light_wanes_with_the_height_above_a_small_ground(renderers, kind):
+    """Above a ground of radius R (to its fade's middle) a vertical surface at height h
+    sees the ground below the depression angle d = atan(h / R): the cosine-weighted share
+    (acos(sin d) - sin d cos d) / pi of its hemisphere, 1/2 at the ground, less higher up."""
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, ground_light
+
+    sand = Ground(8.0)
+    reach = sand.half * (1.0 - 0.5 * sand.fade)
+    plain, h = shaded_side(renderers, kind, PLAIN, sand, height=6.0, heights=True)
+    bounced, _ = shaded_side(renderers, kind, BOUNCE, sand, height=6.0, heights=True)
+    # plain = albedo * ambient / 2, bounced - plain = albedo * ground_light * share
+    green = 1
+    share = (bounced[:, green] / plain[:, green] - 1.0) * 0.5 * AMBIENT_COLOR[green] \
+        / ground_light(LIGHT, "sand")[green]
+    sin_d = h / np.hypot(h, reach)
+    expected = (np.arccos(sin_d) - sin_d * np.sqrt(1.0 - sin_d ** 2)) / np.pi
+    low, high = h < 1.0, h > 4.0
+    assert low.sum() > 10 and high.sum() > 10
+    assert share[low].mean() == pytest.approx(expected[low].mean(), abs=0.03)
+    assert share[high].mean() == pytest.approx(expected[high].mean(), abs=0.03)
+    assert share[high].mean() < 0.6 * share[low].mean()
 
 
 # ---------------------------------------------------------------------- soft sun
