@@ -50,7 +50,7 @@ __all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "AA_C
 EFFECTS = ("relief", "shadows", "animation", "lod", "tone", "translucency", "sky", "bounce")
 #: Effects in force unless the command removes them (``--no-tone``, ``--effects``): cheap,
 #: they cost a plain frame next to nothing.
-DEFAULT_EFFECTS = ("tone", "translucency", "bounce")
+DEFAULT_EFFECTS = ("tone", "translucency")
 #: The levels of detail an export writes for a scene that lists ``lod`` (level 0 full).
 LOD_EXPORT_LEVELS = 4
 #: The image size when neither the command nor a camera file gives one.
@@ -119,8 +119,9 @@ class EffectSettings:
                             "(costs; see "
                             "--sky-samples). Default: on when the effects list sky.", kind="bool")
     bounce: bool | None = knob(None, "--bounce", "The ground's light: the sunlit ground lights the model from "
-                               "below, as the sky does from above (none with --ground none). Default: on unless "
-                               "--effects leaves it out.", kind="bool")
+                               "below, as the sky does from above (untraced: a crown does not hide the ground from "
+                               "itself; none with --ground none). Default: on when the effects list bounce.",
+                               kind="bool")
 
     def __post_init__(self):
         if isinstance(self.effects, str):

@@ -90,7 +90,7 @@ def test_cli_flags_override_the_scene(gl_ctx, scene_file, tmp_path):
     code, stdout, stderr = run_cli("render", scene_file, "-o", out, "--size", "40x30", "--shadows",
                                    "--shadow-res", "32")
     # the scene lists none: the cheap looks are on by default (settings.DEFAULT_EFFECTS)
-    assert code == 0 and "effects: shadows, tone, translucency, bounce (shadow map 32²)" in stdout
+    assert code == 0 and "effects: shadows, tone, translucency (shadow map 32²)" in stdout
 
 
 def test_unknown_effect_is_a_one_line_error(scene_file, tmp_path):

@@ -140,8 +140,8 @@ def test_with_the_looks_off_no_program_has_their_defines_or_code(gl_ctx):
 
 
 def test_the_effects_turn_the_looks_on_and_off():
-    assert set(DEFAULT_EFFECTS) == {"tone", "translucency", "bounce"}
-    assert EffectSettings().resolve(("relief",)) == ("relief", "tone", "translucency", "bounce")
+    assert set(DEFAULT_EFFECTS) == {"tone", "translucency"}
+    assert EffectSettings().resolve(("relief",)) == ("relief", "tone", "translucency")
     assert EffectSettings(effects="relief").resolve(()) == ("relief",)           # --effects replaces all
     assert EffectSettings(tone=False, sky=True, bounce=False).resolve(()) == ("translucency", "sky")
     march, _ = RenderSettings().frame(("tone", "sky"))
