@@ -134,14 +134,24 @@ float ground_share(vec3 n, vec3 p) {
 }
 #endif
 
-// The light the ground reflects onto a surface of unit normal n at eye-relative p:
-// `ground_light` times the share of n's hemisphere the ground covers (ground_share), as
-// the sky's ambient reaches (0.5 + 0.5 n.y); none without GROUND_BOUNCE.
-vec3 ground_bounce(vec3 n, vec3 p) {
+// The shares of the ambient light an open surface of unit normal n at eye-relative p
+// gets: the sky's, 0.5 + 0.5 n.y, and with GROUND_BOUNCE the ground's (ground_share; 0
+// without). sky_light.glsl traces both instead.
+vec2 open_light(vec3 n, vec3 p) {
 #if defined GROUND_BOUNCE
-    return ground_light * ground_share(n, p);
+    return vec2(0.5 + 0.5 * n.y, ground_share(n, p));
 #else
-    return vec3(0.0);
+    return vec2(0.5 + 0.5 * n.y, 0.0);
+#endif
+}
+
+// The ambient light of `share` (open_light's or sky_light.glsl's): the sky's colour times
+// its share, plus with GROUND_BOUNCE the light the ground reflects times its share.
+vec3 ambient_light(vec2 share) {
+#if defined GROUND_BOUNCE
+    return ambient_color * share.x + ground_light * share.y;
+#else
+    return ambient_color * share.x;
 #endif
 }
 
@@ -158,8 +168,7 @@ vec3 shade_surface_visible(vec3 albedo, int material, vec3 normal, vec3 to_eye, 
     vec3 halfway = normalize(light_dir + to_eye);
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
-    float sky_light = 0.5 + 0.5 * n.y;
-    vec3 lit = albedo * ((ambient_color * sky_light + ground_bounce(n, p)) * occlusion + light_color * diffuse)
+    vec3 lit = albedo * (ambient_light(open_light(n, p)) * occlusion + light_color * diffuse)
              + light_color * specular * light_visibility;
     return lit;
 }
@@ -168,32 +177,28 @@ vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float oc
     return shade_surface_visible(albedo, material, normal, to_eye, occlusion, 1.0, p);
 }
 
-// As shade_surface_visible, the sky's light given whole: `sky_light` is the fraction of
-// the ambient (sky) colour reaching the surface, (0.5 + 0.5 n.y) on an open surface
-// (sky_light.glsl traces it; the ground's light, GROUND_BOUNCE, is not traced); `normal`
-// faces the eye.
-vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_light, float light_visibility,
-                       vec3 p) {
+// As shade_surface_visible, the ambient light's shares given whole: `share` (x: of the
+// sky's colour, y: of the ground's light) reaching the surface, open_light's on an open
+// surface (sky_light.glsl traces them); `n` faces the eye.
+vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, vec2 share, float light_visibility) {
     int m = clamp(material, 0, MAX_MATERIALS - 1);
     float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
     vec3 halfway = normalize(light_dir + to_eye);
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
-    return albedo * (ambient_color * sky_light + ground_bounce(n, p) + light_color * diffuse)
-         + light_color * specular * light_visibility;
+    return albedo * (ambient_light(share) + light_color * diffuse) + light_color * specular * light_visibility;
 }
 
 // A leaf, a thin sheet: the side the eye sees (`n`, facing the eye) shaded as a surface,
-// lit by `sky_front` of the sky; with TRANSLUCENT the light falling on the far side comes
-// through, `leaf_transmission` of it, tinted by the albedo: the sun (diffuse on the far
-// side, times its visibility), `sky_back` of the sky and the ground's light on the far
-// side (GROUND_BOUNCE). Open sky: sky_front = 0.5 + 0.5 n.y, sky_back = 0.5 - 0.5 n.y.
-vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_front, float sky_back,
-                float light_visibility, vec3 p) {
-    vec3 lit = shade_surface_sky(albedo, material, n, to_eye, sky_front, light_visibility, p);
+// lit by the ambient shares `front` (shade_surface_sky); with TRANSLUCENT the light
+// falling on the far side comes through, `leaf_transmission` of it, tinted by the albedo:
+// the sun (diffuse on the far side, times its visibility) and the ambient shares `back`.
+// Open: front = open_light(n, p), back = open_light(-n, p).
+vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, vec2 front, vec2 back, float light_visibility) {
+    vec3 lit = shade_surface_sky(albedo, material, n, to_eye, front, light_visibility);
 #if defined TRANSLUCENT
     float behind = max(-dot(n, light_dir), 0.0) * light_visibility;
-    lit += leaf_transmission * albedo * (light_color * behind + ambient_color * sky_back + ground_bounce(-n, p));
+    lit += leaf_transmission * albedo * (light_color * behind + ambient_light(back));
 #endif
     return lit;
 }

@@ -341,6 +341,30 @@ def test_the_ground_light_is_the_grounds_albedo_times_its_light():
     assert ground_light(LIGHT, None) == (0.0, 0.0, 0.0)
 
 
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_traced_ground_light_is_the_open_ones_outside_and_none_inside_a_tube(renderers, kind):
+    """With the sky light the ground's light is traced too (the rays below the horizon):
+    an open surface gets the untraced share in the mean; a tube's inner wall, whose view
+    of the ground its own wall hides, gets none, where the untraced term lights it."""
+    sand = Ground(4000.0)
+    traced = sky_only(LookSettings(sky_samples=64, sky_reach=4.0))
+    sky, _ = shaded_side(renderers, kind, traced, sand)
+    both, _ = shaded_side(renderers, kind, replace(traced, bounce=True), sand)
+    plain, _ = shaded_side(renderers, kind, PLAIN, sand)
+    bounced, _ = shaded_side(renderers, kind, BOUNCE, sand)
+    gained, expected = (both - sky).mean(axis=0), (bounced - plain).mean(axis=0)
+    assert np.all(expected > 0.004) and gained == pytest.approx(expected, rel=0.08)
+
+    frusta = skin_skeleton(column((0.0, -20.0, 0.0), 40.0, 1.0))
+    camera = Camera((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30.0, 32, 32)
+    kw = dict(ground=Ground(4000.0, height=-30.0), light_dir=(1.0, 0.0, 0.0))   # the sun outside the wall seen
+    wall_open = draw(renderers, kind, frusta, camera, BOUNCE, **kw)
+    wall_traced = draw(renderers, kind, frusta, camera, replace(sky_only(LookSettings(sky_reach=2.0)), bounce=True),
+                       **kw)
+    assert np.isfinite(wall_open.distance).all()
+    assert srgb_like(wall_traced.color).mean() < 0.05 * srgb_like(wall_open.color).mean()
+
+
 def test_a_leaf_takes_the_ground_light_through_it(renderers):
     """A translucent leaf facing up, seen from above: its far side faces the ground, whose
     light comes through it with the bounce (its near side, facing up, gets none)."""
