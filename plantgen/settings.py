@@ -119,8 +119,9 @@ class EffectSettings:
                             "(costs; see "
                             "--sky-samples). Default: on when the effects list sky.", kind="bool")
     bounce: bool | None = knob(None, "--bounce", "The ground's light: the sunlit ground lights the model from "
-                               "below, as the sky does from above (untraced: a crown does not hide the ground from "
-                               "itself; none with --ground none). Default: on when the effects list bounce.",
+                               "below, as the sky does from above (traced with --sky-light; else a crown does not hide "
+                               "the ground from itself; none with --ground none). Default: on when the effects list "
+                               "bounce.",
                                kind="bool")
 
     def __post_init__(self):
@@ -165,8 +166,10 @@ class LookSettings:
         pixel traced through the BVH (up to ``sky_reach`` times the model's size), instead
         of an unoccluded hemisphere; the sequence is a hash of the pixel (deterministic)
     bounce : the ground's light: the ground's albedo times the light falling on it (sun and
-        sky) reaches a surface's lower hemisphere, (1 - n_y) / 2 of it, unoccluded, as the
-        sky's ambient reaches the upper one; none where no ground is drawn
+        sky) reaches a surface from below, over the share of its view the ground's disc
+        fills (``shaders/shading.glsl``'s ``ground_share``: (1 - n_y) / 2 at the ground, less
+        higher up), unoccluded, as the sky's ambient reaches it from above; with ``sky`` it
+        is traced with the sky's rays below the horizon; none where no ground is drawn
     exposure : the tone curve's input scale
     sun_angle : the sun's angular diameter in degrees (0: a point, hard shadows): a
         penumbra in the shadow map's filter, shadow rays jittered over the disc in RT,
