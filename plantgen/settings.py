@@ -45,8 +45,9 @@ __all__ = ["EFFECTS", "DEFAULT_EFFECTS", "DEFAULT_SIZE", "GROUND_CHOICES", "AA_C
 #: with detail that follows the pixel (:class:`DetailSettings`). The looks
 #: (:class:`LookSettings`): ``tone`` (a filmic tone curve in linear light, then the sRGB
 #: transfer curve), ``translucency`` (leaves lit from behind glow: sun and sky through the
-#: leaf), ``sky`` (the sky's light occluded by the model: hemisphere rays through its BVH).
-EFFECTS = ("relief", "shadows", "animation", "lod", "tone", "translucency", "sky")
+#: leaf), ``sky`` (the sky's light occluded by the model: hemisphere rays through its BVH),
+#: ``bounce`` (the light the sunlit ground reflects lights the model from below).
+EFFECTS = ("relief", "shadows", "animation", "lod", "tone", "translucency", "sky", "bounce")
 #: Effects in force unless the command removes them (``--no-tone``, ``--effects``): cheap,
 #: they cost a plain frame next to nothing.
 DEFAULT_EFFECTS = ("tone", "translucency")
@@ -98,8 +99,8 @@ def parse_effect_list(text: str) -> tuple[str, ...]:
 class EffectSettings:
     """Which effects a frame simulates: ``effects`` replaces the scene's list (None keeps
     it, with :data:`DEFAULT_EFFECTS` added); ``relief``, ``shadows``, ``tone``,
-    ``translucency`` and ``sky`` True or False add or remove that effect (None: as the list
-    says)."""
+    ``translucency``, ``sky`` and ``bounce`` True or False add or remove that effect (None:
+    as the list says)."""
 
     effects: tuple | None = knob(None, "--effects", "Comma-separated effects replacing the scene's list, e.g. "
                                  f"relief,shadows (known: {', '.join(EFFECTS)}; 'none' for none).",
@@ -117,6 +118,11 @@ class EffectSettings:
                             "through the model's ray-tracing tree, so crevices and the inside of a crown darken "
                             "(costs; see "
                             "--sky-samples). Default: on when the effects list sky.", kind="bool")
+    bounce: bool | None = knob(None, "--bounce", "The ground's light: the sunlit ground lights the model from "
+                               "below, as the sky does from above (traced with --sky-light; else a crown does not hide "
+                               "the ground from itself; none with --ground none). Default: on when the effects list "
+                               "bounce.",
+                               kind="bool")
 
     def __post_init__(self):
         if isinstance(self.effects, str):
@@ -127,7 +133,7 @@ class EffectSettings:
     def resolve(self, scene_effects=()) -> tuple[str, ...]:
         """The effects in force for a model whose scene lists ``scene_effects``."""
         flags = (("relief", self.relief), ("shadows", self.shadows), ("tone", self.tone),
-                 ("translucency", self.translucency), ("sky", self.sky))
+                 ("translucency", self.translucency), ("sky", self.sky), ("bounce", self.bounce))
         defaults = list(DEFAULT_EFFECTS) if self.effects is None else []
         return resolve_effects(scene_effects, replace=self.effects, add=defaults + [n for n, f in flags if f],
                                remove=[n for n, f in flags if f is False])
@@ -143,7 +149,7 @@ SKY_RAY_OFFSET = 1.0
 
 @dataclass(frozen=True)
 class LookSettings:
-    """How light reads (the effects ``tone``, ``translucency``, ``sky``; set from the effects
+    """How light reads (the effects ``tone``, ``translucency``, ``sky``, ``bounce``; set from the effects
     in force by :meth:`RenderSettings.frame`; all off by default, today's shading, for a
     caller that builds its settings itself: :meth:`defaults` gives those of
     :data:`DEFAULT_EFFECTS`), and the knob of each accuracy trade-off.
@@ -159,6 +165,11 @@ class LookSettings:
     sky : the ambient light is the sky's seen along ``sky_samples`` cosine-weighted rays a
         pixel traced through the BVH (up to ``sky_reach`` times the model's size), instead
         of an unoccluded hemisphere; the sequence is a hash of the pixel (deterministic)
+    bounce : the ground's light: the ground's albedo times the light falling on it (sun and
+        sky) reaches a surface from below, over the share of its view the ground's disc
+        fills (``shaders/shading.glsl``'s ``ground_share``: (1 - n_y) / 2 at the ground, less
+        higher up), unoccluded, as the sky's ambient reaches it from above; with ``sky`` it
+        is traced with the sky's rays below the horizon; none where no ground is drawn
     exposure : the tone curve's input scale
     sun_angle : the sun's angular diameter in degrees (0: a point, hard shadows): a
         penumbra in the shadow map's filter, shadow rays jittered over the disc in RT,
@@ -168,6 +179,7 @@ class LookSettings:
     tone: bool = False
     translucency: bool = False
     sky: bool = False
+    bounce: bool = False
     transmission: float = knob(0.5, "--leaf-transmission", "Translucency: the fraction of the light falling on a "
                                "leaf's far side that comes through it (0..1).", lo=0, hi=1, metavar="F")
     sky_samples: int = knob(SKY_SAMPLES, "--sky-samples", "Sky light: rays a pixel towards the sky (more: less "
@@ -194,13 +206,14 @@ class LookSettings:
     def defaults(cls) -> LookSettings:
         """The looks of :data:`DEFAULT_EFFECTS` (what a render gets unless it says otherwise)."""
         return cls(tone="tone" in DEFAULT_EFFECTS, translucency="translucency" in DEFAULT_EFFECTS,
-                   sky="sky" in DEFAULT_EFFECTS)
+                   sky="sky" in DEFAULT_EFFECTS, bounce="bounce" in DEFAULT_EFFECTS)
 
     def defines(self) -> dict[str, bool]:
         """The shader variant: ``TONE_MAP`` (``TONE_ACES``), ``TRANSLUCENT``, ``SKY_LIGHT``,
-        ``SOFT_SUN``."""
+        ``SOFT_SUN``, ``GROUND_BOUNCE``."""
         return {"TONE_MAP": self.tone, "TONE_ACES": self.tone and self.tone_curve == "aces",
-                "TRANSLUCENT": self.translucency, "SKY_LIGHT": self.sky, "SOFT_SUN": self.sun_angle > 0}
+                "TRANSLUCENT": self.translucency, "SKY_LIGHT": self.sky, "SOFT_SUN": self.sun_angle > 0,
+                "GROUND_BOUNCE": self.bounce}
 
     def shading_uniforms(self) -> dict:
         """Uniforms of ``shaders/shading.glsl`` (every program's)."""
@@ -586,7 +599,7 @@ class RenderSettings:
         on iff they hold ``relief``, each look iff they hold it (:class:`LookSettings`); no
         shadow map without ``shadows``."""
         look = replace(self.march.look, tone="tone" in effects, translucency="translucency" in effects,
-                       sky="sky" in effects)
+                       sky="sky" in effects, bounce="bounce" in effects)
         return (replace(self.march, relief="relief" in effects, look=look),
                 self.shadows if "shadows" in effects else None)
 

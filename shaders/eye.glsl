@@ -32,7 +32,7 @@ layout(location = 1) out float out_distance;   // distance along the ray from th
 
 #if !defined LABELS
 #if defined SKY_LIGHT
-float sky_light_traced(vec3 p, vec3 n, vec3 side, float distance, int samples);   // sky_light.glsl
+vec2 sky_light_traced(vec3 p, vec3 n, vec3 side, float distance, int samples);   // sky_light.glsl
 #endif
 // Shade and write the hit at p (eye-relative), `distance` along the eye's ray direction d:
 // its albedo, material, shading normal and (with SHADOWS, shadow.glsl included before) the
@@ -49,10 +49,10 @@ void write_hit(vec3 albedo, int material, vec3 normal, vec3 receiver_normal, vec
     // the sky's light traced (sky_light.glsl), about the normal facing the eye
     vec3 n_eye = dot(normal, d) > 0.0 ? -normal : normal;
     vec3 side = dot(receiver_normal, d) > 0.0 ? -receiver_normal : receiver_normal;
-    float sky = sky_light_traced(p, n_eye, side, distance, sky_samples);
+    vec2 sky = sky_light_traced(p, n_eye, side, distance, sky_samples);
     vec3 color = shade_surface_sky(albedo, material, n_eye, -d, sky, visibility);
 #else
-    vec3 color = shade_surface_visible(albedo, material, normal, -d, 1.0, visibility);
+    vec3 color = shade_surface_visible(albedo, material, normal, -d, 1.0, visibility, p);
 #endif
     out_color = vec4(to_display(color), 1.0);
     out_distance = distance;

@@ -72,10 +72,10 @@ void main() {
 #endif
     vec3 up = vec3(0.0, 1.0, 0.0);
 #if defined SKY_LIGHT
-    float sky = sky_light_traced(v_position, up, up, length(v_position), sky_samples);
+    vec2 sky = sky_light_traced(v_position, up, up, length(v_position), sky_samples);
     vec3 lit = shade_surface_sky(albedo, ground_material, up, to_eye, sky, visibility);
 #else
-    vec3 lit = shade_surface_visible(albedo, ground_material, up, to_eye, 1.0, visibility);
+    vec3 lit = shade_surface_visible(albedo, ground_material, up, to_eye, 1.0, visibility, v_position);
 #endif
 #if defined FLAT_BACKGROUND
     out_color = mix(vec4(to_display(lit), 1.0), background, fade);

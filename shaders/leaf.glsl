@@ -108,19 +108,19 @@ void main() {
 #if defined SKY_LIGHT
     float distance = length(v_position);
     // the far side's sky, dimmed by the transmission, with half the rays
-    float sky_front = sky_light_traced(v_position, n, flat_normal, distance, sky_samples);
+    vec2 sky_front = sky_light_traced(v_position, n, flat_normal, distance, sky_samples);
 #if defined TRANSLUCENT
-    float sky_back = sky_light_traced(v_position, -n, -flat_normal, distance, max(sky_samples / 2, 1));
+    vec2 sky_back = sky_light_traced(v_position, -n, -flat_normal, distance, max(sky_samples / 2, 1));
 #else
-    float sky_back = 0.0;
+    vec2 sky_back = vec2(0.0);
 #endif
 #else
-    float sky_front = 0.5 + 0.5 * n.y, sky_back = 0.5 - 0.5 * n.y;
+    vec2 sky_front = open_light(n, v_position), sky_back = open_light(-n, v_position);
 #endif
     // the far side's sun: visible where the sheet itself is (its shadow test is the same)
     out_color = vec4(to_display(shade_leaf(albedo, material, n, to_eye, sky_front, sky_back, visibility)), 1.0);
 #else
-    out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility)), 1.0);
+    out_color = vec4(to_display(shade_surface_visible(albedo, material, n, to_eye, 1.0, visibility, v_position)), 1.0);
 #endif
 #endif
 #if defined THIN_LEAVES

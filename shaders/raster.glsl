@@ -294,7 +294,7 @@ void main() {
 #else
     float visibility = 1.0;
 #endif
-    vec3 color = shade_surface_visible(albedo, material, normal, to_eye, 1.0, visibility);
+    vec3 color = shade_surface_visible(albedo, material, normal, to_eye, 1.0, visibility, v_position);
     out_color = vec4(to_display(color), 1.0);
     out_distance = length(v_position) + along;
 }

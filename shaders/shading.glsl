@@ -7,7 +7,9 @@
 // filmic tone curve in linear light, then the sRGB transfer curve; without it: clip, then
 // c^(1/2.2)); TRANSLUCENT (shade_leaf: light falling on a leaf's far side comes through it,
 // tinted by its albedo); SKY_LIGHT (shade_surface_sky: the sky's light as traced by
-// sky_light.glsl, occluded, instead of the open hemisphere).
+// sky_light.glsl, occluded, instead of the open hemisphere); GROUND_BOUNCE (the light the
+// sunlit ground sends up, `ground_light`, reaches the surface from below, as much of it as
+// the ground covers of the surface's hemisphere: ground_share; 0 where no ground is drawn).
 
 #ifndef SHADING_GLSL
 #define SHADING_GLSL
@@ -27,6 +29,9 @@ uniform float leaf_transmission;                // TRANSLUCENT: fraction through
 uniform float exposure;                         // TONE_MAP: linear light scale before the curve
 uniform float tone_knee;                        // TONE_MAP: the filmic curve's knee
 uniform int sky_samples;                        // SKY_LIGHT: rays a pixel (sky_light.glsl)
+uniform vec3 ground_light;                      // GROUND_BOUNCE: the ground's albedo times its light
+uniform float ground_eye_height;                // GROUND_BOUNCE: the eye's height above the ground
+uniform float ground_reach;                     // GROUND_BOUNCE: the ground's radius (to its fade's middle)
 
 // Sky seen along unit direction `dir` (y up): horizon haze to zenith blue, darker below.
 vec3 sky_color(vec3 dir) {
@@ -107,50 +112,93 @@ vec3 facet_normal(vec3 position, vec3 fallback) {
 }
 #endif
 
-// One directional light, Blinn-Phong, plus a hemispherical ambient term.
+#if defined GROUND_BOUNCE
+// The share of the ground's light that reaches a surface of unit normal n at eye-relative
+// p: seen from p, h above it, the ground is a disc of radius ground_reach straight below
+// (the plant stands at its middle), a cap of directions about -y of half-angle s with
+// sin^2 s = R^2 / (R^2 + h^2). Its cosine-weighted share of n's hemisphere is the
+// irradiance of a uniform cap over pi (J. Snyder, "Area light sources for real-time
+// graphics", 1996; the cap cut by n's horizon where it straddles it): (1 - n.y) / 2 on the
+// ground itself, less higher up, where the ground spans less of the view below.
+float ground_share(vec3 n, vec3 p) {
+    float reach = max(ground_reach, 1e-30);
+    float h = max(p.y + ground_eye_height, 1e-6 * reach);
+    float x = h / reach;                                   // cot s
+    float sin2 = 1.0 / (1.0 + x * x);
+    float c = -n.y;                                        // cos of n's angle to the cap's axis
+    if (c * c > sin2) return max(c, 0.0) * sin2;           // the cap wholly above n's horizon, or below
+    float s = sqrt(max(1.0 - c * c, 0.0));
+    float y = clamp(-x * c / max(s, 1e-30), -1.0, 1.0);
+    float sy = s * sqrt(max(1.0 - y * y, 0.0));
+    return max(((c * acos(y) - x * sy) * sin2 + atan(sy, x)) * 0.3183098862, 0.0);
+}
+#endif
+
+// The shares of the ambient light an open surface of unit normal n at eye-relative p
+// gets: the sky's, 0.5 + 0.5 n.y, and with GROUND_BOUNCE the ground's (ground_share; 0
+// without). sky_light.glsl traces both instead.
+vec2 open_light(vec3 n, vec3 p) {
+#if defined GROUND_BOUNCE
+    return vec2(0.5 + 0.5 * n.y, ground_share(n, p));
+#else
+    return vec2(0.5 + 0.5 * n.y, 0.0);
+#endif
+}
+
+// The ambient light of `share` (open_light's or sky_light.glsl's): the sky's colour times
+// its share, plus with GROUND_BOUNCE the light the ground reflects times its share.
+vec3 ambient_light(vec2 share) {
+#if defined GROUND_BOUNCE
+    return ambient_color * share.x + ground_light * share.y;
+#else
+    return ambient_color * share.x;
+#endif
+}
+
+// One directional light, Blinn-Phong, plus a hemispherical ambient term (and with
+// GROUND_BOUNCE the ground's light from below).
 // normal and to_eye are unit vectors; the normal is flipped to face the eye.
 // `light_visibility` in [0, 1] scales the direct light (1: lit, 0: in shadow; see shadow.glsl).
+// p: the eye-relative position (the ground's light depends on the height above it).
 vec3 shade_surface_visible(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion,
-                           float light_visibility) {
+                           float light_visibility, vec3 p) {
     int m = clamp(material, 0, MAX_MATERIALS - 1);
     vec3 n = dot(normal, to_eye) < 0.0 ? -normal : normal;
     float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
     vec3 halfway = normalize(light_dir + to_eye);
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
-    float sky_light = 0.5 + 0.5 * n.y;
-    vec3 lit = albedo * (ambient_color * sky_light * occlusion + light_color * diffuse)
+    vec3 lit = albedo * (ambient_light(open_light(n, p)) * occlusion + light_color * diffuse)
              + light_color * specular * light_visibility;
     return lit;
 }
 
-vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion) {
-    return shade_surface_visible(albedo, material, normal, to_eye, occlusion, 1.0);
+vec3 shade_surface(vec3 albedo, int material, vec3 normal, vec3 to_eye, float occlusion, vec3 p) {
+    return shade_surface_visible(albedo, material, normal, to_eye, occlusion, 1.0, p);
 }
 
-// As shade_surface_visible, the sky's light given whole: `sky_light` is the fraction of
-// the ambient (sky) colour reaching the surface, (0.5 + 0.5 n.y) on an open surface
-// (sky_light.glsl traces it); `normal` faces the eye.
-vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_light, float light_visibility) {
+// As shade_surface_visible, the ambient light's shares given whole: `share` (x: of the
+// sky's colour, y: of the ground's light) reaching the surface, open_light's on an open
+// surface (sky_light.glsl traces them); `n` faces the eye.
+vec3 shade_surface_sky(vec3 albedo, int material, vec3 n, vec3 to_eye, vec2 share, float light_visibility) {
     int m = clamp(material, 0, MAX_MATERIALS - 1);
     float diffuse = max(dot(n, light_dir), 0.0) * light_visibility;
     vec3 halfway = normalize(light_dir + to_eye);
     float specular = diffuse > 0.0
         ? material_gloss[m].x * pow(max(dot(n, halfway), 0.0), material_gloss[m].y) : 0.0;
-    return albedo * (ambient_color * sky_light + light_color * diffuse) + light_color * specular * light_visibility;
+    return albedo * (ambient_light(share) + light_color * diffuse) + light_color * specular * light_visibility;
 }
 
 // A leaf, a thin sheet: the side the eye sees (`n`, facing the eye) shaded as a surface,
-// lit by `sky_front` of the sky; with TRANSLUCENT the light falling on the far side comes
-// through, `leaf_transmission` of it, tinted by the albedo: the sun (diffuse on the far
-// side, times its visibility) and `sky_back` of the sky. Open sky: sky_front = 0.5 + 0.5
-// n.y, sky_back = 0.5 - 0.5 n.y.
-vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, float sky_front, float sky_back,
-                float light_visibility) {
-    vec3 lit = shade_surface_sky(albedo, material, n, to_eye, sky_front, light_visibility);
+// lit by the ambient shares `front` (shade_surface_sky); with TRANSLUCENT the light
+// falling on the far side comes through, `leaf_transmission` of it, tinted by the albedo:
+// the sun (diffuse on the far side, times its visibility) and the ambient shares `back`.
+// Open: front = open_light(n, p), back = open_light(-n, p).
+vec3 shade_leaf(vec3 albedo, int material, vec3 n, vec3 to_eye, vec2 front, vec2 back, float light_visibility) {
+    vec3 lit = shade_surface_sky(albedo, material, n, to_eye, front, light_visibility);
 #if defined TRANSLUCENT
     float behind = max(-dot(n, light_dir), 0.0) * light_visibility;
-    lit += leaf_transmission * albedo * (light_color * behind + ambient_color * sky_back);
+    lit += leaf_transmission * albedo * (light_color * behind + ambient_light(back));
 #endif
     return lit;
 }

@@ -21,21 +21,35 @@ uniform float sky_reach;        // world units a ray looks for an occluder
 uniform float sky_ray_offset;   // pixel footprints off the surface
 
 // The fraction of the sky's light reaching p (`distance` from the eye) about unit normal
-// n, traced with `samples` rays; in [0, 1]. The rays start off the surface along `side`
-// (unit: the geometric normal on n's side).
-float sky_light_traced(vec3 p, vec3 n, vec3 side, float distance, int samples) {
+// n, traced with `samples` rays, in [0, 1] (x); with GROUND_BOUNCE (y) that of the
+// ground's light: the rays below the horizon that no part of the model stops and that
+// meet the ground within ground_reach of the point under p (shading.glsl's ground_share,
+// which the untraced light takes, is its expectation on an open surface). The rays start
+// off the surface along `side` (unit: the geometric normal on n's side).
+vec2 sky_light_traced(vec3 p, vec3 n, vec3 side, float distance, int samples) {
     float lift = sky_ray_offset * (pixel_footprint.x * distance + pixel_footprint.y);
     vec3 o = p + lift * side;
     vec3 t, b;
     look_basis(n, t, b);
     vec2 shift = pixel_random(1u);
-    float open = 0.0;
+    vec2 open = vec2(0.0);
+#if defined GROUND_BOUNCE
+    float h = max(p.y + ground_eye_height, 0.0);
+#endif
     for (int i = 0; i < samples; ++i) {
         vec2 u = look_sample(i, samples, shift);
         vec2 disc = look_disc(u);                     // cosine-weighted: the disc lifted
         vec3 d = normalize(disc.x * t + disc.y * b + sqrt(max(1.0 - u.x, 0.0)) * n);
-        if (d.y <= 0.0) continue;                     // below the horizon: no sky
-        if (bvh_trace(o, d, 0.0, sky_reach, true, distance, true).prim < 0) open += 1.0;
+        if (d.y > 0.0) {
+            if (bvh_trace(o, d, 0.0, sky_reach, true, distance, true).prim < 0) open.x += 1.0;
+            continue;
+        }
+#if defined GROUND_BOUNCE
+        // below the horizon: the ground, where the ray meets it within its reach
+        if (h * length(d.xz) > ground_reach * max(-d.y, 1e-30)) continue;
+        float to_ground = h / max(-d.y, 1e-30);
+        if (bvh_trace(o, d, 0.0, min(to_ground, sky_reach), true, distance, true).prim < 0) open.y += 1.0;
+#endif
     }
     return open / float(samples);
 }

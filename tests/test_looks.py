@@ -36,7 +36,7 @@ from plantgen.settings import (
 
 NAMES = ("bark", "leaf")
 PLAIN = LookSettings()                                   # every look off: today's shading
-LOOK_DEFINES = ("TONE_MAP", "TONE_ACES", "TRANSLUCENT", "SKY_LIGHT", "SOFT_SUN")
+LOOK_DEFINES = ("TONE_MAP", "TONE_ACES", "TRANSLUCENT", "SKY_LIGHT", "SOFT_SUN", "GROUND_BOUNCE")
 
 
 def column(base=(0.0, 0.0, 0.0), height: float = 2.0, radius: float = 0.3) -> Skeleton:
@@ -143,9 +143,11 @@ def test_the_effects_turn_the_looks_on_and_off():
     assert set(DEFAULT_EFFECTS) == {"tone", "translucency"}
     assert EffectSettings().resolve(("relief",)) == ("relief", "tone", "translucency")
     assert EffectSettings(effects="relief").resolve(()) == ("relief",)           # --effects replaces all
-    assert EffectSettings(tone=False, sky=True).resolve(()) == ("translucency", "sky")
+    assert EffectSettings(tone=False, sky=True, bounce=False).resolve(()) == ("translucency", "sky")
     march, _ = RenderSettings().frame(("tone", "sky"))
-    assert (march.look.tone, march.look.translucency, march.look.sky) == (True, False, True)
+    assert (march.look.tone, march.look.translucency, march.look.sky, march.look.bounce) == (True, False, True, False)
+    march, _ = RenderSettings().frame(("bounce",))
+    assert march.look.bounce and march.look.defines()["GROUND_BOUNCE"]
     march, _ = RenderSettings().frame(())
     assert march.look == PLAIN and not any(march.look.defines().values())
 
@@ -275,6 +277,131 @@ def test_more_sky_samples_lower_the_noise_and_a_frame_is_deterministic(renderers
     assert errors[1] < 0.5 * errors[0]
     # the post darkens the leaf next to it: occlusion, not an open hemisphere
     assert reference[seen].min() < 0.8 * np.percentile(reference[seen], 95)
+
+
+# ---------------------------------------------------------------------- the ground's light
+BOUNCE = LookSettings(bounce=True)
+LIGHT = (0.45, 0.8, 0.35)                     # the model light's, towards the sun
+
+
+def shaded_side(renderers, kind, look, ground, leaf=None, height: float = 3.0, heights: bool = False):
+    """A post on ``ground`` seen from the side the sun does not reach (its normals
+    horizontal, turned from the light, so the sky and the ground light it alone):
+    linear colours of its pixels (k, 3), and of the ground's (m, 3); with ``heights``
+    also the post's pixels' heights (k,)."""
+    frusta = skin_skeleton(column((0.0, 0.0, 0.0), height, 0.5))
+    mid = 0.5 * height
+    camera = Camera((-1.5 * height, mid, -1.17 * height), (0.0, mid, 0.0), (0.0, 1.0, 0.0), 30.0, 48, 48)
+    result = draw(renderers, kind, frusta, camera, look, ground=ground, light_dir=LIGHT, leaves=leaf)
+    origins, dirs = camera.rays()
+    seen = np.isfinite(result.distance)
+    hit = origins + np.where(seen, result.distance, 0.0)[..., None] * dirs
+    post = seen & (hit[..., 1] > 0.1) & (np.hypot(hit[..., 0], hit[..., 2]) < 0.6)
+    floor = seen & (np.abs(hit[..., 1]) < 1e-2) & (np.hypot(hit[..., 0], hit[..., 2]) > 1.0)
+    assert post.sum() > 100
+    if heights:
+        return srgb_like(result.color[post]), hit[..., 1][post]
+    return srgb_like(result.color[post]), srgb_like(result.color[floor])
+
+
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_sunlit_ground_lights_the_shaded_side_from_below(renderers, kind):
+    """Cycles' reference of the looks bench lights a plant's shaded side with the sand's
+    light; plantgen lit it with the sky alone, so the saguaro's shade was a third of the
+    reference's. On a vertical surface turned from the sun the sky gives ambient / 2 and
+    the ground ground_light / 2: each channel grows by 1 + ground_light / ambient,
+    whatever the albedo."""
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, ground_light
+
+    sand = Ground(4000.0)                                     # the ground's edge far below the horizon
+    plain, plain_floor = shaded_side(renderers, kind, PLAIN, sand)
+    bounced, bounced_floor = shaded_side(renderers, kind, BOUNCE, sand)
+    expected = 1.0 + np.asarray(ground_light(LIGHT, "sand")) / np.asarray(AMBIENT_COLOR)
+    assert np.all(expected > 1.5)                             # the sand's light is not small beside the sky's
+    ratio = bounced.mean(axis=0) / plain.mean(axis=0)
+    assert ratio == pytest.approx(expected, rel=0.04), (ratio, expected)
+    # the ground faces up: none of its own light reaches it
+    assert len(plain_floor) > 50 and np.array_equal(bounced_floor, plain_floor)
+    # no ground, no ground light
+    alone, _ = shaded_side(renderers, kind, PLAIN, None)
+    alone_bounce, _ = shaded_side(renderers, kind, BOUNCE, None)
+    assert np.array_equal(alone, alone_bounce)
+
+
+def test_the_ground_light_is_the_grounds_albedo_times_its_light():
+    from plantgen.geometry.skeletons.materials import PALETTE
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, LIGHT_COLOR, ground_light
+
+    dark, light, _ = PALETTE["grass"]
+    up = np.asarray(LIGHT) / np.linalg.norm(LIGHT)
+    expected = 0.5 * (np.asarray(dark) + np.asarray(light)) * (np.asarray(LIGHT_COLOR) * up[1] + AMBIENT_COLOR)
+    assert ground_light(LIGHT, "grass") == pytest.approx(expected, rel=1e-6)
+    below = ground_light((0.0, -1.0, 0.0), "grass")               # the sun under the horizon: the sky alone
+    assert below == pytest.approx(0.5 * (np.asarray(dark) + np.asarray(light)) * AMBIENT_COLOR, rel=1e-6)
+    assert ground_light(LIGHT, None) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_traced_ground_light_is_the_open_ones_outside_and_none_inside_a_tube(renderers, kind):
+    """With the sky light the ground's light is traced too (the rays below the horizon):
+    an open surface gets the untraced share in the mean; a tube's inner wall, whose view
+    of the ground its own wall hides, gets none, where the untraced term lights it."""
+    sand = Ground(4000.0)
+    traced = sky_only(LookSettings(sky_samples=64, sky_reach=4.0))
+    sky, _ = shaded_side(renderers, kind, traced, sand)
+    both, _ = shaded_side(renderers, kind, replace(traced, bounce=True), sand)
+    plain, _ = shaded_side(renderers, kind, PLAIN, sand)
+    bounced, _ = shaded_side(renderers, kind, BOUNCE, sand)
+    gained, expected = (both - sky).mean(axis=0), (bounced - plain).mean(axis=0)
+    assert np.all(expected > 0.004) and gained == pytest.approx(expected, rel=0.08)
+
+    frusta = skin_skeleton(column((0.0, -20.0, 0.0), 40.0, 1.0))
+    camera = Camera((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30.0, 32, 32)
+    kw = dict(ground=Ground(4000.0, height=-30.0), light_dir=(1.0, 0.0, 0.0))   # the sun outside the wall seen
+    wall_open = draw(renderers, kind, frusta, camera, BOUNCE, **kw)
+    wall_traced = draw(renderers, kind, frusta, camera, replace(sky_only(LookSettings(sky_reach=2.0)), bounce=True),
+                       **kw)
+    assert np.isfinite(wall_open.distance).all()
+    assert srgb_like(wall_traced.color).mean() < 0.05 * srgb_like(wall_open.color).mean()
+
+
+def test_a_leaf_takes_the_ground_light_through_it(renderers):
+    """A translucent leaf facing up, seen from above: its far side faces the ground, whose
+    light comes through it with the bounce (its near side, facing up, gets none)."""
+    frusta = skin_skeleton(column((5.0, 0.0, -5.0), 0.5, 0.05))
+    camera = Camera((0.0, 4.0, 0.5), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 30.0, 40, 40)
+    leaf = square((0.0, 1.0, 0.0), 0.6, (0.0, 1.0, 0.0))
+    kw = dict(leaves=leaf, ground=Ground(40.0), light_dir=LIGHT)
+    through = LookSettings(translucency=True)
+    a = draw(renderers, "rc", frusta, camera, through, **kw)
+    b = draw(renderers, "rc", frusta, camera, replace(through, bounce=True), **kw)
+    seen = np.isfinite(a.distance) & (a.distance < 3.5)
+    assert seen.sum() > 100
+    assert srgb_like(b.color[seen]).mean() > 1.05 * srgb_like(a.color[seen]).mean()
+
+
+@pytest.mark.parametrize("kind", ["rc", "rt"])
+def test_the_ground_light_wanes_with_the_height_above_a_small_ground(renderers, kind):
+    """Above a ground of radius R (to its fade's middle) a vertical surface at height h
+    sees the ground below the depression angle d = atan(h / R): the cosine-weighted share
+    (acos(sin d) - sin d cos d) / pi of its hemisphere, 1/2 at the ground, less higher up."""
+    from plantgen.gl.material_uniforms import AMBIENT_COLOR, ground_light
+
+    sand = Ground(8.0)
+    reach = sand.half * (1.0 - 0.5 * sand.fade)
+    plain, h = shaded_side(renderers, kind, PLAIN, sand, height=6.0, heights=True)
+    bounced, _ = shaded_side(renderers, kind, BOUNCE, sand, height=6.0, heights=True)
+    # plain = albedo * ambient / 2, bounced - plain = albedo * ground_light * share
+    green = 1
+    share = (bounced[:, green] / plain[:, green] - 1.0) * 0.5 * AMBIENT_COLOR[green] \
+        / ground_light(LIGHT, "sand")[green]
+    sin_d = h / np.hypot(h, reach)
+    expected = (np.arccos(sin_d) - sin_d * np.sqrt(1.0 - sin_d ** 2)) / np.pi
+    low, high = h < 1.0, h > 4.0
+    assert low.sum() > 10 and high.sum() > 10
+    assert share[low].mean() == pytest.approx(expected[low].mean(), abs=0.03)
+    assert share[high].mean() == pytest.approx(expected[high].mean(), abs=0.03)
+    assert share[high].mean() < 0.6 * share[low].mean()
 
 
 # ---------------------------------------------------------------------- soft sun

@@ -137,8 +137,9 @@ def test_a_value_out_of_range_is_one_line_naming_the_option(cls, field, bad):
 
 def test_effects_resolve_against_the_scenes_list():
     assert EffectSettings().resolve(("shadows", "animation")) == ("shadows", "animation", "tone", "translucency")
-    assert EffectSettings(relief=True, shadows=False, tone=False, translucency=False).resolve(("shadows",)) == (
-        "relief",)
+    assert EffectSettings(bounce=True).resolve(()) == ("tone", "translucency", "bounce")
+    assert EffectSettings(relief=True, shadows=False, tone=False, translucency=False,
+                          bounce=False).resolve(("shadows",)) == ("relief",)
     assert EffectSettings(effects=()).resolve(("relief",)) == ()
     assert EffectSettings(effects="relief,animation").effects == ("relief", "animation")
     march, shadows = RenderSettings().frame(("relief",))

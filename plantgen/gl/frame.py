@@ -29,7 +29,7 @@ from ..settings import AA_CHOICES, AA_FLOOR_PIXELS, MAX_SSAA, ShadowSettings
 from .context import gl_context, release_framebuffer
 from .instanced import IDENTITY_TURN
 from .leaf_layer import LeafLayer
-from .material_uniforms import HeightTextures, palette_uniforms, shading_uniforms
+from .material_uniforms import HeightTextures, ground_uniforms, palette_uniforms, shading_uniforms
 from .passes import LightWindow, ShadowPass, light_window, traced_look
 from .result import WorkCounter
 from .shaders import build_program, mat4, set_uniforms
@@ -326,8 +326,10 @@ class OffscreenRenderer:
         if light_dir is None:
             light_dir = MODEL_LIGHT.towards()
         names = tuple(material_names) + ((ground.material,) if ground is not None else ())
+        bounce = look is not None and look.bounce and ground is not None
         shading = {**shading_uniforms(light_dir), **palette_uniforms(names),
-                   **(look.shading_uniforms() if look is not None else {})}
+                   **(look.shading_uniforms() if look is not None else {}),
+                   **ground_uniforms(ground if bounce else None, light_dir, eye)}
         if shadows is None:
             return FrameLighting(names, shading, None, {}, look=look)
         anchor = light_anchor(caster_box) if anchor is None else np.asarray(anchor, dtype=np.float64)

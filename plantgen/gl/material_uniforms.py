@@ -11,7 +11,8 @@ import numpy as np
 
 from ..geometry.skeletons.materials import MAX_MATERIALS, material_height_maps, material_palette
 
-__all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms",
+__all__ = ["LIGHT_COLOR", "AMBIENT_COLOR", "SKY", "shading_uniforms", "palette_uniforms", "ground_light",
+           "ground_uniforms",
            "HeightTextures", "corner_maps"]
 
 LIGHT_COLOR = (1.0, 0.96, 0.9)
@@ -28,6 +29,35 @@ def shading_uniforms(light_dir) -> dict:
     light = light / np.linalg.norm(light)
     return {"light_dir": tuple(light), "light_color": LIGHT_COLOR,
             "ambient_color": AMBIENT_COLOR, **SKY}
+
+
+def ground_light(light_dir, material: str | None) -> tuple[float, float, float]:
+    """The ``bounce`` look's ``ground_light`` (shaders/shading.glsl): what an open, flat
+    ground of ``material`` sends up, its albedo (the mottle's mean, halfway between the
+    material's dark and light colours) times the light it gets, the sun at its elevation
+    (``light_dir`` (3,) towards the light, y up) and the whole sky's ambient; a surface of
+    normal n gets (1 - n_y) / 2 of it. None (no ground): black."""
+    if material is None:
+        return (0.0, 0.0, 0.0)
+    light = np.asarray(light_dir, dtype=np.float64)
+    light = light / np.linalg.norm(light)
+    palette = material_palette([material])
+    albedo = 0.5 * (palette["dark"][0].astype(np.float64) + palette["light"][0].astype(np.float64))
+    falling = np.asarray(LIGHT_COLOR) * max(float(light[1]), 0.0) + np.asarray(AMBIENT_COLOR)
+    return tuple(float(v) for v in albedo * falling)
+
+
+def ground_uniforms(ground, light_dir, eye) -> dict:
+    """The ``bounce`` look's uniforms of shaders/shading.glsl for ``ground`` (a
+    :class:`~plantgen.geometry.stage.Ground`, None: none, no light from below) lit from
+    ``light_dir``, seen from ``eye`` (3,) world, the render origin: ``ground_light``
+    (:func:`ground_light`), the eye's height above the ground and the ground's reach, its
+    half size to the middle of its fade (``ground_share`` takes it for a disc's radius)."""
+    if ground is None:
+        return {"ground_light": (0.0, 0.0, 0.0), "ground_eye_height": 0.0, "ground_reach": 1.0}
+    return {"ground_light": ground_light(light_dir, ground.material),
+            "ground_eye_height": float(eye[1]) - float(ground.height),
+            "ground_reach": ground.half * (1.0 - 0.5 * float(np.clip(ground.fade, 0.0, 1.0)))}
 
 
 def palette_uniforms(material_names) -> dict[str, np.ndarray]:

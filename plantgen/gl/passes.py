@@ -60,8 +60,10 @@ def look_defines(look, program: str, shadowed: bool = False) -> dict:
     """The defines of the looks (:class:`~plantgen.settings.LookSettings`, None: none) that
     ``program`` takes: every program its tone curve (``TONE_MAP``, ``TONE_ACES``), the shadow receivers the
     soft sun (``SOFT_SUN``, with ``shadowed``), the frusta (``raycast.glsl``, ``rt.glsl``),
-    the leaves and the ground the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``. A look that is
-    off gives no define: the program is today's."""
+    the leaves and the ground the sky light (``SKY_LIGHT``), the leaves ``TRANSLUCENT``,
+    every program but the sky and the ground (which faces up, away from itself) the
+    ground's light (``GROUND_BOUNCE``). A look that is off gives no define: the program is
+    today's."""
     if look is None:
         return {}
     on = look.defines()
@@ -69,6 +71,8 @@ def look_defines(look, program: str, shadowed: bool = False) -> dict:
     if program == "sky.glsl":
         return out
     out["SOFT_SUN"] = on["SOFT_SUN"] and shadowed
+    if program != "ground.glsl":
+        out["GROUND_BOUNCE"] = on["GROUND_BOUNCE"]
     if program in ("raycast.glsl", "rt.glsl", "leaf.glsl", "ground.glsl"):
         out["SKY_LIGHT"] = on["SKY_LIGHT"]
     if program == "leaf.glsl":
