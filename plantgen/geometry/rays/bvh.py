@@ -41,7 +41,9 @@ leaf by default: 0.7 nodes a copy (LBVH), 23 of the 32-byte nodes' bytes, where 
 a leaf take 1.3 nodes (41 bytes), so that a copy costs the GPU (its 32-byte map included,
 :mod:`plantgen.gl.trace`) under 64 bytes.
 
-Pure numpy, no GL.
+Pure numpy, no GL; where the compiled traversal runs, a scan target's LBVH is laid out by
+compiled code instead (:mod:`plantgen.geometry.rays.native_build`: the same tree, node for
+node, without the per-level overhead that dominates the small trees a stand's light builds).
 """
 
 from __future__ import annotations
@@ -250,11 +252,15 @@ def _sah_splits(lo: np.ndarray, hi: np.ndarray, bins: int):
 
 
 # ------------------------------------------------------------------------------ the build
-def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16) -> BVH:
+def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16, compiled: bool = False) -> BVH:
     """A :class:`BVH` over the boxes (``lo``, ``hi``) ((n, 3) each, float64, lo <= hi;
     primitive i is box i). A node with at most ``leaf_size`` primitives is a leaf; larger
     ones split (``method``: "lbvh" Morton order or "sah" binned surface-area heuristic with
-    ``bins`` bins an axis; module docstring). Zero-size and coincident boxes are fine."""
+    ``bins`` bins an axis; module docstring). Zero-size and coincident boxes are fine.
+    ``compiled``: the "lbvh" nodes laid out by the compiled build
+    (:mod:`plantgen.geometry.rays.native_build`: the same tree and boxes, without numpy's
+    per-level overhead, which dominates small trees); the caller checks that the compiled
+    code runs (:func:`plantgen.geometry.rays.native_trace.available`)."""
     lo, hi = _check_boxes(lo, hi)
     if method not in BVH_METHODS:
         raise BVHError(f"BVH method must be one of {', '.join(BVH_METHODS)}, got {method!r}")
@@ -269,6 +275,11 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))
         order = np.argsort(codes, kind="stable")
+        if compiled:
+            from .native_build import lbvh_arrays
+
+            node_lo, node_hi, first, count = lbvh_arrays(lo, hi, codes, order, leaf_size)
+            return BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
         split = _lbvh_splits(codes[order])
     else:
         order = np.arange(n, dtype=np.int64)

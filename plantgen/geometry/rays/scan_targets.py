@@ -69,10 +69,10 @@ class ScanTarget:
     @cached_property
     def bvh(self):
         """The :class:`~plantgen.geometry.rays.bvh.BVH` over the primitives' boxes (built on
-        first use)."""
+        first use; by the compiled build where the compiled traversal runs: the same tree)."""
         from .bvh import build_bvh
 
-        return build_bvh(self.lo, self.hi)
+        return build_bvh(self.lo, self.hi, compiled=_native_on(None))
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
                    t_min: float = 0.0, t_max=np.inf, packets: int = 0, native: bool | None = None):

@@ -1,0 +1,61 @@
+"""The compiled LBVH build (plantgen.geometry.rays.native_build): the numpy build's tree,
+node for node: the same primitive order, the same first and count of every node and the
+same node boxes, on random, coincident, flat and tiny sets of boxes and every leaf size;
+so a target traced with it answers as with the numpy build."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from plantgen.geometry.rays import native_trace
+from plantgen.geometry.rays.bvh import build_bvh
+
+pytestmark = pytest.mark.skipif(not native_trace.available(), reason="numba does not run here: the numpy build "
+                                                                     "is the only one")
+
+
+def _boxes(rng, n, kind):
+    lo = rng.uniform(-5, 5, (n, 3))
+    if kind == "coincident":            # many equal centres: equal Morton codes split in the middle
+        lo = np.round(lo / 4) * 4
+    hi = lo + (0.0 if kind == "flat" else rng.uniform(0, 1, (n, 3)))
+    return lo, hi
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 8, 17, 200, 3000])
+@pytest.mark.parametrize("kind", ["random", "coincident", "flat"])
+@pytest.mark.parametrize("leaf_size", [1, 2, 4, 7])
+def test_the_compiled_build_lays_out_the_numpy_builds_tree(n, kind, leaf_size):
+    lo, hi = _boxes(np.random.default_rng(n * 31 + leaf_size), n, kind)
+    numpy_tree = build_bvh(lo, hi, leaf_size=leaf_size)
+    compiled = build_bvh(lo, hi, leaf_size=leaf_size, compiled=True)
+    assert compiled.nodes == numpy_tree.nodes
+    for name in ("lo", "hi", "first", "count", "prims"):
+        a, b = getattr(numpy_tree, name), getattr(compiled, name)
+        assert a.dtype == b.dtype and a.shape == b.shape
+        assert np.array_equal(a, b), name
+    assert [len(level) for level in compiled.levels()] == [len(level) for level in numpy_tree.levels()]
+
+
+def test_a_scan_target_builds_its_tree_compiled_where_the_walk_runs_and_answers_the_same():
+    """A target's BVH (built compiled here) is the numpy build's, and the walk over it
+    gives the numpy oracle's hits."""
+    from plantgen.geometry.rays.scan_targets import scan_target
+    from plantgen.geometry.skeletons.skeleton import Skeleton
+
+    rng = np.random.default_rng(3)
+    n = 60
+    start = rng.uniform(-1, 1, (n, 3))
+    skel = Skeleton(start, start + rng.uniform(-0.3, 0.3, (n, 3)), np.full(n, 0.05), np.full(n, 0.04),
+                    np.full(n, -1), np.zeros(n, bool), np.zeros(n, np.int32))
+    target = scan_target(skel)
+    numpy_tree = build_bvh(target.lo, target.hi)
+    for name in ("lo", "hi", "first", "count", "prims"):
+        assert np.array_equal(getattr(target.bvh, name), getattr(numpy_tree, name)), name
+    origins = rng.uniform(-1.5, 1.5, (500, 3))
+    dirs = rng.normal(size=(500, 3))
+    t_native, _ = target.first_hits(origins, dirs, any_hit=True, origin=target.base)
+    t_numpy, _ = target.first_hits(origins, dirs, any_hit=True, origin=target.base, native=False)
+    assert np.isfinite(t_native).any() and not np.isfinite(t_native).all()
+    assert np.array_equal(np.isfinite(t_native), np.isfinite(t_numpy))
