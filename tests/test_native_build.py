@@ -59,3 +59,57 @@ def test_a_scan_target_builds_its_tree_compiled_where_the_walk_runs_and_answers_
     t_numpy, _ = target.first_hits(origins, dirs, any_hit=True, origin=target.base, native=False)
     assert np.isfinite(t_native).any() and not np.isfinite(t_native).all()
     assert np.array_equal(np.isfinite(t_native), np.isfinite(t_numpy))
+
+
+def _random_rows(rng, n):
+    """Rows of every kind the pyramids meet: ordinary joints, planes tilted towards the
+    axis (grazing: the axial-extent fallback), planes parallel to it, cones past their
+    apex, zero radii, zero slopes."""
+    from plantgen.geometry.skeletons.frusta import Frusta
+
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    ref = rng.normal(size=(n, 3))
+    ref -= axis * np.einsum("ij,ij->i", ref, axis)[:, None]
+    ref /= np.linalg.norm(ref, axis=1, keepdims=True)
+    base = rng.uniform(-3, 3, (n, 3))
+    length = rng.uniform(0.05, 1.0, n)
+    r1 = rng.choice([0.0, 0.02, 0.1, 0.4], n) * rng.uniform(0.5, 1.5, n)
+    r2 = np.where(rng.random(n) < 0.2, r1, rng.uniform(0, 0.4, n))
+    planes = []
+    for end in (0.0, 1.0):
+        tilt = rng.choice([0.0, 0.3, 1.2, 1.5, np.pi / 2], n) * rng.uniform(0.9, 1.0, n)
+        other = rng.normal(size=(n, 3))
+        other -= axis * np.einsum("ij,ij->i", other, axis)[:, None]
+        other /= np.linalg.norm(other, axis=1, keepdims=True)
+        normal = np.cos(tilt)[:, None] * axis + np.sin(tilt)[:, None] * other
+        point = base + (end * length)[:, None] * axis
+        planes.append(np.concatenate([normal, np.einsum("ij,ij->i", normal, point)[:, None]], axis=1))
+    return Frusta(base=base, axis=axis, length=length, r1=r1, r2=r2, plane_lo=planes[0], plane_hi=planes[1],
+                  ref_dir=ref, u_offset=np.zeros(n), twist=np.zeros(n), material=np.zeros(n, np.int32),
+                  shell=np.zeros(n), segment=np.arange(n))
+
+
+def test_the_compiled_row_boxes_are_the_numpy_ones_number_for_number():
+    """Random rows (grazing, parallel and past-the-apex ones among them) and a skinned
+    tree: the compiled boxes are numpy's, each number and its sign; grazing rows (the
+    axial-extent fallback) occur."""
+    from plantgen.geometry.rays import native_build
+    from plantgen.geometry.rays.reference import row_boxes
+    from plantgen.geometry.skeletons.skin import skin_skeleton
+    from plantgen.pipeline import grow_file
+
+    rows = _random_rows(np.random.default_rng(11), 4000)
+    tree = skin_skeleton(grow_file("self_organizing", iterations=8).skeleton)
+    for frusta in (rows, tree):
+        with np.errstate(all="ignore"):
+            expected = row_boxes(frusta)
+        got = native_build.row_boxes(frusta)
+        for a, b in zip(expected, got, strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
+            assert np.array_equal(np.signbit(a), np.signbit(b))
+    lo, hi = native_build.row_boxes(rows)
+    extent = (hi - lo).max(axis=1)
+    size = rows.length + np.maximum(rows.r1, rows.r2)
+    assert (extent > 50 * size).any()      # planes near the axis: grazing cuts and the fallback's long boxes
+    assert (extent < 3 * size).sum() > len(rows) // 4

@@ -1,13 +1,21 @@
-"""The compiled LBVH build: :func:`~plantgen.geometry.rays.bvh.build_bvh`'s ``lbvh`` tree,
-node for node, in native code (numba), for the many small targets a stand's light builds
-(one a plant a step). The primitives are sorted by their Morton codes as numpy sorts them;
-the nodes are then laid out breadth first as the numpy build lays them out (a level's
-leaves and splits in node order, the children of its internal nodes numbered in that
-order), each split where the highest bit in which a node's first and last codes differ
-flips (the middle where they are equal), and the node boxes are the unions of their
-primitives' (leaves) and children's boxes: min and max, exact. So the arrays are the numpy
-build's, bit for bit (the tests compare them). Compiled on first use and cached on disk as
-the tracer is (:mod:`plantgen.geometry.rays.native_trace`)."""
+"""What a scan target is built from, compiled (numba), for the many small targets a
+stand's light builds (one a plant a step): the LBVH and the rows' boxes, each the numpy
+build's numbers, computed without numpy's per-call overhead.
+
+- :func:`lbvh_arrays`: :func:`~plantgen.geometry.rays.bvh.build_bvh`'s ``lbvh`` tree, node
+  for node. The primitives are sorted by their Morton codes as numpy sorts them; the nodes
+  are then laid out breadth first as the numpy build lays them out (a level's leaves and
+  splits in node order, the children of its internal nodes numbered in that order), each
+  split where the highest bit in which a node's first and last codes differ flips (the
+  middle where they are equal), and the node boxes are the unions of their primitives'
+  (leaves) and children's boxes: min and max, exact.
+- :func:`row_boxes`: :func:`~plantgen.geometry.rays.reference.row_boxes` (no relief
+  shell), the bounding pyramids' corners and their pad row by row, every operation in
+  numpy's order (no fused multiply-add: numba does not contract), numpy's NaN rule in
+  min and max.
+
+The tests compare every array, number for number. Compiled on first use and cached on
+disk as the tracer is (:mod:`plantgen.geometry.rays.native_trace`)."""
 
 from __future__ import annotations
 
@@ -15,7 +23,7 @@ import numpy as np
 
 from ..compiled import njit
 
-__all__ = ["lbvh_arrays"]
+__all__ = ["lbvh_arrays", "row_boxes"]
 
 
 @njit(cache=True)
@@ -107,3 +115,114 @@ def lbvh_arrays(lo: np.ndarray, hi: np.ndarray, codes: np.ndarray, order: np.nda
     node_lo, node_hi = _boxes(np.ascontiguousarray(lo), np.ascontiguousarray(hi), np.ascontiguousarray(order, np.int64),
                               first, count, level_first)
     return node_lo, node_hi, first, count
+
+
+# ============================================================================ the rows' boxes
+@njit(cache=True, inline="always")
+def _nmin(a, b):
+    """numpy's ``minimum`` (a NaN wins)."""
+    return a if a != a else (b if b != b else (a if a < b else b))
+
+
+@njit(cache=True, inline="always")
+def _nmax(a, b):
+    """numpy's ``maximum`` (a NaN wins)."""
+    return a if a != a else (b if b != b else (a if a > b else b))
+
+
+@njit(cache=True, inline="always")
+def _dot3(P, i, c, V, j):
+    """``P[i, c:c + 3]`` · ``V[j, :3]``, left to right (:func:`plantgen.geometry.vec.dot`)."""
+    return P[i, c] * V[j, 0] + P[i, c + 1] * V[j, 1] + P[i, c + 2] * V[j, 2]
+
+
+@njit(cache=True)
+def _extent(P, base, axis, i, r1, k, generator_rise):
+    """The heights of plane ``P[i]`` on the cone's generators at n·e = -|n_perp| and
+    +|n_perp| (``_axial_extent`` of :mod:`plantgen.geometry.skeletons.frusta`, one plane)."""
+    na = _dot3(P, i, 0, axis, i)
+    nperp = np.sqrt(_nmax(1 - na * na, 0.0))
+    gap = P[i, 3] - _dot3(P, i, 0, base, i)
+    radial = -1.0 * nperp
+    rise = na + k * radial
+    low = (gap - r1 * radial) / (rise if abs(rise) > generator_rise else generator_rise)
+    radial = 1.0 * nperp
+    rise = na + k * radial
+    return low, (gap - r1 * radial) / (rise if abs(rise) > generator_rise else generator_rise)
+
+
+@njit(cache=True)
+def _row_box(base, axis, ref, r1_, r2, length, plane_lo, plane_hi, i, grazing_tol, tilt_cos, generator_rise,
+             box_pad, box_pad_floor, lo, hi, side, q, ys, rises, y_lo, y_hi):
+    """Row ``i``'s padded box into ``lo[i]``, ``hi[i]``: the bounding pyramid's corners
+    (no shell), then ``row_boxes``' pad, every operation as numpy does it."""
+    k = (r2[i] - r1_[i]) / length[i]
+    r1 = r1_[i] + 0.0
+    side[0] = ref[i, 1] * axis[i, 2] - ref[i, 2] * axis[i, 1]
+    side[1] = ref[i, 2] * axis[i, 0] - ref[i, 0] * axis[i, 2]
+    side[2] = ref[i, 0] * axis[i, 1] - ref[i, 1] * axis[i, 0]
+    for c in range(4):
+        sx, sz = (-1.0 if c % 2 == 0 else 1.0), (-1.0 if c < 2 else 1.0)
+        for a in range(3):
+            q[c, a] = sx * ref[i, a] + sz * side[a]
+    for p in range(2):
+        P = plane_lo if p == 0 else plane_hi
+        gap = P[i, 3] - _dot3(P, i, 0, base, i)
+        n_axis = _dot3(P, i, 0, axis, i)
+        for c in range(4):
+            radial = P[i, 0] * q[c, 0] + P[i, 1] * q[c, 1] + P[i, 2] * q[c, 2]
+            rise = n_axis + k * radial
+            rises[p, c] = rise
+            ys[p, c] = (gap - r1 * radial) / rise
+    lo_v, hi_v = _extent(plane_lo, base, axis, i, r1, k, generator_rise), \
+        _extent(plane_hi, base, axis, i, r1, k, generator_rise)
+    ext_lo = _nmin(_nmin(lo_v[0], lo_v[1]), _nmin(hi_v[0], hi_v[1]))
+    ext_hi = _nmax(_nmax(hi_v[0], hi_v[1]), _nmax(lo_v[0], lo_v[1]))
+    n_dot_a = _nmin(_dot3(plane_lo, i, 0, axis, i), _dot3(plane_hi, i, 0, axis, i))
+    limit = grazing_tol * _nmax(n_dot_a, tilt_cos)
+    grazing = False
+    for c in range(4):
+        y_lo[c], y_hi[c] = _nmin(ys[0, c], ys[1, c]), _nmax(ys[0, c], ys[1, c])
+        if _nmin(rises[0, c], rises[1, c]) < limit or not (np.isfinite(y_lo[c]) and np.isfinite(y_hi[c])):
+            grazing = True
+    big = 0.0
+    for a in range(3):
+        low, high = np.inf, -np.inf
+        for c in range(8):
+            y = (ext_lo if c < 4 else ext_hi) if grazing else (y_lo[c] if c < 4 else y_hi[c - 4])
+            rad = _nmax(r1 + k * y, 0.0)
+            v = base[i, a] + y * axis[i, a] + rad * q[c % 4, a]
+            if c == 0:
+                low, high = v, v
+            else:
+                low, high = _nmin(low, v), _nmax(high, v)
+        lo[i, a], hi[i, a] = low, high
+        big = _nmax(big, _nmax(abs(low), abs(high))) if a else _nmax(abs(low), abs(high))
+    pad = box_pad * big + box_pad_floor
+    for a in range(3):
+        lo[i, a], hi[i, a] = lo[i, a] - pad, hi[i, a] + pad
+
+
+@njit(cache=True)
+def _row_boxes(base, axis, ref, r1, r2, length, plane_lo, plane_hi, grazing_tol, tilt_cos, generator_rise, box_pad,
+               box_pad_floor):
+    n = len(base)
+    lo, hi = np.empty((n, 3)), np.empty((n, 3))
+    side, q, ys, rises, y_lo, y_hi = np.empty(3), np.empty((4, 3)), np.empty((2, 4)), np.empty((2, 4)), np.empty(4), \
+        np.empty(4)
+    for i in range(n):
+        _row_box(base, axis, ref, r1, r2, length, plane_lo, plane_hi, i, grazing_tol, tilt_cos, generator_rise,
+                 box_pad, box_pad_floor, lo, hi, side, q, ys, rises, y_lo, y_hi)
+    return lo, hi
+
+
+def row_boxes(frusta) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~plantgen.geometry.rays.reference.row_boxes` of ``frusta`` (no relief shell),
+    compiled: the bounding pyramids' corners and the pad, operation for operation as numpy
+    computes them (the same numbers; the tests compare them)."""
+    from ...tolerances import tol
+
+    c = np.ascontiguousarray
+    return _row_boxes(c(frusta.base), c(frusta.axis), c(frusta.ref_dir), c(frusta.r1), c(frusta.r2), c(frusta.length),
+                      c(frusta.plane_lo), c(frusta.plane_hi), float(tol.pyramid_grazing), float(tol.plane_tilt_cos),
+                      float(tol.generator_rise), float(tol.box_pad), float(tol.box_pad_floor))

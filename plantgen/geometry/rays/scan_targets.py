@@ -137,10 +137,13 @@ def _leaf_arrays(leaves: Polygons | None) -> tuple[np.ndarray, np.ndarray]:
 
 
 def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: Frusta | None = None,
-                plant=0, leaf_plant=None, topology: Branches | None = None) -> ScanTarget:
+                plant=0, leaf_plant=None, topology: Branches | None = None, compiled: bool = False) -> ScanTarget:
     """What a scan of ``skeleton`` (skinned here unless ``frusta`` are given) and its
     ``leaves`` sees. ``plant``: one number for every point, or (n,) per segment (a scene's
-    instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant)."""
+    instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant).
+    ``compiled``: the rows' boxes computed by compiled code
+    (:func:`plantgen.geometry.rays.native_build.row_boxes`: the same numbers), for a caller
+    that has checked the compiled code runs (a light traced many times a step)."""
     from ..skeletons.skin import skin_skeleton  # skinning is the heavy import; a given frusta skips it
 
     frusta = skin_skeleton(skeleton) if frusta is None else frusta
@@ -158,7 +161,12 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
         leaf_plant = np.full(p, int(own) if own.ndim == 0 else 0, dtype=np.int64)
         hung = polygon_segment >= 0
         leaf_plant[hung] = segment_plant[polygon_segment[hung]]
-    lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
+    if compiled and len(frusta):
+        from .native_build import row_boxes as compiled_row_boxes
+
+        lo, hi = compiled_row_boxes(frusta)
+    else:
+        lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
     if len(triangles):               # min / max of the 3 corners pairwise: exact, and fast where axis=1 is not
         v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
         t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
