@@ -38,6 +38,20 @@ def test_the_compiled_build_lays_out_the_numpy_builds_tree(n, kind, leaf_size):
     assert [len(level) for level in compiled.levels()] == [len(level) for level in numpy_tree.levels()]
 
 
+@pytest.mark.parametrize("n", [1, 2, 50, 4000])
+def test_the_compiled_morton_codes_are_numpys(n):
+    """The centres' codes, flat and coincident sets among them (a zero extent)."""
+    from plantgen.geometry.rays.morton import morton_codes
+    from plantgen.geometry.rays.native_build import centre_codes
+
+    rng = np.random.default_rng(n)
+    for lo, hi in (_boxes(rng, n, "random"), _boxes(rng, n, "coincident"), (np.ones((n, 3)), np.ones((n, 3))),
+                   (rng.uniform(-1e6, 1e6, (n, 3)), np.full((n, 3), 1e6))):
+        codes = centre_codes(lo, hi)
+        assert codes.dtype == np.uint64
+        assert np.array_equal(codes, morton_codes(0.5 * (lo + hi)))
+
+
 def test_a_scan_target_builds_its_tree_compiled_where_the_walk_runs_and_answers_the_same():
     """A target's BVH (built compiled here) is the numpy build's, and the walk over it
     gives the numpy oracle's hits."""

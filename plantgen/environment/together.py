@@ -203,6 +203,7 @@ class _World:
         self.placed: list[_Placed | None] = [None] * len(plants)
         self.segments = 0
         self._stand: _Stand | None = None
+        self._joined: tuple[Skeleton, np.ndarray, bool] | None = None
 
     def put(self, i: int, skeleton: Skeleton, polygons: Polygons) -> None:
         m = self.plants[i].matrix
@@ -211,6 +212,7 @@ class _World:
         self.placed[i] = _placed(skeleton, polygons, m)
         self.segments += len(skeleton)
         self._stand = None
+        self._joined = None
 
     def stand(self) -> _Stand:
         """Every plant's leaves joined (built once after the plants last moved; a plant not
@@ -232,8 +234,28 @@ class _World:
         if not parts:
             return None
         back = np.linalg.inv(self.plants[i].matrix)
-        return Neighbours(Skeleton.concatenate([p.skeleton for p in parts]).transformed(back),
-                          StandLeaves(self, i, back))
+        return Neighbours(self._others_joined(i, parts).transformed(back), StandLeaves(self, i, back))
+
+    def _others_joined(self, i: int, parts: list[_Placed]) -> Skeleton:
+        """The placed skeletons but plant ``i``'s, joined in order: what
+        :meth:`Skeleton.concatenate` makes of them. Where every plant's material names are
+        the same (no index remapped), the rows of all the plants joined once after they
+        last moved, plant ``i``'s left out and the parents after them moved down."""
+        if self._joined is None:
+            placed = [p.skeleton if p is not None else Skeleton.empty() for p in self.placed]
+            every = [p.skeleton for p in self.placed if p is not None]
+            joined = Skeleton.concatenate(every)
+            self._joined = (joined, np.cumsum([0] + [len(p) for p in placed]).astype(np.int64),
+                            all(p.material_names == joined.material_names for p in every))
+        joined, first, same = self._joined
+        if not same:
+            return Skeleton.concatenate([p.skeleton for p in parts])
+        a, b = int(first[i]), int(first[i + 1])
+        rows = np.r_[0:a, b:len(joined)]
+        parent = joined.parent[rows]
+        return Skeleton(joined.start[rows], joined.end[rows], joined.r_start[rows], joined.r_end[rows],
+                        np.where(parent >= b, parent - (b - a), parent), joined.continues[rows], joined.material[rows],
+                        joined.material_names)
 
 
 def _check_steps(plants: list[TogetherPlant], limits: Limits, work: Meter | None) -> None:

@@ -272,14 +272,16 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
     if n == 0:
         return BVH(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32),
                    np.zeros(0, np.int32))
+    if method == "lbvh" and compiled:
+        from .native_build import centre_codes, lbvh_arrays
+
+        codes = centre_codes(lo, hi)
+        order = np.argsort(codes, kind="stable")
+        node_lo, node_hi, first, count = lbvh_arrays(lo, hi, codes, order, leaf_size)
+        return BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))
         order = np.argsort(codes, kind="stable")
-        if compiled:
-            from .native_build import lbvh_arrays
-
-            node_lo, node_hi, first, count = lbvh_arrays(lo, hi, codes, order, leaf_size)
-            return BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
         split = _lbvh_splits(codes[order])
     else:
         order = np.arange(n, dtype=np.int64)

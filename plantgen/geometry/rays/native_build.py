@@ -23,7 +23,47 @@ import numpy as np
 
 from ..compiled import njit
 
-__all__ = ["lbvh_arrays", "row_boxes"]
+__all__ = ["centre_codes", "lbvh_arrays", "row_boxes"]
+
+
+@njit(cache=True, inline="always")
+def _spread21(x):
+    """A 21-bit value spread out to every third bit (:mod:`plantgen.geometry.rays.morton`)."""
+    x = x & np.uint64(0x1FFFFF)
+    x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
+    x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
+    x = (x | (x << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
+    x = (x | (x << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
+    x = (x | (x << np.uint64(2))) & np.uint64(0x1249249249249249)
+    return x
+
+
+@njit(cache=True)
+def _centre_codes(lo, hi):
+    """The Morton codes of the boxes' centres ``0.5 * (lo + hi)``, as
+    :func:`~plantgen.geometry.rays.morton.morton_codes` computes them (n >= 1)."""
+    n = len(lo)
+    centre = np.empty((n, 3))
+    for i in range(n):
+        for a in range(3):
+            centre[i, a] = 0.5 * (lo[i, a] + hi[i, a])
+    low, extent = np.empty(3), 0.0
+    for a in range(3):
+        small, big = centre[0, a], centre[0, a]
+        for i in range(1, n):
+            small, big = min(small, centre[i, a]), max(big, centre[i, a])
+        low[a] = small
+        extent = max(extent, big - small) if a else big - small
+    scale = extent if extent > 0 else np.inf
+    top = float(2 ** 21 - 1)
+    codes = np.empty(n, np.uint64)
+    for i in range(n):
+        code = np.uint64(0)
+        for a in range(3):
+            q = min(max((centre[i, a] - low[a]) / scale * top, 0.0), top)
+            code = code | (_spread21(np.uint64(q)) << np.uint64(2 - a))
+        codes[i] = code
+    return codes
 
 
 @njit(cache=True)
@@ -104,6 +144,12 @@ def _boxes(lo, hi, order, first, count, level_first):
                     low, high = min(node_lo[c, a], node_lo[c + 1, a]), max(node_hi[c, a], node_hi[c + 1, a])
                 node_lo[node, a], node_hi[node, a] = low, high
     return node_lo, node_hi
+
+
+def centre_codes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(n,) uint64 the Morton codes of the centres of boxes ``lo``, ``hi`` ((n, 3) float64,
+    finite, n >= 1): ``morton_codes(0.5 * (lo + hi))``, the same codes."""
+    return _centre_codes(np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64))
 
 
 def lbvh_arrays(lo: np.ndarray, hi: np.ndarray, codes: np.ndarray, order: np.ndarray, leaf_size: int):
