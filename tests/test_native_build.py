@@ -127,3 +127,37 @@ def test_the_compiled_row_boxes_are_the_numpy_ones_number_for_number():
     size = rows.length + np.maximum(rows.r1, rows.r2)
     assert (extent > 50 * size).any()      # planes near the axis: grazing cuts and the fallback's long boxes
     assert (extent < 3 * size).sum() > len(rows) // 4
+
+
+def test_a_native_scenes_tables_are_its_targets_in_slot_order():
+    """The compiled walk's tables (gathered in one compiled pass): the rows and triangles
+    in the order the BVH's leaves list them, each primitive's kind pointing at its own
+    table row, each slot's box its primitive's."""
+    from _geometry_helpers import random_tree
+
+    from plantgen.geometry.meshes.polygons import Polygons
+    from plantgen.geometry.rays.native_trace import ROW_WIDTH, native_scene
+    from plantgen.geometry.rays.scan_targets import scan_target
+
+    rng = np.random.default_rng(5)
+    skel = random_tree(80, seed=2)
+    v = rng.uniform(-1, 1, (60, 3))
+    leaves = Polygons(v, rng.integers(0, 60, (40, 3)), np.arange(40), np.zeros(40, np.int32), np.zeros((40, 3)),
+                      rng.integers(0, 80, 40))
+    target = scan_target(skel, leaves)
+    scene = native_scene(target)
+    nodes, slot_box, prims, slot_kind, rows, triangles = scene.scene
+    n_rows = target.rows
+    assert np.array_equal(prims, target.bvh.prims)
+    assert np.array_equal(slot_box, np.concatenate([target.lo[prims], target.hi[prims]], axis=1))
+    assert np.array_equal(slot_kind, scene.kind[prims])
+    is_row = prims < n_rows
+    assert np.array_equal(slot_kind[is_row], np.arange(is_row.sum()))           # rows in slot order
+    assert np.array_equal(-1 - slot_kind[~is_row], np.arange((~is_row).sum()))  # and triangles
+    up = target.pair_tester.upload
+    row_table = np.column_stack([up.c1, up.a, up.h, up.r1, up.k, up.n_lo, up.n_hi, up.d_lo, up.d_hi, up.open_lo,
+                                 up.open_hi]).astype(np.float64)
+    assert rows.shape == (n_rows, ROW_WIDTH) and np.array_equal(rows, row_table[prims[is_row]])
+    v0, e1, e2, size = target.triangle_edges
+    tri = prims[~is_row] - n_rows
+    assert np.array_equal(triangles, np.column_stack([v0, e1, e2, size])[tri])

@@ -680,14 +680,14 @@ class NativeScene:
     def __init__(self, *, nodes_f, nodes_i, prim_box, prims, kind, rows, triangles, roots, prim_first, top, depth):
         c = np.ascontiguousarray
         prims = c(prims, np.int64)
-        kind, rows, triangles = _slot_order(c(kind, np.int64), prims, rows, triangles)
         nodes = np.concatenate([np.asarray(nodes_f, np.float64), np.asarray(nodes_i, np.float64)], axis=1)
         # what a walk reads, in the order it reads it: a node's box, first and count in one
         # 64-byte row; a leaf's primitives' boxes, kinds and tables in its slots' order
-        slot_box = np.empty((len(prims), 6))
-        slot_box[:, :3], slot_box[:, 3:] = prim_box[0][prims], prim_box[1][prims]
-        self.scene = (c(nodes), slot_box, prims, c(kind[prims]),
-                      c(rows, np.float64), c(triangles, np.float64))
+        # (:func:`_gather`: the tables reordered as the slots list their primitives)
+        kind, slot_kind, rows, triangles, slot_box = _gather(
+            prims, c(kind, np.int64), c(prim_box[0], np.float64), c(prim_box[1], np.float64),
+            c(rows, np.float64).reshape(-1, ROW_WIDTH), c(triangles, np.float64).reshape(-1, 10))
+        self.scene = (c(nodes), slot_box, prims, slot_kind, rows, triangles)
         self.kind = kind
         self.roots = c(roots, np.int64)
         self.prim_first = c(prim_first, np.int64)
@@ -735,19 +735,31 @@ class NativeScene:
         return out
 
 
-def _slot_order(kind, prims, rows, triangles):
+@njit(cache=True)
+def _gather(prims, kind, lo, hi, rows, triangles):
     """The row and triangle tables reordered as the leaves' slots ``prims`` list their
-    primitives, and ``kind`` (by global primitive) pointing into them."""
-    slot_kind = kind[prims]
-    row_order = slot_kind[slot_kind >= 0]
-    tri_order = -1 - slot_kind[slot_kind < 0]
-    new_row = np.empty(len(rows), np.int64)
-    new_row[row_order] = np.arange(len(row_order))
-    new_tri = np.empty(len(triangles), np.int64)
-    new_tri[tri_order] = np.arange(len(tri_order))
-    out = np.where(kind >= 0, new_row[np.maximum(kind, 0)] if len(rows) else 0,
-                   -1 - (new_tri[np.maximum(-1 - kind, 0)] if len(triangles) else 0))
-    return out.astype(np.int64), np.asarray(rows)[row_order], np.asarray(triangles)[tri_order]
+    primitives, ``kind`` (by global primitive, G) pointing into them, each slot's kind,
+    and (G, 6) each slot's primitive's box (lo, hi): one pass over the slots."""
+    n = len(prims)
+    out_kind = np.empty(len(kind), np.int64)
+    rows_out, tris_out = np.empty(rows.shape), np.empty(triangles.shape)
+    slot_kind, slot_box = np.empty(n, np.int64), np.empty((n, 6))
+    n_rows = n_tris = 0
+    for s in range(n):
+        g = prims[s]
+        k = kind[g]
+        if k >= 0:
+            rows_out[n_rows] = rows[k]
+            out_kind[g] = n_rows
+            n_rows += 1
+        else:
+            tris_out[n_tris] = triangles[-1 - k]
+            out_kind[g] = -1 - n_tris
+            n_tris += 1
+        slot_kind[s] = out_kind[g]
+        for a in range(3):
+            slot_box[s, a], slot_box[s, 3 + a] = lo[g, a], hi[g, a]
+    return out_kind, slot_kind, rows_out[:n_rows], tris_out[:n_tris], slot_box
 
 
 def _rows3(a) -> np.ndarray:
