@@ -36,6 +36,7 @@ def test_the_compiled_build_lays_out_the_numpy_builds_tree(n, kind, leaf_size):
         assert a.dtype == b.dtype and a.shape == b.shape
         assert np.array_equal(a, b), name
     assert [len(level) for level in compiled.levels()] == [len(level) for level in numpy_tree.levels()]
+    assert compiled.depth() == numpy_tree.depth() == len(numpy_tree.levels())
 
 
 @pytest.mark.parametrize("n", [1, 2, 50, 4000])
@@ -161,3 +162,30 @@ def test_a_native_scenes_tables_are_its_targets_in_slot_order():
     v0, e1, e2, size = target.triangle_edges
     tri = prims[~is_row] - n_rows
     assert np.array_equal(triangles, np.column_stack([v0, e1, e2, size])[tri])
+
+
+def test_a_target_built_compiled_is_the_numpy_built_one():
+    """scan_target(compiled=True) (rows' and leaves' boxes compiled) gives the numpy
+    build's triangles and boxes, number for number and sign for sign; so does a target
+    with no leaves or no branches."""
+    from _geometry_helpers import random_tree
+
+    from plantgen.geometry.meshes.polygons import Polygons
+    from plantgen.geometry.rays.scan_targets import scan_target
+    from plantgen.geometry.skeletons.skeleton import Skeleton
+
+    rng = np.random.default_rng(9)
+    v = rng.uniform(-2, 2, (90, 3))
+    v[:10, 1] = 0.0                          # corners on a coordinate plane: zeros in the boxes
+    v[10:20, 0] = -0.0
+    leaves = Polygons(v, rng.integers(0, 90, (70, 3)), np.arange(70), np.zeros(70, np.int32), np.zeros((70, 3)),
+                      rng.integers(-1, 50, 70))
+    unhung = Polygons(leaves.vertices, leaves.triangles, leaves.polygon, leaves.material, leaves.normal,
+                      np.full(70, -1))
+    for skel, polys in ((random_tree(50, seed=4), leaves), (random_tree(50, seed=4), None),
+                        (Skeleton.empty(), unhung)):
+        a, b = scan_target(skel, polys), scan_target(skel, polys, compiled=True)
+        for name in ("triangles", "triangle_polygon", "lo", "hi", "base"):
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.dtype == y.dtype and x.shape == y.shape, name
+            assert np.array_equal(x, y) and np.array_equal(np.signbit(x), np.signbit(y)), name

@@ -104,8 +104,10 @@ class BVH:
         return sum(a.nbytes for a in (self.lo, self.hi, self.first, self.count, self.prims))
 
     def depth(self) -> int:
-        """The levels of the tree (0: empty, 1: a single leaf)."""
-        return len(self.levels())
+        """The levels of the tree (0: empty, 1: a single leaf); counted by the compiled
+        build where it built the tree."""
+        known = self.__dict__.get("known_depth")
+        return known if known is not None else len(self.levels())
 
     def levels(self) -> list[np.ndarray]:
         """The nodes of each level of the tree, the root's first (none: empty)."""
@@ -277,8 +279,10 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
 
         codes = centre_codes(lo, hi)
         order = np.argsort(codes, kind="stable")
-        node_lo, node_hi, first, count = lbvh_arrays(lo, hi, codes, order, leaf_size)
-        return BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
+        node_lo, node_hi, first, count, levels = lbvh_arrays(lo, hi, codes, order, leaf_size)
+        tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
+        tree.__dict__["known_depth"] = int(levels)        # the build counted the levels: depth() need not walk
+        return tree
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))
         order = np.argsort(codes, kind="stable")

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..compiled import njit
 
-__all__ = ["centre_codes", "lbvh_arrays", "row_boxes"]
+__all__ = ["centre_codes", "lbvh_arrays", "leaf_boxes", "row_boxes"]
 
 
 @njit(cache=True, inline="always")
@@ -153,14 +153,14 @@ def centre_codes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def lbvh_arrays(lo: np.ndarray, hi: np.ndarray, codes: np.ndarray, order: np.ndarray, leaf_size: int):
-    """(node lo, node hi, first, count) of the LBVH over boxes ``lo``, ``hi`` ((n, 3)
+    """(node lo, node hi, first, count, levels) of the LBVH over boxes ``lo``, ``hi`` ((n, 3)
     float64, n >= 1, finite, checked) whose Morton ``codes`` sort as ``order`` (stable):
     the numpy build's arrays (module notes)."""
     sorted_codes = np.ascontiguousarray(codes[order], np.uint64)
     first, count, level_first = _topology(sorted_codes, int(leaf_size))
     node_lo, node_hi = _boxes(np.ascontiguousarray(lo), np.ascontiguousarray(hi), np.ascontiguousarray(order, np.int64),
                               first, count, level_first)
-    return node_lo, node_hi, first, count
+    return node_lo, node_hi, first, count, len(level_first) - 1
 
 
 # ============================================================================ the rows' boxes
@@ -272,3 +272,31 @@ def row_boxes(frusta) -> tuple[np.ndarray, np.ndarray]:
     return _row_boxes(c(frusta.base), c(frusta.axis), c(frusta.ref_dir), c(frusta.r1), c(frusta.r2), c(frusta.length),
                       c(frusta.plane_lo), c(frusta.plane_hi), float(tol.pyramid_grazing), float(tol.plane_tilt_cos),
                       float(tol.generator_rise), float(tol.box_pad), float(tol.box_pad_floor))
+
+
+@njit(cache=True)
+def _leaf_boxes(vertices, index):
+    n = len(index)
+    tri, lo, hi = np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            for a in range(3):
+                tri[i, c, a] = vertices[index[i, c], a]
+        big = 0.0
+        for a in range(3):
+            low = _nmin(_nmin(tri[i, 0, a], tri[i, 1, a]), tri[i, 2, a])
+            high = _nmax(_nmax(tri[i, 0, a], tri[i, 1, a]), tri[i, 2, a])
+            lo[i, a], hi[i, a] = low, high
+            size = _nmax(abs(low), abs(high))
+            big = _nmax(big, size) if a else size
+        pad = 1e-9 * big + 1e-12
+        for a in range(3):
+            lo[i, a], hi[i, a] = lo[i, a] - pad, hi[i, a] + pad
+    return tri, lo, hi
+
+
+def leaf_boxes(vertices: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, 3, 3) the leaf triangles' corners (``vertices[index]``) and their padded boxes
+    (lo, hi) as :func:`~plantgen.geometry.rays.scan_targets.scan_target` pads them: the
+    corners' min and max, widened by 1e-9 of the largest coordinate plus 1e-12."""
+    return _leaf_boxes(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(index, np.int64))

@@ -136,14 +136,35 @@ def _leaf_arrays(leaves: Polygons | None) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(leaves.vertices, dtype=np.float64)[leaves.triangles], np.asarray(leaves.polygon, np.int64)
 
 
+def _leaf_boxes(leaves: Polygons | None, compiled: bool):
+    """The leaf triangles' corners (t, 3, 3), polygons (t,) and padded boxes (lo, hi):
+    the corners' min and max, widened by 1e-9 of the largest coordinate plus 1e-12
+    (compiled where ``compiled``: :func:`~plantgen.geometry.rays.native_build.leaf_boxes`,
+    the same numbers)."""
+    if compiled and leaves is not None and len(leaves.triangles):
+        from .native_build import leaf_boxes
+
+        triangles, t_lo, t_hi = leaf_boxes(leaves.vertices, np.asarray(leaves.triangles).reshape(-1, 3))
+        return triangles, np.asarray(leaves.polygon, np.int64), t_lo, t_hi
+    triangles, triangle_polygon = _leaf_arrays(leaves)
+    if not len(triangles):
+        return triangles, triangle_polygon, np.zeros((0, 3)), np.zeros((0, 3))
+    v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]   # min / max pairwise: exact, and fast
+    t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
+    big = np.maximum(np.abs(t_lo), np.abs(t_hi))
+    pad = 1e-9 * np.maximum(np.maximum(big[:, 0], big[:, 1]), big[:, 2])[:, None] + 1e-12
+    return triangles, triangle_polygon, t_lo - pad, t_hi + pad
+
+
 def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: Frusta | None = None,
                 plant=0, leaf_plant=None, topology: Branches | None = None, compiled: bool = False) -> ScanTarget:
     """What a scan of ``skeleton`` (skinned here unless ``frusta`` are given) and its
     ``leaves`` sees. ``plant``: one number for every point, or (n,) per segment (a scene's
     instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant).
-    ``compiled``: the rows' boxes computed by compiled code
-    (:func:`plantgen.geometry.rays.native_build.row_boxes`: the same numbers), for a caller
-    that has checked the compiled code runs (a light traced many times a step)."""
+    ``compiled``: the rows' and leaves' boxes computed by compiled code
+    (:func:`plantgen.geometry.rays.native_build.row_boxes` and
+    :func:`~plantgen.geometry.rays.native_build.leaf_boxes`: the same numbers), for a
+    caller that has checked the compiled code runs (a light traced many times a step)."""
     from ..skeletons.skin import skin_skeleton  # skinning is the heavy import; a given frusta skips it
 
     frusta = skin_skeleton(skeleton) if frusta is None else frusta
@@ -154,7 +175,7 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
         if value is not None and np.ndim(value) and np.shape(value) != (count,):
             raise ScanError(f"{name} must be one number or one per {what} ({count}), got {np.shape(value)[0]}")
     segment_plant = np.broadcast_to(np.asarray(plant, dtype=np.int64), (n,)).copy()
-    triangles, triangle_polygon = _leaf_arrays(leaves)
+    triangles, triangle_polygon, t_lo, t_hi = _leaf_boxes(leaves, compiled)
     polygon_segment = np.asarray(leaves.segment, np.int64) if p else np.zeros(0, np.int64)
     if leaf_plant is None:
         own = np.asarray(plant, dtype=np.int64)
@@ -167,12 +188,7 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
         lo, hi = compiled_row_boxes(frusta)
     else:
         lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
-    if len(triangles):               # min / max of the 3 corners pairwise: exact, and fast where axis=1 is not
-        v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-        t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
-        big = np.maximum(np.abs(t_lo), np.abs(t_hi))
-        pad = 1e-9 * np.maximum(np.maximum(big[:, 0], big[:, 1]), big[:, 2])[:, None] + 1e-12
-        lo, hi = np.concatenate([lo, t_lo - pad]), np.concatenate([hi, t_hi + pad])
+    lo, hi = np.concatenate([lo, t_lo]), np.concatenate([hi, t_hi])
     base = skeleton.start[0].copy() if n else (triangles.reshape(-1, 3).min(axis=0) if len(triangles) else np.zeros(3))
     return ScanTarget(frusta, triangles, triangle_polygon, lo, hi, topology.segment_order.astype(np.int64)
                       if n else np.zeros(0, np.int64), segment_plant,
