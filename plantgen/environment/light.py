@@ -168,8 +168,9 @@ class Light:
         if not (len(skeleton) or len(polygons)):
             return None
         from ..geometry.rays.native_trace import available  # numba's import is paid by the first trace
+        from ..geometry.skeletons.skin import skin_skeleton
 
-        return scan_target(skeleton, polygons, compiled=available())
+        return scan_target(skeleton, polygons, frusta=skin_skeleton(skeleton, texture=False), compiled=available())
 
 
 def _with_leaves_met(own: Polygons, own_segments: int, leaves, origins: np.ndarray, dirs: np.ndarray) -> Polygons:
