@@ -5,6 +5,7 @@ leaves) and the labels of what a ray hit. The scan itself: :mod:`plantgen.geomet
 
 from __future__ import annotations
 
+import sys
 from copy import copy as shallow_copy
 from dataclasses import dataclass
 from functools import cached_property
@@ -30,6 +31,14 @@ def _native_on(native: bool | None) -> bool:
     from .native_trace import available  # numba's import is paid by the first trace, not by every import
 
     return available()
+
+
+def _compiled_ready() -> bool:
+    """Whether the compiled kernels already run in this process (a trace warmed them up,
+    :func:`plantgen.geometry.rays.native_trace.warm_up`): a target built where they do
+    not (a GPU scan's) neither imports numba nor compiles for its BVH."""
+    native = sys.modules.get(__package__ + ".native_trace")
+    return native is not None and native.compile_seconds() is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,10 +78,11 @@ class ScanTarget:
     @cached_property
     def bvh(self):
         """The :class:`~plantgen.geometry.rays.bvh.BVH` over the primitives' boxes (built on
-        first use; by the compiled build where the compiled traversal runs: the same tree)."""
+        first use; by the compiled build where the compiled traversal already runs in
+        this process: the same tree)."""
         from .bvh import build_bvh
 
-        return build_bvh(self.lo, self.hi, compiled=_native_on(None))
+        return build_bvh(self.lo, self.hi, compiled=_compiled_ready())
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
                    t_min: float = 0.0, t_max=np.inf, packets: int = 0, native: bool | None = None):
