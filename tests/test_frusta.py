@@ -355,3 +355,19 @@ def test_the_paper_seam_figures_are_worked_out_when_read_and_bounds_are_kept():
     again = frusta_bounds(fitted)
     assert again.tobytes() == frusta_bounds(dataclasses.replace(fitted)).tobytes()
     assert (again[0] < 1e9).all()
+
+
+def test_skinning_without_texture_leaves_u_offsets_zero_and_every_other_number_as_it_is():
+    """``texture=False`` (a light's target, which reads no texture coordinate): the same
+    rows, every array the same, but ``u_offset``, all zero; a tree with knuckle fans and
+    side branches among its rows."""
+    from plantgen.geometry.skeletons.frusta import ROW_FIELDS
+
+    skel = random_tree(120, seed=6, max_bend_deg=150.0)
+    full, bare = skin_skeleton(skel), skin_skeleton(skel, texture=False)
+    assert len(full) > len(skel)                              # fan rows among them
+    assert (full.u_offset != 0).any() and not bare.u_offset.any()
+    for name in ROW_FIELDS:
+        if name != "u_offset":
+            assert np.array_equal(getattr(full, name), getattr(bare, name)), name
+    assert np.array_equal(full.open_lo, bare.open_lo) and np.array_equal(full.open_hi, bare.open_hi)

@@ -131,7 +131,7 @@ def test_a_stand_grown_with_the_cull_derives_what_it_derives_with_every_leaf_kep
     growing.grow_file(scene)
     assert together.CLUSTER >= 1 and sum(k for k, _ in kept) < 0.8 * sum(n for _, n in kept)   # leaves left out
 
-    def every(lo, hi, block, group, origins, dirs, *, matrix=None, skip=-1, t_min=0.0):
+    def every(lo, hi, block, group, origins, dirs, *, matrix=None, skip=-1, t_min=0.0, box=None):
         met = np.ones(len(lo), bool)
         met[block[group[skip]]:block[group[skip + 1]]] = False
         return met

@@ -165,7 +165,12 @@ class Light:
             polygons = _with_leaves_met(polygons, len(drawing.skeleton), others.leaves,
                                         self._origins(state.position, radius, dirs),
                                         np.broadcast_to(dirs[None], (len(state), len(dirs), 3)).reshape(-1, 3))
-        return scan_target(skeleton, polygons) if len(skeleton) or len(polygons) else None
+        if not (len(skeleton) or len(polygons)):
+            return None
+        from ..geometry.rays.native_trace import available  # numba's import is paid by the first trace
+        from ..geometry.skeletons.skin import skin_skeleton
+
+        return scan_target(skeleton, polygons, frusta=skin_skeleton(skeleton, texture=False), compiled=available())
 
 
 def _with_leaves_met(own: Polygons, own_segments: int, leaves, origins: np.ndarray, dirs: np.ndarray) -> Polygons:

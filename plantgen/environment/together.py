@@ -129,9 +129,15 @@ class StandLeaves:
         from ..geometry.rays.native_cull import boxes_met
 
         s = self.world.stand()
-        met = boxes_met(s.lo, s.hi, s.block, s.group, origins, dirs, matrix=self.back, skip=self.i)
+        met = boxes_met(s.lo, s.hi, s.block, s.group, origins, dirs, matrix=self.back, skip=self.i, box=s.box)
         keep = np.flatnonzero(met[s.cluster])
-        corners, at = np.unique(s.triangles[keep], return_inverse=True)
+        kept = s.triangles[keep]
+        used = np.zeros(len(s.vertices), bool)         # np.unique's sorted corners and inverse, without its sort
+        used[kept] = True
+        corners = np.flatnonzero(used)
+        number = np.empty(len(s.vertices), np.int64)
+        number[corners] = np.arange(len(corners))
+        at = number[kept]
         vertices = _affine(s.vertices[corners], self.back)
         polygon = s.polygon[keep]
         polygon = polygon - (polygon >= s.polygon_first[self.i + 1]) * self.own_polygons
@@ -143,7 +149,8 @@ class _Stand(NamedTuple):
     all: vertices, triangles (into them), each triangle's polygon, each polygon's segment
     (among the skeletons joined), the clusters' boxes (lo, hi), each triangle's cluster,
     each block's first cluster (``block``), each plant's first block (``group``), and
-    each plant's first polygon, segment and triangle."""
+    each plant's first polygon, segment and triangle; and ``box``, (lo, hi) side by side
+    (:func:`~plantgen.geometry.rays.native_cull.boxes_met`'s)."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -157,6 +164,7 @@ class _Stand(NamedTuple):
     polygon_first: np.ndarray
     segment_first: np.ndarray
     triangle_first: np.ndarray
+    box: np.ndarray
 
 
 def _stand(placed: list[_Placed]) -> _Stand:
@@ -174,13 +182,14 @@ def _stand(placed: list[_Placed]) -> _Stand:
         where = np.repeat(np.arange(len(p.first) - 1), np.diff(p.first)) + clusters[j]
         cluster[triangle_first[j] + p.order] = where
     cat = lambda arrays, shape: np.concatenate(list(arrays)).reshape(shape)  # noqa: E731
+    lo, hi = cat((p.lo for p in placed), (-1, 3)), cat((p.hi for p in placed), (-1, 3))
     return _Stand(cat((p.vertices for p in placed), (-1, 3)),
                   cat((p.triangles + v for p, v in zip(placed, vertex_first, strict=False)), (-1, 3)),
                   cat((p.polygon + k for p, k in zip(placed, polygon_first, strict=False)), (-1,)),
                   cat((np.where(p.segment >= 0, p.segment + o, -1) for p, o in zip(placed, segment_first,
                                                                                    strict=False)), (-1,)),
-                  cat((p.lo for p in placed), (-1, 3)), cat((p.hi for p in placed), (-1, 3)),
-                  cluster, block, group, polygon_first, segment_first, triangle_first)
+                  lo, hi, cluster, block, group, polygon_first, segment_first, triangle_first,
+                  np.ascontiguousarray(np.concatenate([lo, hi], axis=1), np.float64))
 
 
 class Neighbours(NamedTuple):
@@ -203,6 +212,7 @@ class _World:
         self.placed: list[_Placed | None] = [None] * len(plants)
         self.segments = 0
         self._stand: _Stand | None = None
+        self._joined: tuple[Skeleton, np.ndarray, bool] | None = None
 
     def put(self, i: int, skeleton: Skeleton, polygons: Polygons) -> None:
         m = self.plants[i].matrix
@@ -211,6 +221,7 @@ class _World:
         self.placed[i] = _placed(skeleton, polygons, m)
         self.segments += len(skeleton)
         self._stand = None
+        self._joined = None
 
     def stand(self) -> _Stand:
         """Every plant's leaves joined (built once after the plants last moved; a plant not
@@ -232,8 +243,28 @@ class _World:
         if not parts:
             return None
         back = np.linalg.inv(self.plants[i].matrix)
-        return Neighbours(Skeleton.concatenate([p.skeleton for p in parts]).transformed(back),
-                          StandLeaves(self, i, back))
+        return Neighbours(self._others_joined(i, parts).transformed(back), StandLeaves(self, i, back))
+
+    def _others_joined(self, i: int, parts: list[_Placed]) -> Skeleton:
+        """The placed skeletons but plant ``i``'s, joined in order: what
+        :meth:`Skeleton.concatenate` makes of them. Where every plant's material names are
+        the same (no index remapped), the rows of all the plants joined once after they
+        last moved, plant ``i``'s left out and the parents after them moved down."""
+        if self._joined is None:
+            placed = [p.skeleton if p is not None else Skeleton.empty() for p in self.placed]
+            every = [p.skeleton for p in self.placed if p is not None]
+            joined = Skeleton.concatenate(every)
+            self._joined = (joined, np.cumsum([0] + [len(p) for p in placed]).astype(np.int64),
+                            all(p.material_names == joined.material_names for p in every))
+        joined, first, same = self._joined
+        if not same:
+            return Skeleton.concatenate([p.skeleton for p in parts])
+        a, b = int(first[i]), int(first[i + 1])
+        rows = np.r_[0:a, b:len(joined)]
+        parent = joined.parent[rows]
+        return Skeleton(joined.start[rows], joined.end[rows], joined.r_start[rows], joined.r_end[rows],
+                        np.where(parent >= b, parent - (b - a), parent), joined.continues[rows], joined.material[rows],
+                        joined.material_names)
 
 
 def _check_steps(plants: list[TogetherPlant], limits: Limits, work: Meter | None) -> None:

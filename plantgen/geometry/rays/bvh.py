@@ -41,7 +41,9 @@ leaf by default: 0.7 nodes a copy (LBVH), 23 of the 32-byte nodes' bytes, where 
 a leaf take 1.3 nodes (41 bytes), so that a copy costs the GPU (its 32-byte map included,
 :mod:`plantgen.gl.trace`) under 64 bytes.
 
-Pure numpy, no GL.
+Pure numpy, no GL; where the compiled traversal runs, a scan target's LBVH is laid out by
+compiled code instead (:mod:`plantgen.geometry.rays.native_build`: the same tree, node for
+node, without the per-level overhead that dominates the small trees a stand's light builds).
 """
 
 from __future__ import annotations
@@ -102,8 +104,10 @@ class BVH:
         return sum(a.nbytes for a in (self.lo, self.hi, self.first, self.count, self.prims))
 
     def depth(self) -> int:
-        """The levels of the tree (0: empty, 1: a single leaf)."""
-        return len(self.levels())
+        """The levels of the tree (0: empty, 1: a single leaf); counted by the compiled
+        build where it built the tree."""
+        known = self.__dict__.get("known_depth")
+        return known if known is not None else len(self.levels())
 
     def levels(self) -> list[np.ndarray]:
         """The nodes of each level of the tree, the root's first (none: empty)."""
@@ -250,11 +254,15 @@ def _sah_splits(lo: np.ndarray, hi: np.ndarray, bins: int):
 
 
 # ------------------------------------------------------------------------------ the build
-def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16) -> BVH:
+def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 16, compiled: bool = False) -> BVH:
     """A :class:`BVH` over the boxes (``lo``, ``hi``) ((n, 3) each, float64, lo <= hi;
     primitive i is box i). A node with at most ``leaf_size`` primitives is a leaf; larger
     ones split (``method``: "lbvh" Morton order or "sah" binned surface-area heuristic with
-    ``bins`` bins an axis; module docstring). Zero-size and coincident boxes are fine."""
+    ``bins`` bins an axis; module docstring). Zero-size and coincident boxes are fine.
+    ``compiled``: the "lbvh" nodes laid out by the compiled build
+    (:mod:`plantgen.geometry.rays.native_build`: the same tree and boxes, without numpy's
+    per-level overhead, which dominates small trees); the caller checks that the compiled
+    code runs (:func:`plantgen.geometry.rays.native_trace.available`)."""
     lo, hi = _check_boxes(lo, hi)
     if method not in BVH_METHODS:
         raise BVHError(f"BVH method must be one of {', '.join(BVH_METHODS)}, got {method!r}")
@@ -266,6 +274,15 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
     if n == 0:
         return BVH(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32),
                    np.zeros(0, np.int32))
+    if method == "lbvh" and compiled:
+        from .native_build import centre_codes, lbvh_arrays
+
+        codes = centre_codes(lo, hi)
+        order = np.argsort(codes, kind="stable")
+        node_lo, node_hi, first, count, levels = lbvh_arrays(lo, hi, codes, order, leaf_size)
+        tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
+        tree.__dict__["known_depth"] = int(levels)        # the build counted the levels: depth() need not walk
+        return tree
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))
         order = np.argsort(codes, kind="stable")

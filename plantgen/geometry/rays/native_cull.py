@@ -125,7 +125,8 @@ def _rows3(a) -> np.ndarray:
     return a if a.flags.writeable else a.copy()
 
 
-def boxes_met(lo, hi, block, group, origins, dirs, *, matrix=None, skip: int = -1, t_min: float = 0.0) -> np.ndarray:
+def boxes_met(lo, hi, block, group, origins, dirs, *, matrix=None, skip: int = -1, t_min: float = 0.0,
+              box=None) -> np.ndarray:
     """(c,) bool: the boxes (``lo``, ``hi``: (c, 3) each) that a ray (``origins``, ``dirs``
     (m, 3)) may meet beyond ``t_min``, by a slab test no tighter than the compiled walk's:
     wherever a ray passes the walk's test of a box inside one, it meets that one.
@@ -138,7 +139,8 @@ def boxes_met(lo, hi, block, group, origins, dirs, *, matrix=None, skip: int = -
     half size through the matrix and its absolute value, widened by :data:`GROW` of the
     largest coordinate plus :data:`GROW` (the rounding and the pad are below 1e-9 of
     it). A box is moved only once a ray reaches its block. True for all the others where
-    the compiled walk does not run."""
+    the compiled walk does not run. ``box``: (c, 6) float64, C-contiguous, ``lo`` and
+    ``hi`` side by side, where the caller keeps them so for many calls."""
     block = np.ascontiguousarray(block, np.int64)
     group = np.ascontiguousarray(group, np.int64)
     met = np.zeros(len(lo), np.bool_)
@@ -150,7 +152,9 @@ def boxes_met(lo, hi, block, group, origins, dirs, *, matrix=None, skip: int = -
         if 0 <= skip < len(group) - 1:
             met[block[group[skip]]:block[group[skip + 1]]] = False
         return met
-    box = np.ascontiguousarray(np.concatenate([np.reshape(lo, (-1, 3)), np.reshape(hi, (-1, 3))], axis=1), np.float64)
+    if box is None:
+        box = np.ascontiguousarray(np.concatenate([np.reshape(lo, (-1, 3)), np.reshape(hi, (-1, 3))], axis=1),
+                                   np.float64)
     M = np.ascontiguousarray(np.eye(4) if matrix is None else matrix, np.float64)
     with KERNEL_LOCK:
         _boxes_met(box, block, group, int(skip), M, matrix is not None, O, D, float(t_min), met)

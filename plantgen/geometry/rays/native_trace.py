@@ -44,7 +44,6 @@ import numpy as np
 
 from ...tolerances import tol
 from ..compiled import NUMBA_ERROR, njit, numba, prange
-from ..vec import dot
 
 __all__ = ["NativeScene", "available", "compile_seconds", "native_scene", "pair_distances", "warm_up"]
 
@@ -651,7 +650,7 @@ def _tiny() -> NativeScene:
     R[0, 3:9] = [0.0, 1.0, 0.0, 1.0, 1.0, 0.0]
     R[0, 9:17] = [0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]
     R[0, 17:19] = 1.0
-    T = np.array([[2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0]])
+    T = np.array([[[2.0, 0.0, 0.0], [3.0, 0.0, 0.0], [2.0, 0.0, 1.0]]])     # v0, v0 + e1, v0 + e2
     box = np.array([[-1.0, 0.0, -1.0, 3.0, 1.0, 1.0]])
     two = (np.repeat(box[:, :3], 2, 0), np.repeat(box[:, 3:], 2, 0))
     return NativeScene(nodes_f=box.copy(), nodes_i=np.array([[0, 2]], np.int64), prim_box=two,
@@ -674,20 +673,21 @@ class NativeScene:
     ``prim_box`` (lo, hi) (G, 3) each: the primitives' own boxes, ``prims`` the leaves'
     primitives,
     ``kind`` (G,) a row (>= 0) or a triangle (-1 - j), the ``rows`` (:data:`ROW_WIDTH`
-    columns) and ``triangles`` (v0, e1, e2, size) tables, each plant's root node and first
+    columns) table and the leaf ``triangles``' corners (T, 3, 3) (their table, v0, e1, e2
+    and size, is made from them: :func:`_gather`), each plant's root node and first
     primitive, and the top level (``top``: a dict of the copies' arrays)."""
 
     def __init__(self, *, nodes_f, nodes_i, prim_box, prims, kind, rows, triangles, roots, prim_first, top, depth):
         c = np.ascontiguousarray
         prims = c(prims, np.int64)
-        kind, rows, triangles = _slot_order(c(kind, np.int64), prims, rows, triangles)
         nodes = np.concatenate([np.asarray(nodes_f, np.float64), np.asarray(nodes_i, np.float64)], axis=1)
         # what a walk reads, in the order it reads it: a node's box, first and count in one
         # 64-byte row; a leaf's primitives' boxes, kinds and tables in its slots' order
-        slot_box = np.empty((len(prims), 6))
-        slot_box[:, :3], slot_box[:, 3:] = prim_box[0][prims], prim_box[1][prims]
-        self.scene = (c(nodes), slot_box, prims, c(kind[prims]),
-                      c(rows, np.float64), c(triangles, np.float64))
+        # (:func:`_gather`: the tables reordered as the slots list their primitives)
+        kind, slot_kind, rows, triangles, slot_box = _gather(
+            prims, c(kind, np.int64), c(prim_box[0], np.float64), c(prim_box[1], np.float64),
+            c(rows, np.float64).reshape(-1, ROW_WIDTH), c(triangles, np.float64).reshape(-1, 3, 3))
+        self.scene = (c(nodes), slot_box, prims, slot_kind, rows, triangles)
         self.kind = kind
         self.roots = c(roots, np.int64)
         self.prim_first = c(prim_first, np.int64)
@@ -735,19 +735,45 @@ class NativeScene:
         return out
 
 
-def _slot_order(kind, prims, rows, triangles):
-    """The row and triangle tables reordered as the leaves' slots ``prims`` list their
-    primitives, and ``kind`` (by global primitive) pointing into them."""
-    slot_kind = kind[prims]
-    row_order = slot_kind[slot_kind >= 0]
-    tri_order = -1 - slot_kind[slot_kind < 0]
-    new_row = np.empty(len(rows), np.int64)
-    new_row[row_order] = np.arange(len(row_order))
-    new_tri = np.empty(len(triangles), np.int64)
-    new_tri[tri_order] = np.arange(len(tri_order))
-    out = np.where(kind >= 0, new_row[np.maximum(kind, 0)] if len(rows) else 0,
-                   -1 - (new_tri[np.maximum(-1 - kind, 0)] if len(triangles) else 0))
-    return out.astype(np.int64), np.asarray(rows)[row_order], np.asarray(triangles)[tri_order]
+@njit(cache=True, inline="always")
+def _triangle_row(corners, j, out):
+    """``out`` (10,): triangle ``j``'s v0, e1 = v1 - v0, e2 = v2 - v0 and the edges'
+    lengths' product sqrt((e1·e1)(e2·e2)), the numbers of
+    :attr:`~plantgen.geometry.rays.scan_targets.ScanTarget.triangle_edges`."""
+    for a in range(3):
+        out[a] = corners[j, 0, a]
+        out[3 + a] = corners[j, 1, a] - corners[j, 0, a]
+        out[6 + a] = corners[j, 2, a] - corners[j, 0, a]
+    out[9] = np.sqrt((out[3] * out[3] + out[4] * out[4] + out[5] * out[5])
+                     * (out[6] * out[6] + out[7] * out[7] + out[8] * out[8]))
+
+
+@njit(cache=True)
+def _gather(prims, kind, lo, hi, rows, corners):
+    """The row table and the triangles' (:func:`_triangle_row`, from their ``corners``)
+    in the order the leaves' slots ``prims`` list their primitives, ``kind`` (by global
+    primitive, G) pointing into them, each slot's kind, and (G, 6) each slot's
+    primitive's box (lo, hi): one pass over the slots."""
+    n = len(prims)
+    out_kind = np.empty(len(kind), np.int64)
+    rows_out, tris_out = np.empty(rows.shape), np.empty((len(corners), 10))
+    slot_kind, slot_box = np.empty(n, np.int64), np.empty((n, 6))
+    n_rows = n_tris = 0
+    for s in range(n):
+        g = prims[s]
+        k = kind[g]
+        if k >= 0:
+            rows_out[n_rows] = rows[k]
+            out_kind[g] = n_rows
+            n_rows += 1
+        else:
+            _triangle_row(corners, -1 - k, tris_out[n_tris])
+            out_kind[g] = -1 - n_tris
+            n_tris += 1
+        slot_kind[s] = out_kind[g]
+        for a in range(3):
+            slot_box[s, a], slot_box[s, 3 + a] = lo[g, a], hi[g, a]
+    return out_kind, slot_kind, rows_out[:n_rows], tris_out[:n_tris], slot_box
 
 
 def _rows3(a) -> np.ndarray:
@@ -772,23 +798,6 @@ def _row_table(targets) -> np.ndarray:
         parts.append(np.column_stack([up.c1, up.a, up.h, up.r1, up.k, up.n_lo, up.n_hi, up.d_lo, up.d_hi,
                                       up.open_lo, up.open_hi]).astype(np.float64, copy=False))
     return np.concatenate(parts) if parts else np.zeros((0, ROW_WIDTH))
-
-
-def _triangle_table(targets) -> np.ndarray:
-    """(triangles, 10) v0, e1, e2 and the edges' lengths' product, plant by plant: the
-    numbers of :attr:`~plantgen.geometry.rays.scan_targets.ScanTarget.triangle_edges`, filled in place."""
-    total = sum(len(t.triangles) for t in targets)
-    out, k = np.empty((total, 10)), 0
-    for t in targets:
-        tri = t.triangles
-        part = out[k:k + len(tri)]
-        k += len(tri)
-        part[:, 0:3] = tri[:, 0]
-        np.subtract(tri[:, 1], tri[:, 0], out=part[:, 3:6])
-        np.subtract(tri[:, 2], tri[:, 0], out=part[:, 6:9])
-        e1, e2 = part[:, 3:6], part[:, 6:9]
-        part[:, 9] = np.sqrt(dot(e1, e1) * dot(e2, e2))
-    return out
 
 
 def _joined(targets, *names) -> tuple:
@@ -829,7 +838,8 @@ def native_scene(target) -> NativeScene:
     return NativeScene(nodes_f=boxes(flat.lo, flat.hi), nodes_i=np.column_stack([flat.first, flat.count]),
                        prim_box=_joined(targets, "lo", "hi"),
                        prims=flat.prims, kind=_kinds(targets), rows=_row_table(targets),
-                       triangles=_triangle_table(targets), roots=roots, prim_first=prim_first, top=top, depth=depth)
+                       triangles=_joined(targets, "triangles")[0], roots=roots, prim_first=prim_first, top=top,
+                       depth=depth)
 
 
 def pair_distances(target, prim, origins, dirs, *, t_min: float = 0.0) -> np.ndarray:

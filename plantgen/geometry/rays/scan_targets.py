@@ -5,6 +5,7 @@ leaves) and the labels of what a ray hit. The scan itself: :mod:`plantgen.geomet
 
 from __future__ import annotations
 
+import sys
 from copy import copy as shallow_copy
 from dataclasses import dataclass
 from functools import cached_property
@@ -30,6 +31,14 @@ def _native_on(native: bool | None) -> bool:
     from .native_trace import available  # numba's import is paid by the first trace, not by every import
 
     return available()
+
+
+def _compiled_ready() -> bool:
+    """Whether the compiled kernels already run in this process (a trace warmed them up,
+    :func:`plantgen.geometry.rays.native_trace.warm_up`): a target built where they do
+    not (a GPU scan's) neither imports numba nor compiles for its BVH."""
+    native = sys.modules.get(__package__ + ".native_trace")
+    return native is not None and native.compile_seconds() is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,10 +78,11 @@ class ScanTarget:
     @cached_property
     def bvh(self):
         """The :class:`~plantgen.geometry.rays.bvh.BVH` over the primitives' boxes (built on
-        first use)."""
+        first use; by the compiled build where the compiled traversal already runs in
+        this process: the same tree)."""
         from .bvh import build_bvh
 
-        return build_bvh(self.lo, self.hi)
+        return build_bvh(self.lo, self.hi, compiled=_compiled_ready())
 
     def first_hits(self, origins, dirs, *, precision: str = "float64", origin=None, any_hit: bool = False,
                    t_min: float = 0.0, t_max=np.inf, packets: int = 0, native: bool | None = None):
@@ -136,11 +146,35 @@ def _leaf_arrays(leaves: Polygons | None) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(leaves.vertices, dtype=np.float64)[leaves.triangles], np.asarray(leaves.polygon, np.int64)
 
 
+def _leaf_boxes(leaves: Polygons | None, compiled: bool):
+    """The leaf triangles' corners (t, 3, 3), polygons (t,) and padded boxes (lo, hi):
+    the corners' min and max, widened by 1e-9 of the largest coordinate plus 1e-12
+    (compiled where ``compiled``: :func:`~plantgen.geometry.rays.native_build.leaf_boxes`,
+    the same numbers)."""
+    if compiled and leaves is not None and len(leaves.triangles):
+        from .native_build import leaf_boxes
+
+        triangles, t_lo, t_hi = leaf_boxes(leaves.vertices, np.asarray(leaves.triangles).reshape(-1, 3))
+        return triangles, np.asarray(leaves.polygon, np.int64), t_lo, t_hi
+    triangles, triangle_polygon = _leaf_arrays(leaves)
+    if not len(triangles):
+        return triangles, triangle_polygon, np.zeros((0, 3)), np.zeros((0, 3))
+    v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]   # min / max pairwise: exact, and fast
+    t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
+    big = np.maximum(np.abs(t_lo), np.abs(t_hi))
+    pad = 1e-9 * np.maximum(np.maximum(big[:, 0], big[:, 1]), big[:, 2])[:, None] + 1e-12
+    return triangles, triangle_polygon, t_lo - pad, t_hi + pad
+
+
 def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: Frusta | None = None,
-                plant=0, leaf_plant=None, topology: Branches | None = None) -> ScanTarget:
+                plant=0, leaf_plant=None, topology: Branches | None = None, compiled: bool = False) -> ScanTarget:
     """What a scan of ``skeleton`` (skinned here unless ``frusta`` are given) and its
     ``leaves`` sees. ``plant``: one number for every point, or (n,) per segment (a scene's
-    instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant)."""
+    instances); ``leaf_plant``: (p,) per leaf polygon (default: its segment's plant).
+    ``compiled``: the rows' and leaves' boxes computed by compiled code
+    (:func:`plantgen.geometry.rays.native_build.row_boxes` and
+    :func:`~plantgen.geometry.rays.native_build.leaf_boxes`: the same numbers), for a
+    caller that has checked the compiled code runs (a light traced many times a step)."""
     from ..skeletons.skin import skin_skeleton  # skinning is the heavy import; a given frusta skips it
 
     frusta = skin_skeleton(skeleton) if frusta is None else frusta
@@ -151,20 +185,20 @@ def scan_target(skeleton: Skeleton, leaves: Polygons | None = None, *, frusta: F
         if value is not None and np.ndim(value) and np.shape(value) != (count,):
             raise ScanError(f"{name} must be one number or one per {what} ({count}), got {np.shape(value)[0]}")
     segment_plant = np.broadcast_to(np.asarray(plant, dtype=np.int64), (n,)).copy()
-    triangles, triangle_polygon = _leaf_arrays(leaves)
+    triangles, triangle_polygon, t_lo, t_hi = _leaf_boxes(leaves, compiled)
     polygon_segment = np.asarray(leaves.segment, np.int64) if p else np.zeros(0, np.int64)
     if leaf_plant is None:
         own = np.asarray(plant, dtype=np.int64)
         leaf_plant = np.full(p, int(own) if own.ndim == 0 else 0, dtype=np.int64)
         hung = polygon_segment >= 0
         leaf_plant[hung] = segment_plant[polygon_segment[hung]]
-    lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
-    if len(triangles):               # min / max of the 3 corners pairwise: exact, and fast where axis=1 is not
-        v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-        t_lo, t_hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
-        big = np.maximum(np.abs(t_lo), np.abs(t_hi))
-        pad = 1e-9 * np.maximum(np.maximum(big[:, 0], big[:, 1]), big[:, 2])[:, None] + 1e-12
-        lo, hi = np.concatenate([lo, t_lo - pad]), np.concatenate([hi, t_hi + pad])
+    if compiled and len(frusta):
+        from .native_build import row_boxes as compiled_row_boxes
+
+        lo, hi = compiled_row_boxes(frusta)
+    else:
+        lo, hi = row_boxes(frusta) if len(frusta) else (np.zeros((0, 3)), np.zeros((0, 3)))
+    lo, hi = np.concatenate([lo, t_lo]), np.concatenate([hi, t_hi])
     base = skeleton.start[0].copy() if n else (triangles.reshape(-1, 3).min(axis=0) if len(triangles) else np.zeros(3))
     return ScanTarget(frusta, triangles, triangle_polygon, lo, hi, topology.segment_order.astype(np.int64)
                       if n else np.zeros(0, np.int64), segment_plant,

@@ -110,7 +110,7 @@ def skin_skeleton(skeleton: Skeleton, *, smooth_bends: float | None = None,
 
 def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
           max_bend_deg: float = 120.0, fan_step_deg: float = 10.0, twist: float = 0.0,
-          extend_side_branches: bool = True) -> Frusta:
+          extend_side_branches: bool = True, texture: bool = True) -> Frusta:
     """Skin a skeleton with conical frusta, vectorised over all segments (§2).
 
     Parameters
@@ -140,6 +140,9 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
         parent (keeping its slope) by min(rc·tan β, (rp - rc)/sin β), β the branch
         angle: far enough that the base disc is under the parent's end plane, not so far
         that its rim leaves the parent's side; the base is capped
+    texture : the rows' texture offsets ``u_offset`` (the default); False leaves them 0,
+        for a target that reads no texture coordinate (a light's rays: every other number
+        is the same)
 
     Returns
     -------
@@ -176,7 +179,7 @@ def _skin(skeleton: Skeleton, *, shell=None, seam_fit: bool = True,
     if n_rows != n:                      # fan rows: each row's segment's
         row_shell = row_shell[rows.segment]
     row_material = skeleton.material[rows.segment] if n else np.zeros(0, np.int32)
-    u_offset = u_offsets(rows, ref_dir, row_twist)
+    u_offset = u_offsets(rows, ref_dir, row_twist) if texture else np.zeros(n_rows)
     return Frusta(base=rows.base, axis=rows.axis, length=rows.length, r1=rows.r1, r2=rows.r2,
                   plane_lo=rows.plane_lo, plane_hi=rows.plane_hi, ref_dir=ref_dir,
                   u_offset=u_offset, twist=row_twist, material=row_material, shell=row_shell,
