@@ -466,28 +466,34 @@ def _right_first(box, n, S, care, r, t_min):
 
 
 @njit(cache=True)
-def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, f, l, t_min, t_hi, below, lim, mask,
-                 copy, best_t, best_c, best_g, origin):
+def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below, lim,
+                 mask, hits, copy, best_t, best_c, best_g, origin):
     """The rays of [f, l] that meet a leaf (``mask``) against its slots ``first`` ..
-    ``first + count - 1``, as a lone walk tests them: their best hits (and ``lim``) updated."""
-    for r in range(f, l + 1):
-        if not mask[r]:
-            continue
-        ox, oy, oz, dx, dy, dz = S[0, r], S[1, r], S[2, r], cd[r, 0], cd[r, 1], cd[r, 2]
-        i0, i1, i2, care = S[3, r], S[4, r], S[5, r], cc[r]
-        th = t_hi[r]
-        for s in range(first, first + count):
-            near, far = _enter(slot_box, s, ox, oy, oz, i0, i1, i2, care, t_min)
-            if not (near <= far and far > t_min and near <= min(th, best_t[r])):
+    ``first + count - 1``, each slot's box against the rays at once (``hits``), as lone
+    walks test them: their best hits (and ``lim``) updated."""
+    for s in range(first, first + count):
+        if any_care:
+            for r in range(f, l + 1):
+                near, far = _enter(slot_box, s, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], cc[r], t_min)
+                hits[r] = mask[r] and near <= far and far > t_min and near <= min(t_hi[r], best_t[r])
+        else:
+            b0, b1, b2 = slot_box[s, 0], slot_box[s, 1], slot_box[s, 2]
+            b3, b4, b5 = slot_box[s, 3], slot_box[s, 4], slot_box[s, 5]
+            for r in range(f, l + 1):
+                hits[r] = mask[r] & _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r],
+                                               S[5, r], t_min, min(t_hi[r], best_t[r]))
+        k = slot_kind[s]
+        g = prims[s]
+        for r in range(f, l + 1):
+            if not hits[r]:
                 continue
-            k = slot_kind[s]
+            ox, oy, oz, dx, dy, dz = S[0, r], S[1, r], S[2, r], cd[r, 0], cd[r, 1], cd[r, 2]
             if k >= 0:
                 t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin)
             else:
                 t = triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
-            if not (t > t_min and t < th):
+            if not (t > t_min and t < t_hi[r]):
                 continue
-            g = prims[s]
             bt = best_t[r]
             if t < bt or (t == bt and (copy < best_c[r] or (copy == best_c[r] and g < best_g[r]))):
                 best_t[r], best_c[r], best_g[r] = t, copy, g
@@ -496,7 +502,7 @@ def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, f, l
 
 @njit(cache=True)
 def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, any_care, f, l, t_min, t_hi, below, lim,
-                 mask, copy, best_t, best_c, best_g, sn, sf, sl, origin):
+                 mask, hits, copy, best_t, best_c, best_g, sn, sf, sl, origin):
     """Rays [f, l] of a packet through one plant's tree from ``root``, in a copy's frame
     (origins and 1 / directions ``S`` (6, P), directions ``cd``, careful ``cc``); each
     ray's best hit updated; ``sn``, ``sf``, ``sl``: the stack's nodes and ranges."""
@@ -511,8 +517,8 @@ def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, any_c
         count = int(nodes[node, 7])
         first = int(nodes[node, 6])
         if count > 0:
-            _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, f, l, t_min, t_hi, below, lim,
-                         mask, copy, best_t, best_c, best_g, origin)
+            _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below,
+                         lim, mask, hits, copy, best_t, best_c, best_g, origin)
             continue
         nearer_right = _right_first(nodes, first, S, cc, f, t_min)
         a, b = (first, first + 1) if nearer_right else (first + 1, first)
@@ -562,7 +568,7 @@ def _packet_rays(O, D, a, n, t_hi, W, wc, below, lim, best_t, best_c, best_g):
 
 @njit(cache=True)
 def _trace_packet(nodes, slot_box, prims, slot_kind, R, T, t_box, t_nodes, t_prims, copy_box, copy_plant, inverse,
-                  roots, O, D, a, n, t_min, t_hi, W, wc, below, lim, mask, S, cd, cc, best_t, best_c, best_g,
+                  roots, O, D, a, n, t_min, t_hi, W, wc, below, lim, mask, hits, S, cd, cc, best_t, best_c, best_g,
                   tn, tf, tl, sn, sf, sl, origin):
     """Rays ``a`` .. ``a + n - 1`` (one packet) through the copies: their closest hits in
     ``best_t``, ``best_c``, ``best_g`` (t, copy, global primitive)."""
@@ -588,7 +594,7 @@ def _trace_packet(nodes, slot_box, prims, slot_kind, R, T, t_box, t_nodes, t_pri
                     continue
                 c_care = _to_copy(inverse[c], O, D, a, cf, cl, S, cd, cc)
                 _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, c_care, cf, cl, t_min, th,
-                             below, lim, mask, c, best_t, best_c, best_g, sn, sf, sl, origin)
+                             below, lim, mask, hits, c, best_t, best_c, best_g, sn, sf, sl, origin)
             continue
         nearer_right = _right_first(t_box, first, W, wc, f, t_min)
         x, y = (first, first + 1) if nearer_right else (first + 1, first)
@@ -617,11 +623,11 @@ def _trace_all(scene, top, O, D, t_min, t_hi, any_hit, depth, widest, origin, ou
             continue
         sn, sf, sl = np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty(depth, np.int64)
         W, S, cd = np.empty((6, P)), np.empty((6, P)), np.empty((P, 3))
-        wc, cc, mask = np.empty(P, np.bool_), np.empty(P, np.bool_), np.empty(P, np.bool_)
+        wc, cc, mask, hits = np.empty(P, np.bool_), np.empty(P, np.bool_), np.empty(P, np.bool_), np.empty(P, np.bool_)
         below, lim, best_t = np.empty(P), np.empty(P), np.empty(P)
         best_c, best_g = np.empty(P, np.int64), np.empty(P, np.int64)
         _trace_packet(nodes, slot_box, prims, slot_kind, R, T, t_box, t_nodes, t_prims, copy_box, copy_plant,
-                      inverse, roots, O, D, a, n, t_min, t_hi, W, wc, below, lim, mask, S, cd, cc, best_t, best_c,
+                      inverse, roots, O, D, a, n, t_min, t_hi, W, wc, below, lim, mask, hits, S, cd, cc, best_t, best_c,
                       best_g, tn, tf, tl, sn, sf, sl, origin)
         out_t[a:a + n], out_c[a:a + n], out_p[a:a + n] = best_t[:n], best_c[:n], best_g[:n]
 
