@@ -443,7 +443,8 @@ def _range(box, n, S, care, any_care, f, l, t_min, lim, mask):
             mask[r] = near <= far and far > t_min and near <= lim[r]
     else:
         b0, b1, b2, b3, b4, b5 = box[n, 0], box[n, 1], box[n, 2], box[n, 3], box[n, 4], box[n, 5]
-        for r in range(f, l + 1):
+        for i in range(f, l + 1):
+            r = np.uint64(i)                  # an unsigned index: no wraparound per lane, the loop vectorises
             mask[r] = _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], t_min,
                                  lim[r])
     while f <= l and not mask[f]:
@@ -479,7 +480,8 @@ def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_
         else:
             b0, b1, b2 = slot_box[s, 0], slot_box[s, 1], slot_box[s, 2]
             b3, b4, b5 = slot_box[s, 3], slot_box[s, 4], slot_box[s, 5]
-            for r in range(f, l + 1):
+            for i in range(f, l + 1):
+                r = np.uint64(i)
                 hits[r] = mask[r] & _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r],
                                                S[5, r], t_min, min(t_hi[r], best_t[r]))
         k = slot_kind[s]
