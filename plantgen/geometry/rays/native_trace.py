@@ -11,7 +11,12 @@ are walked a packet of :data:`RAY_BLOCK` neighbouring rays at a time (a scan's b
 camera's pixels, in the order given): ranged traversal, each node narrowing the packet's
 range of rays to the first and last that meet it (each ray culled by its own best hit),
 each leaf testing every ray of its range as a lone walk would; the nodes near the root are
-then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x).
+then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x). A
+node's box (and a leaf's slot boxes, one slot at a time) is tested against every ray of
+the range in one branch-free loop over the packet's rays stored by coordinate, indexed by
+an unsigned ray number so that the compiler vectorises it (the slab arithmetic of the lone
+walk, number for number; a packet with a ray parallel to a box face takes the NaN rule
+ray by ray): 1.3-2.2x less CPU than the scalar ranged walk on the forest.
 Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The tests:
 
 - a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
