@@ -12,11 +12,8 @@ camera's pixels, in the order given): ranged traversal, each node narrowing the 
 range of rays to the first and last that meet it (each ray culled by its own best hit),
 each leaf testing every ray of its range as a lone walk would; the nodes near the root are
 then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x). A
-node's box (and a leaf's slot boxes, one slot at a time) is tested against every ray of
-the range in one branch-free loop over the packet's rays stored by coordinate, indexed by
-an unsigned ray number so that the compiler vectorises it (the slab arithmetic of the lone
-walk, number for number; a packet with a ray parallel to a box face takes the NaN rule
-ray by ray): 1.3-2.2x less CPU than the scalar ranged walk on the forest.
+box (node or slot) meets the range's rays in one branch-free, vectorised loop (the lone
+walk's slab arithmetic; the NaN rule ray by ray where a 1/d is infinite): 1.3-2.2x.
 Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The tests:
 
 - a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
@@ -417,13 +414,9 @@ def _trace_one(scene, top, o0, o1, o2, d0, d1, d2, t_min, t_hi, any_hit, tstack,
 # hit, exactly as alone); a leaf tests each ray of its range as a lone walk would. Every
 # primitive a lone walk tests is tested, so each ray's hit is the lone walk's, bit for
 # bit; neighbouring rays (a scan's beams, a camera's pixels) share the nodes near the root.
-# A node's box is tested against every ray of its range at once (:func:`_range`: the
-# packet's rays stored by coordinate, one branch-free loop the compiler vectorises, the
-# arithmetic of :func:`_slab`), the outcome kept per ray (``mask``) for a leaf's rays.
 @njit(cache=True, inline="always")
 def _box_meets(b0, b1, b2, b3, b4, b5, ox, oy, oz, ix, iy, iz, t_min, lim):
-    """Whether the ray (o, 1/d) meets the box (lo, hi) in (t_min, lim]: :func:`_slab`'s
-    fast path (every 1/d finite), without a branch."""
+    """Whether the ray (o, 1/d) meets the box in (t_min, lim]: :func:`_slab`'s fast path, branch-free."""
     t1, t2 = (b0 - ox) * ix, (b3 - ox) * ix
     near, far = (t1, t2) if t1 < t2 else (t2, t1)
     t1, t2 = (b1 - oy) * iy, (b4 - oy) * iy
@@ -438,10 +431,8 @@ def _box_meets(b0, b1, b2, b3, b4, b5, ox, oy, oz, ix, iy, iz, t_min, lim):
 
 @njit(cache=True)
 def _range(box, n, S, care, any_care, f, l, t_min, lim, mask):
-    """The first and last rays of [f, l] that meet box ``n`` before their end and best
-    hit (``lim``) (f > l: none); ``mask`` [f, l]: whether each does. ``S`` (6, P): the
-    packet's origins and 1 / directions by coordinate; ``any_care``: a ray of the packet
-    has an infinite 1/d (then each takes :func:`_slab`'s NaN rule as it needs)."""
+    """The first and last rays of [f, l] meeting box ``n`` before ``lim`` (f > l: none), ``mask``
+    each; ``S`` (6, P): origins, 1 / directions; ``any_care``: some 1/d infinite (the NaN rule)."""
     if any_care:
         for r in range(f, l + 1):
             near, far = _enter(box, n, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], care[r], t_min)
@@ -464,19 +455,14 @@ def _right_first(box, n, S, care, r, t_min):
     """Whether child ``n + 1`` is nearer than child ``n`` along ray ``r`` (a miss: farthest)."""
     n0, f0 = _enter(box, n, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], care[r], t_min)
     n1, f1 = _enter(box, n + 1, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], care[r], t_min)
-    if not (n0 <= f0):
-        return True
-    if not (n1 <= f1):
-        return False
-    return n1 < n0
+    return not (n0 <= f0) or (n1 <= f1 and n1 < n0)
 
 
 @njit(cache=True)
 def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below, lim,
                  mask, hits, copy, best_t, best_c, best_g, origin):
-    """The rays of [f, l] that meet a leaf (``mask``) against its slots ``first`` ..
-    ``first + count - 1``, each slot's box against the rays at once (``hits``), as lone
-    walks test them: their best hits (and ``lim``) updated."""
+    """The rays of [f, l] meeting a leaf (``mask``) against its slots, a slot's box against them at
+    once (``hits``), as lone walks test them: their best hits (and ``lim``) updated."""
     for s in range(first, first + count):
         if any_care:
             for r in range(f, l + 1):
@@ -489,16 +475,13 @@ def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_
                 r = np.uint64(i)
                 hits[r] = mask[r] & _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r],
                                                S[5, r], t_min, min(t_hi[r], best_t[r]))
-        k = slot_kind[s]
-        g = prims[s]
+        k, g = slot_kind[s], prims[s]
         for r in range(f, l + 1):
             if not hits[r]:
                 continue
             ox, oy, oz, dx, dy, dz = S[0, r], S[1, r], S[2, r], cd[r, 0], cd[r, 1], cd[r, 2]
-            if k >= 0:
-                t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin)
-            else:
-                t = triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
+            t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin) if k >= 0 else \
+                triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
             if not (t > t_min and t < t_hi[r]):
                 continue
             bt = best_t[r]
@@ -536,8 +519,7 @@ def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, any_c
 
 @njit(cache=True)
 def _to_copy(m, O, D, a, cf, cl, S, cd, cc):
-    """Rays [cf, cl] of the packet at ``a`` moved by the 4x4 ``m`` into a copy's frame:
-    ``S`` (origins, 1 / directions), ``cd``, careful ``cc``; whether any is careful."""
+    """Rays [cf, cl] of packet ``a`` moved by the 4x4 ``m`` into ``S``, ``cd``, ``cc``: any careful?"""
     any_care = False
     for r in range(cf, cl + 1):
         o0, o1, o2 = O[a + r, 0], O[a + r, 1], O[a + r, 2]
@@ -558,8 +540,7 @@ def _to_copy(m, O, D, a, cf, cl, S, cd, cc):
 
 @njit(cache=True)
 def _packet_rays(O, D, a, n, t_hi, W, wc, below, lim, best_t, best_c, best_g):
-    """The packet's world rays ``W`` (origins, 1 / directions by coordinate), careful
-    ``wc``, ends and no hit yet: whether any is careful."""
+    """The packet's world rays ``W``, careful ``wc``, ends and no hit yet: whether any is careful."""
     any_care = False
     for r in range(n):
         i0, i1, i2 = _inv(D[a + r, 0]), _inv(D[a + r, 1]), _inv(D[a + r, 2])
