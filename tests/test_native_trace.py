@@ -116,6 +116,27 @@ def test_grazing_and_axis_rays():
     assert np.isfinite(t[[3, k + 3]]).all() and np.isfinite(t[2 * k:]).all()
 
 
+def test_packets_mixing_axis_parallel_and_oblique_rays(bush):
+    """A packet's boxes are tested branch-free where every ray's 1/d is finite, ray by ray
+    (numpy's NaN rule) where one is not: packets of both kinds, and mixed, answer as the
+    oracle and as each ray traced alone; a scanner's fan (one origin) likewise."""
+    skeleton, leaves = bush
+    target = scan_target(skeleton, leaves)
+    rng = np.random.default_rng(12)
+    O, D = random_rays(*target.box(), 3 * native_trace.RAY_BLOCK, rng)
+    n = native_trace.RAY_BLOCK
+    mixed = slice(n, 2 * n)                                 # the second packet: every 3rd ray along an axis plane
+    D[mixed][::3, rng.integers(0, 3)] = 0.0
+    D[2 * n + 5, :2] = -0.0                                 # one ray of the third packet along the z axis
+    t, _ = assert_same(target, O, D)
+    alone = [target.first_hits(O[i:i + 1], D[i:i + 1]) for i in range(0, len(O), 7)]
+    np.testing.assert_array_equal(np.concatenate([a[0] for a in alone]), t[::7])
+    scanner = target.box()[0] - 0.3
+    fan = target.box()[0] + rng.random((2 * n, 3)) * (target.box()[1] - target.box()[0]) - scanner
+    fan[::5, 0] = 0.0
+    assert_same(target, np.broadcast_to(scanner, fan.shape).copy(), fan)
+
+
 def test_cones_closing_to_a_point_zero_length_and_huge_rows():
     skel = chain_skeleton(bends_deg=(20.0, 0.0, 10.0), lengths=(1.0, 0.0, 1e3, 1e-3),
                           radii=(0.2, 0.2, 0.2, 20.0, 0.0))
