@@ -10,12 +10,14 @@ through ``plantgen.cli.main`` with its stdout and stderr captured, timing it (wa
 this process's CPU seconds: on a shared machine the CPU time is what the case cost), and records
 every file the case opens (an audit hook on ``open``). It prints one JSON list: per case
 the exit status, stdout, stderr, seconds and the files opened outside Python's own
-installation.
+installation, leaving out plantgen's own modules (a command's module is imported when the
+command runs).
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import json
 import os
@@ -39,11 +41,13 @@ def main(argv: list[str]) -> int:
     opened: list[str] = []
     recording = [False]
     library = tuple({sys.prefix, sys.base_prefix, sys.exec_prefix, os.path.dirname(os.__file__)})
+    package = os.path.dirname(importlib.util.find_spec("plantgen").origin) + os.sep
 
     def hook(event, args):
         if recording[0] and event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
             path = os.path.abspath(os.fsdecode(args[0]))
-            if not path.startswith(library):
+            module = path.startswith(package) and path.endswith((".py", ".pyc"))
+            if not path.startswith(library) and not module:
                 opened.append(path)
 
     sys.addaudithook(hook)

@@ -10,6 +10,7 @@ themselves, and say so in one line).
 
 from __future__ import annotations
 
+import importlib
 import sys
 import traceback
 import warnings
@@ -19,21 +20,35 @@ import numpy as np
 
 from .._resources import short_names
 from ..errors import PlantgenError
-from .batch import batch
-from .bench import bench
-from .convert import convert
-from .export import export
-from .grow import grow
-from .listing import list_models
 from .options import debug_opt, debug_requested
-from .render import render
-from .scan import scan
-from .view import view
 
-__all__ = ["cli", "main"]
+__all__ = ["COMMANDS", "LazyGroup", "cli", "main"]
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+#: Each command: the module of this package that holds it and its function's name. A
+#: command's module is imported when the command is asked for (:class:`LazyGroup`), so
+#: ``plantgen grow`` does not import the renderer, the exporters or the batch engine.
+COMMANDS = {"list": ("listing", "list_models"), "grow": ("grow", "grow"), "export": ("export", "export"),
+            "render": ("render", "render"), "scan": ("scan", "scan"), "view": ("view", "view"),
+            "bench": ("bench", "bench"), "batch": ("batch", "batch"), "convert": ("convert", "convert")}
+
+
+class LazyGroup(click.Group):
+    """A click group whose commands (:data:`COMMANDS`) are imported on first use, each
+    given the ``--debug`` option once."""
+
+    def list_commands(self, ctx) -> list[str]:
+        return sorted({*COMMANDS, *self.commands})
+
+    def get_command(self, ctx, cmd_name):
+        if cmd_name not in self.commands and cmd_name in COMMANDS:
+            module, name = COMMANDS[cmd_name]
+            command = getattr(importlib.import_module(f"{__package__}.{module}"), name)
+            self.add_command(debug_opt(command), cmd_name)
+        return self.commands.get(cmd_name)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="plantgen")
 @debug_opt
 def cli() -> None:
@@ -52,10 +67,6 @@ def cli() -> None:
     """
 
 
-for _command in (list_models, grow, export, render, scan, view, bench, batch):
-    cli.add_command(debug_opt(_command))
-
-cli.add_command(debug_opt(convert))
 
 
 def main(argv: list[str] | None = None) -> None:
