@@ -45,6 +45,23 @@ def test_unit_vectors_and_their_fallback(vectors):
     assert np.array_equal(unit(zero, fallback), np.repeat(fallback, 2, 0))
 
 
+def test_unit_rows_far_below_one_keep_unit_length(vectors):
+    """A row whose squares are subnormal (length under 1e-154) loses its norm's digits: it
+    is rescaled first, so its unit row has unit length (a segment 1e-155 long along x gave
+    -1.0000000000000067, which put a crown's hull a radius wide of its disc). Rows under
+    tol.tiny still take the fallback, and every ordinary row is divided as before."""
+    a, _ = vectors
+    for scale in (1e-155, 1e-160, 3e-200, 1e-290):
+        rows = unit(a * scale, np.zeros(3))
+        np.testing.assert_allclose(norm(rows), 1.0, rtol=1e-15)
+        np.testing.assert_allclose(rows, unit(a), rtol=1e-14, atol=1e-15)
+    along_x = unit(np.array([[-1.2705465286743225e-155, 0.0, 0.0]]), np.zeros(3))
+    assert along_x.tolist() == [[-1.0, 0.0, 0.0]]
+    fallback = np.array([[0.0, 1.0, 0.0]])
+    assert np.array_equal(unit(np.array([[1e-301, 0.0, 0.0]]), fallback), fallback)
+    assert np.array_equal(unit(a), a / np.sqrt(dot(a, a))[:, None])
+
+
 def test_any_perpendicular_is_a_unit_normal(vectors):
     a = unit(vectors[0])
     p = any_perpendicular(a)

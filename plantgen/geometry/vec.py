@@ -41,6 +41,11 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
+#: Below this length a row's squared components are subnormal (under 2.2e-308) and its
+#: norm loses digits: :func:`unit` rescales such rows first.
+SQUARE_SAFE = 1e-150
+
+
 def norm(a: np.ndarray) -> np.ndarray:
     """(...) row-wise lengths of (..., 3) arrays."""
     return np.sqrt(dot(a, a))
@@ -62,12 +67,23 @@ def unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
     """(..., 3) the rows of ``v`` (..., 3) scaled to unit length.
 
     Rows of length 0 stay 0; with ``fallback`` (broadcast against ``v``), rows shorter than
-    ``tol.tiny`` (no direction) take the fallback's row instead.
+    ``tol.tiny`` (no direction) take the fallback's row instead. A row whose components
+    are all under :data:`SQUARE_SAFE` (its squares fall among the subnormals, or to 0, and
+    its norm loses its digits) is scaled by its largest component first, so its unit row
+    has unit length too; every other row is divided by its norm as it is.
     """
     n = norm(v)[..., None]
+    length = n
+    if np.any(n < SQUARE_SAFE):                        # short rows, or rows of zero
+        big = np.max(np.abs(v), axis=-1, keepdims=True)
+        short = (big > 0) & (big < SQUARE_SAFE)
+        if np.any(short):
+            v = np.where(short, v / np.where(short, big, 1.0), v)
+            n = np.where(short, norm(v)[..., None], n)
+            length = np.where(short, big * n, n)
     if fallback is None:
         return v / np.where(n > 0, n, 1.0)
-    return np.where(n > tol.tiny, v / np.where(n > 0, n, 1.0), fallback)
+    return np.where(length > tol.tiny, v / np.where(n > 0, n, 1.0), fallback)
 
 
 def any_perpendicular(a: np.ndarray) -> np.ndarray:
