@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["highest_bit", "morton_codes"]
+__all__ = ["highest_bit", "morton_codes", "spread21"]
 
 
-def _spread21(x: np.ndarray) -> np.ndarray:
-    """uint64 values of 21 bits spread out to every third bit."""
+def spread21(x):
+    """uint64 values (an array, or one value) of 21 bits spread out to every third bit;
+    plain operators only, so the compiled LBVH build compiles this same function
+    (:mod:`plantgen.geometry.rays.native_build`)."""
     x = x & np.uint64(0x1FFFFF)
     x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
     x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
@@ -35,7 +37,7 @@ def morton_codes(points: np.ndarray) -> np.ndarray:
     extent = float((points.max(axis=0) - lo).max())
     q = np.clip((points - lo) / (extent if extent > 0 else np.inf) * (2 ** 21 - 1), 0, 2 ** 21 - 1)
     q = q.astype(np.uint64)
-    return (_spread21(q[:, 0]) << np.uint64(2)) | (_spread21(q[:, 1]) << np.uint64(1)) | _spread21(q[:, 2])
+    return (spread21(q[:, 0]) << np.uint64(2)) | (spread21(q[:, 1]) << np.uint64(1)) | spread21(q[:, 2])
 
 
 def highest_bit(x: np.ndarray) -> np.ndarray:

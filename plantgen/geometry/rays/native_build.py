@@ -22,20 +22,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiled import njit
+from .morton import spread21
 
 __all__ = ["centre_codes", "lbvh_arrays", "leaf_boxes", "row_boxes"]
 
 
-@njit(cache=True, inline="always")
-def _spread21(x):
-    """A 21-bit value spread out to every third bit (:mod:`plantgen.geometry.rays.morton`)."""
-    x = x & np.uint64(0x1FFFFF)
-    x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    x = (x | (x << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    x = (x | (x << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    x = (x | (x << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return x
+#: :func:`~plantgen.geometry.rays.morton.spread21`, compiled.
+_spread21 = njit(cache=True, inline="always")(spread21)
 
 
 @njit(cache=True)
