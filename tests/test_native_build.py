@@ -1,7 +1,7 @@
-"""The compiled LBVH build (plantgen.geometry.rays.native_build): the numpy build's tree,
-node for node: the same primitive order, the same first and count of every node and the
-same node boxes, on random, coincident, flat and tiny sets of boxes and every leaf size;
-so a target traced with it answers as with the numpy build."""
+"""The compiled BVH builds (plantgen.geometry.rays.native_build), LBVH and binned SAH: the
+numpy build's tree, node for node: the same primitive order, the same first and count of
+every node and the same node boxes, on random, coincident, flat and tiny sets of boxes and
+every leaf size; so a target traced with it answers as with the numpy build."""
 
 from __future__ import annotations
 
@@ -26,10 +26,11 @@ def _boxes(rng, n, kind):
 @pytest.mark.parametrize("n", [1, 2, 3, 5, 8, 17, 200, 3000])
 @pytest.mark.parametrize("kind", ["random", "coincident", "flat"])
 @pytest.mark.parametrize("leaf_size", [1, 2, 4, 7])
-def test_the_compiled_build_lays_out_the_numpy_builds_tree(n, kind, leaf_size):
+@pytest.mark.parametrize("method,bins", [("lbvh", 16), ("sah", 16), ("sah", 2)])
+def test_the_compiled_build_lays_out_the_numpy_builds_tree(n, kind, leaf_size, method, bins):
     lo, hi = _boxes(np.random.default_rng(n * 31 + leaf_size), n, kind)
-    numpy_tree = build_bvh(lo, hi, leaf_size=leaf_size)
-    compiled = build_bvh(lo, hi, leaf_size=leaf_size, compiled=True)
+    numpy_tree = build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins)
+    compiled = build_bvh(lo, hi, leaf_size=leaf_size, method=method, bins=bins, compiled=True)
     assert compiled.nodes == numpy_tree.nodes
     for name in ("lo", "hi", "first", "count", "prims"):
         a, b = getattr(numpy_tree, name), getattr(compiled, name)
@@ -54,8 +55,9 @@ def test_the_compiled_morton_codes_are_numpys(n):
 
 
 def test_a_scan_target_builds_its_tree_compiled_where_the_walk_runs_and_answers_the_same():
-    """A target's BVH (built compiled here) is the numpy build's, and the walk over it
-    gives the numpy oracle's hits."""
+    """Where the compiled walk runs, a target's BVH is built compiled, by the SAH unless
+    the target asks for the LBVH (a light's): each the numpy build's tree; and the walk
+    over either gives the numpy oracle's hits."""
     from plantgen.geometry.rays.scan_targets import scan_target
     from plantgen.geometry.skeletons.skeleton import Skeleton
 
@@ -64,16 +66,21 @@ def test_a_scan_target_builds_its_tree_compiled_where_the_walk_runs_and_answers_
     start = rng.uniform(-1, 1, (n, 3))
     skel = Skeleton(start, start + rng.uniform(-0.3, 0.3, (n, 3)), np.full(n, 0.05), np.full(n, 0.04),
                     np.full(n, -1), np.zeros(n, bool), np.zeros(n, np.int32))
-    target = scan_target(skel)
-    numpy_tree = build_bvh(target.lo, target.hi)
-    for name in ("lo", "hi", "first", "count", "prims"):
-        assert np.array_equal(getattr(target.bvh, name), getattr(numpy_tree, name)), name
     origins = rng.uniform(-1.5, 1.5, (500, 3))
     dirs = rng.normal(size=(500, 3))
-    t_native, _ = target.first_hits(origins, dirs, any_hit=True, origin=target.base)
-    t_numpy, _ = target.first_hits(origins, dirs, any_hit=True, origin=target.base, native=False)
-    assert np.isfinite(t_native).any() and not np.isfinite(t_native).all()
-    assert np.array_equal(np.isfinite(t_native), np.isfinite(t_numpy))
+    native_trace.warm_up()
+    for split, method in (("auto", "sah"), ("lbvh", "lbvh")):
+        target = scan_target(skel, split=split)
+        numpy_tree = build_bvh(target.lo, target.hi, method=method)
+        for name in ("lo", "hi", "first", "count", "prims"):
+            assert np.array_equal(getattr(target.bvh, name), getattr(numpy_tree, name)), (split, name)
+        for any_hit in (True, False):
+            t_native, p_native = target.first_hits(origins, dirs, any_hit=any_hit, origin=target.base)
+            t_numpy, p_numpy = target.first_hits(origins, dirs, any_hit=any_hit, origin=target.base, native=False)
+            assert np.isfinite(t_native).any() and not np.isfinite(t_native).all()
+            assert np.array_equal(np.isfinite(t_native), np.isfinite(t_numpy))
+            if not any_hit:                  # the closest hit: the same primitive, the same t
+                assert np.array_equal(t_native, t_numpy) and np.array_equal(p_native, p_numpy)
 
 
 def _random_rows(rng, n):

@@ -40,6 +40,19 @@ def test_two_levels_hit_what_the_merged_scene_hits(scene):
     assert (b["leaf"] >= 0).any() == (a["leaf"] >= 0).any()
 
 
+def test_a_scenes_box_is_known_before_its_trees_are_built(scene):
+    """A scan sizes its beams from the copies' box before any budget check: the box comes
+    from the plants' primitive boxes, without building a tree, and it is the box the
+    built two-level tree gives."""
+    grown = scene[0]
+    fresh = scene_target(grown.scene.plants())
+    early = fresh.box()
+    assert "bvh" not in fresh.__dict__ and not any("bvh" in t.__dict__ for t in fresh.targets)
+    fresh.bvh
+    assert np.array_equal(early, fresh.box())
+    assert (early[1] > early[0]).all()
+
+
 def test_scan_of_a_scene_matches_the_merged_scan(scene):
     """The same scanner: points agree in number and labels up to the beam grid's alignment
     (aimed at the copies' box rather than the placed rows' box)."""

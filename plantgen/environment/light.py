@@ -170,7 +170,10 @@ class Light:
         from ..geometry.rays.native_trace import available  # numba's import is paid by the first trace
         from ..geometry.skeletons.skin import skin_skeleton
 
-        return scan_target(skeleton, polygons, frusta=skin_skeleton(skeleton, texture=False), compiled=available())
+        # a plant's light is traced by few rays a build: the LBVH's quicker build pays (the
+        # grove, SAH trees: 5.2 s against 4.3 s)
+        return scan_target(skeleton, polygons, frusta=skin_skeleton(skeleton, texture=False), compiled=available(),
+                           split="lbvh")
 
 
 def _with_leaves_met(own: Polygons, own_segments: int, leaves, origins: np.ndarray, dirs: np.ndarray) -> Polygons:

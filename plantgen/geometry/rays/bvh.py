@@ -259,10 +259,10 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
     primitive i is box i). A node with at most ``leaf_size`` primitives is a leaf; larger
     ones split (``method``: "lbvh" Morton order or "sah" binned surface-area heuristic with
     ``bins`` bins an axis; module docstring). Zero-size and coincident boxes are fine.
-    ``compiled``: the "lbvh" nodes laid out by the compiled build
+    ``compiled``: the nodes laid out by the compiled build
     (:mod:`plantgen.geometry.rays.native_build`: the same tree and boxes, without numpy's
-    per-level overhead, which dominates small trees); the caller checks that the compiled
-    code runs (:func:`plantgen.geometry.rays.native_trace.available`)."""
+    per-level overhead, which dominates small trees, and the SAH's per-node work); the
+    caller checks that the compiled code runs (:func:`plantgen.geometry.rays.native_trace.available`)."""
     lo, hi = _check_boxes(lo, hi)
     if method not in BVH_METHODS:
         raise BVHError(f"BVH method must be one of {', '.join(BVH_METHODS)}, got {method!r}")
@@ -282,6 +282,13 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
         node_lo, node_hi, first, count, levels = lbvh_arrays(lo, hi, codes, order, leaf_size)
         tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
         tree.__dict__["known_depth"] = int(levels)        # the build counted the levels: depth() need not walk
+        return tree
+    if compiled:
+        from .native_build import sah_arrays
+
+        node_lo, node_hi, first, count, order, levels = sah_arrays(lo, hi, leaf_size, int(bins))
+        tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
+        tree.__dict__["known_depth"] = int(levels)
         return tree
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))

@@ -1,6 +1,7 @@
-"""What a scan target is built from, compiled (numba), for the many small targets a
-stand's light builds (one a plant a step): the LBVH and the rows' boxes, each the numpy
-build's numbers, computed without numpy's per-call overhead.
+"""What a scan target is built from, compiled (numba): for the many small targets a
+stand's light builds (one a plant a step) the LBVH and the rows' boxes, and for a scan's or
+a trace's targets the SAH tree; each the numpy build's numbers, computed without numpy's
+per-call overhead.
 
 - :func:`lbvh_arrays`: :func:`~plantgen.geometry.rays.bvh.build_bvh`'s ``lbvh`` tree, node
   for node. The primitives are sorted by their Morton codes as numpy sorts them; the nodes
@@ -9,6 +10,14 @@ build's numbers, computed without numpy's per-call overhead.
   split where the highest bit in which a node's first and last codes differ flips (the
   middle where they are equal), and the node boxes are the unions of their primitives'
   (leaves) and children's boxes: min and max, exact.
+- :func:`sah_arrays`: the ``sah`` tree (binned surface-area heuristic), node for node: each
+  split as ``_sah_splits`` chooses it (the centres' bins an axis, the cheapest of the
+  ``bins - 1`` planes an axis, the first axis and plane on ties, the middle where no plane
+  parts the centres) and its primitives partitioned stably; laid out as the LBVH is. A
+  level's nodes are split on the threads at once (each node's range of the order is its
+  own), so the thread count changes nothing. The forest's 20 plants (91,264 primitives):
+  47 ms; the forest cut's 4 (458,816, the pine's needles among them): 240 ms, against
+  the numpy build's 318 ms and 2.7 s.
 - :func:`row_boxes`: :func:`~plantgen.geometry.rays.reference.row_boxes` (no relief
   shell), the bounding pyramids' corners and their pad row by row, every operation in
   numpy's order (no fused multiply-add: numba does not contract), numpy's NaN rule in
@@ -21,10 +30,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compiled import njit
+from ..compiled import njit, numba, prange
 from .morton import spread21
 
-__all__ = ["centre_codes", "lbvh_arrays", "leaf_boxes", "row_boxes"]
+__all__ = ["centre_codes", "lbvh_arrays", "leaf_boxes", "row_boxes", "sah_arrays"]
 
 
 #: :func:`~plantgen.geometry.rays.morton.spread21`, compiled.
@@ -85,26 +94,118 @@ def _split(codes, s, e):
     return lo
 
 
+@njit(cache=True, inline="always")
+def _area(x0, y0, z0, x1, y1, z1):
+    """:func:`~plantgen.geometry.rays.bvh.box_area` of one box (empty or flat: 0)."""
+    dx, dy, dz = max(x1 - x0, 0.0), max(y1 - y0, 0.0), max(z1 - z0, 0.0)
+    return 2.0 * (dx * dy + dy * dz + dz * dx)
+
+
+@njit(cache=True, inline="always")
+def _bin(centre, p, a, low, ext, bins):
+    return min(int((centre[p, a] - low) / ext * bins), bins - 1)
+
+
 @njit(cache=True)
-def _topology(codes, leaf_size):
-    """``first``, ``count`` of every node and each level's first node (levels + 1 offsets)."""
-    n = len(codes)
+def _sah_split(lo, hi, centre, order, s, e, bins, cnt, box, spare, spare_order):
+    """Where node [s, e) of ``order`` splits by the binned SAH (module notes), its
+    primitives partitioned stably (the left ones first): the first right one. ``cnt``
+    (3, bins), ``box`` (3, bins, 6), ``spare`` (bins,) and ``spare_order`` (n,): scratch."""
+    c_lo, c_hi, ext = np.empty(3), np.empty(3), np.empty(3)
+    for a in range(3):
+        c_lo[a] = c_hi[a] = centre[order[s], a]
+    for q in range(s + 1, e):
+        p = order[q]
+        for a in range(3):
+            c_lo[a], c_hi[a] = min(c_lo[a], centre[p, a]), max(c_hi[a], centre[p, a])
+    for a in range(3):
+        ext[a] = c_hi[a] - c_lo[a] if c_hi[a] - c_lo[a] > 0 else np.inf     # flat: every centre in bin 0
+    cnt[:, :] = 0
+    box[:, :, :3], box[:, :, 3:] = np.inf, -np.inf
+    for q in range(s, e):                            # every axis's bins in one pass
+        p = order[q]
+        for a in range(3):
+            b = _bin(centre, p, a, c_lo[a], ext[a], bins)
+            cnt[a, b] += 1
+            for k in range(3):
+                box[a, b, k], box[a, b, 3 + k] = min(box[a, b, k], lo[p, k]), max(box[a, b, 3 + k], hi[p, k])
+    best_cost, best_axis, best_bin = np.inf, 0, 0
+    for a in range(3):
+        # spare[j]: the area of bins j + 1 .. bins - 1 together, swept from the right
+        x0 = y0 = z0 = np.inf
+        x1 = y1 = z1 = -np.inf
+        for j in range(bins - 1, 0, -1):
+            x0, y0, z0 = min(x0, box[a, j, 0]), min(y0, box[a, j, 1]), min(z0, box[a, j, 2])
+            x1, y1, z1 = max(x1, box[a, j, 3]), max(y1, box[a, j, 4]), max(z1, box[a, j, 5])
+            spare[j - 1] = _area(x0, y0, z0, x1, y1, z1)
+        x0 = y0 = z0 = np.inf
+        x1 = y1 = z1 = -np.inf
+        n_left = 0
+        for j in range(bins - 1):
+            x0, y0, z0 = min(x0, box[a, j, 0]), min(y0, box[a, j, 1]), min(z0, box[a, j, 2])
+            x1, y1, z1 = max(x1, box[a, j, 3]), max(y1, box[a, j, 4]), max(z1, box[a, j, 5])
+            n_left += cnt[a, j]
+            n_right = (e - s) - n_left
+            if n_left > 0 and n_right > 0:
+                cost = n_left * _area(x0, y0, z0, x1, y1, z1) + n_right * spare[j]
+                if cost < best_cost:
+                    best_cost, best_axis, best_bin = cost, a, j
+    if not best_cost < np.inf:                       # every centre in one bin: halve the range
+        return s + (e - s) // 2
+    a = best_axis
+    left = s
+    right = 0
+    for q in range(s, e):                            # stable: the left ones in place, the right ones aside
+        p = order[q]
+        if _bin(centre, p, a, c_lo[a], ext[a], bins) <= best_bin:
+            order[left] = p
+            left += 1
+        else:
+            spare_order[s + right] = p
+            right += 1
+    order[left:e] = spare_order[s:s + right]
+    return left
+
+
+@njit(cache=True, parallel=True)
+def _sah_level(lo, hi, centre, order, s, e, k, leaf_size, bins, spare_order, mids, threads):
+    """Where each of a level's ``k`` nodes [s, e) splits (``mids``; a leaf's untouched), the
+    nodes shared among ``threads`` threads (each reorders its own ranges of ``order``)."""
+    threads = min(threads, k)
+    for c in prange(threads):
+        cnt, box, spare = np.zeros((3, bins), np.int64), np.empty((3, bins, 6)), np.empty(bins)
+        for j in range(c, k, threads):
+            if e[j] - s[j] > leaf_size:
+                mids[j] = _sah_split(lo, hi, centre, order, s[j], e[j], bins, cnt, box, spare, spare_order)
+
+
+@njit(cache=True)
+def _topology(codes, leaf_size, lo, hi, order, bins, sah, threads):
+    """``first``, ``count`` of every node and each level's first node (levels + 1 offsets):
+    split by the sorted Morton ``codes``, or (``sah``) by the binned SAH over boxes ``lo``,
+    ``hi``, reordering ``order`` as it goes."""
+    n = len(order)
+    centre = 0.5 * (lo + hi)                       # (0, 3) for the LBVH
+    spare_order = np.empty(n if sah else 0, np.int64)
     cap = 2 * n - 1
     first, count = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     ids, s, e = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     nxt_ids, nxt_s, nxt_e = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     level_first = np.zeros(cap + 1, np.int64)
+    mids = np.zeros(cap if sah else 0, np.int64)
     e[0], k, nodes, levels = n, 1, 1, 0
     while k:
         level_first[levels] = ids[0]
         levels += 1
+        if sah:                                    # the level's splits first, in parallel; then the layout
+            _sah_level(lo, hi, centre, order, s, e, k, leaf_size, bins, spare_order, mids, threads)
         m = 0
         for j in range(k):
             size = e[j] - s[j]
             if size <= leaf_size:
                 first[ids[j]], count[ids[j]] = s[j], size
                 continue
-            mid = _split(codes, s[j], e[j])
+            mid = mids[j] if sah else _split(codes, s[j], e[j])
             first[ids[j]] = nodes
             nxt_ids[m], nxt_s[m], nxt_e[m] = nodes, s[j], mid
             nxt_ids[m + 1], nxt_s[m + 1], nxt_e[m + 1] = nodes + 1, mid, e[j]
@@ -150,10 +251,23 @@ def lbvh_arrays(lo: np.ndarray, hi: np.ndarray, codes: np.ndarray, order: np.nda
     float64, n >= 1, finite, checked) whose Morton ``codes`` sort as ``order`` (stable):
     the numpy build's arrays (module notes)."""
     sorted_codes = np.ascontiguousarray(codes[order], np.uint64)
-    first, count, level_first = _topology(sorted_codes, int(leaf_size))
-    node_lo, node_hi = _boxes(np.ascontiguousarray(lo), np.ascontiguousarray(hi), np.ascontiguousarray(order, np.int64),
-                              first, count, level_first)
+    none = np.zeros((0, 3))
+    order = np.ascontiguousarray(order, np.int64)
+    first, count, level_first = _topology(sorted_codes, int(leaf_size), none, none, order, 2, False, 1)
+    node_lo, node_hi = _boxes(np.ascontiguousarray(lo), np.ascontiguousarray(hi), order, first, count, level_first)
     return node_lo, node_hi, first, count, len(level_first) - 1
+
+
+def sah_arrays(lo: np.ndarray, hi: np.ndarray, leaf_size: int, bins: int):
+    """(node lo, node hi, first, count, order, levels) of the binned SAH tree over boxes
+    ``lo``, ``hi`` ((n, 3) float64, n >= 1, finite, checked) with ``bins`` bins an axis:
+    the numpy build's arrays (module notes)."""
+    lo, hi = np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64)
+    order = np.arange(len(lo), dtype=np.int64)
+    first, count, level_first = _topology(np.zeros(0, np.uint64), int(leaf_size), lo, hi, order, int(bins), True,
+                                          numba.get_num_threads())
+    node_lo, node_hi = _boxes(lo, hi, order, first, count, level_first)
+    return node_lo, node_hi, first, count, order, len(level_first) - 1
 
 
 # ============================================================================ the rows' boxes
