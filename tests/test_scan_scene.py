@@ -48,7 +48,7 @@ def test_a_scenes_box_is_known_before_its_trees_are_built(scene):
     fresh = scene_target(grown.scene.plants())
     early = fresh.box()
     assert "bvh" not in fresh.__dict__ and not any("bvh" in t.__dict__ for t in fresh.targets)
-    fresh.bvh
+    assert fresh.bvh.copies == len(fresh.instance)
     assert np.array_equal(early, fresh.box())
     assert (early[1] > early[0]).all()
 

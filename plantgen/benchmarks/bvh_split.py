@@ -103,8 +103,8 @@ def markdown(results: list[dict]) -> str:
                   f"Rays: {c['primary']:,} primary (closest hit), {c['shadow']:,} shadow (any hit), {c['scan']:,} "
                   f"scan beams at {r['scan_step']}° (closest hit). Rays/s of wall time, the median of "
                   f"{r['rounds']} interleaved rounds; in brackets the ratio to the LBVH's.", "",
-                  "| plants' trees | build ms | nodes | SAH cost (the plants', weighted by their primitives) | primary rays/s | shadow rays/s | "
-                  "scan rays/s |", "|---|---:|---:|---:|---:|---:|---:|"]
+                  "| plants' trees | build ms | nodes | SAH cost (the plants', weighted by their primitives) | "
+                  "primary rays/s | shadow rays/s | scan rays/s |", "|---|---:|---:|---:|---:|---:|---:|"]
         for s, row in r["rows"].items():
             cells = " | ".join(f"{row[k]:,.0f} ({row[k] / base[k]:.2f})" for k in ("primary", "shadow", "scan"))
             lines.append(f"| {s} | {1e3 * row['build']:,.0f} | {row['nodes']:,} | {row['sah_cost']:.1f} | {cells} |")
@@ -117,7 +117,8 @@ def markdown(results: list[dict]) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", default="forest,forest_cut", help="scenes, comma-separated (default forest,forest_cut)")
+    parser.add_argument("--scene", default="forest,forest_cut",
+                        help="scenes, comma-separated (default forest,forest_cut)")
     parser.add_argument("--size", default="1024x768", type=image_size)
     parser.add_argument("--scan-step", default=0.5, type=float)
     parser.add_argument("--rounds", default=7, type=int)

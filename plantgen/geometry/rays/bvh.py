@@ -274,21 +274,17 @@ def build_bvh(lo, hi, *, leaf_size: int = 4, method: str = "lbvh", bins: int = 1
     if n == 0:
         return BVH(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32),
                    np.zeros(0, np.int32))
-    if method == "lbvh" and compiled:
-        from .native_build import centre_codes, lbvh_arrays
+    if compiled:
+        from .native_build import centre_codes, lbvh_arrays, sah_arrays
 
-        codes = centre_codes(lo, hi)
-        order = np.argsort(codes, kind="stable")
-        node_lo, node_hi, first, count, levels = lbvh_arrays(lo, hi, codes, order, leaf_size)
+        if method == "lbvh":
+            codes = centre_codes(lo, hi)
+            order = np.argsort(codes, kind="stable")
+            node_lo, node_hi, first, count, levels = lbvh_arrays(lo, hi, codes, order, leaf_size)
+        else:
+            node_lo, node_hi, first, count, order, levels = sah_arrays(lo, hi, leaf_size, int(bins))
         tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
         tree.__dict__["known_depth"] = int(levels)        # the build counted the levels: depth() need not walk
-        return tree
-    if compiled:
-        from .native_build import sah_arrays
-
-        node_lo, node_hi, first, count, order, levels = sah_arrays(lo, hi, leaf_size, int(bins))
-        tree = BVH(node_lo, node_hi, first.astype(np.int32), count.astype(np.int32), order.astype(np.int32))
-        tree.__dict__["known_depth"] = int(levels)
         return tree
     if method == "lbvh":
         codes = morton_codes(0.5 * (lo + hi))
