@@ -14,14 +14,9 @@ each leaf testing every ray of its range as a lone walk would; the nodes near th
 then tested about once a packet instead of once a ray (the forest's scan beams: 1.5x). A
 box (node or slot) meets the range's rays in one branch-free, vectorised loop (the lone
 walk's slab arithmetic; the NaN rule ray by ray where a 1/d is infinite): 1.3-2.2x.
-Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The tests:
-
-- a frustum row by the reference's pair test (:class:`~plantgen.geometry.rays.reference.PairTester`,
-  float64, recentred: the slope-form cone, the quadratic in pbrt-v4's stable form with
-  the discriminant as a difference of exact products, the oblique cutting planes with
-  their joint slack, open ends capped), operation for operation;
-- a leaf triangle by the scan's Möller-Trumbore test (both faces; a ray in its plane
-  misses), operation for operation.
+Any hits (light, shadows) walk a ray at a time, stopping at the first hit. The exact tests
+(:mod:`plantgen.geometry.rays.native_prims`): a frustum row by the reference's float64 pair
+test, a leaf triangle by the scan's Möller-Trumbore test, each operation for operation.
 
 The answer is the numpy traversal's (:func:`~plantgen.geometry.rays.bvh.trace_bvh`,
 :func:`~plantgen.geometry.rays.bvh.trace_scene`): the smallest t in (t_min, t_max), ties to
@@ -44,17 +39,13 @@ import time
 
 import numpy as np
 
-from ...tolerances import tol
 from ..compiled import NUMBA_ERROR, njit, numba, prange
+from .native_prims import prim_hit, row_hit, triangle_hit
 
 __all__ = ["NativeScene", "available", "compile_seconds", "native_scene", "pair_distances", "warm_up"]
 
 _NUMBA_ERROR = NUMBA_ERROR                    # numpy walks where numba does not import
 
-#: Half an ulp of 1.0 times the joint slack (:func:`plantgen.geometry.rays.reference._joint_slack`'s factor).
-JOINT_SLACK = float(tol.joint_slack * (np.finfo(np.float64).eps / 2))
-RECENTER_PARALLEL = float(tol.recenter_parallel)
-SPLIT = 2.0 ** 27 + 1.0                       # Veltkamp's split of a float64
 #: Rays a worker thread takes at a time.
 RAY_BLOCK = 64
 #: Blocks of rays a thread takes at a time (numba's parallel chunk size): a scan's beams
@@ -63,158 +54,6 @@ BLOCKS_A_CHUNK = 4
 #: Row fields (columns of the row table): base (3), axis (3), h, r1, k, n_lo (3), n_hi (3),
 #: d_lo, d_hi, open_lo, open_hi.
 ROW_WIDTH = 19
-
-
-# ============================================================================ the primitive tests
-@njit(cache=True, inline="always")
-def _dot(ax, ay, az, bx, by, bz):
-    return ax * bx + ay * by + az * bz
-
-
-@njit(cache=True, inline="always")
-def _two_product(a, b):
-    a_big = SPLIT * a
-    a_hi = a_big - (a_big - a)
-    a_lo = a - a_hi
-    b_big = SPLIT * b
-    b_hi = b_big - (b_big - b)
-    b_lo = b - b_hi
-    p = a * b
-    return p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
-
-
-@njit(cache=True)
-def _solve(A, B, C):
-    """solve_quadratic of reference.py: (disc, t_q, t_c)."""
-    bb, bb_e = _two_product(B, B)
-    ac, ac_e = _two_product(A, C)
-    disc = (bb - ac) + (bb_e - ac_e)
-    root = np.sqrt(max(disc, 0.0))
-    q = -(B + (root if B >= 0 else -root))
-    t_q = q / A if A != 0 else np.inf
-    t_c = C / q if q != 0 else t_q
-    return disc, t_q, t_c
-
-
-@njit(cache=True)
-def _lateral(R, i, ex, ey, ez, dx, dy, dz, t_lo, s_lo, s_hi, best):
-    """The nearest lateral root beyond ``t_lo`` between the planes (reference step 4)."""
-    ax, ay, az, r1, k = R[i, 3], R[i, 4], R[i, 5], R[i, 7], R[i, 8]
-    e_y = _dot(ex, ey, ez, ax, ay, az)
-    d_y = _dot(dx, dy, dz, ax, ay, az)
-    epx, epy, epz = ex - e_y * ax, ey - e_y * ay, ez - e_y * az
-    dpx, dpy, dpz = dx - d_y * ax, dy - d_y * ay, dz - d_y * az
-    r0 = r1 + 0.0 + k * e_y
-    A = _dot(dpx, dpy, dpz, dpx, dpy, dpz) - k * k * d_y * d_y
-    B = _dot(epx, epy, epz, dpx, dpy, dpz) - k * d_y * r0
-    C = _dot(epx, epy, epz, epx, epy, epz) - r0 * r0
-    disc, t1, t2 = _solve(A, B, C)
-    if not disc >= 0:
-        return best
-    for j in range(2):
-        t = t1 if j == 0 else t2
-        if not np.isfinite(t):
-            continue
-        X, Y, Z = ex + t * dx, ey + t * dy, ez + t * dz
-        y = _dot(X, Y, Z, ax, ay, az)
-        if not (r1 + k * y >= 0):
-            continue
-        if not (_dot(R[i, 9], R[i, 10], R[i, 11], X, Y, Z) - R[i, 15] >= -s_lo):
-            continue
-        if not (_dot(R[i, 12], R[i, 13], R[i, 14], X, Y, Z) - R[i, 16] <= s_hi):
-            continue
-        if t > t_lo and t < best:
-            best = t
-    return best
-
-
-@njit(cache=True)
-def _cap(R, i, upper, ex, ey, ez, dx, dy, dz, t_lo, slack_o, best):
-    """An open end's disc (reference step 5): the lower (``upper`` False) or upper one."""
-    c, o = (12, 9) if upper else (9, 12)
-    dc, do = (16, 15) if upper else (15, 16)
-    ax, ay, az, r1, k = R[i, 3], R[i, 4], R[i, 5], R[i, 7], R[i, 8]
-    den = _dot(R[i, c], R[i, c + 1], R[i, c + 2], dx, dy, dz)
-    if den == 0:
-        return best
-    t = (R[i, dc] - _dot(R[i, c], R[i, c + 1], R[i, c + 2], ex, ey, ez)) / den
-    if not np.isfinite(t):
-        return best
-    X, Y, Z = ex + t * dx, ey + t * dy, ez + t * dz
-    y = _dot(X, Y, Z, ax, ay, az)
-    rr = r1 + k * y
-    px, py, pz = X - y * ax, Y - y * ay, Z - y * az
-    if not (rr >= 0 and _dot(px, py, pz, px, py, pz) <= rr * rr):
-        return best
-    other = _dot(R[i, o], R[i, o + 1], R[i, o + 2], X, Y, Z) - R[i, do]
-    if not ((other >= slack_o) if upper else (other <= slack_o)):
-        return best
-    if t > t_lo and t < best:
-        return t
-    return best
-
-
-@njit(cache=True)
-def row_hit(R, i, ox, oy, oz, dx, dy, dz, t_min, origin):
-    """t of the ray (o, d) at row ``i`` of the row table ``R`` (inf: a miss), the rows
-    relative to ``origin`` (3,): the reference's float64 pair test, recentred."""
-    cx, cy, cz = R[i, 0] - origin[0], R[i, 1] - origin[1], R[i, 2] - origin[2]
-    ax, ay, az, h = R[i, 3], R[i, 4], R[i, 5], R[i, 6]
-    ex, ey, ez = (ox - origin[0]) - cx, (oy - origin[1]) - cy, (oz - origin[2]) - cz
-    dd = _dot(dx, dy, dz, dx, dy, dz)
-    size = np.sqrt(_dot(cx, cy, cz, cx, cy, cz)) + h
-    slack = JOINT_SLACK * size
-    s_lo = 0.0 if R[i, 17] != 0 else slack
-    s_hi = 0.0 if R[i, 18] != 0 else slack
-    b_ = _dot(dx, dy, dz, ax, ay, az)
-    d_ = _dot(dx, dy, dz, ex, ey, ez)
-    e_ = _dot(ax, ay, az, ex, ey, ez)
-    denom = dd - b_ * b_
-    if denom <= RECENTER_PARALLEL * dd:
-        s_axis = h * 0.5
-    else:
-        s_axis = min(max(e_ + b_ * (b_ * e_ - d_) / denom, 0.0), h)
-    t0 = (s_axis * b_ - d_) / dd
-    ex, ey, ez = ex + t0 * dx, ey + t0 * dy, ez + t0 * dz
-    t_lo = t_min - t0
-    best = _lateral(R, i, ex, ey, ez, dx, dy, dz, t_lo, s_lo, s_hi, np.inf)
-    if R[i, 17] != 0:
-        best = _cap(R, i, False, ex, ey, ez, dx, dy, dz, t_lo, s_hi, best)
-    if R[i, 18] != 0:
-        best = _cap(R, i, True, ex, ey, ez, dx, dy, dz, t_lo, -s_lo, best)
-    return best + t0
-
-
-@njit(cache=True)
-def triangle_hit(T, j, ox, oy, oz, dx, dy, dz):
-    """t of the ray (o, d) at triangle ``j`` of the table ``T`` (v0, e1, e2, size): the
-    scan's Möller-Trumbore test, both faces (inf: a miss)."""
-    e1x, e1y, e1z, e2x, e2y, e2z = T[j, 3], T[j, 4], T[j, 5], T[j, 6], T[j, 7], T[j, 8]
-    px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
-    det = _dot(e1x, e1y, e1z, px, py, pz)
-    scale = T[j, 9] * np.sqrt(_dot(dx, dy, dz, dx, dy, dz))
-    if not (abs(det) > 1e-12 * scale):
-        return np.inf
-    inv = 1.0 / det
-    sx, sy, sz = ox - T[j, 0], oy - T[j, 1], oz - T[j, 2]
-    u = _dot(sx, sy, sz, px, py, pz) * inv
-    qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
-    v = _dot(dx, dy, dz, qx, qy, qz) * inv
-    t = _dot(e2x, e2y, e2z, qx, qy, qz) * inv
-    if u >= 0 and v >= 0 and u + v <= 1 and t > 0:
-        return t
-    return np.inf
-
-
-@njit(cache=True)
-def _prim_hit(kind, R, T, g, ox, oy, oz, dx, dy, dz, t_min, origin):
-    """t of primitive ``g`` (its ``kind``: a row >= 0, a triangle -1 - j), only beyond ``t_min``."""
-    k = kind[g]
-    if k >= 0:
-        t = row_hit(R, k, ox, oy, oz, dx, dy, dz, t_min, origin)
-    else:
-        t = triangle_hit(T, -1 - k, ox, oy, oz, dx, dy, dz)
-    return t if t > t_min else np.inf
 
 
 # ============================================================================ the walk
@@ -442,11 +281,41 @@ def _range(box, n, S, care, any_care, f, l, t_min, lim, mask):
             r = np.uint64(i)                  # an unsigned index: no wraparound per lane, the loop vectorises
             mask[r] = _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], t_min,
                                  lim[r])
+    return _first_last(mask, f, l)
+
+
+@njit(cache=True)
+def _first_last(mask, f, l):
+    """The first and last ``mask``-ed rays of [f, l] (f > l: none)."""
     while f <= l and not mask[f]:
         f += 1
     while l > f and not mask[l]:
         l -= 1
     return f, l
+
+
+@njit(cache=True)
+def _children(box, n, S, care, any_care, f, l, t_min, lim, mask, mask2):
+    """:func:`_range` of sibling boxes ``n`` and ``n + 1`` in one pass over the rays of [f, l]
+    (each ray's origin and 1/d read once): (f0, l0, f1, l1)."""
+    if any_care:
+        for r in range(f, l + 1):
+            near, far = _enter(box, n, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], care[r], t_min)
+            mask[r] = near <= far and far > t_min and near <= lim[r]
+            near, far = _enter(box, n + 1, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], care[r], t_min)
+            mask2[r] = near <= far and far > t_min and near <= lim[r]
+    else:
+        b0, b1, b2, b3, b4, b5 = box[n, 0], box[n, 1], box[n, 2], box[n, 3], box[n, 4], box[n, 5]
+        c0, c1, c2 = box[n + 1, 0], box[n + 1, 1], box[n + 1, 2]
+        c3, c4, c5 = box[n + 1, 3], box[n + 1, 4], box[n + 1, 5]
+        for i in range(f, l + 1):
+            r = np.uint64(i)
+            ox, oy, oz, ix, iy, iz, lm = S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], lim[r]
+            mask[r] = _box_meets(b0, b1, b2, b3, b4, b5, ox, oy, oz, ix, iy, iz, t_min, lm)
+            mask2[r] = _box_meets(c0, c1, c2, c3, c4, c5, ox, oy, oz, ix, iy, iz, t_min, lm)
+    f0, l0 = _first_last(mask, f, l)
+    f1, l1 = _first_last(mask2, f, l)
+    return f0, l0, f1, l1
 
 
 @njit(cache=True)
@@ -494,25 +363,34 @@ def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, any_c
                  mask, hits, copy, best_t, best_c, best_g, sn, sf, sl, origin):
     """Rays [f, l] of a packet through one plant's tree from ``root``, in a copy's frame
     (origins and 1 / directions ``S`` (6, P), directions ``cd``, careful ``cc``); each
-    ray's best hit updated; ``sn``, ``sf``, ``sl``: the stack's nodes and ranges."""
+    ray's best hit updated; ``sn``, ``sf``, ``sl``: the stack's nodes and ranges. A node
+    on the stack holds the range of rays that met its box when its parent was walked; an
+    inner node tests both children's boxes in one pass and pushes those met, the nearer
+    (along the range's first ray) on top."""
+    f, l = _range(nodes, root, S, cc, any_care, f, l, t_min, lim, mask)
+    if f > l:
+        return
     sp = 0
     sn[0], sf[0], sl[0] = root, f, l
     while sp >= 0:
         node, f, l = sn[sp], sf[sp], sl[sp]
         sp -= 1
-        f, l = _range(nodes, node, S, cc, any_care, f, l, t_min, lim, mask)
-        if f > l:
-            continue
         count = int(nodes[node, 7])
         first = int(nodes[node, 6])
         if count > 0:
+            mask[f:l + 1] = True                  # the slots' own boxes cull each ray
             _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below,
                          lim, mask, hits, copy, best_t, best_c, best_g, origin)
             continue
-        nearer_right = _right_first(nodes, first, S, cc, f, t_min)
-        a, b = (first, first + 1) if nearer_right else (first + 1, first)
-        sn[sp + 1], sf[sp + 1], sl[sp + 1] = a, f, l
-        sn[sp + 2], sf[sp + 2], sl[sp + 2] = b, f, l
+        f0, l0, f1, l1 = _children(nodes, first, S, cc, any_care, f, l, t_min, lim, mask, hits)
+        if f0 > l0 or f1 > l1:
+            if f0 <= l0 or f1 <= l1:
+                sp += 1
+                sn[sp], sf[sp], sl[sp] = (first, f0, l0) if f0 <= l0 else (first + 1, f1, l1)
+            continue
+        right = _right_first(nodes, first, S, cc, min(f0, f1), t_min)
+        sn[sp + 1], sf[sp + 1], sl[sp + 1] = (first, f0, l0) if right else (first + 1, f1, l1)
+        sn[sp + 2], sf[sp + 2], sl[sp + 2] = (first + 1, f1, l1) if right else (first, f0, l0)
         sp += 2
 
 
@@ -624,7 +502,7 @@ def _pairs_all(kind, R, T, prim, O, D, t_min, origin, out_t):
     """t of each ray (k,) at its primitive ``prim`` (k,) (global ids; -1: inf)."""
     for r in prange(len(prim)):
         g = prim[r]
-        out_t[r] = np.inf if g < 0 else _prim_hit(kind, R, T, g, O[r, 0], O[r, 1], O[r, 2], D[r, 0], D[r, 1],
+        out_t[r] = np.inf if g < 0 else prim_hit(kind, R, T, g, O[r, 0], O[r, 1], O[r, 2], D[r, 0], D[r, 1],
                                                   D[r, 2], t_min, origin)
 
 
