@@ -33,6 +33,9 @@ def _dot(ax, ay, az, bx, by, bz):
 
 @njit(cache=True, inline="always")
 def _two_product(a, b):
+    """:func:`plantgen.geometry.rays.reference._two_product` for float64 scalars (its split
+    2^27 + 1), operation for operation; the reference's works on arrays of either dtype,
+    which numba does not compile."""
     a_big = SPLIT * a
     a_hi = a_big - (a_big - a)
     a_lo = a - a_hi

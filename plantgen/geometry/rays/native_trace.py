@@ -329,21 +329,22 @@ def _right_first(box, n, S, care, r, t_min):
 
 @njit(cache=True)
 def _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below, lim,
-                 mask, hits, copy, best_t, best_c, best_g, origin):
-    """The rays of [f, l] meeting a leaf (``mask``) against its slots, a slot's box against them at
-    once (``hits``), as lone walks test them: their best hits (and ``lim``) updated."""
+                 hits, copy, best_t, best_c, best_g, origin):
+    """The rays of [f, l] (those that met the leaf's box at its parent) against its slots, a
+    slot's box against them at once (``hits``), each ray culled by its own best hit as a lone
+    walk is: their best hits (and ``lim``) updated."""
     for s in range(first, first + count):
         if any_care:
             for r in range(f, l + 1):
                 near, far = _enter(slot_box, s, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r], cc[r], t_min)
-                hits[r] = mask[r] and near <= far and far > t_min and near <= min(t_hi[r], best_t[r])
+                hits[r] = near <= far and far > t_min and near <= min(t_hi[r], best_t[r])
         else:
             b0, b1, b2 = slot_box[s, 0], slot_box[s, 1], slot_box[s, 2]
             b3, b4, b5 = slot_box[s, 3], slot_box[s, 4], slot_box[s, 5]
             for i in range(f, l + 1):
                 r = np.uint64(i)
-                hits[r] = mask[r] & _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r],
-                                               S[5, r], t_min, min(t_hi[r], best_t[r]))
+                hits[r] = _box_meets(b0, b1, b2, b3, b4, b5, S[0, r], S[1, r], S[2, r], S[3, r], S[4, r], S[5, r],
+                                     t_min, min(t_hi[r], best_t[r]))
         k, g = slot_kind[s], prims[s]
         for r in range(f, l + 1):
             if not hits[r]:
@@ -379,9 +380,8 @@ def _walk_packet(nodes, slot_box, prims, slot_kind, R, T, root, S, cd, cc, any_c
         count = int(nodes[node, 7])
         first = int(nodes[node, 6])
         if count > 0:
-            mask[f:l + 1] = True                  # the slots' own boxes cull each ray
             _leaf_packet(slot_box, prims, slot_kind, R, T, first, count, S, cd, cc, any_care, f, l, t_min, t_hi, below,
-                         lim, mask, hits, copy, best_t, best_c, best_g, origin)
+                         lim, hits, copy, best_t, best_c, best_g, origin)
             continue
         f0, l0, f1, l1 = _children(nodes, first, S, cc, any_care, f, l, t_min, lim, mask, hits)
         if f0 > l0 or f1 > l1:
@@ -504,7 +504,7 @@ def _pairs_all(kind, R, T, prim, O, D, t_min, origin, out_t):
     for r in prange(len(prim)):
         g = prim[r]
         out_t[r] = np.inf if g < 0 else prim_hit(kind, R, T, g, O[r, 0], O[r, 1], O[r, 2], D[r, 0], D[r, 1],
-                                                  D[r, 2], t_min, origin)
+                                                 D[r, 2], t_min, origin)
 
 
 # ============================================================================ the Python side

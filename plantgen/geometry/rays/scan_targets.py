@@ -346,11 +346,8 @@ class SceneTarget:
         """(2, 3) the box around every copy (zeros for none)."""
         if not len(self):
             return np.zeros((2, 3))
-        if "bvh" in self.__dict__:
-            keep = np.repeat([len(t) > 0 for t in self.targets], [len(m) for m in self.matrices])
-            return np.stack([self.bvh.copy_lo[keep].min(axis=0), self.bvh.copy_hi[keep].max(axis=0)])
         # the copies' boxes as scene_bvh makes them (a plant's root box is its primitives'
-        # union), without building the trees before the work is known to fit
+        # union), without building the trees: a scan sizes its beams before its budget checks
         from .bvh import copy_boxes
 
         parts = [copy_boxes(t.lo.min(axis=0), t.hi.max(axis=0), m) for t, m in zip(self.targets, self.matrices,
